@@ -1,0 +1,360 @@
+"""Uniform simplicial (Kuhn / Freudenthal "type-1") partition of a hyper-rectangle.
+
+This module is the single source of truth for the geometry used by the fit, the float and
+fixed-point models and the hardware generator.
+
+Conventions
+-----------
+Domain
+    ``S = [lo_0, hi_0] x ... x [lo_{n-1}, hi_{n-1}]`` (physical units of each regressor).
+Partition
+    Dimension ``j`` is cut into ``p_j >= 1`` equal intervals of width ``h_j = (hi_j - lo_j) / p_j``,
+    so there are ``p_j + 1`` vertex coordinates ``0 .. p_j`` per dimension, ``N = prod(p_j + 1)``
+    vertices and ``L = n! * prod(p_j)`` simplices.
+Vertex numbering
+    A vertex with integer coordinates ``v = (v_0, ..., v_{n-1})``, ``0 <= v_j <= p_j``, has the
+    linear index ``k = sum_j v_j * stride_j`` with ``stride_{n-1} = 1`` and
+    ``stride_j = stride_{j+1} * (p_{j+1} + 1)`` (row-major / C order: the *last* dimension varies
+    fastest, exactly as :func:`numpy.ravel_multi_index`). Weight vectors, the columns of the
+    basis matrix ``H`` and the ROM contents all use this numbering.
+Location of a point (Kuhn's lemma)
+    1. grid coordinate ``s_j = (x_j - lo_j) / h_j``, clamped to ``[0, p_j]``;
+    2. cell ``c_j = min(floor(s_j), p_j - 1)``, fractional part ``d_j = s_j - c_j`` in ``[0, 1]``;
+    3. order: ``rank_j = #{i : d_i > d_j or (d_i == d_j and i < j)}`` -- descending ``d``,
+       **ties broken by the lower dimension index first**; ``perm[k]`` is the dimension of rank
+       ``k``;
+    4. vertices ``v_0 = c``, ``v_k = v_{k-1} + e_{perm[k-1]}`` (``k = 1..n``);
+    5. barycentric weights ``mu_0 = 1 - d_perm[0]``, ``mu_k = d_perm[k-1] - d_perm[k]``,
+       ``mu_n = d_perm[n-1]``; all ``>= 0`` and summing to 1.
+    The value of a PWAS function with vertex weights ``w`` is ``sum_k mu_k * w[vertex_k]``.
+    The tie rule only decides which of several simplices sharing a face is reported; the value is
+    the same on both sides of the face (continuity).
+
+Equivalently (the form used by the hardware, with no sorter): dimension ``j`` has stepped at
+vertex ``k`` exactly when ``rank_j < k``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["Grid", "Location"]
+
+
+@dataclass(frozen=True)
+class Location:
+    """Result of locating points in the Kuhn partition (all arrays have ``m`` rows).
+
+    Attributes
+    ----------
+    s : ndarray, shape (m, n), float
+        Clamped grid coordinates (grid units, ``0 <= s_j <= p_j``).
+    cell : ndarray, shape (m, n), int64
+        Cell (lower corner) integer coordinates, ``0 <= c_j <= p_j - 1``.
+    frac : ndarray, shape (m, n), float
+        Fractional parts ``d_j = s_j - c_j`` in ``[0, 1]``.
+    rank : ndarray, shape (m, n), int64
+        Rank of each dimension in descending order of ``frac`` (ties: lower index first).
+    perm : ndarray, shape (m, n), int64
+        ``perm[:, k]`` is the dimension with rank ``k`` (the step taken at vertex ``k + 1``).
+    vertices : ndarray, shape (m, n + 1), int64
+        Linear indices of the simplex vertices ``v_0 .. v_n``.
+    mu : ndarray, shape (m, n + 1), float
+        Barycentric weights of the vertices (``>= 0``, sum 1).
+    out_of_domain : ndarray, shape (m,), bool
+        True where at least one coordinate was clamped to the domain.
+    """
+
+    s: np.ndarray
+    cell: np.ndarray
+    frac: np.ndarray
+    rank: np.ndarray
+    perm: np.ndarray
+    vertices: np.ndarray
+    mu: np.ndarray
+    out_of_domain: np.ndarray
+
+
+def _as_partitions(p: int | Sequence[int], n: int) -> tuple[int, ...]:
+    arr = np.atleast_1d(np.asarray(p))
+    if arr.size == 1 and n > 1:
+        arr = np.repeat(arr, n)
+    if arr.shape != (n,):
+        raise ValueError(f"partitions must be one integer or {n} integers (one per dimension), got {p!r}")
+    out = []
+    for j, v in enumerate(arr.tolist()):
+        if isinstance(v, float) and not float(v).is_integer():
+            raise ValueError(f"partitions[{j}] = {v!r} is not an integer; use a whole number of intervals >= 1")
+        iv = int(v)
+        if iv < 1:
+            raise ValueError(f"partitions[{j}] = {iv} but every dimension needs p >= 1 intervals")
+        out.append(iv)
+    return tuple(out)
+
+
+class Grid:
+    """Uniform Kuhn simplicial partition of the box ``[lo, hi]``.
+
+    Parameters
+    ----------
+    lo, hi : array_like, shape (n,)
+        Lower and upper bounds of the domain, physical units; ``hi > lo`` elementwise.
+    partitions : int or array_like of int, shape (n,)
+        Number of intervals ``p_j >= 1`` per dimension (one int is used for every dimension).
+
+    Examples
+    --------
+    >>> g = Grid([0.0, 0.0], [1.0, 2.0], [2, 4])
+    >>> g.n_vertices, g.n_simplices
+    (15, 16)
+    """
+
+    def __init__(self, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int]):
+        lo_a = np.asarray(lo, dtype=float).reshape(-1)
+        hi_a = np.asarray(hi, dtype=float).reshape(-1)
+        if lo_a.shape != hi_a.shape or lo_a.size == 0:
+            raise ValueError(f"lo and hi must be non-empty and of equal length, got {lo_a.size} and {hi_a.size}")
+        if not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
+            raise ValueError("domain bounds must be finite numbers")
+        bad = np.flatnonzero(~(hi_a > lo_a))
+        if bad.size:
+            j = int(bad[0])
+            raise ValueError(
+                f"domain dimension {j} has zero or negative width ([{lo_a[j]}, {hi_a[j]}]); "
+                "a constant regressor cannot be partitioned: drop that signal or give an explicit domain"
+            )
+        self.lo = lo_a
+        self.hi = hi_a
+        self.n = lo_a.size
+        self.partitions = np.array(_as_partitions(partitions, self.n), dtype=np.int64)
+        self.shape = tuple(int(v) for v in self.partitions + 1)
+        strides = np.ones(self.n, dtype=np.int64)
+        for j in range(self.n - 2, -1, -1):
+            strides[j] = strides[j + 1] * self.shape[j + 1]
+        self.strides = strides
+        self.step = (self.hi - self.lo) / self.partitions
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices (= weights) ``N = prod(p_j + 1)``."""
+        return int(np.prod(self.shape))
+
+    @property
+    def n_simplices(self) -> int:
+        """Number of simplices ``L = n! * prod(p_j)``."""
+        return math.factorial(self.n) * int(np.prod(self.partitions))
+
+    def __repr__(self) -> str:
+        return f"Grid(lo={self.lo.tolist()}, hi={self.hi.tolist()}, partitions={self.partitions.tolist()})"
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, Grid)
+            and np.array_equal(self.lo, other.lo)
+            and np.array_equal(self.hi, other.hi)
+            and np.array_equal(self.partitions, other.partitions)
+        )
+
+    __hash__ = None  # mutable numpy members
+
+    # --------------------------------------------------------------- vertices
+    def vertex_index(self, coords: np.ndarray) -> np.ndarray:
+        """Linear index of integer vertex coordinates.
+
+        Parameters
+        ----------
+        coords : ndarray, shape (..., n), int
+            Vertex coordinates, ``0 <= coords[..., j] <= p_j``.
+
+        Returns
+        -------
+        ndarray, shape (...), int64
+        """
+        return np.asarray(coords, dtype=np.int64) @ self.strides
+
+    def vertex_coords(self, index: np.ndarray | int | None = None) -> np.ndarray:
+        """Integer coordinates of vertices (all of them, in index order, when ``index`` is None).
+
+        Returns
+        -------
+        ndarray, shape (..., n), int64
+        """
+        if index is None:
+            index = np.arange(self.n_vertices)
+        return np.stack(np.unravel_index(np.asarray(index, dtype=np.int64), self.shape), axis=-1).astype(np.int64)
+
+    def vertex_points(self, index: np.ndarray | int | None = None) -> np.ndarray:
+        """Physical coordinates of vertices, shape (..., n)."""
+        return self.lo + self.vertex_coords(index) * self.step
+
+    # --------------------------------------------------------------- location
+    def to_grid_units(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Scale physical points to clamped grid units.
+
+        Parameters
+        ----------
+        x : array_like, shape (m, n) or (n,)
+            Points in physical units.
+
+        Returns
+        -------
+        s : ndarray, shape (m, n)
+            Grid coordinates clamped to ``[0, p_j]``.
+        out_of_domain : ndarray, shape (m,), bool
+            True where a coordinate was outside the domain and has been clamped.
+        """
+        xa = np.atleast_2d(np.asarray(x, dtype=float))
+        if xa.shape[1] != self.n:
+            raise ValueError(f"points have {xa.shape[1]} coordinates but the grid has n = {self.n} dimensions")
+        if not np.all(np.isfinite(xa)):
+            raise ValueError("points contain NaN or infinite values; clean the data before evaluating")
+        s = (xa - self.lo) / self.step
+        out = np.any((s < 0) | (s > self.partitions), axis=1)
+        np.clip(s, 0, self.partitions, out=s)
+        return s, out
+
+    def locate_grid_units(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Kuhn location from clamped grid coordinates (shared by the float and fixed-point models).
+
+        Parameters
+        ----------
+        s : ndarray, shape (m, n)
+            Grid coordinates, already clamped to ``[0, p_j]``. May be float or integer-valued
+            (the fixed-point model passes integer cells and fractions separately, see
+            :meth:`simplex_from_cell`).
+
+        Returns
+        -------
+        cell, frac, rank, perm, vertices, mu : see :class:`Location`.
+        """
+        cell = np.minimum(np.floor(s).astype(np.int64), self.partitions - 1)
+        frac = s - cell
+        rank, perm = self.order(frac)
+        vertices = self.simplex_vertices(cell, perm)
+        mu = self.barycentric(frac, perm)
+        return cell, frac, rank, perm, vertices, mu
+
+    def locate(self, x: np.ndarray) -> Location:
+        """Locate points: cell, fractional parts, ordering, simplex vertices and weights.
+
+        Parameters
+        ----------
+        x : array_like, shape (m, n) or (n,)
+            Points in physical units; coordinates outside the domain are clamped and flagged.
+
+        Returns
+        -------
+        Location
+        """
+        s, out = self.to_grid_units(x)
+        cell, frac, rank, perm, vertices, mu = self.locate_grid_units(s)
+        return Location(s, cell, frac, rank, perm, vertices, mu, out)
+
+    @staticmethod
+    def order(frac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Descending order of fractional parts with the documented tie rule.
+
+        Works for float or integer arrays (the fixed-point model uses integer fractions).
+
+        Parameters
+        ----------
+        frac : ndarray, shape (m, n)
+
+        Returns
+        -------
+        rank : ndarray, shape (m, n), int64
+            ``rank[:, j] = #{i : frac_i > frac_j or (frac_i == frac_j and i < j)}``.
+        perm : ndarray, shape (m, n), int64
+            Inverse of ``rank``: ``perm[:, k]`` is the dimension of rank ``k``.
+        """
+        # A stable sort of the negated values keeps equal values in increasing index order,
+        # which is exactly "lower index first" on ties.
+        perm = np.argsort(-frac, axis=1, kind="stable").astype(np.int64)
+        rank = np.empty_like(perm)
+        rows = np.arange(perm.shape[0])[:, None]
+        rank[rows, perm] = np.arange(perm.shape[1])[None, :]
+        return rank, perm
+
+    def simplex_vertices(self, cell: np.ndarray, perm: np.ndarray) -> np.ndarray:
+        """Linear indices of the ``n + 1`` vertices of the Kuhn simplex (cell, perm).
+
+        Returns
+        -------
+        ndarray, shape (m, n + 1), int64
+        """
+        base = cell @ self.strides
+        steps = np.cumsum(self.strides[perm], axis=1)
+        return np.concatenate([base[:, None], base[:, None] + steps], axis=1)
+
+    @staticmethod
+    def barycentric(frac: np.ndarray, perm: np.ndarray) -> np.ndarray:
+        """Barycentric weights ``mu`` from fractional parts (float) and their ordering.
+
+        Returns
+        -------
+        ndarray, shape (m, n + 1)
+        """
+        m = frac.shape[0]
+        d_sorted = np.take_along_axis(frac, perm, axis=1)
+        one = np.ones((m, 1), dtype=frac.dtype)
+        zero = np.zeros((m, 1), dtype=frac.dtype)
+        upper = np.concatenate([one, d_sorted], axis=1)
+        lower = np.concatenate([d_sorted, zero], axis=1)
+        return upper - lower
+
+    # ------------------------------------------------------------- evaluation
+    def evaluate(self, weights: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Value of the PWAS function with vertex weights ``weights`` at points ``x``.
+
+        Parameters
+        ----------
+        weights : ndarray, shape (N,) or (N, nz)
+        x : array_like, shape (m, n)
+            Points, physical units (clamped to the domain).
+
+        Returns
+        -------
+        ndarray, shape (m,) or (m, nz)
+        """
+        w = np.asarray(weights, dtype=float)
+        if w.shape[0] != self.n_vertices:
+            raise ValueError(f"weights have {w.shape[0]} rows but the grid has N = {self.n_vertices} vertices")
+        loc = self.locate(x)
+        if w.ndim == 1:
+            return np.einsum("mk,mk->m", loc.mu, w[loc.vertices])
+        return np.einsum("mk,mkz->mz", loc.mu, w[loc.vertices])
+
+    def basis_matrix(self, x: np.ndarray):
+        """Sparse alpha-basis matrix ``H`` (``H[t, k] = alpha_k(x_t)``), n + 1 entries per row.
+
+        Parameters
+        ----------
+        x : array_like, shape (m, n)
+
+        Returns
+        -------
+        scipy.sparse.csr_array, shape (m, N)
+        """
+        from scipy import sparse
+
+        loc = self.locate(x)
+        m = loc.mu.shape[0]
+        indptr = np.arange(0, m * (self.n + 1) + 1, self.n + 1, dtype=np.int64)
+        # Vertices of one simplex are distinct, so a row has no duplicate column.
+        order = np.argsort(loc.vertices, axis=1)
+        cols = np.take_along_axis(loc.vertices, order, axis=1).reshape(-1)
+        vals = np.take_along_axis(loc.mu, order, axis=1).reshape(-1)
+        return sparse.csr_array((vals, cols, indptr), shape=(m, self.n_vertices))
+
+    # ----------------------------------------------------------- neighbours
+    def axis_edges(self, dim: int) -> tuple[np.ndarray, np.ndarray]:
+        """All grid edges parallel to axis ``dim``: pairs (a, a + e_dim) of vertex indices."""
+        coords = self.vertex_coords()
+        keep = coords[:, dim] < self.partitions[dim]
+        a = np.flatnonzero(keep).astype(np.int64)
+        return a, a + self.strides[dim]

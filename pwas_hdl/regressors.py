@@ -1,0 +1,178 @@
+"""Regressor vectors from lagged inputs and outputs (paper Section II).
+
+For ``nu`` inputs with ``Mu`` lags and ``ny`` outputs with ``My`` lags the regressor at time ``t`` is
+
+    xi(t) = [u(t-Mu+1)' ... u(t)'  y(t-My+1)' ... y(t)']'          (n = nu*Mu + ny*My)
+
+i.e. oldest sample first, and within one time instant all channels of the signal in column order.
+Rows exist for ``t = M-1 .. T-1`` (0-based) of each trajectory with ``M = max(Mu, My)``, so that no
+regressor straddles two trajectories.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["LagStructure", "as_trajectories"]
+
+
+def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, width: int | None = None) -> list[np.ndarray]:
+    """Normalise one array or a list of arrays (one per trajectory) to a list of 2-D float arrays.
+
+    Parameters
+    ----------
+    data : ndarray (T,) or (T, k), or a list of them, or None (no such signal)
+    name : str
+        Signal name for error messages ("u", "y", "z").
+    width : int, optional
+        Expected number of columns.
+
+    Returns
+    -------
+    list of ndarray, each shape (T_i, k)
+    """
+    if data is None:
+        return []
+    if isinstance(data, np.ndarray) and data.dtype != object:
+        items = [data]
+    else:
+        items = list(data)
+    out = []
+    for i, a in enumerate(items):
+        arr = np.asarray(a, dtype=float)
+        if arr.ndim == 1:
+            arr = arr[:, None]
+        if arr.ndim != 2:
+            raise ValueError(f"{name} trajectory {i} must be 1-D or 2-D (samples x channels), got shape {arr.shape}")
+        if width is not None and arr.shape[1] != width:
+            raise ValueError(f"{name} trajectory {i} has {arr.shape[1]} channels, expected {width}")
+        if not np.all(np.isfinite(arr)):
+            bad = np.argwhere(~np.isfinite(arr))[0]
+            raise ValueError(
+                f"{name} trajectory {i} has a NaN or infinite value at sample {bad[0]}, channel {bad[1]}; "
+                "remove or interpolate missing samples before fitting"
+            )
+        out.append(arr)
+    return out
+
+
+@dataclass(frozen=True)
+class LagStructure:
+    """How many past samples of each signal form the regressor.
+
+    Parameters
+    ----------
+    mu : int
+        Number of input samples ``Mu >= 0`` (0: the inputs are not used).
+    my : int
+        Number of output samples ``My >= 0``.
+    nu : int
+        Number of input channels.
+    ny : int
+        Number of output channels.
+    """
+
+    mu: int
+    my: int
+    nu: int
+    ny: int
+
+    def __post_init__(self) -> None:
+        for nm in ("mu", "my", "nu", "ny"):
+            v = getattr(self, nm)
+            if not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
+        if self.dimension == 0:
+            raise ValueError(
+                "the regressor is empty: give at least one lag of one signal (Mu*nu + My*ny >= 1)"
+            )
+
+    @property
+    def dimension(self) -> int:
+        """Regressor dimension ``n = nu*Mu + ny*My``."""
+        return self.nu * self.mu + self.ny * self.my
+
+    @property
+    def memory(self) -> int:
+        """``M = max(Mu, My)``: samples of history a regressor needs."""
+        return max(self.mu if self.nu else 0, self.my if self.ny else 0)
+
+    def signal_of_dimension(self) -> list[tuple[str, int, int]]:
+        """For each regressor dimension: (kind 'u' or 'y', channel, lag) with lag 0 = current sample."""
+        out: list[tuple[str, int, int]] = []
+        for lag in range(self.mu - 1, -1, -1):
+            out += [("u", c, lag) for c in range(self.nu)]
+        for lag in range(self.my - 1, -1, -1):
+            out += [("y", c, lag) for c in range(self.ny)]
+        return out
+
+    def names(self, inputs: Sequence[str], outputs: Sequence[str]) -> list[str]:
+        """Human-readable regressor names such as ``y[t-3]``."""
+        res = []
+        for kind, ch, lag in self.signal_of_dimension():
+            base = inputs[ch] if kind == "u" else outputs[ch]
+            res.append(f"{base}[t]" if lag == 0 else f"{base}[t-{lag}]")
+        return res
+
+    def build(self, u: np.ndarray | None, y: np.ndarray | None) -> np.ndarray:
+        """Regressors of one trajectory.
+
+        Parameters
+        ----------
+        u : ndarray, shape (T, nu) or None when nu == 0
+        y : ndarray, shape (T, ny) or None when ny == 0
+
+        Returns
+        -------
+        ndarray, shape (T - M + 1, n)
+            Row ``i`` is ``xi(t)`` for ``t = M - 1 + i``.
+        """
+        t_len = self._length(u, y)
+        m = self.memory
+        if t_len < m:
+            raise ValueError(
+                f"a trajectory has {t_len} samples but the lags need at least M = max(Mu, My) = {m}; "
+                "use longer trajectories or fewer lags"
+            )
+        rows = t_len - m + 1
+        cols = []
+        for kind, ch, lag in self.signal_of_dimension():
+            sig = u if kind == "u" else y
+            start = m - 1 - lag
+            cols.append(sig[start : start + rows, ch])
+        return np.stack(cols, axis=1) if cols else np.empty((rows, 0))
+
+    def _length(self, u: np.ndarray | None, y: np.ndarray | None) -> int:
+        lens = []
+        if self.nu:
+            if u is None:
+                raise ValueError("the lag structure has inputs but no input data was given")
+            lens.append(u.shape[0])
+        if self.ny:
+            if y is None:
+                raise ValueError("the lag structure has outputs but no output data was given")
+            lens.append(y.shape[0])
+        if len(set(lens)) > 1:
+            raise ValueError(f"inputs and outputs of a trajectory have different lengths {lens}")
+        return lens[0]
+
+    def build_many(self, us: list[np.ndarray], ys: list[np.ndarray], n_traj: int) -> tuple[np.ndarray, list[slice]]:
+        """Regressors of several trajectories, stacked; also the sample slice each row block covers.
+
+        Returns
+        -------
+        xi : ndarray, shape (sum_i (T_i - M + 1), n)
+        valid : list of slice
+            For trajectory ``i``, the samples ``t`` whose regressor exists (``slice(M - 1, T_i)``).
+        """
+        blocks, valid = [], []
+        for i in range(n_traj):
+            ui = us[i] if self.nu else None
+            yi = ys[i] if self.ny else None
+            xi = self.build(ui, yi)
+            blocks.append(xi)
+            valid.append(slice(self.memory - 1, self.memory - 1 + xi.shape[0]))
+        return np.concatenate(blocks, axis=0), valid
