@@ -1,0 +1,297 @@
+"""Command-line interface: a thin layer over the public API.
+
+Every command has ``--help``. Errors in the input (bad CSV, unknown column, impossible
+parameter, corrupt model) print one clear line on stderr and exit with status 2, writing nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Iterator, Optional
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from . import __version__
+from .atomic import atomic_write_text
+from .data_io import read_csv, select_signals, split_trajectories, write_csv
+from .virtual_sensor import PWASVirtualSensor
+
+app = typer.Typer(
+    name="pwas-hdl",
+    help="PWAS virtual sensors: fit from plant data, evaluate, benchmark (and generate verified Verilog).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+bench_app = typer.Typer(help="Reproduce the seed paper's benchmarks.", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+data_app = typer.Typer(help="Write the built-in example data sets as CSV.", no_args_is_help=True)
+app.add_typer(data_app, name="make-data")
+
+err = Console(stderr=True, soft_wrap=True)
+out = Console(soft_wrap=True)
+
+
+class UserError(Exception):
+    """An error in what the user asked for: reported in one line, exit status 2."""
+
+
+@contextmanager
+def _user_errors() -> Iterator[None]:
+    try:
+        yield
+    except (ValueError, FileNotFoundError, IsADirectoryError, UserError) as exc:
+        err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+        raise typer.Exit(2) from None
+
+
+def _int_list(text: str, what: str) -> list[int]:
+    try:
+        vals = [int(v) for v in text.replace(" ", "").split(",") if v]
+    except ValueError:
+        raise UserError(f"{what} must be an integer or a comma-separated list of integers, got {text!r}") from None
+    if not vals:
+        raise UserError(f"{what} is empty")
+    return vals
+
+
+def _float_list(text: str, what: str) -> list[float]:
+    """Comma list of floats, or ``logspace:A:B:K`` (K values from 1eA to 1eB)."""
+    t = text.replace(" ", "")
+    try:
+        if t.startswith("logspace:"):
+            a, b, k = t.split(":")[1:]
+            return [float(v) for v in np.logspace(float(a), float(b), int(k))]
+        return [float(v) for v in t.split(",") if v]
+    except ValueError:
+        raise UserError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
+
+
+def _names(values: Optional[list[str]]) -> list[str]:
+    res: list[str] = []
+    for v in values or []:
+        res += [s for s in v.replace(" ", "").split(",") if s]
+    return res
+
+
+@contextmanager
+def _progress(description: str) -> Iterator:
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True
+    ) as prog:
+        task = prog.add_task(description, total=None)
+
+        def update(done: int, total: int) -> None:
+            prog.update(task, completed=done, total=total)
+
+        yield update
+
+
+@app.command()
+def fit(
+    data: Annotated[Path, typer.Argument(help="CSV file with a header line; one row per sample.")],
+    output: Annotated[Path, typer.Option("-o", "--output-model", help="Model file to write (JSON).")],
+    inputs: Annotated[Optional[list[str]], typer.Option("--input", "-u", help="Input column(s) u (repeat or comma-separate).")] = None,
+    outputs: Annotated[Optional[list[str]], typer.Option("--output", "-y", help="Measured output column(s) y.")] = None,
+    targets: Annotated[Optional[list[str]], typer.Option("--target", "-z", help="Column(s) z to estimate.")] = None,
+    mu: Annotated[int, typer.Option("--mu", help="Mu: past input samples in the regressor (0 = inputs unused).")] = 0,
+    my: Annotated[int, typer.Option("--my", help="My: past output samples in the regressor.")] = 1,
+    partitions: Annotated[str, typer.Option("-p", "--partitions", help="Intervals per dimension: one integer or a comma list (one per regressor).")] = "7",
+    gamma: Annotated[float, typer.Option("--gamma", help="Domain expansion factor (>= 1) about the centre of the data box.")] = 1.2,
+    sigma: Annotated[Optional[float], typer.Option("--sigma", help="Tikhonov weight (unnormalised, eq. 14). Omit to choose it by cross-validation.")] = None,
+    sigma_grid: Annotated[Optional[str], typer.Option("--sigma-grid", help="CV candidates: comma list or logspace:A:B:K.")] = None,
+    folds: Annotated[int, typer.Option("--folds", help="Cross-validation folds.")] = 5,
+    cv_shuffle: Annotated[bool, typer.Option("--cv-shuffle", help="Shuffle samples across CV folds (default: contiguous blocks).")] = False,
+    tikhonov: Annotated[int, typer.Option("--tikhonov", help="Tikhonov order: 0 (Gamma = I) or 1 (gradient penalty).")] = 0,
+    traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Column naming the trajectory of each row (no regressor straddles two).")] = None,
+    domain: Annotated[Optional[str], typer.Option("--domain", help="Explicit domain 'lo:hi,lo:hi,...' (one pair per regressor) instead of the gamma-expanded data box.")] = None,
+    separate_lag_domains: Annotated[bool, typer.Option("--separate-lag-domains", help="Give each lag its own data range (default: all lags of a signal share one interval, as the hardware scales once per signal).")] = False,
+) -> None:
+    """Fit a PWAS virtual sensor to DATA and write the model file."""
+    with _user_errors():
+        ins, outs, tgts = _names(inputs), _names(outputs), _names(targets)
+        if not tgts:
+            raise UserError("give the column(s) to estimate with --target")
+        if my and not outs:
+            raise UserError(f"--my {my} needs measured output column(s): give --output (or --my 0)")
+        if mu and not ins:
+            raise UserError(f"--mu {mu} needs input column(s): give --input (or --mu 0)")
+        table = read_csv(data)
+        if traj_col is not None:
+            table.column_index(traj_col)
+        u = select_signals(table, ins, traj_col) if mu else None
+        y = select_signals(table, outs, traj_col) if my else None
+        z = select_signals(table, tgts, traj_col)
+        dom = None
+        if domain is not None:
+            try:
+                pairs = [tuple(float(v) for v in s.split(":")) for s in domain.replace(" ", "").split(",")]
+                dom = ([a for a, _ in pairs], [b for _, b in pairs])
+            except ValueError:
+                raise UserError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
+        parts = _int_list(partitions, "--partitions")
+        model = PWASVirtualSensor(
+            mu=mu,
+            my=my,
+            partitions=parts[0] if len(parts) == 1 else parts,
+            gamma=gamma,
+            sigma=sigma,
+            tikhonov_order=tikhonov,
+            cv_folds=folds,
+            sigma_grid=_float_list(sigma_grid, "--sigma-grid") if sigma_grid else None,
+            cv_shuffle=cv_shuffle,
+            domain=dom,
+            share_lag_domain=not separate_lag_domains,
+            input_names=ins if mu else [],
+            output_names=outs if my else [],
+            target_names=tgts,
+        )
+        with _progress("cross-validating sigma" if sigma is None else "solving") as update:
+            model.fit(u, y, z, progress=update)
+        model.save(output)
+        d = model.to_dict()
+        err.print(
+            f"fitted n = {model.grid_.n} ({', '.join(d['regressors'])}), N = {model.grid_.n_vertices} weights, "
+            f"sigma = {model.sigma_:.3g}{' (CV)' if sigma is None else ''}, "
+            f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}",
+            highlight=False, markup=False,
+        )
+        err.print(f"wrote {output}", highlight=False, markup=False)
+
+
+@app.command()
+def predict(
+    model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
+    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="CSV of estimates to write.")],
+    traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
+) -> None:
+    """Estimate the targets for every row of DATA that has a full regressor.
+
+    Writes columns: row (0-based data row), <target>_hat for each target, out_of_domain (1 when a
+    regressor was outside the model's domain and was clamped). When DATA holds the target column
+    (or <target>_true), the RMSE of the estimate against it is printed.
+    """
+    with _user_errors():
+        model = PWASVirtualSensor.load(model_path)
+        ins, outs, tgts = model.signal_names()
+        table = read_csv(data)
+        if traj_col is not None:
+            table.column_index(traj_col)
+        u = select_signals(table, ins, traj_col) if model.lags_.nu else None
+        y = select_signals(table, outs, traj_col) if model.lags_.ny else None
+        zhat, flags = model.predict(u, y, return_flags=True)
+        rows = np.concatenate(
+            [np.arange(sl.start, sl.stop)[model.lags_.memory - 1 :] for sl in split_trajectories(table, traj_col)]
+        )
+        cols: dict = {"row": rows}
+        for i, t in enumerate(tgts):
+            cols[f"{t}_hat"] = zhat[:, i]
+        cols["out_of_domain"] = flags
+        write_csv(output, cols)
+        for i, t in enumerate(tgts):
+            for ref in (f"{t}_true", t):
+                if ref in table.header:
+                    ztrue = table.numeric([ref])[rows, 0]
+                    rmse = float(np.sqrt(np.mean((zhat[:, i] - ztrue) ** 2)))
+                    err.print(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {rows.size} samples", highlight=False, markup=False)
+                    break
+        if flags.any():
+            err.print(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)", highlight=False, markup=False)
+        err.print(f"wrote {output} ({rows.size} rows)", highlight=False, markup=False)
+
+
+@app.command()
+def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file.")]) -> None:
+    """Print a summary of a model file as JSON (everything but the weights)."""
+    with _user_errors():
+        model = PWASVirtualSensor.load(model_path)
+        d = model.to_dict()
+        d.pop("weights")
+        d["N"] = model.grid_.n_vertices
+        d["n"] = model.grid_.n
+        d["weight_range"] = [float(model.weights_.min()), float(model.weights_.max())]
+        out.print_json(json.dumps(d))
+
+
+@data_app.command("lorenz")
+def make_data_lorenz(
+    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns y, z, z_true).")],
+    samples: Annotated[int, typer.Option("--samples", help="Number of samples in OUTPUT.")] = 6000,
+    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the continuation of the same trajectory here (a test set).")] = None,
+    test_samples: Annotated[int, typer.Option("--test-samples", help="Samples in the test file.")] = 2000,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (initial state and noise).")] = 0,
+) -> None:
+    """The discrete Lorenz system of the paper (eq. 18): y = x1 + noise(0.02), z = x2*x3 + noise(20).
+
+    The columns are y (measured output), z (the real sensor's noisy measurement) and z_true (the
+    noise-free value, used for the RMSEE of eq. 17).
+    """
+    from .plants import lorenz
+
+    with _user_errors():
+        if samples < 1 or (test_output is not None and test_samples < 1):
+            raise UserError("--samples and --test-samples must be >= 1")
+        total = samples + (test_samples if test_output is not None else 0)
+        d = lorenz(total, seed=seed)
+        train, test = d.split(samples)
+        write_csv(output, train.columns())
+        err.print(f"wrote {output} ({samples} samples, seed {seed})", highlight=False, markup=False)
+        if test_output is not None:
+            write_csv(test_output, test.columns())
+            err.print(f"wrote {test_output} ({test_samples} samples following {output})", highlight=False, markup=False)
+
+
+@bench_app.command("lorenz")
+def bench_lorenz(
+    json_out: Annotated[Path, typer.Option("--json", help="JSON result file to write.")],
+    markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write a Markdown table here.")] = None,
+    seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds (0..seeds-1) to average over.")] = 5,
+    quick: Annotated[bool, typer.Option("--quick", help="Only the Table II row (My=4, p=7, gamma=1.2).")] = False,
+) -> None:
+    """Reproduce Tables II-V of the paper (Lorenz): RMSEE over seeds, beside the paper's values."""
+    from . import lorenz_tables
+
+    with _user_errors():
+        if seeds < 1:
+            raise UserError("--seeds must be >= 1")
+        rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
+
+        def report(msg: str) -> None:
+            err.print(msg, highlight=False, markup=False)
+
+        result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=report)
+        atomic_write_text(json_out, json.dumps(result, indent=2) + "\n")
+        table = lorenz_tables.markdown_table(result)
+        if markdown is not None:
+            atomic_write_text(markdown, table)
+        out.print(table, highlight=False, markup=False)
+        err.print(f"wrote {json_out}", highlight=False, markup=False)
+
+
+def _version(value: bool) -> None:
+    if value:
+        out.print(f"pwas-hdl {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")] = False,
+) -> None:
+    """PWAS virtual sensors: fit from plant data, evaluate, benchmark, generate verified Verilog."""
+
+
+def main() -> None:  # console-script entry point
+    app()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
