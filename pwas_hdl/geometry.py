@@ -292,16 +292,27 @@ class Grid:
         return np.concatenate([base[:, None], base[:, None] + steps], axis=1)
 
     @staticmethod
-    def barycentric(frac: np.ndarray, perm: np.ndarray) -> np.ndarray:
-        """Barycentric weights ``mu`` from fractional parts (float) and their ordering.
+    def barycentric(frac: np.ndarray, perm: np.ndarray, one: float | int = 1) -> np.ndarray:
+        """Barycentric weights ``mu`` from fractional parts and their ordering.
+
+        Parameters
+        ----------
+        frac : ndarray, shape (m, n)
+            Fractional parts, float in ``[0, 1]`` or integers in ``[0, one]``.
+        perm : ndarray, shape (m, n), int
+            Ordering from :meth:`order`.
+        one : float or int
+            The value that stands for 1 (default 1). The fixed-point model passes integer
+            fractions in units of ``2**-F`` together with ``one = 2**F``; the result then is exact
+            integer ``mu`` summing to ``2**F``.
 
         Returns
         -------
-        ndarray, shape (m, n + 1)
+        ndarray, shape (m, n + 1), dtype of ``frac``
         """
         m = frac.shape[0]
         d_sorted = np.take_along_axis(frac, perm, axis=1)
-        one = np.ones((m, 1), dtype=frac.dtype)
+        one = np.full((m, 1), one, dtype=frac.dtype)
         zero = np.zeros((m, 1), dtype=frac.dtype)
         upper = np.concatenate([one, d_sorted], axis=1)
         lower = np.concatenate([d_sorted, zero], axis=1)
