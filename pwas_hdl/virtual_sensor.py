@@ -375,22 +375,27 @@ class PWASVirtualSensor:
             obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
             if obj.lags_.dimension != grid.n:
                 raise ValueError(f"lags give n = {obj.lags_.dimension} but the grid has {grid.n} dimensions")
-        except (KeyError, TypeError, ValueError) as exc:
+            sigma = float(fit["sigma"])
+            cv = fit.get("cv")
+            cv_res = (
+                CVResult(np.array(cv["sigmas"]), np.array(cv["mse"]), float(cv["best_sigma"]), int(cv["folds"]))
+                if cv
+                else None
+            )
+            n_train = int(fit.get("n_train", 0))
+            n_traj = int(fit.get("n_trajectories", 1))
+            train_rmse = np.array([fit.get("train_rmse", {}).get(t, float("nan")) for t in tgts])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ValueError(f"{source} is corrupt or incomplete ({type(exc).__name__}: {exc}); re-run `pwas-hdl fit`") from exc
         if not np.all(np.isfinite(w)):
             raise ValueError(f"{source} has non-finite weights; re-run `pwas-hdl fit`")
         obj.grid_ = grid
         obj.weights_ = w
-        obj.sigma_ = float(fit["sigma"])
-        cv = fit.get("cv")
-        obj.cv_ = (
-            CVResult(np.array(cv["sigmas"]), np.array(cv["mse"]), float(cv["best_sigma"]), int(cv["folds"]))
-            if cv
-            else None
-        )
-        obj.n_train_ = int(fit.get("n_train", 0))
-        obj.n_trajectories_ = int(fit.get("n_trajectories", 1))
-        obj.train_rmse_ = np.array([fit.get("train_rmse", {}).get(t, float("nan")) for t in tgts])
+        obj.sigma_ = sigma
+        obj.cv_ = cv_res
+        obj.n_train_ = n_train
+        obj.n_trajectories_ = n_traj
+        obj.train_rmse_ = train_rmse
         return obj
 
     @classmethod
