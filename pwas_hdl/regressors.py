@@ -40,6 +40,8 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
         items = [data]
     else:
         items = list(data)
+        if items and all(np.ndim(a) == 0 for a in items):  # a plain list of numbers: one trajectory
+            items = [np.asarray(items, dtype=float)]
     out = []
     for i, a in enumerate(items):
         arr = np.asarray(a, dtype=float)

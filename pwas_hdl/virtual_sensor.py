@@ -121,33 +121,39 @@ class PWASVirtualSensor:
     def _check_params(self) -> None:
         if not (isinstance(self.gamma, (int, float)) and math.isfinite(self.gamma) and self.gamma >= 1):
             raise ValueError(f"gamma must be a number >= 1 (domain expansion factor), got {self.gamma!r}")
-        if self.sigma is not None and not (math.isfinite(self.sigma) and self.sigma > 0):
+        if self.sigma is not None and not (
+            isinstance(self.sigma, (int, float, np.floating)) and math.isfinite(self.sigma) and self.sigma > 0
+        ):
             raise ValueError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
             raise ValueError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
 
     # ------------------------------------------------------------------ fit
     def regressors(self, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
-        """Stacked regressors of the trajectories (see :mod:`pwas_hdl.regressors`)."""
-        lags = self._lag_structure(u, y)
-        us = as_trajectories(u, "u", lags.nu if lags.nu else None)
-        ys = as_trajectories(y, "y", lags.ny if lags.ny else None)
-        n_traj = max(len(us), len(ys))
+        """Stacked regressors of the trajectories (see :mod:`pwas_hdl.regressors`).
+
+        Uses the fitted lag structure when the sensor is fitted, else the one implied by the data.
+        """
+        lags = self.lags_ if hasattr(self, "lags_") else self._infer_lags(u, y)
+        return self._build_regressors(lags, u, y)
+
+    @staticmethod
+    def _build_regressors(lags: LagStructure, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
+        us = as_trajectories(u, "u", lags.nu) if lags.nu else []
+        ys = as_trajectories(y, "y", lags.ny) if lags.ny else []
         if us and ys and len(us) != len(ys):
             raise ValueError(f"got {len(us)} input trajectories but {len(ys)} output trajectories")
-        return lags.build_many(us, ys, n_traj)
+        return lags.build_many(us, ys, max(len(us), len(ys)))
 
-    def _lag_structure(self, u: Trajectories, y: Trajectories) -> LagStructure:
-        if hasattr(self, "lags_"):
-            return self.lags_
+    def _infer_lags(self, u: Trajectories, y: Trajectories) -> LagStructure:
         us = as_trajectories(u, "u")
         ys = as_trajectories(y, "y")
-        nu = us[0].shape[1] if us and self.mu else 0
-        ny = ys[0].shape[1] if ys and self.my else 0
         if self.mu and not us:
             raise ValueError(f"Mu = {self.mu} input lags requested but no input data given; pass u or set mu=0")
         if self.my and not ys:
             raise ValueError(f"My = {self.my} output lags requested but no output data given; pass y or set my=0")
+        nu = us[0].shape[1] if us and self.mu else 0
+        ny = ys[0].shape[1] if ys and self.my else 0
         return LagStructure(int(self.mu), int(self.my), nu, ny)
 
     def _data_domain(self, xi: np.ndarray, lags: LagStructure) -> tuple[np.ndarray, np.ndarray]:
@@ -200,17 +206,18 @@ class PWASVirtualSensor:
         self
         """
         self._check_params()
-        for attr in ("lags_", "grid_", "weights_"):
-            if hasattr(self, attr):
-                delattr(self, attr)
-        lags = self._lag_structure(u, y)
-        xi, valid = self.regressors(u, y)
+        # Everything is computed into locals first: a fit that fails leaves a previous fit intact.
+        lags = self._infer_lags(u, y)
+        xi, valid = self._build_regressors(lags, u, y)
         zs = as_trajectories(z, "z")
         if len(zs) != len(valid):
             raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
         for i, (zi, sl) in enumerate(zip(zs, valid)):
-            if zi.shape[0] < sl.stop:
-                raise ValueError(f"target trajectory {i} has {zi.shape[0]} samples, expected at least {sl.stop}")
+            if zi.shape[0] != sl.stop:
+                raise ValueError(
+                    f"target trajectory {i} has {zi.shape[0]} samples but its inputs/outputs have {sl.stop}; "
+                    "u, y and z must be sampled at the same instants"
+                )
         zt = np.concatenate([zi[sl] for zi, sl in zip(zs, valid)], axis=0)
         nz = zt.shape[1]
         if self.target_names is not None and len(self.target_names) != nz:
@@ -349,7 +356,7 @@ class PWASVirtualSensor:
         """Rebuild a fitted sensor from the dict written by :meth:`to_dict`."""
         if not isinstance(d, dict) or d.get("format") != MODEL_FORMAT:
             raise ValueError(f"{source} is not a pwas-hdl model (missing \"format\": \"{MODEL_FORMAT}\")")
-        if d.get("version") != MODEL_VERSION:
+        if type(d.get("version")) is not int or d.get("version") != MODEL_VERSION:
             raise ValueError(
                 f"{source} has model version {d.get('version')!r}, this pwas-hdl reads version {MODEL_VERSION}; "
                 "re-run `pwas-hdl fit` to regenerate it"
@@ -375,6 +382,8 @@ class PWASVirtualSensor:
             obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
             if obj.lags_.dimension != grid.n:
                 raise ValueError(f"lags give n = {obj.lags_.dimension} but the grid has {grid.n} dimensions")
+            if d["regressors"] != obj._regressor_names(obj.lags_):
+                raise ValueError(f"regressors {d['regressors']} do not match the lags and signal names")
             sigma = float(fit["sigma"])
             cv = fit.get("cv")
             cv_res = (

@@ -153,7 +153,7 @@ def test_mismatched_lengths_and_trajectory_counts(good_data):
     u, y, z = good_data
     with pytest.raises(ValueError, match="different lengths"):
         PWASVirtualSensor(mu=1, my=1, sigma=1.0).fit(u[:-1], y, z)
-    with pytest.raises(ValueError, match="target trajectory 0 has 150 samples, expected at least 200"):
+    with pytest.raises(ValueError, match="target trajectory 0 has 150 samples but its inputs/outputs have 200"):
         PWASVirtualSensor(mu=1, my=1, sigma=1.0).fit(u, y, z[:150])
     with pytest.raises(ValueError, match="got 2 target trajectories for 1"):
         PWASVirtualSensor(mu=1, my=1, sigma=1.0).fit(u, y, [z, z])
@@ -375,3 +375,39 @@ def test_model_inconsistent_content(tmp_path, model_dict):
     text = json.dumps(model_dict).replace(repr(model_dict["weights"]["z0"][4]), "NaN", 1)
     with pytest.raises(ValueError, match="non-finite weights"):
         PWASVirtualSensor.load(_write(tmp_path / "nan.json", text))
+
+
+def test_failed_refit_keeps_the_previous_fit(good_data):
+    u, y, z = good_data
+    m = PWASVirtualSensor(mu=1, my=1, sigma=1.0).fit(u, y, z)
+    before = m.weights_.copy()
+    with pytest.raises(ValueError, match="NaN"):
+        m.fit(u, y, np.full_like(z, np.nan))
+    assert np.array_equal(m.weights_, before)
+    assert m.predict(u, y).shape[0] == u.shape[0] - 1
+
+
+def test_z_longer_than_inputs_is_refused(good_data):
+    u, y, z = good_data
+    with pytest.raises(ValueError, match="sampled at the same instants"):
+        PWASVirtualSensor(mu=1, my=1, sigma=1.0).fit(u, y, np.concatenate([z, z[:5]]))
+
+
+@pytest.mark.parametrize("version", [True, 1.0])
+def test_model_version_must_be_the_integer_1(tmp_path, good_data, version):
+    import json
+
+    u, y, z = good_data
+    p = tmp_path / "m.json"
+    PWASVirtualSensor(mu=1, my=1, sigma=1.0).fit(u, y, z).save(p)
+    d = json.loads(p.read_text())
+    d["version"] = version
+    p.write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="model version"):
+        PWASVirtualSensor.load(p)
+
+
+def test_sigma_of_the_wrong_type_is_a_value_error(good_data):
+    u, y, z = good_data
+    with pytest.raises(ValueError, match="sigma must be a positive number"):
+        PWASVirtualSensor(mu=1, my=1, sigma="1").fit(u, y, z)
