@@ -1,0 +1,691 @@
+"""Fixed-point number formats: two's complement codes, rounding, overflow, physical scaling.
+
+Everything the bit-true model (:mod:`pwas_hdl.bittrue`) and the RTL generator need to agree on a
+number format lives here.
+
+Conventions
+-----------
+Code and value
+    A :class:`FixedFormat` ``sB.F`` (signed) or ``uB.F`` (unsigned) holds integer *codes* ``c`` of
+    ``B`` bits; the code stands for the *format value* ``c * 2**-F`` (``F`` may be negative or
+    larger than ``B``). Signed codes are two's complement: ``-2**(B-1) <= c <= 2**(B-1) - 1``;
+    unsigned ``0 <= c <= 2**B - 1``. Codes are ``numpy.int64``, so ``B <= 64`` (signed) and
+    ``B <= 63`` (unsigned).
+Rounding (value -> code)
+    ``"half_up"``: ``c = floor(v * 2**F + 0.5)`` (ties go towards +infinity, also for negative
+    values: -0.5 -> 0, -1.5 -> -1). ``"truncate"``: ``c = floor(v * 2**F)`` (towards -infinity,
+    what dropping low bits of a two's complement number does). Both are computed exactly in
+    float64 (``v * 2**F`` is an exact scaling; the half-up test uses ``x - floor(x) >= 0.5``, which
+    is exact, not ``floor(x + 0.5)``, which is not for ``x`` just below a tie).
+Overflow (code outside the range)
+    ``"saturate"``: clamp to the nearest end; ``"error"``: raise :class:`ValueError` naming the
+    worst value and the bits it needs; ``"wrap"``: keep the low ``B`` bits (two's complement
+    wrap-around; exact while ``|v * 2**F| < 2**53``).
+Physical meaning
+    A port carries a :class:`PortFormat` = format + :class:`SignalScaling`::
+
+        physical = offset + scale * (code * 2**-F)
+
+    The manifest prints format, scale and offset of every port.
+Grid inputs
+    :class:`InputFormat` is the format of one regressor dimension of a PWAS grid: signed
+    ``B_in``-bit codes placed so that **one grid cell is exactly** ``2**F_j`` **codes** (see the
+    class). The hardware then needs no multiplier to go from the input code to the cell index
+    and the fraction.
+
+RTL rounding of a right shift
+    :func:`shift_round` is the integer operation the RTL performs to drop ``sh`` low bits:
+    ``(a + 2**(sh-1)) >> sh`` (half up) or ``a >> sh`` (truncate), arithmetic shifts.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "ROUNDING_MODES",
+    "OVERFLOW_MODES",
+    "FixedFormat",
+    "SignalScaling",
+    "PortFormat",
+    "InputFormat",
+    "grid_input_formats",
+    "signed_bits_needed",
+    "unsigned_bits_needed",
+    "shift_round",
+    "frac_for_bits",
+]
+
+ROUNDING_MODES = ("half_up", "truncate")
+OVERFLOW_MODES = ("saturate", "error", "wrap")
+
+_MAX_ABS_FRAC = 1000  # keeps 2**-frac a normal float64
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+def signed_bits_needed(codes) -> int:
+    """Fewest two's complement bits that hold every integer in ``codes`` (at least 1).
+
+    ``c >= 0`` needs ``c.bit_length() + 1`` bits, ``c < 0`` needs ``(-c - 1).bit_length() + 1``.
+
+    Parameters
+    ----------
+    codes : int or array_like of int
+
+    Returns
+    -------
+    int
+    """
+    a = np.asarray(codes)
+    if a.size == 0:
+        return 1
+    hi = int(a.max())
+    lo = int(a.min())
+    return max(1, hi.bit_length() + 1 if hi >= 0 else 1, (-lo - 1).bit_length() + 1 if lo < 0 else 1)
+
+
+def unsigned_bits_needed(codes) -> int:
+    """Fewest unsigned bits that hold every integer in ``codes`` (at least 1).
+
+    Raises
+    ------
+    ValueError
+        A code is negative.
+    """
+    a = np.asarray(codes)
+    if a.size == 0:
+        return 1
+    if int(a.min()) < 0:
+        raise ValueError(f"negative code {int(a.min())} cannot be unsigned")
+    return max(1, int(a.max()).bit_length())
+
+
+def shift_round(a, sh: int, rounding: str = "half_up") -> np.ndarray:
+    """Drop ``sh`` low bits of integers as the RTL does.
+
+    Parameters
+    ----------
+    a : array_like of int
+        Two's complement integers (``numpy.int64``).
+    sh : int
+        Bits to drop, ``>= 0``; ``sh = 0`` returns ``a`` unchanged (no rounding).
+    rounding : {"half_up", "truncate"}
+        ``"half_up"``: ``(a + 2**(sh-1)) >> sh`` = ``floor(a / 2**sh + 1/2)``;
+        ``"truncate"``: ``a >> sh`` = ``floor(a / 2**sh)``. ``>>`` is an arithmetic shift.
+
+    Returns
+    -------
+    ndarray of int64
+    """
+    if not _is_int(sh) or sh < 0:
+        raise ValueError(f"shift must be an integer >= 0, got {sh!r}")
+    if rounding not in ROUNDING_MODES:
+        raise ValueError(f"rounding must be one of {ROUNDING_MODES}, got {rounding!r}")
+    x = np.asarray(a, dtype=np.int64)
+    if sh == 0:
+        return x.copy()
+    if rounding == "half_up":
+        x = x + np.int64(1 << (sh - 1))
+    return x >> np.int64(sh)
+
+
+def _round_scaled(scaled: np.ndarray, rounding: str) -> np.ndarray:
+    """Integer-valued float array: ``floor(scaled)`` or ``floor(scaled + 1/2)``, exactly."""
+    fl = np.floor(scaled)
+    if rounding == "truncate":
+        return fl
+    # scaled - floor(scaled) is exact in float64, floor(scaled + 0.5) is not (0.49999999999999994).
+    with np.errstate(invalid="ignore"):  # +-inf - +-inf: left infinite, saturated later
+        return np.where(np.isfinite(scaled), fl + ((scaled - fl) >= 0.5), scaled)
+
+
+@dataclass(frozen=True)
+class FixedFormat:
+    """A binary fixed-point format: ``bits`` total, ``frac`` fraction bits, two's complement.
+
+    Parameters
+    ----------
+    bits : int
+        Total width, ``1 <= bits <= 64`` (signed) or ``<= 63`` (unsigned; codes are int64).
+    frac : int
+        Fraction bits: the code ``c`` stands for ``c * 2**-frac``. May be negative (lsb > 1) or
+        larger than ``bits`` (all values smaller than 1). ``|frac| <= 1000``.
+    signed : bool
+        Two's complement signed (default) or unsigned.
+    rounding : {"half_up", "truncate"}
+        Rounding of :meth:`quantize` (see the module docstring).
+    overflow : {"saturate", "error", "wrap"}
+        What :meth:`quantize` does with values outside the range.
+
+    Examples
+    --------
+    >>> f = FixedFormat(8, 4)
+    >>> str(f), f.lsb, f.min_value, f.max_value
+    ('s8.4', 0.0625, -8.0, 7.9375)
+    >>> f.quantize([0.03125, -0.03125, 100.0]).tolist()
+    [1, 0, 127]
+    """
+
+    bits: int
+    frac: int
+    signed: bool = True
+    rounding: str = "half_up"
+    overflow: str = "saturate"
+
+    def __post_init__(self) -> None:
+        if not _is_int(self.bits):
+            raise ValueError(f"bits must be an integer, got {self.bits!r}")
+        if not _is_int(self.frac):
+            raise ValueError(f"frac (fraction bits) must be an integer, got {self.frac!r}")
+        if not isinstance(self.signed, (bool, np.bool_)):
+            raise ValueError(f"signed must be True or False, got {self.signed!r}")
+        if self.bits < 1:
+            raise ValueError(f"bits = {self.bits}: a fixed-point format needs at least 1 bit")
+        limit = 64 if self.signed else 63
+        if self.bits > limit:
+            raise ValueError(
+                f"bits = {self.bits} exceeds {limit}, the widest {'signed' if self.signed else 'unsigned'} "
+                "format whose codes fit numpy.int64"
+            )
+        if abs(self.frac) > _MAX_ABS_FRAC:
+            raise ValueError(f"frac = {self.frac} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
+        if self.rounding not in ROUNDING_MODES:
+            raise ValueError(f"rounding must be one of {ROUNDING_MODES}, got {self.rounding!r}")
+        if self.overflow not in OVERFLOW_MODES:
+            raise ValueError(f"overflow must be one of {OVERFLOW_MODES}, got {self.overflow!r}")
+        # normalise numpy scalars to Python ints so that the dataclass hashes/compares simply
+        object.__setattr__(self, "bits", int(self.bits))
+        object.__setattr__(self, "frac", int(self.frac))
+        object.__setattr__(self, "signed", bool(self.signed))
+
+    # ------------------------------------------------------------ range
+    @property
+    def lsb(self) -> float:
+        """Value of one code step, ``2**-frac``."""
+        return math.ldexp(1.0, -self.frac)
+
+    @property
+    def min_code(self) -> int:
+        """Smallest code: ``-2**(bits-1)`` (signed) or 0."""
+        return -(1 << (self.bits - 1)) if self.signed else 0
+
+    @property
+    def max_code(self) -> int:
+        """Largest code: ``2**(bits-1) - 1`` (signed) or ``2**bits - 1``."""
+        return (1 << (self.bits - 1)) - 1 if self.signed else (1 << self.bits) - 1
+
+    @property
+    def min_value(self) -> float:
+        """``min_code * lsb``."""
+        return math.ldexp(float(self.min_code), -self.frac)
+
+    @property
+    def max_value(self) -> float:
+        """``max_code * lsb`` (rounded to float64 for ``bits > 53``)."""
+        return math.ldexp(float(self.max_code), -self.frac)
+
+    def __str__(self) -> str:
+        return f"{'s' if self.signed else 'u'}{self.bits}.{self.frac}"
+
+    @classmethod
+    def from_string(cls, text: str, rounding: str = "half_up", overflow: str = "saturate") -> "FixedFormat":
+        """Parse ``"s16.4"``, ``"u12.9"`` or ``"s8.-2"`` (the :meth:`__str__` form)."""
+        m = re.fullmatch(r"\s*([su])(\d+)\.(-?\d+)\s*", str(text))
+        if not m:
+            raise ValueError(f"cannot parse fixed-point format {text!r}; expected e.g. 's16.4' or 'u12.9'")
+        return cls(int(m.group(2)), int(m.group(3)), m.group(1) == "s", rounding, overflow)
+
+    # ------------------------------------------------------- conversion
+    def fits(self, codes) -> np.ndarray:
+        """Elementwise: is the integer code inside ``[min_code, max_code]``?
+
+        Returns
+        -------
+        ndarray of bool, shape of ``codes`` (use ``.all()`` for one answer)
+        """
+        c = np.asarray(codes)
+        if c.dtype.kind in "iu":
+            return (c >= self.min_code) & (c <= self.max_code)
+        return (c >= self.min_code) & (c <= self.max_code) & (c == np.floor(c))
+
+    def to_float(self, codes) -> np.ndarray:
+        """Format values ``codes * 2**-frac`` (float64; exact for ``|code| < 2**53``)."""
+        return np.ldexp(np.asarray(codes, dtype=np.int64).astype(float), -self.frac)
+
+    def quantize(self, values, return_saturated: bool = False, what: str = "value"):
+        """Round values to codes and apply the overflow rule.
+
+        Parameters
+        ----------
+        values : array_like of float
+            Format values (``code * 2**-frac`` units, i.e. *not* physical units; see
+            :meth:`PortFormat.quantize` for physical values). NaN is refused; +-inf saturates
+            (or raises with ``overflow="error"``).
+        return_saturated : bool
+            Also return the boolean mask of the values that were outside the range before the
+            overflow rule (saturated, wrapped; with ``"error"`` it is all False). ``mask.sum()``
+            is the number of saturated values.
+        what : str
+            Noun used in error messages (e.g. ``"weight"``).
+
+        Returns
+        -------
+        codes : ndarray of int64, shape of ``values``
+        saturated : ndarray of bool (only with ``return_saturated``)
+
+        Raises
+        ------
+        ValueError
+            NaN input, or ``overflow="error"`` and a value does not fit. The message names the
+            worst value (the one furthest outside the range), the range of the format and the
+            number of bits (at this ``frac``) that would hold every value.
+        """
+        v = np.asarray(values, dtype=float)
+        if np.isnan(v).any():
+            idx = np.unravel_index(int(np.flatnonzero(np.isnan(v.reshape(-1)))[0]), v.shape)
+            raise ValueError(f"{what} at index {tuple(int(i) for i in idx)} is NaN; cannot quantize to {self}")
+        return self._apply(_round_scaled(np.ldexp(v, self.frac), self.rounding), v, return_saturated, what)
+
+    def _apply(self, r: np.ndarray, v: np.ndarray, return_saturated: bool, what: str):
+        """Overflow rule on integer-valued float codes ``r`` (``v``: original values, for messages)."""
+        lo_f = float(self.min_code)  # exact: a power of two or 0
+        hi_f = float(self.max_code)
+        if int(hi_f) > self.max_code:  # bits > 53: largest float64 <= max_code
+            hi_f = float(np.nextafter(hi_f, -np.inf))
+        below = r < lo_f
+        above = r > hi_f
+        bad = below | above
+        if self.overflow == "error" and bad.any():
+            excess = np.where(below, lo_f - r, np.where(above, r - hi_f, 0.0))
+            flat = int(np.argmax(excess.reshape(-1)))
+            idx = tuple(int(i) for i in np.unravel_index(flat, r.shape))
+            worst = float(v.reshape(-1)[flat])
+            where = f" at index {idx}" if r.ndim else ""
+            if not np.isfinite(r).all():
+                need = "no finite number of bits holds an infinite value"
+            elif not self.signed and r.min() < 0:
+                need = "negative values need a signed format"
+            else:
+                rr = [int(r.min()), int(r.max())]
+                nb = signed_bits_needed(rr) if self.signed else unsigned_bits_needed(rr)
+                need = f"{nb} bits are needed at {self.frac} fraction bits"
+            raise ValueError(
+                f"{what}{where} = {worst!r} does not fit the fixed-point format {self} "
+                f"(range [{self.min_value!r}, {self.max_value!r}], lsb {self.lsb!r}); "
+                f"{int(bad.sum())} value(s) overflow and {need}. "
+                "Use more bits, fewer fraction bits, or overflow='saturate'"
+            )
+        if self.overflow == "wrap":
+            span = 2.0 ** self.bits
+            r = np.where(bad, np.mod(r - lo_f, span) + lo_f, r)
+            codes = r.astype(np.int64)
+        else:
+            codes = np.clip(r, lo_f, hi_f).astype(np.int64)
+            codes = np.where(above, np.int64(self.max_code), codes)
+            codes = np.where(below, np.int64(self.min_code), codes)
+        codes = np.asarray(codes, dtype=np.int64)
+        return (codes, bad) if return_saturated else codes
+
+    # ---------------------------------------------------------- files
+    def to_dict(self) -> dict:
+        """JSON-ready description (``from_dict`` reads ``bits``, ``frac``, ``signed``,
+        ``rounding``, ``overflow``; the rest is for people and the manifest)."""
+        return {
+            "str": str(self),
+            "bits": self.bits,
+            "frac": self.frac,
+            "signed": self.signed,
+            "rounding": self.rounding,
+            "overflow": self.overflow,
+            "lsb": self.lsb,
+            "min_code": self.min_code,
+            "max_code": self.max_code,
+            "min_value": self.min_value,
+            "max_value": self.max_value,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "FixedFormat":
+        """Inverse of :meth:`to_dict`."""
+        try:
+            return cls(int(d["bits"]), int(d["frac"]), bool(d.get("signed", True)), d.get("rounding", "half_up"), d.get("overflow", "saturate"))
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"not a fixed-point format description ({type(exc).__name__}: {exc}): {d!r}") from exc
+
+
+def frac_for_bits(values, bits: int, signed: bool = True, rounding: str = "half_up") -> int:
+    """Largest number of fraction bits with which every value fits in ``bits`` bits.
+
+    Useful for precision sweeps ("given B_w bits, the finest lsb that holds all weights").
+
+    Parameters
+    ----------
+    values : array_like of float
+        Must be finite; at least one must be non-zero.
+    bits : int
+    signed : bool
+    rounding : {"half_up", "truncate"}
+
+    Returns
+    -------
+    int
+        ``frac`` such that ``FixedFormat(bits, frac, signed, rounding, "error").quantize(values)``
+        succeeds and ``frac + 1`` would not.
+    """
+    v = np.asarray(values, dtype=float).reshape(-1)
+    if v.size == 0 or not np.all(np.isfinite(v)) or not np.any(v != 0):
+        raise ValueError("frac_for_bits needs finite values, at least one of them non-zero")
+    FixedFormat(bits, 0, signed)  # validates bits
+    big = float(np.max(np.abs(v)))
+    frac = (bits - 1 if signed else bits) - (math.frexp(big)[1])  # a first guess, refined below
+    frac = max(-_MAX_ABS_FRAC, min(_MAX_ABS_FRAC, frac))
+
+    def ok(f: int) -> bool:
+        fmt = FixedFormat(bits, f, signed, rounding, "saturate")
+        _, sat = fmt.quantize(v, return_saturated=True)
+        return not sat.any()
+
+    while not ok(frac):
+        frac -= 1
+        if frac < -_MAX_ABS_FRAC:
+            raise ValueError(f"no fraction-bit count lets the values fit {bits} bits")
+    while frac < _MAX_ABS_FRAC and ok(frac + 1):
+        frac += 1
+    return frac
+
+
+@dataclass(frozen=True)
+class SignalScaling:
+    """Physical meaning of a format value: ``physical = offset + scale * value``.
+
+    Parameters
+    ----------
+    scale : float
+        Positive, finite.
+    offset : float
+        Finite.
+    """
+
+    scale: float = 1.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"scale must be a positive finite number, got {self.scale!r}")
+        if not math.isfinite(self.offset):
+            raise ValueError(f"offset must be finite, got {self.offset!r}")
+        object.__setattr__(self, "scale", float(self.scale))
+        object.__setattr__(self, "offset", float(self.offset))
+
+    def to_physical(self, value) -> np.ndarray:
+        """``offset + scale * value``."""
+        return self.offset + self.scale * np.asarray(value, dtype=float)
+
+    def from_physical(self, x) -> np.ndarray:
+        """``(x - offset) / scale``."""
+        return (np.asarray(x, dtype=float) - self.offset) / self.scale
+
+    def to_dict(self) -> dict:
+        return {"scale": self.scale, "offset": self.offset}
+
+
+@dataclass(frozen=True)
+class PortFormat:
+    """Format of a port: codes of ``format`` with the physical meaning ``scaling``.
+
+    ``physical = scaling.offset + scaling.scale * (code * 2**-format.frac)``.
+
+    Parameters
+    ----------
+    format : FixedFormat
+    scaling : SignalScaling
+        Default: the identity (physical value = format value).
+    """
+
+    format: FixedFormat
+    scaling: SignalScaling = SignalScaling()
+
+    @property
+    def physical_lsb(self) -> float:
+        """Physical value of one code step, ``scale * 2**-frac``."""
+        return self.scaling.scale * self.format.lsb
+
+    def to_physical(self, codes) -> np.ndarray:
+        """Physical values of codes."""
+        return self.scaling.to_physical(self.format.to_float(codes))
+
+    def quantize(self, x, return_saturated: bool = False, what: str = "value"):
+        """Codes of physical values (rounding and overflow of ``format``)."""
+        return self.format.quantize(self.scaling.from_physical(x), return_saturated, what)
+
+    def to_dict(self) -> dict:
+        """Format, scale and offset (JSON-ready) with the conversion rule spelled out."""
+        return {
+            **self.format.to_dict(),
+            "scale": self.scaling.scale,
+            "offset": self.scaling.offset,
+            "physical_lsb": self.physical_lsb,
+            "physical": "offset + scale * code * 2**-frac",
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PortFormat":
+        """Inverse of :meth:`to_dict`."""
+        return cls(FixedFormat.from_dict(d), SignalScaling(float(d.get("scale", 1.0)), float(d.get("offset", 0.0))))
+
+
+def _cell_frac_bits(p: int, bits: int, fill: float) -> int:
+    """Largest ``F`` with ``p * 2**F <= fill * 2**bits`` (= floor(log2(fill * 2**bits / p))), exactly."""
+    rhs = Fraction(fill) * (1 << bits)
+    f = bits  # p >= 1 and fill <= 1, so F <= bits
+    while f >= 0 and Fraction(p) * Fraction(2) ** f > rhs:
+        f -= 1
+    return f
+
+
+@dataclass(frozen=True)
+class InputFormat:
+    """Input code format of one regressor dimension ``j`` of a PWAS grid.
+
+    Build it with :meth:`for_interval`. The domain ``[lo, hi]`` with ``p`` intervals of width
+    ``h = (hi - lo) / p`` is mapped to signed ``bits``-bit codes ``q`` so that **one grid cell is
+    exactly** ``2**F`` **codes**:
+
+    * ``F = floor(log2(fill * 2**bits / p))``, required ``>= 0``;
+    * ``lo_code = -((p * 2**F) // 2)``, ``hi_code = lo_code + p * 2**F`` (the domain is centred in
+      the code range; ``q = lo_code`` is ``x = lo``, ``q = hi_code`` is ``x = hi``);
+    * ``lsb = h / 2**F`` (physical units per code), ``offset = lo - lo_code * lsb``, so
+      ``x = offset + lsb * q``.
+
+    As a :class:`PortFormat` this is ``s<bits>.<F>`` with ``scale = h`` and ``offset``: the format
+    value ``q * 2**-F`` counts grid cells.
+
+    With ``fill = 1`` and ``p`` a power of two, ``hi_code = 2**(bits-1)`` is one above the
+    largest code: ``x = hi`` then saturates to ``hi_code - 1`` (one input lsb short) and the
+    input can never be above the domain. ``fill < 1`` leaves head room on both sides so that
+    out-of-domain inputs are seen and flagged.
+
+    Hardware (scale stage, no multiplier): ``t = q - lo_code`` (``bits + 1`` signed bits),
+    clamp ``t`` to ``[0, p * 2**F]`` (flag ``out_of_range`` if it clamped), cell
+    ``c = min(t >> F, p - 1)``, fraction ``d = t - c * 2**F`` in ``[0, 2**F]`` (``F + 1`` bits;
+    ``2**F`` only on the top face).
+
+    Attributes
+    ----------
+    lo, hi : float
+        Domain bounds, physical units.
+    partitions : int
+        ``p >= 1``.
+    bits : int
+        ``B_in``.
+    fill : float
+        ``input_fill`` in ``(0, 1]``.
+    frac : int
+        ``F_j``.
+    lo_code : int
+    """
+
+    lo: float
+    hi: float
+    partitions: int
+    bits: int
+    fill: float
+    frac: int
+    lo_code: int
+
+    @classmethod
+    def for_interval(cls, lo: float, hi: float, partitions: int, bits: int = 12, fill: float = 0.9, dim: int | None = None) -> "InputFormat":
+        """The input format of the interval ``[lo, hi]`` cut into ``partitions`` cells.
+
+        Parameters
+        ----------
+        lo, hi : float
+            ``hi > lo``, finite.
+        partitions : int
+            ``p >= 1``.
+        bits : int
+            ``B_in``, ``2 <= bits <= 40``.
+        fill : float
+            Fraction of the code range the domain may use, ``0 < fill <= 1``.
+        dim : int, optional
+            Dimension index, for error messages.
+
+        Raises
+        ------
+        ValueError
+            Bad arguments, or ``F < 0`` ("B_in too small for p_j intervals").
+        """
+        tag = f"_{dim}" if dim is not None else ""
+        lo, hi = float(lo), float(hi)
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            raise ValueError(f"input domain{tag} [{lo}, {hi}] must be finite with hi > lo")
+        if not _is_int(partitions) or partitions < 1:
+            raise ValueError(f"p{tag} = {partitions!r}: need an integer number of intervals >= 1")
+        if not _is_int(bits) or not 2 <= bits <= 40:
+            raise ValueError(f"input_bits = {bits!r}: need an integer in [2, 40]")
+        if not (isinstance(fill, (int, float, np.floating)) and 0 < float(fill) <= 1):
+            raise ValueError(f"input_fill = {fill!r}: need a number in (0, 1]")
+        fill = float(fill)
+        p = int(partitions)
+        f = _cell_frac_bits(p, int(bits), fill)
+        if f < 0:
+            need = int(bits)
+            while _cell_frac_bits(p, need, fill) < 0:
+                need += 1
+            raise ValueError(
+                f"B_in too small for p{tag} = {p} intervals: input_bits = {bits} at input_fill = {fill} gives "
+                f"fewer than one code per grid cell; use input_bits >= {need} (or fewer intervals)"
+            )
+        lo_code = -((p << f) // 2)
+        return cls(lo, hi, p, int(bits), fill, int(f), int(lo_code))
+
+    # ------------------------------------------------------------ derived
+    @property
+    def cell_codes(self) -> int:
+        """Codes per grid cell, ``2**F``."""
+        return 1 << self.frac
+
+    @property
+    def span_codes(self) -> int:
+        """Codes across the domain, ``p * 2**F``."""
+        return self.partitions << self.frac
+
+    @property
+    def hi_code(self) -> int:
+        """``lo_code + p * 2**F`` (the code of ``hi``; may be one above ``max_code``, see class)."""
+        return self.lo_code + self.span_codes
+
+    @property
+    def step(self) -> float:
+        """Physical cell width ``h = (hi - lo) / p`` (as :attr:`pwas_hdl.geometry.Grid.step`)."""
+        return (self.hi - self.lo) / self.partitions
+
+    @property
+    def lsb(self) -> float:
+        """Physical value of one input code, ``h / 2**F``."""
+        return math.ldexp(self.step, -self.frac)
+
+    @property
+    def offset(self) -> float:
+        """``lo - lo_code * lsb``: the physical value of code 0."""
+        return self.lo - self.lo_code * self.lsb
+
+    @property
+    def format(self) -> FixedFormat:
+        """``s<bits>.<F>``, rounding half up, saturating."""
+        return FixedFormat(self.bits, self.frac, True, "half_up", "saturate")
+
+    @property
+    def port(self) -> PortFormat:
+        """:class:`PortFormat` with ``scale = h`` and :attr:`offset`."""
+        return PortFormat(self.format, SignalScaling(self.step, self.offset))
+
+    # --------------------------------------------------------- conversion
+    def quantize(self, x, return_saturated: bool = False):
+        """Input codes of physical values.
+
+        ``q = floor(lo_code + (x - lo) / lsb + 1/2)`` evaluated in float64 (round half up to the
+        nearest code; measured from ``lo`` so that ``x = lo`` gives ``lo_code`` exactly), then
+        saturated to ``[-2**(bits-1), 2**(bits-1) - 1]``.
+
+        Parameters
+        ----------
+        x : array_like of float, physical units
+        return_saturated : bool
+            Also return the mask of values that saturated the ``bits``-bit range.
+
+        Returns
+        -------
+        q : ndarray of int64
+        saturated : ndarray of bool (only with ``return_saturated``)
+        """
+        v = np.asarray(x, dtype=float)
+        if np.isnan(v).any():
+            raise ValueError("input values contain NaN; cannot quantize")
+        scaled = self.lo_code + (v - self.lo) / self.lsb
+        return self.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
+
+    def to_physical(self, q) -> np.ndarray:
+        """Physical value a code represents: ``lo + lsb * (q - lo_code)`` (= ``offset + lsb*q``)."""
+        return self.lo + self.lsb * (np.asarray(q, dtype=np.int64) - self.lo_code).astype(float)
+
+    def grid_units(self, q) -> np.ndarray:
+        """Unclamped grid coordinate of codes, ``(q - lo_code) / 2**F`` (exact float)."""
+        return np.ldexp((np.asarray(q, dtype=np.int64) - self.lo_code).astype(float), -self.frac)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: domain, ``F``, codes, physical scaling."""
+        return {
+            "format": str(self.format),
+            "bits": self.bits,
+            "signed": True,
+            "F": self.frac,
+            "partitions": self.partitions,
+            "lo": self.lo,
+            "hi": self.hi,
+            "fill": self.fill,
+            "lo_code": self.lo_code,
+            "hi_code": self.hi_code,
+            "cell_codes": self.cell_codes,
+            "min_code": self.format.min_code,
+            "max_code": self.format.max_code,
+            "lsb": self.lsb,
+            "offset": self.offset,
+            "scale": self.step,
+            "physical": "offset + lsb * code = offset + scale * code * 2**-F",
+        }
+
+
+def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Sequence[int], bits: int = 12, fill: float = 0.9) -> list[InputFormat]:
+    """One :class:`InputFormat` per dimension (e.g. of a :class:`~pwas_hdl.geometry.Grid`:
+    ``grid_input_formats(g.lo, g.hi, g.partitions)``)."""
+    return [InputFormat.for_interval(float(a), float(b), int(p), bits, fill, dim=j) for j, (a, b, p) in enumerate(zip(lo, hi, partitions))]
