@@ -1,0 +1,351 @@
+"""Weight memory layouts: where each vertex weight lives in the ROM banks.
+
+This module is the single source of truth for the ROM layout: the generator writes the memory
+contents with :meth:`BankedLayout.contents` / :func:`hex_files`, and the bit-true model
+(:mod:`pwas_hdl.bittrue`) reads the weights back through the same layout, so a layout bug shows
+up as a bit-true mismatch against the float model.
+
+Both layouts give ``n + 1`` banks (one read port each, all read in the same cycle) and have the
+same interface: ``n_banks``, ``depth``, ``total_words``, ``bank_addr``, ``simplex_bank_addr``,
+``contents``, ``to_dict``.
+
+Banked layout (default, :class:`BankedLayout`)
+----------------------------------------------
+Vertex ``v = (v_0 .. v_{n-1})`` (coordinates of :mod:`pwas_hdl.geometry`, last dimension has
+stride 1) goes to
+
+* bank ``b(v) = (v_0 + ... + v_{n-1}) mod (n + 1)``;
+* address ``a(v) = r * (P' / (n+1)) + v_{n-1} // (n+1)``, where ``r`` is the C-order index of
+  ``(v_0 .. v_{n-2})`` (``r = linear_index // (p_{n-1} + 1)``; ``r = 0`` when ``n = 1``) and
+  ``P' = ceil((p_{n-1} + 1) / (n+1)) * (n+1)`` is the last dimension padded to a multiple of
+  ``n + 1``.
+
+Depth ``D = R * P' / (n+1)`` with ``R = N / (p_{n-1} + 1)`` rows; total ``(n+1) * D = R * P'``
+words, i.e. ``N`` plus the padding of each row (``N * P' / (p_{n-1}+1)``; 1.25 N for n = 4,
+p = 7). Slots that hold no vertex contain 0.
+
+*Uniqueness.* Given ``(b, a)``: ``r = a // (P'/(n+1))`` and the block ``g = a mod (P'/(n+1))``
+fix ``v_0 .. v_{n-2}`` (so their sum ``S``) and ``v_{n-1} in {g(n+1), .., g(n+1) + n}``; these
+``n + 1`` candidates have distinct residues mod ``n + 1``, so ``b = (S + v_{n-1}) mod (n+1)``
+selects exactly one. Hence no two vertices share ``(bank, addr)``.
+
+*One read per bank.* The vertices of a Kuhn simplex are ``v_k = c + e_perm[0] + .. +
+e_perm[k-1]``, whose coordinate sums are ``|c| + k``: vertex ``k`` is in bank
+``(|c| + k) mod (n+1)`` -- the ``n + 1`` vertices hit the ``n + 1`` banks once each (a rotation
+by ``|c| mod (n+1)``).
+
+Replicated layout (:class:`ReplicatedLayout`, for comparison)
+-------------------------------------------------------------
+``n + 1`` identical copies of the whole weight vector (depth ``N``, address = linear vertex
+index); vertex ``k`` of a simplex is read from copy ``k``. ``(n+1) * N`` words.
+
+``$readmemh`` files
+-------------------
+:func:`readmemh_text` writes one word per line, two's complement, lower-case hex with a fixed
+number of digits ``ceil(bits / 4)``, no comments, no address markers: line ``a`` is address ``a``.
+:func:`hex_files` chooses **one file per bank per target** by default (``<prefix>_b<bank>_z<target>.hex``,
+each word ``B_w`` bits wide), so every memory is a plain signed ROM of one weight. With
+``packed=True`` it writes one file per bank whose words hold all targets, target 0 in the least
+significant ``B_w`` bits (``<prefix>_b<bank>.hex``, ``nz * B_w`` bits).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import Grid
+
+__all__ = ["BankedLayout", "ReplicatedLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
+
+LAYOUT_KINDS = ("banked", "replicated")
+
+
+def _as_weight_matrix(weight_codes, n_vertices: int) -> np.ndarray:
+    w = np.asarray(weight_codes)
+    if w.dtype.kind not in "iu":
+        if not np.all(w == np.floor(w)):
+            raise ValueError("weight codes must be integers (quantize the weights first)")
+    w = w.astype(np.int64)
+    if w.ndim == 1:
+        w = w[:, None]
+    if w.ndim != 2 or w.shape[0] != n_vertices:
+        raise ValueError(f"weight codes must have shape (N, nz) with N = {n_vertices}, got {np.shape(weight_codes)}")
+    return w
+
+
+class _LayoutBase:
+    kind = ""
+
+    def __init__(self, grid: Grid):
+        if not isinstance(grid, Grid):
+            raise TypeError(f"expected a pwas_hdl.geometry.Grid, got {type(grid).__name__}")
+        self.grid = grid
+        self.n = grid.n
+        self.n_banks = grid.n + 1
+
+    @property
+    def total_words(self) -> int:
+        """Words over all banks, ``n_banks * depth``."""
+        return self.n_banks * self.depth
+
+    @property
+    def addr_bits(self) -> int:
+        """Address width of one bank, ``max(1, ceil(log2(depth)))``."""
+        return max(1, (self.depth - 1).bit_length())
+
+    def _index(self, vertex) -> np.ndarray:
+        if isinstance(vertex, tuple):
+            return self.grid.vertex_index(np.asarray(vertex, dtype=np.int64))
+        idx = np.asarray(vertex)
+        if idx.dtype.kind not in "iu":
+            raise ValueError("vertex indices must be integers")
+        idx = idx.astype(np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= self.grid.n_vertices):
+            raise ValueError(f"vertex index out of range [0, {self.grid.n_vertices})")
+        return idx
+
+    def contents(self, weight_codes) -> np.ndarray:
+        """ROM contents.
+
+        Parameters
+        ----------
+        weight_codes : array_like of int, shape (N, nz) or (N,)
+            Weight codes in vertex order.
+
+        Returns
+        -------
+        ndarray of int64, shape (n_banks, depth, nz)
+            ``out[b, a, t]`` is the word at address ``a`` of bank ``b`` for target ``t``; unused
+            slots are 0.
+        """
+        w = _as_weight_matrix(weight_codes, self.grid.n_vertices)
+        out = np.zeros((self.n_banks, self.depth, w.shape[1]), dtype=np.int64)
+        idx = np.arange(self.grid.n_vertices, dtype=np.int64)
+        for slot in range(self.n_banks) if self.kind == "replicated" else (None,):
+            b, a = self.bank_addr(idx, slot) if slot is not None else self.bank_addr(idx)
+            out[b, a, :] = w
+        return out
+
+    def used_mask(self) -> np.ndarray:
+        """Boolean ``(n_banks, depth)``: True where a vertex is stored."""
+        return self.contents(np.ones(self.grid.n_vertices, dtype=np.int64))[:, :, 0] != 0
+
+    def to_dict(self) -> dict:
+        """JSON-ready description for the manifest."""
+        return {
+            "kind": self.kind,
+            "n_banks": self.n_banks,
+            "depth": self.depth,
+            "addr_bits": self.addr_bits,
+            "total_words": self.total_words,
+            "n_vertices": self.grid.n_vertices,
+            "words_per_vertex": self.total_words / self.grid.n_vertices,
+        }
+
+
+class BankedLayout(_LayoutBase):
+    """``n + 1`` banks by coordinate sum mod ``n + 1`` (see the module docstring).
+
+    Parameters
+    ----------
+    grid : Grid
+
+    Attributes
+    ----------
+    n_banks : int
+        ``n + 1``.
+    n_rows : int
+        ``R = N / (p_{n-1} + 1)``.
+    padded_last : int
+        ``P'``, the last dimension padded to a multiple of ``n + 1``.
+    row_words : int
+        ``P' / (n + 1)``: addresses per row in each bank.
+    depth : int
+        ``R * P' / (n + 1)``.
+    """
+
+    kind = "banked"
+
+    def __init__(self, grid: Grid):
+        super().__init__(grid)
+        last = int(grid.partitions[-1]) + 1
+        self.n_rows = grid.n_vertices // last
+        self.padded_last = -(-last // self.n_banks) * self.n_banks
+        self.row_words = self.padded_last // self.n_banks
+        self.depth = self.n_rows * self.row_words
+
+    def bank_addr(self, vertex, slot=None) -> tuple[np.ndarray, np.ndarray]:
+        """Bank and address of vertices.
+
+        Parameters
+        ----------
+        vertex : int, array of int (linear indices, any shape) or tuple of n ints (coordinates)
+        slot : ignored
+            (Position in the simplex; only :class:`ReplicatedLayout` needs it.)
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape of the indices
+        """
+        return self.bank_addr_coords(self.grid.vertex_coords(self._index(vertex)))
+
+    def bank_addr_coords(self, coords) -> tuple[np.ndarray, np.ndarray]:
+        """Bank and address from integer coordinates, shape ``(..., n)``."""
+        c = np.asarray(coords, dtype=np.int64)
+        if c.shape[-1:] != (self.n,):
+            raise ValueError(f"vertex coordinates must have shape (..., {self.n}), got {c.shape}")
+        if c.size and (np.any(c < 0) or np.any(c > self.grid.partitions)):
+            raise ValueError("vertex coordinates outside the grid")
+        bank = c.sum(axis=-1) % self.n_banks
+        row = c[..., :-1] @ (self.grid.strides[:-1] // self.grid.shape[-1]) if self.n > 1 else np.zeros(c.shape[:-1], dtype=np.int64)
+        addr = row * self.row_words + c[..., -1] // self.n_banks
+        return bank.astype(np.int64), np.asarray(addr, dtype=np.int64)
+
+    def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
+        """Bank and address of each vertex of simplices.
+
+        Parameters
+        ----------
+        vertices : ndarray of int, shape (m, n + 1)
+            Linear indices, ``vertices[:, k]`` = vertex ``k`` (as :meth:`Grid.simplex_vertices`).
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape (m, n + 1)
+            For the banked layout ``bank[:, k] = (|cell| + k) mod (n + 1)``.
+        """
+        return self.bank_addr(np.asarray(vertices, dtype=np.int64))
+
+    def to_dict(self) -> dict:
+        d = super().to_dict()
+        d.update(
+            {
+                "n_rows": self.n_rows,
+                "padded_last": self.padded_last,
+                "row_words": self.row_words,
+                "bank": "(v_0 + ... + v_{n-1}) mod (n+1)",
+                "addr": "r * row_words + v_{n-1} // (n+1), r = C-order index of (v_0..v_{n-2})",
+            }
+        )
+        return d
+
+
+class ReplicatedLayout(_LayoutBase):
+    """``n + 1`` full copies of the weights (the MOBY-DIC "fast" circuit), for comparison.
+
+    Copy ``k`` serves vertex ``k`` of the simplex; address = linear vertex index.
+    """
+
+    kind = "replicated"
+
+    def __init__(self, grid: Grid):
+        super().__init__(grid)
+        self.depth = grid.n_vertices
+
+    def bank_addr(self, vertex, slot: int | np.ndarray | None = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Bank (= ``slot``, the vertex's position ``k`` in its simplex; default 0) and address
+        (= linear index) of vertices. Every copy holds every vertex."""
+        idx = self._index(vertex)
+        slot = 0 if slot is None else slot
+        bank = np.broadcast_to(np.asarray(slot, dtype=np.int64), idx.shape).copy()
+        return bank, idx.copy()
+
+    def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex ``k`` from copy ``k``; see :meth:`BankedLayout.simplex_bank_addr`."""
+        v = np.asarray(vertices, dtype=np.int64)
+        return self.bank_addr(v, np.arange(v.shape[-1], dtype=np.int64))
+
+
+def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLayout:
+    """Layout by name: ``"banked"`` (default) or ``"replicated"``."""
+    if kind == "banked":
+        return BankedLayout(grid)
+    if kind == "replicated":
+        return ReplicatedLayout(grid)
+    raise ValueError(f"memory layout must be one of {LAYOUT_KINDS}, got {kind!r}")
+
+
+def readmemh_text(words, bits: int) -> str:
+    """``$readmemh`` text: one word per line, two's complement, ``ceil(bits/4)`` lower-case hex digits.
+
+    Parameters
+    ----------
+    words : sequence of int
+        Signed or unsigned integers that fit ``bits`` bits (two's complement for negatives).
+    bits : int
+        Word width, ``>= 1``.
+
+    Returns
+    -------
+    str
+        Ends with a newline (empty string for no words).
+    """
+    if not isinstance(bits, (int, np.integer)) or bits < 1:
+        raise ValueError(f"word width must be an integer >= 1, got {bits!r}")
+    bits = int(bits)
+    digits = -(-bits // 4)
+    mask = (1 << bits) - 1
+    lines = []
+    for w in words:
+        w = int(w)
+        if not -(1 << (bits - 1)) <= w <= mask:
+            raise ValueError(f"word {w} does not fit {bits} bits")
+        lines.append(format(w & mask, f"0{digits}x"))
+    return "".join(line + "\n" for line in lines)
+
+
+def pack_words(codes, bits: int) -> list[int]:
+    """Pack ``nz`` codes of ``bits`` bits per word, target 0 in the least significant bits.
+
+    Parameters
+    ----------
+    codes : array_like of int, shape (depth, nz)
+
+    Returns
+    -------
+    list of int (unsigned, ``nz * bits`` bits each)
+    """
+    c = np.asarray(codes, dtype=np.int64)
+    if c.ndim == 1:
+        c = c[:, None]
+    mask = (1 << bits) - 1
+    out = []
+    for row in c.tolist():
+        word = 0
+        for t, v in enumerate(row):
+            if not -(1 << (bits - 1)) <= v <= mask:
+                raise ValueError(f"code {v} does not fit {bits} bits")
+            word |= (v & mask) << (t * bits)
+        out.append(word)
+    return out
+
+
+def hex_files(layout: BankedLayout | ReplicatedLayout, weight_codes, bits: int, packed: bool = False, prefix: str = "w") -> dict[str, str]:
+    """``$readmemh`` files of all banks.
+
+    Parameters
+    ----------
+    layout : BankedLayout or ReplicatedLayout
+    weight_codes : array_like of int, shape (N, nz)
+    bits : int
+        Weight width ``B_w``.
+    packed : bool
+        False (default): one file per bank per target, ``<prefix>_b<bank>_z<target>.hex``.
+        True: one file per bank, ``<prefix>_b<bank>.hex``, ``nz * bits``-bit words with target 0
+        in the least significant bits.
+    prefix : str
+
+    Returns
+    -------
+    dict
+        File name -> text, in bank (then target) order.
+    """
+    rom = layout.contents(weight_codes)
+    files: dict[str, str] = {}
+    for b in range(layout.n_banks):
+        if packed:
+            files[f"{prefix}_b{b}.hex"] = readmemh_text(pack_words(rom[b], bits), bits * rom.shape[2])
+        else:
+            for t in range(rom.shape[2]):
+                files[f"{prefix}_b{b}_z{t}.hex"] = readmemh_text(rom[b, :, t], bits)
+    return files
