@@ -1,0 +1,628 @@
+"""Bit-true fixed-point model of the PWAS circuit ("architecture B"): THE specification of the RTL.
+
+Every integer the RTL computes is computed here, with the same widths, the same rounding, the
+same saturation and the same tie rule, in plain ``numpy.int64``. A mismatch between RTL and this
+model is an RTL bug (or a spec change); :meth:`FixedPointModel.trace` returns every pipeline
+stage so that a testbench can name the first stage that differs.
+
+Formats (all decided from the data by default, every one overridable)
+---------------------------------------------------------------------
+Inputs, per regressor dimension ``j`` (:class:`~pwas_hdl.fixed_point.InputFormat`)
+    Signed ``B_in``-bit codes ``q`` (default ``B_in = 12``); one grid cell is exactly ``2**F_j``
+    codes, ``F_j = floor(log2(input_fill * 2**B_in / p_j))`` (``input_fill = 0.9``),
+    ``lo_code_j = -((p_j * 2**F_j) // 2)``; physical ``x = offset_j + lsb_j * q`` with
+    ``lsb_j = h_j / 2**F_j``, ``offset_j = lo_j - lo_code_j * lsb_j``. All lags of one signal
+    share ``lo, hi, p`` and so the same format (:meth:`FixedPointModel.signal_input_formats`).
+    ``F = max_j F_j`` is the common fraction width.
+Weights
+    Signed ``B_w``-bit codes, physical weight ``= code * 2**-Fw`` (offset 0), one format for all
+    targets. Default ``Fw = Fo + 2`` and ``B_w`` = the fewest bits that hold every weight code.
+    Overflow policy ``"error"`` (default: :class:`ValueError` naming the weight, its vertex,
+    value, the format range and the bits needed) or ``"saturate"`` (with a
+    :func:`warnings.warn`, the error bound then includes the saturation error).
+Output
+    Signed ``B_out``-bit codes, physical output ``= code * 2**-Fo``, one format for all targets.
+    Default ``Fo = -floor(log2(ref / 32))`` (output lsb = the largest power of two ``<= ref/32``)
+    with ``ref`` = the training RMSE (max over targets) or, when unknown, the weight range
+    ``(max w - min w) / 2**10``; ``B_out`` = the fewest bits such that no output can saturate
+    (``|f| <= max |w_q|`` because the ``mu`` are a convex combination).
+Rounding
+    ``rounding="half_up"`` (default) or ``"truncate"`` applies to the weight quantisation and to
+    the output shift. Input quantisation (:meth:`FixedPointModel.quantize_inputs`, done before
+    the circuit) is always half up with saturation.
+
+Datapath (one row of the pipeline; names are the keys of :meth:`FixedPointModel.trace`)
+---------------------------------------------------------------------------------------
+1. ``t = q - lo_code`` (``B_in + 1`` bits signed); ``t_clamped = clip(t, 0, p_j * 2**F_j)``;
+   ``out_of_range`` = some ``t`` was clamped.
+2. ``cell_j = min(t_clamped >> F_j, p_j - 1)``; ``frac_raw_j = t_clamped - cell_j * 2**F_j`` in
+   ``[0, 2**F_j]``; aligned ``frac_j = frac_raw_j << (F - F_j)`` in ``[0, 2**F]`` (``F + 1`` bits).
+3. ``rank, perm = Grid.order(frac)`` (descending, ties: lower dimension first);
+   ``vertices = Grid.simplex_vertices(cell, perm)``;
+   ``mu = Grid.barycentric(frac, perm, one=2**F)``: ``mu_0 = 2**F - frac_perm[0]``,
+   ``mu_k = frac_perm[k-1] - frac_perm[k]``, ``mu_n = frac_perm[n-1]``; each in ``[0, 2**F]``
+   (``F + 1`` bits unsigned), ``sum mu = 2**F`` exactly.
+4. Memory (:mod:`pwas_hdl.memory_layout`, banked by default): vertex ``k`` is read from
+   ``bank[k] = (sum(cell) + k) mod (n+1)`` at ``addr[k]``; ``w[k]`` is the word read back from
+   the ROM image (so the layout is part of what is checked).
+5. ``products_k = mu_k * w_k`` (exact, ``(F+1) + B_w + 1`` bits signed);
+   ``acc = sum_k products_k`` (exact, ``product_bits + ceil(log2(n+1))`` bits).
+6. ``sh = F + Fw - Fo >= 0``; ``acc_rounded = (acc + 2**(sh-1)) >> sh`` (half up) or
+   ``acc >> sh`` (truncate), arithmetic shift, no rounding when ``sh = 0``;
+   ``out = clip(acc_rounded, -2**(B_out-1), 2**(B_out-1) - 1)``.
+
+Error bound
+-----------
+Against the float model with the *unquantised* weights evaluated at the physical input the code
+represents (:meth:`FixedPointModel.reference`): ``mu`` is exact and sums to 1, so
+
+    ``|out * 2**-Fo - f(x_q)| <= e_w + e_out``
+
+with ``e_w = lsb_w / 2`` (half up) or ``lsb_w`` (truncate) -- or ``max |w - w_q|`` if weights were
+saturated -- and ``e_out = lsb_out / 2`` (half up), ``(1 - 2**-sh) * lsb_out`` (truncate), 0 when
+``sh = 0``. It holds for every input code (out-of-domain ones are clamped, and compared with the
+float model at the clamped point) unless the output saturates, which the default ``B_out``
+rules out. ``error_bound`` is in physical units, ``error_bound_lsb`` in output LSBs.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Sequence
+
+import numpy as np
+
+from .fixed_point import (
+    FixedFormat,
+    InputFormat,
+    PortFormat,
+    SignalScaling,
+    grid_input_formats,
+    signed_bits_needed,
+    shift_round,
+)
+from .geometry import Grid
+from .memory_layout import make_layout
+
+__all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES"]
+
+#: Widest intermediate the int64 model (and the generator) accepts.
+MAX_DATAPATH_BITS = 62
+
+#: Keys of :meth:`FixedPointModel.trace`, in pipeline order.
+TRACE_STAGES = (
+    "q",
+    "t",
+    "t_clamped",
+    "out_of_range",
+    "cell",
+    "frac_raw",
+    "frac",
+    "rank",
+    "perm",
+    "vertices",
+    "rot",
+    "bank",
+    "addr",
+    "addr_by_bank",
+    "mu",
+    "w_by_bank",
+    "w",
+    "products",
+    "acc",
+    "acc_rounded",
+    "out_saturated",
+    "out",
+)
+
+
+def _py_shift_round(a: int, sh: int, rounding: str) -> int:
+    if sh == 0:
+        return a
+    return (a + (1 << (sh - 1))) >> sh if rounding == "half_up" else a >> sh
+
+
+class FixedPointModel:
+    """Bit-true model of the PWAS circuit for one grid and weight set.
+
+    Parameters
+    ----------
+    grid : Grid
+    weights : ndarray, shape (N,) or (N, nz)
+        Float weights in vertex order (``PWASVirtualSensor.weights_``).
+    input_bits : int
+        ``B_in`` (default 12).
+    input_fill : float
+        Fraction of the input code range used by the domain, ``(0, 1]`` (default 0.9).
+    weight_bits : int, optional
+        ``B_w``; default: the fewest bits that hold every weight code.
+    weight_frac : int, optional
+        ``Fw``; default ``Fo + 2``.
+    output_bits : int, optional
+        ``B_out``; default: the fewest bits such that no output saturates.
+    output_frac : int, optional
+        ``Fo``; default ``-floor(log2(reference_error / 32))``.
+    overflow : {"error", "saturate"}
+        What to do with weights that do not fit ``weight_bits`` (default "error").
+    rounding : {"half_up", "truncate"}
+        Rounding of the weight quantisation and of the output shift.
+    reference_error : float, optional
+        The accuracy the output lsb is chosen against (``from_sensor`` passes the training
+        RMSE). Default/invalid: ``(max w - min w) / 2**10`` (or 1.0 if all weights are equal).
+    layout : {"banked", "replicated"}
+        Weight memory layout (:mod:`pwas_hdl.memory_layout`).
+    regressor_names : sequence of str, optional
+        Names of the ``n`` dimensions (default ``x0 ..``).
+    regressor_signals : sequence of (str, int), optional
+        ``(signal name, lag)`` per dimension (default: each dimension its own signal, lag 0).
+    target_names : sequence of str, optional
+        Names of the ``nz`` outputs (default ``z0 ..``).
+
+    Attributes
+    ----------
+    grid : Grid
+    n, nz : int
+    weights : ndarray (N, nz), float -- the unquantised weights
+    inputs : list of InputFormat, one per dimension
+    F : int
+        ``max_j F_j``.
+    weight_format : FixedFormat
+        ``s<B_w>.<Fw>``.
+    output_format : FixedFormat
+        ``s<B_out>.<Fo>``, saturating.
+    output_port : PortFormat
+        Output format with identity scaling.
+    shift : int
+        ``sh = F + Fw - Fo``.
+    weight_codes : ndarray (N, nz), int64
+    n_weights_saturated : int
+    weight_error_max : float
+        ``max |w - w_q|`` over all weights (physical).
+    layout : BankedLayout or ReplicatedLayout
+    rom : ndarray (n_banks, depth, nz), int64 -- the memory image
+    widths : dict
+        Bit widths of every datapath signal (see :attr:`widths`).
+    output_may_saturate : bool
+        True when a user-given ``output_bits`` is too narrow for some reachable output.
+    error_bound : float
+        Physical units.
+    error_bound_lsb : float
+        Output LSBs.
+    """
+
+    def __init__(
+        self,
+        grid: Grid,
+        weights: np.ndarray,
+        *,
+        input_bits: int = 12,
+        input_fill: float = 0.9,
+        weight_bits: int | None = None,
+        weight_frac: int | None = None,
+        output_bits: int | None = None,
+        output_frac: int | None = None,
+        overflow: str = "error",
+        rounding: str = "half_up",
+        reference_error: float | None = None,
+        layout: str = "banked",
+        regressor_names: Sequence[str] | None = None,
+        regressor_signals: Sequence[tuple[str, int]] | None = None,
+        target_names: Sequence[str] | None = None,
+    ):
+        if not isinstance(grid, Grid):
+            raise TypeError(f"grid must be a pwas_hdl.geometry.Grid, got {type(grid).__name__}")
+        w = np.asarray(weights, dtype=float)
+        if w.ndim == 1:
+            w = w[:, None]
+        if w.ndim != 2 or w.shape[0] != grid.n_vertices or w.shape[1] < 1:
+            raise ValueError(f"weights must have shape (N, nz) with N = {grid.n_vertices}, got {np.shape(weights)}")
+        if not np.all(np.isfinite(w)):
+            raise ValueError("weights contain NaN or infinite values")
+        if overflow not in ("error", "saturate"):
+            raise ValueError(f"weight overflow policy must be 'error' or 'saturate', got {overflow!r}")
+        if rounding not in ("half_up", "truncate"):
+            raise ValueError(f"rounding must be 'half_up' or 'truncate', got {rounding!r}")
+        for nm, v in (("weight_bits", weight_bits), ("weight_frac", weight_frac), ("output_bits", output_bits), ("output_frac", output_frac)):
+            if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
+                raise ValueError(f"{nm} must be an integer or None, got {v!r}")
+        self.grid = grid
+        self.n = grid.n
+        self.nz = int(w.shape[1])
+        self.weights = w
+        self.rounding = rounding
+        self.overflow = overflow
+
+        # ---- names
+        self.regressor_names = list(regressor_names) if regressor_names is not None else [f"x{j}" for j in range(self.n)]
+        self.regressor_signals = (
+            [(str(s), int(lag)) for s, lag in regressor_signals] if regressor_signals is not None else [(nm, 0) for nm in self.regressor_names]
+        )
+        self.target_names = list(target_names) if target_names is not None else [f"z{i}" for i in range(self.nz)]
+        if len(self.regressor_names) != self.n or len(self.regressor_signals) != self.n:
+            raise ValueError(f"need {self.n} regressor names/signals, got {len(self.regressor_names)}/{len(self.regressor_signals)}")
+        if len(self.target_names) != self.nz:
+            raise ValueError(f"need {self.nz} target names, got {len(self.target_names)}")
+
+        # ---- inputs
+        self.inputs: list[InputFormat] = grid_input_formats(grid.lo, grid.hi, grid.partitions, input_bits, input_fill)
+        self.input_bits = int(input_bits)
+        self.input_fill = float(input_fill)
+        self.F = max(f.frac for f in self.inputs)
+        self._lo_code = np.array([f.lo_code for f in self.inputs], dtype=np.int64)
+        self._fj = np.array([f.frac for f in self.inputs], dtype=np.int64)
+        self._span = np.array([f.span_codes for f in self.inputs], dtype=np.int64)
+        self._qmin = np.array([f.format.min_code for f in self.inputs], dtype=np.int64)
+        self._qmax = np.array([f.format.max_code for f in self.inputs], dtype=np.int64)
+
+        # ---- output lsb from the reference error
+        if reference_error is not None and math.isfinite(reference_error) and reference_error > 0:
+            ref, ref_src = float(reference_error), "given"
+        else:
+            rng = float(w.max() - w.min())
+            ref, ref_src = (rng / 2**10, "weight_range") if rng > 0 else (1.0, "constant_weights")
+        self.reference_error = ref
+        self.reference_error_source = ref_src
+        fo = int(output_frac) if output_frac is not None else -(math.frexp(ref / 32)[1] - 1)
+        fw = int(weight_frac) if weight_frac is not None else fo + 2
+        sh = self.F + fw - fo
+        if sh < 0:
+            raise ValueError(
+                f"output_frac = {fo} is finer than the exact product (F + weight_frac = {self.F} + {fw} = {self.F + fw}); "
+                f"the output would need padding bits: use output_frac <= {self.F + fw}"
+            )
+        self.shift = sh
+
+        # ---- weights
+        self.weight_codes, self.weight_format, self.n_weights_saturated = self._quantize_weights(w, weight_bits, fw)
+        self.weight_error_max = float(np.max(np.abs(w - self.weight_format.to_float(self.weight_codes))))
+
+        # ---- output format
+        wmin, wmax = int(self.weight_codes.min()), int(self.weight_codes.max())
+        self._out_reach = (_py_shift_round(wmin << self.F, sh, rounding), _py_shift_round(wmax << self.F, sh, rounding))
+        b_out = int(output_bits) if output_bits is not None else signed_bits_needed(list(self._out_reach))
+        self.output_format = FixedFormat(b_out, fo, True, rounding, "saturate")
+        self.output_port = PortFormat(self.output_format, SignalScaling(1.0, 0.0))
+        self.output_may_saturate = not bool(np.all(self.output_format.fits(np.array(self._out_reach))))
+        if self.output_may_saturate:
+            warnings.warn(
+                f"output format {self.output_format} cannot hold every reachable output (codes {self._out_reach[0]}"
+                f"..{self._out_reach[1]}, {signed_bits_needed(list(self._out_reach))} bits needed): outputs may saturate "
+                "and the error bound does not hold for saturated outputs",
+                stacklevel=2,
+            )
+
+        # ---- widths
+        pb = (self.F + 1) + self.weight_format.bits + 1
+        self.widths = {
+            "q": self.input_bits,
+            "t": self.input_bits + 1,
+            "cell": [max(1, int(p - 1).bit_length()) for p in grid.partitions],
+            "frac_raw": [int(f) + 1 for f in self._fj],
+            "frac": self.F + 1,
+            "rank": max(1, (self.n - 1).bit_length()),
+            "mu": self.F + 1,
+            "weight": self.weight_format.bits,
+            "product": pb,
+            "acc": pb + self.n.bit_length(),  # + ceil(log2(n + 1))
+            "out": self.output_format.bits,
+        }
+        if self.widths["acc"] > MAX_DATAPATH_BITS:
+            raise ValueError(
+                f"the accumulator would need {self.widths['acc']} bits (> {MAX_DATAPATH_BITS}): "
+                f"F = {self.F}, B_w = {self.weight_format.bits}; use fewer input or weight bits"
+            )
+
+        # ---- memory
+        self.layout = make_layout(grid, layout)
+        self.rom = self.layout.contents(self.weight_codes)
+
+        # ---- error bound
+        lsb_w, lsb_o = self.weight_format.lsb, self.output_format.lsb
+        e_w = 0.5 * lsb_w if rounding == "half_up" else lsb_w
+        if self.n_weights_saturated:
+            e_w = max(e_w, self.weight_error_max)
+        if sh == 0:
+            e_o = 0.0
+        else:
+            e_o = 0.5 * lsb_o if rounding == "half_up" else (1.0 - 2.0**-sh) * lsb_o
+        self.error_bound_weight = e_w
+        self.error_bound_output = e_o
+        self.error_bound = e_w + e_o
+        self.error_bound_lsb = self.error_bound / lsb_o
+
+    # ------------------------------------------------------------- construction
+    def _quantize_weights(self, w: np.ndarray, weight_bits: int | None, fw: int) -> tuple[np.ndarray, FixedFormat, int]:
+        free = FixedFormat(64, fw, True, self.rounding, "saturate")
+        codes_free, sat_free = free.quantize(w, return_saturated=True)
+        if sat_free.any():
+            raise ValueError(f"weights are too large for 64-bit codes at weight_frac = {fw}; use fewer fraction bits")
+        need = signed_bits_needed(codes_free)
+        if weight_bits is None:
+            return codes_free, FixedFormat(need, fw, True, self.rounding, self.overflow), 0
+        fmt = FixedFormat(int(weight_bits), fw, True, self.rounding, self.overflow)
+        codes, sat = FixedFormat(fmt.bits, fw, True, self.rounding, "saturate").quantize(w, return_saturated=True)
+        if not sat.any():
+            return codes, fmt, 0
+        err = np.abs(w - fmt.to_float(codes))
+        i, t = np.unravel_index(int(np.argmax(np.where(sat, err, -1.0))), w.shape)
+        coords = tuple(int(c) for c in self.grid.vertex_coords(int(i)))
+        what = f"weight {int(i)} (vertex {coords}) of target {self.target_names[t]!r} = {float(w[i, t])!r}"
+        if self.overflow == "error":
+            raise ValueError(
+                f"{what} does not fit the weight format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}], "
+                f"lsb {fmt.lsb!r}); {int(sat.sum())} weight(s) overflow, {need} bits are needed at {fw} fraction bits. "
+                "Use weight_bits >= %d, fewer weight_frac bits, or overflow='saturate'" % need
+            )
+        warnings.warn(
+            f"{int(sat.sum())} weight(s) saturated to the format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}]); "
+            f"the worst is {what}, error {float(err[i, t])!r}; {need} bits would avoid it. "
+            "The error bound includes the saturation error",
+            stacklevel=3,
+        )
+        return codes, fmt, int(sat.sum())
+
+    @classmethod
+    def from_sensor(cls, sensor, **overrides) -> "FixedPointModel":
+        """Bit-true model of a fitted :class:`~pwas_hdl.virtual_sensor.PWASVirtualSensor`.
+
+        The reference error for the default output lsb is the sensor's training RMSE (max over
+        targets) unless ``reference_error`` is given. Names of regressors, signals and targets
+        come from the sensor. Other keyword arguments: see :class:`FixedPointModel`.
+        """
+        if not hasattr(sensor, "weights_"):
+            raise RuntimeError("the sensor is not fitted; call fit() or load a model first")
+        ins, outs, tgts = sensor.signal_names()
+        lags = sensor.lags_
+        names = lags.names(ins, outs)
+        signals = [((ins if kind == "u" else outs)[ch], lag) for kind, ch, lag in lags.signal_of_dimension()]
+        given = set(overrides)
+        if "reference_error" not in overrides:
+            rmse = np.asarray(getattr(sensor, "train_rmse_", []), dtype=float).reshape(-1)
+            rmse = rmse[np.isfinite(rmse) & (rmse > 0)]
+            overrides["reference_error"] = float(rmse.max()) if rmse.size else None
+        overrides.setdefault("regressor_names", names)
+        overrides.setdefault("regressor_signals", signals)
+        overrides.setdefault("target_names", tgts)
+        from_rmse = overrides["reference_error"] is not None and "reference_error" not in given
+        model = cls(sensor.grid_, sensor.weights_, **overrides)
+        if from_rmse:
+            model.reference_error_source = "train_rmse"
+        return model
+
+    # ------------------------------------------------------------- inputs
+    def quantize_inputs(self, x, return_saturated: bool = False):
+        """Input codes of physical regressors (half up, saturated to ``B_in`` bits).
+
+        Parameters
+        ----------
+        x : array_like, shape (m, n) or (n,)
+        return_saturated : bool
+            Also return a bool (m,) mask of rows where some value saturated the code range.
+
+        Returns
+        -------
+        q : ndarray of int64, shape (m, n)
+        saturated : ndarray of bool, shape (m,) (only with ``return_saturated``)
+        """
+        xa = np.atleast_2d(np.asarray(x, dtype=float))
+        if xa.shape[1] != self.n:
+            raise ValueError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
+        q = np.empty(xa.shape, dtype=np.int64)
+        sat = np.zeros(xa.shape, dtype=bool)
+        for j, f in enumerate(self.inputs):
+            q[:, j], sat[:, j] = f.quantize(xa[:, j], return_saturated=True)
+        return (q, sat.any(axis=1)) if return_saturated else q
+
+    def represented_inputs(self, q) -> np.ndarray:
+        """Physical values the codes stand for, ``lo_j + lsb_j * (q - lo_code_j)``, shape (m, n)."""
+        qa = self._check_codes(q)
+        return np.stack([f.to_physical(qa[:, j]) for j, f in enumerate(self.inputs)], axis=1)
+
+    def _check_codes(self, q) -> np.ndarray:
+        qa = np.atleast_2d(np.asarray(q))
+        if qa.dtype.kind not in "iu":
+            if qa.dtype.kind != "f" or not np.all(qa == np.floor(qa)):
+                raise ValueError("input codes must be integers; use quantize_inputs() for physical values")
+        qa = qa.astype(np.int64)
+        if qa.ndim != 2 or qa.shape[1] != self.n:
+            raise ValueError(f"input codes must have shape (m, {self.n}), got {np.shape(q)}")
+        bad = (qa < self._qmin) | (qa > self._qmax)
+        if bad.any():
+            r, j = np.argwhere(bad)[0]
+            raise ValueError(
+                f"input code {int(qa[r, j])} (row {int(r)}, dimension {int(j)}) is outside the "
+                f"{self.input_bits}-bit range [{int(self._qmin[j])}, {int(self._qmax[j])}]"
+            )
+        return qa
+
+    # ------------------------------------------------------------- datapath
+    def _run(self, q, full: bool) -> dict:
+        qa = self._check_codes(q)
+        m = qa.shape[0]
+        t = qa - self._lo_code
+        tc = np.clip(t, 0, self._span)
+        oor = np.any(tc != t, axis=1)
+        cell = np.minimum(tc >> self._fj, self.grid.partitions - 1)
+        frac_raw = tc - (cell << self._fj)
+        frac = frac_raw << (self.F - self._fj)
+        rank, perm = Grid.order(frac)
+        vertices = self.grid.simplex_vertices(cell, perm)
+        mu = Grid.barycentric(frac, perm, one=1 << self.F)
+        bank, addr = self.layout.simplex_bank_addr(vertices)
+        w = self.rom[bank, addr, :]  # (m, n+1, nz)
+        products = mu[:, :, None] * w
+        acc = products.sum(axis=1)
+        acc_r = shift_round(acc, self.shift, self.rounding)
+        fo = self.output_format
+        out = np.clip(acc_r, fo.min_code, fo.max_code)
+        lim = 1 << (self.widths["acc"] - 1)
+        assert np.all(np.abs(acc) < lim), "accumulator exceeds its declared width"  # cannot happen: sum mu = 2**F
+        res = {"out": out, "out_of_range": oor}
+        if full:
+            rows = np.arange(m)[:, None]
+            addr_by_bank = np.zeros_like(addr)
+            addr_by_bank[rows, bank] = addr
+            w_by_bank = np.zeros_like(w)
+            w_by_bank[rows, bank, :] = w
+            res.update(
+                q=qa,
+                t=t,
+                t_clamped=tc,
+                cell=cell,
+                frac_raw=frac_raw,
+                frac=frac,
+                rank=rank,
+                perm=perm,
+                vertices=vertices,
+                rot=cell.sum(axis=1) % (self.n + 1),
+                bank=bank,
+                addr=addr,
+                addr_by_bank=addr_by_bank,
+                mu=mu,
+                w_by_bank=w_by_bank,
+                w=w,
+                products=products,
+                acc=acc,
+                acc_rounded=acc_r,
+                out_saturated=np.any(acc_r != out, axis=1),
+            )
+        return res
+
+    def evaluate(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """Run the circuit on input codes.
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        out : ndarray of int64, shape (m, nz)
+            Output codes (``s<B_out>.<Fo>``).
+        out_of_range : ndarray of bool, shape (m,)
+            True where some input was outside the domain and has been clamped.
+        """
+        r = self._run(q, full=False)
+        return r["out"], r["out_of_range"]
+
+    def trace(self, q) -> dict[str, np.ndarray]:
+        """Every pipeline stage for input codes ``q`` (integer arrays, ``m`` rows).
+
+        Keys (:data:`TRACE_STAGES`) and shapes: ``q, t, t_clamped, cell, frac_raw, frac, rank,
+        perm`` (m, n); ``out_of_range, out_saturated`` (m,); ``vertices, bank, addr, mu`` (m, n+1)
+        indexed by simplex vertex ``k``; ``rot`` (m,) = ``sum(cell) mod (n+1)``;
+        ``addr_by_bank`` (m, n_banks) address presented to each bank; ``w`` (m, n+1, nz) weight
+        code of vertex ``k``; ``w_by_bank`` (m, n_banks, nz) word read from each bank;
+        ``products`` (m, n+1, nz); ``acc, acc_rounded, out`` (m, nz). See the module docstring
+        for the definitions and :attr:`widths` for the widths.
+        """
+        return self._run(q, full=True)
+
+    def reference(self, q) -> np.ndarray:
+        """Float model (unquantised weights) at the physical inputs the codes represent.
+
+        Equal to ``grid.evaluate(weights, represented_inputs(q))`` up to float rounding; it is
+        computed from the exact grid coordinates ``(clip(q - lo_code) ) / 2**F_j`` with
+        :meth:`Grid.locate_grid_units`, so no physical round trip moves a point across a face.
+
+        Returns
+        -------
+        ndarray, shape (m, nz), float
+        """
+        qa = self._check_codes(q)
+        tc = np.clip(qa - self._lo_code, 0, self._span)
+        s = np.ldexp(tc.astype(float), -self._fj)
+        _, _, _, _, vertices, mu = self.grid.locate_grid_units(s)
+        return np.einsum("mk,mkz->mz", mu, self.weights[vertices])
+
+    def to_physical_output(self, out_codes) -> np.ndarray:
+        """Physical output values ``code * 2**-Fo``."""
+        return self.output_port.to_physical(out_codes)
+
+    def predict(self, x, return_flags: bool = False):
+        """Physical regressors -> physical outputs through the bit-true circuit.
+
+        Returns
+        -------
+        zhat : ndarray (m, nz), float
+        flags : ndarray (m,), bool -- out_of_range or input saturation (only with ``return_flags``)
+        """
+        q, sat = self.quantize_inputs(x, return_saturated=True)
+        out, oor = self.evaluate(q)
+        z = self.to_physical_output(out)
+        return (z, oor | sat) if return_flags else z
+
+    # ------------------------------------------------------------- reporting
+    def signal_input_formats(self) -> dict[str, InputFormat]:
+        """The input format of each signal (all its lags share it).
+
+        Raises
+        ------
+        ValueError
+            Two lags of one signal have different formats (the lag bank of the sensor top
+            scales once per signal, so it needs ``share_lag_domain=True`` in the fit).
+        """
+        res: dict[str, InputFormat] = {}
+        for j, (sig, _lag) in enumerate(self.regressor_signals):
+            f = self.inputs[j]
+            if sig in res and res[sig] != f:
+                raise ValueError(
+                    f"the lags of signal {sig!r} have different input formats (dimension {j}: {f.to_dict()['format']} "
+                    f"on [{f.lo}, {f.hi}]); fit with share_lag_domain=True"
+                )
+            res.setdefault(sig, f)
+        return res
+
+    def to_dict(self) -> dict:
+        """Everything the manifest needs (JSON-ready): formats, codes, scaling, widths, layout, bound."""
+        try:
+            signals = {k: v.to_dict() for k, v in self.signal_input_formats().items()}
+        except ValueError:
+            signals = None
+        return {
+            "n": self.n,
+            "nz": self.nz,
+            "F": self.F,
+            "rounding": self.rounding,
+            "weight_overflow": self.overflow,
+            "inputs": [
+                {"name": nm, "signal": sig, "lag": lag, **f.to_dict()}
+                for nm, (sig, lag), f in zip(self.regressor_names, self.regressor_signals, self.inputs)
+            ],
+            "signals": signals,
+            "weights": {
+                **self.weight_format.to_dict(),
+                "scale": 1.0,
+                "offset": 0.0,
+                "n_saturated": self.n_weights_saturated,
+                "max_abs_error": self.weight_error_max,
+            },
+            "output": {
+                **self.output_port.to_dict(),
+                "targets": list(self.target_names),
+                "shift": self.shift,
+                "reachable_codes": [int(self._out_reach[0]), int(self._out_reach[1])],
+                "may_saturate": self.output_may_saturate,
+            },
+            "widths": dict(self.widths),
+            "layout": self.layout.to_dict(),
+            "error_bound": {
+                "physical": self.error_bound,
+                "lsb": self.error_bound_lsb,
+                "weight_term": self.error_bound_weight,
+                "output_term": self.error_bound_output,
+                "includes_weight_saturation": bool(self.n_weights_saturated),
+                "holds_unless_output_saturates": True,
+                "against": "float model, unquantised weights, at the physical input the code represents",
+            },
+            "reference_error": {"value": self.reference_error, "source": self.reference_error_source},
+        }
+
+    def __repr__(self) -> str:
+        fin = ", ".join(f"{f.format}" for f in self.inputs)
+        return (
+            f"FixedPointModel(n={self.n}, nz={self.nz}, inputs=[{fin}], F={self.F}, weights={self.weight_format}, "
+            f"output={self.output_format}, shift={self.shift}, bound={self.error_bound_lsb:.3g} lsb)"
+        )
