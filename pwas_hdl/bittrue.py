@@ -331,6 +331,27 @@ class FixedPointModel:
         self.error_bound = e_w + e_o
         self.error_bound_lsb = self.error_bound / lsb_o
 
+    # ------------------------------------------------------------- per-dimension views
+    @property
+    def lo_codes(self) -> tuple[int, ...]:
+        """``lo_code_j`` per dimension."""
+        return tuple(f.lo_code for f in self.inputs)
+
+    @property
+    def frac_bits(self) -> tuple[int, ...]:
+        """``F_j`` per dimension (one grid cell = ``2**F_j`` input codes)."""
+        return tuple(f.frac for f in self.inputs)
+
+    @property
+    def input_lsb(self) -> np.ndarray:
+        """Physical ``lsb_j`` per dimension."""
+        return np.array([f.lsb for f in self.inputs])
+
+    @property
+    def input_offset(self) -> np.ndarray:
+        """Physical ``offset_j`` per dimension (``x = offset_j + lsb_j * q``)."""
+        return np.array([f.offset for f in self.inputs])
+
     # ------------------------------------------------------------- construction
     def _quantize_weights(self, w: np.ndarray, weight_bits: int | None, fw: int) -> tuple[np.ndarray, FixedFormat, int]:
         free = FixedFormat(64, fw, True, self.rounding, "saturate")

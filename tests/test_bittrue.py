@@ -331,6 +331,9 @@ def test_from_sensor_lorenz_defaults():
     m = FixedPointModel.from_sensor(s)
     assert [str(f.format) for f in m.inputs] == ["s12.9"] * 4 and m.F == 9
     assert [f.lo_code for f in m.inputs] == [-1792] * 4
+    assert m.lo_codes == (-1792,) * 4 and m.frac_bits == (9,) * 4
+    assert np.allclose(m.input_offset + m.input_lsb * -1792, s.grid_.lo, rtol=0, atol=1e-12)
+    assert np.allclose(m.input_lsb * 512, s.grid_.step, rtol=1e-15, atol=0)
     ref = float(np.max(s.train_rmse_))
     assert 2.0**-m.output_format.frac <= ref / 32 < 2.0 ** (-m.output_format.frac + 1)
     assert m.weight_format.frac == m.output_format.frac + 2
