@@ -1,0 +1,104 @@
+"""Public entry points: build a design from a bit-true model, describe it for a manifest."""
+
+from __future__ import annotations
+
+import re
+
+from .core import PWASCore
+from .emit import port_list
+from .params import CoreParams, Pipeline
+
+__all__ = ["build_core", "design_info"]
+
+
+def _check_name(name: str) -> str:
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or ""):
+        raise ValueError(f"module name {name!r} is not a plain Verilog identifier (letters, digits, _)")
+    return name
+
+
+def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core") -> PWASCore:
+    """The pipelined PWAS core of a bit-true model.
+
+    Parameters
+    ----------
+    model : pwas_hdl.bittrue.FixedPointModel or CoreParams
+    memory : {"banked", "replicated"}
+        Weight memory layout (:mod:`pwas_hdl.memory_layout`), independent of ``model.layout``.
+    pipeline : Pipeline, "min", "balanced" (default) or "max"
+    name : str
+        Verilog module name used by :func:`~pwas_hdl.hdl.emit.emit_verilog` and :func:`design_info`.
+
+    Returns
+    -------
+    PWASCore
+        ``.latency`` (cycles), ``.ii`` (1), ``.memory_plan``, ``.params``.
+    """
+    params = CoreParams.from_model(model)
+    core = PWASCore(params, memory=memory, pipeline=pipeline)
+    core.module_name = _check_name(name)
+    core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))
+    core.target_names = list(getattr(model, "target_names", [f"z{i}" for i in range(params.nz)]))
+    return core
+
+
+def _fields(names_widths):
+    out, lsb = [], 0
+    for name, width, signed in names_widths:
+        out.append({"name": name, "lsb": lsb, "width": width, "signed": signed})
+        lsb += width
+    return out
+
+
+def design_info(component) -> dict:
+    """JSON-ready description of a built design (core or sensor top).
+
+    Keys: ``module``, ``kind``, ``latency`` (cycles), ``ii``, ``ports`` (flattened Verilog ports,
+    see :func:`~pwas_hdl.hdl.emit.port_list`), ``payload`` (bit fields of ``in__payload`` and
+    ``out__payload``, LSB first), ``flow_control``, ``memory`` (memories, depth, word bits,
+    words, bits), ``pipeline``, ``arithmetic``; the sensor top adds ``lags`` and ``warmup``.
+    """
+    core = getattr(component, "core", component)
+    p: CoreParams = core.params
+    in_fields = getattr(component, "input_fields", None)
+    if in_fields is None:
+        names = getattr(core, "input_names", [f"x{j}" for j in range(p.n)])
+        in_fields = _fields([(nm, p.in_width, True) for nm in names])
+    tnames = getattr(core, "target_names", [f"z{i}" for i in range(p.nz)])
+    out_fields = _fields([(nm, p.out_width, True) for nm in tnames] + [("out_of_range", 1, False)])
+    info = {
+        "module": getattr(component, "module_name", None),
+        "kind": getattr(component, "kind", "core"),
+        "latency": int(component.latency),
+        "ii": int(component.ii),
+        "ports": port_list(component),
+        "payload": {"in__payload": in_fields, "out__payload": out_fields},
+        "flow_control": {
+            "advance": "~out__valid | out__ready",
+            "in__ready": "advance",
+            "reset": "rst: synchronous, active high, clears the valid bits only",
+            "latency": "a transfer on `in` in cycle t gives out__valid with its result in cycle t + latency "
+            "when out__ready stays high; stalls delay it by the stalled cycles",
+        },
+        "memory": core.memory_plan.to_dict(),
+        "pipeline": core.pipeline.to_dict(),
+        "arithmetic": {
+            "n": p.n,
+            "nz": p.nz,
+            "partitions": list(p.partitions),
+            "in_width": p.in_width,
+            "lo_code": list(p.lo_code),
+            "frac_bits": list(p.frac_bits),
+            "F": p.frac,
+            "weight_width": p.weight_width,
+            "weight_frac": p.weight_frac,
+            "out_width": p.out_width,
+            "out_frac": p.out_frac,
+            "shift": p.shift,
+            "rounding": p.rounding,
+            "product_bits": p.acc_width,
+            "sum_bits": p.acc_width + 1,
+        },
+    }
+    info.update(getattr(component, "extra_info", {}))
+    return info

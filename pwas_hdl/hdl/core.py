@@ -1,0 +1,515 @@
+"""The PWAS core ("architecture B", fully parallel, pipelined, II = 1) as an Amaranth component.
+
+Data path (which registers exist is chosen by :class:`~pwas_hdl.hdl.params.Pipeline`)::
+
+    in.payload (n codes) -> scale/clamp/split -> rank extractor (+ address precomputation)
+        -> vertex addresses + mu -> n+1 synchronous memory reads -> n+1 multipliers per target
+        -> adder tree -> rounding + saturation -> out.payload (nz codes + out_of_range)
+
+Flow control (one global enable, no skid buffer)::
+
+    advance  = ~out.valid | out.ready
+    in.ready = advance
+
+Every pipeline register, every memory read-port enable and the chain of valid bits advance
+together; only the valid bits have a (synchronous) reset. A bubble is a slot with valid = 0.
+
+Arithmetic (the bit-true specification, see :mod:`pwas_hdl.hdl.params`):
+
+* the clamp flags and the cell / fraction split use the offset-binary input
+  ``qu = q + 2**(B_in-1)`` and ``L = lo_code + 2**(B_in-1)``: ``under = qu < L``,
+  ``top = qu >= L + p*2**F_j``, ``over = qu > L + p*2**F_j``; inside the domain the cell and the
+  fraction are bit fields of ``(qu - L) mod 2**(F_j + width(c_j))``;
+* rank: ``d_i >= d_j`` for ``i < j`` (ties to the lower index), ``n(n-1)/2`` comparators; a case
+  table turns the ``n-1`` comparison bits of dimension ``j`` into the thermometer code
+  ``lt_j[k-1] = (rank_j < k)`` (``k = 1..n-1``), which gives both the vertex steps and the one-hot
+  selection of ``d_(k)``;
+* banked addresses: ``addr(v_k) = base + sum_{j<n-1} step_kj * S_j + (step_k,n-1 & wrap)`` where
+  ``base`` and ``S_j`` follow :class:`~pwas_hdl.hdl.params.MemoryPlan` and
+  ``wrap = (c_{n-1} mod (n+1) == n)``; bank ``b`` reads vertex ``(b - rot) mod (n+1)`` with
+  ``rot = |c| mod (n+1)``, and the data are rotated back after the read;
+* widths: fractions and ``mu`` have ``F + 1`` bits (``mu_0 = 2**F`` is representable); products and
+  partial sums are kept in ``F + B_w`` signed bits, the final sum in ``F + B_w + 1``: the ``mu_k``
+  are non-negative and sum to ``2**F``, so every partial sum lies in
+  ``[-2**(F+B_w-1), 2**F * (2**(B_w-1) - 1)]`` and nothing can overflow.
+
+The Verilog of this description passes ``verilator --lint-only -Wall``; see
+:mod:`pwas_hdl.hdl._lintsafe` for the rules that make it so.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ._lintsafe import add_const_wrap, bits_for, ge_const, mux_const, rom, sink_unused, sum_wrap
+from .params import CoreParams, MemoryPlan, Pipeline
+
+__all__ = ["PWASCore", "core_input_layout", "core_output_layout"]
+
+
+def core_input_layout(p: CoreParams) -> data.ArrayLayout:
+    """Input payload fields: ``n`` signed ``B_in``-bit codes; element ``j`` at bits ``[j*B_in +: B_in]``.
+
+    The port itself is a flat ``unsigned(n*B_in)`` (a layout-typed port makes Amaranth emit one
+    alias wire per field, which Verilator reports as unused); use this layout to view it.
+    """
+    return data.ArrayLayout(signed(p.in_width), p.n)
+
+
+def core_output_layout(p: CoreParams) -> data.StructLayout:
+    """Output payload fields: ``z`` (``nz`` signed ``B_out``-bit codes, target ``i`` at
+    ``[i*B_out +: B_out]``) then ``out_of_range`` (bit ``nz*B_out``). The port is a flat unsigned."""
+    return data.StructLayout({"z": data.ArrayLayout(signed(p.out_width), p.nz), "out_of_range": 1})
+
+
+class _Pipe:
+    """Collects the pipeline registers (all enabled by ``advance``)."""
+
+    def __init__(self, m: Module, advance):
+        self.m = m
+        self.advance = advance
+        self.regs = []
+        self.valids = []
+        self.count = 0
+
+    def stage(self, name: str, enabled: bool, valid, values: dict):
+        """Register ``values`` (dict name -> value / int / list) when ``enabled``."""
+        if not enabled:
+            return valid, values
+        out = {}
+        for key, val in values.items():
+            if isinstance(val, list):
+                out[key] = [self._reg(f"{name}_{key}{i}", v) for i, v in enumerate(val)]
+            else:
+                out[key] = self._reg(f"{name}_{key}", val)
+        v = Signal(name=f"{name}_valid")
+        self.valids.append((v, valid))
+        self.count += 1
+        return v, out
+
+    def _reg(self, name: str, val):
+        if val is None or isinstance(val, (int, bool)):
+            return val
+        r = Signal(unsigned(len(val)), name=name, reset_less=True)
+        self.regs.append((r, val))
+        return r
+
+    def finish(self):
+        with self.m.If(self.advance):
+            self.m.d.sync += [dst.eq(src) for dst, src in self.regs]
+            self.m.d.sync += [dst.eq(src) for dst, src in self.valids]
+
+
+def _bit(v):
+    return Const(int(v), 1) if isinstance(v, (bool, int)) else v
+
+
+def _or(a, b):
+    if a is False:
+        return b
+    if b is False:
+        return a
+    if a is True or b is True:
+        return True
+    return a | b
+
+
+def _not(a):
+    return (not a) if isinstance(a, bool) else ~a
+
+
+class PWASCore(wiring.Component):
+    """Pipelined PWAS evaluator: one regressor in, ``nz`` estimates out, every clock.
+
+    Parameters
+    ----------
+    params : CoreParams
+    memory : {"banked", "replicated"}
+    pipeline : Pipeline, preset name ("min", "balanced", "max") or None (balanced)
+
+    Ports (flattened Verilog names): ``clk``, ``rst`` (synchronous, active high), ``in__valid``,
+    ``in__ready``, ``in__payload`` (``n*B_in`` bits), ``out__valid``, ``out__ready``,
+    ``out__payload`` (``nz*B_out + 1`` bits); see :func:`core_input_layout` and
+    :func:`core_output_layout` for the payload bit fields.
+
+    Attributes
+    ----------
+    latency : int
+        Cycles from an input transfer to the corresponding output: when ``in.valid & in.ready`` is
+        high in cycle ``t`` (sampled at the clock edge ending it) and the sink never stalls,
+        ``out.valid`` is high with the result in cycle ``t + latency``.
+    ii : int
+        Initiation interval (1).
+    memory_plan : MemoryPlan
+        Number, depth and width of the weight memories and their contents.
+    """
+
+    def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        lo, hi = -(1 << (params.in_width - 1)), (1 << (params.in_width - 1)) - 1
+        for j, v in enumerate(params.lo_code):
+            if not lo <= v <= hi:
+                raise ValueError(
+                    f"lo_code[{j}] = {v} is outside the signed {params.in_width}-bit input range; "
+                    "the domain's lower bound must be a representable input code"
+                )
+        self.params = params
+        self.pipeline = Pipeline.cast(pipeline)
+        self.memory_kind = memory
+        self.memory_plan = MemoryPlan.build(params, memory)
+        self.latency = self.pipeline.latency(params.n)
+        self.ii = 1
+        super().__init__(
+            {
+                "in": In(stream.Signature(unsigned(core_input_layout(params).size))),
+                "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+            }
+        )
+
+    def elaborate(self, platform):
+        m = Module()
+        inp = getattr(self, "in")
+        # advance = in.ready (one net; a separately named copy would be an unused alias wire)
+        advance = inp.ready
+        m.d.comb += advance.eq(~self.out.valid | self.out.ready)
+        pipe = _Pipe(m, advance)
+        valid, vals = self._front(m, pipe, inp.payload, inp.valid)
+        zs, oor, valid = self._back(m, pipe, valid, vals, advance)
+        outw = self.params.out_width
+        for z, o in enumerate(zs):
+            pipe.regs.append((self.out.payload[z * outw : (z + 1) * outw], o))
+        pipe.regs.append((self.out.payload[-1], _bit(oor)))
+        pipe.valids.append((self.out.valid, valid))
+        pipe.count += 1
+        pipe.finish()
+        assert pipe.count == self.latency, (pipe.count, self.latency)
+        return m
+
+    # ------------------------------------------------------------------ front end
+    def _front(self, m: Module, pipe: _Pipe, payload, valid):
+        """Scale/clamp/split, rank, addresses and mu (up to the memory address)."""
+        p, pl = self.params, self.pipeline
+        n, big_f, bin_ = p.n, p.frac, p.in_width
+        nb = n + 1
+        dw = big_f + 1
+        cw = [bits_for(pj - 1) for pj in p.partitions]
+
+        # ---------------------------------------------------------- A: scale / clamp / split
+        cs, ds, oor = [], [], False
+        for j in range(n):
+            pj, fj = p.partitions[j], p.frac_bits[j]
+            q = payload[j * bin_ : (j + 1) * bin_]
+            big_l = p.lo_code[j] + (1 << (bin_ - 1))
+            tmax = pj << fj
+            w = min(fj + cw[j], bin_)
+            # offset binary qu = q + 2**(B-1) (order preserving); its inverted sign bit is a named
+            # net, created only when something reads it
+            full = 1 << bin_
+            need_msb = w == bin_ or any(0 < k < full for k in (big_l, big_l + tmax, big_l + tmax + 1))
+            if need_msb:
+                msb = Signal(name=f"q{j}_msb_n")
+                m.d.comb += msb.eq(~q[bin_ - 1])
+                qu = Cat(q[: bin_ - 1], msb)
+            else:
+                qu = q
+            under = _not(ge_const(qu, big_l))
+            top = ge_const(qu, big_l + tmax)
+            over = ge_const(qu, big_l + tmax + 1)
+            if not isinstance(under, bool):
+                under = self._name(m, under, f"under{j}")
+            if not isinstance(top, bool):
+                top = self._name(m, top, f"top{j}")
+            if not isinstance(over, bool):
+                over = self._name(m, over, f"over{j}")
+            oor = _or(oor, _or(under, over))
+            # inside: (qu - L) mod 2**W holds the cell (upper bits) and the fraction (lower bits)
+            t = add_const_wrap(m, qu[:w], -big_l, f"t{j}")
+            c = 0 if pj == 1 else Signal(unsigned(cw[j]), name=f"c{j}")
+            d = Signal(unsigned(dw), name=f"d{j}")
+
+            def inside(c=c, d=d, t=t, fj=fj, w=w):
+                if not isinstance(c, int) and w > fj:
+                    m.d.comb += c.eq(t[fj:w])
+                if fj > 0:
+                    m.d.comb += d.eq(Cat(Const(0, big_f - fj), t[: min(fj, w)]))
+
+            if top is not False:
+                with m.If(top):
+                    if not isinstance(c, int):
+                        m.d.comb += c.eq(pj - 1)
+                    m.d.comb += d.eq(1 << big_f)
+                if under is not False:
+                    with m.Elif(~under):
+                        inside()
+                else:
+                    with m.Else():
+                        inside()
+            elif under is not False:
+                with m.If(~under):
+                    inside()
+            else:  # the domain covers every input code: no clamping, still a process for full widths
+                with m.If(valid):
+                    inside()
+            cs.append(c)
+            ds.append(d)
+            if isinstance(c, int) and w > fj:  # p_j = 1: the cell is always 0
+                sink_unused(m, t[fj:w], f"t{j}_cell")
+
+        valid, r = pipe.stage("s_split", pl.split, valid, {"c": cs, "d": ds, "oor": oor})
+        cs, ds, oor = r["c"], r["d"], r["oor"]
+
+        # ---------------------------------------------------------- B: rank + address precompute
+        lt = []
+        if n > 1:
+            ge = {}
+            for i in range(n):
+                for j in range(i + 1, n):
+                    ge[i, j] = self._name(m, ds[i] >= ds[j], f"ge_{i}_{j}")  # ties go to i < j
+            therm = []
+            for v in range(1 << (n - 1)):
+                rank = bin(v).count("1")
+                therm.append(sum(1 << (k - 1) for k in range(1, n) if rank < k))
+            for j in range(n):
+                bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
+                lt.append(rom(m, Cat(*bits), therm, n - 1, f"lt{j}"))
+
+        plan = self.memory_plan
+        aw = plan.addr_width
+        base = wrap = 0
+        rot = 0
+        if self.memory_kind == "banked":
+            g_words, _, rst = MemoryPlan.banked_geometry(p.partitions)
+            p_last = p.partitions[n - 1]
+            if aw:
+                terms = [rom(m, cs[j], [i * rst[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n - 1)]
+                terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
+                base = sum_wrap(m, terms, aw, "base")
+                wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
+            rbits = bits_for(n)
+            res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
+            rot = self._modsum(m, res, nb, rbits, "rot")
+        else:
+            st = p.strides
+            terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
+            base = sum_wrap(m, terms, aw, "base")
+
+        valid, r = pipe.stage(
+            "s_rank", pl.rank, valid, {"lt": lt, "d": ds, "oor": oor, "base": base, "wrap": wrap, "rot": rot}
+        )
+        lt, ds, oor, base, wrap, rot = r["lt"], r["d"], r["oor"], r["base"], r["wrap"], r["rot"]
+
+        # ---------------------------------------------------------- C: vertices, addresses, mu
+        def step(k, j):
+            if k == 0:
+                return False
+            if k == n:
+                return True
+            return lt[j][k - 1]
+
+        bank_addr = None
+        if aw:
+            addr = []
+            for k in range(nb):
+                if self.memory_kind == "banked":
+                    terms = [base] + [mux_const(step(k, j), rst[j], aw) for j in range(n - 1)]
+                    if k > 0 and not isinstance(wrap, int):
+                        s = step(k, n - 1)
+                        terms.append(mux_const(wrap if s is True else (wrap & s), 1, aw))
+                else:
+                    terms = [base] + [mux_const(step(k, j), st[j], aw) for j in range(n)]
+                addr.append(sum_wrap(m, terms, aw, f"vaddr{k}"))
+            if self.memory_kind == "banked" and not isinstance(rot, int):
+                bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)]
+                with m.Switch(rot):
+                    for s in range(nb):
+                        with (m.Case(s) if s < n else m.Default()):
+                            m.d.comb += [bank_addr[b].eq(addr[(b - s) % nb]) for b in range(nb)]
+            else:
+                r0 = rot if isinstance(rot, int) else 0
+                bank_addr = [addr[(b - r0) % nb] for b in range(nb)]
+                bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
+
+        # d_(k): the fraction of rank k-1 (one-hot selection from the thermometer codes)
+        def sel(k, j):
+            if n == 1:
+                return True
+            if k == 1:
+                return lt[j][0]
+            if k == n:
+                return ("not", lt[j][n - 2])
+            return lt[j][k - 1] & ~lt[j][k - 2]
+
+        dsorted = []
+        for k in range(1, n + 1):
+            if n == 1:
+                dsorted.append(ds[0])
+                continue
+            acc = None
+            for j in range(n):
+                sj = sel(k, j)
+                if isinstance(sj, tuple):  # Mux(~s, a, b) would leave the inverter unused
+                    term = Mux(sj[1], Const(0, dw), ds[j])
+                else:
+                    term = Mux(sj, ds[j], Const(0, dw))
+                acc = term if acc is None else acc | term
+            dsorted.append(self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+        mus = []
+        for k in range(nb):
+            if k == n:
+                mus.append(dsorted[n - 1])
+                continue
+            hi = Const(1 << big_f, dw) if k == 0 else dsorted[k - 1]
+            diff = Signal(signed(dw + 1), name=f"mu{k}")
+            m.d.comb += diff.eq(hi - dsorted[k])
+            sink_unused(m, diff[dw], f"mu{k}_sign")
+            mus.append(diff[:dw])
+
+        # ---------------------------------------------------------- D: memory read (the register)
+        mem_data = []
+        for b in range(nb):
+            mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[b])
+            m.submodules[f"wmem{b}"] = mem
+            rp = mem.read_port(domain="sync")
+            # Drive the port with our own nets instead of assigning to its addr/en signals (which
+            # would leave those as unused alias wires); ReadPort does the same for its comb `en`.
+            if aw:
+                rp.addr = bank_addr[b]
+            rp.en = pipe.advance
+            mem_data.append(rp.data)
+        valid, r = pipe.stage("s_mem", True, valid, {"mu": mus, "oor": oor, "rot": rot})
+        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"], "rot": r["rot"]}
+
+    # ------------------------------------------------------------------ back end
+    def _back(self, m: Module, pipe: _Pipe, valid, vals, advance):
+        p, pl = self.params, self.pipeline
+        n, nz = p.n, p.nz
+        nb = n + 1
+        dw = p.frac + 1
+        bw, accw = p.weight_width, p.acc_width
+
+        valid, r = pipe.stage("s_memout", pl.mem_out, valid, vals)
+        data_, mus, oor, rot = r["data"], r["mu"], r["oor"], r["rot"]
+
+        # ---------------------------------------------------------- E: un-rotate, multiply
+        if isinstance(rot, int):
+            vdata = [data_[(k + rot) % nb] for k in range(nb)]
+        else:
+            vdata = [Signal(unsigned(len(data_[0])), name=f"vdata{k}") for k in range(nb)]
+            with m.Switch(rot):
+                for s in range(nb):
+                    with (m.Case(s) if s < n else m.Default()):
+                        m.d.comb += [vdata[k].eq(data_[(k + s) % nb]) for k in range(nb)]
+        prods = []
+        for z in range(nz):
+            for k in range(nb):
+                w = vdata[k][z * bw : (z + 1) * bw].as_signed()
+                pr = Signal(signed(dw + bw), name=f"prod{z}_{k}")
+                m.d.comb += pr.eq(mus[k] * w)
+                sink_unused(m, pr[accw], f"prod{z}_{k}_top")
+                prods.append(pr[:accw])
+        valid, r = pipe.stage("s_prod", pl.product, valid, {"p": prods, "oor": oor})
+        prods, oor = r["p"], r["oor"]
+        terms = [prods[z * nb : (z + 1) * nb] for z in range(nz)]
+
+        # ---------------------------------------------------------- F: adder tree
+        levels = Pipeline.tree_depth(n)
+        for lvl in range(levels):
+            last = lvl == levels - 1
+            new = []
+            for z in range(nz):
+                cur = terms[z]
+                row = []
+                for i in range(0, len(cur), 2):
+                    if i + 1 < len(cur):
+                        s = Signal(signed(accw + 1), name=f"sum{lvl}_{z}_{i // 2}")
+                        m.d.comb += s.eq(cur[i].as_signed() + cur[i + 1].as_signed())
+                        if last:
+                            row.append(s)
+                        else:
+                            sink_unused(m, s[accw], f"sum{lvl}_{z}_{i // 2}_top")
+                            row.append(s[:accw])
+                    else:
+                        row.append(cur[i])
+                new.append(row)
+            terms = new
+            if pl.tree_levels and ((lvl + 1) % pl.tree_levels == 0 or last):
+                flat = [t for row in terms for t in row]
+                valid, r = pipe.stage(f"s_tree{lvl}", True, valid, {"t": flat, "oor": oor})
+                pos, new = 0, []
+                for row in terms:
+                    new.append(r["t"][pos : pos + len(row)])
+                    pos += len(row)
+                terms, oor = new, r["oor"]
+        accs = [row[0] for row in terms]  # accw + 1 bits
+
+        # ---------------------------------------------------------- G: round, saturate
+        outw, sh = p.out_width, p.shift
+        zs = []
+        for z in range(nz):
+            a = accs[z]
+            if sh > accw:
+                # |acc| <= 2**(accw-1) <= 2**(sh-1): the result is 0 (half up) or the sign (truncate)
+                if p.rounding == "half_up":
+                    sink_unused(m, a, f"acc{z}")
+                    zs.append(Const(0, signed(outw)))
+                    continue
+                sink_unused(m, a[:-1], f"acc{z}")
+                rv = a[-1:].as_signed()
+            elif sh > 0:
+                # exact in accw + 1 bits: acc + 2**(sh-1) <= 2**(accw-1) - 2**F + 2**(accw-1)
+                rs = a.as_unsigned()
+                if p.rounding == "half_up":
+                    rs = add_const_wrap(m, rs, 1 << (sh - 1), f"rnd{z}")
+                sink_unused(m, rs[:sh], f"rnd{z}_frac")
+                rv = rs[sh:].as_signed()
+            elif sh == 0:
+                rv = a.as_signed()
+            else:
+                rv = Cat(Const(0, -sh), a).as_signed()
+            if len(rv) <= outw:
+                zs.append(rv)
+                continue
+            sign = rv[-1]
+            upper = rv[outw - 1 : len(rv) - 1]
+            o = Signal(signed(outw), name=f"sat{z}")
+            with m.If(~sign & upper.any()):
+                m.d.comb += o.eq((1 << (outw - 1)) - 1)
+            with m.Elif(sign & ~upper.all()):
+                m.d.comb += o.eq(-(1 << (outw - 1)))
+            with m.Else():
+                m.d.comb += o.eq(rv[:outw])
+            zs.append(o)
+        return zs, oor, valid
+
+    # ------------------------------------------------------------------ helpers
+    @staticmethod
+    def _name(m: Module, value, name: str, shape=None):
+        s = Signal(shape if shape is not None else unsigned(len(value)), name=name)
+        m.d.comb += s.eq(value)
+        return s
+
+    @staticmethod
+    def _modsum(m: Module, res, nb: int, rbits: int, name: str):
+        """``sum(res) mod nb`` for residues in ``0 .. nb-1`` (case tables, no arithmetic)."""
+        consts = sum(r for r in res if isinstance(r, int)) % nb
+        vals = [r for r in res if not isinstance(r, int)]
+        if not vals:
+            return consts
+        lvl = 0
+        while len(vals) > 1:
+            nxt = []
+            for i in range(0, len(vals), 2):
+                if i + 1 < len(vals):
+                    a, b = vals[i], vals[i + 1]
+                    table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
+                    nxt.append(rom(m, Cat(a, b), table, rbits, f"{name}_{lvl}_{i // 2}"))
+                else:
+                    nxt.append(vals[i])
+            vals = nxt
+            lvl += 1
+        v = vals[0]
+        if consts:
+            v = rom(m, v, [(x + consts) % nb for x in range(nb)], rbits, f"{name}_k")
+        return v

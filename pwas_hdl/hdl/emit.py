@@ -1,0 +1,86 @@
+"""Verilog export and port / resource description of the generated designs.
+
+:func:`emit_verilog` converts a component with ``amaranth.back.verilog.convert(..., emit_src=False)``
+(Amaranth's builtin Yosys) and applies one textual, semantics-preserving normalisation:
+
+* Amaranth attaches an ``init`` attribute to every flip-flop and Yosys' ``write_verilog`` prints it
+  as a declaration initialiser (``reg [5:0] x = 6'h00;``) of a variable that an ``always`` block
+  then assigns, which ``verilator -Wall`` reports as PROCASSINIT. The initialiser is moved into an
+  ``initial`` statement right after the declaration (``reg [5:0] x;`` / ``initial x = 6'h00;``);
+  IEEE 1364-2005 §6.2.1 defines the declaration form as exactly that. Variables that no
+  ``always`` block assigns (Yosys' time-zero trigger register) are left untouched.
+
+The output is deterministic (no paths, no time stamps; the first line names the Yosys version).
+"""
+
+from __future__ import annotations
+
+import re
+
+from amaranth.back import verilog
+from amaranth.lib import wiring
+
+__all__ = ["emit_verilog", "port_list", "normalise_verilog"]
+
+_DECL = re.compile(
+    r"^(?P<indent>[ \t]*)reg (?P<range>(?:signed )?(?:\[[0-9]+:[0-9]+\] )?)"
+    r"(?P<name>\\\S+ |[A-Za-z_][A-Za-z0-9_$]*)(?P<sp> ?)= (?P<value>[^;]+);$",
+    re.M,
+)
+
+
+def normalise_verilog(text: str) -> str:
+    """Move the initialisers of procedurally assigned ``reg`` declarations to ``initial`` statements."""
+    assigned = set()
+    for mo in re.finditer(r"^[ \t]*(\\\S+ |[A-Za-z_][A-Za-z0-9_$]*)\s*(?:\[[^\]]*\]\s*)?<=", text, re.M):
+        assigned.add(mo.group(1).rstrip())
+
+    def repl(mo: re.Match) -> str:
+        name = mo.group("name")
+        if name.rstrip() not in assigned:
+            return mo.group(0)
+        ind = mo.group("indent")
+        return f"{ind}reg {mo.group('range')}{name.rstrip()}{' ' if name.startswith(chr(92)) else ''};\n" \
+               f"{ind}initial {name}{mo.group('sp')}= {mo.group('value')};"
+
+    return _DECL.sub(repl, text)
+
+
+def emit_verilog(component: wiring.Component, name: str | None = None) -> str:
+    """Verilog-2005 text of ``component`` as a single module called ``name`` (default: the
+    ``module_name`` given to :func:`~pwas_hdl.hdl.build_core`).
+
+    The module has the ports listed by :func:`port_list` (``clk`` and ``rst`` for the ``sync``
+    domain, then the flattened signature members). Deterministic: equal inputs give byte-identical
+    text.
+    """
+    if name is None:
+        name = getattr(component, "module_name", None) or "top"
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise ValueError(f"module name {name!r} is not a plain Verilog identifier")
+    text = verilog.convert(component, name=name, emit_src=False)
+    return normalise_verilog(text)
+
+
+def port_list(component: wiring.Component) -> list[dict]:
+    """Flattened Verilog ports of a component: ``[{name, direction, width, signed}]``.
+
+    ``clk`` (rising edge) and ``rst`` (synchronous, active high) come first; then every signature
+    member, named by joining its path with ``__`` (``in__valid``, ``in__ready``, ``in__payload``,
+    ``out__valid``, ``out__ready``, ``out__payload``, ...), in signature order.
+    """
+    ports = [
+        {"name": "clk", "direction": "input", "width": 1, "signed": False},
+        {"name": "rst", "direction": "input", "width": 1, "signed": False},
+    ]
+    for path, member, value in component.signature.flatten(component):
+        shape = value.shape() if hasattr(value, "shape") else None
+        ports.append(
+            {
+                "name": "__".join(map(str, path)),
+                "direction": "input" if member.flow == wiring.In else "output",
+                "width": len(value.as_value()) if hasattr(value, "as_value") else len(value),
+                "signed": bool(getattr(shape, "signed", False)),
+            }
+        )
+    return ports

@@ -1,0 +1,366 @@
+"""Parameters of the PWAS hardware core, pipeline options and the weight-memory plan.
+
+:class:`CoreParams` is the integer description the RTL generator works from. It is filled from the
+bit-true model (:class:`pwas_hdl.bittrue.FixedPointModel`, see :meth:`CoreParams.from_model`); it
+can also be built by hand (tests).
+
+The arithmetic (the specification the RTL implements bit for bit, see ``ARCHITECTURE.md`` §1-2):
+
+* input codes ``q_j``: signed ``in_width``-bit integers;
+* ``t_j = q_j - lo_code_j``; clamped to ``[0, p_j * 2**F_j]`` (``out_of_range`` = some ``t_j`` was
+  clamped); cell ``c_j = min(t_j >> F_j, p_j - 1)``; fraction ``d_j = t_j - c_j * 2**F_j``, aligned to
+  ``F = max F_j`` by ``<< (F - F_j)`` (so ``0 <= d_j <= 2**F``);
+* ``rank_j = #{i : d_i > d_j or (d_i == d_j and i < j)}``; vertex ``k`` has coordinates
+  ``c_j + (rank_j < k)``;
+* ``mu_0 = 2**F - d_(1)``, ``mu_k = d_(k) - d_(k+1)``, ``mu_n = d_(n)`` (``d_(k)`` = the ``d_j`` with
+  ``rank_j == k - 1``);
+* ``acc = sum_k mu_k * W[v_k]`` exact; ``out = (acc + 2**(sh-1)) >> sh`` (arithmetic, no rounding term
+  when ``sh == 0``, ``acc << -sh`` when ``sh < 0``) with ``sh = F + Fw - Fo``; saturated to signed
+  ``out_width`` bits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["CoreParams", "Pipeline", "MemoryPlan", "reference_eval", "PIPELINE_PRESETS"]
+
+
+def _bits_for(v: int) -> int:
+    """Width of an unsigned integer able to hold ``0 .. v`` (at least 1)."""
+    return max(1, int(v).bit_length())
+
+
+@dataclass(frozen=True, eq=False)
+class CoreParams:
+    """Integer description of one PWAS core.
+
+    Attributes
+    ----------
+    partitions : tuple of int
+        ``p_j >= 1`` intervals per dimension (``n = len(partitions)``).
+    in_width : int
+        Width ``B_in`` of the signed input codes (all dimensions).
+    lo_code : tuple of int
+        Input code of the lower domain bound per dimension.
+    frac_bits : tuple of int
+        ``F_j >= 0``: one grid interval of dimension ``j`` is ``2**F_j`` input codes.
+    weight_width, weight_frac : int
+        Signed weight codes ``B_w`` bits with ``Fw`` fractional bits.
+    out_width, out_frac : int
+        Signed output codes ``B_out`` bits with ``Fo`` fractional bits.
+    weights : ndarray, shape (N, nz), int64
+        Weight codes in the vertex order of :mod:`pwas_hdl.geometry` (C order, last dimension fastest).
+    """
+
+    partitions: tuple[int, ...]
+    in_width: int
+    lo_code: tuple[int, ...]
+    frac_bits: tuple[int, ...]
+    weight_width: int
+    weight_frac: int
+    out_width: int
+    out_frac: int
+    weights: np.ndarray = field(repr=False)
+    rounding: str = "half_up"
+
+    def __post_init__(self) -> None:
+        n = len(self.partitions)
+        if n < 1:
+            raise ValueError("a PWAS core needs at least one dimension")
+        if len(self.lo_code) != n or len(self.frac_bits) != n:
+            raise ValueError(f"lo_code and frac_bits need {n} entries (one per dimension)")
+        if any(int(p) < 1 for p in self.partitions):
+            raise ValueError(f"partitions must be >= 1, got {self.partitions}")
+        if any(int(f) < 0 for f in self.frac_bits):
+            raise ValueError(f"frac_bits must be >= 0, got {self.frac_bits}")
+        if self.in_width < 2 or self.weight_width < 1 or self.out_width < 1:
+            raise ValueError("widths must be >= 1 (inputs >= 2)")
+        if self.rounding not in ("half_up", "truncate"):
+            raise ValueError(f"rounding must be 'half_up' or 'truncate', got {self.rounding!r}")
+        w = np.asarray(self.weights, dtype=np.int64)
+        if w.ndim == 1:
+            w = w[:, None]
+        if w.shape[0] != self.n_vertices or w.shape[1] < 1:
+            raise ValueError(f"weights must have shape (N={self.n_vertices}, nz>=1), got {w.shape}")
+        lim = 1 << (self.weight_width - 1)
+        if w.min() < -lim or w.max() >= lim:
+            raise ValueError(f"weight codes do not fit signed {self.weight_width} bits")
+        object.__setattr__(self, "weights", w)
+        object.__setattr__(self, "partitions", tuple(int(p) for p in self.partitions))
+        object.__setattr__(self, "lo_code", tuple(int(v) for v in self.lo_code))
+        object.__setattr__(self, "frac_bits", tuple(int(v) for v in self.frac_bits))
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n(self) -> int:
+        return len(self.partitions)
+
+    @property
+    def nz(self) -> int:
+        return int(self.weights.shape[1])
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(p + 1 for p in self.partitions)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(np.prod([p + 1 for p in self.partitions]))
+
+    @property
+    def strides(self) -> tuple[int, ...]:
+        s = [1] * self.n
+        for j in range(self.n - 2, -1, -1):
+            s[j] = s[j + 1] * (self.partitions[j + 1] + 1)
+        return tuple(s)
+
+    @property
+    def frac(self) -> int:
+        """``F = max F_j`` (fractional bits of the aligned fractions and of ``mu``)."""
+        return max(self.frac_bits)
+
+    @property
+    def shift(self) -> int:
+        """``sh = F + Fw - Fo``."""
+        return self.frac + self.weight_frac - self.out_frac
+
+    @property
+    def acc_width(self) -> int:
+        """Width of products, partial sums and the accumulator: ``F + B_w`` (exact, see core)."""
+        return self.frac + self.weight_width
+
+    # ------------------------------------------------------------- builders
+    @classmethod
+    def from_model(cls, model) -> "CoreParams":
+        """Core parameters of a bit-true model (:class:`pwas_hdl.bittrue.FixedPointModel`)."""
+        return _params_from_model(cls, model)
+
+
+def _params_from_model(cls, model) -> CoreParams:
+    if isinstance(model, CoreParams):
+        return model
+    try:
+        return cls(
+            partitions=tuple(int(v) for v in model.grid.partitions),
+            in_width=int(model.input_bits),
+            lo_code=tuple(int(v) for v in model.lo_codes),
+            frac_bits=tuple(int(v) for v in model.frac_bits),
+            weight_width=int(model.weight_format.bits),
+            weight_frac=int(model.weight_format.frac),
+            out_width=int(model.output_format.bits),
+            out_frac=int(model.output_format.frac),
+            weights=np.asarray(model.weight_codes, dtype=np.int64),
+            rounding=str(model.rounding),
+        )
+    except AttributeError as exc:
+        raise TypeError(f"expected a pwas_hdl.bittrue.FixedPointModel or CoreParams, got {type(model).__name__} ({exc})") from exc
+
+
+# ---------------------------------------------------------------------------------------------
+# Reference arithmetic (integer, vectorised). Kept for tests and as a cross-check of the bit-true
+# model; the specification proper is pwas_hdl.bittrue.
+# ---------------------------------------------------------------------------------------------
+def reference_eval(p: CoreParams, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Integer evaluation of the core: ``(codes (m, nz) int64, out_of_range (m,) bool)``."""
+    q = np.atleast_2d(np.asarray(q, dtype=np.int64))
+    m, n = q.shape
+    assert n == p.n
+    parts = np.array(p.partitions, dtype=np.int64)
+    fb = np.array(p.frac_bits, dtype=np.int64)
+    big_f = p.frac
+    t = q - np.array(p.lo_code, dtype=np.int64)
+    tmax = parts << fb
+    oor = np.any((t < 0) | (t > tmax), axis=1)
+    t = np.clip(t, 0, tmax)
+    c = np.minimum(t >> fb, parts - 1)
+    d = (t - (c << fb)) << (big_f - fb)
+    rank = np.zeros_like(d)
+    for j in range(n):
+        for i in range(n):
+            if i != j:
+                rank[:, j] += (d[:, i] > d[:, j]) | ((d[:, i] == d[:, j]) & (i < j))
+    strides = np.array(p.strides, dtype=np.int64)
+    acc = np.zeros((m, p.nz), dtype=object)
+    dsorted = np.zeros((m, n + 2), dtype=np.int64)
+    dsorted[:, 0] = 1 << big_f
+    for k in range(1, n + 1):
+        dsorted[:, k] = np.sum(np.where(rank == k - 1, d, 0), axis=1)
+    for k in range(n + 1):
+        mu = dsorted[:, k] - dsorted[:, k + 1]
+        v = c + (rank < k)
+        idx = v @ strides
+        acc = acc + mu[:, None].astype(object) * p.weights[idx].astype(object)
+    sh = p.shift
+    if sh > 0:
+        rnd = (1 << (sh - 1)) if p.rounding == "half_up" else 0
+        r = (acc + rnd) // (1 << sh)  # floor division == arithmetic shift
+    else:
+        r = acc * (1 << (-sh))
+    lo, hi = -(1 << (p.out_width - 1)), (1 << (p.out_width - 1)) - 1
+    r = np.clip(r, lo, hi).astype(np.int64)
+    return r, oor
+
+
+# ---------------------------------------------------------------------------------------------
+# Pipeline options
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Pipeline:
+    """Which pipeline registers the core has.
+
+    Stages (in order, ``*`` = always present):
+
+    ============ ========================================================================
+    ``split``    register after scale / clamp / cell-fraction split
+    ``rank``     register after the rank extractor (and the address/bank precomputation)
+    memory *     vertex addresses + ``mu`` feed the synchronous read ports (one register)
+    ``mem_out``  extra register on the memory read data
+    ``product``  register after the ``mu_k * w`` multipliers
+    ``tree``     a register after every ``tree_levels`` adder-tree levels (0: none)
+    output *     rounding / saturation, then the output register (the stream's payload)
+    ============ ========================================================================
+    """
+
+    split: bool = True
+    rank: bool = True
+    mem_out: bool = False
+    product: bool = True
+    tree_levels: int = 2
+
+    def __post_init__(self) -> None:
+        if self.tree_levels < 0:
+            raise ValueError("tree_levels must be >= 0 (0 = no adder-tree registers)")
+
+    @staticmethod
+    def tree_depth(n: int) -> int:
+        """Adder-tree levels to sum ``n + 1`` products."""
+        return max(1, math.ceil(math.log2(n + 1)))
+
+    def tree_registers(self, n: int) -> int:
+        if self.tree_levels == 0:
+            return 0
+        return math.ceil(self.tree_depth(n) / self.tree_levels)
+
+    def latency(self, n: int) -> int:
+        """Cycles from an input transfer to the matching output (without backpressure)."""
+        return (
+            int(self.split)
+            + int(self.rank)
+            + 1
+            + int(self.mem_out)
+            + int(self.product)
+            + self.tree_registers(n)
+            + 1
+        )
+
+    @classmethod
+    def cast(cls, value: "Pipeline | str | None") -> "Pipeline":
+        if value is None:
+            return cls()
+        if isinstance(value, Pipeline):
+            return value
+        if isinstance(value, str):
+            try:
+                return PIPELINE_PRESETS[value]
+            except KeyError:
+                raise ValueError(
+                    f"unknown pipeline preset {value!r}; choose one of {', '.join(PIPELINE_PRESETS)}"
+                ) from None
+        raise TypeError(f"pipeline must be a Pipeline, a preset name or None, not {value!r}")
+
+    def to_dict(self) -> dict:
+        return {
+            "split": self.split,
+            "rank": self.rank,
+            "mem_out": self.mem_out,
+            "product": self.product,
+            "tree_levels": self.tree_levels,
+        }
+
+
+#: Named pipelines: ``min`` (2 registers: memory + output), ``balanced`` (default), ``max``.
+PIPELINE_PRESETS: dict[str, Pipeline] = {
+    "min": Pipeline(split=False, rank=False, mem_out=False, product=False, tree_levels=0),
+    "balanced": Pipeline(),
+    "max": Pipeline(split=True, rank=True, mem_out=True, product=True, tree_levels=1),
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# Weight memory plan
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MemoryPlan:
+    """How the weights are laid out in ``n + 1`` memories (one read each per cycle).
+
+    ``banked``: bank ``b(v) = (sum_j v_j) mod (n+1)``; the last dimension padded to
+    ``P' = ceil((p_{n-1}+1)/(n+1)) * (n+1)``; ``addr(v) = r * P'/(n+1) + v_{n-1} // (n+1)`` with ``r``
+    the C-order index over dimensions ``0 .. n-2``. Vertex ``k`` of a simplex with cell ``c`` lies in
+    bank ``(|c| + k) mod (n+1)``. Padding words are 0.
+
+    ``replicated``: ``n + 1`` copies of the ``N``-word memory addressed by the linear vertex index.
+    """
+
+    kind: str
+    n_banks: int
+    depth: int
+    word_bits: int
+    contents: tuple[tuple[int, ...], ...]  # per bank: packed words (nz codes, target 0 in the LSBs)
+
+    @property
+    def words(self) -> int:
+        return self.n_banks * self.depth
+
+    @property
+    def bits(self) -> int:
+        return self.words * self.word_bits
+
+    @property
+    def addr_width(self) -> int:
+        return max(0, (self.depth - 1).bit_length())
+
+    def to_dict(self) -> dict:
+        return {
+            "kind": self.kind,
+            "memories": self.n_banks,
+            "depth": self.depth,
+            "word_bits": self.word_bits,
+            "words": self.words,
+            "bits": self.bits,
+        }
+
+    # Layout geometry shared with the core's address logic.
+    @staticmethod
+    def banked_geometry(partitions: Sequence[int]) -> tuple[int, int, tuple[int, ...]]:
+        """``(G, rows, row_strides)``: ``G = P'/(n+1)`` words per row, number of rows, and the C-order
+        strides of dimensions ``0 .. n-2`` (premultiplied by ``G``: address weight of ``c_j``)."""
+        n = len(partitions)
+        g = -(-(partitions[-1] + 1) // (n + 1))
+        rows = int(np.prod([p + 1 for p in partitions[:-1]])) if n > 1 else 1
+        st = [0] * (n - 1)
+        acc = g
+        for j in range(n - 2, -1, -1):
+            st[j] = acc
+            acc *= partitions[j] + 1
+        return g, rows, tuple(st)
+
+    @classmethod
+    def build(cls, p: CoreParams, kind: str = "banked") -> "MemoryPlan":
+        """The plan of :mod:`pwas_hdl.memory_layout` (the layout the bit-true model reads through);
+        one word per bank and address holds all ``nz`` targets, target 0 in the LSBs."""
+        from ..geometry import Grid
+        from ..memory_layout import make_layout, pack_words
+
+        parts = np.array(p.partitions, dtype=np.int64)
+        layout = make_layout(Grid(np.zeros(p.n), parts.astype(float), parts), kind)
+        rom = layout.contents(p.weights)  # (n_banks, depth, nz)
+        if kind == "banked":  # the core's address logic relies on this geometry
+            g, rows, _ = cls.banked_geometry(p.partitions)
+            assert (layout.row_words, layout.n_rows, layout.depth) == (g, rows, g * rows)
+        contents = tuple(tuple(pack_words(rom[b], p.weight_width)) for b in range(layout.n_banks))
+        return cls(kind, layout.n_banks, layout.depth, p.nz * p.weight_width, contents)
