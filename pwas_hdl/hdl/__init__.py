@@ -15,7 +15,8 @@ Typical use::
 from .core import PWASCore, core_input_layout, core_output_layout
 from .emit import emit_verilog, normalise_verilog, port_list
 from .params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline, reference_eval
-from .api import build_core, design_info
+from .api import build_core, build_sensor, design_info
+from .sensor_top import PWASSensorTop, lag_plan
 
 __all__ = [
     "PWASCore",
@@ -27,6 +28,9 @@ __all__ = [
     "core_input_layout",
     "core_output_layout",
     "build_core",
+    "build_sensor",
+    "PWASSensorTop",
+    "lag_plan",
     "design_info",
     "emit_verilog",
     "normalise_verilog",

@@ -8,7 +8,7 @@ from .core import PWASCore
 from .emit import port_list
 from .params import CoreParams, Pipeline
 
-__all__ = ["build_core", "design_info"]
+__all__ = ["build_core", "build_sensor", "design_info"]
 
 
 def _check_name(name: str) -> str:
@@ -102,3 +102,39 @@ def design_info(component) -> dict:
     }
     info.update(getattr(component, "extra_info", {}))
     return info
+
+
+def build_sensor(
+    model,
+    lags=None,
+    *,
+    memory: str = "banked",
+    pipeline: Pipeline | str | None = None,
+    name: str = "pwas_sensor",
+):
+    """The virtual-sensor top (lag bank + core) of a bit-true model.
+
+    Parameters
+    ----------
+    model : pwas_hdl.bittrue.FixedPointModel (or CoreParams together with ``lags``)
+    lags : LagStructure, optional
+        Default: derived from ``model.regressor_signals`` (as ``FixedPointModel.from_sensor``
+        sets them); pass ``sensor.lags_`` to be explicit.
+    memory, pipeline, name : as :func:`build_core`
+
+    Returns
+    -------
+    PWASSensorTop
+        ``.latency``, ``.ii``, ``.warmup`` (= M - 1), ``.core``, ``.signals``, ``.dims``.
+    """
+    from .sensor_top import PWASSensorTop, lag_plan
+
+    params = CoreParams.from_model(model)
+    if hasattr(model, "signal_input_formats"):
+        model.signal_input_formats()  # raises unless all lags of each signal share one format
+    signals, dims = lag_plan(model, lags)
+    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline)
+    top.module_name = _check_name(name)
+    top.core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))
+    top.core.target_names = list(getattr(model, "target_names", [f"z{i}" for i in range(params.nz)]))
+    return top

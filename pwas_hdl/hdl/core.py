@@ -172,20 +172,28 @@ class PWASCore(wiring.Component):
         m = Module()
         inp = getattr(self, "in")
         # advance = in.ready (one net; a separately named copy would be an unused alias wire)
-        advance = inp.ready
-        m.d.comb += advance.eq(~self.out.valid | self.out.ready)
+        self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
+        return m
+
+    def build_into(self, m: Module, payload, valid, advance, out) -> None:
+        """Add the core's logic to ``m`` (used by :meth:`elaborate` and by the sensor top).
+
+        ``payload`` / ``valid``: the input sample (``n*B_in`` bits) and its valid bit; ``advance``:
+        a 1-bit signal this method drives with ``~out.valid | out.ready`` (the input is taken when
+        ``valid & advance``); ``out``: the output stream interface (payload, valid driven here).
+        """
+        m.d.comb += advance.eq(~out.valid | out.ready)
         pipe = _Pipe(m, advance)
-        valid, vals = self._front(m, pipe, inp.payload, inp.valid)
+        valid, vals = self._front(m, pipe, payload, valid)
         zs, oor, valid = self._back(m, pipe, valid, vals, advance)
         outw = self.params.out_width
         for z, o in enumerate(zs):
-            pipe.regs.append((self.out.payload[z * outw : (z + 1) * outw], o))
-        pipe.regs.append((self.out.payload[-1], _bit(oor)))
-        pipe.valids.append((self.out.valid, valid))
+            pipe.regs.append((out.payload[z * outw : (z + 1) * outw], o))
+        pipe.regs.append((out.payload[-1], _bit(oor)))
+        pipe.valids.append((out.valid, valid))
         pipe.count += 1
         pipe.finish()
         assert pipe.count == self.latency, (pipe.count, self.latency)
-        return m
 
     # ------------------------------------------------------------------ front end
     def _front(self, m: Module, pipe: _Pipe, payload, valid):

@@ -1,0 +1,192 @@
+"""Virtual-sensor top: one (u, y) sample per transfer -> lag bank -> PWAS core.
+
+Input stream payload (``in__payload``, LSB first): one signed ``B_in``-bit code per *signal*, in
+the order of :class:`pwas_hdl.regressors.LagStructure` (inputs ``u0 .. u{nu-1}``, then outputs
+``y0 .. y{ny-1}``; only signals that appear in the regressor). Each signal keeps its own format:
+all lags of a signal share it (``FixedPointModel.signal_input_formats``).
+
+Lag bank: per signal with ``L`` lags, ``L - 1`` registers holding the previous ``L - 1`` accepted
+samples; the regressor is formed from them and the current sample, oldest first
+(``u(t-Mu+1) .. u(t), y(t-My+1) .. y(t)``, channels within a time step), exactly as
+:meth:`LagStructure.build`. The registers shift on every input transfer.
+
+Warm-up: the first ``M - 1`` transfers after reset (``M = max(Mu, My)``) only fill the lag bank
+and produce no output; the transfer of sample ``t >= M - 1`` produces one output, ``latency``
+cycles later -- the rows of ``LagStructure.build``. The output port ``warm`` is high once the lag
+bank is full (``M - 1`` samples held), i.e. when the next transfer yields an output; it is
+constant 1 when ``M = 1``. During warm-up ``in.ready`` is 1 (the lag bank never waits for the
+pipeline); afterwards ``in.ready = ~out.valid | out.ready``. ``rst`` restarts the warm-up.
+"""
+
+from __future__ import annotations
+
+import re
+
+from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from ..regressors import LagStructure
+from .core import PWASCore, core_output_layout
+from .params import CoreParams, Pipeline
+
+__all__ = ["PWASSensorTop", "lag_plan"]
+
+
+def lag_plan(model, lags: LagStructure | None = None):
+    """Signals and regressor dimensions of the lag bank.
+
+    Returns
+    -------
+    signals : list of (name, n_lags)
+        In payload order.
+    dims : list of (signal index, lag)
+        One per regressor dimension, ``lag = 0`` the current sample.
+    """
+    n = len(CoreParams.from_model(model).partitions)
+    names = list(getattr(model, "regressor_signals", []) or [])
+    if lags is not None:
+        if lags.dimension != n:
+            raise ValueError(f"the lag structure has n = {lags.dimension} regressors, the model {n}")
+        sod = lags.signal_of_dimension()
+        seen: list[tuple[str, int]] = []  # (kind, channel) in first-appearance (= payload) order
+        for kind, ch, _ in sod:
+            if (kind, ch) not in seen:
+                seen.append((kind, ch))
+        dims = [(seen.index((kind, ch)), lag) for kind, ch, lag in sod]
+        counts = [lags.mu if kind == "u" else lags.my for kind, _ in seen]
+        sig_names = [f"{kind}{ch}" for kind, ch in seen]
+        if names:
+            for j, (s, _) in enumerate(dims):
+                sig_names[s] = str(names[j][0])
+            if [(sig_names[s], lag) for s, lag in dims] != [(str(a), int(b)) for a, b in names]:
+                raise ValueError("the lag structure does not match the model's regressor signals")
+        return list(zip(sig_names, counts)), dims
+    if not names:
+        raise ValueError("the model has no regressor_signals; pass the LagStructure (sensor.lags_)")
+    order: dict[str, int] = {}
+    for s, _ in names:
+        order.setdefault(s, len(order))
+    dims = [(order[s], int(lag)) for s, lag in names]
+    counts = [0] * len(order)
+    for s, lag in dims:
+        counts[s] = max(counts[s], lag + 1)
+    return list(zip(order, counts)), dims
+
+
+def _ident(name: str) -> str:
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
+
+
+class PWASSensorTop(wiring.Component):
+    """Lag bank + PWAS core with one sample of every signal per input transfer.
+
+    Parameters
+    ----------
+    params : CoreParams
+    signals : list of (name, n_lags)
+    dims : list of (signal index, lag), one per regressor dimension
+    memory, pipeline : as :class:`PWASCore`
+
+    Ports: ``clk``, ``rst``, ``in__valid``, ``in__ready``, ``in__payload`` (``S*B_in`` bits, one code
+    per signal), ``out__valid``, ``out__ready``, ``out__payload`` (as the core), ``warm``.
+
+    Attributes
+    ----------
+    core : PWASCore  (its logic is inlined; ``latency``, ``memory_plan``, ``params`` apply)
+    latency, ii : int
+        As the core's (from the transfer of a sample that completes a regressor).
+    warmup : int
+        ``M - 1``: transfers after reset that produce no output.
+    """
+
+    kind = "sensor"
+
+    def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        if len(dims) != params.n:
+            raise ValueError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
+        for s, lag in dims:
+            if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
+                raise ValueError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
+        for s, (nm, _) in enumerate(signals):
+            fmt = {(params.lo_code[j], params.frac_bits[j], params.partitions[j]) for j, (sj, _) in enumerate(dims) if sj == s}
+            if len(fmt) > 1:
+                raise ValueError(
+                    f"the lags of signal {nm!r} have different input formats (lo_code, F, p) {sorted(fmt)}; "
+                    "the lag bank feeds one code to all of them: fit with share_lag_domain=True and equal partitions per signal"
+                )
+        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True  # its logic is inlined by elaborate(), never elaborated itself
+        self.params = params
+        self.signals = [(str(nm), int(k)) for nm, k in signals]
+        self.dims = [(int(s), int(lag)) for s, lag in dims]
+        self.latency = self.core.latency
+        self.ii = 1
+        self.memory_plan = self.core.memory_plan
+        self.pipeline = self.core.pipeline
+        self.warmup = max(k for _, k in self.signals) - 1
+        super().__init__(
+            {
+                "in": In(stream.Signature(unsigned(len(self.signals) * params.in_width))),
+                "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+                "warm": Out(1),
+            }
+        )
+
+    @property
+    def input_fields(self) -> list[dict]:
+        b = self.params.in_width
+        return [{"name": nm, "lsb": i * b, "width": b, "signed": True} for i, (nm, _) in enumerate(self.signals)]
+
+    @property
+    def extra_info(self) -> dict:
+        return {
+            "lags": {
+                "signals": [{"name": nm, "lags": k} for nm, k in self.signals],
+                "regressor": [{"signal": self.signals[s][0], "lag": lag} for s, lag in self.dims],
+            },
+            "warmup": {
+                "samples_without_output": self.warmup,
+                "port": "warm",
+                "meaning": "warm = 1 once the lag bank holds M-1 samples since reset; the first M-1 "
+                "transfers after reset produce no output, every later transfer produces one",
+            },
+        }
+
+    def expected_outputs(self, n_samples: int) -> int:
+        return max(0, n_samples - self.warmup)
+
+    def elaborate(self, platform):
+        m = Module()
+        p = self.params
+        b = p.in_width
+        inp = getattr(self, "in")
+        cur = [inp.payload[i * b : (i + 1) * b] for i in range(len(self.signals))]
+        if self.warmup:
+            advance = Signal(name="advance")
+            # thermometer of the samples held: fill[i] = i+1 samples; its last stage is `warm`
+            fill = [Signal(name=f"warmup{i + 1}") for i in range(self.warmup - 1)] + [self.warm]
+            warm = self.warm
+            m.d.comb += inp.ready.eq(advance | ~warm)
+        else:
+            advance = inp.ready  # one net (a copy would be an unused alias wire)
+            fill = []
+            warm = Const(1, 1)
+            m.d.comb += self.warm.eq(1)
+        transfer = inp.valid & inp.ready
+        hist = []
+        for i, (nm, k) in enumerate(self.signals):
+            regs = [Signal(b, name=f"lag_{_ident(nm)}_{lag}", reset_less=True) for lag in range(1, k)]
+            with m.If(transfer):
+                if regs:
+                    m.d.sync += regs[0].eq(cur[i])
+                for lag in range(1, len(regs)):
+                    m.d.sync += regs[lag].eq(regs[lag - 1])
+            hist.append(regs)
+        if fill:
+            with m.If(transfer):
+                m.d.sync += [fill[0].eq(1)] + [fill[i].eq(fill[i - 1]) for i in range(1, len(fill))]
+        regressor = Cat(*[cur[s] if lag == 0 else hist[s][lag - 1] for s, lag in self.dims])
+        self.core.build_into(m, regressor, inp.valid & warm, advance, self.out)
+        return m
