@@ -32,7 +32,7 @@ _DECL = re.compile(
 def normalise_verilog(text: str) -> str:
     """Move the initialisers of procedurally assigned ``reg`` declarations to ``initial`` statements."""
     assigned = set()
-    for mo in re.finditer(r"^[ \t]*(\\\S+ |[A-Za-z_][A-Za-z0-9_$]*)\s*(?:\[[^\]]*\]\s*)?<=", text, re.M):
+    for mo in re.finditer(r"(?<![A-Za-z0-9_$\\])(\\\S+ |[A-Za-z_][A-Za-z0-9_$]*)\s*(?:\[[^\]]*\]\s*)?<=", text):
         assigned.add(mo.group(1).rstrip())
 
     def repl(mo: re.Match) -> str:
