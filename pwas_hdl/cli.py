@@ -221,6 +221,48 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
         out.print_json(json.dumps(d))
 
 
+@app.command()
+def generate(
+    model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
+    outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Folder to write (created; replaced only if an earlier `generate` made it).")],
+    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer).")] = "core",
+    name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
+    memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
+    pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default) or max.")] = None,
+    input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes.")] = 12,
+    input_fill: Annotated[float, typer.Option("--input-fill", help="Largest fraction of the input code range the domain may take (the rest detects out-of-range).")] = 0.9,
+    weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Weight width (default: the fewest bits that hold every weight).")] = None,
+    weight_frac: Annotated[Optional[int], typer.Option("--weight-frac", help="Weight fraction bits (default: output fraction + 2).")] = None,
+    output_bits: Annotated[Optional[int], typer.Option("--output-bits", help="Output width (default: never saturates).")] = None,
+    output_frac: Annotated[Optional[int], typer.Option("--output-frac", help="Output fraction bits (default: LSB = largest power of two <= train RMSE / 32).")] = None,
+    overflow: Annotated[str, typer.Option("--overflow", help="Weights that do not fit: error (refuse) or saturate (with a warning).")] = "error",
+    rounding: Annotated[str, typer.Option("--rounding", help="Rounding of weights and output: half_up or truncate.")] = "half_up",
+) -> None:
+    """Generate the Verilog, weight memory (.hex), manifest.json and report.md of a model.
+
+    Same inputs give byte-identical files. Nothing is written unless the whole design builds.
+    """
+    from .generate import generate as _generate
+
+    with _user_errors():
+        with _progress("building the design"):
+            gd = _generate(
+                model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline,
+                input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
+                output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
+            )
+        man = gd.manifest
+        eb = man["error_bound"]
+        mem = man["memory"]
+        err.print(
+            f"{man['top']}: latency {man['latency_cycles']} cycles, II {man['ii']}, memory {mem['words']} words "
+            f"({mem['words'] / mem['n_vertices']:.3g} N) x {mem['word_bits']} bits, error bound {eb['lsb']:.4g} LSB "
+            f"= {eb['physical']:.4g}",
+            highlight=False, markup=False,
+        )
+        err.print(f"wrote {outdir}/ ({len(gd.files)} files)", highlight=False, markup=False)
+
+
 @data_app.command("lorenz")
 def make_data_lorenz(
     output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns y, z, z_true).")],

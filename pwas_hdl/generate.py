@@ -1,0 +1,415 @@
+"""``pwas-hdl generate``: model file -> self-contained hardware folder.
+
+The folder holds (``<top>`` is the module name):
+
+``<top>.v``
+    The design, one synthesizable Verilog-2005 file (weights inline as memory initialisers).
+``<top>_rom_b<bank>_z<target>.hex``
+    The same weight memory as ``$readmemh`` files, one per bank and target
+    (:func:`pwas_hdl.memory_layout.hex_files`), for FPGA flows that load ROMs from files.
+``manifest.json``
+    Machine-readable description (:mod:`pwas_hdl.manifest`): ports, formats, latency, II, domain,
+    lags, error bound, memory, and the options that rebuild the bit-true model.
+``report.md``
+    Short human-readable report.
+``model.json``
+    The model file the design was generated from (the float reference of the testbenches).
+``<top>_inst.v``, ``<top>.core``
+    Instantiation template and FuseSoC core description, filled from ``rtl_templates/``.
+
+Same inputs give byte-identical files. The folder is written only when everything has been built
+(in memory) without error; an existing folder is replaced only if it was made by ``generate``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from string import Template
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .bittrue import FixedPointModel
+from .manifest import MANIFEST_FORMAT, MANIFEST_VERSION
+from .memory_layout import hex_files
+from .virtual_sensor import PWASVirtualSensor
+
+__all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fixed_point_model", "TEMPLATE_DIR"]
+
+#: Keyword options of :class:`~pwas_hdl.bittrue.FixedPointModel` that ``generate`` accepts.
+FORMAT_OPTIONS = (
+    "input_bits",
+    "input_fill",
+    "weight_bits",
+    "weight_frac",
+    "output_bits",
+    "output_frac",
+    "overflow",
+    "rounding",
+)
+
+TEMPLATE_DIR = Path(__file__).resolve().parent.parent / "rtl_templates"
+
+
+@dataclass
+class GeneratedDesign:
+    """A design built in memory (and possibly written to a folder).
+
+    Attributes
+    ----------
+    top : str
+        Verilog module name.
+    files : dict of str -> str
+        File name (relative to the folder) -> text.
+    manifest : dict
+        The content of ``manifest.json``.
+    model : FixedPointModel
+        The bit-true model the RTL implements.
+    component : amaranth Component
+        The Amaranth design (core or sensor top).
+    outdir : Path or None
+        Where it was written.
+    """
+
+    top: str
+    files: dict[str, str]
+    manifest: dict[str, Any]
+    model: FixedPointModel
+    component: Any = field(repr=False)
+    outdir: Path | None = None
+
+
+def _load_sensor(model: PWASVirtualSensor | str | os.PathLike) -> PWASVirtualSensor:
+    if isinstance(model, PWASVirtualSensor):
+        return model
+    return PWASVirtualSensor.load(model)
+
+
+def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **formats: Any) -> FixedPointModel:
+    """The bit-true model of ``sensor`` with the given format options (see :data:`FORMAT_OPTIONS`)."""
+    unknown = set(formats) - set(FORMAT_OPTIONS)
+    if unknown:
+        raise ValueError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
+    given = {k: v for k, v in formats.items() if v is not None}
+    return FixedPointModel.from_sensor(sensor, layout=memory, **given)
+
+
+def _template(name: str) -> Template:
+    path = TEMPLATE_DIR / name
+    if not path.is_file():
+        raise FileNotFoundError(f"template {path} is missing; the pwas-hdl installation is incomplete")
+    return Template(path.read_text(encoding="utf-8"))
+
+
+def _role(port_name: str) -> str:
+    return {"clk": "clock", "rst": "reset"}.get(port_name, port_name.replace("__", "."))
+
+
+def _fields(design: str, fxm: FixedPointModel, info: dict, port: str) -> list[dict]:
+    """Payload bit fields with their fixed-point formats and physical scaling."""
+    fields = [dict(f) for f in info["payload"].get(port, [])]
+    if port.startswith("in"):
+        if design == "core":
+            for j, f in enumerate(fields):
+                inp = fxm.inputs[j]
+                f.update({"regressor": fxm.regressor_names[j], "signal": fxm.regressor_signals[j][0],
+                          "lag": fxm.regressor_signals[j][1], "format": inp.port.to_dict(),
+                          "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
+        else:
+            sig = fxm.signal_input_formats()
+            for f in fields:
+                inp = sig[f["name"]]
+                f.update({"signal": f["name"], "format": inp.port.to_dict(),
+                          "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
+    else:
+        for f in fields:
+            if f["name"] in fxm.target_names:
+                f.update({"target": f["name"], "format": fxm.output_port.to_dict()})
+            elif f["name"] == "out_of_range":
+                f["meaning"] = "1: some regressor was outside the domain and was clamped to it"
+    return fields
+
+
+def _manifest(design: str, top: str, fxm: FixedPointModel, info: dict, sensor: PWASVirtualSensor,
+              files: dict[str, Any], options: dict[str, Any]) -> dict:
+    fx = fxm.to_dict()
+    ports = []
+    for prt in info["ports"]:
+        entry = {**prt, "role": _role(prt["name"])}
+        if prt["name"] in info["payload"]:
+            entry["fields"] = _fields(design, fxm, info, prt["name"])
+        ports.append(entry)
+    ins, outs, tgts = sensor.signal_names()
+    lags = sensor.lags_
+    mem = dict(info["memory"])
+    return {
+        "format": MANIFEST_FORMAT,
+        "version": MANIFEST_VERSION,
+        "generator": {"pwas_hdl": __version__, "options": options},
+        "design": design,
+        "top": top,
+        "files": files,
+        "clock": {"port": "clk", "edge": "rising"},
+        "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
+        "latency_cycles": int(info["latency"]),
+        "ii": int(info["ii"]),
+        "flow_control": info["flow_control"],
+        "ports": ports,
+        "formats": {
+            "inputs": fx["inputs"],
+            "signals": fx["signals"],
+            "weight": fx["weights"],
+            "output": fx["output"],
+            "mu_frac": int(fx["F"]),
+            "widths": fx["widths"],
+            "rounding": fx["rounding"],
+        },
+        "domain": {
+            "lo": [float(v) for v in sensor.grid_.lo],
+            "hi": [float(v) for v in sensor.grid_.hi],
+            "partitions": [int(v) for v in sensor.grid_.partitions],
+            "lo_code": [int(v) for v in fxm.lo_codes],
+            "frac_bits": [int(v) for v in fxm.frac_bits],
+            "n_vertices": int(sensor.grid_.n_vertices),
+            "out_of_range": "inputs outside the domain are clamped to it and raise out_of_range",
+        },
+        "lags": {
+            "Mu": int(lags.mu),
+            "My": int(lags.my),
+            "inputs": ins if lags.nu else [],
+            "outputs": outs if lags.ny else [],
+            "targets": tgts,
+            "regressors": list(fxm.regressor_names),
+            **({k: v for k, v in info.items() if k in ("warmup",)}),
+        },
+        "error_bound": fx["error_bound"],
+        "memory": {**mem, "n_vertices": int(sensor.grid_.n_vertices), "layout_spec": fx["layout"]},
+        "pipeline": info["pipeline"],
+        "arithmetic": info["arithmetic"],
+    }
+
+
+def _md_table(header: list[str], rows: list[list[Any]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
+    ports = _md_table(
+        ["port", "dir", "width", "fields (LSB first)"],
+        [
+            [f"`{p['name']}`", p["direction"], p["width"],
+             ", ".join(f"{f['name']} [{f['lsb'] + f['width'] - 1}:{f['lsb']}]" for f in p.get("fields", [])) or "-"]
+            for p in man["ports"]
+        ],
+    )
+    fmts = man["formats"]
+    rows = []
+    seen = set()
+    for inp in fmts["inputs"]:
+        key = inp.get("signal") if man["design"] == "sensor" else inp["name"]
+        if key in seen:
+            continue
+        seen.add(key)
+        rows.append([f"input {key}", f"{'s' if inp['format']['signed'] else 'u'}{inp['format']['bits']}.{inp['format']['frac']}"
+                     if isinstance(inp.get("format"), dict) else inp.get("format", "?"),
+                     f"{inp.get('lsb', inp.get('physical_lsb', '')):.6g}" if isinstance(inp.get('lsb', inp.get('physical_lsb')), float) else "",
+                     f"[{inp['lo']:.6g}, {inp['hi']:.6g}], p = {inp['partitions']}"])
+    w, o = fmts["weight"], fmts["output"]
+    rows.append(["weights", f"s{w['bits']}.{w['frac']}", f"{2.0 ** -w['frac']:.6g}", f"{fxm.weight_codes.size} codes, {w['n_saturated']} saturated"])
+    rows.append(["output", f"s{o['bits']}.{o['frac']}", f"{o['physical_lsb']:.6g}", f"shift {o['shift']}, may saturate: {o['may_saturate']}"])
+    fmt_table = _md_table(["quantity", "format", "physical LSB", "notes"], rows)
+    dom = man["domain"]
+    dom_table = _md_table(
+        ["regressor", "lo", "hi", "p", "codes lo..hi", "F_j"],
+        [[r, f"{lo:.6g}", f"{hi:.6g}", p, f"{lc} .. {lc + p * 2 ** fb}", fb]
+         for r, lo, hi, p, lc, fb in zip(man["lags"]["regressors"], dom["lo"], dom["hi"], dom["partitions"],
+                                          dom["lo_code"], dom["frac_bits"])],
+    )
+    mem = man["memory"]
+    mem_text = (
+        f"Layout **{mem.get('layout', mem.get('kind', '?'))}**: {mem.get('memories', mem.get('banks', '?'))} memories x "
+        f"{mem.get('depth', '?')} words x {mem.get('word_bits', '?')} bits = {mem.get('words', '?')} words, "
+        f"{mem.get('bits', '?')} bits for N = {mem['n_vertices']} weights"
+        + (f" ({mem['words'] / mem['n_vertices']:.3f} N)." if isinstance(mem.get("words"), int) else ".")
+    )
+    eb = man["error_bound"]
+    terms = f"(weight rounding {eb['weight_term']:.4g} + output rounding {eb['output_term']:.4g}, physical units)"
+    files = "\n".join(f"- `{f}`" for f in sorted(_file_names(man["files"])))
+    return _template("report.md.tmpl").substitute(
+        top=man["top"], design="virtual-sensor top (lag bank + core)" if man["design"] == "sensor" else "core",
+        version=__version__,
+        model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
+                       f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
+        clock="clk", reset="rst", latency=man["latency_cycles"], ii=man["ii"],
+        port_table=ports, format_table=fmt_table, bound_lsb=f"{eb['lsb']:.4g}", bound_phys=f"{eb['physical']:.4g}",
+        bound_terms=terms, domain_table=dom_table, memory_text=mem_text, file_list=files,
+    )
+
+
+def _file_names(files: dict) -> list[str]:
+    out = []
+    for v in files.values():
+        if isinstance(v, str):
+            out.append(v)
+        elif isinstance(v, list):
+            out += [h["file"] for h in v]
+        elif isinstance(v, dict):
+            out += [x for x in v.values() if isinstance(x, str)]
+    return out
+
+
+def _instance(man: dict) -> str:
+    comments = []
+    for p in man["ports"]:
+        for f in p.get("fields", []):
+            fmt = f.get("format")
+            desc = ""
+            if fmt:
+                desc = (f" {'s' if fmt['signed'] else 'u'}{fmt['bits']}.{fmt['frac']}, physical = "
+                        f"{fmt['offset']!r} + {fmt['scale']!r} * code * 2^-{fmt['frac']}")
+            comments.append(f"//   {p['name']}[{f['lsb'] + f['width'] - 1}:{f['lsb']}] {f['name']}{desc}")
+    conns = ",\n".join(
+        f"    .{p['name']}({p['name']})" for p in man["ports"]
+    )
+    return _template("instance.v.tmpl").substitute(
+        top=man["top"], version=__version__, clock="clk", reset="rst", latency=man["latency_cycles"], ii=man["ii"],
+        field_comments="\n".join(comments), connections=conns,
+    )
+
+
+def _fusesoc(man: dict) -> str:
+    hexes = "\n".join(f"      - {h['file']}" for h in man["files"]["hex"])
+    return _template("fusesoc.core.tmpl").substitute(
+        version=__version__, vlnv=f"pwas-hdl:generated:{man['top']}:0.1.0",
+        description=f"PWAS {man['design']} {man['top']} (latency {man['latency_cycles']} cycles, II {man['ii']})",
+        verilog=man["files"]["verilog"], hex_files=hexes, top=man["top"],
+    )
+
+
+def build_design(
+    model: PWASVirtualSensor | str | os.PathLike,
+    *,
+    design: str = "core",
+    name: str | None = None,
+    memory: str = "banked",
+    pipeline: str | None = None,
+    **formats: Any,
+) -> GeneratedDesign:
+    """Build the RTL and all artifacts in memory.
+
+    Parameters
+    ----------
+    model : PWASVirtualSensor or path of a model file
+    design : {"core", "sensor"}
+        The PWAS core alone (input = regressor codes) or the virtual-sensor top (input = one
+        (u, y) sample per transfer, lag bank inside).
+    name : str, optional
+        Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
+    memory : {"banked", "replicated"}
+        Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words.
+    pipeline : str, optional
+        Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``).
+    **formats
+        Fixed-point options (:data:`FORMAT_OPTIONS`); ``None`` means the data-driven default.
+
+    Returns
+    -------
+    GeneratedDesign
+    """
+    from .hdl import build_core, build_sensor, design_info, emit_verilog
+
+    if design not in ("core", "sensor"):
+        raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
+    if memory not in ("banked", "replicated"):
+        raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+    sensor = _load_sensor(model)
+    top = name or ("pwas_core" if design == "core" else "pwas_sensor")
+    fxm = fixed_point_model(sensor, memory=memory, **formats)
+    if design == "core":
+        comp = build_core(fxm, memory=memory, pipeline=pipeline, name=top)
+    else:
+        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipeline, name=top)
+    info = design_info(comp)
+    verilog = emit_verilog(comp, top)
+
+    hexes = hex_files(fxm.layout, fxm.weight_codes, fxm.weight_format.bits, prefix=f"{top}_rom")
+    hex_entries = []
+    for fname in hexes:
+        b = int(fname.rsplit("_b", 1)[1].split("_z")[0])
+        t = int(fname.rsplit("_z", 1)[1].split(".")[0])
+        hex_entries.append({"file": fname, "bank": b, "target": fxm.target_names[t],
+                            "depth": int(fxm.layout.depth), "width": int(fxm.weight_format.bits)})
+    files = {
+        "verilog": f"{top}.v",
+        "model": "model.json",
+        "manifest": "manifest.json",
+        "report": "report.md",
+        "instance_template": f"{top}_inst.v",
+        "fusesoc_core": f"{top}.core",
+        "hex": hex_entries,
+    }
+    options = {"design": design, "memory": memory, "pipeline": info["pipeline"].get("preset", pipeline),
+               **{k: formats.get(k) for k in FORMAT_OPTIONS}}
+    man = _manifest(design, top, fxm, info, sensor, files, options)
+    texts: dict[str, str] = {
+        files["verilog"]: verilog,
+        "model.json": json.dumps(sensor.to_dict(), indent=1, allow_nan=False) + "\n",
+        "manifest.json": json.dumps(man, indent=1, allow_nan=False) + "\n",
+        "report.md": _report(man, sensor, fxm),
+        files["instance_template"]: _instance(man),
+        files["fusesoc_core"]: _fusesoc(man),
+        **hexes,
+    }
+    return GeneratedDesign(top, texts, man, fxm, comp)
+
+
+def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
+    """Write ``files`` as the whole content of ``outdir``, atomically.
+
+    The files go to a temporary folder next to ``outdir``, which then replaces it. An existing
+    ``outdir`` is replaced only when it is empty or holds a pwas-hdl ``manifest.json`` (a folder
+    made by ``generate``); anything else is refused so that no user file is lost.
+    """
+    out = Path(outdir)
+    if out.exists():
+        if not out.is_dir():
+            raise ValueError(f"{out} exists and is not a folder; choose another output path")
+        entries = list(out.iterdir())
+        man = out / "manifest.json"
+        ours = man.is_file() and '"pwas-hdl-manifest"' in man.read_text(encoding="utf-8", errors="replace")[:200]
+        if entries and not ours:
+            raise ValueError(f"{out} is not empty and was not made by pwas-hdl generate; choose a new or empty folder")
+    parent = out.parent if str(out.parent) else Path(".")
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    try:
+        for fname, text in files.items():
+            (tmp / fname).write_text(text, encoding="utf-8")
+            os.chmod(tmp / fname, 0o644)
+        os.chmod(tmp, 0o755)
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
+            os.replace(out, old / out.name)
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
+def generate(model: PWASVirtualSensor | str | os.PathLike, outdir: str | os.PathLike, **options: Any) -> GeneratedDesign:
+    """Build the design (see :func:`build_design` for the options) and write its folder."""
+    gd = build_design(model, **options)
+    gd.outdir = write_folder(gd.files, outdir)
+    return gd

