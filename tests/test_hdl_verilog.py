@@ -12,7 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pwas_hdl.hdl import CoreParams, PWASCore, build_core, build_sensor, design_info, emit_verilog, normalise_verilog
+from pwas_hdl.hdl import (
+    CoreParams,
+    PWASCore,
+    build_core,
+    build_sensor,
+    design_info,
+    emit_verilog,
+    memory_hex_files,
+    normalise_verilog,
+)
 from pwas_hdl.hdl.simulate import pack_fields, unpack_fields
 
 from test_hdl_core import codes, make_model
@@ -164,8 +173,8 @@ endmodule
 
 
 @pytest.mark.skipif(IVERILOG is None, reason="iverilog not installed")
-@pytest.mark.parametrize("key", ["n4_p7_lorenz_like", "odd_formats"])
-def test_icarus_runs_the_verilog_bit_true(key, tmp_path):
+@pytest.mark.parametrize("key, init", [("n4_p7_lorenz_like", "inline"), ("odd_formats", "inline"), ("n2_replicated_max", "readmemh")])
+def test_icarus_runs_the_verilog_bit_true(key, init, tmp_path):
     dut = DESIGNS[key]()
     p = dut.params
     if key == "odd_formats":
@@ -175,10 +184,13 @@ def test_icarus_runs_the_verilog_bit_true(key, tmp_path):
         q = rng.integers(-128, 128, (120, p.n))
         ref = reference_eval(p, q)[0]
     else:
-        model = make_model([7, 7, 7, 7], seed=3)
+        model = make_model([7, 7, 7, 7], seed=3) if key == "n4_p7_lorenz_like" else make_model([7, 3], seed=2)
         q = codes(model, 120, seed=8)
         ref = model.evaluate(q)[0]
-    (tmp_path / "dut.v").write_text(emit_verilog(dut, "pwas_core"))
+    (tmp_path / "dut.v").write_text(emit_verilog(dut, "pwas_core", memory_init=init))
+    if init == "readmemh":
+        for fname, text in memory_hex_files(dut).items():
+            (tmp_path / fname).write_text(text)
     wi = p.n * p.in_width
     (tmp_path / "in.hex").write_text("".join(f"{pack_fields(row, p.in_width):x}\n" for row in q))
     rng = np.random.default_rng(1)
@@ -194,3 +206,15 @@ def test_icarus_runs_the_verilog_bit_true(key, tmp_path):
     assert "TIMEOUT" not in out and len(words) == len(q)
     got = np.array([unpack_fields(w, p.out_width, p.nz) for w in words])
     assert np.array_equal(got, ref)
+
+
+def test_readmemh_files_are_the_packed_layout_files():
+    from pwas_hdl.memory_layout import hex_files
+
+    for mem in ("banked", "replicated"):
+        model = make_model([3, 2, 2], seed=9, nz=2, layout=mem)
+        core = build_core(model, memory=mem)
+        text = emit_verilog(core, "pwas_core", memory_init="readmemh", hex_prefix="wt")
+        assert memory_hex_files(core, "wt") == hex_files(model.layout, model.weight_codes, model.weight_format.bits, packed=True, prefix="wt")
+        assert [f'$readmemh("wt_b{b}.hex", wmem{b});' in text for b in range(4)] == [True] * 4
+        assert "wmem0[0] =" not in text

@@ -13,7 +13,7 @@ Typical use::
 """
 
 from .core import PWASCore, core_input_layout, core_output_layout
-from .emit import emit_verilog, normalise_verilog, port_list
+from .emit import emit_verilog, memory_hex_files, normalise_verilog, port_list
 from .params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline, reference_eval
 from .api import build_core, build_sensor, design_info
 from .sensor_top import PWASSensorTop, lag_plan
@@ -33,6 +33,7 @@ __all__ = [
     "lag_plan",
     "design_info",
     "emit_verilog",
+    "memory_hex_files",
     "normalise_verilog",
     "port_list",
 ]
