@@ -8,7 +8,6 @@ import pytest
 from pwas_hdl.bittrue import FixedPointModel
 from pwas_hdl.hdl import build_sensor, design_info, lag_plan
 from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
-from pwas_hdl.regressors import LagStructure
 from pwas_hdl.virtual_sensor import PWASVirtualSensor
 
 

@@ -4,12 +4,35 @@ and their Verilog export.
 Typical use::
 
     from pwas_hdl.bittrue import FixedPointModel
-    from pwas_hdl.hdl import build_core, emit_verilog, design_info
+    from pwas_hdl.hdl import build_core, build_sensor, emit_verilog, design_info
 
     model = FixedPointModel.from_sensor(sensor)
     core = build_core(model, memory="banked", pipeline="balanced", name="pwas_core")
-    text = emit_verilog(core)               # one Verilog-2005 module named "pwas_core"
-    info = design_info(core)                # latency, II, ports, payload fields, memory
+    text = emit_verilog(core)          # one Verilog-2005 module "pwas_core" (memory_init="readmemh"
+                                       # for $readmemh files, see memory_hex_files)
+    info = design_info(core)           # latency, II, ports, payload fields, memory, pipeline
+    top = build_sensor(model, sensor.lags_, name="pwas_sensor")   # lag bank + core
+
+Verilog ports (flattened ``amaranth.lib.stream`` members; all payloads are plain unsigned
+vectors, fields LSB first as listed by ``design_info(...)["payload"]``):
+
+=================  ======  ==========================================================
+``clk``            in      rising edge
+``rst``            in      synchronous, active high; clears the valid bits only
+``in__payload``    in      core: ``n`` signed ``B_in`` codes (``x_j`` at ``[j*B_in +: B_in]``);
+                           sensor top: one code per signal (u0.., y0..)
+``in__valid``      in
+``in__ready``      out     ``~out__valid | out__ready`` (sensor top: also 1 during warm-up)
+``out__payload``   out     ``nz`` signed ``B_out`` codes (``z_i`` at ``[i*B_out +: B_out]``),
+                           then ``out_of_range`` at bit ``nz*B_out``
+``out__valid``     out
+``out__ready``     in
+``warm``           out     sensor top only: the lag bank holds ``M-1`` samples
+=================  ======  ==========================================================
+
+Latency (cycles from the input transfer to ``out__valid``, no stalls) is ``component.latency``
+= ``Pipeline.latency(n)`` = split + rank + 1 (memory) + mem_out + product
++ ceil(ceil(log2(n+1)) / tree_levels) + 1 (output); II = 1.
 """
 
 from .core import PWASCore, core_input_layout, core_output_layout

@@ -28,7 +28,7 @@ The rules followed by the generator, and implemented here:
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
+from amaranth.hdl import Const, Module, Mux, Signal, Value, unsigned
 
 __all__ = ["bits_for", "rom", "sink_unused", "add_wrap", "add_const_wrap", "sum_wrap", "ge_const", "mux_const"]
 
@@ -140,13 +140,3 @@ def mux_const(sel, k: int, width: int):
         return 0
     return Mux(sel, Const(k, width), Const(0, width))
 
-
-def as_bit(v):
-    """A Python bool or an Amaranth 1-bit value -> Amaranth value."""
-    if isinstance(v, bool):
-        return Const(int(v), 1)
-    return v
-
-
-def cat(*parts):
-    return Cat(*parts)

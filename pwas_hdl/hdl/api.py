@@ -34,9 +34,11 @@ def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None
     PWASCore
         ``.latency`` (cycles), ``.ii`` (1), ``.memory_plan``, ``.params``.
     """
+    name = _check_name(name)
     params = CoreParams.from_model(model)
     core = PWASCore(params, memory=memory, pipeline=pipeline)
-    core.module_name = _check_name(name)
+    core.module_name = name
+    core._MustUse__silence = True  # often only described (design_info), not elaborated
     core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))
     core.target_names = list(getattr(model, "target_names", [f"z{i}" for i in range(params.nz)]))
     return core
@@ -129,12 +131,14 @@ def build_sensor(
     """
     from .sensor_top import PWASSensorTop, lag_plan
 
+    name = _check_name(name)
     params = CoreParams.from_model(model)
     if hasattr(model, "signal_input_formats"):
         model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
     top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline)
-    top.module_name = _check_name(name)
+    top.module_name = name
+    top._MustUse__silence = True
     top.core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))
     top.core.target_names = list(getattr(model, "target_names", [f"z{i}" for i in range(params.nz)]))
     return top

@@ -148,6 +148,7 @@ class PWASCore(wiring.Component):
     """
 
     def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True  # no "never used" warning for an object whose __init__ raised
         lo, hi = -(1 << (params.in_width - 1)), (1 << (params.in_width - 1)) - 1
         for j, v in enumerate(params.lo_code):
             if not lo <= v <= hi:
@@ -167,6 +168,7 @@ class PWASCore(wiring.Component):
                 "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
             }
         )
+        self._MustUse__silence = False
 
     def elaborate(self, platform):
         m = Module()

@@ -104,6 +104,7 @@ class PWASSensorTop(wiring.Component):
     kind = "sensor"
 
     def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True  # see PWASCore.__init__
         if len(dims) != params.n:
             raise ValueError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
         for s, lag in dims:
@@ -133,6 +134,7 @@ class PWASSensorTop(wiring.Component):
                 "warm": Out(1),
             }
         )
+        self._MustUse__silence = False
 
     @property
     def input_fields(self) -> list[dict]:
