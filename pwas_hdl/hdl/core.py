@@ -27,7 +27,9 @@ Arithmetic (the bit-true specification, see :mod:`pwas_hdl.hdl.params`):
 * banked addresses: ``addr(v_k) = base + sum_{j<n-1} step_kj * S_j + (step_k,n-1 & wrap)`` where
   ``base`` and ``S_j`` follow :class:`~pwas_hdl.hdl.params.MemoryPlan` and
   ``wrap = (c_{n-1} mod (n+1) == n)``; bank ``b`` reads vertex ``(b - rot) mod (n+1)`` with
-  ``rot = |c| mod (n+1)``, and the data are rotated back after the read;
+  ``rot = |c| mod (n+1)``; the ``mu_k`` are rotated the same way (bank ``b`` multiplies its word
+  by ``mu_{(b - rot) mod (n+1)}``), so the read data need no rotation back -- the exact sum of
+  products does not depend on the order of its terms;
 * widths: fractions and ``mu`` have ``F + 1`` bits (``mu_0 = 2**F`` is representable); products and
   partial sums are kept in ``F + B_w`` signed bits, the final sum in ``F + B_w + 1``: the ``mu_k``
   are non-negative and sum to ``2**F``, so every partial sum lies in
@@ -318,9 +320,8 @@ class PWASCore(wiring.Component):
                 return True
             return lt[j][k - 1]
 
-        bank_addr = None
+        addr = []
         if aw:
-            addr = []
             for k in range(nb):
                 if self.memory_kind == "banked":
                     terms = [base] + [mux_const(step(k, j), rst[j], aw) for j in range(n - 1)]
@@ -330,16 +331,6 @@ class PWASCore(wiring.Component):
                 else:
                     terms = [base] + [mux_const(step(k, j), st[j], aw) for j in range(n)]
                 addr.append(sum_wrap(m, terms, aw, f"vaddr{k}"))
-            if self.memory_kind == "banked" and not isinstance(rot, int):
-                bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)]
-                with m.Switch(rot):
-                    for s in range(nb):
-                        with (m.Case(s) if s < n else m.Default()):
-                            m.d.comb += [bank_addr[b].eq(addr[(b - s) % nb]) for b in range(nb)]
-            else:
-                r0 = rot if isinstance(rot, int) else 0
-                bank_addr = [addr[(b - r0) % nb] for b in range(nb)]
-                bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
 
         # d_(k): the fraction of rank k-1 (one-hot selection from the thermometer codes)
         def sel(k, j):
@@ -376,6 +367,22 @@ class PWASCore(wiring.Component):
             sink_unused(m, diff[dw], f"mu{k}_sign")
             mus.append(diff[:dw])
 
+        # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
+        # same way instead of the read data back (the sum of products does not depend on the
+        # order; mu is narrower than nz weights and needs no rot downstream).
+        if not isinstance(rot, int):
+            bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)] if aw else []
+            bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
+            with m.Switch(rot):
+                for s in range(nb):
+                    with (m.Case(s) if s < n else m.Default()):
+                        m.d.comb += [bank_addr[b].eq(addr[(b - s) % nb]) for b in range(nb) if aw]
+                        m.d.comb += [bank_mu[b].eq(mus[(b - s) % nb]) for b in range(nb)]
+        else:
+            bank_addr = [addr[(b - rot) % nb] for b in range(nb)] if aw else []
+            bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
+            bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
+
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
         for b in range(nb):
@@ -388,8 +395,8 @@ class PWASCore(wiring.Component):
                 rp.addr = bank_addr[b]
             rp.en = pipe.advance
             mem_data.append(rp.data)
-        valid, r = pipe.stage("s_mem", True, valid, {"mu": mus, "oor": oor, "rot": rot})
-        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"], "rot": r["rot"]}
+        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor})
+        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"]}
 
     # ------------------------------------------------------------------ back end
     def _back(self, m: Module, pipe: _Pipe, valid, vals, advance):
@@ -400,17 +407,9 @@ class PWASCore(wiring.Component):
         bw, accw = p.weight_width, p.acc_width
 
         valid, r = pipe.stage("s_memout", pl.mem_out, valid, vals)
-        data_, mus, oor, rot = r["data"], r["mu"], r["oor"], r["rot"]
+        vdata, mus, oor = r["data"], r["mu"], r["oor"]
 
-        # ---------------------------------------------------------- E: un-rotate, multiply
-        if isinstance(rot, int):
-            vdata = [data_[(k + rot) % nb] for k in range(nb)]
-        else:
-            vdata = [Signal(unsigned(len(data_[0])), name=f"vdata{k}") for k in range(nb)]
-            with m.Switch(rot):
-                for s in range(nb):
-                    with (m.Case(s) if s < n else m.Default()):
-                        m.d.comb += [vdata[k].eq(data_[(k + s) % nb]) for k in range(nb)]
+        # ---------------------------------------------------------- E: multiply (in bank order)
         prods = []
         for z in range(nz):
             for k in range(nb):
