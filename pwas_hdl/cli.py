@@ -47,7 +47,7 @@ class UserError(Exception):
 def _user_errors() -> Iterator[None]:
     try:
         yield
-    except (ValueError, FileNotFoundError, IsADirectoryError, UserError) as exc:
+    except (ValueError, FileNotFoundError, IsADirectoryError, RuntimeError, UserError) as exc:
         err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         raise typer.Exit(2) from None
 
@@ -261,6 +261,33 @@ def generate(
             highlight=False, markup=False,
         )
         err.print(f"wrote {outdir}/ ({len(gd.files)} files)", highlight=False, markup=False)
+
+
+@app.command()
+def synth(
+    outdir: Annotated[Path, typer.Argument(help="Folder written by `pwas-hdl generate`.")],
+    target: Annotated[str, typer.Option("--target", help="ice40 (yosys + nextpnr-ice40), ecp5 (yosys + nextpnr-ecp5) or generic (yosys only).")] = "ecp5",
+    device: Annotated[Optional[str], typer.Option("--device", help="Device (ice40: hx8k, hx1k, lp8k, up5k, ...; ecp5: 25k, 45k, 85k, ...). Default: ice40 hx8k, ecp5 45k.")] = None,
+    package: Annotated[Optional[str], typer.Option("--package", help="Package (default per device).")] = None,
+    freq: Annotated[Optional[float], typer.Option("--freq", help="Clock constraint in MHz for place and route (default: nextpnr's).")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Placer seed.")] = 1,
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="Also copy the JSON report here.")] = None,
+) -> None:
+    """Synthesize (and place and route) a generated design with open tools from PyPI (YoWASP).
+
+    Writes OUTDIR/synth/TARGET/synth.json (LUTs, FFs, carries, DSPs, block RAMs and bits, fmax
+    after place and route, latency in ns = latency cycles / fmax) and synth.txt.
+    """
+    from .synthesis import synth_summary_text, synthesize
+
+    with _user_errors():
+        def report(msg: str) -> None:
+            err.print(msg, highlight=False, markup=False)
+
+        res = synthesize(outdir, target, device=device, package=package, freq_mhz=freq, seed=seed, progress=report)
+        if json_out is not None:
+            atomic_write_text(json_out, json.dumps(res, indent=2) + "\n")
+        out.print(synth_summary_text(res), highlight=False, markup=False)
 
 
 @data_app.command("lorenz")
