@@ -290,6 +290,44 @@ def synth(
         out.print(synth_summary_text(res), highlight=False, markup=False)
 
 
+@app.command()
+def simulate(
+    outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core or sensor design).")],
+    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or <target>_true).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="CSV of the per-sample hardware outputs to write.")],
+    simulator: Annotated[str, typer.Option("--simulator", help="icarus or verilator.")] = "icarus",
+    summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: OUTPUT with the suffix .json).")] = None,
+    traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit (the sensor design is reset between trajectories).")] = None,
+    stall: Annotated[float, typer.Option("--stall", help="Probability of a random bubble on the input and of backpressure on the output in each cycle (0 = none: latency and II are measured at full speed).")] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the random stalls.")] = 0,
+    build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.")] = None,
+    waves: Annotated[bool, typer.Option("--waves", help="Record waveforms (Icarus: FST, Verilator: VCD) next to the build; the path is in the summary.")] = False,
+) -> None:
+    """Replay DATA through the generated RTL in a simulator (cocotb) and check it bit for bit.
+
+    Writes OUTPUT (one row per hardware output: row, <target>_hw, <target>_bittrue, <target>_float,
+    out_of_range) and a JSON summary: samples, mismatches against the bit-true model, the largest
+    error against the float model (LSB and physical units), the RMSEE of the hardware estimate
+    against <target>_true (or <target>) when DATA has it, the measured latency (cycles) and II, and
+    the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.
+    """
+    from .simulation import simulate_data
+
+    with _user_errors():
+        res = simulate_data(
+            outdir, data, output, simulator=simulator, summary_path=summary, traj_col=traj_col,
+            stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
+            progress=lambda msg: err.print(msg, highlight=False, markup=False),
+        )
+        s = res["summary"]
+        out.print_json(json.dumps(s))
+        err.print(f"wrote {output} and {res['summary_path']}", highlight=False, markup=False)
+        if s["mismatches"]:
+            err.print(f"error: {s['mismatches']} hardware output(s) differ from the bit-true model (first: "
+                      f"{json.dumps(s['first_mismatch'])})", highlight=False, markup=False)
+            raise typer.Exit(1)
+
+
 @data_app.command("lorenz")
 def make_data_lorenz(
     output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns y, z, z_true).")],
