@@ -229,6 +229,7 @@ def generate(
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default) or max.")] = None,
+    memory_init: Annotated[str, typer.Option("--memory-init", help="inline: weights inside the Verilog; readmemh: the Verilog loads the .hex files (relative names).")] = "inline",
     input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes.")] = 12,
     input_fill: Annotated[float, typer.Option("--input-fill", help="Largest fraction of the input code range the domain may take (the rest detects out-of-range).")] = 0.9,
     weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Weight width (default: the fewest bits that hold every weight).")] = None,
@@ -247,7 +248,7 @@ def generate(
     with _user_errors():
         with _progress("building the design"):
             gd = _generate(
-                model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline,
+                model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
                 input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
                 output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
             )

@@ -4,9 +4,11 @@ The folder holds (``<top>`` is the module name):
 
 ``<top>.v``
     The design, one synthesizable Verilog-2005 file (weights inline as memory initialisers).
-``<top>_rom_b<bank>_z<target>.hex``
-    The same weight memory as ``$readmemh`` files, one per bank and target
-    (:func:`pwas_hdl.memory_layout.hex_files`), for FPGA flows that load ROMs from files.
+``<top>_rom_b<bank>.hex``
+    The weight memories as ``$readmemh`` files, one per bank, one word per line holding all
+    targets (target 0 in the least significant bits), exactly the words of the RTL memories
+    (:func:`pwas_hdl.hdl.emit.memory_hex_files`); ``memory_init="readmemh"`` makes the Verilog
+    load them instead of carrying the weights inline.
 ``manifest.json``
     Machine-readable description (:mod:`pwas_hdl.manifest`): ports, formats, latency, II, domain,
     lags, error bound, memory, and the options that rebuild the bit-true model.
@@ -37,7 +39,6 @@ import numpy as np
 from . import __version__
 from .bittrue import FixedPointModel
 from .manifest import MANIFEST_FORMAT, MANIFEST_VERSION
-from .memory_layout import hex_files
 from .virtual_sensor import PWASVirtualSensor
 
 __all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fixed_point_model", "TEMPLATE_DIR"]
@@ -301,6 +302,7 @@ def build_design(
     name: str | None = None,
     memory: str = "banked",
     pipeline: str | None = None,
+    memory_init: str = "inline",
     **formats: Any,
 ) -> GeneratedDesign:
     """Build the RTL and all artifacts in memory.
@@ -317,6 +319,9 @@ def build_design(
         Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words.
     pipeline : str, optional
         Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``).
+    memory_init : {"inline", "readmemh"}
+        Weights as initialisers inside the Verilog (self-contained), or ``$readmemh`` of the
+        ``.hex`` files of the folder (relative names: run tools from the folder).
     **formats
         Fixed-point options (:data:`FORMAT_OPTIONS`); ``None`` means the data-driven default.
 
@@ -325,6 +330,7 @@ def build_design(
     GeneratedDesign
     """
     from .hdl import build_core, build_sensor, design_info, emit_verilog
+    from .hdl.emit import memory_hex_files
 
     if design not in ("core", "sensor"):
         raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
@@ -338,15 +344,17 @@ def build_design(
     else:
         comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipeline, name=top)
     info = design_info(comp)
-    verilog = emit_verilog(comp, top)
 
-    hexes = hex_files(fxm.layout, fxm.weight_codes, fxm.weight_format.bits, prefix=f"{top}_rom")
-    hex_entries = []
-    for fname in hexes:
-        b = int(fname.rsplit("_b", 1)[1].split("_z")[0])
-        t = int(fname.rsplit("_z", 1)[1].split(".")[0])
-        hex_entries.append({"file": fname, "bank": b, "target": fxm.target_names[t],
-                            "depth": int(fxm.layout.depth), "width": int(fxm.weight_format.bits)})
+    prefix = f"{top}_rom"
+    verilog = emit_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix)
+    hexes = memory_hex_files(comp, prefix)
+    plan = info["memory"]
+    bw = fxm.weight_format.bits
+    hex_entries = [
+        {"file": fname, "bank": b, "depth": int(plan["depth"]), "width": int(plan["word_bits"]),
+         "fields": [{"target": t, "lsb": i * bw, "width": bw, "signed": True} for i, t in enumerate(fxm.target_names)]}
+        for b, fname in enumerate(hexes)
+    ]
     files = {
         "verilog": f"{top}.v",
         "model": "model.json",
@@ -356,7 +364,7 @@ def build_design(
         "fusesoc_core": f"{top}.core",
         "hex": hex_entries,
     }
-    options = {"design": design, "memory": memory, "pipeline": info["pipeline"].get("preset", pipeline),
+    options = {"design": design, "memory": memory, "pipeline": pipeline, "memory_init": memory_init,
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
     man = _manifest(design, top, fxm, info, sensor, files, options)
     texts: dict[str, str] = {

@@ -68,7 +68,8 @@ def test_hex_files_hold_the_weight_codes(lorenz_core, lorenz_model):
     rom = gd.model.rom  # (banks, depth, nz)
     for h in man["files"]["hex"]:
         words = [int(line, 16) for line in (lorenz_core / h["file"]).read_text().split()]
-        bits = h["width"]
+        (fld,) = h["fields"]
+        bits = fld["width"]
         codes = [w - (1 << bits) if w >= 1 << (bits - 1) else w for w in words]
         assert codes == rom[h["bank"], :, 0].tolist()
 
@@ -81,9 +82,9 @@ def test_generate_is_deterministic(lorenz_model, tmp_path):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
 
 
-@pytest.mark.parametrize("design", ["core", "sensor"])
-def test_verilog_is_lint_clean(lorenz_model, tmp_path, design):
-    gd = generate(lorenz_model, tmp_path / design, design=design)
+@pytest.mark.parametrize("design, init", [("core", "inline"), ("sensor", "inline"), ("core", "readmemh")])
+def test_verilog_is_lint_clean(lorenz_model, tmp_path, design, init):
+    gd = generate(lorenz_model, tmp_path / design, design=design, memory_init=init)
     res = lint_verilog(tmp_path / design / f"{gd.top}.v", gd.top)
     assert res.returncode == 0 and "%Warning" not in res.stderr, res.stderr[-3000:]
 
@@ -126,3 +127,25 @@ def test_saturate_option_warns_and_builds(lorenz_model):
     assert gd.model.n_weights_saturated > 0
     assert gd.manifest["error_bound"]["includes_weight_saturation"] is True
     assert gd.model.weight_codes.min() >= -(2 ** 11) and gd.model.weight_codes.max() <= 2 ** 11 - 1
+
+
+def test_two_targets_share_one_word_per_bank(tmp_path):
+    rng = np.random.default_rng(1)
+    u = rng.uniform(-1, 1, (400, 1))
+    y = np.cumsum(u, axis=0) * 0.1
+    z = np.hstack([u * y, u + y])
+    m = PWASVirtualSensor(mu=2, my=1, partitions=[3, 2, 4], sigma=1e-3, input_names=["u"], output_names=["y"],
+                          target_names=["a", "b"]).fit(u, y, z)
+    gd = generate(m, tmp_path / "two", design="sensor")
+    man = gd.manifest
+    assert [f["name"] for f in port(man, "out.payload")["fields"]] == ["a", "b", "out_of_range"]
+    rom = gd.model.rom
+    for h in man["files"]["hex"]:
+        words = [int(line, 16) for line in (tmp_path / "two" / h["file"]).read_text().split()]
+        for i, fld in enumerate(h["fields"]):
+            bits = fld["width"]
+            codes = [((w >> fld["lsb"]) & ((1 << bits) - 1)) for w in words]
+            codes = [c - (1 << bits) if c >= 1 << (bits - 1) else c for c in codes]
+            assert codes == rom[h["bank"], :, i].tolist()
+    res = lint_verilog(tmp_path / "two" / f"{gd.top}.v", gd.top)
+    assert res.returncode == 0 and "%Warning" not in res.stderr, res.stderr[-3000:]
