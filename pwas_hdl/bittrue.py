@@ -591,7 +591,8 @@ class FixedPointModel:
             if sig in res and res[sig] != f:
                 raise ValueError(
                     f"the lags of signal {sig!r} have different input formats (dimension {j}: {f.to_dict()['format']} "
-                    f"on [{f.lo}, {f.hi}]); fit with share_lag_domain=True"
+                    f"on [{f.lo}, {f.hi}]); the sensor top scales each signal once, so its lags need one interval "
+                    "(fit with share_lag_domain=True) and the same number of partitions p"
                 )
             res.setdefault(sig, f)
         return res

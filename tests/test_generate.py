@@ -134,7 +134,7 @@ def test_two_targets_share_one_word_per_bank(tmp_path):
     u = rng.uniform(-1, 1, (400, 1))
     y = np.cumsum(u, axis=0) * 0.1
     z = np.hstack([u * y, u + y])
-    m = PWASVirtualSensor(mu=2, my=1, partitions=[3, 2, 4], sigma=1e-3, input_names=["u"], output_names=["y"],
+    m = PWASVirtualSensor(mu=2, my=1, partitions=[3, 3, 4], sigma=1e-3, input_names=["u"], output_names=["y"],
                           target_names=["a", "b"]).fit(u, y, z)
     gd = generate(m, tmp_path / "two", design="sensor")
     man = gd.manifest
