@@ -1,0 +1,821 @@
+"""Run a generated design in a Verilog simulator (cocotb: Icarus or Verilator) against the bit-true model.
+
+This is the library behind ``pwas-hdl simulate`` and the RTL tests. The testbench itself lives in
+``sim/`` next to the package (``sim/pwas_tb.py``, drivers in ``sim/pwas_drivers.py``, build cache
+in ``sim/pwas_runner.py``); it reads the design's ``manifest.json`` for ports, bit fields and
+latency. This module prepares what the testbench replays and checks:
+
+* :func:`load_design` reads a folder written by ``pwas-hdl generate`` and rebuilds the bit-true
+  model from ``model.json`` and the generator options recorded in the manifest (the *expected*
+  values come from there, never from the RTL).
+* :func:`segment` turns input transfers (codes) into a :class:`Segment` with its expected outputs:
+  for the core one output per transfer, for the sensor top one per transfer after the ``M - 1``
+  warm-up transfers, computed through :class:`~pwas_hdl.regressors.LagStructure` exactly as the
+  software does.
+* :func:`run_rtl` builds (cached) and runs the testbench and returns an :class:`RTLResult`:
+  every mismatch (exact, 0 LSB), the error of the RTL against the float model and the stated bound,
+  the measured latency and II, and -- with ``debug=True`` -- the first pipeline stage whose
+  registers differ from :meth:`FixedPointModel.trace <pwas_hdl.bittrue.FixedPointModel.trace>`
+  for the first failing sample.
+* :func:`simulate_data` replays a CSV file (``pwas-hdl simulate``).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import re
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .bittrue import FixedPointModel
+from .manifest import load_manifest
+
+__all__ = [
+    "SIM_DIR",
+    "SIMULATORS",
+    "Design",
+    "Segment",
+    "Run",
+    "RTLResult",
+    "load_design",
+    "segment",
+    "standard_runs",
+    "run_rtl",
+    "simulate_data",
+    "stage_probes",
+    "locate_difference",
+    "sim_module",
+]
+
+SIM_DIR = Path(__file__).resolve().parent.parent / "sim"
+SIMULATORS = ("icarus", "verilator")
+
+
+def sim_module(name: str):
+    """Import a module of ``sim/`` (not an installed package) by path, e.g. ``"pwas_runner"``."""
+    if name in sys.modules:
+        return sys.modules[name]
+    path = SIM_DIR / f"{name}.py"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing; the pwas-hdl checkout is incomplete (sim/ must sit next to pwas_hdl/)")
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    try:
+        spec.loader.exec_module(mod)
+    except BaseException:
+        sys.modules.pop(name, None)
+        raise
+    return mod
+
+
+# ---------------------------------------------------------------------------------------------------- design
+
+
+@dataclass
+class Design:
+    """A generated design folder and the bit-true model it must match."""
+
+    outdir: Path
+    manifest: dict
+    sensor: Any  # PWASVirtualSensor
+    model: FixedPointModel
+    verilog_path: Path
+
+    @property
+    def top(self) -> str:
+        return self.manifest["top"]
+
+    @property
+    def kind(self) -> str:
+        return self.manifest["design"]
+
+    @property
+    def latency(self) -> int:
+        return int(self.manifest["latency_cycles"])
+
+    @property
+    def warmup(self) -> int:
+        if self.kind != "sensor":
+            return 0
+        return int(self.manifest["lags"].get("warmup", {}).get("samples_without_output", self.sensor.lags_.memory - 1))
+
+    def port(self, role: str) -> dict:
+        for p in self.manifest["ports"]:
+            if p.get("role") == role:
+                return p
+        raise KeyError(f"the manifest of {self.outdir} has no port with role {role!r}")
+
+    @property
+    def in_fields(self) -> list[dict]:
+        return self.port("in.payload")["fields"]
+
+    @property
+    def out_fields(self) -> list[dict]:
+        return self.port("out.payload")["fields"]
+
+    @property
+    def verilog(self) -> str:
+        return self.verilog_path.read_text(encoding="utf-8")
+
+
+def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = None) -> Design:
+    """Read a folder written by ``pwas-hdl generate``; rebuild its bit-true model.
+
+    ``verilog``: simulate this file instead of the folder's (e.g. a deliberately mutated copy).
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        No manifest / model, or the model rebuilt from ``model.json`` does not give the formats
+        the manifest lists (the folder was edited by hand: regenerate it).
+    """
+    from .generate import FORMAT_OPTIONS, fixed_point_model
+    from .virtual_sensor import PWASVirtualSensor
+
+    out = Path(outdir)
+    man = load_manifest(out)
+    files = man.get("files", {})
+    model_file = out / files.get("model", "model.json")
+    if not model_file.is_file():
+        raise FileNotFoundError(f"{model_file} is missing; regenerate the folder with `pwas-hdl generate`")
+    sensor = PWASVirtualSensor.load(model_file)
+    opts = man.get("generator", {}).get("options", {})
+    fmts = {k: opts.get(k) for k in FORMAT_OPTIONS if opts.get(k) is not None}
+    fxm = fixed_point_model(sensor, memory=opts.get("memory", "banked"), **fmts)
+    fx = fxm.to_dict()
+    want = man["formats"]
+    for key, mine in (("output", fx["output"]), ("weight", fx["weights"]), ("widths", fx["widths"]), ("mu_frac", fx["F"])):
+        theirs = want.get(key)
+        if key in ("output", "weight"):
+            mine = {k: mine[k] for k in ("bits", "frac")}
+            theirs = {k: (theirs or {}).get(k) for k in ("bits", "frac")}
+        if json.dumps(mine, sort_keys=True) != json.dumps(theirs, sort_keys=True):
+            raise ValueError(
+                f"{out}: the bit-true model rebuilt from model.json has {key} {mine}, the manifest says {theirs}; "
+                "the folder was modified after `pwas-hdl generate`: regenerate it"
+            )
+    if [int(v) for v in man["domain"]["lo_code"]] != [int(v) for v in fxm.lo_codes]:
+        raise ValueError(f"{out}: manifest lo_code {man['domain']['lo_code']} differs from the model's {list(fxm.lo_codes)}; regenerate")
+    vpath = Path(verilog) if verilog is not None else out / files.get("verilog", f"{man['top']}.v")
+    if not vpath.is_file():
+        raise FileNotFoundError(f"{vpath} is missing; regenerate the folder with `pwas-hdl generate`")
+    return Design(out, man, sensor, fxm, vpath)
+
+
+# ---------------------------------------------------------------------------------------------------- stimulus
+
+
+@dataclass
+class Segment:
+    """Input transfers between two resets and the outputs they must give.
+
+    ``codes`` (T, fields): one row per input transfer (the core: regressor codes ``q``; the sensor
+    top: one code per signal, payload order). ``q`` (m, n): the regressor of each expected output;
+    ``expected`` (m, nz) output codes and ``oor`` (m,) flags from the bit-true model; ``src`` (m,):
+    the transfer that completes each output's regressor. ``drain``: wait for every output before the
+    next reset; otherwise reset ``hold`` cycles after the last transfer (in the middle of the stream).
+    """
+
+    codes: np.ndarray
+    q: np.ndarray
+    expected: np.ndarray
+    oor: np.ndarray
+    src: np.ndarray
+    drain: bool = True
+    hold: int = 0
+
+    def to_job(self) -> dict:
+        exp = np.concatenate([self.expected, self.oor[:, None].astype(np.int64)], axis=1)
+        return {"codes": self.codes.astype(np.int64).tolist(), "expected": exp.astype(np.int64).tolist(),
+                "src": self.src.astype(np.int64).tolist(), "drain": bool(self.drain), "hold": int(self.hold)}
+
+
+@dataclass
+class Run:
+    """Segments replayed with one stall pattern: ``p_valid`` / ``p_ready`` = probability that the
+    source offers / the sink accepts in a cycle (1.0: never stalls)."""
+
+    name: str
+    segments: list[Segment]
+    p_valid: float = 1.0
+    p_ready: float = 1.0
+    seed: int = 0
+
+    def to_job(self) -> dict:
+        return {"name": self.name, "p_valid": self.p_valid, "p_ready": self.p_ready, "seed": self.seed,
+                "segments": [s.to_job() for s in self.segments]}
+
+
+def _signal_columns(design: Design, codes: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Split sensor-top transfer codes (payload order) into the u and y code matrices of LagStructure."""
+    lags = design.sensor.lags_
+    ins, outs, _ = design.sensor.signal_names()
+    names = [f.get("signal", f["name"]) for f in design.in_fields]
+    col = {nm: i for i, nm in enumerate(names)}
+    try:
+        cu = codes[:, [col[nm] for nm in ins]] if lags.nu and lags.mu else None
+        cy = codes[:, [col[nm] for nm in outs]] if lags.ny and lags.my else None
+    except KeyError as exc:
+        raise ValueError(f"the sensor top has no input field for signal {exc}; regenerate the design") from None
+    return cu, cy
+
+
+def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segment:
+    """The expected outputs of the input transfers ``codes`` right after a reset."""
+    c = np.asarray(codes, dtype=np.int64)
+    if c.ndim != 2 or c.shape[1] != len(design.in_fields):
+        raise ValueError(f"codes must have shape (T, {len(design.in_fields)}), got {c.shape}")
+    if design.kind == "core":
+        q = c
+        src = np.arange(len(c))
+    else:
+        w = design.warmup
+        if len(c) <= w:
+            q = np.empty((0, design.model.n), dtype=np.int64)
+        else:
+            cu, cy = _signal_columns(design, c)
+            q = design.sensor.lags_.build(cu, cy).astype(np.int64)
+        src = np.arange(w, w + len(q))
+    if len(q):
+        out, oor = design.model.evaluate(q)
+    else:
+        out, oor = np.empty((0, design.model.nz), dtype=np.int64), np.empty(0, dtype=bool)
+    return Segment(c, q, out, oor, src, drain, hold)
+
+
+def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[Run]:
+    """The three replays of the RTL tests: full speed (latency, II = 1), random bubbles and
+    backpressure, and a reset in the middle of a stream (with stalls) followed by a fresh stream."""
+    c = np.asarray(codes, dtype=np.int64)
+    rng = np.random.default_rng(seed)
+    cut = max(design.warmup + 2, len(c) // 3)
+    hold = int(rng.integers(0, max(1, design.latency)))
+    return [
+        Run("full-speed", [segment(design, c)]),
+        Run("stalls", [segment(design, c)], stalls[0], stalls[1], seed + 1),
+        Run("reset-mid-stream", [segment(design, c[:cut], drain=False, hold=hold), segment(design, c[cut:])], 0.8, 0.8, seed + 2),
+    ]
+
+
+# ---------------------------------------------------------------------------------------------------- probes
+
+_PROBE_RE = re.compile(
+    r"^\s*reg\s+(?:signed\s+)?(?:\[(\d+):(\d+)\]\s+)?"
+    r"(s_(?:split|rank|memout|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload)\s*;",
+    re.M,
+)
+_STAGE_ORDER = ("s_split", "s_rank", "s_mem", "s_memout", "s_prod")
+
+
+def stage_probes(verilog: str) -> dict[str, int]:
+    """Pipeline registers of a generated design that the debug run records: name -> width.
+
+    They keep the Amaranth names (``s_<stage>_<value><index>``, ``vdata<k>`` = weight words of
+    vertex ``k`` after the memory, ``out__payload``); the ``_valid`` bits are left out.
+    """
+    res = {}
+    for mo in _PROBE_RE.finditer(verilog):
+        hi, lo, name = mo.group(1), mo.group(2), mo.group(3)
+        if name.endswith("_valid"):
+            continue
+        res[name] = (int(hi) - int(lo) + 1) if hi is not None else 1
+    return res
+
+
+_MEM_RE = re.compile(r"^\s*reg\s+\[(\d+):(\d+)\]\s+(wmem\d+)\s*\[(\d+):(\d+)\]\s*;", re.M)
+
+
+def weight_memories(verilog: str) -> dict[str, int]:
+    """Weight memories of a generated design (inline arrays ``wmem<b>``): name -> depth."""
+    return {mo.group(3): abs(int(mo.group(4)) - int(mo.group(5))) + 1 for mo in _MEM_RE.finditer(verilog)}
+
+
+def _memory_diffs(design: Design, read: dict) -> list[dict]:
+    """Words of the simulated weight memories that differ from the bit-true model's ROM image."""
+    rom = design.model.rom  # (banks, depth, nz)
+    bw = design.model.weight_format.bits
+    diffs = []
+    for name, words in read.items():
+        b = int(name[4:])
+        if not isinstance(words, list) or b >= rom.shape[0]:
+            continue
+        for a, got in enumerate(words[: rom.shape[1]]):
+            exp = _pack(rom[b, a], bw)
+            if got is None or got != exp:
+                diffs.append({"memory": name, "addr": a, "expected": exp, "actual": got,
+                              "expected_codes": [int(v) for v in rom[b, a]]})
+    return diffs
+
+
+def _stage_of(name: str) -> str:
+    if name.startswith("vdata"):
+        return "vdata"
+    if name == "out__payload":
+        return "out"
+    mo = re.match(r"(s_(?:split|rank|memout|mem|prod|tree\d+))_", name)
+    return mo.group(1) if mo else name
+
+
+def _stage_offsets(names: Sequence[str], latency: int) -> dict[str, int] | None:
+    """Cycle offset (after the input transfer) at which each stage register holds the sample."""
+    stages = {_stage_of(n) for n in names} - {"vdata", "out"}
+    order = [s for s in _STAGE_ORDER if s in stages]
+    order += sorted((s for s in stages if s.startswith("s_tree")), key=lambda s: int(s[6:]))
+    order.append("out")
+    if len(order) != latency:
+        return None
+    off = {s: i + 1 for i, s in enumerate(order)}
+    off["vdata"] = off.get("s_memout", off.get("s_mem", 0))
+    return off
+
+
+def _pack(values, width: int) -> int:
+    word = 0
+    for i, v in enumerate(values):
+        word |= (int(v) & ((1 << width) - 1)) << (i * width)
+    return word
+
+
+def _tree_levels(products: np.ndarray) -> list[list[list[int]]]:
+    """The adder tree of the core: per level, per target, the partial sums (pairs, odd one passes)."""
+    nz = products.shape[1]
+    terms = [[int(products[k, z]) for k in range(products.shape[0])] for z in range(nz)]
+    levels = []
+    while len(terms[0]) > 1:
+        terms = [[row[i] + row[i + 1] if i + 1 < len(row) else row[i] for i in range(0, len(row), 2)] for row in terms]
+        levels.append(terms)
+    return levels
+
+
+def _bank_order(tr: dict, values: np.ndarray) -> np.ndarray:
+    """Rows of ``values`` (indexed by simplex vertex k) re-ordered by the memory that reads vertex k."""
+    out = np.empty_like(values)
+    out[np.asarray(tr["bank"], dtype=np.int64)] = values
+    return out
+
+
+def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: list[dict], bank_order: bool) -> int | None:
+    """Value the bit-true trace (one sample) gives for a pipeline register; None if not modelled.
+
+    ``bank_order``: after the memory read the generator keeps ``mu``, products and partial sums in
+    memory (bank) order -- memory ``b`` multiplies its word by the ``mu`` of the vertex it read --
+    rather than in simplex-vertex order (older generators, recognised by their ``vdata`` nets).
+    """
+    if name == "out__payload":
+        vals = [int(v) for v in tr["out"]] + [int(tr["out_of_range"])]
+        word = 0
+        for v, f in zip(vals, out_fields):
+            word |= (v & ((1 << f["width"]) - 1)) << f["lsb"]
+        return word
+    bw = model.weight_format.bits
+    mo = re.match(r"vdata(\d+)$", name)
+    if mo:
+        return _pack(tr["w"][int(mo.group(1))], bw)
+    mo = re.match(r"s_(?:split|rank|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
+    if not mo:
+        return None
+    lvl, what, idx = mo.group(1), mo.group(2), mo.group(3)
+    i = int(idx) if idx else None
+    n = model.n
+    nb = n + 1
+    mu = _bank_order(tr, tr["mu"]) if bank_order else tr["mu"]
+    products = _bank_order(tr, tr["products"]) if bank_order else tr["products"]
+    if what == "c":
+        return int(tr["cell"][i])
+    if what == "d":
+        return int(tr["frac"][i])
+    if what == "oor":
+        return int(tr["out_of_range"])
+    if what == "rot":
+        return int(tr["rot"])
+    if what == "mu":
+        return int(mu[i])
+    if what == "lt":
+        r = int(tr["rank"][i])
+        return sum(1 << (k - 1) for k in range(1, n) if r < k)
+    if what == "data":
+        return _pack(tr["w_by_bank"][i], bw)
+    if what == "p":
+        return int(products[i % nb, i // nb])
+    if what == "t" and lvl is not None:
+        levels = _tree_levels(products)
+        flat = [v for row in levels[int(lvl)] for v in row]
+        return flat[i] if i < len(flat) else None
+    return None  # base, wrap: address intermediates the model does not name
+
+
+@dataclass
+class StageDiff:
+    stage: str
+    offset: int
+    register: str
+    expected: int
+    actual: int | None
+
+
+def locate_difference(design: Design, probe: dict, q_row: Sequence[int]) -> dict:
+    """Compare the recorded pipeline registers of one sample with the bit-true trace.
+
+    Returns ``{"first_stage": name or None, "diffs": [StageDiff...], "checked": k,
+    "trace": {stage: value}}`` (``first_stage`` None: every register the model names agreed, e.g. a
+    corrupted constant that only shows in the output, or no offsets could be assigned).
+    """
+    model = design.model
+    tr_all = model.trace(np.asarray(q_row, dtype=np.int64)[None, :])
+    tr = {k: v[0] for k, v in tr_all.items()}
+    widths = stage_probes(design.verilog)
+    values = probe.get("values", {})
+    offsets = _stage_offsets(list(values), design.latency)
+    bank_order = re.search(r"\bvdata\d+\b", design.verilog) is None
+    diffs, checked = [], 0
+    if offsets is not None:
+        for name, rec in values.items():
+            st = _stage_of(name)
+            off = offsets.get(st)
+            if off is None or off >= len(rec):
+                continue
+            exp = _expected_probe(name, tr, model, design.out_fields, bank_order)
+            if exp is None:
+                continue
+            w = widths.get(name, 64)
+            got = rec[off]
+            checked += 1
+            if got is None or (exp - got) % (1 << w) != 0:
+                diffs.append(StageDiff(st, off, name, exp % (1 << w), got))
+    diffs.sort(key=lambda d: (d.offset, d.register))
+    first = diffs[0].stage if diffs else None
+    mem = _memory_diffs(design, probe["memories"]) if isinstance(probe.get("memories"), dict) else None
+    trace = {k: (v.tolist() if isinstance(v, np.ndarray) else (v.item() if hasattr(v, "item") else v)) for k, v in tr.items()}
+    return {"first_stage": first, "diffs": diffs, "checked": checked, "trace": trace, "offsets": offsets,
+            "memory_diffs": mem}
+
+
+# ---------------------------------------------------------------------------------------------------- results
+
+
+@dataclass
+class RTLResult:
+    """Outcome of :func:`run_rtl` (one simulator, one design, several runs)."""
+
+    simulator: str
+    design: Design
+    runs: list[Run]
+    raw: dict
+    failures: list[str]
+    mismatches: int
+    outputs: int
+    latencies: list[int]
+    ii: float | None
+    float_error_max: float  # physical units, RTL output vs float model at the input codes
+    float_error_max_lsb: float
+    error_bound: float
+    error_bound_lsb: float
+    cycles: int
+    sim_seconds: float  # inside the simulator (testbench runs)
+    wall_seconds: float  # simulator process(es), start-up included
+    build_seconds: float
+    build_reused: bool
+    located: dict | None = None
+    hw: list = field(default_factory=list, repr=False)  # per run, per segment: (codes (m, nz), oor (m,))
+
+    @property
+    def passed(self) -> bool:
+        return not self.failures and self.mismatches == 0 and bool(self.raw.get("passed"))
+
+    @property
+    def within_bound(self) -> bool:
+        return self.float_error_max <= self.error_bound * (1 + 1e-9) + 1e-12
+
+    def first_mismatch(self) -> dict | None:
+        for r in self.raw.get("runs", []):
+            for s in r.get("segments", []):
+                if s.get("first_mismatches"):
+                    return s["first_mismatches"][0]
+        return None
+
+    def report(self) -> str:
+        """Human-readable account: failures, the first mismatch, its bit-true trace and the first
+        pipeline stage that differs (when the debug run recorded the registers)."""
+        lines = [f"{self.simulator} {self.design.top} ({self.design.kind}, {self.design.outdir.name}): "
+                 f"{self.outputs} outputs, {self.mismatches} mismatches, latency {sorted(set(self.latencies))} "
+                 f"(manifest {self.design.latency}), II {self.ii}"]
+        lines += [f"  FAIL {f}" for f in self.failures]
+        m = self.first_mismatch()
+        if m is not None:
+            fields = [f["name"] for f in self.design.out_fields]
+            lines.append(f"  first mismatch: run {m['run']!r} segment {m['segment']} output {m['output']} "
+                         f"(input transfer {m['input']}, codes {m['input_codes']}): expected {dict(zip(fields, m['expected']))}, "
+                         f"RTL {dict(zip(fields, m['actual']))}")
+        if self.located is not None:
+            loc = self.located
+            if loc["first_stage"]:
+                lines.append(f"  first differing pipeline stage: {loc['first_stage']} (cycle +{loc['diffs'][0].offset} after the transfer)")
+                for d in loc["diffs"][:8]:
+                    lines.append(f"    {d.register}: expected {d.expected}, RTL {d.actual} (stage {d.stage})")
+            else:
+                lines.append(f"  debug run: all {loc['checked']} modelled pipeline registers agree with the bit-true trace "
+                             "(the difference is in logic the model does not name, e.g. the output rounding or an address)")
+            md = loc.get("memory_diffs")
+            if md:
+                lines.append(f"  weight memory differs from the model's ROM image in {len(md)} word(s):")
+                for d in md[:4]:
+                    lines.append(f"    {d['memory']}[{d['addr']}]: expected {d['expected']:#x} (codes {d['expected_codes']}), RTL {d['actual']!r}")
+            elif md is not None:
+                lines.append("  weight memories: every word equals the model's ROM image")
+            tr = loc["trace"]
+            keys = ("q", "t_clamped", "out_of_range", "cell", "frac", "rank", "vertices", "bank", "addr", "mu", "w", "acc", "acc_rounded", "out")
+            lines.append("  bit-true trace of the sample: " + "; ".join(f"{k}={tr[k]}" for k in keys if k in tr))
+        if not self.within_bound:
+            lines.append(f"  float error {self.float_error_max:.6g} > bound {self.error_bound:.6g}")
+        return "\n".join(lines)
+
+
+def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build: dict, wall: float) -> RTLResult:
+    model = design.model
+    fo = model.output_format
+    lsb = 2.0 ** -fo.frac
+    failures = list(raw.get("failures", []))
+    mismatches = outputs = cycles = 0
+    lat: list[int] = []
+    ii = None
+    err = 0.0
+    hw = []
+    sim_s = 0.0
+    for run, rr in zip(runs, raw.get("runs", [])):
+        cycles += int(rr.get("cycles", 0))
+        sim_s += float(rr.get("wall_s", 0.0))
+        hw_run = []
+        for seg, sr in zip(run.segments, rr.get("segments", [])):
+            got = np.array(sr.get("got", []), dtype=np.int64).reshape(-1, model.nz + 1)
+            hw_run.append((got[:, :model.nz], got[:, model.nz].astype(bool)))
+            mismatches += int(sr.get("mismatches", 0))
+            outputs += len(got)
+            if run.p_ready >= 1.0:
+                lat += [int(v) for v in sr.get("latencies", [])]
+            acc = sr.get("accepted_at", [])
+            if run.p_ready >= 1.0 and run.p_valid >= 1.0 and len(acc) > 1 and seg.drain:
+                seg_ii = (acc[-1] - acc[0]) / (len(acc) - 1)
+                ii = seg_ii if ii is None else max(ii, seg_ii)
+            k = min(len(got), len(seg.q))
+            if k:
+                ref = model.reference(seg.q[:k])
+                err = max(err, float(np.max(np.abs(got[:k, :model.nz] * lsb - ref))))
+        hw.append(hw_run)
+    return RTLResult(
+        simulator, design, runs, raw, failures, mismatches, outputs, lat, ii, err, err / lsb,
+        float(model.error_bound), float(model.error_bound_lsb), cycles, sim_s, wall,
+        float(build.get("build_seconds", 0.0)), bool(build.get("reused", False)), None, hw,
+    )
+
+
+def run_rtl(
+    design: Design,
+    runs: Sequence[Run],
+    simulator: str = "icarus",
+    *,
+    cache_dir: str | os.PathLike | None = None,
+    work_dir: str | os.PathLike | None = None,
+    waves: bool = False,
+    debug: bool = False,
+    strict: bool = True,
+    clock_ns: float = 10.0,
+) -> RTLResult:
+    """Build (or reuse) ``design`` for ``simulator`` and replay ``runs`` through the testbench.
+
+    ``debug``: when an output differs, re-run that sample alone and record the pipeline registers
+    (:func:`stage_probes`), then name the first stage that differs from the bit-true trace
+    (:attr:`RTLResult.located`). ``waves``: record FST (Icarus) / VCD (Verilator) in ``work_dir``
+    (a separate cached build). ``strict``: the cocotb test itself fails on a mismatch (the result
+    is returned either way). ``work_dir`` (default: a temporary folder, removed afterwards unless
+    ``waves``) holds the job, the result, the log and the waveform.
+    """
+    if simulator not in SIMULATORS:
+        raise ValueError(f"simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+    runner = sim_module("pwas_runner")
+    b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
+    tmp = None
+    if work_dir is None:
+        tmp = Path(tempfile.mkdtemp(prefix=f"pwas-sim-{simulator}-"))
+        wd = tmp
+    else:
+        wd = Path(work_dir)
+    job = {
+        "manifest": str((design.outdir / "manifest.json").resolve()),
+        "strict": bool(strict),
+        "debug": bool(debug),
+        "probes": sorted(stage_probes(design.verilog)) if debug else [],
+        "memories": weight_memories(design.verilog) if debug else {},
+        "clock_ns": clock_ns,
+        "reset_cycles": 2,
+        "runs": [r.to_job() for r in runs],
+    }
+    try:
+        raw = runner.run_job(b, job, wd)
+    finally:
+        if tmp is not None and not waves:
+            shutil.rmtree(tmp, ignore_errors=True)
+    res = _summarise(design, list(runs), raw, simulator, raw.get("build", {}), float(raw.get("wall_s", 0.0)))
+    if debug:
+        for ri, rr in enumerate(raw.get("runs", [])):
+            pr = rr.get("probe")
+            if pr:
+                seg = runs[ri].segments[pr["segment"]]
+                row = int(np.flatnonzero(seg.src == pr["input"])[0])
+                res.located = locate_difference(design, pr, seg.q[row])
+                break
+    return res
+
+
+# ---------------------------------------------------------------------------------------------------- CSV replay
+
+
+def _rmse(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2))) if len(a) else float("nan")
+
+
+def simulate_data(
+    outdir: str | os.PathLike,
+    data: str | os.PathLike,
+    output: str | os.PathLike,
+    *,
+    simulator: str = "icarus",
+    summary_path: str | os.PathLike | None = None,
+    traj_col: str | None = None,
+    stall: float = 0.0,
+    seed: int = 0,
+    cache_dir: str | os.PathLike | None = None,
+    waves: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> dict:
+    """Replay the rows of a CSV file through the generated RTL (``pwas-hdl simulate``).
+
+    The sensor top gets one (u, y) sample per transfer (reset between trajectories); the core gets
+    the regressors built in software. Inputs are quantised as the bit-true model does (half up,
+    saturated). Writes ``output`` (CSV: ``row``, ``<t>_hw``, ``<t>_bittrue``, ``<t>_float``,
+    ``out_of_range``, ``mismatch``; one row per hardware output, in data order) and the JSON
+    summary (``summary_path``, default ``output`` with the suffix ``.json``).
+
+    Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult}``.
+    Mismatches against the bit-true model do not raise: they are counted in the summary.
+    """
+    from .atomic import atomic_write_text
+    from .data_io import read_csv, split_trajectories, write_csv
+
+    say = progress or (lambda msg: None)
+    if simulator not in SIMULATORS:
+        raise ValueError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+    if not 0.0 <= stall < 1.0:
+        raise ValueError(f"--stall must be in [0, 1), got {stall}")
+    design = load_design(outdir)
+    sensor, model = design.sensor, design.model
+    ins, outs, tgts = sensor.signal_names()
+    lags = sensor.lags_
+    table = read_csv(data)
+    if traj_col is not None:
+        table.column_index(traj_col)
+    slices = split_trajectories(table, traj_col)
+    u_all = table.numeric(ins) if lags.nu and lags.mu else None
+    y_all = table.numeric(outs) if lags.ny and lags.my else None
+    m_hist = lags.memory
+    segs, rows, xs = [], [], []
+    for sl in slices:
+        t_len = sl.stop - sl.start
+        if t_len < m_hist:
+            raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {t_len} samples; the lags need {m_hist}")
+        u = u_all[sl] if u_all is not None else None
+        y = y_all[sl] if y_all is not None else None
+        xi = lags.build(u, y)  # physical regressors (float model input)
+        if design.kind == "core":
+            codes = model.quantize_inputs(xi)
+        else:
+            fmts = model.signal_input_formats()
+            cols = []
+            for f in design.in_fields:
+                nm = f.get("signal", f["name"])
+                src = u if nm in ins and u is not None and lags.mu else y
+                names = ins if src is u else outs
+                cols.append(fmts[nm].quantize(src[:, names.index(nm)]))
+            codes = np.stack(cols, axis=1).astype(np.int64)
+        segs.append(segment(design, codes))
+        rows.append(np.arange(sl.start + m_hist - 1, sl.stop))
+        xs.append(xi)
+    p = 1.0 - stall
+    run = Run("replay", segs, p, p, seed)
+    say(f"simulating {sum(len(s.src) for s in segs)} samples of {data} through {design.top} on {simulator} ...")
+    t0 = time.perf_counter()
+    res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False,
+                  work_dir=(Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else None)
+    wall = time.perf_counter() - t0
+    lsb = 2.0 ** -model.output_format.frac
+    hw_codes = [h[0] for h in res.hw[0]]
+    hw_oor = [h[1] for h in res.hw[0]]
+    complete = all(len(hc) == len(s.expected) for hc, s in zip(hw_codes, segs))
+    if not complete:
+        raise RuntimeError("the RTL did not produce every output: " + "; ".join(res.failures[:3]))
+    hw = np.concatenate(hw_codes) if hw_codes else np.empty((0, model.nz), dtype=np.int64)
+    oor = np.concatenate(hw_oor)
+    bt = np.concatenate([s.expected for s in segs])
+    bt_oor = np.concatenate([s.oor for s in segs])
+    q = np.concatenate([s.q for s in segs])
+    xi = np.concatenate(xs)
+    row = np.concatenate(rows)
+    mism = np.any(hw != bt, axis=1) | (oor != bt_oor)
+    zf = sensor.predict_regressors(xi)  # float model at the real inputs
+    zref = model.reference(q)  # float model at the inputs the codes represent
+    zhw = hw * lsb
+    cols: dict[str, Any] = {"row": row}
+    for i, t in enumerate(tgts):
+        cols[f"{t}_hw"] = zhw[:, i]
+        cols[f"{t}_bittrue"] = bt[:, i] * lsb
+        cols[f"{t}_float"] = zf[:, i]
+    cols["out_of_range"] = oor
+    cols["mismatch"] = mism
+    write_csv(output, cols)
+    e_ref = np.abs(zhw - zref)
+    e_float = np.abs(zhw - zf)
+    targets = {}
+    for i, t in enumerate(tgts):
+        entry: dict[str, Any] = {
+            "max_error_vs_float_at_codes": float(e_ref[:, i].max()) if len(e_ref) else 0.0,
+            "max_error_vs_float_at_codes_lsb": float(e_ref[:, i].max() / lsb) if len(e_ref) else 0.0,
+            "max_error_vs_float_model": float(e_float[:, i].max()) if len(e_float) else 0.0,
+            "max_error_vs_float_model_lsb": float(e_float[:, i].max() / lsb) if len(e_float) else 0.0,
+        }
+        for ref in (f"{t}_true", t):
+            if ref in table.header:
+                ztrue = table.numeric([ref])[row, 0]
+                entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
+                             rmsee_float=_rmse(zf[:, i], ztrue))
+                entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
+                break
+        targets[t] = entry
+    first = None
+    if mism.any():
+        k = int(np.flatnonzero(mism)[0])
+        first = {"row": int(row[k]), "regressor_codes": q[k].tolist(), "expected": bt[k].tolist() + [int(bt_oor[k])],
+                 "actual": hw[k].tolist() + [int(oor[k])]}
+    lat = sorted(set(res.latencies))
+    n = int(len(row))
+    summary = {
+        "design": design.top,
+        "kind": design.kind,
+        "outdir": str(design.outdir),
+        "data": str(data),
+        "simulator": simulator,
+        "simulator_version": sim_module("pwas_runner").tool_versions(simulator),
+        "samples": n,
+        "input_transfers": int(sum(len(s.codes) for s in segs)),
+        "trajectories": len(segs),
+        "mismatches": int(mism.sum()),
+        "first_mismatch": first,
+        "out_of_range": int(oor.sum()),
+        "output_lsb": lsb,
+        "error_bound": res.error_bound,
+        "error_bound_lsb": res.error_bound_lsb,
+        "within_error_bound": bool(float(e_ref.max(initial=0.0)) <= res.error_bound * (1 + 1e-9) + 1e-12),
+        "max_error_vs_float_lsb": float(e_ref.max(initial=0.0) / lsb),
+        "max_error_vs_float": float(e_ref.max(initial=0.0)),
+        "targets": targets,
+        "latency_cycles": {"manifest": design.latency, "measured_min": lat[0] if lat else None,
+                           "measured_max": lat[-1] if lat else None,
+                           "note": "from the input transfer that completes a regressor to out.valid"
+                           + ("" if stall == 0 else "; with stalls, cycles waiting on out.ready are included")},
+        "ii": {"manifest": int(design.manifest["ii"]), "measured": res.ii,
+               "note": "cycles per accepted input at full speed" if stall == 0 else "not measured with stalls (--stall > 0)"},
+        "stall": stall,
+        "cycles": res.cycles,
+        "clock_ns": 10.0,
+        "simulation_seconds": res.sim_seconds,
+        "samples_per_second": n / res.sim_seconds if res.sim_seconds > 0 else None,
+        "cycles_per_second": res.cycles / res.sim_seconds if res.sim_seconds > 0 else None,
+        "simulator_process_seconds": res.wall_seconds,
+        "build_seconds": res.build_seconds,
+        "build_reused": res.build_reused,
+        "total_seconds": wall,
+        "testbench_failures": res.failures,
+        "waves": res.raw.get("waves"),
+    }
+    spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
+    atomic_write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
+    return {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res}
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o) if math.isfinite(float(o)) else None
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
