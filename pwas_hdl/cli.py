@@ -238,6 +238,8 @@ def generate(
     output_frac: Annotated[Optional[int], typer.Option("--output-frac", help="Output fraction bits (default: LSB = largest power of two <= train RMSE / 32).")] = None,
     overflow: Annotated[str, typer.Option("--overflow", help="Weights that do not fit: error (refuse) or saturate (with a warning).")] = "error",
     rounding: Annotated[str, typer.Option("--rounding", help="Rounding of weights and output: half_up or truncate.")] = "half_up",
+    target_mhz: Annotated[Optional[float], typer.Option("--target-mhz", help="Choose the pipeline by timing closure instead of --pipeline: the shallowest one whose fmax, measured by place and route (nextpnr, --fpga), reaches this clock. One P&R run per candidate tried (ECP5 ~25 s, iCE40 ~100 s for a Lorenz-size core).")] = None,
+    fpga: Annotated[str, typer.Option("--fpga", help="FPGA of --target-mhz: ecp5 (LFE5U-45F) or ice40 (HX8K).")] = "ecp5",
 ) -> None:
     """Generate the Verilog, weight memory (.hex), manifest.json and report.md of a model.
 
@@ -246,11 +248,20 @@ def generate(
     from .generate import generate as _generate
 
     with _user_errors():
-        with _progress("building the design"):
+        if target_mhz is None:
+            with _progress("building the design"):
+                gd = _generate(
+                    model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
+                    input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
+                    output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
+                )
+        else:
             gd = _generate(
                 model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
                 input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
                 output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
+                target_mhz=target_mhz, fpga_target=fpga,
+                progress=lambda msg: err.print(msg, highlight=False, markup=False),
             )
         man = gd.manifest
         eb = man["error_bound"]
@@ -261,6 +272,11 @@ def generate(
             f"= {eb['physical']:.4g}",
             highlight=False, markup=False,
         )
+        tm = man.get("timing")
+        if tm:
+            c = tm["candidates"][tm["chosen"]]
+            err.print(f"timing: {c['latency_cycles']} cycles ({c['label']}) reach {c['fmax_mhz']:.1f} MHz >= {tm['target_mhz']:g} MHz "
+                      f"on {tm['part']} = {c['latency_ns']:.1f} ns", highlight=False, markup=False)
         err.print(f"wrote {outdir}/ ({len(gd.files)} files)", highlight=False, markup=False)
 
 

@@ -32,7 +32,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from string import Template
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from . import __version__
 from .bittrue import FixedPointModel
 from .manifest import MANIFEST_FORMAT, MANIFEST_VERSION
 from .virtual_sensor import PWASVirtualSensor
+
+if TYPE_CHECKING:  # the hdl package (Amaranth) is imported when a design is built
+    from .hdl.params import Pipeline
 
 __all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fixed_point_model", "TEMPLATE_DIR"]
 
@@ -301,8 +304,13 @@ def build_design(
     design: str = "core",
     name: str | None = None,
     memory: str = "banked",
-    pipeline: str | None = None,
+    pipeline: str | Pipeline | dict | None = None,
     memory_init: str = "inline",
+    target_mhz: float | None = None,
+    fpga_target: str = "ecp5",
+    timing_seed: int = 1,
+    prescreen: bool = True,
+    progress: Callable[[str], None] | None = None,
     **formats: Any,
 ) -> GeneratedDesign:
     """Build the RTL and all artifacts in memory.
@@ -317,8 +325,23 @@ def build_design(
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated"}
         Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words.
-    pipeline : str, optional
-        Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``).
+    pipeline : str, Pipeline or dict, optional
+        Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``), or the
+        registers themselves (a :class:`~pwas_hdl.hdl.params.Pipeline` or its ``to_dict()``).
+    target_mhz : float, optional
+        Choose the pipeline by timing closure instead (:mod:`pwas_hdl.timing_closure`): the
+        shallowest candidate whose fmax, measured by place and route on ``fpga_target``, reaches
+        ``target_mhz``; recorded in the manifest (``timing``) and the report. Not with ``pipeline``.
+        Raises :class:`~pwas_hdl.timing_closure.TimingNotMet` (a ``ValueError``) when even the
+        deepest pipeline misses the target. Takes one place-and-route run per candidate tried.
+    fpga_target : {"ecp5", "ice40"}
+        FPGA family of the timing closure (devices: ECP5 LFE5U-45F, iCE40 HX8K).
+    timing_seed : int
+        nextpnr placer seed of the timing closure (same inputs and seed: same choice).
+    prescreen : bool
+        Let the timing closure skip candidates that cannot reach the target (see its notes).
+    progress : callable, optional
+        Called with one line of text before each place-and-route run of the timing closure.
     memory_init : {"inline", "readmemh"}
         Weights as initialisers inside the Verilog (self-contained), or ``$readmemh`` of the
         ``.hex`` files of the folder (relative names: run tools from the folder).
@@ -329,7 +352,7 @@ def build_design(
     -------
     GeneratedDesign
     """
-    from .hdl import build_core, build_sensor, design_info, emit_verilog
+    from .hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
     from .hdl.emit import memory_hex_files
 
     if design not in ("core", "sensor"):
@@ -339,10 +362,26 @@ def build_design(
     sensor = _load_sensor(model)
     top = name or ("pwas_core" if design == "core" else "pwas_sensor")
     fxm = fixed_point_model(sensor, memory=memory, **formats)
-    if design == "core":
-        comp = build_core(fxm, memory=memory, pipeline=pipeline, name=top)
+    timing = None
+    if target_mhz is not None:
+        from .timing_closure import close_timing
+
+        if pipeline is not None:
+            raise ValueError("give either a pipeline or a target clock (target_mhz / --target-mhz), not both")
+        if memory_init not in ("inline", "readmemh"):
+            raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+
+        def candidate(pipe: Pipeline) -> GeneratedDesign:
+            return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline", **formats)
+
+        chosen, timing = close_timing(candidate, sensor.grid_.n, target_mhz, fpga=fpga_target, seed=timing_seed,
+                                      prescreen=prescreen, progress=progress)
     else:
-        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipeline, name=top)
+        chosen = pipeline
+    if design == "core":
+        comp = build_core(fxm, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top)
+    else:
+        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top)
     info = design_info(comp)
 
     prefix = f"{top}_rom"
@@ -364,19 +403,31 @@ def build_design(
         "fusesoc_core": f"{top}.core",
         "hex": hex_entries,
     }
+    if pipeline is not None and not isinstance(pipeline, str):
+        pipeline = Pipeline.cast(pipeline).to_dict()
     options = {"design": design, "memory": memory, "pipeline": pipeline, "memory_init": memory_init,
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
+    if timing is not None:
+        options.update(target_mhz=float(target_mhz), fpga_target=fpga_target)
     man = _manifest(design, top, fxm, info, sensor, files, options)
+    if timing is not None:
+        man["timing"] = timing
     texts: dict[str, str] = {
         files["verilog"]: verilog,
         "model.json": json.dumps(sensor.to_dict(), indent=1, allow_nan=False) + "\n",
         "manifest.json": json.dumps(man, indent=1, allow_nan=False) + "\n",
-        "report.md": _report(man, sensor, fxm),
+        "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else ""),
         files["instance_template"]: _instance(man),
         files["fusesoc_core"]: _fusesoc(man),
         **hexes,
     }
     return GeneratedDesign(top, texts, man, fxm, comp)
+
+
+def _timing_section(timing: dict) -> str:
+    from .timing_closure import timing_report_text
+
+    return "\n" + timing_report_text(timing)
 
 
 def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:

@@ -383,6 +383,10 @@ class PWASCore(wiring.Component):
             bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
             bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
 
+        if pl.addr:  # optional register between the address / mu logic and the memories
+            valid, r = pipe.stage("s_addr", True, valid, {"addr": bank_addr, "mu": bank_mu, "oor": oor})
+            bank_addr, bank_mu, oor = r["addr"], r["mu"], r["oor"]
+
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
         for b in range(nb):

@@ -218,6 +218,7 @@ class Pipeline:
     ============ ========================================================================
     ``split``    register after scale / clamp / cell-fraction split
     ``rank``     register after the rank extractor (and the address/bank precomputation)
+    ``addr``     register on the bank addresses and (rotated) ``mu`` before the memories
     memory *     vertex addresses + ``mu`` feed the synchronous read ports (one register)
     ``mem_out``  extra register on the memory read data
     ``product``  register after the ``mu_k * w`` multipliers
@@ -231,6 +232,7 @@ class Pipeline:
     mem_out: bool = False
     product: bool = True
     tree_levels: int = 2
+    addr: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -251,6 +253,7 @@ class Pipeline:
         return (
             int(self.split)
             + int(self.rank)
+            + int(self.addr)
             + 1
             + int(self.mem_out)
             + int(self.product)
@@ -259,11 +262,17 @@ class Pipeline:
         )
 
     @classmethod
-    def cast(cls, value: "Pipeline | str | None") -> "Pipeline":
+    def cast(cls, value: "Pipeline | str | dict | None") -> "Pipeline":
         if value is None:
             return cls()
         if isinstance(value, Pipeline):
             return value
+        if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
+            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr"}
+            bad = set(value) - known
+            if bad:
+                raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
+            return cls(**value)
         if isinstance(value, str):
             try:
                 return PIPELINE_PRESETS[value]
@@ -271,7 +280,7 @@ class Pipeline:
                 raise ValueError(
                     f"unknown pipeline preset {value!r}; choose one of {', '.join(PIPELINE_PRESETS)}"
                 ) from None
-        raise TypeError(f"pipeline must be a Pipeline, a preset name or None, not {value!r}")
+        raise TypeError(f"pipeline must be a Pipeline, a preset name, a dict of its options or None, not {value!r}")
 
     def to_dict(self) -> dict:
         return {
@@ -280,6 +289,7 @@ class Pipeline:
             "mem_out": self.mem_out,
             "product": self.product,
             "tree_levels": self.tree_levels,
+            "addr": self.addr,
         }
 
 

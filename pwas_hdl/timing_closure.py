@@ -1,0 +1,443 @@
+"""Timing closure: pick the shallowest pipeline whose *measured* fmax reaches a target clock.
+
+``generate(..., target_mhz=F, fpga_target="ecp5")`` (CLI: ``--target-mhz F --fpga ecp5``) trades
+pipeline depth for clock rate. :func:`pipeline_candidates` lists pipeline configurations from the
+shallowest (2 cycles) to the deepest, one more register each, in the order that cuts the critical
+path nextpnr reports (see the list's docstring); :func:`close_timing` places and routes them with
+:func:`pwas_hdl.synthesis.synthesize` (``--freq`` = the target, fixed placer seed) and returns the
+first whose fmax reaches the target, with every measurement it made.
+
+What is measured. nextpnr's fmax covers register-to-register paths only; a path from an input pin
+to the first register (or from the last register to an output pin) is not constrained. A core whose
+first register sits after the scale / rank / address logic would look fast while its input path
+is long. So every candidate is placed inside a *timing harness*: a wrapper module that registers
+every input and every output of the design (as the logic around an embedded core would), so that
+the input and output paths are register-to-register paths and count in fmax. The harness adds
+``harness_ffs`` flip-flops (the port bits) and nothing else; ``ffs_core`` subtracts them.
+
+Search (deterministic for the same inputs, tools and seed): measure the shallowest candidate; while
+the measured fmax is below the target, jump to the shallowest deeper candidate that could reach it
+if its extra registers split the delay evenly (``fmax * L_next / L_measured >= target``; with
+``prescreen=False`` simply the next one); when a candidate reaches the target after such a jump, the
+skipped shallower candidates are measured downwards until one misses, so the answer is measured and
+is the shallowest passing candidate above the last miss. When even the deepest misses, a
+``TimingNotMet`` error (a ``ValueError``) says the best fmax reached.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from .hdl.params import Pipeline
+
+__all__ = [
+    "FPGA_TARGETS",
+    "TimingNotMet",
+    "pipeline_candidates",
+    "harness_verilog",
+    "measure_design",
+    "close_timing",
+    "timing_report_text",
+]
+
+#: FPGA families the search places and routes on (``synthesis.synthesize`` targets).
+FPGA_TARGETS = ("ecp5", "ice40")
+
+Progress = Callable[[str], None]
+
+
+class TimingNotMet(ValueError):
+    """Even the deepest pipeline misses the target clock (the message gives the best fmax)."""
+
+    def __init__(self, message: str, record: dict[str, Any]):
+        super().__init__(message)
+        self.record = record
+
+
+# ---------------------------------------------------------------------------------------------
+# candidates
+# ---------------------------------------------------------------------------------------------
+def pipeline_candidates(n: int) -> list[Pipeline]:
+    """Pipeline configurations of an ``n``-input core, shallowest first, latencies strictly increasing.
+
+    Each one adds one register to the previous one where the critical path of the previous one lies
+    (nextpnr, ECP5 and iCE40, Lorenz core n = 4 inside the timing harness)::
+
+        2  min        memory read and output registers only
+        3  +product   cuts the back end after the multipliers
+        4  +rank      cuts the front end after the rank extractor
+        5  +mem_out   register on the block-RAM read data (its clock-to-out is long)
+        6  +split     register after scale / clamp / split
+        7.. +tree     adder-tree registers: one after the whole tree, then more, down to one per level
+        last +addr    bank addresses and mu registered before the block RAMs
+
+    The ``min`` and ``max`` presets are in the list; ``balanced`` has the latency of the first
+    tree candidate.
+    """
+    n = int(n)
+    if n < 1:
+        raise ValueError("a PWAS core needs at least one input (n >= 1)")
+    depth = Pipeline.tree_depth(n)
+    out = [Pipeline(split=False, rank=False, mem_out=False, product=False, tree_levels=0)]
+    for key in ("product", "rank", "mem_out", "split"):
+        d = out[-1].to_dict()
+        d[key] = True
+        out.append(Pipeline.cast(d))
+    seen = set()
+    for t in range(depth, 0, -1):  # tree registers: ceil(depth / t), distinct, increasing
+        regs = -(-depth // t)
+        if regs in seen:
+            continue
+        seen.add(regs)
+        d = out[-1].to_dict()
+        d["tree_levels"] = t
+        out.append(Pipeline.cast(d))
+    d = out[-1].to_dict()
+    d["addr"] = True
+    out.append(Pipeline.cast(d))
+    lat = [p.latency(n) for p in out]
+    assert all(a < b for a, b in zip(lat, lat[1:])), lat
+    return out
+
+
+def _label(p: Pipeline, n: int) -> str:
+    for name in ("min", "balanced", "max"):
+        if Pipeline.cast(name) == p:
+            return name
+    on = [k for k in ("split", "rank", "addr", "mem_out", "product") if getattr(p, k, False)]
+    if p.tree_levels:
+        on.append(f"tree/{p.tree_levels}")
+    return "+".join(on) or "min"
+
+
+# ---------------------------------------------------------------------------------------------
+# timing harness
+# ---------------------------------------------------------------------------------------------
+def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[str, str, int]:
+    """A Verilog wrapper that registers every port of the manifest's top except the clock.
+
+    Returns ``(module name, Verilog text, number of harness flip-flops)``.
+    """
+    top = manifest["top"]
+    name = name or f"{top}_timing_harness"
+    clk = (manifest.get("clock") or {}).get("port", "clk")
+    ports = manifest["ports"]
+    decl, regs, seq, conns = [], [], [], []
+    nff = 0
+    for p in ports:
+        nm, w, d = p["name"], int(p["width"]), p["direction"]
+        rng = f"[{w - 1}:0] " if w > 1 else ""
+        if nm == clk:
+            decl.append(f"    input wire {nm}")
+            conns.append(f"        .{nm}({nm})")
+            continue
+        nff += w
+        if d == "input":
+            decl.append(f"    input wire {rng}{nm}")
+            regs.append(f"    reg {rng}io_{nm};")
+            seq.append(f"        io_{nm} <= {nm};")
+            conns.append(f"        .{nm}(io_{nm})")
+        elif d == "output":
+            decl.append(f"    output reg {rng}{nm}")
+            regs.append(f"    wire {rng}core_{nm};")
+            seq.append(f"        {nm} <= core_{nm};")
+            conns.append(f"        .{nm}(core_{nm})")
+        else:
+            raise ValueError(f"port {nm} has direction {d!r}; the timing harness handles input and output ports")
+    text = (
+        f"// Timing harness of {top} (pwas-hdl): every port registered, so that nextpnr's fmax covers\n"
+        f"// the input and output paths of the core as they are when it is embedded in a design.\n"
+        f"module {name} (\n" + ",\n".join(decl) + "\n);\n"
+        + "\n".join(regs) + "\n"
+        f"    always @(posedge {clk}) begin\n" + "\n".join(seq) + "\n    end\n"
+        f"    {top} core (\n" + ",\n".join(conns) + "\n    );\n"
+        "endmodule\n"
+    )
+    return name, text, nff
+
+
+_STAGE_RE = re.compile(r"(?:^|[.$])(s_(?:split|rank|addr|mem|memout|prod|tree\d+))_")
+
+
+def _stage_of_cell(cell: str) -> str:
+    """Pipeline stage a nextpnr cell belongs to (by the register names of :mod:`pwas_hdl.hdl.core`)."""
+    c = cell.split("$")[0] if not cell.startswith("$") else cell
+    if c.startswith("io_"):
+        return "harness input" if "payload" in c and c.startswith("io_in") or c.startswith(("io_rst", "io_out__ready", "io_in__valid")) else "harness"
+    if re.search(r"(^|\.)wmem\d+", c):
+        return "memory"
+    if re.search(r"(^|\.)(out__payload|out__valid|core_out)", c) or c.startswith(("out__", "in__ready")):
+        return "output"
+    m = _STAGE_RE.search(c)
+    if m:
+        return m.group(1)
+    return c.split("_TRELLIS")[0].split("_SB_")[0][:40]
+
+
+def _critical_path(report: dict[str, Any]) -> dict[str, Any] | None:
+    """The clock-to-clock critical path of a nextpnr report: start/end cell and stage, delays."""
+    for cp in report.get("critical_paths", []):
+        if cp.get("from", "").startswith("posedge") and cp.get("to", "").startswith("posedge"):
+            path = cp.get("path") or []
+            if not path:
+                return None
+            total = sum(float(s.get("delay", 0.0)) for s in path)
+            routing = sum(float(s.get("delay", 0.0)) for s in path if s.get("type") == "routing")
+            src, dst = path[0]["from"]["cell"], path[-1]["to"]["cell"]
+            return {
+                "from": _stage_of_cell(src),
+                "to": _stage_of_cell(dst),
+                "delay_ns": round(total, 3),
+                "routing_ns": round(routing, 3),
+            }
+    return None
+
+
+# ---------------------------------------------------------------------------------------------
+# measuring one design
+# ---------------------------------------------------------------------------------------------
+def measure_design(
+    gd,
+    fpga: str,
+    *,
+    freq_mhz: float | None,
+    seed: int = 1,
+    device: str | None = None,
+    workdir: str | os.PathLike,
+    harness: bool = True,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Place and route a built design (:class:`~pwas_hdl.generate.GeneratedDesign`) on ``fpga``.
+
+    The design's files (and, with ``harness``, the timing harness as top) are written to
+    ``workdir``; returns the :func:`~pwas_hdl.synthesis.synthesize` result with ``harness_ffs``,
+    ``ffs_core`` and ``critical_path`` added.
+    """
+    from .synthesis import synthesize
+
+    work = Path(workdir)
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    for fname, text in gd.files.items():
+        if fname.endswith((".v", ".hex", ".json")):
+            (work / fname).write_text(text, encoding="utf-8")
+    man = json.loads(json.dumps(gd.manifest))
+    nff = 0
+    if harness:
+        hname, htext, nff = harness_verilog(man)
+        (work / f"{hname}.v").write_text(htext, encoding="utf-8")
+        man["files"]["verilog"] = [man["files"]["verilog"], f"{hname}.v"]
+        man["top"] = hname
+    (work / "manifest.json").write_text(json.dumps(man, indent=1) + "\n", encoding="utf-8")
+    res = synthesize(work, fpga, device=device, freq_mhz=freq_mhz, seed=seed, workdir=work / "pnr", progress=progress)
+    res["harness_ffs"] = nff
+    res["ffs_core"] = res["ffs"] - nff if isinstance(res.get("ffs"), int) else None
+    rep = work / "pnr" / "report.json"
+    res["critical_path"] = _critical_path(json.loads(rep.read_text(encoding="utf-8"))) if rep.is_file() else None
+    return res
+
+
+# ---------------------------------------------------------------------------------------------
+# the search
+# ---------------------------------------------------------------------------------------------
+def _entry(pipe: Pipeline, n: int, res: dict[str, Any] | None, target: float, note: str | None = None) -> dict[str, Any]:
+    e: dict[str, Any] = {"latency_cycles": pipe.latency(n), "label": _label(pipe, n), "pipeline": pipe.to_dict()}
+    if res is None:
+        e.update({"measured": False, "note": note})
+        return e
+    fm = res.get("fmax_mhz")
+    e.update({
+        "measured": True,
+        "fmax_mhz": fm,
+        "latency_ns": res.get("latency_ns"),
+        "meets_target": bool(fm is not None and fm >= target),
+        "luts": res.get("luts"),
+        "ffs": res.get("ffs"),
+        "ffs_core": res.get("ffs_core"),
+        "dsp": res.get("dsp"),
+        "bram": res.get("bram"),
+        "critical_path": res.get("critical_path"),
+    })
+    if note:
+        e["note"] = note
+    return e
+
+
+def close_timing(
+    build: Callable[[Pipeline], Any],
+    n: int,
+    target_mhz: float,
+    *,
+    fpga: str = "ecp5",
+    device: str | None = None,
+    seed: int = 1,
+    prescreen: bool = True,
+    candidates: Sequence[Pipeline] | None = None,
+    workdir: str | os.PathLike | None = None,
+    progress: Progress | None = None,
+) -> tuple[Pipeline, dict[str, Any]]:
+    """Find the shallowest candidate pipeline whose measured fmax reaches ``target_mhz``.
+
+    Parameters
+    ----------
+    build
+        ``pipeline -> GeneratedDesign`` (the design to measure, weights inline).
+    n
+        Number of core inputs (sets the adder-tree depth of the candidates).
+    target_mhz
+        Clock target; also nextpnr's ``--freq``.
+    fpga, device
+        ``"ecp5"`` (default device 45k) or ``"ice40"`` (hx8k).
+    seed
+        nextpnr placer seed (same inputs and seed: same result).
+    prescreen
+        Skip candidates that cannot reach the target even if their extra registers split the
+        measured delay evenly; the skipped ones just below a passing candidate are measured
+        afterwards (see the module notes).
+    candidates
+        Default :func:`pipeline_candidates` ``(n)``.
+    workdir
+        Where the place-and-route runs go (default: a temporary folder, removed afterwards).
+
+    Returns
+    -------
+    (Pipeline, dict)
+        The chosen pipeline and the JSON-ready record: ``target_mhz``, ``fpga``, ``device``,
+        ``seed``, ``harness``, ``tools``, ``chosen`` (index into ``candidates``), ``candidates``
+        (every candidate with ``measured``, and for the measured ones ``fmax_mhz``, ``latency_ns``,
+        resources and the critical path), ``measurements`` (order of the runs).
+
+    Raises
+    ------
+    TimingNotMet
+        No candidate reaches the target (``record`` holds what was measured).
+    ValueError
+        Bad target or FPGA family; a design that does not fit the device.
+    """
+    if fpga not in FPGA_TARGETS:
+        raise ValueError(f"fpga_target must be one of {', '.join(FPGA_TARGETS)}, got {fpga!r}")
+    if isinstance(target_mhz, bool) or not isinstance(target_mhz, (int, float)) or not target_mhz > 0 or target_mhz == float("inf"):
+        raise ValueError(f"target_mhz must be a positive number of MHz, got {target_mhz!r}")
+    target = float(target_mhz)
+    cands = list(candidates) if candidates is not None else pipeline_candidates(n)
+    lat = [p.latency(n) for p in cands]
+    if any(a >= b for a, b in zip(lat, lat[1:])):
+        raise ValueError(f"candidate latencies must increase strictly, got {lat}")
+
+    results: dict[int, dict[str, Any]] = {}
+    order: list[int] = []
+    tmp = None
+    if workdir is None:
+        tmp = tempfile.mkdtemp(prefix="pwas-timing-")
+        base = Path(tmp)
+    else:
+        base = Path(workdir)
+    tools = None
+    try:
+        def run(i: int) -> float:
+            nonlocal tools
+            if progress:
+                progress(f"timing: candidate {i + 1}/{len(cands)} ({_label(cands[i], n)}, {lat[i]} cycles) on {fpga} at {target:g} MHz")
+            gd = build(cands[i])
+            res = measure_design(gd, fpga, freq_mhz=target, seed=seed, device=device, workdir=base / f"c{i:02d}_L{lat[i]}")
+            results[i] = res
+            order.append(i)
+            tools = tools or res.get("tools")
+            fm = res.get("fmax_mhz") or 0.0
+            if progress:
+                progress(f"timing: {lat[i]} cycles -> fmax {fm:.1f} MHz ({'meets' if fm >= target else 'misses'} {target:g} MHz)")
+            return fm
+
+        chosen = None
+        last_miss = -1
+        i = 0
+        while True:
+            fm = run(i)
+            if fm >= target:
+                # measured downwards through skipped candidates until one misses
+                j = i
+                while j - 1 > last_miss:
+                    if run(j - 1) >= target:
+                        j -= 1
+                    else:
+                        break
+                chosen = j
+                break
+            last_miss = i
+            if i == len(cands) - 1:
+                break
+            nxt = i + 1
+            if prescreen and fm > 0:
+                nxt = next((k for k in range(i + 1, len(cands)) if fm * lat[k] / lat[i] >= target), len(cands) - 1)
+            i = nxt
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    entries = []
+    for k, p in enumerate(cands):
+        note = None
+        if k not in results:
+            if chosen is not None and k > chosen:
+                note = "not needed (a shallower candidate meets the target)"
+            else:
+                note = "skipped by the pre-screen (cannot reach the target if its extra registers split the measured delay evenly)"
+        entries.append(_entry(p, n, results.get(k), target, note))
+    best = max(order, key=lambda k: (results[k].get("fmax_mhz") or 0.0, -k))
+    record: dict[str, Any] = {
+        "target_mhz": target,
+        "fpga": fpga,
+        "device": results[order[0]].get("device"),
+        "part": results[order[0]].get("part"),
+        "seed": seed,
+        "prescreen": bool(prescreen),
+        "harness": "every port registered (fmax includes the input and output paths); "
+                   "FF counts include the harness flip-flops (ffs_core excludes them)",
+        "tools": tools,
+        "measurements": [lat[k] for k in order],
+        "chosen": chosen,
+        "met": chosen is not None,
+        "best_fmax_mhz": results[best].get("fmax_mhz"),
+        "candidates": entries,
+    }
+    if chosen is None:
+        fm = results[best].get("fmax_mhz")
+        raise TimingNotMet(
+            f"no pipeline reaches {target:g} MHz on {record['part']}: the best measured fmax is "
+            f"{fm:.1f} MHz ({lat[best]} cycles, {_label(cands[best], n)}); "
+            f"choose a target of at most {fm:.0f} MHz, another FPGA, or a fixed --pipeline",
+            record,
+        )
+    return cands[chosen], record
+
+
+def timing_report_text(rec: dict[str, Any]) -> str:
+    """The Markdown section of ``report.md`` about a timing-closure search."""
+    lines = [
+        "## Timing closure",
+        "",
+        f"Target **{rec['target_mhz']:g} MHz** on {rec['part']} (nextpnr, seed {rec['seed']}, `--freq` = target; "
+        f"design inside a harness that registers every port). Candidates from the shallowest; "
+        f"measured in the order {', '.join(str(v) for v in rec['measurements'])} (cycles).",
+        "",
+        "| cycles | pipeline | fmax (MHz) | latency (ns) | LUT4 | FF (core) | DSP | BRAM | critical path | |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---|---|",
+    ]
+    for k, c in enumerate(rec["candidates"]):
+        if c["measured"]:
+            cp = c.get("critical_path") or {}
+            cpt = f"{cp.get('from')} -> {cp.get('to')} ({cp.get('delay_ns')} ns)" if cp else "-"
+            mark = "**chosen**" if rec.get("chosen") == k else ("meets" if c["meets_target"] else "misses")
+            lines.append(f"| {c['latency_cycles']} | {c['label']} | {c['fmax_mhz']} | {c['latency_ns']} | {c['luts']} | "
+                         f"{c['ffs_core']} | {c['dsp']} | {c['bram']} | {cpt} | {mark} |")
+        else:
+            lines.append(f"| {c['latency_cycles']} | {c['label']} | - | - | | | | | | {c['note']} |")
+    return "\n".join(lines) + "\n"
