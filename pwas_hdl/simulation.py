@@ -31,6 +31,7 @@ import shutil
 import sys
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -128,6 +129,16 @@ class Design:
     def verilog(self) -> str:
         return self.verilog_path.read_text(encoding="utf-8")
 
+    @property
+    def runtime_files(self) -> dict[str, Path]:
+        """Files the Verilog may read at simulation time (the ``$readmemh`` hex files), name -> path."""
+        res = {}
+        for h in self.manifest.get("files", {}).get("hex", []):
+            name = h["file"] if isinstance(h, dict) else str(h)
+            if (self.outdir / name).is_file():
+                res[name] = self.outdir / name
+        return res
+
 
 def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = None) -> Design:
     """Read a folder written by ``pwas-hdl generate``; rebuild its bit-true model.
@@ -152,7 +163,9 @@ def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = N
     sensor = PWASVirtualSensor.load(model_file)
     opts = man.get("generator", {}).get("options", {})
     fmts = {k: opts.get(k) for k in FORMAT_OPTIONS if opts.get(k) is not None}
-    fxm = fixed_point_model(sensor, memory=opts.get("memory", "banked"), **fmts)
+    with warnings.catch_warnings():  # saturation warnings were given by `generate`; the manifest records them
+        warnings.simplefilter("ignore", UserWarning)
+        fxm = fixed_point_model(sensor, memory=opts.get("memory", "banked"), **fmts)
     fx = fxm.to_dict()
     want = man["formats"]
     for key, mine in (("output", fx["output"]), ("weight", fx["weights"]), ("widths", fx["widths"]), ("mu_frac", fx["F"])):
@@ -488,6 +501,8 @@ class RTLResult:
     build_reused: bool
     located: dict | None = None
     hw: list = field(default_factory=list, repr=False)  # per run, per segment: (codes (m, nz), oor (m,))
+    latencies_all: list = field(default_factory=list, repr=False)  # also with backpressure (includes waiting)
+    saturated: int = 0  # outputs at the saturation limits (left out of the float comparison)
 
     @property
     def passed(self) -> bool:
@@ -548,6 +563,8 @@ def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build
     failures = list(raw.get("failures", []))
     mismatches = outputs = cycles = 0
     lat: list[int] = []
+    lat_all: list[int] = []
+    n_sat = 0
     ii = None
     err = 0.0
     hw = []
@@ -561,6 +578,7 @@ def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build
             hw_run.append((got[:, :model.nz], got[:, model.nz].astype(bool)))
             mismatches += int(sr.get("mismatches", 0))
             outputs += len(got)
+            lat_all += [int(v) for v in sr.get("latencies", [])]
             if run.p_ready >= 1.0:
                 lat += [int(v) for v in sr.get("latencies", [])]
             acc = sr.get("accepted_at", [])
@@ -569,13 +587,18 @@ def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build
                 ii = seg_ii if ii is None else max(ii, seg_ii)
             k = min(len(got), len(seg.q))
             if k:
-                ref = model.reference(seg.q[:k])
-                err = max(err, float(np.max(np.abs(got[:k, :model.nz] * lsb - ref))))
+                # the bound holds unless the output saturates (only possible with a narrow output_bits)
+                sat = np.any((seg.expected[:k] <= fo.min_code) | (seg.expected[:k] >= fo.max_code), axis=1) \
+                    if model.output_may_saturate else np.zeros(k, dtype=bool)
+                n_sat += int(sat.sum())
+                if (~sat).any():
+                    ref = model.reference(seg.q[:k][~sat])
+                    err = max(err, float(np.max(np.abs(got[:k, :model.nz][~sat] * lsb - ref))))
         hw.append(hw_run)
     return RTLResult(
         simulator, design, runs, raw, failures, mismatches, outputs, lat, ii, err, err / lsb,
         float(model.error_bound), float(model.error_bound_lsb), cycles, sim_s, wall,
-        float(build.get("build_seconds", 0.0)), bool(build.get("reused", False)), None, hw,
+        float(build.get("build_seconds", 0.0)), bool(build.get("reused", False)), None, hw, lat_all, n_sat,
     )
 
 
@@ -621,7 +644,7 @@ def run_rtl(
         "runs": [r.to_job() for r in runs],
     }
     try:
-        raw = runner.run_job(b, job, wd)
+        raw = runner.run_job(b, job, wd, files=design.runtime_files)
     finally:
         if tmp is not None and not waves:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -765,7 +788,7 @@ def simulate_data(
         k = int(np.flatnonzero(mism)[0])
         first = {"row": int(row[k]), "regressor_codes": q[k].tolist(), "expected": bt[k].tolist() + [int(bt_oor[k])],
                  "actual": hw[k].tolist() + [int(oor[k])]}
-    lat = sorted(set(res.latencies))
+    lat = sorted(set(res.latencies if stall == 0 else res.latencies_all))
     n = int(len(row))
     summary = {
         "design": design.top,

@@ -56,6 +56,15 @@ def round_constant_plus_one_lsb(verilog: str, shift: int, target: int = 0) -> tu
     return _const_edit(verilog, f"rnd{target}", 1 << shift, "every output + 1 LSB")
 
 
-def offset_constant_off_by_one(verilog: str, dim: int = 0, delta: int = -1) -> tuple[str, str]:
-    """Shift the ``lo_code`` subtraction of dimension ``dim`` (``t<dim>``) by ``delta`` input codes."""
+def offset_constant_off_by_one(verilog: str, dim: int | None = None, delta: int = -1) -> tuple[str, str]:
+    """Shift the ``lo_code`` subtraction of dimension ``dim`` (``t<dim>``) by ``delta`` input codes.
+
+    ``dim=None``: the first dimension that has one (a dimension whose domain starts at the lowest
+    input code needs no subtraction).
+    """
+    if dim is None:
+        mo = re.search(r"^\s*assign t(\d+) = .+? [+-] \d+'h[0-9a-fA-F]+;$", verilog, re.M)
+        if not mo:
+            raise ValueError("no dimension subtracts a lo_code constant in this design")
+        dim = int(mo.group(1))
     return _const_edit(verilog, f"t{dim}", delta, f"lo_code of dimension {dim} off by {-delta}")

@@ -237,12 +237,17 @@ def _fail_stamp(stamp: Path):
     raise SimulationError(f"cache entry {stamp.parent} belongs to another design (hash prefix collision); delete it")
 
 
-def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, timeout_note: str = "") -> dict[str, Any]:
+def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, files: dict[str, str | os.PathLike] | None = None,
+            timeout_note: str = "") -> dict[str, Any]:
     """Run the testbench on build ``b`` with ``job`` (``manifest`` must be set; ``result`` is set
-    here). Returns the testbench's result dict plus ``wall_s`` (whole simulator process),
+    here). ``files``: name -> path of files the design reads at run time, relative to the
+    simulator's working directory (``$readmemh`` hex files); copied into ``work_dir``.
+    Returns the testbench's result dict plus ``wall_s`` (whole simulator process),
     ``log``, ``waves`` (path or None), ``passed`` (the cocotb test passed)."""
     wd = Path(work_dir)
     wd.mkdir(parents=True, exist_ok=True)
+    for name, path in (files or {}).items():
+        shutil.copyfile(path, wd / name)
     job = dict(job)
     job["result"] = str((wd / "result.json").resolve())
     job_path = wd / "job.json"

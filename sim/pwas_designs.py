@@ -1,0 +1,102 @@
+"""Small synthetic PWAS designs for the RTL tests (no fitting: a model file written directly).
+
+:func:`synthetic_model` returns a fitted :class:`~pwas_hdl.virtual_sensor.PWASVirtualSensor`
+built with ``from_dict``: an explicit domain, random weights of a chosen scale and a stated
+"training RMSE" (which sets the default output LSB = the largest power of two <= RMSE / 32).
+:class:`DesignConfig` names one hardware configuration (model + ``generate`` options) and
+:meth:`DesignConfig.generate` writes its folder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["synthetic_model", "DesignConfig"]
+
+
+def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int] | int, nz: int = 1, *,
+                    seed: int = 0, weight_scale: float | None = None, rmse: float | None = None):
+    """A PWAS virtual sensor with lags ``(Mu, My)`` of ``nu`` inputs / ``ny`` outputs.
+
+    ``partitions``: one integer, or one per regressor dimension (for the sensor top all lags of a
+    signal need the same value). Lags of one signal share their domain (as ``fit`` does by default).
+    """
+    from pwas_hdl.regressors import LagStructure
+    from pwas_hdl.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor
+
+    rng = np.random.default_rng(seed)
+    lags = LagStructure(mu, my, nu if mu else 0, ny if my else 0)
+    ins = [f"u{i}" for i in range(nu)] if mu else []
+    outs = [f"y{i}" for i in range(ny)] if my else []
+    tgts = [f"z{i}" for i in range(nz)]
+    n = lags.dimension
+    parts = [int(partitions)] * n if np.ndim(partitions) == 0 else [int(p) for p in partitions]
+    if len(parts) != n:
+        raise ValueError(f"{len(parts)} partitions for n = {n}")
+    sig_dom = {}
+    lo, hi = [], []
+    for kind, ch, _lag in lags.signal_of_dimension():
+        key = (kind, ch)
+        if key not in sig_dom:
+            a = float(rng.uniform(-20, 5))
+            sig_dom[key] = (a, a + float(rng.uniform(0.5, 40)))
+        lo.append(sig_dom[key][0])
+        hi.append(sig_dom[key][1])
+    n_v = int(np.prod([p + 1 for p in parts]))
+    scale = weight_scale if weight_scale is not None else float(10.0 ** rng.uniform(-1, 2))
+    # a smooth part plus noise, so that neighbouring weights are related but not equal
+    coords = np.stack(np.unravel_index(np.arange(n_v), [p + 1 for p in parts]), axis=1) / np.maximum(parts, 1)
+    weights = {}
+    for t in range(nz):
+        smooth = np.sin(coords @ rng.normal(0, 2, n) + rng.uniform(0, 6))
+        weights[tgts[t]] = (scale * (smooth + 0.3 * rng.normal(0, 1, n_v))).tolist()
+    r = rmse if rmse is not None else scale / 20
+    d = {
+        "format": MODEL_FORMAT,
+        "version": MODEL_VERSION,
+        "signals": {"inputs": ins, "outputs": outs, "targets": tgts},
+        "lags": {"Mu": mu, "My": my},
+        "regressors": lags.names(ins, outs),
+        "grid": {"lo": lo, "hi": hi, "partitions": parts},
+        "weights": weights,
+        "fit": {"sigma": 1e-3, "sigma_given": True, "tikhonov_order": 0, "gamma": 1.2, "domain_from": "explicit",
+                "share_lag_domain": True, "n_train": 0, "n_trajectories": 1, "train_rmse": {t: r for t in tgts}, "cv": None},
+    }
+    return PWASVirtualSensor.from_dict(d, source="synthetic model")
+
+
+@dataclass(frozen=True)
+class DesignConfig:
+    """One hardware configuration: the model (lags, partitions, nz, seed) and ``generate`` options."""
+
+    name: str
+    design: str  # "core" or "sensor"
+    mu: int
+    my: int
+    nu: int
+    ny: int
+    partitions: Any
+    nz: int = 1
+    options: dict = field(default_factory=dict, hash=False)
+    seed: int = 0
+
+    @property
+    def n(self) -> int:
+        return self.nu * self.mu + self.ny * self.my
+
+    def model(self):
+        return synthetic_model(self.mu, self.my, self.nu, self.ny, self.partitions, self.nz, seed=self.seed)
+
+    def generate(self, outdir: str | Path):
+        """Write the design folder (``pwas_hdl.generate.generate``); returns the GeneratedDesign."""
+        import warnings
+
+        from pwas_hdl.generate import generate
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # deliberate saturation in some configurations
+            return generate(self.model(), outdir, design=self.design, **self.options)

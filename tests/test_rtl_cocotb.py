@@ -1,0 +1,255 @@
+"""The generated Verilog in real simulators (cocotb 2 + Icarus / Verilator) against the bit-true model.
+
+Every design configuration below is generated (``pwas_hdl.generate``), built once per simulator
+(cached by the hash of its Verilog) and replayed three times by the manifest-driven testbench
+``sim/pwas_tb.py``: at full speed (latency = manifest, II = 1), with random bubbles and
+backpressure, and with a synchronous reset in the middle of a stream. Every output must equal the
+bit-true model exactly and lie within the stated bound of the float model. Stimulus
+(``sim/pwas_stimulus.py``): random points, grid vertices, tied fractions (faces of the Kuhn
+simplices), the domain corners, out-of-domain codes (flag set, value clamped), the whole code range.
+
+A failing comparison reports the sample, expected and actual values, the bit-true trace and the
+first pipeline stage whose registers differ (``debug=True`` re-runs the failing sample alone and
+reads the pipeline registers and the weight memories). Waveforms: ``PWAS_HDL_SIM_WAVES=1`` records
+FST (Icarus) / VCD (Verilator) next to each run (in the pytest tmp folder).
+``PWAS_HDL_SIM_CACHE=DIR`` keeps the simulator builds between sessions (default: a pytest tmp dir).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pwas_hdl.simulation import Run, load_design, run_rtl, segment, sim_module, simulate_data, standard_runs
+
+designs = sim_module("pwas_designs")
+stimulus = sim_module("pwas_stimulus")
+mutations = sim_module("pwas_mutations")
+runner = sim_module("pwas_runner")
+DesignConfig = designs.DesignConfig
+
+SIMULATORS = ("icarus", "verilator")
+WAVES = os.environ.get("PWAS_HDL_SIM_WAVES", "") not in ("", "0")
+SAMPLES = 500
+
+C, S = "core", "sensor"
+CONFIGS = [
+    # name, design, Mu, My, nu, ny, partitions, nz, generate options
+    DesignConfig("c-n1-p5", C, 0, 1, 0, 1, [5], 1, {}),
+    DesignConfig("c-n1-p8-z2-repl-min-b8", C, 0, 1, 0, 1, [8], 2, {"memory": "replicated", "pipeline": "min", "input_bits": 8}),
+    DesignConfig("c-n2-p4x3-max-trunc", C, 0, 2, 0, 1, [4, 3], 1, {"pipeline": "max", "rounding": "truncate"}),
+    DesignConfig("c-n2-p1x1", C, 0, 2, 0, 1, [1, 1], 1, {"input_bits": 6}),
+    DesignConfig("c-n2-p7x7-z2-b10", C, 0, 2, 0, 1, [7, 7], 2, {"input_bits": 10}),
+    DesignConfig("c-n3-p2x3x5-min-fill1", C, 0, 3, 0, 1, [2, 3, 5], 1, {"pipeline": "min", "input_fill": 1.0}),
+    DesignConfig("c-n3-p4x4x4-z2-repl-sat", C, 0, 3, 0, 1, [4, 4, 4], 2, {"memory": "replicated", "output_bits": 9}),
+    DesignConfig("c-n3-p6x2x3-wsat", C, 0, 3, 0, 1, [6, 2, 3], 1, {"weight_bits": 8, "overflow": "saturate"}),
+    DesignConfig("c-n4-p3x1x2x4", C, 0, 4, 0, 1, [3, 1, 2, 4], 1, {}),
+    DesignConfig("c-n4-p8x4x8x2-z2-b14", C, 0, 4, 0, 1, [8, 4, 8, 2], 2, {"input_bits": 14, "pipeline": "max"}),
+    DesignConfig("c-n5-p2x2x2x2x2-z2-trunc-max", C, 0, 5, 0, 1, [2, 2, 2, 2, 2], 2, {"rounding": "truncate", "pipeline": "max"}),
+    DesignConfig("c-n5-p3x1x2x4x2-repl-min-b14", C, 0, 5, 0, 1, [3, 1, 2, 4, 2], 1, {"memory": "replicated", "pipeline": "min", "input_bits": 14}),
+    DesignConfig("c-n6-p2x2x2x2x2x2", C, 0, 6, 0, 1, [2] * 6, 1, {}),
+    DesignConfig("c-n6-p1x2x1x3x2x1-z2-b10-wf", C, 0, 6, 0, 1, [1, 2, 1, 3, 2, 1], 2, {"input_bits": 10, "weight_frac": 9, "output_frac": 6}),
+    DesignConfig("c-n3-p5x3x2-readmemh", C, 0, 3, 0, 1, [5, 3, 2], 1, {"memory_init": "readmemh"}),
+    DesignConfig("s-y1-p6", S, 0, 1, 0, 1, 6, 1, {}),
+    DesignConfig("s-y4-p3", S, 0, 4, 0, 1, 3, 1, {}),
+    DesignConfig("s-u2y3-p4-2-z2", S, 2, 3, 1, 1, [4, 4, 2, 2, 2], 2, {}),
+    DesignConfig("s-u1y1-nu2-p3-repl-min", S, 1, 1, 2, 1, 3, 1, {"memory": "replicated", "pipeline": "min"}),
+    DesignConfig("s-u2y1-ny2-z2-trunc", S, 2, 1, 1, 2, [2, 2, 3, 5], 2, {"rounding": "truncate"}),
+    DesignConfig("s-u3y3-p2-max", S, 3, 3, 1, 1, 2, 1, {"pipeline": "max"}),
+    DesignConfig("s-y2-ny2-p5x3-b8", S, 0, 2, 0, 2, [5, 3, 5, 3], 1, {"input_bits": 8}),
+    DesignConfig("s-u1y2-p8-6-z2-b16", S, 1, 2, 1, 1, [8, 6, 6], 2, {"input_bits": 16}),
+]
+BY_NAME = {c.name: c for c in CONFIGS}
+
+
+@pytest.fixture(scope="session")
+def sim_cache(tmp_path_factory) -> Path:
+    env = os.environ.get("PWAS_HDL_SIM_CACHE")
+    return Path(env) if env else tmp_path_factory.mktemp("sim-cache")
+
+
+@pytest.fixture(scope="session")
+def design_folder(tmp_path_factory):
+    """name -> generated folder (made once per session)."""
+    made: dict[str, Path] = {}
+    root = tmp_path_factory.mktemp("designs")
+
+    def get(name: str) -> Path:
+        if name not in made:
+            BY_NAME[name].generate(root / name)
+            made[name] = root / name
+        return made[name]
+
+    return get
+
+
+def stimulus_for(d, seed: int, m: int = SAMPLES) -> np.ndarray:
+    if d.kind == "core":
+        return stimulus.core_codes(d.model, m, seed=seed)
+    return stimulus.sensor_codes(d.model, [f.get("signal", f["name"]) for f in d.in_fields], m, seed=seed)
+
+
+def test_configurations_cover_the_issue():
+    """At least 20 configurations: n = 1..6, powers of two and not, core and sensor, nz = 1 and 2."""
+    assert len(CONFIGS) >= 20
+    assert {c.n for c in CONFIGS} >= {1, 2, 3, 4, 5, 6}
+    parts = {p for c in CONFIGS for p in np.atleast_1d(c.partitions)}
+    assert {2, 4, 8} & parts and {3, 5, 6, 7} & parts and 1 in parts
+    assert {c.design for c in CONFIGS} == {"core", "sensor"}
+    assert {c.nz for c in CONFIGS} == {1, 2}
+    assert len({c.options.get("input_bits", 12) for c in CONFIGS}) >= 4
+
+
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize("name", list(BY_NAME))
+def test_rtl_equals_bittrue_model(name, simulator, design_folder, sim_cache, tmp_path):
+    d = load_design(design_folder(name))
+    codes = stimulus_for(d, seed=len(name))
+    runs = standard_runs(d, codes, seed=len(name))
+    res = run_rtl(d, runs, simulator, cache_dir=sim_cache, work_dir=tmp_path, debug=True, waves=WAVES)
+    assert res.passed, res.report()
+    # every output was compared: full speed + stalls + (prefix before the reset + the stream after it)
+    per_stream = len(segment(d, codes).src)
+    assert res.outputs >= 2 * per_stream + len(runs[2].segments[1].src)
+    assert set(res.latencies) == {d.latency} == {int(d.manifest["latency_cycles"])}, res.report()
+    assert res.ii == 1.0 == d.manifest["ii"]
+    assert res.within_bound, res.report()
+    # out-of-domain inputs were exercised (and flagged), and in-domain ones too
+    oor = np.concatenate([o for run in res.hw for _, o in run])
+    assert oor.any() and not oor.all()
+    if d.model.output_may_saturate:
+        assert res.saturated > 0  # the narrow output format really clips some outputs
+
+
+def _mutated(d, mutate, tmp_path: Path):
+    text, desc = mutate(d)
+    path = tmp_path / f"{d.top}.v"
+    path.write_text(text)
+    return load_design(d.outdir, verilog=path), desc
+
+
+def _corner_word(d):
+    """(bank, addr, bit) of the weight of vertex 0 -- read at the lower domain corner with mu = 1 --
+    and a bit worth two output LSBs, so the corner's output must change."""
+    tr = d.model.trace(np.array([d.model.lo_codes]))
+    return int(tr["bank"][0][0]), int(tr["addr"][0][0]), d.model.weight_format.frac - d.model.output_format.frac + 1
+
+
+def _first_register_stage(res) -> str:
+    offsets = res.located["offsets"]
+    return min((s for s in offsets if s != "vdata"), key=offsets.get)
+
+
+# mutation -> (edit of the Verilog, the stage the debug run must name first)
+MUTATIONS = {
+    "weight-bit": (lambda d: mutations.flip_weight_bit(d.verilog, *_corner_word(d)), lambda res: None),
+    "round-plus-1-lsb": (lambda d: mutations.round_constant_plus_one_lsb(d.verilog, d.model.shift), lambda res: "out"),
+    "lo-code-off-by-one": (lambda d: mutations.offset_constant_off_by_one(d.verilog), _first_register_stage),
+}
+
+
+@pytest.mark.parametrize(
+    "simulator, mutation, name",
+    [("icarus", m, n) for m in MUTATIONS for n in ("c-n3-p2x3x5-min-fill1", "s-y4-p3")] + [("verilator", "round-plus-1-lsb", "c-n4-p3x1x2x4")],
+)
+def test_mutated_rtl_fails(simulator, mutation, name, design_folder, sim_cache, tmp_path):
+    """A corrupted weight or a one-LSB change in the RTL makes the testbench fail, with a clear report."""
+    d = load_design(design_folder(name))
+    mutate, expect = MUTATIONS[mutation]
+    dm, desc = _mutated(d, mutate, tmp_path)
+    assert dm.verilog != d.verilog
+    codes = stimulus_for(d, seed=1, m=200)
+    res = run_rtl(dm, [Run("full-speed", [segment(dm, codes)])], simulator, cache_dir=sim_cache,
+                  work_dir=tmp_path / "run", debug=True)
+    report = res.report()
+    assert not res.passed and res.mismatches > 0, f"{desc}: the testbench did not notice\n{report}"
+    assert res.raw["passed"] is False  # the cocotb test itself failed
+    assert "differ from the bit-true model" in report and "first mismatch" in report
+    stage = expect(res)
+    if stage is not None:  # a logic fault: the debug run names the first pipeline register that differs
+        assert res.located["first_stage"] == stage, report
+        assert f"first differing pipeline stage: {stage}" in report
+        assert "every word equals the model's ROM image" in report
+    else:  # a corrupted weight: the debug run reads the memories and names the word
+        bank, addr, _ = _corner_word(d)
+        assert "weight memory differs" in report and f"wmem{bank}[{addr}]" in report, report
+
+
+def test_corrupted_readmemh_file_fails(design_folder, sim_cache, tmp_path):
+    """Designs that load their ROM with $readmemh: one corrupted word in a hex file is caught."""
+    src = design_folder("c-n3-p5x3x2-readmemh")
+    work = tmp_path / "design"
+    shutil.copytree(src, work)
+    d = load_design(work)
+    assert "$readmemh" in d.verilog and d.runtime_files
+    bank, addr, bit = _corner_word(d)
+    hexname = next(n for n in d.runtime_files if n.endswith(f"_b{bank}.hex") or f"_b{bank}_" in n or f"_b{bank}." in n)
+    lines = (work / hexname).read_text().split()
+    lines[addr] = f"{int(lines[addr], 16) ^ (1 << bit):0{len(lines[addr])}x}"
+    (work / hexname).write_text("\n".join(lines) + "\n")
+    codes = stimulus_for(d, seed=2, m=200)
+    res = run_rtl(d, [Run("full-speed", [segment(d, codes)])], "icarus", cache_dir=sim_cache, work_dir=tmp_path / "run", debug=True)
+    assert not res.passed and res.mismatches > 0, res.report()
+    assert f"wmem{bank}[{addr}]" in res.report()
+
+
+@pytest.mark.parametrize("simulator, suffix", [("icarus", ".fst"), ("verilator", ".vcd")])
+def test_waveforms_on_request(simulator, suffix, design_folder, sim_cache, tmp_path):
+    d = load_design(design_folder("c-n1-p5"))
+    codes = stimulus_for(d, seed=3, m=40)
+    res = run_rtl(d, [Run("full-speed", [segment(d, codes)])], simulator, cache_dir=sim_cache, work_dir=tmp_path, waves=True)
+    assert res.passed, res.report()
+    wave = Path(res.raw["waves"])
+    assert wave.suffix == suffix and wave.is_file() and wave.stat().st_size > 100
+
+
+def test_build_is_cached_per_design(design_folder, sim_cache, tmp_path):
+    """The same Verilog is built once per simulator; another design gets another build."""
+    a = load_design(design_folder("c-n1-p5"))
+    b1 = runner.build(a.verilog_path, a.top, "icarus", cache_dir=sim_cache)
+    b2 = runner.build(a.verilog_path, a.top, "icarus", cache_dir=sim_cache)
+    assert b2.reused and b2.build_dir == b1.build_dir
+    other = load_design(design_folder("c-n2-p1x1"))
+    b3 = runner.build(other.verilog_path, other.top, "icarus", cache_dir=sim_cache)
+    assert b3.build_dir != b1.build_dir
+
+
+@pytest.fixture(scope="module")
+def lorenz_files(tmp_path_factory):
+    """The Table II model (My = 4, p = 7, 12-bit inputs; fixed sigma to keep it fast), its sensor
+    and core folders, and the first 300 samples of the test continuation."""
+    from pwas_hdl.generate import generate
+    from pwas_hdl.plants import lorenz
+    from pwas_hdl.data_io import write_csv
+    from pwas_hdl.virtual_sensor import PWASVirtualSensor
+
+    root = tmp_path_factory.mktemp("lorenz")
+    d = lorenz(6300, seed=0)
+    train, test = d.split(6000)
+    m = PWASVirtualSensor(my=4, partitions=7, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
+    m.fit(None, train.y, train.z)
+    generate(m, root / "sensor", design="sensor")
+    generate(m, root / "core", design="core")
+    write_csv(root / "test.csv", test.columns())
+    return root
+
+
+@pytest.mark.parametrize("simulator", SIMULATORS)
+@pytest.mark.parametrize("kind", ["sensor", "core"])
+def test_lorenz_replay_smoke(kind, simulator, lorenz_files, sim_cache, tmp_path):
+    """The paper's sensor (N = 4096) through simulate_data: exact, measured latency/II, RMSEE."""
+    res = simulate_data(lorenz_files / kind, lorenz_files / "test.csv", tmp_path / "hw.csv", simulator=simulator, cache_dir=sim_cache)
+    s = res["summary"]
+    assert s["mismatches"] == 0, res["result"].report()
+    assert s["samples"] == 300 - 3
+    assert s["latency_cycles"]["measured_min"] == s["latency_cycles"]["measured_max"] == s["latency_cycles"]["manifest"]
+    assert s["ii"]["measured"] == 1.0
+    assert s["within_error_bound"]
+    z = s["targets"]["z"]
+    assert z["reference_column"] == "z_true"
+    assert z["rmsee_hw"] == pytest.approx(z["rmsee_bittrue"])
+    assert abs(z["rmsee_hw"] / z["rmsee_float"] - 1) < 0.05  # far below the paper's +20 % at 12 bits
