@@ -285,10 +285,10 @@ def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, 
 
 _PROBE_RE = re.compile(
     r"^\s*reg\s+(?:signed\s+)?(?:\[(\d+):(\d+)\]\s+)?"
-    r"(s_(?:split|rank|memout|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload)\s*;",
+    r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload)\s*;",
     re.M,
 )
-_STAGE_ORDER = ("s_split", "s_rank", "s_mem", "s_memout", "s_prod")
+_STAGE_ORDER = ("s_split", "s_rank", "s_addr", "s_mem", "s_memout", "s_prod")
 
 
 def stage_probes(verilog: str) -> dict[str, int]:
@@ -336,7 +336,7 @@ def _stage_of(name: str) -> str:
         return "vdata"
     if name == "out__payload":
         return "out"
-    mo = re.match(r"(s_(?:split|rank|memout|mem|prod|tree\d+))_", name)
+    mo = re.match(r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+))_", name)
     return mo.group(1) if mo else name
 
 
@@ -395,7 +395,7 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     mo = re.match(r"vdata(\d+)$", name)
     if mo:
         return _pack(tr["w"][int(mo.group(1))], bw)
-    mo = re.match(r"s_(?:split|rank|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
+    mo = re.match(r"s_(?:split|rank|addr|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
     if not mo:
         return None
     lvl, what, idx = mo.group(1), mo.group(2), mo.group(3)
@@ -419,6 +419,8 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
         return sum(1 << (k - 1) for k in range(1, n) if r < k)
     if what == "data":
         return _pack(tr["w_by_bank"][i], bw)
+    if what == "addr":  # the address presented to memory i (register before the memories)
+        return int(tr["addr_by_bank"][i])
     if what == "p":
         return int(products[i % nb, i // nb])
     if what == "t" and lvl is not None:
@@ -538,9 +540,11 @@ class RTLResult:
                 lines.append(f"  first differing pipeline stage: {loc['first_stage']} (cycle +{loc['diffs'][0].offset} after the transfer)")
                 for d in loc["diffs"][:8]:
                     lines.append(f"    {d.register}: expected {d.expected}, RTL {d.actual} (stage {d.stage})")
-            else:
+            elif self.mismatches:
                 lines.append(f"  debug run: all {loc['checked']} modelled pipeline registers agree with the bit-true trace "
-                             "(the difference is in logic the model does not name, e.g. the output rounding or an address)")
+                             "(the difference is in logic the model does not name, e.g. an address)")
+            else:
+                lines.append(f"  debug self-check: all {loc['checked']} modelled pipeline registers agree with the bit-true trace")
             md = loc.get("memory_diffs")
             if md:
                 lines.append(f"  weight memory differs from the model's ROM image in {len(md)} word(s):")
@@ -613,13 +617,16 @@ def run_rtl(
     debug: bool = False,
     strict: bool = True,
     clock_ns: float = 10.0,
+    probe_output: int | None = None,
 ) -> RTLResult:
     """Build (or reuse) ``design`` for ``simulator`` and replay ``runs`` through the testbench.
 
     ``debug``: when an output differs, re-run that sample alone and record the pipeline registers
     (:func:`stage_probes`), then name the first stage that differs from the bit-true trace
     (:attr:`RTLResult.located`). ``waves``: record FST (Icarus) / VCD (Verilator) in ``work_dir``
-    (a separate cached build). ``strict``: the cocotb test itself fails on a mismatch (the result
+    (a separate cached build). ``probe_output``: with ``debug``, also record the registers of this
+    output of the first run when everything matches (a self-check of the probe mapping: then
+    :attr:`RTLResult.located` must find no difference). ``strict``: the cocotb test itself fails on a mismatch (the result
     is returned either way). ``work_dir`` (default: a temporary folder, removed afterwards unless
     ``waves``) holds the job, the result, the log and the waveform.
     """
@@ -639,6 +646,7 @@ def run_rtl(
         "debug": bool(debug),
         "probes": sorted(stage_probes(design.verilog)) if debug else [],
         "memories": weight_memories(design.verilog) if debug else {},
+        "probe_output": probe_output if debug else None,
         "clock_ns": clock_ns,
         "reset_cycles": 2,
         "runs": [r.to_job() for r in runs],

@@ -27,7 +27,9 @@ sample is accepted and one result produced every clock (II = 1).
 The result file holds, per run and segment, the transfer cycles, the output codes, the mismatches
 (sample, input codes, expected, actual) and, with ``debug``, the values of the named pipeline
 registers while the first failing sample passes through the pipeline (re-run alone, no stalls)
-and every word of the weight memories (``memories``: name -> depth).
+and every word of the weight memories (``memories``: name -> depth). ``probe_output: k`` (with
+``debug``) records them for output ``k`` of the first segment even when nothing differs (to check
+the probe mapping itself).
 With ``strict`` the test fails (AssertionError naming the first mismatch) after writing it.
 """
 
@@ -245,6 +247,12 @@ async def stream_replay(dut):
                     rr["probe"] = {"segment": si, **(await bench.probe(seg["codes"], m["input"], list(job.get("probes", []))))}
                     if job.get("memories"):
                         rr["probe"]["memories"] = bench.read_memories(job["memories"])
+            elif job.get("probe_output") is not None and "probe" not in rr and seg["src"]:
+                # debug self-check: record the registers for one output even though it matched
+                k = min(int(job["probe_output"]), len(seg["src"]) - 1)
+                rr["probe"] = {"segment": si, **(await bench.probe(seg["codes"], seg["src"][k], list(job.get("probes", []))))}
+                if job.get("memories"):
+                    rr["probe"]["memories"] = bench.read_memories(job["memories"])
         rr["cycles"] = bench.loop.cycle - c0
         rr["wall_s"] = time.perf_counter() - t0
         result["runs"].append(rr)

@@ -54,6 +54,8 @@ CONFIGS = [
     DesignConfig("c-n6-p2x2x2x2x2x2", C, 0, 6, 0, 1, [2] * 6, 1, {}),
     DesignConfig("c-n6-p1x2x1x3x2x1-z2-b10-wf", C, 0, 6, 0, 1, [1, 2, 1, 3, 2, 1], 2, {"input_bits": 10, "weight_frac": 9, "output_frac": 6}),
     DesignConfig("c-n3-p5x3x2-readmemh", C, 0, 3, 0, 1, [5, 3, 2], 1, {"memory_init": "readmemh"}),
+    DesignConfig("c-n4-p2x3x2x3-addr-reg", C, 0, 4, 0, 1, [2, 3, 2, 3], 1,
+                 {"pipeline": {"split": True, "rank": True, "addr": True, "mem_out": True, "product": True, "tree_levels": 1}}),
     DesignConfig("s-y1-p6", S, 0, 1, 0, 1, 6, 1, {}),
     DesignConfig("s-y4-p3", S, 0, 4, 0, 1, 3, 1, {}),
     DesignConfig("s-u2y3-p4-2-z2", S, 2, 3, 1, 1, [4, 4, 2, 2, 2], 2, {}),
@@ -62,6 +64,8 @@ CONFIGS = [
     DesignConfig("s-u3y3-p2-max", S, 3, 3, 1, 1, 2, 1, {"pipeline": "max"}),
     DesignConfig("s-y2-ny2-p5x3-b8", S, 0, 2, 0, 2, [5, 3, 5, 3], 1, {"input_bits": 8}),
     DesignConfig("s-u1y2-p8-6-z2-b16", S, 1, 2, 1, 1, [8, 6, 6], 2, {"input_bits": 16}),
+    DesignConfig("s-y3-p4-addr-reg-repl", S, 0, 3, 0, 1, 4, 1,
+                 {"memory": "replicated", "pipeline": {"split": False, "rank": True, "addr": True, "mem_out": False, "product": False, "tree_levels": 0}}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 
@@ -125,6 +129,25 @@ def test_rtl_equals_bittrue_model(name, simulator, design_folder, sim_cache, tmp
         assert res.saturated > 0  # the narrow output format really clips some outputs
 
 
+@pytest.mark.parametrize("name", ["c-n3-p4x4x4-z2-repl-sat", "c-n4-p2x3x2x3-addr-reg", "c-n5-p2x2x2x2x2-z2-trunc-max",
+                                  "s-u2y3-p4-2-z2", "s-y3-p4-addr-reg-repl", "c-n1-p8-z2-repl-min-b8"])
+def test_debug_probes_agree_on_a_correct_design(name, design_folder, sim_cache, tmp_path):
+    """The register/trace mapping used to name the failing stage is itself right: on a correct design
+    every pipeline register it models, and every weight-memory word, equals the bit-true trace."""
+    d = load_design(design_folder(name))
+    codes = stimulus_for(d, seed=5, m=60)
+    seg = segment(d, codes)
+    k = int(np.argmax(~seg.oor & (seg.expected[:, 0] != 0)))  # an in-domain sample with a non-zero output
+    res = run_rtl(d, [Run("full-speed", [seg])], "icarus", cache_dir=sim_cache, work_dir=tmp_path, debug=True, probe_output=k)
+    assert res.passed, res.report()
+    loc = res.located
+    assert loc is not None and loc["offsets"] is not None, "pipeline stages could not be matched to the latency"
+    assert loc["first_stage"] is None, res.report()
+    assert loc["memory_diffs"] == []
+    n_stages = len([s for s in loc["offsets"] if s != "vdata"])
+    assert n_stages == d.latency and loc["checked"] >= n_stages
+
+
 def _mutated(d, mutate, tmp_path: Path):
     text, desc = mutate(d)
     path = tmp_path / f"{d.top}.v"
@@ -154,7 +177,8 @@ MUTATIONS = {
 
 @pytest.mark.parametrize(
     "simulator, mutation, name",
-    [("icarus", m, n) for m in MUTATIONS for n in ("c-n3-p2x3x5-min-fill1", "s-y4-p3")] + [("verilator", "round-plus-1-lsb", "c-n4-p3x1x2x4")],
+    [("icarus", m, n) for m in MUTATIONS for n in ("c-n3-p2x3x5-min-fill1", "s-y4-p3", "c-n4-p2x3x2x3-addr-reg")]
+    + [("verilator", "round-plus-1-lsb", "c-n4-p3x1x2x4"), ("verilator", "weight-bit", "s-u1y1-nu2-p3-repl-min")],
 )
 def test_mutated_rtl_fails(simulator, mutation, name, design_folder, sim_cache, tmp_path):
     """A corrupted weight or a one-LSB change in the RTL makes the testbench fail, with a clear report."""

@@ -1,0 +1,155 @@
+"""`pwas-hdl simulate`: replay a CSV through the generated RTL (cocotb), outputs and JSON summary."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.cli import app
+from pwas_hdl.data_io import write_csv
+from pwas_hdl.simulation import load_design, sim_module
+
+runner = CliRunner()
+designs = sim_module("pwas_designs")
+mutations = sim_module("pwas_mutations")
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("sim-cache")
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    """A sensor top (u0 with Mu = 1, y0 with My = 2) and the core of the same model, and data:
+    two trajectories that wander over the domain and sometimes leave it, with a `z0_true` column."""
+    root = tmp_path_factory.mktemp("cli")
+    cfg = designs.DesignConfig("cli", "sensor", 1, 2, 1, 1, [3, 4, 4], 1, {}, seed=4)
+    cfg.generate(root / "sensor")
+    designs.DesignConfig("cli", "core", 1, 2, 1, 1, [3, 4, 4], 1, {}, seed=4).generate(root / "core")
+    d = load_design(root / "sensor")
+    g = d.sensor.grid_
+    rng = np.random.default_rng(0)
+    cols = {"run": [], "u0": [], "y0": [], "z0_true": []}
+    for run, t_len in ((0, 150), (1, 90)):
+        for dim, name in ((0, "u0"), (1, "y0")):
+            lo, hi = g.lo[dim], g.hi[dim]
+            x = np.clip(np.cumsum(rng.normal(0, 0.08 * (hi - lo), t_len)) + (lo + hi) / 2, lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
+            cols[name] += x.tolist()
+        cols["run"] += [run] * t_len
+        cols["z0_true"] += rng.normal(0, 1, t_len).tolist()
+    write_csv(root / "data.csv", {k: np.array(v) for k, v in cols.items()})
+    single = {k: np.array(v[:150]) for k, v in cols.items() if k != "run"}
+    write_csv(root / "one.csv", single)
+    return root
+
+
+def _rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+def test_simulate_sensor(simulator, folders, cache, tmp_path):
+    out = tmp_path / "hw.csv"
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "--simulator", simulator,
+                              "-o", str(out), "--build-dir", str(cache)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "hw.json").read_text())
+    assert s["mismatches"] == 0 and s["first_mismatch"] is None
+    assert s["samples"] == 150 - 1  # M = max(Mu, My) = 2
+    assert s["simulator"] == simulator and s["kind"] == "sensor"
+    assert s["latency_cycles"]["measured_min"] == s["latency_cycles"]["measured_max"] == s["latency_cycles"]["manifest"]
+    assert s["ii"]["measured"] == 1.0
+    assert s["within_error_bound"] and s["max_error_vs_float_lsb"] <= s["error_bound_lsb"] + 1e-9
+    assert s["out_of_range"] > 0  # the data leave the domain at times
+    z = s["targets"]["z0"]
+    assert z["reference_column"] == "z0_true" and z["rmsee_hw"] == pytest.approx(z["rmsee_bittrue"])
+    assert s["samples_per_second"] > 0 and s["cycles"] > s["samples"]
+    rows = _rows(out)
+    assert [r["row"] for r in rows] == [str(i) for i in range(1, 150)]
+    assert set(rows[0]) == {"row", "z0_hw", "z0_bittrue", "z0_float", "out_of_range", "mismatch"}
+    # the hardware column equals the bit-true model evaluated independently of the testbench
+    d = load_design(folders / "sensor")
+    data = np.loadtxt(folders / "one.csv", delimiter=",", skiprows=1)
+    xi = d.sensor.lags_.build(data[:, [0]], data[:, [1]])
+    want, flags = d.model.predict(xi, return_flags=True)
+    assert np.array_equal(np.array([float(r["z0_hw"]) for r in rows]), want[:, 0])
+    assert np.array_equal(np.array([r["out_of_range"] == "1" for r in rows]), flags)
+
+
+def test_simulate_core_trajectories_with_stalls(folders, cache, tmp_path):
+    out = tmp_path / "core.csv"
+    summ = tmp_path / "s.json"
+    res = runner.invoke(app, ["simulate", str(folders / "core"), str(folders / "data.csv"), "-o", str(out), "--json", str(summ),
+                              "--traj-col", "run", "--stall", "0.3", "--seed", "2", "--build-dir", str(cache)])
+    assert res.exit_code == 0, res.output
+    s = json.loads(summ.read_text())
+    assert s["trajectories"] == 2 and s["samples"] == (150 - 1) + (90 - 1)
+    assert s["mismatches"] == 0
+    assert s["latency_cycles"]["measured_min"] >= s["latency_cycles"]["manifest"]
+    assert s["ii"]["measured"] is None  # not measured with stalls
+    rows = _rows(out)
+    assert rows[149 - 1]["row"] == "149" and rows[149]["row"] == str(150 + 1)  # the second run starts at row 150 (+M-1)
+
+
+def test_simulate_sensor_resets_between_trajectories(folders, cache, tmp_path):
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "data.csv"), "-o", str(tmp_path / "o.csv"),
+                              "--traj-col", "run", "--build-dir", str(cache)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o.json").read_text())
+    assert s["samples"] == 149 + 89 and s["mismatches"] == 0 and s["trajectories"] == 2
+
+
+def test_simulate_reports_rtl_mismatch(folders, cache, tmp_path):
+    """A one-LSB fault in the RTL: every sample is flagged, exit status 1, the summary is written."""
+    bad = tmp_path / "bad"
+    shutil.copytree(folders / "sensor", bad)
+    d = load_design(bad)
+    text, _ = mutations.round_constant_plus_one_lsb(d.verilog, d.model.shift)
+    d.verilog_path.write_text(text)
+    out = tmp_path / "hw.csv"
+    res = runner.invoke(app, ["simulate", str(bad), str(folders / "one.csv"), "-o", str(out), "--build-dir", str(cache)])
+    assert res.exit_code == 1, res.output
+    assert "differ from the bit-true model" in res.output
+    s = json.loads((tmp_path / "hw.json").read_text())
+    assert s["mismatches"] == s["samples"] == 149
+    assert s["first_mismatch"]["actual"][0] == s["first_mismatch"]["expected"][0] + 1
+    assert all(r["mismatch"] == "1" for r in _rows(out))
+
+
+@pytest.mark.parametrize(
+    "args, msg",
+    [
+        (["--simulator", "modelsim"], "simulator must be one of"),
+        (["--stall", "1.5"], "--stall must be in"),
+    ],
+)
+def test_simulate_bad_options(args, msg, folders, tmp_path):
+    out = tmp_path / "o.csv"
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "-o", str(out), *args])
+    assert res.exit_code == 2 and msg in res.output, res.output
+    assert not out.exists() and not (tmp_path / "o.json").exists()
+
+
+def test_simulate_bad_inputs(folders, tmp_path):
+    out = tmp_path / "o.csv"
+    res = runner.invoke(app, ["simulate", str(tmp_path / "nowhere"), str(folders / "one.csv"), "-o", str(out)])
+    assert res.exit_code == 2 and "pwas-hdl generate" in res.output
+    wrong = tmp_path / "wrong.csv"
+    write_csv(wrong, {"a": np.arange(5.0), "y0": np.arange(5.0)})
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(wrong), "-o", str(out)])
+    assert res.exit_code == 2 and "no column named 'u0'" in res.output, res.output
+    assert not out.exists()
+
+
+def test_simulate_help():
+    res = runner.invoke(app, ["simulate", "--help"])
+    assert res.exit_code == 0
+    for opt in ("--simulator", "--json", "--traj-col", "--stall", "--build-dir", "--waves"):
+        assert opt in res.output
