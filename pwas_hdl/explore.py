@@ -1,0 +1,824 @@
+"""Bit-width exploration: accuracy of the bit-true circuit against its resources.
+
+:func:`explore` sweeps the fixed-point formats of a fitted model -- input width ``B_in``, weight
+fraction bits ``Fw`` and output fraction bits ``Fo`` (the widths ``B_w`` and ``B_out`` are the
+fewest bits that hold every weight / every reachable output, as ``generate`` chooses them, unless
+fixed) -- and, for every combination, runs the bit-true model
+(:meth:`FixedPointModel.predict <pwas_hdl.bittrue.FixedPointModel.predict>`, which quantises the
+physical regressors of the data to input codes exactly as the circuit's input does) and estimates
+the hardware the generator would build for it. :func:`pareto_front` marks the combinations that no
+other one beats in both accuracy and cost; :func:`plot_exploration` draws the result.
+
+Accuracy (per point)
+--------------------
+``rmsee``
+    RMSEE (eq. 17 of the paper) of the bit-true estimate against the reference column of the data:
+    ``<target>_true`` when present, else ``<target>``. The float model's RMSEE on the same rows is
+    the reference line (``result["float"]``).
+``rmsee_ratio``
+    ``mean over targets of rmsee / float rmsee``: the accuracy objective of the Pareto front (for
+    one target it orders the points exactly as the RMSEE does; it makes targets of different
+    units comparable).
+``rms_dev_float``, ``max_dev_float``, ``max_dev_float_lsb``
+    RMS / largest ``|bit-true - float|`` (the float model at the unquantised regressor), physical
+    units and output LSBs. It includes the input quantisation, so it may exceed the error bound.
+``max_dev_reference_lsb``
+    Largest deviation from the float model at the *represented* input (what the error bound
+    covers); ``bound_holds`` checks it against ``error_bound_lsb``.
+
+Resources (``resources="estimate"``, every point)
+-------------------------------------------------
+Exact sizes come from the objects the generator itself uses (:func:`pwas_hdl.hdl.build_core` +
+:func:`~pwas_hdl.hdl.design_info`: the memory plan and the arithmetic widths of the manifest; no
+Verilog is emitted, about 40 ms a point); the logic is then counted in bit-level units:
+
+``memory_bits``
+    ``words x word_bits`` of the weight memories (exact: the manifest's ``memory.bits``).
+``register_bits``
+    Flip-flops of the elaborated core: total width of the signals assigned in the ``sync`` domain
+    (pipeline registers, output register, valid bits; the memories' read registers are counted in
+    the block RAM, not here). Exact before synthesis optimisations.
+``mult_bit_products``
+    ``(n+1) * nz`` multipliers ``mu (F+1 bits unsigned) x w (B_w bits signed)``:
+    ``(n+1) * nz * (F+1) * B_w`` partial-product bits (about one LUT4 each in logic).
+``adder_bits``
+    Adder/comparator bits: input offset and clamp ``2 n (B_in+1)``, rank comparators
+    ``n(n-1)/2 (F+1)``, ``mu`` differences ``n (F+2)``, adder tree ``nz n (F+B_w+1)`` and rounding
+    ``nz (F+B_w+1)`` (about one LUT4 + carry per bit).
+``logic_bits``
+    ``mult_bit_products + adder_bits``.
+``total_bits``
+    ``memory_bits + logic_bits + register_bits``: a technology-neutral area proxy in which a stored
+    bit, a flip-flop, a partial-product bit and an adder bit count alike. This is the default
+    ``cost`` of the front. It is dominated by the weight memory when ``N`` is large (FPGA block
+    RAM makes a memory bit far cheaper than a LUT: pick ``cost="logic_bits"`` to look at logic
+    alone, or measure).
+``dsp18``
+    18x18 multiplier blocks if the multipliers go to DSPs: ``(n+1) nz ceil((F+2)/18) ceil(B_w/18)``
+    (the unsigned ``mu`` takes ``F + 2`` bits as a signed operand).
+``bram18k``
+    18-kbit block RAMs (ECP5 DP16KD / Xilinx RAMB18 aspect ratios 16k x 1 .. 512 x 36), best
+    aspect ratio per bank.
+
+Measured resources (``resources="generic" | "ecp5" | "ice40"``)
+----------------------------------------------------------------
+The estimate is computed for every point; then the Pareto points (and the default) are generated
+(:func:`pwas_hdl.generate.build_design`) and synthesised with :func:`pwas_hdl.synthesis.synthesize`
+(Yosys; nextpnr for FPGA targets, about 10 s a point for ``generic``): ``point["measured"]`` holds
+LUTs, FFs, DSPs, block RAMs, memory bits (and fmax). The front stays the estimate's front; the
+measured numbers check it.
+
+Combinations that the bit-true model refuses (an output finer than the exact product, a weight
+that does not fit a fixed ``weight_bits``, an accumulator over 62 bits, an input width too small
+for the partition) are skipped and listed in ``result["refused"]`` with the reason.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from . import __version__
+from .bittrue import FixedPointModel
+from .data_io import Table, read_csv, select_signals
+from .virtual_sensor import PWASVirtualSensor
+
+__all__ = [
+    "EXPLORE_FORMAT",
+    "EXPLORE_VERSION",
+    "DEFAULT_INPUT_BITS",
+    "DEFAULT_FRAC_OFFSETS",
+    "DEFAULT_MEASURE_MAX",
+    "RESOURCE_MODES",
+    "COST_KEYS",
+    "explore",
+    "pareto_front",
+    "plot_exploration",
+    "format_table",
+]
+
+EXPLORE_FORMAT = "pwas-hdl-explore"
+EXPLORE_VERSION = 1
+
+#: Input widths swept by default.
+DEFAULT_INPUT_BITS = (8, 10, 12, 14, 16)
+#: Weight / output fraction bits swept by default, relative to the defaults of ``generate``. The
+#: default output LSB is about train RMSE / 32, so that rounding is negligible; the accuracy starts
+#: to suffer about 5 bits coarser, which the sweep covers.
+DEFAULT_FRAC_OFFSETS = tuple(range(-7, 3))
+#: At most this many Pareto points are synthesised in a measured run (evenly spread, both ends kept).
+DEFAULT_MEASURE_MAX = 10
+#: ``resources=`` values: the analytic estimate only, or the estimate plus synthesis of the front.
+RESOURCE_MODES = ("estimate", "generic", "ecp5", "ice40")
+#: Estimate keys that can serve as the cost axis of the front.
+COST_KEYS = ("total_bits", "memory_bits", "logic_bits", "register_bits", "mult_bit_products", "adder_bits", "dsp18", "bram18k")
+
+#: (depth, width) aspect ratios of an 18-kbit block RAM.
+_BRAM18_SHAPES = ((16384, 1), (8192, 2), (4096, 4), (2048, 9), (1024, 18), (512, 36))
+
+Progress = Callable[[str, int, int], None]
+
+
+# ------------------------------------------------------------------------------------ Pareto
+def pareto_front(points: Sequence, objectives: Sequence[str] | None = None) -> list[int]:
+    """Indices of the non-dominated points (every objective minimised).
+
+    Parameters
+    ----------
+    points : sequence
+        Either sequences of numbers (one value per objective) or mappings; with mappings,
+        ``objectives`` names the keys (default ``("cost", "rmsee_ratio")``).
+    objectives : sequence of str, optional
+
+    Returns
+    -------
+    list of int
+        Point ``i`` is on the front unless some ``j`` is ``<=`` in every objective and ``<`` in
+        at least one. Points equal in every objective are all kept. Sorted by the first
+        objective, then the next ones.
+
+    Raises
+    ------
+    ValueError
+        Points of different lengths, or a NaN objective.
+    """
+    if len(points) == 0:
+        return []
+    if isinstance(points[0], dict):
+        keys = tuple(objectives) if objectives is not None else ("cost", "rmsee_ratio")
+        vals = np.array([[float(p[k]) for k in keys] for p in points], dtype=float)
+    else:
+        rows = [tuple(float(v) for v in p) for p in points]
+        if len({len(r) for r in rows}) != 1 or len(rows[0]) == 0:
+            raise ValueError("all points need the same (non-zero) number of objectives")
+        vals = np.array(rows, dtype=float)
+    if np.isnan(vals).any():
+        raise ValueError("an objective is NaN")
+    front = []
+    for i in range(vals.shape[0]):
+        le = np.all(vals <= vals[i], axis=1)
+        lt = np.any(vals < vals[i], axis=1)
+        if not np.any(le & lt):
+            front.append(i)
+    return sorted(front, key=lambda i: (tuple(vals[i]), i))
+
+
+# ------------------------------------------------------------------------------------ data
+def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
+    if isinstance(model, PWASVirtualSensor):
+        return model, None
+    return PWASVirtualSensor.load(model), str(model)
+
+
+def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None):
+    """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
+    ins, outs, tgts = sensor.signal_names()
+    lags = sensor.lags_
+    if isinstance(data, (str, os.PathLike)):
+        data = read_csv(data)
+    if isinstance(data, Table):
+        if traj_col is not None:
+            data.column_index(traj_col)
+        u = select_signals(data, ins, traj_col) if lags.nu else None
+        y = select_signals(data, outs, traj_col) if lags.ny else None
+        refs = []
+        for t in tgts:
+            col = next((c for c in (f"{t}_true", t) if c in data.header), None)
+            if col is None:
+                raise ValueError(
+                    f"{data.path}: no column {t + '_true'!r} or {t!r} to compare the estimate of target {t!r} with; "
+                    f"the file has columns {', '.join(data.header)}"
+                )
+            refs.append(col)
+        ztab = select_signals(data, refs, traj_col)
+        desc = {"path": data.path, "reference_columns": refs, "traj_col": traj_col}
+    else:
+        try:
+            u, y, ztab = data
+        except (TypeError, ValueError):
+            raise ValueError("data must be a CSV path, a pwas_hdl.data_io.Table or a tuple (u, y, z)") from None
+        from .regressors import as_trajectories
+
+        ztab = as_trajectories(ztab, "z", len(tgts))
+        desc = {"path": None, "reference_columns": None, "traj_col": None}
+    xi, valid = sensor.regressors(u, y)
+    if len(ztab) != len(valid):
+        raise ValueError(f"got {len(ztab)} target trajectories but {len(valid)} input/output trajectories")
+    zs = []
+    for zt, sl in zip(ztab, valid):
+        if zt.shape[0] < sl.stop:
+            raise ValueError(f"a target trajectory has {zt.shape[0]} samples, its regressors need {sl.stop}")
+        zs.append(np.asarray(zt, dtype=float)[sl])
+    z = np.concatenate(zs, axis=0)
+    if xi.shape[0] == 0:
+        raise ValueError("the data have no sample with a full regressor (too few samples for the lags)")
+    desc["samples"] = int(xi.shape[0])
+    return xi, z, desc
+
+
+def _int_values(values, what: str, lo: int | None = None) -> list[int]:
+    if values is None:
+        return []
+    if isinstance(values, (int, np.integer)) and not isinstance(values, bool):
+        values = [values]
+    out = []
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise ValueError(f"{what} must be integers, got {v!r}")
+        if lo is not None and v < lo:
+            raise ValueError(f"{what} must be >= {lo}, got {v}")
+        out.append(int(v))
+    if not out:
+        raise ValueError(f"{what}: the sweep is empty; give at least one value")
+    return sorted(set(out))
+
+
+# ------------------------------------------------------------------------------------ resources
+def _bram18k(depth: int, width: int) -> int:
+    return min(math.ceil(depth / d) * math.ceil(width / w) for d, w in _BRAM18_SHAPES)
+
+
+def _register_bits(core) -> int | None:
+    """Total width of the signals the core assigns in its ``sync`` domain (None if unavailable)."""
+    try:
+        import dataclasses
+
+        from amaranth.hdl import Fragment
+
+        # the register widths do not depend on the memory contents: elaborate with empty
+        # initialisers (the weights would cost ~0.1 s a point to convert, for nothing)
+        plan = core.memory_plan
+        core.memory_plan = dataclasses.replace(plan, contents=tuple(() for _ in plan.contents))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                frag = Fragment.get(core, None)
+        finally:
+            core.memory_plan = plan
+        widths: dict[int, int] = {}
+        for st in frag.statements.get("sync", []):
+            for sig in st._lhs_signals():
+                widths[id(sig)] = len(sig)
+        return int(sum(widths.values()))
+    except Exception:  # pragma: no cover - private Amaranth API changed
+        return None
+
+
+def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None,
+                       _register_cache: dict | None = None) -> dict[str, Any]:
+    """The resource estimate of the core the generator builds for ``fxm`` (see the module notes)."""
+    from .hdl import build_core, design_info
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        core = build_core(fxm, memory=memory, pipeline=pipeline)
+        info = design_info(core)
+    mem, ar = info["memory"], info["arithmetic"]
+    n, nz, f, bw, bin_ = ar["n"], ar["nz"], ar["F"], ar["weight_width"], ar["in_width"]
+    nb = int(mem["memories"])
+    mults = nb * nz
+    mult_bits = mults * (f + 1) * bw
+    acc = f + bw + 1
+    adder = 2 * n * (bin_ + 1) + n * (n - 1) // 2 * (f + 1) + n * (f + 2) + nz * n * acc + nz * acc
+    # the registers depend on the widths only (not on the weights, the shift or the rounding)
+    rkey = (memory, str(pipeline), bin_, tuple(ar["frac_bits"]), bw, int(ar["out_width"]))
+    if _register_cache is not None and rkey in _register_cache:
+        regs = _register_cache[rkey]
+    else:
+        regs = _register_bits(core)
+        if _register_cache is not None:
+            _register_cache[rkey] = regs
+    logic = mult_bits + adder
+    return {
+        "memory_words": int(mem["words"]),
+        "memory_word_bits": int(mem["word_bits"]),
+        "memory_banks": nb,
+        "memory_depth": int(mem["depth"]),
+        "memory_bits": int(mem["bits"]),
+        "multipliers": mults,
+        "multiplier": f"u{f + 1} x s{bw}",
+        "mult_bit_products": mult_bits,
+        "adder_bits": adder,
+        "logic_bits": logic,
+        "register_bits": regs,
+        "total_bits": int(mem["bits"]) + logic + (regs or 0),
+        "dsp18": mults * math.ceil((f + 2) / 18) * math.ceil(bw / 18),
+        "bram18k": nb * _bram18k(int(mem["depth"]), int(mem["word_bits"])),
+        "latency_cycles": int(info["latency"]),
+        "acc_bits": int(ar["sum_bits"]),
+    }
+
+
+_MEASURED_KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "lutram", "memory_bits", "multipliers_rtl",
+                  "logic_cells", "fmax_mhz", "runtime_s")
+
+
+# ------------------------------------------------------------------------------------ sweep
+def _label(p: dict) -> str:
+    return f"in s{p['input_bits']}.{p['input_frac']} / w s{p['weight_bits']}.{p['weight_frac']} / out s{p['output_bits']}.{p['output_frac']}"
+
+
+def _paired_se(e_a: np.ndarray, e_b: np.ndarray, blocks: int = 20) -> np.ndarray:
+    """Standard error (per target) of ``RMSEE(a) - RMSEE(b)`` measured on the same samples.
+
+    Batch means: the per-sample differences ``e_a^2 - e_b^2`` are averaged over ``blocks``
+    contiguous blocks (at least 25 samples each), so that the autocorrelation of a time series
+    within a block is accounted for; the standard error of the MSE difference is the standard
+    deviation of the block means over ``sqrt(blocks)``, turned into RMSEE units by the delta method
+    (``/ (2 RMSEE(b))``).
+    """
+    diff = e_a**2 - e_b**2
+    k = min(blocks, diff.shape[0] // 25)
+    if k < 2:
+        return np.zeros(diff.shape[1])
+    means = np.stack([b.mean(axis=0) for b in np.array_split(diff, k, axis=0)])
+    rm = np.sqrt(np.mean(e_b**2, axis=0))
+    return np.std(means, axis=0, ddof=1) / math.sqrt(k) / (2 * np.where(rm > 0, rm, 1.0))
+
+
+def _evaluate(fxm: FixedPointModel, xi, z, zf, zf_rmsee) -> tuple[dict, np.ndarray]:
+    zb, flags = fxm.predict(xi, return_flags=True)
+    q = fxm.quantize_inputs(xi)
+    ref = fxm.reference(q)
+    lsb = fxm.output_format.lsb
+    err = zb - z
+    rmsee = np.sqrt(np.mean(err**2, axis=0))
+    dev = zb - zf
+    dref = float(np.max(np.abs(zb - ref))) / lsb
+    ratio = float(np.mean(rmsee / np.where(zf_rmsee > 0, zf_rmsee, np.finfo(float).tiny)))
+    acc = {
+        "rmsee": [float(v) for v in rmsee],
+        "rmsee_ratio": ratio,
+        "rmsee_ratio_se": float(np.mean(_paired_se(err, zf - z) / np.where(zf_rmsee > 0, zf_rmsee, 1.0))),
+        "rms_dev_float": [float(v) for v in np.sqrt(np.mean(dev**2, axis=0))],
+        "max_dev_float": [float(v) for v in np.max(np.abs(dev), axis=0)],
+        "max_dev_float_lsb": float(np.max(np.abs(dev)) / lsb),
+        "max_dev_reference_lsb": dref,
+        "error_bound_lsb": float(fxm.error_bound_lsb),
+        "error_bound": float(fxm.error_bound),
+        "bound_holds": bool(dref <= fxm.error_bound_lsb * (1 + 1e-12)),
+        "flagged": int(flags.sum()),
+    }
+    return acc, err
+
+
+def explore(
+    model: PWASVirtualSensor | str | os.PathLike,
+    data,
+    *,
+    traj_col: str | None = None,
+    input_bits: Sequence[int] = DEFAULT_INPUT_BITS,
+    weight_frac: Sequence[int] | None = None,
+    output_frac: Sequence[int] | None = None,
+    weight_bits: int | None = None,
+    output_bits: int | None = None,
+    input_fill: float = 0.9,
+    rounding: str = "half_up",
+    overflow: str = "error",
+    memory: str = "banked",
+    pipeline: str | None = None,
+    resources: str = "estimate",
+    cost: str = "total_bits",
+    device: str | None = None,
+    measure_max: int = DEFAULT_MEASURE_MAX,
+    workdir: str | os.PathLike | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Sweep the fixed-point formats of a model and measure accuracy against resources.
+
+    Parameters
+    ----------
+    model : PWASVirtualSensor or path of a model file
+    data : path of a CSV, :class:`~pwas_hdl.data_io.Table`, or tuple ``(u, y, z)``
+        The evaluation data. From a CSV/Table the model's input/output columns are read (by
+        name) and the reference of target ``t`` is column ``t_true`` if present, else ``t``.
+        A tuple gives arrays (or lists of trajectories) ``u``, ``y`` as for
+        :meth:`PWASVirtualSensor.predict` and the reference ``z`` sample by sample (the first
+        ``M - 1`` samples of each trajectory have no regressor and are skipped).
+    traj_col : str, optional
+        Trajectory column of the CSV, as for ``fit``.
+    input_bits : sequence of int
+        Input widths ``B_in`` (default 8, 10, 12, 14, 16).
+    weight_frac, output_frac : sequence of int, optional
+        Absolute fraction bits ``Fw`` / ``Fo``; default: the defaults of ``generate`` -7 .. +2
+        (:data:`DEFAULT_FRAC_OFFSETS`).
+    weight_bits, output_bits : int, optional
+        Fixed widths (default: the fewest bits for each point; with a fixed ``weight_bits``
+        points whose weights do not fit are refused unless ``overflow="saturate"``).
+    input_fill, rounding, overflow : as :class:`~pwas_hdl.bittrue.FixedPointModel`, fixed.
+    memory, pipeline : as :func:`pwas_hdl.generate.build_design`.
+    resources : {"estimate", "generic", "ecp5", "ice40"}
+        Estimate only, or also synthesise the Pareto points and the default (see module notes).
+    cost : str
+        Estimate key used as the cost axis of the front (:data:`COST_KEYS`, default ``total_bits``).
+    device : str, optional
+        FPGA device for ``ecp5`` / ``ice40``.
+    measure_max : int
+        With measured resources, synthesise at most this many Pareto points (evenly spread along
+        the front, both ends kept), plus the default.
+    workdir : path, optional
+        Where the synthesised designs go (kept); default a temporary folder, removed afterwards.
+    progress : callable(stage, done, total), optional
+
+    Returns
+    -------
+    dict
+        JSON-ready: ``format``, ``version``, ``model``, ``data``, ``float`` (RMSEE of the float
+        model), ``sweep``, ``resource_model``, ``points`` (each with its formats, accuracy,
+        ``resources``, ``cost``, ``on_front``, ``is_default``, ``label``), ``refused``,
+        ``pareto`` (indices into ``points``, by cost), ``default`` (index, on_front, and the
+        points dominating it with the margins), ``measured`` (None for the estimate).
+
+    Raises
+    ------
+    ValueError
+        Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
+        missing target column, data without a full regressor.
+    RuntimeError
+        Synthesis was asked for and every synthesis run failed (e.g. the tools are missing).
+    """
+    if resources not in RESOURCE_MODES:
+        raise ValueError(f"resources must be one of {', '.join(RESOURCE_MODES)}, got {resources!r}")
+    if cost not in COST_KEYS:
+        raise ValueError(f"cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
+    if memory not in ("banked", "replicated"):
+        raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+    if isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1:
+        raise ValueError(f"measure_max must be an integer >= 1, got {measure_max!r}")
+    sensor, model_path = _load_sensor(model)
+    in_bits = _int_values(input_bits, "input_bits", lo=2)
+    fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
+    fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
+    xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col)
+    tgts = sensor.signal_names()[2]
+
+    # ---- the defaults of generate (input_bits=12, everything else from the data)
+    common = {"input_fill": input_fill, "rounding": rounding, "overflow": overflow, "layout": memory}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dflt = FixedPointModel.from_sensor(sensor, input_fill=input_fill, rounding=rounding, layout=memory)
+    fw0, fo0 = dflt.weight_format.frac, dflt.output_format.frac
+    default_key = (dflt.input_bits, fw0, fo0)
+    fws = _int_values(weight_frac, "weight_frac") if weight_frac is not None else [fw0 + d for d in DEFAULT_FRAC_OFFSETS]
+    fos = _int_values(output_frac, "output_frac") if output_frac is not None else [fo0 + d for d in DEFAULT_FRAC_OFFSETS]
+    combos = [(b, fw, fo, False) for b in in_bits for fw in fws for fo in fos]
+    default_in_sweep = fixed_wb is None and fixed_ob is None and (*default_key, False) in combos
+    if default_in_sweep:
+        combos[combos.index((*default_key, False))] = (*default_key, True)
+    else:  # evaluated all the same, with the default widths, so that it can be compared
+        combos.append((*default_key, True))
+
+    # ---- float reference
+    zf = sensor.predict_regressors(xi)
+    zf_rmsee = np.sqrt(np.mean((zf - z) ** 2, axis=0))
+
+    points: list[dict] = []
+    refused: list[dict] = []
+    errors: dict[int, np.ndarray] = {}
+    reg_cache: dict[tuple, int | None] = {}
+    total = len(combos)
+    for i, (b, fw, fo, is_default) in enumerate(combos):
+        given = {"input_bits": b, "weight_frac": fw, "output_frac": fo}
+        if not is_default:
+            given.update(weight_bits=fixed_wb, output_bits=fixed_ob)
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                fxm = FixedPointModel.from_sensor(sensor, **common, **{k: v for k, v in given.items() if v is not None})
+        except ValueError as exc:
+            refused.append({**{k: v for k, v in given.items()}, "reason": str(exc)})
+            if progress:
+                progress("sweep", i + 1, total)
+            continue
+        acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
+        res = estimate_resources(fxm, memory, pipeline, reg_cache)
+        pt = {
+            "input_bits": fxm.input_bits,
+            "input_frac": fxm.F,
+            "weight_bits": fxm.weight_format.bits,
+            "weight_frac": fxm.weight_format.frac,
+            "output_bits": fxm.output_format.bits,
+            "output_frac": fxm.output_format.frac,
+            "shift": fxm.shift,
+            "weight_offset": fxm.weight_format.frac - fw0,
+            "output_offset": fxm.output_format.frac - fo0,
+            "weights_saturated": fxm.n_weights_saturated,
+            "output_may_saturate": fxm.output_may_saturate,
+            "warnings": [str(w.message) for w in caught],
+            **acc,
+            "resources": res,
+            "is_default": bool(is_default),
+        }
+        pt["label"] = _label(pt)
+        pt["cost"] = pt["resources"][cost]
+        errors[len(points)] = err
+        points.append(pt)
+        if progress:
+            progress("sweep", i + 1, total)
+    if not points:
+        raise ValueError(
+            "every combination of the sweep was refused; first reason: " + (refused[0]["reason"] if refused else "none")
+        )
+    if cost == "register_bits" and any(p["cost"] is None for p in points):
+        raise ValueError("register bits are not available with this Amaranth version; choose another cost")
+
+    front = pareto_front(points, ("cost", "rmsee_ratio"))
+    for k, p in enumerate(points):
+        p["on_front"] = k in front
+    di = next(k for k, p in enumerate(points) if p["is_default"])
+    default = _default_summary(points, errors, di, front, z)
+
+    result: dict[str, Any] = {
+        "format": EXPLORE_FORMAT,
+        "version": EXPLORE_VERSION,
+        "generator": {"pwas_hdl": __version__},
+        "model": {
+            "path": model_path,
+            "n": int(sensor.grid_.n),
+            "N": int(sensor.grid_.n_vertices),
+            "partitions": [int(v) for v in sensor.grid_.partitions],
+            "regressors": list(dflt.regressor_names),
+            "targets": list(tgts),
+            "train_rmse": [float(v) for v in np.ravel(getattr(sensor, "train_rmse_", []))],
+        },
+        "data": data_desc,
+        "float": {"rmsee": [float(v) for v in zf_rmsee], "rmsee_ratio": 1.0},
+        "sweep": {
+            "input_bits": in_bits,
+            "weight_frac": fws,
+            "output_frac": fos,
+            "weight_bits": fixed_wb,
+            "output_bits": fixed_ob,
+            "input_fill": input_fill,
+            "rounding": rounding,
+            "overflow": overflow,
+            "memory": memory,
+            "pipeline": pipeline,
+            "default_weight_frac": fw0,
+            "default_output_frac": fo0,
+            "default_in_sweep": default_in_sweep,
+            "combinations": total,
+        },
+        "resource_model": {
+            "mode": resources,
+            "cost": cost,
+            "objectives": ["cost", "rmsee_ratio"],
+            "definition": _COST_DEFINITION,
+        },
+        "points": points,
+        "refused": refused,
+        "pareto": front,
+        "default": default,
+        "measured": None,
+    }
+    if resources != "estimate":
+        if len(front) <= measure_max:
+            pick = list(front)
+        elif measure_max == 1:
+            pick = [front[0]]
+        else:
+            pick = [front[round(i * (len(front) - 1) / (measure_max - 1))] for i in range(measure_max)]
+        result["measured"] = _measure(sensor, points, sorted(set(pick) | {di}), resources, device, workdir, memory,
+                                      pipeline, common, progress)
+    return result
+
+
+_COST_DEFINITION = {
+    "memory_bits": "weight memory words x word bits (exact, the generator's memory plan)",
+    "register_bits": "flip-flops of the elaborated core (width of the sync-domain signals; exact before optimisation)",
+    "mult_bit_products": "(n+1) nz (F+1) B_w partial-product bits of the mu x w multipliers",
+    "adder_bits": "2n(B_in+1) + n(n-1)/2 (F+1) + n(F+2) + nz n (F+B_w+1) + nz (F+B_w+1)",
+    "logic_bits": "mult_bit_products + adder_bits",
+    "total_bits": "memory_bits + logic_bits + register_bits (a stored bit, a flip-flop, a partial-product bit and an adder bit count alike)",
+    "dsp18": "(n+1) nz ceil((F+2)/18) ceil(B_w/18) 18x18 multiplier blocks",
+    "bram18k": "18-kbit block RAMs, best aspect ratio (16k x 1 .. 512 x 36) per bank",
+}
+
+
+def _default_summary(points: list[dict], errors: dict[int, np.ndarray], di: int, front: list[int], z: np.ndarray) -> dict:
+    """Is the default on the front? If not, the points dominating it and by how much."""
+    d = points[di]
+    out: dict[str, Any] = {"index": di, "label": d["label"], "on_front": d["on_front"], "dominated_by": []}
+    if d["on_front"]:
+        return out
+    ed = errors[di]
+    for k in front:
+        p = points[k]
+        if p["cost"] <= d["cost"] and p["rmsee_ratio"] <= d["rmsee_ratio"]:
+            se = _paired_se(errors[k], ed)
+            out["dominated_by"].append({
+                "index": k,
+                "label": p["label"],
+                "cost_saved": d["cost"] - p["cost"],
+                "cost_saved_rel": (d["cost"] - p["cost"]) / d["cost"] if d["cost"] else 0.0,
+                "rmsee_better": [a - b for a, b in zip(d["rmsee"], p["rmsee"])],
+                "rmsee_better_rel": d["rmsee_ratio"] - p["rmsee_ratio"],
+                "rmsee_diff_se": [float(v) for v in se],
+            })
+    out["dominated_by"].sort(key=lambda e: -e["cost_saved"])
+    if out["dominated_by"]:
+        dom = out["dominated_by"]
+        out["max_cost_saved_rel"] = max(e["cost_saved_rel"] for e in dom)
+        out["max_rmsee_gain_rel"] = max(e["rmsee_better_rel"] for e in dom)
+    return out
+
+
+def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress) -> dict:
+    from .generate import build_design, write_folder
+    from .synthesis import synthesize
+
+    own = workdir is None
+    root = Path(tempfile.mkdtemp(prefix="pwas-explore-")) if own else Path(workdir)
+    root.mkdir(parents=True, exist_ok=True)
+    done: dict[str, Any] = {"target": target, "device": device, "points": [], "workdir": None if own else str(root)}
+    errors = []
+    try:
+        for c, k in enumerate(idx):
+            p = points[k]
+            if progress:
+                progress("synthesis", c, len(idx))
+            name = f"i{p['input_bits']}_w{p['weight_bits']}f{p['weight_frac']}_o{p['output_bits']}f{p['output_frac']}".replace("-", "m")
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    gd = build_design(sensor, design="core", memory=memory, pipeline=pipeline,
+                                      input_bits=p["input_bits"], input_fill=common["input_fill"],
+                                      weight_bits=p["weight_bits"], weight_frac=p["weight_frac"],
+                                      output_bits=p["output_bits"], output_frac=p["output_frac"],
+                                      overflow=common["overflow"], rounding=common["rounding"])
+                folder = write_folder(gd.files, root / name)
+                res = synthesize(folder, target, device=device)
+            except (RuntimeError, ValueError, FileNotFoundError) as exc:
+                errors.append(f"{p['label']}: {exc}")
+                p["measured"] = {"error": str(exc)}
+                continue
+            m = {key: res.get(key) for key in _MEASURED_KEYS}
+            m["manifest_memory_bits"] = int(gd.manifest["memory"]["bits"])
+            m["estimate_memory_bits_exact"] = m["manifest_memory_bits"] == p["resources"]["memory_bits"]
+            p["measured"] = m
+            done["points"].append(k)
+        if progress:
+            progress("synthesis", len(idx), len(idx))
+    finally:
+        if own:
+            shutil.rmtree(root, ignore_errors=True)
+    if not done["points"]:
+        raise RuntimeError("synthesis failed for every point; first error: " + (errors[0] if errors else "?"))
+    done["errors"] = errors
+    return done
+
+
+# ------------------------------------------------------------------------------------ reports
+def format_table(result: dict, rows: str = "pareto") -> str:
+    """A Markdown table of the Pareto points (``rows="pareto"``, plus the default) or of all points."""
+    pts = result["points"]
+    idx = list(result["pareto"]) if rows == "pareto" else list(range(len(pts)))
+    di = result["default"]["index"]
+    if di not in idx:
+        idx.append(di)
+    tg = result["model"]["targets"]
+    meas = result.get("measured") is not None
+    head = ["formats (in / weights / out)", "cost", "memory bits", "logic bits", "FFs",
+            f"RMSEE {tg[0]}" if len(tg) == 1 else "RMSEE / float", "vs float", "RMS dev. float", "max dev. (LSB)", "front"]
+    if meas:
+        head[-1:-1] = ["LUT (meas.)", "FF (meas.)", "DSP", "BRAM"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for k in idx:
+        p = pts[k]
+        r = p["resources"]
+        acc = f"{p['rmsee'][0]:.4g}" if len(tg) == 1 else f"{p['rmsee_ratio']:.5f}"
+        row = [
+            p["label"].replace("in ", "").replace("w ", "").replace("out ", "") + (" **(default)**" if p["is_default"] else ""),
+            f"{p['cost']}", f"{r['memory_bits']}", f"{r['logic_bits']}", f"{r['register_bits']}", acc,
+            f"{(p['rmsee_ratio'] - 1) * 100:+.3f} %", ", ".join(f"{v:.3g}" for v in p["rms_dev_float"]),
+            f"{p['max_dev_float_lsb']:.3g}", "yes" if p["on_front"] else "no",
+        ]
+        if meas:
+            m = p.get("measured") or {}
+            row[-1:-1] = [str(m.get("luts", "")), str(m.get("ffs", "")), str(m.get("dsp", "")), str(m.get("bram", ""))]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | None = None) -> Path:
+    """Draw an exploration result as a PNG (written atomically).
+
+    Left: accuracy, ``RMSEE / float RMSEE - 1`` in percent (symmetric-log axis; 0 = the float
+    model, dashed) of every point against the cost, coloured by input width; the Pareto front as a
+    staircase through its points (black edges, with +-1 standard error of their paired RMSEE
+    difference to the float model); the default of ``generate`` as a red star. Right: precision,
+    the RMS deviation of the bit-true estimate from the float model (log axis), same points and
+    marks. With measured resources a third panel plots the same accuracy against the measured LUTs
+    of the synthesised points, annotated with DSP and block-RAM counts.
+    """
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from .atomic import atomic_write_bytes
+
+    pts = result["points"]
+    if not pts:
+        raise ValueError("the result has no points to plot")
+    meas = result.get("measured")
+    ncol = 3 if meas else 2
+    fig, axes = plt.subplots(1, ncol, figsize=(6.4 * ncol, 6.2), layout="constrained")
+    bits = sorted({p["input_bits"] for p in pts})
+    cmap = plt.get_cmap("viridis")
+    color = {b: cmap(0.92 * i / max(len(bits) - 1, 1)) for i, b in enumerate(bits)}
+    cost_key = result["resource_model"]["cost"]
+    front = list(result["pareto"])
+    di = result["default"]["index"]
+    dpt = pts[di]
+    excess = np.array([(p["rmsee_ratio"] - 1) * 100 for p in pts])
+    se = np.array([p.get("rmsee_ratio_se", 0.0) * 100 for p in pts])
+    dev = np.array([float(np.sqrt(np.mean(np.square(p["rms_dev_float"])))) for p in pts])
+    cost = np.array([p["cost"] for p in pts], dtype=float)
+    nz_abs = np.abs(excess[excess != 0])
+    lin = float(max(1e-3, np.min(nz_abs))) if nz_abs.size else 1e-3
+    lin = float(10 ** np.floor(np.log10(max(lin, float(np.median(se)) if se.size else lin))))
+    tg = result["model"]["targets"]
+    flt = ", ".join(f"{v:.4g}" for v in result["float"]["rmsee"])
+    dlabel = "generate default: " + dpt["label"] + (" (on the front)" if dpt["on_front"] else " (dominated)")
+
+    def scatter(ax, y, errs=None):
+        for b in bits:
+            sel = [k for k, p in enumerate(pts) if p["input_bits"] == b and not p["on_front"]]
+            ax.scatter(cost[sel], y[sel], s=13, color=color[b], alpha=0.5, linewidths=0)
+            fr = [k for k in front if pts[k]["input_bits"] == b]
+            ax.scatter(cost[fr], y[fr], s=46, color=color[b], edgecolors="black", linewidths=0.9, zorder=3,
+                       label=f"B_in = {b}" + (" (front: black edge)" if b == bits[0] else ""))
+            if errs is not None and fr:
+                ax.errorbar(cost[fr], y[fr], yerr=errs[fr], fmt="none", ecolor="black", elinewidth=0.7, capsize=2, zorder=2)
+        ax.scatter([cost[di]], [y[di]], marker="*", s=280, color="red", edgecolors="black", linewidths=0.8, zorder=4,
+                   label=dlabel)
+        ax.set_xlabel(f"cost: {cost_key.replace('_', ' ')} (estimate)")
+        ax.grid(True, which="both", alpha=0.3)
+        # top axis: the weight width of each column of points (the memory dominates the cost)
+        groups: dict[int, list[float]] = {}
+        for k, p in enumerate(pts):
+            groups.setdefault(p["weight_bits"], []).append(cost[k])
+        if len(groups) > 1:
+            top = ax.twiny()
+            top.set_xlim(ax.get_xlim())
+            top.set_xticks([float(np.median(v)) for v in groups.values()])
+            top.set_xticklabels([str(b) for b in groups], fontsize=7)
+            top.set_xlabel("weight width B_w (bits), at the median cost of its points", fontsize=8)
+
+    ax = axes[0]
+    scatter(ax, excess, se)
+    ax.step(cost[front], excess[front], where="post", color="black", lw=1.0, zorder=2, label="Pareto front (cost, RMSEE)")
+    ax.set_yscale("symlog", linthresh=lin)
+    ax.axhline(0.0, color="tab:blue", ls="--", lw=1.2, label=f"float model (RMSEE {flt})")
+    ax.set_ylabel("bit-true RMSEE above the float model's (%)")
+    ax.set_title("accuracy: RMSEE against " + ", ".join(result["data"].get("reference_columns") or tg), fontsize=10)
+    handles, labels = ax.get_legend_handles_labels()
+
+    ax = axes[1]
+    scatter(ax, dev)
+    ax.set_yscale("log")
+    ax.set_ylabel("RMS |bit-true - float| (physical units)")
+    ax.set_title("precision: deviation from the float model", fontsize=10)
+
+    if meas:
+        ax = axes[2]
+        mk = [k for k in meas["points"] if isinstance((pts[k].get("measured") or {}).get("luts"), (int, float))]
+        for k in mk:
+            p, m = pts[k], pts[k]["measured"]
+            star = k == di
+            ax.scatter([m["luts"]], [excess[k]], s=260 if star else 50, marker="*" if star else "o",
+                       color="red" if star else color[p["input_bits"]], edgecolors="black", zorder=3)
+            ax.annotate(f"w{p['weight_bits']} DSP {m.get('dsp')} BRAM {m.get('bram')}", (m["luts"], excess[k]),
+                        textcoords="offset points", xytext=(5, 3), fontsize=6)
+        ax.set_yscale("symlog", linthresh=lin)
+        ax.axhline(0.0, color="tab:blue", ls="--", lw=1.2)
+        ax.set_xlabel(f"measured LUTs ({meas['target']}{', ' + meas['device'] if meas.get('device') else ''})")
+        ax.set_ylabel("bit-true RMSEE above the float model's (%)")
+        ax.set_title("front points synthesised")
+        ax.grid(True, which="both", alpha=0.3)
+
+    fig.suptitle(title or f"bit-width exploration: n = {result['model']['n']}, N = {result['model']['N']}, "
+                 f"{result['data']['samples']} samples; {len(pts)} formats, {len(front)} on the front", fontsize=11)
+    note = "error bars: +-1 standard error of the RMSEE difference to the float model (batch means)"
+    dd = result["default"]
+    if not dd["on_front"] and dd.get("dominated_by"):
+        best = dd["dominated_by"][0]
+        note += (f". Default dominated, e.g. by {best['label']}: {100 * best['cost_saved_rel']:.0f} % less cost, "
+                 f"RMSEE {best['rmsee_better'][0]:+.3g} better (+-{best['rmsee_diff_se'][0]:.2g})")
+    leg = fig.legend(handles, labels, loc="outside lower center", ncol=4, fontsize=8, frameon=False, title=note,
+                     title_fontsize=7.5)
+    leg.get_title().set_color("dimgray")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return atomic_write_bytes(png_path, buf.getvalue())
