@@ -345,6 +345,78 @@ def simulate(
         raise typer.Exit(1)
 
 
+@app.command()
+def explore(
+    model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
+    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and <target>_true or <target> (the reference of the RMSEE).")],
+    outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Folder for explore.json and explore.png (created if missing).")],
+    traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
+    input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
+    weight_frac: Annotated[Optional[str], typer.Option("--weight-frac", help="Weight fraction bits to sweep (comma list or A:B; default: generate's default -7..+2).")] = None,
+    output_frac: Annotated[Optional[str], typer.Option("--output-frac", help="Output fraction bits to sweep (comma list or A:B; default: generate's default -7..+2).")] = None,
+    weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Fixed weight width (default: the fewest bits for each point).")] = None,
+    output_bits: Annotated[Optional[int], typer.Option("--output-bits", help="Fixed output width (default: the fewest bits for each point).")] = None,
+    input_fill: Annotated[float, typer.Option("--input-fill", help="As for generate.")] = 0.9,
+    rounding: Annotated[str, typer.Option("--rounding", help="As for generate: half_up or truncate.")] = "half_up",
+    overflow: Annotated[str, typer.Option("--overflow", help="As for generate: error (refuse the point) or saturate.")] = "error",
+    memory: Annotated[str, typer.Option("--memory", help="As for generate: banked or replicated.")] = "banked",
+    pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="As for generate: min, balanced (default) or max.")] = None,
+    resources: Annotated[str, typer.Option("--resources", help="estimate (analytic, every point) or generic/ecp5/ice40 (also synthesise the Pareto points and the default).")] = "estimate",
+    cost: Annotated[str, typer.Option("--cost", help="Cost axis of the front: total_bits, memory_bits, logic_bits, register_bits, mult_bit_products, adder_bits, dsp18 or bram18k.")] = "total_bits",
+    device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --resources ecp5/ice40 (as for synth).")] = None,
+    measure_max: Annotated[int, typer.Option("--measure-max", help="Synthesise at most this many Pareto points (spread along the front) besides the default.")] = 10,
+    synth_dir: Annotated[Optional[Path], typer.Option("--synth-dir", help="Keep the synthesised designs here (default: a temporary folder, removed).")] = None,
+) -> None:
+    """Sweep input, weight and output word lengths: bit-true RMSEE against resources.
+
+    Writes OUTDIR/explore.json (every point: formats, RMSEE against the data, deviation from the
+    float model, error bound, resource estimate, Pareto flag; the refused combinations and why;
+    whether generate's default formats are on the front) and OUTDIR/explore.png, and prints the
+    Pareto points (and the default) as a table.
+    """
+    from .explore import explore as _explore, format_table, plot_exploration
+
+    def ints(text: str, what: str) -> list[int]:
+        t = text.replace(" ", "")
+        if ":" in t:
+            a, _, b = t.partition(":")
+            lo, hi = _int_list(a, what), _int_list(b, what)
+            if len(lo) != 1 or len(hi) != 1 or hi[0] < lo[0]:
+                raise UserError(f"{what}: {text!r} is not a range A:B with A <= B")
+            return list(range(lo[0], hi[0] + 1))
+        return _int_list(t, what)
+
+    with _user_errors():
+        sweep = dict(
+            input_bits=ints(input_bits, "--input-bits"),
+            weight_frac=ints(weight_frac, "--weight-frac") if weight_frac is not None else None,
+            output_frac=ints(output_frac, "--output-frac") if output_frac is not None else None,
+        )
+        if outdir.exists() and not outdir.is_dir():
+            raise UserError(f"{outdir} exists and is not a folder; choose another --outdir")
+        with _progress("exploring formats") as update:
+            res = _explore(
+                model_path, data, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
+                input_fill=input_fill, rounding=rounding, overflow=overflow, memory=memory, pipeline=pipeline,
+                resources=resources, cost=cost, device=device, measure_max=measure_max, workdir=synth_dir,
+                progress=lambda stage, done, total: update(done, total),
+            )
+        outdir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(outdir / "explore.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
+        plot_exploration(res, outdir / "explore.png")
+        out.print(format_table(res), highlight=False, markup=False)
+        d = res["default"]
+        if d["on_front"]:
+            verdict = "on the Pareto front"
+        else:
+            b = d["dominated_by"][0]
+            verdict = (f"NOT on the Pareto front: {b['label']} costs {100 * b['cost_saved_rel']:.1f} % less with an RMSEE "
+                       f"{b['rmsee_better'][0]:+.4g} better (standard error {b['rmsee_diff_se'][0]:.2g})")
+        err.print(f"{len(res['points'])} formats ({len(res['refused'])} refused), {len(res['pareto'])} on the front; "
+                  f"the default {d['label']} is {verdict}", highlight=False, markup=False)
+        err.print(f"wrote {outdir / 'explore.json'} and {outdir / 'explore.png'}", highlight=False, markup=False)
+
+
 @data_app.command("lorenz")
 def make_data_lorenz(
     output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns y, z, z_true).")],
