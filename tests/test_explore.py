@@ -1,0 +1,266 @@
+"""Bit-width exploration (`pwas_hdl.explore`, `pwas-hdl explore`): Pareto front, default point,
+accuracy sanity against the error bound, resource estimate, plot, measured mode, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.bittrue import FixedPointModel
+from pwas_hdl.cli import app
+from pwas_hdl.data_io import read_csv, write_csv
+from pwas_hdl.explore import explore, format_table, pareto_front, plot_exploration
+from pwas_hdl.generate import build_design
+from pwas_hdl.plants import lorenz
+from pwas_hdl.virtual_sensor import PWASVirtualSensor
+
+runner = CliRunner()
+
+
+# ------------------------------------------------------------------------ Pareto front
+def test_pareto_front_on_constructed_points():
+    pts = [(1, 5), (2, 3), (3, 4), (4, 1), (2, 3), (5, 1), (0.5, 9), (3, 3)]
+    # (3,4) and (3,3) are dominated by (2,3); (5,1) by (4,1); the two (2,3) are equal: both kept.
+    assert pareto_front(pts) == [6, 0, 1, 4, 3]
+    assert pareto_front([]) == []
+    assert pareto_front([(7, 7)]) == [0]
+    # three objectives: a point worse in two but better in one survives
+    assert pareto_front([(1, 1, 5), (2, 2, 1), (2, 2, 2), (1, 1, 5)]) == [0, 3, 1]
+    # mappings with named objectives (default cost, rmsee_ratio)
+    dpts = [{"cost": 10, "rmsee_ratio": 1.1}, {"cost": 8, "rmsee_ratio": 1.2}, {"cost": 12, "rmsee_ratio": 1.2}]
+    assert pareto_front(dpts) == [1, 0]
+    assert pareto_front(dpts, ["rmsee_ratio", "cost"]) == [0, 1]
+
+
+def test_pareto_front_rejects_bad_points():
+    with pytest.raises(ValueError, match="same"):
+        pareto_front([(1, 2), (1, 2, 3)])
+    with pytest.raises(ValueError, match="NaN"):
+        pareto_front([(1, float("nan")), (2, 3)])
+
+
+def test_pareto_front_brute_force_property():
+    rng = np.random.default_rng(3)
+    pts = rng.integers(0, 6, (60, 2)).astype(float)
+    front = set(pareto_front(pts.tolist()))
+    for i, p in enumerate(pts):
+        dominated = any(np.all(q <= p) and np.any(q < p) for q in pts)
+        assert (i in front) == (not dominated)
+
+
+# ------------------------------------------------------------------------ a tiny model
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """My = 2, p = 3 (N = 16) Lorenz sensor with a fixed sigma, its test CSV and its model file."""
+    d = lorenz(1300, seed=1)
+    train, test = d.split(1000)
+    m = PWASVirtualSensor(my=2, partitions=3, gamma=1.2, sigma=1e-4, output_names=["y"], target_names=["z"])
+    m.fit(None, train.y, train.z)
+    root = tmp_path_factory.mktemp("explore")
+    m.save(root / "model.json")
+    write_csv(root / "test.csv", test.columns())
+    return m, root
+
+
+@pytest.fixture(scope="module")
+def small_result(tiny):
+    m, root = tiny
+    return explore(root / "model.json", root / "test.csv", input_bits=[8, 12], weight_frac=None,
+                   output_frac=None)
+
+
+def test_default_point_present_and_flagged(tiny, small_result):
+    m, _ = tiny
+    res = small_result
+    dflt = FixedPointModel.from_sensor(m)
+    defaults = [k for k, p in enumerate(res["points"]) if p["is_default"]]
+    assert len(defaults) == 1 and res["default"]["index"] == defaults[0]
+    d = res["points"][defaults[0]]
+    assert (d["input_bits"], d["weight_bits"], d["weight_frac"], d["output_bits"], d["output_frac"]) == (
+        dflt.input_bits, dflt.weight_format.bits, dflt.weight_format.frac, dflt.output_format.bits, dflt.output_format.frac)
+    assert d["weight_offset"] == 0 and d["output_offset"] == 0
+    assert res["sweep"]["default_in_sweep"] is True
+    # default sweep: 2 input widths x 10 weight x 10 output fraction widths
+    assert len(res["points"]) + len(res["refused"]) == 2 * 10 * 10
+    # on_front flags agree with the front, and the default's verdict is justified
+    assert [k for k, p in enumerate(res["points"]) if p["on_front"]] == sorted(res["pareto"])
+    assert res["default"]["on_front"] == (defaults[0] in res["pareto"])
+    if not res["default"]["on_front"]:
+        assert res["default"]["dominated_by"]
+        for e in res["default"]["dominated_by"]:
+            q = res["points"][e["index"]]
+            assert q["cost"] <= d["cost"] and q["rmsee_ratio"] <= d["rmsee_ratio"]
+            assert (q["cost"], q["rmsee_ratio"]) != (d["cost"], d["rmsee_ratio"])
+            assert e["cost_saved"] == d["cost"] - q["cost"] and e["rmsee_diff_se"][0] >= 0
+    else:
+        assert res["default"]["dominated_by"] == []
+    # the front really is non-dominated, every other point is dominated by a front point
+    front = res["pareto"]
+    for k, p in enumerate(res["points"]):
+        dom = [j for j in front if res["points"][j]["cost"] <= p["cost"] and res["points"][j]["rmsee_ratio"] <= p["rmsee_ratio"]
+               and (res["points"][j]["cost"], res["points"][j]["rmsee_ratio"]) != (p["cost"], p["rmsee_ratio"])]
+        assert bool(dom) == (k not in front)
+
+
+def test_default_added_when_outside_the_sweep(tiny):
+    _, root = tiny
+    res = explore(root / "model.json", root / "test.csv", input_bits=[10], weight_frac=[0], output_frac=[-1])
+    assert res["sweep"]["default_in_sweep"] is False
+    assert len(res["points"]) == 2 and res["points"][-1]["is_default"] and res["points"][-1]["input_bits"] == 12
+
+
+def test_accuracy_sanity_against_the_error_bound(tiny, small_result):
+    m, root = tiny
+    res = small_result
+    tab = read_csv(root / "test.csv")
+    ztrue = tab.numeric(["z_true"])[m.lags_.memory - 1:]
+    zf = m.predict(None, tab.numeric(["y"]))
+    assert res["float"]["rmsee"][0] == pytest.approx(math.sqrt(np.mean((zf - ztrue) ** 2)))
+    assert res["data"]["reference_columns"] == ["z_true"] and res["data"]["samples"] == ztrue.shape[0]
+    pts = res["points"]
+    assert all(p["bound_holds"] for p in pts)
+    # more weight bits are never worse than the bounds allow: |RMSEE(a) - RMSEE(b)| is at most the
+    # RMS of the difference of the two estimates, itself at most the distance of each to the float
+    # model at the same represented input (bounds) -- for equal input codes (same B_in).
+    by = {}
+    for p in pts:
+        by.setdefault((p["input_bits"], p["output_frac"]), []).append(p)
+    checked = 0
+    for group in by.values():
+        group.sort(key=lambda p: p["weight_frac"])
+        for a, b in zip(group, group[1:]):  # b has more weight fraction bits
+            assert b["rmsee"][0] <= a["rmsee"][0] + a["error_bound"] + b["error_bound"] + 1e-9
+            checked += 1
+    assert checked > 20
+    # coarse input codes cost accuracy: 8-bit inputs are clearly worse than 12-bit at the default formats
+    d12 = next(p for p in pts if p["input_bits"] == 12 and p["weight_offset"] == 0 and p["output_offset"] == 0)
+    d8 = next(p for p in pts if p["input_bits"] == 8 and p["weight_offset"] == 0 and p["output_offset"] == 0)
+    assert d8["rms_dev_float"][0] > d12["rms_dev_float"][0]
+    # JSON-ready, no NaN
+    json.dumps(res, allow_nan=False)
+
+
+def test_resource_estimate_is_the_generators(tiny, small_result):
+    m, _ = tiny
+    p = next(p for p in small_result["points"] if p["input_bits"] == 8 and p["weight_offset"] == -2 and p["output_offset"] == 1)
+    gd = build_design(m, input_bits=8, weight_frac=p["weight_frac"], output_frac=p["output_frac"])
+    r = p["resources"]
+    assert r["memory_bits"] == gd.manifest["memory"]["bits"] and r["memory_words"] == gd.manifest["memory"]["words"]
+    ar = gd.manifest["arithmetic"]
+    assert r["multiplier"] == f"u{ar['F'] + 1} x s{ar['weight_width']}"
+    assert r["mult_bit_products"] == 3 * 1 * (ar["F"] + 1) * ar["weight_width"]
+    assert isinstance(r["register_bits"], int) and r["register_bits"] > 0
+    assert r["total_bits"] == r["memory_bits"] + r["logic_bits"] + r["register_bits"]
+    assert p["cost"] == r["total_bits"] and r["latency_cycles"] == gd.manifest["latency_cycles"]
+    # wider weights cost more memory and more multiplier bits
+    q = next(q for q in small_result["points"] if q["input_bits"] == 8 and q["weight_offset"] == 1 and q["output_offset"] == 1)
+    assert q["resources"]["memory_bits"] > r["memory_bits"] and q["resources"]["mult_bit_products"] > r["mult_bit_products"]
+
+
+def test_refused_combinations_are_recorded(tiny):
+    _, root = tiny
+    # output finer than the exact product F + Fw: refused, with the reason
+    res = explore(root / "model.json", root / "test.csv", input_bits=[4], weight_frac=[-6], output_frac=[5])
+    assert res["refused"] and "finer than the exact product" in res["refused"][0]["reason"]
+    assert res["refused"][0]["input_bits"] == 4
+    # a fixed weight width too small for the weights: refused (overflow="error")
+    res = explore(root / "model.json", root / "test.csv", input_bits=[12], weight_frac=[2], output_frac=[0], weight_bits=3)
+    assert any("does not fit the weight format" in r["reason"] for r in res["refused"])
+    assert [p["is_default"] for p in res["points"]] == [True]
+
+
+def test_plot_and_table(tmp_path, small_result):
+    png = plot_exploration(small_result, tmp_path / "x.png")
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20000
+    tab = format_table(small_result)
+    assert "(default)" in tab and tab.count("\n") >= len(small_result["pareto"]) + 2
+
+
+def test_bad_input(tiny, tmp_path):
+    m, root = tiny
+    mp, csv = root / "model.json", root / "test.csv"
+    with pytest.raises(ValueError, match="no column named 'run'"):
+        explore(mp, csv, traj_col="run", input_bits=[12], weight_frac=[0], output_frac=[0])
+    write_csv(tmp_path / "noz.csv", {"y": np.linspace(-1, 1, 50)})
+    with pytest.raises(ValueError, match="no column 'z_true' or 'z'"):
+        explore(mp, tmp_path / "noz.csv", input_bits=[12])
+    write_csv(tmp_path / "noy.csv", {"u": np.linspace(-1, 1, 50), "z": np.zeros(50)})
+    with pytest.raises(ValueError, match="no column named 'y'"):
+        explore(mp, tmp_path / "noy.csv", input_bits=[12])
+    for kw, msg in (({"input_bits": []}, "sweep is empty"), ({"weight_frac": []}, "sweep is empty"),
+                    ({"output_frac": []}, "sweep is empty"), ({"input_bits": [12.5]}, "integers"),
+                    ({"input_bits": [1]}, ">= 2"), ({"resources": "vivado"}, "resources must be"),
+                    ({"cost": "area"}, "cost must be"), ({"memory": "dual"}, "memory must be"),
+                    ({"measure_max": 0}, "measure_max")):
+        with pytest.raises(ValueError, match=msg):
+            explore(mp, csv, **kw)
+    with pytest.raises(FileNotFoundError):
+        explore(mp, tmp_path / "missing.csv")
+
+
+def test_arrays_as_data(tiny):
+    m, root = tiny
+    tab = read_csv(root / "test.csv")
+    y, z = tab.numeric(["y"]), tab.numeric(["z_true"])
+    a = explore(m, (None, y, z), input_bits=[12], weight_frac=[0], output_frac=[0])
+    b = explore(m, root / "test.csv", input_bits=[12], weight_frac=[0], output_frac=[0])
+    assert [p["rmsee"] for p in a["points"]] == [p["rmsee"] for p in b["points"]]
+    with pytest.raises(ValueError, match="tuple"):
+        explore(m, 42, input_bits=[12])
+
+
+def test_measured_mode_with_a_stub_synthesizer(tiny, tmp_path, monkeypatch):
+    import pwas_hdl.synthesis as synthesis
+
+    m, root = tiny
+    calls = []
+
+    def fake(outdir, target, **kw):
+        man = json.loads((outdir / "manifest.json").read_text())
+        calls.append((outdir.name, target))
+        return {"luts": 100 + man["arithmetic"]["weight_width"], "ffs": 50, "dsp": 3, "bram": 3, "memory_bits": man["memory"]["bits"]}
+
+    monkeypatch.setattr(synthesis, "synthesize", fake)
+    res = explore(m, root / "test.csv", input_bits=[8, 12], weight_frac=[-2, 0, 2], output_frac=[0], resources="generic",
+                  measure_max=2, workdir=tmp_path / "designs")
+    meas = res["measured"]
+    assert meas["target"] == "generic" and meas["errors"] == []
+    di = res["default"]["index"]
+    assert di in meas["points"] and len(meas["points"]) <= 3 and len(calls) == len(meas["points"])
+    for k in meas["points"]:
+        mm = res["points"][k]["measured"]
+        assert mm["luts"] == 100 + res["points"][k]["weight_bits"] and mm["estimate_memory_bits_exact"] is True
+    assert (tmp_path / "designs").is_dir()
+    plot_exploration(res, tmp_path / "m.png")
+    assert "LUT (meas.)" in format_table(res)
+
+    def broken(outdir, target, **kw):
+        raise RuntimeError("yosys is not installed")
+
+    monkeypatch.setattr(synthesis, "synthesize", broken)
+    with pytest.raises(RuntimeError, match="every point.*yosys is not installed"):
+        explore(m, root / "test.csv", input_bits=[12], weight_frac=[0], output_frac=[0], resources="ecp5")
+
+
+def test_cli_explore(tiny, tmp_path):
+    _, root = tiny
+    out = tmp_path / "ex"
+    r = runner.invoke(app, ["explore", str(root / "model.json"), str(root / "test.csv"), "-o", str(out),
+                            "--input-bits", "10,12", "--weight-frac", "-1:1", "--output-frac", "0"])
+    assert r.exit_code == 0, r.output
+    res = json.loads((out / "explore.json").read_text())
+    assert res["format"] == "pwas-hdl-explore" and len(res["points"]) == 7  # 2 x 3 + the default
+    assert (out / "explore.png").read_bytes()[:4] == b"\x89PNG"
+    assert "formats (in / weights / out)" in r.stdout and "(default)" in r.stdout
+    # bad input: status 2, one error line, nothing written
+    bad = tmp_path / "bad"
+    for args, msg in ((["--traj-col", "run"], "no column named 'run'"), (["--input-bits", "a"], "--input-bits"),
+                      (["--weight-frac", "3:1"], "not a range"), (["--resources", "xx"], "resources must be")):
+        r = runner.invoke(app, ["explore", str(root / "model.json"), str(root / "test.csv"), "-o", str(bad), *args])
+        assert r.exit_code == 2 and msg in r.output, r.output
+        assert not bad.exists()
