@@ -67,41 +67,39 @@ class TimingNotMet(ValueError):
 def pipeline_candidates(n: int) -> list[Pipeline]:
     """Pipeline configurations of an ``n``-input core, shallowest first, latencies strictly increasing.
 
-    Each one adds one register to the previous one where the critical path of the previous one lies
-    (nextpnr, ECP5 and iCE40, Lorenz core n = 4 inside the timing harness)::
+    Each one keeps the registers of the previous one and adds one where nextpnr put the critical
+    path of the previous one (Lorenz core n = 4, N = 4096, ECP5-45F, inside the timing harness,
+    ``--freq`` 150 MHz, seed 1; fmax measured when the list was made)::
 
-        2  min        memory read and output registers only
-        3  +product   cuts the back end after the multipliers
-        4  +rank      cuts the front end after the rank extractor
-        5  +mem_out   register on the block-RAM read data (its clock-to-out is long)
-        6  +split     register after scale / clamp / split
-        7.. +tree     adder-tree registers: one after the whole tree, then more, down to one per level
-        last +addr    bank addresses and mu registered before the block RAMs
+        cycles  adds          critical path of the previous candidate            fmax
+        2       (min)         -                                                   44 MHz
+        3       product       memory -> multipliers -> adder tree -> output       73
+        4       rank          input -> scale / rank / addresses -> memory         76
+        5       mem_out       memory clock-to-out -> multipliers                   98
+        6       tree (1 reg)  products -> adder tree -> rounding -> output        110
+        7       addr          rank -> addresses / mu / bank rotation -> memory    123
+        8       split         input -> scale / split -> rank                      125
+        9..     tree (more)   products -> adder tree (one register per level)     130, 131
 
-    The ``min`` and ``max`` presets are in the list; ``balanced`` has the latency of the first
-    tree candidate.
+    The last one is the ``max`` preset plus ``addr``; there its critical path is the 18x18
+    multiplier (``mem_out`` -> ``product``). ``min`` is the first; ``balanced`` and ``max`` are not
+    in the list (their registers are placed differently).
     """
     n = int(n)
     if n < 1:
         raise ValueError("a PWAS core needs at least one input (n >= 1)")
     depth = Pipeline.tree_depth(n)
+    tree = []  # tree_levels giving 1, 2, ... registers (distinct counts ceil(depth / t))
+    for t in range(depth, 0, -1):
+        if not tree or -(-depth // t) != -(-depth // tree[-1]):
+            tree.append(t)
+    steps = [("product", True), ("rank", True), ("mem_out", True), ("tree_levels", tree[0]), ("addr", True), ("split", True)]
+    steps += [("tree_levels", t) for t in tree[1:]]
     out = [Pipeline(split=False, rank=False, mem_out=False, product=False, tree_levels=0)]
-    for key in ("product", "rank", "mem_out", "split"):
+    for key, val in steps:
         d = out[-1].to_dict()
-        d[key] = True
+        d[key] = val
         out.append(Pipeline.cast(d))
-    seen = set()
-    for t in range(depth, 0, -1):  # tree registers: ceil(depth / t), distinct, increasing
-        regs = -(-depth // t)
-        if regs in seen:
-            continue
-        seen.add(regs)
-        d = out[-1].to_dict()
-        d["tree_levels"] = t
-        out.append(Pipeline.cast(d))
-    d = out[-1].to_dict()
-    d["addr"] = True
-    out.append(Pipeline.cast(d))
     lat = [p.latency(n) for p in out]
     assert all(a < b for a, b in zip(lat, lat[1:])), lat
     return out
@@ -163,22 +161,26 @@ def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[
     return name, text, nff
 
 
-_STAGE_RE = re.compile(r"(?:^|[.$])(s_(?:split|rank|addr|mem|memout|prod|tree\d+))_")
+_STAGE_RE = re.compile(r"^(s_(?:split|rank|addr|memout|mem|prod|tree\d+))_")
 
 
 def _stage_of_cell(cell: str) -> str:
-    """Pipeline stage a nextpnr cell belongs to (by the register names of :mod:`pwas_hdl.hdl.core`)."""
-    c = cell.split("$")[0] if not cell.startswith("$") else cell
-    if c.startswith("io_"):
-        return "harness input" if "payload" in c and c.startswith("io_in") or c.startswith(("io_rst", "io_out__ready", "io_in__valid")) else "harness"
-    if re.search(r"(^|\.)wmem\d+", c):
+    """Pipeline stage of a nextpnr cell, from the register names of :mod:`pwas_hdl.hdl.core`.
+
+    After flattening, the harness registers are named after the nets they drive (``core.in__payload``
+    ...) and the core's cells carry a ``core.`` prefix.
+    """
+    c = cell[5:] if cell.startswith("core.") else cell
+    if c.startswith(("io_", "in__payload", "in__valid", "rst", "out__ready")):
+        return "input register"
+    if c.startswith(("out__payload", "out__valid", "in__ready", "warm")):
+        return "output register"
+    if re.match(r"wmem\d+", c):
         return "memory"
-    if re.search(r"(^|\.)(out__payload|out__valid|core_out)", c) or c.startswith(("out__", "in__ready")):
-        return "output"
-    m = _STAGE_RE.search(c)
+    m = _STAGE_RE.match(c)
     if m:
         return m.group(1)
-    return c.split("_TRELLIS")[0].split("_SB_")[0][:40]
+    return re.split(r"_TRELLIS|_SB_|\$", c)[0][:40] or c[:40]
 
 
 def _critical_path(report: dict[str, Any]) -> dict[str, Any] | None:

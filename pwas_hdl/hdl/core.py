@@ -367,6 +367,10 @@ class PWASCore(wiring.Component):
             sink_unused(m, diff[dw], f"mu{k}_sign")
             mus.append(diff[:dw])
 
+        # optional register on the vertex addresses and mu, before the bank rotation
+        valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
+        addr, mus, rot, oor = r["addr"], r["mu"], r["rot"], r["oor"]
+
         # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
         # same way instead of the read data back (the sum of products does not depend on the
         # order; mu is narrower than nz weights and needs no rot downstream).
@@ -382,10 +386,6 @@ class PWASCore(wiring.Component):
             bank_addr = [addr[(b - rot) % nb] for b in range(nb)] if aw else []
             bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
             bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
-
-        if pl.addr:  # optional register between the address / mu logic and the memories
-            valid, r = pipe.stage("s_addr", True, valid, {"addr": bank_addr, "mu": bank_mu, "oor": oor})
-            bank_addr, bank_mu, oor = r["addr"], r["mu"], r["oor"]
 
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []

@@ -218,7 +218,7 @@ class Pipeline:
     ============ ========================================================================
     ``split``    register after scale / clamp / cell-fraction split
     ``rank``     register after the rank extractor (and the address/bank precomputation)
-    ``addr``     register on the bank addresses and (rotated) ``mu`` before the memories
+    ``addr``     register on the vertex addresses and ``mu`` (before the bank rotation and the memories)
     memory *     vertex addresses + ``mu`` feed the synchronous read ports (one register)
     ``mem_out``  extra register on the memory read data
     ``product``  register after the ``mu_k * w`` multipliers
