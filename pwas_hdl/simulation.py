@@ -395,13 +395,15 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     mo = re.match(r"vdata(\d+)$", name)
     if mo:
         return _pack(tr["w"][int(mo.group(1))], bw)
-    mo = re.match(r"s_(?:split|rank|addr|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
+    mo = re.match(r"s_(split|rank|addr|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
     if not mo:
         return None
-    lvl, what, idx = mo.group(1), mo.group(2), mo.group(3)
+    stage, lvl, what, idx = mo.group(1), mo.group(2), mo.group(3), mo.group(4)
     i = int(idx) if idx else None
     n = model.n
     nb = n + 1
+    if stage == "addr":  # the register before the memories holds vertex order (rotated after it)
+        bank_order = False
     mu = _bank_order(tr, tr["mu"]) if bank_order else tr["mu"]
     products = _bank_order(tr, tr["products"]) if bank_order else tr["products"]
     if what == "c":
@@ -419,8 +421,8 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
         return sum(1 << (k - 1) for k in range(1, n) if r < k)
     if what == "data":
         return _pack(tr["w_by_bank"][i], bw)
-    if what == "addr":  # the address presented to memory i (register before the memories)
-        return int(tr["addr_by_bank"][i])
+    if what == "addr":  # vertex i's address (register before the memories) or memory i's
+        return int(tr["addr_by_bank"][i] if bank_order else tr["addr"][i])
     if what == "p":
         return int(products[i % nb, i // nb])
     if what == "t" and lvl is not None:
