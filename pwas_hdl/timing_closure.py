@@ -27,6 +27,7 @@ is the shallowest passing candidate above the last miss. When even the deepest m
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -415,7 +416,7 @@ def close_timing(
         raise TimingNotMet(
             f"no pipeline reaches {target:g} MHz on {record['part']}: the best measured fmax is "
             f"{fm:.1f} MHz ({lat[best]} cycles, {_label(cands[best], n)}); "
-            f"choose a target of at most {fm:.0f} MHz, another FPGA, or a fixed --pipeline",
+            f"choose a target of at most {math.floor(fm)} MHz, another FPGA, or a fixed --pipeline",
             record,
         )
     return cands[chosen], record
@@ -427,12 +428,13 @@ def timing_report_text(rec: dict[str, Any]) -> str:
         "## Timing closure",
         "",
         f"Target **{rec['target_mhz']:g} MHz** on {rec['part']} (nextpnr, seed {rec['seed']}, `--freq` = target; "
-        f"design inside a harness that registers every port). Candidates from the shallowest; "
-        f"measured in the order {', '.join(str(v) for v in rec['measurements'])} (cycles).",
+        f"design inside a harness that registers every port, so fmax covers the input and output paths). "
+        f"Candidates from the shallowest; measured in the order {', '.join(str(v) for v in rec['measurements'])} (cycles).",
         "",
-        "| cycles | pipeline | fmax (MHz) | latency (ns) | LUT4 | FF (core) | DSP | BRAM | critical path | |",
+        "| cycles | pipeline | fmax (MHz) | latency (ns) | LUT4 | FF (core) | DSP | BRAM | critical path | result |",
         "|---:|---|---:|---:|---:|---:|---:|---:|---|---|",
     ]
+    skipped: dict[str, list[str]] = {}
     for k, c in enumerate(rec["candidates"]):
         if c["measured"]:
             cp = c.get("critical_path") or {}
@@ -441,5 +443,7 @@ def timing_report_text(rec: dict[str, Any]) -> str:
             lines.append(f"| {c['latency_cycles']} | {c['label']} | {c['fmax_mhz']} | {c['latency_ns']} | {c['luts']} | "
                          f"{c['ffs_core']} | {c['dsp']} | {c['bram']} | {cpt} | {mark} |")
         else:
-            lines.append(f"| {c['latency_cycles']} | {c['label']} | - | - | | | | | | {c['note']} |")
+            skipped.setdefault(c["note"], []).append(f"{c['latency_cycles']} ({c['label']})")
+    for note, cands in skipped.items():
+        lines += ["", f"Not measured, {note}: {', '.join(cands)}."]
     return "\n".join(lines) + "\n"
