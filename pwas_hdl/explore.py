@@ -66,7 +66,10 @@ The estimate is computed for every point; then the Pareto points (and the defaul
 (:func:`pwas_hdl.generate.build_design`) and synthesised with :func:`pwas_hdl.synthesis.synthesize`
 (Yosys; nextpnr for FPGA targets, about 10 s a point for ``generic``): ``point["measured"]`` holds
 LUTs, FFs, DSPs, block RAMs, memory bits (and fmax). The front stays the estimate's front; the
-measured numbers check it.
+measured numbers check it: ``result["measured"]["pareto"]`` is the front of the synthesised points
+alone in (LUTs, DSPs, block RAMs, ``rmsee_ratio``), and ``default_on_front`` says whether the
+default is on it. Block RAMs and DSPs come in fixed sizes (an 18-bit word costs the same block as
+a 10-bit one), so the measured front can differ from the bit-count estimate's.
 
 Combinations that the bit-true model refuses (an output finer than the exact product, a weight
 that does not fit a fixed ``weight_bits``, an accumulator over 62 bits, an input width too small
@@ -672,6 +675,12 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
     if not done["points"]:
         raise RuntimeError("synthesis failed for every point; first error: " + (errors[0] if errors else "?"))
     done["errors"] = errors
+    ok = [k for k in done["points"] if all(isinstance(points[k]["measured"].get(key), (int, float)) for key in ("luts", "dsp", "bram"))]
+    objs = [[points[k]["measured"][key] for key in ("luts", "dsp", "bram")] + [points[k]["rmsee_ratio"]] for k in ok]
+    done["objectives"] = ["luts", "dsp", "bram", "rmsee_ratio"]
+    done["pareto"] = [ok[i] for i in pareto_front(objs)] if ok else []
+    di = next((k for k in idx if points[k]["is_default"]), None)
+    done["default_on_front"] = (di in done["pareto"]) if di in ok else None
     return done
 
 
@@ -689,6 +698,8 @@ def format_table(result: dict, rows: str = "pareto") -> str:
             f"RMSEE {tg[0]}" if len(tg) == 1 else "RMSEE / float", "vs float", "RMS dev. float", "max dev. (LSB)", "front"]
     if meas:
         head[-1:-1] = ["LUT (meas.)", "FF (meas.)", "DSP", "BRAM"]
+        head.append("meas. front")
+        mfront = set(result["measured"].get("pareto", []))
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for k in idx:
         p = pts[k]
@@ -703,6 +714,7 @@ def format_table(result: dict, rows: str = "pareto") -> str:
         if meas:
             m = p.get("measured") or {}
             row[-1:-1] = [str(m.get("luts", "")), str(m.get("ffs", "")), str(m.get("dsp", "")), str(m.get("bram", ""))]
+            row.append(("yes" if k in mfront else "no") if "luts" in m else "")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
@@ -800,11 +812,15 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
                        color="red" if star else color[p["input_bits"]], edgecolors="black", zorder=3)
             ax.annotate(f"w{p['weight_bits']} DSP {m.get('dsp')} BRAM {m.get('bram')}", (m["luts"], excess[k]),
                         textcoords="offset points", xytext=(5, 3), fontsize=6)
+        mf = sorted(meas.get("pareto", []), key=lambda k: pts[k]["measured"]["luts"])
+        if mf:
+            ax.step([pts[k]["measured"]["luts"] for k in mf], excess[mf], where="post", color="black", lw=1.0, zorder=2)
         ax.set_yscale("symlog", linthresh=lin)
         ax.axhline(0.0, color="tab:blue", ls="--", lw=1.2)
         ax.set_xlabel(f"measured LUTs ({meas['target']}{', ' + meas['device'] if meas.get('device') else ''})")
         ax.set_ylabel("bit-true RMSEE above the float model's (%)")
-        ax.set_title("front points synthesised")
+        ax.set_title("synthesised: Pareto points and the default\n(line: their own front in LUTs, DSPs, BRAMs, RMSEE)",
+                     fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
 
     fig.suptitle(title or f"bit-width exploration: n = {result['model']['n']}, N = {result['model']['N']}, "

@@ -236,6 +236,12 @@ def test_measured_mode_with_a_stub_synthesizer(tiny, tmp_path, monkeypatch):
         mm = res["points"][k]["measured"]
         assert mm["luts"] == 100 + res["points"][k]["weight_bits"] and mm["estimate_memory_bits_exact"] is True
     assert (tmp_path / "designs").is_dir()
+    # the front of the synthesised points alone: (luts, dsp, bram, rmsee_ratio)
+    objs = {k: (res["points"][k]["measured"]["luts"], res["points"][k]["rmsee_ratio"]) for k in meas["points"]}
+    for k in meas["points"]:
+        dominated = any(o[0] <= objs[k][0] and o[1] <= objs[k][1] and o != objs[k] for o in objs.values())
+        assert (k in meas["pareto"]) == (not dominated)
+    assert meas["default_on_front"] == (di in meas["pareto"])
     plot_exploration(res, tmp_path / "m.png")
     assert "LUT (meas.)" in format_table(res)
 
