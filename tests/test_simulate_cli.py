@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +23,11 @@ mutations = sim_module("pwas_mutations")
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("sim-cache")
+    """Simulator builds, shared with tests/test_rtl_cocotb.py (same folder)."""
+    env = os.environ.get("PWAS_HDL_SIM_CACHE")
+    path = Path(env) if env else tmp_path_factory.getbasetemp() / "pwas-sim-cache"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
 
 
 @pytest.fixture(scope="module")
