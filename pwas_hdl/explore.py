@@ -30,7 +30,8 @@ Resources (``resources="estimate"``, every point)
 -------------------------------------------------
 Exact sizes come from the objects the generator itself uses (:func:`pwas_hdl.hdl.build_core` +
 :func:`~pwas_hdl.hdl.design_info`: the memory plan and the arithmetic widths of the manifest; no
-Verilog is emitted, about 40 ms a point); the logic is then counted in bit-level units:
+Verilog is emitted; with the bit-true run, under 0.1 s a point for N = 4096); the logic is then
+counted in bit-level units:
 
 ``memory_bits``
     ``words x word_bits`` of the weight memories (exact: the manifest's ``memory.bits``).
@@ -64,7 +65,8 @@ Measured resources (``resources="generic" | "ecp5" | "ice40"``)
 ----------------------------------------------------------------
 The estimate is computed for every point; then the Pareto points (and the default) are generated
 (:func:`pwas_hdl.generate.build_design`) and synthesised with :func:`pwas_hdl.synthesis.synthesize`
-(Yosys; nextpnr for FPGA targets, about 10 s a point for ``generic``): ``point["measured"]`` holds
+(Yosys; nextpnr for FPGA targets; for the Lorenz core about 15 s a point for ``generic``, 40 s for
+``ecp5``): ``point["measured"]`` holds
 LUTs, FFs, DSPs, block RAMs, memory bits (and fmax). The front stays the estimate's front; the
 measured numbers check it: ``result["measured"]["pareto"]`` is the front of the synthesised points
 alone in (LUTs, DSPs, block RAMs, ``rmsee_ratio``), and ``default_on_front`` says whether the
