@@ -16,15 +16,19 @@ Inputs, per regressor dimension ``j`` (:class:`~pwas_hdl.fixed_point.InputFormat
     ``F = max_j F_j`` is the common fraction width.
 Weights
     Signed ``B_w``-bit codes, physical weight ``= code * 2**-Fw`` (offset 0), one format for all
-    targets. Default ``Fw = Fo + 2`` and ``B_w`` = the fewest bits that hold every weight code.
+    targets. Default ``Fw`` from a quantisation-noise budget (:func:`default_weight_frac`): the
+    weight lsb is the largest power of two such that the RMS noise of weight rounding plus output
+    rounding (uniform errors, output lsb = half the weight lsb) stays within
+    ``NOISE_BUDGET = 10 %`` of ``ref``, i.e. ``lsb_w <= 0.1 * ref * sqrt(12 / 1.25)``; added in
+    quadrature to an estimation error of size ``ref`` that costs about 0.5 % of RMSEE.
+    ``B_w`` = the fewest bits that hold every weight code.
     Overflow policy ``"error"`` (default: :class:`ValueError` naming the weight, its vertex,
     value, the format range and the bits needed) or ``"saturate"`` (with a
     :func:`warnings.warn`, the error bound then includes the saturation error).
 Output
     Signed ``B_out``-bit codes, physical output ``= code * 2**-Fo``, one format for all targets.
-    Default ``Fo = -floor(log2(ref / 32))`` (output lsb = the largest power of two ``<= ref/32``)
-    with ``ref`` = the training RMSE (max over targets) or, when unknown, the weight range
-    ``(max w - min w) / 2**10``; ``B_out`` = the fewest bits such that no output can saturate
+    Default ``Fo = Fw + 1`` (output lsb = half the weight lsb), with ``ref`` = the training RMSE
+    (max over targets) or, when unknown, the weight range ``(max w - min w) / 2**10``; ``B_out`` = the fewest bits such that no output can saturate
     (``|f| <= max |w_q|`` because the ``mu`` are a convex combination).
 Rounding
     ``rounding="half_up"`` (default) or ``"truncate"`` applies to the weight quantisation and to
@@ -85,7 +89,7 @@ from .fixed_point import (
 from .geometry import Grid
 from .memory_layout import make_layout
 
-__all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES"]
+__all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES", "NOISE_BUDGET", "default_weight_frac"]
 
 #: Widest intermediate the int64 model (and the generator) accepts.
 MAX_DATAPATH_BITS = 62
@@ -117,6 +121,25 @@ TRACE_STAGES = (
 )
 
 
+#: RMS quantisation noise (weight + output rounding) allowed by the default formats, as a
+#: fraction of the reference error (the training RMSE).
+NOISE_BUDGET = 0.1
+
+
+def default_weight_frac(ref: float, budget: float = NOISE_BUDGET) -> int:
+    """Default weight fraction bits ``Fw`` for a reference error ``ref`` (physical units).
+
+    With uniform rounding errors the weight term contributes at most ``lsb_w**2 / 12`` of variance
+    (the ``mu`` are a convex combination) and the output rounding ``lsb_o**2 / 12`` with
+    ``lsb_o = lsb_w / 2``; the largest power-of-two ``lsb_w`` with
+    ``sqrt(1.25 * lsb_w**2 / 12) <= budget * ref`` is chosen, ``Fw = -log2(lsb_w)``.
+    """
+    if not (math.isfinite(ref) and ref > 0):
+        raise ValueError(f"reference error must be a positive number, got {ref!r}")
+    limit = budget * ref * math.sqrt(12.0 / 1.25)
+    return -(math.frexp(limit)[1] - 1)
+
+
 def _py_shift_round(a: int, sh: int, rounding: str) -> int:
     if sh == 0:
         return a
@@ -138,11 +161,11 @@ class FixedPointModel:
     weight_bits : int, optional
         ``B_w``; default: the fewest bits that hold every weight code.
     weight_frac : int, optional
-        ``Fw``; default ``Fo + 2``.
+        ``Fw``; default :func:`default_weight_frac` of ``reference_error`` (noise budget).
     output_bits : int, optional
         ``B_out``; default: the fewest bits such that no output saturates.
     output_frac : int, optional
-        ``Fo``; default ``-floor(log2(reference_error / 32))``.
+        ``Fo``; default ``Fw + 1``.
     overflow : {"error", "saturate"}
         What to do with weights that do not fit ``weight_bits`` (default "error").
     rounding : {"half_up", "truncate"}
@@ -263,8 +286,8 @@ class FixedPointModel:
             ref, ref_src = (rng / 2**10, "weight_range") if rng > 0 else (1.0, "constant_weights")
         self.reference_error = ref
         self.reference_error_source = ref_src
-        fo = int(output_frac) if output_frac is not None else -(math.frexp(ref / 32)[1] - 1)
-        fw = int(weight_frac) if weight_frac is not None else fo + 2
+        fw = int(weight_frac) if weight_frac is not None else default_weight_frac(ref)
+        fo = int(output_frac) if output_frac is not None else fw + 1
         sh = self.F + fw - fo
         if sh < 0:
             raise ValueError(

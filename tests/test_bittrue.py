@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from pwas_hdl.bittrue import TRACE_STAGES, FixedPointModel
+from pwas_hdl.bittrue import TRACE_STAGES, FixedPointModel, default_weight_frac
 from pwas_hdl.fixed_point import FixedFormat, frac_for_bits, shift_round, signed_bits_needed
 from pwas_hdl.geometry import Grid
 
@@ -303,22 +303,24 @@ def test_defaults_from_reference_error():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         m = FixedPointModel(g, w, reference_error=ref)
-    fo = m.output_format.frac
-    assert 2.0**-fo <= ref / 32 < 2.0 ** (-fo + 1)  # largest power of two <= ref / 32
-    assert m.weight_format.frac == fo + 2
+    fw = m.weight_format.frac
+    lsb_w = 2.0**-fw
+    # largest power of two whose rounding noise (weights + output at half the lsb) is within 10 % of ref
+    assert np.sqrt(1.25 * lsb_w**2 / 12) <= 0.1 * ref < np.sqrt(1.25 * (2 * lsb_w) ** 2 / 12)
+    assert m.output_format.frac == fw + 1
     bw = m.weight_format.bits
-    FixedFormat(bw, fo + 2, overflow="error").quantize(w)
+    FixedFormat(bw, fw, overflow="error").quantize(w)
     with pytest.raises(ValueError):
-        FixedFormat(bw - 1, fo + 2, overflow="error").quantize(w)
+        FixedFormat(bw - 1, fw, overflow="error").quantize(w)
     # B_out is minimal and never saturates: the extreme weight codes map to reachable output codes
     reach = [shift_round(np.array([c << m.F]), m.shift, m.rounding)[0] for c in (m.weight_codes.min(), m.weight_codes.max())]
     assert m.output_format.bits == signed_bits_needed(reach)
     assert not m.output_may_saturate
-    assert m.error_bound_lsb == pytest.approx(0.625)  # 0.5 * 2**-2 + 0.5
+    assert m.error_bound_lsb == pytest.approx(1.5)  # 0.5 * 2 (weight lsb = 2 output lsb) + 0.5
     # no reference error: the weight range / 2**10
     m2 = FixedPointModel(g, w)
     r2 = (w.max() - w.min()) / 2**10
-    assert 2.0**-m2.output_format.frac <= r2 / 32 < 2.0 ** (-m2.output_format.frac + 1)
+    assert m2.weight_format.frac == default_weight_frac(r2)
     assert m2.to_dict()["reference_error"]["source"] == "weight_range"
 
 
@@ -335,9 +337,9 @@ def test_from_sensor_lorenz_defaults():
     assert np.allclose(m.input_offset + m.input_lsb * -1792, s.grid_.lo, rtol=0, atol=1e-12)
     assert np.allclose(m.input_lsb * 512, s.grid_.step, rtol=1e-15, atol=0)
     ref = float(np.max(s.train_rmse_))
-    assert 2.0**-m.output_format.frac <= ref / 32 < 2.0 ** (-m.output_format.frac + 1)
-    assert m.weight_format.frac == m.output_format.frac + 2
-    assert m.error_bound_lsb == pytest.approx(0.625)
+    assert m.weight_format.frac == default_weight_frac(ref) == -3  # weight lsb 8 for a training RMSE of ~27
+    assert m.output_format.frac == -2
+    assert m.error_bound_lsb == pytest.approx(1.5)
     assert m.layout.total_words == 5120 <= 1.3 * 4096
     sig = m.signal_input_formats()
     assert len(sig) == 1 and len(set(m.inputs)) == 1  # all lags of y share one format

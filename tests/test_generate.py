@@ -123,10 +123,10 @@ def test_regenerate_replaces_own_folder(lorenz_model, tmp_path):
 
 def test_saturate_option_warns_and_builds(lorenz_model):
     with pytest.warns(UserWarning):
-        gd = build_design(lorenz_model, weight_bits=12, overflow="saturate")
+        gd = build_design(lorenz_model, weight_bits=8, overflow="saturate")
     assert gd.model.n_weights_saturated > 0
     assert gd.manifest["error_bound"]["includes_weight_saturation"] is True
-    assert gd.model.weight_codes.min() >= -(2 ** 11) and gd.model.weight_codes.max() <= 2 ** 11 - 1
+    assert gd.model.weight_codes.min() >= -(2 ** 7) and gd.model.weight_codes.max() <= 2 ** 7 - 1
 
 
 def test_two_targets_share_one_word_per_bank(tmp_path):
