@@ -417,6 +417,30 @@ def explore(
         err.print(f"wrote {outdir / 'explore.json'} and {outdir / 'explore.png'}", highlight=False, markup=False)
 
 
+@app.command()
+def report(
+    outdir: Annotated[Path, typer.Argument(help="Folder written by `pwas-hdl generate`.")],
+    sim: Annotated[Optional[list[str]], typer.Option("--sim", help="Extra `simulate` JSON summaries (OUTDIR/sim/*.json are read anyway).")] = None,
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the collected numbers as JSON.")] = None,
+    markdown: Annotated[Optional[Path], typer.Option("--md", help="Write the Markdown report here (it is printed anyway).")] = None,
+) -> None:
+    """Accuracy, latency and resources of a generated design in one table.
+
+    Collects the manifest and model (generate), simulation summaries (simulate) and synthesis
+    results (OUTDIR/synth/<target>/synth.json from synth).
+    """
+    from .report import collect_report, report_markdown
+
+    with _user_errors():
+        rep = collect_report(outdir, _names(sim))
+        text = report_markdown(rep)
+        if json_out is not None:
+            atomic_write_text(json_out, json.dumps(rep, indent=2) + "\n")
+        if markdown is not None:
+            atomic_write_text(markdown, text)
+        out.print(text, highlight=False, markup=False)
+
+
 @data_app.command("lorenz")
 def make_data_lorenz(
     output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns y, z, z_true).")],

@@ -29,7 +29,7 @@ def lorenz_files(tmp_path_factory):
 
 
 def test_every_command_has_help():
-    for cmd in (["--help"], ["fit", "--help"], ["predict", "--help"], ["info", "--help"], ["bench", "lorenz", "--help"],
+    for cmd in (["--help"], ["fit", "--help"], ["generate", "--help"], ["simulate", "--help"], ["synth", "--help"], ["report", "--help"], ["explore", "--help"], ["predict", "--help"], ["info", "--help"], ["bench", "lorenz", "--help"],
                 ["make-data", "lorenz", "--help"]):
         res = invoke(*cmd)
         assert res.exit_code == 0, (cmd, res.output)

@@ -1,0 +1,154 @@
+"""One report of a generated design: fit, formats, latency, simulation and synthesis results.
+
+:func:`collect_report` reads what the other commands left in a generated folder --
+``manifest.json`` and ``model.json`` (``generate``), ``sim/*.json`` (``simulate --json``, or any
+summary passed explicitly) and ``synth/<target>/synth.json`` (``synth``) -- and puts the numbers
+side by side; :func:`report_markdown` renders them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+from .manifest import load_manifest
+from .virtual_sensor import PWASVirtualSensor
+
+__all__ = ["collect_report", "report_markdown"]
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc})") from exc
+
+
+def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.PathLike] = ()) -> dict[str, Any]:
+    """Gather the results of a generated folder.
+
+    Parameters
+    ----------
+    outdir : path
+        Folder written by ``pwas-hdl generate``.
+    sim_summaries : sequence of paths
+        JSON summaries of ``pwas-hdl simulate`` (in addition to ``outdir/sim/*.json``).
+
+    Returns
+    -------
+    dict
+        ``design`` (top, kind, latency, II, memory, formats, error bound), ``fit`` (model
+        summary), ``simulation`` (one entry per summary), ``synthesis`` (one entry per target).
+    """
+    out = Path(outdir)
+    man = load_manifest(out)
+    model = PWASVirtualSensor.load(out / man["files"]["model"])
+    fit = model.to_dict()["fit"]
+    fmt = man["formats"]
+    design = {
+        "top": man["top"],
+        "kind": man["design"],
+        "n": len(man["lags"]["regressors"]),
+        "N": man["domain"]["n_vertices"],
+        "regressors": man["lags"]["regressors"],
+        "latency_cycles": man["latency_cycles"],
+        "ii": man["ii"],
+        "memory": {k: man["memory"].get(k) for k in ("kind", "memories", "depth", "word_bits", "words", "bits")},
+        "input_formats": sorted({str(i["format"]) for i in fmt["inputs"]}),
+        "weight_format": f"s{fmt['weight']['bits']}.{fmt['weight']['frac']}",
+        "output_format": f"s{fmt['output']['bits']}.{fmt['output']['frac']}",
+        "output_lsb": 2.0 ** -fmt["output"]["frac"],
+        "error_bound_lsb": man["error_bound"]["lsb"],
+        "error_bound": man["error_bound"]["physical"],
+    }
+    paths = sorted((out / "sim").glob("*.json")) if (out / "sim").is_dir() else []
+    paths += [Path(p) for p in sim_summaries]
+    sims = []
+    for p in paths:
+        s = _read_json(p)
+        if "mismatches" not in s or "simulator" not in s:
+            raise ValueError(f"{p} is not a `pwas-hdl simulate` summary")
+        sims.append(
+            {
+                "file": p.name,
+                "simulator": s["simulator"],
+                "samples": s["samples"],
+                "mismatches": s["mismatches"],
+                "latency_measured": [s["latency_cycles"].get("measured_min"), s["latency_cycles"].get("measured_max")],
+                "ii_measured": s["ii"].get("measured"),
+                "max_error_vs_float_lsb": s.get("max_error_vs_float_lsb"),
+                "within_error_bound": s.get("within_error_bound"),
+                "samples_per_second": s.get("samples_per_second"),
+                "targets": {
+                    t: {k: v.get(k) for k in ("reference_column", "rmsee_float", "rmsee_hw", "rmsee_increase_hw_vs_float_percent")}
+                    for t, v in s.get("targets", {}).items()
+                },
+            }
+        )
+    synth = []
+    for p in sorted(out.glob("synth/*/synth.json")):
+        r = _read_json(p)
+        synth.append({k: r.get(k) for k in ("target", "part", "luts", "ffs", "carry", "dsp", "bram", "bram_bits",
+                                             "fmax_mhz", "latency_ns", "throughput_msps", "timing_met")})
+    return {
+        "format": "pwas-hdl-report",
+        "version": 1,
+        "design": design,
+        "fit": {k: fit.get(k) for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")},
+        "simulation": sims,
+        "synthesis": synth,
+    }
+
+
+def _fmt(v: Any, spec: str = ".4g") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return format(v, spec)
+    return str(v)
+
+
+def report_markdown(rep: dict[str, Any]) -> str:
+    """Markdown rendering of :func:`collect_report`."""
+    d, f = rep["design"], rep["fit"]
+    lines = [
+        f"# {d['top']} ({d['kind']}): accuracy, latency, resources",
+        "",
+        f"Model: n = {d['n']} ({', '.join(d['regressors'])}), N = {d['N']}, sigma = {_fmt(f['sigma'], '.3g')}, "
+        f"Tikhonov order {f['tikhonov_order']}, gamma = {f['gamma']}, train RMSE "
+        + ", ".join(f"{t} {_fmt(v)}" for t, v in (f.get("train_rmse") or {}).items())
+        + ".",
+        "",
+        f"Formats: inputs {', '.join(d['input_formats'])}, weights {d['weight_format']}, output {d['output_format']} "
+        f"(LSB {_fmt(d['output_lsb'])}); error bound vs float {_fmt(d['error_bound_lsb'])} LSB = {_fmt(d['error_bound'])}.",
+        f"Latency {d['latency_cycles']} cycles, II {d['ii']}; weight memory {d['memory']['words']} words x "
+        f"{d['memory']['word_bits']} bits ({d['memory']['kind']}, {d['memory']['memories']} memories).",
+        "",
+    ]
+    if rep["simulation"]:
+        lines += ["## Simulation (RTL against the bit-true and float models)", "",
+                  "| simulator | samples | mismatches | latency (meas.) | II (meas.) | max err vs float (LSB) | target | RMSEE float | RMSEE hardware | increase |",
+                  "|---|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
+        for s in rep["simulation"]:
+            lat = s["latency_measured"]
+            for t, v in s["targets"].items():
+                lines.append(
+                    f"| {s['simulator']} | {s['samples']} | {s['mismatches']} | {lat[0]}..{lat[1]} | {_fmt(s['ii_measured'])} | "
+                    f"{_fmt(s['max_error_vs_float_lsb'], '.3f')} | {t} (vs {v['reference_column']}) | {_fmt(v['rmsee_float'])} | "
+                    f"{_fmt(v['rmsee_hw'])} | {_fmt(v['rmsee_increase_hw_vs_float_percent'], '.3f')} % |"
+                )
+        lines.append("")
+    if rep["synthesis"]:
+        lines += ["## Synthesis (Yosys + nextpnr)", "",
+                  "| target | part | LUT | FF | carry | DSP | BRAM (bits) | fmax (MHz) | latency (ns) | Msamples/s |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for s in rep["synthesis"]:
+            lines.append(
+                f"| {s['target']} | {_fmt(s['part'])} | {_fmt(s['luts'])} | {_fmt(s['ffs'])} | {_fmt(s['carry'])} | {_fmt(s['dsp'])} | "
+                f"{_fmt(s['bram'])} ({_fmt(s['bram_bits'])}) | {_fmt(s['fmax_mhz'], '.1f')} | {_fmt(s['latency_ns'], '.1f')} | "
+                f"{_fmt(s['throughput_msps'], '.1f')} |"
+            )
+        lines.append("")
+    return "\n".join(lines)

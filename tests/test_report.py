@@ -1,0 +1,55 @@
+"""`pwas-hdl report`: collects generate / simulate / synth results of a folder into one table."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from typer.testing import CliRunner
+
+from pwas_hdl.cli import app
+from pwas_hdl.generate import generate
+from pwas_hdl.virtual_sensor import PWASVirtualSensor
+
+runner = CliRunner()
+
+
+def _folder(tmp_path):
+    rng = np.random.default_rng(0)
+    y = rng.uniform(-1, 1, (300, 1))
+    m = PWASVirtualSensor(my=2, partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(None, y, y**2)
+    out = tmp_path / "hw"
+    generate(m, out)
+    return out
+
+
+def test_report_collects_sim_and_synth(tmp_path):
+    out = _folder(tmp_path)
+    (out / "sim").mkdir()
+    (out / "sim" / "icarus.json").write_text(json.dumps({
+        "simulator": "icarus", "samples": 10, "mismatches": 0, "latency_cycles": {"measured_min": 7, "measured_max": 7},
+        "ii": {"measured": 1.0}, "max_error_vs_float_lsb": 0.25, "within_error_bound": True, "samples_per_second": 1e3,
+        "targets": {"z": {"reference_column": "z", "rmsee_float": 0.5, "rmsee_hw": 0.51,
+                          "rmsee_increase_hw_vs_float_percent": 2.0}}}))
+    (out / "synth" / "ecp5").mkdir(parents=True)
+    (out / "synth" / "ecp5" / "synth.json").write_text(json.dumps({
+        "target": "ecp5", "part": "LFE5U-45F", "luts": 123, "ffs": 45, "carry": 6, "dsp": 3, "bram": 3,
+        "bram_bits": 55296, "fmax_mhz": 99.5, "latency_ns": 70.35, "throughput_msps": 99.5, "timing_met": True}))
+    res = runner.invoke(app, ["report", str(out), "--json", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["design"]["N"] == 16 and rep["design"]["ii"] == 1
+    assert rep["simulation"][0]["targets"]["z"]["rmsee_hw"] == 0.51
+    assert rep["synthesis"][0]["luts"] == 123
+    assert "| icarus | 10 | 0 | 7..7 |" in res.output
+    assert "| ecp5 | LFE5U-45F | 123 | 45 |" in res.output
+
+
+def test_report_refuses_a_foreign_summary(tmp_path):
+    out = _folder(tmp_path)
+    bad = tmp_path / "x.json"
+    bad.write_text('{"hello": 1}')
+    res = runner.invoke(app, ["report", str(out), "--sim", str(bad)])
+    assert res.exit_code == 2 and "not a `pwas-hdl simulate` summary" in res.output
+    res = runner.invoke(app, ["report", str(tmp_path / "nowhere")])
+    assert res.exit_code == 2 and "run `pwas-hdl generate" in res.output
