@@ -19,8 +19,8 @@ Weights
     targets. Default ``Fw`` from a quantisation-noise budget (:func:`default_weight_frac`): the
     weight lsb is the largest power of two such that the RMS noise of weight rounding plus output
     rounding (uniform errors, output lsb = half the weight lsb) stays within
-    ``NOISE_BUDGET = 10 %`` of ``ref``, i.e. ``lsb_w <= 0.1 * ref * sqrt(12 / 1.25)``; added in
-    quadrature to an estimation error of size ``ref`` that costs about 0.5 % of RMSEE.
+    ``NOISE_BUDGET = 5 %`` of ``ref``, i.e. ``lsb_w <= 0.05 * ref * sqrt(12 / 1.25)``; added in
+    quadrature to an estimation error of size ``ref`` that costs about 0.1 % of RMSEE.
     ``B_w`` = the fewest bits that hold every weight code.
     Overflow policy ``"error"`` (default: :class:`ValueError` naming the weight, its vertex,
     value, the format range and the bits needed) or ``"saturate"`` (with a
@@ -123,7 +123,7 @@ TRACE_STAGES = (
 
 #: RMS quantisation noise (weight + output rounding) allowed by the default formats, as a
 #: fraction of the reference error (the training RMSE).
-NOISE_BUDGET = 0.1
+NOISE_BUDGET = 0.05
 
 
 def default_weight_frac(ref: float, budget: float = NOISE_BUDGET) -> int:

@@ -305,8 +305,8 @@ def test_defaults_from_reference_error():
         m = FixedPointModel(g, w, reference_error=ref)
     fw = m.weight_format.frac
     lsb_w = 2.0**-fw
-    # largest power of two whose rounding noise (weights + output at half the lsb) is within 10 % of ref
-    assert np.sqrt(1.25 * lsb_w**2 / 12) <= 0.1 * ref < np.sqrt(1.25 * (2 * lsb_w) ** 2 / 12)
+    # largest power of two whose rounding noise (weights + output at half the lsb) is within 5 % of ref
+    assert np.sqrt(1.25 * lsb_w**2 / 12) <= 0.05 * ref < np.sqrt(1.25 * (2 * lsb_w) ** 2 / 12)
     assert m.output_format.frac == fw + 1
     bw = m.weight_format.bits
     FixedFormat(bw, fw, overflow="error").quantize(w)
@@ -337,8 +337,8 @@ def test_from_sensor_lorenz_defaults():
     assert np.allclose(m.input_offset + m.input_lsb * -1792, s.grid_.lo, rtol=0, atol=1e-12)
     assert np.allclose(m.input_lsb * 512, s.grid_.step, rtol=1e-15, atol=0)
     ref = float(np.max(s.train_rmse_))
-    assert m.weight_format.frac == default_weight_frac(ref) == -3  # weight lsb 8 for a training RMSE of ~27
-    assert m.output_format.frac == -2
+    assert m.weight_format.frac == default_weight_frac(ref) == -2  # weight lsb 4 for a training RMSE of ~27
+    assert m.output_format.frac == -1
     assert m.error_bound_lsb == pytest.approx(1.5)
     assert m.layout.total_words == 5120 <= 1.3 * 4096
     sig = m.signal_input_formats()
