@@ -142,7 +142,7 @@ def markdown(res: dict) -> str:
     m0 = res["main"][0]
     lines += [
         "",
-        f"Output LSB {m0['output_lsb']} (= largest power of two <= train RMSE / 32); the hardware RMSEE equals the",
+        f"Output LSB {m0['output_lsb']} (default formats: quantisation noise <= 5 % of the train RMSE, pwas_hdl.bittrue.default_weight_frac); the hardware RMSEE equals the",
         "bit-true model's to the last digit (every output identical). Simulation speed is measured inside the",
         "simulator for the replay (cocotb drives one transfer per clock); builds are cached by the hash of the",
         "Verilog (the first Verilator build also compiles Verilator's run-time library, later ones reuse it).",

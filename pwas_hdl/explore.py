@@ -114,10 +114,10 @@ EXPLORE_VERSION = 1
 
 #: Input widths swept by default.
 DEFAULT_INPUT_BITS = (8, 10, 12, 14, 16)
-#: Weight / output fraction bits swept by default, relative to the defaults of ``generate``. The
-#: default output LSB is about train RMSE / 32, so that rounding is negligible; the accuracy starts
-#: to suffer about 5 bits coarser, which the sweep covers.
-DEFAULT_FRAC_OFFSETS = tuple(range(-7, 3))
+#: Weight / output fraction bits swept by default, relative to the defaults of ``generate`` (whose
+#: rounding noise is 5 % of the training RMSE, :func:`pwas_hdl.bittrue.default_weight_frac`): from
+#: 4 bits coarser, where the accuracy clearly suffers, to 4 bits finer.
+DEFAULT_FRAC_OFFSETS = tuple(range(-4, 5))
 #: At most this many Pareto points are synthesised in a measured run (evenly spread, both ends kept).
 DEFAULT_MEASURE_MAX = 10
 #: ``resources=`` values: the analytic estimate only, or the estimate plus synthesis of the front.

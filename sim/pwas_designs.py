@@ -2,7 +2,7 @@
 
 :func:`synthetic_model` returns a fitted :class:`~pwas_hdl.virtual_sensor.PWASVirtualSensor`
 built with ``from_dict``: an explicit domain, random weights of a chosen scale and a stated
-"training RMSE" (which sets the default output LSB = the largest power of two <= RMSE / 32).
+"training RMSE" (which sets the default weight/output LSBs, pwas_hdl.bittrue.default_weight_frac).
 :class:`DesignConfig` names one hardware configuration (model + ``generate`` options) and
 :meth:`DesignConfig.generate` writes its folder.
 """
