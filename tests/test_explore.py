@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from pwas_hdl.bittrue import FixedPointModel
 from pwas_hdl.cli import app
 from pwas_hdl.data_io import read_csv, write_csv
-from pwas_hdl.explore import explore, format_table, pareto_front, plot_exploration
+from pwas_hdl.explore import DEFAULT_FRAC_OFFSETS, explore, format_table, pareto_front, plot_exploration
 from pwas_hdl.generate import build_design
 from pwas_hdl.plants import lorenz
 from pwas_hdl.virtual_sensor import PWASVirtualSensor
@@ -85,7 +85,8 @@ def test_default_point_present_and_flagged(tiny, small_result):
     assert d["weight_offset"] == 0 and d["output_offset"] == 0
     assert res["sweep"]["default_in_sweep"] is True
     # default sweep: 2 input widths x 10 weight x 10 output fraction widths
-    assert len(res["points"]) + len(res["refused"]) == 2 * 10 * 10
+    n_off = len(DEFAULT_FRAC_OFFSETS)
+    assert len(res["points"]) + len(res["refused"]) == 2 * n_off * n_off
     # on_front flags agree with the front, and the default's verdict is justified
     assert [k for k, p in enumerate(res["points"]) if p["on_front"]] == sorted(res["pareto"])
     assert res["default"]["on_front"] == (defaults[0] in res["pareto"])
