@@ -25,10 +25,11 @@ from .virtual_sensor import PWASVirtualSensor
 
 app = typer.Typer(
     name="pwas-hdl",
-    help="PWAS virtual sensors: fit from plant data, evaluate, benchmark (and generate verified Verilog).",
+    help="PWAS virtual sensors: fit from plant data, generate verified Verilog, simulate, synthesize, report.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",
 )
 bench_app = typer.Typer(help="Reproduce the seed paper's benchmarks.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
@@ -175,9 +176,9 @@ def predict(
 ) -> None:
     """Estimate the targets for every row of DATA that has a full regressor.
 
-    Writes columns: row (0-based data row), <target>_hat for each target, out_of_domain (1 when a
+    Writes columns: row (0-based data row), TARGET_hat for each target, out_of_domain (1 when a
     regressor was outside the model's domain and was clamped). When DATA holds the target column
-    (or <target>_true), the RMSE of the estimate against it is printed.
+    (or TARGET_true), the RMSE of the estimate against it is printed.
     """
     with _user_errors():
         model = PWASVirtualSensor.load(model_path)
@@ -310,7 +311,7 @@ def synth(
 @app.command()
 def simulate(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core or sensor design).")],
-    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or <target>_true).")],
+    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="CSV of the per-sample hardware outputs to write.")],
     simulator: Annotated[str, typer.Option("--simulator", help="icarus or verilator.")] = "icarus",
     summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: OUTPUT with the suffix .json).")] = None,
@@ -322,10 +323,10 @@ def simulate(
 ) -> None:
     """Replay DATA through the generated RTL in a simulator (cocotb) and check it bit for bit.
 
-    Writes OUTPUT (one row per hardware output: row, <target>_hw, <target>_bittrue, <target>_float,
+    Writes OUTPUT (one row per hardware output: row, TARGET_hw, TARGET_bittrue, TARGET_float,
     out_of_range) and a JSON summary: samples, mismatches against the bit-true model, the largest
     error against the float model (LSB and physical units), the RMSEE of the hardware estimate
-    against <target>_true (or <target>) when DATA has it, the measured latency (cycles) and II, and
+    against TARGET_true (or TARGET) when DATA has it, the measured latency (cycles) and II, and
     the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.
     """
     from .simulation import simulate_data
@@ -348,7 +349,7 @@ def simulate(
 @app.command()
 def explore(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
-    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and <target>_true or <target> (the reference of the RMSEE).")],
+    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
     outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Folder for explore.json and explore.png (created if missing).")],
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
     input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
@@ -427,7 +428,7 @@ def report(
     """Accuracy, latency and resources of a generated design in one table.
 
     Collects the manifest and model (generate), simulation summaries (simulate) and synthesis
-    results (OUTDIR/synth/<target>/synth.json from synth).
+    results (OUTDIR/synth/TARGET/synth.json from synth).
     """
     from .report import collect_report, report_markdown
 
