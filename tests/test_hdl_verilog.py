@@ -178,7 +178,7 @@ def test_icarus_runs_the_verilog_bit_true(key, init, tmp_path):
     dut = DESIGNS[key]()
     p = dut.params
     if key == "odd_formats":
-        from pwas_hdl.hdl import reference_eval
+        from hdl_reference import reference_eval
 
         rng = np.random.default_rng(3)
         q = rng.integers(-128, 128, (120, p.n))

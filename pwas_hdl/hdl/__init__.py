@@ -37,7 +37,7 @@ Latency (cycles from the input transfer to ``out__valid``, no stalls) is ``compo
 
 from .core import PWASCore, core_input_layout, core_output_layout
 from .emit import emit_verilog, memory_hex_files, normalise_verilog, port_list
-from .params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline, reference_eval
+from .params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline
 from .api import build_core, build_sensor, design_info
 from .sensor_top import PWASSensorTop, lag_plan
 
@@ -47,7 +47,6 @@ __all__ = [
     "MemoryPlan",
     "Pipeline",
     "PIPELINE_PRESETS",
-    "reference_eval",
     "core_input_layout",
     "core_output_layout",
     "build_core",
