@@ -40,6 +40,11 @@ err = Console(stderr=True, soft_wrap=True)
 out = Console(soft_wrap=True)
 
 
+def _say(msg: str) -> None:
+    """One plain line on stderr (no Rich markup: names like y[t-3] must print as they are)."""
+    err.print(msg, highlight=False, markup=False)
+
+
 class UserError(Exception):
     """An error in what the user asked for: reported in one line, exit status 2."""
 
@@ -164,7 +169,7 @@ def fit(
             f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}",
             highlight=False, markup=False,
         )
-        err.print(f"wrote {output}", highlight=False, markup=False)
+        _say(f"wrote {output}")
 
 
 @app.command()
@@ -202,11 +207,11 @@ def predict(
                 if ref in table.header:
                     ztrue = table.numeric([ref])[rows, 0]
                     rmse = float(np.sqrt(np.mean((zhat[:, i] - ztrue) ** 2)))
-                    err.print(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {rows.size} samples", highlight=False, markup=False)
+                    _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {rows.size} samples")
                     break
         if flags.any():
-            err.print(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)", highlight=False, markup=False)
-        err.print(f"wrote {output} ({rows.size} rows)", highlight=False, markup=False)
+            _say(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")
+        _say(f"wrote {output} ({rows.size} rows)")
 
 
 @app.command()
@@ -262,7 +267,7 @@ def generate(
                 input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
                 output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                 target_mhz=target_mhz, fpga_target=fpga,
-                progress=lambda msg: err.print(msg, highlight=False, markup=False),
+                progress=_say,
             )
         man = gd.manifest
         eb = man["error_bound"]
@@ -278,7 +283,7 @@ def generate(
             c = tm["candidates"][tm["chosen"]]
             err.print(f"timing: {c['latency_cycles']} cycles ({c['label']}) reach {c['fmax_mhz']:.1f} MHz >= {tm['target_mhz']:g} MHz "
                       f"on {tm['part']} = {c['latency_ns']:.1f} ns", highlight=False, markup=False)
-        err.print(f"wrote {outdir}/ ({len(gd.files)} files)", highlight=False, markup=False)
+        _say(f"wrote {outdir}/ ({len(gd.files)} files)")
 
 
 @app.command()
@@ -299,10 +304,7 @@ def synth(
     from .synthesis import synth_summary_text, synthesize
 
     with _user_errors():
-        def report(msg: str) -> None:
-            err.print(msg, highlight=False, markup=False)
-
-        res = synthesize(outdir, target, device=device, package=package, freq_mhz=freq, seed=seed, progress=report)
+        res = synthesize(outdir, target, device=device, package=package, freq_mhz=freq, seed=seed, progress=_say)
         if json_out is not None:
             atomic_write_text(json_out, json.dumps(res, indent=2) + "\n")
         out.print(synth_summary_text(res), highlight=False, markup=False)
@@ -335,11 +337,11 @@ def simulate(
         res = simulate_data(
             outdir, data, output, simulator=simulator, summary_path=summary, traj_col=traj_col,
             stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
-            progress=lambda msg: err.print(msg, highlight=False, markup=False),
+            progress=_say,
         )
         s = res["summary"]
         out.print_json(json.dumps(s))
-        err.print(f"wrote {output} and {res['summary_path']}", highlight=False, markup=False)
+        _say(f"wrote {output} and {res['summary_path']}")
     if s["mismatches"]:  # outside _user_errors: typer.Exit is a RuntimeError
         err.print(f"error: {s['mismatches']} hardware output(s) differ from the bit-true model (first: "
                   f"{json.dumps(s['first_mismatch'])})", highlight=False, markup=False)
@@ -415,7 +417,7 @@ def explore(
                        f"{b['rmsee_better'][0]:+.4g} better (standard error {b['rmsee_diff_se'][0]:.2g})")
         err.print(f"{len(res['points'])} formats ({len(res['refused'])} refused), {len(res['pareto'])} on the front; "
                   f"the default {d['label']} is {verdict}", highlight=False, markup=False)
-        err.print(f"wrote {outdir / 'explore.json'} and {outdir / 'explore.png'}", highlight=False, markup=False)
+        _say(f"wrote {outdir / 'explore.json'} and {outdir / 'explore.png'}")
 
 
 @app.command()
@@ -464,10 +466,10 @@ def make_data_lorenz(
         d = lorenz(total, seed=seed)
         train, test = d.split(samples)
         write_csv(output, train.columns())
-        err.print(f"wrote {output} ({samples} samples, seed {seed})", highlight=False, markup=False)
+        _say(f"wrote {output} ({samples} samples, seed {seed})")
         if test_output is not None:
             write_csv(test_output, test.columns())
-            err.print(f"wrote {test_output} ({test_samples} samples following {output})", highlight=False, markup=False)
+            _say(f"wrote {test_output} ({test_samples} samples following {output})")
 
 
 @bench_app.command("lorenz")
@@ -485,16 +487,13 @@ def bench_lorenz(
             raise UserError("--seeds must be >= 1")
         rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
 
-        def report(msg: str) -> None:
-            err.print(msg, highlight=False, markup=False)
-
-        result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=report)
+        result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=_say)
         atomic_write_text(json_out, json.dumps(result, indent=2) + "\n")
         table = lorenz_tables.markdown_table(result)
         if markdown is not None:
             atomic_write_text(markdown, table)
         out.print(table, highlight=False, markup=False)
-        err.print(f"wrote {json_out}", highlight=False, markup=False)
+        _say(f"wrote {json_out}")
 
 
 def _version(value: bool) -> None:
