@@ -27,7 +27,7 @@ output paths count in fmax). Reported: cycles, fmax, latency in ns (cycles / fma
 harness excluded) / DSP / BRAM, beside the paper's L (ns) and SO (Spartan-3 xc3s200 slice
 occupation). On ECP5 the ``short`` build is also made with ``n + 1`` replicated copies of the
 memory, for the banked-versus-replicated words and BRAMs. For the N = 4096 Lorenz core the script
-also runs a ``target_mhz`` timing closure (ECP5, 100 MHz) and simulates the short and fast builds
+also runs a ``target_mhz`` timing closure (ECP5, 125 MHz) and simulates the short and fast builds
 (Amaranth, no stalls) to measure the initiation interval and check them bit for bit against the
 bit-true model.
 
@@ -60,7 +60,7 @@ from pwas_hdl.atomic import atomic_write_text  # noqa: E402
 FORMAT = "pwas-hdl-hw-tables"
 SEED = 1
 FREQ = {"ecp5": 150.0, "ice40": 100.0}
-DEMO_TARGET = {"ecp5": 100.0}
+DEMO_TARGET = {"ecp5": 125.0}
 XC3S200_SLICES = 1920  # Spartan-3 XC3S200: 1920 slices (2 LUT4 + 2 FF each), 12 BRAM18, 12 MULT18X18
 
 DESIGNS: list[dict[str, Any]] = [
@@ -203,13 +203,13 @@ def _stat_needs(work: Path, fpga: str) -> dict[str, Any] | None:
     return {k: r[k] for k in ("luts", "ffs", "dsp", "bram", "bram_bits")}
 
 
-def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path) -> dict[str, Any]:
+def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, memory_init: str = "inline") -> dict[str, Any]:
     from pwas_hdl.generate import build_design
     from pwas_hdl.timing_closure import measure_design
 
-    gd = build_design(model_path, pipeline=pipeline, memory=memory)
+    gd = build_design(model_path, pipeline=pipeline, memory=memory, memory_init=memory_init)
     man = gd.manifest
-    base = {"fpga": fpga, "memory": memory, "pipeline": man["pipeline"], "latency_cycles": man["latency_cycles"],
+    base = {"fpga": fpga, "memory": memory, "memory_init": memory_init, "pipeline": man["pipeline"], "latency_cycles": man["latency_cycles"],
             "ii": man["ii"], "freq_constraint_mhz": FREQ[fpga], "memory_plan": {k: man["memory"][k] for k in ("memories", "depth", "word_bits", "words", "bits")}}
     t0 = time.monotonic()
     try:
@@ -403,8 +403,9 @@ def main(argv: list[str] | None = None) -> int:
         prev = json.loads((args.outdir / f"{stem}.json").read_text())
         if prev.get("settings", {}).get("seed") == SEED and prev.get("settings", {}).get("freq_mhz") == FREQ:
             old = {d["key"]: d for d in prev.get("designs", [])}
-            if prev.get("timing_closure"):
-                old["__tc__"] = prev["timing_closure"]
+            tc = prev.get("timing_closure")
+            if tc and tc.get("target_mhz") == DEMO_TARGET["ecp5"]:
+                old["__tc__"] = tc
     res: dict[str, Any] = {
         "format": FORMAT, "version": 1, "pwas_hdl": __version__, "settings": settings, "complete": False,
         "designs": designs, "timing_closure": None, "must_show": None,
@@ -414,6 +415,10 @@ def main(argv: list[str] | None = None) -> int:
             "Sigma by 5-fold cross-validation over logspace(-7, 3, 21) for every model.",
             "iCE40 HX8K has no DSPs (the multipliers are built from LUTs and carries) and 32 block RAMs of 4 kbit.",
             "A row 'does not fit' is a nextpnr refusal; the bracketed numbers are what Yosys mapped.",
+            "Weights inline in the Verilog, except the replicated-memory builds, which load them with $readmemh "
+            "(Yosys parses (n+1) N inline initialisers very slowly); the memory contents are the same.",
+            "Fixed-point formats are generate's defaults (the noise-budget rule of pwas_hdl.bittrue); the weight width "
+            "of each design is in the memory table.",
         ],
         "environment": {"python": platform.python_version(), "cpus": os.cpu_count(), "tools": None},
     }
@@ -432,19 +437,20 @@ def main(argv: list[str] | None = None) -> int:
         d["builds"] = {}
         for fpga in fpgas:
             d["builds"][fpga] = {}
-            jobs = [("short", builds["short"], "banked")]
+            jobs = [("short", builds["short"], "banked", "inline")]
             if not args.quick:
-                jobs.append(("fast", builds["fast"], "banked"))
+                jobs.append(("fast", builds["fast"], "banked", "inline"))
                 if fpga == "ecp5":
-                    jobs.append(("replicated", builds["short"], "replicated"))
-            for name, pipe, mem in jobs:
+                    # $readmemh: Yosys reads (n+1) N inline initialisers very slowly (N = 32768: > 10 min)
+                    jobs.append(("replicated", builds["short"], "replicated", "readmemh"))
+            for name, pipe, mem, init in jobs:
                 cached = prev.get("builds", {}).get(fpga, {}).get(name)
                 if cached is not None:
                     d["builds"][fpga][name] = cached
                     log(f"{d['key']} {fpga} {name}: reused")
                     continue
                 log(f"{d['key']} {fpga} {name} ({mem}) ...")
-                b = measure(model_path, fpga, pipe, mem, work / "pnr" / f"{d['key']}_{fpga}_{name}")
+                b = measure(model_path, fpga, pipe, mem, work / "pnr" / f"{d['key']}_{fpga}_{name}", init)
                 d["builds"][fpga][name] = b
                 res["environment"]["tools"] = res["environment"]["tools"] or b.get("tools")
                 log(f"  -> {b['latency_cycles']} cycles, " + (f"{b['fmax_mhz']} MHz, {b['latency_ns']} ns, LUT {b['luts']} FF {b['ffs_core']} "
@@ -454,8 +460,9 @@ def main(argv: list[str] | None = None) -> int:
 
         if d["key"] == MUST_SHOW:
             if not args.quick and "ecp5" in fpgas:
-                if old.get("__tc__"):
-                    res["timing_closure"] = old["__tc__"]
+                tc_old = old.get("__tc__")
+                if tc_old and [c["pipeline"] for c in tc_old["candidates"]] == [p.to_dict() for p in pipeline_candidates(n)]:
+                    res["timing_closure"] = tc_old
                 else:
                     log(f"{d['key']}: timing closure at {DEMO_TARGET['ecp5']:g} MHz on ECP5 ...")
                     t0 = time.monotonic()

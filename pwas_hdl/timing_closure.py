@@ -69,22 +69,26 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
     """Pipeline configurations of an ``n``-input core, shallowest first, latencies strictly increasing.
 
     Each one keeps the registers of the previous one and adds one where nextpnr put the critical
-    path of the previous one (Lorenz core n = 4, N = 4096, ECP5-45F, inside the timing harness,
-    ``--freq`` 150 MHz, seed 1; fmax measured when the list was made)::
+    path of the previous one (Lorenz core n = 4, N = 4096, default formats: 12-bit inputs, 11-bit
+    weights; ECP5-45F inside the timing harness, ``--freq`` 150 MHz, seed 1; measured when the list
+    was made)::
 
-        cycles  adds          critical path of the previous candidate            fmax
-        2       (min)         -                                                   44 MHz
-        3       product       memory -> multipliers -> adder tree -> output       73
-        4       rank          input -> scale / rank / addresses -> memory         76
-        5       mem_out       memory clock-to-out -> multipliers                   98
-        6       tree (1 reg)  products -> adder tree -> rounding -> output        110
-        7       addr          rank -> addresses / mu / bank rotation -> memory    123
-        8       split         input -> scale / split -> rank                      125
-        9..     tree (more)   products -> adder tree (one register per level)     130, 131
+        cycles  adds          critical path of the previous candidate             fmax
+        2       (min)         -                                                    47 MHz
+        3       product       memory -> multipliers -> adder tree -> output        74
+        4       rank          input -> scale / rank / addresses -> memory          78
+        5       mem_out       memory clock-to-out -> multipliers                   99
+        6       tree (1 reg)  products -> adder tree -> rounding -> output         111
+        7       addr          rank -> addresses / mu / bank rotation -> memory     130
+        8       tree (2 regs) products -> adder tree                               130
+        9       split         (input -> scale / split -> rank)                     131
+        10      tree (1/level)                                                     131
 
-    The last one is the ``max`` preset plus ``addr``; there its critical path is the 18x18
-    multiplier (``mem_out`` -> ``product``). ``min`` is the first; ``balanced`` and ``max`` are not
-    in the list (their registers are placed differently).
+    From 7 cycles on the critical path of the Lorenz core is the 18x18 multiplier (``mem_out`` ->
+    ``product``, 7.6 ns): deeper candidates add latency without speed there, but may help other
+    designs or devices. On iCE40 HX8K (multipliers in LUTs) the same core goes from 42 MHz
+    (2 cycles) to ~85-94 MHz, limited by the LUT multipliers. The last candidate is the ``max``
+    preset plus ``addr``; ``balanced`` and ``max`` themselves are not in the list.
     """
     n = int(n)
     if n < 1:
@@ -94,8 +98,8 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
     for t in range(depth, 0, -1):
         if not tree or -(-depth // t) != -(-depth // tree[-1]):
             tree.append(t)
-    steps = [("product", True), ("rank", True), ("mem_out", True), ("tree_levels", tree[0]), ("addr", True), ("split", True)]
-    steps += [("tree_levels", t) for t in tree[1:]]
+    steps = [("product", True), ("rank", True), ("mem_out", True), ("tree_levels", tree[0]), ("addr", True)]
+    steps += [("tree_levels", t) for t in tree[1:2]] + [("split", True)] + [("tree_levels", t) for t in tree[2:]]
     out = [Pipeline(split=False, rank=False, mem_out=False, product=False, tree_levels=0)]
     for key, val in steps:
         d = out[-1].to_dict()
