@@ -279,11 +279,12 @@ def markdown(res: dict[str, Any]) -> str:
         "timing-closure candidate.",
         "",
         "Paper: Xilinx Spartan-3 xc3s200 (1920 slices, 12 BRAM, 12 multipliers), 12-bit inputs; SO = slice occupation. "
-        "The column *~SO* turns our LUT4/FF count into xc3s200 slices as max(LUT4, FF)/2 over 1920: a rough "
-        "equivalence across vendors, not a Spartan-3 result.",
+        "*logic use* = nextpnr's share of the device's LUT cells (ECP5 TRELLIS_COMB of 43848, iCE40 logic cells of 7680). "
+        "*~SO* (ECP5 rows, which use hard multipliers like the Spartan-3) turns our LUT4/FF count into xc3s200 slices as "
+        "max(LUT4, FF)/2 over 1920: a rough equivalence across vendors, not a Spartan-3 result.",
         "",
-        "| design | table | n | N | FPGA | build | cycles | fmax (MHz) | latency (ns) | LUT4 | FF | DSP | BRAM | ~SO | paper L (ns) | paper SO |",
-        "|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| design | table | n | N | FPGA | build | cycles | fmax (MHz) | latency (ns) | LUT4 | FF | DSP | BRAM | logic use | ~SO | paper L (ns) | paper SO |",
+        "|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for d in res["designs"]:
         first = True
@@ -296,16 +297,18 @@ def markdown(res: dict[str, Any]) -> str:
                 paper = [str(d["paper_L_ns"]), f"{d['paper_SO_pct']} %"] if first else ["", ""]
                 first = False
                 if b.get("fits"):
-                    so = _so_estimate(b)
+                    so = _so_estimate(b) if fpga == "ecp5" else None
+                    use = (b.get("utilization_pct") or {}).get("TRELLIS_COMB" if fpga == "ecp5" else "ICESTORM_LC")
                     row = [fpga, build, str(b["latency_cycles"]), _f(b["fmax_mhz"]), _f(b["latency_ns"]), str(b["luts"]),
-                           str(b["ffs_core"]), str(b["dsp"]), str(b["bram"]), _f(so, "{:.0f} %")]
+                           str(b["ffs_core"]), str(b["dsp"]), str(b["bram"]), _f(use, "{:.0f} %"), _f(so, "{:.0f} %")]
                 else:
                     y = b.get("yosys_mapped") or {}
                     why = b.get("error", "does not fit")
                     short = "does not fit" + (f" (needs {y['bram']} BRAM)" if y.get("bram") is not None and "RAM" in why else "")
                     if "logic cells" in why or "LUT4" in why:
                         short = "does not fit" + (f" (needs {y.get('luts')} LUT4)" if y.get("luts") else "") + (" + BRAM" if "RAM" in why else "")
-                    row = [fpga, build, str(b["latency_cycles"]), short, "-", _f(y.get("luts"), "({})"), "-", _f(y.get("dsp"), "({})"), _f(y.get("bram"), "({})"), "-"]
+                    row = [fpga, build, str(b["latency_cycles"]), short, "-", _f(y.get("luts"), "({})"), "-", _f(y.get("dsp"), "({})"),
+                           _f(y.get("bram"), "({})"), "-", "-"]
                 lines.append("| " + " | ".join(head + row + paper) + " |")
     lines += [
         "",
@@ -341,14 +344,21 @@ def markdown(res: dict[str, Any]) -> str:
             "|---:|---|---:|---:|---|---|",
         ]
         for k, c in enumerate(tc["candidates"]):
+            if not c["measured"]:
+                continue
             if c["measured"]:
                 cp = c.get("critical_path") or {}
                 lines.append(f"| {c['latency_cycles']} | {c['label']} | {_f(c['fmax_mhz'])} | {_f(c['latency_ns'])} | "
                              f"{cp.get('from')} -> {cp.get('to')} ({cp.get('delay_ns')} ns) | "
                              f"{'**chosen**' if tc.get('chosen') == k else ('meets' if c['meets_target'] else 'misses')} |")
-            else:
-                lines.append(f"| {c['latency_cycles']} | {c['label']} | - | - | - | {c['note']} |")
-        lines.append(f"\nMeasured in the order {tc['measurements']} (cycles); {tc.get('runtime_s')} s.")
+        skipped: dict[str, list[str]] = {}
+        for c in tc["candidates"]:
+            if not c["measured"]:
+                skipped.setdefault(c["note"], []).append(str(c["latency_cycles"]))
+        lines.append("")
+        for note, cyc in skipped.items():
+            lines.append(f"Not measured, {note}: {', '.join(cyc)} cycles.  ")
+        lines.append(f"Measured in the order {tc['measurements']} (cycles); {tc.get('runtime_s')} s.")
     ms = res.get("must_show")
     if ms:
         lines += ["", "## Must show (issue 5): the N = 4096 Lorenz design", ""]
@@ -361,12 +371,22 @@ def markdown(res: dict[str, Any]) -> str:
     lines += ["", "## Notes", ""]
     lines += [f"- {t}" for t in res.get("notes", [])]
     env = res.get("environment", {})
-    lines += ["", f"Tools: {env.get('tools')}. Python {env.get('python')}, {env.get('cpus')} CPUs (shared). "
-                  f"Wall time {res.get('runtime_s')} s."]
+    tools = env.get("tools") or {}
+    tool_txt = ", ".join(f"{k} {v}" for k, v in tools.items() if k.startswith("yowasp")) or "-"
+    lines += ["", f"Tools: {tools.get('yosys', '-')}; {tool_txt}. Python {env.get('python')}, {env.get('cpus')} CPUs "
+                  f"(shared with other jobs). Synthesis + place and route time summed over all measurements: "
+                  f"{res.get('measure_s')} s; this invocation {res.get('runtime_s')} s."]
     return "\n".join(lines) + "\n"
 
 
 def write(res: dict[str, Any], outdir: Path, stem: str) -> None:
+    builds = [b for d in res["designs"] for f in d.get("builds", {}).values() for b in f.values()]
+    tools: dict[str, str] = {}
+    for b in builds:
+        tools.update(b.get("tools") or {})
+    tools.pop("nextpnr", None)
+    res["environment"]["tools"] = dict(sorted(tools.items())) or None
+    res["measure_s"] = round(sum(b.get("runtime_s") or 0 for b in builds) + ((res.get("timing_closure") or {}).get("runtime_s") or 0), 1)
     outdir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(outdir / f"{stem}.json", json.dumps(res, indent=1) + "\n")
     atomic_write_text(outdir / f"{stem}.md", markdown(res))
@@ -415,6 +435,10 @@ def main(argv: list[str] | None = None) -> int:
             "Sigma by 5-fold cross-validation over logspace(-7, 3, 21) for every model.",
             "iCE40 HX8K has no DSPs (the multipliers are built from LUTs and carries) and 32 block RAMs of 4 kbit.",
             "A row 'does not fit' is a nextpnr refusal; the bracketed numbers are what Yosys mapped.",
+            "BRAM 0: Yosys put the small weight banks in LUTs (ROM logic), which also removes the block RAM's long "
+            "clock-to-output from the critical path (hence the higher fmax of the small designs).",
+            "`fast` is the deepest candidate, for the highest fmax; the timing-closure demo shows that on ECP5 the "
+            "Lorenz core reaches about the same fmax with fewer cycles.",
             "Weights inline in the Verilog, except the replicated-memory builds, which load them with $readmemh "
             "(Yosys parses (n+1) N inline initialisers very slowly); the memory contents are the same.",
             "Fixed-point formats are generate's defaults (the noise-budget rule of pwas_hdl.bittrue); the weight width "
