@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -45,3 +48,13 @@ def inside_points(rng):
 
     return _pts
 
+
+
+@pytest.fixture(scope="session")
+def sim_cache(tmp_path_factory) -> Path:
+    """Simulator builds shared by the RTL tests of one run ($PWAS_HDL_SIM_CACHE to keep them across runs);
+    Verilator's run-time library is compiled once per cache."""
+    env = os.environ.get("PWAS_HDL_SIM_CACHE")
+    path = Path(env) if env else tmp_path_factory.getbasetemp() / "pwas-sim-cache"
+    path.mkdir(parents=True, exist_ok=True)
+    return path

@@ -71,15 +71,6 @@ BY_NAME = {c.name: c for c in CONFIGS}
 
 
 @pytest.fixture(scope="session")
-def sim_cache(tmp_path_factory) -> Path:
-    """Simulator builds, shared with tests/test_simulate_cli.py (Verilator's run-time library is compiled once)."""
-    env = os.environ.get("PWAS_HDL_SIM_CACHE")
-    path = Path(env) if env else tmp_path_factory.getbasetemp() / "pwas-sim-cache"
-    path.mkdir(parents=True, exist_ok=True)
-    return path
-
-
-@pytest.fixture(scope="session")
 def design_folder(tmp_path_factory):
     """name -> generated folder (made once per session)."""
     made: dict[str, Path] = {}

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,15 +17,6 @@ from pwas_hdl.simulation import load_design, sim_module
 runner = CliRunner()
 designs = sim_module("pwas_designs")
 mutations = sim_module("pwas_mutations")
-
-
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """Simulator builds, shared with tests/test_rtl_cocotb.py (same folder)."""
-    env = os.environ.get("PWAS_HDL_SIM_CACHE")
-    path = Path(env) if env else tmp_path_factory.getbasetemp() / "pwas-sim-cache"
-    path.mkdir(parents=True, exist_ok=True)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -61,10 +50,10 @@ def _rows(path):
 
 
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_simulate_sensor(simulator, folders, cache, tmp_path):
+def test_simulate_sensor(simulator, folders, sim_cache, tmp_path):
     out = tmp_path / "hw.csv"
     res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "--simulator", simulator,
-                              "-o", str(out), "--build-dir", str(cache)])
+                              "-o", str(out), "--build-dir", str(sim_cache)])
     assert res.exit_code == 0, res.output
     s = json.loads((tmp_path / "hw.json").read_text())
     assert s["mismatches"] == 0 and s["first_mismatch"] is None
@@ -89,11 +78,11 @@ def test_simulate_sensor(simulator, folders, cache, tmp_path):
     assert np.array_equal(np.array([r["out_of_range"] == "1" for r in rows]), flags)
 
 
-def test_simulate_core_trajectories_with_stalls(folders, cache, tmp_path):
+def test_simulate_core_trajectories_with_stalls(folders, sim_cache, tmp_path):
     out = tmp_path / "core.csv"
     summ = tmp_path / "s.json"
     res = runner.invoke(app, ["simulate", str(folders / "core"), str(folders / "data.csv"), "-o", str(out), "--json", str(summ),
-                              "--traj-col", "run", "--stall", "0.3", "--seed", "2", "--build-dir", str(cache)])
+                              "--traj-col", "run", "--stall", "0.3", "--seed", "2", "--build-dir", str(sim_cache)])
     assert res.exit_code == 0, res.output
     s = json.loads(summ.read_text())
     assert s["trajectories"] == 2 and s["samples"] == (150 - 1) + (90 - 1)
@@ -104,15 +93,15 @@ def test_simulate_core_trajectories_with_stalls(folders, cache, tmp_path):
     assert rows[149 - 1]["row"] == "149" and rows[149]["row"] == str(150 + 1)  # the second run starts at row 150 (+M-1)
 
 
-def test_simulate_sensor_resets_between_trajectories(folders, cache, tmp_path):
+def test_simulate_sensor_resets_between_trajectories(folders, sim_cache, tmp_path):
     res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "data.csv"), "-o", str(tmp_path / "o.csv"),
-                              "--traj-col", "run", "--build-dir", str(cache)])
+                              "--traj-col", "run", "--build-dir", str(sim_cache)])
     assert res.exit_code == 0, res.output
     s = json.loads((tmp_path / "o.json").read_text())
     assert s["samples"] == 149 + 89 and s["mismatches"] == 0 and s["trajectories"] == 2
 
 
-def test_simulate_reports_rtl_mismatch(folders, cache, tmp_path):
+def test_simulate_reports_rtl_mismatch(folders, sim_cache, tmp_path):
     """A one-LSB fault in the RTL: every sample is flagged, exit status 1, the summary is written."""
     bad = tmp_path / "bad"
     shutil.copytree(folders / "sensor", bad)
@@ -120,7 +109,7 @@ def test_simulate_reports_rtl_mismatch(folders, cache, tmp_path):
     text, _ = mutations.round_constant_plus_one_lsb(d.verilog, d.model.shift)
     d.verilog_path.write_text(text)
     out = tmp_path / "hw.csv"
-    res = runner.invoke(app, ["simulate", str(bad), str(folders / "one.csv"), "-o", str(out), "--build-dir", str(cache)])
+    res = runner.invoke(app, ["simulate", str(bad), str(folders / "one.csv"), "-o", str(out), "--build-dir", str(sim_cache)])
     assert res.exit_code == 1, res.output
     assert "differ from the bit-true model" in res.output
     s = json.loads((tmp_path / "hw.json").read_text())
