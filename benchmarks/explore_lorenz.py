@@ -32,8 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from pwas_hdl.atomic import atomic_write_text
-from pwas_hdl.explore import format_table
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.flow.explore import format_table
 
 HERE = Path(__file__).resolve().parent
 

@@ -7,7 +7,7 @@ Usage::
 
 Designs (12-bit inputs, weights in the fewest bits that hold them, as ``pwas-hdl generate`` does):
 
-* Lorenz (paper eq. 18), fitted on ``pwas_hdl.plants.lorenz(6000, seed=0)`` with sigma by 5-fold
+* Lorenz (paper eq. 18), fitted on ``pwas_hdl.systems.lorenz.lorenz(6000, seed=0)`` with sigma by 5-fold
   cross-validation, gamma = 1.2, zero-order Tikhonov: My = 3, p = 7 (N = 512); My = 4, p = 7
   (N = 4096, Table II); My = 5, p = 7 (N = 32768); My = 4, p = 3 (N = 256); My = 4, p = 1 (N = 16).
 * Helicopter size (Table VI: n = 6, Mu = 2 with nu = 2, My = 2 with ny = 1, p = 3, N = 4096). There
@@ -19,10 +19,10 @@ Designs (12-bit inputs, weights in the fewest bits that hold them, as ``pwas-hdl
 Every design is generated as the core (``design="core"``, banked memory) in two builds:
 
 * ``short``: the ``min`` pipeline (2 cycles: memory read and output registers);
-* ``fast``: the deepest timing-closure candidate (:func:`pwas_hdl.timing_closure.pipeline_candidates`);
+* ``fast``: the deepest timing-closure candidate (:func:`pwas_hdl.flow.timing_closure.pipeline_candidates`);
 
 placed and routed with nextpnr (seed 1, ``--freq`` 150 MHz on ECP5 LFE5U-45F, 100 MHz on iCE40 HX8K)
-inside the timing harness of :mod:`pwas_hdl.timing_closure` (every port registered, so the input and
+inside the timing harness of :mod:`pwas_hdl.flow.timing_closure` (every port registered, so the input and
 output paths count in fmax). Reported: cycles, fmax, latency in ns (cycles / fmax), LUT4 / FF (core,
 harness excluded) / DSP / BRAM, beside the paper's L (ns) and SO (Spartan-3 xc3s200 slice
 occupation). On ECP5 the ``short`` build is also made with ``n + 1`` replicated copies of the
@@ -55,7 +55,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 from pwas_hdl import __version__  # noqa: E402
-from pwas_hdl.atomic import atomic_write_text  # noqa: E402
+from pwas_hdl.io.atomic import atomic_write_text  # noqa: E402
 
 FORMAT = "pwas-hdl-hw-tables"
 SEED = 1
@@ -151,8 +151,8 @@ def helicopter_plant(n_samples: int, seed: int = 0, dt: float = 0.01, substeps: 
 # ---------------------------------------------------------------------------------------------
 def fit_model(d: dict[str, Any], workdir: Path, log) -> tuple[Path, dict[str, Any]]:
     """Fit (or reuse) the model of design ``d``; returns the model file and a few fit numbers."""
-    from pwas_hdl.plants import lorenz
-    from pwas_hdl.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.lorenz import lorenz
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     path = workdir / "models" / f"{d['key']}.json"
     info_path = path.with_suffix(".info.json")
@@ -164,7 +164,7 @@ def fit_model(d: dict[str, Any], workdir: Path, log) -> tuple[Path, dict[str, An
         data = lorenz(6000, seed=0)
         m = PWASVirtualSensor(mu=0, my=d["my"], partitions=d["p"], gamma=1.2, tikhonov_order=0,
                               output_names=["y"], target_names=["z"]).fit(None, data.y, data.z)
-        info = {"data": "pwas_hdl.plants.lorenz(6000, seed=0)", "gamma": 1.2, "tikhonov_order": 0}
+        info = {"data": "pwas_hdl.systems.lorenz.lorenz(6000, seed=0)", "gamma": 1.2, "tikhonov_order": 0}
     else:
         log("simulating the synthetic helicopter (25000 samples) ...")
         u, y, z, zt = helicopter_plant(25000, seed=0)
@@ -190,7 +190,7 @@ def fit_model(d: dict[str, Any], workdir: Path, log) -> tuple[Path, dict[str, An
 # ---------------------------------------------------------------------------------------------
 def _stat_needs(work: Path, fpga: str) -> dict[str, Any] | None:
     """Resources Yosys mapped (``stat.json``) when nextpnr found that the design does not fit."""
-    from pwas_hdl.synthesis import _count_resources, _read_stat
+    from pwas_hdl.flow.synthesis import _count_resources, _read_stat
 
     stat = work / "pnr" / "stat.json"
     if not stat.is_file():
@@ -204,8 +204,8 @@ def _stat_needs(work: Path, fpga: str) -> dict[str, Any] | None:
 
 
 def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, memory_init: str = "inline") -> dict[str, Any]:
-    from pwas_hdl.generate import build_design
-    from pwas_hdl.timing_closure import measure_design
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.flow.timing_closure import measure_design
 
     gd = build_design(model_path, pipeline=pipeline, memory=memory, memory_init=memory_init)
     man = gd.manifest
@@ -231,7 +231,7 @@ def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, m
 
 def simulate_ii(model_path: Path, pipeline, samples: int = 300) -> dict[str, Any]:
     """Amaranth simulation without stalls: measured II and latency, bit-exact check."""
-    from pwas_hdl.generate import build_design
+    from pwas_hdl.design.generate import build_design
     from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
 
     gd = build_design(model_path, pipeline=pipeline)
@@ -403,8 +403,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resume", action="store_true", help="reuse measurements of an earlier JSON with the same settings")
     args = ap.parse_args(argv)
 
-    from pwas_hdl.timing_closure import close_timing, TimingNotMet, pipeline_candidates
-    from pwas_hdl.generate import build_design
+    from pwas_hdl.flow.timing_closure import close_timing, TimingNotMet, pipeline_candidates
+    from pwas_hdl.design.generate import build_design
 
     stem = "hw_tables_quick" if args.quick else "hw_tables"
     fpgas = ["ecp5"] if args.quick else [f.strip() for f in args.fpga.split(",") if f.strip()]
@@ -441,7 +441,7 @@ def main(argv: list[str] | None = None) -> int:
             "Lorenz core reaches about the same fmax with fewer cycles.",
             "Weights inline in the Verilog, except the replicated-memory builds, which load them with $readmemh "
             "(Yosys parses (n+1) N inline initialisers very slowly); the memory contents are the same.",
-            "Fixed-point formats are generate's defaults (the noise-budget rule of pwas_hdl.bittrue); the weight width "
+            "Fixed-point formats are generate's defaults (the noise-budget rule of pwas_hdl.fixedpoint.bittrue); the weight width "
             "of each design is in the memory table.",
         ],
         "environment": {"python": platform.python_version(), "cpus": os.cpu_count(), "tools": None},

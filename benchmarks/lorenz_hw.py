@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.atomic import atomic_write_text
+from pwas_hdl.io.atomic import atomic_write_text
 
 HERE = Path(__file__).resolve().parent
 PAPER = {"rmsee_float": 22.45, "rmsee_fpga_12bit": 27.05}
@@ -87,11 +87,11 @@ def row_of(s: dict, label: str, **extra) -> dict:
 
 def api_replay(seed: int, bits: int, work: Path, cache: Path, simulator: str = "icarus") -> dict:
     """make-data / fit (CV) / generate sensor / simulate through the Python API."""
-    from pwas_hdl.data_io import write_csv
-    from pwas_hdl.generate import generate
-    from pwas_hdl.plants import lorenz
-    from pwas_hdl.simulation import simulate_data
-    from pwas_hdl.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.io.csv_table import write_csv
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.systems.lorenz import lorenz
+    from pwas_hdl.verify.simulation import simulate_data
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     d = lorenz(6000 + 2003, seed=seed)
     train, test = d.split(6000)
@@ -142,7 +142,7 @@ def markdown(res: dict) -> str:
     m0 = res["main"][0]
     lines += [
         "",
-        f"Output LSB {m0['output_lsb']} (default formats: quantisation noise <= 5 % of the train RMSE, pwas_hdl.bittrue.default_weight_frac); the hardware RMSEE equals the",
+        f"Output LSB {m0['output_lsb']} (default formats: quantisation noise <= 5 % of the train RMSE, pwas_hdl.fixedpoint.bittrue.default_weight_frac); the hardware RMSEE equals the",
         "bit-true model's to the last digit (every output identical). Simulation speed is measured inside the",
         "simulator for the replay (cocotb drives one transfer per clock); builds are cached by the hash of the",
         "Verilog (the first Verilator build also compiles Verilator's run-time library, later ones reuse it).",
@@ -221,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import cocotb
 
-    sim_runner = __import__("pwas_hdl.simulation", fromlist=["sim_module"]).sim_module("pwas_runner")
+    sim_runner = __import__("pwas_hdl.verify.simulation", fromlist=["sim_module"]).sim_module("pwas_runner")
     res = {
         "format": "pwas-hdl-lorenz-hw",
         "version": 1,

@@ -48,8 +48,8 @@ def _maxrss_mib() -> float:
 
 def child_fit(my: int, p: int, repeats: int) -> dict:
     """Time the fit of one case in this (fresh) process; returns a JSON-ready dict."""
-    from pwas_hdl.plants import lorenz
-    from pwas_hdl.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.lorenz import lorenz
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     data = lorenz(N_TRAIN, seed=0)
     rss_before = _maxrss_mib()
@@ -107,8 +107,8 @@ def _median_rate(fn, m: int, repeats: int) -> tuple[float, float]:
 def eval_benchmark(repeats: int, sizes: list[int]) -> dict:
     from scipy.interpolate import RegularGridInterpolator
 
-    from pwas_hdl.plants import lorenz
-    from pwas_hdl.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.lorenz import lorenz
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     data = lorenz(N_TRAIN, seed=0)
     sensor = PWASVirtualSensor(mu=0, my=4, partitions=7, gamma=1.2, sigma=None).fit(None, data.y, data.z)
@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(child_fit(args.child_fit[0], args.child_fit[1], args.repeats)))
         return 0
 
-    from pwas_hdl.atomic import atomic_write_text
+    from pwas_hdl.io.atomic import atomic_write_text
 
     res: dict = {"format": "pwas-hdl-bench-perf", "version": 1, "environment": _environment(), "fit": []}
     for my, p in FIT_CASES:

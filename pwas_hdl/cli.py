@@ -18,10 +18,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from . import __version__
-from .atomic import atomic_write_text
-from .data_io import read_csv, select_signals, split_trajectories, write_csv
-from .virtual_sensor import PWASVirtualSensor
+from pwas_hdl import __version__
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.io.csv_table import read_csv, select_signals, split_trajectories, write_csv
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 app = typer.Typer(
     name="pwas-hdl",
@@ -251,7 +251,7 @@ def generate(
 
     Same inputs give byte-identical files. Nothing is written unless the whole design builds.
     """
-    from .generate import generate as _generate
+    from pwas_hdl.design.generate import generate as _generate
 
     with _user_errors():
         if target_mhz is None:
@@ -301,7 +301,7 @@ def synth(
     Writes OUTDIR/synth/TARGET/synth.json (LUTs, FFs, carries, DSPs, block RAMs and bits, fmax
     after place and route, latency in ns = latency cycles / fmax) and synth.txt.
     """
-    from .synthesis import synth_summary_text, synthesize
+    from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 
     with _user_errors():
         res = synthesize(outdir, target, device=device, package=package, freq_mhz=freq, seed=seed, progress=_say)
@@ -331,7 +331,7 @@ def simulate(
     against TARGET_true (or TARGET) when DATA has it, the measured latency (cycles) and II, and
     the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.
     """
-    from .simulation import simulate_data
+    from pwas_hdl.verify.simulation import simulate_data
 
     with _user_errors():
         res = simulate_data(
@@ -377,7 +377,7 @@ def explore(
     whether generate's default formats are on the front) and OUTDIR/explore.png, and prints the
     Pareto points (and the default) as a table.
     """
-    from .explore import explore as _explore, format_table, plot_exploration
+    from pwas_hdl.flow.explore import explore as _explore, format_table, plot_exploration
 
     def ints(text: str, what: str) -> list[int]:
         t = text.replace(" ", "")
@@ -432,7 +432,7 @@ def report(
     Collects the manifest and model (generate), simulation summaries (simulate) and synthesis
     results (OUTDIR/synth/TARGET/synth.json from synth).
     """
-    from .report import collect_report, report_markdown
+    from pwas_hdl.design.report import collect_report, report_markdown
 
     with _user_errors():
         rep = collect_report(outdir, _names(sim))
@@ -457,7 +457,7 @@ def make_data_lorenz(
     The columns are y (measured output), z (the real sensor's noisy measurement) and z_true (the
     noise-free value, used for the RMSEE of eq. 17).
     """
-    from .plants import lorenz
+    from pwas_hdl.systems.lorenz import lorenz
 
     with _user_errors():
         if samples < 1 or (test_output is not None and test_samples < 1):
@@ -480,7 +480,7 @@ def bench_lorenz(
     quick: Annotated[bool, typer.Option("--quick", help="Only the Table II row (My=4, p=7, gamma=1.2).")] = False,
 ) -> None:
     """Reproduce Tables II-V of the paper (Lorenz): RMSEE over seeds, beside the paper's values."""
-    from . import lorenz_tables
+    from pwas_hdl.benchmarks import lorenz_tables
 
     with _user_errors():
         if seeds < 1:

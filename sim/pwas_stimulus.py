@@ -38,7 +38,7 @@ def _dims(model):
 
 
 def core_codes(model, m: int, seed: int = 0) -> np.ndarray:
-    """``m`` rows of regressor codes (``model``: :class:`pwas_hdl.bittrue.FixedPointModel`), shuffled.
+    """``m`` rows of regressor codes (``model``: :class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`), shuffled.
 
     The domain corners come first (all ``2**n`` of them up to ``n = 6``, at most ``m // 3``), the
     other kinds share the rest equally.

@@ -4,7 +4,7 @@ Nothing about the design is hard-coded: the clock, reset and stream ports are fo
 ``role`` in ``manifest.json``, the input and output payloads are packed / unpacked with the bit
 fields listed there, and the latency is the manifest's ``latency_cycles``.
 
-The host side (:mod:`pwas_runner`, :mod:`pwas_hdl.simulation`) writes a JSON *job* and points the
+The host side (:mod:`pwas_runner`, :mod:`pwas_hdl.verify.simulation`) writes a JSON *job* and points the
 environment variable ``PWAS_TB_JOB`` at it::
 
     {"manifest": "/abs/manifest.json", "result": "/abs/result.json", "strict": true,
@@ -50,7 +50,7 @@ MAX_REPORTED = 20
 def _load_job() -> dict:
     path = os.environ.get("PWAS_TB_JOB")
     if not path:
-        raise RuntimeError("PWAS_TB_JOB is not set: run this testbench through pwas_runner / pwas_hdl.simulation")
+        raise RuntimeError("PWAS_TB_JOB is not set: run this testbench through pwas_runner / pwas_hdl.verify.simulation")
     with open(path, encoding="utf-8") as f:
         return json.load(f)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pwas_hdl.geometry import Grid
+from pwas_hdl.fit.geometry import Grid
 
 @pytest.fixture
 def rng() -> np.random.Generator:

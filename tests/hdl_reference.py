@@ -2,7 +2,7 @@
 
 It evaluates the datapath in the hardware's own form (ranks by pairwise comparison, vertex
 ``k`` = ``c + (rank < k)``, no sorting), so it cross-checks the bit-true model
-(:mod:`pwas_hdl.bittrue`, the specification) on the formats both accept, and serves as the
+(:mod:`pwas_hdl.fixedpoint.bittrue`, the specification) on the formats both accept, and serves as the
 reference for formats the model never builds (``F_j = 0``, domains leaving the code range,
 ``sh <= 0``). Python integers (object arrays) in the accumulation: no overflow.
 """

@@ -9,11 +9,11 @@ import os
 import numpy as np
 import pytest
 
-from pwas_hdl.data_io import read_csv, write_csv
-from pwas_hdl.geometry import Grid
-from pwas_hdl.regressors import LagStructure
-from pwas_hdl.regularized_lsq import cross_validate_sigma, solve_regularized, tikhonov_matrix
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.io.csv_table import read_csv, write_csv
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.fit.regularized_lsq import cross_validate_sigma, solve_regularized, tikhonov_matrix
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 
 def _files(folder) -> list[str]:

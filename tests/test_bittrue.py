@@ -8,9 +8,9 @@ import warnings
 import numpy as np
 import pytest
 
-from pwas_hdl.bittrue import TRACE_STAGES, FixedPointModel, default_weight_frac
-from pwas_hdl.fixed_point import FixedFormat, frac_for_bits, shift_round, signed_bits_needed
-from pwas_hdl.geometry import Grid
+from pwas_hdl.fixedpoint.bittrue import TRACE_STAGES, FixedPointModel, default_weight_frac
+from pwas_hdl.fixedpoint.formats import FixedFormat, frac_for_bits, shift_round, signed_bits_needed
+from pwas_hdl.fit.geometry import Grid
 
 # (partitions, input_bits, input_fill, weight_bits, rounding, output_frac offset from Fw or None)
 CASES = [
@@ -326,7 +326,7 @@ def test_defaults_from_reference_error():
 
 def test_from_sensor_lorenz_defaults():
     from pwas_hdl import PWASVirtualSensor
-    from pwas_hdl.plants import lorenz
+    from pwas_hdl.systems.lorenz import lorenz
 
     d = lorenz(6000, seed=0)
     s = PWASVirtualSensor(my=4, partitions=7, gamma=1.2).fit(None, d.y, d.z)

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from pwas_hdl.cli import app
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 

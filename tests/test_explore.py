@@ -1,4 +1,4 @@
-"""Bit-width exploration (`pwas_hdl.explore`, `pwas-hdl explore`): Pareto front, default point,
+"""Bit-width exploration (`pwas_hdl.flow.explore`, `pwas-hdl explore`): Pareto front, default point,
 accuracy sanity against the error bound, resource estimate, plot, measured mode, bad input."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from pwas_hdl.bittrue import FixedPointModel
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.cli import app
-from pwas_hdl.data_io import read_csv, write_csv
-from pwas_hdl.explore import DEFAULT_FRAC_OFFSETS, explore, format_table, pareto_front, plot_exploration
-from pwas_hdl.generate import build_design
-from pwas_hdl.plants import lorenz
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.io.csv_table import read_csv, write_csv
+from pwas_hdl.flow.explore import DEFAULT_FRAC_OFFSETS, explore, format_table, pareto_front, plot_exploration
+from pwas_hdl.design.generate import build_design
+from pwas_hdl.systems.lorenz import lorenz
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 
@@ -216,7 +216,7 @@ def test_arrays_as_data(tiny):
 
 
 def test_measured_mode_with_a_stub_synthesizer(tiny, tmp_path, monkeypatch):
-    import pwas_hdl.synthesis as synthesis
+    import pwas_hdl.flow.synthesis as synthesis
 
     m, root = tiny
     calls = []

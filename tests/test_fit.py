@@ -1,4 +1,4 @@
-"""Fitting (pwas_hdl.regularized_lsq, pwas_hdl.regressors, PWASVirtualSensor.fit / predict)."""
+"""Fitting (pwas_hdl.fit.regularized_lsq, pwas_hdl.fit.regressors, PWASVirtualSensor.fit / predict)."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from pwas_hdl.data_io import Table, select_signals
-from pwas_hdl.geometry import Grid
-from pwas_hdl.regressors import LagStructure
-from pwas_hdl.regularized_lsq import (
+from pwas_hdl.io.csv_table import Table, select_signals
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.fit.regularized_lsq import (
     DEFAULT_SIGMA_GRID,
     FIRST_ORDER_RIDGE,
     CVResult,
@@ -18,7 +18,7 @@ from pwas_hdl.regularized_lsq import (
     solve_regularized,
     tikhonov_matrix,
 )
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 SMALL_GRIDS = [[1], [4], [3, 4], [2, 1, 3], [2, 2, 2]]
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pwas_hdl.fixed_point import (
+from pwas_hdl.fixedpoint.formats import (
     FixedFormat,
     InputFormat,
     PortFormat,

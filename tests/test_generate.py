@@ -9,11 +9,11 @@ import pytest
 from typer.testing import CliRunner
 
 from pwas_hdl.cli import app
-from pwas_hdl.generate import build_design, generate
-from pwas_hdl.manifest import load_manifest, port
-from pwas_hdl.plants import lorenz
-from pwas_hdl.toolchain import lint_verilog
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.design.generate import build_design, generate
+from pwas_hdl.design.manifest import load_manifest, port
+from pwas_hdl.systems.lorenz import lorenz
+from pwas_hdl.flow.toolchain import lint_verilog
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 

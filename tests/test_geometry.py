@@ -1,4 +1,4 @@
-"""Geometry of the Kuhn partition (pwas_hdl.geometry): exactness, location, continuity, basis matrix.
+"""Geometry of the Kuhn partition (pwas_hdl.fit.geometry): exactness, location, continuity, basis matrix.
 
 The checks here are independent of the implementation where it matters: the located simplex is
 verified by solving the dense barycentric system with numpy, the tie rule by brute force from its
@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from pwas_hdl.geometry import Grid
+from pwas_hdl.fit.geometry import Grid
 
 #: Partitions of the "any n, any p" tests: mixed (powers of two and not, with p_j = 1), powers of two.
 MIXED_P = [1, 3, 7, 2, 5, 4]

@@ -11,8 +11,8 @@ import pytest
 from amaranth.hdl import ClockDomain, Module
 from amaranth.sim import Simulator
 
-from pwas_hdl.bittrue import FixedPointModel
-from pwas_hdl.geometry import Grid
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.fit.geometry import Grid
 from hdl_reference import reference_eval
 from pwas_hdl.hdl import CoreParams, MemoryPlan, PWASCore, Pipeline, build_core
 from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pwas_hdl.bittrue import FixedPointModel
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.hdl import build_sensor, design_info, lag_plan
 from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 
 def plant(t_len, nu, ny, seed):

@@ -83,8 +83,8 @@ def test_verilator_lint_wall_clean(key, tmp_path):
 
 @pytest.mark.skipif(VERILATOR is None, reason="verilator not installed")
 def test_sensor_top_lint_clean(tmp_path):
-    from pwas_hdl.bittrue import FixedPointModel
-    from pwas_hdl.geometry import Grid
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.fit.geometry import Grid
 
     w = np.random.default_rng(5).normal(0, 1, (27, 1))
     signals = [("y0", 2), ("y0", 1), ("y0", 0)]
@@ -209,7 +209,7 @@ def test_icarus_runs_the_verilog_bit_true(key, init, tmp_path):
 
 
 def test_readmemh_files_are_the_packed_layout_files():
-    from pwas_hdl.memory_layout import hex_files
+    from pwas_hdl.fixedpoint.memory_layout import hex_files
 
     for mem in ("banked", "replicated"):
         model = make_model([3, 2, 2], seed=9, nz=2, layout=mem)

@@ -1,10 +1,10 @@
-"""pwas_hdl.lorenz_tables: the paper's rows, the experiment protocol and the Markdown output."""
+"""pwas_hdl.benchmarks.lorenz_tables: the paper's rows, the experiment protocol and the Markdown output."""
 
 import json
 
 import pytest
 
-from pwas_hdl.lorenz_tables import PAPER_ROWS, find_row, markdown_table, run_lorenz_tables
+from pwas_hdl.benchmarks.lorenz_tables import PAPER_ROWS, find_row, markdown_table, run_lorenz_tables
 
 
 def test_paper_rows_are_the_eight_distinct_configurations():

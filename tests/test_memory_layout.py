@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from pwas_hdl.geometry import Grid
-from pwas_hdl.memory_layout import BankedLayout, ReplicatedLayout, hex_files, make_layout, pack_words, readmemh_text
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout, hex_files, make_layout, pack_words, readmemh_text
 
 GRIDS = [
     [1], [2], [7], [8],

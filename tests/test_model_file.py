@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from pwas_hdl.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor, load_model
+from pwas_hdl.fit.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor, load_model
 
 
 def _fitted(nz: int, rng: np.random.Generator) -> tuple[PWASVirtualSensor, np.ndarray, np.ndarray]:

@@ -8,8 +8,8 @@ import numpy as np
 from typer.testing import CliRunner
 
 from pwas_hdl.cli import app
-from pwas_hdl.generate import generate
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.design.generate import generate
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 

@@ -1,6 +1,6 @@
 """The generated Verilog in real simulators (cocotb 2 + Icarus / Verilator) against the bit-true model.
 
-Every design configuration below is generated (``pwas_hdl.generate``), built once per simulator
+Every design configuration below is generated (``pwas_hdl.design.generate``), built once per simulator
 (cached by the hash of its Verilog) and replayed three times by the manifest-driven testbench
 ``sim/pwas_tb.py``: at full speed (latency = manifest, II = 1), with random bubbles and
 backpressure, and with a synchronous reset in the middle of a stream. Every output must equal the
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pwas_hdl.simulation import Run, load_design, run_rtl, segment, sim_module, simulate_data, standard_runs
+from pwas_hdl.verify.simulation import Run, load_design, run_rtl, segment, sim_module, simulate_data, standard_runs
 
 designs = sim_module("pwas_designs")
 stimulus = sim_module("pwas_stimulus")
@@ -240,10 +240,10 @@ def test_build_is_cached_per_design(design_folder, sim_cache, tmp_path):
 def lorenz_files(tmp_path_factory):
     """The Table II model (My = 4, p = 7, 12-bit inputs; fixed sigma to keep it fast), its sensor
     and core folders, and the first 300 samples of the test continuation."""
-    from pwas_hdl.generate import generate
-    from pwas_hdl.plants import lorenz
-    from pwas_hdl.data_io import write_csv
-    from pwas_hdl.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.systems.lorenz import lorenz
+    from pwas_hdl.io.csv_table import write_csv
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     root = tmp_path_factory.mktemp("lorenz")
     d = lorenz(6300, seed=0)

@@ -11,8 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 from pwas_hdl.cli import app
-from pwas_hdl.data_io import write_csv
-from pwas_hdl.simulation import load_design, sim_module
+from pwas_hdl.io.csv_table import write_csv
+from pwas_hdl.verify.simulation import load_design, sim_module
 
 runner = CliRunner()
 designs = sim_module("pwas_designs")

@@ -1,9 +1,9 @@
-"""Synthesis runner (pwas_hdl.synthesis) on a hand-written, generated-looking design folder.
+"""Synthesis runner (pwas_hdl.flow.synthesis) on a hand-written, generated-looking design folder.
 
 No generator is involved: ``tiny_core.v`` is a 4-stage pipeline (clamp -> 256x12 ROM read from a
 ``$readmemh`` file -> registered 12x12 signed multiply -> round and saturate) with the manifest keys
 the runner reads. Warm YoWASP cache: a few seconds per test; the very first Yosys call of a machine
-compiles WebAssembly for ~40-50 s (see the report in the module notes of pwas_hdl.synthesis).
+compiles WebAssembly for ~40-50 s (see the report in the module notes of pwas_hdl.flow.synthesis).
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from pwas_hdl import synthesis
-from pwas_hdl.synthesis import synth_summary_text, synthesize
+from pwas_hdl.flow import synthesis
+from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 
 LATENCY = 4
 ROM_DEPTH, ROM_WIDTH = 256, 12

@@ -14,13 +14,13 @@ import pytest
 from typer.testing import CliRunner
 
 from pwas_hdl.cli import app
-from pwas_hdl.generate import build_design, generate
+from pwas_hdl.design.generate import build_design, generate
 from pwas_hdl.hdl import Pipeline, build_core
 from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
-from pwas_hdl.manifest import load_manifest
-from pwas_hdl.plants import lorenz
-from pwas_hdl.timing_closure import TimingNotMet, harness_verilog, pipeline_candidates
-from pwas_hdl.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.systems.lorenz import lorenz
+from pwas_hdl.flow.timing_closure import TimingNotMet, harness_verilog, pipeline_candidates
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 

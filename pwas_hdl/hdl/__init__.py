@@ -3,7 +3,7 @@ and their Verilog export.
 
 Typical use::
 
-    from pwas_hdl.bittrue import FixedPointModel
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
     from pwas_hdl.hdl import build_core, build_sensor, emit_verilog, design_info
 
     model = FixedPointModel.from_sensor(sensor)
@@ -35,11 +35,11 @@ Latency (cycles from the input transfer to ``out__valid``, no stalls) is ``compo
 + ceil(ceil(log2(n+1)) / tree_levels) + 1 (output); II = 1.
 """
 
-from .core import PWASCore, core_input_layout, core_output_layout
-from .emit import emit_verilog, memory_hex_files, normalise_verilog, port_list
-from .params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline
-from .api import build_core, build_sensor, design_info
-from .sensor_top import PWASSensorTop, lag_plan
+from pwas_hdl.hdl.core import PWASCore, core_input_layout, core_output_layout
+from pwas_hdl.hdl.emit import emit_verilog, memory_hex_files, normalise_verilog, port_list
+from pwas_hdl.hdl.params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.hdl.api import build_core, build_sensor, design_info
+from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 
 __all__ = [
     "PWASCore",

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import re
 
-from .core import PWASCore
-from .emit import port_list
-from .params import CoreParams, Pipeline
+from pwas_hdl.hdl.core import PWASCore
+from pwas_hdl.hdl.emit import port_list
+from pwas_hdl.hdl.params import CoreParams, Pipeline
 
 __all__ = ["build_core", "build_sensor", "design_info"]
 
@@ -22,9 +22,9 @@ def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None
 
     Parameters
     ----------
-    model : pwas_hdl.bittrue.FixedPointModel or CoreParams
+    model : pwas_hdl.fixedpoint.bittrue.FixedPointModel or CoreParams
     memory : {"banked", "replicated"}
-        Weight memory layout (:mod:`pwas_hdl.memory_layout`), independent of ``model.layout``.
+        Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`), independent of ``model.layout``.
     pipeline : Pipeline, "min", "balanced" (default) or "max"
     name : str
         Verilog module name used by :func:`~pwas_hdl.hdl.emit.emit_verilog` and :func:`design_info`.
@@ -118,7 +118,7 @@ def build_sensor(
 
     Parameters
     ----------
-    model : pwas_hdl.bittrue.FixedPointModel (or CoreParams together with ``lags``)
+    model : pwas_hdl.fixedpoint.bittrue.FixedPointModel (or CoreParams together with ``lags``)
     lags : LagStructure, optional
         Default: derived from ``model.regressor_signals`` (as ``FixedPointModel.from_sensor``
         sets them); pass ``sensor.lags_`` to be explicit.
@@ -129,7 +129,7 @@ def build_sensor(
     PWASSensorTop
         ``.latency``, ``.ii``, ``.warmup`` (= M - 1), ``.core``, ``.signals``, ``.dims``.
     """
-    from .sensor_top import PWASSensorTop, lag_plan
+    from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 
     name = _check_name(name)
     params = CoreParams.from_model(model)

@@ -46,8 +46,8 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ._lintsafe import add_const_wrap, bits_for, ge_const, mux_const, rom, sink_unused, sum_wrap
-from .params import CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, mux_const, rom, sink_unused, sum_wrap
+from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
 
 __all__ = ["PWASCore", "core_input_layout", "core_output_layout"]
 

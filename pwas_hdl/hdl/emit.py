@@ -86,7 +86,7 @@ def _plan(component):
 def memory_hex_files(component, prefix: str = "w") -> dict[str, str]:
     """``$readmemh`` files of the weight memories: ``<prefix>_b<bank>.hex``, one packed word per
     line (all targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits."""
-    from ..memory_layout import readmemh_text
+    from pwas_hdl.fixedpoint.memory_layout import readmemh_text
 
     plan = _plan(component)
     return {f"{prefix}_b{b}.hex": readmemh_text(plan.contents[b], plan.word_bits) for b in range(plan.n_banks)}

@@ -1,7 +1,7 @@
 """Parameters of the PWAS hardware core, pipeline options and the weight-memory plan.
 
 :class:`CoreParams` is the integer description the RTL generator works from. It is filled from the
-bit-true model (:class:`pwas_hdl.bittrue.FixedPointModel`, see :meth:`CoreParams.from_model`); it
+bit-true model (:class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`, see :meth:`CoreParams.from_model`); it
 can also be built by hand (tests).
 
 The arithmetic (the specification the RTL implements bit for bit, see ``ARCHITECTURE.md`` §1-2):
@@ -54,7 +54,7 @@ class CoreParams:
     out_width, out_frac : int
         Signed output codes ``B_out`` bits with ``Fo`` fractional bits.
     weights : ndarray, shape (N, nz), int64
-        Weight codes in the vertex order of :mod:`pwas_hdl.geometry` (C order, last dimension fastest).
+        Weight codes in the vertex order of :mod:`pwas_hdl.fit.geometry` (C order, last dimension fastest).
     """
 
     partitions: tuple[int, ...]
@@ -137,7 +137,7 @@ class CoreParams:
     # ------------------------------------------------------------- builders
     @classmethod
     def from_model(cls, model) -> "CoreParams":
-        """Core parameters of a bit-true model (:class:`pwas_hdl.bittrue.FixedPointModel`)."""
+        """Core parameters of a bit-true model (:class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`)."""
         return _params_from_model(cls, model)
 
 
@@ -158,12 +158,12 @@ def _params_from_model(cls, model) -> CoreParams:
             rounding=str(model.rounding),
         )
     except AttributeError as exc:
-        raise TypeError(f"expected a pwas_hdl.bittrue.FixedPointModel or CoreParams, got {type(model).__name__} ({exc})") from exc
+        raise TypeError(f"expected a pwas_hdl.fixedpoint.bittrue.FixedPointModel or CoreParams, got {type(model).__name__} ({exc})") from exc
 
 
 # ---------------------------------------------------------------------------------------------
 # Reference arithmetic (integer, vectorised). Kept for tests and as a cross-check of the bit-true
-# model; the specification proper is pwas_hdl.bittrue.
+# model; the specification proper is pwas_hdl.fixedpoint.bittrue.
 # ---------------------------------------------------------------------------------------------
 # ---------------------------------------------------------------------------------------------
 # Pipeline options
@@ -320,10 +320,10 @@ class MemoryPlan:
 
     @classmethod
     def build(cls, p: CoreParams, kind: str = "banked") -> "MemoryPlan":
-        """The plan of :mod:`pwas_hdl.memory_layout` (the layout the bit-true model reads through);
+        """The plan of :mod:`pwas_hdl.fixedpoint.memory_layout` (the layout the bit-true model reads through);
         one word per bank and address holds all ``nz`` targets, target 0 in the LSBs."""
-        from ..geometry import Grid
-        from ..memory_layout import make_layout, pack_words
+        from pwas_hdl.fit.geometry import Grid
+        from pwas_hdl.fixedpoint.memory_layout import make_layout, pack_words
 
         parts = np.array(p.partitions, dtype=np.int64)
         layout = make_layout(Grid(np.zeros(p.n), parts.astype(float), parts), kind)

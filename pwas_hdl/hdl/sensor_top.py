@@ -1,7 +1,7 @@
 """Virtual-sensor top: one (u, y) sample per transfer -> lag bank -> PWAS core.
 
 Input stream payload (``in__payload``, LSB first): one signed ``B_in``-bit code per *signal*, in
-the order of :class:`pwas_hdl.regressors.LagStructure` (inputs ``u0 .. u{nu-1}``, then outputs
+the order of :class:`pwas_hdl.fit.regressors.LagStructure` (inputs ``u0 .. u{nu-1}``, then outputs
 ``y0 .. y{ny-1}``; only signals that appear in the regressor). Each signal keeps its own format:
 all lags of a signal share it (``FixedPointModel.signal_input_formats``).
 
@@ -26,9 +26,9 @@ from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..regressors import LagStructure
-from .core import PWASCore, core_output_layout
-from .params import CoreParams, Pipeline
+from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.hdl.core import PWASCore, core_output_layout
+from pwas_hdl.hdl.params import CoreParams, Pipeline
 
 __all__ = ["PWASSensorTop", "lag_plan"]
 

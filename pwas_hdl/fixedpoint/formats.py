@@ -1,6 +1,6 @@
 """Fixed-point number formats: two's complement codes, rounding, overflow, physical scaling.
 
-Everything the bit-true model (:mod:`pwas_hdl.bittrue`) and the RTL generator need to agree on a
+Everything the bit-true model (:mod:`pwas_hdl.fixedpoint.bittrue`) and the RTL generator need to agree on a
 number format lives here.
 
 Conventions
@@ -606,7 +606,7 @@ class InputFormat:
 
     @property
     def step(self) -> float:
-        """Physical cell width ``h = (hi - lo) / p`` (as :attr:`pwas_hdl.geometry.Grid.step`)."""
+        """Physical cell width ``h = (hi - lo) / p`` (as :attr:`pwas_hdl.fit.geometry.Grid.step`)."""
         return (self.hi - self.lo) / self.partitions
 
     @property
@@ -686,6 +686,6 @@ class InputFormat:
 
 
 def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Sequence[int], bits: int = 12, fill: float = 0.9) -> list[InputFormat]:
-    """One :class:`InputFormat` per dimension (e.g. of a :class:`~pwas_hdl.geometry.Grid`:
+    """One :class:`InputFormat` per dimension (e.g. of a :class:`~pwas_hdl.fit.geometry.Grid`:
     ``grid_input_formats(g.lo, g.hi, g.partitions)``)."""
     return [InputFormat.for_interval(float(a), float(b), int(p), bits, fill, dim=j) for j, (a, b, p) in enumerate(zip(lo, hi, partitions))]

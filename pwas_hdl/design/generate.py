@@ -10,7 +10,7 @@ The folder holds (``<top>`` is the module name):
     (:func:`pwas_hdl.hdl.emit.memory_hex_files`); ``memory_init="readmemh"`` makes the Verilog
     load them instead of carrying the weights inline.
 ``manifest.json``
-    Machine-readable description (:mod:`pwas_hdl.manifest`): ports, formats, latency, II, domain,
+    Machine-readable description (:mod:`pwas_hdl.design.manifest`): ports, formats, latency, II, domain,
     lags, error bound, memory, and the options that rebuild the bit-true model.
 ``report.md``
     Short human-readable report.
@@ -36,17 +36,18 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from . import __version__
-from .bittrue import FixedPointModel
-from .manifest import MANIFEST_FORMAT, MANIFEST_VERSION
-from .virtual_sensor import PWASVirtualSensor
+from pwas_hdl import __version__
+from pwas_hdl.resources import templates_dir
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.design.manifest import MANIFEST_FORMAT, MANIFEST_VERSION
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 if TYPE_CHECKING:  # the hdl package (Amaranth) is imported when a design is built
-    from .hdl.params import Pipeline
+    from pwas_hdl.hdl.params import Pipeline
 
 __all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fixed_point_model", "TEMPLATE_DIR"]
 
-#: Keyword options of :class:`~pwas_hdl.bittrue.FixedPointModel` that ``generate`` accepts.
+#: Keyword options of :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` that ``generate`` accepts.
 FORMAT_OPTIONS = (
     "input_bits",
     "input_fill",
@@ -58,7 +59,7 @@ FORMAT_OPTIONS = (
     "rounding",
 )
 
-TEMPLATE_DIR = Path(__file__).resolve().parent.parent / "rtl_templates"
+TEMPLATE_DIR = templates_dir()
 
 
 @dataclass
@@ -329,10 +330,10 @@ def build_design(
         Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``), or the
         registers themselves (a :class:`~pwas_hdl.hdl.params.Pipeline` or its ``to_dict()``).
     target_mhz : float, optional
-        Choose the pipeline by timing closure instead (:mod:`pwas_hdl.timing_closure`): the
+        Choose the pipeline by timing closure instead (:mod:`pwas_hdl.flow.timing_closure`): the
         shallowest candidate whose fmax, measured by place and route on ``fpga_target``, reaches
         ``target_mhz``; recorded in the manifest (``timing``) and the report. Not with ``pipeline``.
-        Raises :class:`~pwas_hdl.timing_closure.TimingNotMet` (a ``ValueError``) when even the
+        Raises :class:`~pwas_hdl.flow.timing_closure.TimingNotMet` (a ``ValueError``) when even the
         deepest pipeline misses the target. Takes one place-and-route run per candidate tried.
     fpga_target : {"ecp5", "ice40"}
         FPGA family of the timing closure (devices: ECP5 LFE5U-45F, iCE40 HX8K).
@@ -352,8 +353,8 @@ def build_design(
     -------
     GeneratedDesign
     """
-    from .hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
-    from .hdl.emit import memory_hex_files
+    from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
+    from pwas_hdl.hdl.emit import memory_hex_files
 
     if design not in ("core", "sensor"):
         raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
@@ -364,7 +365,7 @@ def build_design(
     fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
-        from .timing_closure import close_timing
+        from pwas_hdl.flow.timing_closure import close_timing
 
         if pipeline is not None:
             raise ValueError("give either a pipeline or a target clock (target_mhz / --target-mhz), not both")
@@ -425,7 +426,7 @@ def build_design(
 
 
 def _timing_section(timing: dict) -> str:
-    from .timing_closure import timing_report_text
+    from pwas_hdl.flow.timing_closure import timing_report_text
 
     return "\n" + timing_report_text(timing)
 

@@ -7,7 +7,7 @@ stage so that a testbench can name the first stage that differs.
 
 Formats (all decided from the data by default, every one overridable)
 ---------------------------------------------------------------------
-Inputs, per regressor dimension ``j`` (:class:`~pwas_hdl.fixed_point.InputFormat`)
+Inputs, per regressor dimension ``j`` (:class:`~pwas_hdl.fixedpoint.formats.InputFormat`)
     Signed ``B_in``-bit codes ``q`` (default ``B_in = 12``); one grid cell is exactly ``2**F_j``
     codes, ``F_j = floor(log2(input_fill * 2**B_in / p_j))`` (``input_fill = 0.9``),
     ``lo_code_j = -((p_j * 2**F_j) // 2)``; physical ``x = offset_j + lsb_j * q`` with
@@ -46,7 +46,7 @@ Datapath (one row of the pipeline; names are the keys of :meth:`FixedPointModel.
    ``mu = Grid.barycentric(frac, perm, one=2**F)``: ``mu_0 = 2**F - frac_perm[0]``,
    ``mu_k = frac_perm[k-1] - frac_perm[k]``, ``mu_n = frac_perm[n-1]``; each in ``[0, 2**F]``
    (``F + 1`` bits unsigned), ``sum mu = 2**F`` exactly.
-4. Memory (:mod:`pwas_hdl.memory_layout`, banked by default): vertex ``k`` is read from
+4. Memory (:mod:`pwas_hdl.fixedpoint.memory_layout`, banked by default): vertex ``k`` is read from
    ``bank[k] = (sum(cell) + k) mod (n+1)`` at ``addr[k]``; ``w[k]`` is the word read back from
    the ROM image (so the layout is part of what is checked).
 5. ``products_k = mu_k * w_k`` (exact, ``(F+1) + B_w + 1`` bits signed);
@@ -77,7 +77,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .fixed_point import (
+from pwas_hdl.fixedpoint.formats import (
     FixedFormat,
     InputFormat,
     PortFormat,
@@ -86,8 +86,8 @@ from .fixed_point import (
     signed_bits_needed,
     shift_round,
 )
-from .geometry import Grid
-from .memory_layout import make_layout
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fixedpoint.memory_layout import make_layout
 
 __all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES", "NOISE_BUDGET", "default_weight_frac"]
 
@@ -174,7 +174,7 @@ class FixedPointModel:
         The accuracy the output lsb is chosen against (``from_sensor`` passes the training
         RMSE). Default/invalid: ``(max w - min w) / 2**10`` (or 1.0 if all weights are equal).
     layout : {"banked", "replicated"}
-        Weight memory layout (:mod:`pwas_hdl.memory_layout`).
+        Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`).
     regressor_names : sequence of str, optional
         Names of the ``n`` dimensions (default ``x0 ..``).
     regressor_signals : sequence of (str, int), optional
@@ -234,7 +234,7 @@ class FixedPointModel:
         target_names: Sequence[str] | None = None,
     ):
         if not isinstance(grid, Grid):
-            raise TypeError(f"grid must be a pwas_hdl.geometry.Grid, got {type(grid).__name__}")
+            raise TypeError(f"grid must be a pwas_hdl.fit.geometry.Grid, got {type(grid).__name__}")
         w = np.asarray(weights, dtype=float)
         if w.ndim == 1:
             w = w[:, None]
@@ -408,7 +408,7 @@ class FixedPointModel:
 
     @classmethod
     def from_sensor(cls, sensor, **overrides) -> "FixedPointModel":
-        """Bit-true model of a fitted :class:`~pwas_hdl.virtual_sensor.PWASVirtualSensor`.
+        """Bit-true model of a fitted :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor`.
 
         The reference error for the default output lsb is the sensor's training RMSE (max over
         targets) unless ``reference_error`` is given. Names of regressors, signals and targets

@@ -1,7 +1,7 @@
 """The PWAS virtual sensor: fit / predict in the scikit-learn manner, and its model file.
 
 A :class:`PWASVirtualSensor` estimates ``nz`` unmeasured quantities ``z(t)`` from the last ``Mu``
-inputs and ``My`` outputs (paper eq. 2). All targets share one :class:`~pwas_hdl.geometry.Grid`;
+inputs and ``My`` outputs (paper eq. 2). All targets share one :class:`~pwas_hdl.fit.geometry.Grid`;
 each has its own weight vector (componentwise fit).
 
 Model file (``.json``, format ``pwas-hdl-model``, version 1) -- see ``docs`` in the README::
@@ -12,7 +12,7 @@ Model file (``.json``, format ``pwas-hdl-model``, version 1) -- see ``docs`` in 
       "lags": {"Mu": int, "My": int},
       "regressors": ["y[t-3]", ...],                 # order of the regressor dimensions
       "grid": {"lo": [...], "hi": [...], "partitions": [...]},
-      "weights": {"<target>": [w_0, ..., w_{N-1}], ...},   # vertex order of pwas_hdl.geometry
+      "weights": {"<target>": [w_0, ..., w_{N-1}], ...},   # vertex order of pwas_hdl.fit.geometry
       "fit": {"sigma": ..., "tikhonov_order": ..., "gamma": ..., "cv": {...} | null, ...}
     }
 
@@ -29,10 +29,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .atomic import atomic_write_text
-from .geometry import Grid
-from .regressors import LagStructure, as_trajectories
-from .regularized_lsq import CVResult, cross_validate_sigma, solve_regularized, tikhonov_matrix
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regressors import LagStructure, as_trajectories
+from pwas_hdl.fit.regularized_lsq import CVResult, cross_validate_sigma, solve_regularized, tikhonov_matrix
 
 __all__ = ["PWASVirtualSensor", "MODEL_FORMAT", "MODEL_VERSION", "load_model"]
 
@@ -130,7 +130,7 @@ class PWASVirtualSensor:
 
     # ------------------------------------------------------------------ fit
     def regressors(self, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
-        """Stacked regressors of the trajectories (see :mod:`pwas_hdl.regressors`).
+        """Stacked regressors of the trajectories (see :mod:`pwas_hdl.fit.regressors`).
 
         Uses the fitted lag structure when the sensor is fitted, else the one implied by the data.
         """

@@ -10,12 +10,12 @@ latency. This module prepares what the testbench replays and checks:
   values come from there, never from the RTL).
 * :func:`segment` turns input transfers (codes) into a :class:`Segment` with its expected outputs:
   for the core one output per transfer, for the sensor top one per transfer after the ``M - 1``
-  warm-up transfers, computed through :class:`~pwas_hdl.regressors.LagStructure` exactly as the
+  warm-up transfers, computed through :class:`~pwas_hdl.fit.regressors.LagStructure` exactly as the
   software does.
 * :func:`run_rtl` builds (cached) and runs the testbench and returns an :class:`RTLResult`:
   every mismatch (exact, 0 LSB), the error of the RTL against the float model and the stated bound,
   the measured latency and II, and -- with ``debug=True`` -- the first pipeline stage whose
-  registers differ from :meth:`FixedPointModel.trace <pwas_hdl.bittrue.FixedPointModel.trace>`
+  registers differ from :meth:`FixedPointModel.trace <pwas_hdl.fixedpoint.bittrue.FixedPointModel.trace>`
   for the first failing sample.
 * :func:`simulate_data` replays a CSV file (``pwas-hdl simulate``).
 """
@@ -38,8 +38,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .bittrue import FixedPointModel
-from .manifest import load_manifest
+from pwas_hdl.resources import sim_dir
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.design.manifest import load_manifest
 
 __all__ = [
     "SIM_DIR",
@@ -58,7 +59,7 @@ __all__ = [
     "sim_module",
 ]
 
-SIM_DIR = Path(__file__).resolve().parent.parent / "sim"
+SIM_DIR = sim_dir()
 SIMULATORS = ("icarus", "verilator")
 
 
@@ -151,8 +152,8 @@ def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = N
         No manifest / model, or the model rebuilt from ``model.json`` does not give the formats
         the manifest lists (the folder was edited by hand: regenerate it).
     """
-    from .generate import FORMAT_OPTIONS, fixed_point_model
-    from .virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.design.generate import FORMAT_OPTIONS, fixed_point_model
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     out = Path(outdir)
     man = load_manifest(out)
@@ -702,8 +703,8 @@ def simulate_data(
     Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult}``.
     Mismatches against the bit-true model do not raise: they are counted in the summary.
     """
-    from .atomic import atomic_write_text
-    from .data_io import read_csv, split_trajectories, write_csv
+    from pwas_hdl.io.atomic import atomic_write_text
+    from pwas_hdl.io.csv_table import read_csv, split_trajectories, write_csv
 
     say = progress or (lambda msg: None)
     if simulator not in SIMULATORS:

@@ -4,7 +4,7 @@
 pipeline depth for clock rate. :func:`pipeline_candidates` lists pipeline configurations from the
 shallowest (2 cycles) to the deepest, one more register each, in the order that cuts the critical
 path nextpnr reports (see the list's docstring); :func:`close_timing` places and routes them with
-:func:`pwas_hdl.synthesis.synthesize` (``--freq`` = the target, fixed placer seed) and returns the
+:func:`pwas_hdl.flow.synthesis.synthesize` (``--freq`` = the target, fixed placer seed) and returns the
 first whose fmax reaches the target, with every measurement it made.
 
 What is measured. nextpnr's fmax covers register-to-register paths only; a path from an input pin
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from .hdl.params import Pipeline
+from pwas_hdl.hdl.params import Pipeline
 
 __all__ = [
     "FPGA_TARGETS",
@@ -221,13 +221,13 @@ def measure_design(
     harness: bool = True,
     progress: Progress | None = None,
 ) -> dict[str, Any]:
-    """Place and route a built design (:class:`~pwas_hdl.generate.GeneratedDesign`) on ``fpga``.
+    """Place and route a built design (:class:`~pwas_hdl.design.generate.GeneratedDesign`) on ``fpga``.
 
     The design's files (and, with ``harness``, the timing harness as top) are written to
-    ``workdir``; returns the :func:`~pwas_hdl.synthesis.synthesize` result with ``harness_ffs``,
+    ``workdir``; returns the :func:`~pwas_hdl.flow.synthesis.synthesize` result with ``harness_ffs``,
     ``ffs_core`` and ``critical_path`` added.
     """
-    from .synthesis import synthesize
+    from pwas_hdl.flow.synthesis import synthesize
 
     work = Path(workdir)
     if work.exists():

@@ -2,7 +2,7 @@
 
 This module is the single source of truth for the ROM layout: the generator writes the memory
 contents with :meth:`BankedLayout.contents` / :func:`hex_files`, and the bit-true model
-(:mod:`pwas_hdl.bittrue`) reads the weights back through the same layout, so a layout bug shows
+(:mod:`pwas_hdl.fixedpoint.bittrue`) reads the weights back through the same layout, so a layout bug shows
 up as a bit-true mismatch against the float model.
 
 Both layouts give ``n + 1`` banks (one read port each, all read in the same cycle) and have the
@@ -11,7 +11,7 @@ same interface: ``n_banks``, ``depth``, ``total_words``, ``bank_addr``, ``simple
 
 Banked layout (default, :class:`BankedLayout`)
 ----------------------------------------------
-Vertex ``v = (v_0 .. v_{n-1})`` (coordinates of :mod:`pwas_hdl.geometry`, last dimension has
+Vertex ``v = (v_0 .. v_{n-1})`` (coordinates of :mod:`pwas_hdl.fit.geometry`, last dimension has
 stride 1) goes to
 
 * bank ``b(v) = (v_0 + ... + v_{n-1}) mod (n + 1)``;
@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import Grid
+from pwas_hdl.fit.geometry import Grid
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
 
@@ -78,7 +78,7 @@ class _LayoutBase:
 
     def __init__(self, grid: Grid):
         if not isinstance(grid, Grid):
-            raise TypeError(f"expected a pwas_hdl.geometry.Grid, got {type(grid).__name__}")
+            raise TypeError(f"expected a pwas_hdl.fit.geometry.Grid, got {type(grid).__name__}")
         self.grid = grid
         self.n = grid.n
         self.n_banks = grid.n + 1

@@ -53,10 +53,11 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from .atomic import atomic_write_text
-from .manifest import load_manifest
+from pwas_hdl.resources import templates_dir
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.design.manifest import load_manifest
 
-__all__ = ["TARGETS", "DEFAULT_DEVICE", "synthesize", "synth_summary_text", "templates_dir"]
+__all__ = ["TARGETS", "DEFAULT_DEVICE", "synthesize", "synth_summary_text"]
 
 TARGETS = ("ice40", "ecp5", "generic")
 
@@ -120,11 +121,6 @@ _GENERIC_LUT_SIZE = 4
 _GENERIC_MAX_LOGIC_ROM = 64
 
 Progress = Callable[[str], None]
-
-
-def templates_dir() -> Path:
-    """The folder that holds the ``synth_<target>.ys.tmpl`` Yosys script templates."""
-    return Path(__file__).resolve().parent.parent / "rtl_templates"
 
 
 # --------------------------------------------------------------------------------------------

@@ -13,8 +13,8 @@ import os
 from pathlib import Path
 from typing import Any, Sequence
 
-from .manifest import load_manifest
-from .virtual_sensor import PWASVirtualSensor
+from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["collect_report", "report_markdown"]
 

@@ -15,6 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from pwas_hdl.errors import ToolMissing
+
 __all__ = ["verilator_bin_dir", "tool_env", "which", "require", "lint_verilog"]
 
 
@@ -53,10 +55,10 @@ _HINT = {
 
 
 def require(tool: str) -> str:
-    """Full path of ``tool``; RuntimeError saying how to install it when it is missing."""
+    """Full path of ``tool``; :class:`~pwas_hdl.errors.ToolMissing` saying how to install it when it is missing."""
     path = which(tool)
     if path is None:
-        raise RuntimeError(f"{tool} not found; {_HINT.get(tool, 'install it')}")
+        raise ToolMissing(tool, _HINT.get(tool, "install it"))
     return path
 
 

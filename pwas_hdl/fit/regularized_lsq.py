@@ -14,7 +14,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
-from .geometry import Grid
+from pwas_hdl.fit.geometry import Grid
 
 __all__ = [
     "tikhonov_matrix",

@@ -4,7 +4,7 @@
 fraction bits ``Fw`` and output fraction bits ``Fo`` (the widths ``B_w`` and ``B_out`` are the
 fewest bits that hold every weight / every reachable output, as ``generate`` chooses them, unless
 fixed) -- and, for every combination, runs the bit-true model
-(:meth:`FixedPointModel.predict <pwas_hdl.bittrue.FixedPointModel.predict>`, which quantises the
+(:meth:`FixedPointModel.predict <pwas_hdl.fixedpoint.bittrue.FixedPointModel.predict>`, which quantises the
 physical regressors of the data to input codes exactly as the circuit's input does) and estimates
 the hardware the generator would build for it. :func:`pareto_front` marks the combinations that no
 other one beats in both accuracy and cost; :func:`plot_exploration` draws the result.
@@ -64,7 +64,7 @@ counted in bit-level units:
 Measured resources (``resources="generic" | "ecp5" | "ice40"``)
 ----------------------------------------------------------------
 The estimate is computed for every point; then the Pareto points (and the default) are generated
-(:func:`pwas_hdl.generate.build_design`) and synthesised with :func:`pwas_hdl.synthesis.synthesize`
+(:func:`pwas_hdl.design.generate.build_design`) and synthesised with :func:`pwas_hdl.flow.synthesis.synthesize`
 (Yosys; nextpnr for FPGA targets; for the Lorenz core about 15 s a point for ``generic``, 40 s for
 ``ecp5``): ``point["measured"]`` holds
 LUTs, FFs, DSPs, block RAMs, memory bits (and fmax). The front stays the estimate's front; the
@@ -90,10 +90,10 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import __version__
-from .bittrue import FixedPointModel
-from .data_io import Table, read_csv, select_signals
-from .virtual_sensor import PWASVirtualSensor
+from pwas_hdl import __version__
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.io.csv_table import Table, read_csv, select_signals
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = [
     "EXPLORE_FORMAT",
@@ -115,7 +115,7 @@ EXPLORE_VERSION = 1
 #: Input widths swept by default.
 DEFAULT_INPUT_BITS = (8, 10, 12, 14, 16)
 #: Weight / output fraction bits swept by default, relative to the defaults of ``generate`` (whose
-#: rounding noise is 5 % of the training RMSE, :func:`pwas_hdl.bittrue.default_weight_frac`): from
+#: rounding noise is 5 % of the training RMSE, :func:`pwas_hdl.fixedpoint.bittrue.default_weight_frac`): from
 #: 4 bits coarser, where the accuracy clearly suffers, to 4 bits finer.
 DEFAULT_FRAC_OFFSETS = tuple(range(-4, 5))
 #: At most this many Pareto points are synthesised in a measured run (evenly spread, both ends kept).
@@ -208,8 +208,8 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
         try:
             u, y, ztab = data
         except (TypeError, ValueError):
-            raise ValueError("data must be a CSV path, a pwas_hdl.data_io.Table or a tuple (u, y, z)") from None
-        from .regressors import as_trajectories
+            raise ValueError("data must be a CSV path, a pwas_hdl.io.csv_table.Table or a tuple (u, y, z)") from None
+        from pwas_hdl.fit.regressors import as_trajectories
 
         ztab = as_trajectories(ztab, "z", len(tgts))
         desc = {"path": None, "reference_columns": None, "traj_col": None}
@@ -279,7 +279,7 @@ def _register_bits(core) -> int | None:
 def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None,
                        _register_cache: dict | None = None) -> dict[str, Any]:
     """The resource estimate of the core the generator builds for ``fxm`` (see the module notes)."""
-    from .hdl import build_core, design_info
+    from pwas_hdl.hdl import build_core, design_info
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -401,7 +401,7 @@ def explore(
     Parameters
     ----------
     model : PWASVirtualSensor or path of a model file
-    data : path of a CSV, :class:`~pwas_hdl.data_io.Table`, or tuple ``(u, y, z)``
+    data : path of a CSV, :class:`~pwas_hdl.io.csv_table.Table`, or tuple ``(u, y, z)``
         The evaluation data. From a CSV/Table the model's input/output columns are read (by
         name) and the reference of target ``t`` is column ``t_true`` if present, else ``t``.
         A tuple gives arrays (or lists of trajectories) ``u``, ``y`` as for
@@ -417,8 +417,8 @@ def explore(
     weight_bits, output_bits : int, optional
         Fixed widths (default: the fewest bits for each point; with a fixed ``weight_bits``
         points whose weights do not fit are refused unless ``overflow="saturate"``).
-    input_fill, rounding, overflow : as :class:`~pwas_hdl.bittrue.FixedPointModel`, fixed.
-    memory, pipeline : as :func:`pwas_hdl.generate.build_design`.
+    input_fill, rounding, overflow : as :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel`, fixed.
+    memory, pipeline : as :func:`pwas_hdl.design.generate.build_design`.
     resources : {"estimate", "generic", "ecp5", "ice40"}
         Estimate only, or also synthesise the Pareto points and the default (see module notes).
     cost : str
@@ -636,8 +636,8 @@ def _default_summary(points: list[dict], errors: dict[int, np.ndarray], di: int,
 
 
 def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress) -> dict:
-    from .generate import build_design, write_folder
-    from .synthesis import synthesize
+    from pwas_hdl.design.generate import build_design, write_folder
+    from pwas_hdl.flow.synthesis import synthesize
 
     own = workdir is None
     root = Path(tempfile.mkdtemp(prefix="pwas-explore-")) if own else Path(workdir)
@@ -739,7 +739,7 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_write_bytes
+    from pwas_hdl.io.atomic import atomic_write_bytes
 
     pts = result["points"]
     if not pts:

@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .atomic import atomic_write_text
+from pwas_hdl.io.atomic import atomic_write_text
 
 __all__ = ["Table", "read_csv", "write_csv", "select_signals"]
 
