@@ -1,1 +1,1 @@
-"""fit"""
+"""Fitting a PWAS virtual sensor: the Kuhn grid (geometry), lag regressors (regressors), Tikhonov least squares with cross-validation (regularized_lsq) and the estimator with its model file (virtual_sensor)."""
