@@ -62,6 +62,7 @@ import numpy as np
 from pwas_hdl.systems.lorenz import LORENZ_PARAMS, lorenz
 from pwas_hdl.fit.regularized_lsq import DEFAULT_SIGMA_GRID
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.flow.executor import Executor
 from pwas_hdl.io.atomic import atomic_write_text
 
 __all__ = [
@@ -224,6 +225,44 @@ def _environment() -> dict[str, Any]:
     }
 
 
+def _seed_task(task: dict[str, Any]) -> list[dict[str, Any]]:
+    """Every row of one seed (a pure task: its result depends only on ``task``)."""
+    seed, n_train, n_test, folds, grid = task["seed"], task["n_train"], task["n_test"], task["folds"], task["grid"]
+    history, n_total = task["history"], task["n_total"]
+    data = lorenz(n_total, seed=seed, burn_in=_BURN_IN)
+    y_tr, z_tr = data.y[:n_train], data.z[:n_train]
+    test_idx = slice(n_train + history - 1, n_total)
+    z_true_te = data.z_true[test_idx, 0]
+    z_noisy_te = data.z[test_idx, 0]
+    out = []
+    for row in task["rows"]:
+        sensor = PWASVirtualSensor(
+            mu=0, my=row.my, partitions=row.p, gamma=row.gamma, sigma=None,
+            tikhonov_order=0, cv_folds=folds, sigma_grid=grid,
+        )
+        t0 = time.perf_counter()
+        sensor.fit(None, y_tr, z_tr)
+        fit_time = time.perf_counter() - t0
+        y_te = data.y[n_train + history - row.my:]
+        xi, _ = sensor.regressors(None, y_te)
+        zhat, flags = sensor.predict_regressors(xi, return_flags=True)
+        zhat = zhat[:, 0]
+        if zhat.shape[0] != n_test:  # pragma: no cover - protocol invariant
+            raise AssertionError(f"expected {n_test} test estimates, got {zhat.shape[0]}")
+        rmsee = float(np.sqrt(np.mean((zhat - z_true_te) ** 2)))
+        out.append({
+            "seed": seed,
+            "rmsee": rmsee,
+            "sigma": float(sensor.sigma_),
+            "fit_time_s": fit_time,
+            "rmse_vs_noisy_z": float(np.sqrt(np.mean((zhat - z_noisy_te) ** 2))),
+            "train_rmse": float(sensor.train_rmse_[0]),
+            "test_out_of_domain": int(np.count_nonzero(flags)),
+            "sigma_at_grid_edge": bool(sensor.sigma_ in (float(grid.min()), float(grid.max()))),
+        })
+    return out
+
+
 def run_lorenz_tables(
     seeds: Sequence[int] = range(5),
     rows: Sequence[PaperRow | str | tuple[int, int, float]] | None = None,
@@ -232,6 +271,7 @@ def run_lorenz_tables(
     folds: int = 5,
     sigma_grid: Sequence[float] | None = None,
     progress: Callable[[str], None] | None = None,
+    executor: Executor | None = None,
 ) -> dict[str, Any]:
     """Fit and test the PWAS virtual sensor of every selected row of Tables II-V for every seed.
 
@@ -254,7 +294,10 @@ def run_lorenz_tables(
     sigma_grid : sequence of float, optional
         Candidate sigmas (default :data:`pwas_hdl.fit.regularized_lsq.DEFAULT_SIGMA_GRID`).
     progress : callable(str), optional
-        Called with a one-line message after each (row, seed) fit.
+        Called with a one-line message for each (row, seed) fit, as each seed completes.
+    executor : pwas_hdl.flow.executor.Executor, optional
+        Runs one task per seed: serially by default, or on a local or remote Dask cluster
+        (identical results; only the timings differ).
 
     Returns
     -------
@@ -301,42 +344,16 @@ def run_lorenz_tables(
 
     per_row: dict[str, list[dict[str, Any]]] = {r.id: [] for r in todo}
     t_start = time.perf_counter()
-    for seed in seed_list:
-        data = lorenz(n_total, seed=seed, burn_in=_BURN_IN)
-        y_tr, z_tr = data.y[:n_train], data.z[:n_train]
-        test_idx = slice(n_train + history - 1, n_total)
-        z_true_te = data.z_true[test_idx, 0]
-        z_noisy_te = data.z[test_idx, 0]
-        for row in todo:
-            sensor = PWASVirtualSensor(
-                mu=0, my=row.my, partitions=row.p, gamma=row.gamma, sigma=None,
-                tikhonov_order=0, cv_folds=folds, sigma_grid=grid,
-            )
-            t0 = time.perf_counter()
-            sensor.fit(None, y_tr, z_tr)
-            fit_time = time.perf_counter() - t0
-            y_te = data.y[n_train + history - row.my:]
-            xi, _ = sensor.regressors(None, y_te)
-            zhat, flags = sensor.predict_regressors(xi, return_flags=True)
-            zhat = zhat[:, 0]
-            if zhat.shape[0] != n_test:  # pragma: no cover - protocol invariant
-                raise AssertionError(f"expected {n_test} test estimates, got {zhat.shape[0]}")
-            rmsee = float(np.sqrt(np.mean((zhat - z_true_te) ** 2)))
-            rec = {
-                "seed": seed,
-                "rmsee": rmsee,
-                "sigma": float(sensor.sigma_),
-                "fit_time_s": fit_time,
-                "rmse_vs_noisy_z": float(np.sqrt(np.mean((zhat - z_noisy_te) ** 2))),
-                "train_rmse": float(sensor.train_rmse_[0]),
-                "test_out_of_domain": int(np.count_nonzero(flags)),
-                "sigma_at_grid_edge": bool(sensor.sigma_ in (float(grid.min()), float(grid.max()))),
-            }
+    tasks = [{"seed": seed, "rows": todo, "n_train": n_train, "n_test": n_test, "folds": folds, "grid": grid,
+              "history": history, "n_total": n_total} for seed in seed_list]
+    ex = executor if executor is not None else Executor()
+    for seed, recs in zip(seed_list, ex.map(_seed_task, tasks, labels=[f"seed {s}" for s in seed_list])):
+        for row, rec in zip(todo, recs):
             per_row[row.id].append(rec)
             if progress is not None:
                 progress(
-                    f"{row.id} (N={row.n_vertices}) seed {seed}: RMSEE {rmsee:.2f} "
-                    f"(paper {row.rmsee}), sigma {sensor.sigma_:.3g}, fit {fit_time:.2f} s"
+                    f"{row.id} (N={row.n_vertices}) seed {seed}: RMSEE {rec['rmsee']:.2f} "
+                    f"(paper {row.rmsee}), sigma {rec['sigma']:.3g}, fit {rec['fit_time_s']:.2f} s"
                 )
 
     out_rows = []
@@ -451,6 +468,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=5, help="number of seeds 0..K-1 (default 5)")
     ap.add_argument("--quick", action="store_true", help="1 seed, baseline row only (CI smoke)")
     ap.add_argument("--outdir", type=Path, default=HERE / "results", help="output folder")
+    ap.add_argument("--workers", type=int, default=None, help="run the seeds on a local Dask cluster of N workers")
+    ap.add_argument("--scheduler", default=None, help="run the seeds on an existing Dask cluster (tcp://HOST:PORT)")
     args = ap.parse_args(argv)
     if args.seeds < 1:
         ap.error("--seeds must be >= 1")
@@ -460,7 +479,8 @@ def main(argv: list[str] | None = None) -> int:
         seeds, rows, stem = list(range(args.seeds)), None, "lorenz_tables"
     args.outdir.mkdir(parents=True, exist_ok=True)
 
-    res = run_lorenz_tables(seeds=seeds, rows=rows, progress=lambda msg: print(msg, flush=True))
+    with Executor(workers=args.workers, scheduler=args.scheduler) as ex:
+        res = run_lorenz_tables(seeds=seeds, rows=rows, progress=lambda msg: print(msg, flush=True), executor=ex)
     md = markdown_table(res)
     json_path = atomic_write_text(args.outdir / f"{stem}.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
     env = res["environment"]

@@ -80,6 +80,16 @@ def _float_list(text: str, what: str) -> list[float]:
         raise UserError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
 
 
+WorkersOpt = Annotated[Optional[int], typer.Option("--workers", help="Run the independent tasks on a local Dask cluster of this many worker processes (default: serially).")]
+SchedulerOpt = Annotated[Optional[str], typer.Option("--scheduler", help="Run the independent tasks on an existing Dask cluster: its scheduler address tcp://HOST:PORT (default: $PWAS_HDL_SCHEDULER).")]
+
+
+def _executor(workers: Optional[int], scheduler: Optional[str]):
+    from pwas_hdl.flow.executor import Executor
+
+    return Executor(workers=workers, scheduler=scheduler)
+
+
 def _names(values: Optional[list[str]]) -> list[str]:
     res: list[str] = []
     for v in values or []:
@@ -369,6 +379,8 @@ def explore(
     device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --resources ecp5/ice40 (as for synth).")] = None,
     measure_max: Annotated[int, typer.Option("--measure-max", help="Synthesise at most this many Pareto points (spread along the front) besides the default.")] = 10,
     synth_dir: Annotated[Optional[Path], typer.Option("--synth-dir", help="Keep the synthesised designs here (default: a temporary folder, removed).")] = None,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Sweep input, weight and output word lengths: bit-true RMSEE against resources.
 
@@ -397,12 +409,12 @@ def explore(
         )
         if outdir.exists() and not outdir.is_dir():
             raise UserError(f"{outdir} exists and is not a folder; choose another --outdir")
-        with _progress("exploring formats") as update:
+        with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
                 model_path, data, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
                 input_fill=input_fill, rounding=rounding, overflow=overflow, memory=memory, pipeline=pipeline,
                 resources=resources, cost=cost, device=device, measure_max=measure_max, workdir=synth_dir,
-                progress=lambda stage, done, total: update(done, total),
+                progress=lambda stage, done, total: update(done, total), executor=ex,
             )
         outdir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(outdir / "explore.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
@@ -478,6 +490,8 @@ def bench_lorenz(
     markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write a Markdown table here.")] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds (0..seeds-1) to average over.")] = 5,
     quick: Annotated[bool, typer.Option("--quick", help="Only the Table II row (My=4, p=7, gamma=1.2).")] = False,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Reproduce Tables II-V of the paper (Lorenz): RMSEE over seeds, beside the paper's values."""
     from pwas_hdl.benchmarks import lorenz_tables
@@ -487,7 +501,8 @@ def bench_lorenz(
             raise UserError("--seeds must be >= 1")
         rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
 
-        result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=_say)
+        with _executor(workers, scheduler) as ex:
+            result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=_say, executor=ex)
         atomic_write_text(json_out, json.dumps(result, indent=2) + "\n")
         table = lorenz_tables.markdown_table(result)
         if markdown is not None:

@@ -395,6 +395,7 @@ def explore(
     measure_max: int = DEFAULT_MEASURE_MAX,
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
+    executor: "Executor | None" = None,
 ) -> dict[str, Any]:
     """Sweep the fixed-point formats of a model and measure accuracy against resources.
 
@@ -431,6 +432,10 @@ def explore(
     workdir : path, optional
         Where the synthesised designs go (kept); default a temporary folder, removed afterwards.
     progress : callable(stage, done, total), optional
+        Called as the sweep and the synthesis runs progress.
+    executor : pwas_hdl.flow.executor.Executor, optional
+        Runs the synthesis of the measured points (one task per point): serially by default, or
+        on a local or remote Dask cluster. The result does not depend on it.
 
     Returns
     -------
@@ -591,7 +596,7 @@ def explore(
         else:
             pick = [front[round(i * (len(front) - 1) / (measure_max - 1))] for i in range(measure_max)]
         result["measured"] = _measure(sensor, points, sorted(set(pick) | {di}), resources, device, workdir, memory,
-                                      pipeline, common, progress)
+                                      pipeline, common, progress, executor)
     return result
 
 
@@ -635,45 +640,68 @@ def _default_summary(points: list[dict], errors: dict[int, np.ndarray], di: int,
     return out
 
 
-def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress) -> dict:
+def _measure_point(task: dict) -> dict:
+    """One design point: generate the core and synthesise it (a pure task for :class:`Executor`).
+
+    ``task`` holds the sensor, the point's formats, the synthesis target/device, the folder to
+    build in (``None``: a private temporary folder, removed) and the common options. Returns
+    ``{"measured": {...}}`` or ``{"error": "..."}`` for a point that could not be built.
+    """
     from pwas_hdl.design.generate import build_design, write_folder
     from pwas_hdl.flow.synthesis import synthesize
 
-    own = workdir is None
-    root = Path(tempfile.mkdtemp(prefix="pwas-explore-")) if own else Path(workdir)
-    root.mkdir(parents=True, exist_ok=True)
-    done: dict[str, Any] = {"target": target, "device": device, "points": [], "workdir": None if own else str(root)}
-    errors = []
+    p, common = task["point"], task["common"]
+    own = task["folder"] is None
+    root = Path(tempfile.mkdtemp(prefix="pwas-explore-")) if own else Path(task["folder"])
     try:
-        for c, k in enumerate(idx):
-            p = points[k]
-            if progress:
-                progress("synthesis", c, len(idx))
-            name = f"i{p['input_bits']}_w{p['weight_bits']}f{p['weight_frac']}_o{p['output_bits']}f{p['output_frac']}".replace("-", "m")
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    gd = build_design(sensor, design="core", memory=memory, pipeline=pipeline,
-                                      input_bits=p["input_bits"], input_fill=common["input_fill"],
-                                      weight_bits=p["weight_bits"], weight_frac=p["weight_frac"],
-                                      output_bits=p["output_bits"], output_frac=p["output_frac"],
-                                      overflow=common["overflow"], rounding=common["rounding"])
-                folder = write_folder(gd.files, root / name)
-                res = synthesize(folder, target, device=device)
-            except (RuntimeError, ValueError, FileNotFoundError) as exc:
-                errors.append(f"{p['label']}: {exc}")
-                p["measured"] = {"error": str(exc)}
-                continue
-            m = {key: res.get(key) for key in _MEASURED_KEYS}
-            m["manifest_memory_bits"] = int(gd.manifest["memory"]["bits"])
-            m["estimate_memory_bits_exact"] = m["manifest_memory_bits"] == p["resources"]["memory_bits"]
-            p["measured"] = m
-            done["points"].append(k)
-        if progress:
-            progress("synthesis", len(idx), len(idx))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            gd = build_design(task["sensor"], design="core", memory=task["memory"], pipeline=task["pipeline"],
+                              input_bits=p["input_bits"], input_fill=common["input_fill"],
+                              weight_bits=p["weight_bits"], weight_frac=p["weight_frac"],
+                              output_bits=p["output_bits"], output_frac=p["output_frac"],
+                              overflow=common["overflow"], rounding=common["rounding"])
+        folder = write_folder(gd.files, root / "design" if own else root)
+        res = synthesize(folder, task["target"], device=task["device"])
+    except (RuntimeError, ValueError, FileNotFoundError) as exc:
+        return {"error": str(exc)}
     finally:
         if own:
             shutil.rmtree(root, ignore_errors=True)
+    m = {key: res.get(key) for key in _MEASURED_KEYS}
+    m["manifest_memory_bits"] = int(gd.manifest["memory"]["bits"])
+    m["estimate_memory_bits_exact"] = m["manifest_memory_bits"] == p["resources"]["memory_bits"]
+    return {"measured": m}
+
+
+def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress, executor=None) -> dict:
+    from pwas_hdl.flow.executor import Executor
+
+    root = None if workdir is None else Path(workdir)
+    if root is not None:
+        root.mkdir(parents=True, exist_ok=True)
+    done: dict[str, Any] = {"target": target, "device": device, "points": [], "workdir": None if root is None else str(root)}
+    tasks, labels = [], []
+    for k in idx:
+        p = points[k]
+        name = f"i{p['input_bits']}_w{p['weight_bits']}f{p['weight_frac']}_o{p['output_bits']}f{p['output_frac']}".replace("-", "m")
+        tasks.append({"sensor": sensor, "point": p, "target": target, "device": device, "memory": memory, "pipeline": pipeline,
+                      "common": common, "folder": None if root is None else str(root / name)})
+        labels.append(p["label"])
+    ex = executor if executor is not None else Executor()
+    results = ex.map(_measure_point, tasks, labels=labels, return_exceptions=True,
+                     progress=(lambda d, t: progress("synthesis", d, t)) if progress else None)
+    errors = []
+    for k, r in zip(idx, results):
+        p = points[k]
+        if not isinstance(r, dict):  # TaskFailed: the task raised twice (a bug or a lost worker)
+            r = {"error": str(r)}
+        if "error" in r:
+            errors.append(f"{p['label']}: {r['error']}")
+            p["measured"] = {"error": r["error"]}
+            continue
+        p["measured"] = r["measured"]
+        done["points"].append(k)
     if not done["points"]:
         raise RuntimeError("synthesis failed for every point; first error: " + (errors[0] if errors else "?"))
     done["errors"] = errors

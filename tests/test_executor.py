@@ -1,0 +1,138 @@
+"""The execution layer (`pwas_hdl.flow.executor`): serial and Dask runs give identical results.
+
+The distributed tests start a 2-worker `distributed.LocalCluster` (worker processes on this
+machine); they compare the JSON of `explore` (synthesising real design points with Yosys) and of
+`bench lorenz --quick` with the serial run's, key by key, with only the timings left out.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.cli import app
+from pwas_hdl.errors import InputError
+from pwas_hdl.flow.executor import Executor, TaskFailed, environment_versions
+from pwas_hdl.io.csv_table import write_csv
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.systems.lorenz import lorenz
+
+runner = CliRunner()
+
+#: Keys whose values are wall-clock measurements (they differ from run to run by nature).
+_TIMING_KEYS = ("time", "_s", "seconds", "wall")
+
+
+def _without_timings(obj):
+    if isinstance(obj, dict):
+        return {k: _without_timings(v) for k, v in obj.items() if not any(t in k for t in _TIMING_KEYS)}
+    if isinstance(obj, list):
+        return [_without_timings(v) for v in obj]
+    return obj
+
+
+# ------------------------------------------------------------------------------ module-level tasks
+def _square(x: int) -> int:
+    return x * x
+
+
+def _flaky(path: str) -> str:
+    """Fails on its first call for a given path, succeeds on the second (a retried task)."""
+    p = Path(path)
+    if not p.exists():
+        p.write_text("tried")
+        raise OSError("first attempt fails")
+    return p.read_text()
+
+
+def _always_fails(x: int) -> int:
+    raise ValueError(f"task {x} is broken")
+
+
+# ------------------------------------------------------------------------------ serial behaviour
+def test_serial_map_keeps_order_and_retries_once(tmp_path):
+    ex = Executor()
+    assert ex.kind == "serial" and not ex.distributed
+    assert ex.map(_square, [3, 1, 2]) == [9, 1, 4]
+    assert ex.map(_flaky, [str(tmp_path / "a")]) == ["tried"]  # failed once, retried, passed
+    with pytest.raises(TaskFailed, match=r"task point-7 failed twice: ValueError: task 7 is broken"):
+        ex.map(_always_fails, [7], labels=["point-7"])
+    res = ex.map(_always_fails, [1, 2], return_exceptions=True)
+    assert all(isinstance(r, TaskFailed) for r in res) and "task 2 is broken" in str(res[1])
+
+
+def test_progress_is_reported():
+    seen = []
+    Executor().map(_square, range(4), progress=lambda d, t: seen.append((d, t)))
+    assert seen[0] == (0, 4) and seen[-1] == (4, 4) and len(seen) == 5
+
+
+@pytest.mark.parametrize("kw, msg", [
+    ({"workers": -1}, "--workers must be a non-negative integer"),
+    ({"workers": 10**6}, "more than the 256"),
+    ({"scheduler": "localhost"}, "tcp://HOST:PORT"),
+])
+def test_bad_settings_are_input_errors(kw, msg):
+    with pytest.raises(InputError, match=msg):
+        Executor(**kw)
+
+
+def test_labels_must_match_items():
+    with pytest.raises(InputError, match="2 labels for 1 tasks"):
+        Executor().map(_square, [1], labels=["a", "b"])
+
+
+def test_cli_refuses_bad_workers(tmp_path):
+    r = runner.invoke(app, ["bench", "lorenz", "--json", str(tmp_path / "b.json"), "--quick", "--workers", "-3"])
+    assert r.exit_code == 2 and "--workers must be a non-negative integer" in r.output
+    assert not (tmp_path / "b.json").exists()
+
+
+# ------------------------------------------------------------------------------ on a LocalCluster
+@pytest.fixture(scope="module")
+def cluster():
+    with Executor(workers=2) as ex:
+        yield ex
+
+
+@pytest.mark.slow
+def test_local_cluster_map_and_versions(cluster):
+    assert cluster.kind == "local-cluster" and cluster.describe()["workers"] == 2
+    assert cluster.map(_square, range(7)) == [x * x for x in range(7)]
+    assert cluster.tool_versions() == environment_versions()
+    res = cluster.map(_always_fails, [5], return_exceptions=True)
+    assert isinstance(res[0], TaskFailed) and "task 5 is broken" in str(res[0])
+
+
+@pytest.mark.slow
+def test_bench_lorenz_quick_identical_on_two_workers(tmp_path):
+    serial, dist = tmp_path / "serial.json", tmp_path / "dist.json"
+    r1 = runner.invoke(app, ["bench", "lorenz", "--quick", "--seeds", "2", "--json", str(serial)])
+    assert r1.exit_code == 0, r1.output
+    r2 = runner.invoke(app, ["bench", "lorenz", "--quick", "--seeds", "2", "--workers", "2", "--json", str(dist)])
+    assert r2.exit_code == 0, r2.output
+    a, b = json.loads(serial.read_text()), json.loads(dist.read_text())
+    assert [s["seed"] for s in b["rows"][0]["per_seed"]] == [0, 1]
+    assert _without_timings(a) == _without_timings(b)
+    # the numbers themselves, not only their presence
+    assert a["rows"][0]["rmsee_mean"] == b["rows"][0]["rmsee_mean"]
+
+
+@pytest.mark.slow
+@pytest.mark.synth
+def test_explore_measured_identical_on_two_workers(tmp_path, cluster):
+    from pwas_hdl.flow.explore import explore
+
+    d = lorenz(1300, seed=1)
+    train, test = d.split(1000)
+    m = PWASVirtualSensor(my=2, partitions=3, gamma=1.2, sigma=1e-4, output_names=["y"], target_names=["z"])
+    m.fit(None, train.y, train.z)
+    write_csv(tmp_path / "test.csv", test.columns())
+    kw = dict(input_bits=[8, 12], weight_frac=[-2, 0], output_frac=[0], resources="generic", measure_max=2)
+    serial = explore(m, tmp_path / "test.csv", **kw)
+    dist = explore(m, tmp_path / "test.csv", **kw, executor=cluster)
+    assert serial["measured"]["errors"] == [] and len(serial["measured"]["points"]) >= 2
+    assert json.dumps(_without_timings(serial), sort_keys=True) == json.dumps(_without_timings(dist), sort_keys=True)
