@@ -32,9 +32,12 @@ also runs a ``target_mhz`` timing closure (ECP5, 125 MHz) and simulates the shor
 bit-true model.
 
 ``--quick``: the N = 4096 Lorenz core, ECP5, ``short`` build only (a smoke test; writes
-``hw_tables_quick.{json,md}``). Results are written after every measurement (partial files), so an
-interrupted run keeps what it measured; ``--resume`` reuses the measurements of an earlier JSON made
-with the same settings.
+``hw_tables_quick.{json,md}``). Every place-and-route run is an independent task of
+:class:`pwas_hdl.flow.executor.Executor`: serially by default, on a local Dask cluster with
+``--workers N``, or on an existing cluster with ``--scheduler tcp://HOST:PORT`` (identical numbers;
+the timing closure's candidates are measured speculatively on the workers). Results are written
+after the place-and-route batch and after each later step (partial files); ``--resume`` reuses the
+measurements of an earlier JSON made with the same settings.
 """
 
 from __future__ import annotations
@@ -229,6 +232,11 @@ def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, m
     return base
 
 
+def _measure_task(job: dict[str, Any]) -> dict[str, Any]:
+    """One place-and-route measurement as a pure task for :class:`~pwas_hdl.flow.executor.Executor`."""
+    return measure(Path(job["model"]), job["fpga"], job["pipeline"], job["memory"], Path(job["workdir"]), job["memory_init"])
+
+
 def simulate_ii(model_path: Path, pipeline, samples: int = 300) -> dict[str, Any]:
     """Amaranth simulation without stalls: measured II and latency, bit-exact check."""
     from pwas_hdl.design.generate import build_design
@@ -401,7 +409,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--outdir", type=Path, default=HERE / "results")
     ap.add_argument("--workdir", type=Path, default=None, help="place-and-route folders (default: a folder under /tmp)")
     ap.add_argument("--resume", action="store_true", help="reuse measurements of an earlier JSON with the same settings")
+    ap.add_argument("--workers", type=int, default=None, help="place and route on a local Dask cluster of N workers (default: serially)")
+    ap.add_argument("--scheduler", default=None, help="place and route on an existing Dask cluster (tcp://HOST:PORT)")
     args = ap.parse_args(argv)
+    from pwas_hdl.flow.executor import Executor
+
+    with Executor(workers=args.workers, scheduler=args.scheduler) as ex:
+        return _run(args, ex)
+
+
+def _run(args: argparse.Namespace, ex) -> int:
 
     from pwas_hdl.flow.timing_closure import close_timing, TimingNotMet, pipeline_candidates
     from pwas_hdl.design.generate import build_design
@@ -447,41 +464,58 @@ def main(argv: list[str] | None = None) -> int:
         "environment": {"python": platform.python_version(), "cpus": os.cpu_count(), "tools": None},
     }
     t_start = time.monotonic()
+    # 1. fit every model and list the place-and-route jobs (those not reused from --resume)
+    jobs: list[dict[str, Any]] = []
+    builds_of: dict[str, dict[str, Any]] = {}
+    models: dict[str, Path] = {}
     for d in designs:
         prev = old.get(d["key"], {})
         model_path, info = fit_model(d, work, log)
         d["fit"] = info
         d["n"] = info["n"]
+        models[d["key"]] = model_path
         n = info["n"]
         gd = build_design(model_path, pipeline="min")
         wb = gd.model.weight_format.bits
         d["memory"] = {"weight_bits": wb, "banked_words": gd.manifest["memory"]["words"], "banked_bits": gd.manifest["memory"]["bits"],
                        "replicated_words": (n + 1) * d["N"], "replicated_bits": (n + 1) * d["N"] * wb}
         builds = {"short": "min", "fast": pipeline_candidates(n)[-1]}
+        builds_of[d["key"]] = builds
         d["builds"] = {}
         for fpga in fpgas:
             d["builds"][fpga] = {}
-            jobs = [("short", builds["short"], "banked", "inline")]
+            todo = [("short", builds["short"], "banked", "inline")]
             if not args.quick:
-                jobs.append(("fast", builds["fast"], "banked", "inline"))
+                todo.append(("fast", builds["fast"], "banked", "inline"))
                 if fpga == "ecp5":
                     # $readmemh: Yosys reads (n+1) N inline initialisers very slowly (N = 32768: > 10 min)
-                    jobs.append(("replicated", builds["short"], "replicated", "readmemh"))
-            for name, pipe, mem, init in jobs:
+                    todo.append(("replicated", builds["short"], "replicated", "readmemh"))
+            for name, pipe, mem, init in todo:
                 cached = prev.get("builds", {}).get(fpga, {}).get(name)
                 if cached is not None:
                     d["builds"][fpga][name] = cached
                     log(f"{d['key']} {fpga} {name}: reused")
                     continue
-                log(f"{d['key']} {fpga} {name} ({mem}) ...")
-                b = measure(model_path, fpga, pipe, mem, work / "pnr" / f"{d['key']}_{fpga}_{name}", init)
-                d["builds"][fpga][name] = b
-                res["environment"]["tools"] = res["environment"]["tools"] or b.get("tools")
-                log(f"  -> {b['latency_cycles']} cycles, " + (f"{b['fmax_mhz']} MHz, {b['latency_ns']} ns, LUT {b['luts']} FF {b['ffs_core']} "
-                    f"DSP {b['dsp']} BRAM {b['bram']} ({b['runtime_s']} s)" if b.get("fits") else f"{b.get('error')}"))
-                res["runtime_s"] = round(time.monotonic() - t_start, 1)
-                write(res, args.outdir, stem)
+                jobs.append({"key": d["key"], "name": name, "model": str(model_path), "fpga": fpga, "pipeline": pipe,
+                             "memory": mem, "memory_init": init, "workdir": str(work / "pnr" / f"{d['key']}_{fpga}_{name}")})
 
+    # 2. every place-and-route run is an independent task (serial, or on the Dask workers)
+    log(f"{len(jobs)} place-and-route runs on {ex.kind} ({ex.describe()['workers']} worker(s)) ...")
+    t_pnr = time.monotonic()
+    by_key = {d["key"]: d for d in designs}
+    labels = [f"{j['key']} {j['fpga']} {j['name']} ({j['memory']})" for j in jobs]
+    for j, label, b in zip(jobs, labels, ex.map(_measure_task, jobs, labels=labels)):
+        by_key[j["key"]]["builds"][j["fpga"]][j["name"]] = b
+        res["environment"]["tools"] = res["environment"]["tools"] or b.get("tools")
+        log(f"{label} -> {b['latency_cycles']} cycles, " + (f"{b['fmax_mhz']} MHz, {b['latency_ns']} ns, LUT {b['luts']} FF {b['ffs_core']} "
+            f"DSP {b['dsp']} BRAM {b['bram']} ({b['runtime_s']} s)" if b.get("fits") else f"{b.get('error')}"))
+    res["execution"] = {**ex.describe(), "pnr_runs": len(jobs), "pnr_wall_s": round(time.monotonic() - t_pnr, 1)}
+    res["runtime_s"] = round(time.monotonic() - t_start, 1)
+    write(res, args.outdir, stem)
+
+    # 3. the timing-closure demo and the II simulations of the must-show design
+    for d in designs:
+        model_path, n, builds = models[d["key"]], d["n"], builds_of[d["key"]]
         if d["key"] == MUST_SHOW:
             if not args.quick and "ecp5" in fpgas:
                 tc_old = old.get("__tc__")
@@ -496,7 +530,7 @@ def main(argv: list[str] | None = None) -> int:
 
                     try:
                         _, rec = close_timing(cand, n, DEMO_TARGET["ecp5"], fpga="ecp5", seed=SEED, progress=log,
-                                              workdir=work / "pnr" / "timing_closure")
+                                              workdir=work / "pnr" / "timing_closure", executor=ex)
                     except TimingNotMet as exc:
                         rec = dict(exc.record, error=str(exc))
                     rec["runtime_s"] = round(time.monotonic() - t0, 1)

@@ -256,6 +256,8 @@ def generate(
     rounding: Annotated[str, typer.Option("--rounding", help="Rounding of weights and output: half_up or truncate.")] = "half_up",
     target_mhz: Annotated[Optional[float], typer.Option("--target-mhz", help="Choose the pipeline by timing closure instead of --pipeline: the shallowest one whose fmax, measured by place and route (nextpnr, --fpga), reaches this clock. One P&R run per candidate tried (ECP5 ~25 s, iCE40 ~100 s for a Lorenz-size core).")] = None,
     fpga: Annotated[str, typer.Option("--fpga", help="FPGA of --target-mhz: ecp5 (LFE5U-45F) or ice40 (HX8K).")] = "ecp5",
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Generate the Verilog, weight memory (.hex), manifest.json and report.md of a model.
 
@@ -272,13 +274,14 @@ def generate(
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                 )
         else:
-            gd = _generate(
-                model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
-                input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
-                output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
-                target_mhz=target_mhz, fpga_target=fpga,
-                progress=_say,
-            )
+            with _executor(workers, scheduler) as ex:
+                gd = _generate(
+                    model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
+                    input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
+                    output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
+                    target_mhz=target_mhz, fpga_target=fpga,
+                    progress=_say, executor=ex,
+                )
         man = gd.manifest
         eb = man["error_bound"]
         mem = man["memory"]

@@ -136,3 +136,19 @@ def test_explore_measured_identical_on_two_workers(tmp_path, cluster):
     dist = explore(m, tmp_path / "test.csv", **kw, executor=cluster)
     assert serial["measured"]["errors"] == [] and len(serial["measured"]["points"]) >= 2
     assert json.dumps(_without_timings(serial), sort_keys=True) == json.dumps(_without_timings(dist), sort_keys=True)
+
+
+@pytest.mark.slow
+@pytest.mark.synth
+def test_timing_closure_identical_on_two_workers(tmp_path, cluster):
+    from pwas_hdl.design.generate import build_design
+
+    d = lorenz(800, seed=0)
+    m = PWASVirtualSensor(my=2, partitions=2, gamma=1.2, sigma=1e-3).fit(None, d.y, d.z)
+    path = tmp_path / "tiny.json"
+    m.save(path)
+    serial = build_design(path, target_mhz=60, fpga_target="ecp5", input_bits=12)
+    dist = build_design(path, target_mhz=60, fpga_target="ecp5", input_bits=12, executor=cluster)
+    assert serial.manifest["timing"]["met"] is True
+    assert dist.manifest["timing"] == serial.manifest["timing"]
+    assert dist.files == serial.files

@@ -312,6 +312,7 @@ def build_design(
     timing_seed: int = 1,
     prescreen: bool = True,
     progress: Callable[[str], None] | None = None,
+    executor: Any = None,
     **formats: Any,
 ) -> GeneratedDesign:
     """Build the RTL and all artifacts in memory.
@@ -343,6 +344,9 @@ def build_design(
         Let the timing closure skip candidates that cannot reach the target (see its notes).
     progress : callable, optional
         Called with one line of text before each place-and-route run of the timing closure.
+    executor : pwas_hdl.flow.executor.Executor, optional
+        Runs the timing closure's place-and-route candidates on Dask workers (speculatively;
+        the choice and the record are those of the serial search).
     memory_init : {"inline", "readmemh"}
         Weights as initialisers inside the Verilog (self-contained), or ``$readmemh`` of the
         ``.hex`` files of the folder (relative names: run tools from the folder).
@@ -376,7 +380,7 @@ def build_design(
             return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline", **formats)
 
         chosen, timing = close_timing(candidate, sensor.grid_.n, target_mhz, fpga=fpga_target, seed=timing_seed,
-                                      prescreen=prescreen, progress=progress)
+                                      prescreen=prescreen, progress=progress, executor=executor)
     else:
         chosen = pipeline
     if design == "core":

@@ -290,6 +290,7 @@ def close_timing(
     candidates: Sequence[Pipeline] | None = None,
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
+    executor: Any = None,
 ) -> tuple[Pipeline, dict[str, Any]]:
     """Find the shallowest candidate pipeline whose measured fmax reaches ``target_mhz``.
 
@@ -313,6 +314,11 @@ def close_timing(
         Default :func:`pipeline_candidates` ``(n)``.
     workdir
         Where the place-and-route runs go (default: a temporary folder, removed afterwards).
+    executor : pwas_hdl.flow.executor.Executor, optional
+        With a distributed executor, the candidates the search may need next are placed and
+        routed speculatively on the workers (as many as there are workers) while the search
+        waits for the one it needs; the search itself, and so the record, is the serial one
+        (speculative results that the search does not use are dropped).
 
     Returns
     -------
@@ -349,12 +355,33 @@ def close_timing(
         base = Path(workdir)
     tools = None
     try:
+        speculate = executor is not None and getattr(executor, "distributed", False)
+        futures: dict[int, Any] = {}
+        width = executor.describe()["workers"] if speculate else 1
+
+        def measure(i: int) -> dict[str, Any]:
+            return measure_design(build(cands[i]), fpga, freq_mhz=target, seed=seed, device=device,
+                                  workdir=base / f"c{i:02d}_L{lat[i]}")
+
+        def submit(i: int) -> None:
+            if 0 <= i < len(cands) and i not in futures and i not in results:
+                futures[i] = executor._connect().submit(measure, i, retries=1, pure=False)
+
         def run(i: int) -> float:
             nonlocal tools
             if progress:
                 progress(f"timing: candidate {i + 1}/{len(cands)} ({_label(cands[i], n)}, {lat[i]} cycles) on {fpga} at {target:g} MHz")
-            gd = build(cands[i])
-            res = measure_design(gd, fpga, freq_mhz=target, seed=seed, device=device, workdir=base / f"c{i:02d}_L{lat[i]}")
+            if speculate:
+                # the one needed now; then, while workers are free, the one below (the downward
+                # check) and the deeper ones in order
+                submit(i)
+                for k in [i - 1] + list(range(i + 1, len(cands))):
+                    if sum(1 for f in futures.values() if not f.done()) >= width:
+                        break
+                    submit(k)
+                res = futures.pop(i).result()
+            else:
+                res = measure(i)
             results[i] = res
             order.append(i)
             tools = tools or res.get("tools")
@@ -386,6 +413,9 @@ def close_timing(
                 nxt = next((k for k in range(i + 1, len(cands)) if fm * lat[k] / lat[i] >= target), len(cands) - 1)
             i = nxt
     finally:
+        if speculate:
+            for f in futures.values():
+                f.cancel()
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
 
