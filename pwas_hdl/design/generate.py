@@ -290,12 +290,24 @@ def _instance(man: dict) -> str:
     )
 
 
-def _fusesoc(man: dict) -> str:
-    hexes = "\n".join(f"      - {h['file']}" for h in man["files"]["hex"])
+def _fusesoc(man: dict, memory_init: str) -> str:
+    """The FuseSoC CAPI2 core of the folder (Edalize flow API: targets ``lint`` and ``sim``).
+
+    The ``.hex`` files are part of the core only when the Verilog reads them
+    (``memory_init="readmemh"``); each is copied (``copyto``) into the work folder where the
+    simulator runs, since ``$readmemh`` resolves its file name there.
+    """
+    filesets = "rtl"
+    rom = ""
+    if memory_init == "readmemh":
+        filesets += ", rom"
+        rom = "  rom:\n    files:\n" + "".join(
+            f"      - {h['file']}: {{copyto: {h['file']}}}\n" for h in man["files"]["hex"]
+        ) + "    file_type: user\n"
     return _template("fusesoc.core.tmpl").substitute(
         version=__version__, vlnv=f"pwas-hdl:generated:{man['top']}:0.1.0",
         description=f"PWAS {man['design']} {man['top']} (latency {man['latency_cycles']} cycles, II {man['ii']})",
-        verilog=man["files"]["verilog"], hex_files=hexes, top=man["top"],
+        verilog=man["files"]["verilog"], rom_fileset=rom, filesets=filesets, top=man["top"],
     )
 
 
@@ -423,7 +435,7 @@ def build_design(
         "manifest.json": json.dumps(man, indent=1, allow_nan=False) + "\n",
         "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else ""),
         files["instance_template"]: _instance(man),
-        files["fusesoc_core"]: _fusesoc(man),
+        files["fusesoc_core"]: _fusesoc(man, memory_init),
         **hexes,
     }
     return GeneratedDesign(top, texts, man, fxm, comp)
