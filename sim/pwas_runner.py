@@ -27,7 +27,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-SIM_DIR = Path(__file__).resolve().parent
+from pwas_hdl.resources import sim_dir
+
+SIM_DIR = sim_dir()
 SIMULATORS = ("icarus", "verilator")
 TESTBENCH_MODULE = "pwas_tb"
 TIMESCALE = ("1ns", "1ps")

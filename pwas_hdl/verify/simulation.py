@@ -69,7 +69,7 @@ def sim_module(name: str):
         return sys.modules[name]
     path = SIM_DIR / f"{name}.py"
     if not path.is_file():
-        raise FileNotFoundError(f"{path} is missing; the pwas-hdl checkout is incomplete (sim/ must sit next to pwas_hdl/)")
+        raise FileNotFoundError(f"{path} is missing; the pwas-hdl installation is incomplete (reinstall pwas-hdl)")
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod
