@@ -55,7 +55,6 @@ from typing import Any
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
 
 from pwas_hdl import __version__  # noqa: E402
 from pwas_hdl.io.atomic import atomic_write_text  # noqa: E402
