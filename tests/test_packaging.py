@@ -103,14 +103,18 @@ def test_no_source_file_finds_files_relative_to_itself():
 # ------------------------------------------------------------------------------------------------ slow
 
 
+#: Top-level files of the sdist besides the package (MANIFEST.in adds the last three and tests/).
+SDIST_EXTRA_FILES = ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "run.sh", "constraints.txt")
+
+
 def _copy_source(dst: Path) -> Path:
-    """The files a build reads (pyproject, README, LICENSE, the package and its mapped folders)."""
+    """The files a build reads: the top-level files, the package, its mapped folders and the tests."""
     src = dst / "src"
     src.mkdir()
-    for name in ("pyproject.toml", "README.md", "LICENSE"):
+    for name in SDIST_EXTRA_FILES:
         shutil.copy2(ROOT / name, src / name)
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "results", "*.egg-info")
-    for folder in {"pwas_hdl", *SETUPTOOLS.get("package-dir", {}).values()}:
+    for folder in {"pwas_hdl", "tests", *SETUPTOOLS.get("package-dir", {}).values()}:
         shutil.copytree(ROOT / folder, src / folder, ignore=ignore)
     return src
 
@@ -161,6 +165,13 @@ def test_wheel_and_sdist_carry_the_package_data(built):
             assert f"{src_rel}/{f}" in in_sdist, (package, f)
     assert "pwas_hdl/schemas/zz_packaging_probe.json" in in_wheel
     assert "pwas_hdl/schemas/zz_packaging_probe.json" in in_sdist
+    # The sdist runs the test suite and reproduces CI: every file of tests/, run.sh, the pins.
+    for name in SDIST_EXTRA_FILES:
+        assert name in in_sdist, name
+    for f in (ROOT / "tests").glob("*.py"):
+        assert f"tests/{f.name}" in in_sdist, f.name
+    assert not any("__pycache__" in n for n in in_sdist | in_wheel)
+    assert not any(n.startswith("tests/") for n in in_wheel)
     # The benchmark results are data of the repository, not of the package.
     assert not any("/results/" in n for n in in_wheel)
 
