@@ -77,6 +77,16 @@ def test_package_data_patterns_name_listed_packages():
         assert any(fnmatch.fnmatch(f, pattern) for f in _shipped_files(package)), package
 
 
+def test_version_has_one_source():
+    import importlib.metadata
+
+    import pwas_hdl
+
+    assert "version" not in PYPROJECT["project"] and "version" in PYPROJECT["project"]["dynamic"]
+    assert PYPROJECT["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "pwas_hdl.__version__"}
+    assert importlib.metadata.version("pwas-hdl") == pwas_hdl.__version__
+
+
 def test_resources_point_into_the_installed_package():
     from pwas_hdl.resources import schemas_dir, sim_dir, templates_dir
 
@@ -150,7 +160,10 @@ def test_wheel_and_sdist_carry_the_package_data(built):
     with tarfile.open(built["sdist"]) as t:
         top = t.getnames()[0].split("/")[0]
         in_sdist = {n.split("/", 1)[1] for n in t.getnames() if "/" in n}
-    assert top.startswith("pwas_hdl-")
+    import pwas_hdl
+
+    assert top == f"pwas_hdl-{pwas_hdl.__version__}"
+    assert built["wheel"].name.startswith(f"pwas_hdl-{pwas_hdl.__version__}-")
     # SPDX license expression and the license file.
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in in_wheel)
     assert "LICENSE" in in_sdist
