@@ -127,6 +127,7 @@ def test_fusesoc_lint_target_passes(designs, case, tmp_path):
                    core["name"])
     log = res.stdout + res.stderr
     assert res.returncode == 0, log
+    assert "WARNING" not in log and "%Warning" not in log, log  # FuseSoC deprecations, Verilator -Wall
     assert "--lint-only" in (tmp_path / "work" / f"{core['name'].replace(':', '_')}.vc").read_text()
 
 
