@@ -5,6 +5,7 @@ installed wheel runs the whole flow with the checkout out of reach.
 from __future__ import annotations
 
 import fnmatch
+import importlib.metadata
 import json
 import os
 import re
@@ -18,6 +19,8 @@ import zipfile
 from pathlib import Path
 
 import pytest
+
+import pwas_hdl
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
@@ -78,10 +81,6 @@ def test_package_data_patterns_name_listed_packages():
 
 
 def test_version_has_one_source():
-    import importlib.metadata
-
-    import pwas_hdl
-
     assert "version" not in PYPROJECT["project"] and "version" in PYPROJECT["project"]["dynamic"]
     assert PYPROJECT["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "pwas_hdl.__version__"}
     assert importlib.metadata.version("pwas-hdl") == pwas_hdl.__version__
@@ -157,14 +156,15 @@ def built(tmp_path_factory) -> dict[str, Path]:
 def test_wheel_and_sdist_carry_the_package_data(built):
     with zipfile.ZipFile(built["wheel"]) as z:
         in_wheel = set(z.namelist())
+        (meta,) = [n for n in in_wheel if n.endswith(".dist-info/METADATA")]
+        metadata = z.read(meta).decode("utf-8")
     with tarfile.open(built["sdist"]) as t:
         top = t.getnames()[0].split("/")[0]
         in_sdist = {n.split("/", 1)[1] for n in t.getnames() if "/" in n}
-    import pwas_hdl
-
     assert top == f"pwas_hdl-{pwas_hdl.__version__}"
     assert built["wheel"].name.startswith(f"pwas_hdl-{pwas_hdl.__version__}-")
     # SPDX license expression and the license file.
+    assert f"License-Expression: {PYPROJECT['project']['license']}" in metadata.splitlines()
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in in_wheel)
     assert "LICENSE" in in_sdist
     mapping = SETUPTOOLS.get("package-dir", {})
