@@ -152,3 +152,14 @@ def test_timing_closure_identical_on_two_workers(tmp_path, cluster):
     assert serial.manifest["timing"]["met"] is True
     assert dist.manifest["timing"] == serial.manifest["timing"]
     assert dist.files == serial.files
+
+
+@pytest.mark.slow
+def test_speedup_benchmark_quick_smoke(tmp_path):
+    import importlib
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.distributed_speedup")
+    assert bench.main(["--quick", "--workers", "2", "--outdir", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "distributed_speedup_quick.json").read_text())
+    assert res["sweeps"]["toy"]["identical"] is True and res["sweeps"]["toy"]["tasks"] == 4
+    assert bench._lpt_makespan([3.0, 2.0, 2.0, 1.0], 2) == 4.0
