@@ -1,70 +1,157 @@
 """Command-line interface: a thin layer over the public API.
 
-Every command has ``--help``. Errors in the input (bad CSV, unknown column, impossible
-parameter, corrupt model) print one clear line on stderr and exit with status 2, writing nothing.
+Every command has ``-h/--help``. What the command line does with each error class of
+:mod:`pwas_hdl.errors` (one place: :func:`_report_error`):
+
+* bad input (:class:`~pwas_hdl.errors.InputError`, any ``ValueError``, ``OSError``) and Click usage
+  errors (unknown option, non-numeric value, missing file): one ``error:`` line on stderr, exit 2,
+  nothing written;
+* a missing tool (:class:`~pwas_hdl.errors.ToolMissing`): an ``error:`` line with the install step,
+  exit 2; a tool that ran and failed (:class:`~pwas_hdl.errors.ToolFailed`): an ``error:`` line
+  naming its log, exit 2;
+* a verification that found a difference (:class:`~pwas_hdl.errors.CheckFailed`): ``error:``
+  line, exit 1;
+* anything else (:class:`~pwas_hdl.errors.InternalError`, a ``RuntimeError`` from a bug, ...): the
+  traceback and "this is a bug in pwas-hdl, please report it", exit 3.
+
+``pwas-hdl -q COMMAND`` drops the progress and information lines (warnings and errors stay);
+``pwas-hdl -v COMMAND`` adds the traceback to every error and the end of a failed tool's log.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import traceback
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Iterator, Optional
+from typing import Annotated, Any, Iterator, Optional, Sequence
 
+import click
 import numpy as np
 import typer
 from rich.console import Console
-from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from pwas_hdl import __version__
+from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.io.csv_table import read_csv, select_signals, split_trajectories, write_csv
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+#: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
+_CONTEXT = {"help_option_names": ["-h", "--help"]}
 
 app = typer.Typer(
     name="pwas-hdl",
     help="PWAS virtual sensors: fit from plant data, generate verified Verilog, simulate, synthesize, report.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
-    rich_markup_mode="markdown",
+    rich_markup_mode=None,  # help printed literally: no Rich markup, no emoji codes (logspace:A:B:K)
+    context_settings=_CONTEXT,
 )
-bench_app = typer.Typer(help="Reproduce the seed paper's benchmarks.", no_args_is_help=True)
+bench_app = typer.Typer(help="Reproduce the seed paper's benchmarks.", no_args_is_help=True, rich_markup_mode=None,
+                        context_settings=_CONTEXT)
 app.add_typer(bench_app, name="bench")
-data_app = typer.Typer(help="Write the built-in example data sets as CSV.", no_args_is_help=True)
+data_app = typer.Typer(help="Write the built-in example data sets as CSV.", no_args_is_help=True, rich_markup_mode=None,
+                       context_settings=_CONTEXT)
 app.add_typer(data_app, name="make-data")
 
 err = Console(stderr=True, soft_wrap=True)
 out = Console(soft_wrap=True)
 
+#: Global flags of this invocation (set by the root callback: ``-q``, ``-v``).
+_STATE = {"quiet": False, "verbose": False}
+
+#: Usage errors of the command-line parser: Click's, and Typer's own copy of Click (typer >= 0.2x
+#: vendors Click, with its own exception classes).
+_USAGE_ERRORS: tuple[type[Exception], ...] = (click.ClickException,) + (
+    (typer.TyperException,) if hasattr(typer, "TyperException") else ()
+)
+#: Exceptions that end a command on purpose (``--help``, ``--version``, an exit status).
+_EXITS: tuple[type[BaseException], ...] = tuple({typer.Exit, typer.Abort, click.exceptions.Exit, click.exceptions.Abort})
+
+#: Exit statuses.
+EXIT_CHECK_FAILED, EXIT_INPUT, EXIT_BUG = 1, 2, 3
+BUG_NOTE = "this is a bug in pwas-hdl, please report it (with the traceback above and the command line)"
+
 
 def _say(msg: str) -> None:
-    """One plain line on stderr (no Rich markup: names like y[t-3] must print as they are)."""
+    """One plain information line on stderr (no Rich markup: names like y[t-3] must print as they are).
+
+    Silent under ``-q``.
+    """
+    if not _STATE["quiet"]:
+        err.print(msg, highlight=False, markup=False)
+
+
+def _warn(msg: str) -> None:
+    """A warning line on stderr (printed even under ``-q``)."""
     err.print(msg, highlight=False, markup=False)
 
 
-class UserError(Exception):
-    """An error in what the user asked for: reported in one line, exit status 2."""
+def _error_line(msg: str) -> None:
+    err.print(f"error: {msg}", highlight=False, markup=False)
+
+
+def _os_message(exc: OSError) -> str:
+    if exc.filename is not None and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}"
+    return str(exc)
+
+
+def _report_error(exc: BaseException) -> int:
+    """Print what the user needs to see about ``exc`` and return the exit status (the mapping above)."""
+    verbose = _STATE["verbose"]
+    if isinstance(exc, _USAGE_ERRORS) and type(exc).__name__ == "NoArgsIsHelpError":
+        out.print(exc.format_message(), highlight=False, markup=False)  # the help text
+        return EXIT_INPUT
+    if isinstance(exc, _USAGE_ERRORS):
+        hint = ""
+        ctx = getattr(exc, "ctx", None)
+        if ctx is not None:
+            hint = f" (see `{ctx.command_path} --help`)"
+        _error_line(" ".join(exc.format_message().split()) + hint)
+        return EXIT_INPUT
+    if isinstance(exc, CheckFailed):
+        code, msg = EXIT_CHECK_FAILED, str(exc)
+    elif isinstance(exc, (ToolMissing, ToolFailed)):
+        code, msg = EXIT_INPUT, str(exc)
+    elif isinstance(exc, InternalError) or not isinstance(exc, (ValueError, OSError)):
+        traceback.print_exception(exc, file=sys.stderr)
+        _error_line(f"internal error ({type(exc).__name__}: {exc}); {BUG_NOTE}")
+        return EXIT_BUG
+    elif isinstance(exc, OSError):
+        code, msg = EXIT_INPUT, _os_message(exc)
+    else:
+        code, msg = EXIT_INPUT, str(exc)
+    if verbose:
+        traceback.print_exception(exc, file=sys.stderr)
+    _error_line(msg)
+    if verbose and isinstance(exc, ToolFailed) and exc.tail:
+        _warn(exc.tail)
+    return code
 
 
 @contextmanager
 def _user_errors() -> Iterator[None]:
+    """Run a command body: every exception becomes its message and exit status (:func:`_report_error`)."""
     try:
         yield
-    except (ValueError, FileNotFoundError, IsADirectoryError, RuntimeError, UserError) as exc:
-        err.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
-        raise typer.Exit(2) from None
+    except _EXITS:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the one place where every error is turned into an exit status
+        raise typer.Exit(_report_error(exc)) from None
 
 
 def _int_list(text: str, what: str) -> list[int]:
     try:
         vals = [int(v) for v in text.replace(" ", "").split(",") if v]
     except ValueError:
-        raise UserError(f"{what} must be an integer or a comma-separated list of integers, got {text!r}") from None
+        raise InputError(f"{what} must be an integer or a comma-separated list of integers, got {text!r}") from None
     if not vals:
-        raise UserError(f"{what} is empty")
+        raise InputError(f"{what} is empty")
     return vals
 
 
@@ -77,7 +164,7 @@ def _float_list(text: str, what: str) -> list[float]:
             return [float(v) for v in np.logspace(float(a), float(b), int(k))]
         return [float(v) for v in t.split(",") if v]
     except ValueError:
-        raise UserError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
+        raise InputError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
 
 
 WorkersOpt = Annotated[Optional[int], typer.Option("--workers", help="Run the independent tasks on a local Dask cluster of this many worker processes (default: serially).")]
@@ -100,7 +187,8 @@ def _names(values: Optional[list[str]]) -> list[str]:
 @contextmanager
 def _progress(description: str) -> Iterator:
     with Progress(
-        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True,
+        disable=_STATE["quiet"],
     ) as prog:
         task = prog.add_task(description, total=None)
 
@@ -134,11 +222,11 @@ def fit(
     with _user_errors():
         ins, outs, tgts = _names(inputs), _names(outputs), _names(targets)
         if not tgts:
-            raise UserError("give the column(s) to estimate with --target")
+            raise InputError("give the column(s) to estimate with --target")
         if my and not outs:
-            raise UserError(f"--my {my} needs measured output column(s): give --output (or --my 0)")
+            raise InputError(f"--my {my} needs measured output column(s): give --output (or --my 0)")
         if mu and not ins:
-            raise UserError(f"--mu {mu} needs input column(s): give --input (or --mu 0)")
+            raise InputError(f"--mu {mu} needs input column(s): give --input (or --mu 0)")
         table = read_csv(data)
         if traj_col is not None:
             table.column_index(traj_col)
@@ -151,7 +239,7 @@ def fit(
                 pairs = [tuple(float(v) for v in s.split(":")) for s in domain.replace(" ", "").split(",")]
                 dom = ([a for a, _ in pairs], [b for _, b in pairs])
             except ValueError:
-                raise UserError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
+                raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
         parts = _int_list(partitions, "--partitions")
         model = PWASVirtualSensor(
             mu=mu,
@@ -173,11 +261,10 @@ def fit(
             model.fit(u, y, z, progress=update)
         model.save(output)
         d = model.to_dict()
-        err.print(
+        _say(
             f"fitted n = {model.grid_.n} ({', '.join(d['regressors'])}), N = {model.grid_.n_vertices} weights, "
             f"sigma = {model.sigma_:.3g}{' (CV)' if sigma is None else ''}, "
-            f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}",
-            highlight=False, markup=False,
+            f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}"
         )
         _say(f"wrote {output}")
 
@@ -220,7 +307,7 @@ def predict(
                     _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {rows.size} samples")
                     break
         if flags.any():
-            _say(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")
+            _warn(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")
         _say(f"wrote {output} ({rows.size} rows)")
 
 
@@ -285,17 +372,16 @@ def generate(
         man = gd.manifest
         eb = man["error_bound"]
         mem = man["memory"]
-        err.print(
+        _say(
             f"{man['top']}: latency {man['latency_cycles']} cycles, II {man['ii']}, memory {mem['words']} words "
             f"({mem['words'] / mem['n_vertices']:.3g} N) x {mem['word_bits']} bits, error bound {eb['lsb']:.4g} LSB "
-            f"= {eb['physical']:.4g}",
-            highlight=False, markup=False,
+            f"= {eb['physical']:.4g}"
         )
         tm = man.get("timing")
         if tm:
             c = tm["candidates"][tm["chosen"]]
-            err.print(f"timing: {c['latency_cycles']} cycles ({c['label']}) reach {c['fmax_mhz']:.1f} MHz >= {tm['target_mhz']:g} MHz "
-                      f"on {tm['part']} = {c['latency_ns']:.1f} ns", highlight=False, markup=False)
+            _say(f"timing: {c['latency_cycles']} cycles ({c['label']}) reach {c['fmax_mhz']:.1f} MHz >= {tm['target_mhz']:g} MHz "
+                      f"on {tm['part']} = {c['latency_ns']:.1f} ns")
         _say(f"wrote {outdir}/ ({len(gd.files)} files)")
 
 
@@ -355,10 +441,9 @@ def simulate(
         s = res["summary"]
         out.print_json(json.dumps(s))
         _say(f"wrote {output} and {res['summary_path']}")
-    if s["mismatches"]:  # outside _user_errors: typer.Exit is a RuntimeError
-        err.print(f"error: {s['mismatches']} hardware output(s) differ from the bit-true model (first: "
-                  f"{json.dumps(s['first_mismatch'])})", highlight=False, markup=False)
-        raise typer.Exit(1)
+        if s["mismatches"]:
+            raise CheckFailed(f"{s['mismatches']} hardware output(s) differ from the bit-true model (first: "
+                              f"{json.dumps(s['first_mismatch'])}); the outputs are in {output}")
 
 
 @app.command()
@@ -400,7 +485,7 @@ def explore(
             a, _, b = t.partition(":")
             lo, hi = _int_list(a, what), _int_list(b, what)
             if len(lo) != 1 or len(hi) != 1 or hi[0] < lo[0]:
-                raise UserError(f"{what}: {text!r} is not a range A:B with A <= B")
+                raise InputError(f"{what}: {text!r} is not a range A:B with A <= B")
             return list(range(lo[0], hi[0] + 1))
         return _int_list(t, what)
 
@@ -411,7 +496,7 @@ def explore(
             output_frac=ints(output_frac, "--output-frac") if output_frac is not None else None,
         )
         if outdir.exists() and not outdir.is_dir():
-            raise UserError(f"{outdir} exists and is not a folder; choose another --outdir")
+            raise InputError(f"{outdir} exists and is not a folder; choose another --outdir")
         with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
                 model_path, data, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
@@ -430,8 +515,8 @@ def explore(
             b = d["dominated_by"][0]
             verdict = (f"NOT on the Pareto front: {b['label']} costs {100 * b['cost_saved_rel']:.1f} % less with an RMSEE "
                        f"{b['rmsee_better'][0]:+.4g} better (standard error {b['rmsee_diff_se'][0]:.2g})")
-        err.print(f"{len(res['points'])} formats ({len(res['refused'])} refused), {len(res['pareto'])} on the front; "
-                  f"the default {d['label']} is {verdict}", highlight=False, markup=False)
+        _say(f"{len(res['points'])} formats ({len(res['refused'])} refused), {len(res['pareto'])} on the front; "
+                  f"the default {d['label']} is {verdict}")
         _say(f"wrote {outdir / 'explore.json'} and {outdir / 'explore.png'}")
 
 
@@ -476,7 +561,7 @@ def make_data_lorenz(
 
     with _user_errors():
         if samples < 1 or (test_output is not None and test_samples < 1):
-            raise UserError("--samples and --test-samples must be >= 1")
+            raise InputError("--samples and --test-samples must be >= 1")
         total = samples + (test_samples if test_output is not None else 0)
         d = lorenz(total, seed=seed)
         train, test = d.split(samples)
@@ -501,7 +586,7 @@ def bench_lorenz(
 
     with _user_errors():
         if seeds < 1:
-            raise UserError("--seeds must be >= 1")
+            raise InputError("--seeds must be >= 1")
         rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
 
         with _executor(workers, scheduler) as ex:
@@ -523,12 +608,32 @@ def _version(value: bool) -> None:
 @app.callback()
 def _root(
     version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")] = False,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress or information lines (warnings and errors are still printed).")] = False,
+    verbose: Annotated[bool, typer.Option("-v", "--verbose", help="On an error, also print the Python traceback and the end of a failed tool's log.")] = False,
 ) -> None:
-    """PWAS virtual sensors: fit from plant data, evaluate, benchmark, generate verified Verilog."""
+    """PWAS virtual sensors: fit from plant data, evaluate, benchmark, generate verified Verilog.
+
+    Exit status: 0 success, 1 a verification found a difference (simulate), 2 bad input or a
+    missing / failing tool (one error: line), 3 an internal error (a bug: traceback printed).
+    """
+    _STATE["quiet"], _STATE["verbose"] = bool(quiet), bool(verbose)
 
 
-def main() -> None:  # console-script entry point
-    app()
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console-script entry point: run the command line ``argv`` (default ``sys.argv[1:]``).
+
+    Returns the exit status (0, 1, 2 or 3; see the module docstring). Click usage errors are printed
+    as one ``error:`` line (Click runs with ``standalone_mode=False``, so they reach this function).
+    """
+    _STATE["quiet"] = _STATE["verbose"] = False
+    try:
+        rv = app(args=list(argv) if argv is not None else None, prog_name="pwas-hdl", standalone_mode=False)
+    except (typer.Abort, click.exceptions.Abort):
+        _error_line("aborted")
+        return 130
+    except Exception as exc:  # noqa: BLE001 - usage errors, and anything raised outside a command body
+        return _report_error(exc)
+    return rv if isinstance(rv, int) else 0
 
 
 if __name__ == "__main__":

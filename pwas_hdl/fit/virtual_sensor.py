@@ -251,7 +251,9 @@ class PWASVirtualSensor:
     # -------------------------------------------------------------- predict
     def _check_fitted(self) -> None:
         if not hasattr(self, "weights_"):
-            raise RuntimeError("this PWASVirtualSensor is not fitted yet; call fit() or load a model first")
+            from sklearn.exceptions import NotFittedError  # a ValueError; imported here: sklearn is slow to import
+
+            raise NotFittedError("this PWASVirtualSensor is not fitted yet; call fit() or load a model first")
 
     def predict_regressors(self, xi: np.ndarray, return_flags: bool = False):
         """Evaluate the PWAS function at regressor vectors.

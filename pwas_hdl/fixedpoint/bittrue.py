@@ -415,7 +415,9 @@ class FixedPointModel:
         come from the sensor. Other keyword arguments: see :class:`FixedPointModel`.
         """
         if not hasattr(sensor, "weights_"):
-            raise RuntimeError("the sensor is not fitted; call fit() or load a model first")
+            from sklearn.exceptions import NotFittedError  # a ValueError; imported here: sklearn is slow to import
+
+            raise NotFittedError("the sensor is not fitted yet; call fit() or load a model first")
         ins, outs, tgts = sensor.signal_names()
         lags = sensor.lags_
         names = lags.names(ins, outs)

@@ -91,6 +91,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pwas_hdl import __version__
+from pwas_hdl.errors import InputError, ToolFailed, ToolMissing
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.io.csv_table import Table, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -451,8 +452,10 @@ def explore(
     ValueError
         Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
         missing target column, data without a full regressor.
-    RuntimeError
-        Synthesis was asked for and every synthesis run failed (e.g. the tools are missing).
+    ToolMissing
+        Synthesis was asked for and a synthesis tool is not installed.
+    ToolFailed, InputError
+        Synthesis was asked for and every synthesis run failed (the message quotes the first error).
     """
     if resources not in RESOURCE_MODES:
         raise ValueError(f"resources must be one of {', '.join(RESOURCE_MODES)}, got {resources!r}")
@@ -663,8 +666,8 @@ def _measure_point(task: dict) -> dict:
                               overflow=common["overflow"], rounding=common["rounding"])
         folder = write_folder(gd.files, root / "design" if own else root)
         res = synthesize(folder, task["target"], device=task["device"])
-    except (RuntimeError, ValueError, FileNotFoundError) as exc:
-        return {"error": str(exc)}
+    except (ToolMissing, ToolFailed, ValueError, OSError) as exc:  # not a bug: noted, the sweep goes on
+        return {"error": str(exc), "error_kind": _error_kind(exc)}
     finally:
         if own:
             shutil.rmtree(root, ignore_errors=True)
@@ -672,6 +675,15 @@ def _measure_point(task: dict) -> dict:
     m["manifest_memory_bits"] = int(gd.manifest["memory"]["bits"])
     m["estimate_memory_bits_exact"] = m["manifest_memory_bits"] == p["resources"]["memory_bits"]
     return {"measured": m}
+
+
+def _error_kind(exc: Exception) -> dict:
+    """What the caller needs to raise the same kind of error again (tasks return plain, picklable dicts)."""
+    if isinstance(exc, ToolMissing):
+        return {"class": "ToolMissing", "tool": exc.tool, "hint": exc.hint}
+    if isinstance(exc, ToolFailed):
+        return {"class": "ToolFailed", "log": exc.log, "tail": exc.tail}
+    return {"class": "InputError"}
 
 
 def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress, executor=None) -> dict:
@@ -691,19 +703,29 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
     ex = executor if executor is not None else Executor()
     results = ex.map(_measure_point, tasks, labels=labels, return_exceptions=True,
                      progress=(lambda d, t: progress("synthesis", d, t)) if progress else None)
-    errors = []
+    errors: list[str] = []
+    kinds: list[dict] = []
     for k, r in zip(idx, results):
         p = points[k]
         if not isinstance(r, dict):  # TaskFailed: the task raised twice (a bug or a lost worker)
-            r = {"error": str(r)}
+            r = {"error": str(r), "error_kind": {"class": "TaskFailed"}}
         if "error" in r:
+            kinds.append(r["error_kind"])
             errors.append(f"{p['label']}: {r['error']}")
             p["measured"] = {"error": r["error"]}
             continue
         p["measured"] = r["measured"]
         done["points"].append(k)
     if not done["points"]:
-        raise RuntimeError("synthesis failed for every point; first error: " + (errors[0] if errors else "?"))
+        first = kinds[0] if kinds else {"class": "none"}
+        if first["class"] == "ToolMissing":
+            raise ToolMissing(first["tool"], first["hint"])
+        msg = "synthesis failed for every point; first error: " + (errors[0] if errors else "none was run")
+        if first["class"] == "ToolFailed":
+            raise ToolFailed(msg.removesuffix(f"; log: {first['log']}"), first["log"], first["tail"])
+        if first["class"] == "InputError":
+            raise InputError(msg)
+        raise RuntimeError(msg)  # a task that failed twice: a bug or a lost worker (exit 3 with the traceback)
     done["errors"] = errors
     ok = [k for k in done["points"] if all(isinstance(points[k]["measured"].get(key), (int, float)) for key in ("luts", "dsp", "bram"))]
     objs = [[points[k]["measured"][key] for key in ("luts", "dsp", "bram")] + [points[k]["rmsee_ratio"]] for k in ok]

@@ -53,6 +53,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from pwas_hdl.errors import InternalError, ToolFailed, ToolMissing
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.design.manifest import load_manifest
@@ -180,9 +181,10 @@ def synthesize(
         the device (the message says which resource overflowed).
     FileNotFoundError
         No manifest, or a Verilog file it names is missing.
-    RuntimeError
-        A synthesis tool is not installed, or Yosys / nextpnr failed (the message quotes the end
-        of the log and names the log file).
+    ToolMissing
+        A synthesis tool is not installed (the message says how to install it).
+    ToolFailed
+        Yosys or nextpnr failed (``log`` names the log file, ``tail`` holds its end).
     """
     if target not in TARGETS:
         raise ValueError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
@@ -224,11 +226,8 @@ def synthesize(
     rc = _run_tool("yosys", ["-s", "synth.ys"], work, "yosys.log")
     t_yosys = time.monotonic() - t0
     if rc != 0 or not (work / "stat.json").exists():
-        raise RuntimeError(
-            f"yosys failed (exit status {rc}) on {top}; last lines of {work / 'yosys.log'}:\n"
-            + _log_tail(work / "yosys.log")
-            + "\nFix the Verilog (or regenerate the design) and run again."
-        )
+        raise ToolFailed(f"yosys failed (exit status {rc}) on {top}; fix the Verilog (or regenerate the design) and run again",
+                         work / "yosys.log", _log_tail(work / "yosys.log"))
     stat = _read_stat(work / "stat.json", top)
     stat_rtl = _read_stat(work / "stat_rtl.json", top)
     cells = dict(sorted(stat["cells"].items()))
@@ -427,11 +426,11 @@ def _yosys_path(p: str) -> str:
 def _fill_template(target: str, **values: str) -> str:
     path = templates_dir() / f"synth_{target}.ys.tmpl"
     if not path.is_file():
-        raise RuntimeError(f"the Yosys script template {path} is missing; reinstall pwas-hdl from its source tree (bash run.sh setup)")
+        raise FileNotFoundError(f"the Yosys script template {path} is missing; the pwas-hdl installation is incomplete, reinstall it")
     try:
         return string.Template(path.read_text(encoding="utf-8")).substitute(values)
     except (KeyError, ValueError) as exc:
-        raise RuntimeError(f"the Yosys script template {path} has an unknown or malformed placeholder ({exc}); "
+        raise InternalError(f"the Yosys script template {path} has an unknown or malformed placeholder ({exc}); "
                            f"known: {', '.join('$' + k for k in values)} (write $$ for a literal $)") from None
 
 
@@ -446,10 +445,8 @@ def _check_tool(tool: str) -> None:
     except (ImportError, ValueError):
         found = False
     if not found:
-        raise RuntimeError(
-            f"{tool} is not available (Python package {dist} is not installed); "
-            f"run `pip install {dist}` in this environment, or `bash run.sh setup` for the pinned versions"
-        )
+        raise ToolMissing(tool, f"the Python package {dist} is not installed; run `pip install {dist}` in this "
+                                "environment, or `bash run.sh setup` for the pinned versions")
 
 
 def _run_tool(tool: str, args: list[str], cwd: Path, log_name: str) -> int:
@@ -598,6 +595,4 @@ def _raise_nextpnr_failure(log: Path, tool: str, part: str, rc: int, port_bits: 
         elif any(o[0] == "ICESTORM_DSP" for o in over):
             hint = "choose a part with more DSPs, or one without DSPs where multipliers go to LUTs (--device hx8k)"
         raise ValueError(f"the design does not fit {part}: " + "; ".join(msgs) + f"; {hint} (see {log})")
-    raise RuntimeError(
-        f"{tool} failed (exit status {rc}) on {part}; last lines of {log}:\n" + _log_tail(log)
-    )
+    raise ToolFailed(f"{tool} failed (exit status {rc}) on {part}", log, _log_tail(log))

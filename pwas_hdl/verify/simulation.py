@@ -38,6 +38,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import CheckFailed
 from pwas_hdl.resources import sim_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import load_manifest
@@ -756,7 +757,7 @@ def simulate_data(
     hw_oor = [h[1] for h in res.hw[0]]
     complete = all(len(hc) == len(s.expected) for hc, s in zip(hw_codes, segs))
     if not complete:
-        raise RuntimeError("the RTL did not produce every output: " + "; ".join(res.failures[:3]))
+        raise CheckFailed("the RTL did not produce every output: " + "; ".join(res.failures[:3]))
     hw = np.concatenate(hw_codes) if hw_codes else np.empty((0, model.nz), dtype=np.int64)
     oor = np.concatenate(hw_oor)
     bt = np.concatenate([s.expected for s in segs])
