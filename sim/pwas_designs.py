@@ -26,7 +26,7 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
     signal need the same value). Lags of one signal share their domain (as ``fit`` does by default).
     """
     from pwas_hdl.fit.regressors import LagStructure
-    from pwas_hdl.fit.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor
+    from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_SCHEMA_ID, MODEL_VERSION, model_from_dict
 
     rng = np.random.default_rng(seed)
     lags = LagStructure(mu, my, nu if mu else 0, ny if my else 0)
@@ -56,6 +56,7 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
         weights[tgts[t]] = (scale * (smooth + 0.3 * rng.normal(0, 1, n_v))).tolist()
     r = rmse if rmse is not None else scale / 20
     d = {
+        "$schema": MODEL_SCHEMA_ID,
         "format": MODEL_FORMAT,
         "version": MODEL_VERSION,
         "signals": {"inputs": ins, "outputs": outs, "targets": tgts},
@@ -66,7 +67,7 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
         "fit": {"sigma": 1e-3, "sigma_given": True, "tikhonov_order": 0, "gamma": 1.2, "domain_from": "explicit",
                 "share_lag_domain": True, "n_train": 0, "n_trajectories": 1, "train_rmse": {t: r for t in tgts}, "cv": None},
     }
-    return PWASVirtualSensor.from_dict(d, source="synthetic model")
+    return model_from_dict(d, source="synthetic model")
 
 
 @dataclass(frozen=True)

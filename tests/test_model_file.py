@@ -1,13 +1,20 @@
-"""Model file (JSON, format pwas-hdl-model v1): bit-exact save / load round trip."""
+"""Model file (JSON, format pwas-hdl-model v2, pwas_hdl.fit.model_file): bit-exact round trip, schema, clear errors."""
 
 from __future__ import annotations
 
+import copy
 import json
 
+import jsonschema
 import numpy as np
 import pytest
 
-from pwas_hdl.fit.virtual_sensor import MODEL_FORMAT, MODEL_VERSION, PWASVirtualSensor, load_model
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit import model_file
+from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_SCHEMA_ID, MODEL_VERSION, model_errors, validate_model
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor, load_model
+from pwas_hdl.io.json_contract import load_schema
+from pwas_hdl.resources import schemas_dir
 
 
 def _fitted(nz: int, rng: np.random.Generator) -> tuple[PWASVirtualSensor, np.ndarray, np.ndarray]:
@@ -105,3 +112,118 @@ def test_loaded_model_refits_like_the_original(tmp_path, rng):
     loaded.fit(u, y, z)
     assert loaded.grid_ == sensor.grid_
     np.testing.assert_array_equal(loaded.weights_, sensor.weights_)
+
+
+# ------------------------------------------------------------------------ schema
+@pytest.fixture
+def good(rng) -> dict:
+    return _fitted(2, rng)[0].to_dict()
+
+
+def test_shipped_schema_is_draft_2020_12_and_the_written_file_validates(good, tmp_path):
+    schema = json.loads((schemas_dir() / "model-v2.schema.json").read_text(encoding="utf-8"))
+    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    assert schema["$id"] == MODEL_SCHEMA_ID == good["$schema"]
+    jsonschema.Draft202012Validator.check_schema(schema)
+    jsonschema.Draft202012Validator(schema).validate(good)  # the library itself, not only our wrapper
+    assert good["format"] == MODEL_FORMAT and good["version"] == MODEL_VERSION == 2
+    assert model_errors(good) == []
+    assert load_schema("model-v2.schema.json") == schema
+
+
+def _set(d: dict, path: tuple, value) -> dict:
+    d = copy.deepcopy(d)
+    node = d
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = value
+    return d
+
+
+@pytest.mark.parametrize(
+    "path, value, message",
+    [
+        (("lags", "My"), 2.7, "lags.My must be an integer, got 2.7"),
+        (("lags", "My"), "2", 'lags.My must be an integer, got "2"'),
+        (("lags", "Mu"), -1, "lags.Mu must be >= 0, got -1"),
+        (("lags", "Mu"), True, "lags.Mu must be an integer, got true"),
+        (("grid", "partitions"), [4, 3, 2.5], r"grid.partitions[2] must be an integer, got 2.5"),
+        (("grid", "lo"), [0.0, "a", 1.0], 'grid.lo[1] must be a number, got "a"'),
+        (("fit", "tikhonov_order"), 2, "fit.tikhonov_order must be one of 0, 1, got 2"),
+        (("fit", "gamma"), 0.5, "fit.gamma must be >= 1, got 0.5"),
+        (("fit", "sigma"), 0, "fit.sigma must be > 0, got 0"),
+        (("fit", "domain_from"), "file", 'fit.domain_from must be one of "data", "explicit", got "file"'),
+        (("fit", "cv"), [], "fit.cv must be an object or null, got []"),
+        (("signals", "targets"), [], "signals.targets must have at least 1 item, got 0"),
+        (("signals", "inputs"), ["valve", "valve"], "signals.inputs has repeated items"),
+        (("weights", "flow"), [1.0, None], "weights.flow[1] must be a number, got null"),
+        (("fit", "colour"), "red", "fit has the unknown key 'colour'"),
+        (("extra",), 1, "the top level has the unknown key 'extra'"),
+        (("$schema",), "urn:pwas-hdl:schema:model-v1", '$schema must be "urn:pwas-hdl:schema:model-v2"'),
+    ],
+)
+def test_broken_file_one_message_naming_the_key(good, tmp_path, path, value, message):
+    bad = _set(good, path, value)
+    f = tmp_path / "model.json"
+    f.write_text(json.dumps(bad))
+    with pytest.raises(InputError) as ei:
+        PWASVirtualSensor.load(f)
+    msg = str(ei.value)
+    assert msg.startswith(f"{f}: {message}"), msg
+    assert "re-run `pwas-hdl fit`" in msg and "\n" not in msg
+    assert not list(tmp_path.glob(".*"))  # reading leaves nothing behind
+    with pytest.raises(InputError, match="in memory"):
+        validate_model(bad, source="in memory")
+
+
+def test_missing_schema_key_is_named(good, tmp_path):
+    del good["$schema"]
+    with pytest.raises(InputError, match=r"^m: \$schema is missing"):
+        validate_model(good, "m")
+
+
+def test_consistency_beyond_the_schema(good):
+    cases = [
+        (_set(good, ("regressors",), ["a", "b", "c"]), "regressors ['a', 'b', 'c'] do not match the lags"),
+        (_set(good, ("grid", "hi"), good["grid"]["hi"][:2]), "grid.hi has 2 values, the lags give n = 3 regressors"),
+        (_set(good, ("fit", "train_rmse"), {"flow": 1.0}), "fit.train_rmse has the keys ['flow'], signals.targets are ['flow', 'temp']"),
+        (_set(good, ("lags", "Mu"), 0) | {"signals": {**good["signals"], "inputs": []}}, "grid.lo has 3 values, the lags give n = 2"),
+        (_set(good, ("signals", "outputs"), []), "lags.My is 2 but signals.outputs is empty"),
+    ]
+    for d, message in cases:
+        with pytest.raises(InputError) as ei:
+            validate_model(d, "m.json")
+        assert message in str(ei.value), (message, str(ei.value))
+
+
+def test_version_1_file_is_refused_with_the_fix(good, tmp_path):
+    old = {k: v for k, v in good.items() if k != "$schema"} | {"version": 1}
+    f = tmp_path / "old.json"
+    f.write_text(json.dumps(old))
+    with pytest.raises(InputError, match=r"pwas-hdl-model version 1 is not supported \(this pwas-hdl reads version 2\); "
+                                         r"re-run `pwas-hdl fit`"):
+        PWASVirtualSensor.load(f)
+
+
+def test_cli_names_the_bad_key(good, tmp_path, capsys):
+    from pwas_hdl.cli import main
+
+    f = tmp_path / "model.json"
+    f.write_text(json.dumps(_set(good, ("lags", "My"), 2.7)))
+    assert main(["info", str(f)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {f}: lags.My must be an integer, got 2.7; re-run `pwas-hdl fit` to write the model file again"]
+
+
+def test_model_file_module_is_the_only_writer(tmp_path, rng):
+    """save() and model_file.write_model() write the same bytes; the sensor keeps no format code of its own."""
+    sensor = _fitted(1, rng)[0]
+    a = sensor.save(tmp_path / "a.json")
+    b = model_file.write_model(sensor, tmp_path / "b.json")
+    assert a.read_bytes() == b.read_bytes() == model_file.model_text(sensor).encode()
+    import inspect
+
+    from pwas_hdl.fit import virtual_sensor
+
+    src = inspect.getsource(virtual_sensor)
+    assert '"pwas-hdl-model"' not in src and "json.dumps" not in src

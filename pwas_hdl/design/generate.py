@@ -40,6 +40,7 @@ from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import MANIFEST_FORMAT, MANIFEST_VERSION
+from pwas_hdl.fit.model_file import model_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 if TYPE_CHECKING:  # the hdl package (Amaranth) is imported when a design is built
@@ -431,7 +432,7 @@ def build_design(
         man["timing"] = timing
     texts: dict[str, str] = {
         files["verilog"]: verilog,
-        "model.json": json.dumps(sensor.to_dict(), indent=1, allow_nan=False) + "\n",
+        "model.json": model_text(sensor),
         "manifest.json": json.dumps(man, indent=1, allow_nan=False) + "\n",
         "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else ""),
         files["instance_template"]: _instance(man),

@@ -4,24 +4,11 @@ A :class:`PWASVirtualSensor` estimates ``nz`` unmeasured quantities ``z(t)`` fro
 inputs and ``My`` outputs (paper eq. 2). All targets share one :class:`~pwas_hdl.fit.geometry.Grid`;
 each has its own weight vector (componentwise fit).
 
-Model file (``.json``, format ``pwas-hdl-model``, version 1) -- see ``docs`` in the README::
-
-    {
-      "format": "pwas-hdl-model", "version": 1,
-      "signals": {"inputs": [...], "outputs": [...], "targets": [...]},
-      "lags": {"Mu": int, "My": int},
-      "regressors": ["y[t-3]", ...],                 # order of the regressor dimensions
-      "grid": {"lo": [...], "hi": [...], "partitions": [...]},
-      "weights": {"<target>": [w_0, ..., w_{N-1}], ...},   # vertex order of pwas_hdl.fit.geometry
-      "fit": {"sigma": ..., "tikhonov_order": ..., "gamma": ..., "cv": {...} | null, ...}
-    }
-
-Floats are written with Python's shortest round-trip representation, so save/load is bit-exact.
+The model file (save / load) is owned by :mod:`pwas_hdl.fit.model_file`.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from pathlib import Path
@@ -29,15 +16,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.fit import model_file
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
 from pwas_hdl.fit.regularized_lsq import CVResult, cross_validate_sigma, solve_regularized, tikhonov_matrix
 
 __all__ = ["PWASVirtualSensor", "MODEL_FORMAT", "MODEL_VERSION", "load_model"]
-
-MODEL_FORMAT = "pwas-hdl-model"
-MODEL_VERSION = 1
 
 Trajectories = np.ndarray | Sequence[np.ndarray] | None
 
@@ -319,117 +304,31 @@ class PWASVirtualSensor:
 
     # ------------------------------------------------------------ save/load
     def to_dict(self) -> dict:
-        """The model-file content as a JSON-ready dict."""
-        self._check_fitted()
-        ins, outs, tgts = self.signal_names()
-        return {
-            "format": MODEL_FORMAT,
-            "version": MODEL_VERSION,
-            "signals": {"inputs": ins, "outputs": outs, "targets": tgts},
-            "lags": {"Mu": int(self.lags_.mu), "My": int(self.lags_.my)},
-            "regressors": self._regressor_names(self.lags_),
-            "grid": {
-                "lo": [float(v) for v in self.grid_.lo],
-                "hi": [float(v) for v in self.grid_.hi],
-                "partitions": [int(v) for v in self.grid_.partitions],
-            },
-            "weights": {t: [float(v) for v in self.weights_[:, i]] for i, t in enumerate(tgts)},
-            "fit": {
-                "sigma": float(self.sigma_),
-                "sigma_given": self.sigma is not None,
-                "tikhonov_order": int(self.tikhonov_order),
-                "gamma": float(self.gamma),
-                "domain_from": "explicit" if self.domain is not None else "data",
-                "share_lag_domain": bool(self.share_lag_domain),
-                "n_train": int(self.n_train_),
-                "n_trajectories": int(self.n_trajectories_),
-                "train_rmse": {t: float(v) for t, v in zip(tgts, self.train_rmse_)},
-                "cv": self.cv_.to_dict() if self.cv_ is not None else None,
-            },
-        }
+        """The model-file content as a JSON-ready dict (:func:`pwas_hdl.fit.model_file.model_to_dict`)."""
+        return model_file.model_to_dict(self)
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model file atomically (nothing is left half-written on error)."""
-        text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
-        return atomic_write_text(path, text)
+        """Write the model file atomically (:func:`pwas_hdl.fit.model_file.write_model`)."""
+        return model_file.write_model(self, path)
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "model") -> "PWASVirtualSensor":
-        """Rebuild a fitted sensor from the dict written by :meth:`to_dict`."""
-        if not isinstance(d, dict) or d.get("format") != MODEL_FORMAT:
-            raise ValueError(f"{source} is not a pwas-hdl model (missing \"format\": \"{MODEL_FORMAT}\")")
-        if type(d.get("version")) is not int or d.get("version") != MODEL_VERSION:
-            raise ValueError(
-                f"{source} has model version {d.get('version')!r}, this pwas-hdl reads version {MODEL_VERSION}; "
-                "re-run `pwas-hdl fit` to regenerate it"
-            )
-        try:
-            sig, lags, g, fit = d["signals"], d["lags"], d["grid"], d["fit"]
-            ins, outs, tgts = list(sig["inputs"]), list(sig["outputs"]), list(sig["targets"])
-            grid = Grid(g["lo"], g["hi"], g["partitions"])
-            w = np.array([d["weights"][t] for t in tgts], dtype=float).T.reshape(grid.n_vertices, len(tgts))
-            obj = cls(
-                mu=int(lags["Mu"]),
-                my=int(lags["My"]),
-                partitions=[int(p) for p in g["partitions"]],
-                gamma=float(fit["gamma"]),
-                sigma=float(fit["sigma"]) if fit.get("sigma_given") else None,
-                tikhonov_order=int(fit["tikhonov_order"]),
-                domain=(grid.lo, grid.hi) if fit.get("domain_from") == "explicit" else None,
-                share_lag_domain=bool(fit.get("share_lag_domain", True)),
-                input_names=ins,
-                output_names=outs,
-                target_names=tgts,
-            )
-            obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
-            if obj.lags_.dimension != grid.n:
-                raise ValueError(f"lags give n = {obj.lags_.dimension} but the grid has {grid.n} dimensions")
-            if d["regressors"] != obj._regressor_names(obj.lags_):
-                raise ValueError(f"regressors {d['regressors']} do not match the lags and signal names")
-            sigma = float(fit["sigma"])
-            cv = fit.get("cv")
-            cv_res = (
-                CVResult(np.array(cv["sigmas"]), np.array(cv["mse"]), float(cv["best_sigma"]), int(cv["folds"]))
-                if cv
-                else None
-            )
-            n_train = int(fit.get("n_train", 0))
-            n_traj = int(fit.get("n_trajectories", 1))
-            train_rmse = np.array([fit.get("train_rmse", {}).get(t, float("nan")) for t in tgts])
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise ValueError(f"{source} is corrupt or incomplete ({type(exc).__name__}: {exc}); re-run `pwas-hdl fit`") from exc
-        if not np.all(np.isfinite(w)):
-            raise ValueError(f"{source} has non-finite weights; re-run `pwas-hdl fit`")
-        obj.grid_ = grid
-        obj.weights_ = w
-        obj.sigma_ = sigma
-        obj.cv_ = cv_res
-        obj.n_train_ = n_train
-        obj.n_trajectories_ = n_traj
-        obj.train_rmse_ = train_rmse
-        return obj
+        """Rebuild a fitted sensor from a model-file dict (validated: :func:`pwas_hdl.fit.model_file.model_from_dict`)."""
+        return model_file.model_from_dict(d, source)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "PWASVirtualSensor":
-        """Read a model file written by :meth:`save`.
+        """Read and validate a model file (:func:`pwas_hdl.fit.model_file.read_model`).
 
         Raises
         ------
         FileNotFoundError
             The file does not exist.
-        ValueError
-            The file is not valid JSON, not a pwas-hdl model, of another version, or incomplete.
+        InputError
+            The file is not strict JSON, not a pwas-hdl model, of another version, or a key is
+            missing, of the wrong type or inconsistent (the message names it).
         """
-        p = Path(path)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except UnicodeDecodeError as exc:
-            raise ValueError(f"model file {p} is not UTF-8 text (corrupt?); re-run `pwas-hdl fit`") from exc
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"model file {p} is not valid JSON ({exc.msg} at line {exc.lineno}); it is corrupt or truncated, re-run `pwas-hdl fit`") from exc
-        return cls.from_dict(d, source=f"model file {p}")
+        return model_file.read_model(path)
 
 
 def load_model(path: str | os.PathLike) -> PWASVirtualSensor:

@@ -1,0 +1,223 @@
+"""The model file: the one owner of its format (name, version, JSON Schema, writing, reading).
+
+``pwas-hdl fit`` writes it, every later stage reads it (``predict``, ``generate``, ``simulate``,
+``explore``, ``report``). Format ``pwas-hdl-model``, version 2, schema
+``pwas_hdl/schemas/model-v2.schema.json`` (its ``$id`` is the file's ``$schema``)::
+
+    {
+      "$schema": "urn:pwas-hdl:schema:model-v2", "format": "pwas-hdl-model", "version": 2,
+      "signals": {"inputs": [...], "outputs": [...], "targets": [...]},
+      "lags": {"Mu": int, "My": int},
+      "regressors": ["y[t-3]", ...],                 # order of the regressor dimensions
+      "grid": {"lo": [...], "hi": [...], "partitions": [...]},
+      "weights": {"<target>": [w_0, ..., w_{N-1}], ...},   # vertex order of pwas_hdl.fit.geometry
+      "fit": {"sigma": ..., "sigma_given": bool, "tikhonov_order": 0 | 1, "gamma": ..., "domain_from":
+              "data" | "explicit", "share_lag_domain": bool, "n_train": int, "n_trajectories": int,
+              "train_rmse": {"<target>": ...}, "cv": {"sigmas", "mse", "best_sigma", "folds"} | null}
+    }
+
+Floats are written with Python's shortest round-trip representation, so a save / load round trip
+is bit-exact. Reading checks, in this order: strict JSON (no NaN), ``format`` and ``version`` (a
+file of another version is refused with "version N is not supported; re-run `pwas-hdl fit`"),
+the schema (every key, its type and range: the message names the key, e.g.
+``m.json: lags.My must be an integer, got 2.7``), then the consistency the schema cannot state
+(regressor names, dimensions, N weights per target). There are no fallbacks for missing or
+renamed keys.
+
+Version history: 1 (no ``$schema``; ``int()`` of the lags accepted 2.7 as 2), 2 (this one).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+__all__ = [
+    "MODEL_FORMAT", "MODEL_VERSION", "MODEL_SCHEMA", "MODEL_SCHEMA_ID",
+    "model_to_dict", "model_text", "write_model", "validate_model", "model_errors", "model_from_dict", "read_model",
+]
+
+MODEL_FORMAT = "pwas-hdl-model"
+MODEL_VERSION = 2
+#: File name of the schema in ``pwas_hdl/schemas/``.
+MODEL_SCHEMA = "model-v2.schema.json"
+#: The schema's ``$id``, written as ``$schema`` in every model file.
+MODEL_SCHEMA_ID = "urn:pwas-hdl:schema:model-v2"
+
+_HINT = "re-run `pwas-hdl fit` to write the model file again"
+
+
+def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
+    """The model-file content of a fitted sensor as a JSON-ready dict (valid against the schema)."""
+    sensor._check_fitted()
+    ins, outs, tgts = sensor.signal_names()
+    lags, grid = sensor.lags_, sensor.grid_
+    return {
+        "$schema": MODEL_SCHEMA_ID,
+        "format": MODEL_FORMAT,
+        "version": MODEL_VERSION,
+        "signals": {"inputs": ins, "outputs": outs, "targets": tgts},
+        "lags": {"Mu": int(lags.mu), "My": int(lags.my)},
+        "regressors": lags.names(ins, outs),
+        "grid": {
+            "lo": [float(v) for v in grid.lo],
+            "hi": [float(v) for v in grid.hi],
+            "partitions": [int(v) for v in grid.partitions],
+        },
+        "weights": {t: [float(v) for v in sensor.weights_[:, i]] for i, t in enumerate(tgts)},
+        "fit": {
+            "sigma": float(sensor.sigma_),
+            "sigma_given": sensor.sigma is not None,
+            "tikhonov_order": int(sensor.tikhonov_order),
+            "gamma": float(sensor.gamma),
+            "domain_from": "explicit" if sensor.domain is not None else "data",
+            "share_lag_domain": bool(sensor.share_lag_domain),
+            "n_train": int(sensor.n_train_),
+            "n_trajectories": int(sensor.n_trajectories_),
+            "train_rmse": {t: float(v) for t, v in zip(tgts, sensor.train_rmse_)},
+            "cv": sensor.cv_.to_dict() if sensor.cv_ is not None else None,
+        },
+    }
+
+
+def model_text(sensor: "PWASVirtualSensor") -> str:
+    """The model file's text (strict JSON, one key per line at the top, newline at the end).
+
+    Raises
+    ------
+    ValueError
+        A weight or statistic is not finite (not representable in JSON).
+    """
+    return json.dumps(model_to_dict(sensor), indent=1, allow_nan=False) + "\n"
+
+
+def write_model(sensor: "PWASVirtualSensor", path: str | os.PathLike) -> Path:
+    """Write the model file atomically (nothing is left half-written on error); returns the path."""
+    return atomic_write_text(path, model_text(sensor))
+
+
+def _consistency_errors(d: dict[str, Any]) -> list[str]:
+    """What the schema cannot say: names, dimensions and sizes that must agree (``d`` is schema-valid)."""
+    from pwas_hdl.fit.regressors import LagStructure
+
+    sig, lags, g = d["signals"], d["lags"], d["grid"]
+    ins, outs, tgts = sig["inputs"], sig["outputs"], sig["targets"]
+    errs = []
+    if lags["Mu"] and not ins:
+        errs.append(f"lags.Mu is {lags['Mu']} but signals.inputs is empty")
+    if lags["My"] and not outs:
+        errs.append(f"lags.My is {lags['My']} but signals.outputs is empty")
+    if errs:
+        return errs
+    ls = LagStructure(lags["Mu"], lags["My"], len(ins) if lags["Mu"] else 0, len(outs) if lags["My"] else 0)
+    n = ls.dimension
+    for key in ("lo", "hi", "partitions"):
+        if len(g[key]) != n:
+            errs.append(f"grid.{key} has {len(g[key])} values, the lags give n = {n} regressors")
+    if errs:
+        return errs
+    names = ls.names(ins, outs)
+    if d["regressors"] != names:
+        errs.append(f"regressors {d['regressors']} do not match the lags and signal names ({names})")
+    n_vertices = int(np.prod([p + 1 for p in g["partitions"]], dtype=object))
+    for what, keys in (("weights", list(d["weights"])), ("fit.train_rmse", list(d["fit"]["train_rmse"]))):
+        if keys != tgts:
+            errs.append(f"{what} has the keys {keys}, signals.targets are {tgts}")
+    for t, w in d["weights"].items():
+        if len(w) != n_vertices:
+            errs.append(f"weights.{t} has {len(w)} values, the grid has N = {n_vertices} vertices")
+    cv = d["fit"]["cv"]
+    if cv is not None and len(cv["mse"]) != len(cv["sigmas"]):
+        errs.append(f"fit.cv.mse has {len(cv['mse'])} values for {len(cv['sigmas'])} fit.cv.sigmas")
+    return errs
+
+
+def model_errors(d: Any) -> list[str]:
+    """Every problem of a model-file dict, one sentence each (empty: a valid model file)."""
+    if not isinstance(d, dict) or d.get("format") != MODEL_FORMAT:
+        return [f'not a {MODEL_FORMAT} file (missing "format": "{MODEL_FORMAT}")']
+    if type(d.get("version")) is not int or d.get("version") != MODEL_VERSION:
+        return [f"version {d.get('version')!r} is not supported (this pwas-hdl reads version {MODEL_VERSION})"]
+    return schema_errors(d, MODEL_SCHEMA) or _consistency_errors(d)
+
+
+def validate_model(d: Any, source: str = "model") -> None:
+    """Check a model-file dict against the format (header, schema, consistency).
+
+    Raises
+    ------
+    InputError
+        One message that names ``source``, the bad key and what was expected.
+    """
+    check_header(d, MODEL_FORMAT, MODEL_VERSION, source, _HINT)
+    validate(d, MODEL_SCHEMA, source, _HINT)
+    errs = _consistency_errors(d)
+    if errs:
+        raise InputError(f"{source}: {errs[0]}; {_HINT}")
+
+
+def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
+    """A fitted sensor from a model-file dict (validated first, see :func:`validate_model`)."""
+    from pwas_hdl.fit.geometry import Grid
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fit.regularized_lsq import CVResult
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+    validate_model(d, source)
+    sig, lags, g, fit = d["signals"], d["lags"], d["grid"], d["fit"]
+    ins, outs, tgts = list(sig["inputs"]), list(sig["outputs"]), list(sig["targets"])
+    try:
+        grid = Grid(g["lo"], g["hi"], g["partitions"])
+    except ValueError as exc:  # widths <= 0, too many vertices, ...
+        raise InputError(f"{source}: grid: {exc}; {_HINT}") from exc
+    w = np.array([d["weights"][t] for t in tgts], dtype=float).T.reshape(grid.n_vertices, len(tgts))
+    obj = PWASVirtualSensor(
+        mu=lags["Mu"],
+        my=lags["My"],
+        partitions=list(g["partitions"]),
+        gamma=float(fit["gamma"]),
+        sigma=float(fit["sigma"]) if fit["sigma_given"] else None,
+        tikhonov_order=fit["tikhonov_order"],
+        domain=(grid.lo, grid.hi) if fit["domain_from"] == "explicit" else None,
+        share_lag_domain=fit["share_lag_domain"],
+        input_names=ins,
+        output_names=outs,
+        target_names=tgts,
+    )
+    cv = fit["cv"]
+    obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
+    obj.grid_ = grid
+    obj.weights_ = w
+    obj.sigma_ = float(fit["sigma"])
+    obj.cv_ = (CVResult(np.array(cv["sigmas"], dtype=float), np.array(cv["mse"], dtype=float), float(cv["best_sigma"]),
+                        int(cv["folds"])) if cv is not None else None)
+    obj.n_train_ = int(fit["n_train"])
+    obj.n_trajectories_ = int(fit["n_trajectories"])
+    obj.train_rmse_ = np.array([fit["train_rmse"][t] for t in tgts], dtype=float)
+    return obj
+
+
+def read_model(path: str | os.PathLike) -> "PWASVirtualSensor":
+    """Read and validate a model file written by :func:`write_model`.
+
+    Raises
+    ------
+    FileNotFoundError
+        The file does not exist.
+    InputError
+        Not UTF-8 / strict JSON, not a pwas-hdl model, another version, or a key missing, of the
+        wrong type or out of range (the message names it), or inconsistent content.
+    """
+    p = Path(path)
+    return model_from_dict(read_json(p, _HINT), source=str(p))

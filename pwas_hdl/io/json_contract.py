@@ -1,0 +1,172 @@
+"""Reading JSON files that have a contract: strict JSON, a format/version header, a shipped JSON Schema.
+
+The owners of the file formats (:mod:`pwas_hdl.fit.model_file`, :mod:`pwas_hdl.design.manifest`)
+call these helpers, so every format refuses bad files the same way: ONE
+:class:`~pwas_hdl.errors.InputError` whose message names the file, the bad key by its path
+(``lags.My``, ``ports[3].width``) and what was expected, e.g.
+``model.json: lags.My must be an integer, got 2.7``.
+
+The schemas are JSON Schema draft 2020-12 files in ``pwas_hdl/schemas/`` (found with
+:func:`pwas_hdl.resources.schemas_dir`), validated with ``jsonschema``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Iterable
+
+from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.resources import schemas_dir
+
+__all__ = ["load_schema", "read_json", "check_header", "validate", "schema_errors", "json_path"]
+
+
+@lru_cache(maxsize=None)
+def _schema_and_validator(name: str):
+    import jsonschema
+
+    path = schemas_dir() / name
+    try:
+        schema = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InternalError(f"the JSON Schema {path} cannot be read ({exc}); the pwas-hdl installation is broken") from exc
+    cls = jsonschema.validators.validator_for(schema)
+    cls.check_schema(schema)
+    return schema, cls(schema)
+
+
+def load_schema(name: str) -> dict[str, Any]:
+    """The shipped JSON Schema ``pwas_hdl/schemas/<name>`` (parsed; do not modify it)."""
+    return _schema_and_validator(name)[0]
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def read_json(path: str | os.PathLike, hint: str) -> Any:
+    """Parse a UTF-8 strict-JSON file (``NaN`` / ``Infinity`` refused).
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    hint : str
+        How to get a good file (e.g. "re-run `pwas-hdl fit`"), appended to the message.
+
+    Raises
+    ------
+    FileNotFoundError, OSError
+        The file cannot be read.
+    InputError
+        Not UTF-8, not JSON, or holds a non-JSON constant such as NaN.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{p} is not UTF-8 text (corrupt?); {hint}") from exc
+    try:
+        return json.loads(text, parse_constant=_refuse_constant)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p} is not valid JSON ({exc.msg} at line {exc.lineno}); it is corrupt or truncated, {hint}") from exc
+    except ValueError as exc:  # NaN / Infinity
+        raise InputError(f"{p} is not valid JSON ({exc}); {hint}") from exc
+
+
+def check_header(d: Any, fmt: str, version: int, source: str, hint: str) -> None:
+    """Check ``format`` and ``version`` before the schema (an old file gets a version message, not a key list).
+
+    Raises
+    ------
+    InputError
+        ``d`` is not an object with ``"format": fmt``, or its version is not ``version``.
+    """
+    if not isinstance(d, dict) or d.get("format") != fmt:
+        raise InputError(f'{source} is not a {fmt} file (missing "format": "{fmt}"); {hint}')
+    v = d.get("version")
+    if type(v) is not int or v != version:
+        raise InputError(f"{source}: {fmt} version {v!r} is not supported (this pwas-hdl reads version {version}); {hint}")
+
+
+def json_path(parts: Iterable[Any]) -> str:
+    """``["lags", "My"]`` -> ``lags.My``; ``["ports", 3, "width"]`` -> ``ports[3].width``."""
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out
+
+
+def _show(value: Any) -> str:
+    text = json.dumps(value, allow_nan=True, default=str)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+_TYPE_WORDS = {"integer": "an integer", "number": "a number", "string": "a string", "boolean": "true or false",
+               "object": "an object", "array": "a list", "null": "null"}
+
+
+def _describe(err) -> str:
+    """One sentence for one :class:`jsonschema.ValidationError`, naming the key by its path."""
+    path = json_path(err.absolute_path)
+    where = path or "the top level"
+    kind, want, inst = err.validator, err.validator_value, err.instance
+    if kind == "type":
+        types = [want] if isinstance(want, str) else list(want)
+        return f"{where} must be {' or '.join(_TYPE_WORDS.get(t, t) for t in types)}, got {_show(inst)}"
+    if kind == "required":
+        missing = [k for k in want if isinstance(inst, dict) and k not in inst]
+        return f"{json_path([*err.absolute_path, missing[0]]) if missing else where} is missing"
+    if kind == "additionalProperties":
+        known = set((err.schema.get("properties") or {}))
+        extra = sorted(k for k in inst if k not in known) if isinstance(inst, dict) else []
+        return f"{where} has the unknown key{'s' if len(extra) > 1 else ''} {', '.join(repr(k) for k in extra)}"
+    if kind == "const":
+        return f"{where} must be {_show(want)}, got {_show(inst)}"
+    if kind == "enum":
+        return f"{where} must be one of {', '.join(_show(v) for v in want)}, got {_show(inst)}"
+    if kind in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        op = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">", "exclusiveMaximum": "<"}[kind]
+        return f"{where} must be {op} {want}, got {_show(inst)}"
+    if kind == "minItems":
+        return f"{where} must have at least {want} item{'s' if want != 1 else ''}, got {len(inst)}"
+    if kind == "maxItems":
+        return f"{where} must have at most {want} item{'s' if want != 1 else ''}, got {len(inst)}"
+    if kind == "minLength":
+        return f"{where} must not be empty" if want == 1 else f"{where} must have at least {want} characters"
+    if kind == "pattern":
+        return f"{where} must match {want}, got {_show(inst)}"
+    if kind == "uniqueItems":
+        return f"{where} has repeated items"
+    return f"{where}: {err.message}"
+
+
+def schema_errors(d: Any, schema_name: str) -> list[str]:
+    """Every schema violation of ``d`` as one sentence each (empty: valid), most relevant first."""
+    from jsonschema.exceptions import best_match, relevance
+
+    _, validator = _schema_and_validator(schema_name)
+    errs = list(validator.iter_errors(d))
+    if not errs:
+        return []
+    first = best_match(errs)
+    rest = sorted((e for e in errs if e is not first), key=relevance)
+    return [_describe(e) for e in [first, *rest]]
+
+
+def validate(d: Any, schema_name: str, source: str, hint: str) -> None:
+    """Validate ``d`` against a shipped schema.
+
+    Raises
+    ------
+    InputError
+        ``"<source>: <path> must be ..., got ...; <hint>"`` for the most relevant violation
+        (``jsonschema.exceptions.best_match``).
+    """
+    errs = schema_errors(d, schema_name)
+    if errs:
+        more = f" (and {len(errs) - 1} more problem{'s' if len(errs) > 2 else ''})" if len(errs) > 1 else ""
+        raise InputError(f"{source}: {errs[0]}{more}; {hint}")
