@@ -44,6 +44,8 @@ from cocotb.clock import Clock
 
 from pwas_drivers import CycleLoop, StreamSink, StreamSource, pack, random_pauses, unpack
 
+from pwas_hdl.design.manifest import load_manifest
+
 MAX_REPORTED = 20
 
 
@@ -55,13 +57,11 @@ def _load_job() -> dict:
         return json.load(f)
 
 
-def _port(man: dict, role: str, required: bool = True) -> dict | None:
+def _port(man: dict, role: str) -> dict:
     for p in man["ports"]:
-        if p.get("role") == role:
+        if p["role"] == role:
             return p
-    if required:
-        raise KeyError(f"the manifest has no port with role {role!r}")
-    return None
+    raise KeyError(f"the manifest has no port with role {role!r}")
 
 
 def _handle(dut, name: str):
@@ -79,18 +79,19 @@ class Bench:
     def __init__(self, dut, job: dict, man: dict):
         self.dut, self.job, self.man = dut, job, man
         self.latency = int(man["latency_cycles"])
-        self.warmup = int(man.get("lags", {}).get("warmup", {}).get("samples_without_output", 0)) if man["design"] == "sensor" else 0
+        # the manifest is validated (pwas_hdl.design.manifest): a sensor design has lags.warmup, a core none
+        warm = man["lags"]["warmup"] if man["design"] == "sensor" else None
+        self.warmup = int(warm["samples_without_output"]) if warm else 0
         pin, pout = _port(man, "in.payload"), _port(man, "out.payload")
         self.in_fields = pin["fields"]
         self.out_fields = pout["fields"]  # targets then out_of_range, as listed
-        self.clk = _handle(dut, _port(man, "clock")["name"])
-        self.rst = _handle(dut, _port(man, "reset")["name"])
+        self.clk = _handle(dut, man["clock"]["port"])
+        self.rst = _handle(dut, man["reset"]["port"])
         self.src = StreamSource(_handle(dut, _port(man, "in.valid")["name"]), _handle(dut, _port(man, "in.ready")["name"]),
                                 _handle(dut, pin["name"]))
         self.out_valid = _handle(dut, _port(man, "out.valid")["name"])
         self.sink = StreamSink(self.out_valid, _handle(dut, _port(man, "out.ready")["name"]), _handle(dut, pout["name"]))
-        warm = _port(man, "warm", required=False) or next((p for p in man["ports"] if p["name"] == "warm"), None)
-        self.warm = _handle(dut, warm["name"]) if warm else None
+        self.warm = _handle(dut, warm["port"]) if warm else None
         self.warm_log: list[int] = []
         self.loop = CycleLoop(self.clk, [self.src, self.sink], hooks=[self._watch])
         self.rst.value = 0
@@ -211,8 +212,7 @@ class Bench:
 async def stream_replay(dut):
     """Replay the job's runs through the design, compare with the bit-true expectations."""
     job = _load_job()
-    with open(job["manifest"], encoding="utf-8") as f:
-        man = json.load(f)
+    man = load_manifest(job["manifest"])  # validated: the bench reads keys without fallbacks
     bench = Bench(dut, job, man)
     cocotb.start_soon(Clock(bench.clk, float(job.get("clock_ns", 10)), unit="ns").start())
     result = {"top": man["top"], "latency_cycles": bench.latency, "runs": []}

@@ -1,8 +1,8 @@
 """Synthesis runner (pwas_hdl.flow.synthesis) on a hand-written, generated-looking design folder.
 
 No generator is involved: ``tiny_core.v`` is a 4-stage pipeline (clamp -> 256x12 ROM read from a
-``$readmemh`` file -> registered 12x12 signed multiply -> round and saturate) with the manifest keys
-the runner reads. Warm YoWASP cache: a few seconds per test; the very first Yosys call of a machine
+``$readmemh`` file -> registered 12x12 signed multiply -> round and saturate) with a complete
+manifest (format v2, validated against the shipped schema like a generated one). Warm YoWASP cache: a few seconds per test; the very first Yosys call of a machine
 compiles WebAssembly for ~40-50 s (see the report in the module notes of pwas_hdl.flow.synthesis).
 """
 
@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from pwas_hdl.design.manifest import MANIFEST_SCHEMA_ID, validate_manifest
 from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.flow import synthesis
 from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
@@ -29,12 +30,15 @@ module tiny_core (
     input  wire               clk,
     input  wire               rst,
     input  wire               in_valid,
+    output wire               in_ready,
+    input  wire               out_ready,
     input  wire signed [11:0] in_a,
     input  wire        [7:0]  in_addr,
     output reg                out_valid,
     output reg  signed [11:0] out_y,{extra_ports}
     output reg                out_oor
 );
+    assign in_ready = 1'b1;  // no backpressure: out_ready is ignored
     reg signed [11:0] rom [0:{rom_last}];
     initial $readmemh("tiny_core_rom.hex", rom);
 
@@ -74,7 +78,7 @@ endmodule
 def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_depth: int = ROM_DEPTH) -> Path:
     """Write a generated-looking folder: Verilog, ROM hex file, manifest.json.
 
-    ``wide`` adds a 24-bit output port (61 port bits: more than the 39 pins of an UP5K SG48);
+    ``wide`` adds a 24-bit output port (63 port bits: more than the 39 pins of an UP5K SG48);
     ``broken`` leaves a syntax error in the Verilog; ``rom_depth`` (a power of two <= 256) is
     the number of ROM words.
     """
@@ -90,26 +94,49 @@ def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_d
     (folder / "tiny_core_rom.hex").write_text("".join(f"{w:03x}\n" for w in words))
     ports = [
         ("clk", "input", 1, "clock"), ("rst", "input", 1, "reset"), ("in_valid", "input", 1, "in.valid"),
+        ("in_ready", "output", 1, "in.ready"), ("out_ready", "input", 1, "out.ready"),
         ("in_a", "input", 12, "in.payload"), ("in_addr", "input", 8, "in.addr"),
         ("out_valid", "output", 1, "out.valid"), ("out_y", "output", 12, "out.payload"),
         ("out_oor", "output", 1, "out.out_of_range"),
     ]
+    fmt12 = {"str": "s12.0", "bits": 12, "frac": 0, "signed": True, "rounding": "half_up", "overflow": "saturate",
+             "scale": 1.0, "offset": 0.0, "physical_lsb": 1.0}
+    inp = {"format": "s12.0", "bits": 12, "signed": True, "F": 0, "partitions": 1, "lo": -1800.0, "hi": 1800.0,
+           "lo_code": -1800, "hi_code": 1800, "lsb": 1.0, "offset": 0.0, "scale": 1.0}
     manifest = {
+        "$schema": MANIFEST_SCHEMA_ID,
         "format": "pwas-hdl-manifest",
-        "version": 1,
-        "generator": {"pwas_hdl": "test", "amaranth": None},
+        "version": 2,
+        "generator": {"pwas_hdl": "test", "options": {
+            "design": "core", "memory": "replicated", "pipeline": None, "memory_init": "readmemh", "input_bits": 12,
+            "input_fill": None, "weight_bits": 12, "weight_frac": 0, "output_bits": 12, "output_frac": 0,
+            "overflow": None, "rounding": None}},
         "design": "core",
         "top": "tiny_core",
-        "files": {"verilog": "tiny_core.v",
-                  "hex": [{"target": "z", "bank": 0, "file": "tiny_core_rom.hex", "depth": rom_depth, "width": ROM_WIDTH}]},
+        "files": {"verilog": "tiny_core.v", "model": "model.json", "manifest": "manifest.json", "report": "report.md",
+                  "instance_template": "tiny_core_inst.v", "fusesoc_core": "tiny_core.core",
+                  "hex": [{"file": "tiny_core_rom.hex", "bank": 0, "depth": rom_depth, "width": ROM_WIDTH,
+                           "fields": [{"target": "z", "lsb": 0, "width": ROM_WIDTH, "signed": True}]}]},
         "clock": {"port": "clk", "edge": "rising"},
         "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
         "latency_cycles": LATENCY,
         "ii": 1,
+        "flow_control": {"in__ready": "always 1"},
         "ports": [{"name": n, "direction": d, "width": w, "signed": n in ("in_a", "out_y"), "role": r} for n, d, w, r in ports],
-        "memory": {"layout": "replicated", "banks": 1, "depth": rom_depth, "word_bits": ROM_WIDTH,
-                   "words": rom_depth, "bits": rom_depth * ROM_WIDTH, "n_vertices": rom_depth},
+        "formats": {"inputs": [{"name": "a", "signal": "a", "lag": 0, **inp}], "signals": {"a": inp},
+                    "weight": {**fmt12, "n_saturated": 0}, "output": {**fmt12, "targets": ["z"], "shift": 11, "may_saturate": True},
+                    "mu_frac": 0, "widths": {}, "rounding": "half_up"},
+        "domain": {"lo": [-1800.0], "hi": [1800.0], "partitions": [1], "lo_code": [-1800], "frac_bits": [0],
+                   "n_vertices": rom_depth, "out_of_range": "clamped to +-1800"},
+        "lags": {"Mu": 0, "My": 1, "inputs": [], "outputs": ["a"], "targets": ["z"], "regressors": ["a[t]"]},
+        "error_bound": {"physical": 1.0, "lsb": 1.0, "weight_term": 0.5, "output_term": 0.5},
+        "memory": {"kind": "replicated", "memories": 1, "depth": rom_depth, "word_bits": ROM_WIDTH,
+                   "words": rom_depth, "bits": rom_depth * ROM_WIDTH, "n_vertices": rom_depth,
+                   "layout_spec": {"kind": "replicated"}},
+        "pipeline": {},
+        "arithmetic": {},
     }
+    validate_manifest(manifest, "tiny manifest")  # the runner only accepts valid manifests
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
     return folder
 
@@ -178,7 +205,7 @@ def test_ice40_default_hx8k(design: Path, tmp_path: Path):
     assert r["bram"] == 1 and r["bram_bits"] == 4096 and r["memory_bits"] == ROM_DEPTH * ROM_WIDTH
     u = r["utilization"]
     assert u["ICESTORM_LC"]["available"] == 7680 and 0 < u["ICESTORM_LC"]["used"] == r["logic_cells"]
-    assert u["ICESTORM_RAM"]["used"] == 1 and u["SB_IO"]["used"] == 37
+    assert u["ICESTORM_RAM"]["used"] == 1 and u["SB_IO"]["used"] == 39
     _check_timing(r)
     assert r["freq_mhz"] == 20.0 and r["timing_met"] is (r["fmax_mhz"] >= 20.0)
     assert r["tools"]["nextpnr"].startswith("nextpnr-0.")
@@ -217,7 +244,7 @@ def test_ecp5(design: Path, tmp_path: Path):
 
 def test_does_not_fit_names_the_resource(tmp_path: Path):
     d = make_design(tmp_path / "wide", wide=True)
-    with pytest.raises(ValueError, match=r"does not fit iCE40UP5K-SG48: I/O pins: the design needs 61, iCE40UP5K-SG48 has 39") as ei:
+    with pytest.raises(ValueError, match=r"does not fit iCE40UP5K-SG48: I/O pins: the design needs 63, iCE40UP5K-SG48 has 39") as ei:
         synthesize(d, "ice40", device="up5k")
     assert "port bits" in str(ei.value) and "--package" in str(ei.value)
     assert not (d / "synth" / "ice40" / "synth.json").exists()

@@ -25,7 +25,6 @@ Same inputs give byte-identical files. The folder is written only when everythin
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -39,7 +38,7 @@ import numpy as np
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
-from pwas_hdl.design.manifest import MANIFEST_FORMAT, MANIFEST_VERSION
+from pwas_hdl.design.manifest import build_manifest, manifest_text
 from pwas_hdl.fit.model_file import model_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
@@ -113,94 +112,6 @@ def _template(name: str) -> Template:
     return Template(path.read_text(encoding="utf-8"))
 
 
-def _role(port_name: str) -> str:
-    return {"clk": "clock", "rst": "reset"}.get(port_name, port_name.replace("__", "."))
-
-
-def _fields(design: str, fxm: FixedPointModel, info: dict, port: str) -> list[dict]:
-    """Payload bit fields with their fixed-point formats and physical scaling."""
-    fields = [dict(f) for f in info["payload"].get(port, [])]
-    if port.startswith("in"):
-        if design == "core":
-            for j, f in enumerate(fields):
-                inp = fxm.inputs[j]
-                f.update({"regressor": fxm.regressor_names[j], "signal": fxm.regressor_signals[j][0],
-                          "lag": fxm.regressor_signals[j][1], "format": inp.port.to_dict(),
-                          "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
-        else:
-            sig = fxm.signal_input_formats()
-            for f in fields:
-                inp = sig[f["name"]]
-                f.update({"signal": f["name"], "format": inp.port.to_dict(),
-                          "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
-    else:
-        for f in fields:
-            if f["name"] in fxm.target_names:
-                f.update({"target": f["name"], "format": fxm.output_port.to_dict()})
-            elif f["name"] == "out_of_range":
-                f["meaning"] = "1: some regressor was outside the domain and was clamped to it"
-    return fields
-
-
-def _manifest(design: str, top: str, fxm: FixedPointModel, info: dict, sensor: PWASVirtualSensor,
-              files: dict[str, Any], options: dict[str, Any]) -> dict:
-    fx = fxm.to_dict()
-    ports = []
-    for prt in info["ports"]:
-        entry = {**prt, "role": _role(prt["name"])}
-        if prt["name"] in info["payload"]:
-            entry["fields"] = _fields(design, fxm, info, prt["name"])
-        ports.append(entry)
-    ins, outs, tgts = sensor.signal_names()
-    lags = sensor.lags_
-    mem = dict(info["memory"])
-    return {
-        "format": MANIFEST_FORMAT,
-        "version": MANIFEST_VERSION,
-        "generator": {"pwas_hdl": __version__, "options": options},
-        "design": design,
-        "top": top,
-        "files": files,
-        "clock": {"port": "clk", "edge": "rising"},
-        "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
-        "latency_cycles": int(info["latency"]),
-        "ii": int(info["ii"]),
-        "flow_control": info["flow_control"],
-        "ports": ports,
-        "formats": {
-            "inputs": fx["inputs"],
-            "signals": fx["signals"],
-            "weight": fx["weights"],
-            "output": fx["output"],
-            "mu_frac": int(fx["F"]),
-            "widths": fx["widths"],
-            "rounding": fx["rounding"],
-        },
-        "domain": {
-            "lo": [float(v) for v in sensor.grid_.lo],
-            "hi": [float(v) for v in sensor.grid_.hi],
-            "partitions": [int(v) for v in sensor.grid_.partitions],
-            "lo_code": [int(v) for v in fxm.lo_codes],
-            "frac_bits": [int(v) for v in fxm.frac_bits],
-            "n_vertices": int(sensor.grid_.n_vertices),
-            "out_of_range": "inputs outside the domain are clamped to it and raise out_of_range",
-        },
-        "lags": {
-            "Mu": int(lags.mu),
-            "My": int(lags.my),
-            "inputs": ins if lags.nu else [],
-            "outputs": outs if lags.ny else [],
-            "targets": tgts,
-            "regressors": list(fxm.regressor_names),
-            **({k: v for k, v in info.items() if k in ("warmup",)}),
-        },
-        "error_bound": fx["error_bound"],
-        "memory": {**mem, "n_vertices": int(sensor.grid_.n_vertices), "layout_spec": fx["layout"]},
-        "pipeline": info["pipeline"],
-        "arithmetic": info["arithmetic"],
-    }
-
-
 def _md_table(header: list[str], rows: list[list[Any]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
@@ -220,14 +131,11 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     rows = []
     seen = set()
     for inp in fmts["inputs"]:
-        key = inp.get("signal") if man["design"] == "sensor" else inp["name"]
+        key = inp["signal"] if man["design"] == "sensor" else inp["name"]
         if key in seen:
             continue
         seen.add(key)
-        rows.append([f"input {key}", f"{'s' if inp['format']['signed'] else 'u'}{inp['format']['bits']}.{inp['format']['frac']}"
-                     if isinstance(inp.get("format"), dict) else inp.get("format", "?"),
-                     f"{inp.get('lsb', inp.get('physical_lsb', '')):.6g}" if isinstance(inp.get('lsb', inp.get('physical_lsb')), float) else "",
-                     f"[{inp['lo']:.6g}, {inp['hi']:.6g}], p = {inp['partitions']}"])
+        rows.append([f"input {key}", inp["format"], f"{inp['lsb']:.6g}", f"[{inp['lo']:.6g}, {inp['hi']:.6g}], p = {inp['partitions']}"])
     w, o = fmts["weight"], fmts["output"]
     rows.append(["weights", f"s{w['bits']}.{w['frac']}", f"{2.0 ** -w['frac']:.6g}", f"{fxm.weight_codes.size} codes, {w['n_saturated']} saturated"])
     rows.append(["output", f"s{o['bits']}.{o['frac']}", f"{o['physical_lsb']:.6g}", f"shift {o['shift']}, may saturate: {o['may_saturate']}"])
@@ -241,10 +149,9 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     )
     mem = man["memory"]
     mem_text = (
-        f"Layout **{mem.get('layout', mem.get('kind', '?'))}**: {mem.get('memories', mem.get('banks', '?'))} memories x "
-        f"{mem.get('depth', '?')} words x {mem.get('word_bits', '?')} bits = {mem.get('words', '?')} words, "
-        f"{mem.get('bits', '?')} bits for N = {mem['n_vertices']} weights"
-        + (f" ({mem['words'] / mem['n_vertices']:.3f} N)." if isinstance(mem.get("words"), int) else ".")
+        f"Layout **{mem['kind']}**: {mem['memories']} memories x {mem['depth']} words x {mem['word_bits']} bits "
+        f"= {mem['words']} words, {mem['bits']} bits for N = {mem['n_vertices']} weights "
+        f"({mem['words'] / mem['n_vertices']:.3f} N)."
     )
     eb = man["error_bound"]
     terms = f"(weight rounding {eb['weight_term']:.4g} + output rounding {eb['output_term']:.4g}, physical units)"
@@ -280,7 +187,7 @@ def _instance(man: dict) -> str:
             desc = ""
             if fmt:
                 desc = (f" {'s' if fmt['signed'] else 'u'}{fmt['bits']}.{fmt['frac']}, physical = "
-                        f"{fmt['offset']!r} + {fmt['scale']!r} * code * 2^-{fmt['frac']}")
+                        f"{fmt['offset']!r} + {fmt['scale']!r} * code * 2^{-fmt['frac']}")
             comments.append(f"//   {p['name']}[{f['lsb'] + f['width'] - 1}:{f['lsb']}] {f['name']}{desc}")
     conns = ",\n".join(
         f"    .{p['name']}({p['name']})" for p in man["ports"]
@@ -427,13 +334,11 @@ def build_design(
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
     if timing is not None:
         options.update(target_mhz=float(target_mhz), fpga_target=fpga_target)
-    man = _manifest(design, top, fxm, info, sensor, files, options)
-    if timing is not None:
-        man["timing"] = timing
+    man = build_manifest(design, top, fxm, info, sensor, files, options, timing)
     texts: dict[str, str] = {
         files["verilog"]: verilog,
         "model.json": model_text(sensor),
-        "manifest.json": json.dumps(man, indent=1, allow_nan=False) + "\n",
+        "manifest.json": manifest_text(man),
         "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else ""),
         files["instance_template"]: _instance(man),
         files["fusesoc_core"]: _fusesoc(man, memory_init),

@@ -1,39 +1,52 @@
-"""The hardware manifest: the machine-readable description of a generated design.
+"""The hardware manifest: the one owner of ``manifest.json`` (constants, construction, schema, reading).
 
-``pwas-hdl generate`` writes ``manifest.json`` next to the Verilog; the cocotb testbenches, the
-``simulate`` and ``synth`` commands and any FPGA flow read it instead of hard-coding ports, widths,
-formats or latency. Format ``pwas-hdl-manifest``, version 1::
+``pwas-hdl generate`` writes ``manifest.json`` next to the Verilog (built by :func:`build_manifest`,
+written by :func:`manifest_text`); the cocotb testbenches, ``simulate``, ``synth``, ``report`` and
+any FPGA flow read it with :func:`load_manifest` instead of hard-coding ports, widths, formats or
+latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/manifest-v2.schema.json``
+(its ``$id`` is the file's ``$schema``)::
 
     {
-      "format": "pwas-hdl-manifest", "version": 1,
-      "generator": {"pwas_hdl": "0.1.0", "amaranth": "0.5.10"},
+      "$schema": "urn:pwas-hdl:schema:manifest-v2", "format": "pwas-hdl-manifest", "version": 2,
+      "generator": {"pwas_hdl": "0.1.0", "options": {design, memory, pipeline, memory_init, input_bits, ...}},
       "design": "core" | "sensor",              # PWAS core alone, or lag bank + core
       "top": "pwas_core",                        # Verilog module name
-      "files": {"verilog": "pwas_core.v", "model": "model.json", "report": "report.md",
-                "hex": [{"target": "z", "bank": 0, "file": "pwas_core_z_bank0.hex", "depth": .., "width": ..}],
-                "templates": {...}},
+      "files": {"verilog": "pwas_core.v", "model": "model.json", "manifest": "manifest.json",
+                "report": "report.md", "instance_template": "pwas_core_inst.v", "fusesoc_core": "pwas_core.core",
+                "hex": [{"file": "pwas_core_rom_b0.hex", "bank": 0, "depth": .., "width": ..,
+                         "fields": [{"target": "z", "lsb": 0, "width": .., "signed": true}]}, ...]},
       "clock": {"port": "clk", "edge": "rising"},
       "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
       "latency_cycles": 7,                       # input transfer -> output valid, no stalls
-      "ii": 1,                                   # initiation interval (samples per clock: 1/ii)
+      "ii": 1,                                   # initiation interval (one sample every ii clocks)
+      "flow_control": {...},                     # the handshake rules in words
       "ports": [                                 # every top-level port of the Verilog module
-        {"name": "in__payload", "direction": "input", "width": 48, "signed": false,
-         "role": "in.payload",
-         "fields": [{"name": "x0", "regressor": "y[t-3]", "lsb": 0, "width": 12, "signed": true,
-                     "format": {FixedFormat.to_dict()}, "scale": .., "offset": ..}, ...]},
+        {"name": "in__payload", "direction": "input", "width": 48, "signed": false, "role": "in.payload",
+         "fields": [{"name": "y[t-3]", "lsb": 0, "width": 12, "signed": true, "regressor": "y[t-3]",
+                     "signal": "y", "lag": 3, "format": {PortFormat.to_dict()}, "domain_codes": [lo, hi]}, ...]},
         {"name": "in__valid", ...}, {"name": "in__ready", ...}, {"name": "out__payload", ...}, ...
       ],
-      "formats": {"inputs": [...], "weight": {...}, "output": {...}, "mu_frac": F},
-      "domain": {"lo": [...], "hi": [...], "partitions": [...], "lo_code": [...], "frac_bits": [...]},
-      "lags": {"Mu": .., "My": .., "inputs": [...], "outputs": [...], "targets": [...],
-               "regressors": [...]},
-      "error_bound": {"lsb": .., "physical": .., "terms": {...}},
-      "memory": {"layout": "banked" | "replicated", "banks": n+1, "depth": .., "word_bits": ..,
-                 "words": .., "bits": .., "n_vertices": N},
-      "pipeline": {"preset": .., "stages": [...]}
+      "formats": {"inputs": [...], "signals": {...}, "weight": {...}, "output": {...}, "mu_frac": F,
+                  "widths": {...}, "rounding": ..},
+      "domain": {"lo": [...], "hi": [...], "partitions": [...], "lo_code": [...], "frac_bits": [...],
+                 "n_vertices": N, "out_of_range": ".."},
+      "lags": {"Mu": .., "My": .., "inputs": [...], "outputs": [...], "targets": [...], "regressors": [...],
+               "warmup": {"samples_without_output": M - 1, "port": "warm", "meaning": ..}},   # sensor only
+      "error_bound": {"lsb": .., "physical": .., "weight_term": .., "output_term": .., ...},
+      "memory": {"kind": "banked" | "replicated", "memories": n+1, "depth": .., "word_bits": ..,
+                 "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},
+      "pipeline": {...}, "arithmetic": {...},
+      "timing": {...}                            # only with generate --clock-mhz (timing closure)
     }
 
-Physical value of a field: ``physical = offset + scale * code * 2**-frac`` (``format.frac``).
+Physical value of a field: ``physical = offset + scale * code * 2**-frac`` (its ``format``).
+Reading checks strict JSON, ``format`` / ``version`` (another version: "re-run `pwas-hdl
+generate`"), the schema (the message names the bad key, e.g. ``ports[2].width``) and what the
+schema cannot state (ports named by ``clock`` / ``reset`` exist, one port per stream role, fields
+inside their port, one domain entry per regressor). Readers then index keys directly: there are no
+fallbacks for missing or renamed keys.
+
+Version history: 1 (no ``$schema``, no validation), 2 (this one).
 """
 
 from __future__ import annotations
@@ -41,51 +54,269 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["MANIFEST_FORMAT", "MANIFEST_VERSION", "load_manifest", "port", "field"]
+from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+
+__all__ = [
+    "MANIFEST_FORMAT", "MANIFEST_VERSION", "MANIFEST_SCHEMA", "MANIFEST_SCHEMA_ID", "MANIFEST_FILE", "STREAM_ROLES",
+    "build_manifest", "manifest_text", "manifest_errors", "validate_manifest", "load_manifest", "port", "field",
+]
 
 MANIFEST_FORMAT = "pwas-hdl-manifest"
-MANIFEST_VERSION = 1
+MANIFEST_VERSION = 2
+#: File name of the schema in ``pwas_hdl/schemas/``.
+MANIFEST_SCHEMA = "manifest-v2.schema.json"
+#: The schema's ``$id``, written as ``$schema`` in every manifest.
+MANIFEST_SCHEMA_ID = "urn:pwas-hdl:schema:manifest-v2"
+#: Name of the manifest in a generated folder.
+MANIFEST_FILE = "manifest.json"
+#: Roles of the stream ports every design has (one port each).
+STREAM_ROLES = ("in.payload", "in.valid", "in.ready", "out.payload", "out.valid", "out.ready")
+
+_HINT = "re-run `pwas-hdl generate` to write the design folder again"
+
+
+# ------------------------------------------------------------------------------ construction
+def _role(port_name: str) -> str:
+    return {"clk": "clock", "rst": "reset"}.get(port_name, port_name.replace("__", "."))
+
+
+def _fields(design: str, fxm: "FixedPointModel", info: dict, port_name: str) -> list[dict]:
+    """Payload bit fields with their fixed-point formats and physical scaling."""
+    fields = [dict(f) for f in info["payload"].get(port_name, [])]
+    if port_name.startswith("in"):
+        if design == "core":
+            for j, f in enumerate(fields):
+                inp = fxm.inputs[j]
+                f.update({"regressor": fxm.regressor_names[j], "signal": fxm.regressor_signals[j][0],
+                          "lag": fxm.regressor_signals[j][1], "format": inp.port.to_dict(),
+                          "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
+        else:
+            sig = fxm.signal_input_formats()
+            for f in fields:
+                inp = sig[f["name"]]
+                f.update({"signal": f["name"], "format": inp.port.to_dict(),
+                          "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
+    else:
+        for f in fields:
+            if f["name"] in fxm.target_names:
+                f.update({"target": f["name"], "format": fxm.output_port.to_dict()})
+            elif f["name"] == "out_of_range":
+                f["meaning"] = "1: some regressor was outside the domain and was clamped to it"
+    return fields
+
+
+def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str, Any], sensor: "PWASVirtualSensor",
+                   files: dict[str, Any], options: dict[str, Any], timing: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The manifest of a built design, validated against the schema.
+
+    Parameters
+    ----------
+    design : {"core", "sensor"}
+    top : str
+        Verilog module name.
+    fxm : FixedPointModel
+        The bit-true model the RTL implements.
+    info : dict
+        :func:`pwas_hdl.hdl.design_info` of the Amaranth component.
+    sensor : PWASVirtualSensor
+        The fitted model.
+    files : dict
+        The ``files`` entry (names relative to the folder).
+    options : dict
+        The generate options that rebuild the bit-true model (``generator.options``).
+    timing : dict, optional
+        The timing-closure record (:func:`pwas_hdl.flow.timing_closure.close_timing`).
+
+    Raises
+    ------
+    InternalError
+        The manifest does not satisfy its own schema (a bug in the generator).
+    """
+    from pwas_hdl import __version__
+
+    fx = fxm.to_dict()
+    ports = []
+    for prt in info["ports"]:
+        entry = {**prt, "role": _role(prt["name"])}
+        if prt["name"] in info["payload"]:
+            entry["fields"] = _fields(design, fxm, info, prt["name"])
+        ports.append(entry)
+    ins, outs, tgts = sensor.signal_names()
+    lags = sensor.lags_
+    man: dict[str, Any] = {
+        "$schema": MANIFEST_SCHEMA_ID,
+        "format": MANIFEST_FORMAT,
+        "version": MANIFEST_VERSION,
+        "generator": {"pwas_hdl": __version__, "options": options},
+        "design": design,
+        "top": top,
+        "files": files,
+        "clock": {"port": "clk", "edge": "rising"},
+        "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
+        "latency_cycles": int(info["latency"]),
+        "ii": int(info["ii"]),
+        "flow_control": info["flow_control"],
+        "ports": ports,
+        "formats": {
+            "inputs": fx["inputs"],
+            "signals": fx["signals"],
+            "weight": fx["weights"],
+            "output": fx["output"],
+            "mu_frac": int(fx["F"]),
+            "widths": fx["widths"],
+            "rounding": fx["rounding"],
+        },
+        "domain": {
+            "lo": [float(v) for v in sensor.grid_.lo],
+            "hi": [float(v) for v in sensor.grid_.hi],
+            "partitions": [int(v) for v in sensor.grid_.partitions],
+            "lo_code": [int(v) for v in fxm.lo_codes],
+            "frac_bits": [int(v) for v in fxm.frac_bits],
+            "n_vertices": int(sensor.grid_.n_vertices),
+            "out_of_range": "inputs outside the domain are clamped to it and raise out_of_range",
+        },
+        "lags": {
+            "Mu": int(lags.mu),
+            "My": int(lags.my),
+            "inputs": ins if lags.nu else [],
+            "outputs": outs if lags.ny else [],
+            "targets": tgts,
+            "regressors": list(fxm.regressor_names),
+            **({"warmup": info["warmup"]} if "warmup" in info else {}),
+        },
+        "error_bound": fx["error_bound"],
+        "memory": {**info["memory"], "n_vertices": int(sensor.grid_.n_vertices), "layout_spec": fx["layout"]},
+        "pipeline": info["pipeline"],
+        "arithmetic": info["arithmetic"],
+    }
+    if timing is not None:
+        man["timing"] = timing
+    errs = manifest_errors(man)
+    if errs:
+        raise InternalError(f"the generated manifest of {top} breaks its schema: {errs[0]}")
+    return man
+
+
+def manifest_text(manifest: dict[str, Any]) -> str:
+    """The text of ``manifest.json`` (strict JSON, indented, newline at the end)."""
+    return json.dumps(manifest, indent=1, allow_nan=False) + "\n"
+
+
+# ------------------------------------------------------------------------------ validation
+def _consistency_errors(m: dict[str, Any]) -> list[str]:
+    """What the schema cannot say (``m`` is schema-valid)."""
+    errs = []
+    names = [p["name"] for p in m["ports"]]
+    if len(set(names)) != len(names):
+        errs.append(f"ports has repeated names {sorted({n for n in names if names.count(n) > 1})}")
+    for key in ("clock", "reset"):
+        if m[key]["port"] not in names:
+            errs.append(f"{key}.port {m[key]['port']!r} is not one of the ports {names}")
+    roles = [p["role"] for p in m["ports"]]
+    for role in STREAM_ROLES:
+        if roles.count(role) != 1:
+            errs.append(f"ports must have exactly one port with role {role!r}, found {roles.count(role)}")
+    for i, p in enumerate(m["ports"]):
+        used = 0
+        for j, f in enumerate(p.get("fields", [])):
+            mask = ((1 << f["width"]) - 1) << f["lsb"]
+            if f["lsb"] + f["width"] > p["width"]:
+                errs.append(f"ports[{i}].fields[{j}] ({f['name']}) reaches bit {f['lsb'] + f['width'] - 1} "
+                            f"of the {p['width']}-bit port {p['name']}")
+            elif used & mask:
+                errs.append(f"ports[{i}].fields[{j}] ({f['name']}) overlaps another field of {p['name']}")
+            used |= mask
+    for i, p in enumerate(m["ports"]):
+        need = {"in.payload": ("signal", "format"), "out.payload": ("target", "format")}.get(p["role"], ())
+        for j, f in enumerate(p.get("fields", [])):
+            if p["role"] == "out.payload" and f["name"] == "out_of_range":
+                continue
+            for key in need:
+                if key not in f:
+                    errs.append(f"ports[{i}].fields[{j}].{key} is missing (every field of {p['role']} has one)")
+    n = len(m["lags"]["regressors"])
+    for key in ("lo", "hi", "partitions", "lo_code", "frac_bits"):
+        if len(m["domain"][key]) != n:
+            errs.append(f"domain.{key} has {len(m['domain'][key])} values for {n} lags.regressors")
+    if len(m["formats"]["inputs"]) != n:
+        errs.append(f"formats.inputs has {len(m['formats']['inputs'])} entries for {n} lags.regressors")
+    if m["generator"]["options"]["design"] != m["design"]:
+        errs.append(f"generator.options.design is {m['generator']['options']['design']!r} but design is {m['design']!r}")
+    if m["memory"]["n_vertices"] != m["domain"]["n_vertices"]:
+        errs.append(f"memory.n_vertices {m['memory']['n_vertices']} differs from domain.n_vertices {m['domain']['n_vertices']}")
+    warm = m["lags"].get("warmup")  # optional by the schema: present exactly for the sensor design
+    if (warm is not None) != (m["design"] == "sensor"):
+        errs.append("lags.warmup is missing (the sensor design has one)" if warm is None
+                    else "lags.warmup is given for a core design (only the sensor design has a lag bank)")
+    elif warm is not None and warm["port"] not in names:
+        errs.append(f"lags.warmup.port {warm['port']!r} is not one of the ports {names}")
+    return errs
+
+
+def manifest_errors(d: Any) -> list[str]:
+    """Every problem of a manifest dict, one sentence each (empty: a valid manifest)."""
+    if not isinstance(d, dict) or d.get("format") != MANIFEST_FORMAT:
+        return [f'not a {MANIFEST_FORMAT} file (missing "format": "{MANIFEST_FORMAT}")']
+    if type(d.get("version")) is not int or d.get("version") != MANIFEST_VERSION:
+        return [f"version {d.get('version')!r} is not supported (this pwas-hdl reads version {MANIFEST_VERSION})"]
+    return schema_errors(d, MANIFEST_SCHEMA) or _consistency_errors(d)
+
+
+def validate_manifest(d: Any, source: str = "manifest") -> None:
+    """Check a manifest dict against the format (header, schema, consistency).
+
+    Raises
+    ------
+    InputError
+        One message that names ``source``, the bad key by its path and what was expected.
+    """
+    check_header(d, MANIFEST_FORMAT, MANIFEST_VERSION, source, _HINT)
+    validate(d, MANIFEST_SCHEMA, source, _HINT)
+    errs = _consistency_errors(d)
+    if errs:
+        raise InputError(f"{source}: {errs[0]}; {_HINT}")
 
 
 def load_manifest(outdir_or_file: str | os.PathLike) -> dict[str, Any]:
-    """Read and check a manifest (a generated folder or the ``manifest.json`` itself).
+    """Read and validate a manifest (a generated folder or the ``manifest.json`` itself).
 
     Raises
     ------
     FileNotFoundError
         No manifest there (run ``pwas-hdl generate`` first).
-    ValueError
-        Not a pwas-hdl manifest, another version, or not valid JSON.
+    InputError
+        Not strict JSON, not a pwas-hdl manifest, another version, or a key missing, of the wrong
+        type or inconsistent (the message names it).
     """
     p = Path(outdir_or_file)
     if p.is_dir():
-        p = p / "manifest.json"
+        p = p / MANIFEST_FILE
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist; run `pwas-hdl generate MODEL -o DIR` first")
-    try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{p} is not valid JSON ({exc}); regenerate the design") from exc
-    if not isinstance(d, dict) or d.get("format") != MANIFEST_FORMAT:
-        raise ValueError(f"{p} is not a pwas-hdl manifest")
-    if type(d.get("version")) is not int or d["version"] != MANIFEST_VERSION:
-        raise ValueError(f"{p} has manifest version {d.get('version')!r}; this pwas-hdl reads {MANIFEST_VERSION}")
+    d = read_json(p, _HINT)
+    validate_manifest(d, str(p))
     return d
 
 
+# ------------------------------------------------------------------------------ access
 def port(manifest: dict[str, Any], role: str) -> dict[str, Any]:
     """The port whose ``role`` is ``role`` (e.g. ``"in.payload"``, ``"out.valid"``)."""
     for prt in manifest["ports"]:
-        if prt.get("role") == role:
+        if prt["role"] == role:
             return prt
     raise KeyError(f"the manifest has no port with role {role!r}")
 
 
 def field(port_entry: dict[str, Any], name: str) -> dict[str, Any]:
     """A named bit field of a port."""
-    for f in port_entry.get("fields", []):
+    for f in port_entry.get("fields", []):  # "fields" is optional: only payload ports have it
         if f["name"] == name:
             return f
     raise KeyError(f"port {port_entry['name']} has no field {name!r}")

@@ -55,7 +55,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         "regressors": man["lags"]["regressors"],
         "latency_cycles": man["latency_cycles"],
         "ii": man["ii"],
-        "memory": {k: man["memory"].get(k) for k in ("kind", "memories", "depth", "word_bits", "words", "bits")},
+        "memory": {k: man["memory"][k] for k in ("kind", "memories", "depth", "word_bits", "words", "bits")},
         "input_formats": sorted({str(i["format"]) for i in fmt["inputs"]}),
         "weight_format": f"s{fmt['weight']['bits']}.{fmt['weight']['frac']}",
         "output_format": f"s{fmt['output']['bits']}.{fmt['output']['frac']}",
@@ -96,7 +96,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         "format": "pwas-hdl-report",
         "version": 1,
         "design": design,
-        "fit": {k: fit.get(k) for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")},
+        "fit": {k: fit[k] for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")},
         "simulation": sims,
         "synthesis": synth,
     }

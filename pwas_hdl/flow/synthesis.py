@@ -197,13 +197,11 @@ def synthesize(
 
     outdir = Path(outdir)
     manifest = load_manifest(outdir)
-    top = manifest.get("top")
-    if not isinstance(top, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top):
-        raise ValueError(f"{outdir / 'manifest.json'} has no usable \"top\" module name ({top!r}); regenerate the design")
+    top = manifest["top"]  # load_manifest validated it: an identifier
     verilog = _verilog_files(outdir, manifest)
-    latency = manifest.get("latency_cycles")
-    ii = manifest.get("ii", 1)
-    clock_port = (manifest.get("clock") or {}).get("port", "clk")
+    latency = manifest["latency_cycles"]
+    ii = manifest["ii"]
+    clock_port = manifest["clock"]["port"]
 
     tools = ["yosys"] + ([f"nextpnr-{target}"] if target != "generic" else [])
     for t in tools:
@@ -246,7 +244,7 @@ def synthesize(
         **_count_resources(target, cells, stat["memories"], stat["memory_bits"]),
         "multipliers_rtl": stat_rtl["cells"].get("$mul", 0),
         "memory_bits": stat_rtl["memory_bits"],
-        "manifest_memory": manifest.get("memory"),
+        "manifest_memory": manifest["memory"],
         "logic_cells": None,
         "utilization": None,
         "clock": None,
@@ -395,11 +393,9 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
 
 
 def _verilog_files(outdir: Path, manifest: dict[str, Any]) -> list[Path]:
-    files = (manifest.get("files") or {}).get("verilog")
+    files = manifest["files"]["verilog"]  # a name or a list of names (validated by load_manifest)
     if isinstance(files, str):
         files = [files]
-    if not files or not isinstance(files, list) or not all(isinstance(f, str) and f for f in files):
-        raise ValueError(f"{outdir / 'manifest.json'} names no Verilog file (files.verilog); regenerate the design")
     paths = []
     for f in files:
         p = outdir / f

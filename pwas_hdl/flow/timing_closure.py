@@ -130,7 +130,7 @@ def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[
     """
     top = manifest["top"]
     name = name or f"{top}_timing_harness"
-    clk = (manifest.get("clock") or {}).get("port", "clk")
+    clk = manifest["clock"]["port"]
     ports = manifest["ports"]
     decl, regs, seq, conns = [], [], [], []
     nff = 0

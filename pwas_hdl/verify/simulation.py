@@ -111,11 +111,11 @@ class Design:
     def warmup(self) -> int:
         if self.kind != "sensor":
             return 0
-        return int(self.manifest["lags"].get("warmup", {}).get("samples_without_output", self.sensor.lags_.memory - 1))
+        return int(self.manifest["lags"]["warmup"]["samples_without_output"])  # the schema requires it for a sensor
 
     def port(self, role: str) -> dict:
         for p in self.manifest["ports"]:
-            if p.get("role") == role:
+            if p["role"] == role:
                 return p
         raise KeyError(f"the manifest of {self.outdir} has no port with role {role!r}")
 
@@ -135,8 +135,8 @@ class Design:
     def runtime_files(self) -> dict[str, Path]:
         """Files the Verilog may read at simulation time (the ``$readmemh`` hex files), name -> path."""
         res = {}
-        for h in self.manifest.get("files", {}).get("hex", []):
-            name = h["file"] if isinstance(h, dict) else str(h)
+        for h in self.manifest["files"]["hex"]:
+            name = h["file"]
             if (self.outdir / name).is_file():
                 res[name] = self.outdir / name
         return res
@@ -158,23 +158,23 @@ def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = N
 
     out = Path(outdir)
     man = load_manifest(out)
-    files = man.get("files", {})
-    model_file = out / files.get("model", "model.json")
+    files = man["files"]
+    model_file = out / files["model"]
     if not model_file.is_file():
         raise FileNotFoundError(f"{model_file} is missing; regenerate the folder with `pwas-hdl generate`")
     sensor = PWASVirtualSensor.load(model_file)
-    opts = man.get("generator", {}).get("options", {})
-    fmts = {k: opts.get(k) for k in FORMAT_OPTIONS if opts.get(k) is not None}
+    opts = man["generator"]["options"]
+    fmts = {k: opts[k] for k in FORMAT_OPTIONS if opts[k] is not None}
     with warnings.catch_warnings():  # saturation warnings were given by `generate`; the manifest records them
         warnings.simplefilter("ignore", UserWarning)
-        fxm = fixed_point_model(sensor, memory=opts.get("memory", "banked"), **fmts)
+        fxm = fixed_point_model(sensor, memory=opts["memory"], **fmts)
     fx = fxm.to_dict()
     want = man["formats"]
     for key, mine in (("output", fx["output"]), ("weight", fx["weights"]), ("widths", fx["widths"]), ("mu_frac", fx["F"])):
-        theirs = want.get(key)
+        theirs = want[key]
         if key in ("output", "weight"):
             mine = {k: mine[k] for k in ("bits", "frac")}
-            theirs = {k: (theirs or {}).get(k) for k in ("bits", "frac")}
+            theirs = {k: theirs[k] for k in ("bits", "frac")}
         if json.dumps(mine, sort_keys=True) != json.dumps(theirs, sort_keys=True):
             raise ValueError(
                 f"{out}: the bit-true model rebuilt from model.json has {key} {mine}, the manifest says {theirs}; "
@@ -182,7 +182,8 @@ def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = N
             )
     if [int(v) for v in man["domain"]["lo_code"]] != [int(v) for v in fxm.lo_codes]:
         raise ValueError(f"{out}: manifest lo_code {man['domain']['lo_code']} differs from the model's {list(fxm.lo_codes)}; regenerate")
-    vpath = Path(verilog) if verilog is not None else out / files.get("verilog", f"{man['top']}.v")
+    design_v = files["verilog"] if isinstance(files["verilog"], str) else files["verilog"][0]  # [0]: the design
+    vpath = Path(verilog) if verilog is not None else out / design_v
     if not vpath.is_file():
         raise FileNotFoundError(f"{vpath} is missing; regenerate the folder with `pwas-hdl generate`")
     return Design(out, man, sensor, fxm, vpath)
@@ -236,7 +237,7 @@ def _signal_columns(design: Design, codes: np.ndarray) -> tuple[np.ndarray | Non
     """Split sensor-top transfer codes (payload order) into the u and y code matrices of LagStructure."""
     lags = design.sensor.lags_
     ins, outs, _ = design.sensor.signal_names()
-    names = [f.get("signal", f["name"]) for f in design.in_fields]
+    names = [f["signal"] for f in design.in_fields]
     col = {nm: i for i, nm in enumerate(names)}
     try:
         cu = codes[:, [col[nm] for nm in ins]] if lags.nu and lags.mu else None
@@ -737,7 +738,7 @@ def simulate_data(
             fmts = model.signal_input_formats()
             cols = []
             for f in design.in_fields:
-                nm = f.get("signal", f["name"])
+                nm = f["signal"]
                 src = u if nm in ins and u is not None and lags.mu else y
                 names = ins if src is u else outs
                 cols.append(fmts[nm].quantize(src[:, names.index(nm)]))
