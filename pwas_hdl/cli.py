@@ -59,7 +59,7 @@ data_app = typer.Typer(help="Write the built-in example data sets as CSV.", no_a
 app.add_typer(data_app, name="make-data")
 
 err = Console(stderr=True, soft_wrap=True)
-out = Console(soft_wrap=True)
+stdout = Console(soft_wrap=True)
 
 #: Global flags of this invocation (set by the root callback: ``-q``, ``-v``).
 _STATE = {"quiet": False, "verbose": False}
@@ -105,7 +105,7 @@ def _report_error(exc: BaseException) -> int:
     """Print what the user needs to see about ``exc`` and return the exit status (the mapping above)."""
     verbose = _STATE["verbose"]
     if isinstance(exc, _USAGE_ERRORS) and type(exc).__name__ == "NoArgsIsHelpError":
-        out.print(exc.format_message(), highlight=False, markup=False)  # the help text
+        stdout.print(exc.format_message(), highlight=False, markup=False)  # the help text
         return EXIT_INPUT
     if isinstance(exc, _USAGE_ERRORS):
         hint = ""
@@ -143,6 +143,44 @@ def _user_errors() -> Iterator[None]:
         raise
     except Exception as exc:  # noqa: BLE001 - the one place where every error is turned into an exit status
         raise typer.Exit(_report_error(exc)) from None
+
+
+# ------------------------------------------------------------------ one option name per concept
+# Every command uses the same names: -o/--out for the file or folder it writes, -u/--inputs,
+# -y/--outputs, -z/--targets for data columns, --fpga for the FPGA family, --clock-mhz for the
+# clock. The names of earlier versions still work as hidden options (--output-model, --outdir,
+# --output, --input, --target, --resources, --freq, --target-mhz, --md / --json where they named
+# the main output); _merge() folds them into the new one.
+def _hidden(*names: str) -> Any:
+    """A hidden old name of an option (merged into the new one by :func:`_merge`)."""
+    return typer.Option(*names, hidden=True, show_default=False)
+
+
+def _merge(new: str, value: Any, **old: Any) -> Any:
+    """The value of option ``new`` given under its name or one of its old names (``old``: name -> value).
+
+    Raises
+    ------
+    InputError
+        The option was given under two names with different values.
+    """
+    given = {new: value} if value is not None else {}
+    given.update({("--" + k.replace("_", "-")): v for k, v in old.items() if v is not None})
+    if len({json.dumps(v, default=str) for v in given.values()}) > 1:
+        raise InputError(f"{' and '.join(given)} are one option (the second is the old name); give it once")
+    return next(iter(given.values()), None)
+
+
+def _merge_lists(*values: Optional[list[str]]) -> Optional[list[str]]:
+    """Repeated list options given under the new and the old name: all of them, in order."""
+    given = [v for v in values if v]
+    return [x for v in given for x in v] if given else None
+
+
+def _required(value: Any, option: str, what: str) -> Any:
+    if value is None:
+        raise InputError(f"give {what} with {option}")
+    return value
 
 
 def _int_list(text: str, what: str) -> list[int]:
@@ -201,10 +239,10 @@ def _progress(description: str) -> Iterator:
 @app.command()
 def fit(
     data: Annotated[Path, typer.Argument(help="CSV file with a header line; one row per sample.")],
-    output: Annotated[Path, typer.Option("-o", "--output-model", help="Model file to write (JSON).")],
-    inputs: Annotated[Optional[list[str]], typer.Option("--input", "-u", help="Input column(s) u (repeat or comma-separate).")] = None,
-    outputs: Annotated[Optional[list[str]], typer.Option("--output", "-y", help="Measured output column(s) y.")] = None,
-    targets: Annotated[Optional[list[str]], typer.Option("--target", "-z", help="Column(s) z to estimate.")] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Model file to write (JSON). Required.", show_default=False)] = None,
+    inputs: Annotated[Optional[list[str]], typer.Option("-u", "--inputs", help="Input column(s) u (repeat or comma-separate).")] = None,
+    outputs: Annotated[Optional[list[str]], typer.Option("-y", "--outputs", help="Measured output column(s) y.")] = None,
+    targets: Annotated[Optional[list[str]], typer.Option("-z", "--targets", help="Column(s) z to estimate.")] = None,
     mu: Annotated[int, typer.Option("--mu", help="Mu: past input samples in the regressor (0 = inputs unused).")] = 0,
     my: Annotated[int, typer.Option("--my", help="My: past output samples in the regressor.")] = 1,
     partitions: Annotated[str, typer.Option("-p", "--partitions", help="Intervals per dimension: one integer or a comma list (one per regressor).")] = "7",
@@ -217,16 +255,23 @@ def fit(
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Column naming the trajectory of each row (no regressor straddles two).")] = None,
     domain: Annotated[Optional[str], typer.Option("--domain", help="Explicit domain 'lo:hi,lo:hi,...' (one pair per regressor) instead of the gamma-expanded data box.")] = None,
     separate_lag_domains: Annotated[bool, typer.Option("--separate-lag-domains", help="Give each lag its own data range (default: all lags of a signal share one interval, as the hardware scales once per signal).")] = False,
+    output_model: Annotated[Optional[Path], _hidden("--output-model")] = None,
+    input_old: Annotated[Optional[list[str]], _hidden("--input")] = None,
+    output_old: Annotated[Optional[list[str]], _hidden("--output")] = None,
+    target_old: Annotated[Optional[list[str]], _hidden("--target")] = None,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     with _user_errors():
-        ins, outs, tgts = _names(inputs), _names(outputs), _names(targets)
+        output = _required(_merge("-o/--out", out, output_model=output_model), "-o/--out", "the model file to write")
+        ins = _names(_merge_lists(inputs, input_old))
+        outs = _names(_merge_lists(outputs, output_old))
+        tgts = _names(_merge_lists(targets, target_old))
         if not tgts:
-            raise InputError("give the column(s) to estimate with --target")
+            raise InputError("give the column(s) to estimate with -z/--targets")
         if my and not outs:
-            raise InputError(f"--my {my} needs measured output column(s): give --output (or --my 0)")
+            raise InputError(f"--my {my} needs measured output column(s): give -y/--outputs (or --my 0)")
         if mu and not ins:
-            raise InputError(f"--mu {mu} needs input column(s): give --input (or --mu 0)")
+            raise InputError(f"--mu {mu} needs input column(s): give -u/--inputs (or --mu 0)")
         table = read_csv(data)
         if traj_col is not None:
             table.column_index(traj_col)
@@ -273,8 +318,9 @@ def fit(
 def predict(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="CSV of estimates to write.")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of estimates to write. Required.", show_default=False)] = None,
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
+    output_old: Annotated[Optional[Path], _hidden("--output")] = None,
 ) -> None:
     """Estimate the targets for every row of DATA that has a full regressor.
 
@@ -283,6 +329,7 @@ def predict(
     (or TARGET_true), the RMSE of the estimate against it is printed.
     """
     with _user_errors():
+        output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         model = PWASVirtualSensor.load(model_path)
         ins, outs, tgts = model.signal_names()
         table = read_csv(data)
@@ -321,13 +368,13 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
         d["N"] = model.grid_.n_vertices
         d["n"] = model.grid_.n
         d["weight_range"] = [float(model.weights_.min()), float(model.weights_.max())]
-        out.print_json(json.dumps(d))
+        stdout.print_json(json.dumps(d))
 
 
 @app.command()
 def generate(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
-    outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Folder to write (created; replaced only if an earlier `generate` made it).")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; replaced only if an earlier `generate` made it). Required.", show_default=False)] = None,
     design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer).")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
@@ -341,10 +388,12 @@ def generate(
     output_frac: Annotated[Optional[int], typer.Option("--output-frac", help="Output fraction bits (default: weight fraction + 1).")] = None,
     overflow: Annotated[str, typer.Option("--overflow", help="Weights that do not fit: error (refuse) or saturate (with a warning).")] = "error",
     rounding: Annotated[str, typer.Option("--rounding", help="Rounding of weights and output: half_up or truncate.")] = "half_up",
-    target_mhz: Annotated[Optional[float], typer.Option("--target-mhz", help="Choose the pipeline by timing closure instead of --pipeline: the shallowest one whose fmax, measured by place and route (nextpnr, --fpga), reaches this clock. One P&R run per candidate tried (ECP5 ~25 s, iCE40 ~100 s for a Lorenz-size core).")] = None,
-    fpga: Annotated[str, typer.Option("--fpga", help="FPGA of --target-mhz: ecp5 (LFE5U-45F) or ice40 (HX8K).")] = "ecp5",
+    clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Choose the pipeline by timing closure instead of --pipeline: the shallowest one whose fmax, measured by place and route (nextpnr, --fpga), reaches this clock in MHz. One P&R run per candidate tried (ECP5 ~25 s, iCE40 ~100 s for a Lorenz-size core).")] = None,
+    fpga: Annotated[str, typer.Option("--fpga", help="FPGA family of --clock-mhz: ecp5 (LFE5U-45F) or ice40 (HX8K).")] = "ecp5",
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
+    outdir_old: Annotated[Optional[Path], _hidden("--outdir")] = None,
+    target_mhz_old: Annotated[Optional[float], _hidden("--target-mhz")] = None,
 ) -> None:
     """Generate the Verilog, weight memory (.hex), manifest.json and report.md of a model.
 
@@ -353,6 +402,8 @@ def generate(
     from pwas_hdl.design.generate import generate as _generate
 
     with _user_errors():
+        outdir = _required(_merge("-o/--out", out, outdir=outdir_old), "-o/--out", "the folder to write")
+        target_mhz = _merge("--clock-mhz", clock_mhz, target_mhz=target_mhz_old)
         if target_mhz is None:
             with _progress("building the design"):
                 gd = _generate(
@@ -388,43 +439,50 @@ def generate(
 @app.command()
 def synth(
     outdir: Annotated[Path, typer.Argument(help="Folder written by `pwas-hdl generate`.")],
-    target: Annotated[str, typer.Option("--target", help="ice40 (yosys + nextpnr-ice40), ecp5 (yosys + nextpnr-ecp5) or generic (yosys only).")] = "ecp5",
+    fpga: Annotated[Optional[str], typer.Option("--fpga", help="FPGA family: ecp5 (yosys + nextpnr-ecp5, the default), ice40 (yosys + nextpnr-ice40) or generic (yosys only, 4-input LUTs).", show_default=False)] = None,
     device: Annotated[Optional[str], typer.Option("--device", help="Device (ice40: hx8k, hx1k, lp8k, up5k, ...; ecp5: 25k, 45k, 85k, ...). Default: ice40 hx8k, ecp5 45k.")] = None,
     package: Annotated[Optional[str], typer.Option("--package", help="Package (default per device).")] = None,
-    freq: Annotated[Optional[float], typer.Option("--freq", help="Clock constraint in MHz for place and route (default: nextpnr's).")] = None,
+    clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Clock constraint in MHz for place and route (default: nextpnr's).")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Placer seed.")] = 1,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Also copy the JSON report here.")] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for the tool files and results (default OUTDIR/synth/FPGA, where `report` finds them).", show_default=False)] = None,
+    target_old: Annotated[Optional[str], _hidden("--target")] = None,
+    freq_old: Annotated[Optional[float], _hidden("--freq")] = None,
 ) -> None:
     """Synthesize (and place and route) a generated design with open tools from PyPI (YoWASP).
 
-    Writes OUTDIR/synth/TARGET/synth.json (LUTs, FFs, carries, DSPs, block RAMs and bits, fmax
+    Writes OUTDIR/synth/FPGA/synth.json (LUTs, FFs, carries, DSPs, block RAMs and bits, fmax
     after place and route, latency in ns = latency cycles / fmax) and synth.txt.
     """
     from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 
     with _user_errors():
-        res = synthesize(outdir, target, device=device, package=package, freq_mhz=freq, seed=seed, progress=_say)
+        family = _merge("--fpga", fpga, target=target_old) or "ecp5"
+        freq = _merge("--clock-mhz", clock_mhz, freq=freq_old)
+        res = synthesize(outdir, family, device=device, package=package, freq_mhz=freq, seed=seed, workdir=out,
+                         progress=_say)
         if json_out is not None:
             atomic_write_text(json_out, json.dumps(res, indent=2) + "\n")
-        out.print(synth_summary_text(res), highlight=False, markup=False)
+        stdout.print(synth_summary_text(res), highlight=False, markup=False)
 
 
 @app.command()
 def simulate(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core or sensor design).")],
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="CSV of the per-sample hardware outputs to write.")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of the per-sample hardware outputs to write. Required.", show_default=False)] = None,
     simulator: Annotated[str, typer.Option("--simulator", help="icarus or verilator.")] = "icarus",
-    summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: OUTPUT with the suffix .json).")] = None,
+    summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: the -o/--out file with the suffix .json).")] = None,
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit (the sensor design is reset between trajectories).")] = None,
     stall: Annotated[float, typer.Option("--stall", help="Probability of a random bubble on the input and of backpressure on the output in each cycle (0 = none: latency and II are measured at full speed).")] = 0.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the random stalls.")] = 0,
     build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.")] = None,
     waves: Annotated[bool, typer.Option("--waves", help="Record waveforms (Icarus: FST, Verilator: VCD) next to the build; the path is in the summary.")] = False,
+    output_old: Annotated[Optional[Path], _hidden("--output")] = None,
 ) -> None:
     """Replay DATA through the generated RTL in a simulator (cocotb) and check it bit for bit.
 
-    Writes OUTPUT (one row per hardware output: row, TARGET_hw, TARGET_bittrue, TARGET_float,
+    Writes the -o/--out CSV (one row per hardware output: row, TARGET_hw, TARGET_bittrue, TARGET_float,
     out_of_range) and a JSON summary: samples, mismatches against the bit-true model, the largest
     error against the float model (LSB and physical units), the RMSEE of the hardware estimate
     against TARGET_true (or TARGET) when DATA has it, the measured latency (cycles) and II, and
@@ -433,13 +491,14 @@ def simulate(
     from pwas_hdl.verify.simulation import simulate_data
 
     with _user_errors():
+        output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         res = simulate_data(
             outdir, data, output, simulator=simulator, summary_path=summary, traj_col=traj_col,
             stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
             progress=_say,
         )
         s = res["summary"]
-        out.print_json(json.dumps(s))
+        stdout.print_json(json.dumps(s))
         _say(f"wrote {output} and {res['summary_path']}")
         if s["mismatches"]:
             raise CheckFailed(f"{s['mismatches']} hardware output(s) differ from the bit-true model (first: "
@@ -450,7 +509,7 @@ def simulate(
 def explore(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
-    outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Folder for explore.json and explore.png (created if missing).")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for explore.json and explore.png (created if missing). Required.", show_default=False)] = None,
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
     input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
     weight_frac: Annotated[Optional[str], typer.Option("--weight-frac", help="Weight fraction bits to sweep (comma list or A:B; default: generate's default -7..+2).")] = None,
@@ -462,13 +521,15 @@ def explore(
     overflow: Annotated[str, typer.Option("--overflow", help="As for generate: error (refuse the point) or saturate.")] = "error",
     memory: Annotated[str, typer.Option("--memory", help="As for generate: banked or replicated.")] = "banked",
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="As for generate: min, balanced (default) or max.")] = None,
-    resources: Annotated[str, typer.Option("--resources", help="estimate (analytic, every point) or generic/ecp5/ice40 (also synthesise the Pareto points and the default).")] = "estimate",
+    fpga: Annotated[Optional[str], typer.Option("--fpga", help="Also synthesise the Pareto points and the default on this FPGA family: generic, ecp5 or ice40 (default: the analytic resource estimate only).", show_default=False)] = None,
     cost: Annotated[str, typer.Option("--cost", help="Cost axis of the front: total_bits, memory_bits, logic_bits, register_bits, mult_bit_products, adder_bits, dsp18 or bram18k.")] = "total_bits",
-    device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --resources ecp5/ice40 (as for synth).")] = None,
+    device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --fpga ecp5/ice40 (as for synth).")] = None,
     measure_max: Annotated[int, typer.Option("--measure-max", help="Synthesise at most this many Pareto points (spread along the front) besides the default.")] = 10,
     synth_dir: Annotated[Optional[Path], typer.Option("--synth-dir", help="Keep the synthesised designs here (default: a temporary folder, removed).")] = None,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
+    outdir_old: Annotated[Optional[Path], _hidden("--outdir")] = None,
+    resources_old: Annotated[Optional[str], _hidden("--resources")] = None,
 ) -> None:
     """Sweep input, weight and output word lengths: bit-true RMSEE against resources.
 
@@ -490,13 +551,16 @@ def explore(
         return _int_list(t, what)
 
     with _user_errors():
+        outdir = _required(_merge("-o/--out", out, outdir=outdir_old), "-o/--out", "the folder to write")
+        family = _merge("--fpga", fpga, resources=None if resources_old == "estimate" else resources_old)
+        resources = family or "estimate"
         sweep = dict(
             input_bits=ints(input_bits, "--input-bits"),
             weight_frac=ints(weight_frac, "--weight-frac") if weight_frac is not None else None,
             output_frac=ints(output_frac, "--output-frac") if output_frac is not None else None,
         )
         if outdir.exists() and not outdir.is_dir():
-            raise InputError(f"{outdir} exists and is not a folder; choose another --outdir")
+            raise InputError(f"{outdir} exists and is not a folder; choose another -o/--out")
         with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
                 model_path, data, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
@@ -507,7 +571,7 @@ def explore(
         outdir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(outdir / "explore.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
         plot_exploration(res, outdir / "explore.png")
-        out.print(format_table(res), highlight=False, markup=False)
+        stdout.print(format_table(res), highlight=False, markup=False)
         d = res["default"]
         if d["on_front"]:
             verdict = "on the Pareto front"
@@ -525,7 +589,8 @@ def report(
     outdir: Annotated[Path, typer.Argument(help="Folder written by `pwas-hdl generate`.")],
     sim: Annotated[Optional[list[str]], typer.Option("--sim", help="Extra `simulate` JSON summaries (OUTDIR/sim/*.json are read anyway).")] = None,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the collected numbers as JSON.")] = None,
-    markdown: Annotated[Optional[Path], typer.Option("--md", help="Write the Markdown report here (it is printed anyway).")] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Write the Markdown report here (it is printed anyway).", show_default=False)] = None,
+    md_old: Annotated[Optional[Path], _hidden("--md")] = None,
 ) -> None:
     """Accuracy, latency and resources of a generated design in one table.
 
@@ -535,22 +600,25 @@ def report(
     from pwas_hdl.design.report import collect_report, report_markdown
 
     with _user_errors():
+        markdown = _merge("-o/--out", out, md=md_old)
         rep = collect_report(outdir, _names(sim))
         text = report_markdown(rep)
         if json_out is not None:
             atomic_write_text(json_out, json.dumps(rep, indent=2) + "\n")
         if markdown is not None:
             atomic_write_text(markdown, text)
-        out.print(text, highlight=False, markup=False)
+        stdout.print(text, highlight=False, markup=False)
 
 
 @data_app.command("lorenz")
 def make_data_lorenz(
-    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns y, z, z_true).")],
-    samples: Annotated[int, typer.Option("--samples", help="Number of samples in OUTPUT.")] = 6000,
-    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the continuation of the same trajectory here (a test set).")] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns y, z, z_true). Required.", show_default=False)] = None,
+    samples: Annotated[int, typer.Option("--samples", help="Number of samples in the -o/--out file.")] = 6000,
+    test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the continuation of the same trajectory here (a test set).", show_default=False)] = None,
     test_samples: Annotated[int, typer.Option("--test-samples", help="Samples in the test file.")] = 2000,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (initial state and noise).")] = 0,
+    output_old: Annotated[Optional[Path], _hidden("--output")] = None,
+    test_output_old: Annotated[Optional[Path], _hidden("--test-output")] = None,
 ) -> None:
     """The discrete Lorenz system of the paper (eq. 18): y = x1 + noise(0.02), z = x2*x3 + noise(20).
 
@@ -560,6 +628,8 @@ def make_data_lorenz(
     from pwas_hdl.systems.lorenz import lorenz
 
     with _user_errors():
+        output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
+        test_output = _merge("--test-out", test_out, test_output=test_output_old)
         if samples < 1 or (test_output is not None and test_samples < 1):
             raise InputError("--samples and --test-samples must be >= 1")
         total = samples + (test_samples if test_output is not None else 0)
@@ -574,17 +644,19 @@ def make_data_lorenz(
 
 @bench_app.command("lorenz")
 def bench_lorenz(
-    json_out: Annotated[Path, typer.Option("--json", help="JSON result file to write.")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="JSON result file to write. Required.", show_default=False)] = None,
     markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write a Markdown table here.")] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds (0..seeds-1) to average over.")] = 5,
     quick: Annotated[bool, typer.Option("--quick", help="Only the Table II row (My=4, p=7, gamma=1.2).")] = False,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
+    json_old: Annotated[Optional[Path], _hidden("--json")] = None,
 ) -> None:
     """Reproduce Tables II-V of the paper (Lorenz): RMSEE over seeds, beside the paper's values."""
     from pwas_hdl.benchmarks import lorenz_tables
 
     with _user_errors():
+        json_out = _required(_merge("-o/--out", out, json=json_old), "-o/--out", "the JSON file to write")
         if seeds < 1:
             raise InputError("--seeds must be >= 1")
         rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
@@ -595,13 +667,13 @@ def bench_lorenz(
         table = lorenz_tables.markdown_table(result)
         if markdown is not None:
             atomic_write_text(markdown, table)
-        out.print(table, highlight=False, markup=False)
+        stdout.print(table, highlight=False, markup=False)
         _say(f"wrote {json_out}")
 
 
 def _version(value: bool) -> None:
     if value:
-        out.print(f"pwas-hdl {__version__}")
+        stdout.print(f"pwas-hdl {__version__}")
         raise typer.Exit()
 
 

@@ -252,3 +252,142 @@ def test_quiet_drops_information_lines(capsys, lorenz_files, tmp_path):
     code, out, err = run_main(capsys, "-q", "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z", "--my", 2, "-p", 3,
                               "--sigma", "1e-3", "-o", tmp_path / "m2.json")
     assert code == 0 and err == "" and (tmp_path / "m2.json").is_file()
+
+
+# ------------------------------------------------------------------ one option name per concept
+def test_fit_new_and_old_option_names_give_the_same_model(capsys, lorenz_files, tmp_path):
+    common = [lorenz_files / "train.csv", "--my", 2, "-p", 3, "--sigma", "1e-3"]
+    new = tmp_path / "new.json"
+    assert run_main(capsys, "fit", *common, "-y", "y", "-z", "z", "-o", new)[0] == 0
+    for args in (["--outputs", "y", "--targets", "z", "--out"], ["--output", "y", "--target", "z", "--output-model"]):
+        other = tmp_path / f"m{len(list(tmp_path.iterdir()))}.json"
+        code, _, err = run_main(capsys, "fit", *common, *args, other)
+        assert code == 0, err
+        assert other.read_bytes() == new.read_bytes()
+    # inputs: -u / --inputs / --input
+    code, _, err = run_main(capsys, "fit", *common, "--input", "y", "--mu", 1, "--my", 0, "-z", "z", "-o", tmp_path / "u.json")
+    assert code == 0, err
+    assert PWASVirtualSensor.load(tmp_path / "u.json").signal_names()[0] == ["y"]
+
+
+def test_old_and_new_name_together_must_agree(capsys, lorenz_files, tmp_path):
+    code, _, err = run_main(capsys, "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z", "-o", tmp_path / "a.json",
+                            "--output-model", tmp_path / "b.json")
+    assert code == 2 and "-o/--out and --output-model are one option" in _one_error_line(err)
+    assert list(tmp_path.iterdir()) == []
+    code, _, err = run_main(capsys, "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z")
+    assert code == 2 and "give the model file to write with -o/--out" in _one_error_line(err)
+
+
+def test_make_data_and_predict_aliases(capsys, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    assert run_main(capsys, "make-data", "lorenz", "--samples", 300, "-o", a / "t.csv", "--test-out", a / "s.csv", "--test-samples", 50)[0] == 0
+    assert run_main(capsys, "make-data", "lorenz", "--samples", 300, "--output", b / "t.csv", "--test-output", b / "s.csv", "--test-samples", 50)[0] == 0
+    assert (a / "t.csv").read_bytes() == (b / "t.csv").read_bytes() and (a / "s.csv").read_bytes() == (b / "s.csv").read_bytes()
+    assert run_main(capsys, "fit", a / "t.csv", "-y", "y", "-z", "z", "--my", 2, "-p", 3, "--sigma", "1e-2", "--out", a / "m.json")[0] == 0
+    assert run_main(capsys, "predict", a / "m.json", a / "s.csv", "--out", a / "p.csv")[0] == 0
+    assert run_main(capsys, "predict", a / "m.json", a / "s.csv", "--output", b / "p.csv")[0] == 0
+    assert (a / "p.csv").read_bytes() == (b / "p.csv").read_bytes()
+
+
+def _recording(monkeypatch, module, name, seen):
+    """Replace an API function by one that records its arguments and stops with an InputError."""
+    def fake(*args, **kwargs):
+        seen.append((args, kwargs))
+        raise InputError("stopped by the test")
+    monkeypatch.setattr(module, name, fake)
+
+
+@pytest.mark.parametrize("args, fpga, freq", [
+    ([], "ecp5", None),
+    (["--fpga", "ice40", "--clock-mhz", "25"], "ice40", 25.0),
+    (["--target", "generic"], "generic", None),  # issue 8's must-show spelling
+    (["--target", "ice40", "--freq", "12.5"], "ice40", 12.5),
+])
+def test_synth_fpga_and_clock_names(capsys, monkeypatch, tmp_path, args, fpga, freq):
+    from pwas_hdl.flow import synthesis
+
+    seen: list = []
+    _recording(monkeypatch, synthesis, "synthesize", seen)
+    code, _, err = run_main(capsys, "synth", tmp_path, *args)
+    assert code == 2 and "stopped by the test" in err
+    (outdir, family), kw = seen[0]
+    assert (family, kw["freq_mhz"], kw["workdir"]) == (fpga, freq, None)
+
+
+def test_synth_out_folder(capsys, monkeypatch, tmp_path):
+    from pwas_hdl.flow import synthesis
+
+    seen: list = []
+    _recording(monkeypatch, synthesis, "synthesize", seen)
+    run_main(capsys, "synth", tmp_path, "-o", tmp_path / "w")
+    assert seen[0][1]["workdir"] == tmp_path / "w"
+
+
+@pytest.mark.parametrize("args, resources", [
+    ([], "estimate"), (["--fpga", "ecp5"], "ecp5"), (["--resources", "ice40"], "ice40"), (["--resources", "estimate"], "estimate"),
+    (["--outdir-instead"], None),
+])
+def test_explore_fpga_and_out_names(capsys, monkeypatch, tmp_path, args, resources):
+    from pwas_hdl.flow import explore as explore_mod
+
+    seen: list = []
+    _recording(monkeypatch, explore_mod, "explore", seen)
+    out = ["--outdir", tmp_path / "x"] if args == ["--outdir-instead"] else ["-o", tmp_path / "x"]
+    code, _, err = run_main(capsys, "explore", tmp_path / "m.json", tmp_path / "d.csv", *out, *([] if resources is None else args))
+    assert code == 2 and "stopped by the test" in err
+    assert seen[0][1]["resources"] == (resources or "estimate")
+
+
+def test_simulate_out_names(capsys, monkeypatch, tmp_path):
+    from pwas_hdl.verify import simulation
+
+    seen: list = []
+    _recording(monkeypatch, simulation, "simulate_data", seen)
+    for opt in ("-o", "--out", "--output"):
+        run_main(capsys, "simulate", tmp_path, tmp_path / "d.csv", opt, tmp_path / "hw.csv")
+    assert [s[0][2] for s in seen] == [tmp_path / "hw.csv"] * 3
+
+
+def test_generate_out_and_clock_names(capsys, tmp_path, lorenz_files):
+    model = tmp_path / "m.json"
+    assert run_main(capsys, "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z", "--my", 2, "-p", 2, "--sigma", "1e-2", "-o", model)[0] == 0
+    assert run_main(capsys, "generate", model, "-o", tmp_path / "a")[0] == 0
+    assert run_main(capsys, "generate", model, "--outdir", tmp_path / "b")[0] == 0
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == sorted(p.name for p in (tmp_path / "b").iterdir())
+    for f in (tmp_path / "a").iterdir():
+        assert f.read_bytes() == (tmp_path / "b" / f.name).read_bytes(), f.name
+    # both clock names reach the timing closure (refused here before any place and route)
+    for opt in ("--clock-mhz", "--target-mhz"):
+        code, _, err = run_main(capsys, "generate", model, "-o", tmp_path / "c", opt, 50, "--pipeline", "min")
+        assert code == 2 and "give either a pipeline or a target clock" in _one_error_line(err)
+    code, _, err = run_main(capsys, "generate", model, "-o", tmp_path / "c", "--clock-mhz", 50, "--target-mhz", 60)
+    assert code == 2 and "--clock-mhz and --target-mhz are one option" in _one_error_line(err)
+    assert not (tmp_path / "c").exists()
+
+
+def test_report_and_bench_out_names(capsys, monkeypatch, tmp_path):
+    from pwas_hdl.benchmarks import lorenz_tables
+    from pwas_hdl.design import report as report_mod
+
+    monkeypatch.setattr(report_mod, "collect_report", lambda outdir, sims: {"design": str(outdir)})
+    monkeypatch.setattr(report_mod, "report_markdown", lambda rep: f"# report of {rep['design']}\n")
+    for opt, name in (("-o", "a.md"), ("--out", "b.md"), ("--md", "c.md")):
+        assert run_main(capsys, "report", tmp_path, opt, tmp_path / name)[0] == 0
+        assert (tmp_path / name).read_text() == f"# report of {tmp_path}\n"
+    monkeypatch.setattr(lorenz_tables, "run_lorenz_tables", lambda seeds, rows, progress: {"rows": [], "seeds": list(seeds)})
+    monkeypatch.setattr(lorenz_tables, "markdown_table", lambda res: "| table |\n")
+    for opt, name in (("-o", "a.json"), ("--json", "b.json")):
+        assert run_main(capsys, "bench", "lorenz", "--seeds", 2, opt, tmp_path / name)[0] == 0
+        assert json.loads((tmp_path / name).read_text()) == {"rows": [], "seeds": [0, 1]}
+
+
+def test_instance_template_exponent_is_readable(tmp_path):
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.verify.simulation import sim_module
+
+    m = sim_module("pwas_designs").synthetic_model(0, 2, 0, 1, 3, seed=2, weight_scale=300.0)
+    gd = build_design(m, weight_frac=-2, output_frac=-1)
+    inst = gd.files[gd.manifest["files"]["instance_template"]]
+    assert "2^--" not in inst and "* code * 2^1" in inst  # output LSB 2 = 2^1

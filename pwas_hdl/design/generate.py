@@ -292,7 +292,7 @@ def build_design(
         from pwas_hdl.flow.timing_closure import close_timing
 
         if pipeline is not None:
-            raise ValueError("give either a pipeline or a target clock (target_mhz / --target-mhz), not both")
+            raise ValueError("give either a pipeline or a target clock (target_mhz / --clock-mhz), not both")
         if memory_init not in ("inline", "readmemh"):
             raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
 

@@ -1,6 +1,6 @@
 """Timing closure: pick the shallowest pipeline whose *measured* fmax reaches a target clock.
 
-``generate(..., target_mhz=F, fpga_target="ecp5")`` (CLI: ``--target-mhz F --fpga ecp5``) trades
+``generate(..., target_mhz=F, fpga_target="ecp5")`` (CLI: ``--clock-mhz F --fpga ecp5``) trades
 pipeline depth for clock rate. :func:`pipeline_candidates` lists pipeline configurations from the
 shallowest (2 cycles) to the deepest, one more register each, in the order that cuts the critical
 path nextpnr reports (see the list's docstring); :func:`close_timing` places and routes them with
