@@ -47,15 +47,15 @@ demo() {
   local out="${1:-demo}"
   mkdir -p "$out"
   set -x
-  pwas-hdl make-data lorenz --samples 6000 --test-output "$out/lorenz_test.csv" --test-samples 2003 --seed 0 -o "$out/lorenz_train.csv"
-  pwas-hdl fit "$out/lorenz_train.csv" --output y --target z --my 4 -p 7 --gamma 1.2 -o "$out/lorenz_model.json"
+  pwas-hdl make-data lorenz --samples 6000 --test-out "$out/lorenz_test.csv" --test-samples 2003 --seed 0 -o "$out/lorenz_train.csv"
+  pwas-hdl fit "$out/lorenz_train.csv" -y y -z z --my 4 -p 7 --gamma 1.2 -o "$out/lorenz_model.json"
   pwas-hdl predict "$out/lorenz_model.json" "$out/lorenz_test.csv" -o "$out/lorenz_pred.csv"
   pwas-hdl generate "$out/lorenz_model.json" --design sensor -o "$out/hw"
   mkdir -p "$out/hw/sim"
   pwas-hdl simulate "$out/hw" "$out/lorenz_test.csv" --simulator icarus -o "$out/hw/sim/icarus.csv"
   pwas-hdl simulate "$out/hw" "$out/lorenz_test.csv" --simulator verilator -o "$out/hw/sim/verilator.csv"
-  pwas-hdl synth "$out/hw" --target ecp5
-  pwas-hdl report "$out/hw" --json "$out/report.json" --md "$out/report.md"
+  pwas-hdl synth "$out/hw" --fpga ecp5
+  pwas-hdl report "$out/hw" --json "$out/report.json" -o "$out/report.md"
   { set +x; } 2>/dev/null
   echo "demo: outputs in $out/ (report: $out/report.md)" >&2
 }
