@@ -391,3 +391,20 @@ def test_instance_template_exponent_is_readable(tmp_path):
     gd = build_design(m, weight_frac=-2, output_frac=-1)
     inst = gd.files[gd.manifest["files"]["instance_template"]]
     assert "2^--" not in inst and "* code * 2^1" in inst  # output LSB 2 = 2^1
+
+
+def test_console_script_process_exit_statuses(tmp_path):
+    """The real process: python -m pwas_hdl.cli, as the console script runs main()."""
+    import subprocess
+    import sys
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "pwas_hdl.cli", *map(str, args)], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=120)
+
+    r = run("fit", "--bogus")
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == ["error: No such option: --bogus (see `pwas-hdl fit --help`)"]
+    r = run("info", tmp_path / "missing.json")
+    assert r.returncode == 2 and r.stderr.startswith("error: ") and len(r.stderr.strip().splitlines()) == 1
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.startswith("pwas-hdl ")
