@@ -376,7 +376,7 @@ def test_report_and_bench_out_names(capsys, monkeypatch, tmp_path):
     for opt, name in (("-o", "a.md"), ("--out", "b.md"), ("--md", "c.md")):
         assert run_main(capsys, "report", tmp_path, opt, tmp_path / name)[0] == 0
         assert (tmp_path / name).read_text() == f"# report of {tmp_path}\n"
-    monkeypatch.setattr(lorenz_tables, "run_lorenz_tables", lambda seeds, rows, progress: {"rows": [], "seeds": list(seeds)})
+    monkeypatch.setattr(lorenz_tables, "run_lorenz_tables", lambda seeds, rows, progress, **kw: {"rows": [], "seeds": list(seeds)})
     monkeypatch.setattr(lorenz_tables, "markdown_table", lambda res: "| table |\n")
     for opt, name in (("-o", "a.json"), ("--json", "b.json")):
         assert run_main(capsys, "bench", "lorenz", "--seeds", 2, opt, tmp_path / name)[0] == 0
