@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.io.atomic import atomic_write_text
 
 HERE = Path(__file__).resolve().parent
@@ -214,8 +215,8 @@ def main(argv: list[str] | None = None) -> int:
     bits = []
     for b in [int(v) for v in args.bits.split(",") if v.strip()]:
         s = api_replay(0, b, work, cache)
-        man = json.loads((work / f"seed0_b{b}" / "sensor" / "manifest.json").read_text())
-        lsb = man["formats"]["inputs"][0].get("physical_lsb", man["formats"]["inputs"][0].get("lsb"))
+        man = load_manifest(work / f"seed0_b{b}" / "sensor")
+        lsb = man["formats"]["inputs"][0]["lsb"]  # physical LSB of the input codes
         bits.append({"input_bits": b, "input_lsb": float(lsb), **{k: v for k, v in row_of(s, f"bits{b}").items() if k != "label"}})
         print(f"{b:2d}-bit inputs: RMSEE hw {bits[-1]['rmsee_hw']:.3f} (+{bits[-1]['increase_percent']:.2f} %)", flush=True)
 
