@@ -408,5 +408,3 @@ def test_console_script_process_exit_statuses(tmp_path):
     assert lines[0].startswith("error: No such option: --bogus") and lines[0].endswith("(see `pwas-hdl fit --help`)")
     r = run("info", tmp_path / "missing.json")
     assert r.returncode == 2 and r.stderr.startswith("error: ") and len(r.stderr.strip().splitlines()) == 1
-    r = run("--version")
-    assert r.returncode == 0 and r.stdout.startswith("pwas-hdl ")
