@@ -28,7 +28,7 @@ import platform
 import sys
 from typing import Any, Callable, Iterable, Sequence
 
-from pwas_hdl.errors import InputError, PwasError
+from pwas_hdl.errors import InputError, PwasError, ToolMissing
 
 __all__ = ["Executor", "TaskFailed", "SCHEDULER_ENV", "environment_versions"]
 
@@ -145,7 +145,7 @@ class Executor:
         try:
             from distributed import Client, LocalCluster
         except ImportError as exc:  # pragma: no cover - a core dependency
-            raise InputError("--workers/--scheduler need dask.distributed: pip install 'dask[distributed]'") from exc
+            raise ToolMissing("dask.distributed", "--workers/--scheduler need it: pip install 'dask[distributed]'") from exc
         if self.scheduler is not None:
             try:
                 self._client = Client(self.scheduler, timeout="20s")
