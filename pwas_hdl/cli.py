@@ -92,7 +92,9 @@ def _warn(msg: str) -> None:
 
 
 def _error_line(msg: str) -> None:
-    err.print(f"error: {msg}", highlight=False, markup=False)
+    """``error: MESSAGE`` on stderr, always one line (a message's line breaks become spaces)."""
+    one = " ".join(part.strip() for part in msg.splitlines() if part.strip())
+    err.print(f"error: {one}", highlight=False, markup=False)
 
 
 def _os_message(exc: OSError) -> str:

@@ -198,6 +198,7 @@ def _raise(exc):
         (ToolFailed("yosys failed (exit status 1) on top", "w/yosys.log", "ERROR: syntax"), 2,
          ["error: yosys failed (exit status 1) on top; log: w/yosys.log"]),
         (CheckFailed("3 hardware output(s) differ"), 1, ["error: 3 hardware output(s) differ"]),
+        (InputError("first line\n  second line"), 2, ["error: first line second line"]),
     ],
 )
 def test_error_classes_map_to_exit_status(capsys, monkeypatch, tmp_path, exc, code, words):
