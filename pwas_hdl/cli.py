@@ -644,6 +644,56 @@ def make_data_lorenz(
             _say(f"wrote {test_output} ({test_samples} samples following {output})")
 
 
+def _write_plant(output: Path, test_output: Optional[Path], train, test, what: str) -> None:
+    write_csv(output, train.columns())
+    _say(f"wrote {output} ({what})")
+    if test_output is not None and test is not None:
+        write_csv(test_output, test.columns())
+        _say(f"wrote {test_output} (test run)")
+
+
+@data_app.command("three-tank")
+def make_data_three_tank(
+    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns u1, u2, y, x1, x3, x1_true, x3_true, run).")],
+    samples: Annotated[int, typer.Option("--samples", help="Samples per run.")] = 1000,
+    runs: Annotated[int, typer.Option("--runs", help="Training runs from random admissible levels (column run).")] = 20,
+    noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y (the paper has none).")] = 0.0,
+    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the paper's run here (x(0) = (8, 2, 1), rho from t = 100).")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (levels, phases, disturbance, noise).")] = 0,
+) -> None:
+    """The three-tank plant of seed 001 (eq. 26): y = x2, targets x1 and x3; see pwas_hdl.systems.three_tank."""
+    from pwas_hdl.systems.three_tank import three_tank_paper_run, three_tank_training_runs
+
+    with _user_errors():
+        if samples < 1 or runs < 1 or noise < 0:
+            raise UserError("--samples and --runs must be >= 1 and --noise >= 0")
+        train = three_tank_training_runs(runs, samples, seed=seed, noise=noise)
+        test = three_tank_paper_run(samples, seed=seed, noise=noise) if test_output is not None else None
+        _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+
+
+@data_app.command("switched-linear")
+def make_data_switched_linear(
+    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns u, y, x1, x2, x1_true, x2_true, mode, run).")],
+    samples: Annotated[int, typer.Option("--samples", help="Samples per run.")] = 1000,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (column run), random dwell 20-50 and random x0.")] = 10,
+    noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y.")] = 0.0,
+    switching: Annotated[str, typer.Option("--switching", help="Switching law: time (cyclic) or output (thresholds on y).")] = "time",
+    input_kind: Annotated[str, typer.Option("--input-signal", help="Input: step, prbs or sine.")] = "prbs",
+    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the paper-replica run here (100 samples, dwell 34, step input).")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (input, dwell times, x0, noise).")] = 0,
+) -> None:
+    """The switched linear plant of seed 003 (eq. 11), three modes; see pwas_hdl.systems.switched_linear."""
+    from pwas_hdl.systems.switched_linear import switched_paper_run, switched_training_runs
+
+    with _user_errors():
+        if samples < 1 or runs < 1 or noise < 0:
+            raise UserError("--samples and --runs must be >= 1 and --noise >= 0")
+        train = switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise)
+        test = switched_paper_run(seed=seed, switching=switching, noise=noise) if test_output is not None else None
+        _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+
+
 @bench_app.command("lorenz")
 def bench_lorenz(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="JSON result file to write. Required.", show_default=False)] = None,

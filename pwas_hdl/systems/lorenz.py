@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PlantData", "lorenz", "LORENZ_PARAMS"]
+__all__ = ["PlantData", "stack_runs", "lorenz", "LORENZ_PARAMS"]
 
 #: Parameters of the discrete Lorenz system, paper eq. (18).
 LORENZ_PARAMS = {"tau": 0.01, "s": 10.0, "beta": 8.0 / 3.0, "rho": 28.0, "noise_y": 0.02, "noise_z": 20.0}
@@ -31,6 +31,10 @@ class PlantData:
         The noise-free quantity (for RMSEE, eq. 17).
     names : dict
         Column names: ``{"u": [...], "y": [...], "z": [...]}``.
+    run : ndarray of int, shape (T,), optional
+        Trajectory index of each sample (several runs stacked; column ``run``). None: one run.
+    mode : ndarray of int, shape (T,), optional
+        The true active mode of a switched plant at each sample (column ``mode``).
     """
 
     u: np.ndarray
@@ -38,15 +42,26 @@ class PlantData:
     z: np.ndarray
     z_true: np.ndarray
     names: dict
+    run: np.ndarray | None = None
+    mode: np.ndarray | None = None
+
+    def _rows(self, sl: slice) -> "PlantData":
+        pick = lambda a: None if a is None else a[sl]  # noqa: E731
+        return PlantData(self.u[sl], self.y[sl], self.z[sl], self.z_true[sl], self.names, pick(self.run), pick(self.mode))
 
     def split(self, n_first: int) -> tuple["PlantData", "PlantData"]:
         """The first ``n_first`` samples and the rest, as two contiguous data sets."""
-        a = PlantData(self.u[:n_first], self.y[:n_first], self.z[:n_first], self.z_true[:n_first], self.names)
-        b = PlantData(self.u[n_first:], self.y[n_first:], self.z[n_first:], self.z_true[n_first:], self.names)
-        return a, b
+        return self._rows(slice(None, n_first)), self._rows(slice(n_first, None))
+
+    def runs(self) -> list["PlantData"]:
+        """One :class:`PlantData` per trajectory (consecutive samples with the same ``run``)."""
+        if self.run is None or len(self.run) == 0:
+            return [self]
+        cuts = [0] + [int(i) for i in np.flatnonzero(np.diff(self.run)) + 1] + [len(self.run)]
+        return [self._rows(slice(a, b)) for a, b in zip(cuts[:-1], cuts[1:])]
 
     def columns(self, with_truth: bool = True) -> dict[str, np.ndarray]:
-        """Named columns for a CSV file (``<z>_true`` holds the noise-free target)."""
+        """Named columns for a CSV file (``<z>_true`` holds the noise-free target; then ``mode``, ``run``)."""
         cols: dict[str, np.ndarray] = {}
         for key, arr in (("u", self.u), ("y", self.y), ("z", self.z)):
             for i, nm in enumerate(self.names[key]):
@@ -54,7 +69,21 @@ class PlantData:
         if with_truth:
             for i, nm in enumerate(self.names["z"]):
                 cols[f"{nm}_true"] = self.z_true[:, i]
+        if self.mode is not None:
+            cols["mode"] = np.asarray(self.mode, dtype=int)
+        if self.run is not None:
+            cols["run"] = np.asarray(self.run, dtype=int)
         return cols
+
+
+def stack_runs(parts: list[PlantData]) -> PlantData:
+    """Concatenate trajectories into one :class:`PlantData` with a ``run`` index 0..K-1."""
+    if not parts:
+        raise ValueError("stack_runs needs at least one trajectory")
+    cat = lambda k: np.concatenate([getattr(p, k) for p in parts], axis=0)  # noqa: E731
+    run = np.concatenate([np.full(len(p.y), i, dtype=int) for i, p in enumerate(parts)])
+    mode = None if parts[0].mode is None else np.concatenate([p.mode for p in parts]).astype(int)
+    return PlantData(cat("u"), cat("y"), cat("z"), cat("z_true"), parts[0].names, run, mode)
 
 
 def lorenz(n_samples: int, seed: int = 0, burn_in: int = 1000, x0: np.ndarray | None = None) -> PlantData:

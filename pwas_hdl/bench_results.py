@@ -1,0 +1,283 @@
+"""The one results format of every benchmark (``pwas-hdl-bench-results``, version 1).
+
+This module owns the format; its JSON Schema ships as
+``pwas_hdl/schemas/bench-results-v1.schema.json``. A result file is::
+
+    {"format": "pwas-hdl-bench-results", "version": 1, "bench": "three-tank",
+     "rows": [{"system": "three-tank", "target": "x1", "estimator": "pwas", "stage": "float",
+               "metric": "rmse", "value": 0.106, "std": 0.004, "runs": 5, "paper": null,
+               "config": {"window": "t>=100", "noise_y": 0.0}}, ...],
+     "assumptions": {"seed_001.A1": "signed square root ...", ...},
+     "config": {...bench-wide settings...},
+     "environment": {"python": "3.11.2", "platform": "...", "packages": {"numpy": "2.1.0", ...}}}
+
+Each row is one number: the mean over ``runs`` runs of ``metric`` of ``estimator`` on ``target``
+of ``system`` at ``stage`` (``float`` model, ``bittrue`` fixed-point model, ``rtl`` simulation),
+its sample standard deviation (``ddof = 1``; ``null`` for one run) and the paper's printed figure
+for the same quantity (or ``null``). ``config`` holds whatever distinguishes the row.
+
+Use :func:`row` (or :func:`row_from_values`) to build rows, :func:`make_results` to wrap them,
+:func:`write_results` / :func:`load_results` for files (both validate against the schema) and
+:func:`markdown_table` for the human-readable table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import sys
+from functools import lru_cache
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.resources import schemas_dir
+
+__all__ = [
+    "RESULTS_FORMAT",
+    "RESULTS_VERSION",
+    "STAGES",
+    "METRICS",
+    "row",
+    "row_from_values",
+    "make_results",
+    "environment",
+    "validate_results",
+    "write_results",
+    "load_results",
+    "find_rows",
+    "markdown_table",
+    "schema",
+]
+
+RESULTS_FORMAT = "pwas-hdl-bench-results"
+RESULTS_VERSION = 1
+STAGES = ("float", "bittrue", "rtl")
+METRICS = ("rmse", "mse", "fit", "nrmse", "accuracy", "f1")
+_PACKAGES = ("numpy", "scipy", "scikit-learn", "amaranth", "cocotb", "pwas-hdl")
+
+
+@lru_cache(maxsize=1)
+def schema() -> dict:
+    """The JSON Schema of the format (``bench-results-v1.schema.json``)."""
+    return json.loads((schemas_dir() / "bench-results-v1.schema.json").read_text())
+
+
+def _num(v: Any) -> float | None:
+    if v is None:
+        return None
+    f = float(v)
+    if not math.isfinite(f):
+        return None
+    return f
+
+
+def _jsonable(obj: Any) -> Any:
+    """Numpy scalars/arrays and tuples -> plain JSON types (non-finite floats -> None)."""
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [_jsonable(v) for v in obj.tolist()]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    return obj
+
+
+def row(
+    system: str,
+    target: str,
+    estimator: str,
+    stage: str,
+    metric: str,
+    value: float | None,
+    std: float | None = None,
+    runs: int = 1,
+    paper: float | None = None,
+    config: Mapping[str, Any] | None = None,
+) -> dict:
+    """One result row (checked: ``stage`` in :data:`STAGES`, ``metric`` in :data:`METRICS`).
+
+    Non-finite ``value``/``std`` become ``None`` (an estimator that diverged: say why in
+    ``config["note"]``).
+    """
+    if stage not in STAGES:
+        raise InputError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
+    if metric not in METRICS:
+        raise InputError(f"metric must be one of {', '.join(METRICS)}, got {metric!r}")
+    if int(runs) < 1:
+        raise InputError(f"runs must be >= 1, got {runs}")
+    return {
+        "system": str(system),
+        "target": str(target),
+        "estimator": str(estimator),
+        "stage": stage,
+        "metric": metric,
+        "value": _num(value),
+        "std": _num(std),
+        "runs": int(runs),
+        "paper": _num(paper),
+        "config": _jsonable(dict(config or {})),
+    }
+
+
+def row_from_values(
+    system: str,
+    target: str,
+    estimator: str,
+    stage: str,
+    metric: str,
+    values: Sequence[float],
+    paper: float | None = None,
+    config: Mapping[str, Any] | None = None,
+) -> dict:
+    """A row from the per-run values: mean, sample std (``ddof = 1``, ``None`` for one run).
+
+    Parameters
+    ----------
+    values : sequence of float, length = number of runs
+        One value per run. If any is not finite the row's value is ``None`` and
+        ``config["n_nonfinite"]`` counts them.
+    """
+    v = np.asarray(list(values), dtype=float).reshape(-1)
+    if v.size == 0:
+        raise InputError("row_from_values needs at least one value")
+    cfg = dict(config or {})
+    bad = int((~np.isfinite(v)).sum())
+    if bad:
+        cfg["n_nonfinite"] = bad
+        mean, std = None, None
+    else:
+        mean = float(v.mean())
+        std = float(v.std(ddof=1)) if v.size > 1 else None
+    return row(system, target, estimator, stage, metric, mean, std, int(v.size), paper, cfg)
+
+
+def environment(elapsed_s: float | None = None) -> dict:
+    """Python, platform and the versions of the packages that produce the numbers."""
+    pk: dict[str, str] = {}
+    for name in _PACKAGES:
+        try:
+            pk[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    env: dict[str, Any] = {"python": platform.python_version(), "platform": platform.platform(), "packages": pk}
+    if elapsed_s is not None:
+        env["elapsed_s"] = round(float(elapsed_s), 2)
+    return env
+
+
+def make_results(
+    bench: str,
+    rows: Iterable[dict],
+    assumptions: Mapping[str, str],
+    config: Mapping[str, Any] | None = None,
+    description: str | None = None,
+    quick: bool = False,
+    elapsed_s: float | None = None,
+) -> dict:
+    """The result document (validated against the schema).
+
+    Parameters
+    ----------
+    bench : str
+        Bench name (``three-tank``, ``switched-linear``, ``lorenz-hlnn``, ...).
+    rows : iterable of dict
+        Rows from :func:`row` / :func:`row_from_values`.
+    assumptions : mapping id -> text
+        The spec assumptions applied (ids like ``seed_001.A1``).
+    config : mapping, optional
+        Bench-wide settings.
+    """
+    doc: dict[str, Any] = {
+        "format": RESULTS_FORMAT,
+        "version": RESULTS_VERSION,
+        "bench": str(bench),
+    }
+    if description:
+        doc["description"] = description
+    doc["quick"] = bool(quick)
+    doc["rows"] = [dict(r) for r in rows]
+    doc["assumptions"] = {str(k): str(v) for k, v in assumptions.items()}
+    doc["config"] = _jsonable(dict(config or {}))
+    doc["environment"] = environment(elapsed_s)
+    validate_results(doc)
+    return doc
+
+
+def validate_results(doc: Any) -> None:
+    """Raise :class:`~pwas_hdl.errors.InputError` naming the first violation of the schema."""
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(schema())
+    errors = sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))
+    if errors:
+        e = errors[0]
+        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise InputError(f"not a valid {RESULTS_FORMAT} v{RESULTS_VERSION} document at {where}: {e.message}")
+
+
+def write_results(path: str | Path, doc: dict) -> Path:
+    """Validate and write ``doc`` atomically (indented JSON, no NaN)."""
+    validate_results(doc)
+    return atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+
+
+def load_results(path: str | Path) -> dict:
+    """Read and validate a result file."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p}: not JSON ({exc}); expected a {RESULTS_FORMAT} file") from None
+    validate_results(doc)
+    return doc
+
+
+def find_rows(doc: Mapping[str, Any], **match: Any) -> list[dict]:
+    """Rows whose fields equal every ``match`` item (``config`` keys via ``config={"k": v}``)."""
+    cfg = match.pop("config", {}) or {}
+    res = []
+    for r in doc["rows"]:
+        if all(r.get(k) == v for k, v in match.items()) and all(r["config"].get(k) == v for k, v in cfg.items()):
+            res.append(r)
+    return res
+
+
+def _fmt(v: float | None) -> str:
+    if v is None:
+        return "—"
+    a = abs(v)
+    if a != 0 and (a < 1e-3 or a >= 1e5):
+        return f"{v:.3g}"
+    return f"{v:.4g}"
+
+
+def markdown_table(doc: Mapping[str, Any], config_keys: Sequence[str] = ()) -> str:
+    """All rows as one Markdown table (mean ± std, the paper's figure, chosen config keys)."""
+    keys = list(config_keys)
+    head = ["system", "target", "estimator", "stage", "metric", *keys, "ours (mean ± std)", "runs", "paper"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * (len(head) - 3) + "---:|---:|---:|"]
+    for r in doc["rows"]:
+        val = _fmt(r["value"]) + (f" ± {_fmt(r['std'])}" if r["std"] is not None else "")
+        cells = [r["system"], r["target"], r["estimator"], r["stage"], r["metric"]]
+        cells += [str(r["config"].get(k, "")) for k in keys]
+        cells += [val, str(r["runs"]), _fmt(r["paper"]) if r["paper"] is not None else ""]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover
+    for f in sys.argv[1:]:
+        print(markdown_table(load_results(f)))
