@@ -694,6 +694,58 @@ def make_data_switched_linear(
         _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")
 
 
+def _system_bench(module: str, json_out: Path, markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool) -> None:
+    """Run one of the system benches (benchmarks/<module>.py) and write its pwas-hdl-bench-results JSON."""
+    import importlib
+
+    from pwas_hdl import bench_results
+
+    with _user_errors():
+        if runs < 1:
+            raise UserError("--runs must be >= 1")
+        mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
+        for p in (json_out, markdown, plot_out):
+            if p is not None and not p.parent.is_dir():
+                raise UserError(f"folder {p.parent} does not exist; create it first")
+        doc, traces = getattr(mod, f"run_{module}")(runs=runs, quick=quick, progress=_say)
+        bench_results.write_results(json_out, doc)
+        table = mod.markdown(doc)
+        if markdown is not None:
+            atomic_write_text(markdown, table)
+        if plot_out is not None:
+            mod.plot(traces, plot_out)
+        out.print(table, highlight=False, markup=False)
+        _say(f"wrote {json_out}")
+
+
+BenchJson = Annotated[Path, typer.Option("--json", help="Result file to write (format pwas-hdl-bench-results v1).")]
+BenchMd = Annotated[Optional[Path], typer.Option("--md", help="Also write the Markdown tables here.")]
+BenchPlot = Annotated[Optional[Path], typer.Option("--plot", help="Also write the figure (PNG) here.")]
+BenchRuns = Annotated[int, typer.Option("--runs", help="Independent runs (seeds 0..runs-1) to average over.")]
+BenchQuick = Annotated[bool, typer.Option("--quick", help="A reduced smoke run (1 run, no noise study): not a result to quote.")]
+
+
+@bench_app.command("three-tank")
+def bench_three_tank(json_out: BenchJson, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
+                     quick: BenchQuick = False) -> None:
+    """Seed 001: sensors (27)/(28) vs PWAS (float, bit-true) on the paper's three-tank run, with a y-noise study."""
+    _system_bench("three_tank", json_out, markdown, plot_out, runs, quick)
+
+
+@bench_app.command("switched-linear")
+def bench_switched_linear(json_out: BenchJson, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
+                          quick: BenchQuick = False) -> None:
+    """Seed 003: virtual estimator (Table 1) and known-mode observer vs PWAS states and mode classifier."""
+    _system_bench("switched_linear", json_out, markdown, plot_out, runs, quick)
+
+
+@bench_app.command("lorenz-hlnn")
+def bench_lorenz_hlnn(json_out: BenchJson, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
+                      quick: BenchQuick = False) -> None:
+    """Seed 000: HLNN vs PWAS on Lorenz (Table II) and on the helicopter surrogate (Table VI)."""
+    _system_bench("lorenz_hlnn", json_out, markdown, plot_out, runs, quick)
+
+
 @bench_app.command("lorenz")
 def bench_lorenz(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="JSON result file to write. Required.", show_default=False)] = None,

@@ -1,0 +1,72 @@
+"""CI smoke of the system benches (`pwas-hdl bench three-tank|switched-linear|lorenz-hlnn --quick`).
+
+Each writes a valid pwas-hdl-bench-results document, the Markdown tables and the figure. The
+assertions are properties the quick runs must show whatever the machine's speed (no timing).
+"""
+
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl import bench_results as br
+from pwas_hdl.cli import app
+
+
+def _bench(tmp_path, name):
+    files = {k: tmp_path / f"{name}.{k}" for k in ("json", "md", "png")}
+    r = CliRunner().invoke(app, ["bench", name, "--quick", "--json", str(files["json"]), "--md", str(files["md"]),
+                                 "--plot", str(files["png"])])
+    assert r.exit_code == 0, r.output
+    doc = br.load_results(files["json"])
+    assert doc["quick"] and doc["bench"] == name and doc["assumptions"]
+    assert files["png"].stat().st_size > 10_000 and "|" in files["md"].read_text()
+    return doc
+
+
+def _value(doc, **kw):
+    rows = br.find_rows(doc, **kw)
+    assert len(rows) == 1, (kw, rows)
+    return rows[0]["value"]
+
+
+@pytest.mark.slow
+def test_bench_three_tank_quick(tmp_path):
+    doc = _bench(tmp_path, "three-tank")
+    w = {"window": "t>=100", "noise_y": 0.0}
+    # sensor (28) is decoupled from the disturbance: essentially exact; (27) is not
+    assert _value(doc, target="x3", estimator="paper-28", config=w) < 2e-3
+    assert _value(doc, target="x1", estimator="paper-27", config=w) > 0.1
+    for tgt in ("x1", "x3"):
+        f, b = _value(doc, target=tgt, estimator="pwas", stage="float", config=w), _value(doc, target=tgt, estimator="pwas", stage="bittrue", config=w)
+        assert f > 0 and abs(b - f) < 0.1 * f + 1e-3  # 12-bit default formats stay close to the float model
+
+
+@pytest.mark.slow
+def test_bench_switched_linear_quick(tmp_path):
+    doc = _bench(tmp_path, "switched-linear")
+    c = {"test": "replica", "switching": "time", "noise_y": 0.0}
+    known = br.find_rows(doc, target="y", estimator="known-mode-observer", metric="mse", config=c)[0]
+    assert known["paper"] == 0.0069 and 0 < known["value"] < 0.05
+    assert br.find_rows(doc, target="y", estimator="switched-observer", metric="mse", config=c)[0]["paper"] == 0.0966
+    acc = _value(doc, target="mode", estimator="switched-observer", metric="accuracy", config={"test": "long"})
+    assert 1 / 3 < acc <= 1
+    for est in ("pwas-round", "pwas-classifier"):
+        for stage in ("float", "bittrue"):
+            assert 1 / 3 < _value(doc, target="mode", estimator=est, stage=stage, metric="accuracy") <= 1
+
+
+@pytest.mark.slow
+def test_bench_lorenz_hlnn_quick(tmp_path):
+    doc = _bench(tmp_path, "lorenz-hlnn")
+    for system, paper in (("lorenz", 24.0), ("helicopter-surrogate", 2.62)):
+        rows = br.find_rows(doc, system=system, estimator="hlnn")
+        assert rows[0]["paper"] == paper and rows[0]["value"] > 0
+        pw = br.find_rows(doc, system=system, estimator="pwas", stage="float")[0]
+        assert pw["value"] > 0 and pw["config"]["N"] == 4096
+
+
+def test_bench_refuses_bad_runs_and_missing_folder(tmp_path):
+    r = CliRunner().invoke(app, ["bench", "three-tank", "--json", str(tmp_path / "x.json"), "--runs", "0"])
+    assert r.exit_code == 2 and "error:" in r.output
+    r = CliRunner().invoke(app, ["bench", "switched-linear", "--quick", "--json", str(tmp_path / "no" / "x.json")])
+    assert r.exit_code == 2 and "does not exist" in r.output
+    assert not (tmp_path / "x.json").exists()
