@@ -17,7 +17,7 @@ import numpy as np
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 
-__all__ = ["PWASConfig", "select_pwas", "pwas_estimates", "rmse", "fit_pwas"]
+__all__ = ["PWASConfig", "QUICK_SIGMA_GRID", "select_pwas", "pwas_estimates", "rmse", "fit_pwas"]
 
 
 @dataclass(frozen=True)
@@ -34,12 +34,17 @@ class PWASConfig:
         return f"Mu={self.mu} My={self.my} p={self.p}"
 
 
+#: Sigma candidates of the ``--quick`` smoke runs (the full runs use the default 21-value grid).
+QUICK_SIGMA_GRID = tuple(float(v) for v in np.logspace(-6, 2, 5))
+
+
 def fit_pwas(cfg: PWASConfig, us: Sequence[np.ndarray] | None, ys: Sequence[np.ndarray], zs: Sequence[np.ndarray],
-             names: dict | None = None) -> PWASVirtualSensor:
-    """Fit one PWAS sensor (sigma by 5-fold CV on contiguous blocks) on trajectories."""
+             names: dict | None = None, sigma_grid: Sequence[float] | None = None) -> PWASVirtualSensor:
+    """Fit one PWAS sensor (sigma by 5-fold CV on contiguous blocks over ``sigma_grid``) on trajectories."""
     names = names or {}
+    extra = {"sigma_grid": list(sigma_grid)} if sigma_grid is not None else {}
     m = PWASVirtualSensor(mu=cfg.mu, my=cfg.my, partitions=cfg.p, gamma=cfg.gamma, tikhonov_order=cfg.tikhonov,
-                          input_names=names.get("u"), output_names=names.get("y"), target_names=names.get("z"))
+                          input_names=names.get("u"), output_names=names.get("y"), target_names=names.get("z"), **extra)
     return m.fit(list(us) if (us is not None and cfg.mu) else None, list(ys), list(zs))
 
 

@@ -35,7 +35,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pwas_hdl import bench_results as br
-from pwas_hdl.benchmarks.bench_common import PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
+from pwas_hdl.benchmarks.bench_common import QUICK_SIGMA_GRID, PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.systems.switched_linear import SWITCHED_ASSUMPTIONS, switched_paper_run, switched_training_runs
 from pwas_hdl.systems.switched_observer import DEFAULT_POLES, mode_scores, run_switched_observer
@@ -52,10 +52,10 @@ PAPER_TABLE1 = {"known-mode-observer": 0.0069, "switched-observer": 0.0966}
 MODES = (1, 2, 3)
 
 
-def _class_fit(cfg: PWASConfig, train, onehot: bool):
+def _class_fit(cfg: PWASConfig, train, onehot: bool, grid=None):
     zs = [np.eye(3)[d.mode - 1] if onehot else d.mode[:, None].astype(float) for d in train]
     names = {"u": ["u"], "y": ["y"], "z": [f"mode_{c}" for c in MODES] if onehot else ["mode"]}
-    return fit_pwas(cfg, [d.u for d in train], [d.y for d in train], zs, names)
+    return fit_pwas(cfg, [d.u for d in train], [d.y for d in train], zs, names, grid)
 
 
 def _decide(scores: np.ndarray, onehot: bool) -> np.ndarray:
@@ -82,6 +82,7 @@ def run_switched_linear(
         runs, noises, laws, train_runs, test_samples, cands = 1, (0.0,), ("time",), 4, 1000, (CANDIDATES[0],)
     else:
         cands = CANDIDATES
+    grid = QUICK_SIGMA_GRID if quick else None
     chosen: dict[str, PWASConfig] = {}
     validation: dict[str, dict] = {}
     sel = switched_training_runs(train_runs, samples, seed=1000, switching="time").runs()
@@ -128,13 +129,13 @@ def run_switched_linear(
                 pw_tr = {}
                 for col, tgt in enumerate(("x1", "x2")):
                     m = fit_pwas(chosen[tgt], [t.u for t in train], [t.y for t in train], [t.z[:, col : col + 1] for t in train],
-                                 {"u": ["u"], "y": ["y"], "z": [tgt]})
+                                 {"u": ["u"], "y": ["y"], "z": [tgt]}, grid)
                     est = pwas_estimates(m, d.u, d.y)
                     for stage in ("float", "bittrue"):
                         put(("long", tgt, "pwas", stage, "rmse", law, noise), rmse(est[stage][start:, 0] - d.z_true[start:, col]))
                     pw_tr[tgt] = est["float"][:, 0]
                 for onehot, ename in ((False, "pwas-round"), (True, "pwas-classifier")):
-                    m = _class_fit(chosen["mode"], train, onehot)
+                    m = _class_fit(chosen["mode"], train, onehot, grid)
                     est = pwas_estimates(m, d.u, d.y)
                     for stage in ("float", "bittrue"):
                         pred = _decide(est[stage][start:], onehot)

@@ -34,7 +34,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pwas_hdl import bench_results as br
-from pwas_hdl.benchmarks.bench_common import PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
+from pwas_hdl.benchmarks.bench_common import QUICK_SIGMA_GRID, PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.systems.decoupled_observer import paper_sensors
 from pwas_hdl.systems.three_tank import THREE_TANK_ASSUMPTIONS, three_tank_paper_run, three_tank_training_runs
@@ -69,6 +69,7 @@ def run_three_tank(
     else:
         cands = CANDIDATES
     names = {"u": ["u1"], "y": ["y"]}
+    grid = QUICK_SIGMA_GRID if quick else None
     chosen: dict[str, PWASConfig] = {}
     validation: dict[str, dict] = {}
     sel = three_tank_training_runs(train_runs, samples, seed=1000, noise=0.0).runs()
@@ -94,7 +95,7 @@ def run_three_tank(
             for tgt, col, pname in TARGETS:
                 cfg = chosen[tgt]
                 m = fit_pwas(cfg, [d.u[:, :1] for d in train], [d.y for d in train], [d.z[:, col : col + 1] for d in train],
-                             names | {"z": [tgt]})
+                             names | {"z": [tgt]}, grid)
                 est = pwas_estimates(m, test.u[:, :1], test.y)
                 truth = test.z_true[:, col]
                 for wname, w in win.items():
