@@ -261,8 +261,11 @@ def fit(
     input_old: Annotated[Optional[list[str]], _hidden("--input")] = None,
     output_old: Annotated[Optional[list[str]], _hidden("--output")] = None,
     target_old: Annotated[Optional[list[str]], _hidden("--target")] = None,
+    classify: Annotated[bool, typer.Option("--classify", help="The one -z/--targets column is a class label: fit one-hot scores (one per distinct value) on one shared grid; predict decides by argmax.")] = False,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
+    from pwas_hdl.fit import classifier as clf
+
     with _user_errors():
         output = _required(_merge("-o/--out", out, output_model=output_model), "-o/--out", "the model file to write")
         ins = _names(_merge_lists(inputs, input_old))
@@ -270,6 +273,8 @@ def fit(
         tgts = _names(_merge_lists(targets, target_old))
         if not tgts:
             raise InputError("give the column(s) to estimate with -z/--targets")
+        if classify and len(tgts) != 1:
+            raise InputError(f"--classify needs exactly one -z/--targets column (the class label), got {len(tgts)}")
         if my and not outs:
             raise InputError(f"--my {my} needs measured output column(s): give -y/--outputs (or --my 0)")
         if mu and not ins:
@@ -280,6 +285,12 @@ def fit(
         u = select_signals(table, ins, traj_col) if mu else None
         y = select_signals(table, outs, traj_col) if my else None
         z = select_signals(table, tgts, traj_col)
+        classes = None
+        if classify:
+            classes = clf.class_labels(np.concatenate([zi[:, 0] for zi in z]))
+            z = [clf.one_hot(zi[:, 0], classes) for zi in z]
+            class_target = tgts[0]
+            tgts = clf.class_target_names(class_target, classes)
         dom = None
         if domain is not None:
             try:
@@ -306,6 +317,8 @@ def fit(
         )
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
+        if classes is not None:
+            model.classifier_ = {"target": class_target, "classes": classes}
         model.save(output)
         d = model.to_dict()
         _say(
@@ -344,10 +357,29 @@ def predict(
             [np.arange(sl.start, sl.stop)[model.lags_.memory - 1 :] for sl in split_trajectories(table, traj_col)]
         )
         cols: dict = {"row": rows}
-        for i, t in enumerate(tgts):
-            cols[f"{t}_hat"] = zhat[:, i]
-        cols["out_of_domain"] = flags
-        write_csv(output, cols)
+        classifier = getattr(model, "classifier_", None)
+        if classifier is not None:
+            from pwas_hdl.fit import classifier as clf
+
+            ct, classes = classifier["target"], classifier["classes"]
+            label = clf.decide(zhat, classes)
+            cols[f"{ct}_hat"] = label.astype(int) if all(float(c).is_integer() for c in classes) else label
+            for i, c in enumerate(classes):
+                cols[f"{ct}_score_{clf.label_text(c)}"] = zhat[:, i]
+            cols["out_of_domain"] = flags
+            write_csv(output, cols)
+            for ref in (f"{ct}_true", ct):
+                if ref in table.header:
+                    sc = clf.class_scores(table.numeric([ref])[rows, 0], label, classes)
+                    f1 = ", ".join(f"{clf.label_text(c)}: {v:.4f}" for c, v in zip(classes, sc["f1"]))
+                    _say(f"accuracy of {ct}_hat against column {ref}: {sc['accuracy']:.4f} over {rows.size} samples; F1 per class {f1}")
+                    break
+            tgts = []
+        else:
+            for i, t in enumerate(tgts):
+                cols[f"{t}_hat"] = zhat[:, i]
+            cols["out_of_domain"] = flags
+            write_csv(output, cols)
         for i, t in enumerate(tgts):
             for ref in (f"{t}_true", t):
                 if ref in table.header:

@@ -63,7 +63,7 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
     sensor._check_fitted()
     ins, outs, tgts = sensor.signal_names()
     lags, grid = sensor.lags_, sensor.grid_
-    return {
+    d = {
         "$schema": MODEL_SCHEMA_ID,
         "format": MODEL_FORMAT,
         "version": MODEL_VERSION,
@@ -89,6 +89,10 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
             "cv": sensor.cv_.to_dict() if sensor.cv_ is not None else None,
         },
     }
+    classifier = getattr(sensor, "classifier_", None)
+    if classifier is not None:  # optional: one-hot class scores (pwas_hdl.fit.classifier)
+        d["classifier"] = {"target": str(classifier["target"]), "classes": [float(c) for c in classifier["classes"]]}
+    return d
 
 
 def model_text(sensor: "PWASVirtualSensor") -> str:
@@ -137,6 +141,8 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
     for t, w in d["weights"].items():
         if len(w) != n_vertices:
             errs.append(f"weights.{t} has {len(w)} values, the grid has N = {n_vertices} vertices")
+    if "classifier" in d and len(d["classifier"]["classes"]) != len(tgts):
+        errs.append(f"classifier.classes has {len(d['classifier']['classes'])} classes, signals.targets {len(tgts)} targets")
     cv = d["fit"]["cv"]
     if cv is not None and len(cv["mse"]) != len(cv["sigmas"]):
         errs.append(f"fit.cv.mse has {len(cv['mse'])} values for {len(cv['sigmas'])} fit.cv.sigmas")
@@ -205,6 +211,8 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     obj.n_train_ = int(fit["n_train"])
     obj.n_trajectories_ = int(fit["n_trajectories"])
     obj.train_rmse_ = np.array([fit["train_rmse"][t] for t in tgts], dtype=float)
+    if "classifier" in d:
+        obj.classifier_ = {"target": d["classifier"]["target"], "classes": [float(c) for c in d["classifier"]["classes"]]}
     return obj
 
 

@@ -161,10 +161,8 @@ def run_switched_observer(
 
 
 def mode_scores(true: np.ndarray, pred: np.ndarray, labels: Sequence[int] = (1, 2, 3)) -> dict:
-    """Accuracy and per-class F1 (scikit-learn) of mode labels."""
-    from sklearn.metrics import accuracy_score, f1_score
+    """Accuracy and per-mode F1 of mode labels: ``{"accuracy": a, "f1": {label: f1}}``."""
+    from pwas_hdl.fit.classifier import class_scores
 
-    true = np.asarray(true).reshape(-1)
-    pred = np.asarray(pred).reshape(-1)
-    f1 = f1_score(true, pred, labels=list(labels), average=None, zero_division=0)
-    return {"accuracy": float(accuracy_score(true, pred)), "f1": {int(c): float(v) for c, v in zip(labels, f1)}}
+    sc = class_scores(true, pred, labels)
+    return {"accuracy": sc["accuracy"], "f1": {int(c): v for c, v in zip(labels, sc["f1"])}}

@@ -1,0 +1,75 @@
+"""PWAS classifiers: one-hot targets on one shared grid, argmax decision (the one owner of the convention).
+
+A class label column ``c`` with distinct values ``k_1 < ... < k_C`` becomes ``C`` regression
+targets named ``c=k_i`` (1 where the label is ``k_i``, else 0). They share one locator: the
+PWAS weights are an ``(N, C)`` matrix, exactly a multi-target sensor (``nz = C``). The decision
+is the class of the largest score, ties to the lowest class index (``numpy.argmax``), in software
+and in a hardware argmax stage alike. The model file records ``"classifier": {"target": c,
+"classes": [k_1, ..., k_C]}`` (see :mod:`pwas_hdl.fit.virtual_sensor`).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from pwas_hdl.errors import InputError
+
+__all__ = ["class_labels", "one_hot", "class_target_names", "decide", "label_text", "class_scores"]
+
+#: Most classes a classifier may have (one PWAS output each).
+MAX_CLASSES = 64
+
+
+def class_labels(values: np.ndarray) -> list[float]:
+    """Sorted distinct labels of a label column (numbers); refuses a single class or too many."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(v)):
+        raise InputError("the class column has non-finite values")
+    labels = sorted(set(v.tolist()))
+    if len(labels) < 2:
+        raise InputError(f"the class column has a single value {labels}; a classifier needs at least 2 classes")
+    if len(labels) > MAX_CLASSES:
+        raise InputError(f"the class column has {len(labels)} distinct values, more than the limit {MAX_CLASSES}; "
+                         "is it really a class label?")
+    return labels
+
+
+def one_hot(values: np.ndarray, classes: Sequence[float]) -> np.ndarray:
+    """``(T, C)`` one-hot matrix of labels ``values`` over ``classes``."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    cls = np.asarray(classes, dtype=float)
+    hit = v[:, None] == cls[None, :]
+    if not np.all(hit.any(axis=1)):
+        bad = v[~hit.any(axis=1)][0]
+        raise InputError(f"label {bad:g} is not one of the classes {[label_text(c) for c in classes]}")
+    return hit.astype(float)
+
+
+def label_text(c: float) -> str:
+    """A label as text: integers without a decimal point."""
+    return str(int(c)) if float(c).is_integer() else repr(float(c))
+
+
+def class_target_names(target: str, classes: Sequence[float]) -> list[str]:
+    """Target names of the one-hot outputs: ``target=k``."""
+    return [f"{target}={label_text(c)}" for c in classes]
+
+
+def decide(scores: np.ndarray, classes: Sequence[float]) -> np.ndarray:
+    """Class labels of the rows of ``scores`` (m, C): argmax, ties to the lowest index."""
+    s = np.asarray(scores, dtype=float)
+    if s.ndim != 2 or s.shape[1] != len(classes):
+        raise InputError(f"scores have shape {s.shape}; expected (m, {len(classes)})")
+    return np.asarray(classes, dtype=float)[np.argmax(s, axis=1)]
+
+
+def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -> dict:
+    """Accuracy and per-class F1 (scikit-learn): ``{"accuracy": a, "f1": [f1 of each class in order]}``."""
+    from sklearn.metrics import accuracy_score, f1_score
+
+    t = np.asarray(true, dtype=float).reshape(-1)
+    p = np.asarray(pred, dtype=float).reshape(-1)
+    f1 = f1_score(t, p, labels=[float(c) for c in classes], average=None, zero_division=0)
+    return {"accuracy": float(accuracy_score(t, p)), "f1": [float(v) for v in f1]}

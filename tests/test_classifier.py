@@ -1,0 +1,73 @@
+"""PWAS mode classifier: one-hot targets on one grid, argmax decision; `fit --classify`, `predict`."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.cli import app
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit import classifier as clf
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.io.csv_table import read_csv, write_csv
+from pwas_hdl.systems.switched_linear import switched_training_runs
+
+
+def test_one_hot_decide_and_refusals():
+    cls = clf.class_labels(np.array([3, 1, 2, 1]))
+    assert cls == [1.0, 2.0, 3.0]
+    np.testing.assert_array_equal(clf.one_hot([2, 3, 1], cls), np.eye(3)[[1, 2, 0]])
+    assert clf.class_target_names("mode", cls) == ["mode=1", "mode=2", "mode=3"]
+    # argmax; a tie goes to the lowest class index
+    np.testing.assert_array_equal(clf.decide(np.array([[0.1, 0.7, 0.2], [0.4, 0.4, 0.2], [0, 0, 1]]), cls), [2, 1, 3])
+    with pytest.raises(InputError, match="single value"):
+        clf.class_labels(np.ones(5))
+    with pytest.raises(InputError, match="not one of the classes"):
+        clf.one_hot([4], cls)
+    sc = clf.class_scores([1, 2, 3, 3], [1, 2, 3, 1], cls)
+    assert sc["accuracy"] == 0.75 and sc["f1"][1] == 1.0
+
+
+def _csv(path, data):
+    write_csv(path, data.columns())
+
+
+def test_fit_classify_and_predict_cli(tmp_path):
+    _csv(tmp_path / "train.csv", switched_training_runs(4, 800, seed=0))
+    _csv(tmp_path / "test.csv", switched_training_runs(1, 800, seed=7))
+    run = CliRunner().invoke
+    r = run(app, ["fit", str(tmp_path / "train.csv"), "-o", str(tmp_path / "m.json"), "-u", "u", "-y", "y", "--target", "mode",
+                  "--classify", "--mu", "2", "--my", "2", "-p", "4", "--traj-col", "run"])
+    assert r.exit_code == 0, r.output
+    d = json.loads((tmp_path / "m.json").read_text())
+    assert d["classifier"] == {"target": "mode", "classes": [1.0, 2.0, 3.0]}
+    assert d["signals"]["targets"] == ["mode=1", "mode=2", "mode=3"]
+    m = PWASVirtualSensor.load(tmp_path / "m.json")
+    assert m.classifier_["classes"] == [1.0, 2.0, 3.0] and m.to_dict() == d
+    r = run(app, ["predict", str(tmp_path / "m.json"), str(tmp_path / "test.csv"), "-o", str(tmp_path / "p.csv"), "--traj-col", "run"])
+    assert r.exit_code == 0, r.output
+    assert "accuracy of mode_hat" in r.output
+    t = read_csv(tmp_path / "p.csv")
+    assert t.header == ["row", "mode_hat", "mode_score_1", "mode_score_2", "mode_score_3", "out_of_domain"]
+    s = t.numeric(["mode_score_1", "mode_score_2", "mode_score_3"])
+    hat = t.numeric(["mode_hat"])[:, 0]
+    np.testing.assert_array_equal(hat, np.argmax(s, axis=1) + 1)
+    truth = read_csv(tmp_path / "test.csv").numeric(["mode"])[t.numeric(["row"])[:, 0].astype(int), 0]
+    assert (hat == truth).mean() > 0.6   # well above chance (1/3) on an independent run
+
+
+def test_classify_bad_input_writes_nothing(tmp_path):
+    d = switched_training_runs(1, 200, seed=0)
+    cols = d.columns()
+    cols["one"] = np.ones(200)
+    write_csv(tmp_path / "d.csv", cols)
+    for extra in (["--target", "one"], ["--target", "mode,x1"]):
+        r = CliRunner().invoke(app, ["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "-u", "u", "-y", "y",
+                                     "--mu", "1", "--my", "1", "--classify", *extra])
+        assert r.exit_code == 2 and "error:" in r.output, r.output
+        assert not (tmp_path / "m.json").exists()
+    good = PWASVirtualSensor(my=1, partitions=2).fit(None, d.y, np.eye(3)[d.mode - 1]).to_dict()
+    good["classifier"] = {"target": "mode", "classes": [1, 2]}
+    with pytest.raises(ValueError, match="classes"):
+        PWASVirtualSensor.from_dict(good)
