@@ -35,6 +35,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pwas_hdl import bench_results as br
+from pwas_hdl.fit import classifier as clf
 from pwas_hdl.benchmarks.bench_common import QUICK_SIGMA_GRID, PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.systems.switched_linear import SWITCHED_ASSUMPTIONS, switched_paper_run, switched_training_runs
@@ -53,15 +54,16 @@ MODES = (1, 2, 3)
 
 
 def _class_fit(cfg: PWASConfig, train, onehot: bool, grid=None):
-    zs = [np.eye(3)[d.mode - 1] if onehot else d.mode[:, None].astype(float) for d in train]
-    names = {"u": ["u"], "y": ["y"], "z": [f"mode_{c}" for c in MODES] if onehot else ["mode"]}
+    """PWAS of the mode: one-hot scores on one grid (classifier) or the label as a scalar target."""
+    zs = [clf.one_hot(d.mode, MODES) if onehot else d.mode[:, None].astype(float) for d in train]
+    names = {"u": ["u"], "y": ["y"], "z": clf.class_target_names("mode", MODES) if onehot else ["mode"]}
     return fit_pwas(cfg, [d.u for d in train], [d.y for d in train], zs, names, grid)
 
 
 def _decide(scores: np.ndarray, onehot: bool) -> np.ndarray:
     """Mode labels from PWAS outputs: argmax of the one-hot scores, or the rounded scalar (clipped)."""
     if onehot:
-        return np.argmax(scores, axis=1) + 1
+        return clf.decide(scores, MODES).astype(int)
     return np.clip(np.rint(scores[:, 0]), 1, 3).astype(int)
 
 
