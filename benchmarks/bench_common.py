@@ -39,10 +39,12 @@ QUICK_SIGMA_GRID = tuple(float(v) for v in np.logspace(-6, 2, 5))
 
 
 def fit_pwas(cfg: PWASConfig, us: Sequence[np.ndarray] | None, ys: Sequence[np.ndarray], zs: Sequence[np.ndarray],
-             names: dict | None = None, sigma_grid: Sequence[float] | None = None) -> PWASVirtualSensor:
-    """Fit one PWAS sensor (sigma by 5-fold CV on contiguous blocks over ``sigma_grid``) on trajectories."""
+             names: dict | None = None, sigma_grid: Sequence[float] | None = None, sigma: float | None = None) -> PWASVirtualSensor:
+    """Fit one PWAS sensor on trajectories: sigma by 5-fold CV on contiguous blocks over ``sigma_grid``, or ``sigma``."""
     names = names or {}
-    extra = {"sigma_grid": list(sigma_grid)} if sigma_grid is not None else {}
+    extra: dict = {"sigma_grid": list(sigma_grid)} if sigma_grid is not None else {}
+    if sigma is not None:
+        extra["sigma"] = float(sigma)
     m = PWASVirtualSensor(mu=cfg.mu, my=cfg.my, partitions=cfg.p, gamma=cfg.gamma, tikhonov_order=cfg.tikhonov,
                           input_names=names.get("u"), output_names=names.get("y"), target_names=names.get("z"), **extra)
     return m.fit(list(us) if (us is not None and cfg.mu) else None, list(ys), list(zs))
