@@ -697,8 +697,8 @@ def make_data_three_tank(
     from pwas_hdl.systems.three_tank import three_tank_paper_run, three_tank_training_runs
 
     with _user_errors():
-        if samples < 1 or runs < 1 or noise < 0:
-            raise UserError("--samples and --runs must be >= 1 and --noise >= 0")
+        if samples < 1 or runs < 1 or noise < 0 or seed < 0:
+            raise UserError("--samples and --runs must be >= 1, --noise and --seed >= 0")
         train = three_tank_training_runs(runs, samples, seed=seed, noise=noise)
         test = three_tank_paper_run(samples, seed=seed, noise=noise) if test_output is not None else None
         _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")
@@ -719,8 +719,8 @@ def make_data_switched_linear(
     from pwas_hdl.systems.switched_linear import switched_paper_run, switched_training_runs
 
     with _user_errors():
-        if samples < 1 or runs < 1 or noise < 0:
-            raise UserError("--samples and --runs must be >= 1 and --noise >= 0")
+        if samples < 1 or runs < 1 or noise < 0 or seed < 0:
+            raise UserError("--samples and --runs must be >= 1, --noise and --seed >= 0")
         train = switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise)
         test = switched_paper_run(seed=seed, switching=switching, noise=noise) if test_output is not None else None
         _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")

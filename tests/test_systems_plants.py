@@ -73,7 +73,7 @@ def test_make_data_writes_named_columns_with_run(tmp_path):
     r = CliRunner().invoke(app, ["make-data", "switched-linear", "-o", str(tmp_path / "s.csv"), "--runs", "2", "--samples", "60"])
     assert r.exit_code == 0, r.output
     assert read_csv(tmp_path / "s.csv").header == ["u", "y", "x1", "x2", "x1_true", "x2_true", "mode", "run"]
-    for bad in (["--runs", "0"], ["--noise", "-1"], ["--switching", "nope"]):
+    for bad in (["--runs", "0"], ["--noise", "-1"], ["--switching", "nope"], ["--seed", "-1"], ["--input-signal", "chirp"]):
         out = tmp_path / "bad.csv"
         r = CliRunner().invoke(app, ["make-data", "switched-linear", "-o", str(out), *bad])
         assert r.exit_code == 2 and "error:" in r.output and not out.exists()
