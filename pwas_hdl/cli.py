@@ -686,59 +686,62 @@ def _write_plant(output: Path, test_output: Optional[Path], train, test, what: s
 
 @data_app.command("three-tank")
 def make_data_three_tank(
-    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns u1, u2, y, x1, x3, x1_true, x3_true, run).")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns u1, u2, y, x1, x3, x1_true, x3_true, run). Required.", show_default=False)] = None,
     samples: Annotated[int, typer.Option("--samples", help="Samples per run.")] = 1000,
     runs: Annotated[int, typer.Option("--runs", help="Training runs from random admissible levels (column run).")] = 20,
     noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y (the paper has none).")] = 0.0,
-    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the paper's run here (x(0) = (8, 2, 1), rho from t = 100).")] = None,
+    test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the paper's run here (x(0) = (8, 2, 1), rho from t = 100).", show_default=False)] = None,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (levels, phases, disturbance, noise).")] = 0,
 ) -> None:
     """The three-tank plant of seed 001 (eq. 26): y = x2, targets x1 and x3; see pwas_hdl.systems.three_tank."""
     from pwas_hdl.systems.three_tank import three_tank_paper_run, three_tank_training_runs
 
     with _user_errors():
+        output = _required(out, "-o/--out", "the CSV file to write")
         if samples < 1 or runs < 1 or noise < 0 or seed < 0:
-            raise UserError("--samples and --runs must be >= 1, --noise and --seed >= 0")
+            raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
         train = three_tank_training_runs(runs, samples, seed=seed, noise=noise)
-        test = three_tank_paper_run(samples, seed=seed, noise=noise) if test_output is not None else None
-        _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+        test = three_tank_paper_run(samples, seed=seed, noise=noise) if test_out is not None else None
+        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
 
 
 @data_app.command("switched-linear")
 def make_data_switched_linear(
-    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns u, y, x1, x2, x1_true, x2_true, mode, run).")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns u, y, x1, x2, x1_true, x2_true, mode, run). Required.", show_default=False)] = None,
     samples: Annotated[int, typer.Option("--samples", help="Samples per run.")] = 1000,
     runs: Annotated[int, typer.Option("--runs", help="Runs (column run), random dwell 20-50 and random x0.")] = 10,
     noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y.")] = 0.0,
     switching: Annotated[str, typer.Option("--switching", help="Switching law: time (cyclic) or output (thresholds on y).")] = "time",
     input_kind: Annotated[str, typer.Option("--input-signal", help="Input: step, prbs or sine.")] = "prbs",
-    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the paper-replica run here (100 samples, dwell 34, step input).")] = None,
+    test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the paper-replica run here (100 samples, dwell 34, step input).", show_default=False)] = None,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (input, dwell times, x0, noise).")] = 0,
 ) -> None:
     """The switched linear plant of seed 003 (eq. 11), three modes; see pwas_hdl.systems.switched_linear."""
     from pwas_hdl.systems.switched_linear import switched_paper_run, switched_training_runs
 
     with _user_errors():
+        output = _required(out, "-o/--out", "the CSV file to write")
         if samples < 1 or runs < 1 or noise < 0 or seed < 0:
-            raise UserError("--samples and --runs must be >= 1, --noise and --seed >= 0")
+            raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
         train = switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise)
-        test = switched_paper_run(seed=seed, switching=switching, noise=noise) if test_output is not None else None
-        _write_plant(output, test_output, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+        test = switched_paper_run(seed=seed, switching=switching, noise=noise) if test_out is not None else None
+        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
 
 
-def _system_bench(module: str, json_out: Path, markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool) -> None:
+def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool) -> None:
     """Run one of the system benches (benchmarks/<module>.py) and write its pwas-hdl-bench-results JSON."""
     import importlib
 
     from pwas_hdl import bench_results
 
     with _user_errors():
+        json_out = _required(_merge("-o/--out", json_out, json=json_old), "-o/--out", "the JSON result file to write")
         if runs < 1:
-            raise UserError("--runs must be >= 1")
+            raise InputError("--runs must be >= 1")
         mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
         for p in (json_out, markdown, plot_out):
             if p is not None and not p.parent.is_dir():
-                raise UserError(f"folder {p.parent} does not exist; create it first")
+                raise InputError(f"folder {p.parent} does not exist; create it first")
         doc, traces = getattr(mod, f"run_{module}")(runs=runs, quick=quick, progress=_say)
         bench_results.write_results(json_out, doc)
         table = mod.markdown(doc)
@@ -746,11 +749,12 @@ def _system_bench(module: str, json_out: Path, markdown: Optional[Path], plot_ou
             atomic_write_text(markdown, table)
         if plot_out is not None:
             mod.plot(traces, plot_out)
-        out.print(table, highlight=False, markup=False)
+        stdout.print(table, highlight=False, markup=False)
         _say(f"wrote {json_out}")
 
 
-BenchJson = Annotated[Path, typer.Option("--json", help="Result file to write (format pwas-hdl-bench-results v1).")]
+BenchJson = Annotated[Optional[Path], typer.Option("-o", "--out", help="Result file to write (format pwas-hdl-bench-results v1). Required.", show_default=False)]
+BenchJsonOld = Annotated[Optional[Path], _hidden("--json")]
 BenchMd = Annotated[Optional[Path], typer.Option("--md", help="Also write the Markdown tables here.")]
 BenchPlot = Annotated[Optional[Path], typer.Option("--plot", help="Also write the figure (PNG) here.")]
 BenchRuns = Annotated[int, typer.Option("--runs", help="Independent runs (seeds 0..runs-1) to average over.")]
@@ -758,24 +762,24 @@ BenchQuick = Annotated[bool, typer.Option("--quick", help="A reduced smoke run (
 
 
 @bench_app.command("three-tank")
-def bench_three_tank(json_out: BenchJson, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
-                     quick: BenchQuick = False) -> None:
+def bench_three_tank(json_out: BenchJson = None, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
+                     quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
     """Seed 001: sensors (27)/(28) vs PWAS (float, bit-true) on the paper's three-tank run, with a y-noise study."""
-    _system_bench("three_tank", json_out, markdown, plot_out, runs, quick)
+    _system_bench("three_tank", json_out, json_old, markdown, plot_out, runs, quick)
 
 
 @bench_app.command("switched-linear")
-def bench_switched_linear(json_out: BenchJson, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
-                          quick: BenchQuick = False) -> None:
+def bench_switched_linear(json_out: BenchJson = None, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
+                          quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
     """Seed 003: virtual estimator (Table 1) and known-mode observer vs PWAS states and mode classifier."""
-    _system_bench("switched_linear", json_out, markdown, plot_out, runs, quick)
+    _system_bench("switched_linear", json_out, json_old, markdown, plot_out, runs, quick)
 
 
 @bench_app.command("lorenz-hlnn")
-def bench_lorenz_hlnn(json_out: BenchJson, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
-                      quick: BenchQuick = False) -> None:
+def bench_lorenz_hlnn(json_out: BenchJson = None, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
+                      quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
     """Seed 000: HLNN vs PWAS on Lorenz (Table II) and on the helicopter surrogate (Table VI)."""
-    _system_bench("lorenz_hlnn", json_out, markdown, plot_out, runs, quick)
+    _system_bench("lorenz_hlnn", json_out, json_old, markdown, plot_out, runs, quick)
 
 
 @bench_app.command("lorenz")

@@ -37,7 +37,7 @@ def test_fit_classify_and_predict_cli(tmp_path):
     _csv(tmp_path / "train.csv", switched_training_runs(4, 800, seed=0))
     _csv(tmp_path / "test.csv", switched_training_runs(1, 800, seed=7))
     run = CliRunner().invoke
-    r = run(app, ["fit", str(tmp_path / "train.csv"), "-o", str(tmp_path / "m.json"), "-u", "u", "-y", "y", "--target", "mode",
+    r = run(app, ["fit", str(tmp_path / "train.csv"), "-o", str(tmp_path / "m.json"), "-u", "u", "-y", "y", "-z", "mode",
                   "--classify", "--mu", "2", "--my", "2", "-p", "4", "--traj-col", "run"])
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "m.json").read_text())
@@ -62,7 +62,7 @@ def test_classify_bad_input_writes_nothing(tmp_path):
     cols = d.columns()
     cols["one"] = np.ones(200)
     write_csv(tmp_path / "d.csv", cols)
-    for extra in (["--target", "one"], ["--target", "mode,x1"]):
+    for extra in (["-z", "one"], ["-z", "mode,x1"]):
         r = CliRunner().invoke(app, ["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "-u", "u", "-y", "y",
                                      "--mu", "1", "--my", "1", "--classify", *extra])
         assert r.exit_code == 2 and "error:" in r.output, r.output

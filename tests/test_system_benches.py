@@ -13,7 +13,7 @@ from pwas_hdl.cli import app
 
 def _bench(tmp_path, name):
     files = {k: tmp_path / f"{name}.{k}" for k in ("json", "md", "png")}
-    r = CliRunner().invoke(app, ["bench", name, "--quick", "--json", str(files["json"]), "--md", str(files["md"]),
+    r = CliRunner().invoke(app, ["bench", name, "--quick", "-o", str(files["json"]), "--md", str(files["md"]),
                                  "--plot", str(files["png"])])
     assert r.exit_code == 0, r.output
     doc = br.load_results(files["json"])
@@ -65,8 +65,8 @@ def test_bench_lorenz_hlnn_quick(tmp_path):
 
 
 def test_bench_refuses_bad_runs_and_missing_folder(tmp_path):
-    r = CliRunner().invoke(app, ["bench", "three-tank", "--json", str(tmp_path / "x.json"), "--runs", "0"])
+    r = CliRunner().invoke(app, ["bench", "three-tank", "-o", str(tmp_path / "x.json"), "--runs", "0"])
     assert r.exit_code == 2 and "error:" in r.output
-    r = CliRunner().invoke(app, ["bench", "switched-linear", "--quick", "--json", str(tmp_path / "no" / "x.json")])
+    r = CliRunner().invoke(app, ["bench", "switched-linear", "--quick", "-o", str(tmp_path / "no" / "x.json")])
     assert r.exit_code == 2 and "does not exist" in r.output
     assert not (tmp_path / "x.json").exists()

@@ -65,7 +65,7 @@ def test_output_driven_switching_uses_thresholds_at_dwell_boundaries():
 
 def test_make_data_writes_named_columns_with_run(tmp_path):
     r = CliRunner().invoke(app, ["make-data", "three-tank", "-o", str(tmp_path / "t.csv"), "--runs", "2",
-                                 "--samples", "50", "--test-output", str(tmp_path / "p.csv")])
+                                 "--samples", "50", "--test-out", str(tmp_path / "p.csv")])
     assert r.exit_code == 0, r.output
     t = read_csv(tmp_path / "t.csv")
     assert t.header == ["u1", "u2", "y", "x1", "x3", "x1_true", "x3_true", "run"] and len(t) == 100
