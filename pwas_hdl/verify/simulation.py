@@ -623,6 +623,7 @@ def run_rtl(
     strict: bool = True,
     clock_ns: float = 10.0,
     probe_output: int | None = None,
+    verilator_args: Sequence[str] = (),
 ) -> RTLResult:
     """Build (or reuse) ``design`` for ``simulator`` and replay ``runs`` through the testbench.
 
@@ -638,7 +639,7 @@ def run_rtl(
     if simulator not in SIMULATORS:
         raise ValueError(f"simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
     runner = sim_module("pwas_runner")
-    b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
+    b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves, verilator_args=verilator_args)
     tmp = None
     if work_dir is None:
         tmp = Path(tempfile.mkdtemp(prefix=f"pwas-sim-{simulator}-"))
