@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pwas_hdl.fixedpoint.formats import (
     FixedFormat,
@@ -194,16 +196,43 @@ def test_port_format_physical():
 # ---------------------------------------------------------------------- input formats
 @pytest.mark.parametrize(
     "bits, p, fill, expect_f",
-    [(12, 7, 0.9, 9), (12, 1, 0.9, 11), (12, 4, 1.0, 10), (12, 4, 0.9, 9), (8, 3, 0.9, 6), (16, 10, 0.9, 12), (12, 3686, 0.9, 0), (12, 5, 1.0, 9)],
+    [(12, 7, 0.9, 9), (12, 1, 0.9, 11), (12, 4, 0.9, 9), (8, 3, 0.9, 6), (16, 10, 0.9, 12), (12, 3686, 0.9, 0), (12, 5, 1.0, 9)],
 )
 def test_input_frac_bits(bits, p, fill, expect_f):
     f = InputFormat.for_interval(-1.0, 3.0, p, bits, fill)
     assert f.frac == expect_f
-    assert expect_f == math.floor(math.log2(fill * 2**bits / p))  # the spec formula
+    assert expect_f == math.floor(math.log2(fill * 2**bits / p))  # the spec formula (fill < 1 or p * 2**F < 2**bits)
     assert f.cell_codes == 2**expect_f
-    assert f.lo_code == -((p * 2**expect_f) // 2)
+    assert f.lo_code == -((p * 2**expect_f + 1) // 2)
     assert f.hi_code == f.lo_code + p * 2**expect_f
-    assert f.format.min_code <= f.lo_code and f.hi_code <= f.format.max_code + 1
+    assert f.format.min_code <= f.lo_code and f.hi_code <= f.format.max_code
+
+
+@settings(max_examples=400, deadline=None)
+@given(bits=st.integers(2, 24), p=st.integers(1, 5000), fill=st.one_of(st.just(1.0), st.floats(0.01, 1.0)))
+def test_input_domain_codes_are_codes_at_every_fill(bits, p, fill):
+    """lo_code and hi_code are representable at every fill (the off-by-one of fill = 1: 8-bit inputs
+    gave domain codes [-128, 128]), and F is the largest that fits both fill and the code range."""
+    try:
+        f = InputFormat.for_interval(-1.0, 3.0, p, bits, fill)
+    except ValueError:
+        assert p > min(fill * 2**bits, 2**bits - 1)  # not even one code per cell
+        return
+    assert f.format.min_code <= f.lo_code < f.hi_code <= f.format.max_code
+    assert f.span_codes <= fill * 2**bits and f.span_codes <= 2**bits - 1
+    assert not (2 * f.span_codes <= fill * 2**bits and 2 * f.span_codes <= 2**bits - 1)  # F + 1 would not fit
+    # centred: the codes left below and above the domain differ by at most one
+    below, above = f.lo_code - f.format.min_code, f.format.max_code - f.hi_code
+    assert abs(below - above) <= 1
+    # the top vertex is reachable and the flag can rise above it whenever a code is left there
+    assert f.quantize([3.0]).tolist() == [f.hi_code]
+
+
+@pytest.mark.parametrize("p", [1, 2, 3, 4, 5, 7, 8, 255])
+def test_fill_one_8bit_domain_codes(p):
+    f = InputFormat.for_interval(0.0, 1.0, p, 8, 1.0)
+    assert -128 <= f.lo_code and f.hi_code <= 127
+    assert f.quantize([0.0, 1.0]).tolist() == [f.lo_code, f.hi_code]
 
 
 def test_input_bits_too_small():
@@ -255,9 +284,9 @@ def test_input_quantize_ties_round_up():
 
 def test_fill_one_power_of_two_top_face():
     f = InputFormat.for_interval(0.0, 1.0, 4, 8, 1.0)
-    assert f.frac == 6 and f.lo_code == -128 and f.hi_code == 128  # one above max_code: documented
-    codes, sat = f.quantize([1.0], return_saturated=True)
-    assert codes.tolist() == [127] and sat.tolist() == [True]
+    assert f.frac == 5 and f.lo_code == -64 and f.hi_code == 64  # 4 * 2**6 = 256 steps do not fit in 256 codes
+    codes, sat = f.quantize([1.0, 1.0 + f.lsb], return_saturated=True)
+    assert codes.tolist() == [64, 65] and sat.tolist() == [False, False]  # hi is a code, above it is seen
 
 
 def test_grid_input_formats():

@@ -9,8 +9,8 @@ Formats (all decided from the data by default, every one overridable)
 ---------------------------------------------------------------------
 Inputs, per regressor dimension ``j`` (:class:`~pwas_hdl.fixedpoint.formats.InputFormat`)
     Signed ``B_in``-bit codes ``q`` (default ``B_in = 12``); one grid cell is exactly ``2**F_j``
-    codes, ``F_j = floor(log2(input_fill * 2**B_in / p_j))`` (``input_fill = 0.9``),
-    ``lo_code_j = -((p_j * 2**F_j) // 2)``; physical ``x = offset_j + lsb_j * q`` with
+    codes, ``F_j`` the largest with ``p_j 2**F_j <= min(input_fill 2**B_in, 2**B_in - 1)``
+    (``input_fill = 0.9``), ``lo_code_j = -((p_j * 2**F_j + 1) // 2)``; physical ``x = offset_j + lsb_j * q`` with
     ``lsb_j = h_j / 2**F_j``, ``offset_j = lo_j - lo_code_j * lsb_j``. All lags of one signal
     share ``lo, hi, p`` and so the same format (:meth:`FixedPointModel.signal_input_formats`).
     ``F = max_j F_j`` is the common fraction width.

@@ -484,8 +484,13 @@ class PortFormat:
 
 
 def _cell_frac_bits(p: int, bits: int, fill: float) -> int:
-    """Largest ``F`` with ``p * 2**F <= fill * 2**bits`` (= floor(log2(fill * 2**bits / p))), exactly."""
-    rhs = Fraction(fill) * (1 << bits)
+    """Largest ``F`` with ``p * 2**F <= min(fill * 2**bits, 2**bits - 1)``, exactly.
+
+    ``2**bits - 1`` is the widest span a ``bits``-bit code range holds (``2**bits`` codes, so
+    ``2**bits - 1`` steps from the lowest to the highest); without it ``fill = 1`` with a power-of-two
+    ``p`` would put ``hi_code`` one above the largest code. Below ``fill = 1 - 2**-bits`` this is
+    ``floor(log2(fill * 2**bits / p))``."""
+    rhs = min(Fraction(fill) * (1 << bits), Fraction((1 << bits) - 1))
     f = bits  # p >= 1 and fill <= 1, so F <= bits
     while f >= 0 and Fraction(p) * Fraction(2) ** f > rhs:
         f -= 1
@@ -500,19 +505,21 @@ class InputFormat:
     ``h = (hi - lo) / p`` is mapped to signed ``bits``-bit codes ``q`` so that **one grid cell is
     exactly** ``2**F`` **codes**:
 
-    * ``F = floor(log2(fill * 2**bits / p))``, required ``>= 0``;
-    * ``lo_code = -((p * 2**F) // 2)``, ``hi_code = lo_code + p * 2**F`` (the domain is centred in
-      the code range; ``q = lo_code`` is ``x = lo``, ``q = hi_code`` is ``x = hi``);
+    * ``F`` = the largest integer with ``p * 2**F <= min(fill * 2**bits, 2**bits - 1)``
+      (``= floor(log2(fill * 2**bits / p))`` for ``fill < 1``), required ``>= 0``;
+    * ``lo_code = -((p * 2**F + 1) // 2)``, ``hi_code = lo_code + p * 2**F`` (the domain is centred
+      in the code range; ``q = lo_code`` is ``x = lo``, ``q = hi_code`` is ``x = hi``; both are codes:
+      ``min_code <= lo_code`` and ``hi_code <= max_code`` for every ``fill``);
     * ``lsb = h / 2**F`` (physical units per code), ``offset = lo - lo_code * lsb``, so
       ``x = offset + lsb * q``.
 
     As a :class:`PortFormat` this is ``s<bits>.<F>`` with ``scale = h`` and ``offset``: the format
     value ``q * 2**-F`` counts grid cells.
 
-    With ``fill = 1`` and ``p`` a power of two, ``hi_code = 2**(bits-1)`` is one above the
-    largest code: ``x = hi`` then saturates to ``hi_code - 1`` (one input lsb short) and the
-    input can never be above the domain. ``fill < 1`` leaves head room on both sides so that
-    out-of-domain inputs are seen and flagged.
+    ``fill = 1`` uses as much of the code range as a power-of-two cell allows: for ``p`` a power
+    of two that is half of it (``p * 2**F = 2**(bits-1)``: ``2**bits`` steps do not fit in
+    ``2**bits`` codes), for other ``p`` more than half. ``fill < 1`` leaves head room on both sides
+    so that out-of-domain inputs are seen and flagged.
 
     Hardware (scale stage, no multiplier): ``t = q - lo_code`` (``bits + 1`` signed bits),
     clamp ``t`` to ``[0, p * 2**F]`` (flag ``out_of_range`` if it clamped), cell
@@ -585,7 +592,7 @@ class InputFormat:
                 f"B_in too small for p{tag} = {p} intervals: input_bits = {bits} at input_fill = {fill} gives "
                 f"fewer than one code per grid cell; use input_bits >= {need} (or fewer intervals)"
             )
-        lo_code = -((p << f) // 2)
+        lo_code = -(((p << f) + 1) // 2)
         return cls(lo, hi, p, int(bits), fill, int(f), int(lo_code))
 
     # ------------------------------------------------------------ derived
@@ -601,7 +608,7 @@ class InputFormat:
 
     @property
     def hi_code(self) -> int:
-        """``lo_code + p * 2**F`` (the code of ``hi``; may be one above ``max_code``, see class)."""
+        """``lo_code + p * 2**F`` (the code of ``hi``; ``<= max_code``)."""
         return self.lo_code + self.span_codes
 
     @property
