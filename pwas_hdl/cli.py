@@ -414,6 +414,7 @@ def generate(
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default) or max.")] = None,
     memory_init: Annotated[str, typer.Option("--memory-init", help="inline: weights inside the Verilog; readmemh: the Verilog loads the .hex files (relative names).")] = "inline",
+    ports: Annotated[str, typer.Option("--ports", help="Port names: axis (aclk, aresetn active low, s_axis_tvalid/tready/tdata, m_axis_tvalid/tready/tdata) or amaranth (clk, rst active high, in__*, out__*).")] = "axis",
     input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes.")] = 12,
     input_fill: Annotated[float, typer.Option("--input-fill", help="Largest fraction of the input code range the domain may take (the rest detects out-of-range).")] = 0.9,
     weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Weight width (default: the fewest bits that hold every weight).")] = None,
@@ -441,14 +442,14 @@ def generate(
         if target_mhz is None:
             with _progress("building the design"):
                 gd = _generate(
-                    model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
+                    model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
                     input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                 )
         else:
             with _executor(workers, scheduler) as ex:
                 gd = _generate(
-                    model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
+                    model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
                     input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                     target_mhz=target_mhz, fpga_target=fpga,

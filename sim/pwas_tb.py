@@ -1,7 +1,7 @@
 """cocotb testbench of a generated PWAS design (core or virtual-sensor top), driven by its manifest.
 
 Nothing about the design is hard-coded: the clock, reset and stream ports are found by their
-``role`` in ``manifest.json``, the input and output payloads are packed / unpacked with the bit
+``role`` in ``manifest.json`` (the reset's level by ``reset.polarity``), the input and output payloads are packed / unpacked with the bit
 fields listed there, and the latency is the manifest's ``latency_cycles``.
 
 The host side (:mod:`pwas_runner`, :mod:`pwas_hdl.verify.simulation`) writes a JSON *job* and points the
@@ -87,6 +87,8 @@ class Bench:
         self.out_fields = pout["fields"]  # targets then out_of_range, as listed
         self.clk = _handle(dut, man["clock"]["port"])
         self.rst = _handle(dut, man["reset"]["port"])
+        # asserted / released levels of the reset port (AXI-Stream aresetn is active low)
+        self.rst_on = 0 if man["reset"]["polarity"] == "low" else 1
         self.src = StreamSource(_handle(dut, _port(man, "in.valid")["name"]), _handle(dut, _port(man, "in.ready")["name"]),
                                 _handle(dut, pin["name"]))
         self.out_valid = _handle(dut, _port(man, "out.valid")["name"])
@@ -94,7 +96,7 @@ class Bench:
         self.warm = _handle(dut, warm["port"]) if warm else None
         self.warm_log: list[int] = []
         self.loop = CycleLoop(self.clk, [self.src, self.sink], hooks=[self._watch])
-        self.rst.value = 0
+        self.rst.value = 1 - self.rst_on
 
     def _watch(self, cycle: int) -> None:
         if self.warm is not None and self.src.sent_at and self.src.sent_at[-1] == cycle:
@@ -105,8 +107,8 @@ class Bench:
         self.src.enabled = False
         self.sink.enabled = False  # nothing is transferred while rst is high
         for i in range(cycles):
-            await self.loop.step(before=lambda c: setattr(self.rst, "value", 1))
-        await self.loop.step(before=lambda c: setattr(self.rst, "value", 0))
+            await self.loop.step(before=lambda c: setattr(self.rst, "value", self.rst_on))
+        await self.loop.step(before=lambda c: setattr(self.rst, "value", 1 - self.rst_on))
         valid_after = _read(self.out_valid)
         self.src.enabled = True
         self.sink.enabled = True

@@ -117,9 +117,16 @@ def test_normalise_moves_only_assigned_initialisers():
 def test_design_info_ports():
     core = build_core(make_model([2, 3], seed=7, nz=2), name="pwas_core")
     core._MustUse__silence = True
-    info = design_info(core)
+    info = design_info(core, "amaranth")
     names = {p["name"]: p for p in info["ports"]}
-    assert list(names) == ["clk", "rst", "in__payload", "in__valid", "in__ready", "out__payload", "out__valid", "out__ready"]
+    # issue 8: clock, reset, input stream, output stream
+    assert list(names) == ["clk", "rst", "in__valid", "in__ready", "in__payload", "out__valid", "out__ready", "out__payload"]
+    axis = design_info(core)  # the default: AXI-Stream names, same order and roles
+    assert [p["name"] for p in axis["ports"]] == ["aclk", "aresetn", "s_axis_tvalid", "s_axis_tready", "s_axis_tdata",
+                                                "m_axis_tvalid", "m_axis_tready", "m_axis_tdata"]
+    assert [p["role"] for p in axis["ports"]] == [p["role"] for p in info["ports"]]
+    assert axis["reset"] == {"port": "aresetn", "polarity": "low", "kind": "synchronous"}
+    assert info["reset"] == {"port": "rst", "polarity": "high", "kind": "synchronous"}
     b, o = core.params.in_width, core.params.out_width
     assert names["in__payload"]["width"] == 2 * b and names["in__payload"]["direction"] == "input"
     assert names["out__payload"]["width"] == 2 * o + 1 and names["out__ready"]["direction"] == "input"
@@ -187,7 +194,7 @@ def test_icarus_runs_the_verilog_bit_true(key, init, tmp_path):
         model = make_model([7, 7, 7, 7], seed=3) if key == "n4_p7_lorenz_like" else make_model([7, 3], seed=2)
         q = codes(model, 120, seed=8)
         ref = model.evaluate(q)[0]
-    (tmp_path / "dut.v").write_text(emit_verilog(dut, "pwas_core", memory_init=init))
+    (tmp_path / "dut.v").write_text(emit_verilog(dut, "pwas_core", memory_init=init, ports="amaranth"))
     if init == "readmemh":
         for fname, text in memory_hex_files(dut).items():
             (tmp_path / fname).write_text(text)

@@ -161,7 +161,7 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         version=__version__,
         model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
                        f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
-        clock="clk", reset="rst", latency=man["latency_cycles"], ii=man["ii"],
+        clock=man["clock"]["port"], reset=_reset_text(man), latency=man["latency_cycles"], ii=man["ii"],
         port_table=ports, format_table=fmt_table, bound_lsb=f"{eb['lsb']:.4g}", bound_phys=f"{eb['physical']:.4g}",
         bound_terms=terms, domain_table=dom_table, memory_text=mem_text, file_list=files,
     )
@@ -179,6 +179,11 @@ def _file_names(files: dict) -> list[str]:
     return out
 
 
+def _reset_text(man: dict) -> str:
+    r = man["reset"]
+    return f"{r['port']} ({r['kind']}, active {r['polarity']})"
+
+
 def _instance(man: dict) -> str:
     comments = []
     for p in man["ports"]:
@@ -193,7 +198,8 @@ def _instance(man: dict) -> str:
         f"    .{p['name']}({p['name']})" for p in man["ports"]
     )
     return _template("instance.v.tmpl").substitute(
-        top=man["top"], version=__version__, clock="clk", reset="rst", latency=man["latency_cycles"], ii=man["ii"],
+        top=man["top"], version=__version__, clock=man["clock"]["port"], reset=_reset_text(man),
+        latency=man["latency_cycles"], ii=man["ii"],
         field_comments="\n".join(comments), connections=conns,
     )
 
@@ -227,6 +233,7 @@ def build_design(
     memory: str = "banked",
     pipeline: str | Pipeline | dict | None = None,
     memory_init: str = "inline",
+    ports: str = "axis",
     target_mhz: float | None = None,
     fpga_target: str = "ecp5",
     timing_seed: int = 1,
@@ -267,6 +274,11 @@ def build_design(
     executor : pwas_hdl.flow.executor.Executor, optional
         Runs the timing closure's place-and-route candidates on Dask workers (speculatively;
         the choice and the record are those of the serial search).
+    ports : {"axis", "amaranth"}
+        Port names (:func:`pwas_hdl.hdl.emit.emit_verilog`): AXI4-Stream style ``aclk``, ``aresetn``
+        (synchronous, active low), ``s_axis_tvalid/tready/tdata``, ``m_axis_tvalid/tready/tdata``
+        (default), or Amaranth's ``clk``, ``rst`` (active high), ``in__*``, ``out__*``. The
+        manifest lists them with their roles; ``warm`` (sensor top) keeps its name.
     memory_init : {"inline", "readmemh"}
         Weights as initialisers inside the Verilog (self-contained), or ``$readmemh`` of the
         ``.hex`` files of the folder (relative names: run tools from the folder).
@@ -297,7 +309,8 @@ def build_design(
             raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
 
         def candidate(pipe: Pipeline) -> GeneratedDesign:
-            return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline", **formats)
+            return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline",
+                                ports=ports, **formats)
 
         chosen, timing = close_timing(candidate, sensor.grid_.n, target_mhz, fpga=fpga_target, seed=timing_seed,
                                       prescreen=prescreen, progress=progress, executor=executor)
@@ -307,10 +320,10 @@ def build_design(
         comp = build_core(fxm, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top)
     else:
         comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top)
-    info = design_info(comp)
+    info = design_info(comp, ports)
 
     prefix = f"{top}_rom"
-    verilog = emit_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix)
+    verilog = emit_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix, ports=ports)
     hexes = memory_hex_files(comp, prefix)
     plan = info["memory"]
     bw = fxm.weight_format.bits
@@ -330,7 +343,7 @@ def build_design(
     }
     if pipeline is not None and not isinstance(pipeline, str):
         pipeline = Pipeline.cast(pipeline).to_dict()
-    options = {"design": design, "memory": memory, "pipeline": pipeline, "memory_init": memory_init,
+    options = {"design": design, "memory": memory, "pipeline": pipeline, "memory_init": memory_init, "ports": ports,
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
     if timing is not None:
         options.update(target_mhz=float(target_mhz), fpga_target=fpga_target)

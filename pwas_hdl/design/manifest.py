@@ -15,16 +15,19 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
                 "report": "report.md", "instance_template": "pwas_core_inst.v", "fusesoc_core": "pwas_core.core",
                 "hex": [{"file": "pwas_core_rom_b0.hex", "bank": 0, "depth": .., "width": ..,
                          "fields": [{"target": "z", "lsb": 0, "width": .., "signed": true}]}, ...]},
-      "clock": {"port": "clk", "edge": "rising"},
-      "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
+      "clock": {"port": "aclk", "edge": "rising"},       # ("clk" with generate --ports amaranth)
+      "reset": {"port": "aresetn", "polarity": "low", "kind": "synchronous"},  # ("rst", "high")
       "latency_cycles": 7,                       # input transfer -> output valid, no stalls
       "ii": 1,                                   # initiation interval (one sample every ii clocks)
       "flow_control": {...},                     # the handshake rules in words
-      "ports": [                                 # every top-level port of the Verilog module
-        {"name": "in__payload", "direction": "input", "width": 48, "signed": false, "role": "in.payload",
+      "ports": [                                 # every port of the Verilog module, in module order:
+                                                 # clock, reset, input stream, output stream, warm
+        {"name": "aclk", "role": "clock", ...}, {"name": "aresetn", "role": "reset", ...},
+        {"name": "s_axis_tvalid", "role": "in.valid", ...}, {"name": "s_axis_tready", "role": "in.ready", ...},
+        {"name": "s_axis_tdata", "direction": "input", "width": 48, "signed": false, "role": "in.payload",
          "fields": [{"name": "y[t-3]", "lsb": 0, "width": 12, "signed": true, "regressor": "y[t-3]",
                      "signal": "y", "lag": 3, "format": {PortFormat.to_dict()}, "domain_codes": [lo, hi]}, ...]},
-        {"name": "in__valid", ...}, {"name": "in__ready", ...}, {"name": "out__payload", ...}, ...
+        {"name": "m_axis_tvalid", "role": "out.valid", ...}, ..., {"name": "m_axis_tdata", "role": "out.payload", ...}, ...
       ],
       "formats": {"inputs": [...], "signals": {...}, "weight": {...}, "output": {...}, "mu_frac": F,
                   "widths": {...}, "rounding": ..},
@@ -83,14 +86,10 @@ _HINT = "re-run `pwas-hdl generate` to write the design folder again"
 
 
 # ------------------------------------------------------------------------------ construction
-def _role(port_name: str) -> str:
-    return {"clk": "clock", "rst": "reset"}.get(port_name, port_name.replace("__", "."))
-
-
-def _fields(design: str, fxm: "FixedPointModel", info: dict, port_name: str) -> list[dict]:
+def _fields(design: str, fxm: "FixedPointModel", info: dict, port_name: str, is_input: bool) -> list[dict]:
     """Payload bit fields with their fixed-point formats and physical scaling."""
     fields = [dict(f) for f in info["payload"].get(port_name, [])]
-    if port_name.startswith("in"):
+    if is_input:
         if design == "core":
             for j, f in enumerate(fields):
                 inp = fxm.inputs[j]
@@ -144,9 +143,9 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
     fx = fxm.to_dict()
     ports = []
     for prt in info["ports"]:
-        entry = {**prt, "role": _role(prt["name"])}
+        entry = dict(prt)  # name, role, direction, width, signed (pwas_hdl.hdl.emit.port_list)
         if prt["name"] in info["payload"]:
-            entry["fields"] = _fields(design, fxm, info, prt["name"])
+            entry["fields"] = _fields(design, fxm, info, prt["name"], prt["role"] == "in.payload")
         ports.append(entry)
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
@@ -158,8 +157,8 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
         "design": design,
         "top": top,
         "files": files,
-        "clock": {"port": "clk", "edge": "rising"},
-        "reset": {"port": "rst", "polarity": "high", "kind": "synchronous"},
+        "clock": info["clock"],
+        "reset": info["reset"],
         "latency_cycles": int(info["latency"]),
         "ii": int(info["ii"]),
         "flow_control": info["flow_control"],

@@ -176,9 +176,10 @@ def _stage_of_cell(cell: str) -> str:
     ...) and the core's cells carry a ``core.`` prefix.
     """
     c = cell[5:] if cell.startswith("core.") else cell
-    if c.startswith(("io_", "in__payload", "in__valid", "rst", "out__ready")):
+    if c.startswith(("io_", "in__payload", "in__valid", "rst", "out__ready", "s_axis_tdata", "s_axis_tvalid", "aresetn",
+                     "m_axis_tready")):
         return "input register"
-    if c.startswith(("out__payload", "out__valid", "in__ready", "warm")):
+    if c.startswith(("out__payload", "out__valid", "in__ready", "warm", "m_axis_tdata", "m_axis_tvalid", "s_axis_tready")):
         return "output register"
     if re.match(r"wmem\d+", c):
         return "memory"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 
 from pwas_hdl.hdl.core import PWASCore
-from pwas_hdl.hdl.emit import port_list
+from pwas_hdl.hdl.emit import port_list, port_names
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
 __all__ = ["build_core", "build_sensor", "design_info"]
@@ -52,14 +52,18 @@ def _fields(names_widths):
     return out
 
 
-def design_info(component) -> dict:
+def design_info(component, ports: str = "axis") -> dict:
     """JSON-ready description of a built design (core or sensor top).
 
-    Keys: ``module``, ``kind``, ``latency`` (cycles), ``ii``, ``ports`` (flattened Verilog ports,
-    see :func:`~pwas_hdl.hdl.emit.port_list`), ``payload`` (bit fields of ``in__payload`` and
-    ``out__payload``, LSB first), ``flow_control``, ``memory`` (memories, depth, word bits,
-    words, bits), ``pipeline``, ``arithmetic``; the sensor top adds ``lags`` and ``warmup``.
+    Keys: ``module``, ``kind``, ``latency`` (cycles), ``ii``, ``ports`` (Verilog ports in module
+    order with their roles, see :func:`~pwas_hdl.hdl.emit.port_list`; ``ports`` is the naming,
+    ``"axis"`` or ``"amaranth"``), ``clock`` and ``reset`` (port, edge / polarity, kind),
+    ``payload`` (bit fields of the input and output payload ports, by port name, LSB first),
+    ``flow_control``, ``memory`` (memories, depth, word bits, words, bits), ``pipeline``,
+    ``arithmetic``; the sensor top adds ``lags`` and ``warmup``.
     """
+    nm = port_names(ports)
+    rst = f"~{nm['reset']}" if ports == "axis" else nm["reset"]
     core = getattr(component, "core", component)
     p: CoreParams = core.params
     in_fields = getattr(component, "input_fields", None)
@@ -73,14 +77,18 @@ def design_info(component) -> dict:
         "kind": getattr(component, "kind", "core"),
         "latency": int(component.latency),
         "ii": int(component.ii),
-        "ports": port_list(component),
-        "payload": {"in__payload": in_fields, "out__payload": out_fields},
+        "ports": port_list(component, ports),
+        "port_naming": ports,
+        "clock": {"port": nm["clock"], "edge": "rising"},
+        "reset": {"port": nm["reset"], "polarity": "low" if ports == "axis" else "high", "kind": "synchronous"},
+        "payload": {nm["in.payload"]: in_fields, nm["out.payload"]: out_fields},
         "flow_control": {
-            "advance": "~out__valid | out__ready",
-            "in__ready": "advance",
-            "reset": "rst: synchronous, active high, clears the valid bits only",
-            "latency": "a transfer on `in` in cycle t gives out__valid with its result in cycle t + latency "
-            "when out__ready stays high; stalls delay it by the stalled cycles",
+            "advance": f"~{nm['out.valid']} | {nm['out.ready']}",
+            nm["in.ready"]: "advance",
+            "reset": f"{nm['reset']}: synchronous, active {'low' if ports == 'axis' else 'high'} "
+            f"(the design resets while {rst} is 1), clears the valid bits only",
+            "latency": f"a transfer on the input stream in cycle t gives {nm['out.valid']} with its result in cycle "
+            f"t + latency when {nm['out.ready']} stays high; stalls delay it by the stalled cycles",
         },
         "memory": core.memory_plan.to_dict(),
         "pipeline": core.pipeline.to_dict(),

@@ -20,7 +20,42 @@ import re
 from amaranth.back import verilog
 from amaranth.lib import wiring
 
-__all__ = ["emit_verilog", "port_list", "normalise_verilog", "memory_hex_files"]
+from pwas_hdl.errors import InputError, InternalError
+
+__all__ = ["PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog", "memory_hex_files"]
+
+#: Port naming schemes of the generated Verilog: ``"axis"`` (default; AXI4-Stream style, ``aclk``,
+#: active-low ``aresetn``, ``s_axis_t*`` in, ``m_axis_t*`` out) or ``"amaranth"`` (Amaranth's
+#: flattened names: ``clk``, active-high ``rst``, ``in__*``, ``out__*``).
+PORT_NAMINGS = ("axis", "amaranth")
+
+# Amaranth name -> (role, AXI-Stream name), in the port order of the module: clock, reset, input
+# stream, output stream; other signature members (``warm``) follow, keeping their names.
+_PORTS = (
+    ("clk", "clock", "aclk"),
+    ("rst", "reset", "aresetn"),
+    ("in__valid", "in.valid", "s_axis_tvalid"),
+    ("in__ready", "in.ready", "s_axis_tready"),
+    ("in__payload", "in.payload", "s_axis_tdata"),
+    ("out__valid", "out.valid", "m_axis_tvalid"),
+    ("out__ready", "out.ready", "m_axis_tready"),
+    ("out__payload", "out.payload", "m_axis_tdata"),
+)
+_ROLE = {a: r for a, r, _ in _PORTS}
+_AXIS = {a: x for a, _, x in _PORTS}
+_ORDER = {a: i for i, (a, _, _) in enumerate(_PORTS)}
+
+
+def _check_naming(ports: str) -> None:
+    if ports not in PORT_NAMINGS:
+        raise InputError(f"--ports must be one of {', '.join(PORT_NAMINGS)}, got {ports!r}")
+
+
+def port_names(ports: str = "axis") -> dict[str, str]:
+    """Role -> Verilog port name of the clock, reset and stream ports under a naming scheme
+    (roles ``clock``, ``reset``, ``in.valid``, ``in.ready``, ``in.payload``, ``out.valid``, ...)."""
+    _check_naming(ports)
+    return {r: (x if ports == "axis" else a) for a, r, x in _PORTS}
 
 _DECL = re.compile(
     r"^(?P<indent>[ \t]*)reg (?P<range>(?:signed )?(?:\[[0-9]+:[0-9]+\] )?)"
@@ -52,13 +87,17 @@ def emit_verilog(
     *,
     memory_init: str = "inline",
     hex_prefix: str = "w",
+    ports: str = "axis",
 ) -> str:
     """Verilog-2005 text of ``component`` as a single module called ``name`` (default: the
     ``module_name`` given to :func:`~pwas_hdl.hdl.build_core`).
 
-    The module has the ports listed by :func:`port_list` (``clk`` and ``rst`` for the ``sync``
-    domain, then the flattened signature members). Deterministic: equal inputs give byte-identical
-    text.
+    The module has the ports listed by :func:`port_list`, in that order (clock, reset, input
+    stream, output stream, then ``warm`` of the sensor top). ``ports="axis"`` (default) names them
+    ``aclk``, ``aresetn`` (synchronous, **active low**: the design's reset is ``~aresetn``),
+    ``s_axis_tvalid/tready/tdata``, ``m_axis_tvalid/tready/tdata``; ``ports="amaranth"`` keeps
+    Amaranth's ``clk``, ``rst`` (synchronous, active high), ``in__valid`` ... ``out__payload``.
+    Deterministic: equal inputs give byte-identical text.
 
     ``memory_init``: ``"inline"`` (default; the weight memories ``wmem0 .. wmem<n>`` are initialised
     by assignments in ``initial`` blocks) or ``"readmemh"`` (``initial $readmemh("<hex_prefix>_b<b>.hex",
@@ -72,10 +111,45 @@ def emit_verilog(
         raise ValueError(f"module name {name!r} is not a plain Verilog identifier")
     if memory_init not in ("inline", "readmemh"):
         raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+    _check_naming(ports)
     text = normalise_verilog(verilog.convert(component, name=name, emit_src=False))
     if memory_init == "readmemh":
         text = _use_readmemh(text, component, hex_prefix)
-    return text
+    return _name_ports(text, name, component, ports)
+
+
+def _token(name: str) -> re.Pattern:
+    return re.compile(r"(?<![A-Za-z0-9_$\\])" + re.escape(name) + r"(?![A-Za-z0-9_$])")
+
+
+def _name_ports(text: str, module: str, component, ports: str) -> str:
+    """Put the module's port list in :func:`port_list` order and, for ``ports="axis"``, rename the
+    ports (whole identifiers; Yosys writes them as plain names) and derive ``rst = ~aresetn``."""
+    head = re.compile(r"^module " + re.escape(module) + r"\(([^)]*)\);$", re.M)
+    mo = head.search(text)
+    if mo is None:
+        raise InternalError(f"no port list of module {module} in the Yosys output")
+    amaranth = [p["name"] for p in port_list(component, "amaranth")]
+    if sorted(n.strip() for n in mo.group(1).split(",")) != sorted(amaranth):
+        raise InternalError(f"the ports of {module} in the Yosys output are not {amaranth}")
+    if ports == "amaranth":
+        return text[: mo.start(1)] + ", ".join(amaranth) + text[mo.end(1):]
+    new = {a: _AXIS.get(a, a) for a in amaranth}
+    for a, x in new.items():
+        if a != x and _token(x).search(text):
+            raise InternalError(f"cannot name port {a} {x}: the design already has a signal {x}")
+    body = text[mo.end():]
+    decl = re.compile(r"^(?P<ind>[ \t]*)input rst;\n", re.M)
+    if len(decl.findall(body)) != 1:
+        raise InternalError("expected one `input rst;` declaration in the Yosys output")
+    body = decl.sub(lambda m: f"{m.group('ind')}input aresetn;\n{m.group('ind')}wire aresetn;\n", body, count=1)
+    for a, x in new.items():
+        if a not in ("rst",) and a != x:
+            body = _token(a).sub(x, body)
+    end = body.rindex("endmodule")
+    body = body[:end] + "  assign rst = ~aresetn;\n" + body[end:]
+    header = f"module {module}(" + ", ".join(new[a] for a in amaranth) + ");"
+    return text[: mo.start()] + header + body
 
 
 def _plan(component):
@@ -127,20 +201,24 @@ def _use_readmemh(text: str, component, prefix: str) -> str:
     return out
 
 
-def port_list(component: wiring.Component) -> list[dict]:
-    """Flattened Verilog ports of a component: ``[{name, direction, width, signed}]``.
+def port_list(component: wiring.Component, ports: str = "axis") -> list[dict]:
+    """Verilog ports of a component, in module order: ``[{name, role, direction, width, signed}]``.
 
-    ``clk`` (rising edge) and ``rst`` (synchronous, active high) come first; then every signature
-    member, named by joining its path with ``__`` (``in__valid``, ``in__ready``, ``in__payload``,
-    ``out__valid``, ``out__ready``, ``out__payload``, ...), in signature order.
+    Order: clock (rising edge), reset (synchronous), input stream (valid, ready, payload), output
+    stream (valid, ready, payload), then the other signature members (``warm``) in signature
+    order. Roles: ``clock``, ``reset``, ``in.valid``, ``in.ready``, ``in.payload``, ``out.valid``,
+    ``out.ready``, ``out.payload``, else the member's name. Names: see :func:`emit_verilog`
+    (``ports="axis"``: ``aclk``, ``aresetn`` active low, ``s_axis_t*``, ``m_axis_t*``;
+    ``"amaranth"``: ``clk``, ``rst`` active high, the signature path joined with ``__``).
     """
-    ports = [
+    _check_naming(ports)
+    found = [
         {"name": "clk", "direction": "input", "width": 1, "signed": False},
         {"name": "rst", "direction": "input", "width": 1, "signed": False},
     ]
     for path, member, value in component.signature.flatten(component):
         shape = value.shape() if hasattr(value, "shape") else None
-        ports.append(
+        found.append(
             {
                 "name": "__".join(map(str, path)),
                 "direction": "input" if member.flow == wiring.In else "output",
@@ -148,4 +226,10 @@ def port_list(component: wiring.Component) -> list[dict]:
                 "signed": bool(getattr(shape, "signed", False)),
             }
         )
-    return ports
+    found.sort(key=lambda p: _ORDER.get(p["name"], len(_ORDER)))  # stable: extras keep signature order
+    out = []
+    for p in found:
+        a = p["name"]
+        out.append({"name": _AXIS.get(a, a) if ports == "axis" else a, "role": _ROLE.get(a, a.replace("__", ".")),
+                    **{k: v for k, v in p.items() if k != "name"}})
+    return out

@@ -288,9 +288,11 @@ def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, 
 
 _PROBE_RE = re.compile(
     r"^\s*reg\s+(?:signed\s+)?(?:\[(\d+):(\d+)\]\s+)?"
-    r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload)\s*;",
+    r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload|m_axis_tdata)\s*;",
     re.M,
 )
+#: The output payload register under the two port namings (``generate --ports amaranth|axis``).
+_OUT_REGS = ("out__payload", "m_axis_tdata")
 _STAGE_ORDER = ("s_split", "s_rank", "s_addr", "s_mem", "s_memout", "s_prod")
 
 
@@ -337,7 +339,7 @@ def _memory_diffs(design: Design, read: dict) -> list[dict]:
 def _stage_of(name: str) -> str:
     if name.startswith("vdata"):
         return "vdata"
-    if name == "out__payload":
+    if name in _OUT_REGS:
         return "out"
     mo = re.match(r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+))_", name)
     return mo.group(1) if mo else name
@@ -388,7 +390,7 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     memory (bank) order -- memory ``b`` multiplies its word by the ``mu`` of the vertex it read --
     rather than in simplex-vertex order (older generators, recognised by their ``vdata`` nets).
     """
-    if name == "out__payload":
+    if name in _OUT_REGS:
         vals = [int(v) for v in tr["out"]] + [int(tr["out_of_range"])]
         word = 0
         for v, f in zip(vals, out_fields):
