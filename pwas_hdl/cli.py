@@ -506,7 +506,8 @@ def simulate(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core or sensor design).")],
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of the per-sample hardware outputs to write. Required.", show_default=False)] = None,
-    simulator: Annotated[str, typer.Option("--simulator", help="icarus or verilator.")] = "icarus",
+    simulator: Annotated[Optional[str], typer.Option("--simulator", help="icarus or verilator (default: icarus; verilator with --engine native).")] = None,
+    engine: Annotated[str, typer.Option("--engine", help="cocotb: the cocotb bench (reference, debug trace); native: a generated Verilator C++ bench (same checks and outputs, millions of samples/s; Verilator only).")] = "cocotb",
     summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: the -o/--out file with the suffix .json).")] = None,
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit (the sensor design is reset between trajectories).")] = None,
     stall: Annotated[float, typer.Option("--stall", help="Probability of a random bubble on the input and of backpressure on the output in each cycle (0 = none: latency and II are measured at full speed).")] = 0.0,
@@ -528,7 +529,7 @@ def simulate(
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         res = simulate_data(
-            outdir, data, output, simulator=simulator, summary_path=summary, traj_col=traj_col,
+            outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
             stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
             progress=_say,
         )

@@ -38,7 +38,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import CheckFailed
+from pwas_hdl.errors import CheckFailed, InputError
 from pwas_hdl.resources import sim_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import load_manifest
@@ -46,6 +46,7 @@ from pwas_hdl.design.manifest import load_manifest
 __all__ = [
     "SIM_DIR",
     "SIMULATORS",
+    "ENGINES",
     "Design",
     "Segment",
     "Run",
@@ -62,6 +63,8 @@ __all__ = [
 
 SIM_DIR = sim_dir()
 SIMULATORS = ("icarus", "verilator")
+#: Testbench engines of :func:`run_rtl` / ``pwas-hdl simulate --engine``.
+ENGINES = ("cocotb", "native")
 
 
 def sim_module(name: str):
@@ -626,8 +629,14 @@ def run_rtl(
     clock_ns: float = 10.0,
     probe_output: int | None = None,
     verilator_args: Sequence[str] = (),
+    engine: str = "cocotb",
 ) -> RTLResult:
     """Build (or reuse) ``design`` for ``simulator`` and replay ``runs`` through the testbench.
+
+    ``engine``: ``"cocotb"`` (default; the manifest-driven cocotb bench ``sim/pwas_tb.py`` on
+    Icarus or Verilator, with the debug trace) or ``"native"`` (the generated Verilator C++ bench
+    ``sim/pwas_native_tb.cpp``: the same runs, stalls and resets, checks and result layout, about
+    100 times faster; Verilator only, no ``debug`` / ``waves``).
 
     ``debug``: when an output differs, re-run that sample alone and record the pipeline registers
     (:func:`stage_probes`), then name the first stage that differs from the bit-true trace
@@ -640,7 +649,11 @@ def run_rtl(
     """
     if simulator not in SIMULATORS:
         raise ValueError(f"simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+    if engine not in ENGINES:
+        raise InputError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     runner = sim_module("pwas_runner")
+    if engine == "native":
+        return _run_native(design, runs, simulator, cache_dir=cache_dir, work_dir=work_dir, waves=waves, debug=debug)
     b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves, verilator_args=verilator_args)
     tmp = None
     if work_dir is None:
@@ -676,6 +689,23 @@ def run_rtl(
     return res
 
 
+def _run_native(design: Design, runs: Sequence[Run], simulator: str, *, cache_dir, work_dir, waves: bool, debug: bool) -> RTLResult:
+    if simulator != "verilator":
+        raise InputError(f"--engine native runs on Verilator only (got --simulator {simulator}); use --simulator verilator "
+                         "or --engine cocotb")
+    if debug or waves:
+        raise InputError("the debug trace and waveforms need the cocotb engine (--engine cocotb)")
+    native = sim_module("pwas_native")
+    b = native.build(design.verilog_path, design.manifest, cache_dir=cache_dir)
+    tmp = Path(tempfile.mkdtemp(prefix="pwas-native-")) if work_dir is None else None
+    try:
+        raw = native.run(b, design.manifest, list(runs), tmp or work_dir, files=design.runtime_files)
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return _summarise(design, list(runs), raw, "verilator", raw["build"], float(raw["wall_s"]))
+
+
 # ---------------------------------------------------------------------------------------------------- CSV replay
 
 
@@ -688,7 +718,8 @@ def simulate_data(
     data: str | os.PathLike,
     output: str | os.PathLike,
     *,
-    simulator: str = "icarus",
+    simulator: str | None = None,
+    engine: str = "cocotb",
     summary_path: str | os.PathLike | None = None,
     traj_col: str | None = None,
     stall: float = 0.0,
@@ -705,6 +736,10 @@ def simulate_data(
     ``out_of_range``, ``mismatch``; one row per hardware output, in data order) and the JSON
     summary (``summary_path``, default ``output`` with the suffix ``.json``).
 
+    ``engine``: ``"cocotb"`` (default) or ``"native"`` (the Verilator C++ bench, see
+    :func:`run_rtl`; ``simulator`` then defaults to and must be ``"verilator"``). Both write the
+    same summary and CSV.
+
     Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult}``.
     Mismatches against the bit-true model do not raise: they are counted in the summary.
     """
@@ -712,6 +747,10 @@ def simulate_data(
     from pwas_hdl.io.csv_table import read_csv, split_trajectories, write_csv
 
     say = progress or (lambda msg: None)
+    if engine not in ENGINES:
+        raise InputError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if simulator is None:
+        simulator = "verilator" if engine == "native" else "icarus"
     if simulator not in SIMULATORS:
         raise ValueError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
     if not 0.0 <= stall < 1.0:
@@ -751,9 +790,12 @@ def simulate_data(
         xs.append(xi)
     p = 1.0 - stall
     run = Run("replay", segs, p, p, seed)
-    say(f"simulating {sum(len(s.src) for s in segs)} samples of {data} through {design.top} on {simulator} ...")
+    if engine == "native" and (simulator != "verilator" or waves):
+        raise InputError("--engine native runs on Verilator without waveforms: use --simulator verilator and no --waves "
+                         "(or --engine cocotb)")
+    say(f"simulating {sum(len(s.src) for s in segs)} samples of {data} through {design.top} on {simulator} ({engine}) ...")
     t0 = time.perf_counter()
-    res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False,
+    res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False, engine=engine,
                   work_dir=(Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else None)
     wall = time.perf_counter() - t0
     lsb = 2.0 ** -model.output_format.frac
@@ -812,6 +854,7 @@ def simulate_data(
         "outdir": str(design.outdir),
         "data": str(data),
         "simulator": simulator,
+        "engine": engine,
         "simulator_version": sim_module("pwas_runner").tool_versions(simulator),
         "samples": n,
         "input_transfers": int(sum(len(s.codes) for s in segs)),
