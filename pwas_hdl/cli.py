@@ -541,6 +541,28 @@ def simulate(
                               f"{json.dumps(s['first_mismatch'])}); the outputs are in {output}")
 
 
+@app.command("export-testbench")
+def export_testbench(
+    outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate`.")],
+    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="Folder to write (default OUTDIR/tb; replaced only if an earlier export made it).")] = None,
+    samples: Annotated[int, typer.Option("--samples", help="Input transfers of the stimulus (random points, plus vertices, faces, corners, out-of-domain codes).")] = 1000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the stimulus and of the stall pattern.")] = 0,
+    stall: Annotated[float, typer.Option("--stall", help="Probability of a bubble / of backpressure per cycle in the stalled passes.")] = 0.3,
+) -> None:
+    """Write a self-checking plain-Verilog testbench of a generated design (no Python needed to run it).
+
+    The folder holds tb_TOP.v, the input and expected-output vectors ($readmemh, from the bit-true
+    model), a copy of the design and run_icarus.sh / run_verilator.sh. The testbench prints PASS or
+    FAIL and exits non-zero on failure ($fatal).
+    """
+    from pwas_hdl.verify.testbench import export_testbench as _export
+
+    with _user_errors():
+        res = _export(outdir, output, samples=samples, seed=seed, stall=stall)
+    out.print_json(json.dumps(res))
+    _say(f"wrote {res['outdir']}/ ({len(res['files'])} files); run it with {res['outdir']}/run_icarus.sh or run_verilator.sh")
+
+
 @app.command()
 def explore(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],

@@ -37,7 +37,13 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from pwas_runner import SIM_DIR, VERILATOR_MAKE_VARS, SimulationError, default_cache_dir, tool_versions
+try:  # loaded by pwas_hdl.verify.simulation.sim_module (which registers pwas_runner) or with sim/ on sys.path
+    from pwas_runner import SIM_DIR, VERILATOR_MAKE_VARS, SimulationError, default_cache_dir, tool_versions
+except ImportError:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from pwas_runner import SIM_DIR, VERILATOR_MAKE_VARS, SimulationError, default_cache_dir, tool_versions
 
 __all__ = ["TB_SOURCE", "PROBLEMS", "NativeBuild", "ports_header", "verilator_member", "pack_words", "unpack_words",
            "build", "write_job", "run"]

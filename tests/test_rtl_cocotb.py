@@ -64,6 +64,8 @@ CONFIGS = [
     DesignConfig("s-u3y3-p2-max", S, 3, 3, 1, 1, 2, 1, {"pipeline": "max"}),
     DesignConfig("s-y2-ny2-p5x3-b8", S, 0, 2, 0, 2, [5, 3, 5, 3], 1, {"input_bits": 8}),
     DesignConfig("s-u1y2-p8-6-z2-b16", S, 1, 2, 1, 1, [8, 6, 6], 2, {"input_bits": 16}),
+    DesignConfig("c-n2-p3x2-amaranth-ports", C, 0, 2, 0, 1, [3, 2], 1, {"ports": "amaranth"}),
+    DesignConfig("s-y2-p5-amaranth-ports", S, 0, 2, 0, 1, 5, 1, {"ports": "amaranth", "pipeline": "max"}),
     DesignConfig("s-y3-p4-addr-reg-repl", S, 0, 3, 0, 1, 4, 1,
                  {"memory": "replicated", "pipeline": {"split": False, "rank": True, "addr": True, "mem_out": False, "product": False, "tree_levels": 0}}),
 ]
@@ -293,3 +295,73 @@ def test_design_with_split_cpp_builds_and_passes(simulator, lorenz_files, sim_ca
         classes = (bdir / "Vtop_classes.mk").read_text()
         assert "VM_PARALLEL_BUILDS = 1" in classes  # split: the precompiled-header rules were used
         assert len(list(bdir.glob("Vtop___024root__*.cpp"))) >= 4
+
+
+# ------------------------------------------------------------------------------------ native engine
+NATIVE = ["c-n1-p5", "c-n6-p2x2x2x2x2x2", "s-u2y3-p4-2-z2", "c-n3-p5x3x2-readmemh", "c-n1-p8-z2-repl-min-b8",
+          "s-y2-p5-amaranth-ports", "c-n4-p8x4x8x2-z2-b14"]
+
+
+@pytest.mark.rtl
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NATIVE)
+def test_native_engine_equals_bittrue_model(name, design_folder, sim_cache, tmp_path):
+    """The Verilator C++ bench replays the standard runs (full speed, stalls, reset mid-stream) and
+    checks what the cocotb bench checks: wide payloads (> 64 bits), readmemh, warm, both port namings."""
+    d = load_design(design_folder(name))
+    codes = stimulus_for(d, seed=len(name) + 1)
+    runs = standard_runs(d, codes, seed=len(name))
+    res = run_rtl(d, runs, "verilator", cache_dir=sim_cache, work_dir=tmp_path, engine="native")
+    assert res.passed, res.report()
+    assert res.raw["passed"] is True  # the C++ bench's own verdict (exit status 0)
+    per_stream = len(segment(d, codes).src)
+    assert res.outputs >= 2 * per_stream + len(runs[2].segments[1].src)
+    assert set(res.latencies) == {d.latency} and res.ii == 1.0
+    assert res.within_bound, res.report()
+    oor = np.concatenate([o for run in res.hw for _, o in run])
+    assert oor.any() and not oor.all()
+
+
+@pytest.mark.rtl
+@pytest.mark.slow
+@pytest.mark.parametrize("mutation, name", [("weight-bit", "s-y4-p3"), ("round-plus-1-lsb", "c-n4-p3x1x2x4"),
+                                            ("lo-code-off-by-one", "c-n3-p2x3x5-min-fill1")])
+def test_native_engine_fails_on_mutated_rtl(mutation, name, design_folder, sim_cache, tmp_path):
+    d = load_design(design_folder(name))
+    dm, desc = _mutated(d, MUTATIONS[mutation][0], tmp_path)
+    codes = stimulus_for(d, seed=1, m=200)
+    res = run_rtl(dm, standard_runs(dm, codes, seed=1), "verilator", cache_dir=sim_cache, work_dir=tmp_path / "run", engine="native")
+    assert not res.passed and res.mismatches > 0, f"{desc}: the native bench did not notice\n{res.report()}"
+    assert res.raw["passed"] is False  # the C++ bench exited with status 1
+    assert "differ from the bit-true model" in res.report()
+
+
+def test_native_engine_refuses_what_it_cannot_do(design_folder, sim_cache, tmp_path):
+    from pwas_hdl.errors import InputError
+
+    d = load_design(design_folder("c-n1-p5"))
+    runs = [Run("full-speed", [segment(d, stimulus_for(d, seed=0, m=10))])]
+    with pytest.raises(InputError, match="Verilator only"):
+        run_rtl(d, runs, "icarus", engine="native", cache_dir=sim_cache)
+    with pytest.raises(InputError, match="cocotb engine"):
+        run_rtl(d, runs, "verilator", engine="native", debug=True, cache_dir=sim_cache)
+    with pytest.raises(InputError, match="--engine"):
+        run_rtl(d, runs, "verilator", engine="vcs", cache_dir=sim_cache)
+
+
+@pytest.mark.rtl
+@pytest.mark.slow
+def test_native_and_cocotb_replays_agree(lorenz_files, sim_cache, tmp_path):
+    """simulate_data with --engine native writes the same CSV and summary numbers as the cocotb bench."""
+    a = simulate_data(lorenz_files / "sensor", lorenz_files / "test.csv", tmp_path / "n.csv", engine="native", stall=0.3, cache_dir=sim_cache)
+    b = simulate_data(lorenz_files / "sensor", lorenz_files / "test.csv", tmp_path / "c.csv", simulator="verilator", stall=0.3,
+                      cache_dir=sim_cache)
+    assert (tmp_path / "n.csv").read_text() == (tmp_path / "c.csv").read_text()
+    sa, sb = a["summary"], b["summary"]
+    assert sa["engine"] == "native" and sb["engine"] == "cocotb"
+    assert set(sa) == set(sb)
+    for k in ("samples", "mismatches", "out_of_range", "max_error_vs_float_lsb", "targets", "within_error_bound"):
+        assert sa[k] == sb[k], k
+    assert sa["mismatches"] == 0
+    lat = sa["latency_cycles"]
+    assert lat["measured_min"] >= lat["manifest"]  # with stalls, waiting on out.ready is included

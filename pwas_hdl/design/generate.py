@@ -197,9 +197,13 @@ def _instance(man: dict) -> str:
     conns = ",\n".join(
         f"    .{p['name']}({p['name']})" for p in man["ports"]
     )
+    init = man["memory"].get("init", {})
+    params = f'#(.{init["parameter"]}("{init["default"]}")) ' if init.get("parameter") else ""
+    mem_dir = (f"// {init['parameter']}: folder of the .hex weight files (with the trailing /), relative to the\n"
+               "// simulator's working directory or absolute.\n") if params else ""
     return _template("instance.v.tmpl").substitute(
         top=man["top"], version=__version__, clock=man["clock"]["port"], reset=_reset_text(man),
-        latency=man["latency_cycles"], ii=man["ii"],
+        latency=man["latency_cycles"], ii=man["ii"], parameters=params, mem_dir_comment=mem_dir,
         field_comments="\n".join(comments), connections=conns,
     )
 
@@ -290,7 +294,7 @@ def build_design(
     GeneratedDesign
     """
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
-    from pwas_hdl.hdl.emit import memory_hex_files
+    from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 
     if design not in ("core", "sensor"):
         raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
@@ -347,6 +351,10 @@ def build_design(
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
     if timing is not None:
         options.update(target_mhz=float(target_mhz), fpga_target=fpga_target)
+    # how the weights get into the memories (the manifest's memory.init; MEM_DIR: pwas_hdl.hdl.emit)
+    info["memory"]["init"] = ({"kind": "readmemh", "parameter": MEM_DIR_PARAMETER, "default": MEM_DIR_DEFAULT,
+                               "meaning": "folder of the hex files with its trailing /, prefixed to their names"}
+                              if memory_init == "readmemh" else {"kind": "inline"})
     man = build_manifest(design, top, fxm, info, sensor, files, options, timing)
     texts: dict[str, str] = {
         files["verilog"]: verilog,

