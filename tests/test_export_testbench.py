@@ -1,0 +1,130 @@
+"""`pwas-hdl export-testbench`: the plain-Verilog self-checking testbench passes in Icarus and
+Verilator on a correct design and fails (non-zero exit status) on a corrupted weight."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.cli import app
+from pwas_hdl.flow.toolchain import tool_env, which
+from pwas_hdl.verify.simulation import sim_module
+from pwas_hdl.verify.testbench import export_testbench
+
+designs = sim_module("pwas_designs")
+DesignConfig = designs.DesignConfig
+
+SENSOR = DesignConfig("s-u1y2-p3", "sensor", 1, 2, 1, 1, 3, 1, {})
+CORE_WIDE_READMEMH = DesignConfig("c-n6-p2-readmemh-amaranth", "core", 0, 6, 0, 1, 2, 2,
+                                  {"memory_init": "readmemh", "ports": "amaranth", "pipeline": "max"})
+
+needs_iverilog = pytest.mark.skipif(which("iverilog") is None, reason="iverilog not installed")
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    root = tmp_path_factory.mktemp("export-tb")
+    for cfg in (SENSOR, CORE_WIDE_READMEMH):
+        cfg.generate(root / cfg.name)
+    return root
+
+
+def _icarus(tb: Path, cwd: Path | None = None, params: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    name = next(tb.glob("tb_*.v")).stem
+    files = (tb / "files.f").read_text().split()
+    ps = [f'-P{name}.{k}="{v}"' for k, v in (params or {}).items()]
+    vvp = tb / f"{name}.vvp"
+    subprocess.run(["iverilog", "-g2005", *ps, "-o", str(vvp), *[str(tb / f) for f in files]], check=True, capture_output=True)
+    return subprocess.run(["vvp", "-n", str(vvp)], cwd=cwd or tb, capture_output=True, text=True, timeout=600)
+
+
+def _flip_weight(verilog: Path) -> None:
+    text = verilog.read_text()
+    mo = re.search(r"wmem0\[(\d+)\] = (\d+)'h([0-9a-f]+);", text)
+    assert mo, "no inline weight to corrupt"
+    word = int(mo.group(3), 16) ^ (1 << 6)
+    verilog.write_text(text.replace(mo.group(0), f"wmem0[{mo.group(1)}] = {mo.group(2)}'h{word:x};", 1))
+
+
+def _flip_hex(hexfile: Path) -> None:
+    lines = hexfile.read_text().splitlines()
+    lines[0] = f"{int(lines[0], 16) ^ (1 << 6):0{len(lines[0])}x}"
+    hexfile.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.rtl
+@needs_iverilog
+def test_icarus_passes_and_fails_on_a_corrupted_weight(folders, tmp_path):
+    res = export_testbench(folders / SENSOR.name, tmp_path / "tb", samples=300, seed=3)
+    tb = Path(res["outdir"])
+    assert res["outputs"] == res["inputs"] - 1  # My = 2: one warm-up transfer
+    r = _icarus(tb)
+    assert r.returncode == 0 and "PASS" in r.stdout and "FAIL" not in r.stdout, r.stdout + r.stderr
+    # the vector files are what the bit-true model says (the testbench never reads the RTL's answers)
+    text = (tb / "tb_pwas_sensor.v").read_text()
+    assert "$fatal" in text and "$readmemh" in text and "s_axis_tdata" in text and ".aresetn(~rst)" in text
+    bad = tmp_path / "bad"
+    shutil.copytree(tb, bad)
+    _flip_weight(bad / "pwas_sensor.v")
+    r = _icarus(bad)
+    assert r.returncode != 0, r.stdout
+    assert "FAIL" in r.stdout and "output differs from the bit-true model" in r.stdout
+
+
+@pytest.mark.rtl
+@needs_iverilog
+def test_icarus_from_another_directory_with_readmemh(folders, tmp_path):
+    """A readmemh design with Amaranth port names and a > 64-bit input payload, run from elsewhere:
+    VEC_DIR and MEM_DIR (the design's parameter, passed down by the testbench) locate the files."""
+    res = export_testbench(folders / CORE_WIDE_READMEMH.name, tmp_path / "tb", samples=200)
+    tb = Path(res["outdir"])
+    text = (tb / f"{res['testbench']}.v").read_text()
+    assert "#(.MEM_DIR(MEM_DIR))" in text and ".in__payload(in_data)" in text and ".rst(rst)" in text
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    r = _icarus(tb, cwd=elsewhere, params={"VEC_DIR": f"{tb}/", "MEM_DIR": f"{tb}/"})
+    assert r.returncode == 0 and "PASS" in r.stdout, r.stdout + r.stderr
+    _flip_hex(tb / "pwas_core_rom_b0.hex")
+    r = _icarus(tb, cwd=elsewhere, params={"VEC_DIR": f"{tb}/", "MEM_DIR": f"{tb}/"})
+    assert r.returncode != 0 and "FAIL" in r.stdout
+
+
+@pytest.mark.rtl
+@pytest.mark.slow
+def test_verilator_binary_passes_and_fails_on_a_corrupted_hex(folders, tmp_path):
+    res = export_testbench(folders / CORE_WIDE_READMEMH.name, tmp_path / "tb", samples=200)
+    tb = Path(res["outdir"])
+    r = subprocess.run(["sh", str(tb / "run_verilator.sh")], capture_output=True, text=True, env=tool_env(), timeout=900)
+    assert r.returncode == 0 and "PASS" in r.stdout, (r.stdout + r.stderr)[-3000:]
+    exe = tb / "obj_dir" / res["testbench"]
+    _flip_hex(tb / "pwas_core_rom_b0.hex")  # no rebuild: the design reads its weights at time zero
+    r = subprocess.run([str(exe)], cwd=tb, capture_output=True, text=True, timeout=600)
+    assert r.returncode != 0 and "FAIL" in r.stdout, r.stdout + r.stderr
+
+
+def test_export_cli_and_bad_input(folders, tmp_path):
+    runner = CliRunner()
+    r = runner.invoke(app, ["export-testbench", str(folders / SENSOR.name), "-o", str(tmp_path / "t"), "--samples", "50"])
+    assert r.exit_code == 0, r.output
+    files = {f.name for f in (tmp_path / "t").iterdir()}
+    assert {"tb_pwas_sensor.v", "pwas_sensor_tb_in.hex", "pwas_sensor_tb_expected.hex", "pwas_sensor.v", "run_icarus.sh"} <= files
+    # again into the same folder: replaced (it is an export), a foreign non-empty folder is refused
+    assert runner.invoke(app, ["export-testbench", str(folders / SENSOR.name), "-o", str(tmp_path / "t"), "--samples", "50"]).exit_code == 0
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    for args, msg in [
+        ([str(tmp_path / "nodesign")], "does not exist"),
+        ([str(folders / SENSOR.name), "--samples", "0"], "--samples"),
+        ([str(folders / SENSOR.name), "--samples", "2000000"], "limit"),
+        ([str(folders / SENSOR.name), "--stall", "1.5"], "--stall"),
+        ([str(folders / SENSOR.name), "-o", str(tmp_path / "mine")], "not written by export-testbench"),
+    ]:
+        r = runner.invoke(app, ["export-testbench", *args])
+        assert r.exit_code == 2, (args, r.output)
+        assert "error:" in r.output and msg in r.output and "Traceback" not in r.output, r.output
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
