@@ -49,16 +49,16 @@ def _rows(path):
         return list(csv.DictReader(f))
 
 
-@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_simulate_sensor(simulator, folders, sim_cache, tmp_path):
+@pytest.mark.parametrize("simulator, engine", [("icarus", "cocotb"), ("verilator", "cocotb"), ("verilator", "native")])
+def test_simulate_sensor(simulator, engine, folders, sim_cache, tmp_path):
     out = tmp_path / "hw.csv"
     res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "--simulator", simulator,
-                              "-o", str(out), "--build-dir", str(sim_cache)])
+                              "--engine", engine, "-o", str(out), "--build-dir", str(sim_cache)])
     assert res.exit_code == 0, res.output
     s = json.loads((tmp_path / "hw.json").read_text())
     assert s["mismatches"] == 0 and s["first_mismatch"] is None
     assert s["samples"] == 150 - 1  # M = max(Mu, My) = 2
-    assert s["simulator"] == simulator and s["kind"] == "sensor"
+    assert s["simulator"] == simulator and s["kind"] == "sensor" and s["engine"] == engine
     assert s["latency_cycles"]["measured_min"] == s["latency_cycles"]["measured_max"] == s["latency_cycles"]["manifest"]
     assert s["ii"]["measured"] == 1.0
     assert s["within_error_bound"] and s["max_error_vs_float_lsb"] <= s["error_bound_lsb"] + 1e-9
@@ -101,6 +101,26 @@ def test_simulate_sensor_resets_between_trajectories(folders, sim_cache, tmp_pat
     assert s["samples"] == 149 + 89 and s["mismatches"] == 0 and s["trajectories"] == 2
 
 
+@pytest.mark.rtl
+def test_simulate_native_reports_rtl_mismatch_and_resets_between_trajectories(folders, sim_cache, tmp_path):
+    """The native engine on the two-trajectory data (a reset between them) and on a one-LSB fault."""
+    out = tmp_path / "ok.csv"
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "data.csv"), "--traj-col", "run", "--engine", "native",
+                              "--stall", "0.3", "-o", str(out), "--build-dir", str(sim_cache)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "ok.json").read_text())
+    assert s["samples"] == 149 + 89 and s["mismatches"] == 0 and s["trajectories"] == 2
+    bad = tmp_path / "bad"
+    shutil.copytree(folders / "sensor", bad)
+    d = load_design(bad)
+    d.verilog_path.write_text(mutations.round_constant_plus_one_lsb(d.verilog, d.model.shift)[0])
+    res = runner.invoke(app, ["simulate", str(bad), str(folders / "one.csv"), "--engine", "native", "-o", str(tmp_path / "hw.csv"),
+                              "--build-dir", str(sim_cache)])
+    assert res.exit_code == 1, res.output
+    s = json.loads((tmp_path / "hw.json").read_text())
+    assert s["mismatches"] == s["samples"] == 149
+
+
 def test_simulate_reports_rtl_mismatch(folders, sim_cache, tmp_path):
     """A one-LSB fault in the RTL: every sample is flagged, exit status 1, the summary is written."""
     bad = tmp_path / "bad"
@@ -123,6 +143,9 @@ def test_simulate_reports_rtl_mismatch(folders, sim_cache, tmp_path):
     [
         (["--simulator", "modelsim"], "simulator must be one of"),
         (["--stall", "1.5"], "--stall must be in"),
+        (["--engine", "vcs"], "--engine must be one of"),
+        (["--engine", "native", "--simulator", "icarus"], "runs on Verilator"),
+        (["--engine", "native", "--waves"], "without waveforms"),
     ],
 )
 def test_simulate_bad_options(args, msg, folders, tmp_path):
@@ -146,5 +169,5 @@ def test_simulate_bad_inputs(folders, tmp_path):
 def test_simulate_help():
     res = runner.invoke(app, ["simulate", "--help"])
     assert res.exit_code == 0
-    for opt in ("--simulator", "--json", "--traj-col", "--stall", "--build-dir", "--waves"):
+    for opt in ("--simulator", "--engine", "--json", "--traj-col", "--stall", "--build-dir", "--waves"):
         assert opt in res.output

@@ -13,20 +13,23 @@ Typical use::
     info = design_info(core)           # latency, II, ports, payload fields, memory, pipeline
     top = build_sensor(model, sensor.lags_, name="pwas_sensor")   # lag bank + core
 
-Verilog ports (flattened ``amaranth.lib.stream`` members; all payloads are plain unsigned
-vectors, fields LSB first as listed by ``design_info(...)["payload"]``):
+Verilog ports, in module order, as ``emit_verilog(..., ports="amaranth")`` names them (the
+flattened ``amaranth.lib.stream`` members); the default ``ports="axis"`` names them ``aclk``,
+``aresetn`` (active **low**), ``s_axis_tvalid/tready/tdata``, ``m_axis_tvalid/tready/tdata``,
+``warm`` (:func:`~pwas_hdl.hdl.emit.port_list`). All payloads are plain unsigned vectors, fields
+LSB first as listed by ``design_info(...)["payload"]``:
 
 =================  ======  ==========================================================
 ``clk``            in      rising edge
 ``rst``            in      synchronous, active high; clears the valid bits only
-``in__payload``    in      core: ``n`` signed ``B_in`` codes (``x_j`` at ``[j*B_in +: B_in]``);
-                           sensor top: one code per signal (u0.., y0..)
 ``in__valid``      in
 ``in__ready``      out     ``~out__valid | out__ready`` (sensor top: also 1 during warm-up)
-``out__payload``   out     ``nz`` signed ``B_out`` codes (``z_i`` at ``[i*B_out +: B_out]``),
-                           then ``out_of_range`` at bit ``nz*B_out``
+``in__payload``    in      core: ``n`` signed ``B_in`` codes (``x_j`` at ``[j*B_in +: B_in]``);
+                           sensor top: one code per signal (u0.., y0..)
 ``out__valid``     out
 ``out__ready``     in
+``out__payload``   out     ``nz`` signed ``B_out`` codes (``z_i`` at ``[i*B_out +: B_out]``),
+                           then ``out_of_range`` at bit ``nz*B_out``
 ``warm``           out     sensor top only: the lag bank holds ``M-1`` samples
 =================  ======  ==========================================================
 
