@@ -161,7 +161,7 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         version=__version__,
         model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
                        f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
-        clock=man["clock"]["port"], reset=_reset_text(man), latency=man["latency_cycles"], ii=man["ii"],
+        clock=man["clock"]["port"], reset=_reset_text(man, "`"), latency=man["latency_cycles"], ii=man["ii"],
         port_table=ports, format_table=fmt_table, bound_lsb=f"{eb['lsb']:.4g}", bound_phys=f"{eb['physical']:.4g}",
         bound_terms=terms, domain_table=dom_table, memory_text=mem_text, file_list=files,
     )
@@ -179,9 +179,9 @@ def _file_names(files: dict) -> list[str]:
     return out
 
 
-def _reset_text(man: dict) -> str:
+def _reset_text(man: dict, quote: str = "") -> str:
     r = man["reset"]
-    return f"{r['port']} ({r['kind']}, active {r['polarity']})"
+    return f"{quote}{r['port']}{quote} ({r['kind']}, active {r['polarity']})"
 
 
 def _instance(man: dict) -> str:
