@@ -81,11 +81,16 @@ def test_sensor_design_info_documents_ports_and_warmup():
     model = FixedPointModel.from_sensor(sensor)
     top = build_sensor(model, name="vs_top")
     top._MustUse__silence = True  # described, not elaborated
-    info = design_info(top)
+    info = design_info(top, "amaranth")
     assert info["module"] == "vs_top" and info["kind"] == "sensor"
-    assert [p["name"] for p in info["ports"]] == [
-        "clk", "rst", "in__payload", "in__valid", "in__ready", "out__payload", "out__valid", "out__ready", "warm"
+    assert [p["name"] for p in info["ports"]] == [  # clock, reset, input stream, output stream (issue 8)
+        "clk", "rst", "in__valid", "in__ready", "in__payload", "out__valid", "out__ready", "out__payload", "warm"
     ]
+    axis = design_info(top)  # the default naming
+    assert [p["name"] for p in axis["ports"]] == [
+        "aclk", "aresetn", "s_axis_tvalid", "s_axis_tready", "s_axis_tdata", "m_axis_tvalid", "m_axis_tready", "m_axis_tdata", "warm"
+    ]
+    assert [f["name"] for f in axis["payload"]["s_axis_tdata"]] == ["u0", "y0"]
     assert [f["name"] for f in info["payload"]["in__payload"]] == ["u0", "y0"]
     assert [f["name"] for f in info["payload"]["out__payload"]] == ["z0", "out_of_range"]
     assert info["warmup"]["samples_without_output"] == 2

@@ -223,5 +223,6 @@ def test_readmemh_files_are_the_packed_layout_files():
         core = build_core(model, memory=mem)
         text = emit_verilog(core, "pwas_core", memory_init="readmemh", hex_prefix="wt")
         assert memory_hex_files(core, "wt") == hex_files(model.layout, model.weight_codes, model.weight_format.bits, packed=True, prefix="wt")
-        assert [f'$readmemh("wt_b{b}.hex", wmem{b});' in text for b in range(4)] == [True] * 4
+        assert [f'$readmemh({{MEM_DIR, "wt_b{b}.hex"}}, wmem{b});' in text for b in range(4)] == [True] * 4
+        assert 'parameter MEM_DIR = "./";' in text
         assert "wmem0[0] =" not in text
