@@ -42,7 +42,9 @@ try:  # loaded by pwas_hdl.verify.simulation.sim_module (which registers pwas_ru
 except ImportError:
     import sys
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from pwas_hdl.resources import sim_dir
+
+    sys.path.insert(0, str(sim_dir()))
     from pwas_runner import SIM_DIR, VERILATOR_MAKE_VARS, SimulationError, default_cache_dir, tool_versions
 
 __all__ = ["TB_SOURCE", "PROBLEMS", "NativeBuild", "ports_header", "verilator_member", "pack_words", "unpack_words",
