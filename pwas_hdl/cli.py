@@ -417,6 +417,7 @@ def generate(
     ports: Annotated[str, typer.Option("--ports", help="Port names: axis (aclk, aresetn active low, s_axis_tvalid/tready/tdata, m_axis_tvalid/tready/tdata) or amaranth (clk, rst active high, in__*, out__*).")] = "axis",
     input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes.")] = 12,
     input_fill: Annotated[float, typer.Option("--input-fill", help="Largest fraction of the input code range the domain may take (the rest detects out-of-range).")] = 0.9,
+    input_scale: Annotated[str, typer.Option("--input-scale", help="pow2: one grid cell = 2^F input codes, no arithmetic (a power-of-two p uses at most half the code range); exact: the domain takes the whole --input-fill for any p, with a constant multiplier per input in the front end.")] = "pow2",
     weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Weight width (default: the fewest bits that hold every weight).")] = None,
     weight_frac: Annotated[Optional[int], typer.Option("--weight-frac", help="Weight fraction bits (default: rounding noise <= 5 % of the training RMSE).")] = None,
     output_bits: Annotated[Optional[int], typer.Option("--output-bits", help="Output width (default: never saturates).")] = None,
@@ -443,14 +444,14 @@ def generate(
             with _progress("building the design"):
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
-                    input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
+                    input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                 )
         else:
             with _executor(workers, scheduler) as ex:
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
-                    input_bits=input_bits, input_fill=input_fill, weight_bits=weight_bits, weight_frac=weight_frac,
+                    input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                     target_mhz=target_mhz, fpga_target=fpga,
                     progress=_say, executor=ex,

@@ -365,3 +365,26 @@ def test_signal_formats_differ_refused():
     with pytest.raises(ValueError, match="share_lag_domain"):
         m.signal_input_formats()
     assert m.to_dict()["signals"] is None
+
+
+@pytest.mark.parametrize("case", CASES[:10], ids=_ids)
+def test_exact_input_scale_within_bound(case):
+    """input_scale="exact": the stated bound holds against the float model at the points the circuit
+    evaluates, out_of_range = some code outside [lo_code, hi_code], and both domain corners are
+    reached exactly (their outputs are the rounded corner weights)."""
+    m = _model(case, input_scale="exact")
+    rng = np.random.default_rng(7)
+    q = _test_codes(m, rng)
+    out, oor = m.evaluate(q)
+    ref = m.reference(q)
+    tol = 1e-9 * (1.0 + np.abs(m.weights).max())
+    assert np.abs(m.to_physical_output(out) - ref).max() <= m.error_bound + tol
+    assert np.allclose(ref, m.grid.evaluate(m.weights, m.represented_inputs(q)), rtol=0, atol=tol)
+    lo = np.array([f.lo_code for f in m.inputs])
+    hi = np.array([f.hi_code for f in m.inputs])
+    assert np.array_equal(oor, np.any((q < lo) | (q > hi), axis=1))
+    assert all(f.input_span == min(int(f.fill * 2**f.bits), 2**f.bits - 1) for f in m.inputs)
+    corners, flags = m.evaluate(np.stack([lo, hi]))
+    assert not flags.any()
+    vid = [0, m.grid.n_vertices - 1]
+    assert np.array_equal(corners, shift_round(m.weight_codes[vid] << m.F, m.shift, m.rounding))

@@ -228,6 +228,37 @@ def test_input_domain_codes_are_codes_at_every_fill(bits, p, fill):
     assert f.quantize([3.0]).tolist() == [f.hi_code]
 
 
+@settings(max_examples=300, deadline=None)
+@given(bits=st.integers(2, 14), p=st.integers(1, 600), fill=st.one_of(st.just(1.0), st.floats(0.05, 1.0)))
+def test_exact_input_scale_uses_the_whole_range(bits, p, fill):
+    """input_scale="exact": the domain takes min(floor(fill 2^B), 2^B - 1) codes for any p, and the
+    constant scale t' = (t K) >> R maps them onto the grid exactly at both ends and monotonically."""
+    smax = min(math.floor(fill * 2**bits), 2**bits - 1)
+    try:
+        f = InputFormat.for_interval(-1.0, 3.0, p, bits, fill, scale="exact")
+    except ValueError:
+        assert smax < p
+        return
+    assert f.input_span == smax and f.hi_code - f.lo_code == smax
+    assert f.format.min_code <= f.lo_code < f.hi_code <= f.format.max_code
+    assert (p << f.frac) >= smax and (f.frac == 0 or (p << (f.frac - 1)) < smax)  # F: the smallest that resolves every code
+    t = np.arange(smax + 1)
+    ts = f.scaled(t)
+    assert ts[0] == 0 and ts[-1] == p << f.frac and np.all(np.diff(ts) >= 1)  # exact ends, strictly increasing
+    assert f.quantize([-1.0, 3.0]).tolist() == [f.lo_code, f.hi_code]
+    pow2 = InputFormat.for_interval(-1.0, 3.0, p, bits, fill)
+    assert f.input_span >= pow2.input_span  # never fewer codes than the power-of-two cell
+
+
+def test_exact_scale_doubles_the_codes_of_a_power_of_two_p():
+    pow2 = InputFormat.for_interval(0.0, 1.0, 8, 12, 0.9)
+    exact = InputFormat.for_interval(0.0, 1.0, 8, 12, 0.9, scale="exact")
+    assert pow2.input_span == 2048 and exact.input_span == 3686  # half vs 90 % of the 4096 codes
+    assert exact.scale == "exact" and pow2.scale == "pow2" and exact.to_dict()["scale_mul"] == exact.scale_mul
+    same = InputFormat.for_interval(0.0, 1.0, 7, 12, 3584 / 4096, scale="exact")  # 7 * 512 codes: no scale needed
+    assert same.scale == "pow2" and same.input_span == 3584
+
+
 @pytest.mark.parametrize("p", [1, 2, 3, 4, 5, 7, 8, 255])
 def test_fill_one_8bit_domain_codes(p):
     f = InputFormat.for_interval(0.0, 1.0, p, 8, 1.0)

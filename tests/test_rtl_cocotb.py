@@ -65,6 +65,8 @@ CONFIGS = [
     DesignConfig("s-y2-ny2-p5x3-b8", S, 0, 2, 0, 2, [5, 3, 5, 3], 1, {"input_bits": 8}),
     DesignConfig("s-u1y2-p8-6-z2-b16", S, 1, 2, 1, 1, [8, 6, 6], 2, {"input_bits": 16}),
     DesignConfig("c-n2-p3x2-amaranth-ports", C, 0, 2, 0, 1, [3, 2], 1, {"ports": "amaranth"}),
+    DesignConfig("c-n3-p8x4x1-exact-scale-b10", C, 0, 3, 0, 1, [8, 4, 1], 2, {"input_scale": "exact", "input_bits": 10}),
+    DesignConfig("s-y2-p8-exact-scale-fill95-max", S, 0, 2, 0, 1, 8, 1, {"input_scale": "exact", "input_fill": 0.95, "pipeline": "max"}),
     DesignConfig("s-y2-p5-amaranth-ports", S, 0, 2, 0, 1, 5, 1, {"ports": "amaranth", "pipeline": "max"}),
     DesignConfig("s-y3-p4-addr-reg-repl", S, 0, 3, 0, 1, 4, 1,
                  {"memory": "replicated", "pipeline": {"split": False, "rank": True, "addr": True, "mem_out": False, "product": False, "tree_levels": 0}}),
@@ -126,7 +128,8 @@ def test_rtl_equals_bittrue_model(name, simulator, design_folder, sim_cache, tmp
 
 
 @pytest.mark.parametrize("name", ["c-n3-p4x4x4-z2-repl-sat", "c-n4-p2x3x2x3-addr-reg", "c-n5-p2x2x2x2x2-z2-trunc-max",
-                                  "s-u2y3-p4-2-z2", "s-y3-p4-addr-reg-repl", "c-n1-p8-z2-repl-min-b8"])
+                                  "s-u2y3-p4-2-z2", "s-y3-p4-addr-reg-repl", "c-n1-p8-z2-repl-min-b8",
+                                  "s-y2-p8-exact-scale-fill95-max"])
 def test_debug_probes_agree_on_a_correct_design(name, design_folder, sim_cache, tmp_path):
     """The register/trace mapping used to name the failing stage is itself right: on a correct design
     every pipeline register it models, and every weight-memory word, equals the bit-true trace."""
@@ -299,7 +302,7 @@ def test_design_with_split_cpp_builds_and_passes(simulator, lorenz_files, sim_ca
 
 # ------------------------------------------------------------------------------------ native engine
 NATIVE = ["c-n1-p5", "c-n6-p2x2x2x2x2x2", "s-u2y3-p4-2-z2", "c-n3-p5x3x2-readmemh", "c-n1-p8-z2-repl-min-b8",
-          "s-y2-p5-amaranth-ports", "c-n4-p8x4x8x2-z2-b14"]
+          "s-y2-p5-amaranth-ports", "c-n4-p8x4x8x2-z2-b14", "c-n3-p8x4x1-exact-scale-b10"]
 
 
 @pytest.mark.rtl

@@ -51,6 +51,7 @@ __all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fix
 FORMAT_OPTIONS = (
     "input_bits",
     "input_fill",
+    "input_scale",
     "weight_bits",
     "weight_frac",
     "output_bits",
@@ -143,9 +144,9 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     dom = man["domain"]
     dom_table = _md_table(
         ["regressor", "lo", "hi", "p", "codes lo..hi", "F_j"],
-        [[r, f"{lo:.6g}", f"{hi:.6g}", p, f"{lc} .. {lc + p * 2 ** fb}", fb]
-         for r, lo, hi, p, lc, fb in zip(man["lags"]["regressors"], dom["lo"], dom["hi"], dom["partitions"],
-                                          dom["lo_code"], dom["frac_bits"])],
+        [[r, f"{lo:.6g}", f"{hi:.6g}", p, f"{inp['lo_code']} .. {inp['hi_code']}", fb]
+         for r, lo, hi, p, fb, inp in zip(man["lags"]["regressors"], dom["lo"], dom["hi"], dom["partitions"],
+                                          dom["frac_bits"], fmts["inputs"])],
     )
     mem = man["memory"]
     mem_text = (

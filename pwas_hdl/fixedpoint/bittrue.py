@@ -158,6 +158,11 @@ class FixedPointModel:
         ``B_in`` (default 12).
     input_fill : float
         Fraction of the input code range used by the domain, ``(0, 1]`` (default 0.9).
+    input_scale : {"pow2", "exact"}
+        ``"pow2"`` (default): one cell = ``2**F_j`` input codes, no arithmetic in front (a
+        power-of-two ``p`` uses at most half the code range); ``"exact"``: the domain takes the
+        whole ``input_fill`` of the code range for any ``p`` and the front end scales by a constant
+        (:meth:`InputFormat.for_interval <pwas_hdl.fixedpoint.formats.InputFormat.for_interval>`).
     weight_bits : int, optional
         ``B_w``; default: the fewest bits that hold every weight code.
     weight_frac : int, optional
@@ -221,6 +226,7 @@ class FixedPointModel:
         *,
         input_bits: int = 12,
         input_fill: float = 0.9,
+        input_scale: str = "pow2",
         weight_bits: int | None = None,
         weight_frac: int | None = None,
         output_bits: int | None = None,
@@ -268,13 +274,16 @@ class FixedPointModel:
             raise ValueError(f"need {self.nz} target names, got {len(self.target_names)}")
 
         # ---- inputs
-        self.inputs: list[InputFormat] = grid_input_formats(grid.lo, grid.hi, grid.partitions, input_bits, input_fill)
+        self.inputs: list[InputFormat] = grid_input_formats(grid.lo, grid.hi, grid.partitions, input_bits, input_fill, input_scale)
         self.input_bits = int(input_bits)
         self.input_fill = float(input_fill)
+        self.input_scale = str(input_scale)
         self.F = max(f.frac for f in self.inputs)
         self._lo_code = np.array([f.lo_code for f in self.inputs], dtype=np.int64)
         self._fj = np.array([f.frac for f in self.inputs], dtype=np.int64)
-        self._span = np.array([f.span_codes for f in self.inputs], dtype=np.int64)
+        self._span = np.array([f.input_span for f in self.inputs], dtype=np.int64)  # clamp range, input codes
+        self._kmul = np.array([f.scale_mul for f in self.inputs], dtype=np.int64)
+        self._rsh = np.array([f.scale_shift for f in self.inputs], dtype=np.int64)
         self._qmin = np.array([f.format.min_code for f in self.inputs], dtype=np.int64)
         self._qmax = np.array([f.format.max_code for f in self.inputs], dtype=np.int64)
 
@@ -461,9 +470,17 @@ class FixedPointModel:
         return (q, sat.any(axis=1)) if return_saturated else q
 
     def represented_inputs(self, q) -> np.ndarray:
-        """Physical values the codes stand for, ``lo_j + lsb_j * (q - lo_code_j)``, shape (m, n)."""
+        """Physical points the circuit evaluates for codes ``q``, shape (m, n): ``lo_j + lsb_j * (q -
+        lo_code_j)``; with ``input_scale="exact"``, inside the domain ``lo_j + h_j t'_j / 2**F_j``
+        (the scaled offset, :meth:`InputFormat.scaled`)."""
         qa = self._check_codes(q)
-        return np.stack([f.to_physical(qa[:, j]) for j, f in enumerate(self.inputs)], axis=1)
+        x = np.stack([f.to_physical(qa[:, j]) for j, f in enumerate(self.inputs)], axis=1)
+        for j, f in enumerate(self.inputs):
+            if f.scale == "exact":
+                t = qa[:, j] - f.lo_code
+                inside = (t >= 0) & (t <= f.input_span)
+                x[inside, j] = f.lo + f.step * np.ldexp(f.scaled(t[inside]).astype(float), -f.frac)
+        return x
 
     def _check_codes(self, q) -> np.ndarray:
         qa = np.atleast_2d(np.asarray(q))
@@ -489,8 +506,9 @@ class FixedPointModel:
         t = qa - self._lo_code
         tc = np.clip(t, 0, self._span)
         oor = np.any(tc != t, axis=1)
-        cell = np.minimum(tc >> self._fj, self.grid.partitions - 1)
-        frac_raw = tc - (cell << self._fj)
+        ts = (tc * self._kmul) >> self._rsh  # input_scale "exact": constant scale to 2**F_j sub-steps per cell
+        cell = np.minimum(ts >> self._fj, self.grid.partitions - 1)
+        frac_raw = ts - (cell << self._fj)
         frac = frac_raw << (self.F - self._fj)
         rank, perm = Grid.order(frac)
         vertices = self.grid.simplex_vertices(cell, perm)
@@ -579,7 +597,7 @@ class FixedPointModel:
         """
         qa = self._check_codes(q)
         tc = np.clip(qa - self._lo_code, 0, self._span)
-        s = np.ldexp(tc.astype(float), -self._fj)
+        s = np.ldexp(((tc * self._kmul) >> self._rsh).astype(float), -self._fj)
         _, _, _, _, vertices, mu = self.grid.locate_grid_units(s)
         return np.einsum("mk,mkz->mz", mu, self.weights[vertices])
 

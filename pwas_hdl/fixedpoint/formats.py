@@ -548,9 +548,29 @@ class InputFormat:
     fill: float
     frac: int
     lo_code: int
+    span: int = 0  # input codes across the domain; 0: p * 2**F (scale "pow2")
+    scale_mul: int = 1  # K of the exact front-end scale t' = (t * K) >> R ("exact")
+    scale_shift: int = 0  # R
+
+    @property
+    def scale(self) -> str:
+        """``"pow2"`` (one cell = ``2**F`` input codes) or ``"exact"`` (a constant scale in front)."""
+        return "pow2" if self.span == 0 else "exact"
+
+    @property
+    def input_span(self) -> int:
+        """Input codes from ``lo`` to ``hi``: ``p * 2**F`` (pow2) or ``S`` (exact)."""
+        return self.span or self.span_codes
+
+    def scaled(self, t) -> np.ndarray:
+        """Grid sub-steps (``2**F`` per cell) of input offsets ``t = q - lo_code``: ``t`` (pow2) or
+        ``(t * K) >> R`` (exact; ``0 -> 0``, ``S -> p * 2**F``, non-decreasing)."""
+        ta = np.asarray(t, dtype=np.int64)
+        return ta if self.span == 0 else (ta * self.scale_mul) >> self.scale_shift
 
     @classmethod
-    def for_interval(cls, lo: float, hi: float, partitions: int, bits: int = 12, fill: float = 0.9, dim: int | None = None) -> "InputFormat":
+    def for_interval(cls, lo: float, hi: float, partitions: int, bits: int = 12, fill: float = 0.9, dim: int | None = None,
+                     scale: str = "pow2") -> "InputFormat":
         """The input format of the interval ``[lo, hi]`` cut into ``partitions`` cells.
 
         Parameters
@@ -565,6 +585,14 @@ class InputFormat:
             Fraction of the code range the domain may use, ``0 < fill <= 1``.
         dim : int, optional
             Dimension index, for error messages.
+        scale : {"pow2", "exact"}
+            ``"pow2"``: one cell is ``2**F`` codes (no arithmetic in front; a power-of-two ``p``
+            uses at most half the code range). ``"exact"``: the domain takes
+            ``S = min(floor(fill * 2**bits), 2**bits - 1)`` codes for any ``p`` and the front end
+            scales the offset ``t = q - lo_code`` by a constant, ``t' = (t * K) >> R`` with
+            ``F`` the smallest such that ``p * 2**F >= S``, ``R = bits + 1`` and
+            ``K = ceil(p * 2**(F + R) / S)``: exact at both ends (``t' = p * 2**F`` at ``t = S``)
+            and monotone; the point the hardware evaluates is ``lo + h * t' / 2**F``.
 
         Raises
         ------
@@ -583,6 +611,21 @@ class InputFormat:
             raise ValueError(f"input_fill = {fill!r}: need a number in (0, 1]")
         fill = float(fill)
         p = int(partitions)
+        if scale not in ("pow2", "exact"):
+            raise ValueError(f"input_scale must be 'pow2' or 'exact', got {scale!r}")
+        if scale == "exact":
+            smax = int(min(Fraction(fill) * (1 << int(bits)), Fraction((1 << int(bits)) - 1)))
+            if smax < p:
+                raise ValueError(f"B_in too small for p{tag} = {p} intervals: input_bits = {bits} at input_fill = {fill} gives "
+                                 f"{smax} codes, fewer than one per grid cell")
+            f = 0
+            while (p << f) < smax:
+                f += 1
+            if (p << f) == smax:  # the cell is a power of two codes already: no scale needed
+                return cls(lo, hi, p, int(bits), fill, int(f), int(-((smax + 1) // 2)))
+            r = int(bits) + 1
+            k = -(-(p << (f + r)) // smax)
+            return cls(lo, hi, p, int(bits), fill, int(f), int(-((smax + 1) // 2)), int(smax), int(k), int(r))
         f = _cell_frac_bits(p, int(bits), fill)
         if f < 0:
             need = int(bits)
@@ -608,8 +651,8 @@ class InputFormat:
 
     @property
     def hi_code(self) -> int:
-        """``lo_code + p * 2**F`` (the code of ``hi``; ``<= max_code``)."""
-        return self.lo_code + self.span_codes
+        """``lo_code + input_span`` (the code of ``hi``; ``<= max_code``)."""
+        return self.lo_code + self.input_span
 
     @property
     def step(self) -> float:
@@ -618,8 +661,8 @@ class InputFormat:
 
     @property
     def lsb(self) -> float:
-        """Physical value of one input code, ``h / 2**F``."""
-        return math.ldexp(self.step, -self.frac)
+        """Physical value of one input code, ``h / 2**F`` (pow2) or ``(hi - lo) / S`` (exact)."""
+        return math.ldexp(self.step, -self.frac) if self.span == 0 else (self.hi - self.lo) / self.span
 
     @property
     def offset(self) -> float:
@@ -628,13 +671,13 @@ class InputFormat:
 
     @property
     def format(self) -> FixedFormat:
-        """``s<bits>.<F>``, rounding half up, saturating."""
-        return FixedFormat(self.bits, self.frac, True, "half_up", "saturate")
+        """``s<bits>.<F>`` (pow2) or ``s<bits>.0`` (exact), rounding half up, saturating."""
+        return FixedFormat(self.bits, self.frac if self.span == 0 else 0, True, "half_up", "saturate")
 
     @property
     def port(self) -> PortFormat:
-        """:class:`PortFormat` with ``scale = h`` and :attr:`offset`."""
-        return PortFormat(self.format, SignalScaling(self.step, self.offset))
+        """:class:`PortFormat` with ``scale = h`` (pow2) or ``lsb`` (exact) and :attr:`offset`."""
+        return PortFormat(self.format, SignalScaling(self.step if self.span == 0 else self.lsb, self.offset))
 
     # --------------------------------------------------------- conversion
     def quantize(self, x, return_saturated: bool = False):
@@ -666,8 +709,9 @@ class InputFormat:
         return self.lo + self.lsb * (np.asarray(q, dtype=np.int64) - self.lo_code).astype(float)
 
     def grid_units(self, q) -> np.ndarray:
-        """Unclamped grid coordinate of codes, ``(q - lo_code) / 2**F`` (exact float)."""
-        return np.ldexp((np.asarray(q, dtype=np.int64) - self.lo_code).astype(float), -self.frac)
+        """Unclamped grid coordinate the hardware computes for codes, ``scaled(q - lo_code) / 2**F``
+        (exact float; ``(q - lo_code) / 2**F`` for pow2)."""
+        return np.ldexp(self.scaled(np.asarray(q, dtype=np.int64) - self.lo_code).astype(float), -self.frac)
 
     def to_dict(self) -> dict:
         """JSON-ready: domain, ``F``, codes, physical scaling."""
@@ -682,7 +726,10 @@ class InputFormat:
             "fill": self.fill,
             "lo_code": self.lo_code,
             "hi_code": self.hi_code,
-            "cell_codes": self.cell_codes,
+            "scale": self.scale,
+            **({"input_span": self.span, "scale_mul": self.scale_mul, "scale_shift": self.scale_shift,
+                "scaled": "t' = ((q - lo_code) * scale_mul) >> scale_shift grid sub-steps, 2**F per cell"}
+               if self.span else {"cell_codes": self.cell_codes}),
             "min_code": self.format.min_code,
             "max_code": self.format.max_code,
             "lsb": self.lsb,
@@ -692,7 +739,9 @@ class InputFormat:
         }
 
 
-def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Sequence[int], bits: int = 12, fill: float = 0.9) -> list[InputFormat]:
+def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Sequence[int], bits: int = 12, fill: float = 0.9,
+                       scale: str = "pow2") -> list[InputFormat]:
     """One :class:`InputFormat` per dimension (e.g. of a :class:`~pwas_hdl.fit.geometry.Grid`:
     ``grid_input_formats(g.lo, g.hi, g.partitions)``)."""
-    return [InputFormat.for_interval(float(a), float(b), int(p), bits, fill, dim=j) for j, (a, b, p) in enumerate(zip(lo, hi, partitions))]
+    return [InputFormat.for_interval(float(a), float(b), int(p), bits, fill, dim=j, scale=scale)
+            for j, (a, b, p) in enumerate(zip(lo, hi, partitions))]

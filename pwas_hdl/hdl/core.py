@@ -214,8 +214,9 @@ class PWASCore(wiring.Component):
             pj, fj = p.partitions[j], p.frac_bits[j]
             q = payload[j * bin_ : (j + 1) * bin_]
             big_l = p.lo_code[j] + (1 << (bin_ - 1))
-            tmax = pj << fj
-            w = min(fj + cw[j], bin_)
+            sc = p.scaling[j]  # input_scale "exact": (S, K, R), t' = (t * K) >> R
+            tmax = sc[0] if sc else pj << fj  # input codes across the domain
+            w = min(fj + cw[j], bin_) if not sc else bits_for(tmax - 1)
             # offset binary qu = q + 2**(B-1) (order preserving); its inverted sign bit is a named
             # net, created only when something reads it
             full = 1 << bin_
@@ -238,6 +239,15 @@ class PWASCore(wiring.Component):
             oor = _or(oor, _or(under, over))
             # inside: (qu - L) mod 2**W holds the cell (upper bits) and the fraction (lower bits)
             t = add_const_wrap(m, qu[:w], -big_l, f"t{j}")
+            if sc:  # exact scale: t in [0, S) -> t' = (t * K) >> R in [0, p * 2**F_j), cell and fraction
+                k_mul, r_sh = sc[1], sc[2]
+                prod = Signal(unsigned(w + k_mul.bit_length()), name=f"tscale{j}")
+                m.d.comb += prod.eq(t * k_mul)
+                sink_unused(m, prod[:r_sh], f"tscale{j}_low")  # the bits the shift drops
+                w = min(fj + cw[j], len(prod) - r_sh)
+                if len(prod) > r_sh + w:  # always 0: t' < p * 2**F_j
+                    sink_unused(m, prod[r_sh + w:], f"tscale{j}_top")
+                t = prod[r_sh : r_sh + w]
             c = 0 if pj == 1 else Signal(unsigned(cw[j]), name=f"c{j}")
             d = Signal(unsigned(dw), name=f"d{j}")
 

@@ -67,6 +67,9 @@ class CoreParams:
     out_frac: int
     weights: np.ndarray = field(repr=False)
     rounding: str = "half_up"
+    #: ``input_scale="exact"`` dimensions: ``(S_j, K_j, R_j)`` (input codes across the domain, scale
+    #: ``t' = (t * K_j) >> R_j``); ``None`` for a pow2 dimension. Empty: every dimension pow2.
+    scaling: tuple = ()
 
     def __post_init__(self) -> None:
         n = len(self.partitions)
@@ -94,6 +97,10 @@ class CoreParams:
         object.__setattr__(self, "partitions", tuple(int(p) for p in self.partitions))
         object.__setattr__(self, "lo_code", tuple(int(v) for v in self.lo_code))
         object.__setattr__(self, "frac_bits", tuple(int(v) for v in self.frac_bits))
+        sc = tuple(self.scaling) or (None,) * n
+        if len(sc) != n:
+            raise ValueError(f"scaling needs {n} entries (one per dimension)")
+        object.__setattr__(self, "scaling", tuple(None if v is None else tuple(int(x) for x in v) for v in sc))
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -156,6 +163,8 @@ def _params_from_model(cls, model) -> CoreParams:
             out_frac=int(model.output_format.frac),
             weights=np.asarray(model.weight_codes, dtype=np.int64),
             rounding=str(model.rounding),
+            scaling=tuple((f.input_span, f.scale_mul, f.scale_shift) if getattr(f, "span", 0) else None
+                          for f in getattr(model, "inputs", [])) or (),
         )
     except AttributeError as exc:
         raise TypeError(f"expected a pwas_hdl.fixedpoint.bittrue.FixedPointModel or CoreParams, got {type(model).__name__} ({exc})") from exc
