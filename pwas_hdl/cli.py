@@ -545,7 +545,7 @@ def simulate(
 @app.command("export-testbench")
 def export_testbench(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate`.")],
-    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="Folder to write (default OUTDIR/tb; replaced only if an earlier export made it).")] = None,
+    output: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (default OUTDIR/tb; replaced only if an earlier export made it).")] = None,
     samples: Annotated[int, typer.Option("--samples", help="Input transfers of the stimulus (random points, plus vertices, faces, corners, out-of-domain codes).")] = 1000,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the stimulus and of the stall pattern.")] = 0,
     stall: Annotated[float, typer.Option("--stall", help="Probability of a bubble / of backpressure per cycle in the stalled passes.")] = 0.3,

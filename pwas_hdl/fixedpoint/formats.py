@@ -726,7 +726,7 @@ class InputFormat:
             "fill": self.fill,
             "lo_code": self.lo_code,
             "hi_code": self.hi_code,
-            "scale": self.scale,
+            "input_scale": self.scale,
             **({"input_span": self.span, "scale_mul": self.scale_mul, "scale_shift": self.scale_shift,
                 "scaled": "t' = ((q - lo_code) * scale_mul) >> scale_shift grid sub-steps, 2**F per cell"}
                if self.span else {"cell_codes": self.cell_codes}),
