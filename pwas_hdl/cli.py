@@ -560,7 +560,7 @@ def export_testbench(
 
     with _user_errors():
         res = _export(outdir, output, samples=samples, seed=seed, stall=stall)
-    out.print_json(json.dumps(res))
+    stdout.print_json(json.dumps(res))
     _say(f"wrote {res['outdir']}/ ({len(res['files'])} files); run it with {res['outdir']}/run_icarus.sh or run_verilator.sh")
 
 
