@@ -7,6 +7,7 @@ sparse: ``H`` has ``n + 1`` non-zeros per row and ``H'H`` couples only vertices 
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Callable, Literal, Sequence
 
@@ -14,10 +15,19 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
+from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.fit.geometry import Grid
 
 __all__ = [
     "tikhonov_matrix",
+    "NormalEquationSolver",
+    "SolveInfo",
+    "choose_method",
+    "estimate_fit_memory",
+    "check_fit_memory",
+    "memory_limit",
+    "DIRECT_MAX_UNKNOWNS",
+    "CG_RTOL",
     "solve_regularized",
     "cross_validate_sigma",
     "CVResult",
@@ -75,13 +85,419 @@ def tikhonov_matrix(grid: Grid, order: int = 0) -> sparse.csc_array:
     return (lap + eps * sparse.identity(n_v, format="csc")).tocsc()
 
 
+# ------------------------------------------------------------------ solver choice and bounds
+#: ``method="auto"`` uses the sparse direct solve while the system has at most this many
+#: unknowns (after the exact reduction of zero-order problems to the data-supported vertices),
+#: and preconditioned conjugate gradients above. Measured on this project's 2-core machine: the
+#: SuperLU factorisation of ``H'H + sigma Gamma`` at N = 10^6 (n = 2, first order) takes ~60 s and
+#: ~1.1 GB of factor, at N = 262 144 (n = 3) ~30 s; at <= 50 000 unknowns it stays well under 1 s.
+DIRECT_MAX_UNKNOWNS = 50_000
+
+#: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
+#: Since ``A = H'H + sigma Gamma >= sigma * lambda_min(Gamma) I`` this guarantees
+#: ``||w - w_direct||_2 <= CG_RTOL * ||b||_2 / (sigma * lambda_min(Gamma))`` (the *weight bound*,
+#: reported per solve in :class:`SolveInfo`); ``lambda_min(Gamma) = 1`` for order 0 and
+#: ``FIRST_ORDER_RIDGE * mean(diag(Laplacian))`` for order 1.
+CG_RTOL = 1e-10
+
+#: Iteration cap of one CG solve (a solve that hits it is reported as not converged).
+CG_MAXITER = 5000
+
+#: The algebraic-multigrid hierarchy of the preconditioner, built for one sigma, is reused for
+#: the other sigmas within this ratio (the preconditioned spectrum then lies within
+#: ``[1 / ratio, ratio]`` of the one it was built for, see :func:`_Preconditioner`).
+AMG_REUSE_RATIO = 10.0
+
+#: Environment variable with the memory limit in bytes (suffixes K, M, G accepted).
+MAX_MEMORY_ENV = "PWAS_HDL_MAX_MEMORY"
+
+#: Default memory limit: this fraction of ``MemAvailable`` in /proc/meminfo.
+MEMORY_FRACTION = 0.8
+
+#: Pessimistic fill factor of the direct factorisation (``nnz(L + U) / nnz(A)``; measured 17-25 on
+#: the grids of this project) used by :func:`estimate_fit_memory`.
+DIRECT_FILL_FACTOR = 40.0
+
+Method = Literal["auto", "direct", "cg"]
+
+
+@dataclass
+class SolveInfo:
+    """How one system ``(H'H + sigma Gamma) w = b`` was solved.
+
+    Attributes
+    ----------
+    method : {"direct", "cg"}
+    iterations : int
+        CG iterations (summed over target columns); 0 for the direct solve.
+    rel_residual : float
+        Largest ``||b - A w|| / ||b||`` over the target columns (computed afresh, not CG's estimate).
+    weight_bound : float
+        Guaranteed bound on ``max_col ||w - w_exact||_2`` from the residual:
+        ``||r|| / (sigma * lambda_min(Gamma))``.
+    converged : bool
+    """
+
+    method: str
+    iterations: int = 0
+    rel_residual: float = 0.0
+    weight_bound: float = 0.0
+    converged: bool = True
+
+    def to_dict(self) -> dict:
+        return {
+            "method": self.method,
+            "iterations": int(self.iterations),
+            "rel_residual": float(self.rel_residual),
+            "weight_bound": float(self.weight_bound),
+            "converged": bool(self.converged),
+        }
+
+
+def gamma_min_eigenvalue(gamma: sparse.sparray) -> float:
+    """Smallest eigenvalue of a Gamma built by :func:`tikhonov_matrix` (exact, no iteration).
+
+    Order 0: 1. Order 1: the ridge ``eps`` (the Laplacian part is positive semidefinite with the
+    constants in its null space, so ``lambda_min(L + eps I) = eps``). Identified by the row sums:
+    those of ``L + eps I`` are all ``eps``.
+    """
+    rs = np.asarray(sparse.csr_array(gamma).sum(axis=1)).reshape(-1)
+    return float(rs.min()) if rs.size else 1.0
+
+
+def parse_memory(text: str | int | float) -> int:
+    """Bytes from ``"4G"``, ``"512M"``, ``"1e9"`` or a number (for ``$PWAS_HDL_MAX_MEMORY``)."""
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        val = float(text)
+    else:
+        t = str(text).strip().upper().removesuffix("B")
+        mult = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}.get(t[-1:], 1)
+        try:
+            val = float(t[:-1] if mult != 1 else t) * mult
+        except ValueError:
+            raise InputError(f"memory limit {text!r} is not a size; give bytes or a number with K, M or G (e.g. 4G)") from None
+    if not (np.isfinite(val) and val > 0):
+        raise InputError(f"memory limit {text!r} must be a positive size (e.g. 4G)")
+    return int(val)
+
+
+def available_memory() -> int | None:
+    """``MemAvailable`` of /proc/meminfo in bytes (None where there is no /proc/meminfo)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def memory_limit(max_memory: int | str | None = None) -> tuple[int | None, str]:
+    """The memory limit in bytes and where it comes from.
+
+    Order: the explicit ``max_memory``; ``$PWAS_HDL_MAX_MEMORY``; ``MEMORY_FRACTION`` of the
+    available RAM; ``(None, ...)`` (no limit) where none of these is known.
+    """
+    if max_memory is not None:
+        return parse_memory(max_memory), "max_memory"
+    env = os.environ.get(MAX_MEMORY_ENV)
+    if env:
+        return parse_memory(env), f"${MAX_MEMORY_ENV}"
+    avail = available_memory()
+    if avail is None:
+        return None, "unknown"
+    return int(MEMORY_FRACTION * avail), f"{MEMORY_FRACTION:.0%} of the available RAM"
+
+
+def _sparse_bytes(nnz: float, rows: int) -> float:
+    idx = 4 if nnz < 2**31 and rows < 2**31 else 8
+    return nnz * (8 + idx) + (rows + 1) * idx
+
+
+def choose_method(n_unknowns: int, method: Method = "auto") -> str:
+    """``"direct"`` or ``"cg"``: ``auto`` picks direct up to :data:`DIRECT_MAX_UNKNOWNS` unknowns."""
+    if method not in ("auto", "direct", "cg"):
+        raise InputError(f"solver method must be 'auto', 'direct' or 'cg', got {method!r}")
+    if method == "auto":
+        return "direct" if n_unknowns <= DIRECT_MAX_UNKNOWNS else "cg"
+    return method
+
+
+def estimate_fit_memory(
+    n_samples: int, n_vertices: int, n_dims: int, n_targets: int = 1, order: int = 0, method: Method = "auto"
+) -> dict[str, float]:
+    """Estimated peak bytes of a fit (with CV), before anything is allocated.
+
+    Parameters
+    ----------
+    n_samples : int
+        Rows ``T`` of ``H``.
+    n_vertices : int
+        Weights ``N`` per target.
+    n_dims : int
+        Regressor dimension ``n`` (``H`` has ``n + 1`` entries per row).
+    n_targets : int
+        Target columns ``nz``.
+    order : {0, 1}
+        Tikhonov order.
+    method : {"auto", "direct", "cg"}
+
+    Returns
+    -------
+    dict
+        ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
+        ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
+        twice ``A``, or a diagonal), ``vectors`` (weights, right-hand sides, CG work vectors) and
+        ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
+    """
+    t, nv, k = int(n_samples), int(n_vertices), int(n_dims) + 1
+    nnz_h = t * k
+    nnz_hth = min(float(nv) * nv, float(t) * k * k)
+    nnz_gam = float(nv) if order == 0 else float(nv) * (2 * k - 1)
+    nnz_a = nnz_hth + nnz_gam
+    unknowns = min(nv, nnz_h) if order == 0 else nv
+    chosen = choose_method(unknowns, method)
+    est = {
+        "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
+        "HtH": 3 * _sparse_bytes(nnz_a, nv),
+        "Gamma": _sparse_bytes(nnz_gam, nv),
+        "factor": (
+            _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv)
+            if chosen == "direct"
+            else (2 * _sparse_bytes(nnz_a, nv) if order == 1 else 8.0 * nv)
+        ),
+        "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
+    }
+    est["total"] = float(sum(est.values()))
+    est["method"] = 1.0 if chosen == "cg" else 0.0
+    return est
+
+
+def check_fit_memory(
+    n_samples: int,
+    n_vertices: int,
+    n_dims: int,
+    n_targets: int = 1,
+    order: int = 0,
+    method: Method = "auto",
+    max_memory: int | str | None = None,
+) -> dict[str, float]:
+    """Refuse a fit whose estimated memory exceeds the limit, before allocating anything.
+
+    Parameters are those of :func:`estimate_fit_memory`; ``max_memory`` (bytes, or ``"4G"``)
+    overrides ``$PWAS_HDL_MAX_MEMORY`` and the default of ``MEMORY_FRACTION`` of the available RAM.
+
+    Returns
+    -------
+    dict
+        The estimate (see :func:`estimate_fit_memory`).
+
+    Raises
+    ------
+    ResourceLimit
+        Naming the estimate, its largest parts and the limit.
+    """
+    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method)
+    limit, source = memory_limit(max_memory)
+    if limit is not None and est["total"] > limit:
+        parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "vectors"))
+        raise ResourceLimit(
+            f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
+            f"N = {n_vertices} weights, over the limit of {limit / 2**20:.0f} MiB ({source}); use fewer partitions "
+            f"or samples, or raise the limit with max_memory / ${MAX_MEMORY_ENV}"
+        )
+    return est
+
+
+def _order_of(gamma: sparse.sparray) -> int:
+    """0 when Gamma is the identity (zero order), else 1."""
+    g = sparse.csr_array(gamma)
+    return 0 if g.nnz == g.shape[0] and np.all(g.diagonal() == 1.0) else 1
+
+
+def _dims_of(h: sparse.sparray) -> int:
+    """Regressor dimension ``n`` from the non-zeros per row of ``H`` (``n + 1``)."""
+    return max(int(np.ceil(h.nnz / max(h.shape[0], 1))) - 1, 1)
+
+
+# ------------------------------------------------------------------------------- solvers
 def _solve_spd(a: sparse.csc_array, b: np.ndarray) -> np.ndarray:
     """Solve the sparse SPD system ``a x = b`` (``b`` shape (N,) or (N, k)) by sparse LU."""
     lu = splinalg.splu(sparse.csc_matrix(a), permc_spec="MMD_AT_PLUS_A")
     return lu.solve(np.asarray(b, dtype=float))
 
 
-def solve_regularized(h: sparse.sparray, z: np.ndarray, sigma: float, gamma: sparse.sparray) -> np.ndarray:
+class _Preconditioner:
+    """Preconditioner of ``A = M_data + sigma Gamma`` for conjugate gradients.
+
+    Order 0 (``Gamma = I``): Jacobi, ``diag(A)^{-1}``. Order 1: one V-cycle of smoothed-aggregation
+    algebraic multigrid (pyamg) on the *lumped* surrogate ``diag(rowsum(H'H)) + sigma0 Gamma``, an
+    M-matrix (a scaled grid Laplacian plus a positive diagonal) for which AMG is made; since
+    ``H'H <= diag(rowsum(H'H))`` (each row of ``H`` is a probability vector) the surrogate bounds
+    ``A`` from above. The hierarchy is built on the full-data normal matrix and reused for every
+    fold, and for every sigma within ``AMG_REUSE_RATIO`` of ``sigma0``: surrogates of two sigmas
+    are spectrally equivalent within their ratio.
+    """
+
+    def __init__(self, lumped: np.ndarray, gamma: sparse.csr_array, order: int):
+        self.lumped = lumped
+        self.gamma = gamma
+        self.order = order
+        self._sigma0: float | None = None
+        self._ml = None
+        self.builds = 0
+
+    def get(self, a: sparse.csr_array, sigma: float):
+        if self.order == 0:
+            d = a.diagonal()
+            return splinalg.LinearOperator(a.shape, matvec=lambda v: v / d if v.ndim == 1 else v / d[:, None], dtype=float)
+        if self._ml is None or not (1.0 / AMG_REUSE_RATIO <= sigma / self._sigma0 <= AMG_REUSE_RATIO):
+            import pyamg
+
+            m = (sparse.diags_array(self.lumped) + sigma * self.gamma).tocsr()
+            self._ml = pyamg.smoothed_aggregation_solver(sparse.csr_matrix(m), symmetry="symmetric")
+            self._sigma0 = sigma
+            self.builds += 1
+        return self._ml.aspreconditioner(cycle="V")
+
+
+def _cg(
+    a: sparse.csr_array,
+    b: np.ndarray,
+    precond,
+    x0: np.ndarray | None,
+    sigma: float,
+    lam_gamma: float,
+    rtol: float,
+    maxiter: int,
+) -> tuple[np.ndarray, SolveInfo]:
+    """Preconditioned CG column by column; the stopping test is ``||b - A w|| <= rtol ||b||``."""
+    b2 = np.asarray(b, dtype=float).reshape(a.shape[0], -1)
+    w = np.zeros_like(b2) if x0 is None else np.array(x0, dtype=float).reshape(b2.shape)
+    its, worst_rel, worst_abs, ok = 0, 0.0, 0.0, True
+    for j in range(b2.shape[1]):
+        nb = float(np.linalg.norm(b2[:, j]))
+        if nb == 0.0:
+            w[:, j] = 0.0
+            continue
+        count = [0]
+
+        def _cb(_xk, count=count):
+            count[0] += 1
+
+        wj, info = splinalg.cg(a, b2[:, j], x0=w[:, j], rtol=rtol, atol=0.0, maxiter=maxiter, M=precond, callback=_cb)
+        w[:, j] = wj
+        its += count[0]
+        r = float(np.linalg.norm(b2[:, j] - a @ wj))
+        worst_rel = max(worst_rel, r / nb)
+        worst_abs = max(worst_abs, r)
+        ok = ok and info == 0
+    bound = worst_abs / (sigma * lam_gamma)
+    return w.reshape(np.shape(b)), SolveInfo("cg", its, worst_rel, bound, ok)
+
+
+class NormalEquationSolver:
+    """Solves ``(M + sigma Gamma) w = b`` for many ``M`` (folds) and sigmas, reusing work.
+
+    Zero-order problems are first reduced, exactly, to the vertices that some sample touches
+    (elsewhere the row of ``H'H`` is zero and so is ``b``: ``w = 0``).
+
+    Parameters
+    ----------
+    hth : sparse array, shape (N, N)
+        Full-data normal matrix ``H'H`` (the preconditioner is built from it).
+    gamma : sparse array, shape (N, N)
+    method : {"auto", "direct", "cg"}
+        See :func:`choose_method`.
+    rtol : float
+        CG relative-residual tolerance (default :data:`CG_RTOL`).
+    maxiter : int
+    """
+
+    def __init__(
+        self,
+        hth: sparse.sparray,
+        gamma: sparse.sparray,
+        method: Method = "auto",
+        rtol: float = CG_RTOL,
+        maxiter: int = CG_MAXITER,
+    ):
+        hth = sparse.csr_array(hth)
+        gamma = sparse.csr_array(gamma)
+        self.n = hth.shape[0]
+        self.lam_gamma = gamma_min_eigenvalue(gamma)
+        self.order = _order_of(gamma)
+        if self.order == 0:
+            self.keep = np.flatnonzero(hth.diagonal() > 0)
+            if self.keep.size == self.n:
+                self.keep = None
+        else:
+            self.keep = None
+        self.gamma = self._restrict(gamma)
+        self.method = choose_method(self.n if self.keep is None else self.keep.size, method)
+        self.rtol, self.maxiter = float(rtol), int(maxiter)
+        if self.method == "cg":
+            lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
+            self._pre = _Preconditioner(lumped, self.gamma, self.order)
+        self.infos: list[SolveInfo] = []
+
+    def _restrict(self, m: sparse.sparray) -> sparse.csr_array:
+        m = sparse.csr_array(m)
+        return m if self.keep is None else sparse.csr_array(m[self.keep][:, self.keep])
+
+    def restrict_matrix(self, m: sparse.sparray) -> sparse.csr_array:
+        """``m`` on the unknowns that are solved for (identity map unless order 0 with empty vertices)."""
+        return self._restrict(m)
+
+    def solve(
+        self, m: sparse.csr_array, b: np.ndarray, sigma: float, x0: np.ndarray | None = None
+    ) -> tuple[np.ndarray, SolveInfo]:
+        """Weights for ``(m + sigma Gamma) w = b``.
+
+        Parameters
+        ----------
+        m : sparse array
+            A normal matrix already passed through :meth:`restrict_matrix`.
+        b : ndarray, shape (N,) or (N, nz)
+            Full-size right-hand side.
+        sigma : float
+        x0 : ndarray, optional
+            Full-size warm start (CG only).
+
+        Returns
+        -------
+        w : ndarray, same shape as ``b``
+        info : SolveInfo
+        """
+        b = np.asarray(b, dtype=float)
+        bk = b if self.keep is None else b[self.keep]
+        a = (m + sigma * self.gamma).tocsr()
+        if self.method == "direct":
+            wk = _solve_spd(a.tocsc(), bk)
+            info = SolveInfo("direct")
+        else:
+            x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
+            wk, info = _cg(a, bk, self._pre.get(a, sigma), x0k, sigma, self.lam_gamma, self.rtol, self.maxiter)
+        self.infos.append(info)
+        if self.keep is None:
+            return wk, info
+        w = np.zeros_like(b)
+        w[self.keep] = wk
+        return w, info
+
+
+def solve_regularized(
+    h: sparse.sparray,
+    z: np.ndarray,
+    sigma: float,
+    gamma: sparse.sparray,
+    method: Method = "auto",
+    x0: np.ndarray | None = None,
+    rtol: float = CG_RTOL,
+    max_memory: int | str | None = None,
+    return_info: bool = False,
+):
     """Weights ``w = (H'H + sigma Gamma)^{-1} H'z`` (eq. 16).
 
     Parameters
@@ -93,17 +509,41 @@ def solve_regularized(h: sparse.sparray, z: np.ndarray, sigma: float, gamma: spa
     sigma : float
         Tikhonov weight (``> 0``; unnormalised as in eq. 14).
     gamma : sparse array, shape (N, N)
-        Regularisation matrix (symmetric positive definite).
+        Regularisation matrix (symmetric positive definite, from :func:`tikhonov_matrix`).
+    method : {"auto", "direct", "cg"}
+        Sparse LU, or conjugate gradients to relative residual ``rtol`` (see
+        :data:`DIRECT_MAX_UNKNOWNS`, :data:`CG_RTOL` for the rule and the weight bound).
+    x0 : ndarray, shape like the result, optional
+        Warm start for CG.
+    rtol : float
+        CG tolerance.
+    max_memory : int or str, optional
+        Memory limit (see :func:`check_fit_memory`).
+    return_info : bool
+        Also return the :class:`SolveInfo`.
 
     Returns
     -------
-    ndarray, shape (N,) or (N, nz)
+    ndarray, shape (N,) or (N, nz)  (and SolveInfo with ``return_info``)
+
+    Raises
+    ------
+    InputError
+        ``sigma`` not a positive finite number.
+    ResourceLimit
+        Estimated memory over the limit.
     """
     if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be a positive finite number, got {sigma!r}")
+        raise InputError(f"sigma must be a positive finite number, got {sigma!r}")
+    z = np.asarray(z, dtype=float)
+    nz = 1 if z.ndim == 1 else z.shape[1]
+    h = sparse.csr_array(h)
+    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), nz, _order_of(gamma), method, max_memory)
     ht = h.T.tocsr()
-    a = (ht @ h + sigma * gamma).tocsc()
-    return _solve_spd(a, ht @ z)
+    hth = ht @ h
+    solver = NormalEquationSolver(hth, gamma, method, rtol)
+    w, info = solver.solve(solver.restrict_matrix(hth), ht @ z, float(sigma), x0)
+    return (w, info) if return_info else w
 
 
 @dataclass
@@ -120,6 +560,11 @@ class CVResult:
         The candidate with the lowest validation MSE.
     folds : int
         Number of folds.
+    fold_mse : ndarray, shape (folds, S)
+        Validation MSE of each fold and candidate.
+    solver : dict
+        How the systems were solved: ``method``, ``solves``, CG ``iterations`` in total,
+        ``max_rel_residual``, ``all_converged`` (not written to the model file).
     """
 
     sigmas: np.ndarray
@@ -127,6 +572,7 @@ class CVResult:
     best_sigma: float
     folds: int
     fold_mse: np.ndarray = field(repr=False, default_factory=lambda: np.empty(0))
+    solver: dict = field(repr=False, default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
@@ -140,9 +586,9 @@ class CVResult:
 def fold_labels(n_rows: int, folds: int, shuffle: bool = False, seed: int = 0) -> np.ndarray:
     """Fold number of every row: contiguous blocks (default, honest for time series) or shuffled."""
     if folds < 2:
-        raise ValueError(f"cross-validation needs at least 2 folds, got {folds}")
+        raise InputError(f"cross-validation needs at least 2 folds, got {folds}")
     if n_rows < folds:
-        raise ValueError(f"cannot split {n_rows} samples into {folds} folds; use fewer folds or more data")
+        raise InputError(f"cannot split {n_rows} samples into {folds} folds; use fewer folds or more data")
     labels = (np.arange(n_rows) * folds) // n_rows
     if shuffle:
         labels = np.random.default_rng(seed).permutation(labels)
@@ -158,11 +604,18 @@ def cross_validate_sigma(
     shuffle: bool = False,
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
+    method: Method = "auto",
+    rtol: float = CG_RTOL,
+    max_memory: int | str | None = None,
 ) -> CVResult:
     """Choose sigma by k-fold cross-validation over a grid of candidates.
 
-    For each fold the normal equations of the other folds are formed once
-    (``H_k'H_k = H'H - H_v'H_v``), and one sparse factorisation per candidate sigma is made.
+    Work is reused across folds and sigmas: ``H'H`` and ``H'z`` are formed once and each fold's
+    normal equations are the total minus the fold's part (``H_k'H_k = H'H - H_v'H_v``). With the
+    direct method there is one sparse factorisation per (fold, sigma). With CG the sigmas of a
+    fold are solved from the largest down, each warm-started from the previous sigma's weights,
+    and the preconditioner is built from the full-data ``H'H`` and shared by all folds (see
+    :class:`NormalEquationSolver`).
 
     Parameters
     ----------
@@ -180,6 +633,12 @@ def cross_validate_sigma(
         Seed of the shuffle.
     progress : callable(done, total), optional
         Called after each solve.
+    method : {"auto", "direct", "cg"}
+        Solver (see :func:`choose_method`).
+    rtol : float
+        CG relative-residual tolerance.
+    max_memory : int or str, optional
+        Memory limit (see :func:`check_fit_memory`).
 
     Returns
     -------
@@ -187,23 +646,28 @@ def cross_validate_sigma(
     """
     sig = np.asarray(DEFAULT_SIGMA_GRID if sigmas is None else sigmas, dtype=float).reshape(-1)
     if sig.size == 0 or not np.all(np.isfinite(sig)) or np.any(sig <= 0):
-        raise ValueError("sigma candidates must be positive finite numbers")
+        raise InputError("sigma candidates must be positive finite numbers")
     h = sparse.csr_array(h)
     z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
     labels = fold_labels(h.shape[0], folds, shuffle, seed)
+    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory)
     ht = h.T.tocsr()
-    hth = (ht @ h).tocsc()
+    hth = (ht @ h).tocsr()
     htz = ht @ z2
+    solver = NormalEquationSolver(hth, gamma, method, rtol)
+    hth_r = solver.restrict_matrix(hth)
     fold_mse = np.zeros((folds, sig.size))
     total, done = folds * sig.size, 0
+    descending = np.argsort(-sig, kind="stable")
     for f in range(folds):
         val = labels == f
         hv = h[np.flatnonzero(val)]
         hvt = hv.T.tocsr()
-        a_tr = (hth - hvt @ hv).tocsc()
+        a_tr = (hth_r - solver.restrict_matrix(hvt @ hv)).tocsr()
         b_tr = htz - hvt @ z2[val]
-        for i, s in enumerate(sig):
-            w = _solve_spd((a_tr + s * gamma).tocsc(), b_tr)
+        w = None
+        for i in descending:
+            w, _ = solver.solve(a_tr, b_tr, float(sig[i]), x0=w)
             resid = z2[val] - hv @ w
             fold_mse[f, i] = float(np.mean(resid**2))
             done += 1
@@ -211,4 +675,12 @@ def cross_validate_sigma(
                 progress(done, total)
     mse = fold_mse.mean(axis=0)
     best = float(sig[int(np.argmin(mse))])
-    return CVResult(sig, mse, best, folds, fold_mse)
+    infos = solver.infos
+    summary = {
+        "method": solver.method,
+        "solves": len(infos),
+        "iterations": int(sum(i.iterations for i in infos)),
+        "max_rel_residual": float(max((i.rel_residual for i in infos), default=0.0)),
+        "all_converged": bool(all(i.converged for i in infos)),
+    }
+    return CVResult(sig, mse, best, folds, fold_mse, summary)
