@@ -86,12 +86,24 @@ def tikhonov_matrix(grid: Grid, order: int = 0) -> sparse.csc_array:
 
 
 # ------------------------------------------------------------------ solver choice and bounds
-#: ``method="auto"`` uses the sparse direct solve while the system has at most this many
-#: unknowns (after the exact reduction of zero-order problems to the data-supported vertices),
-#: and preconditioned conjugate gradients above. Measured on this project's 2-core machine: the
-#: SuperLU factorisation of ``H'H + sigma Gamma`` at N = 10^6 (n = 2, first order) takes ~60 s and
-#: ~1.1 GB of factor, at N = 262 144 (n = 3) ~30 s; at <= 50 000 unknowns it stays well under 1 s.
-DIRECT_MAX_UNKNOWNS = 50_000
+#: ``method="auto"`` uses the sparse direct solve while the system has at most
+#: ``DIRECT_MAX_UNKNOWNS[(order, min(n, 3))]`` unknowns (``n`` the regressor dimension; zero-order
+#: problems are first reduced, exactly, to the data-supported vertices) and preconditioned
+#: conjugate gradients above. The fill-in of the factor grows with ``n`` (separators of an
+#: ``n``-dimensional grid) and with the first-order penalty, which couples every vertex to its grid
+#: neighbours, while a zero-order ``H'H`` couples only vertices of simplices that hold data.
+#: Measured on this project's shared 2-core machine (SuperLU, symmetric mode, T = 10^5, CPU s per
+#: factorisation): n = 2 order 0, N = 10^6 (243 558 supported): 0.2 s; n = 2 order 1, N = 40 000:
+#: 0.2 s, N = 10^6: ~25 s; n = 3, N = 32 768: 1.7 s (order 0), 4.3 s (order 1); n = 3 order 0,
+#: N = 262 144: 5.3 s.
+DIRECT_MAX_UNKNOWNS: dict[tuple[int, int], int] = {
+    (0, 1): 10_000_000,
+    (0, 2): 2_000_000,
+    (0, 3): 5_000,
+    (1, 1): 1_000_000,
+    (1, 2): 50_000,
+    (1, 3): 5_000,
+}
 
 #: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
 #: Since ``A = H'H + sigma Gamma >= sigma * lambda_min(Gamma) I`` this guarantees
@@ -215,12 +227,16 @@ def _sparse_bytes(nnz: float, rows: int) -> float:
     return nnz * (8 + idx) + (rows + 1) * idx
 
 
-def choose_method(n_unknowns: int, method: Method = "auto") -> str:
-    """``"direct"`` or ``"cg"``: ``auto`` picks direct up to :data:`DIRECT_MAX_UNKNOWNS` unknowns."""
+def choose_method(n_unknowns: int, n_dims: int, order: int = 1, method: Method = "auto") -> str:
+    """``"direct"`` or ``"cg"``.
+
+    ``auto`` picks direct up to ``DIRECT_MAX_UNKNOWNS[(order, min(n_dims, 3))]`` unknowns, CG above.
+    """
     if method not in ("auto", "direct", "cg"):
         raise InputError(f"solver method must be 'auto', 'direct' or 'cg', got {method!r}")
     if method == "auto":
-        return "direct" if n_unknowns <= DIRECT_MAX_UNKNOWNS else "cg"
+        limit = DIRECT_MAX_UNKNOWNS[(1 if order else 0, min(max(int(n_dims), 1), 3))]
+        return "direct" if n_unknowns <= limit else "cg"
     return method
 
 
@@ -257,7 +273,7 @@ def estimate_fit_memory(
     nnz_gam = float(nv) if order == 0 else float(nv) * (2 * k - 1)
     nnz_a = nnz_hth + nnz_gam
     unknowns = min(nv, nnz_h) if order == 0 else nv
-    chosen = choose_method(unknowns, method)
+    chosen = choose_method(unknowns, n_dims, order, method)
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
@@ -323,8 +339,16 @@ def _dims_of(h: sparse.sparray) -> int:
 
 # ------------------------------------------------------------------------------- solvers
 def _solve_spd(a: sparse.csc_array, b: np.ndarray) -> np.ndarray:
-    """Solve the sparse SPD system ``a x = b`` (``b`` shape (N,) or (N, k)) by sparse LU."""
-    lu = splinalg.splu(sparse.csc_matrix(a), permc_spec="MMD_AT_PLUS_A")
+    """Solve the sparse SPD system ``a x = b`` (``b`` shape (N,) or (N, k)) by sparse LU.
+
+    The matrix is symmetric positive definite, so no pivoting is needed: SuperLU runs in symmetric
+    mode on the minimum-degree ordering of ``A + A'`` with the diagonal as pivots (threshold 0).
+    Partial pivoting would only destroy the fill-reducing ordering (measured: 50 s instead of
+    under 1 s at N = 40 000, first order).
+    """
+    lu = splinalg.splu(
+        sparse.csc_matrix(a), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
     return lu.solve(np.asarray(b, dtype=float))
 
 
@@ -408,6 +432,8 @@ class NormalEquationSolver:
     hth : sparse array, shape (N, N)
         Full-data normal matrix ``H'H`` (the preconditioner is built from it).
     gamma : sparse array, shape (N, N)
+    n_dims : int
+        Regressor dimension ``n`` (for the ``auto`` rule).
     method : {"auto", "direct", "cg"}
         See :func:`choose_method`.
     rtol : float
@@ -419,6 +445,7 @@ class NormalEquationSolver:
         self,
         hth: sparse.sparray,
         gamma: sparse.sparray,
+        n_dims: int,
         method: Method = "auto",
         rtol: float = CG_RTOL,
         maxiter: int = CG_MAXITER,
@@ -435,7 +462,7 @@ class NormalEquationSolver:
         else:
             self.keep = None
         self.gamma = self._restrict(gamma)
-        self.method = choose_method(self.n if self.keep is None else self.keep.size, method)
+        self.method = choose_method(self.n if self.keep is None else self.keep.size, n_dims, self.order, method)
         self.rtol, self.maxiter = float(rtol), int(maxiter)
         if self.method == "cg":
             lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
@@ -511,8 +538,8 @@ def solve_regularized(
     gamma : sparse array, shape (N, N)
         Regularisation matrix (symmetric positive definite, from :func:`tikhonov_matrix`).
     method : {"auto", "direct", "cg"}
-        Sparse LU, or conjugate gradients to relative residual ``rtol`` (see
-        :data:`DIRECT_MAX_UNKNOWNS`, :data:`CG_RTOL` for the rule and the weight bound).
+        Sparse LU, or conjugate gradients to relative residual ``rtol``; ``auto`` by size (see
+        :data:`DIRECT_MAX_UNKNOWNS` for the rule, :data:`CG_RTOL` for the weight bound).
     x0 : ndarray, shape like the result, optional
         Warm start for CG.
     rtol : float
@@ -541,7 +568,7 @@ def solve_regularized(
     check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), nz, _order_of(gamma), method, max_memory)
     ht = h.T.tocsr()
     hth = ht @ h
-    solver = NormalEquationSolver(hth, gamma, method, rtol)
+    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol)
     w, info = solver.solve(solver.restrict_matrix(hth), ht @ z, float(sigma), x0)
     return (w, info) if return_info else w
 
@@ -564,7 +591,9 @@ class CVResult:
         Validation MSE of each fold and candidate.
     solver : dict
         How the systems were solved: ``method``, ``solves``, CG ``iterations`` in total,
-        ``max_rel_residual``, ``all_converged`` (not written to the model file).
+        ``max_rel_residual``, ``all_converged`` and ``weight_bound`` (folds, S), the bound of each
+        solve on ``max_col ||w - w_exact||_2`` (zero for the direct solve); not written to the model
+        file.
     """
 
     sigmas: np.ndarray
@@ -654,9 +683,10 @@ def cross_validate_sigma(
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2
-    solver = NormalEquationSolver(hth, gamma, method, rtol)
+    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol)
     hth_r = solver.restrict_matrix(hth)
     fold_mse = np.zeros((folds, sig.size))
+    weight_bound = np.zeros((folds, sig.size))
     total, done = folds * sig.size, 0
     descending = np.argsort(-sig, kind="stable")
     for f in range(folds):
@@ -667,7 +697,8 @@ def cross_validate_sigma(
         b_tr = htz - hvt @ z2[val]
         w = None
         for i in descending:
-            w, _ = solver.solve(a_tr, b_tr, float(sig[i]), x0=w)
+            w, info = solver.solve(a_tr, b_tr, float(sig[i]), x0=w)
+            weight_bound[f, i] = info.weight_bound
             resid = z2[val] - hv @ w
             fold_mse[f, i] = float(np.mean(resid**2))
             done += 1
@@ -682,5 +713,6 @@ def cross_validate_sigma(
         "iterations": int(sum(i.iterations for i in infos)),
         "max_rel_residual": float(max((i.rel_residual for i in infos), default=0.0)),
         "all_converged": bool(all(i.converged for i in infos)),
+        "weight_bound": weight_bound,
     }
     return CVResult(sig, mse, best, folds, fold_mse, summary)

@@ -20,7 +20,13 @@ from pwas_hdl.fit import model_file
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
-from pwas_hdl.fit.regularized_lsq import CVResult, cross_validate_sigma, solve_regularized, tikhonov_matrix
+from pwas_hdl.fit.regularized_lsq import (
+    CVResult,
+    check_fit_memory,
+    cross_validate_sigma,
+    solve_regularized,
+    tikhonov_matrix,
+)
 
 __all__ = ["PWASVirtualSensor", "MODEL_FORMAT", "MODEL_VERSION", "load_model"]
 
@@ -214,6 +220,9 @@ class PWASVirtualSensor:
         else:
             lo, hi = self._data_domain(xi, lags)
         grid = Grid(lo, hi, self.partitions)
+        # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
+        # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
+        check_fit_memory(xi.shape[0], grid.n_vertices, grid.n, nz, int(self.tikhonov_order))
         h = grid.basis_matrix(xi)
         gam = tikhonov_matrix(grid, self.tikhonov_order)
         if self.sigma is None:

@@ -1,0 +1,178 @@
+"""The scalable solver of the regularised least squares (issue 18): CG against the direct solve,
+the automatic choice, CV with warm starts, and the memory check."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from pwas_hdl import PWASVirtualSensor
+from pwas_hdl.errors import InputError, ResourceLimit
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regularized_lsq import (
+    CG_RTOL,
+    DEFAULT_SIGMA_GRID,
+    MAX_MEMORY_ENV,
+    NormalEquationSolver,
+    check_fit_memory,
+    choose_method,
+    cross_validate_sigma,
+    estimate_fit_memory,
+    gamma_min_eigenvalue,
+    memory_limit,
+    parse_memory,
+    solve_regularized,
+    tikhonov_matrix,
+)
+
+
+def _problem(n: int, p: int, t: int, seed: int = 0, nz: int = 1):
+    rng = np.random.default_rng(seed)
+    grid = Grid(np.full(n, -1.2), np.full(n, 1.2), p)
+    x = rng.uniform(-1.0, 1.0, (t, n))
+    z = np.column_stack([np.sin(3 * x + k).sum(axis=1) for k in range(nz)]) + 0.1 * rng.standard_normal((t, nz))
+    return grid, grid.basis_matrix(x), z
+
+
+CASES = [(1, 300, 2000), (2, 40, 4000), (3, 9, 3000), (4, 4, 3000)]
+
+
+@pytest.mark.parametrize("order", [0, 1])
+@pytest.mark.parametrize("n,p,t", CASES)
+def test_cg_matches_direct_within_stated_bound(n, p, t, order):
+    """||w_cg - w_direct|| <= ||r|| / (sigma lambda_min(Gamma)), the bound reported by the solve,
+    over the whole default sigma range; and the residual meets CG_RTOL."""
+    grid, h, z = _problem(n, p, t, seed=n)
+    gam = tikhonov_matrix(grid, order)
+    for sigma in (1e-7, 1e-3, 1.0, 1e3):
+        wd = solve_regularized(h, z, sigma, gam, method="direct")
+        wc, info = solve_regularized(h, z, sigma, gam, method="cg", return_info=True)
+        assert info.method == "cg" and info.converged and info.iterations > 0
+        assert info.rel_residual <= CG_RTOL * 1.0001
+        diff = float(np.max(np.linalg.norm(wc - wd, axis=0)))
+        assert diff <= info.weight_bound, (sigma, diff, info)
+        # what the bound means in practice: the predictions on the training data agree closely
+        scale = float(np.abs(h @ wd).max())
+        assert float(np.abs(h @ (wc - wd)).max()) <= 1e-4 * scale, (sigma, info)
+
+
+def test_gamma_min_eigenvalue_is_exact():
+    grid = Grid([0.0, -1.0], [2.0, 3.0], [4, 3])
+    for order in (0, 1):
+        gam = tikhonov_matrix(grid, order)
+        lam = np.linalg.eigvalsh(gam.toarray()).min()
+        np.testing.assert_allclose(gamma_min_eigenvalue(gam), lam, rtol=1e-6)
+
+
+def test_zero_order_unsupported_vertices_are_exactly_zero():
+    grid = Grid([0.0, 0.0], [1.0, 1.0], 20)
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 0.3, (500, 2))  # data in one corner only
+    h = grid.basis_matrix(x)
+    z = x.sum(axis=1)
+    for method in ("direct", "cg"):
+        w = solve_regularized(h, z, 1e-3, tikhonov_matrix(grid, 0), method=method)
+        untouched = np.asarray(abs(h).sum(axis=0)).reshape(-1) == 0
+        assert untouched.sum() > 300
+        assert np.all(w[untouched] == 0.0)
+
+
+def test_auto_rule():
+    assert choose_method(1000, 2, 1) == "direct"
+    assert choose_method(10**6, 2, 1) == "cg"
+    assert choose_method(10**6, 2, 0) == "direct"  # zero order, 2-D: the factor stays sparse
+    assert choose_method(10**5, 3, 0) == "cg"
+    assert choose_method(10**5, 6, 1) == "cg"
+    assert choose_method(4096, 4, 0) == "direct"  # the Lorenz baseline of the paper
+    assert choose_method(10, 2, 1, "cg") == "cg"
+    assert choose_method(10**7, 2, 1, "direct") == "direct"
+    with pytest.raises(InputError, match="solver method"):
+        choose_method(10, 2, 1, "lu")
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_cv_with_cg_matches_direct(order):
+    grid, h, z = _problem(2, 30, 3000, seed=7, nz=2)
+    gam = tikhonov_matrix(grid, order)
+    cd = cross_validate_sigma(h, z, gam, DEFAULT_SIGMA_GRID, folds=5, method="direct")
+    cc = cross_validate_sigma(h, z, gam, DEFAULT_SIGMA_GRID, folds=5, method="cg")
+    assert cd.solver["method"] == "direct" and cc.solver["method"] == "cg"
+    assert cc.solver["all_converged"] and cc.solver["solves"] == 5 * DEFAULT_SIGMA_GRID.size
+    assert cc.best_sigma == cd.best_sigma
+    # stated bound on the fold errors: |rmse_cg - rmse_direct| <= ||H_v||_2 * weight_bound / sqrt(m),
+    # ||H_v||_2 <= sqrt(max column sum) as every row of H sums to 1
+    labels = np.arange(h.shape[0]) * 5 // h.shape[0]
+    for f in range(5):
+        hv = sparse.csr_array(h[np.flatnonzero(labels == f)])
+        m = hv.shape[0] * z.shape[1]
+        hv_norm = np.sqrt(float(np.asarray(hv.sum(axis=0)).max()))
+        limit = hv_norm * cc.solver["weight_bound"][f] * np.sqrt(z.shape[1]) / np.sqrt(m)
+        gap = np.abs(np.sqrt(cc.fold_mse[f]) - np.sqrt(cd.fold_mse[f]))
+        assert np.all(gap <= limit), (f, gap, limit)
+    # and in practice (measured, not a guarantee) the fold errors agree to 1e-4 relative
+    np.testing.assert_allclose(cc.fold_mse, cd.fold_mse, rtol=1e-4)
+
+
+def test_warm_start_saves_iterations():
+    """From the previous candidate's weights (sigma one grid step larger) CG needs fewer iterations."""
+    grid, h, z = _problem(2, 40, 4000, seed=2)
+    gam = tikhonov_matrix(grid, 0)
+    ht = h.T.tocsr()
+    hth, b = ht @ h, ht @ z[:, 0]
+    solver = NormalEquationSolver(hth, gam, 2, "cg")
+    m = solver.restrict_matrix(hth)
+    w0, _ = solver.solve(m, b, 10**-2.5)
+    _, i_warm = solver.solve(m, b, 1e-3, x0=w0)
+    _, i_cold = solver.solve(m, b, 1e-3)
+    assert i_warm.iterations < i_cold.iterations
+
+
+# ------------------------------------------------------------------------------- memory
+def test_memory_estimate_grows_with_size():
+    small = estimate_fit_memory(10**4, 10**4, 2, 1, 1, "cg")
+    big = estimate_fit_memory(10**5, 10**6, 2, 1, 1, "cg")
+    assert 0 < small["total"] < big["total"]
+    assert big["total"] == pytest.approx(sum(big[k] for k in ("H", "HtH", "Gamma", "factor", "vectors")))
+    # the direct factor is charged its fill
+    assert estimate_fit_memory(10**5, 10**4, 2, 1, 1, "direct")["factor"] > estimate_fit_memory(10**5, 10**4, 2, 1, 1, "cg")["factor"]
+
+
+def test_memory_limit_refuses_before_solving(monkeypatch):
+    grid, h, z = _problem(2, 40, 4000)
+    gam = tikhonov_matrix(grid, 1)
+    with pytest.raises(ResourceLimit, match=r"estimated \d+ MiB .* over the limit of 1 MiB \(max_memory\)"):
+        solve_regularized(h, z, 1.0, gam, max_memory="1M")
+    with pytest.raises(ResourceLimit, match="max_memory"):
+        cross_validate_sigma(h, z, gam, [1.0, 2.0], max_memory=2**20)
+    monkeypatch.setenv(MAX_MEMORY_ENV, "1M")
+    assert memory_limit() == (2**20, f"${MAX_MEMORY_ENV}")
+    with pytest.raises(ResourceLimit, match=MAX_MEMORY_ENV):
+        check_fit_memory(4000, grid.n_vertices, 2)
+    sensor = PWASVirtualSensor(my=2, partitions=40, sigma=1.0)
+    y = np.random.default_rng(0).uniform(-1, 1, 3000)
+    with pytest.raises(ResourceLimit, match="N = 1681 weights"):
+        sensor.fit(None, y, y**2)
+    assert not hasattr(sensor, "weights_")
+    monkeypatch.setenv(MAX_MEMORY_ENV, "1G")
+    sensor.fit(None, y, y**2)
+    assert sensor.weights_.shape == (1681, 1)
+
+
+def test_default_limit_is_a_fraction_of_available_ram(monkeypatch):
+    monkeypatch.delenv(MAX_MEMORY_ENV, raising=False)
+    limit, source = memory_limit()
+    if limit is None:
+        pytest.skip("no /proc/meminfo here")
+    assert "available RAM" in source and limit > 0
+
+
+@pytest.mark.parametrize("text,value", [("4G", 4 * 2**30), ("512M", 512 * 2**20), ("1e9", 10**9), (2048, 2048), ("3kb", 3072)])
+def test_parse_memory(text, value):
+    assert parse_memory(text) == value
+
+
+@pytest.mark.parametrize("text", ["lots", "-1G", "0", "nanG"])
+def test_parse_memory_rejects(text):
+    with pytest.raises(InputError, match="memory limit"):
+        parse_memory(text)
