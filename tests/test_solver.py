@@ -82,7 +82,8 @@ def test_auto_rule():
     assert choose_method(1000, 2, 1) == "direct"
     assert choose_method(10**6, 2, 1) == "cg"
     assert choose_method(10**6, 2, 0) == "direct"  # zero order, 2-D: the factor stays sparse
-    assert choose_method(10**5, 3, 0) == "cg"
+    assert choose_method(10**5, 3, 0) == "direct"
+    assert choose_method(10**6, 3, 0) == "cg"
     assert choose_method(10**5, 6, 1) == "cg"
     assert choose_method(4096, 4, 0) == "direct"  # the Lorenz baseline of the paper
     assert choose_method(10, 2, 1, "cg") == "cg"
@@ -176,3 +177,22 @@ def test_parse_memory(text, value):
 def test_parse_memory_rejects(text):
     with pytest.raises(InputError, match="memory limit"):
         parse_memory(text)
+
+
+def test_cg_that_does_not_converge_falls_back_to_direct(monkeypatch):
+    import pwas_hdl.fit.regularized_lsq as rl
+
+    grid, h, z = _problem(2, 40, 4000, seed=5)  # 1681 unknowns
+    gam = tikhonov_matrix(grid, 1)
+    monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS, (1, 2), 1000)  # auto -> cg, fallback allowed up to 4000
+    ht = h.T.tocsr()
+    hth, b = ht @ h, ht @ z[:, 0]
+    solver = NormalEquationSolver(hth, gam, 2, "auto", maxiter=2)
+    assert solver.method == "cg"
+    w, info = solver.solve(solver.restrict_matrix(hth), b, 1e-5)
+    assert info.method == "direct-fallback" and info.iterations == 2
+    np.testing.assert_array_equal(w, solve_regularized(h, z[:, 0], 1e-5, gam, method="direct"))
+    # explicit cg: no fallback, the iterate is reported as not converged
+    solver = NormalEquationSolver(hth, gam, 2, "cg", maxiter=2)
+    _, info = solver.solve(solver.restrict_matrix(hth), b, 1e-5)
+    assert info.method == "cg" and not info.converged
