@@ -180,14 +180,19 @@ class SolveInfo:
 
 
 def gamma_min_eigenvalue(gamma: sparse.sparray) -> float:
-    """Smallest eigenvalue of a Gamma built by :func:`tikhonov_matrix` (exact, no iteration).
+    """Gershgorin lower bound on the smallest eigenvalue of a symmetric Gamma.
 
-    Order 0: 1. Order 1: the ridge ``eps`` (the Laplacian part is positive semidefinite with the
-    constants in its null space, so ``lambda_min(L + eps I) = eps``). Identified by the row sums:
-    those of ``L + eps I`` are all ``eps``.
+    ``min_i (Gamma_ii - sum_{j != i} |Gamma_ij|)``, clipped at 0. Rigorous for any symmetric
+    matrix, and exact for the matrices of :func:`tikhonov_matrix`: 1 for order 0, the ridge
+    ``eps`` for order 1 (the Laplacian part is diagonally dominant with zero row sums and has the
+    constants in its null space, so ``lambda_min(L + eps I) = eps``).
     """
-    rs = np.asarray(sparse.csr_array(gamma).sum(axis=1)).reshape(-1)
-    return float(rs.min()) if rs.size else 1.0
+    g = sparse.csr_array(gamma)
+    if g.shape[0] == 0:
+        return 1.0
+    diag = g.diagonal()
+    off = np.asarray(abs(g).sum(axis=1)).reshape(-1) - np.abs(diag)
+    return max(float((diag - off).min()), 0.0)
 
 
 def parse_memory(text: str | int | float) -> int:
@@ -436,7 +441,7 @@ def _cg(
         worst_rel = max(worst_rel, r / nb)
         worst_abs = max(worst_abs, r)
         ok = ok and info == 0
-    bound = worst_abs / (sigma * lam_gamma)
+    bound = worst_abs / (sigma * lam_gamma) if lam_gamma > 0 else float("inf")
     return w.reshape(np.shape(b)), SolveInfo("cg", its, worst_rel, bound, ok)
 
 
