@@ -85,6 +85,7 @@ def test_auto_rule():
     assert choose_method(10**5, 3, 0) == "direct"
     assert choose_method(10**6, 3, 0) == "cg"
     assert choose_method(10**5, 6, 1) == "cg"
+    assert choose_method(4096, 6, 0) == "cg"  # H'H nearly dense in 6-D
     assert choose_method(4096, 4, 0) == "direct"  # the Lorenz baseline of the paper
     assert choose_method(10, 2, 1, "cg") == "cg"
     assert choose_method(10**7, 2, 1, "direct") == "direct"

@@ -87,7 +87,7 @@ def tikhonov_matrix(grid: Grid, order: int = 0) -> sparse.csc_array:
 
 # ------------------------------------------------------------------ solver choice and bounds
 #: ``method="auto"`` uses the sparse direct solve while the system has at most
-#: ``DIRECT_MAX_UNKNOWNS[(order, min(n, 3))]`` unknowns (``n`` the regressor dimension; zero-order
+#: ``DIRECT_MAX_UNKNOWNS[(order, min(n, 5))]`` unknowns (``n`` the regressor dimension; zero-order
 #: problems are first reduced, exactly, to the data-supported vertices) and preconditioned
 #: conjugate gradients above. The fill-in of the factor grows with ``n`` (separators of an
 #: ``n``-dimensional grid) and with the first-order penalty, which couples every vertex to its grid
@@ -95,14 +95,20 @@ def tikhonov_matrix(grid: Grid, order: int = 0) -> sparse.csc_array:
 #: Measured on this project's shared 2-core machine (SuperLU, symmetric mode, T = 10^5, CPU s per
 #: factorisation): n = 2 order 0, N = 10^6 (243 558 supported): 0.2 s; n = 2 order 1, N = 40 000:
 #: 0.2 s, N = 10^6: ~25 s; n = 3, N = 32 768: 1.7 s (order 0), 4.3 s (order 1); n = 3 order 0,
-#: N = 262 144: 5.3 s.
+#: N = 262 144: 5.3 s. In 4 to 6 dimensions ``H'H`` itself is nearly dense once T >> N (a vertex
+#: shares simplices with up to 3^n - 1 others): n = 6, N = 4096, T = 10^5: fit with CV over 150 s
+#: direct, 0.3 s CPU for 21 Jacobi-CG solves. The key is ``(order, min(n, 5))``.
 DIRECT_MAX_UNKNOWNS: dict[tuple[int, int], int] = {
     (0, 1): 10_000_000,
     (0, 2): 2_000_000,
     (0, 3): 300_000,
+    (0, 4): 5_000,
+    (0, 5): 2_000,
     (1, 1): 1_000_000,
     (1, 2): 50_000,
     (1, 3): 20_000,
+    (1, 4): 2_000,
+    (1, 5): 2_000,
 }
 
 #: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
@@ -248,12 +254,12 @@ def _sparse_bytes(nnz: float, rows: int) -> float:
 def choose_method(n_unknowns: int, n_dims: int, order: int = 1, method: Method = "auto") -> str:
     """``"direct"`` or ``"cg"``.
 
-    ``auto`` picks direct up to ``DIRECT_MAX_UNKNOWNS[(order, min(n_dims, 3))]`` unknowns, CG above.
+    ``auto`` picks direct up to ``DIRECT_MAX_UNKNOWNS[(order, min(n_dims, 5))]`` unknowns, CG above.
     """
     if method not in ("auto", "direct", "cg"):
         raise InputError(f"solver method must be 'auto', 'direct' or 'cg', got {method!r}")
     if method == "auto":
-        limit = DIRECT_MAX_UNKNOWNS[(1 if order else 0, min(max(int(n_dims), 1), 3))]
+        limit = DIRECT_MAX_UNKNOWNS[(1 if order else 0, min(max(int(n_dims), 1), 5))]
         return "direct" if n_unknowns <= limit else "cg"
     return method
 
@@ -489,7 +495,7 @@ class NormalEquationSolver:
         unknowns = self.n if self.keep is None else self.keep.size
         self.method = choose_method(unknowns, n_dims, self.order, method)
         self.fallback = method == "auto" and unknowns <= FALLBACK_FACTOR * DIRECT_MAX_UNKNOWNS[
-            (self.order, min(max(int(n_dims), 1), 3))
+            (self.order, min(max(int(n_dims), 1), 5))
         ]
         self.rtol, self.maxiter = float(rtol), int(maxiter)
         if self.method == "cg":
