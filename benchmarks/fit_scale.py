@@ -263,8 +263,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=float, default=300.0, help="wall-time limit per fit, s (default 300)")
     ap.add_argument("--direct-limit", type=float, default=120.0, help="wall-time limit per direct solve, s")
     ap.add_argument("--budget", type=float, default=float("inf"), help="start no new point after this many s")
+    ap.add_argument("--points", default=None, help="only these n:p points, comma-separated (e.g. 6:3,2:999)")
+    ap.add_argument("--stem", default=None, help="output file stem (default fit_scale / fit_scale_quick)")
     args = ap.parse_args(argv)
     points, t, stem = (QUICK_POINTS, 10_000, "fit_scale_quick") if args.quick else (FULL_POINTS, 100_000, "fit_scale")
+    if args.points:
+        try:
+            points = [tuple(int(v) for v in item.split(":")) for item in args.points.split(",")]
+        except ValueError:
+            ap.error("--points takes n:p pairs, e.g. 6:3,2:999")
+        if any(len(pt) != 2 or pt[0] < 1 or pt[1] < 1 for pt in points):
+            ap.error("--points takes n:p pairs with n, p >= 1, e.g. 6:3,2:999")
+    stem = args.stem or stem
     from pwas_hdl.io.atomic import atomic_write_text
 
     args.outdir.mkdir(parents=True, exist_ok=True)
