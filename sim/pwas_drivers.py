@@ -28,6 +28,10 @@ from typing import Callable, Iterable, Iterator, Sequence
 
 from cocotb.triggers import FallingEdge, ReadOnly
 
+# payload words by the manifest's bit fields (lsb, width, signed): the package's one implementation
+from pwas_hdl.fixedpoint.bitfields import pack_fields as pack
+from pwas_hdl.fixedpoint.bitfields import unpack_fields as unpack
+
 __all__ = [
     "random_pauses",
     "pack",
@@ -44,26 +48,6 @@ def random_pauses(p_pause: float, seed: int) -> Iterator[bool]:
         return itertools.repeat(False)
     rng = random.Random(seed)
     return (rng.random() < p_pause for _ in itertools.count())
-
-
-def pack(values: Sequence[int], fields: Sequence[dict]) -> int:
-    """Pack integer codes into one payload word by the manifest's bit fields (``lsb``, ``width``)."""
-    word = 0
-    for v, f in zip(values, fields):
-        word |= (int(v) & ((1 << f["width"]) - 1)) << f["lsb"]
-    return word
-
-
-def unpack(word: int, fields: Sequence[dict]) -> list[int]:
-    """Inverse of :func:`pack`; fields with ``signed`` are two's complement."""
-    out = []
-    for f in fields:
-        w = f["width"]
-        v = (word >> f["lsb"]) & ((1 << w) - 1)
-        if f.get("signed") and v >> (w - 1):
-            v -= 1 << w
-        out.append(v)
-    return out
 
 
 class StreamSource:

@@ -1,1 +1,1 @@
-"""Fixed point: word formats and input scaling (formats), the bit-true model of the circuit (bittrue), the weight memory layout (memory_layout)."""
+"""Fixed point: word formats and input scaling (formats), the bit-true model of the circuit (bittrue), the weight memory layout (memory_layout), signed bit fields in words (bitfields), the order of the adder tree (reduction)."""

@@ -50,7 +50,9 @@ Datapath (one row of the pipeline; names are the keys of :meth:`FixedPointModel.
    ``bank[k] = (sum(cell) + k) mod (n+1)`` at ``addr[k]``; ``w[k]`` is the word read back from
    the ROM image (so the layout is part of what is checked).
 5. ``products_k = mu_k * w_k`` (exact, ``(F+1) + B_w + 1`` bits signed);
-   ``acc = sum_k products_k`` (exact, ``product_bits + ceil(log2(n+1))`` bits).
+   ``acc = sum_k products_k`` (exact, ``product_bits + ceil(log2(n+1))`` bits), added in the
+   order of the RTL's adder tree (:mod:`pwas_hdl.fixedpoint.reduction` over the products in
+   memory-bank order).
 6. ``sh = F + Fw - Fo >= 0``; ``acc_rounded = (acc + 2**(sh-1)) >> sh`` (half up) or
    ``acc >> sh`` (truncate), arithmetic shift, no rounding when ``sh = 0``;
    ``out = clip(acc_rounded, -2**(B_out-1), 2**(B_out-1) - 1)``.
@@ -88,6 +90,7 @@ from pwas_hdl.fixedpoint.formats import (
 )
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.memory_layout import make_layout
+from pwas_hdl.fixedpoint.reduction import tree_reduce
 
 __all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES", "NOISE_BUDGET", "default_weight_frac"]
 
@@ -516,7 +519,12 @@ class FixedPointModel:
         bank, addr = self.layout.simplex_bank_addr(vertices)
         w = self.rom[bank, addr, :]  # (m, n+1, nz)
         products = mu[:, :, None] * w
-        acc = products.sum(axis=1)
+        # summed as the RTL sums: memory b multiplies the word it read, the adder tree of
+        # pwas_hdl.fixedpoint.reduction pairs the memories (0, 1), (2, 3), ... (exact either way)
+        rows = np.arange(m)[:, None]
+        by_bank = np.empty_like(products)
+        by_bank[rows, bank] = products
+        acc = tree_reduce([by_bank[:, b, :] for b in range(by_bank.shape[1])], lambda a, b, _lvl, _i: a + b)
         acc_r = shift_round(acc, self.shift, self.rounding)
         fo = self.output_format
         out = np.clip(acc_r, fo.min_code, fo.max_code)
@@ -524,7 +532,6 @@ class FixedPointModel:
         assert np.all(np.abs(acc) < lim), "accumulator exceeds its declared width"  # cannot happen: sum mu = 2**F
         res = {"out": out, "out_of_range": oor}
         if full:
-            rows = np.arange(m)[:, None]
             addr_by_bank = np.zeros_like(addr)
             addr_by_bank[rows, bank] = addr
             w_by_bank = np.zeros_like(w)

@@ -54,6 +54,7 @@ from __future__ import annotations
 import numpy as np
 
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fixedpoint.bitfields import pack_rows
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
 
@@ -160,6 +161,10 @@ class BankedLayout(_LayoutBase):
         ``P'``, the last dimension padded to a multiple of ``n + 1``.
     row_words : int
         ``P' / (n + 1)``: addresses per row in each bank.
+    row_strides : tuple of int
+        Address weight of the coordinates ``v_0 .. v_{n-2}``: ``row_words`` times their C-order
+        strides over the first ``n - 1`` dimensions, so that
+        ``addr(v) = sum_{j<n-1} v_j * row_strides[j] + v_{n-1} // (n+1)`` (what the RTL adds).
     depth : int
         ``R * P' / (n + 1)``.
     """
@@ -173,6 +178,7 @@ class BankedLayout(_LayoutBase):
         self.padded_last = -(-last // self.n_banks) * self.n_banks
         self.row_words = self.padded_last // self.n_banks
         self.depth = self.n_rows * self.row_words
+        self.row_strides = tuple(int(s) * self.row_words for s in grid.strides[:-1] // last)
 
     def bank_addr(self, vertex, slot=None) -> tuple[np.ndarray, np.ndarray]:
         """Bank and address of vertices.
@@ -197,8 +203,7 @@ class BankedLayout(_LayoutBase):
         if c.size and (np.any(c < 0) or np.any(c > self.grid.partitions)):
             raise ValueError("vertex coordinates outside the grid")
         bank = c.sum(axis=-1) % self.n_banks
-        row = c[..., :-1] @ (self.grid.strides[:-1] // self.grid.shape[-1]) if self.n > 1 else np.zeros(c.shape[:-1], dtype=np.int64)
-        addr = row * self.row_words + c[..., -1] // self.n_banks
+        addr = c[..., :-1] @ np.array(self.row_strides, dtype=np.int64) + c[..., -1] // self.n_banks
         return bank.astype(np.int64), np.asarray(addr, dtype=np.int64)
 
     def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
@@ -294,30 +299,8 @@ def readmemh_text(words, bits: int) -> str:
     return "".join(line + "\n" for line in lines)
 
 
-def pack_words(codes, bits: int) -> list[int]:
-    """Pack ``nz`` codes of ``bits`` bits per word, target 0 in the least significant bits.
-
-    Parameters
-    ----------
-    codes : array_like of int, shape (depth, nz)
-
-    Returns
-    -------
-    list of int (unsigned, ``nz * bits`` bits each)
-    """
-    c = np.asarray(codes, dtype=np.int64)
-    if c.ndim == 1:
-        c = c[:, None]
-    mask = (1 << bits) - 1
-    out = []
-    for row in c.tolist():
-        word = 0
-        for t, v in enumerate(row):
-            if not -(1 << (bits - 1)) <= v <= mask:
-                raise ValueError(f"code {v} does not fit {bits} bits")
-            word |= (v & mask) << (t * bits)
-        out.append(word)
-    return out
+#: Packed words of one bank, target 0 in the least significant bits (:func:`pwas_hdl.fixedpoint.bitfields.pack_rows`).
+pack_words = pack_rows
 
 
 def hex_files(layout: BankedLayout | ReplicatedLayout, weight_codes, bits: int, packed: bool = False, prefix: str = "w") -> dict[str, str]:

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 from amaranth.hdl import Const, Module, Mux, Signal, Value, unsigned
 
+from pwas_hdl.fixedpoint.reduction import tree_reduce
+
 __all__ = ["bits_for", "rom", "sink_unused", "add_wrap", "add_const_wrap", "sum_wrap", "ge_const", "mux_const"]
 
 
@@ -105,17 +107,8 @@ def sum_wrap(m: Module, terms, width: int, name: str):
     vals = [t for t in terms if not isinstance(t, int)]
     if not vals:
         return const % (1 << width)
-    lvl = 0
-    while len(vals) > 1:
-        nxt = []
-        for i in range(0, len(vals), 2):
-            if i + 1 < len(vals):
-                nxt.append(add_wrap(m, vals[i], vals[i + 1], f"{name}_s{lvl}_{i // 2}"))
-            else:
-                nxt.append(vals[i])
-        vals = nxt
-        lvl += 1
-    return add_const_wrap(m, vals[0], const, f"{name}_k")
+    total = tree_reduce(vals, lambda a, b, lvl, i: add_wrap(m, a, b, f"{name}_s{lvl}_{i}"))
+    return add_const_wrap(m, total, const, f"{name}_k")
 
 
 def ge_const(x: Value, k: int):

@@ -25,7 +25,7 @@ Arithmetic (the bit-true specification, see :mod:`pwas_hdl.hdl.params`):
   ``lt_j[k-1] = (rank_j < k)`` (``k = 1..n-1``), which gives both the vertex steps and the one-hot
   selection of ``d_(k)``;
 * banked addresses: ``addr(v_k) = base + sum_{j<n-1} step_kj * S_j + (step_k,n-1 & wrap)`` where
-  ``base`` and ``S_j`` follow :class:`~pwas_hdl.hdl.params.MemoryPlan` and
+  ``S_j`` = ``BankedLayout.row_strides`` (:mod:`pwas_hdl.fixedpoint.memory_layout`) and
   ``wrap = (c_{n-1} mod (n+1) == n)``; bank ``b`` reads vertex ``(b - rot) mod (n+1)`` with
   ``rot = |c| mod (n+1)``; the ``mu_k`` are rotated the same way (bank ``b`` multiplies its word
   by ``mu_{(b - rot) mod (n+1)}``), so the read data need no rotation back -- the exact sum of
@@ -47,6 +47,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, mux_const, rom, sink_unused, sum_wrap
+from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
 
 __all__ = ["PWASCore", "core_input_layout", "core_output_layout"]
@@ -302,7 +303,7 @@ class PWASCore(wiring.Component):
         base = wrap = 0
         rot = 0
         if self.memory_kind == "banked":
-            g_words, _, rst = MemoryPlan.banked_geometry(p.partitions)
+            rst = plan.layout.row_strides  # address weight of c_j, j < n-1
             p_last = p.partitions[n - 1]
             if aw:
                 terms = [rom(m, cs[j], [i * rst[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n - 1)]
@@ -437,26 +438,20 @@ class PWASCore(wiring.Component):
         terms = [prods[z * nb : (z + 1) * nb] for z in range(nz)]
 
         # ---------------------------------------------------------- F: adder tree
+        # the order of pwas_hdl.fixedpoint.reduction (as the bit-true model and the debug probes)
         levels = Pipeline.tree_depth(n)
+
+        def add(a, b, lvl, i, z):
+            s = Signal(signed(accw + 1), name=f"sum{lvl}_{z}_{i}")
+            m.d.comb += s.eq(a.as_signed() + b.as_signed())
+            if lvl == levels - 1:
+                return s
+            sink_unused(m, s[accw], f"sum{lvl}_{z}_{i}_top")
+            return s[:accw]
+
         for lvl in range(levels):
             last = lvl == levels - 1
-            new = []
-            for z in range(nz):
-                cur = terms[z]
-                row = []
-                for i in range(0, len(cur), 2):
-                    if i + 1 < len(cur):
-                        s = Signal(signed(accw + 1), name=f"sum{lvl}_{z}_{i // 2}")
-                        m.d.comb += s.eq(cur[i].as_signed() + cur[i + 1].as_signed())
-                        if last:
-                            row.append(s)
-                        else:
-                            sink_unused(m, s[accw], f"sum{lvl}_{z}_{i // 2}_top")
-                            row.append(s[:accw])
-                    else:
-                        row.append(cur[i])
-                new.append(row)
-            terms = new
+            terms = [tree_level(terms[z], lambda a, b, lv, i, z=z: add(a, b, lv, i, z), lvl) for z in range(nz)]
             if pl.tree_levels and ((lvl + 1) % pl.tree_levels == 0 or last):
                 flat = [t for row in terms for t in row]
                 valid, r = pipe.stage(f"s_tree{lvl}", True, valid, {"t": flat, "oor": oor})
@@ -520,19 +515,8 @@ class PWASCore(wiring.Component):
         vals = [r for r in res if not isinstance(r, int)]
         if not vals:
             return consts
-        lvl = 0
-        while len(vals) > 1:
-            nxt = []
-            for i in range(0, len(vals), 2):
-                if i + 1 < len(vals):
-                    a, b = vals[i], vals[i + 1]
-                    table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
-                    nxt.append(rom(m, Cat(a, b), table, rbits, f"{name}_{lvl}_{i // 2}"))
-                else:
-                    nxt.append(vals[i])
-            vals = nxt
-            lvl += 1
-        v = vals[0]
+        table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
+        v = tree_reduce(vals, lambda a, b, lvl, i: rom(m, Cat(a, b), table, rbits, f"{name}_{lvl}_{i}"))
         if consts:
             v = rom(m, v, [(x + consts) % nb for x in range(nb)], rbits, f"{name}_k")
         return v

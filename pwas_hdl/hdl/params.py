@@ -23,9 +23,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from pwas_hdl.fixedpoint.reduction import tree_depth
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout
 
 __all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS"]
 
@@ -171,10 +176,6 @@ def _params_from_model(cls, model) -> CoreParams:
 
 
 # ---------------------------------------------------------------------------------------------
-# Reference arithmetic (integer, vectorised). Kept for tests and as a cross-check of the bit-true
-# model; the specification proper is pwas_hdl.fixedpoint.bittrue.
-# ---------------------------------------------------------------------------------------------
-# ---------------------------------------------------------------------------------------------
 # Pipeline options
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -208,8 +209,8 @@ class Pipeline:
 
     @staticmethod
     def tree_depth(n: int) -> int:
-        """Adder-tree levels to sum ``n + 1`` products."""
-        return max(1, math.ceil(math.log2(n + 1)))
+        """Adder-tree levels to sum ``n + 1`` products (:func:`pwas_hdl.fixedpoint.reduction.tree_depth`)."""
+        return max(1, tree_depth(n + 1))
 
     def tree_registers(self, n: int) -> int:
         if self.tree_levels == 0:
@@ -274,25 +275,42 @@ PIPELINE_PRESETS: dict[str, Pipeline] = {
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MemoryPlan:
-    """How the weights are laid out in ``n + 1`` memories (one read each per cycle).
+    """The weight memories of the core: a view of a layout of :mod:`pwas_hdl.fixedpoint.memory_layout`.
 
-    ``banked``: bank ``b(v) = (sum_j v_j) mod (n+1)``; the last dimension padded to
-    ``P' = ceil((p_{n-1}+1)/(n+1)) * (n+1)``; ``addr(v) = r * P'/(n+1) + v_{n-1} // (n+1)`` with ``r``
-    the C-order index over dimensions ``0 .. n-2``. Vertex ``k`` of a simplex with cell ``c`` lies in
-    bank ``(|c| + k) mod (n+1)``. Padding words are 0.
+    The geometry (banks, depth, which vertex sits at which bank and address, the address weights
+    ``row_strides`` that the core's address logic adds) is the layout's; this class only adds the
+    packed contents: one word per bank and address holds all ``nz`` targets, target 0 in the LSBs
+    (:func:`pwas_hdl.fixedpoint.bitfields.pack_rows`). Padding words are 0.
 
-    ``replicated``: ``n + 1`` copies of the ``N``-word memory addressed by the linear vertex index.
+    Attributes
+    ----------
+    layout : BankedLayout or ReplicatedLayout
+        The layout the bit-true model reads through (built by :meth:`build`).
+    word_bits : int
+        ``nz * B_w``.
+    contents : tuple of tuple of int
+        Per bank, ``depth`` packed words.
     """
 
-    kind: str
-    n_banks: int
-    depth: int
+    layout: "BankedLayout | ReplicatedLayout"
     word_bits: int
-    contents: tuple[tuple[int, ...], ...]  # per bank: packed words (nz codes, target 0 in the LSBs)
+    contents: tuple[tuple[int, ...], ...]
+
+    @property
+    def kind(self) -> str:
+        return self.layout.kind
+
+    @property
+    def n_banks(self) -> int:
+        return self.layout.n_banks
+
+    @property
+    def depth(self) -> int:
+        return self.layout.depth
 
     @property
     def words(self) -> int:
-        return self.n_banks * self.depth
+        return self.layout.total_words
 
     @property
     def bits(self) -> int:
@@ -300,6 +318,7 @@ class MemoryPlan:
 
     @property
     def addr_width(self) -> int:
+        """Address bits of one memory (0 when it has one word: the core then drives no address)."""
         return max(0, (self.depth - 1).bit_length())
 
     def to_dict(self) -> dict:
@@ -312,33 +331,15 @@ class MemoryPlan:
             "bits": self.bits,
         }
 
-    # Layout geometry shared with the core's address logic.
-    @staticmethod
-    def banked_geometry(partitions: Sequence[int]) -> tuple[int, int, tuple[int, ...]]:
-        """``(G, rows, row_strides)``: ``G = P'/(n+1)`` words per row, number of rows, and the C-order
-        strides of dimensions ``0 .. n-2`` (premultiplied by ``G``: address weight of ``c_j``)."""
-        n = len(partitions)
-        g = -(-(partitions[-1] + 1) // (n + 1))
-        rows = int(np.prod([p + 1 for p in partitions[:-1]])) if n > 1 else 1
-        st = [0] * (n - 1)
-        acc = g
-        for j in range(n - 2, -1, -1):
-            st[j] = acc
-            acc *= partitions[j] + 1
-        return g, rows, tuple(st)
-
     @classmethod
     def build(cls, p: CoreParams, kind: str = "banked") -> "MemoryPlan":
-        """The plan of :mod:`pwas_hdl.fixedpoint.memory_layout` (the layout the bit-true model reads through);
-        one word per bank and address holds all ``nz`` targets, target 0 in the LSBs."""
+        """The plan of the layout ``kind`` (``"banked"`` or ``"replicated"``) of ``p``'s grid."""
         from pwas_hdl.fit.geometry import Grid
-        from pwas_hdl.fixedpoint.memory_layout import make_layout, pack_words
+        from pwas_hdl.fixedpoint.bitfields import pack_rows
+        from pwas_hdl.fixedpoint.memory_layout import make_layout
 
         parts = np.array(p.partitions, dtype=np.int64)
         layout = make_layout(Grid(np.zeros(p.n), parts.astype(float), parts), kind)
         rom = layout.contents(p.weights)  # (n_banks, depth, nz)
-        if kind == "banked":  # the core's address logic relies on this geometry
-            g, rows, _ = cls.banked_geometry(p.partitions)
-            assert (layout.row_words, layout.n_rows, layout.depth) == (g, rows, g * rows)
-        contents = tuple(tuple(pack_words(rom[b], p.weight_width)) for b in range(layout.n_banks))
-        return cls(kind, layout.n_banks, layout.depth, p.nz * p.weight_width, contents)
+        contents = tuple(tuple(pack_rows(rom[b], p.weight_width)) for b in range(layout.n_banks))
+        return cls(layout, p.nz * p.weight_width, contents)

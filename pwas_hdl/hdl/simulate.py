@@ -10,25 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 from amaranth.sim import Simulator
 
+# equal-width payload fields, element 0 in the LSBs (the one implementation: pwas_hdl.fixedpoint.bitfields)
+from pwas_hdl.fixedpoint.bitfields import pack as pack_fields
+from pwas_hdl.fixedpoint.bitfields import unpack as unpack_fields
+
 __all__ = ["StreamRun", "run_stream", "pack_fields", "unpack_fields"]
-
-
-def pack_fields(values, width: int) -> int:
-    """Pack signed integers (element 0 in the LSBs) into one unsigned payload integer."""
-    mask = (1 << width) - 1
-    word = 0
-    for i, v in enumerate(values):
-        word |= (int(v) & mask) << (i * width)
-    return word
-
-
-def unpack_fields(word: int, width: int, count: int) -> list[int]:
-    """Inverse of :func:`pack_fields` (two's complement fields)."""
-    out = []
-    for i in range(count):
-        v = (word >> (i * width)) & ((1 << width) - 1)
-        out.append(v - (1 << width) if v >> (width - 1) else v)
-    return out
 
 
 @dataclass

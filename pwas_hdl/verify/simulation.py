@@ -40,7 +40,9 @@ import numpy as np
 
 from pwas_hdl.errors import CheckFailed, InputError
 from pwas_hdl.resources import sim_dir
+from pwas_hdl.fixedpoint.bitfields import pack, pack_fields
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.fixedpoint.reduction import tree_levels
 from pwas_hdl.design.manifest import load_manifest
 
 __all__ = [
@@ -332,7 +334,7 @@ def _memory_diffs(design: Design, read: dict) -> list[dict]:
         if not isinstance(words, list) or b >= rom.shape[0]:
             continue
         for a, got in enumerate(words[: rom.shape[1]]):
-            exp = _pack(rom[b, a], bw)
+            exp = pack(rom[b, a], bw)
             if got is None or got != exp:
                 diffs.append({"memory": name, "addr": a, "expected": exp, "actual": got,
                               "expected_codes": [int(v) for v in rom[b, a]]})
@@ -361,22 +363,10 @@ def _stage_offsets(names: Sequence[str], latency: int) -> dict[str, int] | None:
     return off
 
 
-def _pack(values, width: int) -> int:
-    word = 0
-    for i, v in enumerate(values):
-        word |= (int(v) & ((1 << width) - 1)) << (i * width)
-    return word
-
-
 def _tree_levels(products: np.ndarray) -> list[list[list[int]]]:
-    """The adder tree of the core: per level, per target, the partial sums (pairs, odd one passes)."""
-    nz = products.shape[1]
-    terms = [[int(products[k, z]) for k in range(products.shape[0])] for z in range(nz)]
-    levels = []
-    while len(terms[0]) > 1:
-        terms = [[row[i] + row[i + 1] if i + 1 < len(row) else row[i] for i in range(0, len(row), 2)] for row in terms]
-        levels.append(terms)
-    return levels
+    """The adder tree of the core: per level, per target, the partial sums (pwas_hdl.fixedpoint.reduction)."""
+    per_target = [tree_levels([int(v) for v in products[:, z]], lambda a, b, _lvl, _i: a + b) for z in range(products.shape[1])]
+    return [[t[lvl] for t in per_target] for lvl in range(len(per_target[0]))]
 
 
 def _bank_order(tr: dict, values: np.ndarray) -> np.ndarray:
@@ -394,15 +384,11 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     rather than in simplex-vertex order (older generators, recognised by their ``vdata`` nets).
     """
     if name in _OUT_REGS:
-        vals = [int(v) for v in tr["out"]] + [int(tr["out_of_range"])]
-        word = 0
-        for v, f in zip(vals, out_fields):
-            word |= (v & ((1 << f["width"]) - 1)) << f["lsb"]
-        return word
+        return pack_fields([int(v) for v in tr["out"]] + [int(tr["out_of_range"])], out_fields)
     bw = model.weight_format.bits
     mo = re.match(r"vdata(\d+)$", name)
     if mo:
-        return _pack(tr["w"][int(mo.group(1))], bw)
+        return pack(tr["w"][int(mo.group(1))], bw)
     mo = re.match(r"s_(split|rank|addr|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
     if not mo:
         return None
@@ -428,7 +414,7 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
         r = int(tr["rank"][i])
         return sum(1 << (k - 1) for k in range(1, n) if r < k)
     if what == "data":
-        return _pack(tr["w_by_bank"][i], bw)
+        return pack(tr["w_by_bank"][i], bw)
     if what == "addr":  # vertex i's address (register before the memories) or memory i's
         return int(tr["addr_by_bank"][i] if bank_order else tr["addr"][i])
     if what == "p":
