@@ -11,8 +11,8 @@ Designs (12-bit inputs, weights in the fewest bits that hold them, as ``pwas-hdl
   cross-validation, gamma = 1.2, zero-order Tikhonov: My = 3, p = 7 (N = 512); My = 4, p = 7
   (N = 4096, Table II); My = 5, p = 7 (N = 32768); My = 4, p = 3 (N = 256); My = 4, p = 1 (N = 16).
 * Helicopter size (Table VI: n = 6, Mu = 2 with nu = 2, My = 2 with ny = 1, p = 3, N = 4096). There
-  is no helicopter data here: the model is fitted on a *synthetic* closed-loop plant simulated below
-  (:func:`helicopter_plant`: a nonlinear 2-DOF elevation/azimuth system with propeller motors and
+  is no helicopter data here: the model is fitted on a *synthetic* closed-loop plant
+  (:func:`pwas_hdl.systems.helicopter.helicopter`: a nonlinear 2-DOF elevation/azimuth system with propeller motors and
   two PID loops, references as inputs, azimuth measured, elevation estimated), gamma = 1.1,
   first-order Tikhonov as in the paper, sigma by cross-validation.
 
@@ -77,84 +77,13 @@ MUST_SHOW = "lorenz_my4_p7"
 
 
 # ---------------------------------------------------------------------------------------------
-# the synthetic helicopter
-# ---------------------------------------------------------------------------------------------
-def helicopter_plant(n_samples: int, seed: int = 0, dt: float = 0.01, substeps: int = 10, burn_in: int = 500):
-    """Synthetic stand-in for the CE150 helicopter of the paper (Section VI-B), in closed loop.
-
-    Elevation ``psi`` and azimuth ``phi``; torques from two propellers whose speeds follow their
-    commands with a 0.1 s lag; gravity ``mgl sin psi``, viscous and Coulomb friction, a centrifugal
-    term, a gyroscopic coupling ``k_G phi' tau_1 cos psi``, the main motor's reaction torque on the
-    azimuth, and an azimuth inertia that depends on ``psi``. Two PID loops (elevation with gravity
-    feed-forward) track references ``psi_d``, ``phi_d``: random steps through a 0.5 s prefilter.
-    Sample time 10 ms (RK4, ``substeps`` per sample).
-
-    Returns ``u`` (T, 2) = ``[psi_d, phi_d]``, ``y`` (T, 1) = ``phi`` + noise (0.01 rad),
-    ``z`` (T, 1) = ``psi`` + noise (0.01 rad), ``z_true`` (T, 1) = ``psi``.
-    """
-    rng = np.random.default_rng(seed)
-    total = n_samples + burn_in
-
-    def steps(lo, hi, tmin, tmax):
-        r = np.empty(total)
-        t = 0
-        while t < total:
-            k = int(rng.uniform(tmin, tmax) / dt)
-            r[t : t + k] = rng.uniform(lo, hi)
-            t += k
-        return r
-
-    psi_r, phi_r = steps(0.05, 0.75, 2.0, 6.0), steps(-1.2, 1.2, 2.0, 8.0)
-    a = dt / 0.5
-    psi_d, phi_d = np.empty(total), np.empty(total)
-    pd, fd = psi_r[0], phi_r[0]
-    for t in range(total):
-        pd += a * (psi_r[t] - pd)
-        fd += a * (phi_r[t] - fd)
-        psi_d[t], phi_d[t] = pd, fd
-    i1, i2, mgl, ml2, k1, k2, kr = 0.05, 0.06, 0.5, 0.02, 1.0, 0.4, 0.08
-    b1, b2, c1, c2, kg, tm = 0.08, 0.05, 0.01, 0.01, 0.05, 0.1
-    kp1, ki1, kd1, kp2, ki2, kd2 = 4.0, 2.0, 1.2, 2.5, 0.8, 1.0
-
-    def f(x, pd, fd):
-        psi, dpsi, phi, dphi, w1, w2, e1i, e2i = x
-        e1, e2 = pd - psi, fd - phi
-        v1 = math.sqrt(max(mgl * math.sin(pd), 0.0) / k1) + kp1 * e1 + ki1 * e1i - kd1 * dpsi
-        v2 = kp2 * e2 + ki2 * e2i - kd2 * dphi
-        v1, v2 = min(max(v1, 0.0), 3.0), min(max(v2, -3.0), 3.0)
-        tau1 = k1 * w1 * w1
-        ddpsi = (tau1 + ml2 * dphi**2 * math.sin(psi) * math.cos(psi) - c1 * math.tanh(dpsi / 0.05) - b1 * dpsi
-                 - mgl * math.sin(psi) - kg * dphi * tau1 * math.cos(psi)) / i1
-        ddphi = (k2 * w2 * abs(w2) - c2 * math.tanh(dphi / 0.05) - b2 * dphi - kr * tau1) / (i2 * (0.4 + 0.6 * math.cos(psi) ** 2))
-        return np.array([dpsi, ddpsi, dphi, ddphi, (v1 - w1) / tm, (v2 - w2) / tm, e1, e2])
-
-    x = np.zeros(8)
-    x[0] = psi_d[0]
-    x[4] = math.sqrt(mgl * math.sin(psi_d[0]) / k1)
-    out = np.empty((total, 2))
-    h = dt / substeps
-    for t in range(total):
-        out[t] = x[0], x[2]
-        pd, fd = psi_d[t], phi_d[t]
-        for _ in range(substeps):
-            s1 = f(x, pd, fd)
-            s2 = f(x + h / 2 * s1, pd, fd)
-            s3 = f(x + h / 2 * s2, pd, fd)
-            s4 = f(x + h * s3, pd, fd)
-            x = x + h / 6 * (s1 + 2 * s2 + 2 * s3 + s4)
-    s = slice(burn_in, None)
-    u = np.stack([psi_d, phi_d], 1)[s]
-    psi, phi = out[s, 0:1], out[s, 1:2]
-    return u, phi + rng.normal(0, 0.01, phi.shape), psi + rng.normal(0, 0.01, psi.shape), psi
-
-
-# ---------------------------------------------------------------------------------------------
 # models
 # ---------------------------------------------------------------------------------------------
 def fit_model(d: dict[str, Any], workdir: Path, log) -> tuple[Path, dict[str, Any]]:
     """Fit (or reuse) the model of design ``d``; returns the model file and a few fit numbers."""
-    from pwas_hdl.systems.lorenz import lorenz
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.helicopter import helicopter
+    from pwas_hdl.systems.lorenz import lorenz
 
     path = workdir / "models" / f"{d['key']}.json"
     info_path = path.with_suffix(".info.json")
@@ -169,14 +98,15 @@ def fit_model(d: dict[str, Any], workdir: Path, log) -> tuple[Path, dict[str, An
         info = {"data": "pwas_hdl.systems.lorenz.lorenz(6000, seed=0)", "gamma": 1.2, "tikhonov_order": 0}
     else:
         log("simulating the synthetic helicopter (25000 samples) ...")
-        u, y, z, zt = helicopter_plant(25000, seed=0)
+        heli = helicopter(25000, seed=0)
+        u, y, z, zt = heli.u, heli.y, heli.z, heli.z_true
         tr, te = slice(0, 20000), slice(20000, None)
         m = PWASVirtualSensor(mu=d["mu"], my=d["my"], partitions=d["p"], gamma=1.1, tikhonov_order=1,
                               input_names=["psi_d", "phi_d"], output_names=["phi"], target_names=["psi"]).fit(u[tr], y[tr], z[tr])
         zh = m.predict(u[te], y[te])
         lag = max(d["mu"], d["my"]) - 1
         rmse = float(np.sqrt(np.mean((zh[:, 0] - zt[te][lag:, 0]) ** 2)))
-        info = {"data": "synthetic closed-loop 2-DOF helicopter (benchmarks/hw_tables.py: helicopter_plant), "
+        info = {"data": "synthetic closed-loop 2-DOF helicopter (pwas_hdl.systems.helicopter.helicopter), "
                         "T = 25000 at 10 ms, fit on the first 20000", "gamma": 1.1, "tikhonov_order": 1,
                 "rmse_test_rad": round(rmse, 5), "std_psi_rad": round(float(np.std(zt)), 5),
                 "note": "not the paper's helicopter data (none is available here); only the size (n, p, N) matches Table VI"}
@@ -446,7 +376,7 @@ def _run(args: argparse.Namespace, ex) -> int:
         "format": FORMAT, "version": 1, "pwas_hdl": __version__, "settings": settings, "complete": False,
         "designs": designs, "timing_closure": None, "must_show": None,
         "notes": [
-            "The helicopter row is fitted on a synthetic closed-loop plant simulated in this script (no helicopter data "
+            "The helicopter row is fitted on a synthetic closed-loop plant (pwas_hdl.systems.helicopter; no helicopter data "
             "is available here); only its size (n = 6, p = 3, N = 4096) matches Table VI.",
             "Sigma by 5-fold cross-validation over logspace(-7, 3, 21) for every model.",
             "iCE40 HX8K has no DSPs (the multipliers are built from LUTs and carries) and 32 block RAMs of 4 kbit.",

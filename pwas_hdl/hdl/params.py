@@ -319,7 +319,7 @@ class MemoryPlan:
     @property
     def addr_width(self) -> int:
         """Address bits of one memory (0 when it has one word: the core then drives no address)."""
-        return max(0, (self.depth - 1).bit_length())
+        return self.layout.addr_bits if self.depth > 1 else 0
 
     def to_dict(self) -> dict:
         return {
