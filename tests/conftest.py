@@ -1,8 +1,14 @@
-"""Shared fixtures of the fitting test suite (all deterministic: every random draw is seeded)."""
+"""Shared fixtures of the test suite (all deterministic: every random draw is seeded).
+
+Markers (registered in pyproject.toml): ``rtl`` runs a Verilog simulator (Icarus / Verilator),
+``synth`` runs Yosys / nextpnr, ``slow`` takes more than about 5 s. The fast subset is
+``bash run.sh test -m "not rtl and not synth"``.
+"""
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -58,3 +64,66 @@ def sim_cache(tmp_path_factory) -> Path:
     path = Path(env) if env else tmp_path_factory.getbasetemp() / "pwas-sim-cache"
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+@dataclass(frozen=True)
+class LorenzFit:
+    """A fitted Lorenz sensor of :func:`lorenz_fit` and its files.
+
+    ``sensor`` (fitted PWASVirtualSensor), ``train`` / ``test`` (PlantData), ``root`` (folder),
+    ``model`` (``root/model.json``), ``test_csv`` (``root/test.csv``: ``y``, ``z``, ``z_true``).
+    """
+
+    sensor: object
+    train: object
+    test: object
+    root: Path
+    model: Path
+    test_csv: Path
+
+
+#: The Table II sensor (My = 4, p = 7, N = 4096) with a fixed sigma (CV would cost seconds).
+TABLE2 = dict(my=4, p=7, sigma=3.2e-4, train=6000, test=300, seed=0)
+#: A tiny sensor (My = 2, p = 3, N = 16) for tests that sweep or place and route.
+TINY = dict(my=2, p=3, sigma=1e-4, train=1000, test=300, seed=1)
+
+
+@pytest.fixture(scope="session")
+def lorenz_fit(tmp_path_factory):
+    """Factory, cached per session: ``lorenz_fit(my, p, sigma, train, test, seed)`` -> :class:`LorenzFit`.
+
+    The data are ``lorenz(train + test, seed)`` split after ``train`` samples; the sensor is fitted
+    on the first part with ``gamma = 1.2`` and the given sigma (no cross-validation). Use
+    ``lorenz_fit(**TABLE2)`` or ``lorenz_fit(**TINY)`` so that test files share fits.
+    """
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.io.csv_table import write_csv
+    from pwas_hdl.systems.lorenz import lorenz
+
+    made: dict[tuple, LorenzFit] = {}
+
+    def get(my: int, p: int, sigma: float, train: int, test: int, seed: int) -> LorenzFit:
+        key = (my, p, sigma, train, test, seed)
+        if key not in made:
+            tr, te = lorenz(train + test, seed=seed).split(train)
+            m = PWASVirtualSensor(my=my, partitions=p, gamma=1.2, sigma=sigma, output_names=["y"], target_names=["z"])
+            m.fit(None, tr.y, tr.z)
+            root = tmp_path_factory.mktemp(f"lorenz-my{my}-p{p}-s{seed}")
+            m.save(root / "model.json")
+            write_csv(root / "test.csv", te.columns())
+            made[key] = LorenzFit(m, tr, te, root, root / "model.json", root / "test.csv")
+        return made[key]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def lorenz_table2(lorenz_fit) -> LorenzFit:
+    """The Table II sensor (``TABLE2``): My = 4, p = 7, N = 4096, fitted on lorenz(6300, seed=0)[:6000]."""
+    return lorenz_fit(**TABLE2)
+
+
+@pytest.fixture(scope="session")
+def lorenz_tiny(lorenz_fit) -> LorenzFit:
+    """A tiny sensor (``TINY``): My = 2, p = 3, N = 16, fitted on lorenz(1300, seed=1)[:1000]."""
+    return lorenz_fit(**TINY)

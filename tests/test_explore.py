@@ -16,8 +16,6 @@ from pwas_hdl.cli import app
 from pwas_hdl.io.csv_table import read_csv, write_csv
 from pwas_hdl.flow.explore import DEFAULT_FRAC_OFFSETS, explore, format_table, pareto_front, plot_exploration
 from pwas_hdl.design.generate import build_design
-from pwas_hdl.systems.lorenz import lorenz
-from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 
@@ -55,16 +53,10 @@ def test_pareto_front_brute_force_property():
 
 # ------------------------------------------------------------------------ a tiny model
 @pytest.fixture(scope="module")
-def tiny(tmp_path_factory):
-    """My = 2, p = 3 (N = 16) Lorenz sensor with a fixed sigma, its test CSV and its model file."""
-    d = lorenz(1300, seed=1)
-    train, test = d.split(1000)
-    m = PWASVirtualSensor(my=2, partitions=3, gamma=1.2, sigma=1e-4, output_names=["y"], target_names=["z"])
-    m.fit(None, train.y, train.z)
-    root = tmp_path_factory.mktemp("explore")
-    m.save(root / "model.json")
-    write_csv(root / "test.csv", test.columns())
-    return m, root
+def tiny(lorenz_tiny):
+    """My = 2, p = 3 (N = 16) Lorenz sensor with a fixed sigma and the folder of its ``model.json``
+    and ``test.csv`` (shared conftest fit)."""
+    return lorenz_tiny.sensor, lorenz_tiny.root
 
 
 @pytest.fixture(scope="module")
@@ -216,6 +208,7 @@ def test_arrays_as_data(tiny):
         explore(m, 42, input_bits=[12])
 
 
+@pytest.mark.slow
 def test_measured_mode_with_a_stub_synthesizer(tiny, tmp_path, monkeypatch):
     import pwas_hdl.flow.synthesis as synthesis
 

@@ -11,7 +11,6 @@ from typer.testing import CliRunner
 from pwas_hdl.cli import app
 from pwas_hdl.design.generate import build_design, generate
 from pwas_hdl.design.manifest import load_manifest, port
-from pwas_hdl.systems.lorenz import lorenz
 from pwas_hdl.flow.toolchain import lint_verilog
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
@@ -19,14 +18,9 @@ runner = CliRunner()
 
 
 @pytest.fixture(scope="module")
-def lorenz_model(tmp_path_factory):
-    """The Table II model (My = 4, p = 7, N = 4096), fitted with a fixed sigma to keep it fast."""
-    d = lorenz(6000, seed=0)
-    m = PWASVirtualSensor(my=4, partitions=7, gamma=1.2, sigma=5.57e-4, output_names=["y"], target_names=["z"])
-    m.fit(None, d.y, d.z)
-    path = tmp_path_factory.mktemp("model") / "lorenz.json"
-    m.save(path)
-    return path
+def lorenz_model(lorenz_table2):
+    """The Table II model file (My = 4, p = 7, N = 4096; shared conftest fit)."""
+    return lorenz_table2.model
 
 
 @pytest.fixture(scope="module")
@@ -74,6 +68,7 @@ def test_hex_files_hold_the_weight_codes(lorenz_core, lorenz_model):
         assert codes == rom[h["bank"], :, 0].tolist()
 
 
+@pytest.mark.slow
 def test_generate_is_deterministic(lorenz_model, tmp_path):
     a = generate(lorenz_model, tmp_path / "a")
     b = generate(lorenz_model, tmp_path / "b")
@@ -111,6 +106,7 @@ def test_bad_options_write_nothing(lorenz_model, tmp_path):
     assert [p.name for p in keep.iterdir()] == ["notes.txt"]
 
 
+@pytest.mark.slow
 def test_regenerate_replaces_own_folder(lorenz_model, tmp_path):
     out = tmp_path / "g"
     generate(lorenz_model, out)

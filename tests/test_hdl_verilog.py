@@ -24,7 +24,7 @@ from pwas_hdl.hdl import (
 )
 from pwas_hdl.hdl.simulate import pack_fields, unpack_fields
 
-from test_hdl_core import codes, make_model
+from helpers.hdl_models import codes, make_model
 
 
 def _verilator() -> str | None:
@@ -181,11 +181,12 @@ endmodule
 
 @pytest.mark.skipif(IVERILOG is None, reason="iverilog not installed")
 @pytest.mark.parametrize("key, init", [("n4_p7_lorenz_like", "inline"), ("odd_formats", "inline"), ("n2_replicated_max", "readmemh")])
+@pytest.mark.rtl
 def test_icarus_runs_the_verilog_bit_true(key, init, tmp_path):
     dut = DESIGNS[key]()
     p = dut.params
     if key == "odd_formats":
-        from hdl_reference import reference_eval
+        from helpers.hdl_reference import reference_eval
 
         rng = np.random.default_rng(3)
         q = rng.integers(-128, 128, (120, p.n))

@@ -49,6 +49,7 @@ def _rows(path):
         return list(csv.DictReader(f))
 
 
+@pytest.mark.rtl
 @pytest.mark.parametrize("simulator, engine", [("icarus", "cocotb"), ("verilator", "cocotb"), ("verilator", "native")])
 def test_simulate_sensor(simulator, engine, folders, sim_cache, tmp_path):
     out = tmp_path / "hw.csv"
@@ -78,6 +79,7 @@ def test_simulate_sensor(simulator, engine, folders, sim_cache, tmp_path):
     assert np.array_equal(np.array([r["out_of_range"] == "1" for r in rows]), flags)
 
 
+@pytest.mark.rtl
 def test_simulate_core_trajectories_with_stalls(folders, sim_cache, tmp_path):
     out = tmp_path / "core.csv"
     summ = tmp_path / "s.json"
@@ -93,6 +95,7 @@ def test_simulate_core_trajectories_with_stalls(folders, sim_cache, tmp_path):
     assert rows[149 - 1]["row"] == "149" and rows[149]["row"] == str(150 + 1)  # the second run starts at row 150 (+M-1)
 
 
+@pytest.mark.rtl
 def test_simulate_sensor_resets_between_trajectories(folders, sim_cache, tmp_path):
     res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "data.csv"), "-o", str(tmp_path / "o.csv"),
                               "--traj-col", "run", "--build-dir", str(sim_cache)])
@@ -121,6 +124,7 @@ def test_simulate_native_reports_rtl_mismatch_and_resets_between_trajectories(fo
     assert s["mismatches"] == s["samples"] == 149
 
 
+@pytest.mark.rtl
 def test_simulate_reports_rtl_mismatch(folders, sim_cache, tmp_path):
     """A one-LSB fault in the RTL: every sample is flagged, exit status 1, the summary is written."""
     bad = tmp_path / "bad"

@@ -168,6 +168,7 @@ def _check_timing(result: dict) -> None:
     assert result["clock"] and "clk" in result["clock"]
 
 
+@pytest.mark.synth
 def test_generic(design: Path, tmp_path: Path):
     seen: list[str] = []
     r = synthesize(design, "generic", progress=seen.append)
@@ -188,6 +189,7 @@ def test_generic(design: Path, tmp_path: Path):
     assert "generic" in txt and f"LUT4 {r['luts']}" in txt and "memories kept 1 (3072 bits)" in txt and "n/a" in txt
 
 
+@pytest.mark.synth
 def test_generic_small_rom_becomes_logic(tmp_path: Path):
     big = synthesize(make_design(tmp_path / "big", rom_depth=128), "generic")
     small = synthesize(make_design(tmp_path / "small", rom_depth=64), "generic")
@@ -196,6 +198,7 @@ def test_generic_small_rom_becomes_logic(tmp_path: Path):
     assert small["luts"] > big["luts"]  # the 64x12 table is in the LUTs now
 
 
+@pytest.mark.synth
 def test_ice40_default_hx8k(design: Path, tmp_path: Path):
     r = synthesize(design, "ice40", freq_mhz=20)
     work = design / "synth" / "ice40"
@@ -214,6 +217,7 @@ def test_ice40_default_hx8k(design: Path, tmp_path: Path):
     assert "iCE40HX8K-CT256" in txt and "fmax" in txt and "ns" in txt and "ICESTORM_LC" in txt
 
 
+@pytest.mark.synth
 def test_ice40_up5k_infers_dsp(design: Path, tmp_path: Path):
     work = tmp_path / "elsewhere" / "up5k"
     r = synthesize(design, "ice40", device="up5k", workdir=work, seed=3)
@@ -227,6 +231,7 @@ def test_ice40_up5k_infers_dsp(design: Path, tmp_path: Path):
     _check_files(work, design, r, tmp_path, ("yosys.log", "nextpnr.log"))
 
 
+@pytest.mark.synth
 def test_ecp5(design: Path, tmp_path: Path):
     r = synthesize(design, "ecp5")
     work = design / "synth" / "ecp5"
@@ -242,6 +247,7 @@ def test_ecp5(design: Path, tmp_path: Path):
     assert "LFE5U-45F" in synth_summary_text(r)
 
 
+@pytest.mark.synth
 def test_does_not_fit_names_the_resource(tmp_path: Path):
     d = make_design(tmp_path / "wide", wide=True)
     with pytest.raises(ValueError, match=r"does not fit iCE40UP5K-SG48: I/O pins: the design needs 63, iCE40UP5K-SG48 has 39") as ei:
@@ -250,6 +256,7 @@ def test_does_not_fit_names_the_resource(tmp_path: Path):
     assert not (d / "synth" / "ice40" / "synth.json").exists()
 
 
+@pytest.mark.synth
 def test_yosys_error_shows_the_log(tmp_path: Path):
     d = make_design(tmp_path / "broken", broken=True)
     with pytest.raises(ToolFailed, match="yosys failed") as ei:

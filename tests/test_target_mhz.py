@@ -18,9 +18,7 @@ from pwas_hdl.design.generate import build_design, generate
 from pwas_hdl.hdl import Pipeline, build_core
 from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
 from pwas_hdl.design.manifest import load_manifest
-from pwas_hdl.systems.lorenz import lorenz
 from pwas_hdl.flow.timing_closure import TimingNotMet, harness_verilog, pipeline_candidates
-from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 runner = CliRunner()
 
@@ -31,12 +29,9 @@ needs_pnr = pytest.mark.skipif(
 
 
 @pytest.fixture(scope="module")
-def tiny_model(tmp_path_factory):
-    d = lorenz(800, seed=0)
-    m = PWASVirtualSensor(my=2, partitions=2, gamma=1.2, sigma=1e-3).fit(None, d.y, d.z)
-    path = tmp_path_factory.mktemp("tiny") / "tiny.json"
-    m.save(path)
-    return path
+def tiny_model(lorenz_tiny):
+    """The tiny Lorenz model file (My = 2, p = 3; shared conftest fit)."""
+    return lorenz_tiny.model
 
 
 @pytest.mark.parametrize("n", range(1, 9))
@@ -55,9 +50,10 @@ def test_candidates_increase_strictly(n):
     assert lat[-1] == Pipeline.cast("max").latency(n) + 1
 
 
+@pytest.mark.slow
 def test_every_candidate_is_bit_exact():
     """Amaranth simulation of each candidate (random stalls) against the bit-true model."""
-    from test_hdl_core import codes, make_model
+    from helpers.hdl_models import codes, make_model
 
     for parts, mem in (([3, 2], "banked"), ([2, 1, 3], "replicated")):
         model = make_model(parts, seed=4, nz=2)
@@ -108,6 +104,7 @@ def test_bad_requests_fail_before_place_and_route(tiny_model, tmp_path):
 
 
 @needs_pnr
+@pytest.mark.synth
 def test_target_mhz_build_records_the_search(tiny_model, tmp_path):
     out = tmp_path / "core"
     res = runner.invoke(app, ["generate", str(tiny_model), "-o", str(out), "--target-mhz", "60", "--fpga", "ecp5"])
@@ -139,6 +136,7 @@ def test_target_mhz_build_records_the_search(tiny_model, tmp_path):
 
 
 @needs_pnr
+@pytest.mark.synth
 def test_impossible_target_is_a_clear_error(tiny_model, tmp_path):
     out = tmp_path / "never"
     with pytest.raises(TimingNotMet, match=r"no pipeline reaches 2000 MHz .*best measured fmax is \d+\.\d MHz") as ei:

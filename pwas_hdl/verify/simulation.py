@@ -823,7 +823,7 @@ def simulate_data(
             if ref in table.header:
                 ztrue = table.numeric([ref])[row, 0]
                 entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
-                             rmsee_float=_rmse(zf[:, i], ztrue))
+                             rmsee_float=_rmse(zf[:, i], ztrue), rmsee_float_at_codes=_rmse(zref[:, i], ztrue))
                 entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
                 break
         targets[t] = entry
