@@ -330,3 +330,37 @@ def test_refit_replaces_previous_model(rng):
     s.fit(None, y, 2 * y)
     assert s.grid_.n == 2 and s.lags_.my == 2
     np.testing.assert_allclose(s.predict(None, y)[:, 0], 2 * y[1:], atol=1e-4)
+
+
+# ------------------------------------------------------------------ scikit-learn estimator protocol
+def test_sklearn_protocol_params_clone_score_repr(rng):
+    from sklearn.base import clone
+
+    t = np.arange(400)
+    y = np.sin(0.05 * t)[:, None] + 0.01 * rng.normal(size=(400, 1))
+    z = (y[:, 0] ** 2)[:, None]
+    m = PWASVirtualSensor(my=2, partitions=4, sigma=1e-6, target_names=["z"])
+    params = m.get_params()
+    assert params["my"] == 2 and params["partitions"] == 4 and params["sigma"] == 1e-6 and params["mu"] == 0
+    assert set(params) == {"mu", "my", "partitions", "gamma", "sigma", "tikhonov_order", "cv_folds", "sigma_grid",
+                           "cv_shuffle", "domain", "share_lag_domain", "input_names", "output_names", "target_names"}
+    m.fit(None, y, z)
+    c = clone(m)
+    assert c is not m and not hasattr(c, "weights_") and not hasattr(c, "grid_")
+    assert c.get_params() == m.get_params()
+    with pytest.raises(RuntimeError, match="not fitted"):
+        c.predict(None, y)
+    # set_params changes a hyper-parameter (and only that); the refit uses it
+    assert c.set_params(partitions=2) is c and c.partitions == 2 and c.my == 2
+    assert c.fit(None, y, z).grid_.n_vertices == 9 and m.grid_.n_vertices == 25
+    # score is R^2 of the rows predict returns (as sklearn.metrics.r2_score)
+    zhat = m.predict(None, y)
+    zt = z[1:]
+    r2 = 1 - np.sum((zt - zhat) ** 2) / np.sum((zt - zt.mean()) ** 2)
+    assert m.score(None, y, z) == pytest.approx(r2, rel=1e-12)
+    assert 0.9 < m.score(None, y, z) <= 1.0 and c.score(None, y, z) < m.score(None, y, z)
+    assert m.score(None, y, -z) < 0
+    # a readable repr: the class and the parameters that differ from their defaults
+    assert repr(m) == "PWASVirtualSensor(my=2, partitions=4, sigma=1e-06, target_names=['z'])"
+    with pytest.raises(ValueError, match="Invalid parameter"):
+        m.set_params(nonsense=1)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+from sklearn.base import BaseEstimator, RegressorMixin
 
 from pwas_hdl.fit import model_file
 from pwas_hdl.fit.geometry import Grid
@@ -33,8 +34,14 @@ __all__ = ["PWASVirtualSensor", "MODEL_FORMAT", "MODEL_VERSION", "load_model"]
 Trajectories = np.ndarray | Sequence[np.ndarray] | None
 
 
-class PWASVirtualSensor:
+class PWASVirtualSensor(RegressorMixin, BaseEstimator):
     """Piecewise-affine simplicial virtual sensor.
+
+    A scikit-learn estimator: the hyper-parameters below are the ``__init__`` arguments, stored
+    unchanged (``get_params`` / ``set_params``; ``sklearn.base.clone`` gives an unfitted copy);
+    fitted attributes end in ``_``; :meth:`score` is the coefficient of determination R^2. Unlike
+    a plain regressor it takes the signals ``(u, y)`` rather than a feature matrix: the regressors
+    are built from their lags (use :meth:`predict_regressors` for ready-made regressors).
 
     Parameters
     ----------
@@ -286,6 +293,33 @@ class PWASVirtualSensor:
         self._check_fitted()
         xi, _ = self.regressors(u, y)
         return self.predict_regressors(xi, return_flags)
+
+    def score(self, u: Trajectories, y: Trajectories, z: Trajectories, sample_weight=None) -> float:
+        """Coefficient of determination R^2 of the estimates of ``z`` (as scikit-learn regressors).
+
+        Parameters
+        ----------
+        u, y, z : as in :meth:`fit`
+            ``z`` is compared at the samples that have a full regressor (``t = M-1 .. T_i-1`` of
+            each trajectory), the rows :meth:`predict` returns.
+        sample_weight : array_like, shape (rows,), optional
+
+        Returns
+        -------
+        float
+            ``sklearn.metrics.r2_score``, averaged uniformly over the targets (1 is perfect).
+        """
+        from sklearn.metrics import r2_score
+
+        zhat = self.predict(u, y)
+        _, valid = self.regressors(u, y)
+        zs = as_trajectories(z, "z")
+        if len(zs) != len(valid):
+            raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
+        zt = np.concatenate([zi[sl] for zi, sl in zip(zs, valid)], axis=0)
+        if zt.shape != zhat.shape:
+            raise ValueError(f"z has {zt.shape[0]} usable rows and {zt.shape[1]} columns, the estimates {zhat.shape}")
+        return float(r2_score(zt, zhat, sample_weight=sample_weight))
 
     # ----------------------------------------------------------- properties
     @property

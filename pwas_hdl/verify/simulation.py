@@ -58,6 +58,7 @@ __all__ = [
     "standard_runs",
     "run_rtl",
     "simulate_data",
+    "simulate_arrays",
     "stage_probes",
     "locate_difference",
     "sim_module",
@@ -701,7 +702,7 @@ def _rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 def simulate_data(
     outdir: str | os.PathLike,
-    data: str | os.PathLike,
+    data: "str | os.PathLike | Table",
     output: str | os.PathLike,
     *,
     simulator: str | None = None,
@@ -726,11 +727,15 @@ def simulate_data(
     :func:`run_rtl`; ``simulator`` then defaults to and must be ``"verilator"``). Both write the
     same summary and CSV.
 
-    Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult}``.
-    Mismatches against the bit-true model do not raise: they are counted in the summary.
+    ``data`` is a CSV path or a :class:`~pwas_hdl.io.csv_table.Table` (see :func:`simulate_arrays`).
+
+    Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult,
+    "rows": ndarray (m,), "estimates": ndarray (m, nz)}``: the data row of each hardware output and
+    the hardware estimates in physical units. Mismatches against the bit-true model do not raise:
+    they are counted in the summary.
     """
     from pwas_hdl.io.atomic import atomic_write_text
-    from pwas_hdl.io.csv_table import read_csv, split_trajectories, write_csv
+    from pwas_hdl.io.csv_table import Table, read_csv, split_trajectories, write_csv
 
     say = progress or (lambda msg: None)
     if engine not in ENGINES:
@@ -745,7 +750,8 @@ def simulate_data(
     sensor, model = design.sensor, design.model
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
-    table = read_csv(data)
+    table = data if isinstance(data, Table) else read_csv(data)
+    data = table.path
     if traj_col is not None:
         table.column_index(traj_col)
     slices = split_trajectories(table, traj_col)
@@ -876,7 +882,78 @@ def simulate_data(
     }
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
     atomic_write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
-    return {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res}
+    return {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
+
+
+def simulate_arrays(
+    outdir: str | os.PathLike,
+    output: str | os.PathLike,
+    *,
+    u=None,
+    y=None,
+    z_true=None,
+    **options: Any,
+) -> dict:
+    """Replay signals given as arrays through the generated RTL (as :func:`simulate_data` does a CSV file).
+
+    Parameters
+    ----------
+    outdir : path
+        Folder written by :func:`pwas_hdl.design.generate.generate`.
+    output : path
+        CSV of the hardware estimates to write (as :func:`simulate_data`); the JSON summary goes
+        next to it unless ``summary_path`` is given.
+    u, y : ndarray, shape (T, nu) / (T, ny), or a list of such (one per trajectory), optional
+        Inputs and outputs in physical units, the columns in the order of the model's signals
+        (``sensor.signal_names()``); ``None`` when the model does not use them.
+    z_true : ndarray, shape (T, nz) or (T,), or a list of such, optional
+        Reference values of the targets: the summary then holds the RMSEE of hardware, bit-true and
+        float estimates against them.
+    **options
+        ``simulator``, ``stall``, ``seed``, ``cache_dir``, ``waves``, ``summary_path``,
+        ``progress`` of :func:`simulate_data`.
+
+    Returns
+    -------
+    dict
+        As :func:`simulate_data`: ``summary``, ``estimates`` (m, nz), ``rows`` (m,) (sample index
+        counted over the concatenated trajectories), ``result``.
+    """
+    from pwas_hdl.fit.regressors import as_trajectories
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.io.csv_table import Table
+
+    if "traj_col" in options or "data" in options:
+        raise TypeError("simulate_arrays takes trajectories as lists of arrays, not traj_col/data")
+    sensor = PWASVirtualSensor.load(Path(outdir) / "model.json")
+    ins, outs, tgts = sensor.signal_names()
+    lags = sensor.lags_
+    columns: dict[str, list] = {}
+    n_traj = None
+    for names, arr, what, used in ((ins, u, "u", lags.nu and lags.mu), (outs, y, "y", lags.ny and lags.my),
+                                   ([f"{t}_true" for t in tgts], z_true, "z_true", z_true is not None)):
+        if not used:
+            continue
+        if arr is None:
+            raise ValueError(f"the model uses {what} ({', '.join(names)}); pass {what}=")
+        trajs = as_trajectories(arr, what)
+        if n_traj is not None and len(trajs) != len(n_traj):
+            raise ValueError(f"{what} has {len(trajs)} trajectories, the other signals {len(n_traj)}")
+        if n_traj is not None and [len(t) for t in trajs] != n_traj:
+            raise ValueError(f"{what} has trajectories of {[len(t) for t in trajs]} samples, the other signals {n_traj}")
+        n_traj = [len(t) for t in trajs]
+        stacked = np.concatenate(trajs, axis=0)
+        if stacked.shape[1] != len(names):
+            raise ValueError(f"{what} has {stacked.shape[1]} columns, the model's signals are {', '.join(names)}")
+        for j, nm in enumerate(names):
+            columns[nm] = stacked[:, j].tolist()
+    if n_traj is None:
+        raise ValueError("no signal given: pass u= and/or y=")
+    columns["_trajectory"] = [i for i, t in enumerate(n_traj) for _ in range(t)]
+    header = list(columns)
+    rows = [[repr(columns[h][r]) for h in header] for r in range(sum(n_traj))]
+    table = Table("arrays", header, rows)
+    return simulate_data(outdir, table, output, traj_col="_trajectory", **options)
 
 
 def _json_default(o):
