@@ -464,6 +464,11 @@ def generate(
             f"({mem['words'] / mem['n_vertices']:.3g} N) x {mem['word_bits']} bits, error bound {eb['lsb']:.4g} LSB "
             f"= {eb['physical']:.4g}"
         )
+        from pwas_hdl.design.report import STALE_NOTE, stale_results
+
+        stale = stale_results(gd.outdir)
+        if stale:
+            _say(f"kept {', '.join(stale)} ({STALE_NOTE}; `pwas-hdl report` marks them)")
         tm = man.get("timing")
         if tm:
             c = tm["candidates"][tm["chosen"]]

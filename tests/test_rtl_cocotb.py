@@ -269,6 +269,7 @@ def test_lorenz_replay_smoke(kind, simulator, lorenz_files, sim_cache, tmp_path)
     res = simulate_data(lorenz_files / kind, lorenz_files / "test.csv", tmp_path / "hw.csv", simulator=simulator, cache_dir=sim_cache)
     s = res["summary"]
     assert s["mismatches"] == 0, res["result"].report()
+    assert s["design_hash"] == load_design(lorenz_files / kind).manifest["design_hash"]
     assert s["samples"] == 300 - 3
     assert s["latency_cycles"]["measured_min"] == s["latency_cycles"]["measured_max"] == s["latency_cycles"]["manifest"]
     assert s["ii"]["measured"] == 1.0

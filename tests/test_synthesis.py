@@ -122,6 +122,7 @@ def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_d
         "latency_cycles": LATENCY,
         "ii": 1,
         "flow_control": {"in__ready": "always 1"},
+        "design_hash": DESIGN_HASH,
         "ports": [{"name": n, "direction": d, "width": w, "signed": n in ("in_a", "out_y"), "role": r} for n, d, w, r in ports],
         "formats": {"inputs": [{"name": "a", "signal": "a", "lag": 0, **inp}], "signals": {"a": inp},
                     "weight": {**fmt12, "n_saturated": 0}, "output": {**fmt12, "targets": ["z"], "shift": 11, "may_saturate": True},
@@ -139,6 +140,10 @@ def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_d
     validate_manifest(manifest, "tiny manifest")  # the runner only accepts valid manifests
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
     return folder
+
+
+#: design_hash of the hand-made manifest (synthesis copies it into its result)
+DESIGN_HASH = "ab" * 32
 
 
 @pytest.fixture
@@ -174,6 +179,7 @@ def test_generic(design: Path, tmp_path: Path):
     r = synthesize(design, "generic", progress=seen.append)
     work = design / "synth" / "generic"
     assert r["target"] == "generic" and r["top"] == "tiny_core" and r["device"] is None
+    assert r["design_hash"] == DESIGN_HASH  # the design the result is for (report: stale or not)
     assert r["tools"]["yosys"].startswith("Yosys ")
     assert r["luts"] > 0 and r["cells"]["$lut"] == r["luts"]
     # 4 valid bits + 12 a1 + 8 addr1 + 12 a2 + 12 w2 + 24 p3 + 12 out_y + 3 oor + out_oor, minus

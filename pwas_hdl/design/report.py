@@ -16,7 +16,38 @@ from typing import Any, Sequence
 from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
-__all__ = ["collect_report", "report_markdown"]
+__all__ = ["collect_report", "report_markdown", "stale_results", "STALE_NOTE"]
+
+#: What the report says of a result made for another design than the folder's.
+STALE_NOTE = "stale: made for an earlier design"
+
+
+def _is_stale(result: dict[str, Any], manifest: dict[str, Any]) -> bool:
+    """A result is stale when the folder's manifest has a design hash and the result another (or none)."""
+    current = manifest.get("design_hash")
+    return current is not None and result.get("design_hash") != current
+
+
+def stale_results(outdir: str | os.PathLike) -> list[str]:
+    """Results in ``outdir/sim/*.json`` and ``outdir/synth/*/synth.json`` made for an earlier design.
+
+    Returns
+    -------
+    list of str
+        Their paths relative to ``outdir`` (sorted); empty when every result matches the
+        manifest's ``design_hash``. Files that are not JSON objects are skipped.
+    """
+    out = Path(outdir)
+    man = load_manifest(out)
+    stale = []
+    for p in sorted(out.glob("sim/*.json")) + sorted(out.glob("synth/*/synth.json")):
+        try:
+            r = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(r, dict) and _is_stale(r, man):
+            stale.append(p.relative_to(out).as_posix())
+    return stale
 
 
 def _read_json(path: Path) -> dict[str, Any]:
@@ -81,6 +112,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
                 "max_error_vs_float_lsb": s.get("max_error_vs_float_lsb"),
                 "within_error_bound": s.get("within_error_bound"),
                 "samples_per_second": s.get("samples_per_second"),
+                "stale": _is_stale(s, man),
                 "targets": {
                     t: {k: v.get(k) for k in ("reference_column", "rmsee_float", "rmsee_hw", "rmsee_increase_hw_vs_float_percent")}
                     for t, v in s.get("targets", {}).items()
@@ -92,6 +124,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         r = _read_json(p)
         synth.append({k: r.get(k) for k in ("target", "part", "luts", "ffs", "carry", "dsp", "bram", "bram_bits",
                                              "fmax_mhz", "latency_ns", "throughput_msps", "timing_met")})
+        synth[-1].update(file=p.relative_to(out).as_posix(), stale=_is_stale(r, man))
     return {
         "format": "pwas-hdl-report",
         "version": 1,
@@ -139,6 +172,7 @@ def report_markdown(rep: dict[str, Any]) -> str:
                     f"{_fmt(s['max_error_vs_float_lsb'], '.3f')} | {t} (vs {v['reference_column']}) | {_fmt(v['rmsee_float'])} | "
                     f"{_fmt(v['rmsee_hw'])} | {_fmt(v['rmsee_increase_hw_vs_float_percent'], '.3f')} % |"
                 )
+        lines += _stale_lines(rep["simulation"], "simulate")
         lines.append("")
     if rep["synthesis"]:
         lines += ["## Synthesis (Yosys + nextpnr)", "",
@@ -150,5 +184,13 @@ def report_markdown(rep: dict[str, Any]) -> str:
                 f"{_fmt(s['bram'])} ({_fmt(s['bram_bits'])}) | {_fmt(s['fmax_mhz'], '.1f')} | {_fmt(s['latency_ns'], '.1f')} | "
                 f"{_fmt(s['throughput_msps'], '.1f')} |"
             )
+        lines += _stale_lines(rep["synthesis"], "synth")
         lines.append("")
     return "\n".join(lines)
+
+
+def _stale_lines(entries: list[dict[str, Any]], command: str) -> list[str]:
+    stale = [e.get("file", "?") for e in entries if e.get("stale")]
+    if not stale:
+        return []
+    return ["", f"{STALE_NOTE} (the design was regenerated since): {', '.join(stale)}; re-run `pwas-hdl {command}`."]

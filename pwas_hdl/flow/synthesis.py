@@ -239,6 +239,7 @@ def synthesize(
         "package": pkg,
         "part": part,
         "top": top,
+        "design_hash": manifest.get("design_hash"),  # the design this result is for (report: stale?)
         "seed": seed if target != "generic" else None,
         "cells": cells,
         **_count_resources(target, cells, stat["memories"], stat["memory_bits"]),

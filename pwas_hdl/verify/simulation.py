@@ -842,6 +842,7 @@ def simulate_data(
     n = int(len(row))
     summary = {
         "design": design.top,
+        "design_hash": design.manifest.get("design_hash"),  # the design this result is for (report: stale?)
         "kind": design.kind,
         "outdir": str(design.outdir),
         "data": str(data),
