@@ -1,0 +1,82 @@
+"""The one bit-field packing (fixedpoint/bitfields.py) and the one reduction-tree order (fixedpoint/reduction.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fixedpoint.bitfields import pack, pack_fields, pack_rows, to_signed, to_unsigned, unpack, unpack_fields
+from pwas_hdl.fixedpoint.reduction import tree_depth, tree_level, tree_levels, tree_reduce
+
+
+@st.composite
+def _codes(draw):
+    width = draw(st.integers(1, 40))
+    vals = draw(st.lists(st.integers(-(1 << (width - 1)), (1 << (width - 1)) - 1), min_size=1, max_size=6))
+    return width, vals
+
+
+@given(_codes())
+def test_pack_unpack_round_trip(wv):
+    width, vals = wv
+    word = pack(vals, width)
+    assert 0 <= word < 1 << (width * len(vals))
+    assert unpack(word, width, len(vals)) == vals
+    # field i sits at bits [i*width +: width], two's complement
+    for i, v in enumerate(vals):
+        assert (word >> (i * width)) & ((1 << width) - 1) == v % (1 << width)
+    fields = [{"lsb": i * width, "width": width, "signed": True} for i in range(len(vals))]
+    assert pack_fields(vals, fields) == word and unpack_fields(word, fields) == vals
+
+
+def test_explicit_fields_mixed_signedness():
+    fields = [{"lsb": 0, "width": 5, "signed": True}, {"lsb": 5, "width": 3, "signed": False}, {"lsb": 8, "width": 1}]
+    word = pack_fields([-3, 6, 1], fields)
+    assert word == (29 | 6 << 5 | 1 << 8)
+    assert unpack_fields(word, fields) == [-3, 6, 1]
+    assert unpack(word, 5, 1, signed=False) == [29]
+
+
+@pytest.mark.parametrize("value, width", [(8, 3), (-5, 3), (2, 1), (-2, 1)])
+def test_values_that_do_not_fit_are_refused(value, width):
+    assert to_signed(to_unsigned(-1, width), width) == -1
+    with pytest.raises(InputError, match=f"code {value} does not fit {width} bits"):
+        pack([0, value], width)
+
+
+def test_pack_rows_is_one_word_per_row():
+    codes = np.array([[1, -1], [-2, 3], [0, 0]])
+    assert pack_rows(codes, 4) == [1 | 15 << 4, 14 | 3 << 4, 0]
+    assert pack_rows(np.array([-1, 2]), 4) == [15, 2]
+
+
+def test_tree_order_pairs_neighbours_and_passes_the_odd_one():
+    seen = []
+    levels = tree_levels(list("abcde"), lambda a, b, lvl, i: seen.append((lvl, i, a, b)) or f"({a}{b})")
+    assert levels == [["(ab)", "(cd)", "e"], ["((ab)(cd))", "e"], ["(((ab)(cd))e)"]]
+    assert seen[0] == (0, 0, "a", "b") and seen[1] == (0, 1, "c", "d") and seen[-1][:2] == (2, 0)
+    assert tree_reduce(list("abcde"), lambda a, b, *_: a + b) == "abcde"
+    assert tree_reduce(["x"], lambda a, b, *_: a + b) == "x" and tree_levels(["x"], lambda *a: None) == []
+    assert tree_level([1, 2, 3], lambda a, b, *_: a + b, 4) == [3, 3]
+    assert [tree_depth(k) for k in range(1, 10)] == [0, 1, 2, 2, 3, 3, 3, 3, 4]
+    with pytest.raises(ValueError):
+        tree_depth(0)
+
+
+@given(st.lists(st.integers(-(2**40), 2**40), min_size=1, max_size=9))
+def test_tree_sum_is_the_sum_and_has_depth_levels(values):
+    levels = tree_levels(values, lambda a, b, *_: a + b)
+    assert len(levels) == tree_depth(len(values))
+    assert tree_reduce(values, lambda a, b, *_: a + b) == sum(values)
+
+
+def test_core_adder_tree_and_probes_use_the_same_order():
+    """The partial sums the debug probes expect are the levels of the same tree (bank order)."""
+    from pwas_hdl.verify.simulation import _tree_levels
+
+    products = np.array([[1, 10], [2, 20], [3, 30], [4, 40], [5, 50]])
+    levels = _tree_levels(products)
+    assert levels == [[[3, 7, 5], [30, 70, 50]], [[10, 5], [100, 50]], [[15], [150]]]
