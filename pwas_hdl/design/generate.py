@@ -494,7 +494,11 @@ def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
 
 
 def generate(model: PWASVirtualSensor | str | os.PathLike, outdir: str | os.PathLike, **options: Any) -> GeneratedDesign:
-    """Build the design (see :func:`build_design` for the options) and write its folder."""
+    """Build the design (see :func:`build_design` for the options) and write its folder.
+
+    Re-generating into a folder keeps its ``sim/``, ``synth/`` and user files; results made for
+    another design are then stale (:func:`write_folder`, :func:`pwas_hdl.design.report.stale_results`).
+    """
     gd = build_design(model, **options)
     gd.outdir = write_folder(gd.files, outdir)
     return gd

@@ -54,7 +54,7 @@ from __future__ import annotations
 import numpy as np
 
 from pwas_hdl.fit.geometry import Grid
-from pwas_hdl.fixedpoint.bitfields import pack_rows
+from pwas_hdl.fixedpoint.bitfields import pack_rows, to_unsigned
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
 
@@ -289,14 +289,7 @@ def readmemh_text(words, bits: int) -> str:
         raise ValueError(f"word width must be an integer >= 1, got {bits!r}")
     bits = int(bits)
     digits = -(-bits // 4)
-    mask = (1 << bits) - 1
-    lines = []
-    for w in words:
-        w = int(w)
-        if not -(1 << (bits - 1)) <= w <= mask:
-            raise ValueError(f"word {w} does not fit {bits} bits")
-        lines.append(format(w & mask, f"0{digits}x"))
-    return "".join(line + "\n" for line in lines)
+    return "".join(format(to_unsigned(w, bits), f"0{digits}x") + "\n" for w in words)
 
 
 #: Packed words of one bank, target 0 in the least significant bits (:func:`pwas_hdl.fixedpoint.bitfields.pack_rows`).
