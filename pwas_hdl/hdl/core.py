@@ -314,7 +314,7 @@ class PWASCore(wiring.Component):
             res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
             rot = self._modsum(m, res, nb, rbits, "rot")
         else:
-            st = p.strides
+            st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
             terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
             base = sum_wrap(m, terms, aw, "base")
 

@@ -30,6 +30,7 @@ import numpy as np
 from pwas_hdl.fixedpoint.reduction import tree_depth
 
 if TYPE_CHECKING:
+    from pwas_hdl.fit.geometry import Grid
     from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout
 
 __all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS"]
@@ -117,19 +118,26 @@ class CoreParams:
         return int(self.weights.shape[1])
 
     @property
+    def grid(self) -> "Grid":
+        """The partition in grid units (``lo = 0``, ``hi = p``): the vertex numbering of
+        :mod:`pwas_hdl.fit.geometry`, which the memory layouts and the addresses follow."""
+        from pwas_hdl.fit.geometry import Grid
+
+        parts = np.array(self.partitions, dtype=np.int64)
+        return Grid(np.zeros(self.n), parts.astype(float), parts)
+
+    @property
     def shape(self) -> tuple[int, ...]:
         return tuple(p + 1 for p in self.partitions)
 
     @property
     def n_vertices(self) -> int:
-        return int(np.prod([p + 1 for p in self.partitions]))
+        return int(np.prod(self.shape))
 
     @property
     def strides(self) -> tuple[int, ...]:
-        s = [1] * self.n
-        for j in range(self.n - 2, -1, -1):
-            s[j] = s[j + 1] * (self.partitions[j + 1] + 1)
-        return tuple(s)
+        """C-order vertex strides (last dimension fastest), as ``Grid.strides``."""
+        return tuple(int(v) for v in self.grid.strides)
 
     @property
     def frac(self) -> int:
@@ -334,12 +342,10 @@ class MemoryPlan:
     @classmethod
     def build(cls, p: CoreParams, kind: str = "banked") -> "MemoryPlan":
         """The plan of the layout ``kind`` (``"banked"`` or ``"replicated"``) of ``p``'s grid."""
-        from pwas_hdl.fit.geometry import Grid
         from pwas_hdl.fixedpoint.bitfields import pack_rows
         from pwas_hdl.fixedpoint.memory_layout import make_layout
 
-        parts = np.array(p.partitions, dtype=np.int64)
-        layout = make_layout(Grid(np.zeros(p.n), parts.astype(float), parts), kind)
+        layout = make_layout(p.grid, kind)
         rom = layout.contents(p.weights)  # (n_banks, depth, nz)
         contents = tuple(tuple(pack_rows(rom[b], p.weight_width)) for b in range(layout.n_banks))
         return cls(layout, p.nz * p.weight_width, contents)
