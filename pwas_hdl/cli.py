@@ -37,7 +37,6 @@ from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.io.csv_table import read_csv, select_signals, split_trajectories, write_csv
-from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
 _CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -299,6 +298,7 @@ def fit(
             except ValueError:
                 raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
         parts = _int_list(partitions, "--partitions")
+        from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor(
             mu=mu,
             my=my,
@@ -345,6 +345,7 @@ def predict(
     """
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
+        from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor.load(model_path)
         ins, outs, tgts = model.signal_names()
         table = read_csv(data)
@@ -396,6 +397,7 @@ def predict(
 def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file.")]) -> None:
     """Print a summary of a model file as JSON (everything but the weights)."""
     with _user_errors():
+        from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor.load(model_path)
         d = model.to_dict()
         d.pop("weights")
