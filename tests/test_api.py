@@ -23,8 +23,9 @@ def test_every_exported_name_resolves_to_its_owner():
 
 
 def test_import_is_light():
-    """``import pwas_hdl`` (and so the CLI's start) loads neither Amaranth nor scikit-learn."""
-    code = "import sys, pwas_hdl; print(sorted(m for m in ('amaranth', 'sklearn', 'cocotb') if m in sys.modules))"
+    """``import pwas_hdl`` and the CLI's start load neither Amaranth nor scikit-learn nor cocotb."""
+    code = ("import sys, pwas_hdl, pwas_hdl.cli; "
+            "print(sorted(m for m in ('amaranth', 'sklearn', 'cocotb') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 
