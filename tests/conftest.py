@@ -1,8 +1,9 @@
 """Shared fixtures of the test suite (all deterministic: every random draw is seeded).
 
 Markers (registered in pyproject.toml): ``rtl`` runs a Verilog simulator (Icarus / Verilator),
-``synth`` runs Yosys / nextpnr, ``slow`` takes more than about 5 s. The fast subset is
-``bash run.sh test -m "not rtl and not synth"``.
+``synth`` runs Yosys / nextpnr, ``slow`` takes more than about 5 s (every ``rtl`` and ``synth``
+test counts as slow: :func:`pytest_collection_modifyitems` adds the mark). The fast subset is
+``bash run.sh test -m "not rtl and not synth"``; ``-m "not slow"`` leaves out the slow ones of it too.
 """
 
 from __future__ import annotations
@@ -15,6 +16,13 @@ import numpy as np
 import pytest
 
 from pwas_hdl.fit.geometry import Grid
+
+def pytest_collection_modifyitems(config, items):
+    """Simulator and synthesis runs take seconds to minutes each: mark them ``slow`` as well."""
+    for item in items:
+        if item.get_closest_marker("rtl") or item.get_closest_marker("synth"):
+            item.add_marker(pytest.mark.slow)
+
 
 @pytest.fixture
 def rng() -> np.random.Generator:
