@@ -80,3 +80,33 @@ def test_core_adder_tree_and_probes_use_the_same_order():
     products = np.array([[1, 10], [2, 20], [3, 30], [4, 40], [5, 50]])
     levels = _tree_levels(products)
     assert levels == [[[3, 7, 5], [30, 70, 50]], [[10, 5], [100, 50]], [[15], [150]]]
+
+
+@given(st.data())
+def test_array_packing_into_32_bit_words_matches_the_scalar_one(data):
+    from pwas_hdl.fixedpoint.bitfields import pack_fields_words, unpack_fields_words
+
+    widths = data.draw(st.lists(st.integers(1, 62), min_size=1, max_size=5))
+    signed = data.draw(st.lists(st.booleans(), min_size=len(widths), max_size=len(widths)))
+    fields, lsb = [], 0
+    for w, sg in zip(widths, signed):
+        fields.append({"name": f"f{len(fields)}", "lsb": lsb, "width": w, "signed": sg})
+        lsb += w
+    n_words = -(-lsb // 32)
+    rows = [[data.draw(st.integers(-(1 << (w - 1)) if sg else 0, (1 << (w - 1)) - 1 if sg else (1 << w) - 1))
+             for w, sg in zip(widths, signed)] for _ in range(3)]
+    words = pack_fields_words(np.array(rows), fields, n_words)
+    assert words.dtype == np.uint32 and words.shape == (3, n_words)
+    for r, row in enumerate(rows):
+        assert sum(int(x) << (32 * i) for i, x in enumerate(words[r])) == pack_fields(row, fields)
+    assert unpack_fields_words(words, fields).tolist() == rows
+
+
+def test_array_packing_refuses_what_does_not_fit():
+    from pwas_hdl.fixedpoint.bitfields import pack_fields_words
+
+    fields = [{"name": "a", "lsb": 0, "width": 4}, {"name": "b", "lsb": 4, "width": 40}]
+    with pytest.raises(InputError, match="code 16 does not fit 4 bits"):
+        pack_fields_words(np.array([[16, 0]]), fields, 2)
+    with pytest.raises(InputError, match="ends past"):
+        pack_fields_words(np.array([[1, 1]]), fields, 1)

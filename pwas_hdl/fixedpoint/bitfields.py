@@ -11,7 +11,9 @@ Two ways to name the fields:
 * equal widths, field ``i`` at bits ``[i*width +: width]`` (:func:`pack`, :func:`unpack`,
   :func:`pack_rows`);
 * explicit fields, a sequence of dicts with ``lsb``, ``width`` and optionally ``signed``, as the
-  manifest's ``payload`` lists them (:func:`pack_fields`, :func:`unpack_fields`).
+  manifest's ``payload`` lists them (:func:`pack_fields`, :func:`unpack_fields`; for many rows at
+  once, as arrays of 32-bit words the way Verilator stores a wide port, :func:`pack_fields_words`,
+  :func:`unpack_fields_words`).
 
 A value fits a ``w``-bit field when it lies in ``[-2**(w-1), 2**w - 1]`` (a signed or an unsigned
 reading of the same bits); anything else is refused rather than silently wrapped. Words are Python
@@ -26,7 +28,17 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 
-__all__ = ["to_unsigned", "to_signed", "pack", "unpack", "pack_fields", "unpack_fields", "pack_rows"]
+__all__ = [
+    "to_unsigned",
+    "to_signed",
+    "pack",
+    "unpack",
+    "pack_fields",
+    "unpack_fields",
+    "pack_rows",
+    "pack_fields_words",
+    "unpack_fields_words",
+]
 
 
 def to_unsigned(value: int, width: int) -> int:
@@ -132,3 +144,76 @@ def pack_rows(codes, width: int) -> list[int]:
     if c.ndim == 1:
         c = c[:, None]
     return [pack(row, width) for row in c.tolist()]
+
+
+def _chunks(lsb: int, width: int, word_bits: int):
+    """``(word index, offset in the word, offset in the field, bits)`` of the pieces of a field."""
+    done = 0
+    while done < width:
+        wi, off = divmod(lsb + done, word_bits)
+        take = min(word_bits - off, width - done)
+        yield wi, off, done, take
+        done += take
+
+
+def pack_fields_words(values, fields: Sequence[Mapping], n_words: int, word_bits: int = 32) -> np.ndarray:
+    """:func:`pack_fields` of many rows at once, as ``word_bits``-bit words (word 0 = the low bits).
+
+    Parameters
+    ----------
+    values : array_like of int, shape (m, len(fields))
+        Codes that fit their fields (fields of up to 62 bits).
+    fields : sequence of dict
+        ``lsb``, ``width`` of each field.
+    n_words : int
+        Words per row (``ceil(payload width / word_bits)``).
+    word_bits : int
+        8, 16 or 32 (default 32: Verilator's ``VlWide`` words).
+
+    Returns
+    -------
+    ndarray, shape (m, n_words), unsigned of ``word_bits`` bits
+    """
+    if word_bits not in (8, 16, 32):
+        raise InputError(f"word_bits must be 8, 16 or 32, got {word_bits!r}")
+    v = np.asarray(values, dtype=np.int64)
+    if v.ndim != 2 or v.shape[1] != len(fields):
+        raise InputError(f"values must have shape (m, {len(fields)}), got {v.shape}")
+    out = np.zeros((v.shape[0], int(n_words)), dtype=np.uint64)
+    for k, f in enumerate(fields):
+        w, lsb = int(f["width"]), int(f["lsb"])
+        if w > 62:
+            raise InputError(f"field {f.get('name', k)!r} is {w} bits wide; arrays of codes hold fields of up to 62 bits")
+        col = v[:, k]
+        bad = (col < -(1 << (w - 1))) | (col >= (1 << w))
+        if bad.any():
+            raise InputError(f"code {int(col[bad][0])} does not fit {w} bits (field {f.get('name', k)!r})")
+        col = (col & ((1 << w) - 1)).astype(np.uint64)
+        for wi, off, done, take in _chunks(lsb, w, word_bits):
+            if wi >= n_words:
+                raise InputError(f"field {f.get('name', k)!r} ends past the {n_words} words of {word_bits} bits")
+            out[:, wi] |= ((col >> np.uint64(done)) & np.uint64((1 << take) - 1)) << np.uint64(off)
+    return out.astype({8: np.uint8, 16: np.uint16, 32: np.uint32}[word_bits])
+
+
+def unpack_fields_words(words, fields: Sequence[Mapping], word_bits: int = 32) -> np.ndarray:
+    """Inverse of :func:`pack_fields_words`: ``(m, n_words)`` -> ``(m, len(fields))`` int64.
+
+    Fields with a true ``signed`` are two's complement; fields of up to 62 bits.
+    """
+    wv = np.asarray(words).astype(np.uint64)
+    if wv.ndim != 2:
+        raise InputError(f"words must have shape (m, n_words), got {wv.shape}")
+    out = np.zeros((wv.shape[0], len(fields)), dtype=np.int64)
+    for k, f in enumerate(fields):
+        w, lsb = int(f["width"]), int(f["lsb"])
+        if w > 62:
+            raise InputError(f"field {f.get('name', k)!r} is {w} bits wide; arrays of codes hold fields of up to 62 bits")
+        acc = np.zeros(wv.shape[0], dtype=np.uint64)
+        for wi, off, done, take in _chunks(lsb, w, word_bits):
+            acc |= ((wv[:, wi] >> np.uint64(off)) & np.uint64((1 << take) - 1)) << np.uint64(done)
+        val = acc.astype(np.int64)
+        if f.get("signed"):
+            val = np.where(val >= (1 << (w - 1)), val - (1 << w), val)
+        out[:, k] = val
+    return out
