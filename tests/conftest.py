@@ -1,6 +1,6 @@
 """Shared fixtures of the test suite (all deterministic: every random draw is seeded).
 
-Markers (registered in pyproject.toml): ``rtl`` runs a Verilog simulator (Icarus / Verilator),
+Markers (registered in pyproject.toml): ``rtl`` runs an HDL simulator or linter (Icarus, Verilator),
 ``synth`` runs Yosys / nextpnr, ``slow`` takes more than about 5 s (every ``rtl`` and ``synth``
 test counts as slow: :func:`pytest_collection_modifyitems` adds the mark). The fast subset is
 ``bash run.sh test -m "not rtl and not synth"``; ``-m "not slow"`` leaves out the slow ones of it too.

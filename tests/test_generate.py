@@ -77,6 +77,7 @@ def test_generate_is_deterministic(lorenz_model, tmp_path):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
 
 
+@pytest.mark.rtl  # runs Verilator's linter
 @pytest.mark.parametrize("design, init", [("core", "inline"), ("sensor", "inline"), ("core", "readmemh")])
 def test_verilog_is_lint_clean(lorenz_model, tmp_path, design, init):
     gd = generate(lorenz_model, tmp_path / design, design=design, memory_init=init)
@@ -125,6 +126,7 @@ def test_saturate_option_warns_and_builds(lorenz_model):
     assert gd.model.weight_codes.min() >= -(2 ** 7) and gd.model.weight_codes.max() <= 2 ** 7 - 1
 
 
+@pytest.mark.rtl  # runs Verilator's linter
 def test_two_targets_share_one_word_per_bank(tmp_path):
     rng = np.random.default_rng(1)
     u = rng.uniform(-1, 1, (400, 1))

@@ -74,6 +74,7 @@ DESIGNS = {
 }
 
 
+@pytest.mark.rtl  # runs Verilator's linter
 @pytest.mark.skipif(VERILATOR is None, reason="verilator not installed")
 @pytest.mark.parametrize("key", list(DESIGNS))
 def test_verilator_lint_wall_clean(key, tmp_path):
@@ -81,6 +82,7 @@ def test_verilator_lint_wall_clean(key, tmp_path):
     assert lint(text, "pwas_core", tmp_path) == []
 
 
+@pytest.mark.rtl  # runs Verilator's linter
 @pytest.mark.skipif(VERILATOR is None, reason="verilator not installed")
 def test_sensor_top_lint_clean(tmp_path):
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
