@@ -146,6 +146,14 @@ def pack_rows(codes, width: int) -> list[int]:
     return [pack(row, width) for row in c.tolist()]
 
 
+def _array_field(f: Mapping, k: int) -> tuple[int, int, str]:
+    """``(width, lsb, name)`` of field ``k`` for the array forms (int64 codes: up to 62 bits)."""
+    w, lsb, name = int(f["width"]), int(f["lsb"]), f.get("name", k)
+    if w > 62:
+        raise InputError(f"field {name!r} is {w} bits wide; arrays of codes hold fields of up to 62 bits")
+    return w, lsb, name
+
+
 def _chunks(lsb: int, width: int, word_bits: int):
     """``(word index, offset in the word, offset in the field, bits)`` of the pieces of a field."""
     done = 0
@@ -181,17 +189,15 @@ def pack_fields_words(values, fields: Sequence[Mapping], n_words: int, word_bits
         raise InputError(f"values must have shape (m, {len(fields)}), got {v.shape}")
     out = np.zeros((v.shape[0], int(n_words)), dtype=np.uint64)
     for k, f in enumerate(fields):
-        w, lsb = int(f["width"]), int(f["lsb"])
-        if w > 62:
-            raise InputError(f"field {f.get('name', k)!r} is {w} bits wide; arrays of codes hold fields of up to 62 bits")
+        w, lsb, name = _array_field(f, k)
         col = v[:, k]
         bad = (col < -(1 << (w - 1))) | (col >= (1 << w))
         if bad.any():
-            raise InputError(f"code {int(col[bad][0])} does not fit {w} bits (field {f.get('name', k)!r})")
+            raise InputError(f"code {int(col[bad][0])} does not fit {w} bits (field {name!r})")
         col = (col & ((1 << w) - 1)).astype(np.uint64)
         for wi, off, done, take in _chunks(lsb, w, word_bits):
             if wi >= n_words:
-                raise InputError(f"field {f.get('name', k)!r} ends past the {n_words} words of {word_bits} bits")
+                raise InputError(f"field {name!r} ends past the {n_words} words of {word_bits} bits")
             out[:, wi] |= ((col >> np.uint64(done)) & np.uint64((1 << take) - 1)) << np.uint64(off)
     return out.astype({8: np.uint8, 16: np.uint16, 32: np.uint32}[word_bits])
 
@@ -206,9 +212,7 @@ def unpack_fields_words(words, fields: Sequence[Mapping], word_bits: int = 32) -
         raise InputError(f"words must have shape (m, n_words), got {wv.shape}")
     out = np.zeros((wv.shape[0], len(fields)), dtype=np.int64)
     for k, f in enumerate(fields):
-        w, lsb = int(f["width"]), int(f["lsb"])
-        if w > 62:
-            raise InputError(f"field {f.get('name', k)!r} is {w} bits wide; arrays of codes hold fields of up to 62 bits")
+        w, lsb, _ = _array_field(f, k)
         acc = np.zeros(wv.shape[0], dtype=np.uint64)
         for wi, off, done, take in _chunks(lsb, w, word_bits):
             acc |= ((wv[:, wi] >> np.uint64(off)) & np.uint64((1 << take) - 1)) << np.uint64(done)
