@@ -107,15 +107,15 @@ def test_bad_options_write_nothing(lorenz_model, tmp_path):
     assert [p.name for p in keep.iterdir()] == ["notes.txt"]
 
 
-@pytest.mark.slow
-def test_regenerate_replaces_own_folder(lorenz_model, tmp_path):
+def test_regenerate_replaces_own_folder(lorenz_tiny, tmp_path):
     out = tmp_path / "g"
-    generate(lorenz_model, out)
-    generate(lorenz_model, out, memory="replicated")
+    generate(lorenz_tiny.model, out)
+    generate(lorenz_tiny.model, out, memory="replicated")
     man = load_manifest(out)
-    assert man["memory"]["words"] == 5 * 4096
-    assert len(man["files"]["hex"]) == 5
-    assert sorted(p.name for p in out.iterdir()) == sorted(build_design(lorenz_model, memory="replicated").files)
+    n, n_vertices = len(man["lags"]["regressors"]), man["domain"]["n_vertices"]
+    assert man["memory"]["words"] == (n + 1) * n_vertices  # n + 1 copies
+    assert len(man["files"]["hex"]) == n + 1
+    assert sorted(p.name for p in out.iterdir()) == sorted(build_design(lorenz_tiny.model, memory="replicated").files)
 
 
 def test_saturate_option_warns_and_builds(lorenz_model):
