@@ -410,7 +410,7 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
 @app.command()
 def generate(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; replaced only if an earlier `generate` made it). Required.", show_default=False)] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; in a folder an earlier `generate` made, only its files are replaced: sim/, synth/ and your files stay). Required.", show_default=False)] = None,
     design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer).")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
@@ -693,11 +693,13 @@ def make_data_lorenz(
     """
     from pwas_hdl.systems.lorenz import lorenz
 
-    _write_plant_data(lorenz, output, samples, test_output, test_samples, seed)
+    _write_plant_data(lorenz, samples, test_samples, seed, out=out, output_old=output_old, test_out=test_out,
+                      test_output_old=test_output_old)
 
 
-def _write_plant_data(plant, output: Path, samples: int, test_output: Optional[Path], test_samples: int, seed: int) -> None:
-    """``make-data``: ``plant(total, seed=seed)`` split into OUTPUT and the optional test file."""
+def _write_plant_data(plant, samples: int, test_samples: int, seed: int, *, out: Optional[Path], test_out: Optional[Path],
+                      output_old: Optional[Path] = None, test_output_old: Optional[Path] = None) -> None:
+    """``make-data``: ``plant(total, seed=seed)`` split into the -o/--out file and the optional test file."""
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         test_output = _merge("--test-out", test_out, test_output=test_output_old)
@@ -715,9 +717,9 @@ def _write_plant_data(plant, output: Path, samples: int, test_output: Optional[P
 
 @data_app.command("helicopter")
 def make_data_helicopter(
-    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (columns psi_d, phi_d, phi, psi, psi_true).")],
-    samples: Annotated[int, typer.Option("--samples", help="Number of samples in OUTPUT (10 ms each).")] = 20000,
-    test_output: Annotated[Optional[Path], typer.Option("--test-output", help="Also write the continuation of the same run here (a test set).")] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns psi_d, phi_d, phi, psi, psi_true). Required.", show_default=False)] = None,
+    samples: Annotated[int, typer.Option("--samples", help="Number of samples in the -o/--out file (10 ms each).")] = 20000,
+    test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the continuation of the same run here (a test set).", show_default=False)] = None,
     test_samples: Annotated[int, typer.Option("--test-samples", help="Samples in the test file.")] = 5000,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (reference steps and noise).")] = 0,
 ) -> None:
@@ -725,12 +727,12 @@ def make_data_helicopter(
 
     The columns are the references psi_d and phi_d (inputs u), the measured azimuth phi (output y),
     the measured elevation psi (the target z, noise 0.01 rad) and psi_true (noise-free). Fit the
-    paper's Table VI sensor with `fit DATA.csv --input psi_d,phi_d --output phi --target psi --mu 2
-    --my 2 -p 3 --gamma 1.1 --tikhonov 1`. The simulation takes about 1 ms per sample.
+    paper's Table VI sensor with `fit DATA.csv -u psi_d,phi_d -y phi -z psi --mu 2 --my 2 -p 3
+    --gamma 1.1 --tikhonov 1 -o MODEL.json`. The simulation takes about 1 ms per sample.
     """
     from pwas_hdl.systems.helicopter import helicopter
 
-    _write_plant_data(helicopter, output, samples, test_output, test_samples, seed)
+    _write_plant_data(helicopter, samples, test_samples, seed, out=out, test_out=test_out)
 
 
 def _write_plant(output: Path, test_output: Optional[Path], train, test, what: str) -> None:

@@ -56,7 +56,7 @@ def test_make_data_helicopter_cli(tmp_path):
 
     out, test = tmp_path / "h.csv", tmp_path / "ht.csv"
     r = CliRunner().invoke(app, ["make-data", "helicopter", "-o", str(out), "--samples", "150",
-                                 "--test-output", str(test), "--test-samples", "50", "--seed", "4"])
+                                 "--test-out", str(test), "--test-samples", "50", "--seed", "4"])
     assert r.exit_code == 0, r.output
     d = helicopter(200, seed=4)
     tab = read_csv(out)

@@ -26,6 +26,7 @@ Same inputs give byte-identical files. The folder is written only when everythin
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import tempfile
