@@ -348,7 +348,9 @@ def test_sklearn_protocol_params_clone_score_repr(rng):
     c = clone(m)
     assert c is not m and not hasattr(c, "weights_") and not hasattr(c, "grid_")
     assert c.get_params() == m.get_params()
-    with pytest.raises(RuntimeError, match="not fitted"):
+    from sklearn.exceptions import NotFittedError
+
+    with pytest.raises(NotFittedError, match="not fitted"):
         c.predict(None, y)
     # set_params changes a hyper-parameter (and only that); the refit uses it
     assert c.set_params(partitions=2) is c and c.partitions == 2 and c.my == 2
