@@ -7,7 +7,7 @@
   HLNN on the same regressor. RMSEE (eq. 17) against the noise-free ``z = x2 x3``.
   Paper: PWAS 22.45, 12-bit FPGA 27.05, HLNN [5] 24.
 * **Helicopter surrogate** (Section VI-B; no experimental data is available: the synthetic
-  closed-loop 2-DOF plant ``helicopter_plant`` of ``benchmarks/hw_tables.py``, seed ``r``,
+  closed-loop 2-DOF plant :func:`pwas_hdl.systems.helicopter.helicopter`, seed ``r``,
   25 000 samples at 10 ms): the first 20 000 train, the last 5 000 test; PWAS of Table VI (Mu = 2,
   My = 2, p = 3, N = 4096, gamma = 1.1, first-order Tikhonov, sigma by 5-fold CV over 10 values
   1e-7 .. 1e2 -- the paper's sigma = 50
@@ -54,7 +54,7 @@ HELI_SIGMA_GRID = tuple(float(v) for v in np.logspace(-7, 2, 10))
 #: The ``--quick`` smoke run fixes the helicopter sigma (one factorisation instead of a CV).
 QUICK_HELI_SIGMA = 1.0
 ASSUMPTIONS = {
-    "seed_000.A1": "helicopter: synthetic closed-loop 2-DOF surrogate (benchmarks/hw_tables.py helicopter_plant), "
+    "seed_000.A1": "helicopter: synthetic closed-loop 2-DOF surrogate (pwas_hdl.systems.helicopter), "
     "not the paper's rig data; absolute RMSEE not comparable with Table VI",
     "seed_000.A5": "first-order Tikhonov = the grid-gradient penalty of pwas_hdl.fit.regularized_lsq; sigma by 5-fold CV "
     "instead of the paper's sigma = 50 (scale-dependent)",
@@ -86,9 +86,10 @@ def _lorenz_run(seed: int, hidden: Sequence[int], restarts: int, max_iter: int, 
 
 def _helicopter_run(seed: int, hidden: Sequence[int], restarts: int, max_iter: int, samples: int, sigma_grid=None,
                     sigma: float | None = None):
-    from pwas_hdl.benchmarks.hw_tables import helicopter_plant  # moving to pwas_hdl.systems.helicopter (other branch)
+    from pwas_hdl.systems.helicopter import helicopter
 
-    u, y, z, zt = helicopter_plant(samples, seed=seed)
+    d = helicopter(samples, seed=seed)
+    u, y, z, zt = d.u, d.y, d.z, d.z_true
     n_tr = int(round(samples * 0.8))
     deg = 180.0 / math.pi
     m = fit_pwas(PWASConfig(2, 2, 3, gamma=1.1, tikhonov=1), [u[:n_tr]], [y[:n_tr]], [z[:n_tr]],
