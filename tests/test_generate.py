@@ -169,7 +169,9 @@ def test_verilog_header_names_generator_model_formats_ports(lorenz_tiny, tmp_pat
         assert f"//   {prt['name']} " in header, prt["name"]
         for f in prt.get("fields", []):
             assert f"[{f['lsb'] + f['width'] - 1}:{f['lsb']}]" in header and f" {f['name']}: " in header
-    assert "2**--" not in header and "synchronous reset, active high" in header
+    assert "2**--" not in header and f"synchronous reset, active {man['reset']['polarity']}" in header
+    # the meanings name the design's own ports (AXI-Stream by default), never the other naming
+    assert "in__payload" not in header and "out__valid" not in header
     # deterministic and path-free (the same inputs give the same header)
     again = build_design(lorenz_tiny.model, design="sensor").files[f"{gd.top}.v"]
     assert again == text and str(tmp_path) not in header

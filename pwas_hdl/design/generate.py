@@ -374,18 +374,28 @@ def build_design(
     return GeneratedDesign(top, texts, man, fxm, comp)
 
 
-#: What each port does (by its manifest role), for the Verilog header.
+#: What each port does (by its manifest role), for the Verilog header; ``{in.valid}`` etc. are
+#: replaced by the design's own port names (AXI-Stream or Amaranth naming), ``{polarity}`` by the
+#: reset polarity of the manifest.
 _PORT_MEANING = {
     "clock": "clock, rising edge",
-    "reset": "synchronous reset, active high",
-    "in.valid": "the source offers in__payload",
-    "in.ready": "the design accepts: a transfer on a rising edge with in__valid & in__ready",
+    "reset": "synchronous reset, active {polarity}",
+    "in.valid": "the source offers {in.payload}",
+    "in.ready": "the design accepts: a transfer on a rising edge with {in.valid} & {in.ready}",
     "in.payload": "input sample (signed codes, field 0 in the low bits):",
-    "out.valid": "out__payload holds an estimate (held while out__ready is low)",
-    "out.ready": "the sink takes out__payload (low = backpressure; the whole pipeline waits)",
+    "out.valid": "{out.payload} holds an estimate (held while {out.ready} is low)",
+    "out.ready": "the sink takes {out.payload} (low = backpressure; the whole pipeline waits)",
     "out.payload": "estimate (signed codes, target 0 in the low bits) and flags:",
     "warm": "1 once the lag bank holds a full regressor (the next transfer yields an estimate)",
 }
+
+
+def _port_meaning(man: dict, role: str) -> str:
+    names = {p["role"]: p["name"] for p in man["ports"]}
+    text = _PORT_MEANING.get(role, role)
+    for r, name in names.items():
+        text = text.replace("{" + r + "}", name)
+    return text.replace("{polarity}", man["reset"]["polarity"])
 
 
 def _verilog_header(man: dict, model_sha256: str) -> str:
@@ -401,15 +411,15 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         f"model.json SHA-256 {model_sha256}",
         f"regressor (n = {len(man['lags']['regressors'])}): {', '.join(man['lags']['regressors'])}; "
         f"{man['domain']['n_vertices']} vertices; targets: {', '.join(man['lags']['targets'])}",
-        f"latency {man['latency_cycles']} cycles (input transfer to out__valid), II {man['ii']} (one sample per clock)",
-        f"weights {fm['weight']['str']} ({man['memory'].get('kind', '')} memory, {man['memory'].get('memories')} x "
-        f"{man['memory'].get('depth')} words of {man['memory'].get('word_bits')} bits); output {fm['output']['str']} "
+        f"latency {man['latency_cycles']} cycles (input transfer to {_port_meaning(man, '{out.valid}')}), II {man['ii']} (one sample per clock)",
+        f"weights {fm['weight']['str']} ({man['memory']['kind']} memory, {man['memory']['memories']} x "
+        f"{man['memory']['depth']} words of {man['memory']['word_bits']} bits); output {fm['output']['str']} "
         f"(LSB {fm['output']['lsb']!r}); |hw - float| <= {eb['lsb']!r} LSB = {eb['physical']!r}",
         "ports:",
     ]
     for prt in man["ports"]:
         d = "in " if prt["direction"] == "input" else "out"
-        lines.append(f"  {prt['name']:<14} {d} {prt['width']:>4}  {_PORT_MEANING.get(prt['role'], prt['role'])}")
+        lines.append(f"  {prt['name']:<14} {d} {prt['width']:>4}  {_port_meaning(man, prt['role'])}")
         for f in prt.get("fields", []):
             bits = f"[{f['lsb'] + f['width'] - 1}:{f['lsb']}]"
             what = f.get("meaning")
