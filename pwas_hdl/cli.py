@@ -805,6 +805,89 @@ def bench_lorenz_hlnn(json_out: BenchJson = None, markdown: BenchMd = None, plot
                       quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
     """Seed 000: HLNN vs PWAS on Lorenz (Table II) and on the helicopter surrogate (Table VI)."""
     _system_bench("lorenz_hlnn", json_out, json_old, markdown, plot_out, runs, quick)
+def _write_seed004_data(system: str, output: Path, samples: int, test_output: Optional[Path], test_samples: int,
+                        seed: int, noise: float, rho_law: str = "random-walk") -> None:
+    """Shared body of the seed-004 make-data commands (normalised with the training statistics, noisy)."""
+    from pwas_hdl.systems.battery import make_battery_dataset
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    if samples < 1 or (test_output is not None and test_samples < 1):
+        raise UserError("--samples and --test-samples must be >= 1")
+    if not noise >= 0:
+        raise UserError(f"--noise must be >= 0 (a standard deviation in normalised units), got {noise}")
+    n_test = test_samples if test_output is not None else 1
+    if system == "battery":
+        train, test, _ = make_battery_dataset(samples, n_test, seed, noise)
+    else:
+        train, test, _ = make_pv_dataset(system, samples, n_test, seed, noise, rho_law=rho_law)
+    write_csv(output, train.columns())
+    _say(f"wrote {output} ({samples} samples, seed {seed}, noise {noise})")
+    if test_output is not None:
+        write_csv(test_output, test.columns())
+        _say(f"wrote {test_output} ({test_samples} samples of an independent run, normalised with the statistics of {output})")
+
+
+_SEED004_OUT = typer.Option("-o", "--output", help="CSV to write.")
+_SEED004_HELP = dict(
+    samples="Number of samples in OUTPUT (paper: up to 25 000).",
+    test_output="Also write an independent test run here, normalised with the training statistics.",
+    test_samples="Samples in the test file (paper: 5 000).",
+    seed="Random seed of the run (excitation, parameter law and noise).",
+    noise="Std of the white noise added after normalisation (paper: 0.03).",
+)
+
+
+@data_app.command("pv-benchmark")
+def make_data_pv(
+    output: Annotated[Path, _SEED004_OUT],
+    samples: Annotated[int, typer.Option("--samples", help=_SEED004_HELP["samples"])] = 25000,
+    test_output: Annotated[Optional[Path], typer.Option("--test-output", help=_SEED004_HELP["test_output"])] = None,
+    test_samples: Annotated[int, typer.Option("--test-samples", help=_SEED004_HELP["test_samples"])] = 5000,
+    seed: Annotated[int, typer.Option("--seed", help=_SEED004_HELP["seed"])] = 0,
+    noise: Annotated[float, typer.Option("--noise", help=_SEED004_HELP["noise"])] = 0.03,
+    rho_law: Annotated[str, typer.Option("--rho-law", help="random-walk (eq. 14c-d) or cosine (eq. 16).")] = "random-walk",
+) -> None:
+    """Seed 004's parameter-varying benchmark (eq. 14): columns u1, u2, y, rho (noisy), rho_true.
+
+    All columns are normalised with the training mean and std, then noise is added (Section 4.2).
+    """
+    with _user_errors():
+        _write_seed004_data("pv-benchmark", output, samples, test_output, test_samples, seed, noise, rho_law)
+
+
+@data_app.command("switching-4")
+def make_data_switching4(
+    output: Annotated[Path, _SEED004_OUT],
+    samples: Annotated[int, typer.Option("--samples", help=_SEED004_HELP["samples"])] = 25000,
+    test_output: Annotated[Optional[Path], typer.Option("--test-output", help=_SEED004_HELP["test_output"])] = None,
+    test_samples: Annotated[int, typer.Option("--test-samples", help=_SEED004_HELP["test_samples"])] = 5000,
+    seed: Annotated[int, typer.Option("--seed", help=_SEED004_HELP["seed"])] = 0,
+    noise: Annotated[float, typer.Option("--noise", help=_SEED004_HELP["noise"])] = 0.03,
+) -> None:
+    """Seed 004's 4-mode switching system (eq. 14 with alpha = 0, rho from eq. 18): u1, u2, y, rho, rho_true.
+
+    Normalised and noisy as pv-benchmark, except the mode label rho, which is noise-free.
+    """
+    with _user_errors():
+        _write_seed004_data("switching-4", output, samples, test_output, test_samples, seed, noise)
+
+
+@data_app.command("battery")
+def make_data_battery(
+    output: Annotated[Path, _SEED004_OUT],
+    samples: Annotated[int, typer.Option("--samples", help=_SEED004_HELP["samples"])] = 25000,
+    test_output: Annotated[Optional[Path], typer.Option("--test-output", help=_SEED004_HELP["test_output"])] = None,
+    test_samples: Annotated[int, typer.Option("--test-samples", help=_SEED004_HELP["test_samples"])] = 5000,
+    seed: Annotated[int, typer.Option("--seed", help=_SEED004_HELP["seed"])] = 0,
+    noise: Annotated[float, typer.Option("--noise", help=_SEED004_HELP["noise"])] = 0.03,
+) -> None:
+    """Seed 004's battery (eq. 19-20, RK4, T_s = 5 s): columns i, v, soc (noisy), soc_true.
+
+    The model coefficients are a SUBSTITUTE (Chen & Rincon-Mora 2006, C_c = 3060 A s), not the
+    values of the paper's reference [4], which it does not print. Normalised and noisy as pv-benchmark.
+    """
+    with _user_errors():
+        _write_seed004_data("battery", output, samples, test_output, test_samples, seed, noise)
 
 
 @bench_app.command("lorenz")
