@@ -262,11 +262,26 @@ def fit(
     output_old: Annotated[Optional[list[str]], _hidden("--output")] = None,
     target_old: Annotated[Optional[list[str]], _hidden("--target")] = None,
     classify: Annotated[bool, typer.Option("--classify", help="The one -z/--targets column is a class label: fit one-hot scores (one per distinct value) on one shared grid; predict decides by argmax.")] = False,
+    front_end: Annotated[str, typer.Option("--front-end", help="lags: PWAS on the lag regressor; observer-bank: PWAS on the residual features of a bank of learned local models (seed 004), followed by the --mu/--my taps (0 allowed).")] = "lags",
+    models: Annotated[int, typer.Option("--models", help="observer-bank: N_theta, local models / observers in the bank.")] = 5,
+    observer: Annotated[str, typer.Option("--observer", help="observer-bank: deadbeat, poles:R (all poles at radius R) or kalman:LAMBDA (stationary Kalman, measurement variance LAMBDA).")] = "deadbeat",
+    window: Annotated[int, typer.Option("--window", help="observer-bank: window l of the feature map.")] = 7,
+    features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
+    order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     from pwas_hdl.fit import classifier as clf
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd, parse_observer
 
     with _user_errors():
+        if front_end not in ("lags", "observer-bank"):
+            raise InputError(f"--front-end must be lags or observer-bank, got {front_end!r}")
+        bank = front_end == "observer-bank"
+        fe = "lags"
+        if bank:
+            parse_observer(observer)
+            fe = ObserverBankFrontEnd(n_models=models, observer=observer, window=window, features=features, order=order)
+            fe.check_params()
         output = _required(_merge("-o/--out", out, output_model=output_model), "-o/--out", "the model file to write")
         ins = _names(_merge_lists(inputs, input_old))
         outs = _names(_merge_lists(outputs, output_old))
@@ -275,6 +290,10 @@ def fit(
             raise InputError("give the column(s) to estimate with -z/--targets")
         if classify and len(tgts) != 1:
             raise InputError(f"--classify needs exactly one -z/--targets column (the class label), got {len(tgts)}")
+        if bank and classify:
+            raise InputError("--classify is not available with --front-end observer-bank")
+        if bank and len(outs) != 1:
+            raise InputError("--front-end observer-bank needs exactly one measured output column: give one -y/--outputs")
         if my and not outs:
             raise InputError(f"--my {my} needs measured output column(s): give -y/--outputs (or --my 0)")
         if mu and not ins:
@@ -282,8 +301,9 @@ def fit(
         table = read_csv(data)
         if traj_col is not None:
             table.column_index(traj_col)
-        u = select_signals(table, ins, traj_col) if mu else None
-        y = select_signals(table, outs, traj_col) if my else None
+        use_u = bool(mu or (bank and ins))
+        u = select_signals(table, ins, traj_col) if use_u else None
+        y = select_signals(table, outs, traj_col) if (my or bank) else None
         z = select_signals(table, tgts, traj_col)
         classes = None
         if classify:
@@ -311,9 +331,10 @@ def fit(
             cv_shuffle=cv_shuffle,
             domain=dom,
             share_lag_domain=not separate_lag_domains,
-            input_names=ins if mu else [],
-            output_names=outs if my else [],
+            input_names=ins if use_u else [],
+            output_names=outs if (my or bank) else [],
             target_names=tgts,
+            front_end=fe,
         )
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
@@ -350,11 +371,11 @@ def predict(
         table = read_csv(data)
         if traj_col is not None:
             table.column_index(traj_col)
-        u = select_signals(table, ins, traj_col) if model.lags_.nu else None
-        y = select_signals(table, outs, traj_col) if model.lags_.ny else None
+        u = select_signals(table, ins, traj_col) if model.n_inputs else None
+        y = select_signals(table, outs, traj_col) if model.n_outputs else None
         zhat, flags = model.predict(u, y, return_flags=True)
         rows = np.concatenate(
-            [np.arange(sl.start, sl.stop)[model.lags_.memory - 1 :] for sl in split_trajectories(table, traj_col)]
+            [np.arange(sl.start, sl.stop)[model.memory - 1 :] for sl in split_trajectories(table, traj_col)]
         )
         cols: dict = {"row": rows}
         classifier = getattr(model, "classifier_", None)
