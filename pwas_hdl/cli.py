@@ -940,6 +940,75 @@ def bench_lorenz(
         _say(f"wrote {json_out}")
 
 
+def _seed004_bench(module: str, json_out: Path, markdown: Optional[Path], plot: Optional[Path], **kw) -> None:
+    """Shared body of the seed-004 benches: run, write JSON (+ Markdown, + plot), print the table."""
+    import importlib
+
+    from pwas_hdl import bench_results
+
+    mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
+    if kw.get("runs", 1) < 1:
+        raise UserError("--runs must be >= 1")
+    doc = mod.run(progress=_say, **kw)
+    if plot is not None and hasattr(mod, "plot"):
+        mod.plot(doc, plot)
+    bench_results.write_results(json_out, {k: v for k, v in doc.items() if not k.startswith("_")})
+    table = mod.markdown(doc)
+    if markdown is not None:
+        atomic_write_text(markdown, table)
+    out.print(table, highlight=False, markup=False)
+    _say(f"wrote {json_out}")
+
+
+@bench_app.command("pv-benchmark")
+def bench_pv(
+    json_out: Annotated[Path, typer.Option("--json", help="JSON result file to write (pwas-hdl-bench-results).")],
+    markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write the Markdown tables here.")] = None,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1) per case; the paper averages 10.")] = 10,
+    quick: Annotated[bool, typer.Option("--quick", help="Smoke run: base case, 3000/1000 samples, no ANN.")] = False,
+    tables: Annotated[Optional[str], typer.Option("--tables", help="Only these paper tables, comma list (T1..T7).")] = None,
+    cases: Annotated[Optional[str], typer.Option("--cases", help="Only these cases, comma list (base, 11a, pp0.4, kf0.1, ntheta3, cosine, ...).")] = None,
+    predictors: Annotated[str, typer.Option("--predictors", help="Estimators to run: comma list of dtr, rfr, ann, pwas-feat, pwas-raw.")] = "dtr,rfr,ann,pwas-feat,pwas-raw",
+    ann_cases: Annotated[Optional[str], typer.Option("--ann-cases", help="Run the ANN only in these cases (comma list; default: every case that lists it).")] = None,
+) -> None:
+    """Seed 004 E1, Tables 1-7: FIT/NRMSE of rho for DTR, RFR, ANN, PWAS P-feat and P-raw beside the paper."""
+    with _user_errors():
+        from pwas_hdl.benchmarks import pv_benchmark as pvb
+
+        preds = tuple(_names([predictors]))
+        bad = set(preds) - set(pvb.ESTIMATORS)
+        if bad:
+            raise UserError(f"--predictors: unknown {', '.join(sorted(bad))}; use {', '.join(pvb.ESTIMATORS)}")
+        sel = pvb.select_cases(_names([tables]) if tables else None, ["base"] if quick else (_names([cases]) if cases else None))
+        _seed004_bench("pv_benchmark", json_out, markdown, None, cases=sel, runs=1 if quick else runs, quick=quick,
+                       predictors=preds, ann_cases=tuple(_names([ann_cases])) if ann_cases else None)
+
+
+@bench_app.command("switching-4")
+def bench_switching4(
+    json_out: Annotated[Path, typer.Option("--json", help="JSON result file to write (pwas-hdl-bench-results).")],
+    markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write the Markdown tables here.")] = None,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1); the paper averages 10.")] = 10,
+    quick: Annotated[bool, typer.Option("--quick", help="Smoke run: N_theta = 5 only, 3000/1000 samples, one run.")] = False,
+) -> None:
+    """Seed 004 E2, Tables 8-9: mode reconstruction (FIT, NRMSE, per-mode F1) for RFR, RFC, PWAS beside the paper."""
+    with _user_errors():
+        _seed004_bench("switching4", json_out, markdown, None, runs=1 if quick else runs, quick=quick)
+
+
+@bench_app.command("battery")
+def bench_battery(
+    json_out: Annotated[Path, typer.Option("--json", help="JSON result file to write (pwas-hdl-bench-results).")],
+    markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write the Markdown tables here.")] = None,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Also write a Fig. 5-like plot (PNG) of run 0 here.")] = None,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1).")] = 10,
+    quick: Annotated[bool, typer.Option("--quick", help="Smoke run: 3000/1000 samples, one run.")] = False,
+) -> None:
+    """Seed 004 E3 (Fig. 5): SoC RMSE/FIT of the RFR and PWAS sensors and of 4 EKFs (substitute battery coefficients)."""
+    with _user_errors():
+        _seed004_bench("battery", json_out, markdown, plot, runs=1 if quick else runs, quick=quick)
+
+
 def _version(value: bool) -> None:
     if value:
         stdout.print(f"pwas-hdl {__version__}")

@@ -489,7 +489,8 @@ class ObserverBankFrontEnd:
                     f"trajectory {i} has {y.shape[0]} samples; the observer bank needs at least M + l + 1 = {self.memory}"
                 )
 
-    def fit(self, us: list[np.ndarray], ys: list[np.ndarray], zs: list[np.ndarray], random_state: int = 0) -> "ObserverBankFrontEnd":
+    def fit(self, us: list[np.ndarray], ys: list[np.ndarray], zs: list[np.ndarray], random_state: int = 0,
+            lpv: LPVARXModel | None = None) -> "ObserverBankFrontEnd":
         """Learn the local models, select ``N_theta`` of them and design their observers.
 
         Parameters
@@ -500,6 +501,10 @@ class ObserverBankFrontEnd:
             The measured parameter rho (one target column).
         random_state : int
             Seed of the selection tree.
+        lpv : LPVARXModel, optional
+            Local models already learned on the same data with the same ``order`` (``lpv_`` of another
+            front end): step 1 is skipped. Benches use it to vary N_theta, observer or features
+            without solving the same LAD problem again.
         """
         self.check_params()
         self._check_signals(us, ys)
@@ -520,7 +525,10 @@ class ObserverBankFrontEnd:
             self.y_mean_, self.y_std_ = np.zeros(1), np.ones(1)
         self.nu_ = nu
         usn, ysn = self._scale(us, ys)
-        lpv = fit_lpv_arx(usn, ysn, zs, self.order, self.n_knots, self.lad_rows)
+        if lpv is None:
+            lpv = fit_lpv_arx(usn, ysn, zs, self.order, self.n_knots, self.lad_rows)
+        elif lpv.order != self.order or lpv.nu != nu:
+            raise InputError(f"the given local models have order {lpv.order} and {lpv.nu} inputs, expected {self.order} and {nu}")
         rho = np.concatenate([z[:, 0] for z in zs])
         models, leaf_rho = select_models(rho, lpv.gamma(rho), self.n_models, random_state)
         kind, par = parse_observer(self.observer)
