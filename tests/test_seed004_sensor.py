@@ -37,6 +37,7 @@ def pv_files(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("taps,feat", [((0, 0), "11b"), ((1, 1), "11b"), ((0, 2), "11a")])
 def test_fit_predict_save_load_bit_exact(pv_data, tmp_path, taps, feat):
     tr, te, _ = pv_data
@@ -58,6 +59,7 @@ def test_fit_predict_save_load_bit_exact(pv_data, tmp_path, taps, feat):
     assert (tmp_path / "m.json").read_bytes() == (tmp_path / "m2.json").read_bytes()
 
 
+@pytest.mark.slow
 def test_bank_features_carry_rho(pv_data):
     """On E1 the bank's features explain rho where a short raw window does not (issue 11)."""
     tr, te, _ = pv_data
@@ -86,6 +88,7 @@ def test_corrupt_front_end_block_is_refused(pv_data, tmp_path):
             PWASVirtualSensor.from_dict(bad)
 
 
+@pytest.mark.slow
 def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):
     model = tmp_path / "bank.json"
     res = invoke("fit", pv_files / "train.csv", "-o", model, "--input", "u1,u2", "--output", "y", "--target", "rho",
