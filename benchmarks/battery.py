@@ -34,12 +34,15 @@ from pwas_hdl.systems.pv_method import fit_ratio, make_predictor, nrmse
 SYSTEM = "battery"
 PFEAT_B = {"mu": 1, "my": 1, "partitions": 3, "gamma": 1.0}
 PRAW_B = {"mu": 2, "my": 2, "partitions": 6, "gamma": 1.2}
-#: (name, diag Q, R as a multiple of the voltage-noise variance (0.03 std_v)^2)
+#: (name, diag Q, R as a multiple of the voltage-noise variance (0.03 std_v)^2). The SoC entry q1
+#: sets the EKF's bandwidth: with q1 = 1e-8 it tracks a discharge to 1e-3 but never recovers from
+#: a reset (SoC jumping back to 1, which model (19) does not contain); q1 = 1e-3 recovers within
+#: tens of samples and is noisier (measured on run 0: test RMSE 0.44 / 0.16 / 0.028 / 0.019).
 EKF_SETTINGS = [
-    ("ekf-1", (1e-10, 1e-6, 1e-6), 1.0),
-    ("ekf-2", (1e-8, 1e-6, 1e-6), 1.0),
-    ("ekf-3", (1e-6, 1e-5, 1e-5), 1.0),
-    ("ekf-4", (1e-8, 1e-6, 1e-6), 10.0),
+    ("ekf-1", (1e-8, 1e-6, 1e-6), 1.0),
+    ("ekf-2", (1e-6, 1e-6, 1e-6), 1.0),
+    ("ekf-3", (1e-4, 1e-6, 1e-6), 1.0),
+    ("ekf-4", (1e-3, 1e-6, 1e-6), 10.0),
 ]
 ASSUMPTIONS_E3 = ASSUMPTIONS | {
     "seed_004.C1": "battery coefficients: Chen & Rincon-Mora 2006 values, C_c = 3060 A s (SUBSTITUTE, not [4]'s)",
