@@ -202,7 +202,9 @@ class PWASVirtualSensor:
         ny = ys[0].shape[1] if ys and self.my else 0
         return LagStructure(int(self.mu), int(self.my), nu, ny)
 
-    def _data_domain(self, xi: np.ndarray, lags: LagStructure | None, n_feat: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    def _data_domain(self, xi: np.ndarray, lags: LagStructure | None, fe: ObserverBankFrontEnd | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The gamma-expanded data box; the bank's features (first columns) each get their own range."""
+        n_feat = fe.n_features if fe is not None else 0
         lo = xi.min(axis=0)
         hi = xi.max(axis=0)
         if self.share_lag_domain and lags is not None:
@@ -213,7 +215,7 @@ class PWASVirtualSensor:
                 hi[idx] = hi[idx].max()
         const = np.flatnonzero(hi <= lo)
         if const.size:
-            names = [self._regressor_names(lags, getattr(self, "_fitting_fe", None))[j] for j in const]
+            names = [self._regressor_names(lags, fe)[j] for j in const]
             raise ValueError(
                 f"regressor(s) {', '.join(names)} are constant in the training data (zero-width domain); "
                 "remove the constant signal, add excitation, or pass an explicit domain"
@@ -286,11 +288,7 @@ class PWASVirtualSensor:
             if lo.size != xi.shape[1] or hi.size != xi.shape[1]:
                 raise ValueError(f"explicit domain must have {xi.shape[1]} bounds per side, got {lo.size} and {hi.size}")
         else:
-            self._fitting_fe = fe
-            try:
-                lo, hi = self._data_domain(xi, lags, fe.n_features if fe is not None else 0)
-            finally:
-                del self._fitting_fe
+            lo, hi = self._data_domain(xi, lags, fe)
         grid = Grid(lo, hi, self.partitions)
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
