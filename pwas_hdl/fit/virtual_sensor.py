@@ -5,6 +5,9 @@ inputs and ``My`` outputs (paper eq. 2). All targets share one :class:`~pwas_hdl
 each has its own weight vector (componentwise fit).
 
 The model file (save / load) is owned by :mod:`pwas_hdl.fit.model_file`.
+A sensor with the observer-bank front end (seed 004, :mod:`pwas_hdl.fit.observer_bank`) adds the
+optional ``front_end`` object to the model file; its regressors are the bank's features followed
+by the lag taps. Lag models have no ``front_end`` key.
 """
 
 from __future__ import annotations
