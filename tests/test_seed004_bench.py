@@ -24,7 +24,7 @@ def invoke(*args):
 def test_quick_bench_writes_valid_results(tmp_path, bench, estimators):
     js, md, png = tmp_path / "r.json", tmp_path / "r.md", tmp_path / "r.png"
     extra = ["--plot", png] if bench == "battery" else []
-    res = invoke("bench", bench, "--quick", "--json", js, "--md", md, *extra)
+    res = invoke("bench", bench, "--quick", "-o", js, "--md", md, *extra)
     assert res.exit_code == 0, res.output
     doc = br.load_results(js)
     assert doc["quick"] is True and doc["bench"] == bench
@@ -51,6 +51,6 @@ def test_quick_bench_writes_valid_results(tmp_path, bench, estimators):
 ])
 def test_bench_bad_input(tmp_path, args, needle):
     js = tmp_path / "r.json"
-    res = invoke("bench", *args, "--json", js)
+    res = invoke("bench", *args, "-o", js)
     assert res.exit_code == 2 and "error:" in res.output and needle in res.output, res.output
     assert not js.exists()

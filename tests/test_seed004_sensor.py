@@ -31,7 +31,7 @@ def pv_data():
 @pytest.fixture(scope="module")
 def pv_files(tmp_path_factory):
     d = tmp_path_factory.mktemp("pv")
-    res = invoke("make-data", "pv-benchmark", "-o", d / "train.csv", "--samples", 4000, "--test-output", d / "test.csv",
+    res = invoke("make-data", "pv-benchmark", "-o", d / "train.csv", "--samples", 4000, "--test-out", d / "test.csv",
                  "--test-samples", 1500, "--seed", 2)
     assert res.exit_code == 0, res.output
     return d
@@ -84,14 +84,14 @@ def test_corrupt_front_end_block_is_refused(pv_data, tmp_path):
                    lambda b: b.update(window=0)):
         bad = json.loads(json.dumps(d))
         mutate(bad["front_end"])
-        with pytest.raises(ValueError, match="corrupt"):
+        with pytest.raises(InputError, match="front_end"):
             PWASVirtualSensor.from_dict(bad)
 
 
 @pytest.mark.slow
 def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):
     model = tmp_path / "bank.json"
-    res = invoke("fit", pv_files / "train.csv", "-o", model, "--input", "u1,u2", "--output", "y", "--target", "rho",
+    res = invoke("fit", pv_files / "train.csv", "-o", model, "-u", "u1,u2", "-y", "y", "-z", "rho",
                  "--front-end", "observer-bank", "--models", 5, "--observer", "kalman:0.1", "--window", 7, "--features", "11b",
                  "--mu", 1, "--my", 1, "-p", 2, "--gamma", 1.0)
     assert res.exit_code == 0, res.output
@@ -125,16 +125,16 @@ def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):
         (["--front-end", "bank"], "--front-end must be"),
         (["--models", "0"], "n_models must be an integer >= 1"),
         (["--window", "0"], "window must be"),
-        (["--output", "y,u1"], "exactly one measured output"),
+        (["-y", "y,u1"], "exactly one measured output"),
     ],
 )
 def test_cli_bad_bank_options(pv_files, tmp_path, extra, needle):
     model = tmp_path / "m.json"
-    args = ["fit", pv_files / "train.csv", "-o", model, "--input", "u1,u2", "--output", "y", "--target", "rho",
+    args = ["fit", pv_files / "train.csv", "-o", model, "-u", "u1,u2", "-y", "y", "-z", "rho",
             "--front-end", "observer-bank", "--mu", 0, "--my", 0]
     # a later --output/--front-end replaces the earlier one for single-valued options only; rebuild the list instead
-    if extra[0] == "--output":
-        args[args.index("--output") + 1] = extra[1]
+    if extra[0] == "-y":
+        args[args.index("-y") + 1] = extra[1]
     elif extra[0] == "--front-end":
         args[args.index("--front-end") + 1] = extra[1]
     else:
