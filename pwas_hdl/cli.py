@@ -261,11 +261,26 @@ def fit(
     output_old: Annotated[Optional[list[str]], _hidden("--output")] = None,
     target_old: Annotated[Optional[list[str]], _hidden("--target")] = None,
     classify: Annotated[bool, typer.Option("--classify", help="The one -z/--targets column is a class label: fit one-hot scores (one per distinct value) on one shared grid; predict decides by argmax.")] = False,
+    front_end: Annotated[str, typer.Option("--front-end", help="lags: PWAS on the lag regressor; observer-bank: PWAS on the residual features of a bank of learned local models (seed 004), followed by the --mu/--my taps (0 allowed).")] = "lags",
+    models: Annotated[int, typer.Option("--models", help="observer-bank: N_theta, local models / observers in the bank.")] = 5,
+    observer: Annotated[str, typer.Option("--observer", help="observer-bank: deadbeat, poles:R (all poles at radius R) or kalman:LAMBDA (stationary Kalman, measurement variance LAMBDA).")] = "deadbeat",
+    window: Annotated[int, typer.Option("--window", help="observer-bank: window l of the feature map.")] = 7,
+    features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
+    order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     from pwas_hdl.fit import classifier as clf
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd, parse_observer
 
     with _user_errors():
+        if front_end not in ("lags", "observer-bank"):
+            raise InputError(f"--front-end must be lags or observer-bank, got {front_end!r}")
+        bank = front_end == "observer-bank"
+        fe = "lags"
+        if bank:
+            parse_observer(observer)
+            fe = ObserverBankFrontEnd(n_models=models, observer=observer, window=window, features=features, order=order)
+            fe.check_params()
         output = _required(_merge("-o/--out", out, output_model=output_model), "-o/--out", "the model file to write")
         ins = _names(_merge_lists(inputs, input_old))
         outs = _names(_merge_lists(outputs, output_old))
@@ -274,6 +289,10 @@ def fit(
             raise InputError("give the column(s) to estimate with -z/--targets")
         if classify and len(tgts) != 1:
             raise InputError(f"--classify needs exactly one -z/--targets column (the class label), got {len(tgts)}")
+        if bank and classify:
+            raise InputError("--classify is not available with --front-end observer-bank")
+        if bank and len(outs) != 1:
+            raise InputError("--front-end observer-bank needs exactly one measured output column: give one -y/--outputs")
         if my and not outs:
             raise InputError(f"--my {my} needs measured output column(s): give -y/--outputs (or --my 0)")
         if mu and not ins:
@@ -281,8 +300,9 @@ def fit(
         table = read_csv(data)
         if traj_col is not None:
             table.column_index(traj_col)
-        u = select_signals(table, ins, traj_col) if mu else None
-        y = select_signals(table, outs, traj_col) if my else None
+        use_u = bool(mu or (bank and ins))
+        u = select_signals(table, ins, traj_col) if use_u else None
+        y = select_signals(table, outs, traj_col) if (my or bank) else None
         z = select_signals(table, tgts, traj_col)
         classes = None
         if classify:
@@ -311,9 +331,10 @@ def fit(
             cv_shuffle=cv_shuffle,
             domain=dom,
             share_lag_domain=not separate_lag_domains,
-            input_names=ins if mu else [],
-            output_names=outs if my else [],
+            input_names=ins if use_u else [],
+            output_names=outs if (my or bank) else [],
             target_names=tgts,
+            front_end=fe,
         )
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
@@ -351,11 +372,11 @@ def predict(
         table = read_csv(data)
         if traj_col is not None:
             table.column_index(traj_col)
-        u = select_signals(table, ins, traj_col) if model.lags_.nu else None
-        y = select_signals(table, outs, traj_col) if model.lags_.ny else None
+        u = select_signals(table, ins, traj_col) if model.n_inputs else None
+        y = select_signals(table, outs, traj_col) if model.n_outputs else None
         zhat, flags = model.predict(u, y, return_flags=True)
         rows = np.concatenate(
-            [np.arange(sl.start, sl.stop)[model.lags_.memory - 1 :] for sl in split_trajectories(table, traj_col)]
+            [np.arange(sl.start, sl.stop)[model.memory - 1 :] for sl in split_trajectories(table, traj_col)]
         )
         cols: dict = {"row": rows}
         classifier = getattr(model, "classifier_", None)
@@ -839,6 +860,88 @@ def bench_lorenz_hlnn(json_out: BenchJson = None, markdown: BenchMd = None, plot
                       quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
     """Seed 000: HLNN vs PWAS on Lorenz (Table II) and on the helicopter surrogate (Table VI)."""
     _system_bench("lorenz_hlnn", json_out, json_old, markdown, plot_out, runs, quick)
+def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out: Optional[Path], test_samples: int,
+                        seed: int, noise: float, rho_law: str = "random-walk") -> None:
+    """Shared body of the seed-004 make-data commands (normalised with the training statistics, noisy)."""
+    from pwas_hdl.systems.battery import make_battery_dataset
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    output = _required(out, "-o/--out", "the CSV file to write")
+    if samples < 1 or (test_out is not None and test_samples < 1):
+        raise InputError("--samples and --test-samples must be >= 1")
+    if not noise >= 0:
+        raise InputError(f"--noise must be >= 0 (a standard deviation in normalised units), got {noise}")
+    n_test = test_samples if test_out is not None else 1
+    if system == "battery":
+        train, test, _ = make_battery_dataset(samples, n_test, seed, noise)
+    else:
+        train, test, _ = make_pv_dataset(system, samples, n_test, seed, noise, rho_law=rho_law)
+    write_csv(output, train.columns())
+    _say(f"wrote {output} ({samples} samples, seed {seed}, noise {noise})")
+    if test_out is not None:
+        write_csv(test_out, test.columns())
+        _say(f"wrote {test_out} ({test_samples} samples of an independent run, normalised with the statistics of {output})")
+
+
+Seed004Out = Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write. Required.", show_default=False)]
+Seed004Samples = Annotated[int, typer.Option("--samples", help="Number of samples in the -o/--out file (paper: up to 25 000).")]
+Seed004TestOut = Annotated[Optional[Path], typer.Option("--test-out", help="Also write an independent test run here, normalised with the training statistics.", show_default=False)]
+Seed004TestSamples = Annotated[int, typer.Option("--test-samples", help="Samples in the test file (paper: 5 000).")]
+Seed004Seed = Annotated[int, typer.Option("--seed", help="Random seed of the run (excitation, parameter law and noise).")]
+Seed004Noise = Annotated[float, typer.Option("--noise", help="Std of the white noise added after normalisation (paper: 0.03).")]
+
+
+@data_app.command("pv-benchmark")
+def make_data_pv(
+    out: Seed004Out = None,
+    samples: Seed004Samples = 25000,
+    test_out: Seed004TestOut = None,
+    test_samples: Seed004TestSamples = 5000,
+    seed: Seed004Seed = 0,
+    noise: Seed004Noise = 0.03,
+    rho_law: Annotated[str, typer.Option("--rho-law", help="random-walk (eq. 14c-d) or cosine (eq. 16).")] = "random-walk",
+) -> None:
+    """Seed 004's parameter-varying benchmark (eq. 14): columns u1, u2, y, rho (noisy), rho_true.
+
+    All columns are normalised with the training mean and std, then noise is added (Section 4.2).
+    """
+    with _user_errors():
+        _write_seed004_data("pv-benchmark", out, samples, test_out, test_samples, seed, noise, rho_law)
+
+
+@data_app.command("switching-4")
+def make_data_switching4(
+    out: Seed004Out = None,
+    samples: Seed004Samples = 25000,
+    test_out: Seed004TestOut = None,
+    test_samples: Seed004TestSamples = 5000,
+    seed: Seed004Seed = 0,
+    noise: Seed004Noise = 0.03,
+) -> None:
+    """Seed 004's 4-mode switching system (eq. 14 with alpha = 0, rho from eq. 18): u1, u2, y, rho, rho_true.
+
+    Normalised and noisy as pv-benchmark, except the mode label rho, which is noise-free.
+    """
+    with _user_errors():
+        _write_seed004_data("switching-4", out, samples, test_out, test_samples, seed, noise)
+
+
+@data_app.command("battery")
+def make_data_battery(
+    out: Seed004Out = None,
+    samples: Seed004Samples = 25000,
+    test_out: Seed004TestOut = None,
+    test_samples: Seed004TestSamples = 5000,
+    seed: Seed004Seed = 0,
+    noise: Seed004Noise = 0.03,
+) -> None:
+    """Seed 004's battery (eq. 19-20, RK4, T_s = 5 s): columns i, v, soc (noisy), soc_true.
+
+    The model coefficients are a SUBSTITUTE (Chen & Rincon-Mora 2006, C_c = 3060 A s), not the
+    values of the paper's reference [4], which it does not print. Normalised and noisy as pv-benchmark.
+    """
+    with _user_errors():
+        _write_seed004_data("battery", out, samples, test_out, test_samples, seed, noise)
 
 
 @bench_app.command("lorenz")
@@ -868,6 +971,83 @@ def bench_lorenz(
             atomic_write_text(markdown, table)
         stdout.print(table, highlight=False, markup=False)
         _say(f"wrote {json_out}")
+
+
+def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path],
+                   plot: Optional[Path], **kw) -> None:
+    """Shared body of the seed-004 benches: run, write JSON (+ Markdown, + plot), print the table."""
+    import importlib
+
+    from pwas_hdl import bench_results
+
+    json_out = _required(_merge("-o/--out", json_out, json=json_old), "-o/--out", "the JSON result file to write")
+    if kw.get("runs", 1) < 1:
+        raise InputError("--runs must be >= 1")
+    for p in (json_out, markdown, plot):
+        if p is not None and not p.parent.is_dir():
+            raise InputError(f"folder {p.parent} does not exist; create it first")
+    mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
+    doc = mod.run(progress=_say, **kw)
+    if plot is not None and hasattr(mod, "plot"):
+        mod.plot(doc, plot)
+    bench_results.write_results(json_out, {k: v for k, v in doc.items() if not k.startswith("_")})
+    table = mod.markdown(doc)
+    if markdown is not None:
+        atomic_write_text(markdown, table)
+    stdout.print(table, highlight=False, markup=False)
+    _say(f"wrote {json_out}")
+
+
+@bench_app.command("pv-benchmark")
+def bench_pv(
+    json_out: BenchJson = None,
+    markdown: BenchMd = None,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1) per case; the paper averages 10.")] = 10,
+    quick: Annotated[bool, typer.Option("--quick", help="Smoke run: base case, 3000/1000 samples, no ANN: not a result to quote.")] = False,
+    tables: Annotated[Optional[str], typer.Option("--tables", help="Only these paper tables, comma list (T1..T7).")] = None,
+    cases: Annotated[Optional[str], typer.Option("--cases", help="Only these cases, comma list (base, 11a, pp0.4, kf0.1, ntheta3, cosine, ...).")] = None,
+    predictors: Annotated[str, typer.Option("--predictors", help="Estimators to run: comma list of dtr, rfr, ann, pwas-feat, pwas-raw.")] = "dtr,rfr,ann,pwas-feat,pwas-raw",
+    ann_cases: Annotated[Optional[str], typer.Option("--ann-cases", help="Run the ANN only in these cases (comma list; default: every case that lists it).")] = None,
+    json_old: BenchJsonOld = None,
+) -> None:
+    """Seed 004 E1, Tables 1-7: FIT/NRMSE of rho for DTR, RFR, ANN, PWAS P-feat and P-raw beside the paper."""
+    with _user_errors():
+        from pwas_hdl.benchmarks import pv_benchmark as pvb
+
+        preds = tuple(_names([predictors]))
+        bad = set(preds) - set(pvb.ESTIMATORS)
+        if bad:
+            raise InputError(f"--predictors: unknown {', '.join(sorted(bad))}; use {', '.join(pvb.ESTIMATORS)}")
+        sel = pvb.select_cases(_names([tables]) if tables else None, ["base"] if quick else (_names([cases]) if cases else None))
+        _seed004_bench("pv_benchmark", json_out, json_old, markdown, None, cases=sel, runs=1 if quick else runs, quick=quick,
+                       predictors=preds, ann_cases=tuple(_names([ann_cases])) if ann_cases else None)
+
+
+@bench_app.command("switching-4")
+def bench_switching4(
+    json_out: BenchJson = None,
+    markdown: BenchMd = None,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1); the paper averages 10.")] = 10,
+    quick: Annotated[bool, typer.Option("--quick", help="Smoke run: N_theta = 5 only, 3000/1000 samples, one run: not a result to quote.")] = False,
+    json_old: BenchJsonOld = None,
+) -> None:
+    """Seed 004 E2, Tables 8-9: mode reconstruction (FIT, NRMSE, per-mode F1) for RFR, RFC, PWAS beside the paper."""
+    with _user_errors():
+        _seed004_bench("switching4", json_out, json_old, markdown, None, runs=1 if quick else runs, quick=quick)
+
+
+@bench_app.command("battery")
+def bench_battery(
+    json_out: BenchJson = None,
+    markdown: BenchMd = None,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Also write a Fig. 5-like plot (PNG) of run 0 here.")] = None,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1).")] = 10,
+    quick: Annotated[bool, typer.Option("--quick", help="Smoke run: 3000/1000 samples, one run: not a result to quote.")] = False,
+    json_old: BenchJsonOld = None,
+) -> None:
+    """Seed 004 E3 (Fig. 5): SoC RMSE/FIT of the RFR and PWAS sensors and of 4 EKFs (substitute battery coefficients)."""
+    with _user_errors():
+        _seed004_bench("battery", json_out, json_old, markdown, plot, runs=1 if quick else runs, quick=quick)
 
 
 def _version(value: bool) -> None:

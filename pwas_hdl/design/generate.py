@@ -41,6 +41,7 @@ from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import build_manifest, manifest_text
+from pwas_hdl.errors import InputError
 from pwas_hdl.fit.model_file import model_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
@@ -304,6 +305,9 @@ def build_design(
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
     sensor = _load_sensor(model)
+    if getattr(sensor, "front_end_", None) is not None:
+        raise InputError("hardware for observer-bank front ends is not implemented yet (issue 12); "
+                         "generate supports models fitted with --front-end lags")
     top = name or ("pwas_core" if design == "core" else "pwas_sensor")
     fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None

@@ -68,8 +68,8 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
         "format": MODEL_FORMAT,
         "version": MODEL_VERSION,
         "signals": {"inputs": ins, "outputs": outs, "targets": tgts},
-        "lags": {"Mu": int(lags.mu), "My": int(lags.my)},
-        "regressors": lags.names(ins, outs),
+        "lags": {"Mu": int(lags.mu if lags is not None else sensor.mu), "My": int(lags.my if lags is not None else sensor.my)},
+        "regressors": sensor._regressor_names(lags),
         "grid": {
             "lo": [float(v) for v in grid.lo],
             "hi": [float(v) for v in grid.hi],
@@ -92,7 +92,34 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
     classifier = getattr(sensor, "classifier_", None)
     if classifier is not None:  # optional: one-hot class scores (pwas_hdl.fit.classifier)
         d["classifier"] = {"target": str(classifier["target"]), "classes": [float(c) for c in classifier["classes"]]}
+    # ---- front end (seed 004): only for observer-bank sensors; owned by pwas_hdl.fit.observer_bank
+    front_end = getattr(sensor, "front_end_", None)
+    if front_end is not None:
+        d["front_end"] = front_end.to_dict()
     return d
+
+
+def _front_end_regressors(d: dict[str, Any]) -> tuple[Any, Any, list[str]]:
+    """The observer-bank block of ``d``: (front end, tap lag structure or None, regressor names).
+
+    Raises
+    ------
+    ValueError
+        The block is incomplete or inconsistent with the signals.
+    """
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+    from pwas_hdl.fit.regressors import LagStructure
+
+    try:
+        fe = ObserverBankFrontEnd.from_dict(d["front_end"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"front_end is corrupt or incomplete ({type(exc).__name__}: {exc})") from None
+    ins, outs = d["signals"]["inputs"], d["signals"]["outputs"]
+    if fe.nu_ != len(ins) or len(outs) != 1:
+        raise ValueError(f"front_end has {fe.nu_} inputs and 1 output, signals.inputs {len(ins)} and signals.outputs {len(outs)}")
+    mu, my = d["lags"]["Mu"], d["lags"]["My"]
+    taps = LagStructure(mu, my, len(ins) if mu else 0, 1 if my else 0) if (mu * len(ins) + my) else None
+    return fe, taps, fe.feature_names() + (taps.names(ins, outs) if taps is not None else [])
 
 
 def model_text(sensor: "PWASVirtualSensor") -> str:
@@ -124,14 +151,21 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
         errs.append(f"lags.My is {lags['My']} but signals.outputs is empty")
     if errs:
         return errs
-    ls = LagStructure(lags["Mu"], lags["My"], len(ins) if lags["Mu"] else 0, len(outs) if lags["My"] else 0)
-    n = ls.dimension
+    if "front_end" in d:
+        try:
+            _, _, names = _front_end_regressors(d)
+        except ValueError as exc:
+            return [str(exc)]
+        n = len(names)
+    else:
+        ls = LagStructure(lags["Mu"], lags["My"], len(ins) if lags["Mu"] else 0, len(outs) if lags["My"] else 0)
+        n = ls.dimension
+        names = ls.names(ins, outs)
     for key in ("lo", "hi", "partitions"):
         if len(g[key]) != n:
             errs.append(f"grid.{key} has {len(g[key])} values, the lags give n = {n} regressors")
     if errs:
         return errs
-    names = ls.names(ins, outs)
     if d["regressors"] != names:
         errs.append(f"regressors {d['regressors']} do not match the lags and signal names ({names})")
     n_vertices = int(np.prod([p + 1 for p in g["partitions"]], dtype=object))
@@ -202,7 +236,16 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         target_names=tgts,
     )
     cv = fit["cv"]
-    obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
+    if "front_end" in d:
+        fe, taps, _ = _front_end_regressors(d)
+        obj.front_end = fe
+        obj.front_end_ = fe
+        obj.lags_ = taps
+        obj.nu_, obj.ny_ = fe.nu_, 1
+    else:
+        obj.front_end_ = None
+        obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
+        obj.nu_, obj.ny_ = obj.lags_.nu, obj.lags_.ny
     obj.grid_ = grid
     obj.weights_ = w
     obj.sigma_ = float(fit["sigma"])

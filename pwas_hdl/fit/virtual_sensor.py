@@ -5,10 +5,14 @@ inputs and ``My`` outputs (paper eq. 2). All targets share one :class:`~pwas_hdl
 each has its own weight vector (componentwise fit).
 
 The model file (save / load) is owned by :mod:`pwas_hdl.fit.model_file`.
+A sensor with the observer-bank front end (seed 004, :mod:`pwas_hdl.fit.observer_bank`) adds the
+optional ``front_end`` object to the model file; its regressors are the bank's features followed
+by the lag taps. Lag models have no ``front_end`` key.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 from pathlib import Path
@@ -18,6 +22,8 @@ import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 
 from pwas_hdl.fit import model_file
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
@@ -72,6 +78,12 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         regressor dimension gets its own data range.
     input_names, output_names, target_names : sequence of str, optional
         Signal names (stored in the model file; used by the CLI and the generator).
+    front_end : "lags" or ObserverBankFrontEnd
+        What the PWAS function is evaluated on. ``"lags"`` (default): the lag regressor above.
+        An :class:`~pwas_hdl.fit.observer_bank.ObserverBankFrontEnd` (seed 004): its residual
+        features followed by the lag taps ``u(t-Mu+1..t)``, ``y(t-My+1..t)`` (``Mu = My = 0``
+        allowed: features only). The inputs feed the bank whatever ``mu`` is. The front end is
+        fitted on a copy during :meth:`fit` (``front_end_``) and stored in the model file.
 
     Attributes (after ``fit``)
     --------------------------
@@ -99,6 +111,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         input_names: Sequence[str] | None = None,
         output_names: Sequence[str] | None = None,
         target_names: Sequence[str] | None = None,
+        front_end: str | ObserverBankFrontEnd = "lags",
     ):
         self.mu = mu
         self.my = my
@@ -114,6 +127,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.input_names = input_names
         self.output_names = output_names
         self.target_names = target_names
+        self.front_end = front_end
 
     # ------------------------------------------------------------ validation
     def _check_params(self) -> None:
@@ -125,6 +139,22 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise ValueError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
             raise ValueError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
+        if isinstance(self.front_end, ObserverBankFrontEnd):
+            self.front_end.check_params()
+        elif self.front_end != "lags":
+            raise InputError(f"front_end must be 'lags' or an ObserverBankFrontEnd, got {self.front_end!r}")
+
+    @property
+    def _bank(self) -> bool:
+        """True when the regressor comes from an observer-bank front end."""
+        return isinstance(self.front_end, ObserverBankFrontEnd)
+
+    @property
+    def memory(self) -> int:
+        """Samples of history one estimate needs: estimates exist for ``t = memory - 1 .. T - 1``."""
+        self._check_fitted()
+        m = self.lags_.memory if self.lags_ is not None else 1
+        return max(m, self.front_end_.memory) if getattr(self, "front_end_", None) is not None else m
 
     # ------------------------------------------------------------------ fit
     def regressors(self, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
@@ -132,8 +162,30 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
 
         Uses the fitted lag structure when the sensor is fitted, else the one implied by the data.
         """
+        if self._bank:
+            self._check_fitted()
+            return self._bank_regressors(self.front_end_, self.lags_, u, y)
         lags = self.lags_ if hasattr(self, "lags_") else self._infer_lags(u, y)
         return self._build_regressors(lags, u, y)
+
+    def _bank_regressors(self, fe: ObserverBankFrontEnd, lags: LagStructure | None, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
+        """Observer-bank features, then the lag taps, aligned on the later start of the two."""
+        us = as_trajectories(u, "u", fe.nu_ if hasattr(fe, "nu_") else None)
+        ys = as_trajectories(y, "y", 1)
+        feats, fvalid = fe.transform(us, ys)
+        if lags is None:
+            return feats, fvalid
+        taps, tvalid = self._build_regressors(lags, u, y)
+        start = max(fe.memory, lags.memory) - 1
+        blocks, valid, fo, to = [], [], 0, 0
+        for fv, tv in zip(fvalid, tvalid):
+            fn, tn = fv.stop - fv.start, tv.stop - tv.start
+            fb = feats[fo + start - fv.start : fo + fn]
+            tb = taps[to + start - tv.start : to + tn]
+            blocks.append(np.hstack([fb, tb]))
+            valid.append(slice(start, fv.stop))
+            fo, to = fo + fn, to + tn
+        return np.concatenate(blocks), valid
 
     @staticmethod
     def _build_regressors(lags: LagStructure, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
@@ -143,9 +195,15 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise ValueError(f"got {len(us)} input trajectories but {len(ys)} output trajectories")
         return lags.build_many(us, ys, max(len(us), len(ys)))
 
-    def _infer_lags(self, u: Trajectories, y: Trajectories) -> LagStructure:
+    def _infer_lags(self, u: Trajectories, y: Trajectories) -> LagStructure | None:
         us = as_trajectories(u, "u")
         ys = as_trajectories(y, "y")
+        if self._bank:  # taps only; the bank itself takes every input channel
+            nu = us[0].shape[1] if us else 0
+            ny = ys[0].shape[1] if ys else 0
+            if self.mu * nu + self.my * ny == 0:
+                return None
+            return LagStructure(int(self.mu), int(self.my), nu if self.mu else 0, ny if self.my else 0)
         if self.mu and not us:
             raise ValueError(f"Mu = {self.mu} input lags requested but no input data given; pass u or set mu=0")
         if self.my and not ys:
@@ -154,18 +212,20 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         ny = ys[0].shape[1] if ys and self.my else 0
         return LagStructure(int(self.mu), int(self.my), nu, ny)
 
-    def _data_domain(self, xi: np.ndarray, lags: LagStructure) -> tuple[np.ndarray, np.ndarray]:
+    def _data_domain(self, xi: np.ndarray, lags: LagStructure | None, fe: ObserverBankFrontEnd | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The gamma-expanded data box; the bank's features (first columns) each get their own range."""
+        n_feat = fe.n_features if fe is not None else 0
         lo = xi.min(axis=0)
         hi = xi.max(axis=0)
-        if self.share_lag_domain:
+        if self.share_lag_domain and lags is not None:
             dims = lags.signal_of_dimension()
             for signal in sorted({(kind, ch) for kind, ch, _ in dims}):
-                idx = [j for j, (kind, ch, _) in enumerate(dims) if (kind, ch) == signal]
+                idx = [n_feat + j for j, (kind, ch, _) in enumerate(dims) if (kind, ch) == signal]
                 lo[idx] = lo[idx].min()
                 hi[idx] = hi[idx].max()
         const = np.flatnonzero(hi <= lo)
         if const.size:
-            names = [self._regressor_names(lags)[j] for j in const]
+            names = [self._regressor_names(lags, fe)[j] for j in const]
             raise ValueError(
                 f"regressor(s) {', '.join(names)} are constant in the training data (zero-width domain); "
                 "remove the constant signal, add excitation, or pass an explicit domain"
@@ -174,10 +234,14 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         half = 0.5 * (hi - lo) * self.gamma
         return centre - half, centre + half
 
-    def _regressor_names(self, lags: LagStructure) -> list[str]:
+    def _regressor_names(self, lags: LagStructure | None, fe: ObserverBankFrontEnd | None = None) -> list[str]:
+        fe = fe if fe is not None else getattr(self, "front_end_", None)
+        head = fe.feature_names() if fe is not None else []
+        if lags is None:
+            return head
         ins = list(self.input_names) if self.input_names else [f"u{i}" for i in range(lags.nu)]
         outs = list(self.output_names) if self.output_names else [f"y{i}" for i in range(lags.ny)]
-        return lags.names(ins, outs)
+        return head + lags.names(ins, outs)
 
     def fit(
         self,
@@ -206,8 +270,17 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self._check_params()
         # Everything is computed into locals first: a fit that fails leaves a previous fit intact.
         lags = self._infer_lags(u, y)
-        xi, valid = self._build_regressors(lags, u, y)
         zs = as_trajectories(z, "z")
+        fe = None
+        if self._bank:
+            fe = copy.deepcopy(self.front_end)
+            us, ys = as_trajectories(u, "u"), as_trajectories(y, "y")
+            if len(zs) != len(ys):
+                raise ValueError(f"got {len(zs)} target trajectories for {len(ys)} output trajectories")
+            fe.fit(us, ys, zs)
+            xi, valid = self._bank_regressors(fe, lags, u, y)
+        else:
+            xi, valid = self._build_regressors(lags, u, y)
         if len(zs) != len(valid):
             raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
         for i, (zi, sl) in enumerate(zip(zs, valid)):
@@ -222,10 +295,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise ValueError(f"{len(self.target_names)} target names for {nz} target columns")
         if self.domain is not None:
             lo, hi = (np.asarray(b, dtype=float).reshape(-1) for b in self.domain)
-            if lo.size != lags.dimension or hi.size != lags.dimension:
-                raise ValueError(f"explicit domain must have {lags.dimension} bounds per side, got {lo.size} and {hi.size}")
+            if lo.size != xi.shape[1] or hi.size != xi.shape[1]:
+                raise ValueError(f"explicit domain must have {xi.shape[1]} bounds per side, got {lo.size} and {hi.size}")
         else:
-            lo, hi = self._data_domain(xi, lags)
+            lo, hi = self._data_domain(xi, lags, fe)
         grid = Grid(lo, hi, self.partitions)
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
@@ -240,6 +313,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         w = solve_regularized(h, zt, sigma, gam).reshape(grid.n_vertices, nz)
         resid = zt - h @ w
         self.lags_ = lags
+        self.front_end_ = fe
+        self.nu_ = fe.nu_ if fe is not None else lags.nu
+        self.ny_ = 1 if fe is not None else lags.ny
         self.grid_ = grid
         self.weights_ = w
         self.sigma_ = sigma
@@ -325,12 +401,12 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
     @property
     def n_inputs(self) -> int:
         self._check_fitted()
-        return self.lags_.nu
+        return getattr(self, "nu_", self.lags_.nu if self.lags_ is not None else 0)
 
     @property
     def n_outputs(self) -> int:
         self._check_fitted()
-        return self.lags_.ny
+        return getattr(self, "ny_", self.lags_.ny if self.lags_ is not None else 0)
 
     @property
     def n_targets(self) -> int:
@@ -340,8 +416,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
     def signal_names(self) -> tuple[list[str], list[str], list[str]]:
         """Names of (inputs, outputs, targets), defaults ``u0.., y0.., z0..``."""
         self._check_fitted()
-        ins = list(self.input_names) if self.input_names else [f"u{i}" for i in range(self.lags_.nu)]
-        outs = list(self.output_names) if self.output_names else [f"y{i}" for i in range(self.lags_.ny)]
+        ins = list(self.input_names) if self.input_names else [f"u{i}" for i in range(self.n_inputs)]
+        outs = list(self.output_names) if self.output_names else [f"y{i}" for i in range(self.n_outputs)]
         tgts = list(self.target_names) if self.target_names else [f"z{i}" for i in range(self.n_targets)]
         return ins, outs, tgts
 

@@ -1,0 +1,110 @@
+"""Shared parts of the seed-004 benches (pv_benchmark.py, switching4.py, battery.py).
+
+Masti, Bernardini, Bemporad (EJC 2021). Every number of a run comes from fresh data (seed = run
+index): excitation, parameter law and noise differ between runs, as in Section 4.1 ("ten different
+runs, each one involving different realizations of all the excitation signals u_k, p_k, and
+measurement noise"). Rows are written in the shared bench results format
+(:mod:`pwas_hdl.bench_results`); training time and peak traced memory of each predictor's fit go
+in the row's ``config`` (``train_s``, ``peak_mib``: means over the runs).
+"""
+
+from __future__ import annotations
+
+import time
+import tracemalloc
+from typing import Any, Callable
+
+import numpy as np
+
+from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+#: The PWAS predictor on the (11b) features (P-feat): [v1 .. vN] only, p = 6 per dimension
+#: (7^5 = 16 807 vertices for N_theta = 5), domain = the data box (gamma = 1), sigma by 5-fold CV.
+PFEAT = {"mu": 0, "my": 0, "partitions": 6, "gamma": 1.0}
+#: The raw-lag PWAS (P-raw) of issue 11's measurement: Mu = 2, My = 3, p = 3, sigma by CV.
+PRAW = {"mu": 2, "my": 3, "partitions": 3, "gamma": 1.2}
+
+ASSUMPTIONS = {
+    "seed_004.A1": "output row of (14a) read as C = [0 0 0 0 1]",
+    "seed_004.A2": "x0 = 0, rho0 = 0, no burn-in",
+    "seed_004.A4": "noise (std sigma_N after normalisation) on u, y and the rho label; metrics against the true rho",
+    "seed_004.A5": "local models gamma(rho): PWL (hat basis, 6 knots) in rho fitted by LAD (dual LP, HiGHS) on 10 000 evenly strided rows, not the paper's ANN",
+    "seed_004.A6": "model-selection tree on raw [gamma; rho]",
+    "seed_004.A7": "ANN = scikit-learn MLPRegressor (30, 30) ReLU, Adam (no AMSGrad), lr 1e-3, batch 64, early stopping on 5 % with patience 20, standardised features",
+    "seed_004.A8": "(11a): all residual lags k-l..k",
+    "seed_004.A9": "observer state 0 at k = 0; features from k = M + l (all window residuals after the M-step start-up)",
+    "pwas-hdl.front-end": "the bank's 'normalize' standardises u and y again with the training statistics (near identity on normalised data)",
+}
+
+
+class Timer:
+    """Wall time and peak traced memory (tracemalloc: numpy and Python allocations) of a block."""
+
+    def __enter__(self) -> "Timer":
+        tracemalloc.start()
+        self._t = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.seconds = time.perf_counter() - self._t
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        self.peak_mib = peak / 2**20
+
+
+def fit_sklearn(model, x: np.ndarray, z: np.ndarray) -> tuple[Any, Timer]:
+    with Timer() as t:
+        model.fit(x, z)
+    return model, t
+
+
+def fit_pwas(cfg: dict, fe: ObserverBankFrontEnd | None, u, y, z) -> tuple[PWASVirtualSensor, Timer]:
+    """A PWAS sensor through the toolchain's own fit (front end fitted inside when given)."""
+    with Timer() as t:
+        m = PWASVirtualSensor(**cfg, front_end=fe if fe is not None else "lags").fit(u, y, z)
+    return m, t
+
+
+class Collector:
+    """Per-run values of (key -> list), and the timings of each key."""
+
+    def __init__(self) -> None:
+        self.values: dict[tuple, list[float]] = {}
+        self.timing: dict[tuple, list[tuple[float, float]]] = {}
+
+    def add(self, key: tuple, value: float) -> None:
+        self.values.setdefault(key, []).append(float(value))
+
+    def time(self, key: tuple, timer: Timer) -> None:
+        self.timing.setdefault(key, []).append((timer.seconds, timer.peak_mib))
+
+    def timing_of(self, key: tuple) -> dict:
+        t = self.timing.get(key)
+        if not t:
+            return {}
+        a = np.array(t)
+        return {"train_s": round(float(a[:, 0].mean()), 3), "peak_mib": round(float(a[:, 1].mean()), 2)}
+
+
+def mean_std(values: list[float]) -> tuple[float, float | None]:
+    v = np.asarray(values, dtype=float)
+    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else None)
+
+
+def cell(r: dict | None) -> str:
+    """``0.787 ± 0.023`` of a row (or ``—``)."""
+    if r is None or r["value"] is None:
+        return "—"
+    return f"{r['value']:.3f}" + (f" ± {r['std']:.3f}" if r["std"] is not None else "")
+
+
+def paper_cell(v: float | None, s: float | None = None) -> str:
+    if v is None:
+        return "—"
+    return f"{v:.3f}" + (f" ± {s:.3f}" if s is not None else "")
+
+
+def say(progress: Callable[[str], None] | None, msg: str) -> None:
+    if progress is not None:
+        progress(msg)
