@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from string import Template
@@ -37,6 +36,9 @@ import numpy as np
 
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
+from pwas_hdl.errors import InputError
+from pwas_hdl.design.names import check_module_name, check_signal_names
+from pwas_hdl.io.atomic import check_output_path, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import build_manifest, manifest_text
 from pwas_hdl.fit.model_file import model_text
@@ -284,8 +286,12 @@ def build_design(
         raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+    if name is not None:
+        check_module_name(name)
     sensor = _load_sensor(model)
     top = name or ("pwas_core" if design == "core" else "pwas_sensor")
+    for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
+        check_signal_names(names, f"{kind} signal")
     fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
@@ -353,6 +359,30 @@ def _timing_section(timing: dict) -> str:
     return "\n" + timing_report_text(timing)
 
 
+def check_outdir(outdir: str | os.PathLike, what: str = "-o") -> Path:
+    """Refuse an output folder that ``generate`` may not write or replace (before any work).
+
+    Raises
+    ------
+    InputError
+        A bad path (:func:`~pwas_hdl.io.atomic.check_output_path`), or an existing folder that is
+        neither empty nor made by ``generate`` (it holds no pwas-hdl ``manifest.json``).
+    """
+    out = check_output_path(outdir, what, kind="folder")
+    if out.is_dir():
+        try:
+            entries = list(out.iterdir())
+            man = out / "manifest.json"
+            ours = man.is_file() and '"pwas-hdl-manifest"' in man.read_text(encoding="utf-8", errors="replace")[:200]
+        except OSError as exc:
+            raise InputError(f"{what} {str(out)!r}: cannot read the folder ({exc.strerror or exc})") from None
+        if entries and not ours:
+            raise InputError(f"{out} is not empty and was not made by pwas-hdl generate; choose a new or empty folder")
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise InputError(f"{what} {str(out)!r} is not writable; choose another folder")
+    return out
+
+
 def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
     """Write ``files`` as the whole content of ``outdir``, atomically.
 
@@ -360,25 +390,17 @@ def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
     ``outdir`` is replaced only when it is empty or holds a pwas-hdl ``manifest.json`` (a folder
     made by ``generate``); anything else is refused so that no user file is lost.
     """
-    out = Path(outdir)
-    if out.exists():
-        if not out.is_dir():
-            raise ValueError(f"{out} exists and is not a folder; choose another output path")
-        entries = list(out.iterdir())
-        man = out / "manifest.json"
-        ours = man.is_file() and '"pwas-hdl-manifest"' in man.read_text(encoding="utf-8", errors="replace")[:200]
-        if entries and not ours:
-            raise ValueError(f"{out} is not empty and was not made by pwas-hdl generate; choose a new or empty folder")
+    out = check_outdir(outdir)
     parent = out.parent if str(out.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    tmp = make_temp_dir(parent, out.name)  # pid-named: the next run removes it if this one is killed
     try:
         for fname, text in files.items():
             (tmp / fname).write_text(text, encoding="utf-8")
             os.chmod(tmp / fname, 0o644)
         os.chmod(tmp, 0o755)
         if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
+            old = make_temp_dir(parent, f"{out.name}.old")
             os.replace(out, old / out.name)
             os.replace(tmp, out)
             shutil.rmtree(old, ignore_errors=True)
@@ -391,7 +413,11 @@ def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
 
 
 def generate(model: PWASVirtualSensor | str | os.PathLike, outdir: str | os.PathLike, **options: Any) -> GeneratedDesign:
-    """Build the design (see :func:`build_design` for the options) and write its folder."""
+    """Build the design (see :func:`build_design` for the options) and write its folder.
+
+    The folder is checked (:func:`check_outdir`) before the design is built.
+    """
+    check_outdir(outdir)
     gd = build_design(model, **options)
     gd.outdir = write_folder(gd.files, outdir)
     return gd

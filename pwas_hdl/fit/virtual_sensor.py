@@ -17,6 +17,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pwas_hdl.fit import model_file
+from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
@@ -112,6 +113,9 @@ class PWASVirtualSensor:
             raise ValueError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
             raise ValueError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
+        if self.sigma_grid is not None and hasattr(self.sigma_grid, "__len__"):
+            check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
+                        "give fewer candidates (--sigma-grid)")
 
     # ------------------------------------------------------------------ fit
     def regressors(self, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
@@ -306,6 +310,10 @@ class PWASVirtualSensor:
     def to_dict(self) -> dict:
         """The model-file content as a JSON-ready dict (:func:`pwas_hdl.fit.model_file.model_to_dict`)."""
         return model_file.model_to_dict(self)
+
+    def to_json(self) -> str:
+        """The model file's text (what :meth:`save` writes; :func:`pwas_hdl.fit.model_file.model_text`)."""
+        return model_file.model_text(self)
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the model file atomically (:func:`pwas_hdl.fit.model_file.write_model`)."""
