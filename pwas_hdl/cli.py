@@ -623,10 +623,9 @@ def explore(
         if outdir.is_dir():
             for nm in ("explore.json", "explore.png"):
                 check_output_path(outdir / nm, "-o/--out")
-        table = read_csv(data, blank_rows=blank_rows)
         with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
-                model_path, table, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
+                model_path, data, blank_rows=blank_rows, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
                 input_fill=input_fill, rounding=rounding, overflow=overflow, memory=memory, pipeline=pipeline,
                 resources=resources, cost=cost, device=device, measure_max=measure_max, workdir=synth_dir,
                 progress=lambda stage, done, total: update(done, total), executor=ex,

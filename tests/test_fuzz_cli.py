@@ -30,12 +30,9 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from typer.testing import CliRunner
 
-from pwas_hdl.cli import app
 from pwas_hdl.limits import MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_VERTICES
 
-runner = CliRunner()
 
 #: Examples per command (fixed: the suite's run time is bounded).
 BUDGET = {"fit": 60, "predict": 50, "info": 50, "generate": 25, "simulate": 30, "synth": 25, "explore": 12,
@@ -56,8 +53,18 @@ def _settings(command: str):
                                            HealthCheck.data_too_large, HealthCheck.filter_too_much])
 
 
-class Reached(Exception):
-    """Raised by the patched simulator / synthesis runner: the inputs were accepted up to there."""
+class Reached(BaseException):
+    """Raised by the patched simulator / synthesis runner: the inputs were accepted up to there
+    (a BaseException, so that the CLI's error mapping lets it through to the test)."""
+
+
+class Result:
+    """What one in-process run of ``pwas_hdl.cli.main`` printed and returned."""
+
+    def __init__(self, exit_code: int, stdout: str, stderr: str, exception: BaseException | None) -> None:
+        self.exit_code, self.stdout, self.stderr, self.exception = exit_code, stdout, stderr, exception
+        self.output = stderr + stdout
+        self.exc_info = exception
 
 
 # ------------------------------------------------------------------------------------------------ helpers
@@ -90,11 +97,25 @@ def scratch(base: Path, copy: tuple[str, ...] = ()) -> Iterator[Path]:
         shutil.rmtree(d, ignore_errors=True)
 
 
-def run(args: list[Any], cwd: Path):
+def run(args: list[Any], cwd: Path) -> Result:
+    """Run the real entry point (``main``: Click usage errors included) in this process, in ``cwd``."""
+    import io
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from pwas_hdl.cli import main
+
     old = os.getcwd()
     os.chdir(cwd)
+    out, err = io.StringIO(), io.StringIO()
     try:
-        return runner.invoke(app, [str(a) for a in args])
+        with redirect_stdout(out), redirect_stderr(err):
+            try:
+                code, exc = main([str(a) for a in args]), None
+            except Reached as e:
+                code, exc = -1, e
+            except SystemExit as e:  # noqa: PT017 - main() should return, not exit
+                code, exc = e.code, e
+        return Result(code, out.getvalue(), err.getvalue(), exc)
     finally:
         os.chdir(old)
 
@@ -114,7 +135,7 @@ def check_promise(res, before: dict, after: dict, ok: Callable[[], None] | None 
 def _check(res, before: dict, after: dict, ok: Callable[[], None] | None, args) -> str:
     if isinstance(res.exception, Reached):
         return "reached"
-    assert res.exception is None or isinstance(res.exception, SystemExit), (args, res.output, res.exc_info)
+    assert res.exception is None, (args, res.output, res.exc_info)
     assert "Traceback" not in res.output, (args, res.output)
     if res.exit_code == 0:
         if ok is not None:
@@ -132,9 +153,9 @@ def _check(res, before: dict, after: dict, ok: Callable[[], None] | None, args) 
 def base(tmp_path_factory) -> Path:
     """A folder with valid data (d.csv, t.csv), a tiny model (m.json) and its generated design (g/)."""
     d = tmp_path_factory.mktemp("fuzz")
-    assert run(["make-data", "lorenz", "-o", d / "d.csv", "--samples", 300, "--test-output", d / "t.csv",
+    assert run(["make-data", "lorenz", "-o", d / "d.csv", "--samples", 300, "--test-out", d / "t.csv",
                 "--test-samples", 60], d).exit_code == 0
-    assert run(["fit", d / "d.csv", "-o", d / "m.json", "--output", "y", "--target", "z", "--my", 2, "-p", 2,
+    assert run(["fit", d / "d.csv", "-o", d / "m.json", "-y", "y", "-z", "z", "--my", 2, "-p", 2,
                 "--sigma", "1e-3"], d).exit_code == 0
     res = run(["generate", d / "m.json", "-o", d / "g"], d)
     assert res.exit_code == 0, res.output
@@ -309,10 +330,11 @@ NAN, INF = float("nan"), float("inf")
 def test_fuzz_fit(base, data):
     k = Knobs(data)
     csv = k.csv(("y", "z"))
-    args = ["fit", "data.csv", "-o", k.out("m2.json"), "--output", "y", "--target", "z"]
-    args += k.option("--my", [1, 2, None], [0, 10**6, 25])
+    args = ["fit", "data.csv", "-o", k.out("m2.json"), "-y", "y", "-z", "z"]
+    args += k.option("--my", [1, 2, None], [0, 10**6, 25, "abc", "1.5"])  # non-numeric: a Click usage error
     args += k.option("-p", ["1", "3", "2,2", None], ["0", "-1", "x", "99999999999", "1.5", "", "2,2,2,2"])
-    args += k.option("--gamma", [1.0, 1.5, None], [0.5, NAN, INF])
+    args += k.option("--gamma", [1.0, 1.5, None], [0.5, NAN, INF, "x"])
+    args += k.option("--bogus-option", [None], ["1"])
     if k.data.draw(st.booleans(), "cv?"):
         args += k.option("--sigma-grid", ["logspace:-3:1:3", "0.1,1"], ["logspace:0:1:100000000000", "", "a", "logspace:1:2", "0,1"])
         args += k.option("--folds", [2, 3, None], [0, 1, 10**9])
@@ -395,7 +417,7 @@ def test_fuzz_generate(base, data):
     args += k.option("--memory", ["banked", "replicated", None], ["x"])
     args += k.option("--pipeline", ["min", "max", None], ["x"])
     args += k.option("--memory-init", ["inline", "readmemh", None], ["x"])
-    args += k.option("--input-bits", [8, 12, None], [0, 1, 41, 10**20])
+    args += k.option("--input-bits", [8, 12, None], [0, 1, 41, 10**20, "twelve"])
     args += k.option("--input-fill", [0.5, None], [0.0, 2.0, NAN])
     args += k.option("--weight-frac", [None, 0, 3], [-100, 10**20, -(10**20)])
     args += k.option("--weight-bits", [None, 16], [0, 200])
@@ -453,7 +475,7 @@ def test_fuzz_simulate(base, data):
         args = ["simulate", folder, "data.csv", "-o", k.out("s.csv")]
         args += k.option("--simulator", ["icarus", "verilator", None], ["x"])
         args += k.option("--json", [None, "s2.json"], BAD_FILES + ["s.csv"])
-        args += k.option("--stall", [0.0, 0.5, None], [1.0, -1.0, NAN])
+        args += k.option("--stall", [0.0, 0.5, None], [1.0, -1.0, NAN, "x"])
         args += k.option("--seed", [0, 3, None], [-1])
         args += k.option("--build-dir", [None, "bd"], ["d.csv", "d.csv/b"])
         args += k.option("--traj-col", [None], ["nope"])
@@ -473,10 +495,10 @@ def test_fuzz_synth(base, data):
         _prepare(work)
         folder = _folder_variant(k, base, work)
         args = ["synth", folder]
-        args += k.option("--target", ["ecp5", "ice40", "generic", None], ["x"])
+        args += k.option("--fpga", ["ecp5", "ice40", "generic", None], ["x"])
         args += k.option("--device", [None], ["zz"])
-        args += k.option("--freq", [None, 50.0], [0.0, -1.0, NAN])
-        args += k.option("--seed", [None, 1], [-1])
+        args += k.option("--clock-mhz", [None, 50.0], [0.0, -1.0, NAN])
+        args += k.option("--seed", [None, 1], [-1, "x"])
         args += k.option("--json", [None, "r.json"], BAD_FILES)
         before = tree(work)
         res = run(args, work)
@@ -538,15 +560,15 @@ def test_fuzz_report(base, data):
                 (work / "g" / "sim" / "a.json").write_bytes(k.json_doc(SIM_SUMMARY, "sim"))
         args = ["report", folder]
         args += k.option("--json", [None, "r.json"], BAD_FILES)
-        args += k.option("--md", [None, "r.md"], BAD_FILES + ["r.json"])
+        args += k.option("-o", [None, "r.md"], BAD_FILES + ["r.json"])
         args += k.option("--sim", [None], ["d.csv", "nope.json"])
         before = tree(work)
         res = run(args, work)
 
         def ok():
             assert res.stdout.startswith("# ") and "None" not in res.stdout
-            if "--md" in args:
-                assert (work / args[args.index("--md") + 1]).read_text().startswith("# ")
+            if "-o" in args:
+                assert (work / args[args.index("-o") + 1]).read_text().startswith("# ")
             if "--json" in args:
                 assert json.loads((work / args[args.index("--json") + 1]).read_text())["format"] == "pwas-hdl-report"
 
@@ -559,8 +581,8 @@ def test_fuzz_report(base, data):
 def test_fuzz_make_data(base, data):
     k = Knobs(data)
     args = ["make-data", "lorenz", "-o", k.out("a.csv")]
-    args += ["--samples", k.choose("--samples", [1, 5, 300], [0, -1, 10**8, 10**20])]
-    args += k.option("--test-output", [None, "b.csv"], ["a.csv", "./a.csv", "nodir/b.csv", "d.csv/b", ""])
+    args += ["--samples", k.choose("--samples", [1, 5, 300], [0, -1, 10**8, 10**20, "many", ""])]
+    args += k.option("--test-out", [None, "b.csv"], ["a.csv", "./a.csv", "nodir/b.csv", "d.csv/b", ""])
     args += k.option("--test-samples", [None, 1, 50], [0, -3, MAX_SAMPLES])
     args += k.option("--seed", [None, 0, 7, 2**70], [-1])
     with scratch(base, ("d.csv",)) as work:
@@ -572,9 +594,9 @@ def test_fuzz_make_data(base, data):
             n = int(args[args.index("--samples") + 1])
             lines = (work / args[3]).read_text().splitlines()
             assert lines[0] == "y,z,z_true" and len(lines) == n + 1
-            if "--test-output" in args:
+            if "--test-out" in args:
                 m = int(args[args.index("--test-samples") + 1]) if "--test-samples" in args else 2000
-                assert len((work / args[args.index("--test-output") + 1]).read_text().splitlines()) == m + 1
+                assert len((work / args[args.index("--test-out") + 1]).read_text().splitlines()) == m + 1
 
         check_promise(res, before, tree(work), ok, args)
 
@@ -583,7 +605,7 @@ def test_fuzz_make_data(base, data):
 @given(data=st.data())
 def test_fuzz_bench(base, data):
     k = Knobs(data)
-    args = ["bench", "lorenz", "--json", k.out("b.json"), "--quick"]
+    args = ["bench", "lorenz", "-o", k.out("b.json"), "--quick"]
     args += k.option("--md", [None, "b.md"], BAD_FILES + ["b.json"])
     args += ["--seeds", k.choose("--seeds", [1], [0, -1])]
     with scratch(base, ("d.csv",)) as work:
@@ -620,9 +642,9 @@ def test_fuzz_sizes_refused_within_memory(base, kind, size):
     with scratch(base, ("d.csv", "t.csv", "m.json")) as work:
         if kind == "p":
             p = 1023 + size  # N = (p+1)^2 > 2^20
-            args, limit = ["fit", "d.csv", "-o", "x.json", "--output", "y", "--target", "z", "--my", 2, "-p", p, "--sigma", 1], MAX_VERTICES
+            args, limit = ["fit", "d.csv", "-o", "x.json", "-y", "y", "-z", "z", "--my", 2, "-p", p, "--sigma", 1], MAX_VERTICES
         elif kind == "my":
-            args, limit = ["fit", "d.csv", "-o", "x.json", "--output", "y", "--target", "z", "--my", 20 + size, "--sigma", 1], 20
+            args, limit = ["fit", "d.csv", "-o", "x.json", "-y", "y", "-z", "z", "--my", 20 + size, "--sigma", 1], 20
         elif kind == "inputs":
             k = 21 + size % 80
             rng = np.random.default_rng(size % 1000)
@@ -631,7 +653,7 @@ def test_fuzz_sizes_refused_within_memory(base, kind, size):
             (work / "w.csv").write_text(",".join(cols + ["z"]) + "\n" + "\n".join(",".join(repr(float(v)) for v in r) for r in vals) + "\n")
             args, limit = ["fit", "w.csv", "-o", "x.json", "--output", ",".join(cols), "--target", "z", "-p", 1, "--sigma", 1], 20
         elif kind == "sigma_grid":
-            args, limit = ["fit", "d.csv", "-o", "x.json", "--output", "y", "--target", "z", "--sigma-grid",
+            args, limit = ["fit", "d.csv", "-o", "x.json", "-y", "y", "-z", "z", "--sigma-grid",
                            f"logspace:-3:3:{MAX_SIGMA_CANDIDATES + size}"], MAX_SIGMA_CANDIDATES
         elif kind == "samples":
             args, limit = ["make-data", "lorenz", "-o", "x.csv", "--samples", MAX_SAMPLES + size], MAX_SAMPLES

@@ -67,10 +67,10 @@ def assert_refused(res, *fragments: str) -> None:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("issue9")
-    res = invoke("make-data", "lorenz", "-o", d / "d.csv", "--samples", 600, "--test-output", d / "t.csv",
+    res = invoke("make-data", "lorenz", "-o", d / "d.csv", "--samples", 600, "--test-out", d / "t.csv",
                  "--test-samples", 200)
     assert res.exit_code == 0, res.output
-    res = invoke("fit", d / "d.csv", "-o", d / "m.json", "--output", "y", "--target", "z", "--my", 2, "-p", 3,
+    res = invoke("fit", d / "d.csv", "-o", d / "m.json", "-y", "y", "-z", "z", "--my", 2, "-p", 3,
                  "--sigma", "1e-3")
     assert res.exit_code == 0, res.output
     return d
@@ -106,7 +106,7 @@ def test_bad_output_path_refused_before_work(work, out, frag):
     before = tree(work)
     assert_refused(invoke("make-data", "lorenz", "-o", out, "--samples", 50, cwd=work), frag)
     assert_refused(invoke("predict", "m.json", "t.csv", "-o", out, cwd=work), frag)
-    assert_refused(invoke("fit", "d.csv", "-o", out, "--output", "y", "--target", "z", "--sigma", 1, cwd=work), frag)
+    assert_refused(invoke("fit", "d.csv", "-o", out, "-y", "y", "-z", "z", "--sigma", 1, cwd=work), frag)
     assert tree(work) == before
 
 
@@ -138,12 +138,12 @@ def test_unwritable_check_uses_access(tmp_path, monkeypatch):
 
 def test_same_file_twice_is_refused(work):
     before = tree(work)
-    assert_refused(invoke("make-data", "lorenz", "-o", "n.csv", "--test-output", "n.csv", cwd=work),
-                   "-o and --test-output both name 'n.csv'")
-    assert_refused(invoke("make-data", "lorenz", "-o", "n.csv", "--test-output", "./n.csv", cwd=work),
+    assert_refused(invoke("make-data", "lorenz", "-o", "n.csv", "--test-out", "n.csv", cwd=work),
+                   "-o/--out and --test-out both name 'n.csv'")
+    assert_refused(invoke("make-data", "lorenz", "-o", "n.csv", "--test-out", "./n.csv", cwd=work),
                    "both name")
     # an output that is also the input: the training data would be overwritten by the model
-    assert_refused(invoke("fit", "d.csv", "-o", "d.csv", "--output", "y", "--target", "z", "--sigma", 1, cwd=work),
+    assert_refused(invoke("fit", "d.csv", "-o", "d.csv", "-y", "y", "-z", "z", "--sigma", 1, cwd=work),
                    "is also the input DATA")
     assert tree(work) == before
 
@@ -299,7 +299,7 @@ def test_csv_field_over_128_kib(tmp_path, work):
     with pytest.raises(ResourceLimit, match=rf"line 3 has a cell longer than the limit of {MAX_CSV_FIELD}"):
         read_csv(p)
     before = tree(work)
-    assert_refused(invoke("fit", p, "-o", work / "x.json", "--output", "y", "--target", "z"), "131072")
+    assert_refused(invoke("fit", p, "-o", work / "x.json", "-y", "y", "-z", "z"), "131072")
     assert tree(work) == before
     ok = _csv(tmp_path, "ok.csv", b"y,z\n1," + b"9" * (MAX_CSV_FIELD - 10) + b"\n")  # just below: read
     assert len(read_csv(ok).rows[0][1]) == MAX_CSV_FIELD - 10
@@ -400,21 +400,21 @@ def test_many_inputs_refused_not_a_segfault(work):
     before = tree(work)
     assert_refused(invoke("fit", p, "-o", work / "w.json", "--output", ",".join(cols), "--target", "z", "-p", 1,
                           "--sigma", 1), f"= 70 exceeds the limit of {MAX_REGRESSORS}")
-    assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "--output", "y", "--target", "z",
+    assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "-y", "y", "-z", "z",
                           "--my", 10**6, "--sigma", 1), "exceeds the limit of 20")
-    assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "--output", "y", "--target", "z",
+    assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "-y", "y", "-z", "z",
                           "--my", 4, "-p", 10**20, "--sigma", 1), "more than the limit of 1048576")
     assert tree(work) == before
 
 
 def test_sigma_grid_and_samples_limits(work):
     before = tree(work)
-    assert_refused(invoke("fit", work / "d.csv", "-o", work / "x.json", "--output", "y", "--target", "z",
+    assert_refused(invoke("fit", work / "d.csv", "-o", work / "x.json", "-y", "y", "-z", "z",
                           "--sigma-grid", "logspace:-3:3:1000000000"), f"exceeds the limit of {MAX_SIGMA_CANDIDATES}")
     assert_refused(invoke("make-data", "lorenz", "-o", work / "x.csv", "--samples", 10**8),
                    f"--samples = {10**8} exceeds the limit of {MAX_SAMPLES}")
     assert_refused(invoke("make-data", "lorenz", "-o", work / "x.csv", "--samples", MAX_SAMPLES,
-                          "--test-output", work / "y.csv"), "--samples + --test-samples")
+                          "--test-out", work / "y.csv"), "--samples + --test-samples")
     assert_refused(invoke("explore", work / "m.json", work / "t.csv", "-o", work / "e", "--input-bits", "2:100000000"),
                    "exceeds the limit of 10000")
     assert tree(work) == before
@@ -456,19 +456,13 @@ def test_generate_refuses_signal_names_with_newlines(work):
 # ----------------------------------------------------------------------------------- model files
 @pytest.mark.parametrize("key, value", [("My", 2.7), ("My", "2"), ("My", True), ("My", -1), ("Mu", 0.5)])
 def test_model_with_non_integer_lags_refused(work, key, value):
+    """`"My": 2.7` was read as 2 (the model-file schema of pwas_hdl.fit.model_file refuses it now)."""
     d = json.loads((work / "m.json").read_text())
     d["lags"][key] = value
     (work / "bad.json").write_text(json.dumps(d))
     for cmd in (["info", work / "bad.json"], ["predict", work / "bad.json", work / "t.csv", "-o", work / "p.csv"]):
-        assert_refused(invoke(*cmd), f"lags.{key} = {value!r} is not a non-negative integer")
+        assert_refused(invoke(*cmd), f"lags.{key} must be")
     assert not (work / "p.csv").exists()
-
-
-def test_model_with_integral_float_lag_is_read(work):
-    d = json.loads((work / "m.json").read_text())
-    d["lags"]["My"] = 2.0  # what a JSON schema calls an integer
-    (work / "f.json").write_text(json.dumps(d))
-    assert invoke("info", work / "f.json").exit_code == 0
 
 
 # ----------------------------------------------------------------------------------- formats
@@ -534,7 +528,7 @@ def test_simulate_exits_1_when_latency_disagrees_with_the_manifest(tmp_path, des
 
 def test_error_line_is_printed_verbatim(work):
     """Rich would turn ':a:' into an emoji; the error line shows the text as it is."""
-    res = invoke("fit", work / "d.csv", "-o", work / "x.json", "--output", "y", "--target", "z", "--sigma-grid", "logspace:a:b:3")
+    res = invoke("fit", work / "d.csv", "-o", work / "x.json", "-y", "y", "-z", "z", "--sigma-grid", "logspace:a:b:3")
     assert_refused(res, "logspace:A:B:K", "'logspace:a:b:3'")
 
 
@@ -579,7 +573,7 @@ def test_model_values_of_the_wrong_kind_refused_at_load(work, path, value):
         node = node[k]
     node[path[-1]] = value
     (work / "w.json").write_text(json.dumps(d))
-    assert_refused(invoke("info", work / "w.json"), "corrupt or incomplete")
+    assert_refused(invoke("info", work / "w.json"), ".".join(path[:2]))
 
 
 def test_model_with_huge_lags_of_an_unused_signal_loads_at_once(work):

@@ -186,12 +186,12 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
     return PWASVirtualSensor.load(model), str(model)
 
 
-def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None):
+def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
     """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
     if isinstance(data, (str, os.PathLike)):
-        data = read_csv(data)
+        data = read_csv(data, blank_rows=blank_rows)
     if isinstance(data, Table):
         if traj_col is not None:
             data.column_index(traj_col)
@@ -402,6 +402,7 @@ def explore(
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     executor: "Executor | None" = None,
+    blank_rows: str = "error",
 ) -> dict[str, Any]:
     """Sweep the fixed-point formats of a model and measure accuracy against resources.
 
@@ -439,6 +440,9 @@ def explore(
         Where the synthesised designs go (kept); default a temporary folder, removed afterwards.
     progress : callable(stage, done, total), optional
         Called as the sweep and the synthesis runs progress.
+    blank_rows : {"error", "break"}
+        A blank row in a CSV ``data`` file: an error, or the end of a trajectory
+        (:func:`pwas_hdl.io.csv_table.read_csv`).
     executor : pwas_hdl.flow.executor.Executor, optional
         Runs the synthesis of the measured points (one task per point): serially by default, or
         on a local or remote Dask cluster. The result does not depend on it.
@@ -476,7 +480,7 @@ def explore(
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
-    xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col)
+    xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col, blank_rows)
     tgts = sensor.signal_names()[2]
 
     # ---- the defaults of generate (input_bits=12, everything else from the data)
