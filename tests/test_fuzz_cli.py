@@ -18,6 +18,7 @@ import json
 import os
 import resource
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -107,6 +108,7 @@ def run(args: list[Any], cwd: Path) -> Result:
     old = os.getcwd()
     os.chdir(cwd)
     out, err = io.StringIO(), io.StringIO()
+    term = signal.getsignal(signal.SIGTERM)  # main() installs its SIGTERM handler: not for the rest of pytest
     try:
         with redirect_stdout(out), redirect_stderr(err):
             try:
@@ -117,6 +119,7 @@ def run(args: list[Any], cwd: Path) -> Result:
                 code, exc = e.code, e
         return Result(code, out.getvalue(), err.getvalue(), exc)
     finally:
+        signal.signal(signal.SIGTERM, term)
         os.chdir(old)
 
 
