@@ -35,8 +35,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
-from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.io.csv_table import read_csv, select_signals, split_trajectories, write_csv
+from pwas_hdl.io.atomic import OutputSet, atomic_write_text, check_output_path, install_termination_handler
+from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories, write_csv
+from pwas_hdl.limits import MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
 _CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -57,8 +58,8 @@ data_app = typer.Typer(help="Write the built-in example data sets as CSV.", no_a
                        context_settings=_CONTEXT)
 app.add_typer(data_app, name="make-data")
 
-err = Console(stderr=True, soft_wrap=True)
-stdout = Console(soft_wrap=True)
+err = Console(stderr=True, soft_wrap=True, emoji=False)  # ":a:" in a message is text, not an emoji code
+stdout = Console(soft_wrap=True, emoji=False)
 
 #: Global flags of this invocation (set by the root callback: ``-q``, ``-v``).
 _STATE = {"quiet": False, "verbose": False}
@@ -200,8 +201,14 @@ def _float_list(text: str, what: str) -> list[float]:
     try:
         if t.startswith("logspace:"):
             a, b, k = t.split(":")[1:]
-            return [float(v) for v in np.logspace(float(a), float(b), int(k))]
-        return [float(v) for v in t.split(",") if v]
+            k_count = int(k)
+        else:
+            return [float(v) for v in t.split(",") if v]
+    except ValueError:
+        raise InputError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
+    check_limit(f"the number of {what} candidates K", k_count, MAX_SIGMA_CANDIDATES, "give fewer candidates")
+    try:
+        return [float(v) for v in np.logspace(float(a), float(b), k_count)]
     except ValueError:
         raise InputError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
 
@@ -219,7 +226,7 @@ def _executor(workers: Optional[int], scheduler: Optional[str]):
 def _names(values: Optional[list[str]]) -> list[str]:
     res: list[str] = []
     for v in values or []:
-        res += [s for s in v.replace(" ", "").split(",") if s]
+        res += [s.strip() for s in v.split(",") if s.strip()]  # spaces inside a name are part of it
     return res
 
 
@@ -267,6 +274,7 @@ def fit(
     window: Annotated[int, typer.Option("--window", help="observer-bank: window l of the feature map.")] = 7,
     features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
     order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
+    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     from pwas_hdl.fit import classifier as clf
@@ -282,6 +290,8 @@ def fit(
             fe = ObserverBankFrontEnd(n_models=models, observer=observer, window=window, features=features, order=order)
             fe.check_params()
         output = _required(_merge("-o/--out", out, output_model=output_model), "-o/--out", "the model file to write")
+        outset = OutputSet(inputs=[(data, "DATA")])
+        outset.add(output, "-o/--out")
         ins = _names(_merge_lists(inputs, input_old))
         outs = _names(_merge_lists(outputs, output_old))
         tgts = _names(_merge_lists(targets, target_old))
@@ -297,7 +307,7 @@ def fit(
             raise InputError(f"--my {my} needs measured output column(s): give -y/--outputs (or --my 0)")
         if mu and not ins:
             raise InputError(f"--mu {mu} needs input column(s): give -u/--inputs (or --mu 0)")
-        table = read_csv(data)
+        table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
         use_u = bool(mu or (bank and ins))
@@ -340,7 +350,8 @@ def fit(
             model.fit(u, y, z, progress=update)
         if classes is not None:
             model.classifier_ = {"target": class_target, "classes": classes}
-        model.save(output)
+        with outset:
+            outset.write_text(output, model.to_json())
         d = model.to_dict()
         _say(
             f"fitted n = {model.grid_.n} ({', '.join(d['regressors'])}), N = {model.grid_.n_vertices} weights, "
@@ -357,6 +368,7 @@ def predict(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of estimates to write. Required.", show_default=False)] = None,
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
+    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
 ) -> None:
     """Estimate the targets for every row of DATA that has a full regressor.
 
@@ -367,9 +379,11 @@ def predict(
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
+        outset = OutputSet(inputs=[(model_path, "MODEL"), (data, "DATA")])
+        outset.add(output, "-o/--out")
         model = PWASVirtualSensor.load(model_path)
         ins, outs, tgts = model.signal_names()
-        table = read_csv(data)
+        table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
@@ -389,7 +403,8 @@ def predict(
             for i, c in enumerate(classes):
                 cols[f"{ct}_score_{clf.label_text(c)}"] = zhat[:, i]
             cols["out_of_domain"] = flags
-            write_csv(output, cols)
+            with outset:
+                outset.write_text(output, format_csv(cols))
             for ref in (f"{ct}_true", ct):
                 if ref in table.header:
                     sc = clf.class_scores(table.numeric([ref])[rows, 0], label, classes)
@@ -401,7 +416,8 @@ def predict(
             for i, t in enumerate(tgts):
                 cols[f"{t}_hat"] = zhat[:, i]
             cols["out_of_domain"] = flags
-            write_csv(output, cols)
+            with outset:
+                outset.write_text(output, format_csv(cols))
         for i, t in enumerate(tgts):
             for ref in (f"{t}_true", t):
                 if ref in table.header:
@@ -523,10 +539,16 @@ def synth(
     with _user_errors():
         family = _merge("--fpga", fpga, target=target_old) or "ecp5"
         freq = _merge("--clock-mhz", clock_mhz, freq=freq_old)
+        outset = OutputSet(inputs=[(outdir / "manifest.json", "the manifest")])
+        if json_out is not None:
+            outset.add(json_out, "--json")
+        if out is not None:
+            check_output_path(out, "-o/--out", kind="folder")
         res = synthesize(outdir, family, device=device, package=package, freq_mhz=freq, seed=seed, workdir=out,
                          progress=_say)
         if json_out is not None:
-            atomic_write_text(json_out, json.dumps(res, indent=2) + "\n")
+            with outset:
+                outset.write_text(json_out, json.dumps(res, indent=2) + "\n")
         stdout.print(synth_summary_text(res), highlight=False, markup=False)
 
 
@@ -544,6 +566,7 @@ def simulate(
     build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.")] = None,
     waves: Annotated[bool, typer.Option("--waves", help="Record waveforms (Icarus: FST, Verilator: VCD) next to the build; the path is in the summary.")] = False,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
+    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
 ) -> None:
     """Replay DATA through the generated RTL in a simulator (cocotb) and check it bit for bit.
 
@@ -560,14 +583,15 @@ def simulate(
         res = simulate_data(
             outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
             stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
-            progress=_say,
+            progress=_say, blank_rows=blank_rows,
         )
         s = res["summary"]
         stdout.print_json(json.dumps(s))
         _say(f"wrote {output} and {res['summary_path']}")
-        if s["mismatches"]:
-            raise CheckFailed(f"{s['mismatches']} hardware output(s) differ from the bit-true model (first: "
-                              f"{json.dumps(s['first_mismatch'])}); the outputs are in {output}")
+        fails = s["checks"]["failures"]  # mismatches, testbench failures, latency / II against the manifest
+        if fails:
+            more = f" (and {len(fails) - 1} more, see {res['summary_path']})" if len(fails) > 1 else ""
+            raise CheckFailed(f"{fails[0]}{more}; the outputs are in {output}")
 
 
 @app.command("export-testbench")
@@ -617,6 +641,7 @@ def explore(
     scheduler: SchedulerOpt = None,
     outdir_old: Annotated[Optional[Path], _hidden("--outdir")] = None,
     resources_old: Annotated[Optional[str], _hidden("--resources")] = None,
+    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
 ) -> None:
     """Sweep input, weight and output word lengths: bit-true RMSEE against resources.
 
@@ -634,6 +659,7 @@ def explore(
             lo, hi = _int_list(a, what), _int_list(b, what)
             if len(lo) != 1 or len(hi) != 1 or hi[0] < lo[0]:
                 raise InputError(f"{what}: {text!r} is not a range A:B with A <= B")
+            check_limit(f"the number of values in {what} {text}", hi[0] - lo[0] + 1, MAX_SWEEP_POINTS, "sweep a shorter range")
             return list(range(lo[0], hi[0] + 1))
         return _int_list(t, what)
 
@@ -646,18 +672,24 @@ def explore(
             weight_frac=ints(weight_frac, "--weight-frac") if weight_frac is not None else None,
             output_frac=ints(output_frac, "--output-frac") if output_frac is not None else None,
         )
-        if outdir.exists() and not outdir.is_dir():
-            raise InputError(f"{outdir} exists and is not a folder; choose another -o/--out")
+        check_output_path(outdir, "-o/--out", kind="folder")
+        if outdir.is_dir():
+            for nm in ("explore.json", "explore.png"):
+                check_output_path(outdir / nm, "-o/--out")
         with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
-                model_path, data, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
+                model_path, data, blank_rows=blank_rows, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
                 input_fill=input_fill, rounding=rounding, overflow=overflow, memory=memory, pipeline=pipeline,
                 resources=resources, cost=cost, device=device, measure_max=measure_max, workdir=synth_dir,
                 progress=lambda stage, done, total: update(done, total), executor=ex,
             )
+        text = json.dumps(res, indent=1, allow_nan=False) + "\n"
         outdir.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(outdir / "explore.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
-        plot_exploration(res, outdir / "explore.png")
+        with OutputSet(inputs=[(model_path, "MODEL"), (data, "DATA")]) as outset:
+            outset.add(outdir / "explore.json", "-o/--out")
+            outset.add(outdir / "explore.png", "-o/--out")
+            outset.write_text(outdir / "explore.json", text)
+            plot_exploration(res, outset.temp_path(outdir / "explore.png"))
         stdout.print(format_table(res), highlight=False, markup=False)
         d = res["default"]
         if d["on_front"]:
@@ -688,12 +720,18 @@ def report(
 
     with _user_errors():
         markdown = _merge("-o/--out", out, md=md_old)
-        rep = collect_report(outdir, _names(sim))
+        sims = _names(sim)
+        outset = OutputSet(inputs=[(outdir / "manifest.json", "the manifest"), *((p, "--sim") for p in sims)])
+        for path, what in ((json_out, "--json"), (markdown, "-o/--out")):
+            if path is not None:
+                outset.add(path, what)
+        rep = collect_report(outdir, sims)
         text = report_markdown(rep)
-        if json_out is not None:
-            atomic_write_text(json_out, json.dumps(rep, indent=2) + "\n")
-        if markdown is not None:
-            atomic_write_text(markdown, text)
+        with outset:
+            if json_out is not None:
+                outset.write_text(json_out, json.dumps(rep, indent=2) + "\n")
+            if markdown is not None:
+                outset.write_text(markdown, text)
         stdout.print(text, highlight=False, markup=False)
 
 
@@ -726,13 +764,21 @@ def _write_plant_data(plant, samples: int, test_samples: int, seed: int, *, out:
         test_output = _merge("--test-out", test_out, test_output=test_output_old)
         if samples < 1 or (test_output is not None and test_samples < 1):
             raise InputError("--samples and --test-samples must be >= 1")
+        outset = OutputSet()
+        outset.add(output, "-o/--out")
+        if test_output is not None:
+            outset.add(test_output, "--test-out")
         total = samples + (test_samples if test_output is not None else 0)
+        check_limit("--samples + --test-samples" if test_output is not None else "--samples", total, MAX_SAMPLES,
+                    "ask for fewer samples")
         d = plant(total, seed=seed)
         train, test = d.split(samples)
-        write_csv(output, train.columns())
+        with outset:
+            outset.write_text(output, format_csv(train.columns()))
+            if test_output is not None:
+                outset.write_text(test_output, format_csv(test.columns()))
         _say(f"wrote {output} ({samples} samples, seed {seed})")
         if test_output is not None:
-            write_csv(test_output, test.columns())
             _say(f"wrote {test_output} ({test_samples} samples following {output})")
 
 
@@ -756,11 +802,22 @@ def make_data_helicopter(
     _write_plant_data(helicopter, samples, test_samples, seed, out=out, test_out=test_out)
 
 
+def _plant_outputs(output: Path, test_output: Optional[Path]) -> OutputSet:
+    """The outputs of a make-data command, checked before the data are made."""
+    outset = OutputSet()
+    outset.add(output, "-o/--out")
+    if test_output is not None:
+        outset.add(test_output, "--test-out")
+    return outset
+
+
 def _write_plant(output: Path, test_output: Optional[Path], train, test, what: str) -> None:
-    write_csv(output, train.columns())
+    with _plant_outputs(output, test_output) as outset:  # both files or neither
+        outset.write_text(output, format_csv(train.columns()))
+        if test_output is not None and test is not None:
+            outset.write_text(test_output, format_csv(test.columns()))
     _say(f"wrote {output} ({what})")
     if test_output is not None and test is not None:
-        write_csv(test_output, test.columns())
         _say(f"wrote {test_output} (test run)")
 
 
@@ -780,6 +837,8 @@ def make_data_three_tank(
         output = _required(out, "-o/--out", "the CSV file to write")
         if samples < 1 or runs < 1 or noise < 0 or seed < 0:
             raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
+        _plant_outputs(output, test_out)  # the paths are checked before the work
+        check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
         train = three_tank_training_runs(runs, samples, seed=seed, noise=noise)
         test = three_tank_paper_run(samples, seed=seed, noise=noise) if test_out is not None else None
         _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
@@ -803,6 +862,8 @@ def make_data_switched_linear(
         output = _required(out, "-o/--out", "the CSV file to write")
         if samples < 1 or runs < 1 or noise < 0 or seed < 0:
             raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
+        _plant_outputs(output, test_out)  # the paths are checked before the work
+        check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
         train = switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise)
         test = switched_paper_run(seed=seed, switching=switching, noise=noise) if test_out is not None else None
         _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
@@ -961,14 +1022,19 @@ def bench_lorenz(
         json_out = _required(_merge("-o/--out", out, json=json_old), "-o/--out", "the JSON file to write")
         if seeds < 1:
             raise InputError("--seeds must be >= 1")
+        outset = OutputSet()
+        outset.add(json_out, "-o/--out")
+        if markdown is not None:
+            outset.add(markdown, "--md")
         rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
 
         with _executor(workers, scheduler) as ex:
             result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=_say, executor=ex)
-        atomic_write_text(json_out, json.dumps(result, indent=2) + "\n")
         table = lorenz_tables.markdown_table(result)
-        if markdown is not None:
-            atomic_write_text(markdown, table)
+        with outset:
+            outset.write_text(json_out, json.dumps(result, indent=2) + "\n")
+            if markdown is not None:
+                outset.write_text(markdown, table)
         stdout.print(table, highlight=False, markup=False)
         _say(f"wrote {json_out}")
 
@@ -1077,6 +1143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     as one ``error:`` line (Click runs with ``standalone_mode=False``, so they reach this function).
     """
     _STATE["quiet"] = _STATE["verbose"] = False
+    install_termination_handler()  # SIGTERM runs the cleanup of temporaries instead of killing on the spot
     try:
         rv = app(args=list(argv) if argv is not None else None, prog_name="pwas-hdl", standalone_mode=False)
     except (typer.Abort, click.exceptions.Abort):

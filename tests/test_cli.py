@@ -94,7 +94,7 @@ def test_fit_with_fixed_sigma_first_order_and_trajectories(tmp_path):
         (["--output", "y", "--target", "z", "--sigma", "-1"], "sigma"),
         (["--output", "y", "--target", "z", "--tikhonov", "2"], "order"),
         (["--output", "y", "--target", "z", "-p", "x"], "--partitions"),
-        (["--output", "y", "--target", "z", "--my", "5000"], "lags need at least"),
+        (["--output", "y", "--target", "z", "--my", "5000"], "n = nu*Mu + ny*My = 5000 exceeds the limit of 20"),
     ],
 )
 def test_fit_bad_input_exits_2_and_writes_nothing(lorenz_files, tmp_path, args, message):

@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 import pytest
+
+from pwas_hdl.errors import InputError
 from typer.testing import CliRunner
 
 from pwas_hdl.errors import ToolFailed, ToolMissing
@@ -158,13 +160,17 @@ def test_resource_estimate_is_the_generators(tiny, small_result):
 def test_refused_combinations_are_recorded(tiny):
     _, root = tiny
     # output finer than the exact product F + Fw: refused, with the reason
-    res = explore(root / "model.json", root / "test.csv", input_bits=[4], weight_frac=[-6], output_frac=[5])
+    res = explore(root / "model.json", root / "test.csv", input_bits=[4], weight_frac=[-6, 4], output_frac=[5])
     assert res["refused"] and "finer than the exact product" in res["refused"][0]["reason"]
     assert res["refused"][0]["input_bits"] == 4
+    assert any(not p["is_default"] and p["weight_frac"] == 4 for p in res["points"])
+    # every requested point refused: an error naming the reason (the default, evaluated for comparison
+    # only, does not count as a result; issue 9)
+    with pytest.raises(InputError, match=r"every requested combination of the sweep \(1\) was refused; .*finer than the exact"):
+        explore(root / "model.json", root / "test.csv", input_bits=[4], weight_frac=[-6], output_frac=[5])
     # a fixed weight width too small for the weights: refused (overflow="error")
-    res = explore(root / "model.json", root / "test.csv", input_bits=[12], weight_frac=[2], output_frac=[0], weight_bits=3)
-    assert any("does not fit the weight format" in r["reason"] for r in res["refused"])
-    assert [p["is_default"] for p in res["points"]] == [True]
+    with pytest.raises(InputError, match="does not fit the weight format"):
+        explore(root / "model.json", root / "test.csv", input_bits=[12], weight_frac=[2], output_frac=[0], weight_bits=3)
 
 
 def test_plot_and_table(tmp_path, small_result):

@@ -179,6 +179,7 @@ def test_verilog_header_names_generator_model_formats_ports(lorenz_tiny, tmp_pat
 
 def test_regenerate_keeps_results_and_marks_them_stale(lorenz_tiny, tmp_path):
     from pwas_hdl.design.report import STALE_NOTE, collect_report, report_markdown, stale_results
+    from pwas_hdl.io.atomic import TEMP_MARK
 
     out = tmp_path / "g"
     first = generate(lorenz_tiny.model, out)
@@ -188,7 +189,7 @@ def test_regenerate_keeps_results_and_marks_them_stale(lorenz_tiny, tmp_path):
     sim = {"simulator": "icarus", "samples": 3, "mismatches": 0, "latency_cycles": {}, "ii": {}, "design_hash": h}
     (out / "sim" / "icarus.json").write_text(json.dumps(sim))
     (out / "synth" / "generic").mkdir(parents=True)
-    (out / "synth" / "generic" / "synth.json").write_text(json.dumps({"target": "generic", "luts": 10, "design_hash": h}))
+    (out / "synth" / "generic" / "synth.json").write_text(json.dumps({"target": "generic", "luts": 10, "ffs": 5, "fmax_mhz": None, "design_hash": h}))
     (out / "synth" / "generic" / "synth.log").write_text("log")
     (out / "notes.txt").write_text("mine")
     # same inputs: same hash, nothing stale, everything kept
@@ -206,7 +207,7 @@ def test_regenerate_keeps_results_and_marks_them_stale(lorenz_tiny, tmp_path):
     rep = collect_report(out)
     assert rep["simulation"][0]["stale"] and rep["synthesis"][0]["stale"]
     md = report_markdown(rep)
-    assert md.count(STALE_NOTE) == 2 and "sim" not in [p.name for p in out.glob(".pwas-hdl-generate.*")]
+    assert md.count(STALE_NOTE) == 2 and not [p.name for p in out.iterdir() if TEMP_MARK in p.name]  # no temporaries left
     # a result without a design hash (older pwas-hdl) counts as made for an earlier design
     (out / "sim" / "old.json").write_text(json.dumps({k: v for k, v in sim.items() if k != "design_hash"}))
     assert "sim/old.json" in stale_results(out)

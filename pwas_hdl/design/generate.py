@@ -29,7 +29,6 @@ import hashlib
 import json
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from string import Template
@@ -39,9 +38,11 @@ import numpy as np
 
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
+from pwas_hdl.errors import InputError
+from pwas_hdl.design.names import check_module_name, check_signal_names
+from pwas_hdl.io.atomic import check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import build_manifest, manifest_text
-from pwas_hdl.errors import InputError
 from pwas_hdl.fit.model_file import model_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
@@ -304,11 +305,15 @@ def build_design(
         raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+    if name is not None:
+        check_module_name(name)
     sensor = _load_sensor(model)
     if getattr(sensor, "front_end_", None) is not None:
         raise InputError("hardware for observer-bank front ends is not implemented yet (issue 12); "
                          "generate supports models fitted with --front-end lags")
     top = name or ("pwas_core" if design == "core" else "pwas_sensor")
+    for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
+        check_signal_names(names, f"{kind} signal")
     fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
@@ -467,34 +472,67 @@ def _generated_names(manifest_path: Path) -> set[str]:
     return {n for n in names if n and "/" not in n and "\\" not in n and not n.startswith(".")}
 
 
+def check_outdir(outdir: str | os.PathLike, what: str = "-o") -> Path:
+    """Refuse an output folder that ``generate`` may not write or replace (before any work).
+
+    Raises
+    ------
+    InputError
+        A bad path (:func:`~pwas_hdl.io.atomic.check_output_path`), or an existing folder that is
+        neither empty nor made by ``generate`` (it holds no pwas-hdl ``manifest.json``).
+    """
+    out = check_output_path(outdir, what, kind="folder")
+    if out.is_dir():
+        try:
+            clean_stale_temps(out)  # what a killed earlier run left
+            entries = list(out.iterdir())
+            man = out / "manifest.json"
+            ours = man.is_file() and '"pwas-hdl-manifest"' in man.read_text(encoding="utf-8", errors="replace")[:200]
+        except OSError as exc:
+            raise InputError(f"{what} {str(out)!r}: cannot read the folder ({exc.strerror or exc})") from None
+        if entries and not ours:
+            raise InputError(f"{out} is not empty and was not made by pwas-hdl generate; choose a new or empty folder")
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise InputError(f"{what} {str(out)!r} is not writable; choose another folder")
+    return out
+
+
 def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
     """Write the generated ``files`` into ``outdir``; results and user files there are kept.
 
     ``outdir`` may be new, empty, or a folder made by ``generate`` (it holds a pwas-hdl
-    ``manifest.json``); anything else is refused so that no user file is lost. Re-generating
-    replaces only the files the previous ``generate`` wrote (the names its manifest lists; those
-    the new design does not have are removed). Everything else stays: ``sim/`` and ``synth/``
-    results, user files. The results record the ``design_hash`` they were made for, and
-    ``pwas-hdl report`` marks those whose hash differs from the new manifest's as stale
-    (:func:`pwas_hdl.design.report.stale_results`).
+    ``manifest.json``); anything else is refused so that no user file is lost
+    (:func:`check_outdir`). Re-generating replaces only the files the previous ``generate`` wrote
+    (the names its manifest lists; those the new design does not have are removed). Everything
+    else stays: ``sim/`` and ``synth/`` results, user files. The results record the
+    ``design_hash`` they were made for, and ``pwas-hdl report`` marks those whose hash differs
+    from the new manifest's as stale (:func:`pwas_hdl.design.report.stale_results`).
 
-    Each file is written to a temporary name inside ``outdir`` and renamed into place, the
-    manifest last, so a reader sees either the old or the new version of every file.
+    A new folder is staged beside ``outdir`` and renamed into place whole. In an existing folder
+    each file is written to a temporary folder inside it and renamed into place, the manifest
+    last, so a reader sees either the old or the new version of every file. Temporaries are named
+    with this process's pid, so the next run removes those of a killed one.
     """
-    out = Path(outdir)
-    previous: set[str] = set()
-    if out.exists():
-        if not out.is_dir():
-            raise ValueError(f"{out} exists and is not a folder; choose another output path")
-        entries = list(out.iterdir())
-        man = out / "manifest.json"
-        ours = man.is_file() and '"pwas-hdl-manifest"' in man.read_text(encoding="utf-8", errors="replace")[:200]
-        if entries and not ours:
-            raise ValueError(f"{out} is not empty and was not made by pwas-hdl generate; choose a new or empty folder")
-        if ours:
-            previous = _generated_names(man)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".pwas-hdl-generate.", dir=out))
+    out = check_outdir(outdir)
+    if not out.exists():
+        # a new folder: staged beside it and renamed into place whole (a killed run leaves only a
+        # pid-named temporary, which the next run removes)
+        parent = out.parent if str(out.parent) else Path(".")
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = make_temp_dir(parent, out.name)
+        try:
+            for fname, text in files.items():
+                (tmp / fname).write_text(text, encoding="utf-8")
+                os.chmod(tmp / fname, 0o644)
+            os.chmod(tmp, 0o755)
+            os.replace(tmp, out)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        return out
+    man = out / "manifest.json"
+    previous = _generated_names(man) if man.is_file() else set()
+    tmp = make_temp_dir(out, "generate")
     try:
         for fname, text in files.items():
             (tmp / fname).write_text(text, encoding="utf-8")
@@ -511,9 +549,11 @@ def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
 def generate(model: PWASVirtualSensor | str | os.PathLike, outdir: str | os.PathLike, **options: Any) -> GeneratedDesign:
     """Build the design (see :func:`build_design` for the options) and write its folder.
 
-    Re-generating into a folder keeps its ``sim/``, ``synth/`` and user files; results made for
-    another design are then stale (:func:`write_folder`, :func:`pwas_hdl.design.report.stale_results`).
+    The folder is checked (:func:`check_outdir`) before the design is built. Re-generating into
+    a folder keeps its ``sim/``, ``synth/`` and user files; results made for another design are
+    then stale (:func:`write_folder`, :func:`pwas_hdl.design.report.stale_results`).
     """
+    check_outdir(outdir)
     gd = build_design(model, **options)
     gd.outdir = write_folder(gd.files, outdir)
     return gd

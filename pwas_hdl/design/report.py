@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.errors import InputError
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["collect_report", "report_markdown", "stale_results", "STALE_NOTE"]
@@ -54,7 +55,31 @@ def _read_json(path: Path) -> dict[str, Any]:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path} is not valid JSON ({exc})") from exc
+        raise InputError(f"{path} is not valid JSON ({exc}); re-run the command that wrote it") from exc
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from exc
+
+
+#: Keys a result file must have, by the command that writes it (the report reads them).
+_SIM_KEYS = {"simulator": str, "samples": int, "mismatches": int, "latency_cycles": dict, "ii": dict}
+_SYNTH_KEYS = {"target": str, "luts": int, "ffs": int, "fmax_mhz": (int, float, type(None))}
+
+
+def _require(d: Any, keys: dict[str, Any], path: Path, command: str) -> dict[str, Any]:
+    """Refuse a result file that lacks what the report shows (instead of printing ``None`` rows)."""
+    noun = "summary" if command == "simulate" else "result"
+    if not isinstance(d, dict):
+        raise InputError(f"{path} is not a `pwas-hdl {command}` {noun} (not a JSON object); re-run `pwas-hdl {command}`")
+    missing = [k for k in keys if k not in d]
+    if missing:
+        raise InputError(
+            f"{path} is not a `pwas-hdl {command}` {noun} (missing {', '.join(missing)}); "
+            f"re-run `pwas-hdl {command}` or remove the file"
+        )
+    bad = [k for k, t in keys.items() if not isinstance(d[k], t) or isinstance(d[k], bool)]
+    if bad:
+        raise InputError(f"{path}: {', '.join(f'{k} = {json.dumps(d[k])}' for k in bad)} has the wrong type; re-run `pwas-hdl {command}`")
+    return d
 
 
 def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.PathLike] = ()) -> dict[str, Any]:
@@ -75,6 +100,25 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
     """
     out = Path(outdir)
     man = load_manifest(out)
+    try:
+        design, fit = _design_summary(out, man)
+    except (KeyError, TypeError, AttributeError, IndexError) as exc:
+        raise InputError(
+            f"{out / 'manifest.json'} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
+            "regenerate the folder with `pwas-hdl generate`"
+        ) from exc
+    rep = _collect_results(out, man, design, fit, sim_summaries)
+    try:
+        report_markdown(rep)  # every value the rendering needs is there and of the right kind
+    except (KeyError, TypeError, AttributeError, IndexError, ValueError) as exc:
+        raise InputError(
+            f"{out}: the manifest or a simulate/synth result holds a value of the wrong kind ({type(exc).__name__}: {exc}); "
+            "regenerate the folder or re-run the command that wrote the result"
+        ) from exc
+    return rep
+
+
+def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     model = PWASVirtualSensor.load(out / man["files"]["model"])
     fit = model.to_dict()["fit"]
     fmt = man["formats"]
@@ -94,13 +138,18 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         "error_bound_lsb": man["error_bound"]["lsb"],
         "error_bound": man["error_bound"]["physical"],
     }
+    return design, fit
+
+
+def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit: dict[str, Any],
+                     sim_summaries: Sequence[str | os.PathLike]) -> dict[str, Any]:
     paths = sorted((out / "sim").glob("*.json")) if (out / "sim").is_dir() else []
     paths += [Path(p) for p in sim_summaries]
     sims = []
     for p in paths:
-        s = _read_json(p)
-        if "mismatches" not in s or "simulator" not in s:
-            raise ValueError(f"{p} is not a `pwas-hdl simulate` summary")
+        s = _require(_read_json(p), _SIM_KEYS, p, "simulate")
+        if not isinstance(s.get("targets", {}), dict) or not all(isinstance(v, dict) for v in s.get("targets", {}).values()):
+            raise InputError(f"{p}: \"targets\" is not an object of objects; re-run `pwas-hdl simulate`")
         sims.append(
             {
                 "file": p.name,
@@ -121,7 +170,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         )
     synth = []
     for p in sorted(out.glob("synth/*/synth.json")):
-        r = _read_json(p)
+        r = _require(_read_json(p), _SYNTH_KEYS, p, "synth")
         synth.append({k: r.get(k) for k in ("target", "part", "luts", "ffs", "carry", "dsp", "bram", "bram_bits",
                                              "fmax_mhz", "latency_ns", "throughput_msps", "timing_met")})
         synth[-1].update(file=p.relative_to(out).as_posix(), stale=_is_stale(r, man))
@@ -169,7 +218,7 @@ def report_markdown(rep: dict[str, Any]) -> str:
             for t, v in s["targets"].items():
                 lines.append(
                     f"| {s['simulator']} | {s['samples']} | {s['mismatches']} | {lat[0]}..{lat[1]} | {_fmt(s['ii_measured'])} | "
-                    f"{_fmt(s['max_error_vs_float_lsb'], '.3f')} | {t} (vs {v['reference_column']}) | {_fmt(v['rmsee_float'])} | "
+                    f"{_fmt(s['max_error_vs_float_lsb'], '.3f')} | {t} (vs {_fmt(v.get('reference_column'))}) | {_fmt(v['rmsee_float'])} | "
                     f"{_fmt(v['rmsee_hw'])} | {_fmt(v['rmsee_increase_hw_vs_float_percent'], '.3f')} % |"
                 )
         lines += _stale_lines(rep["simulation"], "simulate")

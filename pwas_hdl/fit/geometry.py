@@ -42,6 +42,8 @@ from typing import Sequence
 
 import numpy as np
 
+from pwas_hdl.limits import MAX_REGRESSORS, check_limit, check_vertices
+
 __all__ = ["Grid", "Location"]
 
 
@@ -127,10 +129,13 @@ class Grid:
                 f"domain dimension {j} has zero or negative width ([{lo_a[j]}, {hi_a[j]}]); "
                 "a constant regressor cannot be partitioned: drop that signal or give an explicit domain"
             )
+        check_limit("the regressor dimension n", lo_a.size, MAX_REGRESSORS, "use fewer lags or signals")
+        parts = _as_partitions(partitions, lo_a.size)
+        check_vertices(parts)  # before any int64 array: N and the strides fit in int64 below the limit
         self.lo = lo_a
         self.hi = hi_a
         self.n = lo_a.size
-        self.partitions = np.array(_as_partitions(partitions, self.n), dtype=np.int64)
+        self.partitions = np.array(parts, dtype=np.int64)
         self.shape = tuple(int(v) for v in self.partitions + 1)
         strides = np.ones(self.n, dtype=np.int64)
         for j in range(self.n - 2, -1, -1):

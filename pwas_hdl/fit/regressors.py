@@ -16,6 +16,8 @@ from typing import Sequence
 
 import numpy as np
 
+from pwas_hdl.limits import MAX_REGRESSORS, check_limit
+
 __all__ = ["LagStructure", "as_trajectories"]
 
 
@@ -87,6 +89,8 @@ class LagStructure:
             v = getattr(self, nm)
             if not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
+        check_limit("the regressor dimension n = nu*Mu + ny*My", self.dimension, MAX_REGRESSORS,
+                    "use fewer lags (--mu, --my) or fewer signals")
         if self.dimension == 0:
             raise ValueError(
                 "the regressor is empty: give at least one lag of one signal (Mu*nu + My*ny >= 1)"
@@ -105,9 +109,10 @@ class LagStructure:
     def signal_of_dimension(self) -> list[tuple[str, int, int]]:
         """For each regressor dimension: (kind 'u' or 'y', channel, lag) with lag 0 = current sample."""
         out: list[tuple[str, int, int]] = []
-        for lag in range(self.mu - 1, -1, -1):
+        # no loop over the lags of a signal without channels (Mu = 10**30 with nu = 0 would never end)
+        for lag in range(self.mu - 1, -1, -1) if self.nu else ():
             out += [("u", c, lag) for c in range(self.nu)]
-        for lag in range(self.my - 1, -1, -1):
+        for lag in range(self.my - 1, -1, -1) if self.ny else ():
             out += [("y", c, lag) for c in range(self.ny)]
         return out
 

@@ -17,6 +17,7 @@ from scipy.sparse import linalg as splinalg
 
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 
 __all__ = [
     "tikhonov_matrix",
@@ -710,7 +711,10 @@ def cross_validate_sigma(
     -------
     CVResult
     """
+    if sigmas is not None and hasattr(sigmas, "__len__"):
+        check_limit("the number of sigma candidates", len(sigmas), MAX_SIGMA_CANDIDATES, "give fewer candidates")
     sig = np.asarray(DEFAULT_SIGMA_GRID if sigmas is None else sigmas, dtype=float).reshape(-1)
+    check_limit("the number of sigma candidates", sig.size, MAX_SIGMA_CANDIDATES, "give fewer candidates")
     if sig.size == 0 or not np.all(np.isfinite(sig)) or np.any(sig <= 0):
         raise InputError("sigma candidates must be positive finite numbers")
     h = sparse.csr_array(h)

@@ -24,6 +24,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from pwas_hdl.fit import model_file
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
@@ -143,6 +144,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             self.front_end.check_params()
         elif self.front_end != "lags":
             raise InputError(f"front_end must be 'lags' or an ObserverBankFrontEnd, got {self.front_end!r}")
+        if self.sigma_grid is not None and hasattr(self.sigma_grid, "__len__"):
+            check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
+                        "give fewer candidates (--sigma-grid)")
 
     @property
     def _bank(self) -> bool:
@@ -425,6 +429,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
     def to_dict(self) -> dict:
         """The model-file content as a JSON-ready dict (:func:`pwas_hdl.fit.model_file.model_to_dict`)."""
         return model_file.model_to_dict(self)
+
+    def to_json(self) -> str:
+        """The model file's text (what :meth:`save` writes; :func:`pwas_hdl.fit.model_file.model_text`)."""
+        return model_file.model_text(self)
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the model file atomically (:func:`pwas_hdl.fit.model_file.write_model`)."""

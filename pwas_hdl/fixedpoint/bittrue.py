@@ -79,6 +79,8 @@ from typing import Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
+from pwas_hdl.fixedpoint.formats import _MAX_ABS_FRAC
 from pwas_hdl.fixedpoint.formats import (
     FixedFormat,
     InputFormat,
@@ -300,6 +302,9 @@ class FixedPointModel:
         self.reference_error_source = ref_src
         fw = int(weight_frac) if weight_frac is not None else default_weight_frac(ref)
         fo = int(output_frac) if output_frac is not None else fw + 1
+        for nm, v in (("weight_frac", fw), ("output_frac", fo)):
+            if abs(v) > _MAX_ABS_FRAC:  # before the shifts below (1 << 10**20 never ends)
+                raise InputError(f"{nm} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
         sh = self.F + fw - fo
         if sh < 0:
             raise ValueError(
@@ -315,6 +320,11 @@ class FixedPointModel:
         # ---- output format
         wmin, wmax = int(self.weight_codes.min()), int(self.weight_codes.max())
         self._out_reach = (_py_shift_round(wmin << self.F, sh, rounding), _py_shift_round(wmax << self.F, sh, rounding))
+        if self._out_reach == (0, 0) and np.any(self.weight_codes):
+            raise InputError(
+                f"output_frac = {fo} (LSB 2^{-fo}) rounds every output to 0 (weights reach {wmin}..{wmax} codes at "
+                f"weight_frac = {fw}); use a larger output_frac (e.g. {fw - max(abs(wmin), abs(wmax)).bit_length() + 1})"
+            )
         b_out = int(output_bits) if output_bits is not None else signed_bits_needed(list(self._out_reach))
         self.output_format = FixedFormat(b_out, fo, True, rounding, "saturate")
         self.output_port = PortFormat(self.output_format, SignalScaling(1.0, 0.0))
@@ -393,6 +403,14 @@ class FixedPointModel:
         codes_free, sat_free = free.quantize(w, return_saturated=True)
         if sat_free.any():
             raise ValueError(f"weights are too large for 64-bit codes at weight_frac = {fw}; use fewer fraction bits")
+        wmax = float(np.max(np.abs(w))) if w.size else 0.0
+        if wmax > 0 and not np.any(codes_free):
+            # a format whose LSB is above every weight: the design would compute 0 for every input
+            least = math.ceil(-math.log2(wmax)) if math.isfinite(math.log2(wmax)) else fw
+            raise InputError(
+                f"weight_frac = {fw} (LSB 2^{-fw}) rounds every weight to 0 (the largest |weight| is {wmax:.6g}); "
+                f"use a larger weight_frac (weight_frac = {least} keeps the largest weight)"
+            )
         need = signed_bits_needed(codes_free)
         if weight_bits is None:
             return codes_free, FixedFormat(need, fw, True, self.rounding, self.overflow), 0

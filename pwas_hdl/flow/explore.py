@@ -95,6 +95,9 @@ from pwas_hdl.errors import InputError, ToolFailed, ToolMissing
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.io.csv_table import Table, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.errors import InputError
+from pwas_hdl.io.atomic import check_output_path, make_temp_dir
+from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit
 
 __all__ = [
     "EXPLORE_FORMAT",
@@ -183,12 +186,12 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
     return PWASVirtualSensor.load(model), str(model)
 
 
-def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None):
+def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
     """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
     if isinstance(data, (str, os.PathLike)):
-        data = read_csv(data)
+        data = read_csv(data, blank_rows=blank_rows)
     if isinstance(data, Table):
         if traj_col is not None:
             data.column_index(traj_col)
@@ -234,6 +237,8 @@ def _int_values(values, what: str, lo: int | None = None) -> list[int]:
         return []
     if isinstance(values, (int, np.integer)) and not isinstance(values, bool):
         values = [values]
+    if hasattr(values, "__len__"):  # before iterating a huge range
+        check_limit(f"the number of {what} values", len(values), MAX_SWEEP_POINTS, "sweep fewer values")
     out = []
     for v in values:
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
@@ -397,6 +402,7 @@ def explore(
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     executor: "Executor | None" = None,
+    blank_rows: str = "error",
 ) -> dict[str, Any]:
     """Sweep the fixed-point formats of a model and measure accuracy against resources.
 
@@ -434,6 +440,9 @@ def explore(
         Where the synthesised designs go (kept); default a temporary folder, removed afterwards.
     progress : callable(stage, done, total), optional
         Called as the sweep and the synthesis runs progress.
+    blank_rows : {"error", "break"}
+        A blank row in a CSV ``data`` file: an error, or the end of a trajectory
+        (:func:`pwas_hdl.io.csv_table.read_csv`).
     executor : pwas_hdl.flow.executor.Executor, optional
         Runs the synthesis of the measured points (one task per point): serially by default, or
         on a local or remote Dask cluster. The result does not depend on it.
@@ -465,11 +474,13 @@ def explore(
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
     if isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1:
         raise ValueError(f"measure_max must be an integer >= 1, got {measure_max!r}")
+    if workdir is not None:
+        check_output_path(workdir, "--synth-dir", kind="folder")
     sensor, model_path = _load_sensor(model)
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
-    xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col)
+    xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col, blank_rows)
     tgts = sensor.signal_names()[2]
 
     # ---- the defaults of generate (input_bits=12, everything else from the data)
@@ -481,6 +492,8 @@ def explore(
     default_key = (dflt.input_bits, fw0, fo0)
     fws = _int_values(weight_frac, "weight_frac") if weight_frac is not None else [fw0 + d for d in DEFAULT_FRAC_OFFSETS]
     fos = _int_values(output_frac, "output_frac") if output_frac is not None else [fo0 + d for d in DEFAULT_FRAC_OFFSETS]
+    check_limit("the number of format combinations", len(in_bits) * len(fws) * len(fos), MAX_SWEEP_POINTS,
+                "sweep fewer input widths or fraction bits")
     combos = [(b, fw, fo, False) for b in in_bits for fw in fws for fo in fos]
     default_in_sweep = fixed_wb is None and fixed_ob is None and (*default_key, False) in combos
     if default_in_sweep:
@@ -535,9 +548,11 @@ def explore(
         points.append(pt)
         if progress:
             progress("sweep", i + 1, total)
-    if not points:
-        raise ValueError(
-            "every combination of the sweep was refused; first reason: " + (refused[0]["reason"] if refused else "none")
+    requested = [p for p in points if default_in_sweep or not p["is_default"]]
+    if not requested:  # the default alone (evaluated for comparison) is not what was asked for
+        raise InputError(
+            f"every requested combination of the sweep ({total - (0 if default_in_sweep else 1)}) was refused; "
+            "first reason: " + (refused[0]["reason"] if refused else "none")
         )
     if cost == "register_bits" and any(p["cost"] is None for p in points):
         raise ValueError("register bits are not available with this Amaranth version; choose another cost")
@@ -655,7 +670,7 @@ def _measure_point(task: dict) -> dict:
 
     p, common = task["point"], task["common"]
     own = task["folder"] is None
-    root = Path(tempfile.mkdtemp(prefix="pwas-explore-")) if own else Path(task["folder"])
+    root = make_temp_dir(tempfile.gettempdir(), "pwas-explore") if own else Path(task["folder"])
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from pwas_hdl.hdl.params import Pipeline
+from pwas_hdl.io.atomic import make_temp_dir
 
 __all__ = [
     "FPGA_TARGETS",
@@ -350,7 +351,7 @@ def close_timing(
     order: list[int] = []
     tmp = None
     if workdir is None:
-        tmp = tempfile.mkdtemp(prefix="pwas-timing-")
+        tmp = str(make_temp_dir(tempfile.gettempdir(), "pwas-timing"))
         base = Path(tmp)
     else:
         base = Path(workdir)

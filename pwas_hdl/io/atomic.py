@@ -1,14 +1,307 @@
-"""Atomic file writes: a file appears complete or not at all."""
+"""Output files: checked before any work, written all-or-nothing, temporaries that never outlive a run.
+
+* :func:`check_output_path` refuses an output path that cannot be written (empty, a folder, a
+  path through a file, a name too long, a folder that is not writable) with an
+  :class:`~pwas_hdl.errors.InputError` -- called before the work starts.
+* :class:`OutputSet` is the transaction of one command: every output path is added (and checked,
+  also against the others and against the command's inputs) first; the contents are staged in
+  temporary files in the target folders; on success they are renamed into place, on any error
+  (or ``SIGTERM``, see :func:`install_termination_handler`) the temporaries are removed and no
+  target is touched.
+* Temporaries are named ``.<name>.pwas-tmp-<pid>-<random>``: a run that was killed outright
+  (``SIGKILL``, power loss) leaves them behind, and the next run that writes into that folder
+  removes those whose process is gone (:func:`clean_stale_temps`).
+"""
 
 from __future__ import annotations
 
 import os
+import re
+import shutil
+import signal
 import tempfile
 from pathlib import Path
+from typing import Iterable
 
-__all__ = ["atomic_write_text", "atomic_write_bytes"]
+from pwas_hdl.errors import InputError
+
+__all__ = [
+    "atomic_write_text",
+    "atomic_write_bytes",
+    "check_output_path",
+    "OutputSet",
+    "clean_stale_temps",
+    "make_temp_dir",
+    "install_termination_handler",
+    "TEMP_MARK",
+]
+
+#: Marks the temporary files and folders of pwas-hdl (followed by the pid of the process).
+TEMP_MARK = ".pwas-tmp-"
+_TEMP_RE = re.compile(r"^\..*" + re.escape(TEMP_MARK) + r"(\d+)-[A-Za-z0-9_]+(?:\.tmp)?$")
 
 
+# ------------------------------------------------------------------------------------------ temporaries
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    except OSError:
+        return True
+    return True
+
+
+def clean_stale_temps(folder: str | os.PathLike) -> list[Path]:
+    """Remove the pwas-hdl temporaries in ``folder`` whose process no longer runs.
+
+    Returns
+    -------
+    list of Path
+        What was removed (nothing that a live process may still use).
+    """
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _TEMP_RE.match(entry.name)
+        if not m or _pid_alive(int(m.group(1))):
+            continue
+        path = Path(entry.path)
+        try:
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+            removed.append(path)
+        except OSError:
+            pass
+    return removed
+
+
+def _temp_prefix(name: str) -> str:
+    return f".{name[:80]}{TEMP_MARK}{os.getpid()}-"
+
+
+def make_temp_dir(parent: str | os.PathLike, name: str) -> Path:
+    """A new temporary folder in ``parent`` for the output ``name`` (stale ones are cleaned first)."""
+    clean_stale_temps(parent)
+    return Path(tempfile.mkdtemp(prefix=_temp_prefix(name), dir=parent))
+
+
+def _make_temp_file(parent: Path, name: str) -> Path:
+    clean_stale_temps(parent)
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(name), suffix=".tmp", dir=parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _publish(tmp: Path, target: Path) -> None:
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, target)
+
+
+# ------------------------------------------------------------------------------------------ path checks
+def _name_max(folder: Path) -> int:
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return 255
+
+
+def _path_max(folder: Path) -> int:
+    try:
+        return int(os.pathconf(folder, "PC_PATH_MAX"))
+    except (OSError, ValueError):
+        return 4096
+
+
+def check_output_path(path: str | os.PathLike, what: str = "output", *, kind: str = "file") -> Path:
+    """Refuse an output path that cannot be written, before any work is done.
+
+    Parameters
+    ----------
+    path : path
+        Where the output will go.
+    what : str
+        The option that named it (``"-o"``, ``"--json"``...), for the message.
+    kind : {"file", "folder"}
+        A file (its folder must exist) or a folder (created with its parents if missing).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        Empty, an existing folder where a file is wanted (or a file where a folder is), a path
+        through a file, a file name or path that is too long, a missing folder (for files), a
+        folder that is not writable.
+    """
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if not text.strip() or (kind == "file" and text in (".", "..")):
+        raise InputError(f"{what}: the output path is empty; give a {kind} name")
+    if "\x00" in text:
+        raise InputError(f"{what} {text!r}: a path cannot contain a NUL character")
+    p = Path(text)
+    shown = text if len(text) <= 80 else text[:38] + "..." + text[-38:]
+    full = os.path.abspath(text)
+    plimit = _path_max(Path("/"))
+    if len(os.fsencode(full)) >= plimit:
+        raise InputError(f"{what}: the path is {len(os.fsencode(full))} bytes long, more than {plimit - 1}; choose a shorter one")
+    # the nearest existing ancestor: everything below it will be created
+    anc = p.parent if kind == "file" else p
+    missing: list[str] = []
+    while True:
+        try:
+            st_exists = anc.exists()
+        except OSError as exc:  # ENAMETOOLONG and the like
+            raise InputError(f"{what} {shown!r}: {exc.strerror or exc}") from None
+        if st_exists or anc == anc.parent:
+            break
+        missing.append(anc.name)
+        anc = anc.parent
+    if kind == "folder" and not missing and not anc.is_dir():
+        raise InputError(f"{what} {shown!r} exists and is not a folder; choose another path")
+    if not anc.is_dir():
+        raise InputError(f"{what} {shown!r} goes through {str(anc)!r}, which is a file, not a folder; choose another path")
+    limit = _name_max(anc)
+    for part in [*missing, p.name]:
+        if len(os.fsencode(part)) > limit:
+            raise InputError(
+                f"{what}: the name {part[:40]!r}... is {len(os.fsencode(part))} bytes long, more than the "
+                f"{limit} bytes a file name may have here; choose a shorter name"
+            )
+    if kind == "file":
+        if missing:
+            raise InputError(f"{what} {shown!r}: folder {str(p.parent)!r} does not exist; create it first")
+        if p.is_dir():
+            raise InputError(f"{what} {shown!r} is a folder; give a file name")
+        if p.exists() and not p.is_file():
+            raise InputError(f"{what} {shown!r} exists and is not a regular file; choose another path")
+    else:
+        if p.exists() and not p.is_dir():
+            raise InputError(f"{what} {shown!r} exists and is not a folder; choose another path")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise InputError(f"{what} {shown!r}: the folder {str(anc)!r} is not writable; choose another path")
+    return p
+
+
+def _same_key(p: Path) -> str:
+    return os.path.normcase(os.path.realpath(p))
+
+
+class OutputSet:
+    """The outputs of one command, written all-or-nothing.
+
+    Add every output first (:meth:`add`: checked at once), do the work, stage the contents
+    (:meth:`write_text`, :meth:`write_bytes`, :meth:`temp_path`), then :meth:`commit` (or leave
+    the ``with`` block normally). On an exception inside the ``with`` block every temporary is
+    removed and no target changes.
+
+    Parameters
+    ----------
+    inputs : iterable of (path, what)
+        Files the command reads: an output naming one of them is refused.
+
+    Examples
+    --------
+    >>> with OutputSet() as outs:                       # doctest: +SKIP
+    ...     csv_path = outs.add("pred.csv", "-o")
+    ...     json_path = outs.add("pred.json", "--json")
+    ...     ...                                          # the work
+    ...     outs.write_text(csv_path, csv_text)
+    ...     outs.write_text(json_path, json_text)
+    """
+
+    def __init__(self, inputs: Iterable[tuple[str | os.PathLike, str]] = ()) -> None:
+        self._inputs = {_same_key(Path(p)): (what, Path(p)) for p, what in inputs if p is not None and os.fspath(p)}
+        self._targets: dict[str, tuple[str, Path]] = {}
+        self._staged: dict[str, Path] = {}
+        self.committed = False
+
+    def add(self, path: str | os.PathLike, what: str = "output", *, kind: str = "file") -> Path:
+        """Check an output path (see :func:`check_output_path`) and reserve it; returns it as a Path."""
+        p = check_output_path(path, what, kind=kind)
+        key = _same_key(p)
+        if key in self._targets:
+            other = self._targets[key][0]
+            raise InputError(f"{other} and {what} both name {str(p)!r}; give each output its own path")
+        for k, (other, ip) in self._inputs.items():
+            if k == key:
+                raise InputError(f"{what} {str(p)!r} is also the input {other}; choose another output path")
+        self._targets[key] = (what, p)
+        return p
+
+    def _slot(self, path: str | os.PathLike) -> tuple[str, Path]:
+        p = Path(path)
+        key = _same_key(p)
+        if key not in self._targets:
+            raise InputError(f"{p} was not added to the outputs (internal use error)")
+        return key, self._targets[key][1]
+
+    def temp_path(self, path: str | os.PathLike) -> Path:
+        """A temporary file beside ``path`` that becomes ``path`` on :meth:`commit` (write into it)."""
+        key, p = self._slot(path)
+        if key not in self._staged:
+            self._staged[key] = _make_temp_file(p.parent if str(p.parent) else Path("."), p.name)
+        return self._staged[key]
+
+    def write_bytes(self, path: str | os.PathLike, data: bytes) -> None:
+        """Stage ``data`` as the content of ``path``."""
+        tmp = self.temp_path(path)
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+
+    def write_text(self, path: str | os.PathLike, text: str) -> None:
+        """Stage UTF-8 ``text`` as the content of ``path``."""
+        self.write_bytes(path, text.encode("utf-8"))
+
+    def commit(self) -> list[Path]:
+        """Rename every staged temporary to its target (outputs that were added but not staged are skipped)."""
+        done = []
+        for key, tmp in list(self._staged.items()):
+            target = self._targets[key][1]
+            _publish(tmp, target)
+            del self._staged[key]
+            done.append(target)
+        self.committed = True
+        return done
+
+    def discard(self) -> None:
+        """Remove every staged temporary; no target is touched."""
+        for tmp in self._staged.values():
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+        self._staged.clear()
+
+    def __enter__(self) -> "OutputSet":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None and not self.committed:
+            try:
+                self.commit()
+            finally:
+                self.discard()
+        else:
+            self.discard()
+
+
+# ------------------------------------------------------------------------------------------ single files
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
@@ -18,14 +311,11 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         raise FileNotFoundError(f"folder {parent} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent)
+    tmp = _make_temp_file(parent, target.name)
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with open(tmp, "wb") as fh:
             fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, target)
+        _publish(tmp, target)
     except BaseException:
         try:
             os.unlink(tmp)
@@ -38,3 +328,22 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """UTF-8 text version of :func:`atomic_write_bytes`."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+# ------------------------------------------------------------------------------------------ signals
+def _terminated(signum, frame) -> None:  # pragma: no cover - exercised in a subprocess
+    signal.signal(signum, signal.SIG_DFL)  # a second SIGTERM kills at once
+    raise SystemExit(128 + signum)
+
+
+def install_termination_handler() -> None:
+    """Make ``SIGTERM`` raise ``SystemExit(143)`` so that ``finally`` blocks and :class:`OutputSet`
+    remove their temporaries (the default action would kill the process on the spot).
+
+    Only in the main thread (signal handlers cannot be set elsewhere); a no-op otherwise.
+    """
+    try:
+        signal.signal(signal.SIGTERM, _terminated)
+    except ValueError:
+        pass
+

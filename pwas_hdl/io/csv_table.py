@@ -8,19 +8,40 @@ regressor straddles two trajectories.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import io
 import math
 import os
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.limits import MAX_CSV_BYTES, MAX_CSV_FIELD, MAX_SAMPLES, check_limit
 
-__all__ = ["Table", "read_csv", "write_csv", "select_signals"]
+__all__ = ["Table", "read_csv", "write_csv", "select_signals", "split_trajectories", "format_csv", "parse_number", "BLANK_ROWS"]
+
+
+#: A number as Python's ``float`` reads it, restricted to ASCII digits and without ``_`` separators
+#: (``float`` also takes ``1_0`` and Arabic-Indic or full-width digits: refused here). Surrounding
+#: whitespace is stripped first; ``nan`` / ``inf`` parse and are then refused as non-finite.
+_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf(?:inity)?|nan)", re.IGNORECASE)
+
+#: What :func:`read_csv` does with a blank row between data rows.
+BLANK_ROWS = ("error", "break")
+
+
+def parse_number(cell: str) -> float | None:
+    """The value of a CSV cell, or None when it is not a number (strict: see :data:`_NUMBER`)."""
+    t = cell.strip()
+    if not _NUMBER.fullmatch(t):
+        return None
+    return float(t)
 
 
 @dataclass
@@ -34,37 +55,46 @@ class Table:
         Column names in file order.
     rows : list of list of str
         The raw text cells (numbers are converted on demand so that text columns are allowed).
+    lines : list of int
+        File line number (1-based) of each row, for messages.
+    breaks : list of int
+        Rows that start a new trajectory because a blank row preceded them (``blank_rows="break"``).
     """
 
     path: str
     header: list[str]
     rows: list[list[str]]
+    lines: list[int] = field(default_factory=list)
+    breaks: list[int] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.rows)
+
+    def _line(self, r: int) -> int:
+        return self.lines[r] if r < len(self.lines) else r + 2
 
     def numeric(self, names: Sequence[str]) -> np.ndarray:
         """The named columns as a float array of shape (rows, len(names)).
 
         Raises
         ------
-        ValueError
+        InputError
             Unknown column, a cell that is not a number, or a NaN / infinite value.
         """
         idx = [self.column_index(nm) for nm in names]
         out = np.empty((len(self.rows), len(idx)))
         for r, row in enumerate(self.rows):
             for k, c in enumerate(idx):
-                cell = row[c].strip()
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise ValueError(
-                        f"{self.path}: line {r + 2}, column '{names[k]}': {cell!r} is not a number"
-                    ) from None
+                cell = row[c]
+                v = parse_number(cell)
+                if v is None:
+                    raise InputError(
+                        f"{self.path}: line {self._line(r)}, column '{names[k]}': {cell.strip()!r} is not a number "
+                        "(ASCII digits, one '.', an optional exponent; no '_' separators)"
+                    )
                 if not math.isfinite(v):
-                    raise ValueError(
-                        f"{self.path}: line {r + 2}, column '{names[k]}' is {cell!r} (NaN/inf); "
+                    raise InputError(
+                        f"{self.path}: line {self._line(r)}, column '{names[k]}' is {cell.strip()!r} (NaN/inf); "
                         "remove or interpolate missing samples first"
                     )
                 out[r, k] = v
@@ -79,53 +109,132 @@ class Table:
         try:
             return self.header.index(name)
         except ValueError:
-            raise ValueError(
+            raise InputError(
                 f"{self.path}: no column named {name!r}; the file has columns {', '.join(self.header)}"
             ) from None
 
 
-def read_csv(path: str | os.PathLike) -> Table:
-    """Read a CSV file with a header line.
+def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
+    """Read a CSV file with a header line (UTF-8, an optional byte-order mark is dropped).
+
+    Parameters
+    ----------
+    path : path
+    blank_rows : {"error", "break"}
+        A blank row between data rows is an error (default: it would shift every later line
+        number and join the samples around it), or ``"break"``: it ends one trajectory and the
+        next row starts another (no regressor straddles it). Blank rows at the end are ignored.
 
     Raises
     ------
     FileNotFoundError
         The file does not exist.
-    ValueError
-        Empty file, duplicate or empty column names, or a row with the wrong number of cells.
+    InputError
+        Unreadable, not UTF-8 (the byte offset is named), empty, duplicate or empty column
+        names, a control character in a column name, a row with the wrong number of cells, a
+        blank row (``blank_rows="error"``), malformed quoting.
+    ResourceLimit
+        A cell longer than :data:`~pwas_hdl.limits.MAX_CSV_FIELD` characters, more than
+        :data:`~pwas_hdl.limits.MAX_SAMPLES` rows or a file over :data:`~pwas_hdl.limits.MAX_CSV_BYTES`.
     """
+    if blank_rows not in BLANK_ROWS:
+        raise InputError(f"blank_rows must be one of {', '.join(BLANK_ROWS)}, got {blank_rows!r}")
     p = Path(path)
-    with p.open(newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
+    try:
+        size = p.stat().st_size
+        if p.is_dir():
+            raise InputError(f"{p} is a folder, not a CSV file")
+        check_limit(f"the size of {p} in bytes", size, MAX_CSV_BYTES, "split the data into several files")
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read {p}: {exc.strerror or exc}; check the path and its permissions") from exc
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        off = exc.start + (3 if raw.startswith(codecs.BOM_UTF8) else 0)
+        line = raw.count(b"\n", 0, off) + 1
+        raise InputError(
+            f"{p} is not UTF-8 text: byte 0x{raw[off]:02x} at offset {off} (line {line}) "
+            "cannot be decoded; save the file as UTF-8"
+        ) from None
+    del raw
+    old_limit = csv.field_size_limit(MAX_CSV_FIELD)
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    breaks: list[int] = []
+    blank_at: int | None = None  # first blank line since the last data row
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    start = 1
+    try:
         try:
             header = [h.strip() for h in next(reader)]
         except StopIteration:
-            raise ValueError(f"{p}: the file is empty; expected a header line of column names") from None
+            raise InputError(f"{p}: the file is empty; expected a header line of column names") from None
+        if not any(header):
+            raise InputError(f"{p}: line 1 is blank; the first line must be the header of column names")
         if any(not h for h in header):
-            raise ValueError(f"{p}: the header has an empty column name")
+            raise InputError(f"{p}: the header has an empty column name")
+        for h in header:
+            if not h.isprintable():
+                raise InputError(
+                    f"{p}: column name {h!r} contains a control or invisible character (a line break inside quotes?); "
+                    "rename the column"
+                )
         dup = sorted({h for h in header if header.count(h) > 1})
         if dup:
-            raise ValueError(f"{p}: duplicate column name(s) {', '.join(dup)}")
-        rows = []
-        for line_no, row in enumerate(reader, start=2):
+            raise InputError(f"{p}: duplicate column name(s) {', '.join(dup)}")
+        start = reader.line_num + 1
+        for row in reader:
+            line_no, start = start, reader.line_num + 1
             if not row or all(not c.strip() for c in row):
+                if blank_at is None:
+                    blank_at = line_no
                 continue
+            if blank_at is not None:
+                if blank_rows == "error" or not rows:
+                    if blank_rows == "error":
+                        raise InputError(
+                            f"{p}: line {blank_at} is blank; remove blank rows, or pass --blank-rows break to make "
+                            "each blank row end a trajectory"
+                        )
+                else:
+                    breaks.append(len(rows))
+                blank_at = None
             if len(row) != len(header):
-                raise ValueError(f"{p}: line {line_no} has {len(row)} cells but the header has {len(header)} columns")
+                raise InputError(f"{p}: line {line_no} has {len(row)} cells but the header has {len(header)} columns")
             rows.append(row)
+            lines.append(line_no)
+            if len(rows) > MAX_SAMPLES:
+                raise ResourceLimit(
+                    f"{p} has more than {MAX_SAMPLES} data rows (the limit); split the data into several files"
+                )
+    except csv.Error as exc:
+        line = reader.line_num
+        if "field larger than field limit" in str(exc):
+            raise ResourceLimit(
+                f"{p}: line {line} has a cell longer than the limit of {MAX_CSV_FIELD} characters (128 KiB); "
+                "is it a CSV file of numbers?"
+            ) from None
+        raise InputError(f"{p}: line {line}: malformed CSV ({exc}); check the quoting") from None
+    finally:
+        csv.field_size_limit(old_limit)
     if not rows:
-        raise ValueError(f"{p}: the file has a header but no data rows")
-    return Table(str(p), header, rows)
+        raise InputError(f"{p}: the file has a header but no data rows")
+    return Table(str(p), header, rows, lines, breaks)
 
 
 def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
-    """Row slices of the trajectories: consecutive rows with equal values of ``traj_column``."""
+    """Row slices of the trajectories: consecutive rows with equal values of ``traj_column``, also
+    cut where a blank row was read as a trajectory break (:attr:`Table.breaks`)."""
     n = len(table)
-    if traj_column is None:
-        return [slice(0, n)]
-    labels = table.text(traj_column)
-    cuts = [0] + [i for i in range(1, n) if labels[i] != labels[i - 1]] + [n]
-    return [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+    cuts = set(b for b in table.breaks if 0 < b < n)
+    if traj_column is not None:
+        labels = table.text(traj_column)
+        cuts |= {i for i in range(1, n) if labels[i] != labels[i - 1]}
+    edges = [0] + sorted(cuts) + [n]
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
 
 
 def select_signals(
@@ -140,6 +249,11 @@ def select_signals(
 
 def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | Sequence]) -> Path:
     """Write named columns (equal lengths) atomically; floats with round-trip precision."""
+    return atomic_write_text(path, format_csv(columns))
+
+
+def format_csv(columns: Mapping[str, np.ndarray | Sequence]) -> str:
+    """The text :func:`write_csv` writes (for an :class:`~pwas_hdl.io.atomic.OutputSet`)."""
     names = list(columns)
     arrays = [np.asarray(columns[nm]) for nm in names]
     lens = {a.shape[0] for a in arrays}
@@ -150,7 +264,7 @@ def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | Sequen
     w.writerow(names)
     for r in range(lens.pop() if lens else 0):
         w.writerow([_fmt(a[r]) for a in arrays])
-    return atomic_write_text(path, buf.getvalue())
+    return buf.getvalue()
 
 
 def _fmt(v) -> str:

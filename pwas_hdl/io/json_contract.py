@@ -68,7 +68,9 @@ def read_json(path: str | os.PathLike, hint: str) -> Any:
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(f"{p} is not UTF-8 text (corrupt?); {hint}") from exc
+        raise InputError(
+            f"{p} is not UTF-8 text (corrupt?): byte 0x{exc.object[exc.start]:02x} at offset {exc.start} cannot be decoded; {hint}"
+        ) from exc
     try:
         return json.loads(text, parse_constant=_refuse_constant)
     except json.JSONDecodeError as exc:

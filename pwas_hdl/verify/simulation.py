@@ -44,6 +44,8 @@ from pwas_hdl.fixedpoint.bitfields import pack, pack_fields
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.reduction import tree_levels
 from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.errors import CheckFailed, InputError
+from pwas_hdl.io.atomic import make_temp_dir
 
 __all__ = [
     "SIM_DIR",
@@ -159,10 +161,24 @@ def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = N
         No manifest / model, or the model rebuilt from ``model.json`` does not give the formats
         the manifest lists (the folder was edited by hand: regenerate it).
     """
+    out = Path(outdir)
+    try:
+        design = _load_design(out, verilog)
+        # what the replay reads later: a hand-edited manifest fails here, not in the middle of a run
+        _ = (design.top, design.kind, design.latency, design.warmup, design.in_fields, design.out_fields,
+             int(design.manifest["ii"]))
+    except (KeyError, TypeError, AttributeError, IndexError) as exc:
+        raise InputError(
+            f"{out / 'manifest.json'} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
+            "regenerate the folder with `pwas-hdl generate`"
+        ) from exc
+    return design
+
+
+def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
     from pwas_hdl.design.generate import FORMAT_OPTIONS, fixed_point_model
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
-    out = Path(outdir)
     man = load_manifest(out)
     files = man["files"]
     model_file = out / files["model"]
@@ -644,7 +660,7 @@ def run_rtl(
     b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves, verilator_args=verilator_args)
     tmp = None
     if work_dir is None:
-        tmp = Path(tempfile.mkdtemp(prefix=f"pwas-sim-{simulator}-"))
+        tmp = make_temp_dir(tempfile.gettempdir(), f"pwas-sim-{simulator}")  # pid-named: removed by a later run if killed
         wd = tmp
     else:
         wd = Path(work_dir)
@@ -714,6 +730,7 @@ def simulate_data(
     cache_dir: str | os.PathLike | None = None,
     waves: bool = False,
     progress: Callable[[str], None] | None = None,
+    blank_rows: str = "error",
 ) -> dict:
     """Replay the rows of a CSV file through the generated RTL (``pwas-hdl simulate``).
 
@@ -731,11 +748,21 @@ def simulate_data(
 
     Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult,
     "rows": ndarray (m,), "estimates": ndarray (m, nz)}``: the data row of each hardware output and
-    the hardware estimates in physical units. Mismatches against the bit-true model do not raise:
-    they are counted in the summary.
+    the hardware estimates in physical units. Differences do not raise: mismatches against the
+    bit-true model, testbench failures, a measured latency or II other than the manifest's and
+    errors beyond the bound are listed in ``summary["checks"]`` (``passed`` false: the CLI exits
+    with status 1). Both files are written or neither; every path is checked before the
+    simulation starts.
+
+    Raises
+    ------
+    InputError
+        Bad data, options or paths (before anything runs).
+    CheckFailed
+        The RTL did not produce every output (nothing is written).
     """
-    from pwas_hdl.io.atomic import atomic_write_text
-    from pwas_hdl.io.csv_table import Table, read_csv, split_trajectories, write_csv
+    from pwas_hdl.io.atomic import OutputSet, check_output_path
+    from pwas_hdl.io.csv_table import Table, format_csv, read_csv, split_trajectories
 
     say = progress or (lambda msg: None)
     if engine not in ENGINES:
@@ -746,11 +773,19 @@ def simulate_data(
         raise ValueError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
     if not 0.0 <= stall < 1.0:
         raise ValueError(f"--stall must be in [0, 1), got {stall}")
+    spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
+    sources = [] if isinstance(data, Table) else [(data, "DATA")]
+    outset = OutputSet(inputs=sources + [(Path(outdir) / "manifest.json", "the manifest"),
+                                         (Path(outdir) / "model.json", "the model")])
+    outset.add(output, "-o")
+    outset.add(spath, "--json" if summary_path is not None else "the summary (-o with .json)")
+    if cache_dir is not None:
+        check_output_path(cache_dir, "--build-dir", kind="folder")
     design = load_design(outdir)
     sensor, model = design.sensor, design.model
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
-    table = data if isinstance(data, Table) else read_csv(data)
+    table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
     data = table.path
     if traj_col is not None:
         table.column_index(traj_col)
@@ -814,7 +849,7 @@ def simulate_data(
         cols[f"{t}_float"] = zf[:, i]
     cols["out_of_range"] = oor
     cols["mismatch"] = mism
-    write_csv(output, cols)
+    csv_text = format_csv(cols)
     e_ref = np.abs(zhw - zref)
     e_float = np.abs(zhw - zf)
     targets = {}
@@ -881,8 +916,10 @@ def simulate_data(
         "testbench_failures": res.failures,
         "waves": res.raw.get("waves"),
     }
-    spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
-    atomic_write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
+    summary["checks"] = _checks(summary, stall)
+    outset.write_text(output, csv_text)
+    outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
+    outset.commit()
     return {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
 
 
@@ -955,6 +992,25 @@ def simulate_arrays(
     rows = [[repr(columns[h][r]) for h in header] for r in range(sum(n_traj))]
     table = Table("arrays", header, rows)
     return simulate_data(outdir, table, output, traj_col="_trajectory", **options)
+
+
+def _checks(summary: dict, stall: float) -> dict:
+    """Every way a replay can fail, from its summary: ``{"passed": bool, "failures": [str, ...]}``."""
+    fails: list[str] = []
+    if summary["mismatches"]:
+        fails.append(f"{summary['mismatches']} hardware output(s) differ from the bit-true model "
+                     f"(first: {json.dumps(summary['first_mismatch'], default=_json_default)})")
+    fails += [f"testbench: {f}" for f in summary["testbench_failures"]]
+    lat = summary["latency_cycles"]
+    if stall == 0 and summary["samples"] and (lat["measured_min"], lat["measured_max"]) != (lat["manifest"], lat["manifest"]):
+        fails.append(f"measured latency {lat['measured_min']}..{lat['measured_max']} cycles, the manifest says {lat['manifest']}")
+    ii = summary["ii"]
+    if stall == 0 and ii["measured"] is not None and ii["measured"] != ii["manifest"]:
+        fails.append(f"measured II {ii['measured']:g}, the manifest says {ii['manifest']}")
+    if not summary["within_error_bound"]:
+        fails.append(f"error against the float model {summary['max_error_vs_float_lsb']:.4g} LSB exceeds the bound "
+                     f"{summary['error_bound_lsb']:.4g} LSB")
+    return {"passed": not fails, "failures": fails}
 
 
 def _json_default(o):

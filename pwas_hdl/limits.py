@@ -1,0 +1,121 @@
+"""The size limits of pwas-hdl, in one place, and the checks that refuse a request before it allocates.
+
+Every limit is a named constant; a request above one raises
+:class:`~pwas_hdl.errors.ResourceLimit` (an ``InputError``: on the command line one ``error:``
+line and exit status 2) whose message names the requested size, the limit and what to change.
+The checks compute sizes with Python integers, so they never overflow, and run before any array
+of that size exists.
+
+=========================  =============  ===============================================
+constant                   value          what it bounds
+=========================  =============  ===============================================
+``MAX_VERTICES``           1 048 576      weights per target ``N = prod(p_j + 1)``
+``MAX_REGRESSORS``         20             regressor dimension ``n = nu*Mu + ny*My``
+``MAX_SAMPLES``            1 000 000      data rows of a CSV file, ``make-data --samples``
+``MAX_SIGMA_CANDIDATES``   1 000          cross-validation candidates (``--sigma-grid``)
+``MAX_SWEEP_POINTS``       10 000         format combinations of one ``explore``
+``MAX_CSV_FIELD``          131 072        characters in one CSV cell (128 KiB)
+``MAX_CSV_BYTES``          1 GiB          size of a CSV file read
+``MAX_NAME_LENGTH``        200            Verilog module name (``--name``), so that the
+                                          file names made from it fit a 255-byte name
+=========================  =============  ===============================================
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable
+
+from pwas_hdl.errors import ResourceLimit
+
+__all__ = [
+    "MAX_VERTICES",
+    "MAX_REGRESSORS",
+    "MAX_SAMPLES",
+    "MAX_SIGMA_CANDIDATES",
+    "MAX_SWEEP_POINTS",
+    "MAX_CSV_FIELD",
+    "MAX_CSV_BYTES",
+    "MAX_NAME_LENGTH",
+    "check_limit",
+    "check_vertices",
+]
+
+#: Largest number of vertices (weights per target) ``N = prod(p_j + 1)`` of a partition.
+MAX_VERTICES = 2**20
+#: Largest regressor dimension ``n``; with ``p_j >= 1`` it also bounds ``N >= 2**n``.
+MAX_REGRESSORS = 20
+#: Largest number of samples: data rows of a CSV file, ``make-data --samples`` (+ ``--test-samples``).
+MAX_SAMPLES = 1_000_000
+#: Largest number of sigma candidates of the cross-validation.
+MAX_SIGMA_CANDIDATES = 1_000
+#: Largest number of format combinations one ``explore`` evaluates.
+MAX_SWEEP_POINTS = 10_000
+#: Largest CSV cell, in characters (128 KiB; also Python's ``csv.field_size_limit`` default).
+MAX_CSV_FIELD = 128 * 1024
+#: Largest CSV file read, in bytes.
+MAX_CSV_BYTES = 2**30
+#: Longest Verilog module name.
+MAX_NAME_LENGTH = 200
+
+
+def check_limit(what: str, value: int, limit: int, hint: str) -> int:
+    """Refuse ``value > limit``.
+
+    Parameters
+    ----------
+    what : str
+        What is counted, as the user named it (e.g. ``"--samples"``, ``"sigma candidates"``).
+    value, limit : int
+    hint : str
+        How to stay within the limit (one clause).
+
+    Returns
+    -------
+    int
+        ``value``.
+
+    Raises
+    ------
+    ResourceLimit
+        ``value > limit``.
+    """
+    if value > limit:
+        raise ResourceLimit(f"{what} = {value} exceeds the limit of {limit}; {hint}")
+    return value
+
+
+def check_vertices(partitions: Iterable[int]) -> int:
+    """Number of vertices ``N = prod(p_j + 1)`` of a partition, refused above :data:`MAX_VERTICES`.
+
+    Parameters
+    ----------
+    partitions : iterable of int
+        Intervals per dimension (already checked to be integers >= 1).
+
+    Returns
+    -------
+    int
+        ``N`` (a Python integer: no int64 overflow, whatever the sizes).
+
+    Raises
+    ------
+    ResourceLimit
+        More dimensions than :data:`MAX_REGRESSORS` or ``N > MAX_VERTICES``.
+    """
+    parts = [int(p) for p in partitions]
+    check_limit("the regressor dimension n", len(parts), MAX_REGRESSORS, "use fewer lags or signals")
+    n_vertices = math.prod(p + 1 for p in parts)
+    if n_vertices > MAX_VERTICES:
+        raise ResourceLimit(
+            f"the partition {_short(parts)} has N = prod(p_j + 1) = {n_vertices} vertices, more than the limit of "
+            f"{MAX_VERTICES}; use fewer intervals (-p) or fewer lags"
+        )
+    return n_vertices
+
+
+def _short(parts: list[int]) -> str:
+    if len(set(parts)) == 1:
+        return f"p = {parts[0]} in {len(parts)} dimension(s)"
+    text = ", ".join(str(p) for p in parts)
+    return f"p = [{text if len(text) < 80 else text[:77] + '...'}]"
