@@ -24,7 +24,6 @@ Usage: ``python benchmarks/lorenz_hlnn.py [--runs 5] [--quick]`` or
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from pathlib import Path
@@ -34,7 +33,6 @@ import numpy as np
 
 from pwas_hdl import bench_results as br
 from pwas_hdl.benchmarks.bench_common import QUICK_SIGMA_GRID, PWASConfig, fit_pwas, pwas_estimates, rmse
-from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.systems.hlnn import HLNNSensor
 from pwas_hdl.systems.lorenz import lorenz
 
@@ -192,28 +190,11 @@ def plot(traces: dict, path: str | Path) -> Path:
         a.legend(fontsize=8, loc="upper right")
     ax[-1].set_xlabel("test sample")
     fig.tight_layout()
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(p)
-    return p
+    return br.save_figure(fig, path)
 
 
 def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - script entry
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--outdir", type=Path, default=Path(__file__).resolve().parent / "results")
-    a = ap.parse_args(argv)
-    doc, traces = run_lorenz_hlnn(a.runs, a.quick, progress=print)
-    a.outdir.mkdir(parents=True, exist_ok=True)
-    stem = "lorenz_hlnn_quick" if a.quick else "lorenz_hlnn"
-    br.write_results(a.outdir / f"{stem}.json", doc)
-    atomic_write_text(a.outdir / f"{stem}.md", markdown(doc))
-    plot(traces, a.outdir / f"{stem}.png")
-    print(markdown(doc))
+    br.bench_main(argv, stem="lorenz_hlnn", description=__doc__.splitlines()[0], run=run_lorenz_hlnn, markdown=markdown, plot=plot)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -27,7 +27,6 @@ Usage: ``python benchmarks/switched_linear.py [--runs 5] [--quick]`` or
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -37,7 +36,6 @@ import numpy as np
 from pwas_hdl import bench_results as br
 from pwas_hdl.fit import classifier as clf
 from pwas_hdl.benchmarks.bench_common import QUICK_SIGMA_GRID, PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
-from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.systems.switched_linear import SWITCHED_ASSUMPTIONS, switched_paper_run, switched_training_runs
 from pwas_hdl.systems.switched_observer import DEFAULT_POLES, mode_scores, run_switched_observer
 
@@ -260,28 +258,11 @@ def plot(traces: dict, path: str | Path) -> Path:
     ax[3].set_title("Commutation signal: real vs estimated (Fig. 5)")
     ax[3].legend(fontsize=8, loc="upper right")
     fig.tight_layout()
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(p)
-    return p
+    return br.save_figure(fig, path)
 
 
 def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - script entry
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--outdir", type=Path, default=Path(__file__).resolve().parent / "results")
-    a = ap.parse_args(argv)
-    doc, traces = run_switched_linear(a.runs, a.quick, progress=print)
-    a.outdir.mkdir(parents=True, exist_ok=True)
-    stem = "switched_linear_quick" if a.quick else "switched_linear"
-    br.write_results(a.outdir / f"{stem}.json", doc)
-    atomic_write_text(a.outdir / f"{stem}.md", markdown(doc))
-    plot(traces, a.outdir / f"{stem}.png")
-    print(markdown(doc))
+    br.bench_main(argv, stem="switched_linear", description=__doc__.splitlines()[0], run=run_switched_linear, markdown=markdown, plot=plot)
 
 
 if __name__ == "__main__":  # pragma: no cover

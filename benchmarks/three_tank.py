@@ -26,7 +26,6 @@ or ``pwas-hdl bench three-tank --json OUT.json [--md OUT.md] [--plot OUT.png] [-
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -35,7 +34,6 @@ import numpy as np
 
 from pwas_hdl import bench_results as br
 from pwas_hdl.benchmarks.bench_common import QUICK_SIGMA_GRID, PWASConfig, fit_pwas, pwas_estimates, rmse, select_pwas
-from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.systems.decoupled_observer import paper_sensors
 from pwas_hdl.systems.three_tank import THREE_TANK_ASSUMPTIONS, three_tank_paper_run, three_tank_training_runs
 
@@ -179,28 +177,11 @@ def plot(traces: dict, path: str | Path) -> Path:
     axes[1].set_xlabel("t (steps); disturbance on from t = 100")
     axes[0].set_title("Three-tank (seed 001): paper's run, states and virtual sensors")
     fig.tight_layout()
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(p)
-    return p
+    return br.save_figure(fig, path)
 
 
 def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - script entry
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--outdir", type=Path, default=Path(__file__).resolve().parent / "results")
-    a = ap.parse_args(argv)
-    doc, traces = run_three_tank(a.runs, a.quick, progress=print)
-    a.outdir.mkdir(parents=True, exist_ok=True)
-    stem = "three_tank_quick" if a.quick else "three_tank"
-    br.write_results(a.outdir / f"{stem}.json", doc)
-    atomic_write_text(a.outdir / f"{stem}.md", markdown(doc))
-    plot(traces, a.outdir / f"{stem}.png")
-    print(markdown(doc))
+    br.bench_main(argv, stem="three_tank", description=__doc__.splitlines()[0], run=run_three_tank, markdown=markdown, plot=plot)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -302,3 +302,43 @@ def from_lorenz_tables(result: Mapping[str, Any]) -> dict:
 if __name__ == "__main__":  # pragma: no cover
     for f in sys.argv[1:]:
         print(markdown_table(load_results(f)))
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
+    """Save a matplotlib figure as PNG atomically (a temporary file renamed into place) and close it."""
+    import matplotlib.pyplot as plt
+
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + ".tmp.png")
+    fig.savefig(tmp, dpi=dpi)
+    plt.close(fig)
+    tmp.replace(p)
+    return p
+
+
+def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: Any, markdown: Any, plot: Any,
+               default_runs: int = 5) -> None:
+    """The script entry of a system bench: ``--runs``, ``--quick``, ``--outdir``; writes JSON, Markdown and PNG.
+
+    ``run(runs, quick, progress=print)`` returns ``(doc, traces)``; ``markdown(doc)`` the table text;
+    ``plot(traces, path)`` the figure. ``--quick`` writes ``STEM_quick.*`` so a smoke run never
+    overwrites the committed results.
+    """
+    import argparse
+
+    from pwas_hdl.io.atomic import atomic_write_text
+    from pwas_hdl.resources import benchmarks_dir
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--runs", type=int, default=default_runs)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--outdir", type=Path, default=benchmarks_dir() / "results")
+    a = ap.parse_args(argv)
+    doc, traces = run(a.runs, a.quick, progress=print)
+    a.outdir.mkdir(parents=True, exist_ok=True)
+    name = f"{stem}_quick" if a.quick else stem
+    write_results(a.outdir / f"{name}.json", doc)
+    atomic_write_text(a.outdir / f"{name}.md", markdown(doc))
+    plot(traces, a.outdir / f"{name}.png")
+    print(markdown(doc))

@@ -11,7 +11,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["templates_dir", "sim_dir", "schemas_dir"]
+__all__ = ["templates_dir", "sim_dir", "schemas_dir", "benchmarks_dir"]
 
 
 def _package_dir(package: str) -> Path:
@@ -35,3 +35,8 @@ def sim_dir() -> Path:
 def schemas_dir() -> Path:
     """Folder of the JSON Schemas of the file formats (model file, manifest, bench results)."""
     return _package_dir("pwas_hdl.schemas")
+
+
+def benchmarks_dir() -> Path:
+    """Folder of the benchmark scripts (``benchmarks/`` of the repository); results go to its ``results/``."""
+    return _package_dir("pwas_hdl.benchmarks")
