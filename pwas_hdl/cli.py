@@ -821,6 +821,20 @@ def _write_plant(output: Path, test_output: Optional[Path], train, test, what: s
         _say(f"wrote {test_output} (test run)")
 
 
+def _write_runs(out: Optional[Path], test_out: Optional[Path], samples: int, runs: int, noise: float, seed: int,
+               make_train, make_test) -> None:
+    """``make-data`` of a multi-run plant: options checked, paths checked, then the data made and written."""
+    with _user_errors():
+        output = _required(out, "-o/--out", "the CSV file to write")
+        if samples < 1 or runs < 1 or noise < 0 or seed < 0:
+            raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
+        _plant_outputs(output, test_out)  # the paths are checked before the work
+        check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
+        train = make_train()
+        test = make_test() if test_out is not None else None
+        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+
+
 @data_app.command("three-tank")
 def make_data_three_tank(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns u1, u2, y, x1, x3, x1_true, x3_true, run). Required.", show_default=False)] = None,
@@ -833,15 +847,9 @@ def make_data_three_tank(
     """The three-tank plant of seed 001 (eq. 26): y = x2, targets x1 and x3; see pwas_hdl.systems.three_tank."""
     from pwas_hdl.systems.three_tank import three_tank_paper_run, three_tank_training_runs
 
-    with _user_errors():
-        output = _required(out, "-o/--out", "the CSV file to write")
-        if samples < 1 or runs < 1 or noise < 0 or seed < 0:
-            raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
-        _plant_outputs(output, test_out)  # the paths are checked before the work
-        check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
-        train = three_tank_training_runs(runs, samples, seed=seed, noise=noise)
-        test = three_tank_paper_run(samples, seed=seed, noise=noise) if test_out is not None else None
-        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+    _write_runs(out, test_out, samples, runs, noise, seed,
+                lambda: three_tank_training_runs(runs, samples, seed=seed, noise=noise),
+                lambda: three_tank_paper_run(samples, seed=seed, noise=noise))
 
 
 @data_app.command("switched-linear")
@@ -858,15 +866,9 @@ def make_data_switched_linear(
     """The switched linear plant of seed 003 (eq. 11), three modes; see pwas_hdl.systems.switched_linear."""
     from pwas_hdl.systems.switched_linear import switched_paper_run, switched_training_runs
 
-    with _user_errors():
-        output = _required(out, "-o/--out", "the CSV file to write")
-        if samples < 1 or runs < 1 or noise < 0 or seed < 0:
-            raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
-        _plant_outputs(output, test_out)  # the paths are checked before the work
-        check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
-        train = switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise)
-        test = switched_paper_run(seed=seed, switching=switching, noise=noise) if test_out is not None else None
-        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+    _write_runs(out, test_out, samples, runs, noise, seed,
+                lambda: switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise),
+                lambda: switched_paper_run(seed=seed, switching=switching, noise=noise))
 
 
 def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool) -> None:
