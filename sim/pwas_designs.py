@@ -19,11 +19,17 @@ __all__ = ["synthetic_model", "DesignConfig"]
 
 
 def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int] | int, nz: int = 1, *,
-                    seed: int = 0, weight_scale: float | None = None, rmse: float | None = None):
+                    seed: int = 0, weight_scale: float | None = None, rmse: float | None = None,
+                    classes: Sequence[float] | None = None, ties: bool = False):
     """A PWAS virtual sensor with lags ``(Mu, My)`` of ``nu`` inputs / ``ny`` outputs.
 
     ``partitions``: one integer, or one per regressor dimension (for the sensor top all lags of a
     signal need the same value). Lags of one signal share their domain (as ``fit`` does by default).
+
+    ``classes``: make it a classifier (:mod:`pwas_hdl.fit.classifier`) of a label ``mode`` with these
+    ``nz`` classes (score targets ``mode=<label>``). ``ties``: force equal scores -- score 1 has the
+    weights of score 0 everywhere and score 3 those of score 2 on every other vertex -- so that the
+    output codes tie often and the argmax tie rule (lowest index) is exercised.
     """
     from pwas_hdl.fit.regressors import LagStructure
     from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_SCHEMA_ID, MODEL_VERSION, model_from_dict
@@ -32,7 +38,14 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
     lags = LagStructure(mu, my, nu if mu else 0, ny if my else 0)
     ins = [f"u{i}" for i in range(nu)] if mu else []
     outs = [f"y{i}" for i in range(ny)] if my else []
-    tgts = [f"z{i}" for i in range(nz)]
+    if classes is not None:
+        from pwas_hdl.fit.classifier import class_target_names
+
+        if len(classes) != nz:
+            raise ValueError(f"{len(classes)} classes for nz = {nz}")
+        tgts = class_target_names("mode", classes)
+    else:
+        tgts = [f"z{i}" for i in range(nz)]
     n = lags.dimension
     parts = [int(partitions)] * n if np.ndim(partitions) == 0 else [int(p) for p in partitions]
     if len(parts) != n:
@@ -54,6 +67,12 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
     for t in range(nz):
         smooth = np.sin(coords @ rng.normal(0, 2, n) + rng.uniform(0, 6))
         weights[tgts[t]] = (scale * (smooth + 0.3 * rng.normal(0, 1, n_v))).tolist()
+    if ties:
+        if nz < 2:
+            raise ValueError("ties need nz >= 2")
+        weights[tgts[1]] = list(weights[tgts[0]])
+        if nz >= 4:
+            weights[tgts[3]] = [a if v % 2 == 0 else b for v, (a, b) in enumerate(zip(weights[tgts[2]], weights[tgts[3]]))]
     r = rmse if rmse is not None else scale / 20
     d = {
         "$schema": MODEL_SCHEMA_ID,
@@ -67,6 +86,8 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
         "fit": {"sigma": 1e-3, "sigma_given": True, "tikhonov_order": 0, "gamma": 1.2, "domain_from": "explicit",
                 "share_lag_domain": True, "n_train": 0, "n_trajectories": 1, "train_rmse": {t: r for t in tgts}, "cv": None},
     }
+    if classes is not None:
+        d["classifier"] = {"target": "mode", "classes": [float(c) for c in classes]}
     return model_from_dict(d, source="synthetic model")
 
 
@@ -84,13 +105,16 @@ class DesignConfig:
     nz: int = 1
     options: dict = field(default_factory=dict, hash=False)
     seed: int = 0
+    classes: tuple = ()  # a classifier of these nz classes (argmax stage after the core)
+    ties: bool = False  # force tied scores (see synthetic_model)
 
     @property
     def n(self) -> int:
         return self.nu * self.mu + self.ny * self.my
 
     def model(self):
-        return synthetic_model(self.mu, self.my, self.nu, self.ny, self.partitions, self.nz, seed=self.seed)
+        return synthetic_model(self.mu, self.my, self.nu, self.ny, self.partitions, self.nz, seed=self.seed,
+                               classes=self.classes or None, ties=self.ties)
 
     def generate(self, outdir: str | Path):
         """Write the design folder (``pwas_hdl.design.generate.generate``); returns the GeneratedDesign."""

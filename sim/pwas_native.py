@@ -242,7 +242,7 @@ def write_job(path: str | os.PathLike, man: dict, runs: Sequence[Any], *, reset_
         seed = int(run.seed) & (2**64 - 1)
         parts.append(np.array([thr(run.p_valid), thr(run.p_ready), seed & 0xFFFFFFFF, seed >> 32, len(run.segments)], dtype=np.uint32))
         for seg in run.segments:
-            exp = np.concatenate([seg.expected, seg.oor[:, None].astype(np.int64)], axis=1)
+            exp = seg.rows()  # scores, out_of_range[, class_index]
             parts.append(np.array([len(seg.codes), len(exp), int(seg.drain), int(seg.hold)], dtype=np.uint32))
             parts.append(pack_words(seg.codes, pin["fields"], wi).ravel())
             parts.append(pack_words(exp, pout["fields"], wo).ravel())
@@ -307,7 +307,7 @@ def run(b: NativeBuild, man: dict, runs: Sequence[Any], work_dir: str | os.PathL
             n_cmp = min(n_got, len(src))
             ok = src[:n_cmp] < n_acc
             lat = prod[:n_cmp][ok] - acc[src[:n_cmp][ok]]
-            exp = np.concatenate([seg.expected, seg.oor[:, None].astype(np.int64)], axis=1)
+            exp = seg.rows()
             bad = np.flatnonzero(np.any(got[:n_cmp] != exp[:n_cmp], axis=1))
             problems = [msg for bit, msg in PROBLEMS.items() if probs & bit]
             if len(bad) != mism:

@@ -332,10 +332,13 @@ def build_design(
                                       prescreen=prescreen, progress=progress, executor=executor)
     else:
         chosen = pipeline
+    classifier = getattr(sensor, "classifier_", None)  # a classifier model: argmax stage after the core
     if design == "core":
-        comp = build_core(fxm, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top)
+        comp = build_core(fxm, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top,
+                          classifier=classifier)
     else:
-        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top)
+        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None,
+                            name=top, classifier=classifier)
     info = design_info(comp, ports)
 
     prefix = f"{top}_rom"
@@ -424,6 +427,14 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         f"weights {fm['weight']['str']} ({man['memory']['kind']} memory, {man['memory']['memories']} x "
         f"{man['memory']['depth']} words of {man['memory']['word_bits']} bits); output {fm['output']['str']} "
         f"(LSB {fm['output']['lsb']!r}); |hw - float| <= {eb['lsb']!r} LSB = {eb['physical']!r}",
+    ]
+    if "classifier" in man:
+        c = man["classifier"]
+        labels = ", ".join(f"{v:g}" for v in c["classes"])
+        lines.append(f"classifier of {c['target']} ({c['n_classes']} classes {labels}): argmax stage after the core, class index in "
+                     f"{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}] {c['field']}, ties to the lowest class index, "
+                     f"{c['stage_latency_cycles']} cycle(s) of the latency")
+    lines += [
         "ports:",
     ]
     for prt in man["ports"]:

@@ -39,7 +39,11 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
       "memory": {"kind": "banked" | "replicated", "memories": n+1, "depth": .., "word_bits": ..,
                  "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},
       "pipeline": {...}, "arithmetic": {...},
-      "timing": {...}                            # only with generate --clock-mhz (timing closure)
+      "timing": {...},                           # only with generate --clock-mhz (timing closure)
+      "classifier": {"target": "mode", "classes": [0, 1, 2], "n_classes": 3,   # only for a classifier model:
+                     "port": "m_axis_tdata", "field": "class_index", "lsb": .., "width": 2,  # argmax stage after
+                     "scores": ["mode=0", ..], "select": "max", "tie_rule": "lowest class index ..",  # the core
+                     "stage_latency_cycles": 1, "meaning": .., "float_agreement": ..}
     }
 
 Physical value of a field: ``physical = offset + scale * code * 2**-frac`` (its ``format``).
@@ -108,6 +112,9 @@ def _fields(design: str, fxm: "FixedPointModel", info: dict, port_name: str, is_
                 f.update({"target": f["name"], "format": fxm.output_port.to_dict()})
             elif f["name"] == "out_of_range":
                 f["meaning"] = "1: some regressor was outside the domain and was clamped to it"
+            elif "classifier" in info and f["name"] == info["classifier"]["field"]:
+                f.update({"meaning": info["classifier"]["meaning"] + "; " + info["classifier"]["tie_rule"],
+                          "classes": info["classifier"]["classes"]})
     return fields
 
 
@@ -197,6 +204,8 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
     }
     if timing is not None:
         man["timing"] = timing
+    if "classifier" in info:  # a classifier model: argmax stage after the core
+        man["classifier"] = info["classifier"]
     errs = manifest_errors(man)
     if errs:
         raise InternalError(f"the generated manifest of {top} breaks its schema: {errs[0]}")
@@ -235,7 +244,7 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
     for i, p in enumerate(m["ports"]):
         need = {"in.payload": ("signal", "format"), "out.payload": ("target", "format")}.get(p["role"], ())
         for j, f in enumerate(p.get("fields", [])):
-            if p["role"] == "out.payload" and f["name"] == "out_of_range":
+            if p["role"] == "out.payload" and (f["name"] == "out_of_range" or "classes" in f):
                 continue
             for key in need:
                 if key not in f:
@@ -256,6 +265,33 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
                     else "lags.warmup is given for a core design (only the sensor design has a lag bank)")
     elif warm is not None and warm["port"] not in names:
         errs.append(f"lags.warmup.port {warm['port']!r} is not one of the ports {names}")
+    errs += _classifier_errors(m)
+    return errs
+
+
+def _classifier_errors(m: dict[str, Any]) -> list[str]:
+    """The classifier entry agrees with its class-index field and the score targets."""
+    c = m.get("classifier")
+    outs = [p for p in m["ports"] if p["role"] == "out.payload"]
+    marked = [f["name"] for p in outs for f in p.get("fields", []) if "classes" in f]
+    if c is None:
+        return [f"output field {marked[0]!r} has classes but the manifest has no classifier entry"] if marked else []
+    errs = []
+    out = outs[0] if len(outs) == 1 else None
+    fields = {f["name"]: f for f in out.get("fields", [])} if out else {}
+    f = fields.get(c["field"])
+    if out is None or c["port"] != out["name"] or f is None:
+        errs.append(f"classifier.field {c['field']!r} is not a field of the output payload port {c['port']!r}")
+    elif (f["lsb"], f["width"], f.get("classes")) != (c["lsb"], c["width"], c["classes"]):
+        errs.append(f"classifier lsb/width/classes {c['lsb']}/{c['width']}/{c['classes']} differ from its field "
+                    f"{f['lsb']}/{f['width']}/{f.get('classes')}")
+    if not (len(c["classes"]) == len(c["scores"]) == c["n_classes"]):
+        errs.append(f"classifier has {len(c['classes'])} classes, {len(c['scores'])} scores and n_classes {c['n_classes']}")
+    missing = [s for s in c["scores"] if s not in fields]
+    if missing:
+        errs.append(f"classifier.scores {missing} are not fields of the output payload")
+    if (1 << c["width"]) < c["n_classes"]:
+        errs.append(f"classifier.width {c['width']} bits cannot index {c['n_classes']} classes")
     return errs
 
 

@@ -17,7 +17,8 @@ def _check_name(name: str) -> str:
     return name
 
 
-def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core") -> PWASCore:
+def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core",
+               classifier: dict | None = None) -> PWASCore:
     """The pipelined PWAS core of a bit-true model.
 
     Parameters
@@ -28,20 +29,38 @@ def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None
     pipeline : Pipeline, "min", "balanced" (default) or "max"
     name : str
         Verilog module name used by :func:`~pwas_hdl.hdl.emit.emit_verilog` and :func:`design_info`.
+    classifier : dict, optional
+        ``{"target": name, "classes": [labels]}`` of a classifier model (``sensor.classifier_``,
+        one class per target, in target order): adds the argmax stage after the core
+        (:class:`~pwas_hdl.hdl.classifier_top.PWASClassifierCore`); the output payload then ends
+        with the ``class_index`` field.
 
     Returns
     -------
-    PWASCore
+    PWASCore or PWASClassifierCore
         ``.latency`` (cycles), ``.ii`` (1), ``.memory_plan``, ``.params``.
     """
     name = _check_name(name)
     params = CoreParams.from_model(model)
-    core = PWASCore(params, memory=memory, pipeline=pipeline)
-    core.module_name = name
-    core._MustUse__silence = True  # often only described (design_info), not elaborated
+    if classifier is not None:
+        from pwas_hdl.hdl.classifier_top import PWASClassifierCore
+
+        _check_classes(classifier, params)
+        comp = PWASClassifierCore(params, memory=memory, pipeline=pipeline)
+        core = comp.core
+    else:
+        comp = core = PWASCore(params, memory=memory, pipeline=pipeline)
+    comp.module_name = name
+    comp._MustUse__silence = True  # often only described (design_info), not elaborated
     core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))
     core.target_names = list(getattr(model, "target_names", [f"z{i}" for i in range(params.nz)]))
-    return core
+    comp.classifier = dict(classifier) if classifier is not None else None
+    return comp
+
+
+def _check_classes(classifier: dict, params: CoreParams) -> None:
+    if len(classifier["classes"]) != params.nz:
+        raise ValueError(f"the classifier has {len(classifier['classes'])} classes for nz = {params.nz} score targets")
 
 
 def _fields(names_widths):
@@ -72,6 +91,13 @@ def design_info(component, ports: str = "axis") -> dict:
         in_fields = _fields([(nm, p.in_width, True) for nm in names])
     tnames = getattr(core, "target_names", [f"z{i}" for i in range(p.nz)])
     out_fields = _fields([(nm, p.out_width, True) for nm in tnames] + [("out_of_range", 1, False)])
+    classifier = getattr(component, "classifier", None)
+    if classifier is not None:  # the argmax stage's class index, in the top bits of the output payload
+        from pwas_hdl.hdl.classifier_top import classifier_info
+
+        cinfo = classifier_info(component, classifier["target"], classifier["classes"], tnames)
+        cinfo["port"] = nm["out.payload"]
+        out_fields.append({"name": cinfo["field"], "lsb": cinfo["lsb"], "width": cinfo["width"], "signed": False})
     info = {
         "module": getattr(component, "module_name", None),
         "kind": getattr(component, "kind", "core"),
@@ -111,6 +137,8 @@ def design_info(component, ports: str = "axis") -> dict:
         },
     }
     info.update(getattr(component, "extra_info", {}))
+    if classifier is not None:
+        info["classifier"] = cinfo
     return info
 
 
@@ -121,6 +149,7 @@ def build_sensor(
     memory: str = "banked",
     pipeline: Pipeline | str | None = None,
     name: str = "pwas_sensor",
+    classifier: dict | None = None,
 ):
     """The virtual-sensor top (lag bank + core) of a bit-true model.
 
@@ -130,12 +159,13 @@ def build_sensor(
     lags : LagStructure, optional
         Default: derived from ``model.regressor_signals`` (as ``FixedPointModel.from_sensor``
         sets them); pass ``sensor.lags_`` to be explicit.
-    memory, pipeline, name : as :func:`build_core`
+    memory, pipeline, name, classifier : as :func:`build_core` (``classifier``: the argmax stage
+        follows the core inside the top)
 
     Returns
     -------
     PWASSensorTop
-        ``.latency``, ``.ii``, ``.warmup`` (= M - 1), ``.core``, ``.signals``, ``.dims``.
+        ``.latency``, ``.ii``, ``.warmup`` (= M - 1), ``.core``, ``.signals``, ``.dims``, ``.argmax``.
     """
     from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 
@@ -144,7 +174,15 @@ def build_sensor(
     if hasattr(model, "signal_input_formats"):
         model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
-    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline)
+    argmax = None
+    if classifier is not None:
+        from pwas_hdl.hdl.classifier_top import classifier_argmax
+
+        _check_classes(classifier, params)
+        argmax = classifier_argmax(params, pipeline)
+        argmax._MustUse__silence = True  # inlined by the top
+    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, argmax=argmax)
+    top.classifier = dict(classifier) if classifier is not None else None
     top.module_name = name
     top._MustUse__silence = True
     top.core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))

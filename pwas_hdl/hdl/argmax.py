@@ -113,6 +113,18 @@ class ArgmaxStage(wiring.Component):
         })
         self._MustUse__silence = False
 
+    def scores_stream(self, out, prefix: str = "scores") -> SimpleNamespace:
+        """The stream that the block before an inlined stage drives, for :meth:`build_into`.
+
+        With registers: new ``<prefix>_payload`` / ``_valid`` / ``_ready`` signals
+        (:func:`inner_stream`). Without (latency 0): a new payload signal but ``out``'s own valid
+        and ready, so that no signal merely aliases another (Verilator's UNUSEDSIGNAL).
+        """
+        if self.latency:
+            return inner_stream(self.index_lsb, prefix)
+        return SimpleNamespace(payload=Signal(unsigned(self.index_lsb), name=f"{prefix}_payload", reset_less=True),
+                               valid=out.valid, ready=out.ready)
+
     def elaborate(self, platform):
         m = Module()
         inp = getattr(self, "in")
@@ -176,7 +188,11 @@ class ArgmaxStage(wiring.Component):
         index = as_index(items[0][0])
         result = Cat(data, index)
         if self.latency == 0:
-            m.d.comb += [advance.eq(out.ready), out.valid.eq(valid), out.payload.eq(result)]
+            m.d.comb += out.payload.eq(result)
+            if valid is not out.valid:  # (a scores_stream() shares them: nothing to connect)
+                m.d.comb += out.valid.eq(valid)
+            if advance is not out.ready:
+                m.d.comb += advance.eq(out.ready)
             return
         m.d.comb += advance.eq(~out.valid | out.ready)
         regs.append((out.payload, result))

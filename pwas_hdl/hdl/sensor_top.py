@@ -88,9 +88,14 @@ class PWASSensorTop(wiring.Component):
     signals : list of (name, n_lags)
     dims : list of (signal index, lag), one per regressor dimension
     memory, pipeline : as :class:`PWASCore`
+    argmax : ArgmaxStage, optional
+        A classifier's decision stage after the core (:mod:`pwas_hdl.hdl.argmax`, ``C = nz``
+        scores of ``B_out`` bits, ``out_of_range`` carried through): the output payload then ends
+        with the class index and the latency grows by ``argmax.latency``.
 
     Ports: ``clk``, ``rst``, ``in__valid``, ``in__ready``, ``in__payload`` (``S*B_in`` bits, one code
-    per signal), ``out__valid``, ``out__ready``, ``out__payload`` (as the core), ``warm``.
+    per signal), ``out__valid``, ``out__ready``, ``out__payload`` (as the core, then the class index
+    with ``argmax``), ``warm``.
 
     Attributes
     ----------
@@ -103,7 +108,8 @@ class PWASSensorTop(wiring.Component):
 
     kind = "sensor"
 
-    def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 argmax=None):
         self._MustUse__silence = True  # see PWASCore.__init__
         if len(dims) != params.n:
             raise ValueError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
@@ -122,7 +128,10 @@ class PWASSensorTop(wiring.Component):
         self.params = params
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
-        self.latency = self.core.latency
+        self.argmax = argmax
+        if argmax is not None and argmax.index_lsb != core_output_layout(params).size:
+            raise ValueError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {core_output_layout(params).size}")
+        self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
         self.ii = 1
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
@@ -130,7 +139,8 @@ class PWASSensorTop(wiring.Component):
         super().__init__(
             {
                 "in": In(stream.Signature(unsigned(len(self.signals) * params.in_width))),
-                "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+                "out": Out(stream.Signature(unsigned(core_output_layout(params).size
+                                                     + (argmax.index_width if argmax is not None else 0)))),
                 "warm": Out(1),
             }
         )
@@ -190,5 +200,10 @@ class PWASSensorTop(wiring.Component):
             with m.If(transfer):
                 m.d.sync += [fill[0].eq(1)] + [fill[i].eq(fill[i - 1]) for i in range(1, len(fill))]
         regressor = Cat(*[cur[s] if lag == 0 else hist[s][lag - 1] for s, lag in self.dims])
-        self.core.build_into(m, regressor, inp.valid & warm, advance, self.out)
+        if self.argmax is None:
+            self.core.build_into(m, regressor, inp.valid & warm, advance, self.out)
+        else:  # core -> argmax stage, both inlined (one module)
+            scores = self.argmax.scores_stream(self.out)
+            self.core.build_into(m, regressor, inp.valid & warm, advance, scores)
+            self.argmax.build_into(m, scores.payload, scores.valid, scores.ready, self.out)
         return m

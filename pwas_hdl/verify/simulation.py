@@ -223,6 +223,8 @@ class Segment:
     ``expected`` (m, nz) output codes and ``oor`` (m,) flags from the bit-true model; ``src`` (m,):
     the transfer that completes each output's regressor. ``drain``: wait for every output before the
     next reset; otherwise reset ``hold`` cycles after the last transfer (in the middle of the stream).
+    ``cls`` (m,): a classifier design's class index (:func:`pwas_hdl.fixedpoint.argmax.argmax_index`
+    of ``expected``), else None.
     """
 
     codes: np.ndarray
@@ -232,9 +234,17 @@ class Segment:
     src: np.ndarray
     drain: bool = True
     hold: int = 0
+    cls: np.ndarray | None = None
+
+    def rows(self) -> np.ndarray:
+        """Expected output payload fields, in the manifest's order: scores, ``out_of_range``[, ``class_index``]."""
+        cols = [self.expected, self.oor[:, None].astype(np.int64)]
+        if self.cls is not None:
+            cols.append(np.asarray(self.cls, dtype=np.int64)[:, None])
+        return np.concatenate(cols, axis=1).astype(np.int64)
 
     def to_job(self) -> dict:
-        exp = np.concatenate([self.expected, self.oor[:, None].astype(np.int64)], axis=1)
+        exp = self.rows()
         return {"codes": self.codes.astype(np.int64).tolist(), "expected": exp.astype(np.int64).tolist(),
                 "src": self.src.astype(np.int64).tolist(), "drain": bool(self.drain), "hold": int(self.hold)}
 
@@ -289,7 +299,13 @@ def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segm
         out, oor = design.model.evaluate(q)
     else:
         out, oor = np.empty((0, design.model.nz), dtype=np.int64), np.empty(0, dtype=bool)
-    return Segment(c, q, out, oor, src, drain, hold)
+    cls = None
+    clf = design.manifest.get("classifier")  # optional: present exactly for a classifier design
+    if clf is not None:
+        from pwas_hdl.fixedpoint.argmax import argmax_index
+
+        cls = argmax_index(out, clf["select"]) if len(out) else np.empty(0, dtype=np.int64)
+    return Segment(c, q, out, oor, src, drain, hold, cls)
 
 
 def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[Run]:
@@ -401,7 +417,12 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     rather than in simplex-vertex order (older generators, recognised by their ``vdata`` nets).
     """
     if name in _OUT_REGS:
-        return pack_fields([int(v) for v in tr["out"]] + [int(tr["out_of_range"])], out_fields)
+        vals = [int(v) for v in tr["out"]] + [int(tr["out_of_range"])]
+        if len(out_fields) > len(vals):  # a classifier: the class index in the top field
+            from pwas_hdl.fixedpoint.argmax import argmax_index
+
+            vals.append(int(argmax_index(np.asarray(tr["out"], dtype=np.int64)[None, :])[0]))
+        return pack_fields(vals, out_fields)
     bw = model.weight_format.bits
     mo = re.match(r"vdata(\d+)$", name)
     if mo:
@@ -516,6 +537,7 @@ class RTLResult:
     build_reused: bool
     located: dict | None = None
     hw: list = field(default_factory=list, repr=False)  # per run, per segment: (codes (m, nz), oor (m,))
+    hw_class: list = field(default_factory=list, repr=False)  # classifier: per run, per segment: class index (m,)
     latencies_all: list = field(default_factory=list, repr=False)  # also with backpressure (includes waiting)
     saturated: int = 0  # outputs at the saturation limits (left out of the float comparison)
 
@@ -585,14 +607,19 @@ def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build
     ii = None
     err = 0.0
     hw = []
+    hw_class = []
     sim_s = 0.0
+    n_fields = len(design.out_fields)  # scores, out_of_range[, class_index]
     for run, rr in zip(runs, raw.get("runs", [])):
         cycles += int(rr.get("cycles", 0))
         sim_s += float(rr.get("wall_s", 0.0))
         hw_run = []
+        cls_run = []
         for seg, sr in zip(run.segments, rr.get("segments", [])):
-            got = np.array(sr.get("got", []), dtype=np.int64).reshape(-1, model.nz + 1)
+            got = np.array(sr.get("got", []), dtype=np.int64).reshape(-1, n_fields)
             hw_run.append((got[:, :model.nz], got[:, model.nz].astype(bool)))
+            if n_fields > model.nz + 1:
+                cls_run.append(got[:, model.nz + 1])
             mismatches += int(sr.get("mismatches", 0))
             outputs += len(got)
             lat_all += [int(v) for v in sr.get("latencies", [])]
@@ -612,10 +639,11 @@ def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build
                     ref = model.reference(seg.q[:k][~sat])
                     err = max(err, float(np.max(np.abs(got[:k, :model.nz][~sat] * lsb - ref))))
         hw.append(hw_run)
+        hw_class.append(cls_run)
     return RTLResult(
         simulator, design, runs, raw, failures, mismatches, outputs, lat, ii, err, err / lsb,
         float(model.error_bound), float(model.error_bound_lsb), cycles, sim_s, wall,
-        float(build.get("build_seconds", 0.0)), bool(build.get("reused", False)), None, hw, lat_all, n_sat,
+        float(build.get("build_seconds", 0.0)), bool(build.get("reused", False)), None, hw, hw_class, lat_all, n_sat,
     )
 
 

@@ -1,0 +1,97 @@
+"""The PWAS classifier in hardware: the core's ``nz`` one-hot scores, then an argmax stage.
+
+A classifier model (:mod:`pwas_hdl.fit.classifier`: ``C`` score targets sharing one locator) is
+generated as the core (or the virtual-sensor top, :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`
+with ``argmax=``) followed by :class:`~pwas_hdl.hdl.argmax.ArgmaxStage` over the ``C`` output codes,
+both inlined into one module. The output payload keeps the core's fields (the ``C`` scores, then
+``out_of_range``) and adds the class index in its top bits (``class_index``, ``index_width`` bits,
+ties to the lowest index); the latency is the core's plus the stage's
+(:func:`~pwas_hdl.hdl.argmax.argmax_latency`: 0 with the ``min`` pipeline).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.fixedpoint.argmax import TIE_RULE
+from pwas_hdl.hdl.argmax import ArgmaxStage
+from pwas_hdl.hdl.core import PWASCore, core_input_layout, core_output_layout
+from pwas_hdl.hdl.params import CoreParams, Pipeline
+
+__all__ = ["CLASS_FIELD", "classifier_argmax", "classifier_info", "PWASClassifierCore"]
+
+#: Name of the class-index field of the output payload (manifest ``classifier.field``).
+CLASS_FIELD = "class_index"
+
+
+def classifier_argmax(params: CoreParams, pipeline: Pipeline | str | None = None) -> ArgmaxStage:
+    """The argmax stage after a core of ``params``: ``nz`` signed ``B_out`` scores, ``out_of_range`` carried."""
+    return ArgmaxStage(params.nz, params.out_width, signed=True, extra_bits=1, pipeline=pipeline, select="max")
+
+
+def classifier_info(component, target: str, classes, score_names) -> dict:
+    """The manifest's ``classifier`` entry of a design with an argmax stage (before port naming)."""
+    am: ArgmaxStage = component.argmax
+    return {
+        "target": str(target),
+        "classes": [float(c) for c in classes],
+        "n_classes": int(am.n_inputs),
+        "field": CLASS_FIELD,
+        "lsb": int(am.index_lsb),
+        "width": int(am.index_width),
+        "scores": [str(s) for s in score_names],
+        "select": am.select,
+        "tie_rule": TIE_RULE,
+        "stage_latency_cycles": int(am.latency),
+        "meaning": f"{CLASS_FIELD} = i: the class classes[i] (the i-th score field has the largest code)",
+        "float_agreement": "the class equals the float classifier's (at the represented inputs) wherever the "
+                           "best float score leads every other by more than 2 * error_bound.physical",
+    }
+
+
+class PWASClassifierCore(wiring.Component):
+    """PWAS core + argmax stage (one regressor in, scores and class index out, every clock).
+
+    Parameters
+    ----------
+    params : CoreParams
+        ``nz = C`` score targets.
+    memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+
+    Attributes
+    ----------
+    core : PWASCore (inlined), argmax : ArgmaxStage (inlined)
+    latency : int
+        ``core.latency + argmax.latency``.
+    ii, params, memory_plan, pipeline : as the core's.
+    """
+
+    kind = "core"
+
+    def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True  # inlined by elaborate()
+        self.argmax = classifier_argmax(params, self.core.pipeline)
+        self.argmax._MustUse__silence = True
+        self.params = params
+        self.memory_plan = self.core.memory_plan
+        self.pipeline = self.core.pipeline
+        self.memory_kind = memory
+        self.latency = self.core.latency + self.argmax.latency
+        self.ii = 1
+        super().__init__({
+            "in": In(stream.Signature(unsigned(core_input_layout(params).size))),
+            "out": Out(stream.Signature(unsigned(core_output_layout(params).size + self.argmax.index_width))),
+        })
+        self._MustUse__silence = False
+
+    def elaborate(self, platform):
+        m = Module()
+        inp = getattr(self, "in")
+        scores = self.argmax.scores_stream(self.out)
+        self.core.build_into(m, inp.payload, inp.valid, inp.ready, scores)
+        self.argmax.build_into(m, scores.payload, scores.valid, scores.ready, self.out)
+        return m
