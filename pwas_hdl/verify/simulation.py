@@ -765,8 +765,12 @@ def simulate_data(
     The sensor top gets one (u, y) sample per transfer (reset between trajectories); the core gets
     the regressors built in software. Inputs are quantised as the bit-true model does (half up,
     saturated). Writes ``output`` (CSV: ``row``, ``<t>_hw``, ``<t>_bittrue``, ``<t>_float``,
-    ``out_of_range``, ``mismatch``; one row per hardware output, in data order) and the JSON
-    summary (``summary_path``, default ``output`` with the suffix ``.json``).
+    ``out_of_range``, ``mismatch``; one row per hardware output, in data order; a classifier design
+    adds ``<c>_hat_hw``, ``<c>_hat_bittrue``, ``<c>_hat_float``, the class labels of the RTL's
+    ``class_index``, of the bit-true argmax and of the float argmax, and its ``mismatch`` includes
+    the class) and the JSON summary (``summary_path``, default ``output`` with the suffix ``.json``;
+    a classifier adds ``classifier``: class mismatches, agreement with the float classifier,
+    accuracy / F1 when the data has the label column).
 
     ``engine``: ``"cocotb"`` (default) or ``"native"`` (the Verilator C++ bench, see
     :func:`run_rtl`; ``simulator`` then defaults to and must be ``"verilator"``). Both write the
@@ -867,6 +871,11 @@ def simulate_data(
     xi = np.concatenate(xs)
     row = np.concatenate(rows)
     mism = np.any(hw != bt, axis=1) | (oor != bt_oor)
+    clf = design.manifest.get("classifier")  # a classifier design: the class index is checked too
+    if clf is not None:
+        hw_cls = np.concatenate(res.hw_class[0]) if res.hw_class and res.hw_class[0] else np.empty(0, dtype=np.int64)
+        bt_cls = np.concatenate([s.cls for s in segs])
+        mism = mism | (hw_cls != bt_cls)
     zf = sensor.predict_regressors(xi)  # float model at the real inputs
     zref = model.reference(q)  # float model at the inputs the codes represent
     zhw = hw * lsb
@@ -875,6 +884,10 @@ def simulate_data(
         cols[f"{t}_hw"] = zhw[:, i]
         cols[f"{t}_bittrue"] = bt[:, i] * lsb
         cols[f"{t}_float"] = zf[:, i]
+    clf_summary = None
+    if clf is not None:
+        clf_summary, clf_cols = _class_columns(clf, hw_cls, bt_cls, bt, zf, zref, model.error_bound, table, row)
+        cols.update(clf_cols)
     cols["out_of_range"] = oor
     cols["mismatch"] = mism
     csv_text = format_csv(cols)
@@ -901,6 +914,9 @@ def simulate_data(
         k = int(np.flatnonzero(mism)[0])
         first = {"row": int(row[k]), "regressor_codes": q[k].tolist(), "expected": bt[k].tolist() + [int(bt_oor[k])],
                  "actual": hw[k].tolist() + [int(oor[k])]}
+        if clf is not None:
+            first["expected"].append(int(bt_cls[k]))
+            first["actual"].append(int(hw_cls[k]))
     lat = sorted(set(res.latencies if stall == 0 else res.latencies_all))
     n = int(len(row))
     summary = {
@@ -944,11 +960,48 @@ def simulate_data(
         "testbench_failures": res.failures,
         "waves": res.raw.get("waves"),
     }
+    if clf_summary is not None:
+        summary["classifier"] = clf_summary
     summary["checks"] = _checks(summary, stall)
     outset.write_text(output, csv_text)
     outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
     outset.commit()
     return {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
+
+
+def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: np.ndarray, zf: np.ndarray,
+                   zref: np.ndarray, bound: float, table, row: np.ndarray) -> tuple[dict, dict]:
+    """CSV columns and summary of a classifier design's class output.
+
+    Columns ``<target>_hat_hw`` (the label of the RTL's class index), ``<target>_hat_bittrue``
+    (argmax of the bit-true codes) and ``<target>_hat_float`` (argmax of the float scores at the
+    real inputs, :func:`pwas_hdl.fit.classifier.decide`). The summary has the class mismatches
+    (RTL vs bit-true), the agreement with the float classifier at the represented inputs (where the
+    bound applies) and at the real inputs (:func:`pwas_hdl.fixedpoint.argmax.agreement`) and, when
+    the data has the label column, accuracy and per-class F1 of the three.
+    """
+    from pwas_hdl.fit import classifier as fc
+    from pwas_hdl.fixedpoint.argmax import agreement
+
+    classes = np.asarray(clf["classes"], dtype=float)
+    t = clf["target"]
+    hw_lab = classes[hw_cls] if len(hw_cls) else np.empty(0)
+    bt_lab = classes[bt_cls] if len(bt_cls) else np.empty(0)
+    fl_lab = fc.decide(zf, classes) if len(zf) else np.empty(0)
+    cols = {f"{t}_hat_hw": hw_lab, f"{t}_hat_bittrue": bt_lab, f"{t}_hat_float": fl_lab}
+    summary: dict[str, Any] = {
+        "target": t, "classes": classes.tolist(), "class_mismatches": int(np.sum(hw_cls != bt_cls)),
+        "tie_rule": clf["tie_rule"],
+        # where the bound applies: the float scores at the inputs the codes represent
+        "agreement_float_at_codes": agreement(zref, bt_codes, bound),
+        "agreement_float": agreement(zf, bt_codes, bound),  # at the real inputs (input rounding too)
+    }
+    if t in table.header:
+        truth = table.numeric([t])[row, 0]
+        for name, lab in (("hw", hw_lab), ("bittrue", bt_lab), ("float", fl_lab)):
+            summary[f"scores_{name}"] = fc.class_scores(truth, lab, classes)
+        summary["reference_column"] = t
+    return summary, cols
 
 
 def simulate_arrays(
