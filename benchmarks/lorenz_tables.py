@@ -8,8 +8,13 @@ test samples. Tables II-V vary one parameter at a time around the baseline
 ``My = 4, p = 7, gamma = 1.2`` (``N = 4096``).
 
 :data:`PAPER_ROWS` holds the distinct configurations of those tables with the paper's numbers;
-:func:`run_lorenz_tables` repeats the experiment over several seeds and returns a JSON-ready dict;
-:func:`markdown_table` prints ours next to the paper's.
+:func:`run_lorenz_tables` repeats the experiment over several seeds and returns a result document in
+the shared bench results format (:mod:`pwas_hdl.bench_results`, schema ``bench-results-v1``): one
+row per configuration, ``system`` ``lorenz``, ``target`` ``z``, ``estimator`` ``pwas``, ``stage``
+``float``, ``metric`` ``rmse`` (the RMSEE of eq. 17), ``value`` / ``std`` over the seeds,
+``paper`` the paper's RMSEE, and in ``config`` the configuration (``id``, ``My``, ``p``,
+``gamma``, ``N``, ``tables``), the sigmas, the other statistics and the per-seed records;
+:func:`markdown_table` prints ours next to the paper's, generated from those rows.
 
 Data protocol (identical for every row, so the rows of one seed differ only in the sensor)
 ---------------------------------------------------------------------------------------
@@ -37,7 +42,7 @@ Usage as a script::
 
     python benchmarks/lorenz_tables.py [--seeds 5] [--quick] [--outdir benchmarks/results]
 
-writes ``lorenz_tables.json`` and ``lorenz_tables.md`` (ours next to the paper's) into ``--outdir``;
+writes ``lorenz_tables.json`` (bench-results-v1) and ``lorenz_tables.md`` (ours next to the paper's) into ``--outdir``;
 ``--quick`` runs one seed of the baseline row only and writes ``lorenz_tables_quick.*``, so a smoke
 run never overwrites the committed results. ``pwas-hdl bench lorenz`` calls the same functions.
 Nothing here asserts on times.
@@ -47,10 +52,8 @@ Nothing here asserts on times.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
-import platform
 import sys
 import time
 from dataclasses import dataclass
@@ -59,6 +62,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from pwas_hdl import bench_results as br
 from pwas_hdl.systems.lorenz import LORENZ_PARAMS, lorenz
 from pwas_hdl.fit.regularized_lsq import DEFAULT_SIGMA_GRID
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -69,17 +73,14 @@ __all__ = [
     "PaperRow",
     "PAPER_ROWS",
     "PAPER_TABLES",
-    "RESULT_FORMAT",
-    "RESULT_VERSION",
+    "BENCH",
     "find_row",
     "run_lorenz_tables",
     "markdown_table",
 ]
 
-#: ``"format"`` entry of the dict returned by :func:`run_lorenz_tables`.
-RESULT_FORMAT = "pwas-hdl-bench-lorenz-tables"
-#: ``"version"`` entry of that dict (bumped when its layout changes).
-RESULT_VERSION = 1
+#: ``bench`` of the result document (format :data:`pwas_hdl.bench_results.RESULTS_FORMAT`).
+BENCH = "lorenz"
 
 #: Captions of the paper's tables (which parameter each one varies).
 PAPER_TABLES: dict[str, str] = {
@@ -209,22 +210,6 @@ def _resolve_rows(rows: Sequence[PaperRow | str | tuple[int, int, float]] | None
     return out
 
 
-def _environment() -> dict[str, Any]:
-    import scipy
-
-    from pwas_hdl import __version__
-
-    return {
-        "pwas_hdl": __version__,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "machine": platform.machine(),
-        "system": platform.system(),
-        "cpu_count": os.cpu_count(),
-    }
-
-
 def _seed_task(task: dict[str, Any]) -> list[dict[str, Any]]:
     """Every row of one seed (a pure task: its result depends only on ``task``)."""
     seed, n_train, n_test, folds, grid = task["seed"], task["n_train"], task["n_test"], task["folds"], task["grid"]
@@ -272,6 +257,7 @@ def run_lorenz_tables(
     sigma_grid: Sequence[float] | None = None,
     progress: Callable[[str], None] | None = None,
     executor: Executor | None = None,
+    quick: bool = False,
 ) -> dict[str, Any]:
     """Fit and test the PWAS virtual sensor of every selected row of Tables II-V for every seed.
 
@@ -298,20 +284,23 @@ def run_lorenz_tables(
     executor : pwas_hdl.flow.executor.Executor, optional
         Runs one task per seed: serially by default, or on a local or remote Dask cluster
         (identical results; only the timings differ).
+    quick : bool
+        Recorded as the document's ``quick`` (a smoke run, not a result to quote).
 
     Returns
     -------
     dict
-        JSON-ready (no NaN, no timestamps). Keys: ``format``, ``version``, ``setup`` (protocol
-        and parameters), ``seeds``, ``environment`` (versions, cpu count), ``rows`` (a list, one
-        entry per configuration: ``id``, ``tables``, ``config`` {My, p, gamma, n}, ``N``,
-        ``per_seed`` [{seed, rmsee, sigma, fit_time_s, rmse_vs_noisy_z, train_rmse,
-        test_out_of_domain (test regressors clamped to the domain), sigma_at_grid_edge (the CV
-        optimum is the smallest or largest candidate)}],
-        ``rmsee_mean``, ``rmsee_std`` (sample std, None for one seed), ``rmsee_min``,
-        ``rmsee_max``, ``sigma_median``, ``fit_time_s_mean``, ``rmse_vs_noisy_z_mean``,
-        ``rmsee_mean_le_paper``, ``paper`` {tables, sigma, rmsee, latency_ns,
-        slice_occupation_pct, note}) and ``total_time_s``.
+        A ``pwas-hdl-bench-results`` v1 document (validated; JSON-ready, no NaN, no timestamps):
+        ``bench`` ``"lorenz"``, ``rows`` (one per configuration, in the order run: ``value`` =
+        mean RMSEE over the seeds, ``std`` = sample std (None for one seed), ``runs`` = seeds,
+        ``paper`` = the paper's RMSEE; ``config``: ``id``, ``My``, ``p``, ``gamma``, ``n``, ``N``,
+        ``tables``, ``units``, ``sigma_median``, ``rmsee_min``, ``rmsee_max``,
+        ``rmse_vs_noisy_z_mean``, ``fit_time_s_mean``, ``rmsee_mean_le_paper``, ``paper_sigma``,
+        ``paper_latency_ns``, ``paper_slice_occupation_pct``, ``paper_note`` and ``per_seed``
+        [{seed, rmsee, sigma, fit_time_s, rmse_vs_noisy_z, train_rmse, test_out_of_domain (test
+        regressors clamped to the domain), sigma_at_grid_edge (the CV optimum is the smallest or
+        largest candidate)}]), ``assumptions``, ``config`` {``setup`` (protocol and parameters),
+        ``seeds``, ``cpu_count``} and ``environment`` (versions, ``elapsed_s``).
 
     Raises
     ------
@@ -321,7 +310,7 @@ def run_lorenz_tables(
     Examples
     --------
     >>> res = run_lorenz_tables(seeds=[0], rows=["My4-p7-g1.2"])  # doctest: +SKIP
-    >>> round(res["rows"][0]["rmsee_mean"], 1)  # doctest: +SKIP
+    >>> round(res["rows"][0]["value"], 1)  # doctest: +SKIP
     20.2
     """
     seed_list = [int(s) for s in seeds]
@@ -360,53 +349,49 @@ def run_lorenz_tables(
     for row in todo:
         recs = per_row[row.id]
         r = np.array([x["rmsee"] for x in recs])
-        mean = float(r.mean())
-        out_rows.append({
-            "id": row.id,
-            "tables": list(row.tables),
-            "config": {"My": row.my, "p": row.p, "gamma": row.gamma, "n": row.my},
-            "N": row.n_vertices,
-            "per_seed": recs,
-            "rmsee_mean": mean,
-            "rmsee_std": float(r.std(ddof=1)) if r.size > 1 else None,
-            "rmsee_min": float(r.min()),
-            "rmsee_max": float(r.max()),
+        cfg = {
+            "id": row.id, "My": row.my, "p": row.p, "gamma": row.gamma, "n": row.my, "N": row.n_vertices,
+            "tables": list(row.tables), "units": "z = x2 x3, RMSEE eq. (17) against the noise-free z",
             "sigma_median": float(np.median([x["sigma"] for x in recs])),
-            "fit_time_s_mean": float(np.mean([x["fit_time_s"] for x in recs])),
+            "rmsee_min": float(r.min()), "rmsee_max": float(r.max()),
             "rmse_vs_noisy_z_mean": float(np.mean([x["rmse_vs_noisy_z"] for x in recs])),
-            "rmsee_mean_le_paper": bool(mean <= row.rmsee),
-            "paper": row.to_dict(),
-        })
-    return {
-        "format": RESULT_FORMAT,
-        "version": RESULT_VERSION,
-        "setup": {
-            "plant": "discrete Lorenz system, paper eq. (18)",
-            "lorenz_params": dict(LORENZ_PARAMS),
-            "burn_in": _BURN_IN,
-            "n_train": n_train,
-            "n_test": n_test,
-            "history": history,
-            "trajectory_samples": n_total,
-            "train_samples": f"[0, {n_train})",
-            "test_estimates": f"[{n_train + history - 1}, {n_total})",
-            "protocol": (
-                "one trajectory per seed; train on its first n_train samples; test on the n_test "
-                "estimates of a disjoint continuation block whose first history-1 samples are only "
-                "regressor history; same samples for every row"
-            ),
-            "rmsee": "eq. (17) against the noise-free z = x2*x3",
-            "tikhonov_order": 0,
-            "cv_folds": folds,
-            "cv_split": "contiguous blocks of the training regressors",
-            "sigma_grid": [float(s) for s in grid],
-            "domain": "box of the training regressors (shared by all lags), expanded by gamma about its centre",
-        },
-        "seeds": seed_list,
-        "environment": _environment(),
-        "rows": out_rows,
-        "total_time_s": time.perf_counter() - t_start,
+            "fit_time_s_mean": float(np.mean([x["fit_time_s"] for x in recs])),
+            "rmsee_mean_le_paper": bool(float(r.mean()) <= row.rmsee),
+            "paper_sigma": row.sigma, "paper_latency_ns": row.latency_ns,
+            "paper_slice_occupation_pct": row.slice_occupation_pct, "paper_note": row.note,
+            "per_seed": recs,
+        }
+        out_rows.append(br.row_from_values("lorenz", "z", "pwas", "float", "rmse", r, row.rmsee, cfg))
+    setup = {
+        "plant": "discrete Lorenz system, paper eq. (18)",
+        "lorenz_params": dict(LORENZ_PARAMS),
+        "burn_in": _BURN_IN,
+        "n_train": n_train,
+        "n_test": n_test,
+        "history": history,
+        "trajectory_samples": n_total,
+        "train_samples": f"[0, {n_train})",
+        "test_estimates": f"[{n_train + history - 1}, {n_total})",
+        "protocol": (
+            "one trajectory per seed; train on its first n_train samples; test on the n_test "
+            "estimates of a disjoint continuation block whose first history-1 samples are only "
+            "regressor history; same samples for every row"
+        ),
+        "rmsee": "eq. (17) against the noise-free z = x2*x3",
+        "tikhonov_order": 0,
+        "cv_folds": folds,
+        "cv_split": "contiguous blocks of the training regressors",
+        "sigma_grid": [float(s) for s in grid],
+        "domain": "box of the training regressors (shared by all lags), expanded by gamma about its centre",
     }
+    assumptions = {
+        "seed_000.lorenz": setup["protocol"],
+        "seed_000.rmsee": setup["rmsee"],
+        "seed_000.sigma": f"sigma by {folds}-fold CV on contiguous training blocks over {grid.size} candidates",
+    }
+    return br.make_results(BENCH, out_rows, assumptions, {"setup": setup, "seeds": seed_list, "cpu_count": os.cpu_count()},
+                           "Seed 000 Tables II-V: PWAS virtual sensor of the Lorenz system, RMSEE over seeds beside the paper's",
+                           quick, time.perf_counter() - t_start)
 
 
 def _fmt_sigma(v: float | None) -> str:
@@ -416,13 +401,14 @@ def _fmt_sigma(v: float | None) -> str:
 def markdown_table(result: dict[str, Any], notes: bool = True) -> str:
     """Markdown table of a :func:`run_lorenz_tables` result next to the paper's values.
 
-    One line per configuration, grouped by the paper table that varies it (the baseline, which
-    all four tables share, comes first).
+    Generated from the document's rows (the human view of the JSON): one line per configuration,
+    grouped by the paper table that varies it (the baseline, which all four tables share, comes
+    first).
 
     Parameters
     ----------
     result : dict
-        The dict returned by :func:`run_lorenz_tables` (or read back from its JSON).
+        The document returned by :func:`run_lorenz_tables` (or read back from its JSON).
     notes : bool
         Append a short paragraph on the protocol below the table.
 
@@ -431,26 +417,27 @@ def markdown_table(result: dict[str, Any], notes: bool = True) -> str:
     str
         Markdown text ending with a newline.
     """
-    rows = result["rows"]
-    k = len(result["seeds"])
+    rows = br.find_rows(result, system="lorenz", target="z", estimator="pwas", metric="rmse")
+    seeds = result["config"]["seeds"]
+    k = len(seeds)
     head = (
         f"| Table | My | p | gamma | N | RMSEE ours (mean ± std, {k} seed{'s' if k != 1 else ''}) "
         "| RMSEE paper | sigma ours (median) | sigma paper | RMSE vs noisy z | fit time (s) |"
     )
     lines = [head, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        c, p = r["config"], r["paper"]
-        std = "" if r["rmsee_std"] is None else f" ± {r['rmsee_std']:.2f}"
+        c = r["config"]
+        std = "" if r["std"] is None else f" ± {r['std']:.2f}"
         lines.append(
-            f"| {', '.join(r['tables'])} | {c['My']} | {c['p']} | {c['gamma']:g} | {r['N']} "
-            f"| {r['rmsee_mean']:.2f}{std} | {p['rmsee']:.2f} | {_fmt_sigma(r['sigma_median'])} "
-            f"| {_fmt_sigma(p['sigma'])} | {r['rmse_vs_noisy_z_mean']:.2f} | {r['fit_time_s_mean']:.2f} |"
+            f"| {', '.join(c['tables'])} | {c['My']} | {c['p']} | {c['gamma']:g} | {c['N']} "
+            f"| {r['value']:.2f}{std} | {r['paper']:.2f} | {_fmt_sigma(c['sigma_median'])} "
+            f"| {_fmt_sigma(c['paper_sigma'])} | {c['rmse_vs_noisy_z_mean']:.2f} | {c['fit_time_s_mean']:.2f} |"
         )
     text = "\n".join(lines) + "\n"
     if notes:
-        s = result["setup"]
+        s = result["config"]["setup"]
         text += (
-            f"\nSeeds {', '.join(str(x) for x in result['seeds'])}. Training on T = {s['n_train']} samples, "
+            f"\nSeeds {', '.join(str(x) for x in seeds)}. Training on T = {s['n_train']} samples, "
             f"RMSEE (eq. 17) over Ts = {s['n_test']} later estimates against the noise-free z = x2*x3; "
             f"zero-order Tikhonov, sigma by {s['cv_folds']}-fold cross-validation on the training data "
             f"({len(s['sigma_grid'])} candidates {min(s['sigma_grid']):.0e} .. {max(s['sigma_grid']):.0e}). "
@@ -480,10 +467,12 @@ def main(argv: list[str] | None = None) -> int:
     args.outdir.mkdir(parents=True, exist_ok=True)
 
     with Executor(workers=args.workers, scheduler=args.scheduler) as ex:
-        res = run_lorenz_tables(seeds=seeds, rows=rows, progress=lambda msg: print(msg, flush=True), executor=ex)
+        res = run_lorenz_tables(seeds=seeds, rows=rows, progress=lambda msg: print(msg, flush=True), executor=ex,
+                                quick=args.quick)
     md = markdown_table(res)
-    json_path = atomic_write_text(args.outdir / f"{stem}.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
+    json_path = br.write_results(args.outdir / f"{stem}.json", res)
     env = res["environment"]
+    pk = env["packages"]
     md_text = (
         "# Lorenz system: Tables II-V of the paper, reproduced\n\n"
         "Generated by `python benchmarks/lorenz_tables.py"
@@ -492,16 +481,16 @@ def main(argv: list[str] | None = None) -> int:
         + json_path.name
         + "`.\n\n"
         + md
-        + f"\nEnvironment: Python {env['python']}, numpy {env['numpy']}, scipy {env['scipy']}, "
-        f"{env['cpu_count']} CPUs. Total run time {res['total_time_s']:.1f} s.\n"
+        + f"\nEnvironment: Python {env['python']}, numpy {pk.get('numpy')}, scipy {pk.get('scipy')}, "
+        f"{res['config']['cpu_count']} CPUs. Total run time {env['elapsed_s']:.1f} s.\n"
     )
     md_path = atomic_write_text(args.outdir / f"{stem}.md", md_text)
     print()
     print(md)
-    base = next((r for r in res["rows"] if r["id"] == "My4-p7-g1.2"), None)
+    base = next(iter(br.find_rows(res, config={"id": "My4-p7-g1.2"})), None)
     if base is not None:
-        verdict = "meets" if base["rmsee_mean_le_paper"] else "does NOT meet"
-        print(f"baseline My=4, p=7, gamma=1.2: mean RMSEE {base['rmsee_mean']:.2f} {verdict} the paper's {base['paper']['rmsee']}")
+        verdict = "meets" if base["config"]["rmsee_mean_le_paper"] else "does NOT meet"
+        print(f"baseline My=4, p=7, gamma=1.2: mean RMSEE {base['value']:.2f} {verdict} the paper's {base['paper']}")
     print(f"wrote {json_path} and {md_path}")
     return 0
 

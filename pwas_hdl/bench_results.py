@@ -53,7 +53,6 @@ __all__ = [
     "find_rows",
     "markdown_table",
     "schema",
-    "from_lorenz_tables",
 ]
 
 RESULTS_FORMAT = "pwas-hdl-bench-results"
@@ -277,26 +276,6 @@ def markdown_table(doc: Mapping[str, Any], config_keys: Sequence[str] = ()) -> s
         cells += [val, str(r["runs"]), _fmt(r["paper"]) if r["paper"] is not None else ""]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def from_lorenz_tables(result: Mapping[str, Any]) -> dict:
-    """The ``pwas-hdl-bench-lorenz-tables`` v1 result of ``bench lorenz`` in this format.
-
-    One row per configuration of Tables II-V: the RMSEE (eq. 17) of the float PWAS over the seeds,
-    the paper's figure, and ``My``, ``p``, ``gamma``, ``N``, the tables and the median sigma.
-    """
-    if result.get("format") != "pwas-hdl-bench-lorenz-tables" or result.get("version") != 1:
-        raise InputError("not a pwas-hdl-bench-lorenz-tables v1 result (run `pwas-hdl bench lorenz` to make one)")
-    rows = []
-    for r in result["rows"]:
-        cfg = dict(r["config"]) | {"N": r["N"], "tables": r["tables"], "sigma_median": r["sigma_median"],
-                                   "paper_sigma": r["paper"].get("sigma"), "units": "z = x2 x3"}
-        rows.append(row_from_values("lorenz", "z", "pwas", "float", "rmse", [x["rmsee"] for x in r["per_seed"]],
-                                    r["paper"].get("rmsee"), cfg))
-    setup = result.get("setup", {})
-    assumptions = {"seed_000.lorenz": str(setup.get("protocol", "")), "seed_000.rmsee": str(setup.get("rmsee", ""))}
-    return make_results("lorenz", rows, assumptions, {"seeds": result.get("seeds"), "setup": setup},
-                        "Seed 000 Tables II-V (converted from the bench lorenz result)")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1009,7 +1009,7 @@ def make_data_battery(
 
 @bench_app.command("lorenz")
 def bench_lorenz(
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="JSON result file to write. Required.", show_default=False)] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Result file to write (format pwas-hdl-bench-results v1). Required.", show_default=False)] = None,
     markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write a Markdown table here.")] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds (0..seeds-1) to average over.")] = 5,
     quick: Annotated[bool, typer.Option("--quick", help="Only the Table II row (My=4, p=7, gamma=1.2).")] = False,
@@ -1031,7 +1031,7 @@ def bench_lorenz(
         rows = [r for r in lorenz_tables.PAPER_ROWS if (r.my, r.p, r.gamma) == (4, 7, 1.2)] if quick else None
 
         with _executor(workers, scheduler) as ex:
-            result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=_say, executor=ex)
+            result = lorenz_tables.run_lorenz_tables(seeds=range(seeds), rows=rows, progress=_say, executor=ex, quick=quick)
         table = lorenz_tables.markdown_table(result)
         with outset:
             outset.write_text(json_out, json.dumps(result, indent=2) + "\n")

@@ -63,14 +63,16 @@ def test_row_refuses_unknown_stage_and_metric():
         br.row("s", "x", "e", "float", "mae", 1.0)
 
 
-def test_lorenz_tables_result_converts(tmp_path):
+def test_committed_bench_results_validate():
+    """Every committed benchmarks/results/*.json that is a bench result satisfies the schema."""
     from pathlib import Path
 
-    src = json.loads((Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "lorenz_tables.json").read_text())
-    doc = br.from_lorenz_tables(src)
-    base = br.find_rows(doc, config={"My": 4, "p": 7, "gamma": 1.2})
-    assert len(base) == 1 and base[0]["paper"] == 22.45 and base[0]["runs"] == len(src["seeds"])
-    assert base[0]["value"] == pytest.approx(src["rows"][0]["rmsee_mean"])
-    br.write_results(tmp_path / "l.json", doc)
-    with pytest.raises(InputError, match="lorenz-tables"):
-        br.from_lorenz_tables({"format": "other"})
+    results = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+    checked = []
+    for f in sorted(results.glob("*.json")):
+        doc = json.loads(f.read_text())
+        if isinstance(doc, dict) and doc.get("format") == br.RESULTS_FORMAT:
+            br.load_results(f)  # raises InputError naming the first violation
+            checked.append(f.stem)
+    # the system benches and the Lorenz tables (bench lorenz writes this format directly now)
+    assert {"lorenz_tables", "three_tank", "switched_linear", "lorenz_hlnn"} <= set(checked)

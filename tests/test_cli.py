@@ -125,11 +125,15 @@ def test_bench_lorenz_quick(tmp_path):
         raise AssertionError(f"{out} holds the non-JSON constant {name}")
 
     data = json.loads(out.read_text(), parse_constant=no_constants)
-    assert [r["id"] for r in data["rows"]] == ["My4-p7-g1.2"]  # --quick: the Table II row only
+    from pwas_hdl import bench_results as br
+
+    br.validate_results(data)  # the shared bench results format
+    assert data["quick"] is True
+    assert [r["config"]["id"] for r in data["rows"]] == ["My4-p7-g1.2"]  # --quick: the Table II row only
     row = data["rows"][0]
-    assert [r["seed"] for r in row["per_seed"]] == [0]
-    assert math.isfinite(row["rmsee_mean"]) and row["rmsee_mean"] > 0
-    assert row["rmsee_mean"] == row["per_seed"][0]["rmsee"]
+    assert [r["seed"] for r in row["config"]["per_seed"]] == [0]
+    assert math.isfinite(row["value"]) and row["value"] > 0
+    assert row["value"] == row["config"]["per_seed"][0]["rmsee"]
     assert md.read_text() == markdown_table(data)  # the Markdown is the table of the JSON written
 
 

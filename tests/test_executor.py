@@ -115,10 +115,11 @@ def test_bench_lorenz_quick_identical_on_two_workers(tmp_path):
     r2 = runner.invoke(app, ["bench", "lorenz", "--quick", "--seeds", "2", "--workers", "2", "--json", str(dist)])
     assert r2.exit_code == 0, r2.output
     a, b = json.loads(serial.read_text()), json.loads(dist.read_text())
-    assert [s["seed"] for s in b["rows"][0]["per_seed"]] == [0, 1]
+    assert [s["seed"] for s in b["rows"][0]["config"]["per_seed"]] == [0, 1]
     assert _without_timings(a) == _without_timings(b)
     # the numbers themselves, not only their presence
-    assert a["rows"][0]["rmsee_mean"] == b["rows"][0]["rmsee_mean"]
+    assert a["rows"][0]["value"] == b["rows"][0]["value"]
+    assert [s["rmsee"] for s in a["rows"][0]["config"]["per_seed"]] == [s["rmsee"] for s in b["rows"][0]["config"]["per_seed"]]
 
 
 @pytest.mark.slow

@@ -4,6 +4,7 @@ import json
 
 import pytest
 
+from pwas_hdl import bench_results as br
 from pwas_hdl.benchmarks.lorenz_tables import PAPER_ROWS, find_row, markdown_table, run_lorenz_tables
 
 
@@ -23,14 +24,16 @@ def test_quick_run_is_deterministic_plain_json_and_scored_on_n_test_estimates():
     kw = dict(seeds=[0], rows=["My4-p7-g1.2"], n_train=1500, n_test=400, sigma_grid=[1e-4, 1e-2, 1.0])
     res = run_lorenz_tables(**kw)
     json.dumps(res, allow_nan=False)
-    assert set(res) == {"format", "version", "setup", "seeds", "environment", "rows", "total_time_s"}  # no timestamp
+    br.validate_results(res)  # the shared bench results format (bench-results-v1), written directly
+    assert res["format"] == br.RESULTS_FORMAT and res["bench"] == "lorenz" and "timestamp" not in json.dumps(res)
     (row,) = res["rows"]
-    assert row["N"] == 4096 and row["rmsee_std"] is None
-    rec = row["per_seed"][0]
+    assert (row["system"], row["target"], row["estimator"], row["stage"], row["metric"]) == ("lorenz", "z", "pwas", "float", "rmse")
+    assert row["config"]["N"] == 4096 and row["std"] is None and row["runs"] == 1 and row["paper"] == 22.45
+    rec = row["config"]["per_seed"][0]
     assert rec["sigma"] in (1e-4, 1e-2, 1.0)
-    assert 0 < rec["rmsee"] < 100 and rec["test_out_of_domain"] >= 0
-    assert res["setup"]["trajectory_samples"] == 1500 + 400 + 4
-    again = run_lorenz_tables(**kw)["rows"][0]["per_seed"][0]
+    assert 0 < rec["rmsee"] < 100 and rec["test_out_of_domain"] >= 0 and row["value"] == rec["rmsee"]
+    assert res["config"]["setup"]["trajectory_samples"] == 1500 + 400 + 4
+    again = run_lorenz_tables(**kw)["rows"][0]["config"]["per_seed"][0]
     assert (again["rmsee"], again["sigma"]) == (rec["rmsee"], rec["sigma"])
     md = markdown_table(res)
     assert "| II, III, IV, V | 4 | 7 | 1.2 | 4096 |" in md and "22.45" in md
@@ -38,9 +41,9 @@ def test_quick_run_is_deterministic_plain_json_and_scored_on_n_test_estimates():
 
 def test_rows_share_training_and_test_samples():
     res = run_lorenz_tables(seeds=[0, 1], rows=[(3, 7, 1.2), (4, 1, 1.2)], n_train=800, n_test=200, sigma_grid=[1e-3])
-    assert [r["id"] for r in res["rows"]] == ["My3-p7-g1.2", "My4-p1-g1.2"]
-    assert all(r["rmsee_std"] is not None and len(r["per_seed"]) == 2 for r in res["rows"])
-    assert res["setup"]["test_estimates"] == "[804, 1004)"
+    assert [r["config"]["id"] for r in res["rows"]] == ["My3-p7-g1.2", "My4-p1-g1.2"]
+    assert all(r["std"] is not None and r["runs"] == 2 and len(r["config"]["per_seed"]) == 2 for r in res["rows"])
+    assert res["config"]["setup"]["test_estimates"] == "[804, 1004)"
 
 
 @pytest.mark.parametrize(
