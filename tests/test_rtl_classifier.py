@@ -175,3 +175,20 @@ def test_simulate_writes_the_class_column(folders, sim_cache, tmp_path):
     truth = d.mode[r["rows"]]
     hw = np.array([float(row[i_hw]) for row in rows])
     assert np.mean(hw == truth) > 0.6  # a working mode classifier, not a constant
+
+
+@pytest.mark.rtl
+def test_switched_linear_bench_rtl_rows():
+    """`bench switched-linear` rtl rows: the classifier's RTL replay gives the bit-true accuracy / F1 exactly."""
+    from pwas_hdl import bench_results as br
+    from pwas_hdl.benchmarks.switched_linear import markdown, run_switched_linear
+
+    doc, _ = run_switched_linear(quick=True, rtl="icarus")
+    br.validate_results(doc)
+    assert doc["config"]["rtl"]["replays"] == 1 and doc["config"]["rtl"]["class_mismatches_vs_bittrue"] == 0
+    for tgt in ["mode"] + [f"mode={c}" for c in MODES]:
+        (hw,) = br.find_rows(doc, target=tgt, estimator="pwas-classifier", stage="rtl")
+        (bt,) = br.find_rows(doc, target=tgt, estimator="pwas-classifier", stage="bittrue")
+        assert hw["metric"] == ("accuracy" if tgt == "mode" else "f1")
+        assert hw["value"] == bt["value"] and 0.5 < hw["value"] <= 1.0
+    assert "| pwas-classifier | rtl |" in markdown(doc)
