@@ -378,7 +378,8 @@ def build_design(
         files["verilog"]: verilog,
         "model.json": model,
         "manifest.json": manifest_text(man),
-        "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else ""),
+        "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else "")
+        + (_classifier_section(man) if "classifier" in man else ""),
         files["instance_template"]: _instance(man),
         files["fusesoc_core"]: _fusesoc(man, memory_init),
         **hexes,
@@ -464,6 +465,16 @@ def design_hash(files: dict[str, str]) -> str:
         h.update(f"{name}\0{len(data)}\0".encode("utf-8"))
         h.update(data)
     return h.hexdigest()
+
+
+def _classifier_section(man: dict) -> str:
+    """Report section of a classifier design (the argmax stage and its class-index field)."""
+    c = man["classifier"]
+    labels = ", ".join(f"{v:g}" for v in c["classes"])
+    return (f"\n## Classifier\n\nTarget `{c['target']}`, {c['n_classes']} classes ({labels}, in index order). An argmax "
+            f"stage after the core ({c['stage_latency_cycles']} cycle(s), included in the latency) writes the class index "
+            f"to `{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}]` (`{c['field']}`); ties go to the lowest class index. "
+            f"{c['float_agreement'][0].upper()}{c['float_agreement'][1:]}.\n")
 
 
 def _timing_section(timing: dict) -> str:

@@ -33,6 +33,11 @@ LSB first as listed by ``design_info(...)["payload"]``:
 ``warm``           out     sensor top only: the lag bank holds ``M-1`` samples
 =================  ======  ==========================================================
 
+A classifier model (``classifier=`` of :func:`build_core` / :func:`build_sensor`) adds an
+:class:`~pwas_hdl.hdl.argmax.ArgmaxStage` after the core: ``out__payload`` then ends with the class
+index (``class_index``, ties to the lowest index) and the latency grows by
+:func:`~pwas_hdl.hdl.argmax.argmax_latency`.
+
 Latency (cycles from the input transfer to ``out__valid``, no stalls) is ``component.latency``
 = ``Pipeline.latency(n)`` = split + rank + 1 (memory) + mem_out + product
 + ceil(ceil(log2(n+1)) / tree_levels) + 1 (output); II = 1.
@@ -43,6 +48,7 @@ from pwas_hdl.hdl.emit import emit_verilog, memory_hex_files, normalise_verilog,
 from pwas_hdl.hdl.params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeline
 from pwas_hdl.hdl.api import build_core, build_sensor, design_info
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
+from pwas_hdl.hdl.argmax import ArgmaxStage, argmax_latency
 
 __all__ = [
     "PWASCore",
@@ -56,6 +62,8 @@ __all__ = [
     "build_sensor",
     "PWASSensorTop",
     "lag_plan",
+    "ArgmaxStage",
+    "argmax_latency",
     "design_info",
     "emit_verilog",
     "memory_hex_files",

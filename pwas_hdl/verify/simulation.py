@@ -780,7 +780,7 @@ def simulate_data(
 
     Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult,
     "rows": ndarray (m,), "estimates": ndarray (m, nz)}``: the data row of each hardware output and
-    the hardware estimates in physical units. Differences do not raise: mismatches against the
+    the hardware estimates in physical units; a classifier design adds ``"class_index"`` (m,). Differences do not raise: mismatches against the
     bit-true model, testbench failures, a measured latency or II other than the manifest's and
     errors beyond the bound are listed in ``summary["checks"]`` (``passed`` false: the CLI exits
     with status 1). Both files are written or neither; every path is checked before the
@@ -966,7 +966,10 @@ def simulate_data(
     outset.write_text(output, csv_text)
     outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
     outset.commit()
-    return {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
+    ret = {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
+    if clf is not None:
+        ret["class_index"] = hw_cls  # the RTL's class index of each output (classifier designs)
+    return ret
 
 
 def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: np.ndarray, zf: np.ndarray,
