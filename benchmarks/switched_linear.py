@@ -18,7 +18,12 @@ Protocol (``seed-specs/seed_003.md`` §4-5; every assumption is written into the
   (nz = 3) on one shared grid, argmax decision (``pwas-classifier``); float and bit-true (default
   formats, 12-bit inputs);
 * noise study: Gaussian noise on y (std 0.01, 0.02, 0.05) on training and test data; errors are
-  against the noise-free states, the output MSE against the measured y (as the paper's y_r - y_e).
+  against the noise-free states, the output MSE against the measured y (as the paper's y_r - y_e);
+* RTL (``stage: rtl``, noise-free runs): the classifier generated as the virtual-sensor top
+  (lag bank + core + argmax stage, default formats) and the long test run replayed through it in
+  a Verilog simulator (cocotb, ``rtl="icarus"``; the full run's default, off under ``--quick``);
+  mode accuracy / F1 from the RTL's class index, which is also checked against the bit-true argmax
+  (``config.rtl.class_mismatches_vs_bittrue``).
 
 Paper figures (Table 1): output MSE 0.0069 (known mode), 0.0966 (unknown mode).
 Usage: ``python benchmarks/switched_linear.py [--runs 5] [--quick]`` or
@@ -74,10 +79,18 @@ def run_switched_linear(
     samples: int = 1000,
     test_samples: int = 2000,
     progress: Callable[[str], None] | None = None,
+    rtl: str | None = "default",
 ) -> tuple[dict, dict]:
-    """Run the bench; returns the document and traces (time law, no noise, run 0) for :func:`plot`."""
+    """Run the bench; returns the document and traces (time law, no noise, run 0) for :func:`plot`.
+
+    ``rtl``: simulator of the RTL replay of the classifier (``"icarus"`` or ``"verilator"``), or
+    None for none; ``"default"``: ``"icarus"`` for the full run, None with ``quick``.
+    """
     say = progress or (lambda s: None)
     t0 = time.monotonic()
+    if rtl == "default":
+        rtl = None if quick else "icarus"
+    rtl_info: dict = {"simulator": rtl, "replays": 0, "samples": 0, "class_mismatches_vs_bittrue": 0}
     if quick:
         runs, noises, laws, train_runs, test_samples, cands = 1, (0.0,), ("time",), 4, 1000, (CANDIDATES[0],)
     else:
@@ -145,6 +158,17 @@ def run_switched_linear(
                             put(("long", f"mode={c}", ename, stage, "f1", law, noise), sc["f1"][c])
                         if onehot and stage == "float":
                             pw_tr["mode"] = np.concatenate([np.zeros(start, dtype=int), pred])
+                    if onehot and rtl and noise == 0.0:
+                        say(f"  RTL replay of the classifier ({rtl}, {len(d.y)} samples) ...")
+                        pred, n_mism = _rtl_classes(m, d, rtl)
+                        ok = np.arange(len(d.y)) >= start
+                        sc = mode_scores(d.mode[ok], pred[ok], MODES)
+                        put(("long", "mode", ename, "rtl", "accuracy", law, noise), sc["accuracy"])
+                        for c in MODES:
+                            put(("long", f"mode={c}", ename, "rtl", "f1", law, noise), sc["f1"][c])
+                        rtl_info["replays"] += 1
+                        rtl_info["samples"] += int(ok.sum())
+                        rtl_info["class_mismatches_vs_bittrue"] += n_mism
                 if law == "time" and noise == 0.0 and r == 0:
                     rep = tests["replica"]
                     traces = {"replica": {"y": rep.y[:, 0], **{k: o.y_hat for k, o in obs["replica"].items()}},
@@ -168,6 +192,8 @@ def run_switched_linear(
         "candidates": [c.label() for c in cands], "chosen": {t: c.label() for t, c in chosen.items()},
         "validation_rmse": validation,
         "seeds": "replica run r: seed r; long test: seed 5000 + r; training: seed 1000 (r + 1); selection: seed 1000",
+        "rtl": rtl_info | {"design": "sensor (lag bank + core + argmax stage), default formats", "noise_levels": [0.0],
+                           "test": "long"},
     }
     assumptions = dict(SWITCHED_ASSUMPTIONS)
     assumptions["seed_003.A3"] = ("detector theta_hat = argmin_i |y_k - C_i xhat^i_k| (single-sample residual); bank = "
@@ -178,6 +204,26 @@ def run_switched_linear(
                           "Seed 003: virtual estimator (bank + detector + switched observer) vs PWAS state sensors and mode classifier",
                           quick, time.monotonic() - t0)
     return doc, traces
+
+
+def _rtl_classes(model, d, simulator: str) -> tuple[np.ndarray, int]:
+    """The classifier's RTL (sensor top) replaying test run ``d``: the mode label of every sample
+    (0 before the first output) and the number of class indices differing from the bit-true argmax."""
+    import tempfile
+
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.verify.simulation import simulate_arrays
+
+    model.classifier_ = {"target": "mode", "classes": [float(c) for c in MODES]}
+    with tempfile.TemporaryDirectory(prefix="pwas-bench-rtl-") as tmp:
+        generate(model, Path(tmp) / "design", design="sensor")
+        r = simulate_arrays(Path(tmp) / "design", Path(tmp) / "hw.csv", u=d.u, y=d.y, simulator=simulator)
+    s = r["summary"]
+    if not s["checks"]["passed"]:
+        raise RuntimeError(f"the RTL replay of the classifier failed: {s['checks']['failures'][:2]}")
+    pred = np.zeros(len(d.y), dtype=int)
+    pred[r["rows"]] = np.asarray(MODES)[r["class_index"]]
+    return pred, int(s["classifier"]["class_mismatches"])
 
 
 def markdown(doc: dict) -> str:
@@ -216,7 +262,9 @@ def markdown(doc: dict) -> str:
         for nz in cfg["noise_levels"]:
             c = {"test": "long", "switching": law, "noise_y": nz}
             for est, stage in (("switched-observer", "float"), ("pwas-round", "float"), ("pwas-round", "bittrue"),
-                               ("pwas-classifier", "float"), ("pwas-classifier", "bittrue")):
+                               ("pwas-classifier", "float"), ("pwas-classifier", "bittrue"), ("pwas-classifier", "rtl")):
+                if stage == "rtl" and not br.find_rows(doc, target="mode", estimator=est, stage=stage, config=c):
+                    continue
                 f1 = [cell(target=f"mode={m}", estimator=est, stage=stage, config=c) for m in MODES]
                 out.append(f"| {law} | {nz} | {est} | {stage} | {cell(target='mode', estimator=est, stage=stage, config=c)} | "
                            + " | ".join(f1) + " |")
