@@ -112,7 +112,7 @@ def export_testbench(
     pin, pout = _port(man, "in.payload"), _port(man, "out.payload")
     wi, wo = int(pin["width"]), int(pout["width"])
     vin = native.pack_words(seg.codes, pin["fields"], (wi + 31) // 32)
-    exp = np.concatenate([seg.expected, seg.oor[:, None].astype(np.int64)], axis=1)
+    exp = seg.rows()  # scores, out_of_range[, class_index of a classifier design]
     vexp = native.pack_words(exp, pout["fields"], (wo + 31) // 32)
     if len(exp) < 1:
         raise InputError("the stimulus gives no output (fewer samples than the lags need); use more --samples")
