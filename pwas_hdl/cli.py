@@ -473,6 +473,8 @@ def generate(
     """Generate the Verilog, weight memory (.hex), manifest.json and report.md of a model.
 
     Same inputs give byte-identical files. Nothing is written unless the whole design builds.
+    A classifier model (fit --classify) gets an argmax stage after the core: the class index
+    (ties to the lowest class) in the top bits of the output payload, field class_index.
     """
     from pwas_hdl.design.generate import generate as _generate
 
@@ -575,6 +577,8 @@ def simulate(
     error against the float model (LSB and physical units), the RMSEE of the hardware estimate
     against TARGET_true (or TARGET) when DATA has it, the measured latency (cycles) and II, and
     the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.
+    A classifier design adds C_hat_hw, C_hat_bittrue, C_hat_float (class labels of the RTL's
+    class_index, of the bit-true and of the float argmax; the class is compared too).
     """
     from pwas_hdl.verify.simulation import simulate_data
 
