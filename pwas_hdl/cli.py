@@ -275,6 +275,9 @@ def fit(
     features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
     order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
     blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
+    mz: Annotated[int, typer.Option("--mz", help="Mz: past estimates z_hat(t-1..t-Mz) of every target fed back as regressors (a dynamical sensor; fitted series-parallel, predict runs the recurrence). 0 = static.")] = 0,
+    refine: Annotated[int, typer.Option("--refine", help="With --mz: up to K closed-loop refinements (refit on the simulated estimates while the closed-loop error improves).")] = 0,
+    z0: Annotated[Optional[str], typer.Option("--z0", help="With --mz: initial past estimates, mean (training mean, default), measured (the measured z before the first estimate; predict then reads the target columns) or one value per target (comma list).")] = None,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     from pwas_hdl.fit import classifier as clf
@@ -328,6 +331,17 @@ def fit(
             except ValueError:
                 raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
         parts = _int_list(partitions, "--partitions")
+        if mz < 0 or refine < 0:
+            raise InputError(f"--mz and --refine must be >= 0, got {mz} and {refine}")
+        if (refine or z0 is not None) and not mz:
+            raise InputError("--refine and --z0 need a dynamical sensor: give --mz K (K >= 1)")
+        if mz and (bank or classify):
+            raise InputError("--mz needs the lag front end and a regression target (not --front-end observer-bank or --classify)")
+        init: Any = "mean"
+        if z0 is not None:
+            init = z0.strip() if z0.strip() in ("mean", "measured") else _float_list(z0, "--z0")
+            if not isinstance(init, str) and len(init) != len(tgts):
+                raise InputError(f"--z0 needs one value per target ({len(tgts)}), got {len(init)}")
         from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor(
             mu=mu,
@@ -345,6 +359,9 @@ def fit(
             output_names=outs if (my or bank) else [],
             target_names=tgts,
             front_end=fe,
+            mz=mz,
+            refine=refine,
+            initial_state=init,
         )
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
@@ -358,6 +375,12 @@ def fit(
             f"sigma = {model.sigma_:.3g}{' (CV)' if sigma is None else ''}, "
             f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}"
         )
+        if "recurrence" in d:
+            rf = d["recurrence"]["fit"]
+            _say(f"dynamical sensor (Mz = {mz}): series-parallel RMSE "
+                 f"{', '.join(f'{t}: {v:.4g}' for t, v in rf['series_parallel_rmse'].items())}; closed-loop RMSE "
+                 f"{', '.join(f'{t}: {v:.4g}' for t, v in rf['closed_loop_rmse'].items())} "
+                 f"({rf['iterations_used']} of {refine} refinement(s) kept)")
         _say(f"wrote {output}")
 
 
@@ -388,10 +411,17 @@ def predict(
             table.column_index(traj_col)
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
         y = select_signals(table, outs, traj_col) if model.n_outputs else None
-        zhat, flags = model.predict(u, y, return_flags=True)
-        rows = np.concatenate(
-            [np.arange(sl.start, sl.stop)[model.memory - 1 :] for sl in split_trajectories(table, traj_col)]
-        )
+        lags = model.lags_
+        measured = lags is not None and lags.recurrent and model.initial_state_rule_ == "measured"
+        zin = select_signals(table, tgts, traj_col) if measured else None
+        zhat, flags = model.predict(u, y, return_flags=True, z=zin)
+        first = lags.start if measured else model.memory - 1
+        lead = int(getattr(model, "lead_", 0))
+        spans = split_trajectories(table, traj_col)
+        rows = np.concatenate([np.arange(sl.start, sl.stop)[first:] for sl in spans])
+        # row t of a recurrent map sensor estimates z(t + lead): compared with the row `lead` later
+        ends = np.concatenate([np.full(max(0, sl.stop - sl.start - first), sl.stop) for sl in spans])
+        scored = rows + lead < ends
         cols: dict = {"row": rows}
         classifier = getattr(model, "classifier_", None)
         if classifier is not None:
@@ -421,9 +451,10 @@ def predict(
         for i, t in enumerate(tgts):
             for ref in (f"{t}_true", t):
                 if ref in table.header:
-                    ztrue = table.numeric([ref])[rows, 0]
-                    rmse = float(np.sqrt(np.mean((zhat[:, i] - ztrue) ** 2)))
-                    _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {rows.size} samples")
+                    ztrue = table.numeric([ref])[rows[scored] + lead, 0]
+                    rmse = float(np.sqrt(np.mean((zhat[scored, i] - ztrue) ** 2)))
+                    shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
+                    _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
                     break
         if flags.any():
             _warn(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")

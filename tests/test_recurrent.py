@@ -1,0 +1,125 @@
+"""Dynamical (recurrent) sensors: past estimates as regressors (issue 13, step 1)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.recurrent import run_recurrence
+from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+
+def _linear_system(rng, runs=3, T=300):
+    """z(t) = 0.8 z(t-1) + 0.3 y(t) - 0.1 u(t): affine in the regressor, so a PWAS holds it exactly."""
+    us, ys, zs = [], [], []
+    for _ in range(runs):
+        u = rng.uniform(-1, 1, (T, 1))
+        y = rng.uniform(-1, 1, (T, 1))
+        z = np.empty((T, 1))
+        z[0] = rng.uniform(-1, 1)
+        for t in range(1, T):
+            z[t] = 0.8 * z[t - 1] + 0.3 * y[t] - 0.1 * u[t]
+        us.append(u), ys.append(y), zs.append(z)
+    return us, ys, zs
+
+
+def test_lag_structure_with_past_estimates():
+    ls = LagStructure(1, 2, 1, 1, 2, 1)
+    assert ls.dimension == 5 and ls.start == 2 and ls.io_dimension == 3
+    assert ls.names(["u"], ["y"], ["x"]) == ["u[t]", "y[t-1]", "y[t]", "x_hat[t-2]", "x_hat[t-1]"]
+    T = 6
+    u, y, z = (np.arange(T, dtype=float)[:, None] + k for k in (0, 10, 100))
+    xi = ls.build_series_parallel(u, y, z)
+    assert xi.shape == (T - 2, 5)
+    np.testing.assert_array_equal(xi[0], [2, 11, 12, 100, 101])  # row t = 2
+    with pytest.raises(ValueError, match="needs at least one lag"):
+        LagStructure(0, 0, 0, 0, 1, 1)
+
+
+def test_run_recurrence_lockstep_matches_a_loop():
+    def step(io, zpast):
+        return 0.5 * zpast[:, -1, :] + io[:, :1] + 0.1 * zpast[:, 0, :]
+
+    io = [np.arange(5.0)[:, None], np.arange(3.0)[:, None] * 2]
+    init = [np.array([[1.0], [2.0]]), np.array([[0.0], [-1.0]])]
+    out = run_recurrence(step, io, init)
+    for b, z0, o in zip(io, init, out):
+        past = list(z0[:, 0])
+        for t in range(b.shape[0]):
+            past.append(0.5 * past[-1] + b[t, 0] + 0.1 * past[-2])
+            assert o[t, 0] == pytest.approx(past[-1])
+
+
+def test_dynamical_sensor_recovers_an_affine_recurrence(rng, tmp_path):
+    us, ys, zs = _linear_system(rng)
+    m = PWASVirtualSensor(mu=1, my=1, partitions=2, gamma=2.0, sigma=1e-9, mz=1, refine=2, target_names=["z"])
+    m.fit(us, ys, zs)
+    assert m.lags_.mz == 1 and m.grid_.n == 3
+    assert m.train_rmse_[0] < 1e-6
+    fit = m.recurrence_fit_
+    assert fit["closed_loop_rmse"][0] < 1e-5 and fit["history"][0] >= fit["closed_loop_rmse"][0] - 1e-15
+    # the recurrence from the true initial state reproduces z (rows t = 0 .. T-1 with Mu = My = 1)
+    u2, y2, z2 = _linear_system(np.random.default_rng(5), runs=1)
+    zt = z2[0]
+    m.initial_values_ = np.array([[(zt[0, 0] - 0.3 * y2[0][0, 0] + 0.1 * u2[0][0, 0]) / 0.8]])  # z(-1)
+    zhat = m.predict(u2, y2)
+    np.testing.assert_allclose(zhat[:, 0], zt[:, 0], atol=1e-5)
+    # measured rule: the rows start at t = max(M - 1, Mz) = 1 and need z
+    m.initial_state_rule_ = "measured"
+    with pytest.raises(ValueError, match="measured"):
+        m.predict(u2, y2)
+    zm, flags = m.predict(u2, y2, z=z2, return_flags=True)
+    assert zm.shape == (zt.shape[0] - 1, 1) and flags.shape == (zt.shape[0] - 1,)
+    np.testing.assert_allclose(zm[:, 0], zt[1:, 0], atol=1e-5)
+
+
+def test_model_file_round_trip_of_a_dynamical_sensor(rng, tmp_path):
+    us, ys, zs = _linear_system(rng, runs=2, T=200)
+    m = PWASVirtualSensor(my=2, partitions=3, sigma=1e-6, mz=2, initial_state=[0.25], target_names=["z"],
+                          output_names=["y"]).fit(None, ys, zs)
+    path = m.save(tmp_path / "m.json")
+    d = json.loads(path.read_text())
+    assert d["regressors"] == ["y[t-1]", "y[t]", "z_hat[t-2]", "z_hat[t-1]"]
+    rec = d["recurrence"]
+    assert rec["Mz"] == 2 and rec["lead"] == 0 and rec["initial_state"] == {"rule": "value", "values": {"z": [0.25, 0.25]}}
+    assert set(rec["fit"]) >= {"mode", "series_parallel_rmse", "closed_loop_rmse"}
+    back = PWASVirtualSensor.load(path)
+    np.testing.assert_array_equal(back.predict(None, ys), m.predict(None, ys))
+    assert back.to_json() == m.to_json()
+    # a broken initial state is refused with the key named
+    d["recurrence"]["initial_state"]["values"] = {"z": [0.25]}
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(d))
+    with pytest.raises(InputError, match="initial_state.values"):
+        PWASVirtualSensor.load(bad)
+
+
+def test_dynamical_sensor_bad_parameters(rng):
+    us, ys, zs = _linear_system(rng, runs=1, T=100)
+    with pytest.raises(InputError, match="mz"):
+        PWASVirtualSensor(my=1, mz=-1).fit(None, ys, zs)
+    with pytest.raises(InputError, match="initial_state"):
+        PWASVirtualSensor(my=1, mz=1, sigma=1e-6, initial_state=[1.0, 2.0, 3.0]).fit(None, ys, zs)
+
+
+def test_cli_fit_mz_and_predict(tmp_path, rng):
+    from pwas_hdl.cli import main
+
+    us, ys, zs = _linear_system(rng, runs=1, T=300)
+    rows = ["u,y,z"] + [f"{a},{b},{c}" for a, b, c in zip(us[0][:, 0], ys[0][:, 0], zs[0][:, 0])]
+    data = tmp_path / "d.csv"
+    data.write_text("\n".join(rows) + "\n")
+    model, pred = tmp_path / "m.json", tmp_path / "p.csv"
+    assert main(["fit", str(data), "-o", str(model), "-u", "u", "-y", "y", "-z", "z", "--mu", "1", "--my", "1", "-p", "2",
+                 "--sigma", "1e-9", "--mz", "1", "--refine", "1", "--z0", "measured"]) == 0
+    assert json.loads(model.read_text())["recurrence"]["initial_state"] == {"rule": "measured"}
+    assert main(["predict", str(model), str(data), "-o", str(pred)]) == 0
+    lines = pred.read_text().splitlines()
+    assert lines[0].startswith("row,z_hat") and len(lines) == 300  # header + rows t = 1 .. 299
+    assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--refine", "2"]) == 2
+    assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--mz", "1", "--z0", "1,2"]) == 2
+    assert not (tmp_path / "x.json").exists()
