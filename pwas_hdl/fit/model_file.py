@@ -27,6 +27,9 @@ for a static sensor, so files without it load as before -- no version bump)::
                              "map_error": {"max": .., "rms": .., "n_test": ..}}}   # stats per mode
 
 The regressors then end with the ``nz * Mz`` past estimates ``<target>_hat[t-Mz] .. <target>_hat[t-1]``.
+Optional ``map_fit`` block (a PWAS approximation of a given map, :mod:`pwas_hdl.fit.map_approximation`)::
+
+      "map_fit": {"max_error": {"<target>": ..}, "rms_error": {"<target>": ..}, "n_test": int, "test": "how"}
 
 Floats are written with Python's shortest round-trip representation, so a save / load round trip
 is bit-exact. Reading checks, in this order: strict JSON (no NaN), ``format`` and ``version`` (a
@@ -110,6 +113,11 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
         d["front_end"] = front_end.to_dict()
     if lags is not None and lags.recurrent:  # dynamical sensor (issue 13): pwas_hdl.fit.recurrent
         d["recurrence"] = _recurrence_to_dict(sensor, tgts)
+    map_fit = getattr(sensor, "map_fit_", None)
+    if map_fit is not None:  # a PWAS approximation of a given map (pwas_hdl.fit.map_approximation)
+        d["map_fit"] = {"max_error": {t: float(v) for t, v in zip(tgts, map_fit["max"])},
+                        "rms_error": {t: float(v) for t, v in zip(tgts, map_fit["rms"])},
+                        "n_test": int(map_fit["n_test"]), "test": str(map_fit["test"])}
     return d
 
 
@@ -232,6 +240,8 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
     for t, w in d["weights"].items():
         if len(w) != n_vertices:
             errs.append(f"weights.{t} has {len(w)} values, the grid has N = {n_vertices} vertices")
+    if "map_fit" in d and any(list(d["map_fit"][k]) != tgts for k in ("max_error", "rms_error")):
+        errs.append(f"map_fit.max_error / map_fit.rms_error must have the keys {tgts}")
     if "classifier" in d and len(d["classifier"]["classes"]) != len(tgts):
         errs.append(f"classifier.classes has {len(d['classifier']['classes'])} classes, signals.targets {len(tgts)} targets")
     cv = d["fit"]["cv"]
@@ -326,6 +336,10 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     obj.n_train_ = int(fit["n_train"])
     obj.n_trajectories_ = int(fit["n_trajectories"])
     obj.train_rmse_ = np.array([fit["train_rmse"][t] for t in tgts], dtype=float)
+    if "map_fit" in d:
+        mf = d["map_fit"]
+        obj.map_fit_ = {"max": [mf["max_error"][t] for t in tgts], "rms": [mf["rms_error"][t] for t in tgts],
+                        "n_test": mf["n_test"], "test": mf["test"]}
     if "classifier" in d:
         obj.classifier_ = {"target": d["classifier"]["target"], "classes": [float(c) for c in d["classifier"]["classes"]]}
     return obj
