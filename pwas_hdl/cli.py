@@ -384,6 +384,85 @@ def fit(
         _say(f"wrote {output}")
 
 
+@app.command("fit-map")
+def fit_map_cmd(
+    data: Annotated[Path, typer.Argument(metavar="SAMPLES", help="CSV of samples of the map: its argument columns and its value columns.")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Model file to write (JSON). Required.", show_default=False)] = None,
+    inputs: Annotated[Optional[list[str]], typer.Option("-u", "--inputs", help="Argument column(s) that are inputs u (current sample).")] = None,
+    outputs: Annotated[Optional[list[str]], typer.Option("-y", "--outputs", help="Argument column(s) that are measured outputs y (current sample).")] = None,
+    state: Annotated[Optional[list[str]], typer.Option("--state", help="Argument column(s) that are the observer state z(t): the model becomes a recurrent sensor z(t+1) = f(u(t), y(t), z(t)) (one per -z column, same order).")] = None,
+    targets: Annotated[Optional[list[str]], typer.Option("-z", "--targets", help="Column(s) holding the map's values f (with --state: z(t+1)).")] = None,
+    partitions: Annotated[str, typer.Option("-p", "--partitions", help="Intervals per argument: one integer or a comma list (order: -u, -y, --state).")] = "7",
+    sigma: Annotated[float, typer.Option("--sigma", help="Tikhonov weight (zero order, unnormalised).")] = 1e-8,
+    test_fraction: Annotated[float, typer.Option("--test-fraction", help="Share of the samples held out to measure the max / RMS approximation error (0: measured on the fitting samples).")] = 0.2,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the hold-out split.")] = 0,
+    domain: Annotated[Optional[str], typer.Option("--domain", help="The box 'lo:hi,lo:hi,...' (one pair per argument; default the samples' bounding box).")] = None,
+    z0: Annotated[Optional[str], typer.Option("--z0", help="With --state: the initial state z(0), one value per state (comma list). Required with --state.")] = None,
+    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in SAMPLES: error, or break.")] = "error",
+) -> None:
+    """Fit a PWAS approximation of a map f from samples and write a model file (issue 13).
+
+    The arguments are the -u columns, then the -y columns, then the --state columns. Without
+    --state the model is a static sensor of the current samples (Mu = 1 / My = 1, usable by
+    generate / simulate); with --state it is a recurrent sensor (Mz = 1, lead 1): predict runs
+    z(t+1) = f(u(t), y(t), z(t)) from --z0. The max and RMS error on the held-out samples are
+    printed and stored (model key map_fit).
+    """
+    with _user_errors():
+        from pwas_hdl.fit.map_approximation import fit_map_samples, recurrent_sensor_from_map, static_sensor_from_map
+
+        output = _required(out, "-o/--out", "the model file to write")
+        outset = OutputSet(inputs=[(data, "SAMPLES")])
+        outset.add(output, "-o/--out")
+        ins, outs, sts, tgts = _names(inputs), _names(outputs), _names(state), _names(targets)
+        if not tgts:
+            raise InputError("give the column(s) of the map's values with -z/--targets")
+        if not (ins or outs or sts):
+            raise InputError("give the map's argument columns with -u/--inputs, -y/--outputs and/or --state")
+        if sts and len(sts) != len(tgts):
+            raise InputError(f"--state names {len(sts)} column(s) but -z/--targets {len(tgts)}: one next-state column per state")
+        if sts and z0 is None:
+            raise InputError("--state needs the initial state: give --z0 (one value per state)")
+        if z0 is not None and not sts:
+            raise InputError("--z0 needs --state (a recurrent map)")
+        init = _float_list(z0, "--z0") if z0 is not None else None
+        if init is not None and len(init) != len(sts):
+            raise InputError(f"--z0 needs one value per state ({len(sts)}), got {len(init)}")
+        cols = ins + outs + sts
+        if len(set(cols)) != len(cols):
+            raise InputError(f"an argument column is named twice: {cols}")
+        if not (0.0 <= test_fraction <= 0.9):
+            raise InputError(f"--test-fraction must be in [0, 0.9], got {test_fraction}")
+        parts = _int_list(partitions, "--partitions")
+        box = None
+        if domain is not None:
+            try:
+                pairs = [tuple(float(v) for v in p_.split(":")) for p_ in domain.replace(" ", "").split(",")]
+                box = ([a for a, _ in pairs], [b for _, b in pairs])
+            except ValueError:
+                raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
+            if len(pairs) != len(cols):
+                raise InputError(f"--domain gives {len(pairs)} interval(s) for {len(cols)} argument(s)")
+        table = read_csv(data, blank_rows=blank_rows)
+        x = table.numeric(cols)
+        fx = table.numeric(tgts)
+        approx = fit_map_samples(x, fx, parts[0] if len(parts) == 1 else parts, box=box, sigma=sigma,
+                                 test_fraction=test_fraction, seed=seed)
+        if sts:
+            model = recurrent_sensor_from_map(approx, ins, outs, sts, init)
+        else:
+            model = static_sensor_from_map(approx, ins, outs, tgts)
+        text = model.to_json()
+        with outset:
+            outset.write_text(output, text)
+        e = approx.errors
+        names = sts or tgts
+        _say(f"fitted a PWAS of {', '.join(tgts)} over {', '.join(cols)}: n = {approx.grid.n}, N = {approx.grid.n_vertices} weights; "
+             f"error on {e['test']}: max {', '.join(f'{t}: {v:.4g}' for t, v in zip(names, e['max']))}, RMS "
+             f"{', '.join(f'{t}: {v:.4g}' for t, v in zip(names, e['rms']))}")
+        _say(f"wrote {output}")
+
+
 @app.command()
 def predict(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],

@@ -123,3 +123,66 @@ def test_cli_fit_mz_and_predict(tmp_path, rng):
     assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--refine", "2"]) == 2
     assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--mz", "1", "--z0", "1,2"]) == 2
     assert not (tmp_path / "x.json").exists()
+
+
+# ------------------------------------------------------------------ PWAS approximation of a map (step 2)
+def test_fit_map_is_exact_on_affine_maps_and_reports_errors():
+    from pwas_hdl.fit.map_approximation import fit_map, fit_map_samples
+
+    f = lambda x: np.stack([1.0 + 2.0 * x[:, 0] - x[:, 1], 0.5 * x[:, 1]], axis=1)  # noqa: E731
+    a = fit_map(f, ([0, -1], [2, 1]), 3, n_test=2000)
+    assert max(a.errors["max"]) < 1e-6 and a.errors["n_test"] == 2000
+    rng = np.random.default_rng(1)
+    x = rng.uniform([0, -1], [2, 1], (500, 2))
+    b = fit_map_samples(x, f(x), 3, test_fraction=0.2)
+    assert max(b.errors["rms"]) < 1e-6 and b.errors["n_test"] == 100
+    # a curved map: the error is measured, and shrinks with the partition
+    g = lambda x: np.sqrt(np.abs(x[:, 0]))  # noqa: E731
+    e4, e16 = (fit_map(g, ([0.0], [4.0]), p).errors["rms"][0] for p in (4, 16))
+    assert 0 < e16 < e4 / 2
+    with pytest.raises(InputError, match="box"):
+        fit_map(f, ([0, 1], [2, 1]), 3)
+
+
+def test_recurrent_sensor_of_map_28_matches_the_paper_sensor():
+    from pwas_hdl.fit.map_approximation import fit_map, recurrent_sensor_from_map
+    from pwas_hdl.systems.decoupled_observer import observer_map_28, paper_sensors
+    from pwas_hdl.systems.three_tank import three_tank_paper_run
+
+    a = fit_map(lambda x: observer_map_28(x[:, 0], x[:, 1]), ([0, 0], [25, 25]), 32)
+    s = recurrent_sensor_from_map(a, [], ["y"], ["x3"], [2.0])
+    te = three_tank_paper_run(1000)
+    zh = s.predict(None, te.y)[:, 0]  # row t: x3(t+1)
+    paper = paper_sensors(te.u[:, 0], te.y)[:, 1]
+    w = np.arange(1, 1000) >= 100
+    err = zh[:-1] - te.z_true[1:, 1]
+    assert np.sqrt(np.mean(err[w] ** 2)) <= 0.01  # measured 0.0008 (the paper's (28): 0.0004)
+    assert np.sqrt(np.mean((zh[:-1] - paper[1:])[w] ** 2)) < 0.002
+    d = json.loads(s.to_json())
+    assert d["recurrence"]["lead"] == 1 and d["map_fit"]["n_test"] == 20000
+    back = PWASVirtualSensor.from_dict(d)
+    np.testing.assert_array_equal(back.predict(None, te.y), s.predict(None, te.y))
+
+
+def test_cli_fit_map_static_and_recurrent(tmp_path):
+    from pwas_hdl.cli import main
+
+    rng = np.random.default_rng(0)
+    y, z = rng.uniform(0, 4, 800), rng.uniform(0, 4, 800)
+    f = 0.9 * z + 0.1 * np.sqrt(y)
+    data = tmp_path / "s.csv"
+    data.write_text("y,z,znext\n" + "".join(f"{float(a)!r},{float(b)!r},{float(c)!r}\n" for a, b, c in zip(y, z, f)))
+    rec, stat = tmp_path / "rec.json", tmp_path / "stat.json"
+    assert main(["fit-map", str(data), "-o", str(rec), "-y", "y", "--state", "z", "-z", "znext", "-p", "8", "--z0", "1"]) == 0
+    d = json.loads(rec.read_text())
+    assert d["regressors"] == ["y[t]", "z_hat[t-1]"] and d["recurrence"]["initial_state"]["values"] == {"z": [1.0]}
+    assert d["map_fit"]["n_test"] == 160 and 0 < d["map_fit"]["rms_error"]["z"] < 0.01
+    assert main(["fit-map", str(data), "-o", str(stat), "-y", "y,z", "-z", "znext", "-p", "8"]) == 0
+    assert json.loads(stat.read_text())["lags"] == {"Mu": 0, "My": 1}
+    bad = tmp_path / "bad.json"
+    for args in (["-y", "y", "--state", "z", "-z", "znext"],  # no --z0
+                 ["-y", "y", "-z", "znext", "--z0", "1"],  # --z0 without --state
+                 ["-y", "y", "--state", "z", "-z", "znext", "--z0", "1", "--test-fraction", "2"],
+                 ["-y", "nope", "-z", "znext"], ["-z", "znext"], ["-y", "y,z", "-z", "znext", "--domain", "0:1"]):
+        assert main(["fit-map", str(data), "-o", str(bad), *args]) == 2, args
+    assert not bad.exists()
