@@ -7,7 +7,9 @@ Driven by a JSON job (``PWAS_TB_JOB``, written by :mod:`pwas_hdl.verify.recurren
      "clock_ns": 10, "reset_cycles": 2,
      "runs": [{"name", "p_valid", "p_ready", "seed",
                "segments": [{"words": [packed input words], "expected": [packed output words],
-                             "drain": true, "hold": 0}]}]}
+                             "drain": true, "hold": 0, "record": false}]}]}
+
+``record``: return the output words of the segment (``words``).
 
 Every segment starts with a synchronous reset (so a segment with ``drain: false`` followed by
 another one is a reset in the middle of a run). Checked: every output word equals the bit-true
@@ -92,6 +94,7 @@ async def recurrent_replay(dut):
             rr["segments"].append({"accepted": len(acc), "outputs": len(got), "expected": len(expected), "mismatches": len(mism),
                                    "first_mismatches": [{"output": i, "expected": expected[i], "actual": got[i]} for i in mism[:MAX_REPORTED]],
                                    "latencies": sorted(set(lats)), "spacings": sorted(set(gaps)), "cycles": loop.cycle,
+                                   "words": [int(w) for w in got] if seg.get("record", False) else None,
                                    "problems": problems})
             failures += [f"run {run['name']!r} segment {si}: {p}" for p in problems]
             if mism:

@@ -90,7 +90,8 @@ def standard_recurrent_runs(n: int, seed: int = 0, stalls: tuple[float, float] =
     """Run plans for ``n`` samples: full speed (checks II and latency), and random bubbles and
     stalls with a reset after about a third of the samples (then the whole trajectory again)."""
     cut = max(1, n // 3)
-    return [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": seed, "segments": [{"rows": (0, n), "drain": True}]},
+    return [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": seed,
+             "segments": [{"rows": (0, n), "drain": True, "record": True}]},
             {"name": "stalls-reset", "p_valid": stalls[0], "p_ready": stalls[1], "seed": seed + 1,
              "segments": [{"rows": (0, cut), "drain": False, "hold": 3}, {"rows": (0, n), "drain": True}]}]
 
@@ -134,7 +135,6 @@ def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus"
                            "out_ready": nm["out.ready"], "out_payload": nm["out.payload"], "warm": "warm"},
                  "latency": design.latency, "ii": design.ii, "warmup": int(design.top.warmup), "runs": []}
     cache: dict = {}
-    last_out = None
     for plan in plans:
         segs = []
         for seg in plan["segments"]:
@@ -142,7 +142,8 @@ def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus"
             if (a, b) not in cache:
                 cache[(a, b)] = design.words(codes[a:b])
             ins, outs, oc = cache[(a, b)]
-            segs.append({"words": ins, "expected": outs, "drain": bool(seg.get("drain", True)), "hold": int(seg.get("hold", 0))})
+            segs.append({"words": ins, "expected": outs, "drain": bool(seg.get("drain", True)), "hold": int(seg.get("hold", 0)),
+                         "record": bool(seg.get("record", False))})
         job["runs"].append({k: plan[k] for k in ("name", "p_valid", "p_ready", "seed")} | {"segments": segs})
     with tempfile.TemporaryDirectory(prefix="pwas-rec-") as tmp:
         wd = Path(work_dir) if work_dir is not None else Path(tmp)
@@ -155,11 +156,13 @@ def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus"
     seg0 = res["runs"][0]["segments"][-1] if res.get("runs") else None
     _, outs_exp, oc = cache[tuple(first)]
     res["bittrue_out"] = oc
+    res["rtl_out"] = None
+    if seg0 is not None and seg0.get("words") is not None:  # decoded output codes of the RTL (without the flag)
+        res["rtl_out"] = np.array([unpack_fields(w, design.out_fields)[:-1] for w in seg0["words"]], dtype=np.int64)
     res["build_s"] = bld.build_seconds
     res["simulator"] = simulator
     res["n_samples"] = int(codes.shape[0])
     res["mismatches"] = int(sum(s["mismatches"] for r in res.get("runs", []) for s in r["segments"]))
     res["outputs_compared"] = int(sum(min(s["outputs"], s["expected"]) for r in res.get("runs", []) for s in r["segments"]))
     res["passed"] = bool(res.get("passed")) and not res.get("failures")
-    del last_out, seg0, outs_exp
     return res
