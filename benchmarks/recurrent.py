@@ -16,6 +16,7 @@ Protocol (every choice is written into the result file's ``config.recurrent``):
   step; 12 bits are reported too for the map-28 sensor), other formats by default;
 * *RTL*: Icarus replay (cocotb, ``sim/pwas_recurrent_tb.py``) of the noise-free run 0, the RTL's
   own output codes (the bench also checks them against the bit-true model: ``rtl_mismatches``);
+  ``--quick``: the map sensors only;
 * *Lorenz*: the data of eq. (18) (6000 training samples, 2000 test samples after them, seed =
   run), RMSEE against the noise-free ``z``: plain ``My = 4, p = 7`` (Table II), plain ``My = 2``,
   and ``My = 2`` with ``Mz = 1, 2`` (``p = 7``, sigma by 5-fold CV, refine 3, initial state the
@@ -102,7 +103,7 @@ def recurrent_rows(runs: int, quick: bool, train_runs: int, samples: int, chosen
             est[("pwas-dyn", "bittrue")] = _pad(ddes.rmodel.predict(du, test.y)[:, 0], start, samples)
             extra.setdefault(("pwas-dyn", tgt, "fit"), []).append(dyn.recurrence_fit_)
             if r == 0:
-                for nm, des, lead in ((name, designs[tgt], True), ("pwas-dyn", ddes, False)):
+                for nm, des, lead in ((name, designs[tgt], True),) + ((("pwas-dyn", ddes, False),) if not quick else ()):
                     uu = du if nm == "pwas-dyn" else u
                     codes = des.rmodel.quantize_signals(uu, test.y)
                     rr = replay(des, codes, simulator, runs=[{"name": "paper-run", "p_valid": 1.0, "p_ready": 1.0, "seed": 0,
