@@ -186,3 +186,22 @@ def test_cli_fit_map_static_and_recurrent(tmp_path):
                  ["-y", "nope", "-z", "znext"], ["-z", "znext"], ["-y", "y,z", "-z", "znext", "--domain", "0:1"]):
         assert main(["fit-map", str(data), "-o", str(bad), *args]) == 2, args
     assert not bad.exists()
+
+
+def test_lag_sensor_top_and_regressors_refuse_a_recurrent_model(rng, tmp_path):
+    from pwas_hdl.cli import main
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.hdl.api import build_sensor
+
+    us, ys, zs = _linear_system(rng, runs=1, T=200)
+    m = PWASVirtualSensor(my=1, partitions=2, sigma=1e-6, mz=1, target_names=["z"], output_names=["y"]).fit(None, ys, zs)
+    fxm = FixedPointModel.from_sensor(m)
+    assert fxm.regressor_signals == [("y", 0), ("z_hat", 1)]
+    with pytest.raises(InputError, match="recurrent"):
+        build_sensor(fxm, m.lags_)
+    with pytest.raises(InputError, match="recurrent"):
+        m.regressors(None, ys)
+    assert m.score(None, ys, zs) > 0.99
+    model = m.save(tmp_path / "m.json")
+    assert main(["generate", str(model), "-o", str(tmp_path / "g"), "--design", "sensor"]) == 2
+    assert not (tmp_path / "g").exists()

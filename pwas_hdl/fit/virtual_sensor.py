@@ -196,6 +196,11 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             self._check_fitted()
             return self._bank_regressors(self.front_end_, self.lags_, u, y)
         lags = self.lags_ if hasattr(self, "lags_") else self._infer_lags(u, y)
+        if lags is not None and lags.recurrent:
+            raise InputError(
+                f"this sensor is recurrent (Mz = {lags.mz}): its regressor holds its own past estimates, which only the "
+                "recurrence produces; use predict() (or LagStructure.build_series_parallel with the measured z)"
+            )
         return self._build_regressors(lags, u, y)
 
     def _bank_regressors(self, fe: ObserverBankFrontEnd, lags: LagStructure | None, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
@@ -509,7 +514,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         from sklearn.metrics import r2_score
 
         zhat = self.predict(u, y)
-        _, valid = self.regressors(u, y)
+        if self.lags_ is not None and self.lags_.recurrent:  # the rows of the recurrence ("value" rule)
+            _, valid = self._build_regressors(self.lags_, u, y)
+        else:
+            _, valid = self.regressors(u, y)
         zs = as_trajectories(z, "z")
         if len(zs) != len(valid):
             raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
