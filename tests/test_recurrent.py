@@ -194,14 +194,18 @@ def test_lag_sensor_top_and_regressors_refuse_a_recurrent_model(rng, tmp_path):
     from pwas_hdl.hdl.api import build_sensor
 
     us, ys, zs = _linear_system(rng, runs=1, T=200)
-    m = PWASVirtualSensor(my=1, partitions=2, sigma=1e-6, mz=1, target_names=["z"], output_names=["y"]).fit(None, ys, zs)
+    m = PWASVirtualSensor(mu=1, my=1, partitions=2, sigma=1e-6, mz=1, target_names=["z"], output_names=["y"],
+                          input_names=["u"]).fit(us, ys, zs)
     fxm = FixedPointModel.from_sensor(m)
-    assert fxm.regressor_signals == [("y", 0), ("z_hat", 1)]
+    assert fxm.regressor_signals == [("u", 0), ("y", 0), ("z_hat", 1)]
     with pytest.raises(InputError, match="recurrent"):
         build_sensor(fxm, m.lags_)
     with pytest.raises(InputError, match="recurrent"):
-        m.regressors(None, ys)
-    assert m.score(None, ys, zs) > 0.99
+        m.regressors(us, ys)
+    from sklearn.metrics import r2_score
+
+    # the recurrence from the training mean, over the rows t = 0 .. T-1
+    assert m.score(us, ys, zs) == pytest.approx(r2_score(zs[0], m.predict(us, ys)))
     model = m.save(tmp_path / "m.json")
     assert main(["generate", str(model), "-o", str(tmp_path / "g"), "--design", "sensor"]) == 2
     assert not (tmp_path / "g").exists()
