@@ -77,6 +77,11 @@ def test_recurrent_top_is_deterministic_and_states_ii():
     assert d.ii == d.latency >= 1
     info = d.top.extra_info["recurrence"]
     assert info["ii_cycles"] == d.ii and info["feedback"][0]["initial_codes"] == [int(d.rmodel.initial_codes[0, 0])]
+    from pwas_hdl.hdl.api import design_info
+
+    di = design_info(d.top)
+    assert di["kind"] == "recurrent-sensor" and di["ii"] == di["latency"] == d.latency
+    assert "busy" in di["flow_control"]["in.ready"] and di["lags"]["regressor"][-1] == {"signal": "x3_hat", "lag": 1}
 
 
 @pytest.mark.rtl

@@ -112,6 +112,14 @@ class PWASRecurrentTop(wiring.Component):
                                         for c, fb in enumerate(self.feedback)],
                            "flow": "one sample in flight: in.ready is low from a transfer that reaches the core until its "
                                    "output is transferred; the requantised output bypasses into the next regressor"},
+            # replaces design_info's generic entry (whose in.ready = advance holds for the feed-forward designs only)
+            "flow_control": {
+                "in.ready": "~busy | (out.valid & out.ready): low from a transfer that reaches the core until its output is "
+                            "transferred (1 during the warm-up)",
+                "ii": f"{self.ii} cycles between accepted samples when out.ready stays high (= latency)",
+                "latency": f"the output of a transfer in cycle t is valid in cycle t + {self.latency} when out.ready stays high",
+                "reset": "synchronous: clears the pipeline and the warm-up, restores the initial state codes",
+            },
         }
 
     def expected_outputs(self, n_samples: int) -> int:
