@@ -342,6 +342,8 @@ def fit(
             init = z0.strip() if z0.strip() in ("mean", "measured") else _float_list(z0, "--z0")
             if not isinstance(init, str) and len(init) != len(tgts):
                 raise InputError(f"--z0 needs one value per target ({len(tgts)}), got {len(init)}")
+            if not isinstance(init, str) and not all(np.isfinite(init)):
+                raise InputError(f"--z0 values must be finite numbers, got {z0!r}")
         from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor(
             mu=mu,
@@ -428,6 +430,8 @@ def fit_map_cmd(
         init = _float_list(z0, "--z0") if z0 is not None else None
         if init is not None and len(init) != len(sts):
             raise InputError(f"--z0 needs one value per state ({len(sts)}), got {len(init)}")
+        if init is not None and not all(np.isfinite(init)):
+            raise InputError(f"--z0 values must be finite numbers, got {z0!r}")
         cols = ins + outs + sts
         if len(set(cols)) != len(cols):
             raise InputError(f"an argument column is named twice: {cols}")

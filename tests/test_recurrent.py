@@ -121,7 +121,8 @@ def test_cli_fit_mz_and_predict(tmp_path, rng):
     lines = pred.read_text().splitlines()
     assert lines[0].startswith("row,z_hat") and len(lines) == 300  # header + rows t = 1 .. 299
     assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--refine", "2"]) == 2
-    assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--mz", "1", "--z0", "1,2"]) == 2
+    for bad in (["--z0", "1,2"], ["--z0", "nan"], ["--z0", "abc"], ["--refine", "-1"], ["--mz", "-1"]):
+        assert main(["fit", str(data), "-o", str(tmp_path / "x.json"), "-y", "y", "-z", "z", "--mz", "1", *bad]) == 2, bad
     assert not (tmp_path / "x.json").exists()
 
 
@@ -183,7 +184,9 @@ def test_cli_fit_map_static_and_recurrent(tmp_path):
     for args in (["-y", "y", "--state", "z", "-z", "znext"],  # no --z0
                  ["-y", "y", "-z", "znext", "--z0", "1"],  # --z0 without --state
                  ["-y", "y", "--state", "z", "-z", "znext", "--z0", "1", "--test-fraction", "2"],
-                 ["-y", "nope", "-z", "znext"], ["-z", "znext"], ["-y", "y,z", "-z", "znext", "--domain", "0:1"]):
+                 ["-y", "nope", "-z", "znext"], ["-z", "znext"], ["-y", "y,z", "-z", "znext", "--domain", "0:1"],
+                 ["-y", "y", "--state", "z", "-z", "znext", "--z0", "inf"], ["-y", "y,z", "-z", "znext", "-p", "0"],
+                 ["-y", "y,z", "-z", "znext", "--sigma", "nan"]):
         assert main(["fit-map", str(data), "-o", str(bad), *args]) == 2, args
     assert not bad.exists()
 

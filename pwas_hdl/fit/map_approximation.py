@@ -247,7 +247,7 @@ def recurrent_sensor_from_map(approx: MapApproximation, inputs: Sequence[str], o
                          f"{len(inputs)} input(s), {len(outputs)} output(s) and {nz} state(s) (arguments u, y, z; outputs z(t+1))")
     z0a = np.asarray(z0, dtype=float).reshape(-1)
     if z0a.size != nz or not np.all(np.isfinite(z0a)):
-        raise InputError(f"z0 must give {nz} finite value(s), got {list(np.atleast_1d(z0))}")
+        raise InputError(f"z0 must give {nz} finite value(s), got {z0a.tolist()}")
     s = _sensor(approx, len(inputs), len(outputs), inputs, outputs, targets)
     s.lags_ = LagStructure(1 if inputs else 0, 1 if outputs else 0, len(inputs), len(outputs), 1, nz)
     s.nu_, s.ny_ = s.lags_.nu, s.lags_.ny

@@ -411,7 +411,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         if v.size == lags.nz:
             v = np.tile(v.reshape(1, lags.nz), (lags.mz, 1))
         if v.shape != (lags.mz, lags.nz) or not np.all(np.isfinite(v)):
-            raise InputError(f"initial_state must be {lags.nz} or {lags.mz}x{lags.nz} finite numbers, got shape {v.shape}")
+            raise InputError(f"initial_state must be {lags.nz} (or {lags.mz}x{lags.nz}) finite numbers, got {v.reshape(-1).tolist()}")
         return "value", v
 
     # -------------------------------------------------------------- predict
