@@ -107,7 +107,14 @@ def run_three_tank(
                     traces[tgt] = {"t": np.arange(samples), "true": truth, pname: paper[:, col], "pwas": est["float"][:, 0],
                                    "pwas_bittrue": est["bittrue"][:, 0]}
                     traces[f"{tgt}_fixed_point"] = str(est["fixed_point"])
-    rows = []
+    # issue 13: recurrent sensors (dynamical PWAS, PWAS of maps 27/28; float, bit-true, RTL) and Lorenz Mz = 1, 2
+    from pwas_hdl.benchmarks.recurrent import lorenz_rows, recurrent_rows
+
+    rec_rows, rec_traces, rec_conf = recurrent_rows(runs, quick, train_runs, samples, chosen, _windows(samples, start), say)
+    lz_rows, lz_conf = lorenz_rows(runs, quick, say)
+    for tgt, tr in rec_traces.items():
+        traces[tgt].update({k: v for k, v in tr.items() if k.startswith(("pwas-map", "pwas-dyn"))})
+    rows = rec_rows + lz_rows
     for (tgt, est_name, stage, wname, noise), v in vals.items():
         cfg = {"window": wname, "noise_y": noise, "test": "paper run (x0 = (8, 2, 1), rho from t = 100, T = 1000)"}
         if est_name == "pwas":
@@ -125,6 +132,7 @@ def run_three_tank(
         "candidates": [c.label() for c in cands], "chosen": {t: c.label() for t, c in chosen.items()},
         "validation_rmse": validation, "causal_limit_x1": 0.15 / np.sqrt(3.0),
         "seeds": "test run r: seed r; training runs: seed 1000 (r + 1); selection: seed 1000, noise 0",
+        "recurrent": rec_conf | lz_conf,
     }
     assumptions = dict(THREE_TANK_ASSUMPTIONS)
     assumptions["seed_001.4-split"] = "PWAS lags/partitions chosen on the training runs only (hold-out of the last quarter)"
@@ -144,7 +152,7 @@ def markdown(doc: dict) -> str:
         return f"{v['value']:.4g}" + (f" ± {v['std']:.2g}" if v["std"] is not None else "")
 
     noises = doc["config"]["noise_levels"]
-    wins = sorted({r["config"]["window"] for r in doc["rows"]}, key=lambda w: w != "t>=100")
+    wins = sorted({r["config"]["window"] for r in doc["rows"] if "window" in r["config"]}, key=lambda w: w != "t>=100")
     lines = [f"Three-tank (seed 001), RMSE on the paper's run, mean ± std over {doc['config']['runs']} runs "
              f"(PWAS x1: {doc['config']['chosen']['x1']}, x3: {doc['config']['chosen']['x3']}; inputs u1, y)", "",
              "| noise y | window | x1 sensor (27) | x1 PWAS float | x1 PWAS bit-true | x3 sensor (28) | x3 PWAS float | x3 PWAS bit-true |",
@@ -155,7 +163,39 @@ def markdown(doc: dict) -> str:
             lines.append(f"| {nz} | {w} | {c('x1', 'paper-27', 'float')} | {c('x1', 'pwas', 'float')} | {c('x1', 'pwas', 'bittrue')} "
                          f"| {c('x3', 'paper-28', 'float')} | {c('x3', 'pwas', 'float')} | {c('x3', 'pwas', 'bittrue')} |")
     lines += ["", f"Causal limit for x1 with rho on: about {doc['config']['causal_limit_x1']:.3f}. The paper prints no numbers.", ""]
+    lines += _recurrent_markdown(doc, cell, wins)
     return "\n".join(lines)
+
+
+def _recurrent_markdown(doc: dict, cell, wins) -> list[str]:
+    """Issue 13 tables: recurrent sensors of x1 / x3 (noise-free paper run) and Lorenz with Mz."""
+    rec = doc["config"].get("recurrent")
+    if rec is None:
+        return []
+    ests = [("paper-27", "paper-28", "sensor (27)/(28)", ("float",)), ("pwas", "pwas", "lag-window PWAS", ("float", "bittrue")),
+            ("pwas-dyn", "pwas-dyn", "dynamical PWAS (Mz = 1)", ("float", "bittrue", "rtl")),
+            ("pwas-map-27", "pwas-map-28", "PWAS of map (27)/(28), recurrent", ("float", "bittrue", "rtl")),
+            (None, "pwas-map-28-12bit", "PWAS of map (28), 12-bit inputs", ("bittrue",))]
+    lines = [f"Recurrent sensors (issue 13), noise-free paper run, RMSE mean ± std over {doc['config']['runs']} runs "
+             f"(RTL: run 0 on Icarus, its own output codes; bit-true of recurrent sensors: {rec['rec_input_bits']}-bit inputs)", "",
+             "| window | estimator | stage | x1 | x3 |", "|---|---|---|---:|---:|"]
+    for w in wins:
+        for e1, e3, label, stages in ests:
+            for st in stages:
+                c1 = cell(target="x1", estimator=e1, stage=st, config={"window": w, "noise_y": 0.0}) if e1 else "—"
+                c3 = cell(target="x3", estimator=e3, stage=st, config={"window": w, "noise_y": 0.0})
+                lines.append(f"| {w} | {label} | {st} | {c1} | {c3} |")
+    rtl = rec.get("rtl", {})
+    if rtl:
+        lines += ["", "RTL replays (run 0): " + "; ".join(f"{k}: {v['outputs']} outputs, {v['mismatches']} mismatches vs bit-true, "
+                                                        f"latency {v['latency']}, II {v['ii']}" for k, v in rtl.items())]
+    lz = br.find_rows(doc, system="lorenz")
+    if lz:
+        lines += ["", "Lorenz (eq. 18), RMSEE on the test samples, mean ± std", "", "| sensor | float | bit-true |", "|---|---:|---:|"]
+        for label in dict.fromkeys(r["config"]["label"] for r in lz):
+            f = [cell(system="lorenz", stage=st, config={"label": label}) for st in ("float", "bittrue")]
+            lines.append(f"| {label} | {f[0]} | {f[1]} |")
+    return lines + [""]
 
 
 def plot(traces: dict, path: str | Path) -> Path:

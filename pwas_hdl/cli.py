@@ -275,6 +275,9 @@ def fit(
     features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
     order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
     blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
+    mz: Annotated[int, typer.Option("--mz", help="Mz: past estimates z_hat(t-1..t-Mz) of every target fed back as regressors (a dynamical sensor; fitted series-parallel, predict runs the recurrence). 0 = static.")] = 0,
+    refine: Annotated[int, typer.Option("--refine", help="With --mz: up to K closed-loop refinements (refit on the simulated estimates while the closed-loop error improves).")] = 0,
+    z0: Annotated[Optional[str], typer.Option("--z0", help="With --mz: initial past estimates, mean (training mean, default), measured (the measured z before the first estimate; predict then reads the target columns) or one value per target (comma list).")] = None,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     from pwas_hdl.fit import classifier as clf
@@ -328,6 +331,19 @@ def fit(
             except ValueError:
                 raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
         parts = _int_list(partitions, "--partitions")
+        if mz < 0 or refine < 0:
+            raise InputError(f"--mz and --refine must be >= 0, got {mz} and {refine}")
+        if (refine or z0 is not None) and not mz:
+            raise InputError("--refine and --z0 need a dynamical sensor: give --mz K (K >= 1)")
+        if mz and (bank or classify):
+            raise InputError("--mz needs the lag front end and a regression target (not --front-end observer-bank or --classify)")
+        init: Any = "mean"
+        if z0 is not None:
+            init = z0.strip() if z0.strip() in ("mean", "measured") else _float_list(z0, "--z0")
+            if not isinstance(init, str) and len(init) != len(tgts):
+                raise InputError(f"--z0 needs one value per target ({len(tgts)}), got {len(init)}")
+            if not isinstance(init, str) and not all(np.isfinite(init)):
+                raise InputError(f"--z0 values must be finite numbers, got {z0!r}")
         from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor(
             mu=mu,
@@ -345,6 +361,9 @@ def fit(
             output_names=outs if (my or bank) else [],
             target_names=tgts,
             front_end=fe,
+            mz=mz,
+            refine=refine,
+            initial_state=init,
         )
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
@@ -358,6 +377,93 @@ def fit(
             f"sigma = {model.sigma_:.3g}{' (CV)' if sigma is None else ''}, "
             f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}"
         )
+        if "recurrence" in d:
+            rf = d["recurrence"]["fit"]
+            _say(f"dynamical sensor (Mz = {mz}): series-parallel RMSE "
+                 f"{', '.join(f'{t}: {v:.4g}' for t, v in rf['series_parallel_rmse'].items())}; closed-loop RMSE "
+                 f"{', '.join(f'{t}: {v:.4g}' for t, v in rf['closed_loop_rmse'].items())} "
+                 f"({rf['iterations_used']} of {refine} refinement(s) kept)")
+        _say(f"wrote {output}")
+
+
+@app.command("fit-map")
+def fit_map_cmd(
+    data: Annotated[Path, typer.Argument(metavar="SAMPLES", help="CSV of samples of the map: its argument columns and its value columns.")],
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Model file to write (JSON). Required.", show_default=False)] = None,
+    inputs: Annotated[Optional[list[str]], typer.Option("-u", "--inputs", help="Argument column(s) that are inputs u (current sample).")] = None,
+    outputs: Annotated[Optional[list[str]], typer.Option("-y", "--outputs", help="Argument column(s) that are measured outputs y (current sample).")] = None,
+    state: Annotated[Optional[list[str]], typer.Option("--state", help="Argument column(s) that are the observer state z(t): the model becomes a recurrent sensor z(t+1) = f(u(t), y(t), z(t)) (one per -z column, same order).")] = None,
+    targets: Annotated[Optional[list[str]], typer.Option("-z", "--targets", help="Column(s) holding the map's values f (with --state: z(t+1)).")] = None,
+    partitions: Annotated[str, typer.Option("-p", "--partitions", help="Intervals per argument: one integer or a comma list (order: -u, -y, --state).")] = "7",
+    sigma: Annotated[float, typer.Option("--sigma", help="Tikhonov weight (zero order, unnormalised).")] = 1e-8,
+    test_fraction: Annotated[float, typer.Option("--test-fraction", help="Share of the samples held out to measure the max / RMS approximation error (0: measured on the fitting samples).")] = 0.2,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the hold-out split.")] = 0,
+    domain: Annotated[Optional[str], typer.Option("--domain", help="The box 'lo:hi,lo:hi,...' (one pair per argument; default the samples' bounding box).")] = None,
+    z0: Annotated[Optional[str], typer.Option("--z0", help="With --state: the initial state z(0), one value per state (comma list). Required with --state.")] = None,
+    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in SAMPLES: error, or break.")] = "error",
+) -> None:
+    """Fit a PWAS approximation of a map f from samples and write a model file (issue 13).
+
+    The arguments are the -u columns, then the -y columns, then the --state columns. Without
+    --state the model is a static sensor of the current samples (Mu = 1 / My = 1, usable by
+    generate / simulate); with --state it is a recurrent sensor (Mz = 1, lead 1): predict runs
+    z(t+1) = f(u(t), y(t), z(t)) from --z0. The max and RMS error on the held-out samples are
+    printed and stored (model key map_fit).
+    """
+    with _user_errors():
+        from pwas_hdl.fit.map_approximation import fit_map_samples, recurrent_sensor_from_map, static_sensor_from_map
+
+        output = _required(out, "-o/--out", "the model file to write")
+        outset = OutputSet(inputs=[(data, "SAMPLES")])
+        outset.add(output, "-o/--out")
+        ins, outs, sts, tgts = _names(inputs), _names(outputs), _names(state), _names(targets)
+        if not tgts:
+            raise InputError("give the column(s) of the map's values with -z/--targets")
+        if not (ins or outs or sts):
+            raise InputError("give the map's argument columns with -u/--inputs, -y/--outputs and/or --state")
+        if sts and len(sts) != len(tgts):
+            raise InputError(f"--state names {len(sts)} column(s) but -z/--targets {len(tgts)}: one next-state column per state")
+        if sts and z0 is None:
+            raise InputError("--state needs the initial state: give --z0 (one value per state)")
+        if z0 is not None and not sts:
+            raise InputError("--z0 needs --state (a recurrent map)")
+        init = _float_list(z0, "--z0") if z0 is not None else None
+        if init is not None and len(init) != len(sts):
+            raise InputError(f"--z0 needs one value per state ({len(sts)}), got {len(init)}")
+        if init is not None and not all(np.isfinite(init)):
+            raise InputError(f"--z0 values must be finite numbers, got {z0!r}")
+        cols = ins + outs + sts
+        if len(set(cols)) != len(cols):
+            raise InputError(f"an argument column is named twice: {cols}")
+        if not (0.0 <= test_fraction <= 0.9):
+            raise InputError(f"--test-fraction must be in [0, 0.9], got {test_fraction}")
+        parts = _int_list(partitions, "--partitions")
+        box = None
+        if domain is not None:
+            try:
+                pairs = [tuple(float(v) for v in p_.split(":")) for p_ in domain.replace(" ", "").split(",")]
+                box = ([a for a, _ in pairs], [b for _, b in pairs])
+            except ValueError:
+                raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
+            if len(pairs) != len(cols):
+                raise InputError(f"--domain gives {len(pairs)} interval(s) for {len(cols)} argument(s)")
+        table = read_csv(data, blank_rows=blank_rows)
+        x = table.numeric(cols)
+        fx = table.numeric(tgts)
+        approx = fit_map_samples(x, fx, parts[0] if len(parts) == 1 else parts, box=box, sigma=sigma,
+                                 test_fraction=test_fraction, seed=seed)
+        if sts:
+            model = recurrent_sensor_from_map(approx, ins, outs, sts, init)
+        else:
+            model = static_sensor_from_map(approx, ins, outs, tgts)
+        text = model.to_json()
+        with outset:
+            outset.write_text(output, text)
+        e = approx.errors
+        names = sts or tgts
+        _say(f"fitted a PWAS of {', '.join(tgts)} over {', '.join(cols)}: n = {approx.grid.n}, N = {approx.grid.n_vertices} weights; "
+             f"error on {e['test']}: max {', '.join(f'{t}: {v:.4g}' for t, v in zip(names, e['max']))}, RMS "
+             f"{', '.join(f'{t}: {v:.4g}' for t, v in zip(names, e['rms']))}")
         _say(f"wrote {output}")
 
 
@@ -388,10 +494,17 @@ def predict(
             table.column_index(traj_col)
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
         y = select_signals(table, outs, traj_col) if model.n_outputs else None
-        zhat, flags = model.predict(u, y, return_flags=True)
-        rows = np.concatenate(
-            [np.arange(sl.start, sl.stop)[model.memory - 1 :] for sl in split_trajectories(table, traj_col)]
-        )
+        lags = model.lags_
+        measured = lags is not None and lags.recurrent and model.initial_state_rule_ == "measured"
+        zin = select_signals(table, tgts, traj_col) if measured else None
+        zhat, flags = model.predict(u, y, return_flags=True, z=zin)
+        first = lags.start if measured else model.memory - 1
+        lead = int(getattr(model, "lead_", 0))
+        spans = split_trajectories(table, traj_col)
+        rows = np.concatenate([np.arange(sl.start, sl.stop)[first:] for sl in spans])
+        # row t of a recurrent map sensor estimates z(t + lead): compared with the row `lead` later
+        ends = np.concatenate([np.full(max(0, sl.stop - sl.start - first), sl.stop) for sl in spans])
+        scored = rows + lead < ends
         cols: dict = {"row": rows}
         classifier = getattr(model, "classifier_", None)
         if classifier is not None:
@@ -421,9 +534,10 @@ def predict(
         for i, t in enumerate(tgts):
             for ref in (f"{t}_true", t):
                 if ref in table.header:
-                    ztrue = table.numeric([ref])[rows, 0]
-                    rmse = float(np.sqrt(np.mean((zhat[:, i] - ztrue) ** 2)))
-                    _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {rows.size} samples")
+                    ztrue = table.numeric([ref])[rows[scored] + lead, 0]
+                    rmse = float(np.sqrt(np.mean((zhat[scored, i] - ztrue) ** 2)))
+                    shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
+                    _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
                     break
         if flags.any():
             _warn(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")

@@ -263,10 +263,12 @@ def _fail_stamp(stamp: Path):
 
 
 def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, files: dict[str, str | os.PathLike] | None = None,
-            timeout_note: str = "") -> dict[str, Any]:
+            timeout_note: str = "", test_module: str = TESTBENCH_MODULE) -> dict[str, Any]:
     """Run the testbench on build ``b`` with ``job`` (``manifest`` must be set; ``result`` is set
     here). ``files``: name -> path of files the design reads at run time, relative to the
     simulator's working directory (``$readmemh`` hex files); copied into ``work_dir``.
+    ``test_module``: the cocotb module (default :data:`TESTBENCH_MODULE`; the recurrent sensor top
+    has its own, ``pwas_recurrent_tb``).
     Returns the testbench's result dict plus ``wall_s`` (whole simulator process),
     ``log``, ``waves`` (path or None), ``passed`` (the cocotb test passed)."""
     wd = Path(work_dir)
@@ -296,7 +298,7 @@ def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, files
         runner = get_runner(b.simulator)
         try:
             runner.test(
-                test_module=TESTBENCH_MODULE, hdl_toplevel=b.top, hdl_toplevel_lang="verilog", build_dir=b.build_dir, test_dir=wd,
+                test_module=test_module, hdl_toplevel=b.top, hdl_toplevel_lang="verilog", build_dir=b.build_dir, test_dir=wd,
                 results_xml=str(xml), extra_env={"PWAS_TB_JOB": str(job_path.resolve())}, waves=b.waves,
                 timescale=TIMESCALE if b.simulator == "verilator" else None, log_file=log, plusargs=plusargs,
             )

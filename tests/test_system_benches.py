@@ -38,6 +38,12 @@ def test_bench_three_tank_quick(tmp_path):
     for tgt in ("x1", "x3"):
         f, b = _value(doc, target=tgt, estimator="pwas", stage="float", config=w), _value(doc, target=tgt, estimator="pwas", stage="bittrue", config=w)
         assert f > 0 and abs(b - f) < 0.1 * f + 1e-3  # 12-bit default formats stay close to the float model
+    # issue 13: the recurrent PWAS of map (28) in hardware (RTL replay, its own output codes) on the paper's run
+    rtl = br.find_rows(doc, target="x3", estimator="pwas-map-28", stage="rtl", config=w)[0]
+    assert rtl["config"]["rtl_mismatches"] == 0 and rtl["config"]["ii"] == rtl["config"]["latency"]
+    assert rtl["value"] == _value(doc, target="x3", estimator="pwas-map-28", stage="bittrue", config=w) <= 0.01
+    assert br.find_rows(doc, target="x1", estimator="pwas-map-27", stage="rtl", config=w)[0]["config"]["rtl_mismatches"] == 0
+    assert {r["config"]["Mz"] for r in br.find_rows(doc, system="lorenz")} >= {0, 1}
 
 
 @pytest.mark.slow

@@ -16,6 +16,21 @@
               "train_rmse": {"<target>": ...}, "cv": {"sigmas", "mse", "best_sigma", "folds"} | null}
     }
 
+Optional ``recurrence`` block (issue 13, a dynamical sensor: :mod:`pwas_hdl.fit.recurrent`; absent
+for a static sensor, so files without it load as before -- no version bump)::
+
+      "recurrence": {"Mz": int >= 1, "lead": 0 | 1,
+                     "initial_state": {"rule": "value", "values": {"<target>": [z(t0-Mz), .., z(t0-1)]}}
+                                    | {"rule": "measured"},
+                     "fit": {"mode": "series-parallel" | "map", "refine": int, "iterations_used": int,
+                             "series_parallel_rmse": {...}, "closed_loop_rmse": {...}, "history": [...],
+                             "map_error": {"max": .., "rms": .., "n_test": ..}}}   # stats per mode
+
+The regressors then end with the ``nz * Mz`` past estimates ``<target>_hat[t-Mz] .. <target>_hat[t-1]``.
+Optional ``map_fit`` block (a PWAS approximation of a given map, :mod:`pwas_hdl.fit.map_approximation`)::
+
+      "map_fit": {"max_error": {"<target>": ..}, "rms_error": {"<target>": ..}, "n_test": int, "test": "how"}
+
 Floats are written with Python's shortest round-trip representation, so a save / load round trip
 is bit-exact. Reading checks, in this order: strict JSON (no NaN), ``format`` and ``version`` (a
 file of another version is refused with "version N is not supported; re-run `pwas-hdl fit`"),
@@ -96,7 +111,47 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
     front_end = getattr(sensor, "front_end_", None)
     if front_end is not None:
         d["front_end"] = front_end.to_dict()
+    if lags is not None and lags.recurrent:  # dynamical sensor (issue 13): pwas_hdl.fit.recurrent
+        d["recurrence"] = _recurrence_to_dict(sensor, tgts)
+    map_fit = getattr(sensor, "map_fit_", None)
+    if map_fit is not None:  # a PWAS approximation of a given map (pwas_hdl.fit.map_approximation)
+        d["map_fit"] = {"max_error": {t: float(v) for t, v in zip(tgts, map_fit["max"])},
+                        "rms_error": {t: float(v) for t, v in zip(tgts, map_fit["rms"])},
+                        "n_test": int(map_fit["n_test"]), "test": str(map_fit["test"])}
     return d
+
+
+def _stat(v: Any) -> Any:
+    """JSON-ready copy of a statistic: arrays to lists, numpy scalars to float."""
+    if isinstance(v, dict):
+        return {k: _stat(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_stat(x) for x in v]
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    return float(v)
+
+
+def _recurrence_to_dict(sensor: "PWASVirtualSensor", tgts: list[str]) -> dict[str, Any]:
+    from pwas_hdl.fit.recurrent import initial_state_dict
+
+    lags = sensor.lags_
+    fit = dict(getattr(sensor, "recurrence_fit_", None) or {"mode": "series-parallel"})
+    out_fit: dict[str, Any] = {"mode": str(fit.pop("mode"))}
+    for key, val in fit.items():
+        if key in ("series_parallel_rmse", "closed_loop_rmse", "series_parallel_closed_loop_rmse"):
+            vals = [val[t] for t in tgts] if isinstance(val, dict) else np.asarray(val, dtype=float).reshape(-1)
+            out_fit[key] = {t: float(v) for t, v in zip(tgts, vals)}
+        else:
+            out_fit[key] = _stat(val)
+    return {
+        "Mz": int(lags.mz),
+        "lead": int(getattr(sensor, "lead_", 0)),
+        "initial_state": initial_state_dict(sensor.initial_state_rule_, getattr(sensor, "initial_values_", None), tgts),
+        "fit": out_fit,
+    }
 
 
 def _front_end_regressors(d: dict[str, Any]) -> tuple[Any, Any, list[str]]:
@@ -158,9 +213,19 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
             return [str(exc)]
         n = len(names)
     else:
-        ls = LagStructure(lags["Mu"], lags["My"], len(ins) if lags["Mu"] else 0, len(outs) if lags["My"] else 0)
+        mz = d["recurrence"]["Mz"] if "recurrence" in d else 0
+        try:
+            ls = LagStructure(lags["Mu"], lags["My"], len(ins) if lags["Mu"] else 0, len(outs) if lags["My"] else 0,
+                              mz, len(tgts) if mz else 0)
+        except ValueError as exc:
+            return [str(exc)]
         n = ls.dimension
-        names = ls.names(ins, outs)
+        names = ls.names(ins, outs, tgts)
+        rec = d.get("recurrence")
+        if rec is not None and rec["initial_state"]["rule"] == "value":
+            vals = rec["initial_state"].get("values")
+            if vals is None or list(vals) != tgts or any(len(v) != mz for v in vals.values()):
+                return [f"recurrence.initial_state.values must give Mz = {mz} values for each of the targets {tgts}"]
     for key in ("lo", "hi", "partitions"):
         if len(g[key]) != n:
             errs.append(f"grid.{key} has {len(g[key])} values, the lags give n = {n} regressors")
@@ -175,6 +240,8 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
     for t, w in d["weights"].items():
         if len(w) != n_vertices:
             errs.append(f"weights.{t} has {len(w)} values, the grid has N = {n_vertices} vertices")
+    if "map_fit" in d and any(list(d["map_fit"][k]) != tgts for k in ("max_error", "rms_error")):
+        errs.append(f"map_fit.max_error / map_fit.rms_error must have the keys {tgts}")
     if "classifier" in d and len(d["classifier"]["classes"]) != len(tgts):
         errs.append(f"classifier.classes has {len(d['classifier']['classes'])} classes, signals.targets {len(tgts)} targets")
     cv = d["fit"]["cv"]
@@ -244,8 +311,23 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         obj.nu_, obj.ny_ = fe.nu_, 1
     else:
         obj.front_end_ = None
-        obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0)
+        rec = d.get("recurrence")
+        mz = rec["Mz"] if rec is not None else 0
+        obj.lags_ = LagStructure(obj.mu, obj.my, len(ins) if obj.mu else 0, len(outs) if obj.my else 0, mz, len(tgts) if mz else 0)
         obj.nu_, obj.ny_ = obj.lags_.nu, obj.lags_.ny
+        obj.lead_ = 0
+        if rec is not None:
+            st = rec["initial_state"]
+            obj.mz = mz
+            obj.refine = int(rec["fit"].get("refine", 0))
+            obj.lead_ = int(rec["lead"])
+            obj.initial_state_rule_ = st["rule"]
+            if st["rule"] == "value":
+                obj.initial_values_ = np.array([st["values"][t] for t in tgts], dtype=float).T.reshape(mz, len(tgts))
+                obj.initial_state = obj.initial_values_.copy()
+            else:
+                obj.initial_state = "measured"
+            obj.recurrence_fit_ = dict(rec["fit"])
     obj.grid_ = grid
     obj.weights_ = w
     obj.sigma_ = float(fit["sigma"])
@@ -254,6 +336,10 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     obj.n_train_ = int(fit["n_train"])
     obj.n_trajectories_ = int(fit["n_trajectories"])
     obj.train_rmse_ = np.array([fit["train_rmse"][t] for t in tgts], dtype=float)
+    if "map_fit" in d:
+        mf = d["map_fit"]
+        obj.map_fit_ = {"max": [mf["max_error"][t] for t in tgts], "rms": [mf["rms_error"][t] for t in tgts],
+                        "n_test": mf["n_test"], "test": mf["test"]}
     if "classifier" in d:
         obj.classifier_ = {"target": d["classifier"]["target"], "classes": [float(c) for c in d["classifier"]["classes"]]}
     return obj

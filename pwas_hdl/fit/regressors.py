@@ -7,6 +7,15 @@ For ``nu`` inputs with ``Mu`` lags and ``ny`` outputs with ``My`` lags the regre
 i.e. oldest sample first, and within one time instant all channels of the signal in column order.
 Rows exist for ``t = M-1 .. T-1`` (0-based) of each trajectory with ``M = max(Mu, My)``, so that no
 regressor straddles two trajectories.
+
+A *dynamical* (recurrent) sensor (``Mz >= 1``, issue 13) appends the ``nz * Mz`` past estimates
+
+    xi(t) = [ ... u/y lags ...  z(t-Mz)' ... z(t-1)' ]'            (n = nu*Mu + ny*My + nz*Mz)
+
+(oldest first, targets in column order). :meth:`LagStructure.build` forms the u/y part only;
+:meth:`LagStructure.build_series_parallel` fills the z part with the *measured* z (the
+series-parallel form used to fit); the recurrence itself (the estimates fed back) is run by
+:mod:`pwas_hdl.fit.recurrent`.
 """
 
 from __future__ import annotations
@@ -77,20 +86,31 @@ class LagStructure:
         Number of input channels.
     ny : int
         Number of output channels.
+    mz : int
+        Number of past estimates ``Mz >= 0`` fed back (0: a static sensor).
+    nz : int
+        Number of fed-back targets (0 unless ``mz >= 1``).
     """
 
     mu: int
     my: int
     nu: int
     ny: int
+    mz: int = 0
+    nz: int = 0
 
     def __post_init__(self) -> None:
-        for nm in ("mu", "my", "nu", "ny"):
+        for nm in ("mu", "my", "nu", "ny", "mz", "nz"):
             v = getattr(self, nm)
             if not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
+        if self.mz and self.nz:
+            check_limit("the regressor dimension n = nu*Mu + ny*My + nz*Mz", self.dimension, MAX_REGRESSORS,
+                        "use fewer lags (--mu, --my, --mz) or fewer signals")
         check_limit("the regressor dimension n = nu*Mu + ny*My", self.dimension, MAX_REGRESSORS,
                     "use fewer lags (--mu, --my) or fewer signals")
+        if self.mz and self.nz and self.io_dimension == 0:
+            raise ValueError("a recurrent sensor (Mz >= 1) needs at least one lag of a measured signal (Mu or My >= 1)")
         if self.dimension == 0:
             raise ValueError(
                 "the regressor is empty: give at least one lag of one signal (Mu*nu + My*ny >= 1)"
@@ -98,8 +118,23 @@ class LagStructure:
 
     @property
     def dimension(self) -> int:
-        """Regressor dimension ``n = nu*Mu + ny*My``."""
+        """Regressor dimension ``n = nu*Mu + ny*My + nz*Mz``."""
+        return self.nu * self.mu + self.ny * self.my + self.nz * self.mz
+
+    @property
+    def recurrent(self) -> bool:
+        """True when past estimates are fed back (``Mz >= 1`` and at least one target)."""
+        return bool(self.mz and self.nz)
+
+    @property
+    def io_dimension(self) -> int:
+        """Dimensions from the measured u, y (``nu*Mu + ny*My``); the z lags follow them."""
         return self.nu * self.mu + self.ny * self.my
+
+    @property
+    def start(self) -> int:
+        """First sample of a trajectory whose series-parallel regressor exists: ``max(M - 1, Mz)``."""
+        return max(self.memory - 1, self.mz if self.nz else 0)
 
     @property
     def memory(self) -> int:
@@ -114,13 +149,18 @@ class LagStructure:
             out += [("u", c, lag) for c in range(self.nu)]
         for lag in range(self.my - 1, -1, -1) if self.ny else ():
             out += [("y", c, lag) for c in range(self.ny)]
+        for lag in range(self.mz, 0, -1) if self.nz else ():  # past estimates: lag >= 1
+            out += [("z", c, lag) for c in range(self.nz)]
         return out
 
-    def names(self, inputs: Sequence[str], outputs: Sequence[str]) -> list[str]:
-        """Human-readable regressor names such as ``y[t-3]``."""
+    def names(self, inputs: Sequence[str], outputs: Sequence[str], targets: Sequence[str] = ()) -> list[str]:
+        """Human-readable regressor names such as ``y[t-3]``; past estimates are ``z_hat[t-1]``."""
         res = []
         for kind, ch, lag in self.signal_of_dimension():
-            base = inputs[ch] if kind == "u" else outputs[ch]
+            if kind == "z":
+                base = f"{targets[ch] if ch < len(targets) else f'z{ch}'}_hat"
+            else:
+                base = inputs[ch] if kind == "u" else outputs[ch]
             res.append(f"{base}[t]" if lag == 0 else f"{base}[t-{lag}]")
         return res
 
@@ -147,10 +187,44 @@ class LagStructure:
         rows = t_len - m + 1
         cols = []
         for kind, ch, lag in self.signal_of_dimension():
+            if kind == "z":
+                continue  # the fed-back part: build_series_parallel / pwas_hdl.fit.recurrent
             sig = u if kind == "u" else y
             start = m - 1 - lag
             cols.append(sig[start : start + rows, ch])
         return np.stack(cols, axis=1) if cols else np.empty((rows, 0))
+
+    def build_series_parallel(self, u: np.ndarray | None, y: np.ndarray | None, z: np.ndarray) -> np.ndarray:
+        """Full regressors of one trajectory with the *measured* ``z`` in the fed-back dimensions.
+
+        Parameters
+        ----------
+        u, y : as in :meth:`build`
+        z : ndarray, shape (T, nz)
+            The measured targets.
+
+        Returns
+        -------
+        ndarray, shape (T - start, n)
+            Row ``i`` is ``xi(t)`` for ``t = start + i`` (:attr:`start` ``= max(M - 1, Mz)``).
+        """
+        io = self.build(u, y)  # rows t = M-1 ..
+        t_len = io.shape[0] + self.memory - 1
+        if z.shape[0] != t_len:
+            raise ValueError(f"a target trajectory has {z.shape[0]} samples, its inputs/outputs {t_len}")
+        s = self.start
+        if t_len <= s:
+            raise ValueError(f"a trajectory has {t_len} samples but the lags and Mz = {self.mz} need more than {s}")
+        rows = t_len - s
+        cols = []
+        j = 0
+        for kind, ch, lag in self.signal_of_dimension():
+            if kind == "z":
+                cols.append(z[s - lag : s - lag + rows, ch])
+            else:
+                cols.append(io[s - (self.memory - 1):, j])
+                j += 1
+        return np.stack(cols, axis=1)
 
     def _length(self, u: np.ndarray | None, y: np.ndarray | None) -> int:
         lens = []

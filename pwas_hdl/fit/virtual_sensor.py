@@ -85,6 +85,18 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         features followed by the lag taps ``u(t-Mu+1..t)``, ``y(t-My+1..t)`` (``Mu = My = 0``
         allowed: features only). The inputs feed the bank whatever ``mu`` is. The front end is
         fitted on a copy during :meth:`fit` (``front_end_``) and stored in the model file.
+    mz : int
+        Past estimates ``Mz >= 0`` fed back as regressors (issue 13, :mod:`pwas_hdl.fit.recurrent`):
+        ``z_hat(t-Mz..t-1)`` of every target follow the lag taps. Fitted in series-parallel form
+        (the measured ``z`` in those dimensions); :meth:`predict` runs the recurrence. Lag front
+        end only.
+    refine : int
+        Closed-loop refinements ``K >= 0`` after the series-parallel fit (``Mz >= 1``): refit on
+        regressors built from the simulated estimates while the closed-loop error improves.
+    initial_state : "mean", "measured" or array_like
+        The past estimates the recurrence starts from: ``"mean"`` (default) the training mean of
+        each target, ``"measured"`` the measured ``z`` before the first estimate (``predict``
+        then needs ``z``), or ``nz`` values (or (Mz, nz), oldest first).
 
     Attributes (after ``fit``)
     --------------------------
@@ -113,6 +125,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         output_names: Sequence[str] | None = None,
         target_names: Sequence[str] | None = None,
         front_end: str | ObserverBankFrontEnd = "lags",
+        mz: int = 0,
+        refine: int = 0,
+        initial_state: str | Sequence[float] = "mean",
     ):
         self.mu = mu
         self.my = my
@@ -129,6 +144,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.output_names = output_names
         self.target_names = target_names
         self.front_end = front_end
+        self.mz = mz
+        self.refine = refine
+        self.initial_state = initial_state
 
     # ------------------------------------------------------------ validation
     def _check_params(self) -> None:
@@ -144,6 +162,14 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             self.front_end.check_params()
         elif self.front_end != "lags":
             raise InputError(f"front_end must be 'lags' or an ObserverBankFrontEnd, got {self.front_end!r}")
+        for nm in ("mz", "refine"):
+            v = getattr(self, nm)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
+                raise InputError(f"{nm} must be a non-negative integer, got {v!r}")
+        if self.mz and self._bank:
+            raise InputError("mz >= 1 (past estimates as regressors) needs the lag front end, not the observer bank")
+        if isinstance(self.initial_state, str) and self.initial_state not in ("mean", "measured"):
+            raise InputError(f"initial_state must be 'mean', 'measured' or numbers, got {self.initial_state!r}")
         if self.sigma_grid is not None and hasattr(self.sigma_grid, "__len__"):
             check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
                         "give fewer candidates (--sigma-grid)")
@@ -170,6 +196,11 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             self._check_fitted()
             return self._bank_regressors(self.front_end_, self.lags_, u, y)
         lags = self.lags_ if hasattr(self, "lags_") else self._infer_lags(u, y)
+        if lags is not None and lags.recurrent:
+            raise InputError(
+                f"this sensor is recurrent (Mz = {lags.mz}): its regressor holds its own past estimates, which only the "
+                "recurrence produces; use predict() (or LagStructure.build_series_parallel with the measured z)"
+            )
         return self._build_regressors(lags, u, y)
 
     def _bank_regressors(self, fe: ObserverBankFrontEnd, lags: LagStructure | None, u: Trajectories, y: Trajectories) -> tuple[np.ndarray, list[slice]]:
@@ -245,7 +276,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             return head
         ins = list(self.input_names) if self.input_names else [f"u{i}" for i in range(lags.nu)]
         outs = list(self.output_names) if self.output_names else [f"y{i}" for i in range(lags.ny)]
-        return head + lags.names(ins, outs)
+        tgts = list(self.target_names) if self.target_names else [f"z{i}" for i in range(lags.nz)]
+        return head + lags.names(ins, outs, tgts)
 
     def fit(
         self,
@@ -283,6 +315,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                 raise ValueError(f"got {len(zs)} target trajectories for {len(ys)} output trajectories")
             fe.fit(us, ys, zs)
             xi, valid = self._bank_regressors(fe, lags, u, y)
+        elif self.mz:
+            lags, xi, valid, rec = self._series_parallel(lags, u, y, zs)
         else:
             xi, valid = self._build_regressors(lags, u, y)
         if len(zs) != len(valid):
@@ -315,6 +349,16 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         else:
             cv, sigma = None, float(self.sigma)
         w = solve_regularized(h, zt, sigma, gam).reshape(grid.n_vertices, nz)
+        rec_info = None
+        if self.mz:
+            from pwas_hdl.fit.recurrent import refine_closed_loop
+
+            sp_rmse = np.sqrt(np.mean((zt - h @ w) ** 2, axis=0))
+            w, rec_info = refine_closed_loop(
+                grid, grid.basis_matrix, lambda hh: solve_regularized(hh, zt, sigma, gam).reshape(grid.n_vertices, nz),
+                w, rec["io"], rec["z"], rec["z_init"], lags.mz, int(self.refine))
+            rec_info["series_parallel_rmse"] = sp_rmse
+            rec_info["initial"] = self._initial_values(zs, lags)
         resid = zt - h @ w
         self.lags_ = lags
         self.front_end_ = fe
@@ -327,7 +371,48 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.n_train_ = int(xi.shape[0])
         self.train_rmse_ = np.sqrt(np.mean(resid**2, axis=0))
         self.n_trajectories_ = len(valid)
+        self.lead_ = 0
+        if rec_info is not None:
+            self.initial_state_rule_, self.initial_values_ = rec_info.pop("initial")
+            self.recurrence_fit_ = {"mode": "series-parallel", "refine": int(self.refine), **rec_info}
         return self
+
+    def _series_parallel(self, lags: LagStructure, u: Trajectories, y: Trajectories, zs: list[np.ndarray]):
+        """Regressors with the measured z in the fed-back dimensions, and the closed-loop pieces."""
+        from dataclasses import replace
+
+        nz = zs[0].shape[1] if zs else 0
+        lags = replace(lags, mz=int(self.mz), nz=nz)
+        us = as_trajectories(u, "u", lags.nu) if lags.nu else []
+        ys = as_trajectories(y, "y", lags.ny) if lags.ny else []
+        n_traj = max(len(us), len(ys))
+        if len(zs) != n_traj:
+            raise ValueError(f"got {len(zs)} target trajectories for {n_traj} input/output trajectories")
+        blocks, valid, io, zb, z0 = [], [], [], [], []
+        s = lags.start
+        for i in range(n_traj):
+            zi = zs[i]
+            xi = lags.build_series_parallel(us[i] if lags.nu else None, ys[i] if lags.ny else None, zi)
+            blocks.append(xi)
+            valid.append(slice(s, zi.shape[0]))
+            io.append(xi[:, : lags.io_dimension])
+            zb.append(zi[s:])
+            z0.append(zi[s - lags.mz: s])
+        return lags, np.concatenate(blocks), valid, {"io": io, "z": zb, "z_init": z0}
+
+    def _initial_values(self, zs: list[np.ndarray], lags: LagStructure):
+        """(rule, values (Mz, nz) or None) from the ``initial_state`` parameter."""
+        if isinstance(self.initial_state, str):
+            if self.initial_state == "measured":
+                return "measured", None
+            mean = np.concatenate(zs).mean(axis=0)
+            return "value", np.tile(mean, (lags.mz, 1))
+        v = np.asarray(self.initial_state, dtype=float)
+        if v.size == lags.nz:
+            v = np.tile(v.reshape(1, lags.nz), (lags.mz, 1))
+        if v.shape != (lags.mz, lags.nz) or not np.all(np.isfinite(v)):
+            raise InputError(f"initial_state must be {lags.nz} (or {lags.mz}x{lags.nz}) finite numbers, got {v.reshape(-1).tolist()}")
+        return "value", v
 
     # -------------------------------------------------------------- predict
     def _check_fitted(self) -> None:
@@ -355,7 +440,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         zhat = np.einsum("mk,mkz->mz", loc.mu, self.weights_[loc.vertices])
         return (zhat, loc.out_of_domain) if return_flags else zhat
 
-    def predict(self, u: Trajectories, y: Trajectories, return_flags: bool = False):
+    def predict(self, u: Trajectories, y: Trajectories, return_flags: bool = False, z: Trajectories = None):
         """Estimate ``z`` for every sample that has a full regressor.
 
         Parameters
@@ -363,16 +448,53 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         u, y : as in :meth:`fit`
         return_flags : bool
             Also return the out-of-domain flags.
+        z : as in :meth:`fit`, optional
+            Only for a recurrent sensor whose initial state rule is "measured": the measured z
+            before the first estimate (rows then start at ``t = max(M-1, Mz)``).
 
         Returns
         -------
         zhat : ndarray, shape (sum_i (T_i - M + 1), nz)
-            Row blocks per trajectory, sample ``t = M-1 .. T_i-1``.
+            Row blocks per trajectory, sample ``t = M-1 .. T_i-1``. A recurrent sensor (``Mz >= 1``)
+            runs the recurrence: row ``t`` is ``z_hat(t + lead)`` from the past estimates.
         flags : ndarray of bool (only with ``return_flags``)
         """
         self._check_fitted()
+        if self.lags_ is not None and self.lags_.recurrent:
+            return self._predict_recurrent(u, y, z, return_flags)
         xi, _ = self.regressors(u, y)
         return self.predict_regressors(xi, return_flags)
+
+    def _predict_recurrent(self, u: Trajectories, y: Trajectories, z: Trajectories, return_flags: bool):
+        """Run the recurrence (:func:`pwas_hdl.fit.recurrent.run_recurrence`) on every trajectory."""
+        from pwas_hdl.fit.recurrent import initial_block, run_recurrence
+
+        lags = self.lags_
+        io, valid = self._build_regressors(lags, u, y)
+        zs = as_trajectories(z, "z", lags.nz) if z is not None else [None] * len(valid)
+        if len(zs) != len(valid):
+            raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
+        skip = lags.start - (lags.memory - 1) if self.initial_state_rule_ == "measured" else 0
+        blocks, inits, off = [], [], 0
+        for sl, zi in zip(valid, zs):
+            rows = sl.stop - sl.start
+            if rows - skip < 1:
+                raise ValueError(f"a trajectory has {sl.stop} samples; the recurrence needs more than {sl.start + skip}")
+            blocks.append(io[off + skip: off + rows])
+            inits.append(initial_block(self, zi, sl.start + skip))
+            off += rows
+        def step(io_rows, zpast):
+            return self.predict_regressors(np.hstack([io_rows, zpast.reshape(zpast.shape[0], -1)]))
+
+        out = run_recurrence(step, blocks, inits)
+        zhat = np.concatenate(out)
+        if not return_flags:
+            return zhat
+        # flags were produced step by step for the active trajectories: recompute per row instead
+        past = [np.concatenate([i0, o]) for i0, o in zip(inits, out)]
+        xi = np.concatenate([np.hstack([b] + [p[lags.mz - lag: lags.mz - lag + b.shape[0]] for lag in range(lags.mz, 0, -1)])
+                             for b, p in zip(blocks, past)])
+        return zhat, self.grid_.locate(xi).out_of_domain
 
     def score(self, u: Trajectories, y: Trajectories, z: Trajectories, sample_weight=None) -> float:
         """Coefficient of determination R^2 of the estimates of ``z`` (as scikit-learn regressors).
@@ -392,7 +514,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         from sklearn.metrics import r2_score
 
         zhat = self.predict(u, y)
-        _, valid = self.regressors(u, y)
+        if self.lags_ is not None and self.lags_.recurrent:  # the rows of the recurrence ("value" rule)
+            _, valid = self._build_regressors(self.lags_, u, y)
+        else:
+            _, valid = self.regressors(u, y)
         zs = as_trajectories(z, "z")
         if len(zs) != len(valid):
             raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")

@@ -450,8 +450,9 @@ class FixedPointModel:
             raise NotFittedError("the sensor is not fitted yet; call fit() or load a model first")
         ins, outs, tgts = sensor.signal_names()
         lags = sensor.lags_
-        names = lags.names(ins, outs)
-        signals = [((ins if kind == "u" else outs)[ch], lag) for kind, ch, lag in lags.signal_of_dimension()]
+        names = lags.names(ins, outs, tgts)
+        by_kind = {"u": ins, "y": outs, "z": [f"{t}_hat" for t in tgts]}  # "z": fed-back estimates (issue 13)
+        signals = [(by_kind[kind][ch], lag) for kind, ch, lag in lags.signal_of_dimension()]
         given = set(overrides)
         if "reference_error" not in overrides:
             rmse = np.asarray(getattr(sensor, "train_rmse_", []), dtype=float).reshape(-1)

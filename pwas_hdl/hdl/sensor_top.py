@@ -45,6 +45,13 @@ def lag_plan(model, lags: LagStructure | None = None):
     """
     n = len(CoreParams.from_model(model).partitions)
     names = list(getattr(model, "regressor_signals", []) or [])
+    if lags is not None and lags.recurrent:  # issue 13: the fed-back estimates need the feedback path
+        from pwas_hdl.errors import InputError
+
+        raise InputError(
+            f"the model is a recurrent (dynamical) sensor (Mz = {lags.mz}): the lag sensor top has no feedback path; "
+            "build it with pwas_hdl.verify.recurrent_replay.build_recurrent_design (generate --design core gives the bare core)"
+        )
     if lags is not None:
         if lags.dimension != n:
             raise ValueError(f"the lag structure has n = {lags.dimension} regressors, the model {n}")

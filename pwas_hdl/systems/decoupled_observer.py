@@ -49,6 +49,8 @@ __all__ = [
     "design_virtual_sensor",
     "simulate_design",
     "paper_sensors",
+    "observer_map_27",
+    "observer_map_28",
 ]
 
 _TOL = 1e-9
@@ -307,6 +309,22 @@ def three_tank_logic_dynamic(prm: dict = THREE_TANK_PARAMS) -> LogicDynamicSyste
     )
 
 
+def observer_map_27(u1, y, z1, prm: dict = THREE_TANK_PARAMS):
+    """One step of sensor (27): ``z1(t+1) = a4 u1(t) - a1 sq(z1(t) - y(t)) + z1(t)`` (elementwise).
+
+    Arguments in the order of a recurrent PWAS regressor (input, output, state); see
+    :func:`pwas_hdl.fit.map_approximation.recurrent_sensor_from_map`.
+    """
+    a1, a4 = prm["a1"], prm["a4"]
+    return a4 * u1 - a1 * signed_sqrt(z1 - y) + z1
+
+
+def observer_map_28(y, z2, prm: dict = THREE_TANK_PARAMS):
+    """One step of sensor (28): ``z2(t+1) = a2 sq(y(t) - z2(t)) - a3 sq(z2(t)) + z2(t)`` (elementwise)."""
+    a2, a3 = prm["a2"], prm["a3"]
+    return a2 * signed_sqrt(y - z2) - a3 * signed_sqrt(z2) + z2
+
+
 def paper_sensors(u1: np.ndarray, y: np.ndarray, z0=(5.0, 2.0), prm: dict = THREE_TANK_PARAMS) -> np.ndarray:
     """The printed sensors (27) and (28): ``[x1_hat, x3_hat]`` (T, 2), sample ``t`` = ``z(t)``.
 
@@ -314,13 +332,11 @@ def paper_sensors(u1: np.ndarray, y: np.ndarray, z0=(5.0, 2.0), prm: dict = THRE
     ``z2(t+1) = a2 sq(y(t) - z2(t)) - a3 sq(z2(t)) + z2(t)`` (28); ``sq`` the signed root (A1),
     ``z(0) = (5, 2)`` (A4).
     """
-    a1, a2, a3, a4 = (prm[k] for k in ("a1", "a2", "a3", "a4"))
     u1 = np.asarray(u1, dtype=float).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1)
     z1, z2 = float(z0[0]), float(z0[1])
     out = np.empty((y.size, 2))
     for t in range(y.size):
         out[t] = z1, z2
-        z1, z2 = (a4 * u1[t] - a1 * float(signed_sqrt(z1 - y[t])) + z1,
-                  a2 * float(signed_sqrt(y[t] - z2)) - a3 * float(signed_sqrt(z2)) + z2)
+        z1, z2 = float(observer_map_27(u1[t], y[t], z1, prm)), float(observer_map_28(y[t], z2, prm))
     return out

@@ -1,0 +1,220 @@
+"""Bit-true model of a recurrent PWAS sensor (issue 13): the fed-back estimate in fixed point.
+
+THE specification of :class:`pwas_hdl.hdl.recurrent_top.PWASRecurrentTop`. One sample of the
+measured signals per transfer (codes of their input formats, as the lag sensor top); the
+regressor of sample ``t`` is the u/y lag taps followed by the past estimates
+``z_hat(t-Mz) .. z_hat(t-1)`` of every target, each already in the *input* code format of its
+regressor dimension (all lags of one target share it: ``share_lag_domain``).
+
+Feedback requantisation (output code ``o``, ``s<B_out>.<Fo>``, to the input code ``q`` of the
+fed-back dimension, format ``lo_code, lsb``)::
+
+    q = clip( (o * K + C) >> S,  -2**(B_in-1), 2**(B_in-1) - 1 )          (arithmetic shift)
+
+with ``r = 2**-Fo / lsb`` (input codes per output code), ``S`` such that ``K = round(r 2**S)``
+has :data:`FEEDBACK_PRECISION` bits, and ``C = floor((lo_code - lo / lsb) 2**S) + 2**(S-1)``:
+``(o K + C) >> S`` is ``o r + (lo_code - lo/lsb)`` -- the input code of the physical value
+``o 2**-Fo`` -- rounded half up (the rule of :meth:`InputFormat.quantize
+<pwas_hdl.fixedpoint.formats.InputFormat.quantize>`), up to the constants' rounding, and
+saturated to the ``B_in``-bit range. Error of the fed-back value against the output it comes from
+(unless it saturates): ``|q lsb + offset - o 2**-Fo| <= lsb (1/2 + eps)`` with
+``eps = 2**(B_out-1) |K 2**-S - r| + |C 2**-S - c0 - 1/2|`` (:attr:`FeedbackRequant.error_bound`).
+Inside the grid domain the stage is the same rounding a sample of a measured signal goes through.
+
+Initial state: the reset values of the feedback registers are the input codes of the model's
+initial values (``InputFormat.quantize``, half up, saturating). The warm-up of the u/y lags
+(``M - 1`` transfers) is as in the lag sensor top; the first estimate (transfer ``M - 1``) sees
+the initial codes as its past.
+
+How quantisation errors propagate: each step adds the bit-true error of the circuit
+(:attr:`FixedPointModel.error_bound`) and the requantisation error above to the state; the
+closed loop filters them with the (local) gain of the recurrence. No closed-form bound is given
+for a general PWAS map; the benches and tests *measure* the deviation of the bit-true recurrence
+from the float one over long runs (:func:`recurrence_deviation`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat
+
+__all__ = ["FEEDBACK_PRECISION", "FeedbackRequant", "RecurrentFixedPointModel"]
+
+#: Significant bits of the requantisation multiplier ``K``.
+FEEDBACK_PRECISION = 24
+
+
+@dataclass(frozen=True)
+class FeedbackRequant:
+    """``q = clip((o * mul + add) >> shift, qmin, qmax)``: an output code to an input code."""
+
+    mul: int
+    add: int
+    shift: int
+    qmin: int
+    qmax: int
+    out_bits: int
+    in_bits: int
+    error_bound: float  # physical units (see the module docstring)
+
+    @classmethod
+    def between(cls, out_format: FixedFormat, inp: InputFormat, precision: int = FEEDBACK_PRECISION) -> "FeedbackRequant":
+        """The requantisation from ``out_format`` codes to ``inp`` codes."""
+        lsb = Fraction(inp.lsb)
+        r = Fraction(1, 1) / (lsb * (Fraction(2) ** out_format.frac))
+        c0 = Fraction(inp.lo_code) - Fraction(inp.lo) / lsb
+        e = math.floor(math.log2(r.numerator) - math.log2(r.denominator))
+        shift = max(1, precision - 1 - e)
+        mul = round(r * 2**shift)
+        add = math.floor(c0 * 2**shift) + (1 << (shift - 1))
+        eps = (2 ** (out_format.bits - 1)) * abs(Fraction(mul, 2**shift) - r) + abs(Fraction(add, 2**shift) - c0 - Fraction(1, 2))
+        fmt = inp.format
+        return cls(int(mul), int(add), int(shift), int(fmt.min_code), int(fmt.max_code), int(out_format.bits), int(inp.bits),
+                   float(lsb * (Fraction(1, 2) + eps)))
+
+    @property
+    def product_bits(self) -> int:
+        """Signed width that holds ``o * mul + add`` for every ``B_out``-bit ``o``."""
+        hi = max(abs(-(1 << (self.out_bits - 1)) * self.mul + self.add), abs(((1 << (self.out_bits - 1)) - 1) * self.mul + self.add))
+        return hi.bit_length() + 1
+
+    def apply(self, o) -> np.ndarray:
+        """Input codes of output codes ``o`` (int64 array)."""
+        oa = np.asarray(o, dtype=np.int64)
+        if self.product_bits > 62:  # exact with Python integers
+            v = np.array([(int(x) * self.mul + self.add) >> self.shift for x in oa.reshape(-1)], dtype=object).reshape(oa.shape)
+            return np.clip(v, self.qmin, self.qmax).astype(np.int64)
+        return np.clip((oa * self.mul + self.add) >> self.shift, self.qmin, self.qmax)
+
+    def to_dict(self) -> dict:
+        return {"rule": "q = clip((o * mul + add) >> shift, qmin, qmax): round half up, saturate",
+                "mul": self.mul, "add": self.add, "shift": self.shift, "qmin": self.qmin, "qmax": self.qmax,
+                "product_bits": self.product_bits, "error_bound": self.error_bound}
+
+
+class RecurrentFixedPointModel:
+    """The recurrence in fixed point: a :class:`FixedPointModel` plus the feedback path.
+
+    Parameters
+    ----------
+    fxm : FixedPointModel
+        Of the recurrent sensor (``FixedPointModel.from_sensor``); its regressor ends with the
+        fed-back dimensions.
+    lags : LagStructure
+        With ``Mz >= 1`` (``sensor.lags_``).
+    initial_values : array_like (Mz, nz)
+        Physical initial past estimates (oldest first; ``sensor.initial_values_``).
+
+    Attributes
+    ----------
+    signals : list of str
+        The measured signals of the input payload, in order (one ``B_in``-bit code each).
+    signal_formats : list of InputFormat
+    feedback : list of FeedbackRequant, one per target
+    initial_codes : ndarray (Mz, nz), int64
+        Reset values of the feedback registers.
+    """
+
+    def __init__(self, fxm: FixedPointModel, lags: LagStructure, initial_values):
+        if not lags.recurrent:
+            raise ValueError("the lag structure has no fed-back estimates (Mz = 0): use FixedPointModel")
+        if lags.dimension != fxm.n:
+            raise ValueError(f"the lag structure has n = {lags.dimension}, the fixed-point model {fxm.n}")
+        self.fxm, self.lags = fxm, lags
+        formats = fxm.signal_input_formats()  # raises unless the lags of each signal share a format
+        sod = lags.signal_of_dimension()
+        self.signals: list[str] = []
+        for j, (kind, _ch, _lag) in enumerate(sod):
+            sig = fxm.regressor_signals[j][0]
+            if kind != "z" and sig not in self.signals:
+                self.signals.append(sig)
+        self.signal_formats = [formats[s] for s in self.signals]
+        zdims = {c: [j for j, (k, ch, _) in enumerate(sod) if k == "z" and ch == c] for c in range(lags.nz)}
+        self.z_formats = [fxm.inputs[zdims[c][0]] for c in range(lags.nz)]
+        self.feedback = [FeedbackRequant.between(fxm.output_format, f) for f in self.z_formats]
+        iv = np.asarray(initial_values, dtype=float).reshape(lags.mz, lags.nz)
+        self.initial_values = iv
+        self.initial_codes = np.stack([f.quantize(iv[:, c]) for c, f in enumerate(self.z_formats)], axis=1).astype(np.int64)
+
+    # ------------------------------------------------------------------ inputs
+    def quantize_signals(self, u: np.ndarray | None, y: np.ndarray | None) -> np.ndarray:
+        """Payload codes (T, S) of one trajectory: each measured signal in its input format."""
+        cols = []
+        for s, f in zip(self.signals, self.signal_formats):
+            kind, ch = self._signal_kind(s)
+            src = u if kind == "u" else y
+            cols.append(f.quantize(np.asarray(src, dtype=float)[:, ch]))
+        return np.stack(cols, axis=1).astype(np.int64)
+
+    def _signal_kind(self, name: str) -> tuple[str, int]:
+        for j, (kind, ch, _lag) in enumerate(self.lags.signal_of_dimension()):
+            if self.fxm.regressor_signals[j][0] == name and kind != "z":
+                return kind, ch
+        raise KeyError(name)
+
+    def _io_codes(self, codes: np.ndarray) -> np.ndarray:
+        """The u/y part of the regressor codes from the payload codes (rows t = M-1 ..)."""
+        lags = self.lags
+        kinds = [self._signal_kind(s) for s in self.signals]
+        u = np.zeros((codes.shape[0], lags.nu)) if lags.nu else None
+        y = np.zeros((codes.shape[0], lags.ny)) if lags.ny else None
+        for i, (kind, ch) in enumerate(kinds):
+            (u if kind == "u" else y)[:, ch] = codes[:, i]
+        io_lags = LagStructure(lags.mu, lags.my, lags.nu, lags.ny)
+        return io_lags.build(u, y).astype(np.int64)
+
+    # ------------------------------------------------------------------ run
+    def run(self, codes) -> dict:
+        """The recurrence on the payload codes of one trajectory (the circuit after a reset).
+
+        Parameters
+        ----------
+        codes : array_like of int, shape (T, S)
+            One row per input transfer.
+
+        Returns
+        -------
+        dict
+            ``out`` (R, nz) output codes, ``out_of_range`` (R,), ``fed_back`` (R, nz) the input
+            codes stored into the feedback registers, ``regressor`` (R, n) the regressor codes,
+            with ``R = T - M + 1`` rows for the transfers ``M-1 .. T-1``.
+        """
+        ca = np.asarray(codes, dtype=np.int64)
+        if ca.ndim != 2 or ca.shape[1] != len(self.signals):
+            raise ValueError(f"codes must have shape (T, {len(self.signals)}), got {ca.shape}")
+        io = self._io_codes(ca)
+        mz, nz = self.lags.mz, self.lags.nz
+        past = self.initial_codes.copy()  # (Mz, nz) oldest first
+        R = io.shape[0]
+        out = np.empty((R, nz), dtype=np.int64)
+        fed = np.empty((R, nz), dtype=np.int64)
+        oor = np.empty(R, dtype=bool)
+        reg = np.empty((R, self.fxm.n), dtype=np.int64)
+        for t in range(R):
+            reg[t] = np.concatenate([io[t], past.reshape(-1)])
+            o, fl = self.fxm.evaluate(reg[t][None, :])
+            out[t], oor[t] = o[0], fl[0]
+            fed[t] = [fb.apply(o[0, c]) for c, fb in enumerate(self.feedback)]
+            past = np.vstack([past[1:], fed[t][None, :]]) if mz > 1 else fed[t][None, :].copy()
+        return {"out": out, "out_of_range": oor, "fed_back": fed, "regressor": reg}
+
+    def predict(self, u: np.ndarray | None, y: np.ndarray | None) -> np.ndarray:
+        """Physical estimates (R, nz) of one trajectory through the bit-true recurrence."""
+        return self.fxm.to_physical_output(self.run(self.quantize_signals(u, y))["out"])
+
+    def to_dict(self) -> dict:
+        """The feedback path for a manifest / report (JSON-ready)."""
+        return {
+            "Mz": self.lags.mz,
+            "signals": list(self.signals),
+            "fed_back": [{"target": t, "input_format": f.to_dict(), "requant": fb.to_dict(),
+                          "initial_codes": [int(v) for v in self.initial_codes[:, c]]}
+                         for c, (t, f, fb) in enumerate(zip(self.fxm.target_names, self.z_formats, self.feedback))],
+        }

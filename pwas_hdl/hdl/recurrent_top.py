@@ -1,0 +1,259 @@
+"""Recurrent virtual-sensor top (issue 13): lag bank + PWAS core + a feedback path from the core
+output back into the regressor.
+
+The bit-true specification is :class:`pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`.
+
+Input payload (``in__payload``, LSB first): one signed ``B_in``-bit code per *measured* signal,
+as :class:`pwas_hdl.hdl.sensor_top.PWASSensorTop` (the u/y lag bank, its warm-up of ``M - 1``
+transfers and the ``warm`` port are the same). The regressor of the core is the lag taps followed
+by the ``nz * Mz`` fed-back estimates ``z_hat(t-Mz) .. z_hat(t-1)``, held in feedback registers.
+
+Feedback: when an output is transferred (``out.valid & out.ready``) each target's output code is
+requantised to the input code format of its fed-back dimension -- ``q = clip((o * K + C) >> S,
+-2**(B_in-1), 2**(B_in-1) - 1)``: round half up, saturate (:class:`FeedbackRequant
+<pwas_hdl.fixedpoint.recurrence.FeedbackRequant>`) -- and shifted into the feedback registers.
+The reset values of the registers are the input codes of the model's initial state.
+
+Flow control: one sample in flight. After a transfer that reaches the core, ``in.ready`` is low
+until its output is transferred; in that cycle ``in.ready`` is high again and the requantised
+output bypasses the feedback registers into the next regressor, so with a sink that never stalls
+a new sample is accepted every ``L`` cycles (``II = latency = L``). During warm-up ``in.ready`` is
+1. ``rst`` (synchronous) clears the pipeline, the warm-up and restores the initial state.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
+from pwas_hdl.hdl.core import PWASCore, _not, core_output_layout
+from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.sensor_top import _ident
+
+__all__ = ["PWASRecurrentTop", "build_recurrent_sensor"]
+
+
+class PWASRecurrentTop(wiring.Component):
+    """Lag bank + PWAS core + feedback registers (see the module docstring).
+
+    Parameters
+    ----------
+    params : CoreParams
+    signals : list of (name, n_lags)
+        The measured signals of the payload.
+    io_dims : list of (signal index, lag)
+        The first ``n - nz*Mz`` regressor dimensions.
+    mz : int
+    feedback : list of FeedbackRequant, one per target
+    initial_codes : array_like (Mz, nz)
+        Reset values (oldest first).
+    memory, pipeline : as :class:`PWASCore`
+
+    Attributes
+    ----------
+    latency : int
+        Cycles from the transfer of a sample that reaches the core to its output.
+    ii : int
+        ``latency``: cycles between accepted samples (sink never stalling).
+    warmup : int
+        ``M - 1``.
+    """
+
+    kind = "recurrent-sensor"
+
+    def __init__(self, params: CoreParams, signals, io_dims, mz: int, feedback, initial_codes, *, memory: str = "banked",
+                 pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        nz = len(feedback)
+        if len(io_dims) + nz * mz != params.n or nz != params.nz or mz < 1:
+            raise ValueError(f"{len(io_dims)} lag dimensions + {nz} x Mz = {mz} fed back do not make the core's n = {params.n}"
+                             f" with nz = {params.nz}")
+        for s, lag in io_dims:
+            if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
+                raise ValueError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
+        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True
+        self.params = params
+        self.signals = [(str(nm), int(k)) for nm, k in signals]
+        self.dims = [(int(s), int(lag)) for s, lag in io_dims]
+        self.mz = int(mz)
+        self.feedback = list(feedback)
+        self.initial_codes = [[int(v) for v in row] for row in initial_codes]
+        self.latency = self.core.latency
+        self.ii = max(1, self.latency)
+        self.memory_plan = self.core.memory_plan
+        self.pipeline = self.core.pipeline
+        self.warmup = max([k for _, k in self.signals] + [1]) - 1
+        super().__init__({
+            "in": In(stream.Signature(unsigned(len(self.signals) * params.in_width))),
+            "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+            "warm": Out(1),
+        })
+        self._MustUse__silence = False
+
+    @property
+    def input_fields(self) -> list[dict]:
+        b = self.params.in_width
+        return [{"name": nm, "lsb": i * b, "width": b, "signed": True} for i, (nm, _) in enumerate(self.signals)]
+
+    @property
+    def extra_info(self) -> dict:
+        tn = getattr(self.core, "target_names", [f"z{i}" for i in range(self.params.nz)])
+        return {
+            "lags": {"signals": [{"name": nm, "lags": k} for nm, k in self.signals],
+                     "regressor": [{"signal": self.signals[s][0], "lag": lag} for s, lag in self.dims]
+                     + [{"signal": f"{tn[c]}_hat", "lag": lag} for lag in range(self.mz, 0, -1) for c in range(self.params.nz)]},
+            "warmup": {"samples_without_output": self.warmup, "port": "warm",
+                       "meaning": "warm = 1 once the lag bank holds M-1 samples since reset"},
+            "recurrence": {"Mz": self.mz, "ii_cycles": self.ii,
+                           "feedback": [{"target": tn[c], **fb.to_dict(), "initial_codes": [r[c] for r in self.initial_codes]}
+                                        for c, fb in enumerate(self.feedback)],
+                           "flow": "one sample in flight: in.ready is low from a transfer that reaches the core until its "
+                                   "output is transferred; the requantised output bypasses into the next regressor"},
+            # replaces design_info's generic entry (whose in.ready = advance holds for the feed-forward designs only)
+            "flow_control": {
+                "in.ready": "~busy | (out.valid & out.ready): low from a transfer that reaches the core until its output is "
+                            "transferred (1 during the warm-up)",
+                "ii": f"{self.ii} cycles between accepted samples when out.ready stays high (= latency)",
+                "latency": f"the output of a transfer in cycle t is valid in cycle t + {self.latency} when out.ready stays high",
+                "reset": "synchronous: clears the pipeline and the warm-up, restores the initial state codes",
+            },
+        }
+
+    def expected_outputs(self, n_samples: int) -> int:
+        return max(0, n_samples - self.warmup)
+
+    def _requant(self, m: Module, o, fb, c: int):
+        """``clip((o * K + C) >> S)`` in lint-safe unsigned arithmetic (:mod:`pwas_hdl.hdl._lintsafe`).
+
+        ``o`` (the raw ``B_out``-bit output field) is taken in offset binary ``ou = o + 2**(B_out-1)``,
+        so ``o * K + C = ou * K + c1`` with ``c1 = C - 2**(B_out-1) K``. With ``P = ou * K`` (exact,
+        unsigned) the clip limits are two comparisons of ``P`` with constants, and inside them
+        ``q - qmin = (P + c1 - qmin 2**S) >> S`` lies in ``[0, 2**B_in)``: it is computed modulo
+        ``2**(B_in + S)`` on the low bits of ``P``. Returns the input code (two's complement bits).
+        """
+        b, ow = self.params.in_width, len(o)
+        k, sh = fb.mul, fb.shift
+        pw = ow + k.bit_length()
+        if pw < b + sh:
+            raise ValueError(f"feedback requantisation of target {c}: the product has {pw} bits, fewer than B_in + S = {b + sh}; "
+                             "use more output bits or fewer input bits")
+        c1 = fb.add - (1 << (ow - 1)) * k
+        base = fb.qmin << sh  # (ou K + c1) >> S < qmin  <=>  ou K < qmin 2**S - c1
+        lo_thr, hi_thr = base - c1, base + ((1 << b) << sh) - c1
+        ou = Cat(o[: ow - 1], ~o[ow - 1])
+        prod = Signal(unsigned(pw), name=f"fb{c}_prod")
+        m.d.comb += prod.eq(ou * k)
+        under = _not(ge_const(prod, lo_thr))
+        over = ge_const(prod, hi_thr)
+        low = add_const_wrap(m, prod[: b + sh], (c1 - base) % (1 << (b + sh)), f"fb{c}_sum")
+        sink_unused(m, low[:sh], f"fb{c}_round")
+        val = low[sh:]
+        q = Signal(unsigned(b), name=f"fb{c}_code")
+        mask = (1 << b) - 1
+        if over is True:
+            m.d.comb += q.eq(fb.qmax & mask)
+            return q
+        if under is True:
+            m.d.comb += q.eq(fb.qmin & mask)
+            return q
+        with m.If(over if not isinstance(over, bool) else Const(0, 1)):
+            m.d.comb += q.eq(fb.qmax & mask)
+        with m.Elif(under if not isinstance(under, bool) else Const(0, 1)):
+            m.d.comb += q.eq(fb.qmin & mask)
+        with m.Else():
+            m.d.comb += q.eq(Cat(val[: b - 1], ~val[b - 1]))
+        return q
+
+    def elaborate(self, platform):
+        m = Module()
+        p = self.params
+        b = p.in_width
+        inp = getattr(self, "in")
+        cur = [inp.payload[i * b: (i + 1) * b] for i in range(len(self.signals))]
+        advance = Signal(name="advance")  # driven by the core: ~out.valid | out.ready
+        busy = Signal(name="busy")
+        out_fire = Signal(name="out_fire")
+        m.d.comb += out_fire.eq(self.out.valid & self.out.ready)
+        m.d.comb += inp.ready.eq(~busy | out_fire)
+        transfer = inp.valid & inp.ready
+        if self.warmup:
+            fill = [Signal(name=f"warmup{i + 1}") for i in range(self.warmup - 1)] + [self.warm]
+            warm = self.warm
+            with m.If(transfer):
+                m.d.sync += [fill[0].eq(1)] + [fill[i].eq(fill[i - 1]) for i in range(1, len(fill))]
+        else:
+            warm = Const(1, 1)
+            m.d.comb += self.warm.eq(1)
+        core_valid = Signal(name="core_valid")
+        m.d.comb += core_valid.eq(transfer & warm)
+        hist = []
+        for i, (nm, k) in enumerate(self.signals):
+            regs = [Signal(b, name=f"lag_{_ident(nm)}_{lag}", reset_less=True) for lag in range(1, k)]
+            with m.If(transfer):
+                if regs:
+                    m.d.sync += regs[0].eq(cur[i])
+                for lag in range(1, len(regs)):
+                    m.d.sync += regs[lag].eq(regs[lag - 1])
+            hist.append(regs)
+        outw = p.out_width
+        zin = {}
+        for c, fb in enumerate(self.feedback):
+            q = self._requant(m, self.out.payload[c * outw: (c + 1) * outw], fb, c)
+            regs = {k: Signal(unsigned(b), name=f"fb{c}_z{k}", init=self.initial_codes[self.mz - k][c] % (1 << b))
+                    for k in range(1, self.mz + 1)}
+            with m.If(out_fire):
+                m.d.sync += regs[1].eq(q)
+                for k in range(2, self.mz + 1):
+                    m.d.sync += regs[k].eq(regs[k - 1])
+            for k in range(1, self.mz + 1):
+                zk = Signal(unsigned(b), name=f"fb{c}_in{k}")
+                with m.If(out_fire):
+                    m.d.comb += zk.eq(q if k == 1 else regs[k - 1])
+                with m.Else():
+                    m.d.comb += zk.eq(regs[k])
+                zin[(c, k)] = zk
+        with m.If(core_valid):
+            m.d.sync += busy.eq(1)
+        with m.Elif(out_fire):
+            m.d.sync += busy.eq(0)
+        parts = [cur[s] if lag == 0 else hist[s][lag - 1] for s, lag in self.dims]
+        parts += [zin[(c, k)] for k in range(self.mz, 0, -1) for c in range(p.nz)]
+        self.core.build_into(m, Cat(*parts), core_valid, advance, self.out)
+        return m
+
+
+def build_recurrent_sensor(rmodel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                           name: str = "pwas_recurrent_sensor") -> PWASRecurrentTop:
+    """The recurrent sensor top of a :class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`.
+
+    Returns
+    -------
+    PWASRecurrentTop
+        ``.latency``, ``.ii`` (= latency), ``.warmup``, ``.signals``, ``.core``.
+    """
+    from pwas_hdl.hdl.api import _check_name
+
+    name = _check_name(name)
+    fxm, lags = rmodel.fxm, rmodel.lags
+    params = CoreParams.from_model(fxm)
+    sod = lags.signal_of_dimension()
+    sig_index = {s: i for i, s in enumerate(rmodel.signals)}
+    counts = [0] * len(rmodel.signals)
+    io_dims = []
+    for j, (kind, _ch, lag) in enumerate(sod):
+        if kind == "z":
+            continue
+        s = sig_index[fxm.regressor_signals[j][0]]
+        io_dims.append((s, lag))
+        counts[s] = max(counts[s], lag + 1)
+    signals = list(zip(rmodel.signals, counts))
+    top = PWASRecurrentTop(params, signals, io_dims, lags.mz, rmodel.feedback, rmodel.initial_codes, memory=memory,
+                           pipeline=pipeline)
+    top.module_name = name
+    top._MustUse__silence = True
+    top.core.input_names = list(fxm.regressor_names)
+    top.core.target_names = list(fxm.target_names)
+    return top

@@ -1,0 +1,168 @@
+"""RTL replay of a recurrent sensor top (issue 13) on Icarus or Verilator, against the bit-true
+recurrence (:class:`pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`).
+
+:func:`build_recurrent_design` turns a recurrent :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor`
+(``Mz >= 1``, initial-state rule "value") into its bit-true model, the Amaranth top and its
+Verilog; :func:`replay` runs the cocotb bench ``sim/pwas_recurrent_tb.py`` (cached builds, as
+:mod:`pwas_runner`) over runs of segments -- each segment after a reset -- and returns the output
+codes the RTL produced together with the checks (exact match, latency, II, reset).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+
+__all__ = ["RecurrentDesign", "build_recurrent_design", "replay", "standard_recurrent_runs"]
+
+
+@dataclass
+class RecurrentDesign:
+    """A recurrent sensor ready to simulate: bit-true model, RTL component, Verilog text."""
+
+    rmodel: Any  # RecurrentFixedPointModel
+    top: Any  # PWASRecurrentTop
+    verilog: str
+    name: str
+    in_fields: list
+    out_fields: list
+
+    @property
+    def latency(self) -> int:
+        return int(self.top.latency)
+
+    @property
+    def ii(self) -> int:
+        return int(self.top.ii)
+
+    def words(self, codes: np.ndarray) -> tuple[list[int], list[int], np.ndarray]:
+        """Packed input words, the expected packed output words and the output codes (R, nz)."""
+        res = self.rmodel.run(codes)
+        ins = [pack_fields([int(v) for v in row], self.in_fields) for row in np.asarray(codes)]
+        outs = [pack_fields([int(v) for v in o] + [int(f)], self.out_fields) for o, f in zip(res["out"], res["out_of_range"])]
+        return ins, outs, res["out"]
+
+
+def build_recurrent_design(sensor, *, input_bits: int = 16, pipeline=None, name: str = "pwas_recurrent_sensor",
+                           **formats) -> RecurrentDesign:
+    """Bit-true model, RTL top and Verilog of a recurrent sensor (``sensor.lags_.mz >= 1``).
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        Recurrent, initial-state rule "value" (the reset values of the feedback registers).
+    input_bits : int
+        ``B_in`` of every regressor dimension (default 16: the fed-back state is re-quantised
+        every step, see :mod:`pwas_hdl.fixedpoint.recurrence`).
+    pipeline, name : as :func:`pwas_hdl.hdl.api.build_sensor`
+    **formats : more :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` options.
+    """
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
+    from pwas_hdl.hdl.emit import emit_verilog
+    from pwas_hdl.hdl.recurrent_top import build_recurrent_sensor
+
+    lags = sensor.lags_
+    if lags is None or not lags.recurrent:
+        raise InputError("the model is not recurrent (Mz = 0): use the lag sensor top (generate --design sensor)")
+    if sensor.initial_state_rule_ != "value":
+        raise InputError("the hardware starts from constant initial states: fit with an initial_state value or 'mean', "
+                         "not 'measured'")
+    fxm = FixedPointModel.from_sensor(sensor, input_bits=input_bits, **formats)
+    rm = RecurrentFixedPointModel(fxm, lags, sensor.initial_values_)
+    top = build_recurrent_sensor(rm, pipeline=pipeline, name=name)
+    verilog = emit_verilog(top, name)
+    b, ow = fxm.input_bits, fxm.output_format.bits
+    in_fields = [{"name": s, "lsb": i * b, "width": b, "signed": True} for i, s in enumerate(rm.signals)]
+    out_fields = [{"name": t, "lsb": i * ow, "width": ow, "signed": True} for i, t in enumerate(fxm.target_names)]
+    out_fields.append({"name": "out_of_range", "lsb": fxm.nz * ow, "width": 1, "signed": False})
+    return RecurrentDesign(rm, top, verilog, name, in_fields, out_fields)
+
+
+def standard_recurrent_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[dict]:
+    """Run plans for ``n`` samples: full speed (checks II and latency), and random bubbles and
+    stalls with a reset after about a third of the samples (then the whole trajectory again)."""
+    cut = max(1, n // 3)
+    return [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": seed,
+             "segments": [{"rows": (0, n), "drain": True, "record": True}]},
+            {"name": "stalls-reset", "p_valid": stalls[0], "p_ready": stalls[1], "seed": seed + 1,
+             "segments": [{"rows": (0, cut), "drain": False, "hold": 3}, {"rows": (0, n), "drain": True}]}]
+
+
+def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus", *, runs: Sequence[dict] | None = None,
+           work_dir: str | Path | None = None, cache_dir: str | Path | None = None) -> dict:
+    """Replay payload codes (T, S) through the RTL; every segment starts after a reset.
+
+    Parameters
+    ----------
+    design : RecurrentDesign
+    codes : ndarray (T, S) of int
+        One row per input transfer (:meth:`RecurrentFixedPointModel.quantize_signals`).
+    simulator : {"icarus", "verilator"}
+    runs : list of dict, optional
+        Plans as :func:`standard_recurrent_runs` (segments give ``rows`` = (start, stop) of
+        ``codes``); default: the standard runs over all of ``codes``.
+
+    Returns
+    -------
+    dict
+        ``passed`` (the bench found no difference), ``failures``, ``runs`` (per segment: outputs,
+        mismatches, latencies, spacings), ``rtl_out`` (R, nz) the output codes of the last segment
+        of the first run as the RTL produced them (decoded), ``bittrue_out`` the model's,
+        ``wall_s``, ``build_s``, ``simulator``.
+    """
+    import sys
+
+    from pwas_hdl.hdl.emit import port_names
+    from pwas_hdl.resources import sim_dir
+
+    if str(sim_dir()) not in sys.path:
+        sys.path.insert(0, str(sim_dir()))
+    import pwas_runner  # noqa: E402 (sim/ on the path)
+
+    codes = np.asarray(codes, dtype=np.int64)
+    plans = list(runs) if runs is not None else standard_recurrent_runs(codes.shape[0])
+    nm = port_names("axis")
+    job: dict = {"ports": {"clock": nm["clock"], "reset": nm["reset"], "reset_on": 0, "in_valid": nm["in.valid"],
+                           "in_ready": nm["in.ready"], "in_payload": nm["in.payload"], "out_valid": nm["out.valid"],
+                           "out_ready": nm["out.ready"], "out_payload": nm["out.payload"], "warm": "warm"},
+                 "latency": design.latency, "ii": design.ii, "warmup": int(design.top.warmup), "runs": []}
+    cache: dict = {}
+    for plan in plans:
+        segs = []
+        for seg in plan["segments"]:
+            a, b = seg["rows"]
+            if (a, b) not in cache:
+                cache[(a, b)] = design.words(codes[a:b])
+            ins, outs, oc = cache[(a, b)]
+            segs.append({"words": ins, "expected": outs, "drain": bool(seg.get("drain", True)), "hold": int(seg.get("hold", 0)),
+                         "record": bool(seg.get("record", False))})
+        job["runs"].append({k: plan[k] for k in ("name", "p_valid", "p_ready", "seed")} | {"segments": segs})
+    with tempfile.TemporaryDirectory(prefix="pwas-rec-") as tmp:
+        wd = Path(work_dir) if work_dir is not None else Path(tmp)
+        wd.mkdir(parents=True, exist_ok=True)
+        vpath = wd / f"{design.name}.v"
+        vpath.write_text(design.verilog, encoding="utf-8")
+        bld = pwas_runner.build(vpath, design.name, simulator, cache_dir=cache_dir)
+        res = pwas_runner.run_job(bld, job, wd / f"run-{simulator}", test_module="pwas_recurrent_tb")
+    first = plans[0]["segments"][-1]["rows"]
+    seg0 = res["runs"][0]["segments"][-1] if res.get("runs") else None
+    _, outs_exp, oc = cache[tuple(first)]
+    res["bittrue_out"] = oc
+    res["rtl_out"] = None
+    if seg0 is not None and seg0.get("words") is not None:  # decoded output codes of the RTL (without the flag)
+        res["rtl_out"] = np.array([unpack_fields(w, design.out_fields)[:-1] for w in seg0["words"]], dtype=np.int64)
+    res["build_s"] = bld.build_seconds
+    res["simulator"] = simulator
+    res["n_samples"] = int(codes.shape[0])
+    res["mismatches"] = int(sum(s["mismatches"] for r in res.get("runs", []) for s in r["segments"]))
+    res["outputs_compared"] = int(sum(min(s["outputs"], s["expected"]) for r in res.get("runs", []) for s in r["segments"]))
+    res["passed"] = bool(res.get("passed")) and not res.get("failures")
+    return res
