@@ -142,11 +142,27 @@ def _tail(path: Path, lines: int = 40) -> str:
     return "\n".join(text[-lines:])
 
 
+def install_identity(simulator: str) -> str:
+    """Where the simulator and cocotb are installed (real paths).
+
+    Part of every cache key: a Verilator build links cocotb's VPI library and its dependency files
+    name Verilator's include folder by absolute path, so a build made from another virtualenv (or
+    one since deleted) must not be reused even when the versions are equal.
+    """
+    import cocotb
+
+    from pwas_hdl.flow.toolchain import which
+
+    exe = which("iverilog" if simulator == "icarus" else "verilator")
+    return f"{os.path.realpath(exe) if exe else '-'}\0{os.path.realpath(os.path.dirname(cocotb.__file__))}"
+
+
 def build_key(verilog_text: str, top: str, simulator: str, waves: bool) -> str:
     import cocotb
 
     h = hashlib.sha256()
-    for part in (verilog_text, top, simulator, str(waves), tool_versions(simulator), cocotb.__version__,
+    for part in (verilog_text, top, simulator, str(waves), tool_versions(simulator), install_identity(simulator),
+                 cocotb.__version__,
                  str(BUILD_RECIPE), " ".join(VERILATOR_BUILD_ARGS), " ".join(VERILATOR_MAKE_VARS)):
         h.update(part.encode())
         h.update(b"\0")
@@ -215,7 +231,7 @@ _RUNTIME_OBJECTS = ("verilated", "verilated_vpi", "verilated_threads", "verilate
 
 
 def _verilator_runtime(root: Path, waves: bool) -> Path:
-    h = hashlib.sha256(f"{tool_versions('verilator')}\0{waves}\0{BUILD_RECIPE}\0{os.environ.get('MAKEFLAGS', '')}".encode())
+    h = hashlib.sha256(f"{tool_versions('verilator')}\0{install_identity('verilator')}\0{waves}\0{BUILD_RECIPE}\0{os.environ.get('MAKEFLAGS', '')}".encode())
     return root / f"_verilator_runtime-{h.hexdigest()[:16]}"
 
 
