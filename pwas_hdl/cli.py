@@ -278,6 +278,7 @@ def fit(
     mz: Annotated[int, typer.Option("--mz", help="Mz: past estimates z_hat(t-1..t-Mz) of every target fed back as regressors (a dynamical sensor; fitted series-parallel, predict runs the recurrence). 0 = static.")] = 0,
     refine: Annotated[int, typer.Option("--refine", help="With --mz: up to K closed-loop refinements (refit on the simulated estimates while the closed-loop error improves).")] = 0,
     z0: Annotated[Optional[str], typer.Option("--z0", help="With --mz: initial past estimates, mean (training mean, default), measured (the measured z before the first estimate; predict then reads the target columns) or one value per target (comma list).")] = None,
+    additive: Annotated[Optional[str], typer.Option("--additive", help="Reduced-complexity additive sensor, a sum of PWAS parts on subsets of the regressors, fitted jointly: time (one part per time instant), pairs / triples (sliding windows of 2 / 3 lags), or regressor indices '0,1;1,2;...' (0-based, in the order fit prints them; parts separated by ';').")] = None,
 ) -> None:
     """Fit a PWAS virtual sensor to DATA and write the model file."""
     from pwas_hdl.fit import classifier as clf
@@ -364,7 +365,13 @@ def fit(
             mz=mz,
             refine=refine,
             initial_state=init,
+            additive=additive,
         )
+        if additive is not None and not bank:  # the parts are checked before the data are read into a fit
+            from pwas_hdl.fit.additive import parse_additive
+            from pwas_hdl.fit.regressors import LagStructure
+
+            parse_additive(additive, LagStructure(mu, my, len(ins) if mu else 0, len(outs) if my else 0).signal_of_dimension())
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
         if classes is not None:
@@ -372,8 +379,9 @@ def fit(
         with outset:
             outset.write_text(output, model.to_json())
         d = model.to_dict()
+        parts = f" in {len(d['additive']['parts'])} additive parts ({d['additive']['spec']})" if "additive" in d else ""
         _say(
-            f"fitted n = {model.grid_.n} ({', '.join(d['regressors'])}), N = {model.grid_.n_vertices} weights, "
+            f"fitted n = {model.grid_.n} ({', '.join(d['regressors'])}), N = {model.grid_.n_vertices} weights{parts}, "
             f"sigma = {model.sigma_:.3g}{' (CV)' if sigma is None else ''}, "
             f"train RMSE = {', '.join(f'{t}: {v:.4g}' for t, v in d['fit']['train_rmse'].items())}"
         )

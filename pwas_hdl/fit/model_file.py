@@ -30,6 +30,12 @@ The regressors then end with the ``nz * Mz`` past estimates ``<target>_hat[t-Mz]
 Optional ``map_fit`` block (a PWAS approximation of a given map, :mod:`pwas_hdl.fit.map_approximation`)::
 
       "map_fit": {"max_error": {"<target>": ..}, "rms_error": {"<target>": ..}, "n_test": int, "test": "how"}
+An additive sensor (:mod:`pwas_hdl.fit.additive`, ``fit --additive``) adds the optional key
+``"additive": {"spec": "pairs", "parts": [[0, 1], [1, 2], ...]}`` (the rule as given and the
+regressor indices of each part); ``grid`` is then the shared domain box of all ``n`` regressors and
+each weight list holds the parts' weights one after the other (``sum_i prod_{j in S_i} (p_j + 1)``
+values, part order, each part in the vertex order of its own grid). Files without the key are full
+PWAS sensors, as before.
 
 Floats are written with Python's shortest round-trip representation, so a save / load round trip
 is bit-exact. Reading checks, in this order: strict JSON (no NaN), ``format`` and ``version`` (a
@@ -118,6 +124,13 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
         d["map_fit"] = {"max_error": {t: float(v) for t, v in zip(tgts, map_fit["max"])},
                         "rms_error": {t: float(v) for t, v in zip(tgts, map_fit["rms"])},
                         "n_test": int(map_fit["n_test"]), "test": str(map_fit["test"])}
+    # ---- additive sensor (issue 15): the parts' regressor subsets; owned by pwas_hdl.fit.additive
+    subsets = getattr(grid, "subsets", None)
+    if subsets is not None:
+        from pwas_hdl.fit.additive import format_subsets
+
+        spec = sensor.additive if isinstance(sensor.additive, str) else format_subsets(subsets)
+        d["additive"] = {"spec": spec, "parts": [[int(v) for v in s] for s in subsets]}
     return d
 
 
@@ -234,6 +247,11 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
     if d["regressors"] != names:
         errs.append(f"regressors {d['regressors']} do not match the lags and signal names ({names})")
     n_vertices = int(np.prod([p + 1 for p in g["partitions"]], dtype=object))
+    if "additive" in d:
+        errs += _additive_errors(d, names)
+        if errs:
+            return errs
+        n_vertices = sum(int(np.prod([g["partitions"][j] + 1 for j in part], dtype=object)) for part in d["additive"]["parts"])
     for what, keys in (("weights", list(d["weights"])), ("fit.train_rmse", list(d["fit"]["train_rmse"]))):
         if keys != tgts:
             errs.append(f"{what} has the keys {keys}, signals.targets are {tgts}")
@@ -248,6 +266,31 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
     if cv is not None and len(cv["mse"]) != len(cv["sigmas"]):
         errs.append(f"fit.cv.mse has {len(cv['mse'])} values for {len(cv['sigmas'])} fit.cv.sigmas")
     return errs
+
+
+def _additive_errors(d: dict[str, Any], names: list[str]) -> list[str]:
+    """The ``additive`` block: parts that are valid subsets of the ``n`` regressors and agree with the spec."""
+    from pwas_hdl.fit.additive import parse_additive
+    from pwas_hdl.fit.regressors import LagStructure
+
+    if "front_end" in d:
+        return ["additive is given together with front_end (an additive sensor has the lag front end)"]
+    if "recurrence" in d:
+        return ["additive is given together with recurrence (an additive sensor with past estimates is not available)"]
+    n = len(names)
+    parts = d["additive"]["parts"]
+    for k, part in enumerate(parts):
+        if part != sorted(set(part)) or part[0] < 0 or part[-1] >= n:
+            return [f"additive.parts[{k}] = {part} is not a sorted list of distinct regressor indices 0..{n - 1}"]
+    sig, lags = d["signals"], d["lags"]
+    ls = LagStructure(lags["Mu"], lags["My"], len(sig["inputs"]) if lags["Mu"] else 0, len(sig["outputs"]) if lags["My"] else 0)
+    try:
+        want = [list(s) for s in parse_additive(d["additive"]["spec"], ls.signal_of_dimension())]
+    except InputError as exc:
+        return [f"additive.spec {d['additive']['spec']!r} is not valid ({exc})"]
+    if want != parts:
+        return [f"additive.parts {parts} differ from the parts of additive.spec {d['additive']['spec']!r} ({want})"]
+    return []
 
 
 def model_errors(d: Any) -> list[str]:
@@ -285,7 +328,12 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     sig, lags, g, fit = d["signals"], d["lags"], d["grid"], d["fit"]
     ins, outs, tgts = list(sig["inputs"]), list(sig["outputs"]), list(sig["targets"])
     try:
-        grid = Grid(g["lo"], g["hi"], g["partitions"])
+        if "additive" in d:
+            from pwas_hdl.fit.additive import AdditiveGrid
+
+            grid = AdditiveGrid(g["lo"], g["hi"], g["partitions"], d["additive"]["parts"])
+        else:
+            grid = Grid(g["lo"], g["hi"], g["partitions"])
     except ValueError as exc:  # widths <= 0, too many vertices, ...
         raise InputError(f"{source}: grid: {exc}; {_HINT}") from exc
     w = np.array([d["weights"][t] for t in tgts], dtype=float).T.reshape(grid.n_vertices, len(tgts))
@@ -301,6 +349,7 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         input_names=ins,
         output_names=outs,
         target_names=tgts,
+        additive=d["additive"]["spec"] if "additive" in d else None,
     )
     cv = fit["cv"]
     if "front_end" in d:

@@ -97,6 +97,14 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         The past estimates the recurrence starts from: ``"mean"`` (default) the training mean of
         each target, ``"measured"`` the measured ``z`` before the first estimate (``predict``
         then needs ``z``), or ``nz`` values (or (Mz, nz), oldest first).
+    additive : str or sequence of sequences of int, optional
+        Reduced-complexity additive sensor (:mod:`pwas_hdl.fit.additive`): ``f(x) = sum_i
+        f_i(x_{S_i})``, one PWAS part per subset ``S_i`` of the regressor dimensions: ``"time"``
+        (one part per time instant), ``"pairs"`` / ``"triples"`` (sliding windows of 2 / 3 lags),
+        ``"0,1;1,2"`` or a list of index lists. The parts share the domain box and partitions;
+        ``grid_`` is then an :class:`~pwas_hdl.fit.additive.AdditiveGrid` and ``weights_`` the
+        stacked part weights. ``None`` (default): one PWAS function on all regressors. Lag
+        regressors only (not with the observer-bank front end).
 
     Attributes (after ``fit``)
     --------------------------
@@ -128,6 +136,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         mz: int = 0,
         refine: int = 0,
         initial_state: str | Sequence[float] = "mean",
+        additive: str | Sequence[Sequence[int]] | None = None,
     ):
         self.mu = mu
         self.my = my
@@ -147,6 +156,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.mz = mz
         self.refine = refine
         self.initial_state = initial_state
+        self.additive = additive
 
     # ------------------------------------------------------------ validation
     def _check_params(self) -> None:
@@ -170,6 +180,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise InputError("mz >= 1 (past estimates as regressors) needs the lag front end, not the observer bank")
         if isinstance(self.initial_state, str) and self.initial_state not in ("mean", "measured"):
             raise InputError(f"initial_state must be 'mean', 'measured' or numbers, got {self.initial_state!r}")
+        if self.additive is not None and self._bank:
+            raise InputError("an additive sensor (--additive) needs the lag front end (--front-end lags)")
+        if self.additive is not None and self.mz:
+            raise InputError("an additive sensor (--additive) with past estimates (--mz) is not available yet; use one of them")
         if self.sigma_grid is not None and hasattr(self.sigma_grid, "__len__"):
             check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
                         "give fewer candidates (--sigma-grid)")
@@ -337,12 +351,20 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                 raise ValueError(f"explicit domain must have {xi.shape[1]} bounds per side, got {lo.size} and {hi.size}")
         else:
             lo, hi = self._data_domain(xi, lags, fe)
-        grid = Grid(lo, hi, self.partitions)
+        if self.additive is not None:  # sum of PWAS parts on regressor subsets (pwas_hdl.fit.additive)
+            from pwas_hdl.fit.additive import AdditiveGrid, additive_tikhonov_matrix, parse_additive
+
+            grid = AdditiveGrid(lo, hi, self.partitions, parse_additive(self.additive, lags.signal_of_dimension()))
+            basis_dims = grid.basis_dims
+        else:
+            grid = Grid(lo, hi, self.partitions)
+            basis_dims = grid.n
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
-        check_fit_memory(xi.shape[0], grid.n_vertices, grid.n, nz, int(self.tikhonov_order))
+        check_fit_memory(xi.shape[0], grid.n_vertices, basis_dims, nz, int(self.tikhonov_order))
         h = grid.basis_matrix(xi)
-        gam = tikhonov_matrix(grid, self.tikhonov_order)
+        gam = (additive_tikhonov_matrix(grid, self.tikhonov_order) if self.additive is not None
+               else tikhonov_matrix(grid, self.tikhonov_order))
         if self.sigma is None:
             cv = cross_validate_sigma(h, zt, gam, self.sigma_grid, self.cv_folds, self.cv_shuffle, progress=progress)
             sigma = cv.best_sigma
@@ -436,6 +458,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         flags : ndarray, shape (m,), bool  (only with ``return_flags``)
         """
         self._check_fitted()
+        if not isinstance(self.grid_, Grid):  # additive: the sum of the parts (pwas_hdl.fit.additive)
+            zhat = self.grid_.evaluate(self.weights_, xi)
+            return (zhat, self.grid_.to_grid_units(xi)[1]) if return_flags else zhat
         loc = self.grid_.locate(xi)
         zhat = np.einsum("mk,mkz->mz", loc.mu, self.weights_[loc.vertices])
         return (zhat, loc.out_of_domain) if return_flags else zhat
