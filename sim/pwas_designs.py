@@ -20,7 +20,7 @@ __all__ = ["synthetic_model", "DesignConfig"]
 
 def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int] | int, nz: int = 1, *,
                     seed: int = 0, weight_scale: float | None = None, rmse: float | None = None,
-                    classes: Sequence[float] | None = None, ties: bool = False):
+                    classes: Sequence[float] | None = None, ties: bool = False, additive: str | None = None):
     """A PWAS virtual sensor with lags ``(Mu, My)`` of ``nu`` inputs / ``ny`` outputs.
 
     ``partitions``: one integer, or one per regressor dimension (for the sensor top all lags of a
@@ -30,6 +30,9 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
     ``nz`` classes (score targets ``mode=<label>``). ``ties``: force equal scores -- score 1 has the
     weights of score 0 everywhere and score 3 those of score 2 on every other vertex -- so that the
     output codes tie often and the argmax tie rule (lowest index) is exercised.
+
+    ``additive``: an additive sensor (``fit --additive``: ``time``, ``pairs``, ``triples``,
+    ``"0,1;1,2"``), with random weights on every part.
     """
     from pwas_hdl.fit.regressors import LagStructure
     from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_SCHEMA_ID, MODEL_VERSION, model_from_dict
@@ -59,14 +62,21 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
             sig_dom[key] = (a, a + float(rng.uniform(0.5, 40)))
         lo.append(sig_dom[key][0])
         hi.append(sig_dom[key][1])
-    n_v = int(np.prod([p + 1 for p in parts]))
+    subsets = [tuple(range(n))]
+    if additive is not None:
+        from pwas_hdl.fit.additive import parse_additive
+
+        subsets = list(parse_additive(additive, lags.signal_of_dimension()))
     scale = weight_scale if weight_scale is not None else float(10.0 ** rng.uniform(-1, 2))
-    # a smooth part plus noise, so that neighbouring weights are related but not equal
-    coords = np.stack(np.unravel_index(np.arange(n_v), [p + 1 for p in parts]), axis=1) / np.maximum(parts, 1)
-    weights = {}
-    for t in range(nz):
-        smooth = np.sin(coords @ rng.normal(0, 2, n) + rng.uniform(0, 6))
-        weights[tgts[t]] = (scale * (smooth + 0.3 * rng.normal(0, 1, n_v))).tolist()
+    weights = {t: [] for t in tgts}
+    for sub in subsets:
+        sp = [parts[j] for j in sub]
+        n_v = int(np.prod([p + 1 for p in sp]))
+        # a smooth part plus noise, so that neighbouring weights are related but not equal
+        coords = np.stack(np.unravel_index(np.arange(n_v), [p + 1 for p in sp]), axis=1) / np.maximum(sp, 1)
+        for t in range(nz):
+            smooth = np.sin(coords @ rng.normal(0, 2, len(sp)) + rng.uniform(0, 6))
+            weights[tgts[t]] += (scale * (smooth + 0.3 * rng.normal(0, 1, n_v))).tolist()
     if ties:
         if nz < 2:
             raise ValueError("ties need nz >= 2")
@@ -88,6 +98,8 @@ def synthetic_model(mu: int, my: int, nu: int, ny: int, partitions: Sequence[int
     }
     if classes is not None:
         d["classifier"] = {"target": "mode", "classes": [float(c) for c in classes]}
+    if additive is not None:
+        d["additive"] = {"spec": additive, "parts": [list(s) for s in subsets]}
     return model_from_dict(d, source="synthetic model")
 
 
@@ -107,6 +119,7 @@ class DesignConfig:
     seed: int = 0
     classes: tuple = ()  # a classifier of these nz classes (argmax stage after the core)
     ties: bool = False  # force tied scores (see synthetic_model)
+    additive: str | None = None  # an additive sensor (fit --additive), e.g. "pairs"
 
     @property
     def n(self) -> int:
@@ -114,7 +127,8 @@ class DesignConfig:
 
     def model(self):
         return synthetic_model(self.mu, self.my, self.nu, self.ny, self.partitions, self.nz, seed=self.seed,
-                               classes=self.classes or None, ties=self.ties)
+                               classes=self.classes or None, ties=self.ties,
+                               additive=self.additive)
 
     def generate(self, outdir: str | Path):
         """Write the design folder (``pwas_hdl.design.generate.generate``); returns the GeneratedDesign."""

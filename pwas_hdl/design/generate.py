@@ -107,7 +107,16 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
     if unknown:
         raise ValueError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
     given = {k: v for k, v in formats.items() if v is not None}
+    if _is_additive(sensor):  # the parts' cores summed before one rounding (pwas_hdl.fixedpoint.additive)
+        from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
+
+        return AdditiveFixedPointModel.from_sensor(sensor, layout=memory, **given)
     return FixedPointModel.from_sensor(sensor, layout=memory, **given)
+
+
+def _is_additive(sensor: PWASVirtualSensor) -> bool:
+    """True for a sensor fitted with ``additive`` (its grid is an AdditiveGrid)."""
+    return getattr(sensor.grid_, "subsets", None) is not None
 
 
 def _template(name: str) -> Template:
@@ -314,6 +323,11 @@ def build_design(
     top = name or ("pwas_core" if design == "core" else "pwas_sensor")
     for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
         check_signal_names(names, f"{kind} signal")
+    additive = _is_additive(sensor)
+    if additive and target_mhz is not None:
+        raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")
+    if additive and memory_init != "inline":
+        raise InputError("--memory-init readmemh is not available for additive sensors (their part modules carry the weights inline)")
     fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
@@ -333,24 +347,38 @@ def build_design(
     else:
         chosen = pipeline
     classifier = getattr(sensor, "classifier_", None)  # a classifier model: argmax stage after the core
-    if design == "core":
-        comp = build_core(fxm, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None, name=top,
-                          classifier=classifier)
+    pipe_arg = Pipeline.cast(chosen) if chosen is not None else None
+    if additive:  # the parts' cores in parallel, summed before one rounding (pwas_hdl.hdl.additive_top)
+        from pwas_hdl.hdl.additive_top import additive_hex_files, build_additive_core, build_additive_sensor, emit_additive_verilog
+
+        if classifier is not None:
+            raise InputError("hardware for an additive classifier (--additive with --classify) is not available yet")
+        comp = (build_additive_core(fxm, memory=memory, pipeline=pipe_arg, name=top) if design == "core"
+                else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top))
+    elif design == "core":
+        comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier)
     else:
-        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=Pipeline.cast(chosen) if chosen is not None else None,
-                            name=top, classifier=classifier)
+        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier)
     info = design_info(comp, ports)
 
     prefix = f"{top}_rom"
-    verilog = emit_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix, ports=ports)
-    hexes = memory_hex_files(comp, prefix)
-    plan = info["memory"]
     bw = fxm.weight_format.bits
-    hex_entries = [
-        {"file": fname, "bank": b, "depth": int(plan["depth"]), "width": int(plan["word_bits"]),
-         "fields": [{"target": t, "lsb": i * bw, "width": bw, "signed": True} for i, t in enumerate(fxm.target_names)]}
-        for b, fname in enumerate(hexes)
-    ]
+    fields = [{"target": t, "lsb": i * bw, "width": bw, "signed": True} for i, t in enumerate(fxm.target_names)]
+    if additive:
+        verilog = emit_additive_verilog(comp, top, ports=ports)
+        hexes = additive_hex_files(comp, prefix)
+        part_plans = [(i, b, c.memory_plan) for i, c in enumerate(comp.core.parts if design == "sensor" else comp.parts)
+                      for b in range(c.memory_plan.n_banks)]
+        hex_entries = [{"file": fname, "part": i, "bank": b, "depth": int(pl.depth), "width": int(pl.word_bits), "fields": fields}
+                       for fname, (i, b, pl) in zip(hexes, part_plans)]
+    else:
+        verilog = emit_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix, ports=ports)
+        hexes = memory_hex_files(comp, prefix)
+        plan = info["memory"]
+        hex_entries = [
+            {"file": fname, "bank": b, "depth": int(plan["depth"]), "width": int(plan["word_bits"]), "fields": fields}
+            for b, fname in enumerate(hexes)
+        ]
     files = {
         "verilog": f"{top}.v",
         "model": "model.json",
@@ -424,6 +452,9 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         f"model.json SHA-256 {model_sha256}",
         f"regressor (n = {len(man['lags']['regressors'])}): {', '.join(man['lags']['regressors'])}; "
         f"{man['domain']['n_vertices']} vertices; targets: {', '.join(man['lags']['targets'])}",
+        *([f"additive sensor: {len(man['additive']['parts'])} parts (" + "; ".join(
+            ", ".join(man['lags']['regressors'][j] for j in pt['regressors']) for pt in man['additive']['parts'])
+            + "), each a PWAS core without rounding; their sums added exactly, then rounded once"] if "additive" in man else []),
         f"latency {man['latency_cycles']} cycles (input transfer to {_port_meaning(man, '{out.valid}')}), II {man['ii']} (one sample per clock)",
         f"weights {fm['weight']['str']} ({man['memory']['kind']} memory, {man['memory']['memories']} x "
         f"{man['memory']['depth']} words of {man['memory']['word_bits']} bits); output {fm['output']['str']} "

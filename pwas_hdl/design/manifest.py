@@ -202,6 +202,14 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
         "pipeline": info["pipeline"],
         "arithmetic": info["arithmetic"],
     }
+    if "additive" in fx:  # additive sensor (issue 15): the parts, bit-true (formats) and hardware (memories)
+        hw = info["additive"]
+        man["additive"] = {
+            "parts": [{**a, **{k: h[k] for k in ("module_suffix", "latency", "pipeline", "memory")}}
+                      for a, h in zip(fx["additive"]["parts"], hw["parts"])],
+            "sum_bits": hw["sum_bits"],
+            "sum": fx["additive"]["sum"],
+        }
     if timing is not None:
         man["timing"] = timing
     if "classifier" in info:  # a classifier model: argmax stage after the core

@@ -132,6 +132,10 @@ class PWASCore(wiring.Component):
     params : CoreParams
     memory : {"banked", "replicated"}
     pipeline : Pipeline, preset name ("min", "balanced", "max") or None (balanced)
+    round_output : bool
+        ``False``: no rounding or saturation; the output register holds the exact accumulator,
+        ``acc_width + 1`` signed bits per target (``out_field_width``), for a design that adds
+        several cores before one rounding (the additive sensor, :mod:`pwas_hdl.hdl.additive_top`).
 
     Ports (flattened Verilog names): ``clk``, ``rst`` (synchronous, active high), ``in__valid``,
     ``in__ready``, ``in__payload`` (``n*B_in`` bits), ``out__valid``, ``out__ready``,
@@ -150,7 +154,8 @@ class PWASCore(wiring.Component):
         Number, depth and width of the weight memories and their contents.
     """
 
-    def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 round_output: bool = True):
         self._MustUse__silence = True  # no "never used" warning for an object whose __init__ raised
         lo, hi = -(1 << (params.in_width - 1)), (1 << (params.in_width - 1)) - 1
         for j, v in enumerate(params.lo_code):
@@ -165,10 +170,13 @@ class PWASCore(wiring.Component):
         self.memory_plan = MemoryPlan.build(params, memory)
         self.latency = self.pipeline.latency(params.n)
         self.ii = 1
+        self.round_output = bool(round_output)
+        #: bits per target in the output payload: B_out, or acc_width + 1 without the rounding
+        self.out_field_width = params.out_width if self.round_output else params.acc_width + 1
         super().__init__(
             {
                 "in": In(stream.Signature(unsigned(core_input_layout(params).size))),
-                "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+                "out": Out(stream.Signature(unsigned(self.out_field_width * params.nz + 1))),
             }
         )
         self._MustUse__silence = False
@@ -191,7 +199,7 @@ class PWASCore(wiring.Component):
         pipe = _Pipe(m, advance)
         valid, vals = self._front(m, pipe, payload, valid)
         zs, oor, valid = self._back(m, pipe, valid, vals, advance)
-        outw = self.params.out_width
+        outw = self.out_field_width
         for z, o in enumerate(zs):
             pipe.regs.append((out.payload[z * outw : (z + 1) * outw], o))
         pipe.regs.append((out.payload[-1], _bit(oor)))
@@ -461,6 +469,8 @@ class PWASCore(wiring.Component):
                     pos += len(row)
                 terms, oor = new, r["oor"]
         accs = [row[0] for row in terms]  # accw + 1 bits
+        if not self.round_output:  # the exact sums go to the output register (additive sensor)
+            return accs, oor, valid
 
         # ---------------------------------------------------------- G: round, saturate
         outw, sh = p.out_width, p.shift

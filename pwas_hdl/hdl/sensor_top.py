@@ -43,7 +43,7 @@ def lag_plan(model, lags: LagStructure | None = None):
     dims : list of (signal index, lag)
         One per regressor dimension, ``lag = 0`` the current sample.
     """
-    n = len(CoreParams.from_model(model).partitions)
+    n = model.n if isinstance(getattr(model, "n", None), int) else len(CoreParams.from_model(model).partitions)  # n: also additive models
     names = list(getattr(model, "regressor_signals", []) or [])
     if lags is not None and lags.recurrent:  # issue 13: the fed-back estimates need the feedback path
         from pwas_hdl.errors import InputError

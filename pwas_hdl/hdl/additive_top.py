@@ -1,0 +1,432 @@
+"""Hardware of the additive PWAS sensor (issue 15): the parts' cores in parallel, summed before one rounding.
+
+Datapath (the bit-true specification is :class:`pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel`)::
+
+    regressor codes (n x B_in) --+--> q[S_1] -> PWASCore part 1 (no rounding) -> acc_1 --+
+                                 +--> q[S_2] -> PWASCore part 2 (no rounding) -> acc_2 --+--> sum (exact,
+                                 ...                                                     |    acc_i << F - F_i)
+                                 +--> q[S_k] -> PWASCore part k (no rounding) -> acc_k --+--> round, saturate
+                                                                                              -> out register
+
+* Every part is a :class:`~pwas_hdl.hdl.core.PWASCore` with ``round_output=False`` (its output
+  register holds the exact accumulator), elaborated into its own Verilog module
+  ``<top>_part<i>`` with its own weight memories. The parts read the same input codes: one scaling
+  per regressor (and, in the sensor top, one lag bank, :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`).
+* The parts get pipelines of equal latency (the given one, with the ``addr`` / ``mem_out`` /
+  ``split`` / ``rank`` / ``product`` registers or more adder-tree registers added to the parts with
+  fewer adder-tree levels), so their valid bits are equal; latency = part latency + 1 (the sum register).
+* Flow control: ``advance = ~out.valid | out.ready`` for the sum register; each part's output
+  register is read when ``advance`` is high (``part.out.ready = advance``), so a part advances when
+  its output is empty or taken: all parts move together, ``in.ready`` is the parts' ``advance``.
+* Widths: ``acc_i`` has ``F_i + B_w + 1`` bits; the aligned terms and partial sums ``W = F + B_w + 1
+  + ceil(log2 k)`` bits (``|acc_i << (F - F_i)| <= 2**(F + B_w - 1)``: no sum can overflow); the
+  rounding adds ``2**(sh-1)`` modulo ``2**W`` and drops ``sh`` bits, then saturates to ``B_out``.
+
+The Verilog (:func:`emit_additive_verilog`) is one file with the top module and one module per part;
+``memory_init="readmemh"`` is not available for additive designs (the weights are inline).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+
+from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.fixedpoint.reduction import tree_reduce
+from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
+from pwas_hdl.hdl.core import PWASCore
+from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
+
+__all__ = ["AdditiveCore", "AdditiveSensorTop", "build_additive_core", "build_additive_sensor", "emit_additive_verilog",
+           "additive_hex_files", "equal_latency_pipelines"]
+
+
+def equal_latency_pipelines(base: Pipeline, dims: list[int]) -> list[Pipeline]:
+    """One pipeline per part (``dims``: the parts' dimensions) with the latency of the slowest part.
+
+    Parts with fewer adder-tree levels get the optional registers of ``base`` they lack (``addr``,
+    ``mem_out``, ``split``, ``rank``, ``product``, in this order), then more adder-tree registers.
+
+    Raises
+    ------
+    InputError
+        No such pipeline exists for some part (e.g. every register is already used).
+    """
+    target = max(base.latency(n) for n in dims)
+    out = []
+    for n in dims:
+        p = base
+        for fld in ("addr", "mem_out", "split", "rank", "product"):
+            if p.latency(n) >= target:
+                break
+            if not getattr(p, fld):
+                p = replace(p, **{fld: True})
+        lv = p.tree_levels
+        while p.latency(n) < target and lv != 1:
+            lv = max(Pipeline.tree_depth(n), 1) if lv == 0 else lv - 1
+            p = replace(p, tree_levels=lv)
+        if p.latency(n) != target:
+            raise InputError(f"the additive parts cannot be given equal latencies with pipeline {base.to_dict()} "
+                             f"(parts of dimensions {sorted(set(dims))}); use another --pipeline or parts of equal size")
+        out.append(p)
+    return out
+
+
+@dataclass(frozen=True)
+class AdditiveParams:
+    """Integer description of the additive datapath as a whole (what ``design_info`` reports).
+
+    ``partitions``, ``lo_code``, ``frac_bits`` per regressor of the whole sensor; ``acc_width + 1``
+    is the width ``W`` of the sum; ``shift = F + Fw - Fo``.
+    """
+
+    partitions: tuple[int, ...]
+    in_width: int
+    lo_code: tuple[int, ...]
+    frac_bits: tuple[int, ...]
+    weight_width: int
+    weight_frac: int
+    out_width: int
+    out_frac: int
+    nz: int
+    rounding: str
+    sum_width: int
+
+    @property
+    def n(self) -> int:
+        return len(self.partitions)
+
+    @property
+    def frac(self) -> int:
+        return max(self.frac_bits)
+
+    @property
+    def shift(self) -> int:
+        return self.frac + self.weight_frac - self.out_frac
+
+    @property
+    def acc_width(self) -> int:
+        return self.sum_width - 1
+
+
+@dataclass(frozen=True)
+class AdditiveMemoryPlan:
+    """The weight memories of all parts (each part's :class:`~pwas_hdl.hdl.params.MemoryPlan`)."""
+
+    parts: tuple
+
+    @property
+    def kind(self) -> str:
+        return self.parts[0].kind
+
+    def to_dict(self) -> dict:
+        return {
+            "kind": self.kind,
+            "memories": int(sum(p.n_banks for p in self.parts)),
+            "depth": int(max(p.depth for p in self.parts)),
+            "word_bits": int(self.parts[0].word_bits),
+            "words": int(sum(p.words for p in self.parts)),
+            "bits": int(sum(p.bits for p in self.parts)),
+        }
+
+
+class _Out:
+    """The output side a part core drives (``payload``, ``valid``) and reads (``ready``)."""
+
+    def __init__(self, name: str, width: int, ready):
+        self.payload = Signal(width, name=f"{name}_acc", reset_less=True)
+        self.valid = Signal(name=f"{name}_valid")
+        self.ready = ready
+
+
+class AdditiveCore(wiring.Component):
+    """The additive datapath: the parts' cores in parallel, the exact sum, one rounding.
+
+    Parameters
+    ----------
+    model : AdditiveFixedPointModel
+    memory : {"banked", "replicated"}
+    pipeline : Pipeline, preset name or None
+        The parts' pipeline (made equal in latency, :func:`equal_latency_pipelines`).
+
+    Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.payload``: ``n`` codes; ``out.payload``:
+    ``nz`` codes of ``B_out`` bits, then ``out_of_range``).
+
+    Attributes
+    ----------
+    parts : list of PWASCore
+        The part cores (``round_output=False``).
+    subsets : tuple of tuple of int
+    latency, ii : int
+    params : AdditiveParams
+    memory_plan : AdditiveMemoryPlan
+    pipeline : Pipeline
+        The pipeline asked for (the parts' own are ``parts[i].pipeline``).
+    """
+
+    def __init__(self, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        base = Pipeline.cast(pipeline)
+        self.subsets = tuple(model.subsets)
+        self.align = list(model.align)
+        part_params = [CoreParams.from_model(p) for p in model.parts]
+        pipes = equal_latency_pipelines(base, [pp.n for pp in part_params])
+        self.parts = [PWASCore(pp, memory=memory, pipeline=pl, round_output=False) for pp, pl in zip(part_params, pipes)]
+        for c in self.parts:
+            c._MustUse__silence = True  # built into the part modules by build_into, never elaborated alone
+        self.pipeline = base
+        self.memory_kind = memory
+        self.memory_plan = AdditiveMemoryPlan(tuple(c.memory_plan for c in self.parts))
+        self.latency = self.parts[0].latency + 1
+        self.ii = 1
+        self.params = AdditiveParams(
+            partitions=tuple(int(v) for v in model.grid.partitions), in_width=int(model.input_bits),
+            lo_code=tuple(int(v) for v in model.lo_codes), frac_bits=tuple(int(v) for v in model.frac_bits),
+            weight_width=int(model.weight_format.bits), weight_frac=int(model.weight_format.frac),
+            out_width=int(model.output_format.bits), out_frac=int(model.output_format.frac), nz=int(model.nz),
+            rounding=str(model.rounding), sum_width=int(model.sum_bits))
+        if self.params.shift >= self.params.sum_width:
+            raise InputError(f"the output shift {self.params.shift} drops every bit of the {self.params.sum_width}-bit sum; "
+                             "use a larger output_frac")
+        for c, a in zip(self.parts, self.align):
+            if c.out_field_width + a > self.params.sum_width:
+                raise InternalError("an aligned part accumulator is wider than the sum")
+        super().__init__({
+            "in": In(stream.Signature(unsigned(self.params.n * self.params.in_width))),
+            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1))),
+        })
+        self._MustUse__silence = False
+
+    def elaborate(self, platform):
+        m = Module()
+        inp = getattr(self, "in")
+        self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
+        return m
+
+    def build_into(self, m: Module, payload, valid, advance, out) -> None:
+        """Add the parts (as submodules ``part<i>``), the sum and the rounding to ``m``.
+
+        The interface of :meth:`PWASCore.build_into`: ``payload`` (``n*B_in`` bits) and ``valid``
+        the input sample, ``advance`` a 1-bit signal driven here (the input is taken when
+        ``valid & advance``), ``out`` the output stream (payload and valid driven here).
+        """
+        p = self.params
+        b = p.in_width
+        nz, big_w, outw, sh = p.nz, p.sum_width, p.out_width, p.shift
+        adv = Signal(name="sum_advance")
+        m.d.comb += adv.eq(~out.valid | out.ready)
+        # one net per regressor code, read by the parts that use it (a process output, so that each
+        # part's ports are exactly the codes it reads; its value while valid = 0 is never used)
+        xs = []
+        for j in range(p.n):
+            x = Signal(b, name=f"x{j}")
+            with m.If(valid):
+                m.d.comb += x.eq(payload[j * b : (j + 1) * b])
+            xs.append(x)
+        used = sorted({j for sub in self.subsets for j in sub})
+        for j in sorted(set(range(p.n)) - set(used)):  # a regressor in no part: read by no one
+            sink_unused(m, xs[j], f"x{j}")
+        outs = []
+        for i, (core, sub) in enumerate(zip(self.parts, self.subsets)):
+            mi = Module()
+            m.submodules[f"part{i}"] = mi
+            o = _Out(f"part{i}", core.out_field_width * nz + 1, adv)
+            part_adv = advance if i == 0 else Signal(name=f"part{i}_advance")  # all equal: equal latency and inputs
+            q = Cat(*[xs[j] for j in sub])
+            core.build_into(mi, q, valid, part_adv, o)
+            outs.append(o)
+
+        zs = []
+        for z in range(nz):
+            terms = []
+            for i, (core, o) in enumerate(zip(self.parts, outs)):
+                fw = core.out_field_width
+                acc = o.payload[z * fw : (z + 1) * fw].as_signed()
+                a = self.align[i]
+                t = Signal(signed(big_w), name=f"term{z}_{i}")
+                with m.If(outs[0].valid):  # a process output: a genuine W-bit net (see _lintsafe)
+                    m.d.comb += t.eq(Cat(Const(0, a), acc).as_signed() if a else acc)
+                terms.append(t)
+
+            def add(x, y, lvl, k, z=z):
+                s = Signal(signed(big_w + 1), name=f"psum{lvl}_{z}_{k}")
+                m.d.comb += s.eq(x.as_signed() + y.as_signed())
+                sink_unused(m, s[big_w], f"psum{lvl}_{z}_{k}_top")
+                return s[:big_w]
+
+            total = tree_reduce(terms, add)
+            zs.append(self._round(m, total, z))
+        oor = outs[0].payload[-1]
+        for o in outs[1:]:
+            oor = oor | o.payload[-1]
+        with m.If(adv):
+            m.d.sync += out.payload.eq(Cat(*zs, oor))
+            m.d.sync += out.valid.eq(outs[0].valid)
+
+    def _round(self, m: Module, acc, z: int):
+        """``clip((acc + 2**(sh-1)) >> sh)`` (half up) or ``clip(acc >> sh)`` (truncate) to ``B_out`` bits."""
+        p = self.params
+        sh, outw = p.shift, p.out_width
+        if sh > 0:
+            rs = acc.as_unsigned()
+            if p.rounding == "half_up":
+                rs = add_const_wrap(m, rs, 1 << (sh - 1), f"sum_rnd{z}")  # no wrap: |acc| < 2**(W-2)
+            sink_unused(m, rs[:sh], f"sum_rnd{z}_frac")
+            rv = rs[sh:].as_signed()
+        else:
+            rv = acc.as_signed()
+        if len(rv) <= outw:
+            return rv.as_signed()
+        sign = rv[-1]
+        upper = rv[outw - 1 : len(rv) - 1]
+        o = Signal(signed(outw), name=f"sum_sat{z}")
+        with m.If(~sign & upper.any()):
+            m.d.comb += o.eq((1 << (outw - 1)) - 1)
+        with m.Elif(sign & ~upper.all()):
+            m.d.comb += o.eq(-(1 << (outw - 1)))
+        with m.Else():
+            m.d.comb += o.eq(rv[:outw])
+        return o
+
+    @property
+    def extra_info(self) -> dict:
+        return {"additive": self.additive_info()}
+
+    def additive_info(self) -> dict:
+        """The parts of the hardware: subsets, pipelines, latencies and memories (for the manifest)."""
+        return {
+            "parts": [
+                {"module_suffix": f"_part{i}", "regressors": [int(j) for j in sub], "latency": int(c.latency),
+                 "pipeline": c.pipeline.to_dict(), "acc_bits": int(c.out_field_width), "align_shift": int(a),
+                 "memory": c.memory_plan.to_dict()}
+                for i, (c, sub, a) in enumerate(zip(self.parts, self.subsets, self.align))
+            ],
+            "sum_bits": int(self.params.sum_width),
+            "latency": "part latency + 1 (the sum, rounding and saturation register)",
+        }
+
+
+class AdditiveSensorTop(PWASSensorTop):
+    """Lag bank (:class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`: its elaborate, ports, warm-up and
+    flow control) + :class:`AdditiveCore` (``core``) in place of the single core."""
+
+    kind = "sensor"
+
+    def __init__(self, model, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        self.core = AdditiveCore(model, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True
+        self.params = self.core.params
+        self.signals = [(str(nm), int(k)) for nm, k in signals]
+        self.dims = [(int(s), int(lag)) for s, lag in dims]
+        if len(self.dims) != self.params.n:
+            raise ValueError(f"{len(self.dims)} lag-bank dimensions for a sensor with n = {self.params.n}")
+        self.latency = self.core.latency
+        self.ii = 1
+        self.memory_plan = self.core.memory_plan
+        self.pipeline = self.core.pipeline
+        self.warmup = max(k for _, k in self.signals) - 1
+        wiring.Component.__init__(self, {  # the sensor top's signature; its __init__ builds a single core
+            "in": In(stream.Signature(unsigned(len(self.signals) * self.params.in_width))),
+            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1))),
+            "warm": Out(1),
+        })
+        self._MustUse__silence = False
+
+    @property
+    def extra_info(self) -> dict:
+        return {**super().extra_info, "additive": self.core.additive_info()}
+
+
+def build_additive_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core") -> AdditiveCore:
+    """The additive core of an :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` (input: regressor codes)."""
+    core = AdditiveCore(model, memory=memory, pipeline=pipeline)
+    core.module_name = name
+    core._MustUse__silence = True
+    core.input_names = list(model.regressor_names)
+    core.target_names = list(model.target_names)
+    return core
+
+
+def build_additive_sensor(model, lags=None, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                          name: str = "pwas_sensor") -> AdditiveSensorTop:
+    """The additive virtual-sensor top (one lag bank, the parts' cores, the sum) of an additive bit-true model."""
+
+    model.signal_input_formats()  # raises unless all lags of each signal share one format
+    signals, dims = lag_plan(model, lags)
+    top = AdditiveSensorTop(model, signals, dims, memory=memory, pipeline=pipeline)
+    top.module_name = name
+    top._MustUse__silence = True
+    top.core.input_names = list(model.regressor_names)
+    top.core.target_names = list(model.target_names)
+    return top
+
+
+#: A name inside a flattened part: ``\\part<i>.<name> `` (Yosys' escaped hierarchical identifier).
+_FLAT_NAME = re.compile(r"\\(?P<flat>\$flatten\\)?part(?P<i>[0-9]+)\.(?P<name>[A-Za-z0-9_$]+) ")
+
+
+def _flat_name(mo: re.Match) -> str:
+    """``\\part3.c0 `` -> ``part3_c0``; Yosys' internal ``\\$flatten\\part3.$7 `` -> ``\\$part3_$7 `` (escaped, as
+    the other internal ``\\$<k> `` names of the output)."""
+    base = f"part{mo.group('i')}_{mo.group('name')}"
+    if mo.group("flat") or not re.match(r"[A-Za-z_]", mo.group("name")):
+        return f"\\${base} "
+    return base
+
+
+def _flat_verilog(component, name: str) -> str:
+    """Amaranth's Verilog conversion (``amaranth.back.verilog.convert``: RTLIL, then Yosys'
+    ``proc -nomux -norom; memory_collect; write_verilog -norename``) with the part modules flattened
+    into the top (Yosys ``flatten`` after ``proc``): one module, as every other design of pwas-hdl."""
+    from amaranth.back import rtlil
+    from amaranth.back.verilog import find_yosys
+
+    text = rtlil.convert(component, name=name, emit_src=False)
+    yosys = find_yosys(lambda ver: ver >= (0, 40))
+    script = [f"read_rtlil <<rtlil\n{text}\nrtlil", "proc -nomux -norom", f"flatten", "memory_collect",
+              "write_verilog -norename"]
+    return yosys.run(["-q", "-"], "\n".join(script), ignore_warnings=True)
+
+
+def emit_additive_verilog(component, name: str, *, ports: str = "axis") -> str:
+    """Verilog of an additive design: one module ``name`` (the parts flattened into it).
+
+    As :func:`pwas_hdl.hdl.emit.emit_verilog` (same normalisation, port order and ``ports`` naming);
+    the parts' names ``\\part<i>.<name>`` become plain identifiers ``part<i>_<name>``. Deterministic.
+    """
+    from pwas_hdl.hdl.emit import _check_naming, _name_ports, _token, normalise_verilog
+
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise ValueError(f"module name {name!r} is not a plain Verilog identifier")
+    _check_naming(ports)
+    text = _flat_verilog(component, name)
+    renamed = {_flat_name(mo) for mo in _FLAT_NAME.finditer(text)}
+    clash = sorted(nm for nm in renamed if not nm.startswith("\\") and _token(nm).search(text))
+    if clash:
+        raise InternalError(f"flattening the additive parts would reuse the name(s) {clash[:3]}")
+    text = _FLAT_NAME.sub(_flat_name, text)
+    if re.search(r"\\\S*\\", text):
+        raise InternalError("a hierarchical name is left in the flattened additive design")
+    if re.search(r"^module ", text, re.M) is None or len(re.findall(r"^module ", text, re.M)) != 1:
+        raise InternalError("the flattened additive design is not one module")
+    return _name_ports(normalise_verilog(text), name, component, ports)
+
+
+def additive_hex_files(component, prefix: str) -> dict[str, str]:
+    """``$readmemh`` files of the parts' weight memories: ``<prefix>_p<i>_b<bank>.hex`` (as
+    :func:`pwas_hdl.hdl.emit.memory_hex_files` per part)."""
+    from pwas_hdl.fixedpoint.memory_layout import readmemh_text
+
+    core = getattr(component, "core", component)
+    out = {}
+    for i, c in enumerate(core.parts):
+        plan = c.memory_plan
+        for bnk in range(plan.n_banks):
+            out[f"{prefix}_p{i}_b{bnk}.hex"] = readmemh_text(plan.contents[bnk], plan.word_bits)
+    return out
