@@ -1,0 +1,274 @@
+"""Additive PWAS sensors (issue 15, item 1): subsets, joint fit, model file, CLI, bit-true model, generate."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.additive import AdditiveGrid, additive_tikhonov_matrix, parse_additive
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.fit.regularized_lsq import solve_regularized, tikhonov_matrix
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
+from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.systems.lorenz import lorenz
+
+DIMS_Y4 = LagStructure(0, 4, 0, 1).signal_of_dimension()  # y[t-3], y[t-2], y[t-1], y[t]
+DIMS_U2Y3 = LagStructure(2, 3, 1, 1).signal_of_dimension()  # u[t-1], u[t], y[t-2], y[t-1], y[t]
+
+
+@pytest.fixture
+def cli(capsys):
+    """Run the console entry point in-process: ``cli(args, expect=0)`` -> (stdout, stderr)."""
+    from pwas_hdl.cli import main
+
+    def run(args, expect=0):
+        code = main([str(a) for a in args])
+        cap = capsys.readouterr()
+        assert code == expect, cap.err
+        return SimpleNamespace(stdout=cap.out, stderr=cap.err)
+
+    return run
+
+
+@pytest.fixture(scope="module")
+def lorenz_data():
+    d = lorenz(3000, seed=1)
+    return d
+
+
+@pytest.fixture(scope="module")
+def pairs_sensor(lorenz_data):
+    d = lorenz_data
+    return PWASVirtualSensor(mu=0, my=4, partitions=5, additive="pairs", output_names=["y"], target_names=["z"]).fit(
+        None, d.y[:2000], d.z[:2000])
+
+
+# ------------------------------------------------------------------------------------------ subsets
+def test_named_rules_give_time_windows():
+    assert parse_additive("time", DIMS_Y4) == ((0,), (1,), (2,), (3,))
+    assert parse_additive("pairs", DIMS_Y4) == ((0, 1), (1, 2), (2, 3))
+    assert parse_additive("triples", DIMS_Y4) == ((0, 1, 2), (1, 2, 3))
+    # with an input: a part holds every signal of its lags (u has lags 1, 0; y has 2, 1, 0)
+    assert parse_additive("time", DIMS_U2Y3) == ((2,), (0, 3), (1, 4))
+    assert parse_additive("pairs", DIMS_U2Y3) == ((0, 2, 3), (0, 1, 3, 4))
+
+
+def test_explicit_subsets_are_sorted_and_may_overlap():
+    assert parse_additive("0,1; 1,2 ;3", DIMS_Y4) == ((0, 1), (1, 2), (3,))
+    assert parse_additive("2,0", DIMS_Y4) == ((0, 2),)
+    assert parse_additive([[3], [0, 1]], DIMS_Y4) == ((3,), (0, 1))
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("0,4", "out of range"), ("0,1;;2", "empty"), ("0,0", "appears twice"), ("0,1;1,0", "repeats part 0"),
+    ("0,x", "not a regressor index"), ("quads", "not a regressor index"), ("", "empty"), ("0,-1", "not a regressor index"),
+    ("1,", "empty"), ([[]], "empty"), ([[0, 1.5]], "not an integer"),
+])
+def test_bad_subsets_are_refused(spec, words):
+    with pytest.raises(InputError, match=words):
+        parse_additive(spec, DIMS_Y4)
+
+
+def test_windows_need_enough_lags():
+    with pytest.raises(InputError, match="needs at least 3 lags"):
+        parse_additive("triples", LagStructure(0, 2, 0, 1).signal_of_dimension())
+
+
+# ------------------------------------------------------------------------------------------ fit
+def test_stacked_basis_and_block_gamma():
+    rng = np.random.default_rng(0)
+    g = AdditiveGrid([0, 0, 0], [1, 2, 3], [2, 3, 4], [(0, 1), (1, 2)])
+    x = rng.uniform(-0.2, 3.2, (50, 3))
+    h = g.basis_matrix(x)
+    parts = [Grid([0, 0], [1, 2], [2, 3]), Grid([0, 0], [2, 3], [3, 4])]
+    want = sparse.hstack([parts[0].basis_matrix(x[:, [0, 1]]), parts[1].basis_matrix(x[:, [1, 2]])])
+    assert h.shape == (50, 12 + 20) and g.n_vertices == 32 and g.part_sizes == [12, 20]
+    assert abs(h - want).max() == 0
+    w = rng.normal(size=32)
+    assert np.allclose(h @ w, g.evaluate(w, x))
+    gam = additive_tikhonov_matrix(g, 1).toarray()
+    assert np.array_equal(gam[:12, :12], tikhonov_matrix(parts[0], 1).toarray()) and not gam[:12, 12:].any()
+
+
+def test_joint_fit_is_the_regularised_least_squares_of_the_stacked_basis(lorenz_data):
+    d = lorenz_data
+    m = PWASVirtualSensor(mu=0, my=3, partitions=4, sigma=0.01, additive="time").fit(None, d.y[:1500], d.z[:1500])
+    xi, _ = m.regressors(None, d.y[:1500])
+    h = m.grid_.basis_matrix(xi)
+    w = solve_regularized(h, d.z[2:1500, 0], 0.01, additive_tikhonov_matrix(m.grid_, 0), method="direct")
+    assert np.allclose(m.weights_[:, 0], w, rtol=1e-8, atol=1e-8)
+    # not identifiable without the penalty: a constant moves between parts, H'H is singular
+    hth = (h.T @ h).toarray()
+    assert np.linalg.matrix_rank(hth) < hth.shape[0]
+    assert m.grid_.n_vertices == 15
+
+
+def test_additive_sensor_fits_lorenz_with_few_weights(lorenz_data, pairs_sensor):
+    d = lorenz_data
+    m = pairs_sensor
+    assert m.grid_.n_vertices == 3 * 36 and m.sigma_ > 0 and m.cv_ is not None
+    zh = m.predict(None, d.y[2000:])
+    rmse = float(np.sqrt(np.mean((zh[:, 0] - d.z_true[2003:, 0]) ** 2)))
+    assert rmse < 0.5 * float(np.std(d.z_true[2003:, 0]))  # it estimates z (std about 80)
+    # the estimate is the sum of the parts
+    xi, _ = m.regressors(None, d.y[2000:])
+    blocks = m.grid_.split_weights(m.weights_)
+    total = sum(g.evaluate(w, xi[:, list(s)]) for g, s, w in zip(m.grid_.parts, m.grid_.subsets, blocks))
+    assert np.allclose(total, zh)
+
+
+def test_additive_with_observer_bank_is_refused():
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+
+    with pytest.raises(InputError, match="lag front end"):
+        PWASVirtualSensor(my=2, additive="time", front_end=ObserverBankFrontEnd())._check_params()
+
+
+# ------------------------------------------------------------------------------------------ model file
+def test_model_file_round_trip(pairs_sensor, tmp_path):
+    m = pairs_sensor
+    p = m.save(tmp_path / "m.json")
+    d = json.loads(p.read_text())
+    assert d["additive"] == {"spec": "pairs", "parts": [[0, 1], [1, 2], [2, 3]]}
+    assert len(d["weights"]["z"]) == 108 and d["grid"]["partitions"] == [5, 5, 5, 5]
+    m2 = PWASVirtualSensor.load(p)
+    assert m2.to_json() == m.to_json() and np.array_equal(m2.weights_, m.weights_)
+    assert m2.grid_ == m.grid_ and m2.get_params()["additive"] == "pairs"
+    x = np.random.default_rng(1).uniform(-30, 30, (20, 4))
+    assert np.array_equal(m2.predict_regressors(x), m.predict_regressors(x))
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d["additive"].update(parts=[[0, 1], [1, 2]]), "differ from the parts of additive.spec"),
+    (lambda d: d["additive"].update(spec="0,7", parts=[[0, 7]]), "not a sorted list of distinct regressor indices"),
+    (lambda d: d["additive"].update(spec="quads"), "additive.spec 'quads' is not valid"),
+    (lambda d: d["weights"]["z"].pop(), "has 107 values, the grid has N = 108"),
+    (lambda d: d["additive"].pop("parts"), "parts"),
+])
+def test_corrupt_additive_model_files_are_refused(pairs_sensor, edit, words):
+    d = pairs_sensor.to_dict()
+    edit(d)
+    with pytest.raises(InputError, match=words):
+        PWASVirtualSensor.from_dict(d)
+
+
+def test_full_model_files_still_load(lorenz_data):
+    d = lorenz_data
+    m = PWASVirtualSensor(mu=0, my=2, partitions=4, sigma=1e-3).fit(None, d.y[:500], d.z[:500])
+    dd = m.to_dict()
+    assert "additive" not in dd and isinstance(PWASVirtualSensor.from_dict(dd).grid_, Grid)
+
+
+# ------------------------------------------------------------------------------------------ CLI
+def test_cli_fit_info_predict(tmp_path, cli):
+    cli(["make-data", "lorenz", "-o", str(tmp_path / "tr.csv"), "--samples", "1500", "--test-out",
+         str(tmp_path / "te.csv"), "--test-samples", "300"])
+    r = cli(["fit", str(tmp_path / "tr.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z", "--my", "6",
+             "-p", "5", "--additive", "triples"])
+    assert "N = 864 weights in 4 additive parts (triples)" in r.stderr  # progress lines go to stderr
+    info = json.loads(cli(["info", str(tmp_path / "m.json")]).stdout)
+    assert info["N"] == 864 and info["additive"]["parts"][0] == [0, 1, 2]
+    r = cli(["predict", str(tmp_path / "m.json"), str(tmp_path / "te.csv"), "-o", str(tmp_path / "p.csv")])
+    assert "RMSE of z_hat" in r.stderr
+
+
+@pytest.mark.parametrize("spec, words", [("0,9", "out of range"), ("0;;1", "empty"), ("1,1", "appears twice"),
+                                         ("0;0", "repeats part 0"), ("triples", "needs at least 3 lags")])
+def test_cli_bad_additive_is_one_error_line(tmp_path, cli, spec, words):
+    cli(["make-data", "lorenz", "-o", str(tmp_path / "tr.csv"), "--samples", "300"])
+    r = cli(["fit", str(tmp_path / "tr.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z", "--my", "2",
+             "--additive", spec], expect=2)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and words in lines[0]
+    assert not (tmp_path / "m.json").exists()
+
+
+# ------------------------------------------------------------------------------------------ bit-true model
+def test_bittrue_error_bound_holds(pairs_sensor):
+    fx = AdditiveFixedPointModel.from_sensor(pairs_sensor)
+    assert len(fx.parts) == 3 and fx.weight_codes.shape == (108, 1)
+    assert fx.error_bound == pytest.approx(sum(p.error_bound_weight for p in fx.parts) + fx.output_format.lsb / 2)
+    rng = np.random.default_rng(2)
+    q = rng.integers(fx._qmin, fx._qmax + 1, (5000, fx.n))
+    out, oor = fx.evaluate(q)
+    err = np.abs(fx.to_physical_output(out) - fx.reference(q))
+    assert oor.any() and not oor.all()
+    assert err.max() <= fx.error_bound * (1 + 1e-12)
+    # the reference is the float sensor at the represented inputs
+    assert np.allclose(fx.reference(q), pairs_sensor.predict_regressors(fx.represented_inputs(q)), atol=1e-9)
+
+
+def test_bittrue_error_bound_is_tight():
+    """Weights 0.49 LSB above a code: every part errs by 0.49 LSB in one direction, so the sum errs by
+    0.49 k LSB + the output rounding, near the bound k/2 + 1/2 output LSB."""
+    g = AdditiveGrid([0.0] * 3, [1.0] * 3, [3, 3, 3], [(0,), (1, 2), (0, 2)])
+    rng = np.random.default_rng(3)
+    w = rng.integers(-40, 40, (g.n_vertices, 1)) + 0.49
+    fx = AdditiveFixedPointModel(g, w, weight_frac=0, output_frac=1)
+    q = rng.integers(fx._qmin, fx._qmax + 1, (4000, 3))
+    err = np.abs(fx.to_physical_output(fx.evaluate(q)[0]) - fx.reference(q))
+    assert fx.error_bound == pytest.approx(3 * 0.5 + 0.25)
+    assert 3 * 0.49 <= err.max() <= fx.error_bound
+
+
+def test_one_part_on_every_regressor_is_the_full_model():
+    rng = np.random.default_rng(4)
+    g = AdditiveGrid([0.0, -1.0], [2.0, 1.0], [4, 3], [(0, 1)])
+    w = rng.normal(0, 5, (g.n_vertices, 2))
+    fmt = dict(weight_frac=6, output_frac=4, output_bits=12)
+    add = AdditiveFixedPointModel(g, w, **fmt)
+    full = FixedPointModel(Grid([0.0, -1.0], [2.0, 1.0], [4, 3]), w, **fmt)
+    q = rng.integers(full._qmin, full._qmax + 1, (3000, 2))
+    assert np.array_equal(add.evaluate(q)[0], full.evaluate(q)[0])
+    assert np.array_equal(add.evaluate(q)[1], full.evaluate(q)[1])
+    assert add.error_bound == full.error_bound
+
+
+# ------------------------------------------------------------------------------------------ generate
+def test_generate_refuses_what_additive_designs_lack(pairs_sensor):
+    from pwas_hdl.design.generate import build_design
+
+    with pytest.raises(InputError, match="readmemh"):
+        build_design(pairs_sensor, design="sensor", memory_init="readmemh")
+    with pytest.raises(InputError, match="clock-mhz"):
+        build_design(pairs_sensor, design="sensor", target_mhz=100.0)
+
+
+@pytest.mark.slow
+def test_generate_manifest_and_deterministic(pairs_sensor):
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.design.manifest import manifest_errors
+
+    a = build_design(pairs_sensor, design="sensor")
+    b = build_design(pairs_sensor, design="sensor")
+    assert a.files == b.files  # byte-identical reruns
+    man = a.manifest
+    assert manifest_errors(json.loads(a.files["manifest.json"])) == []
+    parts = man["additive"]["parts"]
+    assert [p["regressors"] for p in parts] == [[0, 1], [1, 2], [2, 3]]
+    assert [p["names"] for p in parts][0] == ["y[t-3]", "y[t-2]"]
+    assert all(p["memory"]["memories"] == 3 and p["latency"] == man["latency_cycles"] - 1 for p in parts)
+    assert man["memory"]["memories"] == 9 and man["domain"]["n_vertices"] == 108
+    assert [h["part"] for h in man["files"]["hex"]] == [0, 0, 0, 1, 1, 1, 2, 2, 2]
+    v = a.files["pwas_sensor.v"]
+    assert "additive sensor: 3 parts" in v and v.count("\nmodule ") == 1 and "/work" not in v
+
+
+@pytest.mark.rtl
+def test_generated_additive_verilog_is_lint_clean(pairs_sensor, tmp_path):
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.flow.toolchain import lint_verilog
+
+    for design, opts in (("sensor", {}), ("core", {"pipeline": "max", "rounding": "truncate"}), ("sensor", {"ports": "amaranth"})):
+        gd = build_design(pairs_sensor, design=design, **opts)
+        path = tmp_path / f"{gd.top}.v"
+        path.write_text(gd.files[f"{gd.top}.v"])
+        r = lint_verilog(path)
+        assert r.returncode == 0 and not r.stderr.strip(), r.stderr
