@@ -139,3 +139,14 @@ class DesignConfig:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # deliberate saturation in some configurations
             return generate(self.model(), outdir, design=self.design, **self.options)
+
+
+#: The additive designs of the RTL benches (issue 15; ``tests/test_additive_rtl.py``): a sensor top with
+#: the sliding-pair parts (y[t-2], y[t-1]) and (y[t-1], y[t]) behind one lag bank,
+#: and a core with parts of 1 to 3 dimensions, two targets, the deepest pipeline and truncation, whose
+#: 1-dimensional part has a coarser fraction (F_i < F: its accumulator is shifted before the sum).
+ADDITIVE_CONFIGS = [
+    DesignConfig("a-s-y3-pairs", "sensor", 0, 3, 0, 1, 3, 1, {}, seed=1, additive="pairs"),
+    DesignConfig("a-c-n4-z2-max-trunc", "core", 0, 4, 0, 1, [3, 2, 4, 2], 2, {"pipeline": "max", "rounding": "truncate"},
+                 seed=2, additive="2;0,1;1,2,3;0,3"),
+]
