@@ -12,7 +12,7 @@ Accuracy (``run_additive``, format ``pwas-hdl-bench-results``):
 * Helicopter-size (Table VI, ``pwas_hdl.systems.helicopter``: 25000 samples at 10 ms, fit on the
   first 20000, RMSE of ``psi`` against ``psi_true`` on the rest; ``gamma = 1.1``, first-order
   Tikhonov, ``p = 3`` as :mod:`pwas_hdl.benchmarks.hw_tables`): ``Mu = My = 2`` (``n = 6``, full
-  ``N = 4096``) and ``Mu = My = 4`` (``n = 12``: full ``N = 4**12`` refused).
+  ``N = 4096``) and ``Mu = My = 4`` (``n = 12``: full ``N = 4**12`` refused); additive ``time``.
 * Stages: ``float`` (the fitted sensor) and ``bittrue`` (the fixed-point model with the default
   formats of ``generate``: :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` or
   :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel`, 12-bit inputs).
@@ -49,7 +49,10 @@ __all__ = ["BENCH", "LORENZ_ROWS", "HELI_ROWS", "run_additive", "run_hardware", 
 BENCH = "additive"
 KINDS = ("full", "time", "pairs", "triples")
 LORENZ_ROWS = [(my, k) for my in (4, 5, 6, 8) for k in KINDS]
-HELI_ROWS = [(2, "full"), (2, "time"), (4, "full"), (4, "time"), (4, "pairs")]
+#: ``(4, "pairs")`` (3 parts of 6 dimensions, N = 12288, first order) is left out: its cross-validation
+#: did not finish in 9 minutes here (conjugate gradients on a nearly singular system: the ridge of the
+#: first-order penalty is all that fixes the constants shared by overlapping parts).
+HELI_ROWS = [(2, "full"), (2, "time"), (4, "full"), (4, "time")]
 N_TRAIN, N_TEST, HISTORY, BURN_IN = 6000, 2000, 8, 1000
 ASSUMPTIONS = {
     "issue15.parts": "an additive sensor is f = sum_i f_i(x_{S_i}), each f_i a PWAS function on the shared domain box "

@@ -279,3 +279,19 @@ def test_generated_additive_verilog_is_lint_clean(small_sensor, tmp_path):
         path.write_text(gd.files[f"{gd.top}.v"])
         r = lint_verilog(path)
         assert r.returncode == 0 and not r.stderr.strip(), r.stderr
+
+
+# ------------------------------------------------------------------------------------------ benchmark smoke
+@pytest.mark.slow
+def test_benchmark_quick_smoke(tmp_path):
+    from pwas_hdl import bench_results as br
+    from pwas_hdl.benchmarks import additive as bench
+
+    doc, _ = bench.run_additive(1, quick=True, progress=None)
+    br.validate_results(doc)
+    rows = {(r["estimator"], r["config"]["My"], r["stage"]): r for r in doc["rows"]}
+    assert rows[("pwas-additive-pairs", 8, "float")]["config"]["N"] == 448
+    assert rows[("pwas-full", 8, "float")]["value"] is None and "limit" in rows[("pwas-full", 8, "float")]["config"]["note"]
+    assert rows[("pwas-full", 4, "bittrue")]["value"] > 0
+    md = bench.markdown(doc)
+    assert "| lorenz | My = 8 | additive-pairs | 7 | 448 |" in md and "16777216 (refused)" in md

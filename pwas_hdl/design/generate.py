@@ -327,7 +327,7 @@ def build_design(
     if additive and target_mhz is not None:
         raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")
     if additive and memory_init != "inline":
-        raise InputError("--memory-init readmemh is not available for additive sensors (their part modules carry the weights inline)")
+        raise InputError("--memory-init readmemh is not available for additive sensors (the weights of the flattened parts are inline initialisers)")
     fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
