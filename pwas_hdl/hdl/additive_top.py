@@ -321,6 +321,7 @@ class AdditiveSensorTop(PWASSensorTop):
         self._MustUse__silence = True
         self.core = AdditiveCore(model, memory=memory, pipeline=pipeline)
         self.core._MustUse__silence = True
+        self.argmax = None  # no classifier stage (refused for additive models by generate)
         self.params = self.core.params
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
