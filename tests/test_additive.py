@@ -240,6 +240,14 @@ def test_one_part_on_every_regressor_is_the_full_model():
 
 
 # ------------------------------------------------------------------------------------------ generate
+def test_explore_refuses_additive_sensors(small_sensor, tmp_path, cli):
+    small_sensor.save(tmp_path / "m.json")
+    cli(["make-data", "lorenz", "-o", str(tmp_path / "d.csv"), "--samples", "300"])
+    r = cli(["explore", str(tmp_path / "m.json"), str(tmp_path / "d.csv"), "-o", str(tmp_path / "e.json")], expect=2)
+    assert r.stderr.strip().startswith("error: explore is not available for additive sensors")
+    assert not (tmp_path / "e.json").exists()
+
+
 def test_generate_refuses_what_additive_designs_lack(pairs_sensor):
     from pwas_hdl.design.generate import build_design
 

@@ -477,6 +477,8 @@ def explore(
     if workdir is not None:
         check_output_path(workdir, "--synth-dir", kind="folder")
     sensor, model_path = _load_sensor(model)
+    if getattr(sensor.grid_, "subsets", None) is not None:  # pwas_hdl.fit.additive
+        raise InputError("explore is not available for additive sensors (--additive) yet; give the formats to generate")
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
