@@ -570,7 +570,7 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
 def generate(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; in a folder an earlier `generate` made, only its files are replaced: sim/, synth/ and your files stay). Required.", show_default=False)] = None,
-    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer).")] = "core",
+    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer). An additive model (fit --additive) gets one core per part, summed before one rounding.")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default) or max.")] = None,

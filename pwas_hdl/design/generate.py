@@ -268,6 +268,9 @@ def build_design(
     design : {"core", "sensor"}
         The PWAS core alone (input = regressor codes) or the virtual-sensor top (input = one
         (u, y) sample per transfer, lag bank inside).
+        A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
+        :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding); not with
+        ``target_mhz``, ``memory_init="readmemh"`` or a classifier.
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated"}
