@@ -176,7 +176,8 @@ class PWASCore(wiring.Component):
         super().__init__(
             {
                 "in": In(stream.Signature(unsigned(core_input_layout(params).size))),
-                "out": Out(stream.Signature(unsigned(self.out_field_width * params.nz + 1))),
+                "out": Out(stream.Signature(unsigned(core_output_layout(params).size if self.round_output
+                                                     else self.out_field_width * params.nz + 1))),
             }
         )
         self._MustUse__silence = False
