@@ -145,7 +145,7 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     rows = []
     seen = set()
     for inp in fmts["inputs"]:
-        key = inp["signal"] if man["design"] == "sensor" else inp["name"]
+        key = inp["signal"] if man["design"] != "core" else inp["name"]
         if key in seen:
             continue
         seen.add(key)
@@ -171,7 +171,8 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     terms = f"(weight rounding {eb['weight_term']:.4g} + output rounding {eb['output_term']:.4g}, physical units)"
     files = "\n".join(f"- `{f}`" for f in sorted(_file_names(man["files"])))
     return _template("report.md.tmpl").substitute(
-        top=man["top"], design="virtual-sensor top (lag bank + core)" if man["design"] == "sensor" else "core",
+        top=man["top"], design={"core": "core", "sensor": "virtual-sensor top (lag bank + core)",
+                                "recurrent": "recurrent virtual-sensor top (lag bank + core + feedback of the estimates)"}[man["design"]],
         version=__version__,
         model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
                        f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
@@ -265,9 +266,12 @@ def build_design(
     Parameters
     ----------
     model : PWASVirtualSensor or path of a model file
-    design : {"core", "sensor"}
+    design : {"core", "sensor", "recurrent"}
         The PWAS core alone (input = regressor codes) or the virtual-sensor top (input = one
-        (u, y) sample per transfer, lag bank inside).
+        (u, y) sample per transfer, lag bank inside). For a recurrent model (``Mz >= 1``: fit
+        ``--mz``, fit-map ``--state``) "sensor" builds the recurrent top
+        (:mod:`pwas_hdl.design.recurrent`: feedback of the estimates, II = latency) and the
+        manifest's design is "recurrent" (also accepted here).
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
         :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding); not with
         ``target_mhz``, ``memory_init="readmemh"`` or a classifier.
@@ -313,7 +317,7 @@ def build_design(
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
     from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 
-    if design not in ("core", "sensor"):
+    if design not in ("core", "sensor", "recurrent"):
         raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
@@ -323,7 +327,8 @@ def build_design(
     if getattr(sensor, "front_end_", None) is not None:
         raise InputError("hardware for observer-bank front ends is not implemented yet (issue 12); "
                          "generate supports models fitted with --front-end lags")
-    top = name or ("pwas_core" if design == "core" else "pwas_sensor")
+    design = _design_kind(design, sensor)  # "sensor" of a recurrent model: the recurrent top (issue 13)
+    top = name or {"core": "pwas_core", "sensor": "pwas_sensor", "recurrent": "pwas_recurrent_sensor"}[design]
     for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
         check_signal_names(names, f"{kind} signal")
     additive = _is_additive(sensor)
@@ -351,13 +356,21 @@ def build_design(
         chosen = pipeline
     classifier = getattr(sensor, "classifier_", None)  # a classifier model: argmax stage after the core
     pipe_arg = Pipeline.cast(chosen) if chosen is not None else None
+    recurrence = None
     if additive:  # the parts' cores in parallel, summed before one rounding (pwas_hdl.hdl.additive_top)
         from pwas_hdl.hdl.additive_top import additive_hex_files, build_additive_core, build_additive_sensor, emit_additive_verilog
 
         if classifier is not None:
             raise InputError("hardware for an additive classifier (--additive with --classify) is not available yet")
+        if design == "recurrent":
+            raise InputError("hardware for a recurrent additive sensor is not available")
         comp = (build_additive_core(fxm, memory=memory, pipeline=pipe_arg, name=top) if design == "core"
                 else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top))
+    elif design == "recurrent":
+        from pwas_hdl.design.recurrent import build_recurrent_component
+
+        comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
+                                                     pipeline=pipe_arg)
     elif design == "core":
         comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier)
     else:
@@ -401,7 +414,7 @@ def build_design(
     info["memory"]["init"] = ({"kind": "readmemh", "parameter": MEM_DIR_PARAMETER, "default": MEM_DIR_DEFAULT,
                                "meaning": "folder of the hex files with its trailing /, prefixed to their names"}
                               if memory_init == "readmemh" else {"kind": "inline"})
-    man = build_manifest(design, top, fxm, info, sensor, files, options, timing)
+    man = build_manifest(design, top, fxm, info, sensor, files, options, timing, recurrence=recurrence)
     model = model_text(sensor)
     verilog = _verilog_header(man, hashlib.sha256(model.encode("utf-8")).hexdigest()) + verilog
     man["design_hash"] = design_hash({files["verilog"]: verilog, "model.json": model, **hexes})
@@ -410,7 +423,8 @@ def build_design(
         "model.json": model,
         "manifest.json": manifest_text(man),
         "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else "")
-        + (_classifier_section(man) if "classifier" in man else ""),
+        + (_classifier_section(man) if "classifier" in man else "")
+        + (_recurrence_section(man) if "recurrence" in man else ""),
         files["instance_template"]: _instance(man),
         files["fusesoc_core"]: _fusesoc(man, memory_init),
         **hexes,
@@ -434,6 +448,9 @@ _PORT_MEANING = {
 }
 
 
+_HEADER_KIND = {"core": "PWAS core", "sensor": "PWAS virtual-sensor top", "recurrent": "PWAS recurrent virtual-sensor top"}
+
+
 def _port_meaning(man: dict, role: str) -> str:
     names = {p["role"]: p["name"] for p in man["ports"]}
     text = _PORT_MEANING.get(role, role)
@@ -450,7 +467,7 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
     fm = man["formats"]
     eb = man["error_bound"]
     lines = [
-        f"{man['top']}: {'PWAS core' if man['design'] == 'core' else 'PWAS virtual-sensor top'} generated by "
+        f"{man['top']}: {_HEADER_KIND[man['design']]} generated by "
         f"pwas-hdl {__version__} -- do not edit, regenerate",
         f"model.json SHA-256 {model_sha256}",
         f"regressor (n = {len(man['lags']['regressors'])}): {', '.join(man['lags']['regressors'])}; "
@@ -458,7 +475,8 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         *([f"additive sensor: {len(man['additive']['parts'])} parts (" + "; ".join(
             ", ".join(man['lags']['regressors'][j] for j in pt['regressors']) for pt in man['additive']['parts'])
             + "), each a PWAS core without rounding; their sums added exactly, then rounded once"] if "additive" in man else []),
-        f"latency {man['latency_cycles']} cycles (input transfer to {_port_meaning(man, '{out.valid}')}), II {man['ii']} (one sample per clock)",
+        f"latency {man['latency_cycles']} cycles (input transfer to {_port_meaning(man, '{out.valid}')}), II {man['ii']} "
+        + ("(one sample per clock)" if man["ii"] == 1 else f"(one sample every {man['ii']} clocks)"),
         f"weights {fm['weight']['str']} ({man['memory']['kind']} memory, {man['memory']['memories']} x "
         f"{man['memory']['depth']} words of {man['memory']['word_bits']} bits); output {fm['output']['str']} "
         f"(LSB {fm['output']['lsb']!r}); |hw - float| <= {eb['lsb']!r} LSB = {eb['physical']!r}",
@@ -469,6 +487,10 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         lines.append(f"classifier of {c['target']} ({c['n_classes']} classes {labels}): argmax stage after the core, class index in "
                      f"{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}] {c['field']}, ties to the lowest class index, "
                      f"{c['stage_latency_cycles']} cycle(s) of the latency")
+    if "recurrence" in man:
+        from pwas_hdl.design.recurrent import recurrence_header_lines
+
+        lines += recurrence_header_lines(man)
     lines += [
         "ports:",
     ]
@@ -509,6 +531,20 @@ def _classifier_section(man: dict) -> str:
             f"stage after the core ({c['stage_latency_cycles']} cycle(s), included in the latency) writes the class index "
             f"to `{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}]` (`{c['field']}`); ties go to the lowest class index. "
             f"{c['float_agreement'][0].upper()}{c['float_agreement'][1:]}.\n")
+
+
+def _design_kind(design: str, sensor: PWASVirtualSensor) -> str:
+    """``design`` after the recurrent dispatch: a recurrent model's sensor top is the recurrent top."""
+    recurrent = sensor.lags_ is not None and sensor.lags_.recurrent
+    if design == "recurrent" and not recurrent:
+        raise InputError("design 'recurrent' needs a recurrent model (fit --mz or fit-map --state); use --design sensor")
+    return "recurrent" if design == "sensor" and recurrent else design
+
+
+def _recurrence_section(man: dict) -> str:
+    from pwas_hdl.design.recurrent import recurrence_report_text
+
+    return recurrence_report_text(man)
 
 
 def _timing_section(timing: dict) -> str:

@@ -9,7 +9,7 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
     {
       "$schema": "urn:pwas-hdl:schema:manifest-v2", "format": "pwas-hdl-manifest", "version": 2,
       "generator": {"pwas_hdl": "0.1.0", "options": {design, memory, pipeline, memory_init, input_bits, ...}},
-      "design": "core" | "sensor",              # PWAS core alone, or lag bank + core
+      "design": "core" | "sensor" | "recurrent",  # PWAS core alone, lag bank + core, or + feedback
       "top": "pwas_core",                        # Verilog module name
       "files": {"verilog": "pwas_core.v", "model": "model.json", "manifest": "manifest.json",
                 "report": "report.md", "instance_template": "pwas_core_inst.v", "fusesoc_core": "pwas_core.core",
@@ -43,7 +43,14 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
       "classifier": {"target": "mode", "classes": [0, 1, 2], "n_classes": 3,   # only for a classifier model:
                      "port": "m_axis_tdata", "field": "class_index", "lsb": .., "width": 2,  # argmax stage after
                      "scores": ["mode=0", ..], "select": "max", "tie_rule": "lowest class index ..",  # the core
-                     "stage_latency_cycles": 1, "meaning": .., "float_agreement": ..}
+                     "stage_latency_cycles": 1, "meaning": .., "float_agreement": ..},
+      "recurrence": {"Mz": 1, "lead": 1, "ii_cycles": L, "signals": ["y"],   # only for the recurrent design:
+                     "initial_state": {"rule": "value", "values": [[2.0]]},  # the feedback path (issue 13)
+                     "feedback": [{"target": "x3", "port": "m_axis_tdata", "output_field": "x3",
+                                   "regressors": ["x3_hat[t-1]"], "regressor_indices": [1], "input_format": "s16..",
+                                   "requant": {"rule": .., "mul": K, "add": C, "shift": S, "qmin": .., "qmax": ..,
+                                               "product_bits": .., "error_bound": ..}, "initial_codes": [..]}],
+                     "flow": "one sample in flight ..", "bit_true": "pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel"}
     }
 
 Physical value of a field: ``physical = offset + scale * code * 2**-frac`` (its ``format``).
@@ -119,7 +126,8 @@ def _fields(design: str, fxm: "FixedPointModel", info: dict, port_name: str, is_
 
 
 def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str, Any], sensor: "PWASVirtualSensor",
-                   files: dict[str, Any], options: dict[str, Any], timing: dict[str, Any] | None = None) -> dict[str, Any]:
+                   files: dict[str, Any], options: dict[str, Any], timing: dict[str, Any] | None = None,
+                   recurrence: Any = None) -> dict[str, Any]:
     """The manifest of a built design, validated against the schema.
 
     Parameters
@@ -139,6 +147,9 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
         The generate options that rebuild the bit-true model (``generator.options``).
     timing : dict, optional
         The timing-closure record (:func:`pwas_hdl.flow.timing_closure.close_timing`).
+    recurrence : RecurrentFixedPointModel, optional
+        The recurrent design (``design == "recurrent"``): its feedback path becomes the
+        ``recurrence`` block (:func:`_recurrence_entry`).
 
     Raises
     ------
@@ -214,10 +225,38 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
         man["timing"] = timing
     if "classifier" in info:  # a classifier model: argmax stage after the core
         man["classifier"] = info["classifier"]
+    if recurrence is not None:  # the recurrent top (issue 13): the feedback path
+        man["recurrence"] = _recurrence_entry(recurrence, info, sensor, ports)
     errs = manifest_errors(man)
     if errs:
         raise InternalError(f"the generated manifest of {top} breaks its schema: {errs[0]}")
     return man
+
+
+def _recurrence_entry(rm: Any, info: dict[str, Any], sensor: "PWASVirtualSensor", ports: list[dict]) -> dict[str, Any]:
+    """The ``recurrence`` block: which output field feeds which regressors, the requantisation
+    rule, the reset codes, II and the flow control (:mod:`pwas_hdl.design.recurrent`)."""
+    names = list(rm.fxm.regressor_names)
+    sod = rm.lags.signal_of_dimension()
+    out = next(p for p in ports if p["role"] == "out.payload")
+    iv = rm.initial_values
+    feedback = []
+    for c, (t, f, fb) in enumerate(zip(rm.fxm.target_names, rm.z_formats, rm.feedback)):
+        dims = [j for j, (k, ch, _lag) in enumerate(sod) if k == "z" and ch == c]  # oldest lag first
+        feedback.append({
+            "target": t, "port": out["name"], "output_field": t,
+            "regressors": [names[j] for j in dims], "regressor_indices": dims,
+            "input_format": str(f.format),
+            "requant": fb.to_dict(), "initial_codes": [int(v) for v in rm.initial_codes[:, c]],
+        })
+    rec = info["recurrence"]
+    return {
+        "Mz": int(rm.lags.mz), "lead": int(getattr(sensor, "lead_", 0)), "ii_cycles": int(rec["ii_cycles"]),
+        "signals": list(rm.signals),
+        "initial_state": {"rule": str(sensor.initial_state_rule_), "values": [[float(v) for v in row] for row in iv]},
+        "feedback": feedback, "flow": rec["flow"],
+        "bit_true": "pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel",
+    }
 
 
 def manifest_text(manifest: dict[str, Any]) -> str:
@@ -267,13 +306,45 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
         errs.append(f"generator.options.design is {m['generator']['options']['design']!r} but design is {m['design']!r}")
     if m["memory"]["n_vertices"] != m["domain"]["n_vertices"]:
         errs.append(f"memory.n_vertices {m['memory']['n_vertices']} differs from domain.n_vertices {m['domain']['n_vertices']}")
-    warm = m["lags"].get("warmup")  # optional by the schema: present exactly for the sensor design
-    if (warm is not None) != (m["design"] == "sensor"):
+    warm = m["lags"].get("warmup")  # optional by the schema: present exactly for the sensor designs
+    if (warm is not None) != (m["design"] in ("sensor", "recurrent")):
         errs.append("lags.warmup is missing (the sensor design has one)" if warm is None
                     else "lags.warmup is given for a core design (only the sensor design has a lag bank)")
     elif warm is not None and warm["port"] not in names:
         errs.append(f"lags.warmup.port {warm['port']!r} is not one of the ports {names}")
     errs += _classifier_errors(m)
+    errs += _recurrence_errors(m)
+    return errs
+
+
+def _recurrence_errors(m: dict[str, Any]) -> list[str]:
+    """The recurrence block: present exactly for the recurrent design, its fields and regressors exist, II = latency."""
+    r = m.get("recurrence")
+    if (r is not None) != (m["design"] == "recurrent"):
+        return ["recurrence is missing (the recurrent design has one)" if r is None
+                else f"recurrence is given for a {m['design']} design (only the recurrent design has a feedback path)"]
+    if r is None:
+        return []
+    errs = []
+    if not (r["ii_cycles"] == m["ii"] == max(1, m["latency_cycles"])):
+        errs.append(f"recurrence.ii_cycles {r['ii_cycles']}, ii {m['ii']} and latency_cycles {m['latency_cycles']} must agree "
+                    "(one sample in flight: II = latency)")
+    regs = m["lags"]["regressors"]
+    outs = {p["name"]: {f["name"] for f in p.get("fields", [])} for p in m["ports"] if p["role"] == "out.payload"}
+    for i, fb in enumerate(r["feedback"]):
+        if fb["target"] not in m["lags"]["targets"]:
+            errs.append(f"recurrence.feedback[{i}].target {fb['target']!r} is not one of lags.targets")
+        if fb["output_field"] not in outs.get(fb["port"], set()):
+            errs.append(f"recurrence.feedback[{i}].output_field {fb['output_field']!r} is not a field of the output port {fb['port']!r}")
+        if len(fb["regressors"]) != r["Mz"] or len(fb["regressor_indices"]) != r["Mz"] or len(fb["initial_codes"]) != r["Mz"]:
+            errs.append(f"recurrence.feedback[{i}] must name Mz = {r['Mz']} regressors, indices and initial codes")
+        elif any(j >= len(regs) or regs[j] != nm for j, nm in zip(fb["regressor_indices"], fb["regressors"])):
+            errs.append(f"recurrence.feedback[{i}].regressors {fb['regressors']} are not lags.regressors at {fb['regressor_indices']}")
+        q = fb["requant"]
+        if not all(q["qmin"] <= c <= q["qmax"] for c in fb["initial_codes"]):
+            errs.append(f"recurrence.feedback[{i}].initial_codes {fb['initial_codes']} are outside [{q['qmin']}, {q['qmax']}]")
+    if len(r["feedback"]) != len(m["lags"]["targets"]):
+        errs.append(f"recurrence.feedback has {len(r['feedback'])} entries for {len(m['lags']['targets'])} targets")
     return errs
 
 

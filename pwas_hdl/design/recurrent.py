@@ -1,0 +1,111 @@
+"""The recurrent design of ``pwas-hdl generate`` (issue 13): a recurrent model's sensor top.
+
+A recurrent model (``Mz >= 1``: a dynamical sensor fitted with ``fit --mz``, or the PWAS of a map
+run as a recurrence, ``fit-map --state``) has the past estimates ``z_hat(t-Mz) .. z_hat(t-1)`` at
+the end of its regressor. ``generate --design sensor`` on such a model builds
+:class:`~pwas_hdl.hdl.recurrent_top.PWASRecurrentTop` (lag bank + core + feedback registers),
+whose bit-true specification is
+:class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`; the manifest's ``design`` is
+``"recurrent"`` and its ``recurrence`` block (built by :mod:`pwas_hdl.design.manifest`) states
+which output feeds which regressors, the requantisation rule (``K``/``C``/``S`` = ``mul``/
+``add``/``shift``), the reset state codes, II = latency and the flow control.
+
+This module holds what only the recurrent design needs: the component, the bit-true recurrence
+of a folder, and the lines it adds to the Verilog header and ``report.md``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from pwas_hdl.errors import InputError
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
+
+__all__ = ["recurrent_model", "build_recurrent_component", "recurrence_header_lines", "recurrence_report_text"]
+
+
+def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "RecurrentFixedPointModel":
+    """The bit-true recurrence of a recurrent ``sensor`` whose circuit is ``fxm``.
+
+    Raises
+    ------
+    InputError
+        The model is not recurrent, or its initial state is the measured one (the hardware
+        starts from constant reset codes), or the lags of one signal have different formats.
+    """
+    from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
+
+    lags = sensor.lags_
+    if lags is None or not lags.recurrent:
+        raise InputError("the model is not recurrent (Mz = 0): use --design sensor or core")
+    if sensor.initial_state_rule_ != "value":
+        raise InputError("the recurrent hardware starts from constant initial states: fit with --z0 VALUE or 'mean', "
+                         "not 'measured'")
+    try:
+        return RecurrentFixedPointModel(fxm, lags, sensor.initial_values_)
+    except ValueError as exc:  # e.g. separate lag domains of one signal: the lag bank needs one format per signal
+        raise InputError(f"the recurrent top cannot be built for this model: {exc}") from None
+
+
+def build_recurrent_component(sensor: "PWASVirtualSensor", fxm: "FixedPointModel", *, memory: str, name: str,
+                              pipeline: Any = None, classifier: Any = None) -> tuple[Any, "RecurrentFixedPointModel"]:
+    """The Amaranth recurrent top and its bit-true recurrence.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        Recurrent (``sensor.lags_.mz >= 1``), initial-state rule "value".
+    fxm : FixedPointModel
+        The bit-true circuit (:func:`pwas_hdl.design.generate.fixed_point_model`).
+    memory, name, pipeline : as :func:`pwas_hdl.design.generate.build_design`
+    classifier : None
+        A classifier model is refused (no argmax stage in the recurrent top).
+
+    Returns
+    -------
+    (PWASRecurrentTop, RecurrentFixedPointModel)
+    """
+    from pwas_hdl.hdl.recurrent_top import build_recurrent_sensor
+
+    if classifier is not None:
+        raise InputError("a recurrent classifier is not supported: the recurrent top has no argmax stage")
+    rm = recurrent_model(sensor, fxm)
+    try:
+        top = build_recurrent_sensor(rm, memory=memory, pipeline=pipeline, name=name)
+    except ValueError as exc:  # e.g. a requantisation product narrower than B_in + S
+        raise InputError(f"the recurrent top cannot be built with these formats: {exc}") from None
+    return top, rm
+
+
+def recurrence_header_lines(man: dict) -> list[str]:
+    """Lines of the Verilog header that state the feedback path (from the manifest)."""
+    r = man["recurrence"]
+    lines = [f"recurrence: Mz = {r['Mz']}, lead {r['lead']}; one sample in flight, II = latency = {r['ii_cycles']} cycles"]
+    for fb in r["feedback"]:
+        q = fb["requant"]
+        lines.append(f"  feedback {fb['output_field']} -> {', '.join(fb['regressors'])}: q = clip((o * {q['mul']} + {q['add']}) "
+                     f">> {q['shift']}, {q['qmin']}, {q['qmax']}) ({fb['input_format']}); reset codes {fb['initial_codes']}")
+    lines.append("  (the |hw - float| bound above is per step; over the recurrence the deviation is measured, see report.md)")
+    return lines
+
+
+def recurrence_report_text(man: dict) -> str:
+    """The ``## Recurrence`` section of ``report.md``."""
+    r = man["recurrence"]
+    rows = ["| target | feeds | requantisation q = clip((o K + C) >> S) | input format | reset codes (oldest first) | |q - o| bound |",
+            "|---|---|---|---|---|---|"]
+    for fb in r["feedback"]:
+        q = fb["requant"]
+        rows.append(f"| `{fb['target']}` | {', '.join(f'`{x}`' for x in fb['regressors'])} | K = {q['mul']}, C = {q['add']}, "
+                    f"S = {q['shift']}, [{q['qmin']}, {q['qmax']}] | {fb['input_format']} | {fb['initial_codes']} | "
+                    f"{q['error_bound']:.4g} |")
+    return (f"\n## Recurrence\n\nThe past estimates are fed back (Mz = {r['Mz']}, lead {r['lead']}: row t estimates "
+            f"z(t + {r['lead']})). Flow control: {r['flow']}. II = latency = {r['ii_cycles']} cycles. Reset restores the initial state "
+            f"codes (physical {r['initial_state']['values']}).\n\n" + "\n".join(rows) + "\n\n"
+            "The error bound above is that of one step; the recurrence filters the per-step errors with its own gain, so "
+            "the deviation of the hardware from the float recurrence is measured (simulate: bit-true and float columns), "
+            "not bounded.\n")
