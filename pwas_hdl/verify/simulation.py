@@ -117,7 +117,7 @@ class Design:
 
     @property
     def warmup(self) -> int:
-        if self.kind != "sensor":
+        if self.kind not in ("sensor", "recurrent"):
             return 0
         return int(self.manifest["lags"]["warmup"]["samples_without_output"])  # the schema requires it for a sensor
 
@@ -814,6 +814,12 @@ def simulate_data(
     if cache_dir is not None:
         check_output_path(cache_dir, "--build-dir", kind="folder")
     design = load_design(outdir)
+    if design.kind == "recurrent":  # issue 13: the recurrent bench (pwas_hdl.verify.recurrent_simulation)
+        from pwas_hdl.verify.recurrent_simulation import simulate_recurrent
+
+        table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
+        return simulate_recurrent(design, table, output, spath, outset, simulator=simulator, engine=engine, traj_col=traj_col,
+                                  stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say)
     sensor, model = design.sensor, design.model
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
