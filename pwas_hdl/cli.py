@@ -570,7 +570,7 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
 def generate(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; in a folder an earlier `generate` made, only its files are replaced: sim/, synth/ and your files stay). Required.", show_default=False)] = None,
-    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer). An additive model (fit --additive) gets one core per part, summed before one rounding.")] = "core",
+    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer); of a recurrent model (fit --mz, fit-map --state) sensor is the recurrent top: lag bank + core + feedback of the estimates, II = latency (manifest design recurrent; use --input-bits 16). An additive model (fit --additive) gets one core per part, summed before one rounding.")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default) or max.")] = None,
@@ -678,7 +678,7 @@ def synth(
 
 @app.command()
 def simulate(
-    outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core or sensor design).")],
+    outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core, sensor or recurrent design).")],
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of the per-sample hardware outputs to write. Required.", show_default=False)] = None,
     simulator: Annotated[Optional[str], typer.Option("--simulator", help="icarus or verilator (default: icarus; verilator with --engine native).")] = None,
@@ -701,6 +701,9 @@ def simulate(
     the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.
     A classifier design adds C_hat_hw, C_hat_bittrue, C_hat_float (class labels of the RTL's
     class_index, of the bit-true and of the float argmax; the class is compared too).
+    A recurrent design runs the recurrent bench (one reset per trajectory) against the bit-true
+    recurrence; it adds estimate_of_row (row + lead), TARGET_float is the float recurrence, and
+    --engine native is refused.
     """
     from pwas_hdl.verify.simulation import simulate_data
 

@@ -167,6 +167,8 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
                 entry.update(reference_column=ref, reference_rows=int(ok.sum()),
                              rmsee_hw=_rmse(zhw[ok, i], zt[r_ok]), rmsee_bittrue=_rmse(zbt[ok, i], zt[r_ok]),
                              rmsee_float=_rmse(zf[ok, i], zt[r_ok]))
+                if entry["rmsee_hw"] is not None and entry["rmsee_float"]:
+                    entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
                 break
         targets[t] = entry
     first = None
@@ -213,6 +215,8 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         "stall": stall,
         "cycles": int(rsegs[-1]["cycles"]) if rsegs else 0,
         "clock_ns": 10.0,
+        "simulation_seconds": float(raw.get("wall_s", 0.0)),
+        "samples_per_second": n / float(raw["wall_s"]) if raw.get("wall_s") else None,
         "simulator_process_seconds": float(raw.get("wall_s", 0.0)),
         "build_seconds": float(b.build_seconds),
         "build_reused": bool(b.reused),
