@@ -318,7 +318,7 @@ def build_design(
     from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 
     if design not in ("core", "sensor", "recurrent"):
-        raise ValueError(f"design must be 'core' or 'sensor', got {design!r}")
+        raise ValueError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
     if name is not None:

@@ -97,6 +97,9 @@ def export_testbench(
     if not 0.0 <= float(stall) < 1.0:
         raise InputError(f"--stall must be in [0, 1), got {stall}")
     design = load_design(design_dir)
+    if design.kind == "recurrent":  # its expected words come from the recurrence (pwas_hdl.verify.recurrent_simulation)
+        raise InputError(f"{design_dir}: export-testbench does not support recurrent designs yet; verify them with "
+                         "`pwas-hdl simulate DIR DATA.csv` (the recurrent cocotb bench)")
     man, model = design.manifest, design.model
     out = Path(outdir) if outdir is not None else design.outdir / "tb"
     if out.exists():
