@@ -10,6 +10,7 @@ from scipy import sparse
 from pwas_hdl import PWASVirtualSensor
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.sparse_cholesky import cholmod_available
 from pwas_hdl.fit.regularized_lsq import (
     CG_RTOL,
     DEFAULT_SIGMA_GRID,
@@ -80,7 +81,10 @@ def test_zero_order_unsupported_vertices_are_exactly_zero():
 
 def test_auto_rule():
     assert choose_method(1000, 2, 1) == "direct"
-    assert choose_method(10**6, 2, 1) == "cg"
+    # first order in 2-D at N = 10^6: CHOLMOD factorises it in ~1.5 s, SuperLU does not
+    assert choose_method(10**6, 2, 1) == ("direct" if cholmod_available() else "cg")
+    assert choose_method(3 * 10**6, 2, 1) == "cg"
+    assert choose_method(262_144, 3, 1) == "cg"  # 3-D first order: the factor is too dense
     assert choose_method(10**6, 2, 0) == "direct"  # zero order, 2-D: the factor stays sparse
     assert choose_method(10**5, 3, 0) == "direct"
     assert choose_method(10**6, 3, 0) == "cg"
@@ -185,7 +189,7 @@ def test_cg_that_does_not_converge_falls_back_to_direct(monkeypatch):
 
     grid, h, z = _problem(2, 40, 4000, seed=5)  # 1681 unknowns
     gam = tikhonov_matrix(grid, 1)
-    monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS, (1, 2), 1000)  # auto -> cg, fallback allowed up to 4000
+    monkeypatch.setitem(rl._direct_limits(), (1, 2), 1000)  # auto -> cg, fallback allowed up to 4000
     ht = h.T.tocsr()
     hth, b = ht @ h, ht @ z[:, 0]
     solver = NormalEquationSolver(hth, gam, 2, "auto", maxiter=2)

@@ -17,6 +17,7 @@ from scipy.sparse import linalg as splinalg
 
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky, cholmod_available
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 
 __all__ = [
@@ -111,6 +112,15 @@ DIRECT_MAX_UNKNOWNS: dict[tuple[int, int], int] = {
     (1, 4): 2_000,
     (1, 5): 2_000,
 }
+
+#: The ``auto`` limits where CHOLMOD is available (:mod:`pwas_hdl.fit.sparse_cholesky`; the table
+#: above is SuperLU's). Only first order in 2-D moves: measured at n = 2, N = 10^6, T = 10^5 (one
+#: BLAS thread, CPU s): 1.2-1.6 s per numeric factorisation and 0.15 s per solve, while
+#: preconditioned CG at that size took over 150 s for the CV (Jacobi/AMG) and, with the factor of
+#: the neighbouring sigma as preconditioner, 14-15 iterations = 2.2-2.4 s per sigma. In 3-D first
+#: order the factor stays too dense (48 s per factorisation at N = 262 144, 12.7 s with a nested
+#: dissection ordering), so CG is kept there.
+DIRECT_MAX_UNKNOWNS_CHOLMOD: dict[tuple[int, int], int] = {**DIRECT_MAX_UNKNOWNS, (1, 2): 2_000_000}
 
 #: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
 #: Since ``A = H'H + sigma Gamma >= sigma * lambda_min(Gamma) I`` this guarantees
@@ -255,14 +265,20 @@ def _sparse_bytes(nnz: float, rows: int) -> float:
 def choose_method(n_unknowns: int, n_dims: int, order: int = 1, method: Method = "auto") -> str:
     """``"direct"`` or ``"cg"``.
 
-    ``auto`` picks direct up to ``DIRECT_MAX_UNKNOWNS[(order, min(n_dims, 5))]`` unknowns, CG above.
+    ``auto`` picks direct up to ``DIRECT_MAX_UNKNOWNS[(order, min(n_dims, 5))]`` unknowns, CG above
+    (:data:`DIRECT_MAX_UNKNOWNS_CHOLMOD` where CHOLMOD is available).
     """
     if method not in ("auto", "direct", "cg"):
         raise InputError(f"solver method must be 'auto', 'direct' or 'cg', got {method!r}")
     if method == "auto":
-        limit = DIRECT_MAX_UNKNOWNS[(1 if order else 0, min(max(int(n_dims), 1), 5))]
+        limit = _direct_limits()[(1 if order else 0, min(max(int(n_dims), 1), 5))]
         return "direct" if n_unknowns <= limit else "cg"
     return method
+
+
+def _direct_limits() -> dict[tuple[int, int], int]:
+    """The ``auto`` table of the direct solver that is used (CHOLMOD where importable, else SuperLU)."""
+    return DIRECT_MAX_UNKNOWNS_CHOLMOD if cholmod_available() else DIRECT_MAX_UNKNOWNS
 
 
 def estimate_fit_memory(
@@ -470,6 +486,11 @@ class NormalEquationSolver:
     rtol : float
         CG relative-residual tolerance (default :data:`CG_RTOL`).
     maxiter : int
+    direct_backend : {"auto", "cholmod", "superlu"}
+        The direct solve: CHOLMOD (:class:`~pwas_hdl.fit.sparse_cholesky.PatternCholesky`, one
+        symbolic analysis of ``H'H + Gamma`` shared by all folds and sigmas, a numeric
+        factorisation per system) where cvxopt is importable (``auto``), else SuperLU
+        (:func:`_solve_spd`, a full factorisation per system).
     """
 
     def __init__(
@@ -480,6 +501,7 @@ class NormalEquationSolver:
         method: Method = "auto",
         rtol: float = CG_RTOL,
         maxiter: int = CG_MAXITER,
+        direct_backend: Literal["auto", "cholmod", "superlu"] = "auto",
     ):
         hth = sparse.csr_array(hth)
         gamma = sparse.csr_array(gamma)
@@ -495,13 +517,24 @@ class NormalEquationSolver:
         self.gamma = self._restrict(gamma)
         unknowns = self.n if self.keep is None else self.keep.size
         self.method = choose_method(unknowns, n_dims, self.order, method)
-        self.fallback = method == "auto" and unknowns <= FALLBACK_FACTOR * DIRECT_MAX_UNKNOWNS[
+        self.fallback = method == "auto" and unknowns <= FALLBACK_FACTOR * _direct_limits()[
             (self.order, min(max(int(n_dims), 1), 5))
         ]
         self.rtol, self.maxiter = float(rtol), int(maxiter)
         if self.method == "cg":
             lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
             self._pre = _Preconditioner(lumped, self.gamma, self.order)
+        if direct_backend not in ("auto", "cholmod", "superlu"):
+            raise InputError(f"direct backend must be 'auto', 'cholmod' or 'superlu', got {direct_backend!r}")
+        if direct_backend == "cholmod" and not cholmod_available():
+            raise InputError("direct backend 'cholmod' needs cvxopt (pip install cvxopt)")
+        self.backend = "superlu" if direct_backend == "superlu" or not cholmod_available() else "cholmod"
+        self._chol: PatternCholesky | None = None
+        self._m_cache: tuple[object, np.ndarray] | None = None
+        # the pattern that holds every fold's matrix (for the CG fallback, analysed on first use)
+        self._hth_r = self._restrict(hth) if self.backend == "cholmod" else None
+        if self.method == "direct" and self.backend == "cholmod":
+            self._analyse()
         self.infos: list[SolveInfo] = []
 
     def _restrict(self, m: sparse.sparray) -> sparse.csr_array:
@@ -511,6 +544,35 @@ class NormalEquationSolver:
     def restrict_matrix(self, m: sparse.sparray) -> sparse.csr_array:
         """``m`` on the unknowns that are solved for (identity map unless order 0 with empty vertices)."""
         return self._restrict(m)
+
+    def _analyse(self) -> None:
+        """One CHOLMOD symbolic analysis for every fold and sigma: all their matrices lie in
+        the pattern of ``H'H + Gamma``."""
+        self._chol = PatternCholesky(abs(self._hth_r) + abs(self.gamma))
+        self._gamma_vals = self._chol.align(self.gamma)
+
+    def _direct(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
+        """The direct solve of ``(m + sigma Gamma) w = bk`` with the chosen backend."""
+        if self.backend == "cholmod":
+            if self._chol is None:
+                self._analyse()
+            return self._cholmod_solve(m, bk, sigma)
+        return _solve_spd((m + sigma * self.gamma).tocsc(), bk)
+
+    def _cholmod_solve(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
+        """Numeric CHOLMOD factorisation of ``m + sigma Gamma`` on the analysed pattern, then solve.
+
+        The values of ``m`` on the pattern are kept for the next call with the same ``m`` (the CV
+        solves one fold matrix for every sigma). A non-positive pivot (``m`` is a difference of
+        normal matrices, so at tiny sigma rounding can make it indefinite) falls back to SuperLU.
+        """
+        if self._m_cache is None or self._m_cache[0] is not m:
+            self._m_cache = (m, self._chol.align(m))
+        try:
+            self._chol.factorize(self._m_cache[1] + sigma * self._gamma_vals)
+        except NotPositiveDefinite:
+            return _solve_spd((m + sigma * self.gamma).tocsc(), bk)
+        return self._chol.solve(bk)
 
     def solve(
         self, m: sparse.csr_array, b: np.ndarray, sigma: float, x0: np.ndarray | None = None
@@ -534,15 +596,15 @@ class NormalEquationSolver:
         """
         b = np.asarray(b, dtype=float)
         bk = b if self.keep is None else b[self.keep]
-        a = (m + sigma * self.gamma).tocsr()
         if self.method == "direct":
-            wk = _solve_spd(a.tocsc(), bk)
+            wk = self._direct(m, bk, sigma)
             info = SolveInfo("direct")
         else:
+            a = (m + sigma * self.gamma).tocsr()
             x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
             wk, info = _cg(a, bk, self._pre.get(a, sigma), x0k, sigma, self.lam_gamma, self.rtol, self.maxiter)
             if not info.converged and self.fallback:
-                wk = _solve_spd(a.tocsc(), bk)
+                wk = self._direct(m, bk, sigma)
                 info = SolveInfo("direct-fallback", info.iterations)
         self.infos.append(info)
         if self.keep is None:
