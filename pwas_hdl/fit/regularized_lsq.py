@@ -488,9 +488,8 @@ class NormalEquationSolver:
     maxiter : int
     direct_backend : {"auto", "cholmod", "superlu"}
         The direct solve: CHOLMOD (:class:`~pwas_hdl.fit.sparse_cholesky.PatternCholesky`, one
-        symbolic analysis of ``H'H + Gamma`` shared by all folds and sigmas, a numeric
-        factorisation per system) where cvxopt is importable (``auto``), else SuperLU
-        (:func:`_solve_spd`, a full factorisation per system).
+        symbolic analysis per fold matrix, a numeric factorisation per sigma) where cvxopt is
+        importable (``auto``), else SuperLU (:func:`_solve_spd`, a full factorisation per system).
     """
 
     def __init__(
@@ -529,12 +528,7 @@ class NormalEquationSolver:
         if direct_backend == "cholmod" and not cholmod_available():
             raise InputError("direct backend 'cholmod' needs cvxopt (pip install cvxopt)")
         self.backend = "superlu" if direct_backend == "superlu" or not cholmod_available() else "cholmod"
-        self._chol: PatternCholesky | None = None
-        self._m_cache: tuple[object, np.ndarray] | None = None
-        # the pattern that holds every fold's matrix (for the CG fallback, analysed on first use)
-        self._hth_r = self._restrict(hth) if self.backend == "cholmod" else None
-        if self.method == "direct" and self.backend == "cholmod":
-            self._analyse()
+        self._m_cache: tuple | None = None
         self.infos: list[SolveInfo] = []
 
     def _restrict(self, m: sparse.sparray) -> sparse.csr_array:
@@ -545,34 +539,34 @@ class NormalEquationSolver:
         """``m`` on the unknowns that are solved for (identity map unless order 0 with empty vertices)."""
         return self._restrict(m)
 
-    def _analyse(self) -> None:
-        """One CHOLMOD symbolic analysis for every fold and sigma: all their matrices lie in
-        the pattern of ``H'H + Gamma``."""
-        self._chol = PatternCholesky(abs(self._hth_r) + abs(self.gamma))
-        self._gamma_vals = self._chol.align(self.gamma)
-
     def _direct(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
         """The direct solve of ``(m + sigma Gamma) w = bk`` with the chosen backend."""
         if self.backend == "cholmod":
-            if self._chol is None:
-                self._analyse()
             return self._cholmod_solve(m, bk, sigma)
         return _solve_spd((m + sigma * self.gamma).tocsc(), bk)
 
     def _cholmod_solve(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
-        """Numeric CHOLMOD factorisation of ``m + sigma Gamma`` on the analysed pattern, then solve.
+        """CHOLMOD factorisation of ``m + sigma Gamma``, then solve.
 
-        The values of ``m`` on the pattern are kept for the next call with the same ``m`` (the CV
-        solves one fold matrix for every sigma). A non-positive pivot (``m`` is a difference of
-        normal matrices, so at tiny sigma rounding can make it indefinite) falls back to SuperLU.
+        The symbolic analysis is done once per ``m`` (per fold in the CV) on the pattern of
+        ``m + Gamma`` and kept, with ``m``'s values on it, for the next call with the same ``m``;
+        each sigma is then one numeric factorisation. Analysing each fold's own pattern rather
+        than one pattern of the full ``H'H`` for all folds was measured 3x cheaper per numeric
+        factorisation (n = 3, N = 262 144, zero order: 0.17-0.21 s instead of 0.53-0.61 s; the
+        validation samples' entries cancel in ``H'H - H_v'H_v``). A non-positive pivot (``m`` is a
+        difference of normal matrices, so at tiny sigma rounding can make it indefinite) falls
+        back to SuperLU.
         """
         if self._m_cache is None or self._m_cache[0] is not m:
-            self._m_cache = (m, self._chol.align(m))
+            self._m_cache = None  # free the previous factor first
+            chol = PatternCholesky(abs(m) + abs(self.gamma))
+            self._m_cache = (m, chol, chol.align(m), chol.align(self.gamma))
+        _, chol, m_vals, g_vals = self._m_cache
         try:
-            self._chol.factorize(self._m_cache[1] + sigma * self._gamma_vals)
+            chol.factorize(m_vals + sigma * g_vals)
         except NotPositiveDefinite:
             return _solve_spd((m + sigma * self.gamma).tocsc(), bk)
-        return self._chol.solve(bk)
+        return chol.solve(bk)
 
     def solve(
         self, m: sparse.csr_array, b: np.ndarray, sigma: float, x0: np.ndarray | None = None

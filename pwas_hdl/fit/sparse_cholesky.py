@@ -1,10 +1,10 @@
 """Sparse Cholesky of many SPD matrices that share one sparsity pattern (CHOLMOD via cvxopt).
 
 Cross-validation of sigma solves ``(M_k + sigma Gamma) w = b`` for every fold ``k`` and every
-candidate ``sigma``: all these matrices have their non-zeros inside the pattern of
-``H'H + Gamma``. :class:`PatternCholesky` analyses that pattern once (fill-reducing ordering and
-supernodal structure, CHOLMOD ``symbolic``) and then does only the numeric factorisation per
-matrix (CHOLMOD ``numeric``): measured on this project's 2-core machine (T = 10^5, one BLAS
+candidate ``sigma``: for one fold all these matrices have the pattern of ``M_k + Gamma``.
+:class:`PatternCholesky` analyses a pattern once (fill-reducing ordering and supernodal
+structure, CHOLMOD ``symbolic``) and then does only the numeric factorisation per matrix
+(CHOLMOD ``numeric``): measured on this project's 2-core machine (T = 10^5, one BLAS
 thread, CPU s per factorisation): n = 3, N = 262 144 zero order (141 358 touched vertices)
 0.19 s instead of 2.0 s with SuperLU; n = 2, N = 10^6 first order 1.2-1.6 s (SuperLU: ~25 s).
 
@@ -49,7 +49,8 @@ class PatternCholesky:
     ----------
     pattern : sparse array, shape (N, N)
         A symmetric matrix whose non-zeros contain those of every matrix to be factorised
-        (for the CV: ``H'H + Gamma`` restricted to the unknowns). Only its structure is used.
+        (for the CV: ``M_k + Gamma`` of one fold, restricted to the unknowns). Only its structure
+        is used.
 
     Notes
     -----
