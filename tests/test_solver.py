@@ -201,3 +201,91 @@ def test_cg_that_does_not_converge_falls_back_to_direct(monkeypatch):
     solver = NormalEquationSolver(hth, gam, 2, "cg", maxiter=2)
     _, info = solver.solve(solver.restrict_matrix(hth), b, 1e-5)
     assert info.method == "cg" and not info.converged
+
+
+# ------------------------------------------------------------------ direct backends (CHOLMOD)
+needs_cholmod = pytest.mark.skipif(not cholmod_available(), reason="cvxopt (CHOLMOD) not importable")
+
+
+@needs_cholmod
+@pytest.mark.parametrize("order", [0, 1])
+def test_cholmod_matches_superlu(order):
+    """Both direct backends solve the same system: the difference is rounding, bounded by the
+    condition number times machine precision; checked through the residual of each."""
+    grid, h, z = _problem(2, 30, 3000, seed=11, nz=2)
+    gam = tikhonov_matrix(grid, order)
+    ht = h.T.tocsr()
+    hth, b = (ht @ h).tocsr(), ht @ z
+    for sigma in (1e-6, 1e-2, 10.0):
+        out = {}
+        for backend in ("cholmod", "superlu"):
+            solver = NormalEquationSolver(hth, gam, 2, "direct", direct_backend=backend)
+            assert solver.backend == backend
+            w, info = solver.solve(solver.restrict_matrix(hth), b, sigma)
+            a = (hth + sigma * gam).tocsr()
+            assert np.linalg.norm(b - a @ w) <= 1e-9 * np.linalg.norm(b), (backend, sigma)
+            out[backend] = w
+        scale = float(np.abs(out["superlu"]).max())
+        np.testing.assert_allclose(out["cholmod"], out["superlu"], atol=1e-6 * scale)
+
+
+@needs_cholmod
+def test_cholmod_analyses_each_fold_once():
+    """The CV reuses one symbolic analysis per fold: 5 analyses, one numeric factorisation per
+    (fold, sigma); and the CV agrees with the SuperLU one."""
+    import pwas_hdl.fit.sparse_cholesky as sc
+
+    grid, h, z = _problem(2, 20, 2000, seed=4)
+    gam = tikhonov_matrix(grid, 1)
+    made = []
+    orig = sc.PatternCholesky.__init__
+
+    def counting_init(self, pattern):
+        made.append(self)
+        orig(self, pattern)
+
+    sigmas = [1e-4, 1e-2, 1.0]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sc.PatternCholesky, "__init__", counting_init)
+        cv = cross_validate_sigma(h, z, gam, sigmas, folds=5, method="direct")
+    assert len(made) == 5 and [c.factorizations for c in made] == [3] * 5
+    assert cv.solver["method"] == "direct" and cv.solver["solves"] == 15
+
+
+@needs_cholmod
+def test_pattern_cholesky_refuses_entries_outside_its_pattern_and_indefinite():
+    from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky
+
+    pc = PatternCholesky(sparse.identity(4, format="csr"))
+    with pytest.raises(ValueError, match="outside"):
+        pc.align(sparse.csr_array(np.ones((4, 4))))
+    with pytest.raises(NotPositiveDefinite):
+        pc.factorize(np.array([1.0, -1.0, 1.0, 1.0]))
+    pc.factorize(pc.align(2.0 * sparse.identity(4, format="csr")))
+    np.testing.assert_allclose(pc.solve(np.ones(4)), 0.5)
+
+
+@needs_cholmod
+def test_indefinite_fold_matrix_falls_back_to_superlu(monkeypatch):
+    """A non-positive CHOLMOD pivot (rounding in H'H - H_v'H_v at tiny sigma) is solved by SuperLU."""
+    import pwas_hdl.fit.sparse_cholesky as sc
+
+    grid, h, z = _problem(2, 20, 2000, seed=6)
+    gam = tikhonov_matrix(grid, 0)
+    ht = h.T.tocsr()
+    hth, b = (ht @ h).tocsr(), ht @ z[:, 0]
+
+    def refuse(self, values):
+        raise sc.NotPositiveDefinite("test")
+
+    monkeypatch.setattr(sc.PatternCholesky, "factorize", refuse)
+    solver = NormalEquationSolver(hth, gam, 2, "direct")
+    w, info = solver.solve(solver.restrict_matrix(hth), b, 1e-3)
+    ref = NormalEquationSolver(hth, gam, 2, "direct", direct_backend="superlu")
+    np.testing.assert_array_equal(w, ref.solve(ref.restrict_matrix(hth), b, 1e-3)[0])
+
+
+def test_direct_backend_is_checked():
+    grid, h, _ = _problem(2, 5, 100)
+    with pytest.raises(InputError, match="direct backend"):
+        NormalEquationSolver(h.T @ h, tikhonov_matrix(grid, 0), 2, "direct", direct_backend="mkl")
