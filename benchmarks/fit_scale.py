@@ -65,6 +65,7 @@ def _problem(n: int, p: int, t: int, seed: int = 0):
 def worker_fit(n: int, p: int, order: int, t: int, weights_out: str) -> dict:
     """The timed fit (runs in a subprocess); saves the weights for the direct comparison."""
     from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, solve_regularized, tikhonov_matrix
+    from pwas_hdl.fit.sparse_cholesky import cholmod_available
 
     grid, x, z = _problem(n, p, t)
     c0, w0 = time.process_time(), time.perf_counter()
@@ -81,6 +82,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str) -> dict:
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "estimated_mib": est["total"] / 2**20,
         "method": cv.solver["method"],
+        "direct_backend": "cholmod" if cholmod_available() else "superlu",
         "cv_solves": cv.solver["solves"],
         "cv_cg_iterations": cv.solver["iterations"],
         "cv_max_rel_residual": cv.solver["max_rel_residual"],
@@ -161,6 +163,7 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
             "budget_s": budget if budget != float("inf") else None,
             "shared_machine": True,
             "load_average_at_start": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
         },
         "environment": _environment(),
         "rows": rows,
@@ -177,11 +180,18 @@ def _environment() -> dict:
         amg = pyamg.__version__
     except ImportError:  # pragma: no cover
         amg = None
+    try:
+        import cvxopt
+
+        cvx = cvxopt.__version__
+    except ImportError:  # pragma: no cover
+        cvx = None
     return {
         "python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "pyamg": amg,
+        "cvxopt": cvx,
         "cpu_count": os.cpu_count(),
     }
 
@@ -231,7 +241,7 @@ def markdown(res: dict) -> str:
         if r["order"] == 1 and r0 is not None and r0["status"] == "ok":
             ratio = f"{r['cpu_s'] / r0['cpu_s']:.2f}"
         bound = f"{r['final']['weight_bound']:.1e}" if r["method"] == "cg" else "-"
-        solver = r["method"]
+        solver = r["method"] + (f" ({r['direct_backend']})" if r["method"] == "direct" and "direct_backend" in r else "")
         if r.get("cv_direct_fallbacks"):
             solver += f" ({r['cv_direct_fallbacks']} direct fallbacks)"
         if not r["cv_all_converged"] or not r["final"]["converged"]:
@@ -244,6 +254,7 @@ def markdown(res: dict) -> str:
     out += [
         "",
         f"Environment: Python {env['python']}, numpy {env['numpy']}, scipy {env['scipy']}, pyamg {env['pyamg']}, "
+        f"cvxopt {env.get('cvxopt')} (CHOLMOD), OPENBLAS_NUM_THREADS={s.get('OPENBLAS_NUM_THREADS')}, "
         f"{env['cpu_count']} CPUs. Total run time {res['total_time_s']:.0f} s.",
         "",
     ]
