@@ -283,6 +283,7 @@ def test_indefinite_fold_matrix_falls_back_to_superlu(monkeypatch):
     w, info = solver.solve(solver.restrict_matrix(hth), b, 1e-3)
     ref = NormalEquationSolver(hth, gam, 2, "direct", direct_backend="superlu")
     np.testing.assert_array_equal(w, ref.solve(ref.restrict_matrix(hth), b, 1e-3)[0])
+    assert solver.superlu_fallbacks == 1 and ref.superlu_fallbacks == 0
 
 
 def test_direct_backend_is_checked():

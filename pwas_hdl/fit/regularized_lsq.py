@@ -529,6 +529,8 @@ class NormalEquationSolver:
             raise InputError("direct backend 'cholmod' needs cvxopt (pip install cvxopt)")
         self.backend = "superlu" if direct_backend == "superlu" or not cholmod_available() else "cholmod"
         self._m_cache: tuple | None = None
+        #: CHOLMOD factorisations that met a non-positive pivot and were solved by SuperLU instead
+        self.superlu_fallbacks = 0
         self.infos: list[SolveInfo] = []
 
     def _restrict(self, m: sparse.sparray) -> sparse.csr_array:
@@ -565,6 +567,7 @@ class NormalEquationSolver:
         try:
             chol.factorize(m_vals + sigma * g_vals)
         except NotPositiveDefinite:
+            self.superlu_fallbacks += 1
             return _solve_spd((m + sigma * self.gamma).tocsc(), bk)
         return chol.solve(bk)
 
@@ -685,7 +688,8 @@ class CVResult:
         Validation MSE of each fold and candidate.
     solver : dict
         How the systems were solved: ``method``, ``solves``, CG ``iterations`` in total,
-        ``max_rel_residual``, ``all_converged``, ``direct_fallbacks`` and ``weight_bound`` (folds, S), the bound of each
+        ``max_rel_residual``, ``all_converged``, ``direct_fallbacks``, ``superlu_fallbacks`` (CHOLMOD
+        pivots that were not positive) and ``weight_bound`` (folds, S), the bound of each
         solve on ``max_col ||w - w_exact||_2`` (zero for the direct solve); not written to the model
         file.
     """
@@ -811,6 +815,7 @@ def cross_validate_sigma(
         "max_rel_residual": float(max((i.rel_residual for i in infos), default=0.0)),
         "all_converged": bool(all(i.converged for i in infos)),
         "direct_fallbacks": int(sum(i.method == "direct-fallback" for i in infos)),
+        "superlu_fallbacks": int(solver.superlu_fallbacks),
         "weight_bound": weight_bound,
     }
     return CVResult(sig, mse, best, folds, fold_mse, summary)
