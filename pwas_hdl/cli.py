@@ -573,7 +573,8 @@ def generate(
     design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer); of a recurrent model (fit --mz, fit-map --state) sensor is the recurrent top: lag bank + core + feedback of the estimates, II = latency (manifest design recurrent; use --input-bits 16). An additive model (fit --additive) gets one core per part, summed before one rounding.")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
-    pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default) or max.")] = None,
+    pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default), max, latency or throughput (the registers themselves; see --goal).")] = None,
+    goal: Annotated[Optional[str], typer.Option("--goal", help="Choose the pipeline by what matters: latency (fewest ns input to output), throughput (highest clock, II = 1) or balanced (the default). Each is a pipeline preset measured on ECP5 (README hardware tables). One of --goal, --pipeline, --clock-mhz.")] = None,
     memory_init: Annotated[str, typer.Option("--memory-init", help="inline: weights inside the Verilog; readmemh: the Verilog loads the .hex files (relative names).")] = "inline",
     ports: Annotated[str, typer.Option("--ports", help="Port names: axis (aclk, aresetn active low, s_axis_tvalid/tready/tdata, m_axis_tvalid/tready/tdata) or amaranth (clk, rst active high, in__*, out__*).")] = "axis",
     input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes.")] = 12,
@@ -608,7 +609,7 @@ def generate(
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
                     input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
-                    output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
+                    output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding, goal=goal,
                 )
         else:
             with _executor(workers, scheduler) as ex:
@@ -616,7 +617,7 @@ def generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
                     input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
-                    target_mhz=target_mhz, fpga_target=fpga,
+                    target_mhz=target_mhz, fpga_target=fpga, goal=goal,
                     progress=_say, executor=ex,
                 )
         man = gd.manifest
@@ -648,6 +649,7 @@ def synth(
     package: Annotated[Optional[str], typer.Option("--package", help="Package (default per device).")] = None,
     clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Clock constraint in MHz for place and route (default: nextpnr's).")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Placer seed.")] = 1,
+    harness: Annotated[bool, typer.Option("--harness/--no-harness", help="Place and route inside the timing harness that registers every port (default), so fmax covers the input and output paths, as generate --clock-mhz and benchmarks/hw_tables.py measure it; --no-harness: the bare design, register-to-register paths only.")] = True,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Also copy the JSON report here.")] = None,
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for the tool files and results (default OUTDIR/synth/FPGA, where `report` finds them).", show_default=False)] = None,
     target_old: Annotated[Optional[str], _hidden("--target")] = None,
@@ -669,7 +671,7 @@ def synth(
         if out is not None:
             check_output_path(out, "-o/--out", kind="folder")
         res = synthesize(outdir, family, device=device, package=package, freq_mhz=freq, seed=seed, workdir=out,
-                         progress=_say)
+                         progress=_say, harness=harness and family != "generic")
         if json_out is not None:
             with outset:
                 outset.write_text(json_out, json.dumps(res, indent=2) + "\n")

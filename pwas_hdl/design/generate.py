@@ -253,6 +253,7 @@ def build_design(
     pipeline: str | Pipeline | dict | None = None,
     memory_init: str = "inline",
     ports: str = "axis",
+    goal: str | None = None,
     target_mhz: float | None = None,
     fpga_target: str = "ecp5",
     timing_seed: int = 1,
@@ -282,6 +283,12 @@ def build_design(
     pipeline : str, Pipeline or dict, optional
         Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``), or the
         registers themselves (a :class:`~pwas_hdl.hdl.params.Pipeline` or its ``to_dict()``).
+    goal : {"latency", "balanced", "throughput"}, optional
+        Pick the pipeline by what matters (:data:`pwas_hdl.hdl.params.GOALS`): ``latency`` (fewest
+        nanoseconds from input to output), ``throughput`` (highest clock, II = 1) or ``balanced``
+        (the default pipeline). Each names a pipeline preset measured on ECP5 (see the README's
+        hardware tables); recorded in the manifest as that preset. Not with ``pipeline`` or
+        ``target_mhz``: one of the three chooses the pipeline.
     target_mhz : float, optional
         Choose the pipeline by timing closure instead (:mod:`pwas_hdl.flow.timing_closure`): the
         shallowest candidate whose fmax, measured by place and route on ``fpga_target``, reaches
@@ -331,6 +338,16 @@ def build_design(
     top = name or {"core": "pwas_core", "sensor": "pwas_sensor", "recurrent": "pwas_recurrent_sensor"}[design]
     for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
         check_signal_names(names, f"{kind} signal")
+    if goal is not None:
+        from pwas_hdl.hdl.params import GOALS
+
+        if goal not in GOALS:
+            raise ValueError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
+        given = [k for k, v in (("pipeline (--pipeline)", pipeline), ("target_mhz (--clock-mhz)", target_mhz)) if v is not None]
+        if given:
+            raise ValueError(f"give one of goal (--goal), pipeline (--pipeline) or target_mhz (--clock-mhz), not goal with {given[0]}: "
+                             "each chooses the pipeline")
+        pipeline = GOALS[goal]
     additive = _is_additive(sensor)
     if additive and target_mhz is not None:
         raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")

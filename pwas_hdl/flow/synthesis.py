@@ -117,6 +117,9 @@ _MAIN_RESOURCES = {
 
 _LOG_TAIL_LINES = 25
 
+# The timing harness (every port registered) written beside the synthesis files.
+_HARNESS_FILE = "timing_harness.v"
+
 # Generic target: LUT size of the estimate; memories of at most this many words become logic.
 _GENERIC_LUT_SIZE = 4
 _GENERIC_MAX_LOGIC_ROM = 64
@@ -138,6 +141,8 @@ def synthesize(
     seed: int = 1,
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
+    pack_registers: bool = True,
+    harness: bool | None = None,
 ) -> dict[str, Any]:
     """Synthesise (and for FPGA targets place and route) the design generated in ``outdir``.
 
@@ -159,6 +164,17 @@ def synthesize(
         Where the scripts, logs and results go (default ``outdir/synth/<target>``).
     progress
         Called with one line of text before each tool runs.
+    pack_registers
+        ECP5: move the flip-flops around the multipliers and block RAMs into their internal
+        registers before place and route (:func:`pwas_hdl.flow.hard_registers.pack_ecp5_registers`;
+        Yosys does not); ``hard_registers`` in the result counts what was packed.
+    harness
+        Place and route the design inside the timing harness of
+        :func:`pwas_hdl.flow.timing_closure.harness_verilog` (every port but the clock registered,
+        so that fmax covers the input and output paths, as ``generate --clock-mhz`` and
+        ``benchmarks/hw_tables.py`` measure it). Default: on for ``ice40`` / ``ecp5``; the
+        ``generic`` target has no fmax and takes no harness. ``ffs`` excludes the harness
+        flip-flops (``harness.ffs``); ``fmax_basis`` says which paths fmax covers.
 
     Returns
     -------
@@ -194,6 +210,10 @@ def synthesize(
         if isinstance(freq_mhz, bool) or not isinstance(freq_mhz, (int, float)) or not math.isfinite(freq_mhz) or freq_mhz <= 0:
             raise ValueError(f"freq_mhz must be a positive number of MHz, got {freq_mhz!r}")
     dev, pkg, part, family, has_dsp = _resolve_device(target, device, package, freq_mhz)
+    if harness is None:
+        harness = target != "generic"
+    if harness and target == "generic":
+        raise ValueError("the generic target has no place and route, so no timing harness; use --target ice40/ecp5")
 
     outdir = Path(outdir)
     manifest = load_manifest(outdir)
@@ -214,7 +234,16 @@ def synthesize(
 
     # ---- Yosys
     reads = "\n".join(f"read_verilog -sv {_yosys_path(_rel(v, work))}" for v in verilog)
-    script = _fill_template(target, top=top, read=reads, device=family or "", dsp="-dsp" if has_dsp else "",
+    synth_top, harness_info = top, None
+    (work / _HARNESS_FILE).unlink(missing_ok=True)
+    if harness:
+        from pwas_hdl.flow.timing_closure import harness_verilog
+
+        synth_top, htext, nff = harness_verilog(manifest)
+        atomic_write_text(work / _HARNESS_FILE, htext)
+        reads += f"\nread_verilog -sv {_HARNESS_FILE}"
+        harness_info = {"top": synth_top, "file": _HARNESS_FILE, "ffs": nff}
+    script = _fill_template(target, top=synth_top, read=reads, device=family or "", dsp="-dsp" if has_dsp else "",
                             lut_size=str(_GENERIC_LUT_SIZE), max_logic_rom=str(_GENERIC_MAX_LOGIC_ROM))
     atomic_write_text(work / "synth.ys", script)
     if progress:
@@ -226,8 +255,8 @@ def synthesize(
     if rc != 0 or not (work / "stat.json").exists():
         raise ToolFailed(f"yosys failed (exit status {rc}) on {top}; fix the Verilog (or regenerate the design) and run again",
                          work / "yosys.log", _log_tail(work / "yosys.log"))
-    stat = _read_stat(work / "stat.json", top)
-    stat_rtl = _read_stat(work / "stat_rtl.json", top)
+    stat = _read_stat(work / "stat.json", synth_top)
+    stat_rtl = _read_stat(work / "stat_rtl.json", synth_top)
     cells = dict(sorted(stat["cells"].items()))
 
     result: dict[str, Any] = {
@@ -261,6 +290,21 @@ def synthesize(
     }
     if target == "generic":
         result["dsp"] = result["multipliers_rtl"]
+    result["harness"] = harness_info
+    result["fmax_basis"] = None if target == "generic" else (
+        "harness: every port registered, fmax covers the input and output paths" if harness
+        else "bare design: register-to-register paths only (input and output paths unconstrained)")
+    result["critical_path"] = None
+    if harness_info:
+        result["ffs"] -= harness_info["ffs"]  # the design's own flip-flops
+        result["files"]["harness"] = _HARNESS_FILE
+    result["hard_registers"] = None
+    if target == "ecp5" and pack_registers:
+        from pwas_hdl.flow.hard_registers import pack_ecp5_registers
+
+        hr = pack_ecp5_registers(work / "netlist.json", synth_top)
+        result["hard_registers"] = hr
+        result["ffs"] -= hr["ffs_absorbed"]  # the flip-flops left in the fabric
 
     # ---- nextpnr
     if target != "generic":
@@ -282,6 +326,9 @@ def synthesize(
         lc = "ICESTORM_LC" if target == "ice40" else "TRELLIS_COMB"
         result["logic_cells"] = util.get(lc, {}).get("used")
         clk, fmax = _pick_fmax(report.get("fmax", {}), clock_port)
+        from pwas_hdl.flow.timing_closure import _critical_path
+
+        result["critical_path"] = _critical_path(report)
         result["clock"] = clk
         result["fmax_mhz"] = round(fmax, 3) if fmax is not None else None
         if fmax is not None and freq_mhz is not None:
@@ -354,6 +401,17 @@ def synth_summary_text(result: dict[str, Any]) -> str:
             else:
                 goal = "no target given"
             lines.append(f"  fmax {fm:.1f} MHz on {r.get('clock')} ({goal})")
+            if r.get("fmax_basis"):
+                lines.append(f"  fmax basis: {r['fmax_basis']}")
+            cp = r.get("critical_path")
+            if cp:
+                lines.append(f"  critical path: {cp.get('from')} -> {cp.get('to')} ({cp.get('delay_ns')} ns, "
+                             f"routing {cp.get('routing_ns')} ns)")
+        hr = r.get("hard_registers")
+        if hr:
+            lines.append(f"  hard-block registers: DP16KD output {hr['bram_output_registers']}/{hr['dp16kd']}, "
+                         f"MULT18X18D input {hr['mult_input_registers']}/{hr['mult18x18d']}, "
+                         f"output {hr['mult_output_registers']}/{hr['mult18x18d']} ({hr['ffs_absorbed']} FF absorbed)")
     lat, ii = r.get("latency_cycles"), r.get("ii")
     timing = f"  latency {n(lat)} cycles"
     if r.get("latency_ns") is not None:

@@ -167,7 +167,7 @@ def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[
     return name, text, nff
 
 
-_STAGE_RE = re.compile(r"^(s_(?:split|rank|addr|memout|mem|prod|tree\d+))_")
+_STAGE_RE = re.compile(r"^(s_(?:split|rank|addr|memout|mulin|mem|prod|tree\d+))_")
 
 
 def _stage_of_cell(cell: str) -> str:
@@ -225,9 +225,10 @@ def measure_design(
 ) -> dict[str, Any]:
     """Place and route a built design (:class:`~pwas_hdl.design.generate.GeneratedDesign`) on ``fpga``.
 
-    The design's files (and, with ``harness``, the timing harness as top) are written to
-    ``workdir``; returns the :func:`~pwas_hdl.flow.synthesis.synthesize` result with ``harness_ffs``,
-    ``ffs_core`` and ``critical_path`` added.
+    The design's files are written to ``workdir`` and placed and routed by
+    :func:`~pwas_hdl.flow.synthesis.synthesize` (with ``harness``: inside the timing harness, the
+    same one ``pwas-hdl synth`` uses by default); returns its result with ``harness_ffs`` and
+    ``ffs_core`` (the design's flip-flops) added and ``ffs`` counting the harness's too.
     """
     from pwas_hdl.flow.synthesis import synthesize
 
@@ -238,19 +239,14 @@ def measure_design(
     for fname, text in gd.files.items():
         if fname.endswith((".v", ".hex", ".json")):
             (work / fname).write_text(text, encoding="utf-8")
-    man = json.loads(json.dumps(gd.manifest))
-    nff = 0
-    if harness:
-        hname, htext, nff = harness_verilog(man)
-        (work / f"{hname}.v").write_text(htext, encoding="utf-8")
-        man["files"]["verilog"] = [man["files"]["verilog"], f"{hname}.v"]
-        man["top"] = hname
-    (work / "manifest.json").write_text(json.dumps(man, indent=1) + "\n", encoding="utf-8")
-    res = synthesize(work, fpga, device=device, freq_mhz=freq_mhz, seed=seed, workdir=work / "pnr", progress=progress)
+    (work / "manifest.json").write_text(json.dumps(gd.manifest, indent=1) + "\n", encoding="utf-8")
+    res = synthesize(work, fpga, device=device, freq_mhz=freq_mhz, seed=seed, workdir=work / "pnr", progress=progress,
+                     harness=harness)
+    nff = (res.get("harness") or {}).get("ffs", 0)
     res["harness_ffs"] = nff
-    res["ffs_core"] = res["ffs"] - nff if isinstance(res.get("ffs"), int) else None
-    rep = work / "pnr" / "report.json"
-    res["critical_path"] = _critical_path(json.loads(rep.read_text(encoding="utf-8"))) if rep.is_file() else None
+    res["ffs_core"] = res["ffs"]
+    if isinstance(res.get("ffs"), int):
+        res["ffs"] = res["ffs"] + nff
     return res
 
 

@@ -46,7 +46,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, mux_const, rom, sink_unused, sum_wrap
+from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
 from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
 
@@ -340,17 +340,28 @@ class PWASCore(wiring.Component):
                 return True
             return lt[j][k - 1]
 
+        # vertex k's address offset from the base is a function of the n step bits of vertex k
+        # alone (sum_j step_kj * S_j, + the wrap bit on banked memories): one case table of at most
+        # 2**n words and one adder per vertex instead of an adder tree of n + 1 terms
         addr = []
         if aw:
+            full = 1 << aw
             for k in range(nb):
                 if self.memory_kind == "banked":
-                    terms = [base] + [mux_const(step(k, j), rst[j], aw) for j in range(n - 1)]
+                    pairs = [(step(k, j), rst[j]) for j in range(n - 1)]
                     if k > 0 and not isinstance(wrap, int):
                         s = step(k, n - 1)
-                        terms.append(mux_const(wrap if s is True else (wrap & s), 1, aw))
+                        pairs.append((wrap if s is True else (wrap & s), 1))
                 else:
-                    terms = [base] + [mux_const(step(k, j), st[j], aw) for j in range(n)]
-                addr.append(sum_wrap(m, terms, aw, f"vaddr{k}"))
+                    pairs = [(step(k, j), st[j]) for j in range(n)]
+                const = sum(w for b, w in pairs if b is True)
+                var = [(b, w) for b, w in pairs if not isinstance(b, bool)]
+                if var:
+                    table = [(const + sum(w for i, (_, w) in enumerate(var) if v >> i & 1)) % full for v in range(1 << len(var))]
+                    off = rom(m, Cat(*[b for b, _ in var]), table, aw, f"voff{k}")
+                else:
+                    off = const % full
+                addr.append(sum_wrap(m, [base, off], aw, f"vaddr{k}"))
 
         # d_(k): the fraction of rank k-1 (one-hot selection from the thermometer codes)
         def sel(k, j):
@@ -431,6 +442,7 @@ class PWASCore(wiring.Component):
         bw, accw = p.weight_width, p.acc_width
 
         valid, r = pipe.stage("s_memout", pl.mem_out, valid, vals)
+        valid, r = pipe.stage("s_mulin", pl.mul_in, valid, r)
         vdata, mus, oor = r["data"], r["mu"], r["oor"]
 
         # ---------------------------------------------------------- E: multiply (in bank order)

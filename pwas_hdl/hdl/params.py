@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from pwas_hdl.fit.geometry import Grid
     from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout
 
-__all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS"]
+__all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS", "GOALS"]
 
 
 def _bits_for(v: int) -> int:
@@ -197,11 +197,17 @@ class Pipeline:
     ``rank``     register after the rank extractor (and the address/bank precomputation)
     ``addr``     register on the vertex addresses and ``mu`` (before the bank rotation and the memories)
     memory *     vertex addresses + ``mu`` feed the synchronous read ports (one register)
-    ``mem_out``  extra register on the memory read data
-    ``product``  register after the ``mu_k * w`` multipliers
+    ``mem_out``  extra register on the memory read data (on ECP5 the DP16KD output register)
+    ``mul_in``   register on the multiplier operands (``mu`` and the read data; on ECP5 the
+                 MULT18X18D input registers)
+    ``product``  register after the ``mu_k * w`` multipliers (on ECP5 the MULT18X18D output register)
     ``tree``     a register after every ``tree_levels`` adder-tree levels (0: none)
     output *     rounding / saturation, then the output register (the stream's payload)
     ============ ========================================================================
+
+    On ECP5, ``pwas-hdl synth`` moves the ``mem_out``, ``mul_in`` and ``product`` registers into the
+    block RAMs and multipliers (:mod:`pwas_hdl.flow.hard_registers`); the generated Verilog is the
+    same for every FPGA.
     """
 
     split: bool = True
@@ -210,6 +216,7 @@ class Pipeline:
     product: bool = True
     tree_levels: int = 2
     addr: bool = False
+    mul_in: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -233,6 +240,7 @@ class Pipeline:
             + int(self.addr)
             + 1
             + int(self.mem_out)
+            + int(self.mul_in)
             + int(self.product)
             + self.tree_registers(n)
             + 1
@@ -245,7 +253,7 @@ class Pipeline:
         if isinstance(value, Pipeline):
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
-            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr"}
+            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -267,6 +275,7 @@ class Pipeline:
             "product": self.product,
             "tree_levels": self.tree_levels,
             "addr": self.addr,
+            "mul_in": self.mul_in,
         }
 
 

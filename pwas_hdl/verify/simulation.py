@@ -326,12 +326,12 @@ def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, 
 
 _PROBE_RE = re.compile(
     r"^\s*reg\s+(?:signed\s+)?(?:\[(\d+):(\d+)\]\s+)?"
-    r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload|m_axis_tdata)\s*;",
+    r"(s_(?:split|rank|addr|memout|mulin|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload|m_axis_tdata)\s*;",
     re.M,
 )
 #: The output payload register under the two port namings (``generate --ports amaranth|axis``).
 _OUT_REGS = ("out__payload", "m_axis_tdata")
-_STAGE_ORDER = ("s_split", "s_rank", "s_addr", "s_mem", "s_memout", "s_prod")
+_STAGE_ORDER = ("s_split", "s_rank", "s_addr", "s_mem", "s_memout", "s_mulin", "s_prod")
 
 
 def stage_probes(verilog: str) -> dict[str, int]:
@@ -379,7 +379,7 @@ def _stage_of(name: str) -> str:
         return "vdata"
     if name in _OUT_REGS:
         return "out"
-    mo = re.match(r"(s_(?:split|rank|addr|memout|mem|prod|tree\d+))_", name)
+    mo = re.match(r"(s_(?:split|rank|addr|memout|mulin|mem|prod|tree\d+))_", name)
     return mo.group(1) if mo else name
 
 
@@ -427,7 +427,7 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     mo = re.match(r"vdata(\d+)$", name)
     if mo:
         return pack(tr["w"][int(mo.group(1))], bw)
-    mo = re.match(r"s_(split|rank|addr|memout|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
+    mo = re.match(r"s_(split|rank|addr|memout|mulin|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
     if not mo:
         return None
     stage, lvl, what, idx = mo.group(1), mo.group(2), mo.group(3), mo.group(4)
