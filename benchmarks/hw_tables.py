@@ -16,22 +16,28 @@ Designs (12-bit inputs, weights in the fewest bits that hold them, as ``pwas-hdl
   two PID loops, references as inputs, azimuth measured, elevation estimated), gamma = 1.1,
   first-order Tikhonov as in the paper, sigma by cross-validation.
 
-Every design is generated as the core (``design="core"``, banked memory) in two builds:
+Every design is generated as the core (``design="core"``, banked memory) in the builds of
+``generate --goal`` (:data:`pwas_hdl.hdl.params.GOALS`):
 
-* ``short``: the ``min`` pipeline (2 cycles: memory read and output registers);
-* ``fast``: the deepest timing-closure candidate (:func:`pwas_hdl.flow.timing_closure.pipeline_candidates`);
+* ``latency``: ``--goal latency`` (fewest nanoseconds);
+* ``default``: no option (``--goal balanced``, the ``balanced`` preset);
+* ``throughput``: ``--goal throughput`` (highest clock);
 
-placed and routed with nextpnr (seed 1, ``--freq`` 150 MHz on ECP5 LFE5U-45F, 100 MHz on iCE40 HX8K)
-inside the timing harness of :mod:`pwas_hdl.flow.timing_closure` (every port registered, so the input and
-output paths count in fmax). Reported: cycles, fmax, latency in ns (cycles / fmax), LUT4 / FF (core,
+ECP5 gets all three, iCE40 the throughput build. Each is placed and routed with nextpnr
+(``--freq`` 150 MHz on ECP5 LFE5U-45F speed 6, 100 MHz on iCE40 HX8K) by
+:func:`pwas_hdl.flow.synthesis.synthesize` inside its timing harness (every port registered, so the
+input and output paths count in fmax; the harness ``pwas-hdl synth`` and ``generate --clock-mhz``
+use), with the ECP5 multiplier / block-RAM registers packed (:mod:`pwas_hdl.flow.hard_registers`).
+The N = 4096 Lorenz core is placed with nextpnr seeds 1, 2, 3 and its figures are the seed
+averages (fmax is the mean; latency = cycles / mean fmax); the other designs use seed 1. Reported: cycles, fmax, latency in ns (cycles / fmax), LUT4 / FF (core,
 harness excluded) / DSP / BRAM, beside the paper's L (ns) and SO (Spartan-3 xc3s200 slice
 occupation). On ECP5 the ``short`` build is also made with ``n + 1`` replicated copies of the
 memory, for the banked-versus-replicated words and BRAMs. For the N = 4096 Lorenz core the script
-also runs a ``target_mhz`` timing closure (ECP5, 125 MHz) and simulates the short and fast builds
+also runs a ``target_mhz`` timing closure (ECP5, 125 MHz) and simulates the three builds
 (Amaranth, no stalls) to measure the initiation interval and check them bit for bit against the
-bit-true model.
+bit-true model; the must-show section checks the figures issue 14 asks for.
 
-``--quick``: the N = 4096 Lorenz core, ECP5, ``short`` build only (a smoke test; writes
+``--quick``: the N = 4096 Lorenz core, ECP5, ``default`` build, seed 1 (a smoke test; writes
 ``hw_tables_quick.{json,md}``). Every place-and-route run is an independent task of
 :class:`pwas_hdl.flow.executor.Executor`: serially by default, on a local Dask cluster with
 ``--workers N``, or on an existing cluster with ``--scheduler tcp://HOST:PORT`` (identical numbers;
@@ -61,6 +67,11 @@ from pwas_hdl.io.atomic import atomic_write_text  # noqa: E402
 
 FORMAT = "pwas-hdl-hw-tables"
 SEED = 1
+#: nextpnr seeds of the must-show design (its figures are the averages); other designs: SEED
+SEEDS = (1, 2, 3)
+#: build name -> generate --goal (None: the default)
+GOAL_OF_BUILD = {"latency": "latency", "default": None, "throughput": "throughput"}
+BUILDS = {"ecp5": ("latency", "default", "throughput"), "ice40": ("throughput",)}
 FREQ = {"ecp5": 150.0, "ice40": 100.0}
 DEMO_TARGET = {"ecp5": 125.0}
 XC3S200_SLICES = 1920  # Spartan-3 XC3S200: 1920 slices (2 LUT4 + 2 FF each), 12 BRAM18, 12 MULT18X18
@@ -135,17 +146,19 @@ def _stat_needs(work: Path, fpga: str) -> dict[str, Any] | None:
     return {k: r[k] for k in ("luts", "ffs", "dsp", "bram", "bram_bits")}
 
 
-def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, memory_init: str = "inline") -> dict[str, Any]:
+def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, memory_init: str = "inline",
+            seed: int = SEED, goal: str | None = None) -> dict[str, Any]:
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.flow.timing_closure import measure_design
 
-    gd = build_design(model_path, pipeline=pipeline, memory=memory, memory_init=memory_init)
+    gd = build_design(model_path, pipeline=pipeline, memory=memory, memory_init=memory_init, goal=goal)
     man = gd.manifest
-    base = {"fpga": fpga, "memory": memory, "memory_init": memory_init, "pipeline": man["pipeline"], "latency_cycles": man["latency_cycles"],
+    base = {"fpga": fpga, "memory": memory, "memory_init": memory_init, "goal": goal, "seed": seed,
+            "pipeline": man["pipeline"], "latency_cycles": man["latency_cycles"],
             "ii": man["ii"], "freq_constraint_mhz": FREQ[fpga], "memory_plan": {k: man["memory"][k] for k in ("memories", "depth", "word_bits", "words", "bits")}}
     t0 = time.monotonic()
     try:
-        r = measure_design(gd, fpga, freq_mhz=FREQ[fpga], seed=SEED, workdir=workdir)
+        r = measure_design(gd, fpga, freq_mhz=FREQ[fpga], seed=seed, workdir=workdir)
     except ValueError as exc:
         msg = str(exc).split(" (see ")[0]
         base.update(fits=False, error=msg, yosys_mapped=_stat_needs(workdir, fpga), runtime_s=round(time.monotonic() - t0, 1))
@@ -154,7 +167,7 @@ def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, m
     base.update(
         fits=True, part=r["part"], fmax_mhz=r["fmax_mhz"], latency_ns=r["latency_ns"], luts=r["luts"], carry=r["carry"],
         ffs_core=r["ffs_core"], ffs_with_harness=r["ffs"], dsp=r["dsp"], bram=r["bram"], bram_bits=r["bram_bits"],
-        logic_cells=r["logic_cells"], critical_path=r["critical_path"],
+        logic_cells=r["logic_cells"], critical_path=r["critical_path"], hard_registers=r.get("hard_registers"),
         utilization_pct={k: v["percent"] for k, v in util.items() if v["used"]},
         tools=r["tools"], runtime_s=round(time.monotonic() - t0, 1),
     )
@@ -163,15 +176,39 @@ def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, m
 
 def _measure_task(job: dict[str, Any]) -> dict[str, Any]:
     """One place-and-route measurement as a pure task for :class:`~pwas_hdl.flow.executor.Executor`."""
-    return measure(Path(job["model"]), job["fpga"], job["pipeline"], job["memory"], Path(job["workdir"]), job["memory_init"])
+    return measure(Path(job["model"]), job["fpga"], job["pipeline"], job["memory"], Path(job["workdir"]), job["memory_init"],
+                   job.get("seed", SEED), job.get("goal"))
 
 
-def simulate_ii(model_path: Path, pipeline, samples: int = 300) -> dict[str, Any]:
-    """Amaranth simulation without stalls: measured II and latency, bit-exact check."""
+def aggregate(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """One build's figures over its nextpnr seeds: mean fmax, latency = cycles / mean fmax.
+
+    Resources come from Yosys (the same for every seed); ``seeds`` / ``fmax_seeds`` /
+    ``critical_paths`` keep the per-seed numbers; ``critical_path`` is the slowest seed's.
+    """
+    runs = sorted(runs, key=lambda r: r["seed"])
+    if len(runs) == 1 or not all(r.get("fits") for r in runs):
+        out = dict(runs[0])
+        out["seeds"] = [r["seed"] for r in runs]
+        return out
+    out = dict(runs[0])
+    fm = [r["fmax_mhz"] for r in runs]
+    mean = sum(fm) / len(fm)
+    out.update(seeds=[r["seed"] for r in runs], fmax_seeds=fm, fmax_mhz=round(mean, 3),
+               fmax_min_mhz=min(fm), fmax_max_mhz=max(fm),
+               latency_ns=round(runs[0]["latency_cycles"] * 1000.0 / mean, 3),
+               critical_paths=[r["critical_path"] for r in runs],
+               critical_path=min(runs, key=lambda r: r["fmax_mhz"])["critical_path"],
+               runtime_s=round(sum(r.get("runtime_s") or 0 for r in runs), 1))
+    return out
+
+
+def simulate_ii(model_path: Path, goal: str | None, samples: int = 300) -> dict[str, Any]:
+    """Amaranth simulation without stalls of the ``generate --goal`` build: measured II and latency, bit-exact check."""
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
 
-    gd = build_design(model_path, pipeline=pipeline)
+    gd = build_design(model_path, goal=goal)
     fxm, dut = gd.model, gd.component
     p = dut.params
     rng = np.random.default_rng(0)
@@ -191,6 +228,33 @@ def simulate_ii(model_path: Path, pipeline, samples: int = 300) -> dict[str, Any
 # ---------------------------------------------------------------------------------------------
 # output
 # ---------------------------------------------------------------------------------------------
+#: issue 14's figures: (check, build, FPGA, key, comparison, bound)
+TARGETS = [
+    ("latency-first latency (ns)", "latency", "ecp5", "latency_ns", "<=", 30.0),
+    ("throughput-first fmax (MHz)", "throughput", "ecp5", "fmax_mhz", ">=", 200.0),
+    ("default latency (ns)", "default", "ecp5", "latency_ns", "<=", 65.0),
+    ("default fmax (MHz)", "default", "ecp5", "fmax_mhz", ">=", 100.0),
+    ("iCE40 HX8K throughput-first fmax (MHz)", "throughput", "ice40", "fmax_mhz", ">=", 100.0),
+    ("default LUT4 on ECP5", "default", "ecp5", "luts", "<=", 800),
+]
+
+
+def must_show(d: dict[str, Any], sims: dict[str, Any]) -> dict[str, Any]:
+    """Issue 14's figures for the must-show design, each with what was measured and whether it is met."""
+    checks = []
+    for what, build, fpga, key, op, bound in TARGETS:
+        b = d.get("builds", {}).get(fpga, {}).get(build)
+        if not b or not b.get("fits") or b.get(key) is None:
+            continue
+        v = b[key]
+        met = v <= bound if op == "<=" else v >= bound
+        checks.append({"what": what, "build": build, "fpga": fpga, "measured": v, "bound": f"{op} {bound:g}", "met": bool(met),
+                       "cycles": b["latency_cycles"], "seeds": b.get("seeds"), "critical_path": b.get("critical_path")})
+    return {"design": d["key"], "checks": checks,
+            "ii_simulated": {k: v["ii_measured"] for k, v in sims.items()},
+            "bit_exact": {k: v["bit_exact"] for k, v in sims.items()}, "sim_samples": next(iter(sims.values()))["samples"] if sims else None}
+
+
 def _so_estimate(b: dict[str, Any]) -> float | None:
     if not b.get("fits") or b.get("luts") is None:
         return None
@@ -209,24 +273,27 @@ def markdown(res: dict[str, Any]) -> str:
         f"Generated by `python benchmarks/hw_tables.py{' --quick' if s['quick'] else ''}`; numbers in "
         f"`{'hw_tables_quick' if s['quick'] else 'hw_tables'}.json`. {'**Partial: the run has not finished.**' if not res.get('complete') else ''}",
         "",
-        f"Core designs, 12-bit inputs, banked memory. nextpnr seed {s['seed']}, `--freq` {s['freq_mhz']['ecp5']:g} MHz on ECP5 "
+        f"Core designs, 12-bit inputs, banked memory. `--freq` {s['freq_mhz']['ecp5']:g} MHz on ECP5 "
         f"(LFE5U-45F-6, {s['parts'].get('ecp5', 'CABGA381')}) and {s['freq_mhz']['ice40']:g} MHz on iCE40 (HX8K CT256); every run "
-        "inside a harness that registers all ports, so fmax covers the input and output paths. Latency (ns) = cycles / fmax. "
-        "FF = the core's flip-flops (harness excluded). `short` = `min` pipeline (2 cycles); `fast` = the deepest "
-        "timing-closure candidate.",
+        "inside the timing harness of `pwas-hdl synth` (all ports registered, so fmax covers the input and output paths), "
+        "ECP5 multiplier and block-RAM registers packed into the hard blocks. Builds = `generate --goal latency`, the default "
+        "(`balanced`), `--goal throughput`. nextpnr seeds: "
+        f"{', '.join(str(v) for v in s.get('seeds', [s['seed']]))} for {s.get('seeds_design', '-')} (fmax = the mean, "
+        "min-max in brackets; latency (ns) = cycles / mean fmax), seed 1 elsewhere. FF = the core's flip-flops outside the "
+        "hard blocks (harness excluded). Critical path: start -> end stage (delay) of the slowest seed.",
         "",
         "Paper: Xilinx Spartan-3 xc3s200 (1920 slices, 12 BRAM, 12 multipliers), 12-bit inputs; SO = slice occupation. "
         "*logic use* = nextpnr's share of the device's LUT cells (ECP5 TRELLIS_COMB of 43848, iCE40 logic cells of 7680). "
         "*~SO* (ECP5 rows, which use hard multipliers like the Spartan-3) turns our LUT4/FF count into xc3s200 slices as "
         "max(LUT4, FF)/2 over 1920: a rough equivalence across vendors, not a Spartan-3 result.",
         "",
-        "| design | table | n | N | FPGA | build | cycles | fmax (MHz) | latency (ns) | LUT4 | FF | DSP | BRAM | logic use | ~SO | paper L (ns) | paper SO |",
-        "|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| design | table | n | N | FPGA | build | cycles | fmax (MHz) | latency (ns) | LUT4 | FF | DSP | BRAM | logic use | ~SO | critical path | paper L (ns) | paper SO |",
+        "|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|",
     ]
     for d in res["designs"]:
         first = True
         for fpga in ("ecp5", "ice40"):
-            for build in ("short", "fast"):
+            for build in GOAL_OF_BUILD:
                 b = d.get("builds", {}).get(fpga, {}).get(build)
                 if b is None:
                     continue
@@ -236,8 +303,13 @@ def markdown(res: dict[str, Any]) -> str:
                 if b.get("fits"):
                     so = _so_estimate(b) if fpga == "ecp5" else None
                     use = (b.get("utilization_pct") or {}).get("TRELLIS_COMB" if fpga == "ecp5" else "ICESTORM_LC")
-                    row = [fpga, build, str(b["latency_cycles"]), _f(b["fmax_mhz"]), _f(b["latency_ns"]), str(b["luts"]),
-                           str(b["ffs_core"]), str(b["dsp"]), str(b["bram"]), _f(use, "{:.0f} %"), _f(so, "{:.0f} %")]
+                    fm = _f(b["fmax_mhz"])
+                    if b.get("fmax_seeds"):
+                        fm += f" ({b['fmax_min_mhz']:.1f}-{b['fmax_max_mhz']:.1f})"
+                    cp = b.get("critical_path") or {}
+                    cpt = f"{cp.get('from')} -> {cp.get('to')} ({cp.get('delay_ns')} ns)" if cp else "-"
+                    row = [fpga, build, str(b["latency_cycles"]), fm, _f(b["latency_ns"]), str(b["luts"]),
+                           str(b["ffs_core"]), str(b["dsp"]), str(b["bram"]), _f(use, "{:.0f} %"), _f(so, "{:.0f} %"), cpt]
                 else:
                     y = b.get("yosys_mapped") or {}
                     why = b.get("error", "does not fit")
@@ -245,18 +317,18 @@ def markdown(res: dict[str, Any]) -> str:
                     if "logic cells" in why or "LUT4" in why:
                         short = "does not fit" + (f" (needs {y.get('luts')} LUT4)" if y.get("luts") else "") + (" + BRAM" if "RAM" in why else "")
                     row = [fpga, build, str(b["latency_cycles"]), short, "-", _f(y.get("luts"), "({})"), "-", _f(y.get("dsp"), "({})"),
-                           _f(y.get("bram"), "({})"), "-", "-"]
+                           _f(y.get("bram"), "({})"), "-", "-", "-"]
                 lines.append("| " + " | ".join(head + row + paper) + " |")
     lines += [
         "",
-        "## Memory: banked (n + 1 banks, about N words) against n + 1 copies of the N words (ECP5, `short` build)",
+        "## Memory: banked (n + 1 banks, about N words, `default` build) against n + 1 copies of the N words (`min` pipeline), ECP5",
         "",
         "| design | n | N | weight bits | banked words | banked BRAM (bits) | replicated words | replicated BRAM (bits) | (n+1) N w bits |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for d in res["designs"]:
         e = d.get("builds", {}).get("ecp5", {})
-        b, r = e.get("short"), e.get("replicated")
+        b, r = e.get("default"), e.get("replicated")
         if b is None and r is None:
             continue
         mem = d.get("memory", {})
@@ -298,13 +370,16 @@ def markdown(res: dict[str, Any]) -> str:
         lines.append(f"Measured in the order {tc['measurements']} (cycles); {tc.get('runtime_s')} s.")
     ms = res.get("must_show")
     if ms:
-        lines += ["", "## Must show (issue 5): the N = 4096 Lorenz design", ""]
-        lines.append(f"- II = {ms.get('ii_manifest')} (manifest); measured in simulation: {ms.get('ii_simulated')} "
-                     f"({ms.get('sim_samples')} samples, no stalls, bit-exact against the bit-true model: {ms.get('bit_exact')})")
-        lines.append(f"- latency on ECP5 (nextpnr, harness): {ms.get('cycles')} cycles / {_f(ms.get('fmax_mhz'))} MHz = "
-                     f"**{_f(ms.get('latency_ns'))} ns** against the paper's 65 ns: {'below' if ms.get('latency_below_65') else 'NOT below'}")
-        lines.append(f"- block RAM: {ms.get('bram')} DP16KD = {ms.get('bram_bits')} bits (RTL memory {ms.get('memory_bits')} bits) against "
-                     f"(n+1) N w = {ms.get('replicated_bits')} bits: {'fewer' if ms.get('fewer_bram_bits') else 'NOT fewer'}")
+        lines += ["", f"## Must show (issue 14): the N = 4096 Lorenz design ({ms['design']})", "",
+                  "| figure | build | FPGA | cycles | measured | target | met | critical path (slowest seed) |",
+                  "|---|---|---|---:|---:|---|---|---|"]
+        for c in ms.get("checks", []):
+            cp = c.get("critical_path") or {}
+            cpt = f"{cp.get('from')} -> {cp.get('to')} ({cp.get('delay_ns')} ns, routing {cp.get('routing_ns')} ns)" if cp else "-"
+            lines.append(f"| {c['what']} | {c['build']} | {c['fpga']} | {c['cycles']} | {c['measured']} | {c['bound']} | "
+                         f"{'yes' if c['met'] else '**no**'} | {cpt} |")
+        lines += ["", f"Amaranth simulation without stalls ({ms.get('sim_samples')} samples): II "
+                      f"{ms.get('ii_simulated')}, bit-exact against the bit-true model: {ms.get('bit_exact')}."]
     lines += ["", "## Notes", ""]
     lines += [f"- {t}" for t in res.get("notes", [])]
     env = res.get("environment", {})
@@ -332,7 +407,8 @@ def write(res: dict[str, Any], outdir: Path, stem: str) -> None:
 # ---------------------------------------------------------------------------------------------
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="N = 4096 Lorenz, ECP5, short build only")
+    ap.add_argument("--quick", action="store_true", help="N = 4096 Lorenz, ECP5, default build, seed 1 only")
+    ap.add_argument("--no-replicated", action="store_true", help="skip the replicated-memory builds (memory table)")
     ap.add_argument("--fpga", default="ecp5,ice40", help="comma-separated: ecp5, ice40")
     ap.add_argument("--designs", default=None, help="comma-separated design keys (default: all)")
     ap.add_argument("--outdir", type=Path, default=HERE / "results")
@@ -362,7 +438,8 @@ def _run(args: argparse.Namespace, ex) -> int:
     def log(msg: str) -> None:
         print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
-    settings = {"quick": args.quick, "seed": SEED, "freq_mhz": FREQ, "fpgas": fpgas, "input_bits": 12,
+    settings = {"quick": args.quick, "seed": SEED, "seeds": list(SEEDS) if not args.quick else [SEED], "seeds_design": MUST_SHOW,
+                "freq_mhz": FREQ, "fpgas": fpgas, "input_bits": 12,
                 "parts": {"ecp5": "CABGA381", "ice40": "CT256"}}
     old: dict[str, Any] = {}
     if args.resume and (args.outdir / f"{stem}.json").is_file():
@@ -383,8 +460,9 @@ def _run(args: argparse.Namespace, ex) -> int:
             "A row 'does not fit' is a nextpnr refusal; the bracketed numbers are what Yosys mapped.",
             "BRAM 0: Yosys put the small weight banks in LUTs (ROM logic), which also removes the block RAM's long "
             "clock-to-output from the critical path (hence the higher fmax of the small designs).",
-            "`fast` is the deepest candidate, for the highest fmax; the timing-closure demo shows that on ECP5 the "
-            "Lorenz core reaches about the same fmax with fewer cycles.",
+            "The pipelines of the three builds are the presets of pwas_hdl.hdl.params.GOALS (the manifest's pipeline); "
+            "the ECP5 multiplier and block-RAM registers are packed by pwas_hdl.flow.hard_registers (hard_registers in "
+            "the JSON counts them per build).",
             "Weights inline in the Verilog, except the replicated-memory builds, which load them with $readmemh "
             "(Yosys parses (n+1) N inline initialisers very slowly); the memory contents are the same.",
             "Fixed-point formats are generate's defaults (the noise-budget rule of pwas_hdl.fixedpoint.bittrue); the weight width "
@@ -408,36 +486,39 @@ def _run(args: argparse.Namespace, ex) -> int:
         wb = gd.model.weight_format.bits
         d["memory"] = {"weight_bits": wb, "banked_words": gd.manifest["memory"]["words"], "banked_bits": gd.manifest["memory"]["bits"],
                        "replicated_words": (n + 1) * d["N"], "replicated_bits": (n + 1) * d["N"] * wb}
-        builds = {"short": "min", "fast": pipeline_candidates(n)[-1]}
-        builds_of[d["key"]] = builds
+        builds_of[d["key"]] = dict(GOAL_OF_BUILD)
         d["builds"] = {}
+        seeds = SEEDS if (d["key"] == MUST_SHOW and not args.quick) else (SEED,)
         for fpga in fpgas:
             d["builds"][fpga] = {}
-            todo = [("short", builds["short"], "banked", "inline")]
-            if not args.quick:
-                todo.append(("fast", builds["fast"], "banked", "inline"))
-                if fpga == "ecp5":
-                    # $readmemh: Yosys reads (n+1) N inline initialisers very slowly (N = 32768: > 10 min)
-                    todo.append(("replicated", builds["short"], "replicated", "readmemh"))
-            for name, pipe, mem, init in todo:
+            todo = [(b, None, GOAL_OF_BUILD[b], "banked", "inline") for b in (("default",) if args.quick else BUILDS[fpga])]
+            if not args.quick and fpga == "ecp5" and not args.no_replicated:
+                # $readmemh: Yosys reads (n+1) N inline initialisers very slowly (N = 32768: > 10 min)
+                todo.append(("replicated", "min", None, "replicated", "readmemh"))
+            for name, pipe, goal, mem, init in todo:
                 cached = prev.get("builds", {}).get(fpga, {}).get(name)
                 if cached is not None:
                     d["builds"][fpga][name] = cached
                     log(f"{d['key']} {fpga} {name}: reused")
                     continue
-                jobs.append({"key": d["key"], "name": name, "model": str(model_path), "fpga": fpga, "pipeline": pipe,
-                             "memory": mem, "memory_init": init, "workdir": str(work / "pnr" / f"{d['key']}_{fpga}_{name}")})
+                for sd in (seeds if name != "replicated" else (SEED,)):
+                    jobs.append({"key": d["key"], "name": name, "model": str(model_path), "fpga": fpga, "pipeline": pipe,
+                                 "goal": goal, "seed": sd, "memory": mem, "memory_init": init,
+                                 "workdir": str(work / "pnr" / f"{d['key']}_{fpga}_{name}_s{sd}")})
 
     # 2. every place-and-route run is an independent task (serial, or on the Dask workers)
     log(f"{len(jobs)} place-and-route runs on {ex.kind} ({ex.describe()['workers']} worker(s)) ...")
     t_pnr = time.monotonic()
     by_key = {d["key"]: d for d in designs}
-    labels = [f"{j['key']} {j['fpga']} {j['name']} ({j['memory']})" for j in jobs]
+    labels = [f"{j['key']} {j['fpga']} {j['name']} ({j['memory']}, seed {j['seed']})" for j in jobs]
+    runs: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     for j, label, b in zip(jobs, labels, ex.map(_measure_task, jobs, labels=labels)):
-        by_key[j["key"]]["builds"][j["fpga"]][j["name"]] = b
+        runs.setdefault((j["key"], j["fpga"], j["name"]), []).append(b)
         res["environment"]["tools"] = res["environment"]["tools"] or b.get("tools")
         log(f"{label} -> {b['latency_cycles']} cycles, " + (f"{b['fmax_mhz']} MHz, {b['latency_ns']} ns, LUT {b['luts']} FF {b['ffs_core']} "
             f"DSP {b['dsp']} BRAM {b['bram']} ({b['runtime_s']} s)" if b.get("fits") else f"{b.get('error')}"))
+    for (key, fpga, name), rs in runs.items():
+        by_key[key]["builds"][fpga][name] = aggregate(rs)
     res["execution"] = {**ex.describe(), "pnr_runs": len(jobs), "pnr_wall_s": round(time.monotonic() - t_pnr, 1)}
     res["runtime_s"] = round(time.monotonic() - t_start, 1)
     write(res, args.outdir, stem)
@@ -466,30 +547,19 @@ def _run(args: argparse.Namespace, ex) -> int:
                     rec["design"] = d["key"]
                     res["timing_closure"] = rec
             sims = {}
-            for name in ("short", "fast") if not args.quick else ("short",):
+            for name in ("default",) if args.quick else tuple(GOAL_OF_BUILD):
                 log(f"{d['key']}: Amaranth simulation of the {name} build ...")
                 sims[name] = simulate_ii(model_path, builds[name])
             d["simulation"] = sims
-            b = d["builds"].get("ecp5", {}).get("short")
-            if b and b.get("fits"):
-                res["must_show"] = {
-                    "design": d["key"], "ii_manifest": b["ii"], "ii_simulated": sims["short"]["ii_measured"],
-                    "sim_samples": sims["short"]["samples"], "bit_exact": all(s["bit_exact"] for s in sims.values()),
-                    "cycles": b["latency_cycles"], "fmax_mhz": b["fmax_mhz"], "latency_ns": b["latency_ns"],
-                    "latency_below_65": b["latency_ns"] < 65.0, "bram": b["bram"], "bram_bits": b["bram_bits"],
-                    "memory_bits": d["memory"]["banked_bits"], "replicated_bits": d["memory"]["replicated_bits"],
-                    "fewer_bram_bits": b["bram_bits"] < d["memory"]["replicated_bits"],
-                }
+            res["must_show"] = must_show(d, sims)
             res["runtime_s"] = round(time.monotonic() - t_start, 1)
             write(res, args.outdir, stem)
     res["complete"] = True
     res["runtime_s"] = round(time.monotonic() - t_start, 1)
     write(res, args.outdir, stem)
     log(f"wrote {args.outdir / (stem + '.json')} and .md ({res['runtime_s']} s)")
-    ms = res.get("must_show")
-    if ms:
-        log(f"must show: II {ms['ii_manifest']} (simulated {ms['ii_simulated']}), {ms['latency_ns']} ns on ECP5 "
-            f"({'<' if ms['latency_below_65'] else '>='} 65 ns), BRAM bits {ms['bram_bits']} vs (n+1)N w = {ms['replicated_bits']}")
+    for c in (res.get("must_show") or {}).get("checks", []):
+        log(f"must show: {c['what']}: {c['measured']} ({'met' if c['met'] else 'NOT met'})")
     return 0
 
 

@@ -30,7 +30,7 @@ class _Builder:
         q = self.net()
         self.cells[name] = {
             "type": "TRELLIS_FF",
-            "parameters": {"CEMUX": "CE", "CLKMUX": "CLK", "GSR": "DISABLED", "LSRMUX": lsrmux, "REGSET": "RESET",
+            "parameters": {"CEMUX": "CE      ", "CLKMUX": "CLK", "GSR": "DISABLED", "LSRMUX": lsrmux, "REGSET": "RESET",
                            "SRMODE": "LSR_OVER_CE"},
             "port_directions": {"CE": "input", "CLK": "input", "DI": "input", "LSR": "input", "Q": "output"},
             "connections": {"CE": [ce], "CLK": [clk], "DI": [di], "LSR": [lsr], "Q": [q]},

@@ -101,7 +101,8 @@ def test_core_odd_formats(fb, lo, sh, rnd):
         assert np.array_equal(oor, ref_oor)
 
 
-@pytest.mark.parametrize("pipe", ["min", "balanced", "max", Pipeline(split=True, rank=False, mem_out=True, product=False, tree_levels=1)])
+@pytest.mark.parametrize("pipe", ["min", "balanced", "max", Pipeline(split=True, rank=False, mem_out=True, product=False, tree_levels=1),
+                                  Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=True, product=True, tree_levels=0)])
 def test_latency_exact_and_ii_1(pipe):
     """Without stalls one sample enters every clock and leaves exactly `latency` cycles later."""
     model = make_model([3, 2, 4, 1], seed=2, nz=2)
@@ -119,8 +120,9 @@ def test_latency_formula():
     for n in range(1, 9):
         assert Pipeline.cast("min").latency(n) == 2
         levels = int(np.ceil(np.log2(n + 1)))
-        assert Pipeline.cast("balanced").latency(n) == 5 + (levels + 1) // 2
-        assert Pipeline.cast("max").latency(n) == 6 + levels
+        assert Pipeline.cast("balanced").latency(n) == 6 + (levels + 2) // 3
+        assert Pipeline.cast("max").latency(n) == 8 + levels
+        assert Pipeline() == Pipeline.cast("balanced") == Pipeline.cast(None)
 
 
 def test_backpressure_holds_output():

@@ -155,7 +155,12 @@ def _check_files(work: Path, design: Path, result: dict, tmp_path: Path, logs: t
     assert json.loads((work / "synth.json").read_text()) == result
     assert (work / "synth.txt").read_text() == synth_summary_text(result)
     script = (work / "synth.ys").read_text()
-    assert [ln for ln in script.splitlines() if ln.startswith("read_verilog")] == [f"read_verilog -sv {os.path.relpath(design / 'tiny_core.v', work)}"]
+    harness = ["read_verilog -sv timing_harness.v"] if result.get("harness") else []
+    assert [ln for ln in script.splitlines() if ln.startswith("read_verilog")] == [f"read_verilog -sv {os.path.relpath(design / 'tiny_core.v', work)}"] + harness
+    if harness:  # every port but the clock registered: the harness is the synthesis top
+        assert result["harness"] == {"top": "tiny_core_timing_harness", "file": "timing_harness.v", "ffs": 38}
+        assert "module tiny_core_timing_harness" in (work / "timing_harness.v").read_text()
+        assert result["fmax_basis"].startswith("harness: every port registered")
     for name in logs:
         text = (work / name).read_text(errors="replace")
         assert text.strip(), name
@@ -251,6 +256,24 @@ def test_ecp5(design: Path, tmp_path: Path):
     _check_timing(r)
     _check_files(work, design, r, tmp_path, ("yosys.log", "nextpnr.log"))
     assert "LFE5U-45F" in synth_summary_text(r)
+    # p3 <= a2 * w2: the product register goes into the MULT18X18D; its operands stay (w2 is the
+    # block RAM's own read register, not a flip-flop), and no flip-flop follows the read data
+    hr = r["hard_registers"]
+    assert (hr["mult_output_registers"], hr["mult_input_registers"], hr["bram_output_registers"]) == (1, 0, 0)
+    net = json.loads((work / "netlist.json").read_text())["modules"]["tiny_core_timing_harness"]["cells"]
+    mults = [c for c in net.values() if c["type"] == "MULT18X18D"]
+    assert [c["parameters"].get("REG_OUTPUT_CLK") for c in mults] == ["CLK0"]
+    assert r["critical_path"]["delay_ns"] > 0 and "hard-block registers" in synth_summary_text(r)
+
+
+@pytest.mark.synth
+def test_ecp5_bare_design_without_packing(design: Path, tmp_path: Path):
+    r = synthesize(design, "ecp5", harness=False, pack_registers=False, workdir=tmp_path / "bare")
+    assert r["harness"] is None and r["hard_registers"] is None
+    assert r["fmax_basis"].startswith("bare design") and not (tmp_path / "bare" / "timing_harness.v").exists()
+    net = json.loads((tmp_path / "bare" / "netlist.json").read_text())["modules"]["tiny_core"]["cells"]
+    assert all("REG_OUTPUT_CLK" not in c["parameters"] for c in net.values() if c["type"] == "MULT18X18D")
+    _check_timing(r)
 
 
 @pytest.mark.synth
@@ -276,6 +299,8 @@ def test_bad_requests(design: Path):
         synthesize(design, "xilinx")
     with pytest.raises(ValueError, match="generic target has no device"):
         synthesize(design, "generic", device="hx8k")
+    with pytest.raises(ValueError, match="no timing harness"):
+        synthesize(design, "generic", harness=True)
     with pytest.raises(ValueError, match="unknown iCE40 device 'hx9k'"):
         synthesize(design, "ice40", device="hx9k")
     with pytest.raises(ValueError, match="unknown ECP5 device"):

@@ -46,15 +46,21 @@ def _ff_plain(cell: dict[str, Any]) -> bool:
     if cell["type"] != "TRELLIS_FF":
         return False
     p, c = cell.get("parameters", {}), cell["connections"]
-    if p.get("CLKMUX", "CLK") != "CLK" or p.get("CEMUX", "CE") not in ("CE", "1"):
+    if _par(p, "CLKMUX", "CLK") != "CLK" or _par(p, "CEMUX", "CE") not in ("CE", "1"):
         return False
     lsr = c.get("LSR", ["0"])[0]
-    lsrmux = p.get("LSRMUX", "LSR")
+    lsrmux = _par(p, "LSRMUX", "LSR")
     return (lsr == "0" and lsrmux == "LSR") or (lsr == "1" and lsrmux == "INV")
 
 
+def _par(params: dict[str, Any], key: str, default: str) -> str:
+    """A string parameter as Yosys writes it (padded with spaces to a multiple of 8 bits)."""
+    v = params.get(key, default)
+    return v.strip() if isinstance(v, str) else str(v)
+
+
 def _ce(cell: dict[str, Any]):
-    if cell.get("parameters", {}).get("CEMUX", "CE") == "1":
+    if _par(cell.get("parameters", {}), "CEMUX", "CE") == "1":
         return "1"
     return cell["connections"].get("CE", ["1"])[0]
 
@@ -132,10 +138,10 @@ def _pack_bram_outputs(nl: _Netlist, stats: dict[str, int]) -> None:
             continue
         conn, par = cell["connections"], cell.setdefault("parameters", {})
         for x in ("A", "B"):
-            if par.get(f"REGMODE_{x}", "NOREG") != "NOREG":
+            if _par(par, f"REGMODE_{x}", "NOREG") != "NOREG":
                 continue
             clk = conn.get(f"CLK{x}", ["0"])[0]
-            if clk in _CONST or par.get(f"CLK{x}MUX", f"CLK{x}") != f"CLK{x}":
+            if clk in _CONST or _par(par, f"CLK{x}MUX", f"CLK{x}") != f"CLK{x}":
                 continue
             if conn.get(f"RST{x}", ["0"])[0] != "0" or conn.get(f"OCE{x}", ["1"])[0] != "1":
                 continue
@@ -170,7 +176,7 @@ def _pack_mult(nl: _Netlist, stats: dict[str, int]) -> None:
         if cell["type"] != "MULT18X18D":
             continue
         conn, par = cell["connections"], cell.setdefault("parameters", {})
-        if any(par.get(k, "NONE") != "NONE" for k in ("REG_INPUTA_CLK", "REG_INPUTB_CLK", "REG_OUTPUT_CLK")):
+        if any(_par(par, k, "NONE") != "NONE" for k in ("REG_INPUTA_CLK", "REG_INPUTB_CLK", "REG_OUTPUT_CLK")):
             continue
         # inputs: both operands, every non-constant bit the Q of a plain FF, one clock, one enable
         in_ffs, clks, ces, ok = [], set(), set(), True

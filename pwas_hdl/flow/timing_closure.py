@@ -84,12 +84,15 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
         8       tree (2 regs) products -> adder tree                               130
         9       split         (input -> scale / split -> rank)                     131
         10      tree (1/level)                                                     131
+        11      mul_in        (added with issue 14)
 
-    From 7 cycles on the critical path of the Lorenz core is the 18x18 multiplier (``mem_out`` ->
-    ``product``, 7.6 ns): deeper candidates add latency without speed there, but may help other
-    designs or devices. On iCE40 HX8K (multipliers in LUTs) the same core goes from 42 MHz
-    (2 cycles) to ~85-94 MHz, limited by the LUT multipliers. The last candidate is the ``max``
-    preset plus ``addr``; ``balanced`` and ``max`` themselves are not in the list.
+    That table was measured before the multiplier and block-RAM registers were packed into the
+    hard blocks (:mod:`pwas_hdl.flow.hard_registers`, issue 14), when from 7 cycles on the 18x18
+    multiplier was the critical path. Packed, candidate 7 (the ``balanced`` preset) reaches
+    ~114 MHz (critical path: the products -> adder tree) and the last one (the ``max`` preset,
+    11 cycles) ~158 MHz (the vertex addresses); ``benchmarks/hw_tables.py`` has the current
+    figures. On iCE40 HX8K (multipliers in LUTs) the core goes from 42 MHz (2 cycles) to
+    ~85-94 MHz, limited by the LUT multipliers.
     """
     n = int(n)
     if n < 1:
@@ -101,7 +104,8 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
             tree.append(t)
     steps = [("product", True), ("rank", True), ("mem_out", True), ("tree_levels", tree[0]), ("addr", True)]
     steps += [("tree_levels", t) for t in tree[1:2]] + [("split", True)] + [("tree_levels", t) for t in tree[2:]]
-    out = [Pipeline(split=False, rank=False, mem_out=False, product=False, tree_levels=0)]
+    steps += [("mul_in", True)]
+    out = [Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0)]
     for key, val in steps:
         d = out[-1].to_dict()
         d[key] = val

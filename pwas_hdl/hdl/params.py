@@ -210,12 +210,12 @@ class Pipeline:
     same for every FPGA.
     """
 
-    split: bool = True
+    split: bool = False
     rank: bool = True
-    mem_out: bool = False
+    mem_out: bool = True
     product: bool = True
-    tree_levels: int = 2
-    addr: bool = False
+    tree_levels: int = 3
+    addr: bool = True
     mul_in: bool = False
 
     def __post_init__(self) -> None:
@@ -279,12 +279,22 @@ class Pipeline:
         }
 
 
-#: Named pipelines: ``min`` (2 registers: memory + output), ``balanced`` (default), ``max``.
+#: Named pipelines (measured on the Lorenz core n = 4, N = 4096, ECP5-45F speed 6, nextpnr, timing
+#: harness, hard-block registers packed; benchmarks/hw_tables.py has the current figures):
+#:
+#: * ``min``: 2 registers (memory + output) -- the fewest nanoseconds: every other register adds
+#:   more clock overhead than it removes from the longest path;
+#: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
+#:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
+#: * ``max``: every register (11 cycles for n = 4) -- the highest clock.
 PIPELINE_PRESETS: dict[str, Pipeline] = {
-    "min": Pipeline(split=False, rank=False, mem_out=False, product=False, tree_levels=0),
+    "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
     "balanced": Pipeline(),
-    "max": Pipeline(split=True, rank=True, mem_out=True, product=True, tree_levels=1),
+    "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1),
 }
+
+#: ``generate --goal``: what matters -> the pipeline preset that gives it (see PIPELINE_PRESETS).
+GOALS: dict[str, str] = {"latency": "min", "balanced": "balanced", "throughput": "max"}
 
 
 # ---------------------------------------------------------------------------------------------
