@@ -333,43 +333,6 @@ class PWASCore(wiring.Component):
         lt, ds, oor, base, wrap, rot = r["lt"], r["d"], r["oor"], r["base"], r["wrap"], r["rot"]
 
         # ---------------------------------------------------------- C: vertices, addresses, mu
-        if isinstance(rot, int):  # replicated memories (or a constant rotation): vertex order
-            bank_addr, bank_mu = self._vertex_order(m, lt, ds, base, wrap, rot)
-        else:
-            bank_addr, bank_mu = self._bank_order(m, lt, ds, base, wrap, rot)
-        # optional register on the memory addresses and mu (bank order)
-        valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": bank_addr, "mu": bank_mu, "oor": oor})
-        bank_addr, bank_mu, oor = r["addr"], r["mu"], r["oor"]
-        if aw:
-            bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
-
-        # ---------------------------------------------------------- D: memory read (the register)
-        mem_data = []
-        for b in range(nb):
-            mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[b])
-            m.submodules[f"wmem{b}"] = mem
-            rp = mem.read_port(domain="sync")
-            # Drive the port with our own nets instead of assigning to its addr/en signals (which
-            # would leave those as unused alias wires); ReadPort does the same for its comb `en`.
-            if aw:
-                rp.addr = bank_addr[b]
-            rp.en = pipe.advance
-            mem_data.append(rp.data)
-        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor})
-        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"]}
-
-    def _vertex_order(self, m: Module, lt, ds, base, wrap, rot: int):
-        """Addresses and ``mu`` of the simplex vertices, read by bank ``(k + rot) mod (n+1)`` (``rot`` constant)."""
-        p = self.params
-        n, big_f = p.n, p.frac
-        nb, dw = n + 1, big_f + 1
-        plan = self.memory_plan
-        aw = plan.addr_width
-        if self.memory_kind == "banked":
-            rst = plan.layout.row_strides
-        else:
-            st = [int(v) for v in plan.layout.grid.strides]
-
         def step(k, j):
             if k == 0:
                 return False
@@ -435,95 +398,40 @@ class PWASCore(wiring.Component):
             sink_unused(m, diff[dw], f"mu{k}_sign")
             mus.append(diff[:dw])
 
-        bank_addr = [addr[(b - rot) % nb] for b in range(nb)] if aw else []
-        bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
-        return bank_addr, bank_mu
+        # optional register on the vertex addresses and mu, before the bank rotation
+        valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
+        addr, mus, rot, oor = r["addr"], r["mu"], r["rot"], r["oor"]
 
-    def _bank_order(self, m: Module, lt, ds, base, wrap, rot):
-        """Address and ``mu`` of each bank directly: bank ``b`` reads vertex ``k_b = (b - rot) mod (n+1)``.
+        # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
+        # same way instead of the read data back (the sum of products does not depend on the
+        # order; mu is narrower than nz weights and needs no rot downstream).
+        if not isinstance(rot, int):
+            bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)] if aw else []
+            bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
+            with m.Switch(rot):
+                for s in range(nb):
+                    with (m.Case(s) if s < n else m.Default()):
+                        m.d.comb += [bank_addr[b].eq(addr[(b - s) % nb]) for b in range(nb) if aw]
+                        m.d.comb += [bank_mu[b].eq(mus[(b - s) % nb]) for b in range(nb)]
+        else:
+            bank_addr = [addr[(b - rot) % nb] for b in range(nb)] if aw else []
+            bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
+            bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
 
-        Instead of computing the ``n + 1`` vertices and rotating them to the banks (two ``(n+1)``-way
-        multiplexers of addresses and ``mu``), every selection that depends on the vertex index
-        takes ``rot`` as one more case-table input: the step bits ``[rank_j < k_b]`` (then the
-        address offset as in :meth:`_vertex_order`), and the one-hot choice of the fraction of rank
-        ``k_b - 1``, ``P_b``; ``mu`` of bank ``b`` is ``P_b (or 2**F when k_b = 0) - P_(b+1)``
-        (``P`` of the next bank is the fraction of rank ``k_b``, 0 when ``k_b = n``). The same
-        values as the rotation, so the same arithmetic.
-        """
-        p = self.params
-        n, big_f = p.n, p.frac
-        nb, dw = n + 1, big_f + 1
-        plan = self.memory_plan
-        aw = plan.addr_width
-        rbits = len(rot)
-        tw = n - 1  # thermometer bits per dimension
-        nrot = 1 << rbits
-
-        def rank_of(v):  # lt_j[k-1] = (rank_j < k): rank = number of zero bits
-            return tw - bin(v & ((1 << tw) - 1)).count("1")
-
-        def sel_table(fn):
-            """Case table over Cat(lt_j, rot): fn(rank_j, k_b) for each code (0 for rot >= n+1)."""
-            out = []
-            for v in range(1 << (tw + rbits)):
-                r_ = v >> tw
-                out.append(int(fn(rank_of(v), r_)) if r_ < nb else 0)
-            return out
-
-        bank_addr, psel = [], []
+        # ---------------------------------------------------------- D: memory read (the register)
+        mem_data = []
         for b in range(nb):
-            pairs = []
-            for j in range(n):
-                if tw:
-                    key = Cat(lt[j], rot)
-
-                    def table(fn, key=key):
-                        return sel_table(fn)
-                else:  # n = 1: rank 0
-                    key = rot
-
-                    def table(fn):
-                        return [int(fn(0, r_)) if r_ < nb else 0 for r_ in range(nrot)]
-                if aw and (j < n - 1 or not isinstance(wrap, int)):
-                    stp = rom(m, key, table(lambda rk, r_, b=b: rk < (b - r_) % nb), 1, f"bstep{b}_{j}")
-                    if j < n - 1:
-                        pairs.append((stp, plan.layout.row_strides[j]))
-                    elif isinstance(stp, int):
-                        if stp:
-                            pairs.append((wrap, 1))
-                    else:
-                        pairs.append((stp & wrap, 1))
-                psel.append(rom(m, key, table(lambda rk, r_, b=b: rk == (b - r_) % nb - 1), 1, f"bsel{b}_{j}"))
+            mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[b])
+            m.submodules[f"wmem{b}"] = mem
+            rp = mem.read_port(domain="sync")
+            # Drive the port with our own nets instead of assigning to its addr/en signals (which
+            # would leave those as unused alias wires); ReadPort does the same for its comb `en`.
             if aw:
-                full = 1 << aw
-                const = sum(w for bt, w in pairs if isinstance(bt, int) and bt)
-                var = [(bt, w) for bt, w in pairs if not isinstance(bt, int)]
-                if var:
-                    table = [(const + sum(w for i, (_, w) in enumerate(var) if v >> i & 1)) % full for v in range(1 << len(var))]
-                    off = rom(m, Cat(*[bt for bt, _ in var]), table, aw, f"boff{b}")
-                else:
-                    off = const % full
-                bank_addr.append(sum_wrap(m, [base, off], aw, f"baddr{b}"))
-        # P_b: the fraction of rank k_b - 1 (one-hot over the dimensions), 0 when k_b = 0
-        pvals = []
-        for b in range(nb):
-            acc = None
-            for j in range(n):
-                h = psel[b * n + j]
-                if h is False or (isinstance(h, int) and h == 0):
-                    continue
-                term = ds[j] if (h is True or (isinstance(h, int) and h == 1)) else Mux(h, ds[j], Const(0, dw))
-                acc = term if acc is None else acc | term
-            pvals.append(Const(0, dw) if acc is None else self._name(m, acc, f"bfrac{b}", unsigned(dw)))
-        bank_mu = []
-        for b in range(nb):
-            top = rom(m, rot, [int(r_ == b) for r_ in range(nrot)], 1, f"btop{b}")  # k_b = 0: 2**F
-            hi = Cat(pvals[b][:big_f], pvals[b][big_f] | _bit(top)) if big_f else (pvals[b] | _bit(top))
-            diff = Signal(signed(dw + 1), name=f"bmu{b}")
-            m.d.comb += diff.eq(hi - pvals[(b + 1) % nb])
-            sink_unused(m, diff[dw], f"bmu{b}_sign")
-            bank_mu.append(diff[:dw])
-        return bank_addr, bank_mu
+                rp.addr = bank_addr[b]
+            rp.en = pipe.advance
+            mem_data.append(rp.data)
+        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor})
+        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"]}
 
     # ------------------------------------------------------------------ back end
     def _back(self, m: Module, pipe: _Pipe, valid, vals, advance):

@@ -409,8 +409,7 @@ def _bank_order(tr: dict, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: list[dict], bank_order: bool,
-                    addr_vertex_order: bool = True) -> int | None:
+def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: list[dict], bank_order: bool) -> int | None:
     """Value the bit-true trace (one sample) gives for a pipeline register; None if not modelled.
 
     ``bank_order``: after the memory read the generator keeps ``mu``, products and partial sums in
@@ -435,7 +434,7 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     i = int(idx) if idx else None
     n = model.n
     nb = n + 1
-    if stage == "addr" and addr_vertex_order:  # vertex order, rotated after it (a register s_addr_rot)
+    if stage == "addr":  # the register before the memories holds vertex order (rotated after it)
         bank_order = False
     mu = _bank_order(tr, tr["mu"]) if bank_order else tr["mu"]
     products = _bank_order(tr, tr["products"]) if bank_order else tr["products"]
@@ -488,8 +487,6 @@ def locate_difference(design: Design, probe: dict, q_row: Sequence[int]) -> dict
     values = probe.get("values", {})
     offsets = _stage_offsets(list(values), design.latency)
     bank_order = re.search(r"\bvdata\d+\b", design.verilog) is None
-    # issue 14 on: the banked core selects per bank before s_addr (no rotation after it, no s_addr_rot)
-    addr_vertex_order = re.search(r"\bs_addr_rot\b", design.verilog) is not None
     diffs, checked = [], 0
     if offsets is not None:
         for name, rec in values.items():
@@ -497,7 +494,7 @@ def locate_difference(design: Design, probe: dict, q_row: Sequence[int]) -> dict
             off = offsets.get(st)
             if off is None or off >= len(rec):
                 continue
-            exp = _expected_probe(name, tr, model, design.out_fields, bank_order, addr_vertex_order)
+            exp = _expected_probe(name, tr, model, design.out_fields, bank_order)
             if exp is None:
                 continue
             w = widths.get(name, 64)
