@@ -409,6 +409,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="N = 4096 Lorenz, ECP5, default build, seed 1 only")
     ap.add_argument("--no-replicated", action="store_true", help="skip the replicated-memory builds (memory table)")
+    ap.add_argument("--other-builds", default=None,
+                    help="comma-separated builds (latency, default, throughput) of the designs other than the N = 4096 Lorenz "
+                         "core (default: all); an FPGA whose builds are all left out is skipped for them")
+    ap.add_argument("--no-timing-closure", action="store_true", help="skip the generate --clock-mhz demo")
     ap.add_argument("--fpga", default="ecp5,ice40", help="comma-separated: ecp5, ice40")
     ap.add_argument("--designs", default=None, help="comma-separated design keys (default: all)")
     ap.add_argument("--outdir", type=Path, default=HERE / "results")
@@ -438,7 +442,7 @@ def _run(args: argparse.Namespace, ex) -> int:
     def log(msg: str) -> None:
         print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
-    settings = {"quick": args.quick, "seed": SEED, "seeds": list(SEEDS) if not args.quick else [SEED], "seeds_design": MUST_SHOW,
+    settings = {"quick": args.quick, "other_builds": args.other_builds, "replicated": not args.no_replicated, "seed": SEED, "seeds": list(SEEDS) if not args.quick else [SEED], "seeds_design": MUST_SHOW,
                 "freq_mhz": FREQ, "fpgas": fpgas, "input_bits": 12,
                 "parts": {"ecp5": "CABGA381", "ice40": "CT256"}}
     old: dict[str, Any] = {}
@@ -491,7 +495,11 @@ def _run(args: argparse.Namespace, ex) -> int:
         seeds = SEEDS if (d["key"] == MUST_SHOW and not args.quick) else (SEED,)
         for fpga in fpgas:
             d["builds"][fpga] = {}
-            todo = [(b, None, GOAL_OF_BUILD[b], "banked", "inline") for b in (("default",) if args.quick else BUILDS[fpga])]
+            names = ("default",) if args.quick else BUILDS[fpga]
+            if args.other_builds and d["key"] != MUST_SHOW:
+                keep = {b.strip() for b in args.other_builds.split(",")}
+                names = tuple(b for b in names if b in keep)
+            todo = [(b, None, GOAL_OF_BUILD[b], "banked", "inline") for b in names]
             if not args.quick and fpga == "ecp5" and not args.no_replicated:
                 # $readmemh: Yosys reads (n+1) N inline initialisers very slowly (N = 32768: > 10 min)
                 todo.append(("replicated", "min", None, "replicated", "readmemh"))
@@ -527,7 +535,7 @@ def _run(args: argparse.Namespace, ex) -> int:
     for d in designs:
         model_path, n, builds = models[d["key"]], d["n"], builds_of[d["key"]]
         if d["key"] == MUST_SHOW:
-            if not args.quick and "ecp5" in fpgas:
+            if not args.quick and "ecp5" in fpgas and not args.no_timing_closure:
                 tc_old = old.get("__tc__")
                 if tc_old and [c["pipeline"] for c in tc_old["candidates"]] == [p.to_dict() for p in pipeline_candidates(n)]:
                     res["timing_closure"] = tc_old
