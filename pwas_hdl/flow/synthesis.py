@@ -243,8 +243,7 @@ def synthesize(
         atomic_write_text(work / _HARNESS_FILE, htext)
         reads += f"\nread_verilog -sv {_HARNESS_FILE}"
         harness_info = {"top": synth_top, "file": _HARNESS_FILE, "ffs": nff}
-    premap = "hierarchy -check -top " + synth_top + "\nproc\nbooth" if (target == "ice40" and not has_dsp) else ""
-    script = _fill_template(target, top=synth_top, read=reads, device=family or "", dsp="-dsp" if has_dsp else "", premap=premap,
+    script = _fill_template(target, top=synth_top, read=reads, device=family or "", dsp="-dsp" if has_dsp else "",
                             lut_size=str(_GENERIC_LUT_SIZE), max_logic_rom=str(_GENERIC_MAX_LOGIC_ROM))
     atomic_write_text(work / "synth.ys", script)
     if progress:
