@@ -412,6 +412,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--other-builds", default=None,
                     help="comma-separated builds (latency, default, throughput) of the designs other than the N = 4096 Lorenz "
                          "core (default: all); an FPGA whose builds are all left out is skipped for them")
+    ap.add_argument("--redo", default="", help="with --resume: comma-separated FPGA:BUILD measured again (e.g. ice40:throughput)")
     ap.add_argument("--no-timing-closure", action="store_true", help="skip the generate --clock-mhz demo")
     ap.add_argument("--fpga", default="ecp5,ice40", help="comma-separated: ecp5, ice40")
     ap.add_argument("--designs", default=None, help="comma-separated design keys (default: all)")
@@ -505,7 +506,7 @@ def _run(args: argparse.Namespace, ex) -> int:
                 todo.append(("replicated", "min", None, "replicated", "readmemh"))
             for name, pipe, goal, mem, init in todo:
                 cached = prev.get("builds", {}).get(fpga, {}).get(name)
-                if cached is not None:
+                if cached is not None and f"{fpga}:{name}" not in {r.strip() for r in args.redo.split(",")}:
                     d["builds"][fpga][name] = cached
                     log(f"{d['key']} {fpga} {name}: reused")
                     continue
