@@ -46,7 +46,8 @@ def test_widths_and_levels():
     assert [index_width(c) for c in (1, 2, 3, 4, 5, 8, 9)] == [1, 1, 2, 2, 3, 3, 4]
     assert [compare_levels(c) for c in (1, 2, 3, 4, 5, 8, 9)] == [0, 1, 2, 2, 3, 3, 4]
     assert [argmax_latency(c, "min") for c in (2, 3, 4, 8)] == [0, 0, 0, 0]
-    assert [argmax_latency(c, "balanced") for c in (2, 3, 4, 8)] == [1, 1, 1, 2]
+    assert [argmax_latency(c, "balanced") for c in (2, 3, 4, 8)] == [1, 1, 1, 1]  # tree_levels = 3 (issue 14)
+    assert [argmax_latency(c, "balanced") for c in (9, 16)] == [2, 2]
     assert [argmax_latency(c, "max") for c in (2, 3, 4, 8)] == [1, 2, 2, 3]
     assert argmax_latency(1, "max") == 0
 
