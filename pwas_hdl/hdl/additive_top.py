@@ -50,18 +50,29 @@ def equal_latency_pipelines(base: Pipeline, dims: list[int]) -> list[Pipeline]:
     """One pipeline per part (``dims``: the parts' dimensions) with the latency of the slowest part.
 
     Parts with fewer adder-tree levels get the optional registers of ``base`` they lack (``addr``,
-    ``mem_out``, ``split``, ``rank``, ``product``, in this order), then more adder-tree registers.
+    ``mem_out``, ``mul_in``, ``split``, ``rank``, ``product``, in this order), then more adder-tree
+    registers. When ``base`` has every register already (the ``max`` preset), the deeper parts go
+    without ``mul_in`` so that the shallower ones can take it.
 
     Raises
     ------
     InputError
         No such pipeline exists for some part (e.g. every register is already used).
     """
+    try:
+        return _equal_latency(base, dims)
+    except InputError:
+        if not base.mul_in:
+            raise
+        return _equal_latency(replace(base, mul_in=False), dims)
+
+
+def _equal_latency(base: Pipeline, dims: list[int]) -> list[Pipeline]:
     target = max(base.latency(n) for n in dims)
     out = []
     for n in dims:
         p = base
-        for fld in ("addr", "mem_out", "split", "rank", "product"):
+        for fld in ("addr", "mem_out", "mul_in", "split", "rank", "product"):
             if p.latency(n) >= target:
                 break
             if not getattr(p, fld):
