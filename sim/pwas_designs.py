@@ -150,3 +150,13 @@ ADDITIVE_CONFIGS = [
     DesignConfig("a-c-n4-z2-max-trunc", "core", 0, 4, 0, 1, [3, 2, 4, 2], 2, {"pipeline": "max", "rounding": "truncate"},
                  seed=2, additive="2;0,1;1,2,3;0,3"),
 ]
+
+
+#: Serial-architecture configurations (``generate --architecture serial``, issue 15 item 2): a core
+#: with two targets and the balanced pipeline, and a sensor top (lag bank, warm-up) with the
+#: deepest pipeline (mem_out and product registers). Each has a parallel twin (same model, same
+#: options but the architecture) that must give the same output codes.
+SERIAL_CONFIGS = [
+    DesignConfig("serial-c-n3-p4x3x2-z2", "core", 0, 3, 0, 1, [4, 3, 2], 2, {"architecture": "serial"}, seed=3),
+    DesignConfig("serial-s-u1y2-p3-4-max", "sensor", 1, 2, 1, 1, [3, 4, 4], 1, {"architecture": "serial", "pipeline": "max"}, seed=4),
+]

@@ -64,8 +64,8 @@ PROBLEMS = {
     4: "more outputs before the reset than the inputs can give",
     8: "out.valid was high in the cycle after a reset",
     16: "a latency differs from the manifest's",
-    32: "inputs were not accepted every cycle (II > 1)",
-    64: "outputs did not come every cycle",
+    32: "inputs were not accepted every II cycles (the manifest's ii)",
+    64: "outputs did not come every II cycles",
     128: "warm differs from 'high from the transfer that yields the first output'",
 }
 
@@ -123,6 +123,7 @@ def ports_header(man: dict) -> str:
         f"#define PWAS_IN_WORDS {_words(_port(man, 'in.payload')['width'])}",
         f"#define PWAS_OUT_WORDS {_words(_port(man, 'out.payload')['width'])}",
         f"#define PWAS_LATENCY {int(man['latency_cycles'])}",
+        f"#define PWAS_II {int(man['ii'])}",
         f"#define PWAS_WARMUP {warmup}",
         f"#define PWAS_HAS_WARM {1 if warm is not None else 0}",
     ]

@@ -22,7 +22,8 @@ of the expected ones. Checked: every output equals the bit-true model (exact, gi
 ``expected``), no output is missing or extra, ``out.valid`` is low right after a reset, ``warm``
 (sensor top) is high exactly from the transfer that yields the first output, and -- when the sink
 never stalls -- every latency equals ``latency_cycles`` and, with no source bubbles either, one
-sample is accepted and one result produced every clock (II = 1).
+sample is accepted and one result produced every ``ii`` clocks (the manifest's ``ii``: 1, or
+``n + 1`` for the serial architecture, whose warm-up transfers are not throttled).
 
 The result file holds, per run and segment, the transfer cycles, the output codes, the mismatches
 (sample, input codes, expected, actual) and, with ``debug``, the values of the named pipeline
@@ -79,6 +80,7 @@ class Bench:
     def __init__(self, dut, job: dict, man: dict):
         self.dut, self.job, self.man = dut, job, man
         self.latency = int(man["latency_cycles"])
+        self.ii = int(man["ii"])  # serial architecture: one sample every n + 1 clocks
         # the manifest is validated (pwas_hdl.design.manifest): a sensor design has lags.warmup, a core none
         warm = man["lags"]["warmup"] if man["design"] == "sensor" else None
         self.warmup = int(warm["samples_without_output"]) if warm else 0
@@ -154,11 +156,16 @@ class Bench:
         if stall_free_sink and any(v != self.latency for v in lat):
             problems.append(f"latency {sorted(set(lat))} cycles, the manifest says {self.latency}")
         full_speed = stall_free_sink and float(run.get("p_valid", 1.0)) >= 1.0
-        if full_speed and len(acc) > 1 and acc[-1] - acc[0] != len(acc) - 1:
-            problems.append(f"inputs were not accepted every cycle (II > 1): {len(acc)} transfers in {acc[-1] - acc[0] + 1} cycles")
+        ii = self.ii
+        # II > 1: the warm-up transfers (not throttled) are left out; every later one comes ii cycles apart
+        core_acc = acc if ii == 1 else acc[self.warmup:]
+        if full_speed and len(core_acc) > 1 and any(b - a != ii for a, b in zip(core_acc, core_acc[1:])):
+            gaps = sorted({b - a for a, b in zip(core_acc, core_acc[1:])})
+            problems.append(f"inputs were not accepted every {ii} cycle(s) (II = {ii}): gaps {gaps} between {len(core_acc)} transfers")
         rc = list(self.sink.received_at)
-        if full_speed and len(rc) > 1 and rc[-1] - rc[0] != len(rc) - 1:
-            problems.append(f"outputs did not come every cycle: {len(rc)} outputs in {rc[-1] - rc[0] + 1} cycles")
+        if full_speed and len(rc) > 1 and any(b - a != ii for a, b in zip(rc, rc[1:])):
+            gaps = sorted({b - a for a, b in zip(rc, rc[1:])})
+            problems.append(f"outputs did not come every {ii} cycle(s): gaps {gaps} between {len(rc)} outputs")
         if self.warm is not None and self.warm_log:
             want = [int(i >= self.warmup) for i in range(len(self.warm_log))]
             if self.warm_log != want:

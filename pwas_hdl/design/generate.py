@@ -260,6 +260,7 @@ def build_design(
     prescreen: bool = True,
     progress: Callable[[str], None] | None = None,
     executor: Any = None,
+    architecture: str = "parallel",
     **formats: Any,
 ) -> GeneratedDesign:
     """Build the RTL and all artifacts in memory.
@@ -314,6 +315,11 @@ def build_design(
     memory_init : {"inline", "readmemh"}
         Weights as initialisers inside the Verilog (self-contained), or ``$readmemh`` of the
         ``.hex`` files of the folder (relative names: run tools from the folder).
+    architecture : {"parallel", "serial"}
+        ``parallel`` (default): ``n + 1`` memories and multipliers per target, II = 1.
+        ``serial``: one multiplier per target, one memory of N words, ``n + 1`` cycles per
+        sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`);
+        ``memory`` then only selects the bit-true model's layout. Not with ``target_mhz``.
     **formats
         Fixed-point options (:data:`FORMAT_OPTIONS`); ``None`` means the data-driven default.
 
@@ -328,6 +334,13 @@ def build_design(
         raise ValueError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+    from pwas_hdl.hdl.serial_core import ARCHITECTURES
+
+    if architecture not in ARCHITECTURES:
+        raise ValueError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+    if architecture == "serial" and target_mhz is not None:
+        raise ValueError("the timing closure (target_mhz / --clock-mhz) chooses among parallel pipelines; "
+                         "give --pipeline with --architecture serial")
     if name is not None:
         check_module_name(name)
     sensor = _load_sensor(model)
@@ -381,17 +394,23 @@ def build_design(
             raise InputError("hardware for an additive classifier (--additive with --classify) is not available yet")
         if design == "recurrent":
             raise InputError("hardware for a recurrent additive sensor is not available")
+        if architecture != "parallel":
+            raise InputError("the additive sensor's hardware has parallel part cores only; use --architecture parallel")
         comp = (build_additive_core(fxm, memory=memory, pipeline=pipe_arg, name=top) if design == "core"
                 else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top))
     elif design == "recurrent":
         from pwas_hdl.design.recurrent import build_recurrent_component
 
+        if architecture != "parallel":
+            raise InputError("the recurrent top feeds back a parallel core only; use --architecture parallel")
+
         comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
                                                      pipeline=pipe_arg)
     elif design == "core":
-        comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier)
+        comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier, architecture=architecture)
     else:
-        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier)
+        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier,
+                            architecture=architecture)
     info = design_info(comp, ports)
 
     prefix = f"{top}_rom"
@@ -425,6 +444,8 @@ def build_design(
         pipeline = Pipeline.cast(pipeline).to_dict()
     options = {"design": design, "memory": memory, "pipeline": pipeline, "memory_init": memory_init, "ports": ports,
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
+    if architecture != "parallel":
+        options["architecture"] = architecture
     if timing is not None:
         options.update(target_mhz=float(target_mhz), fpga_target=fpga_target)
     # how the weights get into the memories (the manifest's memory.init; MEM_DIR: pwas_hdl.hdl.emit)
@@ -432,6 +453,8 @@ def build_design(
                                "meaning": "folder of the hex files with its trailing /, prefixed to their names"}
                               if memory_init == "readmemh" else {"kind": "inline"})
     man = build_manifest(design, top, fxm, info, sensor, files, options, timing, recurrence=recurrence)
+    if architecture == "serial":  # one memory of N words (pwas_hdl.hdl.serial_core.SingleMemoryPlan)
+        man["memory"]["layout_spec"] = comp_core(comp).memory_plan.layout_spec()
     model = model_text(sensor)
     verilog = _verilog_header(man, hashlib.sha256(model.encode("utf-8")).hexdigest()) + verilog
     man["design_hash"] = design_hash({files["verilog"]: verilog, "model.json": model, **hexes})
@@ -524,6 +547,11 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
                         if fmt.get("offset") or fmt.get("scale") != 1.0 else f"{fmt['str']}, physical = code * {lsb}")
             lines.append(f"      {bits:<9} {f['name']}: {what}")
     return "".join(f"// {ln}".rstrip() + "\n" for ln in lines) + "\n"
+
+
+def comp_core(comp):
+    """The core of a built design (the component itself, or the sensor top's core)."""
+    return getattr(comp, "core", comp)
 
 
 def design_hash(files: dict[str, str]) -> str:

@@ -39,6 +39,8 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
       "memory": {"kind": "banked" | "replicated", "memories": n+1, "depth": .., "word_bits": ..,
                  "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},
       "pipeline": {...}, "arithmetic": {...},
+      "architecture": {"kind": "parallel" | "serial", "multipliers": .., "multipliers_per_target": ..,
+                       "cycles_per_sample": .., "ii": .., "meaning": ..},   # serial: memory.kind "single"
       "timing": {...},                           # only with generate --clock-mhz (timing closure)
       "classifier": {"target": "mode", "classes": [0, 1, 2], "n_classes": 3,   # only for a classifier model:
                      "port": "m_axis_tdata", "field": "class_index", "lsb": .., "width": 2,  # argmax stage after
@@ -221,6 +223,8 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
             "sum_bits": hw["sum_bits"],
             "sum": fx["additive"]["sum"],
         }
+    if "architecture" in info:  # parallel or serial (pwas_hdl.hdl.serial_core.architecture_info)
+        man["architecture"] = info["architecture"]
     if timing is not None:
         man["timing"] = timing
     if "classifier" in info:  # a classifier model: argmax stage after the core

@@ -18,7 +18,7 @@ def _check_name(name: str) -> str:
 
 
 def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core",
-               classifier: dict | None = None) -> PWASCore:
+               classifier: dict | None = None, architecture: str = "parallel") -> PWASCore:
     """The pipelined PWAS core of a bit-true model.
 
     Parameters
@@ -34,22 +34,29 @@ def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None
         one class per target, in target order): adds the argmax stage after the core
         (:class:`~pwas_hdl.hdl.classifier_top.PWASClassifierCore`); the output payload then ends
         with the ``class_index`` field.
+    architecture : {"parallel", "serial"}
+        ``"serial"``: :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` (one multiplier per
+        target, II = n + 1, one memory of N words; ``memory`` is then ignored). Not with
+        ``classifier``.
 
     Returns
     -------
     PWASCore or PWASClassifierCore
-        ``.latency`` (cycles), ``.ii`` (1), ``.memory_plan``, ``.params``.
+        ``.latency`` (cycles), ``.ii`` (1, serial: n + 1), ``.memory_plan``, ``.params``.
     """
     name = _check_name(name)
     params = CoreParams.from_model(model)
     if classifier is not None:
         from pwas_hdl.hdl.classifier_top import PWASClassifierCore
 
+        if architecture != "parallel":
+            raise ValueError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
+
         _check_classes(classifier, params)
         comp = PWASClassifierCore(params, memory=memory, pipeline=pipeline)
         core = comp.core
     else:
-        comp = core = PWASCore(params, memory=memory, pipeline=pipeline)
+        comp = core = _make_core(params, memory, pipeline, architecture)
     comp.module_name = name
     comp._MustUse__silence = True  # often only described (design_info), not elaborated
     core.input_names = list(getattr(model, "regressor_names", [f"x{j}" for j in range(params.n)]))
@@ -61,6 +68,17 @@ def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None
 def _check_classes(classifier: dict, params: CoreParams) -> None:
     if len(classifier["classes"]) != params.nz:
         raise ValueError(f"the classifier has {len(classifier['classes'])} classes for nz = {params.nz} score targets")
+
+
+def _make_core(params: CoreParams, memory: str, pipeline, architecture: str) -> PWASCore:
+    """The core of ``architecture`` ("parallel" or "serial")."""
+    from pwas_hdl.hdl.serial_core import ARCHITECTURES, SerialPWASCore
+
+    if architecture not in ARCHITECTURES:
+        raise ValueError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+    if architecture == "serial":
+        return SerialPWASCore(params, pipeline=pipeline)
+    return PWASCore(params, memory=memory, pipeline=pipeline)
 
 
 def _fields(names_widths):
@@ -136,6 +154,11 @@ def design_info(component, ports: str = "axis") -> dict:
             "sum_bits": p.acc_width + 1,
         },
     }
+    from pwas_hdl.hdl.serial_core import architecture_info
+
+    if hasattr(core, "flow_control"):  # the serial core's input throttle
+        info["flow_control"].update(core.flow_control(nm))
+    info["architecture"] = {**architecture_info(core), "ii": int(component.ii)}  # the design's II (a top may add to it)
     info.update(getattr(component, "extra_info", {}))
     if classifier is not None:
         info["classifier"] = cinfo
@@ -150,6 +173,7 @@ def build_sensor(
     pipeline: Pipeline | str | None = None,
     name: str = "pwas_sensor",
     classifier: dict | None = None,
+    architecture: str = "parallel",
 ):
     """The virtual-sensor top (lag bank + core) of a bit-true model.
 
@@ -159,7 +183,7 @@ def build_sensor(
     lags : LagStructure, optional
         Default: derived from ``model.regressor_signals`` (as ``FixedPointModel.from_sensor``
         sets them); pass ``sensor.lags_`` to be explicit.
-    memory, pipeline, name, classifier : as :func:`build_core` (``classifier``: the argmax stage
+    memory, pipeline, name, classifier, architecture : as :func:`build_core` (``classifier``: the argmax stage
         follows the core inside the top)
 
     Returns
@@ -178,10 +202,14 @@ def build_sensor(
     if classifier is not None:
         from pwas_hdl.hdl.classifier_top import classifier_argmax
 
+        if architecture != "parallel":
+            raise ValueError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
+
         _check_classes(classifier, params)
         argmax = classifier_argmax(params, pipeline)
         argmax._MustUse__silence = True  # inlined by the top
-    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, argmax=argmax)
+    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, argmax=argmax,
+                        architecture=architecture)
     top.classifier = dict(classifier) if classifier is not None else None
     top.module_name = name
     top._MustUse__silence = True

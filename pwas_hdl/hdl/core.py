@@ -212,6 +212,19 @@ class PWASCore(wiring.Component):
     # ------------------------------------------------------------------ front end
     def _front(self, m: Module, pipe: _Pipe, payload, valid):
         """Scale/clamp/split, rank, addresses and mu (up to the memory address)."""
+        valid, addr, mus, rot, oor = self._vertices(m, pipe, payload, valid)
+        p, plan = self.params, self.memory_plan
+        nb, dw, aw = p.n + 1, p.frac + 1, plan.addr_width
+        return self._banks(m, pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan)
+
+    def _vertices(self, m: Module, pipe: _Pipe, payload, valid):
+        """Scale/clamp/split, rank, the n+1 vertex addresses (in vertex order) and mu.
+
+        Returns ``(valid, addr, mu, rot, oor)`` after the optional ``addr`` register; ``addr[k]``
+        is vertex ``k``'s address in its memory (``[]`` when the memories have one word), ``rot``
+        the bank rotation (0 for the replicated layout). Shared with
+        :class:`pwas_hdl.hdl.serial_core.SerialPWASCore`.
+        """
         p, pl = self.params, self.pipeline
         n, big_f, bin_ = p.n, p.frac, p.in_width
         nb = n + 1
@@ -401,7 +414,11 @@ class PWASCore(wiring.Component):
         # optional register on the vertex addresses and mu, before the bank rotation
         valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
         addr, mus, rot, oor = r["addr"], r["mu"], r["rot"], r["oor"]
+        return valid, addr, mus, rot, oor
 
+    def _banks(self, m: Module, pipe: _Pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan):
+        """Bank rotation and the memory read (the memory register)."""
+        n = nb - 1
         # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
         # same way instead of the read data back (the sum of products does not depend on the
         # order; mu is narrower than nz weights and needs no rot downstream).
@@ -484,6 +501,14 @@ class PWASCore(wiring.Component):
         accs = [row[0] for row in terms]  # accw + 1 bits
         if not self.round_output:  # the exact sums go to the output register (additive sensor)
             return accs, oor, valid
+        return self._round(m, accs), oor, valid
+
+    def _round(self, m: Module, accs):
+        """Rounding and saturation of the ``accw + 1``-bit sums to the output codes (one per target).
+
+        Shared with :class:`pwas_hdl.hdl.serial_core.SerialPWASCore`."""
+        p = self.params
+        nz, accw = p.nz, p.acc_width
 
         # ---------------------------------------------------------- G: round, saturate
         outw, sh = p.out_width, p.shift
@@ -522,7 +547,7 @@ class PWASCore(wiring.Component):
             with m.Else():
                 m.d.comb += o.eq(rv[:outw])
             zs.append(o)
-        return zs, oor, valid
+        return zs
 
     # ------------------------------------------------------------------ helpers
     @staticmethod

@@ -116,7 +116,7 @@ class PWASSensorTop(wiring.Component):
     kind = "sensor"
 
     def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 argmax=None):
+                 argmax=None, architecture: str = "parallel"):
         self._MustUse__silence = True  # see PWASCore.__init__
         if len(dims) != params.n:
             raise ValueError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
@@ -130,7 +130,12 @@ class PWASSensorTop(wiring.Component):
                     f"the lags of signal {nm!r} have different input formats (lo_code, F, p) {sorted(fmt)}; "
                     "the lag bank feeds one code to all of them: fit with share_lag_domain=True and equal partitions per signal"
                 )
-        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        if architecture == "serial":  # one multiplier per target, II = n + 1 (pwas_hdl.hdl.serial_core)
+            from pwas_hdl.hdl.serial_core import SerialPWASCore
+
+            self.core = SerialPWASCore(params, pipeline=pipeline)
+        else:
+            self.core = PWASCore(params, memory=memory, pipeline=pipeline)
         self.core._MustUse__silence = True  # its logic is inlined by elaborate(), never elaborated itself
         self.params = params
         self.signals = [(str(nm), int(k)) for nm, k in signals]
@@ -139,7 +144,7 @@ class PWASSensorTop(wiring.Component):
         if argmax is not None and argmax.index_lsb != core_output_layout(params).size:
             raise ValueError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {core_output_layout(params).size}")
         self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
-        self.ii = 1
+        self.ii = self.core.ii
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = max(k for _, k in self.signals) - 1

@@ -626,6 +626,8 @@ def _summarise(design: Design, runs: list[Run], raw: dict, simulator: str, build
             if run.p_ready >= 1.0:
                 lat += [int(v) for v in sr.get("latencies", [])]
             acc = sr.get("accepted_at", [])
+            if int(design.manifest["ii"]) > 1:  # serial: the warm-up transfers are not throttled
+                acc = acc[design.warmup:]
             if run.p_ready >= 1.0 and run.p_valid >= 1.0 and len(acc) > 1 and seg.drain:
                 seg_ii = (acc[-1] - acc[0]) / (len(acc) - 1)
                 ii = seg_ii if ii is None else max(ii, seg_ii)

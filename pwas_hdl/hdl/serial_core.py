@@ -1,0 +1,286 @@
+"""The serial ("small") PWAS core: one multiplier per target, ``n + 1`` cycles per sample.
+
+The MOBY-DIC serial architecture (issue 15, item 2) for small devices such as an iCE40 UP5K. It
+computes exactly what the parallel core (:class:`pwas_hdl.hdl.core.PWASCore`) computes -- the same
+bit-true model (:class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`), bit for bit -- with one
+multiply-accumulate unit per target and one weight memory of ``N`` words instead of ``n + 1``
+banks and an adder tree.
+
+Data path::
+
+    in.payload (n codes) -> scale/clamp/split -> rank -> n+1 vertex addresses + mu   (PWASCore._vertices)
+        -> load register (n+1 addresses, n+1 mu) -> one vertex per cycle, k = 0 .. n
+        -> one synchronous memory read (N words, all targets in one word)
+        -> [mem_out register] -> one multiplier per target -> [product register]
+        -> accumulator (k = 0 loads, k > 0 adds) -> rounding + saturation -> out.payload
+
+The front end is the parallel core's own (:meth:`PWASCore._vertices` with the replicated
+addressing: the address of a vertex is its linear index in the vertex order of
+:mod:`pwas_hdl.fit.geometry`), with the same optional ``split`` / ``rank`` / ``addr`` registers;
+the rounding is the parallel core's own (:meth:`PWASCore._round`). The sum of the ``n + 1``
+products is accumulated in vertex order instead of the adder tree's order: integer sums are
+exact (every partial sum fits ``F + B_w`` signed bits, see :mod:`pwas_hdl.hdl.core`), so the
+accumulator equals the tree's sum and the one rounding step gives identical output codes.
+
+Flow control (one global enable, as the parallel core, plus an input throttle)::
+
+    advance  = ~out.valid | out.ready          (every register and the memory read port)
+    in.ready = advance & (gap == 0)            (gap: n .. 0, counts advancing cycles after a transfer)
+
+so the input accepts at most one sample every ``n + 1`` advancing cycles (II = n + 1 at full
+speed); a stalled sink stops everything, including the throttle. A valid sample reaches the
+load register exactly ``n + 1`` or more advancing cycles after the previous one, when the
+previous sample's last vertex is being read: the load never overwrites a vertex still to be read.
+
+Latency (input transfer to ``out.valid``, no stalls): ``split + rank + addr + 1 (load) + n
+(vertices 1..n) + 1 (memory) + mem_out + product + 1 (accumulator) + 1 (output)``; the
+``tree_levels`` option does not apply (there is no adder tree).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from amaranth.hdl import Const, Module, Signal, signed, unsigned
+from amaranth.lib.memory import Memory
+
+from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
+from pwas_hdl.hdl.core import PWASCore, _Pipe
+from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
+
+__all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency"]
+
+#: The values of ``generate --architecture``.
+ARCHITECTURES = ("parallel", "serial")
+
+
+def serial_latency(pipeline: Pipeline, n: int) -> int:
+    """Cycles from an input transfer to its output in the serial core (no stalls).
+
+    Parameters
+    ----------
+    pipeline : Pipeline
+        ``split``, ``rank``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels`` does not.
+    n : int
+        Regressor dimension.
+    """
+    return int(pipeline.split) + int(pipeline.rank) + int(pipeline.addr) + 1 + n + 1 + int(pipeline.mem_out) \
+        + int(pipeline.product) + 1 + 1
+
+
+class SingleMemoryPlan(MemoryPlan):
+    """One weight memory of ``N`` words, address = linear vertex index (C order, last dimension
+    fastest), each word packing all ``nz`` targets (target 0 in the LSBs).
+
+    The ``layout`` is the replicated layout of the grid (whose copy 0 is exactly this memory);
+    only one copy exists.
+    """
+
+    @property
+    def kind(self) -> str:
+        return "single"
+
+    @property
+    def n_banks(self) -> int:
+        return 1
+
+    @property
+    def words(self) -> int:
+        return self.depth
+
+    @classmethod
+    def build(cls, p: CoreParams, kind: str = "single") -> "SingleMemoryPlan":
+        from pwas_hdl.fixedpoint.bitfields import pack_rows
+        from pwas_hdl.fixedpoint.memory_layout import make_layout
+
+        layout = make_layout(p.grid, "replicated")  # depth N, address = linear vertex index
+        words = tuple(pack_rows(np.asarray(p.weights, dtype=np.int64), p.weight_width))
+        return cls(layout, p.nz * p.weight_width, (words,))
+
+    def layout_spec(self) -> dict:
+        """The manifest's ``memory.layout_spec`` of the serial design."""
+        return {"kind": "single", "memories": 1, "depth": int(self.depth),
+                "address": "linear vertex index (C order, last dimension fastest)"}
+
+
+class SerialPWASCore(PWASCore):
+    """Serial PWAS evaluator: one regressor every ``n + 1`` clocks, ``nz`` estimates out.
+
+    Parameters
+    ----------
+    params : CoreParams
+    pipeline : Pipeline, preset name ("min", "balanced", "max") or None (balanced)
+        ``split``, ``rank``, ``addr`` (front end), ``mem_out`` and ``product`` registers apply.
+
+    Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.ready`` is low while a sample is in the
+    multiply-accumulate loop).
+
+    Attributes
+    ----------
+    latency : int
+        :func:`serial_latency`.
+    ii : int
+        ``n + 1``.
+    memory_plan : SingleMemoryPlan
+    """
+
+    architecture = "serial"
+
+    def __init__(self, params: CoreParams, *, pipeline: Pipeline | str | None = None, memory: str = "single"):
+        self._MustUse__silence = True
+        if memory != "single":
+            raise ValueError(f"the serial core has one weight memory (memory='single'), got {memory!r}")
+        super().__init__(params, memory="replicated", pipeline=pipeline)
+        self._MustUse__silence = True
+        # the front end's addresses are the replicated layout's (linear vertex index)
+        self.memory_plan = SingleMemoryPlan.build(params)
+        self.memory_kind = "replicated"
+        self.latency = serial_latency(self.pipeline, params.n)
+        self.ii = params.n + 1
+        self._MustUse__silence = False
+
+    @property
+    def extra_info(self) -> dict:
+        """Manifest entries of the serial architecture (merged by :func:`pwas_hdl.hdl.api.design_info`)."""
+        return {"architecture": architecture_info(self)}
+
+    def flow_control(self, names: dict) -> dict:
+        """The handshake rules in words (``names``: port names by role)."""
+        ov, orr, ir = names["out.valid"], names["out.ready"], names["in.ready"]
+        return {
+            "advance": f"~{ov} | {orr}",
+            ir: f"advance & (gap == 0): one transfer every {self.ii} advancing cycles at most (II = n + 1); "
+            f"gap counts the advancing cycles since the last transfer",
+        }
+
+    def build_into(self, m: Module, payload, valid, advance, out) -> None:
+        """Add the serial core's logic to ``m`` (as :meth:`PWASCore.build_into`).
+
+        ``advance`` is driven with ``(~out.valid | out.ready) & (gap == 0)``: the input is taken
+        when ``valid & advance``.
+        """
+        p = self.params
+        n, nb, nz = p.n, p.n + 1, p.nz
+        dw, bw, accw = p.frac + 1, p.weight_width, p.acc_width
+        plan = self.memory_plan
+        aw = plan.addr_width
+        pl = self.pipeline
+
+        adv = Signal(name="mac_advance")
+        m.d.comb += adv.eq(~out.valid | out.ready)
+        gap = Signal(unsigned(bits_for(n)), name="gap")
+        free = Signal(name="gap_free")
+        m.d.comb += free.eq(~gap.any())
+        m.d.comb += advance.eq(adv & free)
+        take = valid & free
+        gap_dec = add_const_wrap(m, gap, -1, "gap_dec")
+        with m.If(adv):
+            with m.If(take):
+                m.d.sync += gap.eq(n)
+            with m.Elif(~free):
+                m.d.sync += gap.eq(gap_dec)
+
+        # ---------------------------------------------------------- front end (the parallel core's)
+        pipe = _Pipe(m, adv)
+        fvalid, addr, mus, _rot, oor = self._vertices(m, pipe, payload, take)
+        pipe.finish()
+        front_regs = pipe.count
+
+        # ---------------------------------------------------------- load / shift register of the vertices
+        q_addr = [Signal(unsigned(aw), name=f"q_addr{k}", reset_less=True) for k in range(nb)] if aw else []
+        q_mu = [Signal(unsigned(dw), name=f"q_mu{k}", reset_less=True) for k in range(nb)]
+        q_v = [Signal(name=f"q_valid{k}") for k in range(nb)]
+        oor_v = oor if not isinstance(oor, bool) else None
+        q_oor = Signal(name="q_oor", reset_less=True) if oor_v is not None else Const(int(oor), 1)
+        with m.If(adv):
+            with m.If(fvalid):
+                m.d.sync += [q_addr[k].eq(addr[k]) for k in range(nb) if aw]
+                m.d.sync += [q_mu[k].eq(mus[k]) for k in range(nb)]
+                m.d.sync += [q_v[k].eq(1) for k in range(nb)]
+                if oor_v is not None:
+                    m.d.sync += q_oor.eq(oor_v)
+            with m.Else():
+                m.d.sync += [q_addr[k].eq(q_addr[k + 1]) for k in range(n) if aw]
+                m.d.sync += [q_mu[k].eq(q_mu[k + 1]) for k in range(n)]
+                m.d.sync += [q_v[k].eq(q_v[k + 1]) for k in range(n)] + [q_v[n].eq(0)]
+        # position 0 holds vertex k: it is the first when all n+1 positions are full, the last when
+        # position 1 is empty (the next sample arrives only after position 0 held vertex n)
+        first = q_v[n]
+        last = ~q_v[1]
+
+        # ---------------------------------------------------------- memory read (the register)
+        mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[0])
+        m.submodules["wmem0"] = mem
+        rp = mem.read_port(domain="sync")
+        if aw:
+            rp.addr = q_addr[0]
+        rp.en = adv
+
+        regs = []  # (dst, src) pairs enabled by adv
+        valids = []
+
+        def reg(name, val, shape, reset_less=True):
+            r = Signal(shape, name=name, reset_less=reset_less)
+            (regs if reset_less else valids).append((r, val))
+            return r
+
+        m_v = reg("m_valid", q_v[0], 1, reset_less=False)
+        m_first = reg("m_first", first, 1)
+        m_last = reg("m_last", last, 1)
+        m_mu = reg("m_mu", q_mu[0], unsigned(dw))
+        m_oor = reg("m_oor", q_oor, 1)
+        data = rp.data
+        if pl.mem_out:
+            data = reg("mo_data", data, unsigned(plan.word_bits))
+            m_v = reg("mo_valid", m_v, 1, reset_less=False)
+            m_first, m_last = reg("mo_first", m_first, 1), reg("mo_last", m_last, 1)
+            m_mu, m_oor = reg("mo_mu", m_mu, unsigned(dw)), reg("mo_oor", m_oor, 1)
+
+        # ---------------------------------------------------------- one multiplier per target
+        prods = []
+        for z in range(nz):
+            w = data[z * bw : (z + 1) * bw].as_signed()
+            pr = Signal(signed(dw + bw), name=f"prod{z}")  # accw + 1 bits (exact)
+            m.d.comb += pr.eq(m_mu * w)
+            prods.append(pr)
+        if pl.product:
+            prods = [reg(f"p_prod{z}", prods[z], signed(dw + bw)) for z in range(nz)]
+            m_v = reg("p_valid", m_v, 1, reset_less=False)
+            m_first, m_last = reg("p_first", m_first, 1), reg("p_last", m_last, 1)
+            m_oor = reg("p_oor", m_oor, 1)
+
+        # ---------------------------------------------------------- accumulate (vertex order)
+        accs = []
+        for z in range(nz):
+            acc = Signal(signed(accw + 1), name=f"acc{z}", reset_less=True)
+            nxt = add_wrap(m, acc.as_unsigned(), prods[z].as_unsigned(), f"acc_next{z}")
+            with m.If(adv & m_v):
+                with m.If(m_first):
+                    m.d.sync += acc.eq(prods[z])
+                with m.Else():
+                    m.d.sync += acc.eq(nxt)
+            accs.append(acc)
+        a_done = reg("acc_done", m_v & m_last, 1, reset_less=False)
+        a_oor = reg("acc_oor", m_oor, 1)
+
+        # ---------------------------------------------------------- round, saturate, output register
+        zs = self._round(m, accs)
+        outw = p.out_width
+        for z, o in enumerate(zs):
+            regs.append((out.payload[z * outw : (z + 1) * outw], o))
+        regs.append((out.payload[-1], a_oor))
+        valids.append((out.valid, a_done))
+        with m.If(adv):
+            m.d.sync += [d.eq(s) for d, s in regs] + [d.eq(s) for d, s in valids]
+        got = front_regs + 1 + n + 1 + int(pl.mem_out) + int(pl.product) + 1 + 1
+        assert got == self.latency, (got, self.latency)
+
+
+def architecture_info(core) -> dict:
+    """The manifest's ``architecture`` entry of a core (parallel or serial)."""
+    p = core.params
+    if getattr(core, "architecture", "parallel") == "serial":
+        return {"kind": "serial", "multipliers": p.nz, "multipliers_per_target": 1, "cycles_per_sample": p.n + 1,
+                "ii": p.n + 1, "meaning": "one multiply-accumulate unit per target, one vertex weight x barycentric "
+                "coordinate per cycle, n + 1 cycles per sample, one weight memory of N words"}
+    return {"kind": "parallel", "multipliers": (p.n + 1) * p.nz, "multipliers_per_target": p.n + 1, "cycles_per_sample": 1,
+            "ii": 1, "meaning": "n + 1 memories read and n + 1 multipliers per target in every cycle, adder tree, II = 1"}
