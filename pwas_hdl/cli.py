@@ -263,6 +263,7 @@ def fit(
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Column naming the trajectory of each row (no regressor straddles two).")] = None,
     domain: Annotated[Optional[str], typer.Option("--domain", help="Explicit domain 'lo:hi,lo:hi,...' (one pair per regressor) instead of the gamma-expanded data box.")] = None,
     separate_lag_domains: Annotated[bool, typer.Option("--separate-lag-domains", help="Give each lag its own data range (default: all lags of a signal share one interval, as the hardware scales once per signal).")] = False,
+    breakpoints: Annotated[Optional[str], typer.Option("--breakpoints", help="Non-uniform partition (same N as the uniform grid): quantile (cuts at the k/p data quantiles inside the domain), quantile-pow2 (the same, cell widths rounded to power-of-two multiples of a base step: no divider in hardware), or FILE: JSON {\"format\": \"pwas-hdl-breakpoints\", \"version\": 1, \"breakpoints\": [[b0, .., bp], ...]} with one strictly increasing list per regressor (it sets the partitions and the domain). Default: equal intervals.")] = None,
     output_model: Annotated[Optional[Path], _hidden("--output-model")] = None,
     input_old: Annotated[Optional[list[str]], _hidden("--input")] = None,
     output_old: Annotated[Optional[list[str]], _hidden("--output")] = None,
@@ -345,6 +346,16 @@ def fit(
                 raise InputError(f"--z0 needs one value per target ({len(tgts)}), got {len(init)}")
             if not isinstance(init, str) and not all(np.isfinite(init)):
                 raise InputError(f"--z0 values must be finite numbers, got {z0!r}")
+        bps, bp_names = breakpoints, None
+        if breakpoints is not None and breakpoints not in ("quantile", "quantile-pow2"):
+            from pwas_hdl.fit.breakpoints import read_breakpoints
+
+            if dom is not None:
+                raise InputError("--domain and a --breakpoints FILE both set the domain: give one of them")
+            bpath = Path(breakpoints)
+            if not bpath.is_file():
+                raise InputError(f"--breakpoints must be quantile, quantile-pow2 or a breakpoints file; {breakpoints!r} is neither")
+            bps, bp_names = read_breakpoints(bpath)
         from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor(
             mu=mu,
@@ -366,6 +377,7 @@ def fit(
             refine=refine,
             initial_state=init,
             additive=additive,
+            breakpoints=bps,
         )
         if additive is not None and not bank:  # the parts are checked before the data are read into a fit
             from pwas_hdl.fit.additive import parse_additive
@@ -374,6 +386,9 @@ def fit(
             parse_additive(additive, LagStructure(mu, my, len(ins) if mu else 0, len(outs) if my else 0).signal_of_dimension())
         with _progress("cross-validating sigma" if sigma is None else "solving") as update:
             model.fit(u, y, z, progress=update)
+        if bp_names is not None and bp_names != model.to_dict()["regressors"]:
+            raise InputError(f"--breakpoints {breakpoints}: the file is for regressors {bp_names}, the fit has "
+                             f"{model.to_dict()['regressors']}")
         if classes is not None:
             model.classifier_ = {"target": class_target, "classes": classes}
         with outset:

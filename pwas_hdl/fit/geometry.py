@@ -1,4 +1,4 @@
-"""Uniform simplicial (Kuhn / Freudenthal "type-1") partition of a hyper-rectangle.
+"""Simplicial (Kuhn / Freudenthal "type-1") partition of a hyper-rectangle, uniform or with given breakpoints.
 
 This module is the single source of truth for the geometry used by the fit, the float and
 fixed-point models and the hardware generator.
@@ -32,6 +32,18 @@ Location of a point (Kuhn's lemma)
 
 Equivalently (the form used by the hardware, with no sorter): dimension ``j`` has stepped at
 vertex ``k`` exactly when ``rank_j < k``.
+
+Non-uniform partitions (``breakpoints``, issue 15 item 3)
+    Dimension ``j`` may instead be cut at given breakpoints ``lo_j = b_j0 < b_j1 < ... < b_jp = hi_j``
+    (``p_j + 1`` values). Only step 1 changes: the grid coordinate is the piecewise-linear warp
+    ``s_j = c + (x_j - b_jc) / (b_j(c+1) - b_jc)`` for ``b_jc <= x_j < b_j(c+1)`` (then clamped to
+    ``[0, p_j]`` as above), and vertex ``v`` sits at ``b_jv_j``. Cells, fractions, ordering,
+    vertices, barycentric weights, the vertex numbering and everything that works in grid units
+    (basis matrix, regularisation, memory layouts) are those of the uniform partition; a grid
+    without breakpoints takes exactly the uniform code path. :attr:`Grid.step` is then the mean
+    cell width ``(hi - lo) / p``. :func:`quantile_breakpoints` places them at data quantiles,
+    :func:`pow2_breakpoints` rounds their cell widths to power-of-two multiples of a base step
+    (the hardware-friendly variant: the fraction needs a shift, no divider).
 """
 
 from __future__ import annotations
@@ -44,7 +56,14 @@ import numpy as np
 
 from pwas_hdl.limits import MAX_REGRESSORS, check_limit, check_vertices
 
-__all__ = ["Grid", "Location"]
+__all__ = ["Grid", "Location", "quantile_breakpoints", "pow2_breakpoints", "pow2_exponents", "BREAKPOINT_RULES", "MAX_POW2_RATIO"]
+
+#: Rules of ``fit --breakpoints`` besides a file: data quantiles, or quantiles rounded to
+#: power-of-two multiples of a base step.
+BREAKPOINT_RULES = ("quantile", "quantile-pow2")
+#: Largest ratio of two cell widths of one dimension in the power-of-two variant (each doubling
+#: costs one bit of the warped code).
+MAX_POW2_RATIO = 16
 
 
 @dataclass(frozen=True)
@@ -98,8 +117,31 @@ def _as_partitions(p: int | Sequence[int], n: int) -> tuple[int, ...]:
     return tuple(out)
 
 
+def _as_breakpoints(bps, lo: np.ndarray, hi: np.ndarray, parts: tuple[int, ...]):
+    if len(bps) != len(parts):
+        raise ValueError(f"breakpoints need {len(parts)} entries (one per dimension, None = uniform), got {len(bps)}")
+    out = []
+    for j, b in enumerate(bps):
+        if b is None:
+            out.append(None)
+            continue
+        arr = np.asarray(b, dtype=float).reshape(-1)
+        if arr.size != parts[j] + 1:
+            raise ValueError(f"breakpoints of dimension {j} have {arr.size} values; p = {parts[j]} intervals need {parts[j] + 1}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"breakpoints of dimension {j} contain NaN or infinite values")
+        if not np.all(np.diff(arr) > 0):
+            k = int(np.flatnonzero(~(np.diff(arr) > 0))[0])
+            raise ValueError(f"breakpoints of dimension {j} must increase strictly: b[{k}] = {arr[k]!r} >= b[{k + 1}] = {arr[k + 1]!r}")
+        if arr[0] != lo[j] or arr[-1] != hi[j]:
+            raise ValueError(f"breakpoints of dimension {j} must start at lo = {lo[j]!r} and end at hi = {hi[j]!r}, "
+                             f"got {arr[0]!r} .. {arr[-1]!r}")
+        out.append(arr)
+    return tuple(out) if any(b is not None for b in out) else None
+
+
 class Grid:
-    """Uniform Kuhn simplicial partition of the box ``[lo, hi]``.
+    """Kuhn simplicial partition of the box ``[lo, hi]``, uniform or cut at given breakpoints.
 
     Parameters
     ----------
@@ -107,6 +149,9 @@ class Grid:
         Lower and upper bounds of the domain, physical units; ``hi > lo`` elementwise.
     partitions : int or array_like of int, shape (n,)
         Number of intervals ``p_j >= 1`` per dimension (one int is used for every dimension).
+    breakpoints : sequence of (array_like or None), optional
+        Per dimension, the ``p_j + 1`` strictly increasing cut points from ``lo_j`` to ``hi_j``
+        (physical units), or None for equal intervals. Default: uniform in every dimension.
 
     Examples
     --------
@@ -115,7 +160,8 @@ class Grid:
     (15, 16)
     """
 
-    def __init__(self, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int]):
+    def __init__(self, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int],
+                 breakpoints: Sequence[Sequence[float] | None] | None = None):
         lo_a = np.asarray(lo, dtype=float).reshape(-1)
         hi_a = np.asarray(hi, dtype=float).reshape(-1)
         if lo_a.shape != hi_a.shape or lo_a.size == 0:
@@ -142,6 +188,13 @@ class Grid:
             strides[j] = strides[j + 1] * self.shape[j + 1]
         self.strides = strides
         self.step = (self.hi - self.lo) / self.partitions
+        #: None (uniform), or per dimension None / the p_j + 1 cut points (float arrays)
+        self.breakpoints = None if breakpoints is None else _as_breakpoints(breakpoints, self.lo, self.hi, parts)
+
+    @property
+    def uniform(self) -> bool:
+        """True when every dimension has equal intervals."""
+        return self.breakpoints is None
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -155,7 +208,8 @@ class Grid:
         return math.factorial(self.n) * int(np.prod(self.partitions))
 
     def __repr__(self) -> str:
-        return f"Grid(lo={self.lo.tolist()}, hi={self.hi.tolist()}, partitions={self.partitions.tolist()})"
+        bp = "" if self.breakpoints is None else f", breakpoints={[None if b is None else b.tolist() for b in self.breakpoints]}"
+        return f"Grid(lo={self.lo.tolist()}, hi={self.hi.tolist()}, partitions={self.partitions.tolist()}{bp})"
 
     def __eq__(self, other: object) -> bool:
         return (
@@ -163,6 +217,7 @@ class Grid:
             and np.array_equal(self.lo, other.lo)
             and np.array_equal(self.hi, other.hi)
             and np.array_equal(self.partitions, other.partitions)
+            and _same_breakpoints(self.breakpoints, other.breakpoints)
         )
 
     __hash__ = None  # mutable numpy members
@@ -195,7 +250,13 @@ class Grid:
 
     def vertex_points(self, index: np.ndarray | int | None = None) -> np.ndarray:
         """Physical coordinates of vertices, shape (..., n)."""
-        return self.lo + self.vertex_coords(index) * self.step
+        coords = self.vertex_coords(index)
+        pts = self.lo + coords * self.step
+        if self.breakpoints is not None:
+            for j, b in enumerate(self.breakpoints):
+                if b is not None:
+                    pts[..., j] = b[coords[..., j]]
+        return pts
 
     # --------------------------------------------------------------- location
     def to_grid_units(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -219,6 +280,11 @@ class Grid:
         if not np.all(np.isfinite(xa)):
             raise ValueError("points contain NaN or infinite values; clean the data before evaluating")
         s = (xa - self.lo) / self.step
+        if self.breakpoints is not None:
+            for j, b in enumerate(self.breakpoints):
+                if b is not None:  # piecewise-linear warp: cell c, then the fraction within it
+                    c = np.clip(np.searchsorted(b, xa[:, j], side="right") - 1, 0, b.size - 2)
+                    s[:, j] = c + (xa[:, j] - b[c]) / (b[c + 1] - b[c])
         out = np.any((s < 0) | (s > self.partitions), axis=1)
         np.clip(s, 0, self.partitions, out=s)
         return s, out
@@ -374,3 +440,102 @@ class Grid:
         keep = coords[:, dim] < self.partitions[dim]
         a = np.flatnonzero(keep).astype(np.int64)
         return a, a + self.strides[dim]
+
+
+def _same_breakpoints(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    return len(a) == len(b) and all((x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
+                                    for x, y in zip(a, b))
+
+
+def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int],
+                         min_width: float = 0.05) -> list[np.ndarray]:
+    """Breakpoints at the data quantiles: every cell of dimension ``j`` holds about ``1/p_j`` of the samples.
+
+    Parameters
+    ----------
+    x : ndarray, shape (m, n)
+        Regressor samples (physical units).
+    lo, hi : array_like, shape (n,)
+        The domain (e.g. the data range expanded by ``gamma``); the outer breakpoints are ``lo``
+        and ``hi``, the inner ones the ``k / p_j`` quantiles (``k = 1 .. p_j - 1``) of the samples
+        inside ``[lo_j, hi_j]``.
+    partitions : int or sequence of int
+    min_width : float
+        No cell narrower than ``min_width`` times the uniform width ``(hi - lo) / p`` (repeated
+        values and tails would give empty cells): the cuts are then pushed apart, keeping their
+        order.
+
+    Returns
+    -------
+    list of ndarray, one per dimension, ``p_j + 1`` strictly increasing values
+    """
+    xa = np.atleast_2d(np.asarray(x, dtype=float))
+    lo_a, hi_a = np.asarray(lo, dtype=float).reshape(-1), np.asarray(hi, dtype=float).reshape(-1)
+    parts = _as_partitions(partitions, lo_a.size)
+    if xa.shape[1] != lo_a.size or xa.shape[0] < 1:
+        raise ValueError(f"quantile breakpoints need samples with {lo_a.size} columns, got shape {xa.shape}")
+    if not 0 < min_width < 1:
+        raise ValueError(f"min_width must be in (0, 1), got {min_width!r}")
+    out = []
+    for j, p in enumerate(parts):
+        col = xa[:, j]
+        col = col[(col >= lo_a[j]) & (col <= hi_a[j])]
+        if col.size == 0:
+            raise ValueError(f"no sample of dimension {j} lies inside its domain [{lo_a[j]}, {hi_a[j]}]: no quantiles")
+        inner = np.quantile(col, np.arange(1, p) / p) if p > 1 else np.empty(0)
+        out.append(_spread(np.concatenate([[lo_a[j]], inner, [hi_a[j]]]), min_width * (hi_a[j] - lo_a[j]) / p))
+    return out
+
+
+def _spread(b: np.ndarray, gap: float) -> np.ndarray:
+    """Push the inner cuts of ``b`` (ends fixed) apart so that every cell is at least ``gap`` wide."""
+    b = b.copy()
+    p = b.size - 1
+    for k in range(1, p):  # forward: at least gap above the previous cut, room for the cells left
+        b[k] = min(max(b[k], b[k - 1] + gap), b[-1] - (p - k) * gap)
+    for k in range(p - 1, 0, -1):
+        b[k] = min(b[k], b[k + 1] - gap)
+    return b
+
+
+def pow2_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int],
+                     max_ratio: int = MAX_POW2_RATIO) -> list[np.ndarray]:
+    """Quantile breakpoints whose cell widths are power-of-two multiples of one base step per dimension.
+
+    The quantile cell widths ``t_k`` (:func:`quantile_breakpoints`) are rounded in the log domain:
+    ``e_k = round(log2(t_k / min t))``, capped at ``log2(max_ratio)``; the cells are then
+    ``2**e_k * h0`` wide with ``h0 = (hi - lo) / sum 2**e_k`` (the domain is kept). In hardware a
+    cell of ``2**e_k`` base steps is ``2**(e_k + f0)`` input codes, and the fraction within it is
+    a shift of the code offset (:mod:`pwas_hdl.fixedpoint.warp`).
+
+    Returns
+    -------
+    list of ndarray, one per dimension, ``p_j + 1`` strictly increasing values
+    """
+    if not isinstance(max_ratio, (int, np.integer)) or max_ratio < 1 or max_ratio & (max_ratio - 1):
+        raise ValueError(f"max_ratio must be a power of two >= 1, got {max_ratio!r}")
+    emax = int(max_ratio).bit_length() - 1
+    q = quantile_breakpoints(x, lo, hi, partitions)
+    out = []
+    for b in q:
+        t = np.diff(b)
+        e = np.clip(np.rint(np.log2(t / t.min())), 0, emax).astype(np.int64)
+        units = np.concatenate([[0], np.cumsum(1 << e)])
+        h0 = (b[-1] - b[0]) / units[-1]
+        nb = b[0] + h0 * units
+        nb[-1] = b[-1]
+        out.append(nb)
+    return out
+
+
+def pow2_exponents(b: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """``(e, h0)`` when the cells of ``b`` are ``2**e_k * h0`` wide (to 1e-9 relative), else None."""
+    t = np.diff(np.asarray(b, dtype=float))
+    h0 = float(t.min())
+    r = t / h0
+    e = np.rint(np.log2(r)).astype(np.int64)
+    if np.all(np.abs(r - (1 << e)) <= 1e-9 * r):
+        return e, h0
+    return None

@@ -95,6 +95,8 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
             "lo": [float(v) for v in grid.lo],
             "hi": [float(v) for v in grid.hi],
             "partitions": [int(v) for v in grid.partitions],
+            **({"breakpoints": [None if b is None else [float(v) for v in b] for b in grid.breakpoints]}
+               if getattr(grid, "breakpoints", None) is not None else {}),
         },
         "weights": {t: [float(v) for v in sensor.weights_[:, i]] for i, t in enumerate(tgts)},
         "fit": {
@@ -108,6 +110,8 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
             "n_trajectories": int(sensor.n_trajectories_),
             "train_rmse": {t: float(v) for t, v in zip(tgts, sensor.train_rmse_)},
             "cv": sensor.cv_.to_dict() if sensor.cv_ is not None else None,
+            **({"breakpoints": sensor.breakpoints if isinstance(sensor.breakpoints, str) else "given"}
+               if getattr(grid, "breakpoints", None) is not None else {}),
         },
     }
     classifier = getattr(sensor, "classifier_", None)
@@ -239,7 +243,7 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
             vals = rec["initial_state"].get("values")
             if vals is None or list(vals) != tgts or any(len(v) != mz for v in vals.values()):
                 return [f"recurrence.initial_state.values must give Mz = {mz} values for each of the targets {tgts}"]
-    for key in ("lo", "hi", "partitions"):
+    for key in ("lo", "hi", "partitions") + (("breakpoints",) if "breakpoints" in g else ()):
         if len(g[key]) != n:
             errs.append(f"grid.{key} has {len(g[key])} values, the lags give n = {n} regressors")
     if errs:
@@ -333,7 +337,7 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
 
             grid = AdditiveGrid(g["lo"], g["hi"], g["partitions"], d["additive"]["parts"])
         else:
-            grid = Grid(g["lo"], g["hi"], g["partitions"])
+            grid = Grid(g["lo"], g["hi"], g["partitions"], breakpoints=g.get("breakpoints"))
     except ValueError as exc:  # widths <= 0, too many vertices, ...
         raise InputError(f"{source}: grid: {exc}; {_HINT}") from exc
     w = np.array([d["weights"][t] for t in tgts], dtype=float).T.reshape(grid.n_vertices, len(tgts))
@@ -351,6 +355,9 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         target_names=tgts,
         additive=d["additive"]["spec"] if "additive" in d else None,
     )
+    if getattr(grid, "breakpoints", None) is not None:  # the rule, or the cut points themselves when they were given
+        rule = fit.get("breakpoints", "given")
+        obj.breakpoints = rule if rule != "given" else [None if b is None else b.tolist() for b in grid.breakpoints]
     cv = fit["cv"]
     if "front_end" in d:
         fe, taps, _ = _front_end_regressors(d)

@@ -25,7 +25,7 @@ from pwas_hdl.fit import model_file
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
-from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.geometry import BREAKPOINT_RULES, Grid, pow2_breakpoints, quantile_breakpoints
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
 from pwas_hdl.fit.regularized_lsq import (
@@ -105,6 +105,15 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         ``grid_`` is then an :class:`~pwas_hdl.fit.additive.AdditiveGrid` and ``weights_`` the
         stacked part weights. ``None`` (default): one PWAS function on all regressors. Lag
         regressors only (not with the observer-bank front end).
+    breakpoints : None, "quantile", "quantile-pow2" or sequence of array_like
+        Non-uniform partition (:mod:`pwas_hdl.fit.geometry`). None (default): equal intervals.
+        ``"quantile"``: cuts at the ``k / p_j`` quantiles of the training regressors inside the
+        domain (:func:`~pwas_hdl.fit.geometry.quantile_breakpoints`); ``"quantile-pow2"``: the
+        same rounded to cells that are power-of-two multiples of a base step
+        (:func:`~pwas_hdl.fit.geometry.pow2_breakpoints`). A sequence: one array of ``p_j + 1``
+        strictly increasing cut points per regressor dimension, physical units; it fixes the
+        domain (first and last cut) and the partitions (``domain`` and ``partitions`` are then
+        not used). Same number of weights ``N`` as the uniform grid with the same partitions.
 
     Attributes (after ``fit``)
     --------------------------
@@ -137,6 +146,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         refine: int = 0,
         initial_state: str | Sequence[float] = "mean",
         additive: str | Sequence[Sequence[int]] | None = None,
+        breakpoints: str | Sequence[Sequence[float]] | None = None,
     ):
         self.mu = mu
         self.my = my
@@ -157,6 +167,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.refine = refine
         self.initial_state = initial_state
         self.additive = additive
+        self.breakpoints = breakpoints
 
     # ------------------------------------------------------------ validation
     def _check_params(self) -> None:
@@ -184,9 +195,34 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise InputError("an additive sensor (--additive) needs the lag front end (--front-end lags)")
         if self.additive is not None and self.mz:
             raise InputError("an additive sensor (--additive) with past estimates (--mz) is not available yet; use one of them")
+        if isinstance(self.breakpoints, str) and self.breakpoints not in BREAKPOINT_RULES:
+            raise InputError(f"breakpoints must be None, {', '.join(BREAKPOINT_RULES)} or one list of cut points per "
+                             f"regressor, got {self.breakpoints!r}")
+        if self.breakpoints is not None and self.additive is not None:
+            raise InputError("breakpoints (non-uniform partition) with an additive sensor is not available yet; use one of them")
         if self.sigma_grid is not None and hasattr(self.sigma_grid, "__len__"):
             check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
                         "give fewer candidates (--sigma-grid)")
+
+    def _make_grid(self, xi: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Grid:
+        """The partition of the fit: uniform, at data quantiles, or at the given breakpoints."""
+        bp = self.breakpoints
+        if bp is None:
+            return Grid(lo, hi, self.partitions)
+        if isinstance(bp, str):
+            parts = Grid(lo, hi, self.partitions).partitions  # validated partitions
+            rule = quantile_breakpoints if bp == "quantile" else pow2_breakpoints
+            return Grid(lo, hi, parts, breakpoints=rule(xi, lo, hi, parts))
+        rows = [np.asarray(b, dtype=float).reshape(-1) for b in bp]
+        if len(rows) != xi.shape[1]:
+            raise InputError(f"{len(rows)} breakpoint lists for n = {xi.shape[1]} regressors (one list per regressor)")
+        for j, b in enumerate(rows):
+            if b.size < 2:
+                raise InputError(f"breakpoints of regressor {j} have {b.size} value(s); a dimension needs at least 2 (one interval)")
+        try:
+            return Grid([b[0] for b in rows], [b[-1] for b in rows], [b.size - 1 for b in rows], breakpoints=rows)
+        except ValueError as exc:
+            raise InputError(str(exc)) from exc
 
     @property
     def _bank(self) -> bool:
@@ -357,7 +393,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             grid = AdditiveGrid(lo, hi, self.partitions, parse_additive(self.additive, lags.signal_of_dimension()))
             basis_dims = grid.basis_dims
         else:
-            grid = Grid(lo, hi, self.partitions)
+            grid = self._make_grid(xi, lo, hi)
             basis_dims = grid.n
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)

@@ -1,0 +1,236 @@
+"""Bit-true model of the power-of-two warp: non-uniform (``--breakpoints quantile-pow2``) PWAS in hardware.
+
+A non-uniform partition whose cells are power-of-two multiples of one base step per dimension
+(:func:`pwas_hdl.fit.geometry.pow2_breakpoints`) needs no divider: a small *warp* stage maps the
+input code to the code of a uniform grid, and the unchanged uniform core
+(:class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`, :class:`pwas_hdl.hdl.core.PWASCore`) does
+the rest. This module is the specification of that stage, bit for bit
+(:mod:`pwas_hdl.hdl.warp` is its RTL).
+
+Per dimension ``j`` (index ``j`` dropped), cells ``k = 0 .. p-1`` of ``2**e_k`` base steps ``h0``:
+
+* input codes: signed ``B_in`` bits, ``x = offset + lsb * q`` with ``lsb = h0 / 2**f0``, ``f0`` the
+  largest with ``S * 2**f0 <= min(input_fill * 2**B_in, 2**B_in - 1)`` (``S = sum_k 2**e_k`` base
+  steps across the domain); the domain is ``[B_0, B_p]`` in codes, ``B_0 = -((S 2**f0 + 1) // 2)``,
+  ``B_(k+1) = B_k + 2**(f0 + e_k)`` (every breakpoint is a code);
+* the uniform core sees ``u`` (signed ``W`` bits, its own input format: ``lo_code = L``, one cell
+  ``= 2**F`` codes, ``F >= f0 + max e_k``), where the warp is::
+
+      q <  B_0             -> u = L - 1                  (below: the core clamps and flags it)
+      q >  B_p             -> u = L + p 2**F + 1         (above: idem)
+      q == B_p             -> u = L + p 2**F             (the top face)
+      B_k <= q < B_(k+1)   -> u = L + k 2**F + ((q - B_k) << (F - f0 - e_k))
+
+  exact: within cell ``k`` the grid coordinate of the core, ``(u - L) / 2**F``, is
+  ``k + (q - B_k) / 2**(f0 + e_k)``, the float model's warp (:meth:`pwas_hdl.fit.geometry.Grid.to_grid_units`)
+  at the physical value of ``q``; so the error bound of the core applies unchanged.
+
+:class:`WarpedFixedPointModel` = the warps + a :class:`FixedPointModel` of the same weights on
+the unit grid (cells of one grid unit) with ``input_bits = W``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.geometry import Grid, pow2_exponents
+
+__all__ = ["Pow2Warp", "WarpedFixedPointModel"]
+
+
+@dataclass(frozen=True)
+class Pow2Warp:
+    """The warp of one dimension (all integers; see the module notes).
+
+    Attributes
+    ----------
+    input_bits : int
+        ``B_in`` of the input code ``q``.
+    code_breaks : tuple of int
+        ``B_0 .. B_p`` (input codes).
+    exps : tuple of int
+        ``e_k``: cell ``k`` is ``2**(f0 + e_k)`` input codes.
+    f0 : int
+    frac : int
+        ``F`` of the core's dimension (one core cell = ``2**F`` codes of ``u``).
+    lo_u : int
+        ``L``, the core's ``lo_code``.
+    width : int
+        ``W``, bits of the signed ``u``.
+    """
+
+    input_bits: int
+    code_breaks: tuple[int, ...]
+    exps: tuple[int, ...]
+    f0: int
+    frac: int
+    lo_u: int
+    width: int
+
+    @property
+    def p(self) -> int:
+        return len(self.exps)
+
+    def shifts(self) -> tuple[int, ...]:
+        """Left shift of cell ``k``: ``F - f0 - e_k``."""
+        return tuple(self.frac - self.f0 - e for e in self.exps)
+
+    def apply(self, q: np.ndarray) -> np.ndarray:
+        """``u`` codes (int64, same shape) for input codes ``q``."""
+        q = np.asarray(q, dtype=np.int64)
+        b = np.asarray(self.code_breaks, dtype=np.int64)
+        k = np.clip(np.searchsorted(b, q, side="right") - 1, 0, self.p - 1)
+        sh = np.asarray(self.shifts(), dtype=np.int64)[k]
+        u = self.lo_u + (k << self.frac) + ((q - b[k]) << sh)
+        u = np.where(q < b[0], self.lo_u - 1, u)
+        u = np.where(q > b[-1], self.lo_u + (self.p << self.frac) + 1, u)
+        return u
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"input_bits": self.input_bits, "code_breaks": list(self.code_breaks), "exps": list(self.exps), "f0": self.f0,
+                "F": self.frac, "lo_u": self.lo_u, "width": self.width, "shifts": list(self.shifts())}
+
+
+class WarpedFixedPointModel:
+    """Bit-true model of a power-of-two non-uniform PWAS: input quantisation, warp, uniform core.
+
+    Parameters
+    ----------
+    grid : Grid
+        With breakpoints whose cells are power-of-two multiples of one base step in every
+        dimension (a uniform dimension counts: all ``e_k = 0``).
+    weights : ndarray, shape (N,) or (N, nz)
+    input_bits : int
+        ``B_in`` of the inputs ``q`` (default 12).
+    input_fill : float
+        Largest fraction of the input code range the domain takes (default 0.9); also the fill of
+        the core's ``u`` codes.
+    **core_options
+        Weight / output formats, rounding, names, ``reference_error``: as
+        :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` (``input_scale`` must stay ``pow2``).
+
+    Attributes
+    ----------
+    warps : list of Pow2Warp
+    core : FixedPointModel
+        The uniform core on the unit grid, ``input_bits = W``.
+    lsb, offset : ndarray, shape (n,)
+        ``x = offset + lsb * q`` (physical units).
+    error_bound : float
+        The core's (the warp is exact).
+    """
+
+    def __init__(self, grid: Grid, weights: np.ndarray, *, input_bits: int = 12, input_fill: float = 0.9, **core_options: Any):
+        from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+
+        if core_options.get("input_scale", "pow2") not in ("pow2", None):
+            raise InputError("the power-of-two warp feeds a pow2 core: input_scale must be 'pow2'")
+        core_options.pop("input_scale", None)
+        if not (isinstance(input_bits, (int, np.integer)) and 2 <= input_bits <= 32):
+            raise InputError(f"input_bits must be an integer in 2..32, got {input_bits!r}")
+        if not (0 < input_fill <= 1):
+            raise InputError(f"input_fill must be in (0, 1], got {input_fill!r}")
+        self.grid = grid
+        self.n = grid.n
+        self.input_bits = int(input_bits)
+        self.input_fill = float(input_fill)
+        limit = min(input_fill * 2.0**input_bits, 2**input_bits - 1)
+        cells, lsb, offset = [], [], []
+        for j in range(grid.n):
+            b = grid.breakpoints[j] if grid.breakpoints is not None and grid.breakpoints[j] is not None else \
+                np.linspace(grid.lo[j], grid.hi[j], int(grid.partitions[j]) + 1)
+            got = pow2_exponents(b)
+            if got is None:
+                raise InputError(f"the cells of dimension {j} are not power-of-two multiples of one base step; "
+                                 "the warp needs --breakpoints quantile-pow2 (or a file with such cells)")
+            e, h0 = got
+            e = e - e.min()
+            s = int(np.sum(1 << e))
+            f0 = math.floor(math.log2(limit / s)) if limit >= s else -1
+            while f0 >= 0 and s << f0 > limit:
+                f0 -= 1
+            if f0 < 0:
+                raise InputError(f"dimension {j} spans {s} base steps: {input_bits}-bit inputs cannot give each one a code; "
+                                 f"use more input bits (at least {int(s).bit_length() + 1})")
+            lo_in = -((s << f0) + 1) // 2
+            breaks = [lo_in] + [lo_in + (int(c) << f0) for c in np.cumsum(1 << e)]
+            cells.append((tuple(int(v) for v in breaks), tuple(int(v) for v in e), f0))
+            lsb.append((b[-1] - b[0]) / (s << f0))
+            offset.append(b[0] - lo_in * lsb[-1])
+        self.lsb, self.offset = np.array(lsb), np.array(offset)
+        parts = grid.partitions
+        unit = Grid(np.zeros(grid.n), parts.astype(float), parts)
+        need = [f0 + max(e) for _, e, f0 in cells]
+        width = max(int((int(p) << f) + 1).bit_length() + 1 for p, f in zip(parts, need))
+        while True:
+            core = FixedPointModel(unit, weights, input_bits=width, input_fill=input_fill, **core_options)
+            if all(fj >= nd for fj, nd in zip(core.frac_bits, need)):
+                break
+            width += 1
+        self.core = core
+        self.warps = [Pow2Warp(self.input_bits, br, e, f0, int(core.frac_bits[j]), int(core.lo_codes[j]), width)
+                      for j, (br, e, f0) in enumerate(cells)]
+        for w in self.warps:  # the below / above codes are representable (input_fill < 1 leaves room)
+            hi_code = w.lo_u + (w.p << w.frac) + 1
+            if w.lo_u - 1 < -(1 << (width - 1)) or hi_code > (1 << (width - 1)) - 1:
+                raise InputError("input_fill must leave room for the out-of-range codes of the warp: use input_fill < 1")
+        self.error_bound = core.error_bound
+        self.nz = core.nz
+        self.target_names = core.target_names
+        self.regressor_names = core.regressor_names
+
+    @classmethod
+    def from_sensor(cls, sensor, **options: Any) -> "WarpedFixedPointModel":
+        """The warped bit-true model of a fitted sensor with power-of-two breakpoints."""
+        ins, outs, tgts = sensor.signal_names()
+        lags = sensor.lags_
+        options.setdefault("regressor_names", lags.names(ins, outs))
+        options.setdefault("regressor_signals", [((ins if kind == "u" else outs)[ch], lag) for kind, ch, lag in lags.signal_of_dimension()])
+        options.setdefault("target_names", tgts)
+        if "reference_error" not in options:
+            rmse = np.asarray(getattr(sensor, "train_rmse_", []), dtype=float).reshape(-1)
+            rmse = rmse[np.isfinite(rmse) & (rmse > 0)]
+            options["reference_error"] = float(rmse.max()) if rmse.size else None
+        return cls(sensor.grid_, sensor.weights_, **options)
+
+    # ------------------------------------------------------------------ integer path
+    @property
+    def code_range(self) -> tuple[int, int]:
+        return -(1 << (self.input_bits - 1)), (1 << (self.input_bits - 1)) - 1
+
+    def quantize_inputs(self, x) -> np.ndarray:
+        """Input codes of physical points (half up, saturated to ``B_in`` bits), shape (m, n)."""
+        xa = np.atleast_2d(np.asarray(x, dtype=float))
+        q = np.floor((xa - self.offset) / self.lsb + 0.5)
+        lo, hi = self.code_range
+        return np.clip(q, lo, hi).astype(np.int64)
+
+    def represented_inputs(self, q) -> np.ndarray:
+        """Physical values of input codes, shape (m, n)."""
+        return self.offset + self.lsb * np.atleast_2d(np.asarray(q, dtype=np.int64))
+
+    def warp(self, q) -> np.ndarray:
+        """``u`` codes of the core, shape (m, n)."""
+        qa = np.atleast_2d(np.asarray(q, dtype=np.int64))
+        lo, hi = self.code_range
+        if qa.shape[1] != self.n or qa.min(initial=lo) < lo or qa.max(initial=hi) > hi:
+            raise ValueError(f"input codes must have {self.n} columns within the signed {self.input_bits}-bit range")
+        return np.stack([w.apply(qa[:, j]) for j, w in enumerate(self.warps)], axis=1)
+
+    def evaluate(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """Output codes (m, nz) and out-of-range flags (m,) for input codes ``q`` (m, n)."""
+        return self.core.evaluate(self.warp(q))
+
+    def predict(self, x) -> np.ndarray:
+        """Physical outputs for physical inputs (quantised first), shape (m, nz)."""
+        out, _ = self.evaluate(self.quantize_inputs(x))
+        return self.core.to_physical_output(out)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"input_bits": self.input_bits, "input_fill": self.input_fill, "lsb": self.lsb.tolist(),
+                "offset": self.offset.tolist(), "warps": [w.to_dict() for w in self.warps], "core_input_bits": self.warps[0].width}

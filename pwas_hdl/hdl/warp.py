@@ -1,0 +1,152 @@
+"""RTL of the power-of-two warp (non-uniform partitions in hardware) and the warped core.
+
+:class:`WarpedPWASCore` = one combinational warp per dimension (the specification is
+:mod:`pwas_hdl.fixedpoint.warp`) in front of the unchanged :class:`~pwas_hdl.hdl.core.PWASCore`,
+which is inlined (``build_into``), behind one register on the warped codes (enabled with the
+core's pipeline): ports, flow control and II are the core's, the latency is the core's + 1; the
+input payload holds ``n`` signed ``B_in``-bit codes ``q`` (not the core's ``W``-bit ``u``).
+
+Warp of one dimension (offset-binary ``qo = q + 2**(B_in-1)``, constants ``Bo_k = B_k + 2**(B_in-1)``)::
+
+    below = qo < Bo_0;  above = qo > Bo_p;  top = qo >= Bo_p;  ge_k = qo >= Bo_k  (k = 1 .. p-1)
+    U = all ones (below) | p 2**F + 1 (above) | p 2**F (top) |
+        k 2**F + (((qo - Bo_k) mod 2**(f0+e_k)) << (F - f0 - e_k))   for the highest k with ge_k (else k = 0)
+    u = U + L  (mod 2**W, offset binary, its MSB inverted: the signed core input)
+
+No multiplier and no divider: comparators with constants, constant subtractions of
+``f0 + e_k`` bits, wiring for the shifts, one constant addition.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const
+from pwas_hdl.hdl.core import PWASCore, core_output_layout
+from pwas_hdl.hdl.params import CoreParams, Pipeline
+
+__all__ = ["WarpedPWASCore", "build_warped_core", "warp_into"]
+
+
+def warp_into(m: Module, q, warp, name: str):
+    """Add the warp of one dimension to ``m``: signed ``B_in``-bit ``q`` -> signed ``W``-bit ``u`` (a value)."""
+    b, w, f = warp.input_bits, warp.width, warp.frac
+    half = 1 << (b - 1)
+    msb = Signal(name=f"{name}_msb_n")
+    m.d.comb += msb.eq(~q[b - 1])
+    qo = Cat(q[: b - 1], msb)
+    bo = [c + half for c in warp.code_breaks]
+    p = warp.p
+    below = ge_const(qo, bo[0])
+    below = (not below) if isinstance(below, bool) else ~below
+    top = ge_const(qo, bo[p])
+    above = ge_const(qo, bo[p] + 1)
+    big_u = Signal(unsigned(w), name=f"{name}_U")
+    kbits = w - f
+
+    def cell(k: int):
+        fk = warp.f0 + warp.exps[k]
+        parts = [Const(0, f - fk)] if f > fk else []
+        if fk:
+            parts.append(add_const_wrap(m, qo[:fk], -bo[k], f"{name}_t{k}"))
+        parts.append(Const(k, kbits))
+        m.d.comb += big_u.eq(Cat(*parts))
+
+    def const(v):
+        return lambda: m.d.comb.__iadd__(big_u.eq(v))
+
+    # (condition, action) in priority order; constant conditions are folded
+    chain = [(below, const((1 << w) - 1)), (above, const((p << f) + 1)), (top, const(p << f))]
+    chain += [(ge_const(qo, bo[k]), (lambda k=k: cell(k))) for k in range(p - 1, 0, -1)]
+    conds = []
+    for cond, act in chain:
+        if cond is False:
+            continue
+        conds.append((cond, act))
+        if cond is True:
+            break
+    else:
+        conds.append((True, lambda: cell(0)))
+    if conds[0][0] is True:
+        conds[0][1]()
+    else:
+        with m.If(conds[0][0]):
+            conds[0][1]()
+        for cond, act in conds[1:]:
+            if cond is True:
+                with m.Else():
+                    act()
+                break
+            with m.Elif(cond):
+                act()
+    qu = add_const_wrap(m, big_u, warp.lo_u + (1 << (w - 1)), f"{name}_u")  # offset-binary u
+    return Cat(qu[: w - 1], ~qu[w - 1])  # a value, not a named alias (lint: see pwas_hdl.hdl._lintsafe)
+
+
+class WarpedPWASCore(wiring.Component):
+    """Warp stage (+ register) + PWAS core: ``n`` input codes ``q`` in, ``nz`` estimates out, every clock.
+
+    Parameters
+    ----------
+    model : pwas_hdl.fixedpoint.warp.WarpedFixedPointModel
+    memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+
+    Attributes
+    ----------
+    core : PWASCore (inlined), latency, ii, memory_plan, pipeline, params : the core's
+    warps : list of Pow2Warp
+    """
+
+    kind = "core"
+
+    def __init__(self, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        self.warps = list(model.warps)
+        self.in_width = int(model.input_bits)
+        params = CoreParams.from_model(model.core)
+        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True
+        self.params = params
+        self.latency, self.ii = self.core.latency + 1, self.core.ii  # + the warp register
+        self.memory_plan, self.pipeline = self.core.memory_plan, self.core.pipeline
+        super().__init__({
+            "in": In(stream.Signature(unsigned(params.n * self.in_width))),
+            "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+        })
+        self._MustUse__silence = False
+
+    @property
+    def input_fields(self) -> list[dict]:
+        b = self.in_width
+        names = getattr(self.core, "input_names", [f"x{j}" for j in range(self.params.n)])
+        return [{"name": nm, "lsb": j * b, "width": b, "signed": True} for j, nm in enumerate(names)]
+
+    @property
+    def extra_info(self) -> dict:
+        return {"warp": [w.to_dict() for w in self.warps]}
+
+    def elaborate(self, platform):
+        m = Module()
+        inp = getattr(self, "in")
+        b = self.in_width
+        us = [warp_into(m, inp.payload[j * b : (j + 1) * b], w, f"warp{j}") for j, w in enumerate(self.warps)]
+        # the warp register: one more pipeline stage, enabled by the core's advance (= in.ready)
+        regs = [Signal(w.width, name=f"s_warp_u{j}", reset_less=True) for j, w in enumerate(self.warps)]
+        valid = Signal(name="s_warp_valid")
+        with m.If(inp.ready):
+            m.d.sync += [r.eq(u) for r, u in zip(regs, us)] + [valid.eq(inp.valid)]
+        self.core.build_into(m, Cat(*regs), valid, inp.ready, self.out)
+        return m
+
+
+def build_warped_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                      name: str = "pwas_core") -> WarpedPWASCore:
+    """The warped core of a :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` (named for emit)."""
+    comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline)
+    comp.module_name = name
+    comp._MustUse__silence = True
+    comp.core.input_names = list(model.regressor_names)
+    comp.core.target_names = list(model.target_names)
+    return comp
