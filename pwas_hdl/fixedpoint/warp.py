@@ -231,6 +231,13 @@ class WarpedFixedPointModel:
         out, _ = self.evaluate(self.quantize_inputs(x))
         return self.core.to_physical_output(out)
 
+    def input_port_format(self, j: int) -> dict[str, Any]:
+        """The manifest ``format`` of input field ``j``: ``s<B_in>.0`` with ``physical = offset_j + lsb_j * code``."""
+        from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling
+
+        return PortFormat(FixedFormat(self.input_bits, 0, True, "half_up", "saturate"),
+                          SignalScaling(float(self.lsb[j]), float(self.offset[j]))).to_dict()
+
     def to_dict(self) -> dict[str, Any]:
         return {"input_bits": self.input_bits, "input_fill": self.input_fill, "lsb": self.lsb.tolist(),
                 "offset": self.offset.tolist(), "warps": [w.to_dict() for w in self.warps], "core_input_bits": self.warps[0].width}

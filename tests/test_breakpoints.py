@@ -1,0 +1,298 @@
+"""Non-uniform partitions (issue 15 item 3): geometry, fit --breakpoints, model file, the power-of-two warp.
+
+* :class:`~pwas_hdl.fit.geometry.Grid` with breakpoints: the warp to grid units, vertices at the
+  cut points, PWAS values continuous and exact at the vertices; without breakpoints the uniform
+  path is untouched (same object state, same results).
+* ``fit --breakpoints quantile | quantile-pow2 | FILE``: same N as the uniform grid, the model file
+  round trip, ``predict``; bad files and values give one ``error:`` line, exit 2, nothing written.
+* The power-of-two warp: bit-true model against the float model (error bound), the RTL warp
+  exhaustively against the bit-true warp (Amaranth simulation), the warped core lint-clean and
+  byte-identical, and in cocotb on Icarus and Verilator bit-exact with the bit-true model
+  (full speed, stalls, a mid-stream reset).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pwas_hdl.fit.geometry import Grid, pow2_breakpoints, pow2_exponents, quantile_breakpoints
+
+
+# ------------------------------------------------------------------------------------------ geometry
+def test_uniform_grid_is_unchanged_and_equal_breakpoints_give_the_same_function(rng):
+    g = Grid([0.0, -1.0], [2.0, 3.0], [4, 3])
+    assert g.uniform and g.breakpoints is None
+    gb = Grid([0.0, -1.0], [2.0, 3.0], [4, 3], breakpoints=[np.linspace(0, 2, 5), np.linspace(-1, 3, 4)])
+    assert not gb.uniform and gb != g
+    x = rng.uniform([-0.5, -2], [2.5, 4], (500, 2))
+    w = rng.normal(size=g.n_vertices)
+    np.testing.assert_allclose(gb.evaluate(w, x), g.evaluate(w, x), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(gb.vertex_points(), g.vertex_points())
+
+
+def test_non_uniform_grid_interpolates_its_vertices(rng):
+    b0, b1 = np.array([0.0, 0.1, 0.5, 2.0]), np.array([-1.0, 2.5, 3.0])
+    g = Grid([0.0, -1.0], [2.0, 3.0], [3, 2], breakpoints=[b0, b1])
+    pts = g.vertex_points()
+    assert set(pts[:, 0]) == set(b0) and set(pts[:, 1]) == set(b1)
+    w = rng.normal(size=g.n_vertices)
+    np.testing.assert_allclose(g.evaluate(w, pts), w, atol=1e-12)  # exact at every vertex
+    # affine inside one simplex: the midpoint value is the mean of the ends
+    a, b = np.array([[0.3, 2.6]]), np.array([[0.46, 2.6]])  # fractions (0.5, 0.2) .. (0.9, 0.2): one simplex
+    mid = (a + b) / 2
+    np.testing.assert_allclose(g.evaluate(w, mid), (g.evaluate(w, a) + g.evaluate(w, b)) / 2, atol=1e-12)
+    s, out = g.to_grid_units(np.array([[0.3, 2.75], [-1.0, 9.0]]))
+    np.testing.assert_allclose(s[0], [1.5, 1.5])
+    assert list(out) == [False, True] and list(s[1]) == [0.0, 2.0]
+
+
+@pytest.mark.parametrize("bad, msg", [
+    ([[0.0, 1.0, 0.5, 2.0], None], "increase strictly"),
+    ([[0.0, 1.0, 2.0], None], "need 4"),
+    ([[0.1, 1.0, 1.5, 2.0], None], "must start at lo"),
+    ([[0.0, 1.0, np.nan, 2.0], None], "NaN"),
+])
+def test_bad_breakpoints_are_refused(bad, msg):
+    with pytest.raises(ValueError, match=msg):
+        Grid([0.0, 0.0], [2.0, 1.0], [3, 2], breakpoints=bad)
+
+
+def test_quantile_and_pow2_breakpoints(rng):
+    x = np.concatenate([rng.normal(0, 1, (4000, 1)), rng.uniform(-5, 5, (4000, 1))], axis=1)
+    lo, hi = np.array([-6.0, -6.0]), np.array([6.0, 6.0])
+    q = quantile_breakpoints(x, lo, hi, [6, 4])
+    assert [len(b) for b in q] == [7, 5] and all(b[0] == -6 and b[-1] == 6 for b in q)
+    # the normal column: each cell holds about 1/6 of the samples
+    counts = np.histogram(x[:, 0], q[0])[0] / len(x)
+    assert np.all(np.abs(counts - 1 / 6) < 0.02)
+    p2 = pow2_breakpoints(x, lo, hi, [6, 4])
+    for b in p2:
+        e, h0 = pow2_exponents(b)
+        assert e.min() == 0 and e.max() <= 4 and np.isclose(h0 * np.sum(2.0 ** e), 12.0)
+    # a heavy-tailed column gets narrow central cells
+    assert np.diff(p2[0])[2] < np.diff(p2[0])[0]
+    assert pow2_exponents(q[0]) is None
+
+
+# ------------------------------------------------------------------------------------------ fit / model file / CLI
+@pytest.fixture(scope="module")
+def lorenz_csv(tmp_path_factory):
+    from pwas_hdl.systems.lorenz import lorenz
+
+    d = lorenz(2500, seed=3)
+    path = tmp_path_factory.mktemp("bp") / "lorenz.csv"
+    path.write_text("y,z\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(d.y[:, 0], d.z[:, 0])))
+    return path
+
+
+@pytest.mark.parametrize("rule", ["quantile", "quantile-pow2", "file"])
+def test_fit_breakpoints_cli_round_trip(rule, lorenz_csv, tmp_path):
+    from pwas_hdl.cli import app
+    from pwas_hdl.fit.model_file import read_model
+
+    arg = rule
+    if rule == "file":
+        arg = str(tmp_path / "bp.json")
+        Path(arg).write_text(json.dumps({"format": "pwas-hdl-breakpoints", "version": 1, "regressors": ["y[t-1]", "y[t]"],
+                                         "breakpoints": [[-25, -8, 0, 8, 25], [-25, -5, 0, 5, 25]]}))
+    out = tmp_path / "m.json"
+    r = CliRunner().invoke(app, ["fit", str(lorenz_csv), "-y", "y", "-z", "z", "--my", "2", "-p", "4", "--sigma", "1e-3",
+                                 "--breakpoints", arg, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    m = read_model(out)
+    assert m.grid_.n_vertices == 25 and not m.grid_.uniform
+    d = json.loads(out.read_text())
+    assert d["fit"]["breakpoints"] == ("given" if rule == "file" else rule)
+    if rule == "file":
+        assert d["grid"]["breakpoints"][1] == [-25, -5, 0, 5, 25] and d["grid"]["lo"] == [-25, -25]
+    pred = tmp_path / "p.csv"
+    r = CliRunner().invoke(app, ["predict", str(out), str(lorenz_csv), "-o", str(pred)])
+    assert r.exit_code == 0, r.output
+    zhat = np.loadtxt(pred, delimiter=",", skiprows=1)[:, 1]
+    from pwas_hdl.systems.lorenz import lorenz
+
+    y = lorenz(2500, seed=3).y
+    np.testing.assert_allclose(zhat, m.predict(None, y)[:, 0], rtol=1e-9)
+
+
+@pytest.mark.parametrize("content, msg", [
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, 1, 0.5], [0, 1]]}', "increase strictly"),
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, 1]]}', "1 breakpoint lists for n = 2"),
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, "a"], [0, 1]]}', "is not a finite number"),
+    ('{"format": "other", "version": 1, "breakpoints": [[0, 1], [0, 1]]}', "format"),
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "regressors": ["a", "b"], "breakpoints": [[-30, 30], [-30, 30]]}',
+     "the file is for regressors"),
+    ("[[0, 1]", "JSON"),
+    (None, "neither"),
+])
+def test_bad_breakpoints_file_is_one_error_line(content, msg, lorenz_csv, tmp_path):
+    from pwas_hdl.cli import app
+
+    path = tmp_path / "bp.json"
+    if content is not None:
+        path.write_text(content)
+    out = tmp_path / "m.json"
+    r = CliRunner().invoke(app, ["fit", str(lorenz_csv), "-y", "y", "-z", "z", "--my", "2", "-p", "4", "--sigma", "1e-3",
+                                 "--breakpoints", str(path), "-o", str(out)])
+    assert r.exit_code == 2, r.output
+    errs = [ln for ln in r.output.splitlines() if ln.startswith("error:")]
+    assert len(errs) == 1 and msg in r.output, r.output
+    assert "Traceback" not in r.output and not out.exists()
+
+
+def test_generate_refuses_a_non_uniform_model_clearly(lorenz_csv, tmp_path):
+    from pwas_hdl.cli import app
+
+    out = tmp_path / "m.json"
+    assert CliRunner().invoke(app, ["fit", str(lorenz_csv), "-y", "y", "-z", "z", "--my", "2", "-p", "4", "--sigma", "1e-3",
+                                    "--breakpoints", "quantile", "-o", str(out)]).exit_code == 0
+    r = CliRunner().invoke(app, ["generate", str(out), "-o", str(tmp_path / "g")])
+    assert r.exit_code == 2 and "uniform grid" in r.output and not (tmp_path / "g").exists()
+
+
+# ------------------------------------------------------------------------------------------ the warp
+@pytest.fixture(scope="module")
+def warped():
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+    from pwas_hdl.systems.lorenz import lorenz
+
+    d = lorenz(3000, seed=5)
+    m = PWASVirtualSensor(my=2, partitions=5, breakpoints="quantile-pow2", sigma=1e-3, output_names=["y"], target_names=["z"])
+    m.fit(None, d.y, d.z)
+    return m, WarpedFixedPointModel.from_sensor(m, input_bits=10)
+
+
+def test_warped_bittrue_model_within_the_error_bound(warped, rng):
+    m, w = warped
+    assert any(len(set(wp.exps)) > 1 for wp in w.warps)  # really non-uniform cells
+    x = rng.uniform(m.grid_.lo - 3, m.grid_.hi + 3, (20000, 2))
+    q = w.quantize_inputs(x)
+    xq = w.represented_inputs(q)
+    err = np.abs(w.predict(xq) - m.predict_regressors(xq))
+    assert err.max() <= w.error_bound * (1 + 1e-9)
+    _, oor = w.evaluate(q)
+    inside = np.all((xq >= m.grid_.lo) & (xq <= m.grid_.hi), axis=1)
+    assert oor.any() and np.array_equal(oor, ~inside)
+    for j, wp in enumerate(w.warps):  # every breakpoint is an input code
+        np.testing.assert_allclose(w.offset[j] + w.lsb[j] * np.array(wp.code_breaks), m.grid_.breakpoints[j], rtol=0,
+                                   atol=1e-9 * (m.grid_.hi[j] - m.grid_.lo[j]))
+
+
+def test_warp_rtl_equals_the_bittrue_warp_for_every_code(warped):
+    from amaranth.hdl import Module, Signal
+    from amaranth.sim import Simulator
+
+    from pwas_hdl.hdl.warp import warp_into
+
+    _, w = warped
+    wp = w.warps[0]
+    mm = Module()
+    q = Signal(wp.input_bits)
+    u = Signal(wp.width)
+    mm.d.comb += u.eq(warp_into(mm, q, wp, "w0"))
+    codes = np.arange(-(1 << (wp.input_bits - 1)), 1 << (wp.input_bits - 1))
+    want = wp.apply(codes)
+    got = []
+
+    async def tb(ctx):
+        for c in codes:
+            ctx.set(q, int(c) & ((1 << wp.input_bits) - 1))
+            v = ctx.get(u)
+            got.append(v - (1 << wp.width) if v >> (wp.width - 1) else v)
+
+    sim = Simulator(mm)
+    sim.add_testbench(tb)
+    sim.run()
+    np.testing.assert_array_equal(np.array(got), want)
+
+
+def _warped_folder(m, w, root: Path):
+    """A design folder of the warped core for the manifest-driven testbench: the manifest of the
+    uniform core of the same weights (``generate``), with the input port of the warped core."""
+    import copy
+
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.design.manifest import manifest_errors, manifest_text
+    from pwas_hdl.fit.geometry import Grid
+    from pwas_hdl.hdl.emit import emit_verilog
+    from pwas_hdl.hdl.warp import build_warped_core
+
+    eq = copy.deepcopy(m)
+    p = m.grid_.partitions
+    eq.grid_, eq.breakpoints = Grid(np.zeros(m.grid_.n), p.astype(float), p), None
+    wd = w.warps[0].width
+    gd = build_design(eq, design="core", input_bits=wd, input_fill=w.input_fill)
+    assert gd.model.frac_bits == w.core.frac_bits and gd.model.lo_codes == w.core.lo_codes
+    assert np.array_equal(gd.model.weight_codes, w.core.weight_codes) and gd.model.output_format == w.core.output_format
+    comp = build_warped_core(w, name=gd.top)
+    verilog = emit_verilog(comp, gd.top)
+    man = copy.deepcopy(gd.manifest)
+    port = next(pt for pt in man["ports"] if pt["role"] == "in.payload")
+    b = w.input_bits
+    port["width"] = b * m.grid_.n
+    for j, f in enumerate(port["fields"]):
+        f.update(lsb=j * b, width=b, format=w.input_port_format(j),
+                 domain_codes=[w.warps[j].code_breaks[0], w.warps[j].code_breaks[-1]])
+    man["latency_cycles"] = comp.latency
+    assert manifest_errors(man) == [], manifest_errors(man)
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "manifest.json").write_text(manifest_text(man))
+    (root / f"{gd.top}.v").write_text(verilog)
+    return root, gd.top, verilog, man
+
+
+@pytest.mark.rtl
+def test_warped_core_is_lint_clean_and_deterministic(warped, tmp_path):
+    from pwas_hdl.flow.toolchain import tool_env
+
+    m, w = warped
+    root, top, verilog, _ = _warped_folder(m, w, tmp_path / "a")
+    _, _, again, _ = _warped_folder(m, w, tmp_path / "b")
+    assert again == verilog
+    env = tool_env()
+    exe = shutil.which("verilator", path=env.get("PATH"))
+    if exe is None:
+        pytest.skip("verilator not found")
+    r = subprocess.run([exe, "--lint-only", "-Wall", str(root / f"{top}.v")], capture_output=True, text=True, env=env, cwd=root)
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.rtl
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+def test_warped_core_in_cocotb_bit_exact(simulator, warped, sim_cache, tmp_path):
+    from pwas_hdl.verify.simulation import sim_module
+
+    runner = sim_module("pwas_runner")
+    m, w = warped
+    root, top, _, man = _warped_folder(m, w, tmp_path / "design")
+    rng = np.random.default_rng(7)
+    lo, hi = w.code_range
+    breaks = np.array([wp.code_breaks for wp in w.warps]).T  # every breakpoint and its neighbours
+    near = np.concatenate([breaks - 1, breaks, breaks + 1])
+    q = np.concatenate([rng.integers(lo, hi + 1, (300, w.n)), np.clip(near, lo, hi),
+                        np.array([[lo] * w.n, [hi] * w.n])])
+    out, oor = w.evaluate(q)
+    assert oor.any() and not oor.all()
+    seg = {"codes": q.tolist(), "expected": np.concatenate([out, oor[:, None]], axis=1).tolist(), "src": list(range(len(q))),
+           "drain": True, "hold": 0}
+    half = len(q) // 2
+    cut = {"codes": q[:half].tolist(), "expected": seg["expected"][:half], "src": list(range(half)), "drain": False, "hold": 3}
+    job = {"manifest": str((root / "manifest.json").resolve()), "strict": False, "clock_ns": 10, "reset_cycles": 2,
+           "runs": [{"name": "full-speed", "segments": [seg]},
+                    {"name": "stalls", "p_valid": 0.7, "p_ready": 0.6, "seed": 3, "segments": [seg]},
+                    {"name": "reset-mid-stream", "p_valid": 0.8, "p_ready": 0.8, "seed": 5, "segments": [cut, seg]}]}
+    b = runner.build(root / f"{top}.v", top, simulator, cache_dir=sim_cache)
+    res = runner.run_job(b, job, tmp_path / "run")
+    assert res["passed"] and not res.get("failures"), res.get("failures")
+    segs = [s for r in res["runs"] for s in r["segments"]]
+    assert sum(s["outputs"] for s in segs) >= 3 * len(q) and all(s["mismatches"] == 0 for s in segs)
+    assert set(res["runs"][0]["segments"][0]["latencies"]) == {man["latency_cycles"]}
