@@ -230,7 +230,7 @@ int main(int argc, char** argv) {
             b.n_in = n_in;
             b.qi = 0;
             const double pv = p_valid < 0.05 ? 0.05 : p_valid, pr = p_ready < 0.05 ? 0.05 : p_ready;
-            const uint64_t limit = static_cast<uint64_t>(4.0 * (n_in + PWAS_LATENCY + 8) / (pv * pr)) + 200;
+            const uint64_t limit = static_cast<uint64_t>(4.0 * (static_cast<double>(n_in) * PWAS_II + PWAS_LATENCY + 8) / (pv * pr)) + 200;
             uint32_t problems = 0;
             for (uint64_t k = 0; k < limit && b.qi < n_in; ++k) b.step();
             if (b.qi < n_in) problems |= NOT_ALL_ACCEPTED;

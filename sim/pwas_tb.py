@@ -118,7 +118,7 @@ class Bench:
 
     def _limit(self, n_in: int, run: dict) -> int:
         pv, pr = max(float(run.get("p_valid", 1.0)), 0.05), max(float(run.get("p_ready", 1.0)), 0.05)
-        return int(4 * (n_in + self.latency + 8) / (pv * pr)) + 200
+        return int(4 * (n_in * self.ii + self.latency + 8) / (pv * pr)) + 200  # ii: one sample per ii cycles
 
     async def segment(self, run: dict, seg: dict, ri: int, si: int, res: dict) -> None:
         codes, expected, srcidx = seg["codes"], seg["expected"], seg["src"]
@@ -191,7 +191,7 @@ class Bench:
         self.sink.clear()
         await self.reset(int(self.job.get("reset_cycles", 2)))
         self.src.send(pack(row, self.in_fields) for row in codes[first : last + 1])
-        await self.loop.run_until(self.src.idle, 10 * (last - first + 2))
+        await self.loop.run_until(self.src.idle, 10 * (last - first + 2) * self.ii)
         handles = {}
         for nm in names:
             try:

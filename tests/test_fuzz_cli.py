@@ -347,6 +347,7 @@ def test_fuzz_fit(base, data):
     args += k.option("--traj-col", [None], ["nope", "y"])
     args += k.option("--domain", [None, "-9:9,-9:9"], ["a", "0:1", "1:0,1:0", "nan:1,0:1"])
     args += k.option("--blank-rows", ["error", "break", None], ["x"])
+    args += k.option("--breakpoints", [None, "quantile", "quantile-pow2"], ["x", "d.csv", "nofile.json"])
     with scratch(base, ("d.csv",)) as work:
         _prepare(work)
         (work / "data.csv").write_bytes(csv)
@@ -427,6 +428,7 @@ def test_fuzz_generate(base, data):
     args += k.option("--output-frac", [None], [-100, 10**6])
     args += k.option("--overflow", ["error", "saturate", None], ["x"])
     args += k.option("--rounding", ["half_up", "truncate", None], ["x"])
+    args += k.option("--architecture", ["parallel", "serial", None], ["x", "Serial"])
     args += k.option("--target-mhz", [None], [NAN, -5.0, 0.0])  # a valid one would run nextpnr: never drawn
     with scratch(base) as work:
         _prepare(work)
