@@ -152,11 +152,13 @@ ADDITIVE_CONFIGS = [
 ]
 
 
-#: Serial-architecture configurations (``generate --architecture serial``, issue 15 item 2): a core
-#: with two targets and the balanced pipeline, and a sensor top (lag bank, warm-up) with the
-#: deepest pipeline (mem_out and product registers). Each has a parallel twin (same model, same
-#: options but the architecture) that must give the same output codes.
+#: Serial-architecture configurations (``generate --architecture serial``, issue 15 item 2): the
+#: serial versions of two configurations of ``tests/test_rtl_cocotb.py`` (same model, same
+#: options), so their parallel twins are byte-identical to those and share the cached simulator
+#: builds: a core with two targets and a saturating output (``c-n3-p4x4x4-z2-repl-sat``), and a
+#: sensor top with lag bank, warm-up and the deepest pipeline (``s-u3y3-p2-max``, n = 6, II = 7).
 SERIAL_CONFIGS = [
-    DesignConfig("serial-c-n3-p4x3x2-z2", "core", 0, 3, 0, 1, [4, 3, 2], 2, {"architecture": "serial"}, seed=3),
-    DesignConfig("serial-s-u1y2-p3-4-max", "sensor", 1, 2, 1, 1, [3, 4, 4], 1, {"architecture": "serial", "pipeline": "max"}, seed=4),
+    DesignConfig("serial-c-n3-p4x4x4-z2-sat", "core", 0, 3, 0, 1, [4, 4, 4], 2,
+                 {"memory": "replicated", "output_bits": 9, "architecture": "serial"}),
+    DesignConfig("serial-s-u3y3-p2-max", "sensor", 3, 3, 1, 1, 2, 1, {"pipeline": "max", "architecture": "serial"}),
 ]
