@@ -216,38 +216,13 @@ def test_warp_rtl_equals_the_bittrue_warp_for_every_code(warped):
 
 
 def _warped_folder(m, w, root: Path):
-    """A design folder of the warped core for the manifest-driven testbench: the manifest of the
-    uniform core of the same weights (``generate``), with the input port of the warped core."""
-    import copy
+    """The warped core's design folder (:func:`pwas_hdl.hdl.warp.write_warped_folder`)."""
+    from pwas_hdl.hdl.warp import write_warped_folder
 
-    from pwas_hdl.design.generate import build_design
-    from pwas_hdl.design.manifest import manifest_errors, manifest_text
-    from pwas_hdl.fit.geometry import Grid
-    from pwas_hdl.hdl.emit import emit_verilog
-    from pwas_hdl.hdl.warp import build_warped_core
-
-    eq = copy.deepcopy(m)
-    p = m.grid_.partitions
-    eq.grid_, eq.breakpoints = Grid(np.zeros(m.grid_.n), p.astype(float), p), None
-    wd = w.warps[0].width
-    gd = build_design(eq, design="core", input_bits=wd, input_fill=w.input_fill)
-    assert gd.model.frac_bits == w.core.frac_bits and gd.model.lo_codes == w.core.lo_codes
-    assert np.array_equal(gd.model.weight_codes, w.core.weight_codes) and gd.model.output_format == w.core.output_format
-    comp = build_warped_core(w, name=gd.top)
-    verilog = emit_verilog(comp, gd.top)
-    man = copy.deepcopy(gd.manifest)
-    port = next(pt for pt in man["ports"] if pt["role"] == "in.payload")
-    b = w.input_bits
-    port["width"] = b * m.grid_.n
-    for j, f in enumerate(port["fields"]):
-        f.update(lsb=j * b, width=b, format=w.input_port_format(j),
-                 domain_codes=[w.warps[j].code_breaks[0], w.warps[j].code_breaks[-1]])
-    man["latency_cycles"] = comp.latency
-    assert manifest_errors(man) == [], manifest_errors(man)
-    root.mkdir(parents=True, exist_ok=True)
-    (root / "manifest.json").write_text(manifest_text(man))
-    (root / f"{gd.top}.v").write_text(verilog)
-    return root, gd.top, verilog, man
+    wm, man = write_warped_folder(m, root, input_bits=w.input_bits)
+    assert [wp.to_dict() for wp in wm.warps] == [wp.to_dict() for wp in w.warps]
+    top = man["top"]
+    return root, top, (root / f"{top}.v").read_text(), man
 
 
 @pytest.mark.rtl

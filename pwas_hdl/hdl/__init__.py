@@ -40,7 +40,9 @@ index (``class_index``, ties to the lowest index) and the latency grows by
 
 Latency (cycles from the input transfer to ``out__valid``, no stalls) is ``component.latency``
 = ``Pipeline.latency(n)`` = split + rank + 1 (memory) + mem_out + product
-+ ceil(ceil(log2(n+1)) / tree_levels) + 1 (output); II = 1.
++ ceil(ceil(log2(n+1)) / tree_levels) + 1 (output); II = 1. ``build_core(..., architecture="serial")``
+(and ``build_sensor``) give :class:`SerialPWASCore` instead: one multiplier per target, II = n + 1
+(:mod:`pwas_hdl.hdl.serial_core`). Non-uniform power-of-two partitions: :mod:`pwas_hdl.hdl.warp`.
 """
 
 from pwas_hdl.hdl.core import PWASCore, core_input_layout, core_output_layout
@@ -49,6 +51,7 @@ from pwas_hdl.hdl.params import PIPELINE_PRESETS, CoreParams, MemoryPlan, Pipeli
 from pwas_hdl.hdl.api import build_core, build_sensor, design_info
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 from pwas_hdl.hdl.argmax import ArgmaxStage, argmax_latency
+from pwas_hdl.hdl.serial_core import SerialPWASCore
 
 __all__ = [
     "PWASCore",
@@ -61,6 +64,7 @@ __all__ = [
     "build_core",
     "build_sensor",
     "PWASSensorTop",
+    "SerialPWASCore",
     "lag_plan",
     "ArgmaxStage",
     "argmax_latency",

@@ -27,7 +27,7 @@ from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
-__all__ = ["WarpedPWASCore", "build_warped_core", "warp_into"]
+__all__ = ["WarpedPWASCore", "build_warped_core", "warp_into", "write_warped_folder"]
 
 
 def warp_into(m: Module, q, warp, name: str):
@@ -150,3 +150,62 @@ def build_warped_core(model, *, memory: str = "banked", pipeline: Pipeline | str
     comp.core.input_names = list(model.regressor_names)
     comp.core.target_names = list(model.target_names)
     return comp
+
+
+def write_warped_folder(sensor, outdir, *, input_bits: int = 12, input_fill: float = 0.9, **formats):
+    """Write a design folder of the warped core of a sensor with power-of-two breakpoints.
+
+    The interim path until ``generate`` builds warped designs itself: the folder holds the Verilog
+    of :class:`WarpedPWASCore` and a valid ``manifest.json`` -- the manifest of the uniform core
+    of the same weights on the unit grid (built by :func:`pwas_hdl.design.generate.build_design`,
+    ``input_bits`` = the warp's ``W``), whose input port is replaced by the warped core's
+    (``n`` fields of ``input_bits`` bits, physical ``offset_j + lsb_j * code``, the domain in
+    codes ``[B_0, B_p]``) and whose latency is the warped core's. ``synth`` and the manifest-driven
+    testbench read it; ``simulate`` does not (it rebuilds a uniform bit-true model). ``model.json``
+    is that unit-grid model (the one the manifest describes), not the non-uniform one.
+
+    Returns
+    -------
+    (WarpedFixedPointModel, dict)
+        The bit-true model the Verilog implements and the manifest written.
+    """
+    import copy
+    from pathlib import Path
+
+    import numpy as np
+
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.design.manifest import manifest_errors, manifest_text
+    from pwas_hdl.errors import InternalError
+    from pwas_hdl.fit.geometry import Grid
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+    from pwas_hdl.hdl.emit import emit_verilog
+
+    wm = WarpedFixedPointModel.from_sensor(sensor, input_bits=input_bits, input_fill=input_fill, **formats)
+    eq = copy.deepcopy(sensor)
+    p = sensor.grid_.partitions
+    eq.grid_, eq.breakpoints = Grid(np.zeros(sensor.grid_.n), p.astype(float), p), None
+    gd = build_design(eq, design="core", input_bits=wm.warps[0].width, input_fill=input_fill, **formats)
+    fm = gd.model
+    if (fm.frac_bits != wm.core.frac_bits or fm.lo_codes != wm.core.lo_codes or fm.output_format != wm.core.output_format
+            or not np.array_equal(fm.weight_codes, wm.core.weight_codes)):
+        raise InternalError("the uniform core of the warped design differs from the warp's bit-true core")
+    comp = build_warped_core(wm, name=gd.top)
+    verilog = emit_verilog(comp, gd.top)
+    man = copy.deepcopy(gd.manifest)
+    port = next(pt for pt in man["ports"] if pt["role"] == "in.payload")
+    b = wm.input_bits
+    port["width"] = b * sensor.grid_.n
+    for j, f in enumerate(port["fields"]):
+        f.update(lsb=j * b, width=b, format=wm.input_port_format(j),
+                 domain_codes=[wm.warps[j].code_breaks[0], wm.warps[j].code_breaks[-1]])
+    man["latency_cycles"] = comp.latency
+    errs = manifest_errors(man)
+    if errs:
+        raise InternalError(f"the warped design's manifest breaks its schema: {errs[0]}")
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "manifest.json").write_text(manifest_text(man), encoding="utf-8")
+    (out / man["files"]["verilog"]).write_text(verilog, encoding="utf-8")
+    (out / "model.json").write_text(gd.files["model.json"], encoding="utf-8")
+    return wm, man
