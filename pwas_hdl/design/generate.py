@@ -177,6 +177,7 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
                        f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
         clock=man["clock"]["port"], reset=_reset_text(man, "`"), latency=man["latency_cycles"], ii=man["ii"],
+        rate="one sample per clock" if man["ii"] == 1 else f"one sample every {man['ii']} clocks: serial architecture",
         port_table=ports, format_table=fmt_table, bound_lsb=f"{eb['lsb']:.4g}", bound_phys=f"{eb['physical']:.4g}",
         bound_terms=terms, domain_table=dom_table, memory_text=mem_text, file_list=files,
     )
