@@ -187,14 +187,21 @@ def test_warped_bittrue_model_within_the_error_bound(warped, rng):
                                    atol=1e-9 * (m.grid_.hi[j] - m.grid_.lo[j]))
 
 
-def test_warp_rtl_equals_the_bittrue_warp_for_every_code(warped):
+@pytest.mark.parametrize("bits, dim", [(10, 0), (10, 1), (3, 0), (3, 1)])
+def test_warp_rtl_equals_the_bittrue_warp_for_every_code(bits, dim, warped):
+    """Every input code, both dimensions; 3-bit inputs give f0 = 0 (no offset bits below a base step)."""
     from amaranth.hdl import Module, Signal
     from amaranth.sim import Simulator
 
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
     from pwas_hdl.hdl.warp import warp_into
 
-    _, w = warped
-    wp = w.warps[0]
+    m, w = warped
+    if bits != w.input_bits:
+        w = WarpedFixedPointModel.from_sensor(m, input_bits=bits)
+    wp = w.warps[dim]
+    if bits == 3:
+        assert wp.f0 == 0
     mm = Module()
     q = Signal(wp.input_bits)
     u = Signal(wp.width)

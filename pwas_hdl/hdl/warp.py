@@ -8,13 +8,16 @@ input payload holds ``n`` signed ``B_in``-bit codes ``q`` (not the core's ``W``-
 
 Warp of one dimension (offset-binary ``qo = q + 2**(B_in-1)``, constants ``Bo_k = B_k + 2**(B_in-1)``)::
 
-    below = qo < Bo_0;  above = qo > Bo_p;  top = qo >= Bo_p;  ge_k = qo >= Bo_k  (k = 1 .. p-1)
-    U = all ones (below) | p 2**F + 1 (above) | p 2**F (top) |
-        k 2**F + (((qo - Bo_k) mod 2**(f0+e_k)) << (F - f0 - e_k))   for the highest k with ge_k (else k = 0)
+    below = qo < Bo_0;  above = qo > Bo_p;  top = qo >= Bo_p
+    t = qo - Bo_0;  i = t >> f0 (the base step, 0 .. S-1);  low = t mod 2**f0
+    U = all ones (below) | p 2**F + 1 (above) | p 2**F (top) | HI[i] | (low << SH[i])   (inside)
     u = U + L  (mod 2**W, offset binary, its MSB inverted: the signed core input)
 
-No multiplier and no divider: comparators with constants, constant subtractions of
-``f0 + e_k`` bits, wiring for the shifts, one constant addition.
+with the case tables (``S`` entries) ``HI[i] = k 2**F + j 2**(F - e_k)`` and ``SH[i] = F - f0 - e_k``
+for base step ``i`` = step ``j`` of cell ``k``: within a cell, ``(q - B_k) << (F - f0 - e_k)`` is
+``j 2**(F - e_k) + (low << SH)``, whose two parts do not overlap (an OR). No multiplier, no
+divider: three comparators, one constant subtraction, two small case tables, a shift multiplexer
+over the distinct shifts, one constant addition.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const
+from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, rom
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
@@ -38,49 +41,65 @@ def warp_into(m: Module, q, warp, name: str):
     m.d.comb += msb.eq(~q[b - 1])
     qo = Cat(q[: b - 1], msb)
     bo = [c + half for c in warp.code_breaks]
-    p = warp.p
+    p, f0 = warp.p, warp.f0
     below = ge_const(qo, bo[0])
     below = (not below) if isinstance(below, bool) else ~below
     top = ge_const(qo, bo[p])
     above = ge_const(qo, bo[p] + 1)
+    # inside: t = qo - Bo_0 in [0, S 2**f0): base step idx = t >> f0, offset in it low = t mod 2**f0
+    s_total = (bo[p] - bo[0]) >> f0
+    wt = max(1, (bo[p] - bo[0] - 1).bit_length())
+    t = add_const_wrap(m, qo[:wt], -bo[0], f"{name}_t")
+    low = t[:f0] if f0 else None
+    idx = t[f0:wt] if wt > f0 else 0
+    cell_of, sub_of = [], []
+    for k, e in enumerate(warp.exps):
+        cell_of += [k] * (1 << e)
+        sub_of += list(range(1 << e))
+    assert len(cell_of) == s_total
+    shifts = warp.shifts()
+    hi_vals = [(k << f) + (sub_of[i] << (f - warp.exps[k])) for i, k in enumerate(cell_of)]
+    u_hi = rom(m, idx, hi_vals, w, f"{name}_hi")
+    u_lo = 0
+    if low is not None:
+        kinds = sorted(set(shifts))
+        code = rom(m, idx, [kinds.index(shifts[k]) for k in cell_of], max(1, (len(kinds) - 1).bit_length()), f"{name}_sc")
+        u_lo = Signal(unsigned(w), name=f"{name}_lo")
+        if isinstance(code, int):
+            m.d.comb += u_lo.eq(Cat(Const(0, kinds[code]), low))
+        else:
+            with m.Switch(code):
+                for c, sh in enumerate(kinds):
+                    with (m.Case(c) if c < len(kinds) - 1 else m.Default()):
+                        m.d.comb += u_lo.eq(Cat(Const(0, sh), low) if sh else low)
     big_u = Signal(unsigned(w), name=f"{name}_U")
-    kbits = w - f
 
-    def cell(k: int):
-        fk = warp.f0 + warp.exps[k]
-        parts = [Const(0, f - fk)] if f > fk else []
-        if fk:
-            parts.append(add_const_wrap(m, qo[:fk], -bo[k], f"{name}_t{k}"))
-        parts.append(Const(k, kbits))
-        m.d.comb += big_u.eq(Cat(*parts))
+    def inside():
+        if isinstance(u_hi, int) and isinstance(u_lo, int):
+            m.d.comb += big_u.eq(u_hi | u_lo)
+        elif isinstance(u_lo, int):
+            m.d.comb += big_u.eq(u_hi)
+        elif isinstance(u_hi, int):
+            m.d.comb += big_u.eq(u_lo | Const(u_hi, w) if u_hi else u_lo)
+        else:
+            m.d.comb += big_u.eq(u_hi | u_lo)  # the low bits of u_hi are 0: an OR, no adder
 
     def const(v):
         return lambda: m.d.comb.__iadd__(big_u.eq(v))
 
     # (condition, action) in priority order; constant conditions are folded
     chain = [(below, const((1 << w) - 1)), (above, const((p << f) + 1)), (top, const(p << f))]
-    chain += [(ge_const(qo, bo[k]), (lambda k=k: cell(k))) for k in range(p - 1, 0, -1)]
-    conds = []
-    for cond, act in chain:
-        if cond is False:
-            continue
-        conds.append((cond, act))
-        if cond is True:
-            break
-    else:
-        conds.append((True, lambda: cell(0)))
-    if conds[0][0] is True:
-        conds[0][1]()
+    conds = [(c, a) for c, a in chain if c is not False]
+    if not conds:
+        inside()
     else:
         with m.If(conds[0][0]):
             conds[0][1]()
         for cond, act in conds[1:]:
-            if cond is True:
-                with m.Else():
-                    act()
-                break
             with m.Elif(cond):
                 act()
+        with m.Else():
+            inside()
     qu = add_const_wrap(m, big_u, warp.lo_u + (1 << (w - 1)), f"{name}_u")  # offset-binary u
     return Cat(qu[: w - 1], ~qu[w - 1])  # a value, not a named alias (lint: see pwas_hdl.hdl._lintsafe)
 
