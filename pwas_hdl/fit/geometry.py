@@ -252,8 +252,9 @@ class Grid:
         """Physical coordinates of vertices, shape (..., n)."""
         coords = self.vertex_coords(index)
         pts = self.lo + coords * self.step
-        if self.breakpoints is not None:
-            for j, b in enumerate(self.breakpoints):
+        bps = getattr(self, "breakpoints", None)
+        if bps is not None:
+            for j, b in enumerate(bps):
                 if b is not None:
                     pts[..., j] = b[coords[..., j]]
         return pts
@@ -280,8 +281,9 @@ class Grid:
         if not np.all(np.isfinite(xa)):
             raise ValueError("points contain NaN or infinite values; clean the data before evaluating")
         s = (xa - self.lo) / self.step
-        if self.breakpoints is not None:
-            for j, b in enumerate(self.breakpoints):
+        bps = getattr(self, "breakpoints", None)  # pwas_hdl.fit.additive.AdditiveGrid calls this with its own box
+        if bps is not None:
+            for j, b in enumerate(bps):
                 if b is not None:  # piecewise-linear warp: cell c, then the fraction within it
                     c = np.clip(np.searchsorted(b, xa[:, j], side="right") - 1, 0, b.size - 2)
                     s[:, j] = c + (xa[:, j] - b[c]) / (b[c + 1] - b[c])
