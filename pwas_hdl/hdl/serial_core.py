@@ -34,7 +34,8 @@ previous sample's last vertex is being read: the load never overwrites a vertex 
 
 Latency (input transfer to ``out.valid``, no stalls): ``split + rank + addr + 1 (load) + n
 (vertices 1..n) + 1 (memory) + mem_out + product + 1 (accumulator) + 1 (output)``; the
-``tree_levels`` option does not apply (there is no adder tree).
+``tree_levels`` and ``mul_in`` options do not apply (no adder tree; the multiplier operands come
+straight from the memory register or ``mem_out``).
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ def serial_latency(pipeline: Pipeline, n: int) -> int:
     Parameters
     ----------
     pipeline : Pipeline
-        ``split``, ``rank``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels`` does not.
+        ``split``, ``rank``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels`` and ``mul_in`` do not.
     n : int
         Regressor dimension.
     """
