@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # pwas-hdl entry point for people and CI (see README.md).
 #   bash run.sh demo [DIR]  set up, then run the main job on the built-in Lorenz example
-#   bash run.sh test        set up, then run the test suite
+#   bash run.sh test        set up, then run the test suite (pytest-xdist: -n auto; PWAS_HDL_TEST_WORKERS=0 for one process)
 #   bash run.sh setup       only install what is missing (Debian iverilog, venv with deps pinned by constraints.txt)
 # Environment: PWAS_HDL_VENV (default ./.venv) chooses the virtual environment.
 set -euo pipefail
@@ -60,10 +60,21 @@ demo() {
   echo "demo: outputs in $out/ (report: $out/report.md)" >&2
 }
 
+run_tests() {
+  # pytest-xdist workers on every core (-n auto) when it is installed (the dev extra has it);
+  # PWAS_HDL_TEST_WORKERS=N chooses N workers, 0 one process. A later -n in the arguments wins.
+  local par=()
+  local n="${PWAS_HDL_TEST_WORKERS:-auto}"
+  if [ "$n" != 0 ] && "$VENV/bin/python" -c 'import xdist' >/dev/null 2>&1; then
+    par=(-n "$n" --dist worksteal)
+  fi
+  exec "$VENV/bin/python" -m pytest -q ${par[@]+"${par[@]}"} "$@"
+}
+
 cmd="${1:-}"
 case "$cmd" in
   setup) setup ;;
   demo) shift; setup; demo "$@" ;;
-  test) shift; setup; exec "$VENV/bin/python" -m pytest -q "$@" ;;
+  test) shift; setup; run_tests "$@" ;;
   *) echo "usage: bash run.sh {demo [DIR]|test [pytest args]|setup}" >&2; exit 2 ;;
 esac

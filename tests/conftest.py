@@ -4,6 +4,16 @@ Markers (registered in pyproject.toml): ``rtl`` runs an HDL simulator or linter 
 ``synth`` runs Yosys / nextpnr, ``slow`` takes more than about 5 s (every ``rtl`` and ``synth``
 test counts as slow: :func:`pytest_collection_modifyitems` adds the mark). The fast subset is
 ``bash run.sh test -m "not rtl and not synth"``; ``-m "not slow"`` leaves out the slow ones of it too.
+
+Parallel runs: ``bash run.sh test`` runs pytest-xdist workers (``-n auto``; ``PWAS_HDL_TEST_WORKERS=0``
+for one process). Every fixture here is per worker (``tmp_path_factory`` folders are per worker;
+the simulator build cache is shared but file-locked and keyed by hash), and each worker's BLAS
+runs one thread, so that two workers do not oversubscribe two cores.
+
+Hypothesis profiles: ``ci`` (loaded when ``CI=true``) draws more examples, derandomised and without
+an example database (the same examples on every CI run); ``dev`` (the default) draws fewer, random
+ones. ``HYPOTHESIS_PROFILE=ci`` chooses one explicitly. The CLI fuzz suite scales its per-command
+budgets with the profile (tests/test_fuzz_cli.py, ``FUZZ_SCALE``).
 """
 
 from __future__ import annotations
@@ -14,8 +24,26 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from pwas_hdl.fit.geometry import Grid
+
+#: Examples per property of the profiles (hypothesis' own default is 100).
+settings.register_profile("ci", max_examples=200, derandomize=True, database=None, deadline=None, print_blob=True)
+settings.register_profile("dev", max_examples=100, deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE")
+                      or ("ci" if os.environ.get("CI", "").strip().lower() in ("true", "1", "yes") else "dev"))
+
+
+def pytest_configure(config):
+    """In a pytest-xdist worker, limit BLAS / OpenMP to one thread (two workers share two cores)."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        from threadpoolctl import threadpool_limits
+
+        config._pwas_blas_limit = threadpool_limits(1)
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # and the tests' subprocesses
+            os.environ.setdefault(var, "1")
+
 
 def pytest_collection_modifyitems(config, items):
     """Simulator and synthesis runs take seconds to minutes each: mark them ``slow`` as well."""

@@ -35,21 +35,30 @@ from hypothesis import strategies as st
 from pwas_hdl.limits import MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_VERTICES
 
 
-#: Examples per command (fixed: the suite's run time is bounded).
+#: Examples per command at scale 1 (fixed: the suite's run time is bounded).
 BUDGET = {"fit": 60, "predict": 50, "info": 50, "generate": 25, "simulate": 30, "synth": 25, "explore": 12,
           "report": 40, "make-data": 40, "bench": 10, "limits": 8}
 #: Address-space limit of the subprocess runs (bytes).
 MEMORY_LIMIT = 3 * 2**30
 
-
-#: ``PWAS_FUZZ_SCALE=k`` runs k times the budget (a longer local hunt; CI uses the fixed budget).
+#: Budget factor per hypothesis profile (tests/conftest.py): ``ci`` (CI=true) runs twice the budget,
+#: ``dev`` (the default, the fast local subset) half of it, at least :data:`MIN_EXAMPLES` per command.
+PROFILE_SCALE = {"ci": 2.0, "dev": 0.5}
+MIN_EXAMPLES = 5
+#: ``PWAS_FUZZ_SCALE=k`` runs k times the profile's budget (a longer local hunt).
 SCALE = max(1, int(os.environ.get("PWAS_FUZZ_SCALE", "1")))
+FUZZ_SCALE = PROFILE_SCALE.get(settings.get_current_profile_name(), 1.0) * SCALE
 #: ``PWAS_FUZZ_RANDOM=1`` draws new examples (with ``pytest --hypothesis-seed=N`` to repeat a run).
 RANDOM = os.environ.get("PWAS_FUZZ_RANDOM")
 
 
+def examples(command: str) -> int:
+    """Examples drawn for ``command`` under the loaded profile."""
+    return max(MIN_EXAMPLES, round(BUDGET[command] * FUZZ_SCALE))
+
+
 def _settings(command: str):
-    return settings(max_examples=BUDGET[command] * SCALE, deadline=None, derandomize=RANDOM is None, database=None,
+    return settings(max_examples=examples(command), deadline=None, derandomize=RANDOM is None, database=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
                                            HealthCheck.data_too_large, HealthCheck.filter_too_much])
 
@@ -630,20 +639,83 @@ def _limited() -> None:  # pragma: no cover - runs in the child
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
 
 
-def _cli(args: list[Any], cwd: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    return subprocess.run([sys.executable, "-m", "pwas_hdl.cli", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, preexec_fn=_limited, env=env, timeout=300)
+#: The child: runs ``pwas_hdl.cli.main`` once per request line (JSON: args, cwd) and answers with
+#: one JSON line (exit code, what the run wrote to stderr). One interpreter start for all examples.
+_CHILD = r"""
+import io, json, os, sys
+from contextlib import redirect_stderr, redirect_stdout
+from pwas_hdl.cli import main
+answer = sys.stdout
+for line in sys.stdin:
+    req = json.loads(line)
+    os.chdir(req["cwd"])
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        try:
+            code = main(req["args"])
+        except SystemExit as e:
+            code = e.code
+        except BaseException as e:  # anything main() let through (a MemoryError, ...)
+            code = "escaped"
+            err.write(f"Traceback: {type(e).__name__}: {e}")
+    answer.write(json.dumps({"code": code, "stderr": err.getvalue()}) + "\n")
+    answer.flush()
+"""
 
 
-@pytest.mark.slow
-@settings(max_examples=BUDGET["limits"], deadline=None, derandomize=True, database=None,
+class LimitedCLI:
+    """``pwas-hdl`` in one long-lived child process under ``RLIMIT_AS`` = :data:`MEMORY_LIMIT`.
+
+    ``cli(args, cwd)`` -> ``(exit_code, stderr)``. A child killed by a signal (e.g. the kernel on
+    an allocation) shows as exit code ``"died (<returncode>)"`` and is restarted for the next call.
+    """
+
+    def __init__(self, log: Path) -> None:
+        self.log = log
+        self.proc: subprocess.Popen | None = None
+
+    def _start(self) -> subprocess.Popen:
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+        return subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=open(self.log, "ab"), text=True, preexec_fn=_limited, env=env)
+
+    def __call__(self, args: list[Any], cwd: Path) -> tuple[Any, str]:
+        if self.proc is None or self.proc.poll() is not None:
+            self.proc = self._start()
+        self.proc.stdin.write(json.dumps({"args": [str(a) for a in args], "cwd": str(cwd)}) + "\n")
+        self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        if not line:
+            rc = self.proc.wait(timeout=60)
+            self.proc = None
+            return f"died ({rc})", self.log.read_text(errors="replace")[-2000:]
+        ans = json.loads(line)
+        return ans["code"], ans["stderr"]
+
+    def close(self) -> None:
+        if self.proc is not None:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=60)
+            self.proc = None
+
+
+@pytest.fixture(scope="module")
+def limited_cli(tmp_path_factory):
+    cli = LimitedCLI(tmp_path_factory.mktemp("limited") / "child-stderr.log")
+    yield cli
+    cli.close()
+
+
+LIMIT_KINDS = ["p", "my", "inputs", "sigma_grid", "samples", "model_p", "sweep"]
+
+
+@pytest.mark.parametrize("kind", LIMIT_KINDS)
+@settings(max_examples=examples("limits"), deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(kind=st.sampled_from(["p", "my", "inputs", "sigma_grid", "samples", "model_p", "sweep"]),
-       size=st.integers(min_value=1, max_value=10**30))
-def test_fuzz_sizes_refused_within_memory(base, kind, size):
+@given(size=st.integers(min_value=1, max_value=10**30))
+def test_fuzz_sizes_refused_within_memory(base, limited_cli, kind, size):
     """Requests above a limit: exit 2, one error line naming the number and the limit, no MemoryError,
-    no signal, under a 3 GiB address-space limit."""
+    no signal, under a 3 GiB address-space limit (every kind of limit, several sizes each)."""
     with scratch(base, ("d.csv", "t.csv", "m.json")) as work:
         if kind == "p":
             p = 1023 + size  # N = (p+1)^2 > 2^20
@@ -670,9 +742,9 @@ def test_fuzz_sizes_refused_within_memory(base, kind, size):
         else:
             args, limit = ["explore", "m.json", "t.csv", "-o", "ex", "--input-bits", f"2:{10001 + size}"], 10000
         before = tree(work)
-        proc = _cli(args, work)
-        assert proc.returncode == 2, (args, proc.returncode, proc.stderr[-2000:])
-        assert "Traceback" not in proc.stderr and "MemoryError" not in proc.stderr, proc.stderr[-2000:]
-        errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
-        assert len(errors) == 1 and f"limit of {limit}" in errors[0], proc.stderr
+        code, stderr = limited_cli(args, work)
+        assert code == 2, (args, code, stderr[-2000:])
+        assert "Traceback" not in stderr and "MemoryError" not in stderr, stderr[-2000:]
+        errors = [ln for ln in stderr.splitlines() if ln.startswith("error:")]
+        assert len(errors) == 1 and f"limit of {limit}" in errors[0], stderr
         assert tree(work) == before

@@ -68,6 +68,7 @@ def test_axis_and_amaranth_designs_are_the_same_logic(sensor_model):
     assert back == b
 
 
+@pytest.mark.rtl  # runs Verilator's linter
 @pytest.mark.skipif(which("verilator") is None, reason="verilator not installed")
 @pytest.mark.parametrize("ports, init", [("axis", "inline"), ("amaranth", "inline"), ("axis", "readmemh")])
 def test_lint_clean(ports, init, sensor_model, tmp_path):

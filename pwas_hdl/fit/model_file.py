@@ -57,8 +57,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.limits import check_vertices
 from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
 
 if TYPE_CHECKING:
@@ -250,12 +251,16 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
         return errs
     if d["regressors"] != names:
         errs.append(f"regressors {d['regressors']} do not match the lags and signal names ({names})")
-    n_vertices = int(np.prod([p + 1 for p in g["partitions"]], dtype=object))
     if "additive" in d:
         errs += _additive_errors(d, names)
         if errs:
             return errs
         n_vertices = sum(int(np.prod([g["partitions"][j] + 1 for j in part], dtype=object)) for part in d["additive"]["parts"])
+    else:
+        try:  # a grid above the vertex limit is refused as such, whatever the weights say
+            n_vertices = check_vertices(g["partitions"])
+        except ResourceLimit as exc:
+            return [str(exc)]
     for what, keys in (("weights", list(d["weights"])), ("fit.train_rmse", list(d["fit"]["train_rmse"]))):
         if keys != tgts:
             errs.append(f"{what} has the keys {keys}, signals.targets are {tgts}")
