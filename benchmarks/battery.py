@@ -53,7 +53,7 @@ ASSUMPTIONS_E3 = ASSUMPTIONS | {
 }
 
 
-def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
+def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None, executor=None) -> dict:
     """Run E3; return the results document (plus ``_traces`` of run 0 for :func:`plot`)."""
     if runs < 1:
         raise InputError("--runs must be >= 1")
@@ -61,7 +61,10 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
     n_train, n_test = (3000, 1000) if quick else (25000, 5000)
     col = Collector()
     traces = {}
-    for r in range(runs):
+    def one_run(r: int):
+        """Run r (fresh data, seed r): its values and timings."""
+        col = Collector()
+        traces = {}
         tr, te, norm = make_battery_dataset(n_train, n_test, seed=r, noise=0.03)
         soc_true = norm.invert("z", te.z_true)[:, 0]
         est = {}
@@ -97,6 +100,11 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
             traces["start"] = start
             traces["r0"] = r0
         say(progress, f"run {r + 1}/{runs}: " + ", ".join(f"{k[0]} RMSE {v[-1]:.4f}" for k, v in col.values.items() if k[1] == "rmse"))
+        return col, traces
+
+    for part, tr in br.map_runs(one_run, range(runs), executor, labels=[f"run {r}" for r in range(runs)]):
+        col.extend(part)
+        traces = traces or tr
     rows = []
     for (name, metric), vals in col.values.items():
         cfg = {"n_train": n_train, "n_test": n_test, "units": "SoC fraction" if metric == "rmse" else "1"}

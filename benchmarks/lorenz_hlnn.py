@@ -107,8 +107,12 @@ def _helicopter_run(seed: int, hidden: Sequence[int], restarts: int, max_iter: i
 
 
 def run_lorenz_hlnn(runs: int = 5, quick: bool = False, progress: Callable[[str], None] | None = None,
-                    heli_samples: int = 25000) -> tuple[dict, dict]:
-    """Run the bench; returns the document and the traces of seed 0 for :func:`plot`."""
+                    heli_samples: int = 25000, executor=None) -> tuple[dict, dict]:
+    """Run the bench; returns the document and the traces of seed 0 for :func:`plot`.
+
+    ``executor`` (:class:`pwas_hdl.flow.executor.Executor`, default serial) runs the (seed, system)
+    tasks; the document is the same whatever runs them.
+    """
     say = progress or (lambda s: None)
     t0 = time.monotonic()
     hidden, restarts, max_iter = (HIDDEN, 1, 500) if not quick else ((6,), 1, 200)
@@ -118,17 +122,23 @@ def run_lorenz_hlnn(runs: int = 5, quick: bool = False, progress: Callable[[str]
     vals: dict[tuple, list[float]] = {}
     infos: dict[str, list] = {"lorenz": [], "helicopter-surrogate": []}
     traces: dict = {}
-    for r in range(runs):
-        for system, fn in (("lorenz", lambda: _lorenz_run(r, hidden, restarts, max_iter, grid)),
-                           ("helicopter-surrogate", lambda: _helicopter_run(r, hidden, restarts, max_iter, heli_samples, HELI_SIGMA_GRID,
-                                                                           QUICK_HELI_SIGMA if quick else None))):
-            say(f"{system}: seed {r + 1}/{runs}")
-            res, info, trace = fn()
-            for k, v in res.items():
-                vals.setdefault((system,) + k, []).append(v)
-            infos[system].append(info)
-            if r == 0:
-                traces[system] = trace
+
+    def one_run(task: tuple[int, str]):
+        """Seed r on one system: (results, info, trace)."""
+        r, system = task
+        say(f"{system}: seed {r + 1}/{runs}")
+        if system == "lorenz":
+            return _lorenz_run(r, hidden, restarts, max_iter, grid)
+        return _helicopter_run(r, hidden, restarts, max_iter, heli_samples, HELI_SIGMA_GRID, QUICK_HELI_SIGMA if quick else None)
+
+    tasks = [(r, system) for r in range(runs) for system in ("lorenz", "helicopter-surrogate")]
+    for (r, system), (res, info, trace) in zip(tasks, br.map_runs(one_run, tasks, executor,
+                                                                  labels=[f"{s} seed {r}" for r, s in tasks])):
+        for k, v in res.items():
+            vals.setdefault((system,) + k, []).append(v)
+        infos[system].append(info)
+        if r == 0:
+            traces[system] = trace
     rows = []
     for (system, est, stage), v in vals.items():
         inf = infos[system]

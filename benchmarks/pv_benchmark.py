@@ -114,7 +114,7 @@ def _with_taps(feats: np.ndarray, valid: slice, u: np.ndarray, y: np.ndarray) ->
 
 
 def run(cases: list[Case], runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None,
-        predictors: tuple = ESTIMATORS, ann_cases: tuple | None = None) -> dict:
+        predictors: tuple = ESTIMATORS, ann_cases: tuple | None = None, executor=None) -> dict:
     """Run the cases; return the results document (:mod:`pwas_hdl.bench_results`).
 
     Parameters
@@ -136,7 +136,9 @@ def run(cases: list[Case], runs: int = 10, quick: bool = False, progress: Callab
     t0 = time.perf_counter()
     col = Collector()
     n_test = 1000 if quick else 5000
-    for r in range(runs):
+    def one_run(r: int):
+        """Run r (fresh data, seed r): its values and timings."""
+        col = Collector()
         data, lpvs = {}, {}
         for case in cases:
             n_train = 3000 if quick else case.n_train
@@ -174,6 +176,10 @@ def run(cases: list[Case], runs: int = 10, quick: bool = False, progress: Callab
                 col.time(key, tm)
             say(progress, f"run {r + 1}/{runs} {case.name}: " + ", ".join(
                 f"{e} {col.values[(case.name, e, 'fit')][-1]:.3f}" for e in case.estimators if (case.name, e, "fit") in col.values))
+        return col
+
+    for part in br.map_runs(one_run, range(runs), executor, labels=[f"run {r}" for r in range(runs)]):
+        col.extend(part)
     rows = []
     for case in cases:
         for est in case.estimators:

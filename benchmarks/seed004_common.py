@@ -79,6 +79,14 @@ class Collector:
     def time(self, key: tuple, timer: Timer) -> None:
         self.timing.setdefault(key, []).append((timer.seconds, timer.peak_mib))
 
+    def extend(self, other: "Collector") -> "Collector":
+        """Append another collector's values and timings (one run's, merged in run order)."""
+        for k, v in other.values.items():
+            self.values.setdefault(k, []).extend(v)
+        for k, v in other.timing.items():
+            self.timing.setdefault(k, []).extend(v)
+        return self
+
     def timing_of(self, key: tuple) -> dict:
         t = self.timing.get(key)
         if not t:

@@ -80,11 +80,14 @@ def run_switched_linear(
     test_samples: int = 2000,
     progress: Callable[[str], None] | None = None,
     rtl: str | None = "default",
+    executor=None,
 ) -> tuple[dict, dict]:
     """Run the bench; returns the document and traces (time law, no noise, run 0) for :func:`plot`.
 
     ``rtl``: simulator of the RTL replay of the classifier (``"icarus"`` or ``"verilator"``), or
     None for none; ``"default"``: ``"icarus"`` for the full run, None with ``quick``.
+    ``executor`` (:class:`pwas_hdl.flow.executor.Executor`, default serial) runs the (law, noise,
+    run) tasks; the document is the same whatever runs them.
     """
     say = progress or (lambda s: None)
     t0 = time.monotonic()
@@ -110,72 +113,84 @@ def run_switched_linear(
                                                    {"u": ["u"], "y": ["y"], "z": [tgt]}, say)
     # the mode uses the state sensors' richer configuration (largest regressor of the chosen ones)
     chosen["mode"] = max(chosen.values(), key=lambda c: (c.mu + c.my, c.p))
+    def one_run(task: tuple[str, float, int]) -> tuple[dict, dict, dict]:
+        """Run r of one switching law and noise level: its values, (time law, no noise, run 0) traces
+        and its RTL replay counts."""
+        law, noise, r = task
+        vals: dict[tuple, list[float]] = {}
+        traces: dict = {}
+        rtl_info = {"replays": 0, "samples": 0, "class_mismatches_vs_bittrue": 0}
+
+        def put(key, v):
+            vals.setdefault(key, []).append(float(v))
+
+        say(f"switching {law}, noise {noise}: run {r + 1}/{runs}")
+        train = switched_training_runs(train_runs, samples, seed=1000 * (r + 1), switching=law, noise=noise).runs()
+        tests = {
+            "replica": switched_paper_run(seed=r, switching=law, input_kind="step", noise=noise),
+            "long": switched_training_runs(1, test_samples, seed=5000 + r, switching=law, noise=noise),
+        }
+        obs = {name: {"known-mode-observer": run_switched_observer(d.u, d.y, known_mode=d.mode),
+                      "switched-observer": run_switched_observer(d.u, d.y)} for name, d in tests.items()}
+        for tname, d in tests.items():
+            for est, o in obs[tname].items():
+                put((tname, "y", est, "float", "mse", law, noise), np.mean((d.y[:, 0] - o.y_hat) ** 2))
+                for col, tgt in enumerate(("x1", "x2")):
+                    put((tname, tgt, est, "float", "rmse", law, noise), rmse(o.x_hat[:, col] - d.z_true[:, col]))
+                if est == "switched-observer":
+                    sc = mode_scores(d.mode, o.theta_hat, MODES)
+                    put((tname, "mode", est, "float", "accuracy", law, noise), sc["accuracy"])
+                    for c in MODES:
+                        put((tname, f"mode={c}", est, "float", "f1", law, noise), sc["f1"][c])
+        d = tests["long"]
+        start = max(max(c.mu, c.my) for c in chosen.values()) - 1
+        pw_tr = {}
+        for col, tgt in enumerate(("x1", "x2")):
+            m = fit_pwas(chosen[tgt], [t.u for t in train], [t.y for t in train], [t.z[:, col : col + 1] for t in train],
+                         {"u": ["u"], "y": ["y"], "z": [tgt]}, grid)
+            est = pwas_estimates(m, d.u, d.y)
+            for stage in ("float", "bittrue"):
+                put(("long", tgt, "pwas", stage, "rmse", law, noise), rmse(est[stage][start:, 0] - d.z_true[start:, col]))
+            pw_tr[tgt] = est["float"][:, 0]
+        for onehot, ename in ((False, "pwas-round"), (True, "pwas-classifier")):
+            m = _class_fit(chosen["mode"], train, onehot, grid)
+            est = pwas_estimates(m, d.u, d.y)
+            for stage in ("float", "bittrue"):
+                pred = _decide(est[stage][start:], onehot)
+                sc = mode_scores(d.mode[start:], pred, MODES)
+                put(("long", "mode", ename, stage, "accuracy", law, noise), sc["accuracy"])
+                for c in MODES:
+                    put(("long", f"mode={c}", ename, stage, "f1", law, noise), sc["f1"][c])
+                if onehot and stage == "float":
+                    pw_tr["mode"] = np.concatenate([np.zeros(start, dtype=int), pred])
+            if onehot and rtl and noise == 0.0:
+                say(f"  RTL replay of the classifier ({rtl}, {len(d.y)} samples) ...")
+                pred, n_mism = _rtl_classes(m, d, rtl)
+                ok = np.arange(len(d.y)) >= start
+                sc = mode_scores(d.mode[ok], pred[ok], MODES)
+                put(("long", "mode", ename, "rtl", "accuracy", law, noise), sc["accuracy"])
+                for c in MODES:
+                    put(("long", f"mode={c}", ename, "rtl", "f1", law, noise), sc["f1"][c])
+                rtl_info["replays"] += 1
+                rtl_info["samples"] += int(ok.sum())
+                rtl_info["class_mismatches_vs_bittrue"] += n_mism
+        if law == "time" and noise == 0.0 and r == 0:
+            rep = tests["replica"]
+            traces = {"replica": {"y": rep.y[:, 0], **{k: o.y_hat for k, o in obs["replica"].items()}},
+                      "long": {"x": d.z_true, "obs": obs["long"]["switched-observer"].x_hat,
+                               "known": obs["long"]["known-mode-observer"].x_hat, "pwas_x1": pw_tr["x1"],
+                               "pwas_x2": pw_tr["x2"], "mode": d.mode,
+                               "mode_obs": obs["long"]["switched-observer"].theta_hat, "mode_pwas": pw_tr["mode"]}}
+        return vals, traces, rtl_info
+
     vals: dict[tuple, list[float]] = {}
     traces: dict = {}
-
-    def put(key, v):
-        vals.setdefault(key, []).append(float(v))
-
-    for law in laws:
-        for noise in noises:
-            for r in range(runs):
-                say(f"switching {law}, noise {noise}: run {r + 1}/{runs}")
-                train = switched_training_runs(train_runs, samples, seed=1000 * (r + 1), switching=law, noise=noise).runs()
-                tests = {
-                    "replica": switched_paper_run(seed=r, switching=law, input_kind="step", noise=noise),
-                    "long": switched_training_runs(1, test_samples, seed=5000 + r, switching=law, noise=noise),
-                }
-                obs = {name: {"known-mode-observer": run_switched_observer(d.u, d.y, known_mode=d.mode),
-                              "switched-observer": run_switched_observer(d.u, d.y)} for name, d in tests.items()}
-                for tname, d in tests.items():
-                    for est, o in obs[tname].items():
-                        put((tname, "y", est, "float", "mse", law, noise), np.mean((d.y[:, 0] - o.y_hat) ** 2))
-                        for col, tgt in enumerate(("x1", "x2")):
-                            put((tname, tgt, est, "float", "rmse", law, noise), rmse(o.x_hat[:, col] - d.z_true[:, col]))
-                        if est == "switched-observer":
-                            sc = mode_scores(d.mode, o.theta_hat, MODES)
-                            put((tname, "mode", est, "float", "accuracy", law, noise), sc["accuracy"])
-                            for c in MODES:
-                                put((tname, f"mode={c}", est, "float", "f1", law, noise), sc["f1"][c])
-                d = tests["long"]
-                start = max(max(c.mu, c.my) for c in chosen.values()) - 1
-                pw_tr = {}
-                for col, tgt in enumerate(("x1", "x2")):
-                    m = fit_pwas(chosen[tgt], [t.u for t in train], [t.y for t in train], [t.z[:, col : col + 1] for t in train],
-                                 {"u": ["u"], "y": ["y"], "z": [tgt]}, grid)
-                    est = pwas_estimates(m, d.u, d.y)
-                    for stage in ("float", "bittrue"):
-                        put(("long", tgt, "pwas", stage, "rmse", law, noise), rmse(est[stage][start:, 0] - d.z_true[start:, col]))
-                    pw_tr[tgt] = est["float"][:, 0]
-                for onehot, ename in ((False, "pwas-round"), (True, "pwas-classifier")):
-                    m = _class_fit(chosen["mode"], train, onehot, grid)
-                    est = pwas_estimates(m, d.u, d.y)
-                    for stage in ("float", "bittrue"):
-                        pred = _decide(est[stage][start:], onehot)
-                        sc = mode_scores(d.mode[start:], pred, MODES)
-                        put(("long", "mode", ename, stage, "accuracy", law, noise), sc["accuracy"])
-                        for c in MODES:
-                            put(("long", f"mode={c}", ename, stage, "f1", law, noise), sc["f1"][c])
-                        if onehot and stage == "float":
-                            pw_tr["mode"] = np.concatenate([np.zeros(start, dtype=int), pred])
-                    if onehot and rtl and noise == 0.0:
-                        say(f"  RTL replay of the classifier ({rtl}, {len(d.y)} samples) ...")
-                        pred, n_mism = _rtl_classes(m, d, rtl)
-                        ok = np.arange(len(d.y)) >= start
-                        sc = mode_scores(d.mode[ok], pred[ok], MODES)
-                        put(("long", "mode", ename, "rtl", "accuracy", law, noise), sc["accuracy"])
-                        for c in MODES:
-                            put(("long", f"mode={c}", ename, "rtl", "f1", law, noise), sc["f1"][c])
-                        rtl_info["replays"] += 1
-                        rtl_info["samples"] += int(ok.sum())
-                        rtl_info["class_mismatches_vs_bittrue"] += n_mism
-                if law == "time" and noise == 0.0 and r == 0:
-                    rep = tests["replica"]
-                    traces = {"replica": {"y": rep.y[:, 0], **{k: o.y_hat for k, o in obs["replica"].items()}},
-                              "long": {"x": d.z_true, "obs": obs["long"]["switched-observer"].x_hat,
-                                       "known": obs["long"]["known-mode-observer"].x_hat, "pwas_x1": pw_tr["x1"],
-                                       "pwas_x2": pw_tr["x2"], "mode": d.mode,
-                                       "mode_obs": obs["long"]["switched-observer"].theta_hat, "mode_pwas": pw_tr["mode"]}}
+    tasks = [(law, noise, r) for law in laws for noise in noises for r in range(runs)]
+    for v, t, counts in br.map_runs(one_run, tasks, executor, labels=[f"{law} noise {n} run {r}" for law, n, r in tasks]):
+        br.extend_lists(vals, v)
+        traces = traces or t
+        for k, c in counts.items():
+            rtl_info[k] += c
     rows = []
     for (tname, tgt, est, stage, metric, law, noise), v in vals.items():
         cfg = {"test": tname, "switching": law, "noise_y": noise}

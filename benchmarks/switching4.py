@@ -40,7 +40,7 @@ ASSUMPTIONS_E2 = ASSUMPTIONS | {
 }
 
 
-def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
+def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None, executor=None) -> dict:
     """Run E2; return the results document (:mod:`pwas_hdl.bench_results`)."""
     if runs < 1:
         raise InputError("--runs must be >= 1")
@@ -48,7 +48,9 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
     n_train, n_test = (3000, 1000) if quick else (25000, 5000)
     thetas = (5,) if quick else (2, 3, 4, 5)
     col = Collector()
-    for r in range(runs):
+    def one_run(r: int):
+        """Run r (fresh data, seed r): its values and timings."""
+        col = Collector()
         tr, te, norm = make_pv_dataset(SYSTEM, n_train, n_test, seed=r, noise=0.03)
         modes_n = norm.apply("z", MODES[:, None])[:, 0]
         lpv = None
@@ -90,6 +92,10 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
                 col.time((5, est), tm)
         say(progress, f"run {r + 1}/{runs}: " + ", ".join(
             f"{k[1]}(N={k[0]}) FIT {v[-1]:.3f}" for k, v in col.values.items() if k[2] == "fit"))
+        return col
+
+    for part in br.map_runs(one_run, range(runs), executor, labels=[f"run {r}" for r in range(runs)]):
+        col.extend(part)
     rows = []
     for key, vals in col.values.items():
         nth, est, metric = key

@@ -58,8 +58,13 @@ def run_three_tank(
     train_runs: int = 20,
     samples: int = 1000,
     progress: Callable[[str], None] | None = None,
+    executor=None,
 ) -> tuple[dict, dict]:
-    """Run the bench; returns the result document and the traces of run 0 without noise (for :func:`plot`)."""
+    """Run the bench; returns the result document and the traces of run 0 without noise (for :func:`plot`).
+
+    ``executor`` (:class:`pwas_hdl.flow.executor.Executor`, default serial) runs the (noise, run)
+    tasks; the document is the same whatever runs them.
+    """
     say = progress or (lambda s: None)
     t0 = time.monotonic()
     if quick:
@@ -80,33 +85,45 @@ def run_three_tank(
         chosen[tgt], validation[tgt] = select_pwas(cands, [r.u[:, :1] for r in sel], [r.y for r in sel],
                                                    [r.z[:, col : col + 1] for r in sel], holdout, names | {"z": [tgt]}, say)
     start = max(max(c.mu, c.my) for c in chosen.values()) - 1  # first sample every PWAS estimates
+
+    def one_run(task: tuple[float, int]) -> tuple[dict, dict, dict]:
+        """Run r at one noise level: its values, extra statistics and (run 0, no noise) traces."""
+        noise, r = task
+        vals: dict[tuple, list[float]] = {}
+        extra: dict[tuple, list[float]] = {}
+        traces: dict = {}
+        say(f"noise {noise}: run {r + 1}/{runs}")
+        train = three_tank_training_runs(train_runs, samples, seed=1000 * (r + 1), noise=noise).runs()
+        test = three_tank_paper_run(samples, seed=r, noise=noise)
+        win = _windows(samples, start)
+        paper = paper_sensors(test.u[:, 0], test.y)
+        for tgt, col, pname in TARGETS:
+            cfg = chosen[tgt]
+            m = fit_pwas(cfg, [d.u[:, :1] for d in train], [d.y for d in train], [d.z[:, col : col + 1] for d in train],
+                         names | {"z": [tgt]}, grid)
+            est = pwas_estimates(m, test.u[:, :1], test.y)
+            truth = test.z_true[:, col]
+            for wname, w in win.items():
+                for est_name, stage, zhat in ((pname, "float", paper[:, col]), ("pwas", "float", est["float"][:, 0]),
+                                              ("pwas", "bittrue", est["bittrue"][:, 0])):
+                    vals.setdefault((tgt, est_name, stage, wname, noise), []).append(rmse(zhat - truth, w))
+            key = (tgt, noise)
+            extra.setdefault(key + ("ood",), []).append(float(est["out_of_domain"][start:].mean()))
+            extra.setdefault(key + ("sigma",), []).append(float(m.sigma_))
+            if noise == 0.0 and r == 0:
+                traces[tgt] = {"t": np.arange(samples), "true": truth, pname: paper[:, col], "pwas": est["float"][:, 0],
+                               "pwas_bittrue": est["bittrue"][:, 0]}
+                traces[f"{tgt}_fixed_point"] = str(est["fixed_point"])
+        return vals, extra, traces
+
     vals: dict[tuple, list[float]] = {}
     extra: dict[tuple, list[float]] = {}
     traces: dict = {}
-    for noise in noises:
-        for r in range(runs):
-            say(f"noise {noise}: run {r + 1}/{runs}")
-            train = three_tank_training_runs(train_runs, samples, seed=1000 * (r + 1), noise=noise).runs()
-            test = three_tank_paper_run(samples, seed=r, noise=noise)
-            win = _windows(samples, start)
-            paper = paper_sensors(test.u[:, 0], test.y)
-            for tgt, col, pname in TARGETS:
-                cfg = chosen[tgt]
-                m = fit_pwas(cfg, [d.u[:, :1] for d in train], [d.y for d in train], [d.z[:, col : col + 1] for d in train],
-                             names | {"z": [tgt]}, grid)
-                est = pwas_estimates(m, test.u[:, :1], test.y)
-                truth = test.z_true[:, col]
-                for wname, w in win.items():
-                    for est_name, stage, zhat in ((pname, "float", paper[:, col]), ("pwas", "float", est["float"][:, 0]),
-                                                  ("pwas", "bittrue", est["bittrue"][:, 0])):
-                        vals.setdefault((tgt, est_name, stage, wname, noise), []).append(rmse(zhat - truth, w))
-                key = (tgt, noise)
-                extra.setdefault(key + ("ood",), []).append(float(est["out_of_domain"][start:].mean()))
-                extra.setdefault(key + ("sigma",), []).append(float(m.sigma_))
-                if noise == 0.0 and r == 0:
-                    traces[tgt] = {"t": np.arange(samples), "true": truth, pname: paper[:, col], "pwas": est["float"][:, 0],
-                                   "pwas_bittrue": est["bittrue"][:, 0]}
-                    traces[f"{tgt}_fixed_point"] = str(est["fixed_point"])
+    tasks = [(noise, r) for noise in noises for r in range(runs)]
+    for v, e, t in br.map_runs(one_run, tasks, executor, labels=[f"noise {n} run {r}" for n, r in tasks]):
+        br.extend_lists(vals, v)
+        br.extend_lists(extra, e)
+        traces.update(t)
     # issue 13: recurrent sensors (dynamical PWAS, PWAS of maps 27/28; float, bit-true, RTL) and Lorenz Mz = 1, 2
     from pwas_hdl.benchmarks.recurrent import lorenz_rows, recurrent_rows
 

@@ -53,6 +53,9 @@ __all__ = [
     "find_rows",
     "markdown_table",
     "schema",
+    "map_runs",
+    "extend_lists",
+    "execution_record",
 ]
 
 RESULTS_FORMAT = "pwas-hdl-bench-results"
@@ -176,6 +179,55 @@ def environment(elapsed_s: float | None = None) -> dict:
     if elapsed_s is not None:
         env["elapsed_s"] = round(float(elapsed_s), 2)
     return env
+
+
+def map_runs(fn: Any, items: Iterable[Any], executor: Any = None, *, labels: Sequence[str] | None = None) -> list:
+    """The independent runs of a bench, through the one execution layer (:mod:`pwas_hdl.flow.executor`).
+
+    Parameters
+    ----------
+    fn : callable
+        One run: a pure function of its item (seeds inside the item) returning JSON-ready or
+        picklable results. A function nested in the bench's ``run`` is fine: Dask ships it with
+        cloudpickle, the bench module itself is imported on the worker.
+    items : iterable
+        The runs' inputs, in the order the serial bench loops over them.
+    executor : pwas_hdl.flow.executor.Executor, optional
+        ``None``: serially in this process (the same results, in the same order).
+    labels : sequence of str, optional
+        A label per run for the error of a run that failed twice.
+
+    Returns
+    -------
+    list
+        ``[fn(item) for item in items]`` in input order, whatever ran them.
+    """
+    from pwas_hdl.flow.executor import Executor
+
+    return (executor if executor is not None else Executor()).map(fn, list(items), labels=labels)
+
+
+def extend_lists(into: dict, part: Mapping[Any, Sequence[Any]]) -> dict:
+    """Append the per-run value lists of ``part`` to those of ``into`` (key by key; ``into`` returned).
+
+    Merging the parts of :func:`map_runs` in input order gives the lists of the serial loop.
+    """
+    for k, v in part.items():
+        into.setdefault(k, []).extend(v)
+    return into
+
+
+def execution_record(executor: Any = None) -> dict:
+    """What ran a bench's tasks, for the results' ``config["execution"]``.
+
+    ``{"kind": "serial" | "local-cluster" | "scheduler", "workers": N, "scheduler": address or None,
+    "tool_versions": {...}}``; the tool versions come from every worker and are checked to be equal
+    (:meth:`pwas_hdl.flow.executor.Executor.tool_versions` raises when they differ).
+    """
+    from pwas_hdl.flow.executor import Executor
+
+    ex = executor if executor is not None else Executor()
+    return ex.describe() | {"tool_versions": ex.tool_versions()}
 
 
 def make_results(

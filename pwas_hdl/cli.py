@@ -1018,7 +1018,8 @@ def make_data_switched_linear(
                 lambda: switched_paper_run(seed=seed, switching=switching, noise=noise))
 
 
-def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool) -> None:
+def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool,
+                  workers: Optional[int] = None, scheduler: Optional[str] = None) -> None:
     """Run one of the system benches (benchmarks/<module>.py) and write its pwas-hdl-bench-results JSON."""
     import importlib
 
@@ -1032,7 +1033,9 @@ def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path
         for p in (json_out, markdown, plot_out):
             if p is not None and not p.parent.is_dir():
                 raise InputError(f"folder {p.parent} does not exist; create it first")
-        doc, traces = getattr(mod, f"run_{module}")(runs=runs, quick=quick, progress=_say)
+        with _executor(workers, scheduler) as ex:
+            doc, traces = getattr(mod, f"run_{module}")(runs=runs, quick=quick, progress=_say, executor=ex)
+            doc["config"]["execution"] = bench_results.execution_record(ex)
         bench_results.write_results(json_out, doc)
         table = mod.markdown(doc)
         if markdown is not None:
@@ -1053,23 +1056,26 @@ BenchQuick = Annotated[bool, typer.Option("--quick", help="A reduced smoke run (
 
 @bench_app.command("three-tank")
 def bench_three_tank(json_out: BenchJson = None, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
-                     quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
+                     quick: BenchQuick = False, workers: WorkersOpt = None, scheduler: SchedulerOpt = None,
+                     json_old: BenchJsonOld = None) -> None:
     """Seed 001: sensors (27)/(28) vs PWAS (float, bit-true) on the paper's three-tank run, with a y-noise study."""
-    _system_bench("three_tank", json_out, json_old, markdown, plot_out, runs, quick)
+    _system_bench("three_tank", json_out, json_old, markdown, plot_out, runs, quick, workers, scheduler)
 
 
 @bench_app.command("switched-linear")
 def bench_switched_linear(json_out: BenchJson = None, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
-                          quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
+                          quick: BenchQuick = False, workers: WorkersOpt = None, scheduler: SchedulerOpt = None,
+                          json_old: BenchJsonOld = None) -> None:
     """Seed 003: virtual estimator (Table 1) and known-mode observer vs PWAS states and mode classifier."""
-    _system_bench("switched_linear", json_out, json_old, markdown, plot_out, runs, quick)
+    _system_bench("switched_linear", json_out, json_old, markdown, plot_out, runs, quick, workers, scheduler)
 
 
 @bench_app.command("lorenz-hlnn")
 def bench_lorenz_hlnn(json_out: BenchJson = None, markdown: BenchMd = None, plot_out: BenchPlot = None, runs: BenchRuns = 5,
-                      quick: BenchQuick = False, json_old: BenchJsonOld = None) -> None:
+                      quick: BenchQuick = False, workers: WorkersOpt = None, scheduler: SchedulerOpt = None,
+                      json_old: BenchJsonOld = None) -> None:
     """Seed 000: HLNN vs PWAS on Lorenz (Table II) and on the helicopter surrogate (Table VI)."""
-    _system_bench("lorenz_hlnn", json_out, json_old, markdown, plot_out, runs, quick)
+    _system_bench("lorenz_hlnn", json_out, json_old, markdown, plot_out, runs, quick, workers, scheduler)
 def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out: Optional[Path], test_samples: int,
                         seed: int, noise: float, rho_law: str = "random-walk") -> None:
     """Shared body of the seed-004 make-data commands (normalised with the training statistics, noisy)."""
@@ -1189,7 +1195,7 @@ def bench_lorenz(
 
 
 def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path],
-                   plot: Optional[Path], **kw) -> None:
+                   plot: Optional[Path], workers: Optional[int] = None, scheduler: Optional[str] = None, **kw) -> None:
     """Shared body of the seed-004 benches: run, write JSON (+ Markdown, + plot), print the table."""
     import importlib
 
@@ -1202,7 +1208,9 @@ def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Pat
         if p is not None and not p.parent.is_dir():
             raise InputError(f"folder {p.parent} does not exist; create it first")
     mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
-    doc = mod.run(progress=_say, **kw)
+    with _executor(workers, scheduler) as ex:
+        doc = mod.run(progress=_say, executor=ex, **kw)
+        doc["config"]["execution"] = bench_results.execution_record(ex)
     if plot is not None and hasattr(mod, "plot"):
         mod.plot(doc, plot)
     bench_results.write_results(json_out, {k: v for k, v in doc.items() if not k.startswith("_")})
@@ -1223,6 +1231,8 @@ def bench_pv(
     cases: Annotated[Optional[str], typer.Option("--cases", help="Only these cases, comma list (base, 11a, pp0.4, kf0.1, ntheta3, cosine, ...).")] = None,
     predictors: Annotated[str, typer.Option("--predictors", help="Estimators to run: comma list of dtr, rfr, ann, pwas-feat, pwas-raw.")] = "dtr,rfr,ann,pwas-feat,pwas-raw",
     ann_cases: Annotated[Optional[str], typer.Option("--ann-cases", help="Run the ANN only in these cases (comma list; default: every case that lists it).")] = None,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
     json_old: BenchJsonOld = None,
 ) -> None:
     """Seed 004 E1, Tables 1-7: FIT/NRMSE of rho for DTR, RFR, ANN, PWAS P-feat and P-raw beside the paper."""
@@ -1234,7 +1244,7 @@ def bench_pv(
         if bad:
             raise InputError(f"--predictors: unknown {', '.join(sorted(bad))}; use {', '.join(pvb.ESTIMATORS)}")
         sel = pvb.select_cases(_names([tables]) if tables else None, ["base"] if quick else (_names([cases]) if cases else None))
-        _seed004_bench("pv_benchmark", json_out, json_old, markdown, None, cases=sel, runs=1 if quick else runs, quick=quick,
+        _seed004_bench("pv_benchmark", json_out, json_old, markdown, None, workers, scheduler, cases=sel, runs=1 if quick else runs, quick=quick,
                        predictors=preds, ann_cases=tuple(_names([ann_cases])) if ann_cases else None)
 
 
@@ -1244,11 +1254,13 @@ def bench_switching4(
     markdown: BenchMd = None,
     runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1); the paper averages 10.")] = 10,
     quick: Annotated[bool, typer.Option("--quick", help="Smoke run: N_theta = 5 only, 3000/1000 samples, one run: not a result to quote.")] = False,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
     json_old: BenchJsonOld = None,
 ) -> None:
     """Seed 004 E2, Tables 8-9: mode reconstruction (FIT, NRMSE, per-mode F1) for RFR, RFC, PWAS beside the paper."""
     with _user_errors():
-        _seed004_bench("switching4", json_out, json_old, markdown, None, runs=1 if quick else runs, quick=quick)
+        _seed004_bench("switching4", json_out, json_old, markdown, None, workers, scheduler, runs=1 if quick else runs, quick=quick)
 
 
 @bench_app.command("battery")
@@ -1258,11 +1270,13 @@ def bench_battery(
     plot: Annotated[Optional[Path], typer.Option("--plot", help="Also write a Fig. 5-like plot (PNG) of run 0 here.")] = None,
     runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1).")] = 10,
     quick: Annotated[bool, typer.Option("--quick", help="Smoke run: 3000/1000 samples, one run: not a result to quote.")] = False,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
     json_old: BenchJsonOld = None,
 ) -> None:
     """Seed 004 E3 (Fig. 5): SoC RMSE/FIT of the RFR and PWAS sensors and of 4 EKFs (substitute battery coefficients)."""
     with _user_errors():
-        _seed004_bench("battery", json_out, json_old, markdown, plot, runs=1 if quick else runs, quick=quick)
+        _seed004_bench("battery", json_out, json_old, markdown, plot, workers, scheduler, runs=1 if quick else runs, quick=quick)
 
 
 def _version(value: bool) -> None:

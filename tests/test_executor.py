@@ -123,6 +123,46 @@ def test_bench_lorenz_quick_identical_on_two_workers(tmp_path):
 
 
 @pytest.mark.slow
+def test_system_bench_quick_identical_on_two_workers(tmp_path):
+    """`bench three-tank --quick` on a 2-worker LocalCluster: the same rows and config as serial;
+    the execution record names what ran it, with the workers' (equal) tool versions."""
+    docs = {}
+    for kind, extra in (("serial", []), ("dist", ["--workers", "2"])):
+        out = tmp_path / f"{kind}.json"
+        r = runner.invoke(app, ["bench", "three-tank", "--quick", "-o", str(out), *extra])
+        assert r.exit_code == 0, r.output
+        docs[kind] = json.loads(out.read_text())
+    a, b = docs["serial"], docs["dist"]
+    ea, eb = a["config"].pop("execution"), b["config"].pop("execution")
+    assert (ea["kind"], ea["workers"]) == ("serial", 1) and (eb["kind"], eb["workers"]) == ("local-cluster", 2)
+    assert ea["tool_versions"] == eb["tool_versions"] == environment_versions()
+    assert a["rows"] and _without_timings(a["rows"]) == _without_timings(b["rows"])
+    assert _without_timings(a["config"]) == _without_timings(b["config"])
+    assert [r["value"] for r in a["rows"]] == [r["value"] for r in b["rows"]]  # the numbers, exactly
+
+
+def test_bench_helpers_merge_runs_in_order():
+    from pwas_hdl import bench_results as br
+
+    parts = br.map_runs(_square, [3, 1, 2])
+    assert parts == [9, 1, 4]
+    merged = {}
+    for part in ({"a": [1]}, {"a": [2], "b": [3]}, {"b": [4]}):
+        br.extend_lists(merged, part)
+    assert merged == {"a": [1, 2], "b": [3, 4]} and list(merged) == ["a", "b"]
+    rec = br.execution_record()
+    assert rec["kind"] == "serial" and rec["tool_versions"]["numpy"]
+
+
+def test_system_bench_refuses_bad_workers(tmp_path):
+    r = runner.invoke(app, ["bench", "switched-linear", "--quick", "-o", str(tmp_path / "b.json"), "--workers", "-1"])
+    assert r.exit_code == 2 and "--workers must be a non-negative integer" in r.output
+    r = runner.invoke(app, ["bench", "lorenz-hlnn", "--quick", "-o", str(tmp_path / "b.json"), "--scheduler", "nohost"])
+    assert r.exit_code == 2 and "tcp://HOST:PORT" in r.output
+    assert not (tmp_path / "b.json").exists()
+
+
+@pytest.mark.slow
 @pytest.mark.synth
 def test_explore_measured_identical_on_two_workers(tmp_path, cluster):
     from pwas_hdl.flow.explore import explore
