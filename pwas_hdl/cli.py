@@ -280,8 +280,14 @@ def fit(
     refine: Annotated[int, typer.Option("--refine", help="With --mz: up to K closed-loop refinements (refit on the simulated estimates while the closed-loop error improves).")] = 0,
     z0: Annotated[Optional[str], typer.Option("--z0", help="With --mz: initial past estimates, mean (training mean, default), measured (the measured z before the first estimate; predict then reads the target columns) or one value per target (comma list).")] = None,
     additive: Annotated[Optional[str], typer.Option("--additive", help="Reduced-complexity additive sensor, a sum of PWAS parts on subsets of the regressors, fitted jointly: time (one part per time instant), pairs / triples (sliding windows of 2 / 3 lags), or regressor indices '0,1;1,2;...' (0-based, in the order fit prints them; parts separated by ';').")] = None,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
-    """Fit a PWAS virtual sensor to DATA and write the model file."""
+    """Fit a PWAS virtual sensor to DATA and write the model file.
+
+    With --workers / --scheduler the cross-validation folds (each fold's sigma sweep) run as Dask
+    tasks; the chosen sigma and the weights are the serial run's.
+    """
     from pwas_hdl.fit import classifier as clf
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd, parse_observer
 
@@ -384,8 +390,8 @@ def fit(
             from pwas_hdl.fit.regressors import LagStructure
 
             parse_additive(additive, LagStructure(mu, my, len(ins) if mu else 0, len(outs) if my else 0).signal_of_dimension())
-        with _progress("cross-validating sigma" if sigma is None else "solving") as update:
-            model.fit(u, y, z, progress=update)
+        with _progress("cross-validating sigma" if sigma is None else "solving") as update, _executor(workers, scheduler) as ex:
+            model.fit(u, y, z, progress=update, executor=ex)
         if bp_names is not None and bp_names != model.to_dict()["regressors"]:
             raise InputError(f"--breakpoints {breakpoints}: the file is for regressors {bp_names}, the fit has "
                              f"{model.to_dict()['regressors']}")

@@ -45,11 +45,23 @@ def pytest_configure(config):
             os.environ.setdefault(var, "1")
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
-    """Simulator and synthesis runs take seconds to minutes each: mark them ``slow`` as well."""
+    """Simulator and synthesis runs take seconds to minutes each: mark them ``slow`` as well.
+
+    For ``--dist loadgroup`` (``bash run.sh test``), a test that uses a module-scoped fixture (a
+    fitted model, a generated design, a Dask cluster, a built wheel) joins its module's
+    ``xdist_group``, so that each such fixture is built by one worker only; the other tests are
+    balanced one by one.
+    """
     for item in items:
         if item.get_closest_marker("rtl") or item.get_closest_marker("synth"):
             item.add_marker(pytest.mark.slow)
+        info = getattr(item, "_fixtureinfo", None)
+        if info is not None and not item.get_closest_marker("xdist_group"):
+            scopes = {defs[-1].scope for defs in info.name2fixturedefs.values() if defs}
+            if scopes & {"module", "package"}:
+                item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 @pytest.fixture

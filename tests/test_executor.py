@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -123,18 +124,20 @@ def test_bench_lorenz_quick_identical_on_two_workers(tmp_path):
 
 
 @pytest.mark.slow
-def test_system_bench_quick_identical_on_two_workers(tmp_path):
-    """`bench three-tank --quick` on a 2-worker LocalCluster: the same rows and config as serial;
-    the execution record names what ran it, with the workers' (equal) tool versions."""
+def test_system_bench_quick_identical_on_two_workers(tmp_path, cluster):
+    """`bench three-tank --quick` on a 2-worker LocalCluster (reached with --scheduler): the same
+    rows and config as serial; the execution record names what ran it, with the workers' (equal)
+    tool versions."""
     docs = {}
-    for kind, extra in (("serial", []), ("dist", ["--workers", "2"])):
+    for kind, extra in (("serial", []), ("dist", ["--scheduler", cluster.address])):
         out = tmp_path / f"{kind}.json"
         r = runner.invoke(app, ["bench", "three-tank", "--quick", "-o", str(out), *extra])
         assert r.exit_code == 0, r.output
         docs[kind] = json.loads(out.read_text())
     a, b = docs["serial"], docs["dist"]
     ea, eb = a["config"].pop("execution"), b["config"].pop("execution")
-    assert (ea["kind"], ea["workers"]) == ("serial", 1) and (eb["kind"], eb["workers"]) == ("local-cluster", 2)
+    assert (ea["kind"], ea["workers"]) == ("serial", 1) and (eb["kind"], eb["workers"]) == ("scheduler", 2)
+    assert eb["scheduler"] == cluster.address
     assert ea["tool_versions"] == eb["tool_versions"] == environment_versions()
     assert a["rows"] and _without_timings(a["rows"]) == _without_timings(b["rows"])
     assert _without_timings(a["config"]) == _without_timings(b["config"])
@@ -160,6 +163,36 @@ def test_system_bench_refuses_bad_workers(tmp_path):
     r = runner.invoke(app, ["bench", "lorenz-hlnn", "--quick", "-o", str(tmp_path / "b.json"), "--scheduler", "nohost"])
     assert r.exit_code == 2 and "tcp://HOST:PORT" in r.output
     assert not (tmp_path / "b.json").exists()
+
+
+@pytest.mark.slow
+def test_cv_folds_on_two_workers_choose_the_serial_sigma_and_weights(cluster):
+    """The CV grid (5 folds x 9 sigmas) through the cluster: one task per fold, the same result."""
+    from pwas_hdl.fit import regularized_lsq as rl
+
+    tr, _ = lorenz(1300, seed=1).split(1000)
+    kw = dict(my=2, partitions=4, gamma=1.2, sigma=None, sigma_grid=list(np.logspace(-6, 2, 9)), cv_folds=5)
+    serial = PWASVirtualSensor(**kw).fit(None, tr.y, tr.z)
+    seen = []
+    dist = PWASVirtualSensor(**kw).fit(None, tr.y, tr.z, executor=cluster, progress=lambda d, t: seen.append((d, t)))
+    assert serial.cv_.solver["method"] == "direct"
+    assert dist.sigma_ == serial.sigma_
+    assert np.array_equal(dist.weights_, serial.weights_)
+    assert np.array_equal(dist.cv_.fold_mse, serial.cv_.fold_mse) and dist.cv_.solver["solves"] == 45
+    assert seen[-1] == (45, 45) and all(d % 9 == 0 for d, _ in seen)  # per fold: the tasks ran on the cluster
+    # the map hook itself: distributed only when asked and when the folds are independent
+    calls = []
+    assert rl._map_folds(lambda f: calls.append(f) or f, 3, None, True, 9, None) == [0, 1, 2] and calls == [0, 1, 2]
+    assert rl._map_folds(lambda f: -f, 3, cluster, False, 9, None) == [0, -1, -2]  # in process: a lambda is fine
+
+
+def test_cli_fit_refuses_bad_workers(tmp_path):
+    d = lorenz(200, seed=0)
+    write_csv(tmp_path / "d.csv", d.columns())
+    r = runner.invoke(app, ["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z",
+                            "--my", "1", "-p", "2", "--workers", "-2"])
+    assert r.exit_code == 2 and "--workers must be a non-negative integer" in r.output
+    assert not (tmp_path / "m.json").exists()
 
 
 @pytest.mark.slow

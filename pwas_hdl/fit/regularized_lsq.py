@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable, Literal, Sequence
 
 import numpy as np
@@ -722,6 +723,33 @@ def fold_labels(n_rows: int, folds: int, shuffle: bool = False, seed: int = 0) -
     return labels
 
 
+def _folds_independent(solver: "NormalEquationSolver", sigmas: np.ndarray) -> bool:
+    """True when a fold's solves do not depend on the folds solved before it in this process.
+
+    The direct method and the Jacobi-preconditioned CG are stateless; the AMG hierarchy of CG is
+    built lazily and reused across folds, so a fold solved elsewhere could get another
+    preconditioner (weights equal only to the CG tolerance, not bit for bit).
+    """
+    if solver.method == "direct":
+        return True
+    return not any(solver._pre.use_amg(float(s)) for s in sigmas)
+
+
+def _map_folds(fn: Callable, folds: int, executor, independent: bool, n_sigmas: int,
+               progress: Callable[[int, int], None] | None) -> list:
+    """``[fn(f) for f in range(folds)]``: the map hook of :func:`cross_validate_sigma`.
+
+    On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold
+    when the folds are ``independent``; otherwise in this process, in fold order, with
+    ``fn``'s own per-solve progress. Either way the results are those of the serial loop.
+    """
+    if executor is None or not getattr(executor, "distributed", False) or not independent or folds < 2:
+        return [fn(f) for f in range(folds)]
+    report = None if progress is None else (lambda done, total: progress(done * n_sigmas, total * n_sigmas))
+    return executor.map(partial(fn, progress=None), range(folds), labels=[f"cv fold {f}" for f in range(folds)],
+                        progress=report)
+
+
 def cross_validate_sigma(
     h: sparse.sparray,
     z: np.ndarray,
@@ -734,6 +762,7 @@ def cross_validate_sigma(
     method: Method = "auto",
     rtol: float = CG_RTOL,
     max_memory: int | str | None = None,
+    executor=None,
 ) -> CVResult:
     """Choose sigma by k-fold cross-validation over a grid of candidates.
 
@@ -766,6 +795,9 @@ def cross_validate_sigma(
         CG relative-residual tolerance.
     max_memory : int or str, optional
         Memory limit (see :func:`check_fit_memory`).
+    executor : pwas_hdl.flow.executor.Executor, optional
+        Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is distributed
+        and the folds are independent (see :func:`_map_folds`); the result is the serial one.
 
     Returns
     -------
@@ -790,7 +822,11 @@ def cross_validate_sigma(
     weight_bound = np.zeros((folds, sig.size))
     total, done = folds * sig.size, 0
     descending = np.argsort(-sig, kind="stable")
-    for f in range(folds):
+
+    def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list]:
+        nonlocal done
+        first = len(solver.infos)
+        mse_f, bound_f = np.zeros(sig.size), np.zeros(sig.size)
         val = labels == f
         hv = h[np.flatnonzero(val)]
         hvt = hv.T.tocsr()
@@ -799,12 +835,18 @@ def cross_validate_sigma(
         w = None
         for i in descending:
             w, info = solver.solve(a_tr, b_tr, float(sig[i]), x0=w)
-            weight_bound[f, i] = info.weight_bound
+            bound_f[i] = info.weight_bound
             resid = z2[val] - hv @ w
-            fold_mse[f, i] = float(np.mean(resid**2))
+            mse_f[i] = float(np.mean(resid**2))
             done += 1
             if progress is not None:
                 progress(done, total)
+        return mse_f, bound_f, solver.infos[first:]
+
+    parts = _map_folds(one_fold, folds, executor, _folds_independent(solver, sig), sig.size, progress)
+    for f, (mse_f, bound_f, _) in enumerate(parts):
+        fold_mse[f], weight_bound[f] = mse_f, bound_f
+    solver.infos = [i for part in parts for i in part[2]]
     mse = fold_mse.mean(axis=0)
     best = float(sig[int(np.argmin(mse))])
     infos = solver.infos

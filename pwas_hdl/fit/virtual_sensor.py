@@ -335,6 +335,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         y: Trajectories,
         z: Trajectories,
         progress: Callable[[int, int], None] | None = None,
+        executor=None,
     ) -> "PWASVirtualSensor":
         """Fit the weights by regularised least squares (eqs. 14-16).
 
@@ -348,6 +349,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             The quantity to estimate, measured during the experiment (same sample times).
         progress : callable(done, total), optional
             Called during cross-validation.
+        executor : pwas_hdl.flow.executor.Executor, optional
+            Runs the cross-validation folds on Dask workers when distributed (same result).
 
         Returns
         -------
@@ -402,7 +405,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         gam = (additive_tikhonov_matrix(grid, self.tikhonov_order) if self.additive is not None
                else tikhonov_matrix(grid, self.tikhonov_order))
         if self.sigma is None:
-            cv = cross_validate_sigma(h, zt, gam, self.sigma_grid, self.cv_folds, self.cv_shuffle, progress=progress)
+            cv = cross_validate_sigma(h, zt, gam, self.sigma_grid, self.cv_folds, self.cv_shuffle, progress=progress,
+                                      executor=executor)
             sigma = cv.best_sigma
         else:
             cv, sigma = None, float(self.sigma)

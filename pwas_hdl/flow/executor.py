@@ -157,6 +157,14 @@ class Executor:
             self._client = Client(self._cluster)
         return self._client
 
+    @property
+    def address(self) -> str | None:
+        """The scheduler's address (``tcp://HOST:PORT``; a local cluster is started if needed), or
+        ``None`` when serial: other processes can use the same cluster with ``--scheduler``."""
+        if not self.distributed:
+            return None
+        return self._connect().scheduler.address
+
     def close(self) -> None:
         """Shut down the client and a local cluster this executor started."""
         if self._client is not None:
