@@ -37,6 +37,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from pwas_hdl.fixedpoint.bitfields import pack_fields_words, unpack_fields_words
+
 try:  # loaded by pwas_hdl.verify.simulation.sim_module (which registers pwas_runner) or with sim/ on sys.path
     from pwas_runner import SIM_DIR, VERILATOR_MAKE_VARS, SimulationError, default_cache_dir, tool_versions
 except ImportError:
@@ -134,44 +136,18 @@ def ports_header(man: dict) -> str:
 
 def pack_words(values: np.ndarray, fields: Sequence[dict], n_words: int) -> np.ndarray:
     """Pack rows of integer codes into payload words by the manifest's bit fields:
-    ``(m, len(fields))`` -> ``(m, n_words)`` uint32 (word 0 = bits 31..0)."""
-    v = np.asarray(values, dtype=np.int64)
-    out = np.zeros((len(v), n_words), dtype=np.uint64)
-    for k, f in enumerate(fields):
-        w, lsb = int(f["width"]), int(f["lsb"])
-        col = (v[:, k].astype(np.uint64)) & np.uint64((1 << w) - 1) if w < 64 else v[:, k].astype(np.uint64)
-        done = 0
-        while done < w:  # spread the field over the 32-bit words it touches
-            bit = lsb + done
-            wi, off = divmod(bit, 32)
-            take = min(32 - off, w - done)
-            part = (col >> np.uint64(done)) & np.uint64((1 << take) - 1)
-            out[:, wi] |= part << np.uint64(off)
-            done += take
-    return out.astype(np.uint32)
+    ``(m, len(fields))`` -> ``(m, n_words)`` uint32 (word 0 = bits 31..0).
+
+    The one signed bit-field packer, :func:`pwas_hdl.fixedpoint.bitfields.pack_fields_words`, with
+    32-bit words (Verilator's ``VlWide``); a code that does not fit its field is an error.
+    """
+    return pack_fields_words(values, fields, n_words, word_bits=32)
 
 
 def unpack_words(words: np.ndarray, fields: Sequence[dict]) -> np.ndarray:
-    """Inverse of :func:`pack_words`: ``(m, n_words)`` uint32 -> ``(m, len(fields))`` int64 (signed fields two's complement)."""
-    wv = np.asarray(words, dtype=np.uint64)
-    out = np.zeros((len(wv), len(fields)), dtype=np.int64)
-    for k, f in enumerate(fields):
-        w, lsb = int(f["width"]), int(f["lsb"])
-        if w > 62:
-            raise SimulationError(f"field {f['name']} is {w} bits wide; the native bench unpacks fields of up to 62 bits")
-        acc = np.zeros(len(wv), dtype=np.uint64)
-        done = 0
-        while done < w:
-            bit = lsb + done
-            wi, off = divmod(bit, 32)
-            take = min(32 - off, w - done)
-            acc |= ((wv[:, wi] >> np.uint64(off)) & np.uint64((1 << take) - 1)) << np.uint64(done)
-            done += take
-        val = acc.astype(np.int64)
-        if f.get("signed"):
-            val = np.where(val >= (1 << (w - 1)), val - (1 << w), val)
-        out[:, k] = val
-    return out
+    """Inverse of :func:`pack_words`: ``(m, n_words)`` uint32 -> ``(m, len(fields))`` int64 (signed
+    fields two's complement; :func:`pwas_hdl.fixedpoint.bitfields.unpack_fields_words`)."""
+    return unpack_fields_words(words, fields, word_bits=32)
 
 
 def _verilator() -> str:
