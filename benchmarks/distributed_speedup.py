@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from pwas_hdl.bench_results import default_outdir
 from pwas_hdl.flow.executor import Executor, environment_versions
 from pwas_hdl.io.atomic import atomic_write_text
 
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="a 4-task toy workload (CI smoke)")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--sweeps", default="hw_tables,explore", help="comma list of hw_tables, explore")
     args = ap.parse_args(argv)
     out: dict[str, Any] = {"format": "pwas-hdl-bench-distributed", "version": 1, "workers": args.workers,

@@ -32,6 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from pwas_hdl.bench_results import default_outdir
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.flow.explore import format_table
 
@@ -104,7 +105,7 @@ def main() -> None:
     ap.add_argument("--resources", default="ecp5", choices=["estimate", "generic", "ecp5", "ice40"])
     ap.add_argument("--measure-max", type=int, default=10)
     ap.add_argument("--workdir", type=Path, default=None, help="keep the data, model and exploration here")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     args = ap.parse_args()
 
     own = args.workdir is None

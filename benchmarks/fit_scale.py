@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pwas_hdl.bench_results import default_outdir
+
 HERE = Path(__file__).resolve().parent
 
 #: (n, p) of the full table: N = (p + 1)^n from about 10^3 to 10^6 for n = 2..6; the two points the
@@ -270,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="T = 10^4 and small sizes only (CI smoke)")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results", help="output folder")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder")
     ap.add_argument("--limit", type=float, default=300.0, help="wall-time limit per fit, s (default 300)")
     ap.add_argument("--direct-limit", type=float, default=120.0, help="wall-time limit per direct solve, s")
     ap.add_argument("--budget", type=float, default=float("inf"), help="start no new point after this many s")

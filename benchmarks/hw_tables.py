@@ -62,6 +62,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 
+from pwas_hdl.bench_results import default_outdir
 from pwas_hdl import __version__  # noqa: E402
 from pwas_hdl.io.atomic import atomic_write_text  # noqa: E402
 
@@ -416,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-timing-closure", action="store_true", help="skip the generate --clock-mhz demo")
     ap.add_argument("--fpga", default="ecp5,ice40", help="comma-separated: ecp5, ice40")
     ap.add_argument("--designs", default=None, help="comma-separated design keys (default: all)")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--workdir", type=Path, default=None, help="place-and-route folders (default: a folder under /tmp)")
     ap.add_argument("--resume", action="store_true", help="reuse measurements of an earlier JSON with the same settings")
     ap.add_argument("--workers", type=int, default=None, help="place and route on a local Dask cluster of N workers (default: serially)")

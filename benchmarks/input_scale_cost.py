@@ -18,13 +18,15 @@ import json
 import tempfile
 from pathlib import Path
 
+from pwas_hdl.bench_results import default_outdir
+
 HERE = Path(__file__).resolve().parent
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "fmax_mhz", "latency_cycles")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     args = ap.parse_args()
 
     from pwas_hdl.design.generate import generate

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pwas_hdl.bench_results import default_outdir
 from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.io.atomic import atomic_write_text
 
@@ -176,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=5, help="seeds 0..K-1 for the per-seed table (default 5; 1 = seed 0 only)")
     ap.add_argument("--bits", default="8,10,12,14,16", help="input word lengths of the sweep ('' = none)")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the data, models, designs and outputs here")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
     tmp = None

@@ -63,6 +63,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pwas_hdl import bench_results as br
+from pwas_hdl.bench_results import default_outdir
 from pwas_hdl.systems.lorenz import LORENZ_PARAMS, lorenz
 from pwas_hdl.fit.regularized_lsq import DEFAULT_SIGMA_GRID
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -454,7 +455,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5, help="number of seeds 0..K-1 (default 5)")
     ap.add_argument("--quick", action="store_true", help="1 seed, baseline row only (CI smoke)")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results", help="output folder")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder")
     ap.add_argument("--workers", type=int, default=None, help="run the seeds on a local Dask cluster of N workers")
     ap.add_argument("--scheduler", default=None, help="run the seeds on an existing Dask cluster (tcp://HOST:PORT)")
     args = ap.parse_args(argv)

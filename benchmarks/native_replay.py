@@ -30,13 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
+from pwas_hdl.bench_results import default_outdir
+
 HERE = Path(__file__).resolve().parent
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vectors", type=int, default=1_000_000)
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--md-only", action="store_true", help="rebuild native_replay.md from native_replay.json")
     args = ap.parse_args()
     if args.md_only:

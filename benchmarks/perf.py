@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pwas_hdl.bench_results import default_outdir
+
 HERE = Path(__file__).resolve().parent
 N_TRAIN = 6000
 FIT_CASES = [(4, 7), (5, 7)]
@@ -222,7 +224,7 @@ def _markdown(res: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement (median)")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--child-fit", nargs=2, type=int, metavar=("MY", "P"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.repeats < 1:

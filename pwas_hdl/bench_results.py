@@ -56,6 +56,7 @@ __all__ = [
     "map_runs",
     "extend_lists",
     "execution_record",
+    "default_outdir",
 ]
 
 RESULTS_FORMAT = "pwas-hdl-bench-results"
@@ -348,6 +349,21 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
     return p
 
 
+def default_outdir() -> Path:
+    """Default ``--outdir`` of the benchmark scripts.
+
+    ``benchmarks/results/`` when the scripts run from a source checkout (the committed results),
+    otherwise ``./benchmarks-results`` in the current directory: never inside an installed package
+    (``site-packages``) when the scripts run from the wheel.
+    """
+    from pwas_hdl.resources import benchmarks_dir
+
+    here = benchmarks_dir()
+    if (here.parent / "pyproject.toml").is_file() and (here / "results").is_dir():
+        return here / "results"
+    return Path.cwd() / "benchmarks-results"
+
+
 def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: Any, markdown: Any, plot: Any,
                default_runs: int = 5) -> None:
     """The script entry of a system bench: ``--runs``, ``--quick``, ``--outdir``; writes JSON, Markdown and PNG.
@@ -359,12 +375,11 @@ def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: 
     import argparse
 
     from pwas_hdl.io.atomic import atomic_write_text
-    from pwas_hdl.resources import benchmarks_dir
 
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--runs", type=int, default=default_runs)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--outdir", type=Path, default=benchmarks_dir() / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     a = ap.parse_args(argv)
     doc, traces = run(a.runs, a.quick, progress=print)
     a.outdir.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,7 @@
 """The bench results format (pwas_hdl.bench_results) and its shipped schema."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -76,3 +77,18 @@ def test_committed_bench_results_validate():
             checked.append(f.stem)
     # the system benches and the Lorenz tables (bench lorenz writes this format directly now)
     assert {"lorenz_tables", "three_tank", "switched_linear", "lorenz_hlnn"} <= set(checked)
+
+
+def test_default_outdir_is_the_checkout_results_or_the_cwd(tmp_path, monkeypatch):
+    """Benchmark scripts write into benchmarks/results/ of a checkout, never into an installed
+    package: from a wheel (no pyproject.toml beside the benchmarks folder) into ./benchmarks-results."""
+    import pwas_hdl.resources as res
+
+    checkout = Path(__file__).resolve().parents[1]
+    if (checkout / "benchmarks" / "results").is_dir() and res.benchmarks_dir().parent == checkout:
+        assert br.default_outdir() == res.benchmarks_dir() / "results"
+    installed = tmp_path / "site-packages" / "pwas_hdl" / "benchmarks"
+    (installed / "results").mkdir(parents=True)
+    monkeypatch.setattr(res, "benchmarks_dir", lambda: installed)
+    monkeypatch.chdir(tmp_path)
+    assert br.default_outdir() == tmp_path / "benchmarks-results"
