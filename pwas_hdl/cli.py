@@ -819,6 +819,11 @@ def explore(
     with _user_errors():
         outdir = _required(_merge("-o/--out", out, outdir=outdir_old), "-o/--out", "the folder to write")
         family = _merge("--fpga", fpga, resources=None if resources_old == "estimate" else resources_old)
+        from pwas_hdl.flow.explore import RESOURCE_MODES
+
+        families = [m for m in RESOURCE_MODES if m != "estimate"]
+        if family is not None and family not in families:
+            raise InputError(f"--fpga must be one of {', '.join(families)} (omit it for the analytic estimate only), got {family!r}")
         resources = family or "estimate"
         sweep = dict(
             input_bits=ints(input_bits, "--input-bits"),

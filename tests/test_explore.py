@@ -275,7 +275,9 @@ def test_cli_explore(tiny, tmp_path):
     # bad input: status 2, one error line, nothing written
     bad = tmp_path / "bad"
     for args, msg in ((["--traj-col", "run"], "no column named 'run'"), (["--input-bits", "a"], "--input-bits"),
-                      (["--weight-frac", "3:1"], "not a range"), (["--resources", "xx"], "resources must be")):
+                      (["--weight-frac", "3:1"], "not a range"),
+                      (["--fpga", "xx"], "error: --fpga must be one of generic, ecp5, ice40"),
+                      (["--resources", "xx"], "error: --fpga must be one of generic, ecp5, ice40")):
         r = runner.invoke(app, ["explore", str(root / "model.json"), str(root / "test.csv"), "-o", str(bad), *args])
         assert r.exit_code == 2 and msg in r.output, r.output
         assert not bad.exists()
