@@ -49,6 +49,7 @@ __all__ = [
     "environment",
     "validate_results",
     "write_results",
+    "results_text",
     "load_results",
     "find_rows",
     "markdown_table",
@@ -281,10 +282,15 @@ def validate_results(doc: Any) -> None:
         raise InputError(f"not a valid {RESULTS_FORMAT} v{RESULTS_VERSION} document at {where}: {e.message}")
 
 
+def results_text(doc: dict) -> str:
+    """Validate ``doc`` and return the text of its file (indented JSON, no NaN)."""
+    validate_results(doc)
+    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+
+
 def write_results(path: str | Path, doc: dict) -> Path:
     """Validate and write ``doc`` atomically (indented JSON, no NaN)."""
-    validate_results(doc)
-    return atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    return atomic_write_text(path, results_text(doc))
 
 
 def load_results(path: str | Path) -> dict:

@@ -35,7 +35,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
-from pwas_hdl.io.atomic import OutputSet, atomic_write_text, check_output_path, install_termination_handler
+from pwas_hdl.io.atomic import OutputSet, check_output_path, install_termination_handler
 from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories, write_csv
 from pwas_hdl.limits import MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit
 
@@ -1029,6 +1029,17 @@ def make_data_switched_linear(
                 lambda: switched_paper_run(seed=seed, switching=switching, noise=noise))
 
 
+def _bench_outputs(json_out: Path, markdown: Optional[Path], plot: Optional[Path]) -> OutputSet:
+    """The output set of a bench command (checked before the bench runs)."""
+    outset = OutputSet()
+    outset.add(json_out, "-o/--out")
+    if markdown is not None:
+        outset.add(markdown, "--md")
+    if plot is not None:
+        outset.add(plot, "--plot")
+    return outset
+
+
 def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path], markdown: Optional[Path], plot_out: Optional[Path], runs: int, quick: bool,
                   workers: Optional[int] = None, scheduler: Optional[str] = None) -> None:
     """Run one of the system benches (benchmarks/<module>.py) and write its pwas-hdl-bench-results JSON."""
@@ -1044,15 +1055,17 @@ def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path
         for p in (json_out, markdown, plot_out):
             if p is not None and not p.parent.is_dir():
                 raise InputError(f"folder {p.parent} does not exist; create it first")
+        outset = _bench_outputs(json_out, markdown, plot_out)
         with _executor(workers, scheduler) as ex:
             doc, traces = getattr(mod, f"run_{module}")(runs=runs, quick=quick, progress=_say, executor=ex)
             doc["config"]["execution"] = bench_results.execution_record(ex)
-        bench_results.write_results(json_out, doc)
         table = mod.markdown(doc)
-        if markdown is not None:
-            atomic_write_text(markdown, table)
-        if plot_out is not None:
-            mod.plot(traces, plot_out)
+        with outset:  # the JSON, the tables and the figure: all or nothing
+            outset.write_text(json_out, bench_results.results_text(doc))
+            if markdown is not None:
+                outset.write_text(markdown, table)
+            if plot_out is not None:
+                mod.plot(traces, outset.temp_path(plot_out))
         stdout.print(table, highlight=False, markup=False)
         _say(f"wrote {json_out}")
 
@@ -1219,15 +1232,17 @@ def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Pat
         if p is not None and not p.parent.is_dir():
             raise InputError(f"folder {p.parent} does not exist; create it first")
     mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
+    outset = _bench_outputs(json_out, markdown, plot if hasattr(mod, "plot") else None)
     with _executor(workers, scheduler) as ex:
         doc = mod.run(progress=_say, executor=ex, **kw)
         doc["config"]["execution"] = bench_results.execution_record(ex)
-    if plot is not None and hasattr(mod, "plot"):
-        mod.plot(doc, plot)
-    bench_results.write_results(json_out, {k: v for k, v in doc.items() if not k.startswith("_")})
     table = mod.markdown(doc)
-    if markdown is not None:
-        atomic_write_text(markdown, table)
+    with outset:  # the JSON, the tables and the figure: all or nothing
+        outset.write_text(json_out, bench_results.results_text({k: v for k, v in doc.items() if not k.startswith("_")}))
+        if markdown is not None:
+            outset.write_text(markdown, table)
+        if plot is not None and hasattr(mod, "plot"):
+            mod.plot(doc, outset.temp_path(plot))
     stdout.print(table, highlight=False, markup=False)
     _say(f"wrote {json_out}")
 

@@ -76,3 +76,18 @@ def test_bench_refuses_bad_runs_and_missing_folder(tmp_path):
     r = CliRunner().invoke(app, ["bench", "switched-linear", "--quick", "-o", str(tmp_path / "no" / "x.json")])
     assert r.exit_code == 2 and "does not exist" in r.output
     assert not (tmp_path / "x.json").exists()
+
+
+def test_bench_outputs_are_all_or_nothing(tmp_path, monkeypatch):
+    """A bench whose figure fails leaves neither the JSON nor the Markdown (one OutputSet)."""
+    from pwas_hdl.benchmarks import three_tank
+
+    def broken_plot(traces, path):
+        raise OSError(f"cannot write {path}: disk full")
+
+    monkeypatch.setattr(three_tank, "plot", broken_plot)
+    files = [tmp_path / "b.json", tmp_path / "b.md", tmp_path / "b.png"]
+    r = CliRunner().invoke(app, ["bench", "three-tank", "--quick", "-o", str(files[0]), "--md", str(files[1]),
+                                 "--plot", str(files[2])])
+    assert r.exit_code == 2 and "disk full" in r.output, r.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
