@@ -61,13 +61,13 @@ demo() {
 }
 
 run_tests() {
-  # pytest-xdist workers on every core (-n auto) when it is installed (the dev extra has it); loadgroup:
-  # the tests of a module-scoped fixture stay on one worker (tests/conftest.py), the rest are balanced.
+  # pytest-xdist workers on every core (-n auto) when it is installed (the dev extra has it); loadfile:
+  # each test file runs on one worker, so a module-scoped fixture (a fit, a design, a cluster) is built once.
   # PWAS_HDL_TEST_WORKERS=N chooses N workers, 0 one process. A later -n in the arguments wins.
   local par=()
   local n="${PWAS_HDL_TEST_WORKERS:-auto}"
   if [ "$n" != 0 ] && "$VENV/bin/python" -c 'import xdist' >/dev/null 2>&1; then
-    par=(-n "$n" --dist loadgroup)
+    par=(-n "$n" --dist loadfile)
   fi
   exec "$VENV/bin/python" -m pytest -q ${par[@]+"${par[@]}"} "$@"
 }

@@ -5,7 +5,8 @@ Markers (registered in pyproject.toml): ``rtl`` runs an HDL simulator or linter 
 test counts as slow: :func:`pytest_collection_modifyitems` adds the mark). The fast subset is
 ``bash run.sh test -m "not rtl and not synth"``; ``-m "not slow"`` leaves out the slow ones of it too.
 
-Parallel runs: ``bash run.sh test`` runs pytest-xdist workers (``-n auto``; ``PWAS_HDL_TEST_WORKERS=0``
+Parallel runs: ``bash run.sh test`` runs pytest-xdist workers (``-n auto --dist loadfile``: a test
+file stays on one worker, so its module-scoped fixtures are built once; ``PWAS_HDL_TEST_WORKERS=0``
 for one process). Every fixture here is per worker (``tmp_path_factory`` folders are per worker;
 the simulator build cache is shared but file-locked and keyed by hash), and each worker's BLAS
 runs one thread, so that two workers do not oversubscribe two cores.
@@ -45,23 +46,11 @@ def pytest_configure(config):
             os.environ.setdefault(var, "1")
 
 
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
-    """Simulator and synthesis runs take seconds to minutes each: mark them ``slow`` as well.
-
-    For ``--dist loadgroup`` (``bash run.sh test``), a test that uses a module-scoped fixture (a
-    fitted model, a generated design, a Dask cluster, a built wheel) joins its module's
-    ``xdist_group``, so that each such fixture is built by one worker only; the other tests are
-    balanced one by one.
-    """
+    """Simulator and synthesis runs take seconds to minutes each: mark them ``slow`` as well."""
     for item in items:
         if item.get_closest_marker("rtl") or item.get_closest_marker("synth"):
             item.add_marker(pytest.mark.slow)
-        info = getattr(item, "_fixtureinfo", None)
-        if info is not None and not item.get_closest_marker("xdist_group"):
-            scopes = {defs[-1].scope for defs in info.name2fixturedefs.values() if defs}
-            if scopes & {"module", "package"}:
-                item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 @pytest.fixture
