@@ -80,6 +80,23 @@ def test_simulate_sensor(simulator, engine, folders, sim_cache, tmp_path):
 
 
 @pytest.mark.rtl
+def test_simulate_waves_folder_is_part_of_the_outputs(folders, sim_cache, tmp_path):
+    """--waves: the waveform folder (OUT_waves/) appears with the CSV and the summary, at its final
+    path (no temporary left, a previous folder replaced), and the summary names the file there."""
+    out = tmp_path / "hw.csv"
+    (tmp_path / "hw_waves").mkdir()
+    (tmp_path / "hw_waves" / "old.fst").write_text("previous run")
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "--simulator", "icarus",
+                              "-o", str(out), "--build-dir", str(sim_cache), "--waves"])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "hw.json").read_text())
+    wave = tmp_path / "hw_waves" / s["waves"].split("hw_waves/", 1)[1]
+    assert s["waves"] == str(wave) and wave.is_file() and wave.stat().st_size > 0
+    assert not (tmp_path / "hw_waves" / "old.fst").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hw.csv", "hw.json", "hw_waves"]
+
+
+@pytest.mark.rtl
 def test_simulate_core_trajectories_with_stalls(folders, sim_cache, tmp_path):
     out = tmp_path / "core.csv"
     summ = tmp_path / "s.json"

@@ -109,6 +109,20 @@ def _publish(tmp: Path, target: Path) -> None:
     os.replace(tmp, target)
 
 
+def _publish_dir(tmp: Path, target: Path) -> None:
+    """Put the staged folder ``tmp`` in place of ``target`` (an old ``target`` folder is moved aside, then removed)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)
+    old = None
+    if target.is_dir():
+        old = Path(tempfile.mkdtemp(prefix=_temp_prefix(target.name), dir=target.parent))
+        os.replace(target, old / "old")
+    os.replace(tmp, target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 # ------------------------------------------------------------------------------------------ path checks
 def _name_max(folder: Path) -> int:
     try:
@@ -258,6 +272,16 @@ class OutputSet:
             self._staged[key] = _make_temp_file(p.parent if str(p.parent) else Path("."), p.name)
         return self._staged[key]
 
+    def temp_dir(self, path: str | os.PathLike) -> Path:
+        """A temporary folder beside the folder output ``path`` (added with ``kind="folder"``) that
+        replaces ``path`` on :meth:`commit` (a previous folder of that name is removed then)."""
+        key, p = self._slot(path)
+        if key not in self._staged:
+            parent = p.parent if str(p.parent) else Path(".")
+            parent.mkdir(parents=True, exist_ok=True)
+            self._staged[key] = make_temp_dir(parent, p.name)
+        return self._staged[key]
+
     def write_bytes(self, path: str | os.PathLike, data: bytes) -> None:
         """Stage ``data`` as the content of ``path``."""
         tmp = self.temp_path(path)
@@ -273,6 +297,11 @@ class OutputSet:
         done = []
         for key, tmp in list(self._staged.items()):
             target = self._targets[key][1]
+            if tmp.is_dir():
+                _publish_dir(tmp, target)
+                del self._staged[key]
+                done.append(target)
+                continue
             _publish(tmp, target)
             del self._staged[key]
             done.append(target)
@@ -283,7 +312,10 @@ class OutputSet:
         """Remove every staged temporary; no target is touched."""
         for tmp in self._staged.values():
             try:
-                tmp.unlink()
+                if tmp.is_dir():
+                    shutil.rmtree(tmp, ignore_errors=True)
+                else:
+                    tmp.unlink()
             except OSError:
                 pass
         self._staged.clear()

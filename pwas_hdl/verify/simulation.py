@@ -813,6 +813,9 @@ def simulate_data(
                                          (Path(outdir) / "model.json", "the model")])
     outset.add(output, "-o")
     outset.add(spath, "--json" if summary_path is not None else "the summary (-o with .json)")
+    waves_dir = Path(output).resolve().parent / f"{Path(output).stem}_waves"
+    if waves:  # the waveform folder is an output too: replaced with the CSV and the summary, or not at all
+        outset.add(waves_dir, "the --waves folder", kind="folder")
     if cache_dir is not None:
         check_output_path(cache_dir, "--build-dir", kind="folder")
     design = load_design(outdir)
@@ -862,14 +865,24 @@ def simulate_data(
                          "(or --engine cocotb)")
     say(f"simulating {sum(len(s.src) for s in segs)} samples of {data} through {design.top} on {simulator} ({engine}) ...")
     t0 = time.perf_counter()
-    res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False, engine=engine,
-                  work_dir=(Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else None)
+    # the simulator writes its folder in a private temporary one; staged into the output set at the end
+    work = Path(tempfile.mkdtemp(prefix="pwas-hdl-waves-")) if waves else None
+    try:
+        res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False, engine=engine, work_dir=work)
+    except BaseException:
+        if work is not None:
+            shutil.rmtree(work, ignore_errors=True)
+        raise
+    if work is not None and res.raw.get("waves"):  # where the waveform will be once committed
+        res.raw["waves"] = str(waves_dir / Path(res.raw["waves"]).resolve().relative_to(work.resolve()))
     wall = time.perf_counter() - t0
     lsb = 2.0 ** -model.output_format.frac
     hw_codes = [h[0] for h in res.hw[0]]
     hw_oor = [h[1] for h in res.hw[0]]
     complete = all(len(hc) == len(s.expected) for hc, s in zip(hw_codes, segs))
     if not complete:
+        if work is not None:
+            shutil.rmtree(work, ignore_errors=True)
         raise CheckFailed("the RTL did not produce every output: " + "; ".join(res.failures[:3]))
     hw = np.concatenate(hw_codes) if hw_codes else np.empty((0, model.nz), dtype=np.int64)
     oor = np.concatenate(hw_oor)
@@ -973,6 +986,11 @@ def simulate_data(
     summary["checks"] = _checks(summary, stall)
     outset.write_text(output, csv_text)
     outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
+    if work is not None:
+        staged = outset.temp_dir(waves_dir)
+        for item in work.iterdir():
+            shutil.move(str(item), str(staged / item.name))
+        shutil.rmtree(work, ignore_errors=True)
     outset.commit()
     ret = {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
     if clf is not None:
