@@ -109,11 +109,13 @@ def test_local_cluster_map_and_versions(cluster):
 
 
 @pytest.mark.slow
-def test_bench_lorenz_quick_identical_on_two_workers(tmp_path):
+def test_bench_lorenz_quick_identical_on_two_workers(tmp_path, cluster):
+    """On the module's 2-worker LocalCluster through --scheduler (one cluster start for the file;
+    --workers N makes the same Executor, see test_system_bench_quick_identical_on_two_workers)."""
     serial, dist = tmp_path / "serial.json", tmp_path / "dist.json"
     r1 = runner.invoke(app, ["bench", "lorenz", "--quick", "--seeds", "2", "--json", str(serial)])
     assert r1.exit_code == 0, r1.output
-    r2 = runner.invoke(app, ["bench", "lorenz", "--quick", "--seeds", "2", "--workers", "2", "--json", str(dist)])
+    r2 = runner.invoke(app, ["bench", "lorenz", "--quick", "--seeds", "2", "--scheduler", cluster.address, "--json", str(dist)])
     assert r2.exit_code == 0, r2.output
     a, b = json.loads(serial.read_text()), json.loads(dist.read_text())
     assert [s["seed"] for s in b["rows"][0]["config"]["per_seed"]] == [0, 1]
@@ -124,20 +126,19 @@ def test_bench_lorenz_quick_identical_on_two_workers(tmp_path):
 
 
 @pytest.mark.slow
-def test_system_bench_quick_identical_on_two_workers(tmp_path, cluster):
-    """`bench three-tank --quick` on a 2-worker LocalCluster (reached with --scheduler): the same
-    rows and config as serial; the execution record names what ran it, with the workers' (equal)
-    tool versions."""
+def test_system_bench_quick_identical_on_two_workers(tmp_path):
+    """`bench three-tank --quick --workers 2` (a LocalCluster the command starts): the same rows
+    and config as serial; the execution record names what ran it, with the workers' (equal) tool
+    versions."""
     docs = {}
-    for kind, extra in (("serial", []), ("dist", ["--scheduler", cluster.address])):
+    for kind, extra in (("serial", []), ("dist", ["--workers", "2"])):
         out = tmp_path / f"{kind}.json"
         r = runner.invoke(app, ["bench", "three-tank", "--quick", "-o", str(out), *extra])
         assert r.exit_code == 0, r.output
         docs[kind] = json.loads(out.read_text())
     a, b = docs["serial"], docs["dist"]
     ea, eb = a["config"].pop("execution"), b["config"].pop("execution")
-    assert (ea["kind"], ea["workers"]) == ("serial", 1) and (eb["kind"], eb["workers"]) == ("scheduler", 2)
-    assert eb["scheduler"] == cluster.address
+    assert (ea["kind"], ea["workers"]) == ("serial", 1) and (eb["kind"], eb["workers"]) == ("local-cluster", 2)
     assert ea["tool_versions"] == eb["tool_versions"] == environment_versions()
     assert a["rows"] and _without_timings(a["rows"]) == _without_timings(b["rows"])
     assert _without_timings(a["config"]) == _without_timings(b["config"])
