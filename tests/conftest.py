@@ -98,7 +98,10 @@ def sim_cache(tmp_path_factory) -> Path:
     """Simulator builds shared by the RTL tests of one run ($PWAS_HDL_SIM_CACHE to keep them across runs);
     Verilator's run-time library is compiled once per cache."""
     env = os.environ.get("PWAS_HDL_SIM_CACHE")
-    path = Path(env) if env else tmp_path_factory.getbasetemp() / "pwas-sim-cache"
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # one cache for all workers of the run (builds are file-locked)
+        base = base.parent
+    path = Path(env) if env else base / "pwas-sim-cache"
     path.mkdir(parents=True, exist_ok=True)
     return path
 
