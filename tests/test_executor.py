@@ -180,6 +180,7 @@ def test_cv_folds_on_two_workers_choose_the_serial_sigma_and_weights(cluster):
     assert dist.sigma_ == serial.sigma_
     assert np.array_equal(dist.weights_, serial.weights_)
     assert np.array_equal(dist.cv_.fold_mse, serial.cv_.fold_mse) and dist.cv_.solver["solves"] == 45
+    assert {k: v for k, v in dist.cv_.solver.items() if k != "weight_bound"} == {k: v for k, v in serial.cv_.solver.items() if k != "weight_bound"}
     assert seen[-1] == (45, 45) and all(d % 9 == 0 for d, _ in seen)  # per fold: the tasks ran on the cluster
     # the map hook itself: distributed only when asked and when the folds are independent
     calls = []

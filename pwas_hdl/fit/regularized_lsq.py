@@ -825,7 +825,7 @@ def cross_validate_sigma(
 
     def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list]:
         nonlocal done
-        first = len(solver.infos)
+        first, fallbacks = len(solver.infos), solver.superlu_fallbacks
         mse_f, bound_f = np.zeros(sig.size), np.zeros(sig.size)
         val = labels == f
         hv = h[np.flatnonzero(val)]
@@ -841,12 +841,14 @@ def cross_validate_sigma(
             done += 1
             if progress is not None:
                 progress(done, total)
-        return mse_f, bound_f, solver.infos[first:]
+        return mse_f, bound_f, solver.infos[first:], solver.superlu_fallbacks - fallbacks
 
+    # one fold = one task: the counts a fold leaves in the solver come back with its results
     parts = _map_folds(one_fold, folds, executor, _folds_independent(solver, sig), sig.size, progress)
-    for f, (mse_f, bound_f, _) in enumerate(parts):
+    for f, (mse_f, bound_f, _, _) in enumerate(parts):
         fold_mse[f], weight_bound[f] = mse_f, bound_f
     solver.infos = [i for part in parts for i in part[2]]
+    solver.superlu_fallbacks = sum(part[3] for part in parts)
     mse = fold_mse.mean(axis=0)
     best = float(sig[int(np.argmin(mse))])
     infos = solver.infos
