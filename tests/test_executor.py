@@ -126,6 +126,7 @@ def test_bench_lorenz_quick_identical_on_two_workers(tmp_path, cluster):
 
 
 @pytest.mark.slow
+@pytest.mark.rtl  # the three-tank --quick run replays a recurrent sensor on Icarus in each task
 def test_system_bench_quick_identical_on_two_workers(tmp_path):
     """`bench three-tank --quick --workers 2` (a LocalCluster the command starts): the same rows
     and config as serial; the execution record names what ran it, with the workers' (equal) tool

@@ -29,6 +29,7 @@ def _value(doc, **kw):
 
 
 @pytest.mark.slow
+@pytest.mark.rtl  # its --quick run replays the recurrent map-28 sensor on Icarus
 def test_bench_three_tank_quick(tmp_path):
     doc = _bench(tmp_path, "three-tank")
     w = {"window": "t>=100", "noise_y": 0.0}
@@ -80,14 +81,14 @@ def test_bench_refuses_bad_runs_and_missing_folder(tmp_path):
 
 def test_bench_outputs_are_all_or_nothing(tmp_path, monkeypatch):
     """A bench whose figure fails leaves neither the JSON nor the Markdown (one OutputSet)."""
-    from pwas_hdl.benchmarks import three_tank
+    from pwas_hdl.benchmarks import lorenz_hlnn  # the cheapest system bench (no simulator run)
 
     def broken_plot(traces, path):
         raise OSError(f"cannot write {path}: disk full")
 
-    monkeypatch.setattr(three_tank, "plot", broken_plot)
+    monkeypatch.setattr(lorenz_hlnn, "plot", broken_plot)
     files = [tmp_path / "b.json", tmp_path / "b.md", tmp_path / "b.png"]
-    r = CliRunner().invoke(app, ["bench", "three-tank", "--quick", "-o", str(files[0]), "--md", str(files[1]),
+    r = CliRunner().invoke(app, ["bench", "lorenz-hlnn", "--quick", "-o", str(files[0]), "--md", str(files[1]),
                                  "--plot", str(files[2])])
     assert r.exit_code == 2 and "disk full" in r.output, r.output
     assert sorted(p.name for p in tmp_path.iterdir()) == []
