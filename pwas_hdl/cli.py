@@ -273,7 +273,7 @@ def fit(
     models: Annotated[int, typer.Option("--models", help="observer-bank: N_theta, local models / observers in the bank.")] = 5,
     observer: Annotated[str, typer.Option("--observer", help="observer-bank: deadbeat, poles:R (all poles at radius R) or kalman:LAMBDA (stationary Kalman, measurement variance LAMBDA).")] = "deadbeat",
     window: Annotated[int, typer.Option("--window", help="observer-bank: window l of the feature map.")] = 7,
-    features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
+    features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer), 11b-sq (its square: no square root in hardware) or 11a (all residual lags).")] = "11b",
     order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
     blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
     mz: Annotated[int, typer.Option("--mz", help="Mz: past estimates z_hat(t-1..t-Mz) of every target fed back as regressors (a dynamical sensor; fitted series-parallel, predict runs the recurrence). 0 = static.")] = 0,
