@@ -453,7 +453,7 @@ class ObserverBankFrontEnd:
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
                 raise InputError(f"observer bank: {nm} must be an integer >= {lo}, got {v!r}")
         if self.features not in FEATURE_MAPS:
-            raise InputError(f"observer bank: features must be 11a, 11b or 11b-sq, got {self.features!r}")
+            raise InputError(f"observer bank: features must be 11a or 11b (or 11b-sq, the squared 11b), got {self.features!r}")
         parse_observer(self.observer)
 
     @property
