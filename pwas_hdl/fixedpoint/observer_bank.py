@@ -334,12 +334,11 @@ class FixedPointObserverBank:
         prodmax = max(k * cap for k, cap in zip(ks, caps))
         scaleb = signed_bits_needed(np.array([prodmax + max(cs), min(cs), prodmax + min(cs)])) + 1
         r_max = max(caps)
-        accb = max(fc + bs + 2, 1) + 0
         # acc_i = A0 x0 + (sum B qu + L qy) << (Fs-Fin) + D + (x_{i+1} << Fc): bound it from the codes
         amax = np.abs(self.a0_codes).max(initial=0) * (1 << (bs - 1))
         bin_max = (np.abs(self.b_codes).sum(axis=2).max(initial=0) + np.abs(self.l_codes).max(initial=0)) * (1 << (self.input_bits - 1))
         accmax = int(amax + (int(bin_max) << (fs - fin)) + np.abs(self.d_codes).max(initial=0) + ((1 << (bs - 1)) << fc))
-        accb = signed_bits_needed(np.array([accmax, -accmax]))
+        accb = signed_bits_needed(np.array([accmax, -accmax])) + 1  # + 1: the rounding term 2**(F_c-1) is added in it
         self.formats = ObserverBankFormats(self.input_bits, fin, fc, bs, fs, rb, sqb, sumb, rootb, shift, kb, accb)
         self.cap_bits = capb
         self.widths = {"acc": accb, "state": bs, "residual": rb, "square": sqb, "window_sum": sumb, "root": rootb,
