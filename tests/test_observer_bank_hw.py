@@ -55,7 +55,7 @@ def test_bounds_11b_deadbeat(pv_data, sensor_11b):
     _check_bounds(ObserverBankSensorModel.from_sensor(sensor_11b), pv_data)
 
 
-@pytest.mark.parametrize("observer,features", [("poles:0.4", "11b-sq"), ("kalman:1", "11b")])
+@pytest.mark.parametrize("observer,features", [("deadbeat", "11b-sq"), ("poles:0.4", "11b"), ("kalman:1", "11b")])
 def test_bounds_other_gains_and_squared_feature(pv_data, observer, features):
     _check_bounds(ObserverBankSensorModel.from_sensor(_sensor(pv_data, 2, observer, features)), pv_data)
 

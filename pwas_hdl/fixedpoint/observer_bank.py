@@ -297,9 +297,12 @@ class FixedPointObserverBank:
         if bs < 2:
             raise InputError(f"state_bits must be >= 2, got {bs}")
         self.state_may_saturate = bs < need
-        rb = max(bs, self.input_bits + fs - fin) + 1  # residual x0 - y: exact
-        sqb = 2 * rb - 1  # unsigned square < 2**(2 rb - 2)
-        sumb = sqb + max(1, math.ceil(math.log2(l_w + 1)))
+        # residual x0 - y (exact in max(B_s, B_in + F_s - F_in) + 1 bits), widened so that the square
+        # e * e (2 rb bits) also holds the window sum of l + 1 squares: the RTL sums at one width
+        lgw = max(1, math.ceil(math.log2(l_w + 1)))
+        rb = max(bs + 2, self.input_bits + fs - fin + 2) + (lgw + 1) // 2
+        sqb = 2 * rb  # the square as the multiplier gives it (value < 2**(2 rb - 2 - lgw))
+        sumb = 2 * rb  # window sum, < 2**(2 rb - 2)
         if self.feature_map == "11b":
             rootb = (sumb + 1) // 2
             r_max = (1 << rootb) - 1
@@ -333,12 +336,14 @@ class FixedPointObserverBank:
         capb = max(int(v).bit_length() for v in caps) + 1
         prodmax = max(k * cap for k, cap in zip(ks, caps))
         scaleb = signed_bits_needed(np.array([prodmax + max(cs), min(cs), prodmax + min(cs)])) + 1
+        scaleb = max(scaleb, capb + kb, shift + bcore + 1)  # the RTL's product width; the code field wider than B_in
         r_max = max(caps)
         # acc_i = A0 x0 + (sum B qu + L qy) << (Fs-Fin) + D + (x_{i+1} << Fc): bound it from the codes
-        amax = np.abs(self.a0_codes).max(initial=0) * (1 << (bs - 1))
+        amax = int(np.abs(self.a0_codes).max(initial=0)) * (1 << (bs - 1))
         bin_max = (np.abs(self.b_codes).sum(axis=2).max(initial=0) + np.abs(self.l_codes).max(initial=0)) * (1 << (self.input_bits - 1))
-        accmax = int(amax + (int(bin_max) << (fs - fin)) + np.abs(self.d_codes).max(initial=0) + ((1 << (bs - 1)) << fc))
-        accb = signed_bits_needed(np.array([accmax, -accmax])) + 1  # + 1: the rounding term 2**(F_c-1) is added in it
+        accmax = int(amax) + (int(bin_max) << (fs - fin)) + int(np.abs(self.d_codes).max(initial=0)) + ((1 << (bs - 1)) << fc)
+        accb = accmax.bit_length() + 2  # + 1: the rounding term 2**(F_c-1) is added in it
+        accb = max(accb, bs + fc + 2)  # x_{i+1} 2**F_c is a product of that width in the RTL
         self.formats = ObserverBankFormats(self.input_bits, fin, fc, bs, fs, rb, sqb, sumb, rootb, shift, kb, accb)
         self.cap_bits = capb
         self.widths = {"acc": accb, "state": bs, "residual": rb, "square": sqb, "window_sum": sumb, "root": rootb,

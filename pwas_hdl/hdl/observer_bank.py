@@ -9,8 +9,9 @@ coefficients (``a0`` of a deadbeat gain) cost nothing. Per observer and state: `
 constant multiplications by the input codes and one by the first state (when ``a0 != 0``).
 
 All arithmetic is written so that the Verilog passes ``verilator --lint-only -Wall``: every
-operand of an addition is a named net of the accumulator width (:func:`_ext`), constants enter
-through named constant nets.
+operand of an addition is a whole product net of the accumulator width (:func:`const_product`:
+the input alignment and the ``<< F_c`` of the next state are folded into constant factors),
+constants are added modulo the width (:func:`add_const_signed`).
 """
 
 from __future__ import annotations
@@ -19,38 +20,23 @@ from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
 
 from pwas_hdl.hdl._lintsafe import sink_unused
 
-__all__ = ["build_observer_bank", "const_net", "ext_signed", "saturate"]
+__all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate"]
 
 
-def const_net(m: Module, value: int, width: int, name: str, is_signed: bool = True):
-    """A named net holding a constant (so that arithmetic sees a full-width operand)."""
-    s = Signal(signed(width) if is_signed else unsigned(width), name=name)
-    m.d.comb += s.eq(value)
-    return s
-
-
-def ext_signed(m: Module, value, width: int, name: str):
-    """``value`` (signed) sign-extended to a named ``width``-bit signed net."""
-    s = Signal(signed(width), name=name)
-    m.d.comb += s.eq(value)
-    return s
-
-
-def saturate(m: Module, rv, width: int, name: str):
-    """Saturate a signed value to ``width`` bits; returns (net, saturated flag)."""
-    if len(rv) <= width:
-        return ext_signed(m, rv, width, name), Const(0, 1)
+def saturate(m: Module, rv, width: int, name: str, flag: bool = True):
+    """Saturate a signed value (wider than ``width``) to ``width`` bits; returns (net, saturated flag or None)."""
+    assert len(rv) > width, (len(rv), width)
     sign = rv[-1]
     upper = rv[width - 1 : len(rv) - 1]
     o = Signal(signed(width), name=name)
-    flag = Signal(name=f"{name}_sat")
+    f = Signal(name=f"{name}_sat") if flag else None
     with m.If(~sign & upper.any()):
-        m.d.comb += [o.eq((1 << (width - 1)) - 1), flag.eq(1)]
+        m.d.comb += [o.eq((1 << (width - 1)) - 1)] + ([f.eq(1)] if flag else [])
     with m.Elif(sign & ~upper.all()):
-        m.d.comb += [o.eq(-(1 << (width - 1))), flag.eq(1)]
+        m.d.comb += [o.eq(-(1 << (width - 1)))] + ([f.eq(1)] if flag else [])
     with m.Else():
         m.d.comb += o.eq(rv[:width])
-    return o, flag
+    return o, f
 
 
 def _sum(m: Module, terms: list, width: int, name: str):
@@ -68,6 +54,33 @@ def _sum(m: Module, terms: list, width: int, name: str):
         terms = nxt
         level += 1
     return terms[0]
+
+
+def _cbits(v: int) -> int:
+    """Signed width of the constant ``v`` (at least 2)."""
+    return max(2, (v.bit_length() if v >= 0 else (-v - 1).bit_length()) + 1)
+
+
+def const_product(m: Module, k: int, x, width: int, name: str):
+    """``k * x`` (signed constant times signed ``x``) as a named product net of exactly ``width`` bits.
+
+    The constant net gets ``width - len(x)`` bits, so the multiplier's natural width is the
+    accumulator width (a whole cell output: no extension in front of the adders).
+    """
+    kw = width - len(x)
+    if kw < _cbits(k):
+        raise ValueError(f"constant {k} does not fit {kw} bits (product {name})")
+    p = Signal(signed(width), name=name)
+    m.d.comb += p.eq(Const(k, signed(kw)) * x.as_signed())
+    return p
+
+
+def add_const_signed(m: Module, x, k: int, name: str):
+    """``x + k`` for a signed named net ``x`` whose true sum fits its width (modular add)."""
+    from pwas_hdl.hdl._lintsafe import add_const_wrap
+
+    w = len(x)
+    return add_const_wrap(m, x.as_unsigned(), k % (1 << w), name).as_signed()
 
 
 def build_observer_bank(m: Module, bank, qu: list, qy, transfer):
@@ -91,13 +104,12 @@ def build_observer_bank(m: Module, bank, qu: list, qy, transfer):
     fc, fs, fin = fmt.coef_frac, fmt.state_frac, fmt.input_frac
     bs, accw, rb = fmt.state_bits, fmt.acc_bits, fmt.residual_bits
     sh_in = fs - fin
-    bin_ = fmt.input_bits
     states = [[Signal(signed(bs), name=f"obs{j}_x{i}") for i in range(mo)] for j in range(n)]
-    qy_al = ext_signed(m, Cat(Const(0, sh_in), qy).as_signed() if sh_in else qy, rb, "y_aligned")
+    qy_al = const_product(m, 1 << sh_in, qy, rb, "y_aligned")
     residuals = []
     sat_flags = []
     for j in range(n):
-        x0 = ext_signed(m, states[j][0], rb, f"obs{j}_yhat")
+        x0 = const_product(m, 1, states[j][0], rb, f"obs{j}_yhat")
         e = Signal(signed(rb + 1), name=f"obs{j}_e_full")
         m.d.comb += e.eq(x0 - qy_al)
         sink_unused(m, e[rb], f"obs{j}_e_top")
@@ -106,33 +118,26 @@ def build_observer_bank(m: Module, bank, qu: list, qy, transfer):
             terms = []
             a0 = int(bank.a0_codes[j, i])
             if a0:
-                cw = max(2, a0.bit_length() + 1) if a0 >= 0 else max(2, (-a0 - 1).bit_length() + 1)
-                k = const_net(m, a0, cw, f"obs{j}_a0_{i}")
-                p = Signal(signed(cw + bs), name=f"obs{j}_pa_{i}")
-                m.d.comb += p.eq(k * states[j][0])
-                terms.append(ext_signed(m, p, accw, f"obs{j}_ta_{i}"))
-            inj = []
+                terms.append(const_product(m, a0, states[j][0], accw, f"obs{j}_pa_{i}"))
             coefs = [(int(bank.b_codes[j, i, c]), qu[c], f"b{c}") for c in range(nu)] + [(int(bank.l_codes[j, i]), qy, "l")]
             for cv, sig, nm in coefs:
-                if not cv:
-                    continue
-                cw = max(2, cv.bit_length() + 1) if cv >= 0 else max(2, (-cv - 1).bit_length() + 1)
-                k = const_net(m, cv, cw, f"obs{j}_{nm}_{i}")
-                p = Signal(signed(cw + bin_), name=f"obs{j}_p{nm}_{i}")
-                m.d.comb += p.eq(k * sig)
-                if sh_in:
-                    p = Cat(Const(0, sh_in), p).as_signed()
-                terms.append(ext_signed(m, p, accw, f"obs{j}_t{nm}_{i}"))
-            d = int(bank.d_codes[j, i]) + (1 << (fc - 1))  # the rounding term folded into the constant
-            terms.append(const_net(m, d, accw, f"obs{j}_d_{i}"))
+                if cv:  # the input alignment << (F_s - F_in) is folded into the constant
+                    terms.append(const_product(m, cv << sh_in, sig, accw, f"obs{j}_p{nm}_{i}"))
             if i + 1 < mo:
-                terms.append(ext_signed(m, Cat(Const(0, fc), states[j][i + 1]).as_signed(), accw, f"obs{j}_tx_{i}"))
-            acc = _sum(m, terms, accw, f"obs{j}_acc{i}")
-            rv = acc[fc:].as_signed()
-            sink_unused(m, acc[:fc], f"obs{j}_acc{i}_frac")
-            nxt, flag = saturate(m, rv, bs, f"obs{j}_next{i}")
-            if not isinstance(flag, Const):
+                terms.append(const_product(m, 1 << fc, states[j][i + 1], accw, f"obs{j}_px_{i}"))
+            d = int(bank.d_codes[j, i]) + (1 << (fc - 1))  # the rounding term folded into the constant
+            if terms:
+                acc = add_const_signed(m, _sum(m, terms, accw, f"obs{j}_acc{i}"), d, f"obs{j}_acc{i}_d")
+                rv = acc[fc:].as_signed()
+                sink_unused(m, acc[:fc], f"obs{j}_acc{i}_frac")
+                nxt, flag = saturate(m, rv, bs, f"obs{j}_next{i}")
                 sat_flags.append(flag)
+            else:  # a constant state (all its coefficients are 0)
+                v = d >> fc
+                lim = 1 << (bs - 1)
+                nxt = Const(min(max(v, -lim), lim - 1), signed(bs))
+                if not -lim <= v < lim:
+                    sat_flags.append(transfer)
             with m.If(transfer):
                 m.d.sync += states[j][i].eq(nxt)
     saturated = Signal(name="state_saturated")

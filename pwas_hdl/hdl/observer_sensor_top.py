@@ -114,8 +114,7 @@ class ObserverSensorTop(wiring.Component):
         b = bank.input_bits
         inp = getattr(self, "in")
         cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(self.signals))]
-        advance = Signal(name="advance")
-        m.d.comb += inp.ready.eq(advance)
+        advance = inp.ready  # the core drives it: ~out.valid | out.ready (one net, no alias)
         transfer = Signal(name="transfer")
         m.d.comb += transfer.eq(inp.valid & advance)
 

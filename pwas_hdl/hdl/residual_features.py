@@ -2,9 +2,10 @@
 
 Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank`: per observer
 ``sq = e * e``, a delay line of ``l + 1`` squares and the running window sum
-``S <= S + sq - sq_{k-l-1}`` (registers, updated on each input transfer, 0 after reset), then
-(one pipeline register later) the integer square root ``r = isqrt(S)`` (map 11b; digit by digit,
-``ceil(B_S / 2)`` compare-subtract steps) or ``r = S`` (11b-sq), and the constant affine map to the
+``S <= S + sq - sq_{k-l-1}`` (registers, updated on each input transfer, 0 after reset; modulo
+``2**B_S``, exact because the window sum lies in ``[0, 2**B_S)``), then (one pipeline register
+later) the integer square root ``r = isqrt(S)`` (map 11b; digit by digit, ``B_S / 2``
+compare-subtract steps, combinational) or ``r = S`` (11b-sq), and the constant affine map to the
 PWAS core's input code ``q = sat((min(r >> t, cap) * K + C) >> R)``.
 """
 
@@ -12,112 +13,106 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 
-from pwas_hdl.hdl._lintsafe import ge_const, sink_unused
-from pwas_hdl.hdl.observer_bank import const_net, ext_signed, saturate
+from pwas_hdl.hdl._lintsafe import add_wrap, ge_const, rom, sink_unused
+from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
 
-__all__ = ["build_window_sums", "build_isqrt", "build_feature_codes"]
+__all__ = ["build_window_sums", "build_isqrt", "build_feature_codes", "sub_wrap"]
+
+
+def sub_wrap(m: Module, a, b, name: str):
+    """``(a - b) mod 2**w`` for two unsigned ``w``-bit nets."""
+    assert len(a) == len(b), (len(a), len(b))
+    w = len(a)
+    s = Signal(unsigned(w + 1), name=name)
+    m.d.comb += s.eq(a - b)
+    sink_unused(m, s[w], f"{name}_borrow")
+    return s[:w]
 
 
 def build_window_sums(m: Module, bank, residuals: list, transfer) -> list:
     """Squares, delay lines and running sums; returns the ``S_j`` registers (unsigned ``window_sum`` bits)."""
     fmt = bank.formats
-    rb, sqb, sumb = fmt.residual_bits, fmt.square_bits, fmt.sum_bits
+    rb, sumb = fmt.residual_bits, fmt.sum_bits
+    assert fmt.square_bits == sumb == 2 * rb
     lw = bank.window
     sums = []
     for j, e in enumerate(residuals):
-        p = Signal(signed(2 * rb), name=f"feat{j}_sq_full")
+        p = Signal(signed(2 * rb), name=f"feat{j}_sq")
         m.d.comb += p.eq(e * e)
-        sink_unused(m, p[sqb:], f"feat{j}_sq_top")  # e*e >= 0 and < 2**(2 rb - 2)
-        sq = p[:sqb]
-        dl = [Signal(unsigned(sqb), name=f"feat{j}_dl{i}") for i in range(lw + 1)]
+        sq = p.as_unsigned()
+        dl = [Signal(unsigned(sumb), name=f"feat{j}_dl{i}") for i in range(lw + 1)]
         s = Signal(unsigned(sumb), name=f"feat{j}_sum")
-        sq_w = Signal(signed(sumb + 2), name=f"feat{j}_sq_in")
-        old_w = Signal(signed(sumb + 2), name=f"feat{j}_sq_out")
-        s_w = Signal(signed(sumb + 2), name=f"feat{j}_sum_ext")
-        m.d.comb += [sq_w.eq(sq), old_w.eq(dl[lw]), s_w.eq(s)]
-        t1 = Signal(signed(sumb + 3), name=f"feat{j}_sum_add")
-        m.d.comb += t1.eq(s_w + sq_w)
-        sink_unused(m, t1[sumb + 2], f"feat{j}_sum_add_top")
-        t2 = Signal(signed(sumb + 3), name=f"feat{j}_sum_next")
-        m.d.comb += t2.eq(t1[: sumb + 2].as_signed() - old_w)
-        sink_unused(m, t2[sumb:], f"feat{j}_sum_next_top")  # the window sum is in [0, 2**sumb)
+        added = add_wrap(m, s, sq, f"feat{j}_sum_add")
+        nxt = sub_wrap(m, added, dl[lw], f"feat{j}_sum_next")
         with m.If(transfer):
-            m.d.sync += [dl[0].eq(sq), s.eq(t2[:sumb])] + [dl[i].eq(dl[i - 1]) for i in range(1, lw + 1)]
+            m.d.sync += [dl[0].eq(sq), s.eq(nxt)] + [dl[i].eq(dl[i - 1]) for i in range(1, lw + 1)]
         sums.append(s)
     return sums
 
 
 def build_isqrt(m: Module, value, name: str):
-    """``floor(sqrt(value))`` of an unsigned value, combinational digit-by-digit (restoring) square root.
+    """``floor(sqrt(value))`` of an unsigned value: combinational digit-by-digit (restoring) square root.
 
-    Returns an unsigned ``ceil(len(value) / 2)``-bit net.
+    Step ``i`` (``i = 0 ..``, two input bits each, MSB first) holds the remainder in ``i + 2`` bits
+    and the root in ``i + 1`` bits: ``cur = rem << 2 | two`` (``i + 3`` bits), ``trial = root << 2 | 1``
+    (``i + 2`` bits); ``bit = cur >= trial`` = ``cur[i+2] | no borrow of cur[:i+2] - trial``;
+    ``rem = bit ? cur - trial : cur`` (both ``< 2**(i+2)``). Returns an unsigned ``ceil(len / 2)``-bit net.
     """
     w = len(value)
     pairs = (w + 1) // 2
     v = Cat(value, Const(0, 2 * pairs - w)) if 2 * pairs > w else value
-    rw = pairs + 2  # remainder / trial width
-    rem = Const(0, rw)
-    root = None  # bits so far, MSB first
-    for i in range(pairs):
-        hi = 2 * (pairs - 1 - i)
-        two = v[hi : hi + 2]
-        cur = Signal(unsigned(rw), name=f"{name}_r{i}")
-        m.d.comb += cur.eq(Cat(two, rem[: rw - 2]))
-        # trial = (root << 2) | 1
-        trial = Signal(unsigned(rw), name=f"{name}_t{i}")
-        m.d.comb += trial.eq(Cat(Const(1, 2), root) if root is not None else 1)
-        diff = Signal(unsigned(rw + 1), name=f"{name}_d{i}")
-        m.d.comb += diff.eq(cur - trial)
+    two0 = v[2 * pairs - 2 : 2 * pairs]
+    b0 = Signal(name=f"{name}_b0")
+    m.d.comb += b0.eq(two0.any())
+    rem = rom(m, two0, [0, 0, 1, 2], 2, f"{name}_m0")  # two - (two != 0)
+    if isinstance(rem, int):
+        rem = Const(rem, 2)
+    bits = [b0]
+    for i in range(1, pairs):
+        lo = 2 * (pairs - 1 - i)
+        two = v[lo : lo + 2]
+        root = Cat(*reversed(bits))  # i bits, latest bit lowest
+        trial = Cat(Const(1, 2), root)  # i + 2 bits
+        cur_lo = Cat(two, rem[:i])  # i + 2 low bits of cur
+        diff = Signal(unsigned(i + 3), name=f"{name}_d{i}")
+        m.d.comb += diff.eq(cur_lo - trial)
         bit = Signal(name=f"{name}_b{i}")
-        m.d.comb += bit.eq(~diff[rw])
-        nrem = Signal(unsigned(rw), name=f"{name}_m{i}")
-        m.d.comb += nrem.eq(Mux(bit, diff[:rw], cur))
+        m.d.comb += bit.eq(rem[i] | ~diff[i + 2])
+        nrem = Signal(unsigned(i + 2), name=f"{name}_m{i}")
+        m.d.comb += nrem.eq(Mux(bit, diff[: i + 2], cur_lo))
         rem = nrem
-        root = Cat(bit, root) if root is not None else bit
-        if len(root) > rw - 2:
-            root = root[: rw - 2]
+        bits.append(bit)
     sink_unused(m, rem, f"{name}_rem")
-    out = Signal(unsigned(pairs), name=name)
-    m.d.comb += out.eq(root)
-    return out
+    return Cat(*reversed(bits))
 
 
 def build_feature_codes(m: Module, bank, roots: list) -> list:
     """Affine map of ``r`` to the core's input code per feature: ``sat((min(r >> t, cap) * K + C) >> R)``."""
     t, sh = bank.root_shift, bank.scale_shift
     bcore = bank.input_bits_core
+    sw = bank.widths["scale_product"]
     codes = []
     for j, r in enumerate(roots):
+        if t:
+            sink_unused(m, r[:t], f"feat{j}_root_low")
         rs = r[t:] if t else r
         cap = int(bank.root_cap[j])
         capw = max(1, cap.bit_length())
+        capped = Signal(unsigned(capw), name=f"feat{j}_capped")
         if cap < (1 << len(rs)) - 1:
             over = ge_const(rs, cap + 1)
             if isinstance(over, bool):
-                capped_v = Const(cap, capw) if over else rs[:capw]
+                m.d.comb += capped.eq(cap if over else rs[:capw])
             else:
-                capped_v = Mux(over, Const(cap, capw), rs[:capw])
+                with m.If(over):
+                    m.d.comb += capped.eq(cap)
+                with m.Else():
+                    m.d.comb += capped.eq(rs[:capw])
         else:
-            capped_v = rs
-        capped = Signal(unsigned(capw), name=f"feat{j}_capped")
-        m.d.comb += capped.eq(capped_v)
-        if len(rs) > capw and not (cap < (1 << len(rs)) - 1):
-            sink_unused(m, rs[capw:], f"feat{j}_root_top")
-        k = int(bank.scale_mul[j])
-        kw = k.bit_length() + 1
-        kn = const_net(m, k, kw, f"feat{j}_k")
-        pw = capw + 1 + kw
-        prod = Signal(signed(pw), name=f"feat{j}_prod")
-        m.d.comb += prod.eq(Cat(capped, Const(0, 1)).as_signed() * kn)
-        sw = bank.widths["scale_product"]
-        c = int(bank.scale_add[j])
-        cn = const_net(m, c, sw, f"feat{j}_c")
-        pe = ext_signed(m, prod, sw, f"feat{j}_prod_ext")
-        tot = Signal(signed(sw + 1), name=f"feat{j}_affine")
-        m.d.comb += tot.eq(pe + cn)
-        sink_unused(m, tot[sw], f"feat{j}_affine_top")
+            m.d.comb += capped.eq(rs)
+        prod = const_product(m, int(bank.scale_mul[j]), Cat(capped, Const(0, 1)), sw, f"feat{j}_prod")
+        tot = add_const_signed(m, prod, int(bank.scale_add[j]), f"feat{j}_affine")
         sink_unused(m, tot[:sh], f"feat{j}_affine_frac")
-        rv = tot[sh:sw].as_signed()
-        q, _ = saturate(m, rv, bcore, f"feat{j}_q")
+        q, _ = saturate(m, tot[sh:].as_signed(), bcore, f"feat{j}_q", flag=False)
         codes.append(q)
     return codes
