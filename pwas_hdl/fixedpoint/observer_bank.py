@@ -89,10 +89,12 @@ from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat, PortFormat, Si
 from pwas_hdl.fit.observer_bank import FRONT_END_KIND, ObserverBankFrontEnd, canonical_form
 
 __all__ = [
-    "ObserverBankFormats", "FixedPointObserverBank", "ObserverBankSensorModel", "isqrt_floor",
+    "observer_bank_model", "BANK_FORMAT_OPTIONS", "ObserverBankFormats", "FixedPointObserverBank", "ObserverBankSensorModel", "isqrt_floor",
     "l1_gain", "HW_FEATURE_MAPS", "FEATURE_BUDGET", "BANK_TRACE_STAGES",
 ]
 
+#: Options of the bank's formats that ``generate`` accepts besides the core's (None: the default).
+BANK_FORMAT_OPTIONS = ("state_bits", "state_frac", "coef_frac", "input_headroom")
 #: Feature maps the hardware implements.
 HW_FEATURE_MAPS = ("11b", "11b-sq")
 #: Each of the two front-end error terms may use this fraction of the smallest feature input LSB.
@@ -517,7 +519,7 @@ class ObserverBankSensorModel:
         self.error_bound = [float(core.error_bound + self.lipschitz[z] @ fb) for z in range(core.nz)]
 
     @classmethod
-    def from_sensor(cls, sensor, *, input_bits: int = 12, input_headroom: float = 8.0, coef_frac: int | None = None,
+    def from_sensor(cls, sensor, *, input_bits: int = 12, input_headroom: float | None = 8.0, coef_frac: int | None = None,
                     state_frac: int | None = None, state_bits: int | None = None, **core_formats) -> "ObserverBankSensorModel":
         """From a fitted :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor` with an observer-bank front end.
 
@@ -533,6 +535,8 @@ class ObserverBankSensorModel:
                              "fit the bank sensor with --mu 0 --my 0 (the P-feat predictor)")
         names = fe.feature_names()
         given = {k: v for k, v in core_formats.items() if v is not None}
+        if input_headroom is None:
+            input_headroom = 8.0
         rmse = np.asarray(getattr(sensor, "train_rmse_", []), float).reshape(-1)
         rmse = rmse[np.isfinite(rmse) & (rmse > 0)]
         given.setdefault("reference_error", float(rmse.max()) if rmse.size else None)
@@ -576,3 +580,20 @@ class ObserverBankSensorModel:
                                 "rule": "core bound + sum_j G_j * feature bound_j",
                                 "holds_unless_state_saturates": True,
                                 "against": "float sensor (front end + PWAS) at the physical signals the codes represent"}}
+
+
+def observer_bank_model(sensor, memory: str = "banked", **formats) -> ObserverBankSensorModel:
+    """The bit-true model ``generate`` builds for an observer-bank sensor.
+
+    ``formats``: the core's format options (those of :class:`FixedPointModel`; ``input_bits`` is
+    shared by the u / y codes and the feature codes) and :data:`BANK_FORMAT_OPTIONS`; None means
+    the default. Raises :class:`InputError` for an option the bank design does not have.
+    """
+    given = {k: v for k, v in formats.items() if v is not None}
+    bank = {k: given.pop(k) for k in BANK_FORMAT_OPTIONS if k in given}
+    if "input_scale" in given and given["input_scale"] != "pow2":
+        raise InputError("observer-bank sensors use the pow2 input scale of the core (their feature codes are scaled already)")
+    try:
+        return ObserverBankSensorModel.from_sensor(sensor, layout=memory, **bank, **given)
+    except TypeError as exc:
+        raise InputError(f"unknown format option for an observer-bank sensor: {exc}") from None

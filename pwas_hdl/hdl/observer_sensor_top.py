@@ -32,7 +32,7 @@ from pwas_hdl.hdl.observer_bank import build_observer_bank
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
 
-__all__ = ["ObserverSensorTop", "FRONT_END_STAGES"]
+__all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor"]
 
 #: Pipeline stages in front of the core (the sum registers and the root register).
 FRONT_END_STAGES = 2
@@ -72,6 +72,8 @@ class ObserverSensorTop(wiring.Component):
         self.pipeline = self.core.pipeline
         self.warmup = bank.first_output
         self.signals = list(bank.signal_names)
+        #: per target |estimate - float sensor| bound (physical), set by build_observer_sensor
+        self.estimate_bound = None
         super().__init__(
             {
                 "in": In(stream.Signature(unsigned(len(self.signals) * bank.input_bits))),
@@ -88,15 +90,17 @@ class ObserverSensorTop(wiring.Component):
 
     @property
     def extra_info(self) -> dict:
+        fe = {
+            "kind": "observer-bank",
+            "architecture": "parallel constant multipliers, one state update of every observer per input transfer",
+            "cycles_per_sample": self.cycles_per_sample,
+            "ii": self.ii,
+            "stages_before_core": FRONT_END_STAGES,
+            **self.bank.to_dict(),
+        }
+        fe["error_bound"] = {**fe["error_bound"], "estimate": self.estimate_bound}
         return {
-            "front_end": {
-                "kind": "observer-bank",
-                "architecture": "parallel constant multipliers, one state update of every observer per input transfer",
-                "cycles_per_sample": self.cycles_per_sample,
-                "ii": self.ii,
-                "stages_before_core": FRONT_END_STAGES,
-                **self.bank.to_dict(),
-            },
+            "front_end": fe,
             "warmup": {
                 "samples_without_output": self.warmup,
                 "port": "warm",
@@ -148,3 +152,26 @@ class ObserverSensorTop(wiring.Component):
         codes = build_feature_codes(m, bank, roots)
         self.core.build_into(m, Cat(*codes), v2, advance, self.out)
         return m
+
+
+def build_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                          name: str = "pwas_sensor") -> ObserverSensorTop:
+    """The observer-bank sensor top of a bit-true :class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`.
+
+    Returns
+    -------
+    ObserverSensorTop
+        ``.latency``, ``.ii``, ``.cycles_per_sample``, ``.warmup`` (= M + l), ``.core``.
+    """
+    from pwas_hdl.hdl.api import _check_name
+
+    name = _check_name(name)
+    top = ObserverSensorTop(model.bank, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline)
+    top.module_name = name
+    top._MustUse__silence = True
+    top.core.input_names = list(model.core.regressor_names)
+    top.core.target_names = list(model.core.target_names)
+    top.estimate_bound = {"physical": list(model.error_bound), "lipschitz": model.lipschitz.tolist(),
+                          "rule": "core bound + sum_j G_j * feature bound_j (G_j: largest edge slope along j)",
+                          "against": "float sensor (front end + PWAS) at the physical signals the input codes represent"}
+    return top
