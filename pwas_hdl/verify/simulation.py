@@ -102,6 +102,9 @@ class Design:
     sensor: Any  # PWASVirtualSensor
     model: FixedPointModel
     verilog_path: Path
+    #: observer-bank sensors (manifest ``front_end``): the bit-true bank + core
+    #: (:class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`); ``model`` is its core
+    bank: Any = None
 
     @property
     def top(self) -> str:
@@ -187,9 +190,16 @@ def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
     sensor = PWASVirtualSensor.load(model_file)
     opts = man["generator"]["options"]
     fmts = {k: opts[k] for k in FORMAT_OPTIONS if opts[k] is not None}
+    bank = None
     with warnings.catch_warnings():  # saturation warnings were given by `generate`; the manifest records them
         warnings.simplefilter("ignore", UserWarning)
-        fxm = fixed_point_model(sensor, memory=opts["memory"], **fmts)
+        if "front_end" in man:  # observer-bank sensor (issue 12)
+            from pwas_hdl.fixedpoint.observer_bank import BANK_FORMAT_OPTIONS, observer_bank_model
+
+            bank = observer_bank_model(sensor, memory=opts["memory"], **fmts, **{k: opts.get(k) for k in BANK_FORMAT_OPTIONS})
+            fxm = bank.core
+        else:
+            fxm = fixed_point_model(sensor, memory=opts["memory"], **fmts)
     fx = fxm.to_dict()
     want = man["formats"]
     for key, mine in (("output", fx["output"]), ("weight", fx["weights"]), ("widths", fx["widths"]), ("mu_frac", fx["F"])):
@@ -208,7 +218,7 @@ def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
     vpath = Path(verilog) if verilog is not None else out / design_v
     if not vpath.is_file():
         raise FileNotFoundError(f"{vpath} is missing; regenerate the folder with `pwas-hdl generate`")
-    return Design(out, man, sensor, fxm, vpath)
+    return Design(out, man, sensor, fxm, vpath, bank)
 
 
 # ---------------------------------------------------------------------------------------------------- stimulus
@@ -291,6 +301,8 @@ def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segm
         w = design.warmup
         if len(c) <= w:
             q = np.empty((0, design.model.n), dtype=np.int64)
+        elif design.bank is not None:  # observer bank: q = the feature codes the bank gives the core
+            q = design.bank.bank.trace(c)["feature_codes"][w:]
         else:
             cu, cy = _signal_columns(design, c)
             q = design.sensor.lags_.build(cu, cy).astype(np.int64)
