@@ -105,3 +105,33 @@ def test_refusals(pv_data):
         ObserverBankSensorModel.from_sensor(s)
     with pytest.raises(InputError, match="stable"):
         l1_gain(np.array([[1.0]]), np.ones((1, 1)))
+
+
+def test_seed003_estimator_bittrue_within_bounds():
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+    from pwas_hdl.systems.switched_linear import SWITCHED_A, SWITCHED_B, SWITCHED_C, switched_paper_run, switched_training_runs
+    from pwas_hdl.systems.switched_observer import observer_gains
+
+    est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, SWITCHED_C, observer_gains())
+    assert est.state_error_bound is not None and not est.state_may_saturate
+    rep = switched_paper_run(seed=0, switching="time", input_kind="step", noise=0.02)
+    long = switched_training_runs(1, 1000, seed=5000, switching="time", noise=0.01)
+    for d in (rep, long):
+        codes = est.quantize_signals(d.u, d.y)
+        tr, ref = est.trace(codes), est.reference(codes)
+        ws = np.sort(ref.residuals, axis=1)
+        margin = ws[:, 1] - ws[:, 0]
+        differ = tr["theta"] != ref.theta_hat
+        assert not np.any(differ & (margin > 2 * est.sum_error_bound))  # modes differ only at near-ties
+        if not differ.any():  # the same modes: the state error bound holds (and is not vacuous)
+            err = np.abs(est.to_physical_state(tr["x_hat"]) - ref.x_hat).max()
+            assert err <= est.state_error_bound
+            yerr = np.abs(tr["y_hat"] * 2.0**-est.state_frac - ref.y_hat).max()
+            assert yerr <= est.output_error_bound
+    # the paper replica (Table 1 setting): same modes, output MSE equal within the bound
+    codes = est.quantize_signals(rep.u, rep.y)
+    tr, ref = est.trace(codes), est.reference(codes)
+    assert np.array_equal(tr["theta"], ref.theta_hat)
+    y = rep.y[:, 0]
+    m_hw, m_f = np.mean((y - tr["y_hat"] * 2.0**-est.state_frac) ** 2), np.mean((y - ref.y_hat) ** 2)
+    assert abs(m_hw - m_f) <= 2 * math.sqrt(m_f) * est.output_error_bound + est.output_error_bound**2

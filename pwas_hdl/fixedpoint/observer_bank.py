@@ -597,3 +597,154 @@ def observer_bank_model(sensor, memory: str = "banked", **formats) -> ObserverBa
         return ObserverBankSensorModel.from_sensor(sensor, layout=memory, **bank, **given)
     except TypeError as exc:
         raise InputError(f"unknown format option for an observer-bank sensor: {exc}") from None
+
+
+# ---------------------------------------------------------------------------------------------------
+# Seed 003's estimator as a configuration of the bank: per-mode observers, argmin detector, switched observer
+# ---------------------------------------------------------------------------------------------------
+class FixedPointSwitchedEstimator:
+    """Bit-true virtual estimator of seed 003 (Morales-Morales et al.; float: :func:`pwas_hdl.systems.switched_observer.run_switched_observer`).
+
+    The same arithmetic as :class:`FixedPointObserverBank`, in general state-space form (``n``
+    states per mode, ``F = A - K C``, ``G = B``, ``L = K``, ``H = C`` quantised with ``F_c``
+    fraction bits, states ``s<B_s>.<F_s>`` saturating, inputs ``s<B_in>.<F_in>`` of the physical
+    u, y with head room ``H``):
+
+    * bank (8) with output injection: ``x_j' = sat((F_j x_j + (G_j qu + L_j qy) << (F_s - F_in) + 2**(F_c-1)) >> F_c)``;
+    * residual ``r_j = ((qy << (F_s - F_in + F_c)) - H_j x_j + 2**(F_c-1)) >> F_c``, the window sum
+      of ``r_j**2`` over ``window`` samples (running sum, exact), and the detector (9) ``theta =
+      argmin_j`` by the compare tree of :mod:`pwas_hdl.fixedpoint.argmax` (``select="min"``, ties to
+      the lowest mode: ``numpy.argmin`` as the float estimator);
+    * the switched observer (10) with the coefficients of the detected mode; outputs per sample
+      (before its update): ``x_hat`` codes, ``theta``, ``y_hat = (H_theta x + 2**(F_c-1)) >> F_c``.
+
+    Bounds against the float estimator at the represented inputs: the residual error ``dr``
+    (l1 gain of ``(F_j, I, H_j)`` times the per-step injection), the window-sum error
+    ``dS = W (2 R dr + dr**2)`` (``R`` the largest residual); the detected mode equals the float one
+    wherever the float detector's margin (runner-up minus best window sum) exceeds ``2 dS``; with
+    the same modes, ``|x_hw - x_float| <= dx = eta / (1 - rho)`` (``rho = max_i ||F_i||_inf < 1``)
+    and ``|y_hat_hw - y_hat| <= ||H||_1 dx + 2**-(F_s+1)``.
+    """
+
+    def __init__(self, A, B, C, K, *, window: int = 1, input_bits: int = 12, input_headroom: float = 8.0,
+                 coef_frac: int | None = None, state_frac: int | None = None, state_bits: int | None = None,
+                 budget: float = FEATURE_BUDGET):
+        self.A = [np.atleast_2d(np.asarray(a, float)) for a in A]
+        self.B = [np.asarray(b, float).reshape(-1) for b in B]
+        self.C = [np.asarray(c, float).reshape(-1) for c in C]
+        self.K = [np.asarray(k, float).reshape(-1) for k in K]
+        s, n = len(self.A), self.A[0].shape[0]
+        if not (len(self.B) == len(self.C) == len(self.K) == s) or window < 1:
+            raise InputError("A, B, C, K need one entry per mode and window >= 1")
+        self.n_modes, self.n, self.window = s, n, int(window)
+        self.input_bits = int(input_bits)
+        fin = self.input_bits - 1 - max(0, math.ceil(math.log2(float(input_headroom))))
+        self.input_frac = fin
+        h_in = (2 ** (self.input_bits - 1)) * 2.0**-fin
+        self.input_port = PortFormat(FixedFormat(self.input_bits, fin, True, "half_up", "saturate"))
+        self.F = [a - np.outer(k, c) for a, k, c in zip(self.A, self.K, self.C)]
+        # state bound (inputs within the code range), residual gain, switched contraction
+        xb = [l1_gain(f, np.column_stack([b, k])).sum(axis=1) * h_in for f, b, k in zip(self.F, self.B, self.K)]
+        self.state_bound = float(np.max(xb))
+        self.residual_gain = max(float(np.abs(l1_gain(f.T, c[:, None])).sum()) for f, c in zip(self.F, self.C))
+        self.rho = max(float(np.abs(f).sum(axis=1).max()) for f in self.F)
+        x0 = self.state_bound + 1.0
+        target = budget * 2.0**-fin
+        g = max(self.residual_gain, 1.0 / (1.0 - self.rho) if self.rho < 1 else self.residual_gain)
+        fs = fin if state_frac is None else int(state_frac)
+        while state_frac is None and g * 2.0 ** -(fs + 1) > target and fs < 40:
+            fs += 1
+        fc = 4 if coef_frac is None else int(coef_frac)
+        while coef_frac is None and g * 2.0 ** -(fc + 1) * (n * x0 + 2 * h_in) > target and fc < 40:
+            fc += 1
+        self.state_frac, self.coef_frac = fs, fc
+        q = lambda v: np.floor(np.asarray(v, float) * 2.0**fc + 0.5).astype(np.int64)  # noqa: E731
+        self.f_codes = np.array([q(f) for f in self.F])  # (s, n, n)
+        self.g_codes = np.array([q(b) for b in self.B])  # (s, n)
+        self.l_codes = np.array([q(k) for k in self.K])
+        self.h_codes = np.array([q(c) for c in self.C])
+        eps = max(float(np.max(np.abs(self.f_codes * 2.0**-fc - np.array(self.F)))),
+                  float(np.max(np.abs(self.g_codes * 2.0**-fc - np.array(self.B)))),
+                  float(np.max(np.abs(self.l_codes * 2.0**-fc - np.array(self.K)))),
+                  float(np.max(np.abs(self.h_codes * 2.0**-fc - np.array(self.C)))))
+        need = signed_bits_needed(np.array([math.ceil(x0 * 2.0**fs), -math.ceil(x0 * 2.0**fs)]))
+        self.state_bits = int(state_bits) if state_bits is not None else int(need)
+        self.state_may_saturate = self.state_bits < need
+        # bounds (normalised = physical here)
+        eta = 2.0 ** -(fs + 1) + eps * (n * x0 + 2 * h_in)
+        self.residual_error_bound = self.residual_gain * eta + 2.0 ** -(fs + 1) + eps * n * x0
+        r_max = h_in + float(np.abs(np.array(self.C)).sum(axis=1).max()) * x0
+        dr = self.residual_error_bound
+        self.sum_error_bound = self.window * (2 * r_max * dr + dr * dr)
+        self.state_error_bound = eta / (1.0 - self.rho) if self.rho < 1 else None
+        hn = float(np.abs(np.array(self.C)).sum(axis=1).max())
+        self.output_error_bound = (hn * self.state_error_bound + 2.0 ** -(fs + 1)) if self.state_error_bound is not None else None
+
+    def quantize_signals(self, u, y) -> np.ndarray:
+        """Codes (T, 2): columns u, y."""
+        x = np.column_stack([np.asarray(u, float).reshape(-1), np.asarray(y, float).reshape(-1)])
+        return self.input_port.quantize(x)
+
+    def represented(self, codes) -> tuple[np.ndarray, np.ndarray]:
+        p = self.input_port.to_physical(np.asarray(codes, np.int64))
+        return p[:, 0], p[:, 1]
+
+    def _step(self, fc, gc, lc, x, qu, qy, sh, lim):
+        acc = x @ fc.T if x.ndim == 1 else np.einsum("jmk,jk->jm", fc, x)
+        acc = acc + ((gc * qu + lc * qy) << sh) + (1 << (self.coef_frac - 1))
+        r = acc >> self.coef_frac
+        xs = np.clip(r, -lim, lim - 1)
+        return xs, bool(np.any(xs != r))
+
+    def trace(self, codes) -> dict[str, np.ndarray]:
+        """Run from reset (all states 0): ``theta`` (T,) 1-based modes, ``x_hat`` (T, n) codes, ``y_hat`` (T,)
+        codes (frac F_s), ``residual`` (T, s), ``window_sum`` (T, s), ``state_saturated`` (T,)."""
+        from pwas_hdl.fixedpoint.argmax import argmax_index
+
+        c = np.asarray(codes, np.int64)
+        t_len, s, n, fc, sh = len(c), self.n_modes, self.n, self.coef_frac, self.state_frac - self.input_frac
+        lim = 1 << (self.state_bits - 1)
+        half = 1 << (fc - 1)
+        xb = np.zeros((s, n), np.int64)
+        xo = np.zeros(n, np.int64)
+        res = np.empty((t_len, s), np.int64)
+        xh = np.empty((t_len, n), np.int64)
+        yh = np.empty(t_len, np.int64)
+        th = np.empty(t_len, np.int64)
+        wsum = np.empty((t_len, s), np.int64)
+        sat = np.zeros(t_len, bool)
+        sq_hist = np.zeros((self.window, s), np.int64)
+        for k in range(t_len):
+            qu, qy = c[k, 0], c[k, 1]
+            yal = qy << (sh + fc)
+            r = (yal - np.einsum("jm,jm->j", self.h_codes, xb) + half) >> fc
+            res[k] = r
+            sq_hist[k % self.window] = r * r
+            wsum[k] = sq_hist.sum(axis=0)
+            i = int(argmax_index(wsum[k][None, :], select="min")[0])
+            th[k] = i + 1
+            xh[k] = xo
+            yh[k] = (int(self.h_codes[i] @ xo) + half) >> fc
+            xo, s1 = self._step(self.f_codes[i], self.g_codes[i], self.l_codes[i], xo, qu, qy, sh, lim)
+            xb, s2 = self._step(self.f_codes, self.g_codes, self.l_codes, xb, qu, qy, sh, lim)
+            sat[k] = s1 or s2
+        return {"theta": th, "x_hat": xh, "y_hat": yh, "residual": res, "window_sum": wsum, "state_saturated": sat}
+
+    def to_physical_state(self, codes) -> np.ndarray:
+        return np.asarray(codes, np.int64) * 2.0**-self.state_frac
+
+    def reference(self, codes):
+        """The float estimator (bank ``practical``) at the represented signals."""
+        from pwas_hdl.systems.switched_observer import run_switched_observer
+
+        u, y = self.represented(codes)
+        return run_switched_observer(u, y, K=self.K, window=self.window, A=self.A, B=self.B, C=self.C)
+
+    def to_dict(self) -> dict:
+        return {"kind": "switched-observer", "modes": self.n_modes, "states": self.n, "window": self.window,
+                "formats": {"input_bits": self.input_bits, "input_frac": self.input_frac, "coef_frac": self.coef_frac,
+                            "state_bits": self.state_bits, "state_frac": self.state_frac},
+                "state_bound": self.state_bound, "residual_gain": self.residual_gain, "contraction_inf_norm": self.rho,
+                "error_bound": {"residual": self.residual_error_bound, "window_sum": self.sum_error_bound,
+                                "state": self.state_error_bound, "y_hat": self.output_error_bound,
+                                "modes": "equal to the float detector wherever its margin exceeds 2 * window_sum"}}
