@@ -128,3 +128,22 @@ def test_seed003_estimator_rtl_bit_exact_and_lint(tmp_path, window):
     res = simulate_estimator(top, codes, p_valid=0.7, p_ready=0.6, seed=window)
     assert np.array_equal(res["x_hat"], tr["x_hat"]) and np.array_equal(res["y_hat"], tr["y_hat"])
     assert np.array_equal(res["theta"], tr["theta"])
+
+
+@pytest.mark.rtl
+def test_cli_simulate_observer_sensor(bank_sensor, pv_small, tmp_path, sim_cache, monkeypatch):
+    monkeypatch.setenv("PWAS_HDL_SIM_CACHE", str(sim_cache))
+    _, te, _ = pv_small
+    model = tmp_path / "bank.json"
+    bank_sensor.save(model)
+    ins, outs, tg = bank_sensor.signal_names()
+    cols = {**{n: te.u[:, i] for i, n in enumerate(ins)}, outs[0]: te.y[:, 0], f"{tg[0]}_true": te.z_true[:, 0]}
+    lines = [",".join(cols)] + [",".join(repr(float(c[k])) for c in cols.values()) for k in range(len(te.y))]
+    (tmp_path / "test.csv").write_text("\n".join(lines) + "\n")
+    assert main(["generate", str(model), "--design", "sensor", "-o", str(tmp_path / "d")]) == 0
+    assert main(["simulate", str(tmp_path / "d"), str(tmp_path / "test.csv"), "-o", str(tmp_path / "hw.csv")]) == 0
+    summ = json.loads((tmp_path / "hw.json").read_text())
+    assert summ["mismatches"] == 0 and summ["checks"]["passed"] and summ["samples"] == len(te.y) - 12
+    hw = np.genfromtxt(tmp_path / "hw.csv", delimiter=",", names=True)
+    zf = bank_sensor.predict(te.u, te.y)[:, 0]
+    assert np.allclose(hw[f"{tg[0]}_float"], zf)

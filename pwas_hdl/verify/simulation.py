@@ -845,11 +845,26 @@ def simulate_data(
     if traj_col is not None:
         table.column_index(traj_col)
     slices = split_trajectories(table, traj_col)
-    u_all = table.numeric(ins) if lags.nu and lags.mu else None
-    y_all = table.numeric(outs) if lags.ny and lags.my else None
-    m_hist = lags.memory
     segs, rows, xs = [], [], []
+    if design.bank is not None:  # observer-bank sensor: every u and the y feed the bank
+        u_all, y_all = (table.numeric(ins) if ins else None), table.numeric(outs)
+        m_hist = design.warmup + 1
+        zfs = []
+    else:
+        u_all = table.numeric(ins) if lags.nu and lags.mu else None
+        y_all = table.numeric(outs) if lags.ny and lags.my else None
+        m_hist = lags.memory
     for sl in slices:
+        if design.bank is not None:
+            if sl.stop - sl.start < m_hist:
+                raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {sl.stop - sl.start} samples; "
+                                 f"the observer bank needs {m_hist}")
+            u = u_all[sl] if u_all is not None else None
+            codes, _ = design.bank.quantize_signals(u, y_all[sl])
+            segs.append(segment(design, codes))
+            rows.append(np.arange(sl.start + m_hist - 1, sl.stop))
+            zfs.append(sensor.predict(u if u is not None else None, y_all[sl]))
+            continue
         t_len = sl.stop - sl.start
         if t_len < m_hist:
             raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {t_len} samples; the lags need {m_hist}")
@@ -901,7 +916,6 @@ def simulate_data(
     bt = np.concatenate([s.expected for s in segs])
     bt_oor = np.concatenate([s.oor for s in segs])
     q = np.concatenate([s.q for s in segs])
-    xi = np.concatenate(xs)
     row = np.concatenate(rows)
     mism = np.any(hw != bt, axis=1) | (oor != bt_oor)
     clf = design.manifest.get("classifier")  # a classifier design: the class index is checked too
@@ -909,7 +923,8 @@ def simulate_data(
         hw_cls = np.concatenate(res.hw_class[0]) if res.hw_class and res.hw_class[0] else np.empty(0, dtype=np.int64)
         bt_cls = np.concatenate([s.cls for s in segs])
         mism = mism | (hw_cls != bt_cls)
-    zf = sensor.predict_regressors(xi)  # float model at the real inputs
+    # float model at the real inputs
+    zf = np.concatenate(zfs) if design.bank is not None else sensor.predict_regressors(np.concatenate(xs))
     zref = model.reference(q)  # float model at the inputs the codes represent
     zhw = hw * lsb
     cols: dict[str, Any] = {"row": row}
