@@ -4,8 +4,8 @@ Designs (fitted on the seed 004 pv-benchmark data, seed 0): the P-feat sensor of
 (N_theta = 5, M = 5, l = 7, 11b, p = 6: 16 807 vertices), and a small one (N_theta = 3, p = 3,
 64 vertices) that also fits an iCE40 HX8K, plus its 11b-sq twin (no square root). Every design
 goes through ``generate --design sensor`` and :func:`pwas_hdl.flow.synthesis.synthesize`
-(Yosys + nextpnr, seed 1) for ECP5 (LFE5U-45F) and iCE40 (HX8K, default device); a design that
-does not fit a device is recorded with the reason. Samples/s = fmax / II (one sample per clock).
+(Yosys + nextpnr, seed 1) for ECP5 (LFE5U-45F, then LFE5U-85F if it does not fit) and iCE40
+(HX8K); a design that does not fit a device is recorded with the reason. Samples/s = fmax / II (one sample per clock).
 
 ``python -m pwas_hdl.benchmarks.observer_bank_synth [--quick]`` writes
 ``results/observer_bank_synth.{json,md}`` (``--quick``: the small design on ECP5 only).
@@ -27,6 +27,8 @@ DESIGNS = {
     "small-n3-p3-11b": dict(n_models=3, features="11b", partitions=3, n_train=3000),
     "small-n3-p3-11b-sq": dict(n_models=3, features="11b-sq", partitions=3, n_train=3000),
 }
+#: Parts tried in order per family (the next one only when a design does not fit).
+FALLBACK = {"ecp5": ("45k", "85k"), "ice40": ("hx8k",)}
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "logic_cells", "fmax_mhz", "latency_cycles", "latency_ns", "ii",
         "throughput_msps", "runtime_s")
 
@@ -59,26 +61,32 @@ def run(quick: bool = False) -> dict:
                 row = {"design": name, "target": target, "n_vertices": g.manifest["domain"]["n_vertices"],
                        "memory_bits": g.manifest["memory"]["bits"], "formats": fe["formats"], "feature_map": fe["feature_map"],
                        "cycles_per_sample": fe["cycles_per_sample"]}
-                try:
-                    res = synthesize(Path(tmp) / "d", target)
-                    row.update({k: res.get(k) for k in KEYS}, device=res.get("part"), fits=True)
-                except (ValueError, RuntimeError) as exc:  # does not fit the device, or a tool failed
-                    row.update(fits=False, reason=str(exc).splitlines()[0][:300])
-                print(json.dumps({k: row.get(k) for k in ("design", "target", "luts", "ffs", "dsp", "bram", "fmax_mhz", "fits", "reason")}), flush=True)
-                rows.append(row)
+                for device in FALLBACK.get(target, (None,)):  # a larger part when the default does not fit
+                    r = dict(row)
+                    try:
+                        res = synthesize(Path(tmp) / "d", target, device=device)
+                        r.update({k: res.get(k) for k in KEYS}, device=res.get("part"), fits=True)
+                    except (ValueError, RuntimeError) as exc:  # does not fit the device, or a tool failed
+                        r.update(fits=False, device=device, reason=str(exc).splitlines()[0][:300])
+                    print(json.dumps({k: r.get(k) for k in ("design", "target", "device", "luts", "ffs", "dsp", "bram", "fmax_mhz",
+                                                            "fits", "reason")}), flush=True)
+                    rows.append(r)
+                    if r["fits"]:
+                        break
     return {"bench": "observer-bank-synth", "quick": quick, "rows": rows, "elapsed_s": round(time.perf_counter() - t0, 1)}
 
 
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors: resources on ECP5 and iCE40{' (QUICK)' if doc['quick'] else ''}", "",
-             "| design | target | N | LUT4 | FF | carry | DSP | BRAM | fmax MHz | latency (cycles / ns) | Msamples/s | note |",
+             "| design | part | N | LUT4 | FF | carry | DSP | BRAM | fmax MHz | latency (cycles / ns) | Msamples/s | note |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---|"]
+    # device in the target column
     for r in doc["rows"]:
         if r["fits"]:
-            lines.append(f"| {r['design']} | {r['target']} | {r['n_vertices']} | {r['luts']} | {r['ffs']} | {r['carry']} | {r['dsp']} | "
+            lines.append(f"| {r['design']} | {r['device']} | {r['n_vertices']} | {r['luts']} | {r['ffs']} | {r['carry']} | {r['dsp']} | "
                          f"{r['bram']} | {r['fmax_mhz']:.1f} | {r['latency_cycles']} / {r['latency_ns']:.0f} | {r['throughput_msps']:.1f} | |")
         else:
-            lines.append(f"| {r['design']} | {r['target']} | {r['n_vertices']} | | | | | | | | | {r['reason']} |")
+            lines.append(f"| {r['design']} | {r['target']} {r.get('device') or ''} | {r['n_vertices']} | | | | | | | | | {r['reason']} |")
     return "\n".join(lines) + "\n"
 
 
