@@ -23,10 +23,12 @@ from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.resources import benchmarks_dir
 
 DESIGNS = {
-    "pfeat-n5-p6-11b": dict(n_models=5, features="11b", partitions=6, n_train=25000),
     "small-n3-p3-11b": dict(n_models=3, features="11b", partitions=3, n_train=3000),
     "small-n3-p3-11b-sq": dict(n_models=3, features="11b-sq", partitions=3, n_train=3000),
+    "pfeat-n5-p6-11b": dict(n_models=5, features="11b", partitions=6, n_train=25000),
 }
+#: iCE40 HX8K block RAM: 32 x 4 kbit; a design whose weight memory is larger is not run on it.
+ICE40_BRAM_BITS = 32 * 4096
 #: Parts tried in order per family (the next one only when a design does not fit).
 FALLBACK = {"ecp5": ("45k", "85k"), "ice40": ("hx8k",)}
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "logic_cells", "fmax_mhz", "latency_cycles", "latency_ns", "ii",
@@ -58,6 +60,12 @@ def run(quick: bool = False) -> dict:
             fe = g.manifest["front_end"]
             for target in targets:
                 print(f"{name} on {target} ...", flush=True)
+                if target == "ice40" and g.manifest["memory"]["bits"] > ICE40_BRAM_BITS:
+                    rows.append({"design": name, "target": target, "device": "hx8k", "n_vertices": g.manifest["domain"]["n_vertices"],
+                                 "memory_bits": g.manifest["memory"]["bits"], "fits": False,
+                                 "reason": f"not run: {g.manifest['memory']['bits']} bits of weight memory > the "
+                                           f"{ICE40_BRAM_BITS} bits of block RAM of an HX8K"})
+                    continue
                 row = {"design": name, "target": target, "n_vertices": g.manifest["domain"]["n_vertices"],
                        "memory_bits": g.manifest["memory"]["bits"], "formats": fe["formats"], "feature_map": fe["feature_map"],
                        "cycles_per_sample": fe["cycles_per_sample"]}
