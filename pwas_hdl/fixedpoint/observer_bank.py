@@ -83,7 +83,7 @@ from typing import Any
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, FixedPointModel
 from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat, PortFormat, SignalScaling, signed_bits_needed
 from pwas_hdl.fit.observer_bank import FRONT_END_KIND, ObserverBankFrontEnd, canonical_form
@@ -108,16 +108,12 @@ def isqrt_floor(a: np.ndarray) -> np.ndarray:
     """Elementwise ``floor(sqrt(a))`` of non-negative int64 (exact, corrected float guess)."""
     a = np.asarray(a, dtype=np.int64)
     if np.any(a < 0):
-        raise InternalErrorLike("isqrt of a negative number")
+        raise InternalError("isqrt of a negative number (a window sum below 0 cannot happen)")
     r = np.floor(np.sqrt(a.astype(np.float64))).astype(np.int64)
     for _ in range(3):
         r = np.where(r * r > a, r - 1, r)
         r = np.where((r + 1) * (r + 1) <= a, r + 1, r)
     return r
-
-
-class InternalErrorLike(AssertionError):
-    """An impossible integer state (a bug)."""
 
 
 def l1_gain(a_cl: np.ndarray, b: np.ndarray, tol: float = 1e-13, max_steps: int = 100_000) -> np.ndarray:
