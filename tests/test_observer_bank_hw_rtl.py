@@ -147,3 +147,16 @@ def test_cli_simulate_observer_sensor(bank_sensor, pv_small, tmp_path, sim_cache
     hw = np.genfromtxt(tmp_path / "hw.csv", delimiter=",", names=True)
     zf = bank_sensor.predict(te.u, te.y)[:, 0]
     assert np.allclose(hw[f"{tg[0]}_float"], zf)
+
+
+@pytest.mark.slow
+def test_switched_estimator_bench_quick_smoke():
+    from pwas_hdl import bench_results as br
+    from pwas_hdl.benchmarks.switched_estimator_hw import markdown, run
+
+    doc, _ = run(runs=1, quick=True, progress=None)
+    br.validate_results(doc)
+    rtl = br.find_rows(doc, stage="rtl", metric="mse")
+    assert rtl and all(r["config"]["mismatches"] == 0 for r in rtl)
+    assert all(r["config"]["mode_differs_beyond_bound"] == 0 for r in br.find_rows(doc, stage="bittrue"))
+    assert "| replica |" in markdown(doc)
