@@ -273,7 +273,7 @@ def fit(
     models: Annotated[int, typer.Option("--models", help="observer-bank: N_theta, local models / observers in the bank.")] = 5,
     observer: Annotated[str, typer.Option("--observer", help="observer-bank: deadbeat, poles:R (all poles at radius R) or kalman:LAMBDA (stationary Kalman, measurement variance LAMBDA).")] = "deadbeat",
     window: Annotated[int, typer.Option("--window", help="observer-bank: window l of the feature map.")] = 7,
-    features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer) or 11a (all residual lags).")] = "11b",
+    features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer), 11b-sq (its square: no square root in hardware) or 11a (all residual lags).")] = "11b",
     order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
     blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
     mz: Annotated[int, typer.Option("--mz", help="Mz: past estimates z_hat(t-1..t-Mz) of every target fed back as regressors (a dynamical sensor; fitted series-parallel, predict runs the recurrence). 0 = static.")] = 0,
@@ -591,7 +591,7 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
 def generate(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; in a folder an earlier `generate` made, only its files are replaced: sim/, synth/ and your files stay). Required.", show_default=False)] = None,
-    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer); of a recurrent model (fit --mz, fit-map --state) sensor is the recurrent top: lag bank + core + feedback of the estimates, II = latency (manifest design recurrent; use --input-bits 16). An additive model (fit --additive) gets one core per part, summed before one rounding.")] = "core",
+    design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer), or for an observer-bank model (fit --front-end observer-bank --mu 0 --my 0) the observer bank + residual features + core; of a recurrent model (fit --mz, fit-map --state) sensor is the recurrent top: lag bank + core + feedback of the estimates, II = latency (manifest design recurrent; use --input-bits 16). An additive model (fit --additive) gets one core per part, summed before one rounding.")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[str, typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words) or replicated (n+1 copies of N words).")] = "banked",
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, balanced (default), max, latency or throughput (the registers themselves; see --goal).")] = None,

@@ -23,7 +23,7 @@ import itertools
 
 import numpy as np
 
-__all__ = ["core_codes", "sensor_codes", "KINDS"]
+__all__ = ["core_codes", "sensor_codes", "observer_codes", "KINDS", "OBSERVER_KINDS"]
 
 KINDS = ("random", "vertices", "ties", "corners", "outside", "fullrange")
 
@@ -124,3 +124,47 @@ def sensor_codes(model, signals: list[str], t_len: int, seed: int = 0) -> np.nda
             seq.extend(int(v) for v in blk)
         cols.append(np.clip(np.array(seq[:t_len], dtype=np.int64), qmin, qmax))
     return np.stack(cols, axis=1)
+
+
+#: Blocks of :func:`observer_codes`.
+OBSERVER_KINDS = ("data", "steps", "fullscale", "saturating", "silence")
+
+
+def observer_codes(bank, t_len: int, seed: int = 0, data: np.ndarray | None = None) -> np.ndarray:
+    """``t_len`` transfers of (u0 .., y0) codes for the observer-bank top (``bank``: FixedPointObserverBank).
+
+    Blocks (lengths 8 .. 40 samples, so the windows and the observers see each kind long enough):
+    ``data`` (rows of the given codes, e.g. a quantised test trajectory; without it a random walk
+    of about one standard deviation), ``steps`` (piecewise-constant levels), ``fullscale`` (uniform
+    over the whole code range: out-of-range inputs for every feature), ``saturating`` (the largest
+    codes alternating with the smallest every few samples: drives the observer states to their
+    limits), ``silence`` (all zero).
+    """
+    rng = np.random.default_rng(seed)
+    b = int(bank.input_bits)
+    qmin, qmax = -(1 << (b - 1)), (1 << (b - 1)) - 1
+    one = 1 << int(bank.input_frac)  # one standard deviation of the normalised signal
+    k = int(bank.nu) + 1
+    rows, pos = [], 0
+    while sum(len(r) for r in rows) < t_len:
+        kind = OBSERVER_KINDS[len(rows) % len(OBSERVER_KINDS)] if len(rows) < 2 * len(OBSERVER_KINDS) else \
+            OBSERVER_KINDS[int(rng.integers(0, len(OBSERVER_KINDS)))]
+        L = int(rng.integers(8, 41))
+        if kind == "data":
+            if data is not None and len(data):
+                blk = np.asarray(data, dtype=np.int64)[np.arange(pos, pos + L) % len(data)]
+                pos += L
+            else:
+                blk = np.cumsum(rng.normal(0, one / 4, (L, k)), axis=0) + rng.normal(0, one, (1, k))
+        elif kind == "steps":
+            blk = np.repeat(rng.normal(0, 2 * one, (max(1, L // 6), k)), 6, axis=0)[:L]
+        elif kind == "fullscale":
+            blk = rng.integers(qmin, qmax + 1, (L, k))
+        elif kind == "saturating":
+            per = int(rng.integers(1, 5))
+            sgn = np.where((np.arange(L) // per) % 2 == 0, 1, -1)[:, None] * rng.choice([1, -1], (1, k))
+            blk = np.where(sgn > 0, qmax, qmin)
+        else:
+            blk = np.zeros((L, k))
+        rows.append(np.clip(np.round(np.asarray(blk, dtype=float)), qmin, qmax).astype(np.int64))
+    return np.concatenate(rows)[:t_len]

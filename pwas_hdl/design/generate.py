@@ -171,8 +171,10 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     terms = f"(weight rounding {eb['weight_term']:.4g} + output rounding {eb['output_term']:.4g}, physical units)"
     files = "\n".join(f"- `{f}`" for f in sorted(_file_names(man["files"])))
     return _template("report.md.tmpl").substitute(
-        top=man["top"], design={"core": "core", "sensor": "virtual-sensor top (lag bank + core)",
-                                "recurrent": "recurrent virtual-sensor top (lag bank + core + feedback of the estimates)"}[man["design"]],
+        top=man["top"], design=("virtual-sensor top (observer bank + residual features + core)"
+                                if "front_end" in man and man["design"] == "sensor" else
+                                {"core": "core", "sensor": "virtual-sensor top (lag bank + core)",
+                                 "recurrent": "recurrent virtual-sensor top (lag bank + core + feedback of the estimates)"}[man["design"]]),
         version=__version__,
         model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
                        f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
@@ -345,9 +347,6 @@ def build_design(
     if name is not None:
         check_module_name(name)
     sensor = _load_sensor(model)
-    if getattr(sensor, "front_end_", None) is not None:
-        raise InputError("hardware for observer-bank front ends is not implemented yet (issue 12); "
-                         "generate supports models fitted with --front-end lags")
     design = _design_kind(design, sensor)  # "sensor" of a recurrent model: the recurrent top (issue 13)
     top = name or {"core": "pwas_core", "sensor": "pwas_sensor", "recurrent": "pwas_recurrent_sensor"}[design]
     for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
@@ -367,7 +366,18 @@ def build_design(
         raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")
     if additive and memory_init != "inline":
         raise InputError("--memory-init readmemh is not available for additive sensors (the weights of the flattened parts are inline initialisers)")
-    fxm = fixed_point_model(sensor, memory=memory, **formats)
+    bank_model = None  # observer-bank front end (issue 12): pwas_hdl.fixedpoint.observer_bank
+    if getattr(sensor, "front_end_", None) is not None:
+        from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
+
+        if target_mhz is not None:
+            raise InputError("--clock-mhz (timing closure) is not supported for observer-bank sensors yet; give --pipeline")
+        if design == "recurrent":
+            raise InputError("hardware for a recurrent observer-bank sensor is not available")
+        bank_model = observer_bank_model(sensor, memory=memory, **formats)
+        fxm = bank_model.core
+    else:
+        fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
         from pwas_hdl.flow.timing_closure import close_timing
@@ -409,6 +419,12 @@ def build_design(
                                                      pipeline=pipe_arg)
     elif design == "core":
         comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier, architecture=architecture)
+    elif bank_model is not None:
+        from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
+
+        if architecture != "parallel":
+            raise InputError("the observer-bank sensor top has a parallel core only; use --architecture parallel")
+        comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top)
     else:
         comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier,
                             architecture=architecture)
@@ -447,6 +463,10 @@ def build_design(
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
     if architecture != "parallel":
         options["architecture"] = architecture
+    if bank_model is not None:
+        from pwas_hdl.fixedpoint.observer_bank import BANK_FORMAT_OPTIONS
+
+        options.update({k: formats.get(k) for k in BANK_FORMAT_OPTIONS})
     if timing is not None:
         options.update(target_mhz=float(target_mhz), fpga_target=fpga_target)
     # how the weights get into the memories (the manifest's memory.init; MEM_DIR: pwas_hdl.hdl.emit)
@@ -486,6 +506,7 @@ _PORT_MEANING = {
     "out.ready": "the sink takes {out.payload} (low = backpressure; the whole pipeline waits)",
     "out.payload": "estimate (signed codes, target 0 in the low bits) and flags:",
     "warm": "1 once the lag bank holds a full regressor (the next transfer yields an estimate)",
+    "warm.observer-bank": "1 once M + l samples have been taken since reset (the next transfer yields an estimate)",
 }
 
 
@@ -494,6 +515,8 @@ _HEADER_KIND = {"core": "PWAS core", "sensor": "PWAS virtual-sensor top", "recur
 
 def _port_meaning(man: dict, role: str) -> str:
     names = {p["role"]: p["name"] for p in man["ports"]}
+    if role == "warm" and "front_end" in man:
+        role = f"warm.{man['front_end']['kind']}"
     text = _PORT_MEANING.get(role, role)
     for r, name in names.items():
         text = text.replace("{" + r + "}", name)
@@ -532,6 +555,14 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         from pwas_hdl.design.recurrent import recurrence_header_lines
 
         lines += recurrence_header_lines(man)
+    if "front_end" in man:  # observer-bank sensor: the bank in front of the core
+        fe = man["front_end"]
+        ff = fe["formats"]
+        lines.append(f"observer bank: {fe['n_models']} observers of order {fe['order']} ({fe['observer']}), window l = {fe['window']}, "
+                     f"feature map {fe['feature_map']}; states s{ff['state_bits']}.{ff['state_frac']} (saturating), coefficients "
+                     f"{ff['coef_frac']} fraction bits; {fe['cycles_per_sample']} cycle per sample; first estimate at sample "
+                     f"{fe['first_output_sample']} after reset; |estimate - float sensor| <= "
+                     f"{', '.join(repr(v) for v in fe['error_bound']['estimate']['physical'])} unless a state saturates")
     lines += [
         "ports:",
     ]

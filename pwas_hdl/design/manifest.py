@@ -52,7 +52,10 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
                                    "regressors": ["x3_hat[t-1]"], "regressor_indices": [1], "input_format": "s16..",
                                    "requant": {"rule": .., "mul": K, "add": C, "shift": S, "qmin": .., "qmax": ..,
                                                "product_bits": .., "error_bound": ..}, "initial_codes": [..]}],
-                     "flow": "one sample in flight ..", "bit_true": "pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel"}
+                     "flow": "one sample in flight ..", "bit_true": "pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel"},
+      "front_end": {...}                         # only for observer-bank sensors: kind, cycles_per_sample,
+                                                 # ii, stages_before_core, signals, formats, coefficients,
+                                                 # feature_scale, widths, error_bound (FixedPointObserverBank.to_dict)
     }
 
 Physical value of a field: ``physical = offset + scale * code * 2**-frac`` (its ``format``).
@@ -109,6 +112,11 @@ def _fields(design: str, fxm: "FixedPointModel", info: dict, port_name: str, is_
                 f.update({"regressor": fxm.regressor_names[j], "signal": fxm.regressor_signals[j][0],
                           "lag": fxm.regressor_signals[j][1], "format": inp.port.to_dict(),
                           "domain_codes": [int(inp.lo_code), int(inp.hi_code)]})
+        elif "front_end" in info:  # observer-bank sensor: one normalised code per u / y signal
+            sig = {d["name"]: d for d in info["front_end"]["signals"]}
+            for f in fields:
+                d = sig[f["name"]]
+                f.update({"signal": f["name"], "format": {k: v for k, v in d.items() if k != "name"}})
         else:
             sig = fxm.signal_input_formats()
             for f in fields:
@@ -202,10 +210,10 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
             "out_of_range": "inputs outside the domain are clamped to it and raise out_of_range",
         },
         "lags": {
-            "Mu": int(lags.mu),
-            "My": int(lags.my),
-            "inputs": ins if lags.nu else [],
-            "outputs": outs if lags.ny else [],
+            "Mu": int(lags.mu) if lags is not None else 0,
+            "My": int(lags.my) if lags is not None else 0,
+            "inputs": ins if lags is not None and lags.nu else [],
+            "outputs": outs if lags is not None and lags.ny else [],
             "targets": tgts,
             "regressors": list(fxm.regressor_names),
             **({"warmup": info["warmup"]} if "warmup" in info else {}),
@@ -231,6 +239,8 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
         man["classifier"] = info["classifier"]
     if recurrence is not None:  # the recurrent top (issue 13): the feedback path
         man["recurrence"] = _recurrence_entry(recurrence, info, sensor, ports)
+    if "front_end" in info:  # observer-bank sensor (issue 12): bank formats, constants, bounds, cycles per sample
+        man["front_end"] = info["front_end"]
     errs = manifest_errors(man)
     if errs:
         raise InternalError(f"the generated manifest of {top} breaks its schema: {errs[0]}")

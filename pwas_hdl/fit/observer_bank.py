@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 FRONT_END_KIND = "observer-bank"
-FEATURE_MAPS = ("11a", "11b")
+FEATURE_MAPS = ("11a", "11b", "11b-sq")
 OBSERVER_KINDS = ("deadbeat", "poles", "kalman")
 #: LAD rows above this are refused (the LP has 2 slack variables per row).
 MAX_LAD_ROWS = 200_000
@@ -376,23 +376,26 @@ def residual_features(res: np.ndarray, window: int, feature_map: str) -> np.ndar
     res : ndarray, shape (T, N_theta)
     window : int
         ``l >= 1``.
-    feature_map : {"11a", "11b"}
+    feature_map : {"11a", "11b", "11b-sq"}
 
     Returns
     -------
     ndarray, shape (T - l, n_feat)
         Row ``i`` belongs to sample ``k = l + i``. (11a): ``[e^1_k .. e^1_{k-l}, .., e^N_k .. e^N_{k-l}]``
-        (``n_feat = N_theta (l + 1)``); (11b): ``[v^1_k .. v^N_k]`` (``n_feat = N_theta``).
+        (``n_feat = N_theta (l + 1)``); (11b): ``[v^1_k .. v^N_k]`` (``n_feat = N_theta``);
+        (11b-sq): ``[s^1_k .. s^N_k]``, ``s = v**2`` (the squared feature, an equivalent monotone map that
+        needs no square root in hardware, :mod:`pwas_hdl.fixedpoint.observer_bank`).
     """
     t_len, n_th = res.shape
     rows = t_len - window
     if feature_map == "11a":
         cols = [res[window - lag : window - lag + rows, j] for j in range(n_th) for lag in range(window + 1)]
         return np.stack(cols, axis=1)
-    if feature_map == "11b":
+    if feature_map in ("11b", "11b-sq"):
         c = np.concatenate([np.zeros((1, n_th)), np.cumsum(res**2, axis=0)])
         sums = c[window + 1 :] - c[: rows]
-        return np.sqrt(np.maximum(sums, 0.0) / window)
+        ms = np.maximum(sums, 0.0) / window
+        return np.sqrt(ms) if feature_map == "11b" else ms
     raise InputError(f"feature map must be one of {', '.join(FEATURE_MAPS)}, got {feature_map!r}")
 
 
@@ -408,7 +411,7 @@ class ObserverBankFrontEnd:
         ``"deadbeat"`` (default), ``"poles:R"`` or ``"kalman:LAMBDA"`` (:func:`parse_observer`).
     window : int
         ``l`` of the feature map (paper 7).
-    features : {"11b", "11a"}
+    features : {"11b", "11a", "11b-sq"}
         Feature map.
     order : int
         ``M`` of the local ARX models (paper 5).
@@ -450,7 +453,7 @@ class ObserverBankFrontEnd:
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
                 raise InputError(f"observer bank: {nm} must be an integer >= {lo}, got {v!r}")
         if self.features not in FEATURE_MAPS:
-            raise InputError(f"observer bank: features must be 11a or 11b, got {self.features!r}")
+            raise InputError(f"observer bank: features must be 11a or 11b (or 11b-sq, the squared 11b), got {self.features!r}")
         parse_observer(self.observer)
 
     @property
@@ -468,9 +471,9 @@ class ObserverBankFrontEnd:
         return int(self.models_.shape[0])
 
     def feature_names(self) -> list[str]:
-        """``v1[t] ..`` (11b) or ``e1[t] .. e1[t-l] ..`` (11a)."""
-        if self.features == "11b":
-            return [f"v{j + 1}[t]" for j in range(self.n_models_)]
+        """``v1[t] ..`` (11b), ``s1[t] ..`` (11b-sq) or ``e1[t] .. e1[t-l] ..`` (11a)."""
+        if self.features in ("11b", "11b-sq"):
+            return [f"{'v' if self.features == '11b' else 's'}{j + 1}[t]" for j in range(self.n_models_)]
         return [f"e{j + 1}[t]" if lag == 0 else f"e{j + 1}[t-{lag}]" for j in range(self.n_models_) for lag in range(self.window + 1)]
 
     def _scale(self, us: list[np.ndarray], ys: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:

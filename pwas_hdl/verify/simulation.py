@@ -102,6 +102,9 @@ class Design:
     sensor: Any  # PWASVirtualSensor
     model: FixedPointModel
     verilog_path: Path
+    #: observer-bank sensors (manifest ``front_end``): the bit-true bank + core
+    #: (:class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`); ``model`` is its core
+    bank: Any = None
 
     @property
     def top(self) -> str:
@@ -187,9 +190,16 @@ def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
     sensor = PWASVirtualSensor.load(model_file)
     opts = man["generator"]["options"]
     fmts = {k: opts[k] for k in FORMAT_OPTIONS if opts[k] is not None}
+    bank = None
     with warnings.catch_warnings():  # saturation warnings were given by `generate`; the manifest records them
         warnings.simplefilter("ignore", UserWarning)
-        fxm = fixed_point_model(sensor, memory=opts["memory"], **fmts)
+        if "front_end" in man:  # observer-bank sensor (issue 12)
+            from pwas_hdl.fixedpoint.observer_bank import BANK_FORMAT_OPTIONS, observer_bank_model
+
+            bank = observer_bank_model(sensor, memory=opts["memory"], **fmts, **{k: opts.get(k) for k in BANK_FORMAT_OPTIONS})
+            fxm = bank.core
+        else:
+            fxm = fixed_point_model(sensor, memory=opts["memory"], **fmts)
     fx = fxm.to_dict()
     want = man["formats"]
     for key, mine in (("output", fx["output"]), ("weight", fx["weights"]), ("widths", fx["widths"]), ("mu_frac", fx["F"])):
@@ -208,7 +218,7 @@ def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
     vpath = Path(verilog) if verilog is not None else out / design_v
     if not vpath.is_file():
         raise FileNotFoundError(f"{vpath} is missing; regenerate the folder with `pwas-hdl generate`")
-    return Design(out, man, sensor, fxm, vpath)
+    return Design(out, man, sensor, fxm, vpath, bank)
 
 
 # ---------------------------------------------------------------------------------------------------- stimulus
@@ -291,6 +301,8 @@ def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segm
         w = design.warmup
         if len(c) <= w:
             q = np.empty((0, design.model.n), dtype=np.int64)
+        elif design.bank is not None:  # observer bank: q = the feature codes the bank gives the core
+            q = design.bank.bank.trace(c)["feature_codes"][w:]
         else:
             cu, cy = _signal_columns(design, c)
             q = design.sensor.lags_.build(cu, cy).astype(np.int64)
@@ -833,11 +845,26 @@ def simulate_data(
     if traj_col is not None:
         table.column_index(traj_col)
     slices = split_trajectories(table, traj_col)
-    u_all = table.numeric(ins) if lags.nu and lags.mu else None
-    y_all = table.numeric(outs) if lags.ny and lags.my else None
-    m_hist = lags.memory
     segs, rows, xs = [], [], []
+    if design.bank is not None:  # observer-bank sensor: every u and the y feed the bank
+        u_all, y_all = (table.numeric(ins) if ins else None), table.numeric(outs)
+        m_hist = design.warmup + 1
+        zfs = []
+    else:
+        u_all = table.numeric(ins) if lags.nu and lags.mu else None
+        y_all = table.numeric(outs) if lags.ny and lags.my else None
+        m_hist = lags.memory
     for sl in slices:
+        if design.bank is not None:
+            if sl.stop - sl.start < m_hist:
+                raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {sl.stop - sl.start} samples; "
+                                 f"the observer bank needs {m_hist}")
+            u = u_all[sl] if u_all is not None else None
+            codes, _ = design.bank.quantize_signals(u, y_all[sl])
+            segs.append(segment(design, codes))
+            rows.append(np.arange(sl.start + m_hist - 1, sl.stop))
+            zfs.append(sensor.predict(u if u is not None else None, y_all[sl]))
+            continue
         t_len = sl.stop - sl.start
         if t_len < m_hist:
             raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {t_len} samples; the lags need {m_hist}")
@@ -889,7 +916,6 @@ def simulate_data(
     bt = np.concatenate([s.expected for s in segs])
     bt_oor = np.concatenate([s.oor for s in segs])
     q = np.concatenate([s.q for s in segs])
-    xi = np.concatenate(xs)
     row = np.concatenate(rows)
     mism = np.any(hw != bt, axis=1) | (oor != bt_oor)
     clf = design.manifest.get("classifier")  # a classifier design: the class index is checked too
@@ -897,7 +923,8 @@ def simulate_data(
         hw_cls = np.concatenate(res.hw_class[0]) if res.hw_class and res.hw_class[0] else np.empty(0, dtype=np.int64)
         bt_cls = np.concatenate([s.cls for s in segs])
         mism = mism | (hw_cls != bt_cls)
-    zf = sensor.predict_regressors(xi)  # float model at the real inputs
+    # float model at the real inputs
+    zf = np.concatenate(zfs) if design.bank is not None else sensor.predict_regressors(np.concatenate(xs))
     zref = model.reference(q)  # float model at the inputs the codes represent
     zhw = hw * lsb
     cols: dict[str, Any] = {"row": row}

@@ -1,0 +1,172 @@
+"""Seed 004 virtual sensors through the RTL (issue 12): pv-benchmark and switching-4, ``stage: rtl`` rows.
+
+Per run (seed = run index, the data of :mod:`pwas_hdl.benchmarks.pv_benchmark` / ``switching4``):
+the observer-bank front end (deadbeat, N_theta = 5, M = 5, l = 7, 11b) and the PWAS P-feat sensor
+(:data:`~pwas_hdl.benchmarks.seed004_common.PFEAT`) are fitted as in the float benches; then
+``generate --design sensor`` builds the hardware, and the **whole test trajectory** is replayed
+through the generated Verilog on Verilator (native engine, full speed; every output compared
+with the bit-true model: the ``mismatches`` in the row's config). The hardware estimates are the
+RTL's output codes (physical = code * 2**-Fo) and the input codes are the test signals quantised
+by the design's input formats. Rows: FIT / NRMSE of rho (pv-benchmark, switching-4) and per-mode
+F1 (switching-4, minimum-distance classifier) at ``stage: float`` (the same sensor in float on
+the unquantised signals) and ``stage: rtl``, with the latency and II measured, and the largest
+|RTL - float| beside the stated bound.
+
+Battery (P-feat with the u/y taps i_k, v_k) and seed 003 are not here: the hardware has no lag
+taps behind the bank yet, and seed 003's switched observer is not built (see the report).
+
+``python -m pwas_hdl.benchmarks.observer_bank_hw [--runs 3] [--quick]`` writes
+``results/observer_bank_hw.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import copy
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from pwas_hdl import bench_results as br
+from pwas_hdl.benchmarks.seed004_common import ASSUMPTIONS, PFEAT, Collector, cell, fit_pwas, say
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+from pwas_hdl.systems.pv_benchmark import MODES, make_pv_dataset
+from pwas_hdl.systems.pv_method import f1_per_mode, fit_ratio, min_distance_classify, nrmse
+
+BENCH = "observer-bank-hw"
+SYSTEMS = ("pv-benchmark", "switching-4")
+
+
+def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator: str = "verilator") -> dict:
+    """Generate the sensor's hardware and replay one trajectory through it.
+
+    Returns
+    -------
+    dict with ``zhat`` (physical RTL estimates, rows k >= M + l), ``mismatches``, ``outputs``,
+    ``latency`` (measured, cycles), ``latency_manifest``, ``ii``, ``err_max`` (|RTL - float sensor
+    at the represented signals|, physical) and ``bound`` (the manifest's estimate bound), ``manifest``.
+    """
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.verify.simulation import Run, load_design, run_rtl, segment
+
+    out = workdir / "design"
+    generate(sensor, out, design="sensor")
+    d = load_design(out)
+    codes, _ = d.bank.quantize_signals(u, y)
+    engine = "native" if simulator == "verilator" else "cocotb"
+    r = run_rtl(d, [Run("full-speed", [segment(d, codes)])], simulator, engine=engine)
+    got, _oor = r.hw[0][0]
+    zhat = d.model.to_physical_output(got)
+    ref = d.bank.reference(codes)
+    return {"zhat": zhat, "mismatches": int(r.mismatches), "outputs": int(r.outputs), "passed": bool(r.passed),
+            "latency": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
+            "err_max": float(np.max(np.abs(zhat - ref))) if len(zhat) else 0.0,
+            "bound": float(d.manifest["front_end"]["error_bound"]["estimate"]["physical"][0]), "manifest": d.manifest}
+
+
+def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print,
+        systems: tuple = SYSTEMS) -> tuple[dict, dict]:
+    """Run the hardware rows; returns ``(doc, traces)`` for :func:`pwas_hdl.bench_results.bench_main`."""
+    if runs < 1:
+        raise InputError("--runs must be >= 1")
+    t0 = time.perf_counter()
+    n_train, n_test = (3000, 1000) if quick else (25000, 5000)
+    col = Collector()
+    hw_info: dict = {}
+    for r in range(runs):
+        for system in systems:
+            tr, te, norm = make_pv_dataset(system, n_train, n_test, seed=r, noise=0.03)
+            fe = ObserverBankFrontEnd(n_models=5, observer="deadbeat", features="11b")
+            model, tm = fit_pwas(PFEAT, copy.deepcopy(fe), tr.u, tr.y, tr.z)
+            zf = model.predict(te.u, te.y)[:, 0]
+            zt = te.z_true[model.memory - 1 :, 0]
+            with tempfile.TemporaryDirectory(prefix="pwas-obs-hw-") as tmp:
+                hw = rtl_estimates(model, te.u, te.y, Path(tmp))
+            if not hw["passed"] or hw["mismatches"]:
+                raise AssertionError(f"{system} run {r}: the RTL differs from the bit-true model ({hw['mismatches']} mismatches)")
+            zh = hw["zhat"][:, 0]
+            assert zh.shape == zf.shape, (zh.shape, zf.shape)
+            for stage, z in (("float", zf), ("rtl", zh)):
+                col.add((system, stage, "rho", "fit"), fit_ratio(zt, z))
+                col.add((system, stage, "rho", "nrmse"), nrmse(zt, z))
+                if system == "switching-4":
+                    modes_n = norm.apply("z", MODES[:, None])[:, 0]
+                    ti = min_distance_classify(zt, modes_n)
+                    for m, f in enumerate(f1_per_mode(ti, min_distance_classify(z, modes_n), 4)):
+                        col.add((system, stage, f"mode{m + 1}", "f1"), f)
+            col.add((system, "rtl", "abs", "err_max"), hw["err_max"])
+            col.time((system, "float"), tm)
+            man = hw["manifest"]
+            hw_info[system] = {"latency_cycles": man["latency_cycles"], "ii": man["ii"],
+                               "cycles_per_sample": man["front_end"]["cycles_per_sample"],
+                               "formats": man["front_end"]["formats"], "n_vertices": man["domain"]["n_vertices"],
+                               "memory_bits": man["memory"]["bits"]}
+            col.add((system, "rtl", "meta", "latency"), float(hw["latency"][0]) if hw["latency"] else float("nan"))
+            col.add((system, "rtl", "meta", "ii"), float(hw["ii"]) if hw["ii"] is not None else float("nan"))
+            col.add((system, "rtl", "meta", "bound"), hw["bound"])
+            col.add((system, "rtl", "meta", "mismatches"), float(hw["mismatches"]))
+            col.add((system, "rtl", "meta", "outputs"), float(hw["outputs"]))
+            say(progress, f"run {r + 1}/{runs} {system}: FIT float {col.values[(system, 'float', 'rho', 'fit')][-1]:.4f} "
+                          f"rtl {col.values[(system, 'rtl', 'rho', 'fit')][-1]:.4f}, {hw['outputs']} RTL outputs, "
+                          f"{hw['mismatches']} mismatches, |rtl - float| <= {hw['err_max']:.4g} (bound {hw['bound']:.4g})")
+    rows = []
+    for (system, stage, target, metric), vals in col.values.items():
+        if metric not in br.METRICS:
+            continue
+        cfg = {"case": "base", "n_models": 5, "observer": "deadbeat", "features": "11b", "pwas": PFEAT,
+               "n_train": n_train, "n_test": n_test}
+        if stage == "rtl":
+            g = lambda k: col.values[(system, "rtl", "meta", k)]  # noqa: E731
+            cfg |= {"simulator": "verilator (native engine)", "rtl_outputs": int(sum(g("outputs"))),
+                    "mismatches": int(sum(g("mismatches"))), "latency_cycles": int(max(g("latency"))),
+                    "ii": float(max(g("ii"))), "abs_err_max_vs_float": float(max(col.values[(system, 'rtl', 'abs', 'err_max')])),
+                    "estimate_bound": float(max(g("bound"))), **hw_info[system]}
+            if metric.startswith("f1"):
+                cfg["classifier"] = "minimum distance"
+        else:
+            cfg |= col.timing_of((system, "float"))
+        rows.append(br.row_from_values(system, target, "pwas-feat", stage, metric, vals, None, cfg))
+    doc = br.make_results(
+        BENCH, rows, ASSUMPTIONS,
+        config={"runs": runs, "n_train": n_train, "n_test": n_test, "systems": list(systems), "pfeat": PFEAT},
+        description="Seed 004 P-feat sensors through the generated RTL (observer bank + residual features + PWAS core): "
+                    "hardware FIT / NRMSE / F1 beside float",
+        quick=quick, elapsed_s=time.perf_counter() - t0,
+    )
+    return doc, {}
+
+
+def markdown(doc: dict) -> str:
+    """Float vs RTL per system and metric."""
+    c = doc["config"]
+    lines = [f"# Seed 004 P-feat through the RTL (runs = {c['runs']}{', QUICK' if doc.get('quick') else ''})", "",
+             "Observer bank (N_theta = 5, deadbeat, M = 5, l = 7, 11b with an integer square root) + PWAS core, "
+             "whole test trajectory replayed on Verilator; hardware metrics from the RTL's output codes.", "",
+             "| system | target | metric | float | rtl | rtl - float | mismatches | latency | II |", "|---|---|---|---|---|---|---|---|---|"]
+    for system in c["systems"]:
+        for r in br.find_rows(doc, system=system, stage="rtl"):
+            f = br.find_rows(doc, system=system, stage="float", target=r["target"], metric=r["metric"])[0]
+            k = r["config"]
+            lines.append(f"| {system} | {r['target']} | {r['metric']} | {cell(f)} | {cell(r)} | {r['value'] - f['value']:+.5f} | "
+                         f"{k['mismatches']} / {k['rtl_outputs']} | {k['latency_cycles']} | {k['ii']:g} |")
+    lines += ["", "| system | max |rtl - float| | stated bound | formats |", "|---|---|---|---|"]
+    for system in c["systems"]:
+        r = br.find_rows(doc, system=system, stage="rtl", metric="fit")[0]["config"]
+        f = r["formats"]
+        lines.append(f"| {system} | {r['abs_err_max_vs_float']:.4g} | {r['estimate_bound']:.4g} | states s{f['state_bits']}.{f['state_frac']}, "
+                     f"coefficients .{f['coef_frac']}, inputs s{f['input_bits']}.{f['input_frac']} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(traces: dict, path) -> None:  # no figure for this bench
+    return None
+
+
+if __name__ == "__main__":
+    import sys
+
+    br.bench_main(sys.argv[1:], stem="observer_bank_hw", description=__doc__.splitlines()[0], run=run, markdown=markdown,
+                  plot=plot, default_runs=3)

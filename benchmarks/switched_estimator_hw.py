@@ -1,0 +1,131 @@
+"""Seed 003's estimator in hardware (issue 12): float vs bit-true vs RTL, output MSE and mode accuracy.
+
+The estimator of Morales-Morales et al. (bank (8) with injection, single-sample residual detector
+(9) as argmin, switched observer (10), poles {0.3, 0.4}, A3/A4/A6 of ``seed_003.md``) as
+:class:`pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator` (default formats: 12-bit
+inputs with 8 units of head room) and :class:`pwas_hdl.hdl.switched_estimator_top.SwitchedEstimatorTop`.
+Test sets as :mod:`pwas_hdl.benchmarks.switched_linear`: the paper replica (100 samples, step
+u = 1, time switching) and a long run (2000 samples, PRBS, dwell 20-50), noise on y 0 .. 0.05.
+Stages: ``float`` (the float estimator on the unquantised signals), ``bittrue`` (the fixed-point
+model on the quantised signals) and ``rtl`` (the replica through the Amaranth netlist the
+Verilog is emitted from, simulated with bubbles and backpressure; every output compared with the
+bit-true model: ``mismatches`` in the row config). Also the number of samples whose detected mode
+differs from the float detector's, and how many of those had a float margin above ``2 dS`` (the
+stated bound: must be 0).
+
+``python -m pwas_hdl.benchmarks.switched_estimator_hw [--runs 3] [--quick]``.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from pwas_hdl import bench_results as br
+from pwas_hdl.systems.switched_linear import (SWITCHED_A, SWITCHED_ASSUMPTIONS, SWITCHED_B, SWITCHED_C, switched_paper_run,
+                                              switched_training_runs)
+from pwas_hdl.systems.switched_observer import mode_scores, observer_gains, run_switched_observer
+
+SYSTEM = "switched-linear"
+PAPER_MSE = 0.0966  # Table 1, unknown mode
+NOISES = (0.0, 0.01, 0.02, 0.05)
+
+
+def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print) -> tuple[dict, dict]:
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+    from pwas_hdl.hdl.switched_estimator_top import SwitchedEstimatorTop, simulate_estimator
+
+    t0 = time.perf_counter()
+    noises = (0.0, 0.02) if quick else NOISES
+    long_n = 300 if quick else 2000
+    est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, SWITCHED_C, observer_gains())
+    top = SwitchedEstimatorTop(est)
+    vals: dict[tuple, list[float]] = {}
+    extra: dict[tuple, dict] = {}
+
+    def put(key, v):
+        vals.setdefault(key, []).append(float(v))
+
+    for noise in noises:
+        for r in range(runs):
+            tests = {"replica": switched_paper_run(seed=r, switching="time", input_kind="step", noise=noise),
+                     "long": switched_training_runs(1, long_n, seed=5000 + r, switching="time", noise=noise)}
+            for tname, d in tests.items():
+                y = d.y[:, 0]
+                codes = est.quantize_signals(d.u, d.y)
+                fl = run_switched_observer(d.u, d.y)
+                tr = est.trace(codes)
+                stages = {"float": (fl.x_hat, fl.y_hat, fl.theta_hat),
+                          "bittrue": (est.to_physical_state(tr["x_hat"]), tr["y_hat"] * 2.0**-est.state_frac, tr["theta"])}
+                if tname == "replica":
+                    hw = simulate_estimator(top, codes, p_valid=0.8, p_ready=0.7, seed=r)
+                    mism = int(np.sum((hw["theta"] != tr["theta"]) | (hw["y_hat"] != tr["y_hat"])
+                                      | np.any(hw["x_hat"] != tr["x_hat"], axis=1)))
+                    stages["rtl"] = (est.to_physical_state(hw["x_hat"]), hw["y_hat"] * 2.0**-est.state_frac, hw["theta"])
+                    ex = extra.setdefault((tname, noise), {"mismatches": 0, "rtl_outputs": 0})
+                    ex["mismatches"] += mism
+                    ex["rtl_outputs"] += len(hw["theta"])
+                ref = est.reference(codes)  # float at the represented signals: the bound's reference
+                ws = np.sort(ref.residuals, axis=1)
+                margin = ws[:, 1] - ws[:, 0]
+                differ = tr["theta"] != ref.theta_hat
+                ex = extra.setdefault((tname, noise), {"mismatches": 0, "rtl_outputs": 0})
+                ex["mode_differs"] = ex.get("mode_differs", 0) + int(differ.sum())
+                ex["mode_differs_beyond_bound"] = ex.get("mode_differs_beyond_bound", 0) + int(np.sum(differ & (margin > 2 * est.sum_error_bound)))
+                for stage, (xh, yh, th) in stages.items():
+                    put((tname, "y", stage, "mse", noise), np.mean((y - yh) ** 2))
+                    put((tname, "mode", stage, "accuracy", noise), mode_scores(d.mode, th)["accuracy"])
+                    for col, tgt in enumerate(("x1", "x2")):
+                        put((tname, tgt, stage, "rmse", noise), float(np.sqrt(np.mean((xh[:, col] - d.z_true[:, col]) ** 2))))
+            if progress:
+                progress(f"noise {noise} run {r + 1}/{runs}: replica MSE float {vals[('replica', 'y', 'float', 'mse', noise)][-1]:.5f} "
+                         f"rtl {vals[('replica', 'y', 'rtl', 'mse', noise)][-1]:.5f}; long accuracy float "
+                         f"{vals[('long', 'mode', 'float', 'accuracy', noise)][-1]:.4f} bittrue {vals[('long', 'mode', 'bittrue', 'accuracy', noise)][-1]:.4f}")
+    rows = []
+    for (tname, tgt, stage, metric, noise), v in vals.items():
+        cfg = {"test": tname, "switching": "time", "noise_y": noise, "estimator_formats": est.to_dict()["formats"]}
+        if stage != "float":
+            cfg |= {k: extra[(tname, noise)][k] for k in ("mode_differs", "mode_differs_beyond_bound")}
+            cfg |= {"error_bound": est.to_dict()["error_bound"]}
+        if stage == "rtl":
+            cfg |= {"simulator": "amaranth (the netlist of the emitted Verilog)", "mismatches": extra[(tname, noise)]["mismatches"],
+                    "rtl_outputs": extra[(tname, noise)]["rtl_outputs"], "latency_cycles": top.latency, "ii": top.ii,
+                    "stalls": {"p_valid": 0.8, "p_ready": 0.7}}
+        paper = PAPER_MSE if (tname == "replica" and tgt == "y" and metric == "mse" and noise == 0.0) else None
+        rows.append(br.row_from_values(SYSTEM, tgt, "switched-observer", stage, metric, v, paper, cfg))
+    doc = br.make_results("switched-estimator-hw", rows, SWITCHED_ASSUMPTIONS,
+                          config={"runs": runs, "noises": list(noises), "long_samples": long_n, "switching": "time"},
+                          description="Seed 003's switched observer: float, bit-true and RTL", quick=quick,
+                          elapsed_s=time.perf_counter() - t0)
+    return doc, {}
+
+
+def markdown(doc: dict) -> str:
+    lines = [f"# Seed 003 estimator in hardware (runs = {doc['config']['runs']}{', QUICK' if doc.get('quick') else ''})", "",
+             "| test | noise | metric | float | bit-true | rtl | modes differing (beyond bound) | rtl mismatches |",
+             "|---|---|---|---|---|---|---|---|"]
+    for tname in ("replica", "long"):
+        for noise in doc["config"]["noises"]:
+            for tgt, metric in (("y", "mse"), ("mode", "accuracy"), ("x1", "rmse"), ("x2", "rmse")):
+                get = lambda st: br.find_rows(doc, target=tgt, stage=st, metric=metric, config={"test": tname, "noise_y": noise})  # noqa: E731
+                f, b, r = get("float"), get("bittrue"), get("rtl")
+                if not f:
+                    continue
+                c = lambda rr: f"{rr[0]['value']:.5f}" if rr else "—"  # noqa: E731
+                k = b[0]["config"]
+                mm = f"{r[0]['config']['mismatches']} / {r[0]['config']['rtl_outputs']}" if r else "—"
+                lines.append(f"| {tname} | {noise} | {tgt} {metric} | {c(f)} | {c(b)} | {c(r)} | {k['mode_differs']} ({k['mode_differs_beyond_bound']}) | {mm} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(traces, path) -> None:
+    return None
+
+
+if __name__ == "__main__":
+    import sys
+
+    br.bench_main(sys.argv[1:], stem="switched_estimator_hw", description=__doc__.splitlines()[0], run=run, markdown=markdown,
+                  plot=plot, default_runs=3)

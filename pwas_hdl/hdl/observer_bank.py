@@ -1,0 +1,145 @@
+"""The observer bank of seed 004 as Amaranth logic: ``N_theta`` Luenberger predictors, one sample per clock.
+
+Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank` (see its module for
+the arithmetic). Architecture: **parallel constant multipliers**, one state update of every
+observer per input transfer (1 cycle per sample, II = 1). Time-multiplexing over ``M`` cycles
+would save multipliers but cut the sample rate by ``M``; the multipliers are by constants (the
+coefficient codes), which synthesis turns into shift-add trees or DSP blocks, and zero
+coefficients (``a0`` of a deadbeat gain) cost nothing. Per observer and state: ``nu + 1``
+constant multiplications by the input codes and one by the first state (when ``a0 != 0``).
+
+All arithmetic is written so that the Verilog passes ``verilator --lint-only -Wall``: every
+operand of an addition is a whole product net of the accumulator width (:func:`const_product`:
+the input alignment and the ``<< F_c`` of the next state are folded into constant factors),
+constants are added modulo the width (:func:`add_const_signed`).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+
+from pwas_hdl.hdl._lintsafe import sink_unused
+
+__all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate"]
+
+
+def saturate(m: Module, rv, width: int, name: str, flag: bool = True):
+    """Saturate a signed value (wider than ``width``) to ``width`` bits; returns (net, saturated flag or None)."""
+    assert len(rv) > width, (len(rv), width)
+    sign = rv[-1]
+    upper = rv[width - 1 : len(rv) - 1]
+    o = Signal(signed(width), name=name)
+    f = Signal(name=f"{name}_sat") if flag else None
+    with m.If(~sign & upper.any()):
+        m.d.comb += [o.eq((1 << (width - 1)) - 1)] + ([f.eq(1)] if flag else [])
+    with m.Elif(sign & ~upper.all()):
+        m.d.comb += [o.eq(-(1 << (width - 1)))] + ([f.eq(1)] if flag else [])
+    with m.Else():
+        m.d.comb += o.eq(rv[:width])
+    return o, f
+
+
+def _sum(m: Module, terms: list, width: int, name: str):
+    """Balanced sum of signed ``width``-bit nets, result kept at ``width`` bits (no overflow by construction)."""
+    level = 0
+    while len(terms) > 1:
+        nxt = []
+        for i in range(0, len(terms) - 1, 2):
+            s = Signal(signed(width + 1), name=f"{name}_s{level}_{i // 2}")
+            m.d.comb += s.eq(terms[i] + terms[i + 1])
+            sink_unused(m, s[width], f"{name}_s{level}_{i // 2}_top")
+            nxt.append(s[:width].as_signed())
+        if len(terms) % 2:
+            nxt.append(terms[-1])
+        terms = nxt
+        level += 1
+    return terms[0]
+
+
+def _cbits(v: int) -> int:
+    """Signed width of the constant ``v`` (at least 2)."""
+    return max(2, (v.bit_length() if v >= 0 else (-v - 1).bit_length()) + 1)
+
+
+def const_product(m: Module, k: int, x, width: int, name: str):
+    """``k * x`` (signed constant times signed ``x``) as a named product net of exactly ``width`` bits.
+
+    The constant net gets ``width - len(x)`` bits, so the multiplier's natural width is the
+    accumulator width (a whole cell output: no extension in front of the adders).
+    """
+    kw = width - len(x)
+    if kw < _cbits(k):
+        raise ValueError(f"constant {k} does not fit {kw} bits (product {name})")
+    p = Signal(signed(width), name=name)
+    m.d.comb += p.eq(Const(k, signed(kw)) * x.as_signed())
+    return p
+
+
+def add_const_signed(m: Module, x, k: int, name: str):
+    """``x + k`` for a signed named net ``x`` whose true sum fits its width (modular add)."""
+    from pwas_hdl.hdl._lintsafe import add_const_wrap
+
+    w = len(x)
+    return add_const_wrap(m, x.as_unsigned(), k % (1 << w), name).as_signed()
+
+
+def build_observer_bank(m: Module, bank, qu: list, qy, transfer):
+    """Add the bank to ``m``.
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+    qu : list of signed ``B_in`` values (one per input channel);  qy : signed ``B_in`` value
+    transfer : 1-bit value; the states update when it is high
+
+    Returns
+    -------
+    residuals : list of signed ``residual_bits`` nets, ``e_j = x_j0 - (qy << (F_s - F_in))``
+        (from the states before the update: the residual of the sample being transferred)
+    saturated : 1-bit net, some state saturates in this update
+    states : list (N) of lists (M) of state registers
+    """
+    fmt = bank.formats
+    n, mo, nu = bank.n_models, bank.order, bank.nu
+    fc, fs, fin = fmt.coef_frac, fmt.state_frac, fmt.input_frac
+    bs, accw, rb = fmt.state_bits, fmt.acc_bits, fmt.residual_bits
+    sh_in = fs - fin
+    states = [[Signal(signed(bs), name=f"obs{j}_x{i}") for i in range(mo)] for j in range(n)]
+    qy_al = const_product(m, 1 << sh_in, qy, rb, "y_aligned")
+    residuals = []
+    sat_flags = []
+    for j in range(n):
+        x0 = const_product(m, 1, states[j][0], rb, f"obs{j}_yhat")
+        e = Signal(signed(rb + 1), name=f"obs{j}_e_full")
+        m.d.comb += e.eq(x0 - qy_al)
+        sink_unused(m, e[rb], f"obs{j}_e_top")
+        residuals.append(e[:rb].as_signed())
+        for i in range(mo):
+            terms = []
+            a0 = int(bank.a0_codes[j, i])
+            if a0:
+                terms.append(const_product(m, a0, states[j][0], accw, f"obs{j}_pa_{i}"))
+            coefs = [(int(bank.b_codes[j, i, c]), qu[c], f"b{c}") for c in range(nu)] + [(int(bank.l_codes[j, i]), qy, "l")]
+            for cv, sig, nm in coefs:
+                if cv:  # the input alignment << (F_s - F_in) is folded into the constant
+                    terms.append(const_product(m, cv << sh_in, sig, accw, f"obs{j}_p{nm}_{i}"))
+            if i + 1 < mo:
+                terms.append(const_product(m, 1 << fc, states[j][i + 1], accw, f"obs{j}_px_{i}"))
+            d = int(bank.d_codes[j, i]) + (1 << (fc - 1))  # the rounding term folded into the constant
+            if terms:
+                acc = add_const_signed(m, _sum(m, terms, accw, f"obs{j}_acc{i}"), d, f"obs{j}_acc{i}_d")
+                rv = acc[fc:].as_signed()
+                sink_unused(m, acc[:fc], f"obs{j}_acc{i}_frac")
+                nxt, flag = saturate(m, rv, bs, f"obs{j}_next{i}")
+                sat_flags.append(flag)
+            else:  # a constant state (all its coefficients are 0)
+                v = d >> fc
+                lim = 1 << (bs - 1)
+                nxt = Const(min(max(v, -lim), lim - 1), signed(bs))
+                if not -lim <= v < lim:
+                    sat_flags.append(transfer)
+            with m.If(transfer):
+                m.d.sync += states[j][i].eq(nxt)
+    saturated = Signal(name="state_saturated")
+    m.d.comb += saturated.eq(Cat(*sat_flags).any() if sat_flags else 0)
+    return residuals, saturated, states

@@ -1,0 +1,177 @@
+"""Observer-bank virtual-sensor top: one (u, y) sample per transfer -> bank -> features -> PWAS core.
+
+Input stream payload (``in__payload``, LSB first): one signed ``B_in``-bit code per signal,
+``u0 .. u{nu-1}`` then ``y0``; the code is the *normalised* signal in ``s<B_in>.<F_in>``
+(``physical = mean + std * code * 2**-F_in``, :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank`).
+
+Pipeline (one global enable ``advance = ~out.valid | out.ready``, ``in.ready = advance``):
+
+* cycle of the transfer of sample ``k``: residuals ``e_j = yhat_j - y`` from the states, the
+  observer updates, the squares, the delay lines and the running sums ``S_j`` (registers);
+* stage ``s_root``: ``r_j = isqrt(S_j)`` (11b) or ``S_j`` (11b-sq) registered;
+* the affine map to the feature codes feeds the PWAS core
+  (:meth:`pwas_hdl.hdl.core.PWASCore.build_into`), whose latency follows.
+
+``latency = 2 + core latency`` cycles, II = 1, one cycle per sample (parallel multipliers).
+Warm-up: the first ``M + l`` transfers after reset produce no output (their windows hold observer
+start-up residuals; the float front end has no features for them either); ``warm`` is 1 once they
+have been taken. ``rst`` (synchronous) clears states, delay lines, sums, the warm-up counter and
+the valid bits: the stream restarts as from power-up. ``state_sat`` is 1 in the cycle where a
+state saturates (a sticky copy is ``obs_sat_seen``: no; the flag is combinational, for debug).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Signal, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
+from pwas_hdl.hdl.core import PWASCore, core_output_layout
+from pwas_hdl.hdl.observer_bank import build_observer_bank
+from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
+
+__all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor"]
+
+#: Pipeline stages in front of the core (the sum registers and the root register).
+FRONT_END_STAGES = 2
+
+
+class ObserverSensorTop(wiring.Component):
+    """Observer bank + residual features + PWAS core.
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+    params : CoreParams of the PWAS core on the features
+    memory, pipeline : as :class:`PWASCore`
+
+    Ports: ``clk``, ``rst``, ``in__valid/ready/payload`` (``(nu+1) B_in`` bits), ``out__valid/ready/payload``
+    (as the core), ``warm``.
+
+    Attributes: ``core``, ``latency``, ``ii`` (1), ``cycles_per_sample`` (1), ``warmup`` (``M + l``).
+    """
+
+    kind = "observer-sensor"
+
+    def __init__(self, bank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        if params.n != bank.n_models:
+            raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features")
+        if params.in_width != bank.input_bits_core:
+            raise ValueError("the core's input width differs from the feature code width")
+        self.bank = bank
+        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True
+        self.params = params
+        self.latency = FRONT_END_STAGES + self.core.latency
+        self.ii = 1
+        self.cycles_per_sample = 1
+        self.memory_plan = self.core.memory_plan
+        self.pipeline = self.core.pipeline
+        self.warmup = bank.first_output
+        self.signals = list(bank.signal_names)
+        #: per target |estimate - float sensor| bound (physical), set by build_observer_sensor
+        self.estimate_bound = None
+        super().__init__(
+            {
+                "in": In(stream.Signature(unsigned(len(self.signals) * bank.input_bits))),
+                "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+                "warm": Out(1),
+            }
+        )
+        self._MustUse__silence = False
+
+    @property
+    def input_fields(self) -> list[dict]:
+        b = self.bank.input_bits
+        return [{"name": nm, "lsb": i * b, "width": b, "signed": True} for i, nm in enumerate(self.signals)]
+
+    @property
+    def extra_info(self) -> dict:
+        fe = {
+            "kind": "observer-bank",
+            "architecture": "parallel constant multipliers, one state update of every observer per input transfer",
+            "cycles_per_sample": self.cycles_per_sample,
+            "ii": self.ii,
+            "stages_before_core": FRONT_END_STAGES,
+            **self.bank.to_dict(),
+        }
+        fe["error_bound"] = {**fe["error_bound"], "estimate": self.estimate_bound}
+        return {
+            "front_end": fe,
+            "warmup": {
+                "samples_without_output": self.warmup,
+                "port": "warm",
+                "meaning": "warm = 1 once M + l samples have been taken since reset; the first M + l transfers "
+                "after reset produce no output, every later transfer produces one",
+            },
+        }
+
+    def expected_outputs(self, n_samples: int) -> int:
+        return max(0, n_samples - self.warmup)
+
+    def elaborate(self, platform):
+        m = Module()
+        bank = self.bank
+        b = bank.input_bits
+        inp = getattr(self, "in")
+        cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(self.signals))]
+        advance = inp.ready  # the core drives it: ~out.valid | out.ready (one net, no alias)
+        transfer = Signal(name="transfer")
+        m.d.comb += transfer.eq(inp.valid & advance)
+
+        # warm-up counter 0 .. M + l (saturating)
+        wu = self.warmup
+        cw = max(1, wu.bit_length())
+        cnt = Signal(unsigned(cw), name="warmup_count")
+        full = ge_const(cnt, wu)
+        m.d.comb += self.warm.eq(full)
+        inc = add_const_wrap(m, cnt, 1, "warmup_inc")
+        with m.If(transfer & ~self.warm):
+            m.d.sync += cnt.eq(inc)
+
+        residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
+        sink_unused(m, _sat, "state_saturated_flag")
+        sums = build_window_sums(m, bank, residuals, transfer)
+        v1 = Signal(name="s_sum_valid")
+        with m.If(advance):
+            m.d.sync += v1.eq(transfer & self.warm)
+        # stage s_root
+        roots = []
+        for j, s in enumerate(sums):
+            r = build_isqrt(m, s, f"feat{j}_isqrt") if bank.feature_map == "11b" else s
+            reg = Signal(unsigned(len(r)), name=f"s_root_r{j}", reset_less=True)
+            with m.If(advance):
+                m.d.sync += reg.eq(r)
+            roots.append(reg)
+        v2 = Signal(name="s_root_valid")
+        with m.If(advance):
+            m.d.sync += v2.eq(v1)
+        codes = build_feature_codes(m, bank, roots)
+        self.core.build_into(m, Cat(*codes), v2, advance, self.out)
+        return m
+
+
+def build_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                          name: str = "pwas_sensor") -> ObserverSensorTop:
+    """The observer-bank sensor top of a bit-true :class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`.
+
+    Returns
+    -------
+    ObserverSensorTop
+        ``.latency``, ``.ii``, ``.cycles_per_sample``, ``.warmup`` (= M + l), ``.core``.
+    """
+    from pwas_hdl.hdl.api import _check_name
+
+    name = _check_name(name)
+    top = ObserverSensorTop(model.bank, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline)
+    top.module_name = name
+    top._MustUse__silence = True
+    top.core.input_names = list(model.core.regressor_names)
+    top.core.target_names = list(model.core.target_names)
+    top.estimate_bound = {"physical": list(model.error_bound), "lipschitz": model.lipschitz.tolist(),
+                          "rule": "core bound + sum_j G_j * feature bound_j (G_j: largest edge slope along j)",
+                          "against": "float sensor (front end + PWAS) at the physical signals the input codes represent"}
+    return top

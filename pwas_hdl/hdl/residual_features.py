@@ -1,0 +1,118 @@
+"""The residual feature unit (seed 004, map 11b / 11b-sq) as Amaranth logic.
+
+Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank`: per observer
+``sq = e * e``, a delay line of ``l + 1`` squares and the running window sum
+``S <= S + sq - sq_{k-l-1}`` (registers, updated on each input transfer, 0 after reset; modulo
+``2**B_S``, exact because the window sum lies in ``[0, 2**B_S)``), then (one pipeline register
+later) the integer square root ``r = isqrt(S)`` (map 11b; digit by digit, ``B_S / 2``
+compare-subtract steps, combinational) or ``r = S`` (11b-sq), and the constant affine map to the
+PWAS core's input code ``q = sat((min(r >> t, cap) * K + C) >> R)``.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+
+from pwas_hdl.hdl._lintsafe import add_wrap, ge_const, rom, sink_unused
+from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
+
+__all__ = ["build_window_sums", "build_isqrt", "build_feature_codes", "sub_wrap"]
+
+
+def sub_wrap(m: Module, a, b, name: str):
+    """``(a - b) mod 2**w`` for two unsigned ``w``-bit nets."""
+    assert len(a) == len(b), (len(a), len(b))
+    w = len(a)
+    s = Signal(unsigned(w + 1), name=name)
+    m.d.comb += s.eq(a - b)
+    sink_unused(m, s[w], f"{name}_borrow")
+    return s[:w]
+
+
+def build_window_sums(m: Module, bank, residuals: list, transfer) -> list:
+    """Squares, delay lines and running sums; returns the ``S_j`` registers (unsigned ``window_sum`` bits)."""
+    fmt = bank.formats
+    rb, sumb = fmt.residual_bits, fmt.sum_bits
+    assert fmt.square_bits == sumb == 2 * rb
+    lw = bank.window
+    sums = []
+    for j, e in enumerate(residuals):
+        p = Signal(signed(2 * rb), name=f"feat{j}_sq")
+        m.d.comb += p.eq(e * e)
+        sq = p.as_unsigned()
+        dl = [Signal(unsigned(sumb), name=f"feat{j}_dl{i}") for i in range(lw + 1)]
+        s = Signal(unsigned(sumb), name=f"feat{j}_sum")
+        added = add_wrap(m, s, sq, f"feat{j}_sum_add")
+        nxt = sub_wrap(m, added, dl[lw], f"feat{j}_sum_next")
+        with m.If(transfer):
+            m.d.sync += [dl[0].eq(sq), s.eq(nxt)] + [dl[i].eq(dl[i - 1]) for i in range(1, lw + 1)]
+        sums.append(s)
+    return sums
+
+
+def build_isqrt(m: Module, value, name: str):
+    """``floor(sqrt(value))`` of an unsigned value: combinational digit-by-digit (restoring) square root.
+
+    Step ``i`` (``i = 0 ..``, two input bits each, MSB first) holds the remainder in ``i + 2`` bits
+    and the root in ``i + 1`` bits: ``cur = rem << 2 | two`` (``i + 3`` bits), ``trial = root << 2 | 1``
+    (``i + 2`` bits); ``bit = cur >= trial`` = ``cur[i+2] | no borrow of cur[:i+2] - trial``;
+    ``rem = bit ? cur - trial : cur`` (both ``< 2**(i+2)``). Returns an unsigned ``ceil(len / 2)``-bit net.
+    """
+    w = len(value)
+    pairs = (w + 1) // 2
+    v = Cat(value, Const(0, 2 * pairs - w)) if 2 * pairs > w else value
+    two0 = v[2 * pairs - 2 : 2 * pairs]
+    b0 = Signal(name=f"{name}_b0")
+    m.d.comb += b0.eq(two0.any())
+    rem = rom(m, two0, [0, 0, 1, 2], 2, f"{name}_m0")  # two - (two != 0)
+    if isinstance(rem, int):
+        rem = Const(rem, 2)
+    bits = [b0]
+    for i in range(1, pairs):
+        lo = 2 * (pairs - 1 - i)
+        two = v[lo : lo + 2]
+        root = Cat(*reversed(bits))  # i bits, latest bit lowest
+        trial = Cat(Const(1, 2), root)  # i + 2 bits
+        cur_lo = Cat(two, rem[:i])  # i + 2 low bits of cur
+        diff = Signal(unsigned(i + 3), name=f"{name}_d{i}")
+        m.d.comb += diff.eq(cur_lo - trial)
+        bit = Signal(name=f"{name}_b{i}")
+        m.d.comb += bit.eq(rem[i] | ~diff[i + 2])
+        nrem = Signal(unsigned(i + 2), name=f"{name}_m{i}")
+        m.d.comb += nrem.eq(Mux(bit, diff[: i + 2], cur_lo))
+        rem = nrem
+        bits.append(bit)
+    sink_unused(m, rem, f"{name}_rem")
+    return Cat(*reversed(bits))
+
+
+def build_feature_codes(m: Module, bank, roots: list) -> list:
+    """Affine map of ``r`` to the core's input code per feature: ``sat((min(r >> t, cap) * K + C) >> R)``."""
+    t, sh = bank.root_shift, bank.scale_shift
+    bcore = bank.input_bits_core
+    sw = bank.widths["scale_product"]
+    codes = []
+    for j, r in enumerate(roots):
+        if t:
+            sink_unused(m, r[:t], f"feat{j}_root_low")
+        rs = r[t:] if t else r
+        cap = int(bank.root_cap[j])
+        capw = max(1, cap.bit_length())
+        capped = Signal(unsigned(capw), name=f"feat{j}_capped")
+        if cap < (1 << len(rs)) - 1:
+            over = ge_const(rs, cap + 1)
+            if isinstance(over, bool):
+                m.d.comb += capped.eq(cap if over else rs[:capw])
+            else:
+                with m.If(over):
+                    m.d.comb += capped.eq(cap)
+                with m.Else():
+                    m.d.comb += capped.eq(rs[:capw])
+        else:
+            m.d.comb += capped.eq(rs)
+        prod = const_product(m, int(bank.scale_mul[j]), Cat(capped, Const(0, 1)), sw, f"feat{j}_prod")
+        tot = add_const_signed(m, prod, int(bank.scale_add[j]), f"feat{j}_affine")
+        sink_unused(m, tot[:sh], f"feat{j}_affine_frac")
+        q, _ = saturate(m, tot[sh:].as_signed(), bcore, f"feat{j}_q", flag=False)
+        codes.append(q)
+    return codes

@@ -1,0 +1,222 @@
+"""Seed 003's virtual estimator on the FPGA: per-mode observer bank, argmin detector, switched observer.
+
+Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator`, built from the
+same pieces as the observer-bank sensor (:func:`pwas_hdl.hdl.observer_bank.const_product`,
+``saturate``, the window sums of :mod:`pwas_hdl.hdl.residual_features`) and cls10's compare tree
+(:class:`pwas_hdl.hdl.argmax.ArgmaxStage`, ``select="min"``, combinational: preset ``min``).
+
+One (u, y) sample per input transfer; per transfer (one clock, II = 1): the residuals of the
+bank, their window sums, the detected mode (argmin, ties to the lowest mode), the switched
+observer's output for the sample (``x_hat``, ``y_hat`` from its state before the update) and the
+updates of every state. The output register holds ``x_hat`` (``n`` codes ``s<B_s>.<F_s>``),
+``y_hat`` (``F_s`` fraction bits, :func:`estimator_widths`) and the mode index (``theta - 1``, ``index_width`` bits), LSB first;
+latency 1 cycle, one output per transfer, no warm-up (the estimator starts at 0, A6).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.fixedpoint.argmax import index_width
+from pwas_hdl.hdl._lintsafe import sink_unused
+from pwas_hdl.hdl.argmax import ArgmaxStage, inner_stream
+from pwas_hdl.hdl.observer_bank import _sum, add_const_signed, const_product, saturate
+from pwas_hdl.hdl.residual_features import sub_wrap
+from pwas_hdl.hdl._lintsafe import add_wrap  # noqa: E402
+
+__all__ = ["SwitchedEstimatorTop", "estimator_widths", "simulate_estimator"]
+
+
+def estimator_widths(est) -> dict:
+    """Widths of the datapath of :class:`SwitchedEstimatorTop` (all exact)."""
+    fc, bs, b_in = est.coef_frac, est.state_bits, est.input_bits
+    sh = est.state_frac - est.input_frac
+    lw = max(1, (est.window - 1).bit_length()) if est.window > 1 else 0
+    amax = int(abs(est.f_codes).max()) * (1 << (bs - 1)) * est.n
+    bmax = (int(abs(est.g_codes).max()) + int(abs(est.l_codes).max())) * (1 << (b_in - 1)) << sh
+    acc = (amax + bmax + (1 << fc)).bit_length() + 2
+    hmax = int(abs(est.h_codes).max()) * (1 << (bs - 1)) * est.n + ((1 << (b_in - 1)) << (sh + fc)) + (1 << fc)
+    racc = hmax.bit_length() + 2
+    racc = max(racc, bs + 2, b_in + sh + fc + 2) + (lw + 1) // 2  # widened so that r * r holds the window sum
+    rb = racc - fc  # the residual after rounding
+    return {"acc": max(acc, bs + 2, b_in + sh + fc + 2), "racc": racc, "residual": rb, "sum": 2 * rb, "y_hat": rb}
+
+
+class SwitchedEstimatorTop(wiring.Component):
+    """The estimator of seed 003 as one stream component (see the module docstring)."""
+
+    kind = "switched-estimator"
+
+    def __init__(self, est):
+        self._MustUse__silence = True
+        self.est = est
+        self.widths = estimator_widths(est)
+        self.index_width = index_width(est.n_modes)
+        self.latency = 1
+        self.ii = 1
+        self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
+                           + [("mode_index", self.index_width)])
+        super().__init__({
+            "in": In(stream.Signature(unsigned(2 * est.input_bits))),
+            "out": Out(stream.Signature(unsigned(sum(w for _, w in self.out_fields)))),
+        })
+        self._MustUse__silence = False
+
+    def _update(self, m, fc_rows, gc, lc, x, qu, qy, name):
+        """``sat((F x + (G qu + L qy) << sh + 2**(F_c-1)) >> F_c)`` per state; returns (next states, saturation flags)."""
+        est, wd = self.est, self.widths
+        sh, fcb = est.state_frac - est.input_frac, est.coef_frac
+        nxt, flags = [], []
+        for i in range(est.n):
+            terms = [const_product(m, int(fc_rows[i][k]) << 0, x[k], wd["acc"], f"{name}_f{i}{k}")
+                     for k in range(est.n) if int(fc_rows[i][k])]
+            if int(gc[i]):
+                terms.append(const_product(m, int(gc[i]) << sh, qu, wd["acc"], f"{name}_g{i}"))
+            if int(lc[i]):
+                terms.append(const_product(m, int(lc[i]) << sh, qy, wd["acc"], f"{name}_l{i}"))
+            acc = add_const_signed(m, _sum(m, terms, wd["acc"], f"{name}_acc{i}"), 1 << (fcb - 1), f"{name}_rnd{i}")
+            sink_unused(m, acc[:fcb], f"{name}_acc{i}_frac")
+            v, f = saturate(m, acc[fcb:].as_signed(), est.state_bits, f"{name}_next{i}")
+            nxt.append(v)
+            flags.append(f)
+        return nxt, flags
+
+    def _output_of(self, m, hc, x, qy_al, name):
+        """``(qy_al - H x + 2**(F_c-1)) >> F_c`` (the residual; ``qy_al`` the aligned ``qy << (sh + F_c)``
+        product net) or, with ``qy_al = None``, ``(H x + 2**(F_c-1)) >> F_c`` (``y_hat``)."""
+        est, wd = self.est, self.widths
+        sign = -1 if qy_al is not None else 1
+        terms = [const_product(m, sign * int(hc[k]), x[k], wd["racc"], f"{name}_h{k}") for k in range(est.n) if int(hc[k])]
+        if qy_al is not None:
+            terms.append(qy_al)
+        acc = add_const_signed(m, _sum(m, terms, wd["racc"], f"{name}_acc"), 1 << (est.coef_frac - 1), f"{name}_rnd")
+        sink_unused(m, acc[: est.coef_frac], f"{name}_frac")
+        return acc[est.coef_frac :].as_signed()
+
+    def elaborate(self, platform):
+        m = Module()
+        est, wd = self.est, self.widths
+        b = est.input_bits
+        inp = getattr(self, "in")
+        qu = inp.payload[:b].as_signed()
+        qy = inp.payload[b : 2 * b].as_signed()
+        advance = inp.ready
+        m.d.comb += advance.eq(~self.out.valid | self.out.ready)
+        transfer = Signal(name="transfer")
+        m.d.comb += transfer.eq(inp.valid & advance)
+        sh = est.state_frac - est.input_frac
+        s, n = est.n_modes, est.n
+        bank = [[Signal(signed(est.state_bits), name=f"bank{j}_x{i}") for i in range(n)] for j in range(s)]
+        xo = [Signal(signed(est.state_bits), name=f"obs_x{i}") for i in range(n)]
+        qy_al = const_product(m, 1 << (sh + est.coef_frac), qy, wd["racc"], "y_aligned")
+        # ---- bank residuals, squares, window sums
+        rb, sw = wd["residual"], wd["sum"]
+        sums = []
+        for j in range(s):
+            r = self._output_of(m, est.h_codes[j], bank[j], qy_al, f"bank{j}_res")
+            assert len(r) == rb
+            sq = Signal(signed(2 * rb), name=f"bank{j}_sq")
+            m.d.comb += sq.eq(r * r)
+            if est.window == 1:
+                sums.append(sq.as_unsigned())
+                continue
+            dl = [Signal(unsigned(sw), name=f"bank{j}_dl{i}") for i in range(est.window)]
+            acc = Signal(unsigned(sw), name=f"bank{j}_sum")
+            tot = sub_wrap(m, add_wrap(m, acc, sq.as_unsigned(), f"bank{j}_sum_add"), dl[-1], f"bank{j}_sum_next")
+            with m.If(transfer):
+                m.d.sync += [dl[0].eq(sq.as_unsigned()), acc.eq(tot)] + [dl[i].eq(dl[i - 1]) for i in range(1, est.window)]
+            sums.append(tot)
+        # ---- detector: argmin by the shared compare tree (combinational preset "min")
+        det = ArgmaxStage(s, sw, signed=False, pipeline="min", select="min")
+        det._MustUse__silence = True
+        # the stage's handshake and its copy of the scores are not needed here (every transfer is
+        # decided in its own cycle): its link wires are aliases, named as deliberately unused
+        link = inner_stream(s * sw + self.index_width, "unused_detector")
+        det_adv = Signal(name="unused_detector_advance")
+        m.d.comb += link.ready.eq(1)
+        det.build_into(m, Cat(*sums), Const(1, 1), det_adv, link)
+        theta = link.payload[s * sw :]
+        # ---- switched observer: the candidates of every mode, selected by theta
+        yh = Signal(signed(wd["y_hat"]), name="y_hat")
+        nxt = [Signal(signed(est.state_bits), name=f"obs_next{i}") for i in range(n)]
+        cands = [self._output_of(m, est.h_codes[j], xo, None, f"obs_y{j}") for j in range(s)]
+        updates, sat_flags = [], []
+        for j in range(s):
+            nx, fl = self._update(m, est.f_codes[j], est.g_codes[j], est.l_codes[j], xo, qu, qy, f"obs_m{j}")
+            updates.append(nx)
+            sat_flags += fl
+        with m.Switch(theta):
+            for j in range(s):
+                with m.Case(j):
+                    m.d.comb += [d.eq(v) for d, v in zip(nxt, updates[j])]
+                    m.d.comb += yh.eq(cands[j])
+            with m.Default():
+                m.d.comb += [d.eq(x) for d, x in zip(nxt, xo)]
+                m.d.comb += yh.eq(0)
+        sink_unused(m, Cat(*sat_flags), "obs_saturated")
+        bank_flags = []
+        for j in range(s):
+            nb, fl = self._update(m, est.f_codes[j], est.g_codes[j], est.l_codes[j], bank[j], qu, qy, f"bank{j}")
+            bank_flags += fl
+            with m.If(transfer):
+                m.d.sync += [d.eq(v) for d, v in zip(bank[j], nb)]
+        sink_unused(m, Cat(*bank_flags), "bank_saturated")
+        with m.If(transfer):
+            m.d.sync += [d.eq(v) for d, v in zip(xo, nxt)]
+        with m.If(advance):
+            m.d.sync += [self.out.valid.eq(inp.valid), self.out.payload.eq(Cat(*xo, yh, theta))]
+        return m
+
+
+def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0, p_ready: float = 1.0, seed: int = 0) -> dict:
+    """Replay (u, y) codes (T, 2) through ``top`` in Amaranth's simulator (the netlist the Verilog is
+    emitted from), with random bubbles (``p_valid``) and backpressure (``p_ready``).
+
+    Returns ``x_hat`` (T, n), ``y_hat`` (T,), ``theta`` (T,) 1-based, as the bit-true
+    :meth:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator.trace`, and ``cycles``.
+    """
+    import numpy as np
+    from amaranth.sim import Simulator
+
+    codes = np.asarray(codes, dtype=np.int64)
+    b = top.est.input_bits
+    mask = (1 << b) - 1
+    rng = np.random.default_rng(seed)
+    got: list[int] = []
+    cycles = [0]
+
+    async def bench(ctx):
+        inp = getattr(top, "in")
+        k = 0
+        while len(got) < len(codes):
+            if k < len(codes):
+                ctx.set(inp.payload, (int(codes[k, 0]) & mask) | ((int(codes[k, 1]) & mask) << b))
+            ctx.set(inp.valid, int(k < len(codes) and rng.random() < p_valid))
+            ctx.set(top.out.ready, int(rng.random() < p_ready))
+            await ctx.delay(1e-9)
+            took = bool(ctx.get(inp.valid) and ctx.get(inp.ready))
+            if ctx.get(top.out.valid) and ctx.get(top.out.ready):
+                got.append(int(ctx.get(top.out.payload)))
+            await ctx.tick()
+            k += int(took)
+            cycles[0] += 1
+
+    sim = Simulator(top)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    rows = []
+    for v in got:
+        out, lsb = [], 0
+        for nm, w in top.out_fields:
+            x = (v >> lsb) & ((1 << w) - 1)
+            if nm != "mode_index" and x >> (w - 1):
+                x -= 1 << w
+            out.append(x)
+            lsb += w
+        rows.append(out)
+    a = np.array(rows, dtype=np.int64).reshape(-1, len(top.out_fields))
+    n = top.est.n
+    return {"x_hat": a[:, :n], "y_hat": a[:, n], "theta": a[:, n + 1] + 1, "cycles": cycles[0]}

@@ -1,0 +1,137 @@
+"""Bit-true observer-bank front end (pwas_hdl.fixedpoint.observer_bank): bounds, running sum, saturation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.fixedpoint.observer_bank import ObserverBankSensorModel, isqrt_floor, l1_gain
+from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+
+@pytest.fixture(scope="module")
+def pv_data():
+    return make_pv_dataset("pv-benchmark", 2500, 800, seed=1)
+
+
+def _sensor(data, n_models=3, observer="deadbeat", features="11b", p=3):
+    tr, _, _ = data
+    fe = ObserverBankFrontEnd(n_models=n_models, observer=observer, features=features)
+    return PWASVirtualSensor(mu=0, my=0, partitions=p, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+
+
+@pytest.fixture(scope="module")
+def sensor_11b(pv_data):
+    return _sensor(pv_data)
+
+
+def _check_bounds(hm, data):
+    _, te, _ = data
+    codes, _ = hm.quantize_signals(te.u, te.y)
+    tr = hm.trace(codes)
+    assert not tr["state_saturated"].any()
+    b = hm.bank
+    ff = b.float_features(codes)
+    fhw = np.stack([f.to_physical(tr["feature_codes"][b.first_output:, j]) for j, f in enumerate(b.feature_inputs)], 1)
+    lo, hi = hm.core.grid.lo, hm.core.grid.hi  # the bound is on the features the core uses: clamped to the domain
+    err_f = np.abs(np.clip(fhw, lo, hi) - np.clip(ff, lo, hi)).max(axis=0)
+    bound_f = np.array(b.feature_error_bound)
+    assert np.all(err_f <= bound_f)
+    assert np.all(err_f >= 0.3 * bound_f)  # the bound is tight on data (measured 0.6 - 0.9 of it)
+    out = hm.core.to_physical_output(tr["out"])
+    ref = hm.reference(codes)
+    err = np.abs(out - ref).max(axis=0)
+    assert np.all(err <= np.array(hm.error_bound))
+    assert np.all(err >= 0.05 * np.array(hm.error_bound))
+    return err
+
+
+def test_bounds_11b_deadbeat(pv_data, sensor_11b):
+    _check_bounds(ObserverBankSensorModel.from_sensor(sensor_11b), pv_data)
+
+
+@pytest.mark.parametrize("observer,features", [("deadbeat", "11b-sq"), ("poles:0.4", "11b"), ("kalman:1", "11b")])
+def test_bounds_other_gains_and_squared_feature(pv_data, observer, features):
+    _check_bounds(ObserverBankSensorModel.from_sensor(_sensor(pv_data, 2, observer, features)), pv_data)
+
+
+def test_running_sum_is_the_window_sum_and_isqrt_exact(pv_data, sensor_11b):
+    hm = ObserverBankSensorModel.from_sensor(sensor_11b)
+    _, te, _ = pv_data
+    codes, _ = hm.quantize_signals(te.u[:200], te.y[:200])
+    tr = hm.trace(codes)
+    lw = hm.bank.window
+    sq = [[int(v) for v in col] for col in tr["square"].T]
+    for j, col in enumerate(sq):
+        for k in range(len(col)):
+            assert tr["window_sum"][k, j] == sum(col[max(0, k - lw): k + 1])
+            assert tr["root"][k, j] == math.isqrt(int(tr["window_sum"][k, j]))
+    rng = np.random.default_rng(0)
+    a = rng.integers(0, 2**62, size=2000, dtype=np.int64)
+    a[:4] = [0, 1, 2**62 - 1, (2**31 - 1) ** 2]
+    assert [int(v) for v in isqrt_floor(a)] == [math.isqrt(int(v)) for v in a]
+
+
+def test_state_bound_reaches_no_saturation_and_narrow_states_saturate(pv_data, sensor_11b):
+    _, te, _ = pv_data
+    wide = ObserverBankSensorModel.from_sensor(sensor_11b)
+    # largest inputs the codes hold, alternating: no saturation at the default width
+    hb = wide.bank
+    t = 300
+    lo, hi = -(1 << (hb.input_bits - 1)), (1 << (hb.input_bits - 1)) - 1
+    codes = np.where((np.arange(t)[:, None] // 3) % 2 == 0, hi, lo).repeat(hb.nu + 1, axis=1).astype(np.int64)
+    assert not wide.bank.trace(codes)["state_saturated"].any()
+    narrow = ObserverBankSensorModel.from_sensor(sensor_11b, state_bits=hb.formats.state_bits - 4)
+    tr = narrow.bank.trace(codes)
+    assert narrow.bank.state_may_saturate and tr["state_saturated"].any()
+    smax = (1 << (narrow.bank.formats.state_bits - 1)) - 1
+    assert np.abs(tr["state"]).max() <= smax + 1
+
+
+def test_refusals(pv_data):
+    tr, _, _ = pv_data
+    fe = ObserverBankFrontEnd(n_models=2, features="11a", window=2)
+    s = PWASVirtualSensor(mu=0, my=0, partitions=1, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+    with pytest.raises(InputError, match="11b"):
+        ObserverBankSensorModel.from_sensor(s)
+    fe = ObserverBankFrontEnd(n_models=2)
+    s = PWASVirtualSensor(mu=1, my=1, partitions=2, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+    with pytest.raises(InputError, match="taps"):
+        ObserverBankSensorModel.from_sensor(s)
+    with pytest.raises(InputError, match="stable"):
+        l1_gain(np.array([[1.0]]), np.ones((1, 1)))
+
+
+def test_seed003_estimator_bittrue_within_bounds():
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+    from pwas_hdl.systems.switched_linear import SWITCHED_A, SWITCHED_B, SWITCHED_C, switched_paper_run, switched_training_runs
+    from pwas_hdl.systems.switched_observer import observer_gains
+
+    est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, SWITCHED_C, observer_gains())
+    assert est.state_error_bound is not None and not est.state_may_saturate
+    rep = switched_paper_run(seed=0, switching="time", input_kind="step", noise=0.02)
+    long = switched_training_runs(1, 1000, seed=5000, switching="time", noise=0.01)
+    for d in (rep, long):
+        codes = est.quantize_signals(d.u, d.y)
+        tr, ref = est.trace(codes), est.reference(codes)
+        ws = np.sort(ref.residuals, axis=1)
+        margin = ws[:, 1] - ws[:, 0]
+        differ = tr["theta"] != ref.theta_hat
+        assert not np.any(differ & (margin > 2 * est.sum_error_bound))  # modes differ only at near-ties
+        if not differ.any():  # the same modes: the state error bound holds (and is not vacuous)
+            err = np.abs(est.to_physical_state(tr["x_hat"]) - ref.x_hat).max()
+            assert err <= est.state_error_bound
+            yerr = np.abs(tr["y_hat"] * 2.0**-est.state_frac - ref.y_hat).max()
+            assert yerr <= est.output_error_bound
+    # the paper replica (Table 1 setting): same modes, output MSE equal within the bound
+    codes = est.quantize_signals(rep.u, rep.y)
+    tr, ref = est.trace(codes), est.reference(codes)
+    assert np.array_equal(tr["theta"], ref.theta_hat)
+    y = rep.y[:, 0]
+    m_hw, m_f = np.mean((y - tr["y_hat"] * 2.0**-est.state_frac) ** 2), np.mean((y - ref.y_hat) ** 2)
+    assert abs(m_hw - m_f) <= 2 * math.sqrt(m_f) * est.output_error_bound + est.output_error_bound**2
