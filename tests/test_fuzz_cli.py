@@ -13,7 +13,6 @@ never runs one.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import resource
@@ -33,6 +32,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from pwas_hdl.limits import MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_VERTICES
+
+from helpers.folders import tree
 
 
 #: Examples per command at scale 1 (fixed: the suite's run time is bounded).
@@ -78,18 +79,6 @@ class Result:
 
 
 # ------------------------------------------------------------------------------------------------ helpers
-def tree(root: Path) -> dict[str, str]:
-    out = {}
-    for dirpath, dirs, files in os.walk(root):
-        for d in dirs:
-            out[os.path.relpath(os.path.join(dirpath, d), root) + "/"] = ""
-        for f in files:
-            p = os.path.join(dirpath, f)
-            try:
-                out[os.path.relpath(p, root)] = hashlib.sha256(Path(p).read_bytes()).hexdigest()
-            except OSError:
-                out[os.path.relpath(p, root)] = "?"
-    return out
 
 
 @contextmanager

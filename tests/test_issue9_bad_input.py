@@ -6,7 +6,6 @@ tree unchanged (no output, no temporary); or, for a verification that found a di
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -26,6 +25,7 @@ from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.io.atomic import TEMP_MARK, OutputSet, check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.io.csv_table import read_csv, split_trajectories
 from pwas_hdl.limits import MAX_CSV_FIELD, MAX_REGRESSORS, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_VERTICES
+from helpers.folders import tree
 
 runner = CliRunner()
 
@@ -40,16 +40,6 @@ def invoke(*args, cwd: Path | None = None):
         os.chdir(old)
 
 
-def tree(root: Path) -> dict[str, str]:
-    """Every file and folder under root (hidden ones too) with a hash of its content."""
-    out = {}
-    for dirpath, dirs, files in os.walk(root):
-        for d in dirs:
-            out[os.path.relpath(os.path.join(dirpath, d), root) + "/"] = ""
-        for f in files:
-            p = os.path.join(dirpath, f)
-            out[os.path.relpath(p, root)] = hashlib.sha256(Path(p).read_bytes()).hexdigest()
-    return out
 
 
 def assert_refused(res, *fragments: str) -> None:

@@ -31,6 +31,7 @@ from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.observer_bank import build_observer_bank
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
+from pwas_hdl.hdl.sensor_top import sample_fields
 
 __all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor"]
 
@@ -85,8 +86,7 @@ class ObserverSensorTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
-        b = self.bank.input_bits
-        return [{"name": nm, "lsb": i * b, "width": b, "signed": True} for i, nm in enumerate(self.signals)]
+        return sample_fields(self.signals, self.bank.input_bits)
 
     @property
     def extra_info(self) -> dict:

@@ -30,7 +30,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _not, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
-from pwas_hdl.hdl.sensor_top import _ident
+from pwas_hdl.hdl.sensor_top import _ident, sample_fields
 
 __all__ = ["PWASRecurrentTop", "build_recurrent_sensor"]
 
@@ -95,8 +95,7 @@ class PWASRecurrentTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
-        b = self.params.in_width
-        return [{"name": nm, "lsb": i * b, "width": b, "signed": True} for i, (nm, _) in enumerate(self.signals)]
+        return sample_fields([nm for nm, _ in self.signals], self.params.in_width)
 
     @property
     def extra_info(self) -> dict:

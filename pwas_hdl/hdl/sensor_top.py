@@ -81,6 +81,20 @@ def lag_plan(model, lags: LagStructure | None = None):
     return list(zip(order, counts)), dims
 
 
+def sample_fields(names, width: int) -> list[dict]:
+    """Fields of a sensor top's input payload: one signed ``width``-bit code per signal, signal ``i``
+    at bits ``[i*width, (i+1)*width)`` (the manifest's ``input.fields``).
+
+    Parameters
+    ----------
+    names : sequence of str
+        Signal names in payload order.
+    width : int
+        Bits per code.
+    """
+    return [{"name": str(nm), "lsb": i * width, "width": width, "signed": True} for i, nm in enumerate(names)]
+
+
 def _ident(name: str) -> str:
     s = re.sub(r"[^A-Za-z0-9_]", "_", name)
     return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
@@ -160,8 +174,7 @@ class PWASSensorTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
-        b = self.params.in_width
-        return [{"name": nm, "lsb": i * b, "width": b, "signed": True} for i, (nm, _) in enumerate(self.signals)]
+        return sample_fields([nm for nm, _ in self.signals], self.params.in_width)
 
     @property
     def extra_info(self) -> dict:

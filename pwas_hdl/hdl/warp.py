@@ -29,6 +29,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, rom
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.sensor_top import sample_fields
 
 __all__ = ["WarpedPWASCore", "build_warped_core", "warp_into", "write_warped_folder"]
 
@@ -138,9 +139,7 @@ class WarpedPWASCore(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
-        b = self.in_width
-        names = getattr(self.core, "input_names", [f"x{j}" for j in range(self.params.n)])
-        return [{"name": nm, "lsb": j * b, "width": b, "signed": True} for j, nm in enumerate(names)]
+        return sample_fields(getattr(self.core, "input_names", [f"x{j}" for j in range(self.params.n)]), self.in_width)
 
     @property
     def extra_info(self) -> dict:
