@@ -126,7 +126,9 @@ def test_fit_breakpoints_cli_round_trip(rule, lorenz_csv, tmp_path):
 @pytest.mark.parametrize("content, msg", [
     ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, 1, 0.5], [0, 1]]}', "increase strictly"),
     ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, 1]]}', "1 breakpoint lists for n = 2"),
-    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, "a"], [0, 1]]}', "is not a finite number"),
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, "a"], [0, 1]]}', "breakpoints[0][1]"),
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, 1e999], [0, 1]]}', "is not a finite number"),
+    ('{"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [[0, 1], [0, 1]], "extra": 1}', "extra"),
     ('{"format": "other", "version": 1, "breakpoints": [[0, 1], [0, 1]]}', "format"),
     ('{"format": "pwas-hdl-breakpoints", "version": 1, "regressors": ["a", "b"], "breakpoints": [[-30, 30], [-30, 30]]}',
      "the file is for regressors"),

@@ -21,31 +21,28 @@ import os
 from pathlib import Path
 
 from pwas_hdl.errors import InputError
-from pwas_hdl.io.json_contract import check_header, read_json
+from pwas_hdl.io.json_contract import check_header, read_json, schema_errors
 
-__all__ = ["BREAKPOINTS_FORMAT", "BREAKPOINTS_VERSION", "read_breakpoints", "breakpoints_errors"]
+__all__ = ["BREAKPOINTS_FORMAT", "BREAKPOINTS_VERSION", "SCHEMA", "read_breakpoints", "breakpoints_errors"]
 
 BREAKPOINTS_FORMAT = "pwas-hdl-breakpoints"
 BREAKPOINTS_VERSION = 1
 _HINT = "see the format in `pwas-hdl fit --help` and the README (non-uniform partitions)"
 
 
+SCHEMA = "breakpoints-v1.schema.json"
+
+
 def breakpoints_errors(d: object) -> list[str]:
-    """What is wrong with a parsed breakpoints document (empty when it is valid)."""
-    if not isinstance(d, dict):
-        return [f"the file must hold a JSON object, got {type(d).__name__}"]
-    errs = []
-    extra = set(d) - {"format", "version", "regressors", "breakpoints"}
-    if extra:
-        errs.append(f"unknown key(s) {sorted(extra)}; known: format, version, regressors, breakpoints")
-    bps = d.get("breakpoints")
-    if not isinstance(bps, list) or not bps:
-        return errs + ["breakpoints must be a non-empty list with one list of cut points per regressor"]
+    """What is wrong with a parsed breakpoints document (empty when it is valid): the shipped
+    schema's violations first, then what a schema cannot say (strictly increasing cut points, as
+    many regressor names as lists)."""
+    errs = schema_errors(d, SCHEMA)
+    if errs:
+        return errs
+    bps, regs = d["breakpoints"], d.get("regressors")
     for j, b in enumerate(bps):
-        if not isinstance(b, list) or len(b) < 2:
-            errs.append(f"breakpoints[{j}] must be a list of at least 2 numbers (one interval)")
-            continue
-        bad = [k for k, v in enumerate(b) if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)]
+        bad = [k for k, v in enumerate(b) if not math.isfinite(v)]  # e.g. 1e999 parses as inf
         if bad:
             errs.append(f"breakpoints[{j}][{bad[0]}] = {b[bad[0]]!r} is not a finite number")
             continue
@@ -53,12 +50,8 @@ def breakpoints_errors(d: object) -> list[str]:
         if dec:
             k = dec[0]
             errs.append(f"breakpoints[{j}] must increase strictly: [{k}] = {b[k]!r}, [{k + 1}] = {b[k + 1]!r}")
-    regs = d.get("regressors")
-    if regs is not None:
-        if not isinstance(regs, list) or not all(isinstance(r, str) for r in regs):
-            errs.append("regressors must be a list of regressor names")
-        elif len(regs) != len(bps):
-            errs.append(f"{len(regs)} regressor names for {len(bps)} breakpoint lists")
+    if regs is not None and len(regs) != len(bps):
+        errs.append(f"{len(regs)} regressor names for {len(bps)} breakpoint lists")
     return errs
 
 
