@@ -2,9 +2,10 @@
 
 Usage::
 
-    python benchmarks/distributed_speedup.py [--workers 2] [--quick] [--outdir benchmarks/results]
+    python benchmarks/distributed_speedup.py [--workers 2 | --scheduler tcp://HOST:PORT] [--quick] [--outdir benchmarks/results]
 
-Runs two sweeps twice, serially and on a local Dask cluster of ``--workers`` processes, checks that
+Runs two sweeps twice, serially and on a local Dask cluster of ``--workers`` processes (or an existing
+cluster, ``--scheduler``), checks that
 the results are identical (timings aside) and writes ``distributed_speedup.{json,md}``:
 
 * ``hw_tables``: the place-and-route runs of ``benchmarks/hw_tables.py`` for the small Lorenz
@@ -70,10 +71,12 @@ def _lpt_makespan(durations: list[float], workers: int) -> float:
     return max(loads)
 
 
-def _hw_tables(workers: int | None, outdir: Path) -> tuple[dict[str, Any], float]:
+def _hw_tables(workers: int | None, outdir: Path, scheduler: str | None = None) -> tuple[dict[str, Any], float]:
     cmd = [sys.executable, str(HERE / "hw_tables.py"), "--designs", "lorenz_my4_p3,lorenz_my4_p1", "--fpga", "ecp5",
            "--outdir", str(outdir), "--workdir", str(outdir / "work")]
-    if workers:
+    if workers and scheduler:
+        cmd += ["--scheduler", scheduler]
+    elif workers:
         cmd += ["--workers", str(workers)]
     t0 = time.monotonic()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
@@ -81,7 +84,7 @@ def _hw_tables(workers: int | None, outdir: Path) -> tuple[dict[str, Any], float
     return json.loads((outdir / "hw_tables.json").read_text()), wall
 
 
-def _explore(workers: int | None, root: Path) -> tuple[dict[str, Any], float]:
+def _explore(workers: int | None, root: Path, scheduler: str | None = None) -> tuple[dict[str, Any], float]:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
     from pwas_hdl.flow.explore import explore
     from pwas_hdl.io.csv_table import write_csv
@@ -94,7 +97,7 @@ def _explore(workers: int | None, root: Path) -> tuple[dict[str, Any], float]:
     data = root.parent / "explore_test.csv"  # one file for both runs: its path is part of the result
     write_csv(data, test.columns())
     t0 = time.monotonic()
-    with Executor(workers=workers) as ex:
+    with Executor(workers=workers, scheduler=scheduler if workers else None) as ex:
         res = explore(m, data, input_bits=[8, 10, 12], resources="ecp5", measure_max=5, executor=ex)
     return res, time.monotonic() - t0
 
@@ -110,6 +113,8 @@ def _toy(x: float) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--scheduler", default=None,
+                    help="run the distributed half on an existing Dask cluster (tcp://HOST:PORT) instead of a LocalCluster of --workers")
     ap.add_argument("--quick", action="store_true", help="a 4-task toy workload (CI smoke)")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--sweeps", default="hw_tables,explore", help="comma list of hw_tables, explore")
@@ -121,17 +126,17 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="pwas-dist-") as tmp:
         tmp = Path(tmp)
         if args.quick:
-            items = [0.5, 0.5, 0.5, 0.5]
+            items = [0.2, 0.2, 0.2, 0.2]
             t0 = time.monotonic()
             serial = Executor().map(_toy, items)
             ts = time.monotonic() - t0
             t0 = time.monotonic()
-            with Executor(workers=args.workers) as ex:
+            with Executor(workers=args.workers, scheduler=args.scheduler) as ex:
                 dist = ex.map(_toy, items)
             td = time.monotonic() - t0
             out["sweeps"]["toy"] = {"tasks": len(items), "serial_s": round(ts, 2), "distributed_s": round(td, 2),
                                     "speedup": round(ts / td, 2), "identical": serial == dist,
-                                    "note": "includes the LocalCluster start-up (about 2-4 s)"}
+                                    "note": "includes the LocalCluster start-up (about 2-4 s)" if args.scheduler is None else "on an existing cluster (--scheduler)"}
         else:
             chosen = [x.strip() for x in args.sweeps.split(",") if x.strip()]
             for name, fn in (("hw_tables", _hw_tables), ("explore", _explore)):
@@ -142,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{name}: serial ...", flush=True)
                 a, ts = fn(None, tmp / f"{name}_s")
                 print(f"{name}: {args.workers} workers ...", flush=True)
-                b, td = fn(args.workers, tmp / f"{name}_d")
+                b, td = fn(args.workers, tmp / f"{name}_d", args.scheduler)
                 diffs = _differences(_without_timings(a), _without_timings(b))
                 same = not diffs
                 rec: dict[str, Any] = {"serial_s": round(ts, 1), "distributed_s": round(td, 1), "speedup": round(ts / td, 2),

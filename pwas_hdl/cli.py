@@ -20,6 +20,7 @@ Every command has ``-h/--help``. What the command line does with each error clas
 
 from __future__ import annotations
 
+import functools
 import json
 import sys
 import traceback
@@ -1325,6 +1326,16 @@ def _root(
     _STATE["quiet"], _STATE["verbose"] = bool(quiet), bool(verbose)
 
 
+@functools.lru_cache(maxsize=None)
+def command() -> Any:
+    """The Click command of :data:`app`, built once per process.
+
+    Calling a ``typer.Typer`` builds its Click command tree again (every command's signature and type
+    hints: about 50 ms); :func:`main` and in-process callers (tests, notebooks) run this one instead.
+    """
+    return typer.main.get_command(app)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Console-script entry point: run the command line ``argv`` (default ``sys.argv[1:]``).
 
@@ -1334,7 +1345,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _STATE["quiet"] = _STATE["verbose"] = False
     install_termination_handler()  # SIGTERM runs the cleanup of temporaries instead of killing on the spot
     try:
-        rv = app(args=list(argv) if argv is not None else None, prog_name="pwas-hdl", standalone_mode=False)
+        rv = command()(args=list(argv) if argv is not None else None, prog_name="pwas-hdl", standalone_mode=False)
     except (typer.Abort, click.exceptions.Abort):
         _error_line("aborted")
         return 130

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.fit.geometry import Grid, pow2_breakpoints, pow2_exponents, quantile_breakpoints
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.benchmarks.lorenz_tables import markdown_table
 from pwas_hdl.cli import app, main

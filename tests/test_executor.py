@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
 from pwas_hdl.errors import InputError
@@ -232,11 +232,13 @@ def test_timing_closure_identical_on_two_workers(tmp_path, cluster):
 
 
 @pytest.mark.slow
-def test_speedup_benchmark_quick_smoke(tmp_path):
+def test_speedup_benchmark_quick_smoke(tmp_path, cluster):
+    """The --quick toy sweep on the module's cluster (--scheduler; the LocalCluster start of --workers
+    is the cluster fixture's)."""
     import importlib
 
     bench = importlib.import_module("pwas_hdl.benchmarks.distributed_speedup")
-    assert bench.main(["--quick", "--workers", "2", "--outdir", str(tmp_path)]) == 0
+    assert bench.main(["--quick", "--scheduler", cluster.address, "--outdir", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "distributed_speedup_quick.json").read_text())
     assert res["sweeps"]["toy"]["identical"] is True and res["sweeps"]["toy"]["tasks"] == 4
     assert bench._lpt_makespan([3.0, 2.0, 2.0, 1.0], 2) == 4.0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pwas_hdl.errors import InputError
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel

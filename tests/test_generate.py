@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
 from pwas_hdl.design.generate import build_design, generate

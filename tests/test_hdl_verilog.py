@@ -105,6 +105,29 @@ def test_deterministic_and_path_free():
     assert "PROCASSINIT" not in a and not re.search(r"^\s*reg [^;]*<= ", a, re.M)
 
 
+def test_in_process_yosys_writes_amaranths_exact_text(monkeypatch):
+    """pwas_hdl.hdl.yosys_convert runs Amaranth's builtin Yosys in-process: the same bytes as
+    ``amaranth.back.verilog.convert`` (a subprocess per call), for a core and for the fallback path."""
+    from amaranth.back import verilog
+
+    from pwas_hdl.hdl import yosys_convert
+
+    model = make_model([2, 3], seed=8, nz=2)
+    ref = verilog.convert(build_core(model, name="core_c"), name="core_c", emit_src=False)
+    assert yosys_convert.component_verilog(build_core(model, name="core_c"), "core_c") == ref
+    assert yosys_convert.component_verilog(build_core(model, name="core_c"), "core_c") == ref  # a second instance
+    monkeypatch.setattr(yosys_convert, "_builtin", lambda: None)  # the fallback: Amaranth's own runner
+    assert yosys_convert.component_verilog(build_core(model, name="core_c"), "core_c") == ref
+
+
+def test_in_process_yosys_reports_a_refused_design():
+    from pwas_hdl.errors import InternalError
+    from pwas_hdl.hdl.yosys_convert import rtlil_to_verilog
+
+    with pytest.raises(InternalError, match="Yosys"):
+        rtlil_to_verilog("module \\m\n  this is not RTLIL\nend\n")
+
+
 def test_normalise_moves_only_assigned_initialisers():
     text = (
         "module m(clk);\n  input clk;\n  reg \\$auto$x$1  = 0;\n  reg [3:0] r = 4'h0;\n  reg q = 1'h1;\n"

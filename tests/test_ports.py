@@ -8,7 +8,7 @@ import re
 import subprocess
 
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
 from pwas_hdl.design.generate import build_design

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
 from pwas_hdl.design.generate import generate

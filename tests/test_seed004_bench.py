@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl import bench_results as br
 from pwas_hdl.cli import app

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.verify.simulation import load_design, run_rtl, segment, sim_module, standard_runs
 

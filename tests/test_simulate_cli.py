@@ -8,7 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
 from pwas_hdl.io.csv_table import write_csv

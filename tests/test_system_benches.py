@@ -5,7 +5,7 @@ assertions are properties the quick runs must show whatever the machine's speed 
 """
 
 import pytest
-from typer.testing import CliRunner
+from helpers.cli import CliRunner
 
 from pwas_hdl import bench_results as br
 from pwas_hdl.cli import app

@@ -49,7 +49,7 @@ def test_helicopter_refuses_bad_sizes(bad):
 
 
 def test_make_data_helicopter_cli(tmp_path):
-    from typer.testing import CliRunner
+    from helpers.cli import CliRunner
 
     from pwas_hdl.cli import app
     from pwas_hdl.io.csv_table import read_csv

@@ -393,17 +393,12 @@ def _flat_name(mo: re.Match) -> str:
 
 
 def _flat_verilog(component, name: str) -> str:
-    """Amaranth's Verilog conversion (``amaranth.back.verilog.convert``: RTLIL, then Yosys'
+    """Amaranth's Verilog conversion (:mod:`pwas_hdl.hdl.yosys_convert`: RTLIL, then Yosys'
     ``proc -nomux -norom; memory_collect; write_verilog -norename``) with the part modules flattened
     into the top (Yosys ``flatten`` after ``proc``): one module, as every other design of pwas-hdl."""
-    from amaranth.back import rtlil
-    from amaranth.back.verilog import find_yosys
+    from pwas_hdl.hdl.yosys_convert import CONVERT_PASSES, component_verilog
 
-    text = rtlil.convert(component, name=name, emit_src=False)
-    yosys = find_yosys(lambda ver: ver >= (0, 40))
-    script = [f"read_rtlil <<rtlil\n{text}\nrtlil", "proc -nomux -norom", f"flatten", "memory_collect",
-              "write_verilog -norename"]
-    return yosys.run(["-q", "-"], "\n".join(script), ignore_warnings=True)
+    return component_verilog(component, name, (CONVERT_PASSES[0], "flatten", *CONVERT_PASSES[1:]))
 
 
 def emit_additive_verilog(component, name: str, *, ports: str = "axis") -> str:

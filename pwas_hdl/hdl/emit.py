@@ -1,7 +1,7 @@
 """Verilog export and port / resource description of the generated designs.
 
-:func:`emit_verilog` converts a component with ``amaranth.back.verilog.convert(..., emit_src=False)``
-(Amaranth's builtin Yosys) and applies one textual, semantics-preserving normalisation:
+:func:`emit_verilog` converts a component as ``amaranth.back.verilog.convert(..., emit_src=False)``
+does (Amaranth's builtin Yosys, run in-process by :mod:`pwas_hdl.hdl.yosys_convert`) and applies one textual, semantics-preserving normalisation:
 
 * Amaranth attaches an ``init`` attribute to every flip-flop and Yosys' ``write_verilog`` prints it
   as a declaration initialiser (``reg [5:0] x = 6'h00;``) of a variable that an ``always`` block
@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import re
 
-from amaranth.back import verilog
 from amaranth.lib import wiring
 
 from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.hdl.yosys_convert import component_verilog
 
 __all__ = ["MEM_DIR_PARAMETER", "MEM_DIR_DEFAULT", "PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog", "memory_hex_files"]
 
@@ -118,7 +118,7 @@ def emit_verilog(
     if memory_init not in ("inline", "readmemh"):
         raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
     _check_naming(ports)
-    text = normalise_verilog(verilog.convert(component, name=name, emit_src=False))
+    text = normalise_verilog(component_verilog(component, name))
     if memory_init == "readmemh":
         text = _use_readmemh(text, component, hex_prefix)
     return _name_ports(text, name, component, ports)

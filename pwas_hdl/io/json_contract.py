@@ -33,8 +33,10 @@ def _schema_and_validator(name: str):
         schema = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise InternalError(f"the JSON Schema {path} cannot be read ({exc}); the pwas-hdl installation is broken") from exc
+    # The shipped schemas are checked against their metaschema by the test suite
+    # (tests/test_json_contract.py), not on every load: the draft 2020-12 metaschema check costs
+    # about 0.6 s per schema per process, more than most commands' own work.
     cls = jsonschema.validators.validator_for(schema)
-    cls.check_schema(schema)
     return schema, cls(schema)
 
 
