@@ -233,9 +233,11 @@ def _names(values: Optional[list[str]]) -> list[str]:
 
 @contextmanager
 def _progress(description: str) -> Iterator:
+    """A transient progress bar on stderr, shown on a terminal only (piped or captured, rich would
+    leave a blank line before the command's own messages) and not under ``-q``."""
     with Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True,
-        disable=_STATE["quiet"],
+        disable=_STATE["quiet"] or not err.is_terminal,
     ) as prog:
         task = prog.add_task(description, total=None)
 

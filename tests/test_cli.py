@@ -413,3 +413,9 @@ def test_console_script_process_exit_statuses(tmp_path):
     assert lines[0].startswith("error: No such option: --bogus") and lines[0].endswith("(see `pwas-hdl fit --help`)")
     r = run("info", tmp_path / "missing.json")
     assert r.returncode == 2 and r.stderr.startswith("error: ") and len(r.stderr.strip().splitlines()) == 1
+    # a command with a progress bar, piped: no bar and no blank line before its messages
+    (tmp_path / "d.csv").write_text("y,z\n" + "".join(f"{k * 0.1},{k * 0.2}\n" for k in range(40)))
+    r = run("fit", "d.csv", "-o", "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2)
+    assert r.returncode == 0 and r.stderr.startswith("fitted ") and "\n\n" not in r.stderr, r.stderr
+    r = run("generate", "m.json", "-o", "g", "--goal", "latency", "--pipeline", "max")
+    assert r.returncode == 2 and r.stderr.startswith("error: ") and len(r.stderr.splitlines()) == 1, r.stderr
