@@ -230,13 +230,15 @@ def test_cholmod_matches_superlu(order):
 
 
 @needs_cholmod
-def test_cholmod_analyses_each_fold_once():
-    """The CV reuses one symbolic analysis per fold: 5 analyses, one numeric factorisation per
-    (fold, sigma); and the CV agrees with the SuperLU one."""
+@pytest.mark.parametrize("order", [0, 1])
+def test_cholmod_analyses_each_fold_once(order):
+    """The CV reuses symbolic analyses: zero order one per fold (5 analyses), first order one on
+    the full-data pattern for all folds; one numeric factorisation per (fold, sigma) either way;
+    and the CV agrees with the SuperLU one."""
     import pwas_hdl.fit.sparse_cholesky as sc
 
     grid, h, z = _problem(2, 20, 2000, seed=4)
-    gam = tikhonov_matrix(grid, 1)
+    gam = tikhonov_matrix(grid, order)
     made = []
     orig = sc.PatternCholesky.__init__
 
@@ -248,8 +250,19 @@ def test_cholmod_analyses_each_fold_once():
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(sc.PatternCholesky, "__init__", counting_init)
         cv = cross_validate_sigma(h, z, gam, sigmas, folds=5, method="direct")
-    assert len(made) == 5 and [c.factorizations for c in made] == [3] * 5
+    if order == 0:
+        assert len(made) == 5 and [c.factorizations for c in made] == [3] * 5
+    else:
+        assert len(made) == 1 and made[0].factorizations == 15
     assert cv.solver["method"] == "direct" and cv.solver["solves"] == 15
+    # against dense solves of every fold's system (441 unknowns)
+    labels = np.arange(h.shape[0]) * 5 // h.shape[0]
+    hd, g = h.toarray(), gam.toarray()
+    for f in range(5):
+        tr, va = labels != f, labels == f
+        for i, s in enumerate(sigmas):
+            w = np.linalg.solve(hd[tr].T @ hd[tr] + s * g, hd[tr].T @ z[tr])
+            assert cv.fold_mse[f, i] == pytest.approx(float(np.mean((z[va] - hd[va] @ w) ** 2)), rel=1e-8)
 
 
 @needs_cholmod

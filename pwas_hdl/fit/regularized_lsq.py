@@ -530,9 +530,20 @@ class NormalEquationSolver:
             raise InputError("direct backend 'cholmod' needs cvxopt (pip install cvxopt)")
         self.backend = "superlu" if direct_backend == "superlu" or not cholmod_available() else "cholmod"
         self._m_cache: tuple | None = None
+        #: first order: the full-data pattern ``H'H + Gamma`` holds every fold's ``H_k'H_k + Gamma``
+        #: (``H_k'H_k = H'H - H_v'H_v``), so one symbolic analysis serves every fold and the
+        #: final solve (see :meth:`_cholmod_solve`); built lazily, in the process that solves
+        self._shared_hth = hth if self.order == 1 and self.keep is None else None
+        self._shared_chol: tuple | None = None
         #: CHOLMOD factorisations that met a non-positive pivot and were solved by SuperLU instead
         self.superlu_fallbacks = 0
         self.infos: list[SolveInfo] = []
+
+    def __getstate__(self) -> dict:
+        """Pickled (e.g. shipped to a Dask worker) without the CHOLMOD factors, which cannot be."""
+        state = dict(self.__dict__)
+        state["_m_cache"] = state["_shared_chol"] = None
+        return state
 
     def _restrict(self, m: sparse.sparray) -> sparse.csr_array:
         m = sparse.csr_array(m)
@@ -553,7 +564,11 @@ class NormalEquationSolver:
 
         The symbolic analysis is done once per ``m`` (per fold in the CV) on the pattern of
         ``m + Gamma`` and kept, with ``m``'s values on it, for the next call with the same ``m``;
-        each sigma is then one numeric factorisation. Analysing each fold's own pattern rather
+        each sigma is then one numeric factorisation. First order analyses once, on the full-data
+        pattern ``H'H + Gamma``, for all folds: there the grid edges of Gamma dominate the pattern
+        and the fold's numeric factorisation was measured no dearer on it (n = 2, N = 10^6,
+        T = 10^5: 1.66 / 1.38 s instead of 1.93 / 1.48 s at sigma = 1e-3 / 10), while each
+        analysis costs 1.8-1.9 s CPU. For zero order, analysing each fold's own pattern rather
         than one pattern of the full ``H'H`` for all folds was measured 3x cheaper per numeric
         factorisation (n = 3, N = 262 144, zero order: 0.17-0.21 s instead of 0.53-0.61 s; the
         validation samples' entries cancel in ``H'H - H_v'H_v``). A non-positive pivot (``m`` is a
@@ -562,8 +577,18 @@ class NormalEquationSolver:
         """
         if self._m_cache is None or self._m_cache[0] is not m:
             self._m_cache = None  # free the previous factor first
-            chol = PatternCholesky(abs(m) + abs(self.gamma))
-            self._m_cache = (m, chol, chol.align(m), chol.align(self.gamma))
+            if self._shared_hth is not None:
+                if self._shared_chol is None:
+                    chol = PatternCholesky(abs(self._shared_hth) + abs(self.gamma))
+                    self._shared_chol = (chol, chol.align(self.gamma))
+                chol, g_vals = self._shared_chol
+                try:
+                    self._m_cache = (m, chol, chol.align(m), g_vals)
+                except ValueError:  # not a fold of the full-data matrix: its own analysis
+                    self._m_cache = None
+            if self._m_cache is None:
+                chol = PatternCholesky(abs(m) + abs(self.gamma))
+                self._m_cache = (m, chol, chol.align(m), chol.align(self.gamma))
         _, chol, m_vals, g_vals = self._m_cache
         try:
             chol.factorize(m_vals + sigma * g_vals)
