@@ -64,24 +64,36 @@ def _problem(n: int, p: int, t: int, seed: int = 0):
     return grid, x, z
 
 
-def worker_fit(n: int, p: int, order: int, t: int, weights_out: str) -> dict:
-    """The timed fit (runs in a subprocess); saves the weights for the direct comparison."""
+def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: int = 0) -> dict:
+    """The timed fit (runs in a subprocess); saves the weights for the direct comparison.
+
+    ``workers >= 2``: the CV folds run on a local Dask cluster of that many single-threaded
+    processes (:class:`pwas_hdl.flow.executor.Executor`; its start-up is timed too). CPU time is
+    then this process's plus the workers' (``RUSAGE_CHILDREN`` after the cluster is shut down);
+    the peak memory is this process's plus that of the largest worker, times the worker count
+    (an upper bound of the sum: ``ru_maxrss`` of the children is their maximum, not their sum).
+    """
     from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, solve_regularized, tikhonov_matrix
     from pwas_hdl.fit.sparse_cholesky import cholmod_available
+    from pwas_hdl.flow.executor import Executor
 
     grid, x, z = _problem(n, p, t)
     c0, w0 = time.process_time(), time.perf_counter()
     est = check_fit_memory(t, grid.n_vertices, n, 1, order)
-    h = grid.basis_matrix(x)
-    gam = tikhonov_matrix(grid, order)
-    cv = cross_validate_sigma(h, z, gam, folds=5)
-    w, info = solve_regularized(h, z, cv.best_sigma, gam, return_info=True)
+    with Executor(workers=workers if workers >= 2 else None) as ex:
+        h = grid.basis_matrix(x)
+        gam = tikhonov_matrix(grid, order)
+        cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex)
+        w, info = solve_regularized(h, z, cv.best_sigma, gam, return_info=True)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    own_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     np.save(weights_out, w)
     return {
         "wall_s": wall,
-        "cpu_s": cpu,
-        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "cpu_s": cpu + (kids.ru_utime + kids.ru_stime if workers >= 2 else 0.0),
+        "workers": workers if workers >= 2 else 1,
+        "peak_rss_mib": own_peak + (workers * kids.ru_maxrss / 1024.0 if workers >= 2 else 0.0),
         "estimated_mib": est["total"] / 2**20,
         "method": cv.solver["method"],
         "direct_backend": "cholmod" if cholmod_available() else "superlu",
@@ -129,7 +141,8 @@ def _run_child(args: list[str], limit: float) -> dict:
     return res
 
 
-def run(points, t: int, limit: float, direct_limit: float, budget: float = float("inf"), progress=print) -> dict:
+def run(points, t: int, limit: float, direct_limit: float, budget: float = float("inf"), progress=print,
+        workers: int = 0) -> dict:
     rows = []
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pwas-fit-scale-") as tmp:
@@ -141,7 +154,7 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
                     row.update({"status": "not run (time budget of the benchmark spent)"})
                     rows.append(row)
                     continue
-                row.update(_run_child(["--worker", "fit", json.dumps([n, p, order, t, wfile])], limit))
+                row.update(_run_child(["--worker", "fit", json.dumps([n, p, order, t, wfile, workers])], limit))
                 if row["status"] == "ok" and row["method"] == "cg":
                     d = _run_child(
                         ["--worker", "direct", json.dumps([n, p, order, t, row["best_sigma"], wfile])], direct_limit
@@ -163,6 +176,7 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
             "limit_s": limit,
             "direct_limit_s": direct_limit,
             "budget_s": budget if budget != float("inf") else None,
+            "workers": workers if workers >= 2 else 1,
             "shared_machine": True,
             "load_average_at_start": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
             "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
@@ -219,7 +233,10 @@ def markdown(res: dict) -> str:
         f"by `method=\"auto\"`. Each point in its own process; limit {s['limit_s']:.0f} s wall per fit and "
         f"{s['direct_limit_s']:.0f} s per direct reference solve. **The 2-core machine was shared with other "
         f"engineers' jobs** (load average {s['load_average_at_start']:.1f} at the start): wall times are "
-        "inflated, CPU times are the fairer measure.",
+        "inflated, CPU times are the fairer measure."
+        + (f" The CV folds ran on a local Dask cluster of {s['workers']} processes (`--workers {s['workers']}`): "
+           "CPU includes the workers', peak RSS is this process's plus workers x the largest worker's."
+           if s.get("workers", 1) > 1 else ""),
         "",
         "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU |",
         "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
@@ -277,6 +294,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--direct-limit", type=float, default=120.0, help="wall-time limit per direct solve, s")
     ap.add_argument("--budget", type=float, default=float("inf"), help="start no new point after this many s")
     ap.add_argument("--points", default=None, help="only these n:p points, comma-separated (e.g. 6:3,2:999)")
+    ap.add_argument("--workers", type=int, default=0,
+                    help="run the CV folds on a local Dask cluster of this many processes (default: serial)")
     ap.add_argument("--stem", default=None, help="output file stem (default fit_scale / fit_scale_quick)")
     args = ap.parse_args(argv)
     points, t, stem = (QUICK_POINTS, 10_000, "fit_scale_quick") if args.quick else (FULL_POINTS, 100_000, "fit_scale")
@@ -291,7 +310,10 @@ def main(argv: list[str] | None = None) -> int:
     from pwas_hdl.io.atomic import atomic_write_text
 
     args.outdir.mkdir(parents=True, exist_ok=True)
-    res = run(points, t, args.limit, args.direct_limit, args.budget, progress=lambda m: print(m, flush=True))
+    if args.workers < 0:
+        ap.error("--workers must be 0 (serial) or a positive count")
+    res = run(points, t, args.limit, args.direct_limit, args.budget, progress=lambda m: print(m, flush=True),
+              workers=args.workers)
     atomic_write_text(args.outdir / f"{stem}.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
     md = markdown(res)
     atomic_write_text(args.outdir / f"{stem}.md", md)

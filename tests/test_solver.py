@@ -255,14 +255,19 @@ def test_cholmod_analyses_each_fold_once(order):
     else:
         assert len(made) == 1 and made[0].factorizations == 15
     assert cv.solver["method"] == "direct" and cv.solver["solves"] == 15
-    # against dense solves of every fold's system (441 unknowns)
+    # against SuperLU solves of every fold's own system (441 unknowns)
+    from scipy.sparse.linalg import spsolve
+
     labels = np.arange(h.shape[0]) * 5 // h.shape[0]
-    hd, g = h.toarray(), gam.toarray()
+    hs = sparse.csr_array(h)
     for f in range(5):
         tr, va = labels != f, labels == f
+        ht_tr = hs[np.flatnonzero(tr)].T.tocsr()
+        gram, rhs = (ht_tr @ ht_tr.T).tocsc(), ht_tr @ z[tr, 0]
+        hv = hs[np.flatnonzero(va)]
         for i, s in enumerate(sigmas):
-            w = np.linalg.solve(hd[tr].T @ hd[tr] + s * g, hd[tr].T @ z[tr])
-            assert cv.fold_mse[f, i] == pytest.approx(float(np.mean((z[va] - hd[va] @ w) ** 2)), rel=1e-8)
+            w = spsolve((gram + s * gam).tocsc(), rhs)
+            assert cv.fold_mse[f, i] == pytest.approx(float(np.mean((z[va, 0] - hv @ w) ** 2)), rel=1e-8)
 
 
 @needs_cholmod
@@ -303,3 +308,22 @@ def test_direct_backend_is_checked():
     grid, h, _ = _problem(2, 5, 100)
     with pytest.raises(InputError, match="direct backend"):
         NormalEquationSolver(h.T @ h, tikhonov_matrix(grid, 0), 2, "direct", direct_backend="mkl")
+
+
+@needs_cholmod
+def test_solver_pickles_without_its_factors():
+    """A solver shipped to a Dask worker (pickled) leaves its CHOLMOD factors behind (they cannot be
+    pickled) and analyses again there, with the same weights."""
+    import pickle
+
+    grid, h, z = _problem(2, 10, 500, seed=8)
+    gam = tikhonov_matrix(grid, 1)
+    ht = h.T.tocsr()
+    hth, b = (ht @ h).tocsr(), ht @ z[:, 0]
+    solver = NormalEquationSolver(hth, gam, 2, "direct")
+    w1, _ = solver.solve(solver.restrict_matrix(hth), b, 1e-2)
+    assert solver._shared_chol is not None
+    copy = pickle.loads(pickle.dumps(solver))
+    assert copy._shared_chol is None and copy._m_cache is None
+    w2, _ = copy.solve(copy.restrict_matrix(hth), b, 1e-2)
+    np.testing.assert_allclose(w2, w1, rtol=1e-12, atol=1e-14)
