@@ -120,7 +120,9 @@ DIRECT_MAX_UNKNOWNS: dict[tuple[int, int], int] = {
 #: preconditioned CG at that size took over 150 s for the CV (Jacobi/AMG) and, with the factor of
 #: the neighbouring sigma as preconditioner, 14-15 iterations = 2.2-2.4 s per sigma. In 3-D first
 #: order the factor stays too dense (48 s per factorisation at N = 262 144, 12.7 s with a nested
-#: dissection ordering), so CG is kept there.
+#: dissection ordering; 45.8 s on the full-data pattern shared by the folds), so CG is kept there.
+#: Solving the other sigmas from a neighbour's factor (PCG, multi-shift Lanczos) or reducing to the
+#: touched vertices was measured and does not pay (``benchmarks/results/fit_scale.md``).
 DIRECT_MAX_UNKNOWNS_CHOLMOD: dict[tuple[int, int], int] = {**DIRECT_MAX_UNKNOWNS, (1, 2): 2_000_000}
 
 #: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
