@@ -17,7 +17,7 @@ solve guarantees (``||r|| / (sigma lambda_min(Gamma))``).
 
 Usage::
 
-    python benchmarks/fit_scale.py [--quick] [--outdir benchmarks/results] [--limit 300] [--budget S]
+    python benchmarks/fit_scale.py [--quick] [--outdir benchmarks/results] [--limit 300] [--budget S] [--workers N]
 
 writes ``fit_scale.json`` and ``fit_scale.md`` (``--quick``: ``T = 10^4``, small sizes only,
 ``fit_scale_quick.*``). Nothing here asserts on times.
