@@ -6,9 +6,8 @@
 * ``fit --breakpoints quantile | quantile-pow2 | FILE``: same N as the uniform grid, the model file
   round trip, ``predict``; bad files and values give one ``error:`` line, exit 2, nothing written.
 * The power-of-two warp: bit-true model against the float model (error bound), the RTL warp
-  exhaustively against the bit-true warp (Amaranth simulation), the warped core lint-clean and
-  byte-identical, and in cocotb on Icarus and Verilator bit-exact with the bit-true model
-  (full speed, stalls, a mid-stream reset).
+  exhaustively against the bit-true warp (Amaranth simulation); the warped designs in
+  ``generate`` / ``simulate``: ``tests/test_warped_design.py``.
 """
 
 from __future__ import annotations
@@ -150,14 +149,16 @@ def test_bad_breakpoints_file_is_one_error_line(content, msg, lorenz_csv, tmp_pa
     assert "Traceback" not in r.output and not out.exists()
 
 
-def test_generate_refuses_a_non_uniform_model_clearly(lorenz_csv, tmp_path):
+def test_generate_refuses_a_non_pow2_partition_clearly(lorenz_csv, tmp_path):
+    """Quantile cuts are not power-of-two multiples of a base step: no warp, one error line (quantile-pow2 is built)."""
     from pwas_hdl.cli import app
 
     out = tmp_path / "m.json"
     assert CliRunner().invoke(app, ["fit", str(lorenz_csv), "-y", "y", "-z", "z", "--my", "2", "-p", "4", "--sigma", "1e-3",
                                     "--breakpoints", "quantile", "-o", str(out)]).exit_code == 0
     r = CliRunner().invoke(app, ["generate", str(out), "-o", str(tmp_path / "g")])
-    assert r.exit_code == 2 and "uniform grid" in r.output and not (tmp_path / "g").exists()
+    assert r.exit_code == 2 and "power-of-two multiples" in r.output and "quantile-pow2" in r.output, r.output
+    assert not (tmp_path / "g").exists()
 
 
 # ------------------------------------------------------------------------------------------ the warp
@@ -224,59 +225,5 @@ def test_warp_rtl_equals_the_bittrue_warp_for_every_code(bits, dim, warped):
     np.testing.assert_array_equal(np.array(got), want)
 
 
-def _warped_folder(m, w, root: Path):
-    """The warped core's design folder (:func:`pwas_hdl.hdl.warp.write_warped_folder`)."""
-    from pwas_hdl.hdl.warp import write_warped_folder
-
-    wm, man = write_warped_folder(m, root, input_bits=w.input_bits)
-    assert [wp.to_dict() for wp in wm.warps] == [wp.to_dict() for wp in w.warps]
-    top = man["top"]
-    return root, top, (root / f"{top}.v").read_text(), man
-
-
-@pytest.mark.rtl
-def test_warped_core_is_lint_clean_and_deterministic(warped, tmp_path):
-    from pwas_hdl.flow.toolchain import tool_env
-
-    m, w = warped
-    root, top, verilog, _ = _warped_folder(m, w, tmp_path / "a")
-    _, _, again, _ = _warped_folder(m, w, tmp_path / "b")
-    assert again == verilog
-    env = tool_env()
-    exe = shutil.which("verilator", path=env.get("PATH"))
-    if exe is None:
-        pytest.skip("verilator not found")
-    r = subprocess.run([exe, "--lint-only", "-Wall", str(root / f"{top}.v")], capture_output=True, text=True, env=env, cwd=root)
-    assert r.returncode == 0, r.stderr
-
-
-@pytest.mark.rtl
-@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_warped_core_in_cocotb_bit_exact(simulator, warped, sim_cache, tmp_path):
-    from pwas_hdl.verify.simulation import sim_module
-
-    runner = sim_module("pwas_runner")
-    m, w = warped
-    root, top, _, man = _warped_folder(m, w, tmp_path / "design")
-    rng = np.random.default_rng(7)
-    lo, hi = w.code_range
-    breaks = np.array([wp.code_breaks for wp in w.warps]).T  # every breakpoint and its neighbours
-    near = np.concatenate([breaks - 1, breaks, breaks + 1])
-    q = np.concatenate([rng.integers(lo, hi + 1, (300, w.n)), np.clip(near, lo, hi),
-                        np.array([[lo] * w.n, [hi] * w.n])])
-    out, oor = w.evaluate(q)
-    assert oor.any() and not oor.all()
-    seg = {"codes": q.tolist(), "expected": np.concatenate([out, oor[:, None]], axis=1).tolist(), "src": list(range(len(q))),
-           "drain": True, "hold": 0}
-    half = len(q) // 2
-    cut = {"codes": q[:half].tolist(), "expected": seg["expected"][:half], "src": list(range(half)), "drain": False, "hold": 3}
-    job = {"manifest": str((root / "manifest.json").resolve()), "strict": False, "clock_ns": 10, "reset_cycles": 2,
-           "runs": [{"name": "full-speed", "segments": [seg]},
-                    {"name": "stalls", "p_valid": 0.7, "p_ready": 0.6, "seed": 3, "segments": [seg]},
-                    {"name": "reset-mid-stream", "p_valid": 0.8, "p_ready": 0.8, "seed": 5, "segments": [cut, seg]}]}
-    b = runner.build(root / f"{top}.v", top, simulator, cache_dir=sim_cache)
-    res = runner.run_job(b, job, tmp_path / "run")
-    assert res["passed"] and not res.get("failures"), res.get("failures")
-    segs = [s for r in res["runs"] for s in r["segments"]]
-    assert sum(s["outputs"] for s in segs) >= 3 * len(q) and all(s["mismatches"] == 0 for s in segs)
-    assert set(res["runs"][0]["segments"][0]["latencies"]) == {man["latency_cycles"]}
+# The warped core and sensor top through generate / simulate (lint, byte-identical reruns, cocotb on both
+# simulators with stalls, a mid-stream reset and out-of-range codes): tests/test_warped_design.py.

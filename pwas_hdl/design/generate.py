@@ -111,7 +111,16 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
         from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
 
         return AdditiveFixedPointModel.from_sensor(sensor, layout=memory, **given)
+    if _is_warped(sensor):  # non-uniform partition: warp + the uniform core (pwas_hdl.fixedpoint.warp)
+        from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+        return WarpedFixedPointModel.from_sensor(sensor, layout=memory, **given)
     return FixedPointModel.from_sensor(sensor, layout=memory, **given)
+
+
+def _is_warped(sensor: PWASVirtualSensor) -> bool:
+    """True for a sensor fitted with ``breakpoints`` (a non-uniform grid: the warped designs)."""
+    return getattr(sensor.grid_, "breakpoints", None) is not None and getattr(sensor.grid_, "subsets", None) is None
 
 
 def _is_additive(sensor: PWASVirtualSensor) -> bool:
@@ -366,6 +375,15 @@ def build_design(
         raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")
     if additive and memory_init != "inline":
         raise InputError("--memory-init readmemh is not available for additive sensors (the weights of the flattened parts are inline initialisers)")
+    warped = _is_warped(sensor)  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
+    if warped:
+        for what, bad in (("--clock-mhz (timing closure)", target_mhz is not None),
+                          ("a classifier (fit --classify)", getattr(sensor, "classifier_", None) is not None),
+                          ("a recurrent sensor (fit --mz)", design == "recurrent"),
+                          ("an observer-bank sensor", getattr(sensor, "front_end_", None) is not None)):
+            if bad:
+                raise InputError(f"{what} is not available with a non-uniform partition (--breakpoints) yet; "
+                                 "fit with equal intervals or leave the option out")
     bank_model = None  # observer-bank front end (issue 12): pwas_hdl.fixedpoint.observer_bank
     if getattr(sensor, "front_end_", None) is not None:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
@@ -417,6 +435,10 @@ def build_design(
 
         comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
                                                      pipeline=pipe_arg)
+    elif warped:  # lag bank (sensor) -> warp + register -> the uniform core (parallel or serial)
+        from pwas_hdl.hdl.warp import build_warped_design
+
+        comp = build_warped_design(fxm, design, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture)
     elif design == "core":
         comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier, architecture=architecture)
     elif bank_model is not None:

@@ -53,6 +53,9 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
                                    "requant": {"rule": .., "mul": K, "add": C, "shift": S, "qmin": .., "qmax": ..,
                                                "product_bits": .., "error_bound": ..}, "initial_codes": [..]}],
                      "flow": "one sample in flight ..", "bit_true": "pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel"},
+      "warp": {"kind": "pow2", "input_bits": B_in, "core_input_bits": W, "latency_cycles": 1,  # only for a
+               "dimensions": [{"regressor", "breakpoints", "code_breaks", "exps", "f0", "F", "lo_u",  # non-uniform
+                               "width", "shifts"}, ..], "rule": .., "register": .., "meaning": ..},   # partition
       "front_end": {...}                         # only for observer-bank sensors: kind, cycles_per_sample,
                                                  # ii, stages_before_core, signals, formats, coefficients,
                                                  # feature_scale, widths, error_bound (FixedPointObserverBank.to_dict)
@@ -231,6 +234,8 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
             "sum_bits": hw["sum_bits"],
             "sum": fx["additive"]["sum"],
         }
+    if "warp" in info:  # non-uniform partition (issue 15): the warp in front of the core (pwas_hdl.hdl.warp)
+        man["warp"] = info["warp"]
     if "architecture" in info:  # parallel or serial (pwas_hdl.hdl.serial_core.architecture_info)
         man["architecture"] = info["architecture"]
     if timing is not None:

@@ -32,7 +32,7 @@ the unit grid (cells of one grid unit) with ``input_bits = W``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,7 @@ import numpy as np
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid, pow2_exponents
 
-__all__ = ["Pow2Warp", "WarpedFixedPointModel"]
+__all__ = ["Pow2Warp", "WarpInputFormat", "WarpedFixedPointModel"]
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,86 @@ class Pow2Warp:
                 "F": self.frac, "lo_u": self.lo_u, "width": self.width, "shifts": list(self.shifts())}
 
 
+@dataclass(frozen=True)
+class WarpInputFormat:
+    """Input code format of one dimension of a warped (power-of-two non-uniform) design.
+
+    Signed ``bits``-bit codes ``q`` with ``x = offset + lsb * q`` (as a port format ``s<bits>.0``
+    with ``scale = lsb``); the domain ``[lo, hi]`` is ``[lo_code, hi_code] = [B_0, B_p]`` in codes.
+    Two dimensions with equal formats (``==`` compares the quantisation only, not the cut points
+    inside the domain) can share one input code: the lags of one signal in the sensor top.
+
+    Attributes
+    ----------
+    bits : int
+    lo, hi : float
+        Domain, physical units.
+    partitions : int
+    lsb, offset : float
+        Physical units per code and of code 0.
+    lo_code, hi_code : int
+        ``B_0`` and ``B_p``.
+    breakpoints : tuple of float
+        The cut points (physical), ``p + 1`` (not compared).
+    code_breaks : tuple of int
+        ``B_0 .. B_p`` (not compared).
+    """
+
+    bits: int
+    lo: float
+    hi: float
+    partitions: int
+    lsb: float
+    offset: float
+    lo_code: int
+    hi_code: int
+    breakpoints: tuple[float, ...] = field(default=(), compare=False)
+    code_breaks: tuple[int, ...] = field(default=(), compare=False)
+
+    @property
+    def frac(self) -> int:
+        """0: the codes are integers (the cells are ``2**(f0 + e_k)`` codes, not one power of two)."""
+        return 0
+
+    @property
+    def format(self):
+        from pwas_hdl.fixedpoint.formats import FixedFormat
+
+        return FixedFormat(self.bits, 0, True, "half_up", "saturate")
+
+    @property
+    def port(self):
+        """:class:`~pwas_hdl.fixedpoint.formats.PortFormat` ``s<bits>.0``, ``scale = lsb``, :attr:`offset`."""
+        from pwas_hdl.fixedpoint.formats import PortFormat, SignalScaling
+
+        return PortFormat(self.format, SignalScaling(self.lsb, self.offset))
+
+    def quantize(self, x, return_saturated: bool = False):
+        """Input codes of physical values: ``floor(lo_code + (x - lo) / lsb + 1/2)``, saturated to
+        ``bits`` (as :meth:`pwas_hdl.fixedpoint.formats.InputFormat.quantize`: ``x = lo`` gives
+        ``lo_code`` exactly)."""
+        from pwas_hdl.fixedpoint.formats import _round_scaled
+
+        v = np.asarray(x, dtype=float)
+        if np.isnan(v).any():
+            raise ValueError("input values contain NaN; cannot quantize")
+        scaled = self.lo_code + (v - self.lo) / self.lsb
+        return self.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
+
+    def to_physical(self, q) -> np.ndarray:
+        """``lo + lsb * (q - lo_code)``."""
+        return self.lo + self.lsb * (np.asarray(q, dtype=np.int64) - self.lo_code).astype(float)
+
+    def to_dict(self) -> dict[str, Any]:
+        fmt = self.format
+        return {"format": str(fmt), "bits": self.bits, "signed": True, "F": 0, "partitions": self.partitions,
+                "lo": self.lo, "hi": self.hi, "lo_code": self.lo_code, "hi_code": self.hi_code,
+                "input_scale": "warp", "min_code": fmt.min_code, "max_code": fmt.max_code, "lsb": self.lsb,
+                "offset": self.offset, "scale": self.lsb, "breakpoints": list(self.breakpoints),
+                "code_breaks": list(self.code_breaks),
+                "physical": "offset + lsb * code; the warp maps the code to the uniform core's (manifest warp)"}
+
+
 class WarpedFixedPointModel:
     """Bit-true model of a power-of-two non-uniform PWAS: input quantisation, warp, uniform core.
 
@@ -140,7 +220,7 @@ class WarpedFixedPointModel:
         self.input_bits = int(input_bits)
         self.input_fill = float(input_fill)
         limit = min(input_fill * 2.0**input_bits, 2**input_bits - 1)
-        cells, lsb, offset = [], [], []
+        cells, lsb, offset, cuts = [], [], [], []
         for j in range(grid.n):
             b = grid.breakpoints[j] if grid.breakpoints is not None and grid.breakpoints[j] is not None else \
                 np.linspace(grid.lo[j], grid.hi[j], int(grid.partitions[j]) + 1)
@@ -162,7 +242,11 @@ class WarpedFixedPointModel:
             cells.append((tuple(int(v) for v in breaks), tuple(int(v) for v in e), f0))
             lsb.append((b[-1] - b[0]) / (s << f0))
             offset.append(b[0] - lo_in * lsb[-1])
+            cuts.append(tuple(float(v) for v in b))
         self.lsb, self.offset = np.array(lsb), np.array(offset)
+        self.inputs = [WarpInputFormat(self.input_bits, float(grid.lo[j]), float(grid.hi[j]), int(grid.partitions[j]),
+                                       float(lsb[j]), float(offset[j]), br[0], br[-1], cuts[j], br)
+                       for j, (br, _e, _f0) in enumerate(cells)]
         parts = grid.partitions
         unit = Grid(np.zeros(grid.n), parts.astype(float), parts)
         need = [f0 + max(e) for _, e, f0 in cells]
@@ -183,6 +267,99 @@ class WarpedFixedPointModel:
         self.nz = core.nz
         self.target_names = core.target_names
         self.regressor_names = core.regressor_names
+        self.regressor_signals = core.regressor_signals
+
+    # ------------------------------------------------------------------ the core's formats (a FixedPointModel's interface)
+    #: attributes of the uniform core that are the warped model's own (formats, memory, bound)
+    _CORE_ATTRIBUTES = ("output_format", "output_port", "weight_format", "weight_codes", "n_weights_saturated",
+                        "weight_error_max", "error_bound_lsb", "error_bound_weight", "error_bound_output",
+                        "output_may_saturate", "widths", "F", "shift", "rounding", "overflow", "layout", "rom",
+                        "weights", "reference_error", "reference_error_source")
+
+    def __getattr__(self, name: str):
+        if name in WarpedFixedPointModel._CORE_ATTRIBUTES:
+            return getattr(self.__dict__["core"], name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @property
+    def lo_codes(self) -> tuple[int, ...]:
+        """``B_0`` per dimension: the input code of the domain's lower bound."""
+        return tuple(f.lo_code for f in self.inputs)
+
+    @property
+    def frac_bits(self) -> tuple[int, ...]:
+        """``F_j`` of the uniform core behind the warp (one core cell = ``2**F_j`` codes of ``u``)."""
+        return tuple(self.core.frac_bits)
+
+    def to_physical_output(self, out_codes) -> np.ndarray:
+        """Physical output values (the core's output format)."""
+        return self.core.to_physical_output(out_codes)
+
+    def reference(self, q) -> np.ndarray:
+        """Float model (unquantised weights) at the physical inputs the codes ``q`` represent, shape (m, nz).
+
+        The warp is exact, so this is the uniform core's reference at the warped codes: the
+        non-uniform PWAS of the fit at ``represented_inputs(q)`` (clamped to the domain).
+        """
+        return self.core.reference(self.warp(q))
+
+    def trace(self, q) -> dict[str, np.ndarray]:
+        """The core's trace (:meth:`FixedPointModel.trace`) at the warped codes, with ``q`` the
+        input codes and ``u`` (m, n) the warped ones."""
+        qa = np.atleast_2d(np.asarray(q, dtype=np.int64))
+        u = self.warp(qa)
+        tr = self.core.trace(u)
+        tr["u"], tr["q"] = u, qa
+        return tr
+
+    def signal_input_formats(self) -> dict[str, WarpInputFormat]:
+        """The input format of each signal (the sensor top feeds one code to all its lags).
+
+        Raises
+        ------
+        InputError
+            Two lags of one signal are quantised differently (other domains or another number of
+            base steps): the lag bank cannot feed them one code.
+        """
+        res: dict[str, WarpInputFormat] = {}
+        for j, (sig, _lag) in enumerate(self.regressor_signals):
+            f = self.inputs[j]
+            if sig in res and res[sig] != f:
+                raise InputError(
+                    f"the lags of signal {sig!r} need different input codes (dimension {j}: lsb {f.lsb!r} on [{f.lo}, {f.hi}], "
+                    f"{f.bits}-bit codes {f.lo_code}..{f.hi_code}); the sensor top feeds one code per signal to all its lags, "
+                    "so their breakpoints need the same domain and the same number of base steps (generate --design core "
+                    "takes one code per regressor)"
+                )
+            res.setdefault(sig, f)
+        return res
+
+    def warp_info(self) -> dict[str, Any]:
+        """The manifest's ``warp`` entry without the hardware keys (bit-true facts of every dimension)."""
+        return {
+            "kind": "pow2",
+            "input_bits": self.input_bits,
+            "core_input_bits": int(self.warps[0].width),
+            "dimensions": [{"regressor": nm, "breakpoints": list(f.breakpoints), **w.to_dict()}
+                           for nm, f, w in zip(self.regressor_names, self.inputs, self.warps)],
+            "rule": "B_k <= q < B_(k+1): u = lo_u + k 2**F + ((q - B_k) << shifts[k]); q == B_p: lo_u + p 2**F; "
+                    "q < B_0: lo_u - 1; q > B_p: lo_u + p 2**F + 1 (the core clamps and flags both)",
+            "bit_true": "pwas_hdl.fixedpoint.warp.WarpedFixedPointModel",
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """Everything the manifest needs (as :meth:`FixedPointModel.to_dict`): the core's formats
+        with the warped inputs, plus ``warp``."""
+        d = self.core.to_dict()
+        try:
+            signals = {k: v.to_dict() for k, v in self.signal_input_formats().items()}
+        except InputError:
+            signals = None
+        d["inputs"] = [{"name": nm, "signal": sig, "lag": lag, **f.to_dict()}
+                       for nm, (sig, lag), f in zip(self.regressor_names, self.regressor_signals, self.inputs)]
+        d["signals"] = signals
+        d["warp"] = self.warp_info()
+        return d
 
     @classmethod
     def from_sensor(cls, sensor, **options: Any) -> "WarpedFixedPointModel":
@@ -192,11 +369,15 @@ class WarpedFixedPointModel:
         options.setdefault("regressor_names", lags.names(ins, outs))
         options.setdefault("regressor_signals", [((ins if kind == "u" else outs)[ch], lag) for kind, ch, lag in lags.signal_of_dimension()])
         options.setdefault("target_names", tgts)
-        if "reference_error" not in options:
+        from_rmse = "reference_error" not in options
+        if from_rmse:
             rmse = np.asarray(getattr(sensor, "train_rmse_", []), dtype=float).reshape(-1)
             rmse = rmse[np.isfinite(rmse) & (rmse > 0)]
             options["reference_error"] = float(rmse.max()) if rmse.size else None
-        return cls(sensor.grid_, sensor.weights_, **options)
+        model = cls(sensor.grid_, sensor.weights_, **options)
+        if from_rmse and options["reference_error"] is not None:
+            model.core.reference_error_source = "train_rmse"
+        return model
 
     # ------------------------------------------------------------------ integer path
     @property
@@ -206,9 +387,9 @@ class WarpedFixedPointModel:
     def quantize_inputs(self, x) -> np.ndarray:
         """Input codes of physical points (half up, saturated to ``B_in`` bits), shape (m, n)."""
         xa = np.atleast_2d(np.asarray(x, dtype=float))
-        q = np.floor((xa - self.offset) / self.lsb + 0.5)
-        lo, hi = self.code_range
-        return np.clip(q, lo, hi).astype(np.int64)
+        if xa.shape[1] != self.n:
+            raise ValueError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
+        return np.stack([f.quantize(xa[:, j]) for j, f in enumerate(self.inputs)], axis=1).astype(np.int64)
 
     def represented_inputs(self, q) -> np.ndarray:
         """Physical values of input codes, shape (m, n)."""
@@ -238,6 +419,6 @@ class WarpedFixedPointModel:
         return PortFormat(FixedFormat(self.input_bits, 0, True, "half_up", "saturate"),
                           SignalScaling(float(self.lsb[j]), float(self.offset[j]))).to_dict()
 
-    def to_dict(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, Any]:
         return {"input_bits": self.input_bits, "input_fill": self.input_fill, "lsb": self.lsb.tolist(),
                 "offset": self.offset.tolist(), "warps": [w.to_dict() for w in self.warps], "core_input_bits": self.warps[0].width}

@@ -171,6 +171,10 @@ class PWASCore(wiring.Component):
         self.latency = self.pipeline.latency(params.n)
         self.ii = 1
         self.round_output = bool(round_output)
+        #: optional first pipeline stage in front of the scale stage: ``f(m, pipe, payload, valid) ->
+        #: (valid, payload)``, e.g. the warp of a non-uniform partition (:func:`pwas_hdl.hdl.warp.attach_warp`,
+        #: which also adds its register to ``latency``)
+        self.input_stage = None
         #: bits per target in the output payload: B_out, or acc_width + 1 without the rounding
         self.out_field_width = params.out_width if self.round_output else params.acc_width + 1
         super().__init__(
@@ -230,6 +234,8 @@ class PWASCore(wiring.Component):
         nb = n + 1
         dw = big_f + 1
         cw = [bits_for(pj - 1) for pj in p.partitions]
+        if self.input_stage is not None:  # e.g. the warp (pwas_hdl.hdl.warp): n codes of in_width bits after it
+            valid, payload = self.input_stage(m, pipe, payload, valid)
 
         # ---------------------------------------------------------- A: scale / clamp / split
         cs, ds, oor = [], [], False

@@ -113,6 +113,10 @@ class PWASSensorTop(wiring.Component):
         A classifier's decision stage after the core (:mod:`pwas_hdl.hdl.argmax`, ``C = nz``
         scores of ``B_out`` bits, ``out_of_range`` carried through): the output payload then ends
         with the class index and the latency grows by ``argmax.latency``.
+    warps : list of Pow2Warp, optional
+        A non-uniform (power-of-two) partition: the lag bank holds ``B_in``-bit input codes
+        (``warps[0].input_bits``) and every regressor dimension is warped to the core's code in
+        one more register (:func:`pwas_hdl.hdl.warp.attach_warp`; latency + 1).
 
     Ports: ``clk``, ``rst``, ``in__valid``, ``in__ready``, ``in__payload`` (``S*B_in`` bits, one code
     per signal), ``out__valid``, ``out__ready``, ``out__payload`` (as the core, then the class index
@@ -130,14 +134,14 @@ class PWASSensorTop(wiring.Component):
     kind = "sensor"
 
     def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 argmax=None, architecture: str = "parallel"):
+                 argmax=None, architecture: str = "parallel", warps=None):
         self._MustUse__silence = True  # see PWASCore.__init__
         if len(dims) != params.n:
             raise ValueError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
         for s, lag in dims:
             if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
                 raise ValueError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
-        for s, (nm, _) in enumerate(signals):
+        for s, (nm, _) in enumerate(signals if warps is None else []):  # warped: the model checks its input codes
             fmt = {(params.lo_code[j], params.frac_bits[j], params.partitions[j]) for j, (sj, _) in enumerate(dims) if sj == s}
             if len(fmt) > 1:
                 raise ValueError(
@@ -151,6 +155,13 @@ class PWASSensorTop(wiring.Component):
         else:
             self.core = PWASCore(params, memory=memory, pipeline=pipeline)
         self.core._MustUse__silence = True  # its logic is inlined by elaborate(), never elaborated itself
+        #: bits of one signal's code in the payload and the lag bank (the core's, or the warp's input)
+        self.in_width = params.in_width
+        self.warp_entry = None  # the manifest's warp entry of a warped top (pwas_hdl.hdl.warp.build_warped_sensor)
+        if warps is not None:  # non-uniform partition: warp + register in front of the core (pwas_hdl.hdl.warp)
+            from pwas_hdl.hdl.warp import attach_warp
+
+            self.in_width = attach_warp(self.core, warps)
         self.params = params
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
@@ -164,7 +175,7 @@ class PWASSensorTop(wiring.Component):
         self.warmup = max(k for _, k in self.signals) - 1
         super().__init__(
             {
-                "in": In(stream.Signature(unsigned(len(self.signals) * params.in_width))),
+                "in": In(stream.Signature(unsigned(len(self.signals) * self.in_width))),
                 "out": Out(stream.Signature(unsigned(core_output_layout(params).size
                                                      + (argmax.index_width if argmax is not None else 0)))),
                 "warm": Out(1),
@@ -174,11 +185,12 @@ class PWASSensorTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
-        return sample_fields([nm for nm, _ in self.signals], self.params.in_width)
+        return sample_fields([nm for nm, _ in self.signals], self.in_width)
 
     @property
     def extra_info(self) -> dict:
         return {
+            **({"warp": self.warp_entry} if self.warp_entry is not None else {}),
             "lags": {
                 "signals": [{"name": nm, "lags": k} for nm, k in self.signals],
                 "regressor": [{"signal": self.signals[s][0], "lag": lag} for s, lag in self.dims],
@@ -196,8 +208,7 @@ class PWASSensorTop(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        p = self.params
-        b = p.in_width
+        b = self.in_width
         inp = getattr(self, "in")
         cur = [inp.payload[i * b : (i + 1) * b] for i in range(len(self.signals))]
         if self.warmup:

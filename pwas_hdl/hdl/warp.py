@@ -1,10 +1,15 @@
-"""RTL of the power-of-two warp (non-uniform partitions in hardware) and the warped core.
+"""RTL of the power-of-two warp (non-uniform partitions in hardware): the warped core and sensor top.
 
-:class:`WarpedPWASCore` = one combinational warp per dimension (the specification is
-:mod:`pwas_hdl.fixedpoint.warp`) in front of the unchanged :class:`~pwas_hdl.hdl.core.PWASCore`,
-which is inlined (``build_into``), behind one register on the warped codes (enabled with the
-core's pipeline): ports, flow control and II are the core's, the latency is the core's + 1; the
-input payload holds ``n`` signed ``B_in``-bit codes ``q`` (not the core's ``W``-bit ``u``).
+One combinational warp per dimension (the specification is :mod:`pwas_hdl.fixedpoint.warp`)
+and one register on the warped codes become the first pipeline stage of the unchanged core
+(:func:`attach_warp` sets :attr:`PWASCore.input_stage <pwas_hdl.hdl.core.PWASCore>`; the register
+advances with the core's pipeline): ports, flow control and II are the core's, the latency is
+the core's + 1; the input payload holds signed ``B_in``-bit codes ``q`` (not the core's ``W``-bit
+``u``). The same stage serves the parallel and the serial core (``architecture="serial"``: the
+warp register is one more front-end register of :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore`)
+and the virtual-sensor top (:class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop` with ``warps``: lag
+bank of ``B_in``-bit codes -> warp -> core). ``pwas-hdl generate`` builds all of them for a model
+fitted with ``--breakpoints quantile-pow2`` (:func:`build_warped_design`).
 
 Warp of one dimension (offset-binary ``qo = q + 2**(B_in-1)``, constants ``Bo_k = B_k + 2**(B_in-1)``)::
 
@@ -31,7 +36,8 @@ from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import sample_fields
 
-__all__ = ["WarpedPWASCore", "build_warped_core", "warp_into", "write_warped_folder"]
+__all__ = ["WarpedPWASCore", "attach_warp", "build_warped_core", "build_warped_sensor", "build_warped_design",
+           "warp_into", "write_warped_folder"]
 
 
 def warp_into(m: Module, q, warp, name: str):
@@ -105,32 +111,82 @@ def warp_into(m: Module, q, warp, name: str):
     return Cat(qu[: w - 1], ~qu[w - 1])  # a value, not a named alias (lint: see pwas_hdl.hdl._lintsafe)
 
 
+def attach_warp(core: PWASCore, warps) -> int:
+    """Put the warps (one per dimension) and their register in front of ``core`` (parallel or serial).
+
+    Sets ``core.input_stage`` and adds the register to ``core.latency``.
+
+    Parameters
+    ----------
+    core : PWASCore or SerialPWASCore
+        Not elaborated yet; its ``params`` are the uniform core's (``in_width = W``).
+    warps : sequence of Pow2Warp
+        One per regressor dimension, all with the same ``input_bits`` and ``width == params.in_width``.
+
+    Returns
+    -------
+    int
+        ``B_in``: bits of one input code in front of the warp.
+    """
+    warps = list(warps)
+    p = core.params
+    if len(warps) != p.n or {w.input_bits for w in warps} != {warps[0].input_bits} or any(w.width != p.in_width for w in warps):
+        raise ValueError(f"need {p.n} warps of one input width whose output width is the core's {p.in_width} bits")
+    if core.input_stage is not None:
+        raise ValueError("the core has an input stage already")
+    b = warps[0].input_bits
+
+    def stage(m: Module, pipe, payload, valid):
+        us = [warp_into(m, payload[j * b : (j + 1) * b], w, f"warp{j}") for j, w in enumerate(warps)]
+        v, regs = pipe.stage("s_warp", True, valid, {"u": us})  # s_warp_u<j>, s_warp_valid
+        return v, Cat(*regs["u"])
+
+    core.input_stage = stage
+    core.latency += 1
+    core.warps = warps
+    return b
+
+
+def warp_hw_info(model, latency_cycles: int = 1) -> dict:
+    """The manifest's ``warp`` entry: the model's :meth:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel.warp_info`
+    plus the hardware facts (cycles added, register names)."""
+    return {**model.warp_info(), "latency_cycles": int(latency_cycles), "register": "s_warp_u<j> (one per dimension)",
+            "meaning": "one warp per regressor dimension maps the input code q (s<B_in>.0, physical = offset + lsb * q) "
+                       "to the code u of the uniform core (core_input_bits): three comparators, a constant subtraction, "
+                       "two case tables over the base steps, a shift multiplexer, a constant addition; one register"}
+
+
 class WarpedPWASCore(wiring.Component):
-    """Warp stage (+ register) + PWAS core: ``n`` input codes ``q`` in, ``nz`` estimates out, every clock.
+    """Warp stage (+ register) + PWAS core: ``n`` input codes ``q`` in, ``nz`` estimates out.
 
     Parameters
     ----------
     model : pwas_hdl.fixedpoint.warp.WarpedFixedPointModel
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+    architecture : {"parallel", "serial"}
+        The core behind the warp (serial: II = n + 1, :mod:`pwas_hdl.hdl.serial_core`).
 
     Attributes
     ----------
-    core : PWASCore (inlined), latency, ii, memory_plan, pipeline, params : the core's
+    core : PWASCore (inlined), latency, ii, memory_plan, pipeline, params : the core's (latency + 1)
     warps : list of Pow2Warp
     """
 
     kind = "core"
 
-    def __init__(self, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, architecture: str = "parallel"):
+        from pwas_hdl.hdl.api import _make_core
+
         self._MustUse__silence = True
         self.warps = list(model.warps)
-        self.in_width = int(model.input_bits)
         params = CoreParams.from_model(model.core)
-        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True
+        self.in_width = attach_warp(self.core, self.warps)
         self.params = params
-        self.latency, self.ii = self.core.latency + 1, self.core.ii  # + the warp register
+        self.latency, self.ii = self.core.latency, self.core.ii
         self.memory_plan, self.pipeline = self.core.memory_plan, self.core.pipeline
+        self._model = model
         super().__init__({
             "in": In(stream.Signature(unsigned(params.n * self.in_width))),
             "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
@@ -143,26 +199,19 @@ class WarpedPWASCore(wiring.Component):
 
     @property
     def extra_info(self) -> dict:
-        return {"warp": [w.to_dict() for w in self.warps]}
+        return {"warp": warp_hw_info(self._model)}
 
     def elaborate(self, platform):
         m = Module()
         inp = getattr(self, "in")
-        b = self.in_width
-        us = [warp_into(m, inp.payload[j * b : (j + 1) * b], w, f"warp{j}") for j, w in enumerate(self.warps)]
-        # the warp register: one more pipeline stage, enabled by the core's advance (= in.ready)
-        regs = [Signal(w.width, name=f"s_warp_u{j}", reset_less=True) for j, w in enumerate(self.warps)]
-        valid = Signal(name="s_warp_valid")
-        with m.If(inp.ready):
-            m.d.sync += [r.eq(u) for r, u in zip(regs, us)] + [valid.eq(inp.valid)]
-        self.core.build_into(m, Cat(*regs), valid, inp.ready, self.out)
+        self.core.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
 
 def build_warped_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                      name: str = "pwas_core") -> WarpedPWASCore:
+                      name: str = "pwas_core", architecture: str = "parallel") -> WarpedPWASCore:
     """The warped core of a :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` (named for emit)."""
-    comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline)
+    comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture)
     comp.module_name = name
     comp._MustUse__silence = True
     comp.core.input_names = list(model.regressor_names)
@@ -170,60 +219,56 @@ def build_warped_core(model, *, memory: str = "banked", pipeline: Pipeline | str
     return comp
 
 
-def write_warped_folder(sensor, outdir, *, input_bits: int = 12, input_fill: float = 0.9, **formats):
-    """Write a design folder of the warped core of a sensor with power-of-two breakpoints.
+def build_warped_sensor(model, lags, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                        name: str = "pwas_sensor", architecture: str = "parallel"):
+    """The warped virtual-sensor top: lag bank of ``B_in``-bit codes -> warp (+ register) -> core.
 
-    The interim path until ``generate`` builds warped designs itself: the folder holds the Verilog
-    of :class:`WarpedPWASCore` and a valid ``manifest.json`` -- the manifest of the uniform core
-    of the same weights on the unit grid (built by :func:`pwas_hdl.design.generate.build_design`,
-    ``input_bits`` = the warp's ``W``), whose input port is replaced by the warped core's
-    (``n`` fields of ``input_bits`` bits, physical ``offset_j + lsb_j * code``, the domain in
-    codes ``[B_0, B_p]``) and whose latency is the warped core's. ``synth`` and the manifest-driven
-    testbench read it; ``simulate`` does not (it rebuilds a uniform bit-true model). ``model.json``
-    is that unit-grid model (the one the manifest describes), not the non-uniform one.
+    Parameters
+    ----------
+    model : pwas_hdl.fixedpoint.warp.WarpedFixedPointModel
+        Its lags of one signal must share one input quantisation (:meth:`signal_input_formats`).
+    lags : LagStructure
+    memory, pipeline, name, architecture : as :func:`pwas_hdl.hdl.api.build_sensor`
+
+    Returns
+    -------
+    PWASSensorTop
+        With ``warps``; ``extra_info`` adds the manifest's ``warp`` entry.
+    """
+    from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
+
+    model.signal_input_formats()  # InputError unless the lags of each signal can share one code
+    params = CoreParams.from_model(model.core)
+    signals, dims = lag_plan(model.core, lags)
+    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, architecture=architecture, warps=model.warps)
+    top.module_name = name
+    top.classifier = None
+    top._MustUse__silence = True
+    top.core.input_names = list(model.regressor_names)
+    top.core.target_names = list(model.target_names)
+    top.warp_entry = warp_hw_info(model)
+    return top
+
+
+def build_warped_design(model, design: str, lags, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                        name: str = "pwas_core", architecture: str = "parallel"):
+    """The component ``generate`` builds for a warped model: ``design`` "core" or "sensor"."""
+    if design == "core":
+        return build_warped_core(model, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
+    return build_warped_sensor(model, lags, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
+
+
+def write_warped_folder(sensor, outdir, *, input_bits: int = 12, input_fill: float = 0.9, design: str = "core", **options):
+    """Write the design folder of a sensor with power-of-two breakpoints: ``pwas-hdl generate``
+    (:func:`pwas_hdl.design.generate.generate`) with these options, kept for the callers of the
+    interim API.
 
     Returns
     -------
     (WarpedFixedPointModel, dict)
         The bit-true model the Verilog implements and the manifest written.
     """
-    import copy
-    from pathlib import Path
+    from pwas_hdl.design.generate import generate
 
-    import numpy as np
-
-    from pwas_hdl.design.generate import build_design
-    from pwas_hdl.design.manifest import manifest_errors, manifest_text
-    from pwas_hdl.errors import InternalError
-    from pwas_hdl.fit.geometry import Grid
-    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
-    from pwas_hdl.hdl.emit import emit_verilog
-
-    wm = WarpedFixedPointModel.from_sensor(sensor, input_bits=input_bits, input_fill=input_fill, **formats)
-    eq = copy.deepcopy(sensor)
-    p = sensor.grid_.partitions
-    eq.grid_, eq.breakpoints = Grid(np.zeros(sensor.grid_.n), p.astype(float), p), None
-    gd = build_design(eq, design="core", input_bits=wm.warps[0].width, input_fill=input_fill, **formats)
-    fm = gd.model
-    if (fm.frac_bits != wm.core.frac_bits or fm.lo_codes != wm.core.lo_codes or fm.output_format != wm.core.output_format
-            or not np.array_equal(fm.weight_codes, wm.core.weight_codes)):
-        raise InternalError("the uniform core of the warped design differs from the warp's bit-true core")
-    comp = build_warped_core(wm, name=gd.top)
-    verilog = emit_verilog(comp, gd.top)
-    man = copy.deepcopy(gd.manifest)
-    port = next(pt for pt in man["ports"] if pt["role"] == "in.payload")
-    b = wm.input_bits
-    port["width"] = b * sensor.grid_.n
-    for j, f in enumerate(port["fields"]):
-        f.update(lsb=j * b, width=b, format=wm.input_port_format(j),
-                 domain_codes=[wm.warps[j].code_breaks[0], wm.warps[j].code_breaks[-1]])
-    man["latency_cycles"] = comp.latency
-    errs = manifest_errors(man)
-    if errs:
-        raise InternalError(f"the warped design's manifest breaks its schema: {errs[0]}")
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "manifest.json").write_text(manifest_text(man), encoding="utf-8")
-    (out / man["files"]["verilog"]).write_text(verilog, encoding="utf-8")
-    (out / "model.json").write_text(gd.files["model.json"], encoding="utf-8")
-    return wm, man
+    gd = generate(sensor, outdir, design=design, input_bits=input_bits, input_fill=input_fill, **options)
+    return gd.model, gd.manifest
