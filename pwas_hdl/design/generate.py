@@ -507,7 +507,8 @@ def build_design(
         "manifest.json": manifest_text(man),
         "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else "")
         + (_classifier_section(man) if "classifier" in man else "")
-        + (_recurrence_section(man) if "recurrence" in man else ""),
+        + (_recurrence_section(man) if "recurrence" in man else "")
+        + (_warp_section(man) if "warp" in man else ""),
         files["instance_template"]: _instance(man),
         files["fusesoc_core"]: _fusesoc(man, memory_init),
         **hexes,
@@ -573,6 +574,12 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         lines.append(f"classifier of {c['target']} ({c['n_classes']} classes {labels}): argmax stage after the core, class index in "
                      f"{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}] {c['field']}, ties to the lowest class index, "
                      f"{c['stage_latency_cycles']} cycle(s) of the latency")
+    if "warp" in man:  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
+        w = man["warp"]
+        lines.append(f"non-uniform partition (power-of-two cells): a warp maps each s{w['input_bits']}.0 input code to the uniform "
+                     f"core's {w['core_input_bits']}-bit code, {w['latency_cycles']} register (in the latency); breakpoints:")
+        lines += [f"  {d['regressor']}: {', '.join(f'{v:.6g}' for v in d['breakpoints'])} (codes {', '.join(map(str, d['code_breaks']))})"
+                  for d in w["dimensions"]]
     if "recurrence" in man:
         from pwas_hdl.design.recurrent import recurrence_header_lines
 
@@ -638,6 +645,17 @@ def _design_kind(design: str, sensor: PWASVirtualSensor) -> str:
     if design == "recurrent" and not recurrent:
         raise InputError("design 'recurrent' needs a recurrent model (fit --mz or fit-map --state); use --design sensor")
     return "recurrent" if design == "sensor" and recurrent else design
+
+
+def _warp_section(man: dict) -> str:
+    """Report section of a non-uniform (power-of-two) partition: the warp in front of the core."""
+    w = man["warp"]
+    rows = [[f"`{d['regressor']}`", ", ".join(f"{v:.6g}" for v in d["breakpoints"]), ", ".join(map(str, d["code_breaks"])),
+             ", ".join(str(1 << e) for e in d["exps"]), d["F"]] for d in w["dimensions"]]
+    return (f"\n## Non-uniform partition\n\nEach input code (s{w['input_bits']}.0) is warped to the code of the uniform core "
+            f"({w['core_input_bits']} bits, `2**F` codes per cell) in {w['latency_cycles']} register, included in the latency: "
+            "comparators, a subtraction, two case tables, a shift (no multiplier, no divider).\n\n"
+            + _md_table(["regressor", "breakpoints", "input codes", "base steps per cell", "core F"], rows) + "\n")
 
 
 def _recurrence_section(man: dict) -> str:

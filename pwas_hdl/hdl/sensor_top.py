@@ -132,6 +132,14 @@ class PWASSensorTop(wiring.Component):
     """
 
     kind = "sensor"
+    #: the manifest's warp entry of a warped top (pwas_hdl.hdl.warp.build_warped_sensor), else None
+    warp_entry = None
+    _warp_in_width = None
+
+    @property
+    def in_width(self) -> int:
+        """Bits of one signal's code in the payload and the lag bank: the core's, or the warp's input."""
+        return self._warp_in_width or self.params.in_width
 
     def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                  argmax=None, architecture: str = "parallel", warps=None):
@@ -155,14 +163,11 @@ class PWASSensorTop(wiring.Component):
         else:
             self.core = PWASCore(params, memory=memory, pipeline=pipeline)
         self.core._MustUse__silence = True  # its logic is inlined by elaborate(), never elaborated itself
-        #: bits of one signal's code in the payload and the lag bank (the core's, or the warp's input)
-        self.in_width = params.in_width
-        self.warp_entry = None  # the manifest's warp entry of a warped top (pwas_hdl.hdl.warp.build_warped_sensor)
+        self.params = params
         if warps is not None:  # non-uniform partition: warp + register in front of the core (pwas_hdl.hdl.warp)
             from pwas_hdl.hdl.warp import attach_warp
 
-            self.in_width = attach_warp(self.core, warps)
-        self.params = params
+            self._warp_in_width = attach_warp(self.core, warps)
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
         self.argmax = argmax
