@@ -404,13 +404,18 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         h = grid.basis_matrix(xi)
         gam = (additive_tikhonov_matrix(grid, self.tikhonov_order) if self.additive is not None
                else tikhonov_matrix(grid, self.tikhonov_order))
+        method = "auto"
+        if self.additive is not None:  # first order: the factorisation (CG does not converge, see the module)
+            from pwas_hdl.fit.additive import additive_solver_method
+
+            method = additive_solver_method(grid, self.tikhonov_order)
         if self.sigma is None:
             cv = cross_validate_sigma(h, zt, gam, self.sigma_grid, self.cv_folds, self.cv_shuffle, progress=progress,
-                                      executor=executor)
+                                      executor=executor, method=method)
             sigma = cv.best_sigma
         else:
             cv, sigma = None, float(self.sigma)
-        w = solve_regularized(h, zt, sigma, gam).reshape(grid.n_vertices, nz)
+        w = solve_regularized(h, zt, sigma, gam, method=method).reshape(grid.n_vertices, nz)
         rec_info = None
         if self.mz:
             from pwas_hdl.fit.recurrent import refine_closed_loop
