@@ -22,6 +22,13 @@ contiguous blocks (default 21-value grid) for each fit separately.
 
 Rows: ``metric = rmse``, ``stage = float``, config ``breakpoints``, lags, p, N. ``--quick``: one
 run, Lorenz My = 2, p = 8 and a 5-value sigma grid, 6 three-tank training runs.
+
+Through the RTL (``--hardware``, :func:`run_hardware`; writes ``breakpoints_hw.json`` / ``.md``):
+run 0 of the rows above with the uniform and the ``quantile-pow2`` partition, each generated as the
+virtual-sensor top (``generate --design sensor``, default formats, 12-bit inputs; the
+``quantile-pow2`` one with the warp in front of the core) and its test data replayed through the
+Verilog (``simulate``, Verilator), the hardware RMSE beside the bit-true and the float one, and
+the mismatches against the bit-true model.
 """
 
 from __future__ import annotations
@@ -185,7 +192,118 @@ def plot(traces: dict, path: str | Path) -> Path:
     return br.save_figure(fig, path)
 
 
+HW_RULES = (None, "quantile-pow2")
+
+
+def _replay(sensor, design_dir: Path, cols: dict, window, z_true: np.ndarray, simulator: str, cache: Path, say) -> dict:
+    """Generate the sensor top of ``sensor``, replay ``cols`` (CSV columns) and score the estimates on ``window``."""
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.io.csv_table import format_csv
+    from pwas_hdl.verify.simulation import simulate_data
+
+    gd = generate(sensor, design_dir, design="sensor")
+    csv = design_dir.parent / f"{design_dir.name}.csv"
+    csv.write_text(format_csv(cols))
+    t0 = time.monotonic()
+    res = simulate_data(design_dir, csv, design_dir.parent / f"{design_dir.name}_hw.csv", simulator=simulator,
+                        engine="native" if simulator == "verilator" else "cocotb", cache_dir=cache)
+    s = res["summary"]
+    rows = res["rows"]
+    keep = window[rows]
+    from pwas_hdl.io.csv_table import read_csv
+
+    out = read_csv(design_dir.parent / f"{design_dir.name}_hw.csv")
+    t = sensor.signal_names()[2][0]
+    e = {stage: float(np.sqrt(np.mean((out.numeric([f"{t}_{stage}"])[keep, 0] - z_true[rows][keep]) ** 2)))
+         for stage in ("hw", "bittrue", "float")}
+    say(f"  {design_dir.name}: {s['samples']} outputs, {s['mismatches']} mismatches, RMSE hw {e['hw']:.4g} float {e['float']:.4g}")
+    return {"design": gd.manifest["design"], "latency_cycles": gd.manifest["latency_cycles"], "ii": gd.manifest["ii"],
+            "warp": "warp" in gd.manifest, "input_bits": gd.manifest["generator"]["options"]["input_bits"] or 12,
+            "weights": gd.manifest["formats"]["weight"]["str"], "outputs": int(s["samples"]), "mismatches": int(s["mismatches"]),
+            "passed": bool(s["checks"]["passed"]), "simulator": simulator, "rmse": e, "sim_wall_s": round(time.monotonic() - t0, 1)}
+
+
+def run_hardware(workdir: Path, simulator: str = "verilator", progress: Callable[[str], None] | None = print) -> dict:
+    """Run 0 of the Lorenz (My = 4, p = 7) and three-tank rows, uniform and quantile-pow2, through the RTL."""
+    from pwas_hdl.benchmarks.bench_common import PWASConfig, fit_pwas
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.lorenz import lorenz
+    from pwas_hdl.systems.three_tank import three_tank_paper_run, three_tank_training_runs
+
+    say = progress or (lambda m: None)
+    work = Path(workdir)
+    work.mkdir(parents=True, exist_ok=True)
+    cache = work / "sim-cache"
+    recs = []
+    n_train, n_test, my, p = 6000, 2000, 4, 7
+    data = lorenz(n_train + n_test + my - 1, seed=0, burn_in=1000)
+    te = slice(n_train, None)
+    for rule in HW_RULES:
+        say(f"lorenz My = {my}, p = {p}, {_label(rule)}")
+        s = PWASVirtualSensor(mu=0, my=my, partitions=p, gamma=1.2, breakpoints=rule, output_names=["y"], target_names=["z"])
+        s.fit(None, data.y[:n_train], data.z[:n_train])
+        win = np.ones(len(data.y[te]), dtype=bool)
+        r = _replay(s, work / f"lorenz_{_label(rule)}", {"y": data.y[te, 0], "z_true": data.z_true[te, 0]}, win,
+                    data.z_true[te, 0], simulator, cache, say)
+        recs.append({"system": "lorenz", "target": "z", "breakpoints": _label(rule), "My": my, "p": p, "N": (p + 1) ** my, **r})
+    cfg = PWASConfig(2, 3, 4)
+    samples = 1000
+    train = three_tank_training_runs(20, samples, seed=1000, noise=0.0).runs()
+    test = three_tank_paper_run(samples, seed=0, noise=0.0)
+    win = np.arange(samples) >= 100
+    for tgt, col in (("x1", 0), ("x3", 1)):
+        for rule in HW_RULES:
+            say(f"three-tank {tgt}, {_label(rule)}")
+            m = _fit_with(fit_pwas, rule, cfg, [d.u[:, :1] for d in train], [d.y for d in train],
+                          [d.z[:, col:col + 1] for d in train], {"u": ["u1"], "y": ["y"], "z": [tgt]}, None)
+            r = _replay(m, work / f"three_tank_{tgt}_{_label(rule)}", {"u1": test.u[:, 0], "y": test.y[:, 0],
+                                                                      f"{tgt}_true": test.z_true[:, col]}, win,
+                        test.z_true[:, col], simulator, cache, say)
+            recs.append({"system": "three-tank", "target": tgt, "breakpoints": _label(rule), "Mu": cfg.mu, "My": cfg.my, "p": cfg.p,
+                         "N": (cfg.p + 1) ** (cfg.mu + cfg.my), **r})
+    return {"bench": "breakpoints-hw", "run": 0, "rows": recs, "environment": br.environment(),
+            "note": "float = the fitted sensor at the real inputs, bittrue = the fixed-point model at the quantised inputs, "
+                    "hw = the Verilog's outputs (simulate); Lorenz: RMSEE vs noise-free z over 2000 test samples; three-tank: "
+                    "RMSE vs the noise-free state over t >= 100 of the paper's run"}
+
+
+def hardware_markdown(hw: dict) -> str:
+    out = ["# Non-uniform vs uniform partitions through the RTL (`benchmarks/breakpoints_accuracy.py --hardware`)", "",
+           f"Run 0; virtual-sensor tops, default formats, 12-bit input codes, replayed with `simulate` ({hw['rows'][0]['simulator']}). "
+           + hw["note"] + ".", "",
+           "| system | target | lags, p | N | partition | latency | weights | outputs | mismatches | RMSE float | RMSE bit-true | RMSE hw |",
+           "|---|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|"]
+    for r in hw["rows"]:
+        lags = (f"Mu = {r['Mu']}, " if r.get("Mu") else "") + f"My = {r['My']}, p = {r['p']}"
+        e = r["rmse"]
+        out.append(f"| {r['system']} | {r['target']} | {lags} | {r['N']} | {r['breakpoints']} | {r['latency_cycles']} | {r['weights']} | "
+                   f"{r['outputs']} | {r['mismatches']} | {e['float']:.4g} | {e['bittrue']:.4g} | {e['hw']:.4g} |")
+    return "\n".join(out) + "\n"
+
+
 def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - script entry
+    import sys
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    if "--hardware" in args:  # the RTL replay (not a pwas-hdl-bench-results document)
+        import argparse
+        import json
+        import tempfile
+
+        from pwas_hdl.io.atomic import atomic_write_text
+
+        ap = argparse.ArgumentParser(description="non-uniform vs uniform partitions through the RTL")
+        ap.add_argument("--hardware", action="store_true")
+        ap.add_argument("--simulator", default="verilator", choices=("icarus", "verilator"))
+        ap.add_argument("--outdir", type=Path, default=br.default_outdir())
+        ap.add_argument("--workdir", type=Path, default=None)
+        a = ap.parse_args(args)
+        hw = run_hardware(a.workdir or Path(tempfile.mkdtemp(prefix="pwas-bp-hw-")), a.simulator)
+        a.outdir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(a.outdir / "breakpoints_hw.json", json.dumps(hw, indent=1) + "\n")
+        atomic_write_text(a.outdir / "breakpoints_hw.md", hardware_markdown(hw))
+        print(hardware_markdown(hw))
+        return
     br.bench_main(argv, stem="breakpoints_accuracy", description=__doc__.splitlines()[0], run=run, markdown=markdown,
                   plot=plot, default_runs=3)
 

@@ -81,6 +81,19 @@ def test_quantile_and_pow2_breakpoints(rng):
     assert pow2_exponents(q[0]) is None
 
 
+def test_quantile_groups_pool_the_samples_of_a_group(rng):
+    x = np.stack([rng.normal(0, 1, 3000), rng.normal(0.5, 2, 3000), rng.uniform(-5, 5, 3000)], axis=1)
+    lo, hi = np.array([-6.0, -6.0, -6.0]), np.array([6.0, 6.0, 6.0])
+    q = quantile_breakpoints(x, lo, hi, 4, groups=[[0, 1], [2]])
+    np.testing.assert_array_equal(q[0], q[1])
+    pooled = x[:, :2].reshape(-1)
+    np.testing.assert_allclose(q[0][1:-1], np.quantile(pooled[np.abs(pooled) <= 6], [0.25, 0.5, 0.75]))
+    np.testing.assert_array_equal(q[2], quantile_breakpoints(x, lo, hi, 4)[2])
+    hi2 = np.array([6.0, 7.0, 6.0])  # another domain: not pooled
+    q2 = quantile_breakpoints(x, lo, hi2, 4, groups=[[0, 1]])
+    np.testing.assert_array_equal(q2[0], quantile_breakpoints(x, lo, hi2, 4)[0])
+
+
 # ------------------------------------------------------------------------------------------ fit / model file / CLI
 @pytest.fixture(scope="module")
 def lorenz_csv(tmp_path_factory):

@@ -37,6 +37,7 @@ def test_warped_sensor_manifest(warped_sensor, tmp_path):
     from pwas_hdl.verify.simulation import load_design
 
     m, _ = warped_sensor
+    np.testing.assert_array_equal(m.grid_.breakpoints[0], m.grid_.breakpoints[1])  # one set of cuts per signal
     gd = generate(m, tmp_path / "s", design="sensor", input_bits=10)
     man = gd.manifest
     w = man["warp"]

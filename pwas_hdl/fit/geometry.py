@@ -452,7 +452,7 @@ def _same_breakpoints(a, b) -> bool:
 
 
 def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int],
-                         min_width: float = 0.05) -> list[np.ndarray]:
+                         min_width: float = 0.05, groups: Sequence[Sequence[int]] | None = None) -> list[np.ndarray]:
     """Breakpoints at the data quantiles: every cell of dimension ``j`` holds about ``1/p_j`` of the samples.
 
     Parameters
@@ -468,6 +468,10 @@ def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float]
         No cell narrower than ``min_width`` times the uniform width ``(hi - lo) / p`` (repeated
         values and tails would give empty cells): the cuts are then pushed apart, keeping their
         order.
+    groups : sequence of sequence of int, optional
+        Dimensions that share one set of cuts (e.g. the lags of one signal, which the sensor top
+        feeds one input code): the quantiles of their pooled samples. A group is pooled only when
+        its dimensions have the same domain and partitions; other dimensions are cut alone.
 
     Returns
     -------
@@ -480,9 +484,15 @@ def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float]
         raise ValueError(f"quantile breakpoints need samples with {lo_a.size} columns, got shape {xa.shape}")
     if not 0 < min_width < 1:
         raise ValueError(f"min_width must be in (0, 1), got {min_width!r}")
+    pool = {j: [j] for j in range(lo_a.size)}
+    for g in groups or ():
+        g = [int(j) for j in g]
+        if len({(lo_a[j], hi_a[j], int(parts[j])) for j in g}) == 1:
+            for j in g:
+                pool[j] = g
     out = []
     for j, p in enumerate(parts):
-        col = xa[:, j]
+        col = xa[:, pool[j]].reshape(-1)
         col = col[(col >= lo_a[j]) & (col <= hi_a[j])]
         if col.size == 0:
             raise ValueError(f"no sample of dimension {j} lies inside its domain [{lo_a[j]}, {hi_a[j]}]: no quantiles")
@@ -503,7 +513,7 @@ def _spread(b: np.ndarray, gap: float) -> np.ndarray:
 
 
 def pow2_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], partitions: int | Sequence[int],
-                     max_ratio: int = MAX_POW2_RATIO) -> list[np.ndarray]:
+                     max_ratio: int = MAX_POW2_RATIO, groups: Sequence[Sequence[int]] | None = None) -> list[np.ndarray]:
     """Quantile breakpoints whose cell widths are power-of-two multiples of one base step per dimension.
 
     The quantile cell widths ``t_k`` (:func:`quantile_breakpoints`) are rounded in the log domain:
@@ -519,7 +529,7 @@ def pow2_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], pa
     if not isinstance(max_ratio, (int, np.integer)) or max_ratio < 1 or max_ratio & (max_ratio - 1):
         raise ValueError(f"max_ratio must be a power of two >= 1, got {max_ratio!r}")
     emax = int(max_ratio).bit_length() - 1
-    q = quantile_breakpoints(x, lo, hi, partitions)
+    q = quantile_breakpoints(x, lo, hi, partitions, groups=groups)  # groups: identical cuts, identical rounding
     out = []
     for b in q:
         t = np.diff(b)

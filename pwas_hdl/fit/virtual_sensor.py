@@ -204,15 +204,19 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
                         "give fewer candidates (--sigma-grid)")
 
-    def _make_grid(self, xi: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Grid:
-        """The partition of the fit: uniform, at data quantiles, or at the given breakpoints."""
+    def _make_grid(self, xi: np.ndarray, lo: np.ndarray, hi: np.ndarray, groups=None) -> Grid:
+        """The partition of the fit: uniform, at data quantiles, or at the given breakpoints.
+
+        ``groups``: dimensions whose quantile cuts are taken from their pooled samples (the lags of
+        one signal with ``share_lag_domain``: one set of cuts per signal, so that the sensor top
+        feeds one input code to all of them, :mod:`pwas_hdl.hdl.warp`)."""
         bp = self.breakpoints
         if bp is None:
             return Grid(lo, hi, self.partitions)
         if isinstance(bp, str):
             parts = Grid(lo, hi, self.partitions).partitions  # validated partitions
             rule = quantile_breakpoints if bp == "quantile" else pow2_breakpoints
-            return Grid(lo, hi, parts, breakpoints=rule(xi, lo, hi, parts))
+            return Grid(lo, hi, parts, breakpoints=rule(xi, lo, hi, parts, groups=groups))
         rows = [np.asarray(b, dtype=float).reshape(-1) for b in bp]
         if len(rows) != xi.shape[1]:
             raise InputError(f"{len(rows)} breakpoint lists for n = {xi.shape[1]} regressors (one list per regressor)")
@@ -396,7 +400,11 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             grid = AdditiveGrid(lo, hi, self.partitions, parse_additive(self.additive, lags.signal_of_dimension()))
             basis_dims = grid.basis_dims
         else:
-            grid = self._make_grid(xi, lo, hi)
+            groups = None  # one set of quantile cuts per signal when its lags share the domain
+            if self.share_lag_domain and lags is not None and fe is None:
+                sod = lags.signal_of_dimension()
+                groups = [[j for j, d in enumerate(sod) if d[:2] == key] for key in dict.fromkeys(d[:2] for d in sod)]
+            grid = self._make_grid(xi, lo, hi, groups)
             basis_dims = grid.n
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
