@@ -248,7 +248,8 @@ class FixedPointModel:
             raise TypeError(f"grid must be a pwas_hdl.fit.geometry.Grid, got {type(grid).__name__}")
         if getattr(grid, "breakpoints", None) is not None:  # the input formats below assume equal cells
             raise InputError("the fixed-point model needs a uniform grid; a model fitted with --breakpoints "
-                             "(non-uniform partition) has no bit-true model / hardware yet")
+                             "(non-uniform partition) has the warped model of generate / simulate "
+                             "(pwas_hdl.fixedpoint.warp), not available in this command yet")
         w = np.asarray(weights, dtype=float)
         if w.ndim == 1:
             w = w[:, None]

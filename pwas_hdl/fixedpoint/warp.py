@@ -277,8 +277,9 @@ class WarpedFixedPointModel:
                         "weights", "reference_error", "reference_error_source")
 
     def __getattr__(self, name: str):
-        if name in WarpedFixedPointModel._CORE_ATTRIBUTES:
-            return getattr(self.__dict__["core"], name)
+        core = self.__dict__.get("core")
+        if core is not None and name in WarpedFixedPointModel._CORE_ATTRIBUTES:
+            return getattr(core, name)
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     @property
