@@ -27,6 +27,7 @@ hardware estimates), and, with ``--synth``, one ECP5 place and route of the ``pa
 
     python benchmarks/additive.py [--runs 5] [--quick] [--outdir benchmarks/results]
     python benchmarks/additive.py --hardware [--synth]
+    python benchmarks/additive.py --heli-hardware      # the additive helicopter cores on ECP5, once
 
 Nothing here asserts on times.
 """
@@ -292,6 +293,24 @@ def run_heli_hardware(kinds=("time", "pairs"), workdir: Path | None = None,
     return out
 
 
+def heli_hardware_markdown(hw: dict[str, Any]) -> str:
+    """The additive helicopter cores beside the full Table VI-size core (ECP5, the settings of ``hw_tables``)."""
+    lines = ["## Helicopter size: additive Mu = My = 4 cores beside the full Mu = My = 2 core", "",
+             f"{hw['data']}; core designs, default pipeline, 12-bit inputs, ECP5 LFE5U-45F, 150 MHz constraint, nextpnr seed 1, "
+             "the timing harness of `hw_tables` (the full core: `hw_tables.json`, design heli_mu2_my2_p3, fitted on the same plant).", "",
+             "| sensor | n | parts | N | weights | memories (words) | cycles | fmax (MHz) | latency (ns) | LUT4 | FF | DSP | BRAM |",
+             "|---|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    f = hw.get("full_reference")
+    if f:
+        lines.append(f"| full Mu = My = 2 | {f['n']} | 1 | {f['N']} | {f['weights_bits']} bits | - | {f['latency_cycles']} | "
+                     f"{f['fmax_mhz']:.1f} | {f['latency_ns']:.1f} | {f['luts']} | {f['ffs_core']} | {f['dsp']} | {f['bram']} |")
+    for d in hw["designs"]:
+        lines.append(f"| additive {d['kind']} Mu = My = 4 | {d['n']} | {d['parts']} | {d['N']} | {d['weights']} | "
+                     f"{d['memory']['memories']} ({d['memory']['words']}) | {d['latency_cycles']} | {d['fmax_mhz']:.1f} | "
+                     f"{d['latency_ns']:.1f} | {d['luts']} | {d['ffs_core']} | {d['dsp']} | {d['bram']} |")
+    return "\n".join(lines) + "\n"
+
+
 def hardware_markdown(hw: dict[str, Any]) -> str:
     lines = ["## Additive Lorenz My = 8 in hardware", "", f"{hw['data']}; virtual-sensor top (lag bank + parts + sum), cocotb.", "",
              "| sensor | parts | N | weights | latency | memories (words) | simulator | outputs | mismatches | II | RMSEE (hw) |",
@@ -329,7 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.heli_hardware:
         hw = run_heli_hardware(workdir=a.workdir)
         atomic_write_text(a.outdir / "additive_heli_hw.json", json.dumps(hw, indent=1) + "\n")
-        print(json.dumps(hw["designs"], indent=1))
+        atomic_write_text(a.outdir / "additive_heli_hw.md", heli_hardware_markdown(hw))
+        print(heli_hardware_markdown(hw))
         return 0
     if a.hardware:
         hw = run_hardware(synth=a.synth, workdir=a.workdir)
