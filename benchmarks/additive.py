@@ -285,6 +285,7 @@ def run_heli_hardware(kinds=("time", "pairs"), workdir: Path | None = None,
         b = full["builds"]["ecp5"]["default"]
         out["full_reference"] = {"design": HELI_FULL_DESIGN, "source": "benchmarks/results/hw_tables.json", "n": full["n"],
                                  "N": full["N"], "weights_bits": full["memory"]["weight_bits"],
+                                 "memories": b["memory_plan"]["memories"], "words": b["memory_plan"]["words"],
                                  **{k: b.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp",
                                                           "bram", "bram_bits")}}
     except (OSError, ValueError, KeyError, StopIteration):
@@ -302,7 +303,7 @@ def heli_hardware_markdown(hw: dict[str, Any]) -> str:
              "|---|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     f = hw.get("full_reference")
     if f:
-        lines.append(f"| full Mu = My = 2 | {f['n']} | 1 | {f['N']} | {f['weights_bits']} bits | - | {f['latency_cycles']} | "
+        lines.append(f"| full Mu = My = 2 | {f['n']} | 1 | {f['N']} | {f['weights_bits']} bits | {f.get('memories', '-')} ({f.get('words', '-')}) | {f['latency_cycles']} | "
                      f"{f['fmax_mhz']:.1f} | {f['latency_ns']:.1f} | {f['luts']} | {f['ffs_core']} | {f['dsp']} | {f['bram']} |")
     for d in hw["designs"]:
         lines.append(f"| additive {d['kind']} Mu = My = 4 | {d['n']} | {d['parts']} | {d['N']} | {d['weights']} | "
