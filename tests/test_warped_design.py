@@ -155,3 +155,18 @@ def test_simulate_writes_hw_beside_bittrue_and_float(warped_sensor, sim_cache, t
     np.testing.assert_array_equal(hw, bt)
     np.testing.assert_allclose(fl, m.predict(None, d.y[:300])[:, 0], rtol=1e-12)
     assert np.max(np.abs(hw - fl)) < 0.05 * np.std(fl)  # quantised, close to the float sensor
+
+
+@pytest.mark.synth
+def test_warped_sensor_synth_and_report(warped_sensor, tmp_path):
+    """``synth`` (Yosys, generic target) and ``report`` read the warped folder."""
+    from pwas_hdl import collect_report, report_markdown, synthesize
+    from pwas_hdl.design.generate import generate
+
+    m, _ = warped_sensor
+    generate(m, tmp_path / "g", design="sensor", input_bits=10)
+    r = synthesize(tmp_path / "g", "generic")
+    assert r["luts"] > 0 and r["dsp"] >= 0 and r["latency_cycles"] == 8
+    md = report_markdown(collect_report(tmp_path / "g", []))
+    assert "generic" in md and "inputs s10.0" in md
+    assert "## Non-uniform partition" in (tmp_path / "g" / "report.md").read_text()
