@@ -201,8 +201,15 @@ class WarpedFixedPointModel:
         The uniform core on the unit grid, ``input_bits = W``.
     lsb, offset : ndarray, shape (n,)
         ``x = offset + lsb * q`` (physical units).
+    inputs : list of WarpInputFormat
+        The input code format of every dimension.
     error_bound : float
         The core's (the warp is exact).
+
+    The model has the interface of a :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` that
+    ``generate``, the manifest and ``simulate`` use (``evaluate``, ``reference``, ``trace``,
+    ``quantize_inputs``, ``signal_input_formats``, ``to_dict``, ``lo_codes`` = ``B_0``, and the
+    core's formats, memory and bound: ``output_format``, ``weight_format``, ``widths``, ...).
     """
 
     def __init__(self, grid: Grid, weights: np.ndarray, *, input_bits: int = 12, input_fill: float = 0.9, **core_options: Any):
