@@ -223,8 +223,10 @@ def _replay(sensor, design_dir: Path, cols: dict, window, z_true: np.ndarray, si
             "passed": bool(s["checks"]["passed"]), "simulator": simulator, "rmse": e, "sim_wall_s": round(time.monotonic() - t0, 1)}
 
 
-def run_hardware(workdir: Path, simulator: str = "verilator", progress: Callable[[str], None] | None = print) -> dict:
-    """Run 0 of the Lorenz (My = 4, p = 7) and three-tank rows, uniform and quantile-pow2, through the RTL."""
+def run_hardware(workdir: Path, simulator: str = "verilator", progress: Callable[[str], None] | None = print,
+                 synth: bool = False) -> dict:
+    """Run 0 of the Lorenz (My = 4, p = 7) and three-tank rows, uniform and quantile-pow2, through the RTL;
+    ``synth``: the two Lorenz sensor tops placed and routed once on ECP5 (``pwas-hdl synth`` defaults)."""
     from pwas_hdl.benchmarks.bench_common import PWASConfig, fit_pwas
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
     from pwas_hdl.systems.lorenz import lorenz
@@ -245,6 +247,12 @@ def run_hardware(workdir: Path, simulator: str = "verilator", progress: Callable
         win = np.ones(len(data.y[te]), dtype=bool)
         r = _replay(s, work / f"lorenz_{_label(rule)}", {"y": data.y[te, 0], "z_true": data.z_true[te, 0]}, win,
                     data.z_true[te, 0], simulator, cache, say)
+        if synth:
+            from pwas_hdl.flow.synthesis import synthesize
+
+            sy = synthesize(work / f"lorenz_{_label(rule)}", "ecp5")
+            r["ecp5"] = {k: sy.get(k) for k in ("part", "luts", "ffs", "carry", "dsp", "bram", "fmax_mhz", "latency_cycles")}
+            say(f"  ECP5: {r['ecp5']}")
         recs.append({"system": "lorenz", "target": "z", "breakpoints": _label(rule), "My": my, "p": p, "N": (p + 1) ** my, **r})
     cfg = PWASConfig(2, 3, 4)
     samples = 1000
@@ -278,6 +286,12 @@ def hardware_markdown(hw: dict) -> str:
         e = r["rmse"]
         out.append(f"| {r['system']} | {r['target']} | {lags} | {r['N']} | {r['breakpoints']} | {r['latency_cycles']} | {r['weights']} | "
                    f"{r['outputs']} | {r['mismatches']} | {e['float']:.4g} | {e['bittrue']:.4g} | {e['hw']:.4g} |")
+    syn = [r for r in hw["rows"] if r.get("ecp5")]
+    if syn:
+        out += ["", "ECP5 (`pwas-hdl synth` defaults: LFE5U-45F, timing harness, nextpnr seed 1), the Lorenz sensor tops:", "",
+                "| partition | LUT4 | FF | carry | DSP | BRAM | fmax (MHz) | cycles |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        out += [f"| {r['breakpoints']} | {r['ecp5']['luts']} | {r['ecp5']['ffs']} | {r['ecp5']['carry']} | {r['ecp5']['dsp']} | "
+                f"{r['ecp5']['bram']} | {r['ecp5']['fmax_mhz']} | {r['ecp5']['latency_cycles']} |" for r in syn]
     return "\n".join(out) + "\n"
 
 
@@ -297,8 +311,9 @@ def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - scrip
         ap.add_argument("--simulator", default="verilator", choices=("icarus", "verilator"))
         ap.add_argument("--outdir", type=Path, default=br.default_outdir())
         ap.add_argument("--workdir", type=Path, default=None)
+        ap.add_argument("--synth", action="store_true", help="also place and route the two Lorenz sensor tops on ECP5, once")
         a = ap.parse_args(args)
-        hw = run_hardware(a.workdir or Path(tempfile.mkdtemp(prefix="pwas-bp-hw-")), a.simulator)
+        hw = run_hardware(a.workdir or Path(tempfile.mkdtemp(prefix="pwas-bp-hw-")), a.simulator, synth=a.synth)
         a.outdir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(a.outdir / "breakpoints_hw.json", json.dumps(hw, indent=1) + "\n")
         atomic_write_text(a.outdir / "breakpoints_hw.md", hardware_markdown(hw))
