@@ -46,7 +46,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
+from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
 from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
 
@@ -238,7 +238,7 @@ class PWASCore(wiring.Component):
             valid, payload = self.input_stage(m, pipe, payload, valid)
 
         # ---------------------------------------------------------- A: scale / clamp / split
-        cs, ds, oor = [], [], False
+        cs, ds, oor_j = [], [], []
         for j in range(n):
             pj, fj = p.partitions[j], p.frac_bits[j]
             q = payload[j * bin_ : (j + 1) * bin_]
@@ -265,7 +265,7 @@ class PWASCore(wiring.Component):
                 top = self._name(m, top, f"top{j}")
             if not isinstance(over, bool):
                 over = self._name(m, over, f"over{j}")
-            oor = _or(oor, _or(under, over))
+            oor_j.append(_or(under, over))
             # inside: (qu - L) mod 2**W holds the cell (upper bits) and the fraction (lower bits)
             t = add_const_wrap(m, qu[:w], -big_l, f"t{j}")
             if sc:  # exact scale: t in [0, S) -> t' = (t * K) >> R in [0, p * 2**F_j), cell and fraction
@@ -308,16 +308,50 @@ class PWASCore(wiring.Component):
             if isinstance(c, int) and w > fj:  # p_j = 1: the cell is always 0
                 sink_unused(m, t[fj:w], f"t{j}_cell")
 
-        valid, r = pipe.stage("s_split", pl.split, valid, {"c": cs, "d": ds, "oor": oor})
-        cs, ds, oor = r["c"], r["d"], r["oor"]
+        # the out-of-range flags of the dimensions are registered one by one and joined after the
+        # split register (the flag is only needed at the output)
+        valid, r = pipe.stage("s_split", pl.split, valid, {"c": cs, "d": ds, "oor": oor_j})
+        cs, ds = r["c"], r["d"]
+        oor = False
+        for f in r["oor"]:
+            oor = _or(oor, f)
 
         # ---------------------------------------------------------- B: rank + address precompute
+        # the n(n-1)/2 comparison bits are what the rank register holds; the case tables that turn
+        # them into thermometer codes come after it (one carry chain per stage)
+        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+        ge_bits = [self._name(m, ds[i] >= ds[j], f"ge_{i}_{j}") for i, j in pairs]  # ties go to i < j
+
+        # the base address and the bank rotation are sums over the dimensions: their first tree level
+        # is computed here, the rest after the rank register (so that the rank stage holds one carry
+        # chain, as the comparators; the sums are the same in any order)
+        plan = self.memory_plan
+        aw = plan.addr_width
+        base_part, wrap, rot_part = [], 0, []
+        rbits = bits_for(n)
+        if self.memory_kind == "banked":
+            rst = plan.layout.row_strides  # address weight of c_j, j < n-1
+            p_last = p.partitions[n - 1]
+            if aw:
+                terms = [rom(m, cs[j], [i * rst[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n - 1)]
+                terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
+                base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
+                wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
+            res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
+            table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
+            rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
+        else:
+            st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
+            terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
+            base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
+
+        valid, r = pipe.stage(
+            "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part}
+        )
+        ds, oor, wrap = r["d"], r["oor"], r["wrap"]
+        ge = dict(zip(pairs, r["ge"]))
         lt = []
         if n > 1:
-            ge = {}
-            for i in range(n):
-                for j in range(i + 1, n):
-                    ge[i, j] = self._name(m, ds[i] >= ds[j], f"ge_{i}_{j}")  # ties go to i < j
             therm = []
             for v in range(1 << (n - 1)):
                 rank = bin(v).count("1")
@@ -325,31 +359,8 @@ class PWASCore(wiring.Component):
             for j in range(n):
                 bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
                 lt.append(rom(m, Cat(*bits), therm, n - 1, f"lt{j}"))
-
-        plan = self.memory_plan
-        aw = plan.addr_width
-        base = wrap = 0
-        rot = 0
-        if self.memory_kind == "banked":
-            rst = plan.layout.row_strides  # address weight of c_j, j < n-1
-            p_last = p.partitions[n - 1]
-            if aw:
-                terms = [rom(m, cs[j], [i * rst[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n - 1)]
-                terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
-                base = sum_wrap(m, terms, aw, "base")
-                wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
-            rbits = bits_for(n)
-            res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
-            rot = self._modsum(m, res, nb, rbits, "rot")
-        else:
-            st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
-            terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
-            base = sum_wrap(m, terms, aw, "base")
-
-        valid, r = pipe.stage(
-            "s_rank", pl.rank, valid, {"lt": lt, "d": ds, "oor": oor, "base": base, "wrap": wrap, "rot": rot}
-        )
-        lt, ds, oor, base, wrap, rot = r["lt"], r["d"], r["oor"], r["base"], r["wrap"], r["rot"]
+        base = sum_wrap(m, r["base"], aw, "base") if aw else 0
+        rot = self._modsum(m, r["rot"], nb, rbits, "rot") if self.memory_kind == "banked" else 0
 
         # ---------------------------------------------------------- C: vertices, addresses, mu
         def step(k, j):
@@ -362,7 +373,7 @@ class PWASCore(wiring.Component):
         # vertex k's address offset from the base is a function of the n step bits of vertex k
         # alone (sum_j step_kj * S_j, + the wrap bit on banked memories): one case table of at most
         # 2**n words and one adder per vertex instead of an adder tree of n + 1 terms
-        addr = []
+        addr, offs = [], []
         if aw:
             full = 1 << aw
             for k in range(nb):
@@ -380,7 +391,7 @@ class PWASCore(wiring.Component):
                     off = rom(m, Cat(*[b for b, _ in var]), table, aw, f"voff{k}")
                 else:
                     off = const % full
-                addr.append(sum_wrap(m, [base, off], aw, f"vaddr{k}"))
+                offs.append(off)
 
         # d_(k): the fraction of rank k-1 (one-hot selection from the thermometer codes)
         def sel(k, j):
@@ -406,6 +417,12 @@ class PWASCore(wiring.Component):
                     term = Mux(sj, ds[j], Const(0, dw))
                 acc = term if acc is None else acc | term
             dsorted.append(self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+        # optional register on the offsets and the selected fractions, before the address adders and
+        # the mu subtractions (it splits stage C in two: tables / one-hot selection, then carry chains)
+        valid, r = pipe.stage("s_voff", pl.offset, valid,
+                              {"off": offs, "base": base, "ds": dsorted, "rot": rot, "oor": oor})
+        offs, base, dsorted, rot, oor = r["off"], r["base"], r["ds"], r["rot"], r["oor"]
+        addr = [sum_wrap(m, [base, off], aw, f"vaddr{k}") for k, off in enumerate(offs)]
         mus = []
         for k in range(nb):
             if k == n:
@@ -440,6 +457,11 @@ class PWASCore(wiring.Component):
             bank_addr = [addr[(b - rot) % nb] for b in range(nb)] if aw else []
             bank_addr = [Const(a, aw) if isinstance(a, int) else a for a in bank_addr]
             bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
+
+        # optional register on the rotated addresses and mu: the memories' address pins are then
+        # driven by flip-flops (no logic between them and the block RAMs)
+        valid, r = pipe.stage("s_bank", self.pipeline.bank, valid, {"addr": bank_addr, "mu": bank_mu, "oor": oor})
+        bank_addr, bank_mu, oor = r["addr"], r["mu"], r["oor"]
 
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
@@ -561,6 +583,15 @@ class PWASCore(wiring.Component):
         s = Signal(shape if shape is not None else unsigned(len(value)), name=name)
         m.d.comb += s.eq(value)
         return s
+
+    @staticmethod
+    def _first_level(values, combine, modulus: int) -> list:
+        """The first level of a pairwise reduction of ``values`` (ints folded into one constant
+        ``mod modulus``, kept last when non-zero): ``combine(a, b, i)`` joins two nets."""
+        const = sum(v for v in values if isinstance(v, int)) % modulus
+        nets = [v for v in values if not isinstance(v, int)]
+        out = tree_level(nets, lambda a, b, _lvl, i: combine(a, b, i), 0) if len(nets) > 2 else nets
+        return out + ([const] if const else [])
 
     @staticmethod
     def _modsum(m: Module, res, nb: int, rbits: int, name: str):

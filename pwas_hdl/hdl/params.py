@@ -195,7 +195,12 @@ class Pipeline:
     ============ ========================================================================
     ``split``    register after scale / clamp / cell-fraction split
     ``rank``     register after the rank extractor (and the address/bank precomputation)
+    ``offset``   register on the vertex-address offsets (case tables of the step bits), the base address
+                 and the one-hot selected fractions ``d_(k)``: before the address adders and the ``mu``
+                 subtractions (it cuts the rank -> address path between its tables and its carry chains)
     ``addr``     register on the vertex addresses and ``mu`` (before the bank rotation and the memories)
+    ``bank``     register on the bank-rotated addresses and ``mu`` (the memories' address pins then come
+                 straight from flip-flops)
     memory *     vertex addresses + ``mu`` feed the synchronous read ports (one register)
     ``mem_out``  extra register on the memory read data (on ECP5 the DP16KD output register)
     ``mul_in``   register on the multiplier operands (``mu`` and the read data; on ECP5 the
@@ -217,6 +222,8 @@ class Pipeline:
     tree_levels: int = 3
     addr: bool = True
     mul_in: bool = False
+    offset: bool = False
+    bank: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -237,7 +244,9 @@ class Pipeline:
         return (
             int(self.split)
             + int(self.rank)
+            + int(self.offset)
             + int(self.addr)
+            + int(self.bank)
             + 1
             + int(self.mem_out)
             + int(self.mul_in)
@@ -253,7 +262,7 @@ class Pipeline:
         if isinstance(value, Pipeline):
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
-            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in"}
+            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -276,6 +285,8 @@ class Pipeline:
             "tree_levels": self.tree_levels,
             "addr": self.addr,
             "mul_in": self.mul_in,
+            "offset": self.offset,
+            "bank": self.bank,
         }
 
 

@@ -60,11 +60,11 @@ def serial_latency(pipeline: Pipeline, n: int) -> int:
     Parameters
     ----------
     pipeline : Pipeline
-        ``split``, ``rank``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels`` and ``mul_in`` do not.
+        ``split``, ``rank``, ``offset``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels``, ``mul_in`` and ``bank`` do not.
     n : int
         Regressor dimension.
     """
-    return int(pipeline.split) + int(pipeline.rank) + int(pipeline.addr) + 1 + n + 1 + int(pipeline.mem_out) \
+    return int(pipeline.split) + int(pipeline.rank) + int(pipeline.offset) + int(pipeline.addr) + 1 + n + 1 + int(pipeline.mem_out) \
         + int(pipeline.product) + 1 + 1
 
 
