@@ -26,7 +26,8 @@ def test_goals_name_presets():
     assert lat["latency"] < lat["balanced"] < lat["throughput"]
     assert Pipeline.cast(GOALS["balanced"]) == Pipeline()  # the default
     mx = Pipeline.cast(GOALS["throughput"])
-    assert all(mx.to_dict()[k] for k in ("split", "rank", "addr", "mem_out", "mul_in", "product")) and mx.tree_levels == 1
+    assert all(mx.to_dict()[k] for k in ("split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "product")) and mx.tree_levels == 1
+    assert Pipeline.cast(GOALS["latency"]) == Pipeline.cast("short")  # min + the multipliers' output register
 
 
 def test_goal_builds_the_preset(lorenz_tiny):

@@ -102,7 +102,9 @@ def test_core_odd_formats(fb, lo, sh, rnd):
 
 
 @pytest.mark.parametrize("pipe", ["min", "balanced", "max", Pipeline(split=True, rank=False, mem_out=True, product=False, tree_levels=1),
-                                  Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=True, product=True, tree_levels=0)])
+                                  Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=True, product=True, tree_levels=0),
+                                  "short", Pipeline(split=False, rank=True, addr=False, offset=True, bank=True, mem_out=False, product=False, tree_levels=0),
+                                  Pipeline(split=True, rank=False, addr=True, offset=True, bank=False, tree_levels=2)])
 def test_latency_exact_and_ii_1(pipe):
     """Without stalls one sample enters every clock and leaves exactly `latency` cycles later."""
     model = make_model([3, 2, 4, 1], seed=2, nz=2)
@@ -121,7 +123,8 @@ def test_latency_formula():
         assert Pipeline.cast("min").latency(n) == 2
         levels = int(np.ceil(np.log2(n + 1)))
         assert Pipeline.cast("balanced").latency(n) == 6 + (levels + 2) // 3
-        assert Pipeline.cast("max").latency(n) == 8 + levels
+        assert Pipeline.cast("max").latency(n) == 10 + levels
+        assert Pipeline.cast("short").latency(n) == 3
         assert Pipeline() == Pipeline.cast("balanced") == Pipeline.cast(None)
 
 

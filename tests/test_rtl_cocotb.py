@@ -70,10 +70,14 @@ CONFIGS = [
     DesignConfig("s-y2-p5-amaranth-ports", S, 0, 2, 0, 1, 5, 1, {"ports": "amaranth", "pipeline": "max"}),
     DesignConfig("s-y3-p4-addr-reg-repl", S, 0, 3, 0, 1, 4, 1,
                  {"memory": "replicated", "pipeline": {"split": False, "rank": True, "addr": True, "mem_out": False, "product": False, "tree_levels": 0}}),
-    # issue 14: the generate --goal builds (latency = min; throughput = max, every register incl. mul_in;
-    # the max configurations above and the default ones run the new max / balanced presets too)
+    # issue 14: the generate --goal builds (latency = short: min + product; throughput = max, every
+    # register incl. mul_in, offset and bank; the max configurations above and the default ones run
+    # the new max / balanced presets too), and the offset / bank registers without the others
     DesignConfig("c-n4-p3x2x5x2-goal-throughput", C, 0, 4, 0, 1, [3, 2, 5, 2], 1, {"goal": "throughput"}),
     DesignConfig("c-n3-p5x2x3-z2-goal-latency", C, 0, 3, 0, 1, [5, 2, 3], 2, {"goal": "latency"}),
+    DesignConfig("s-y4-p3-offset-bank", S, 0, 4, 0, 1, 3, 1,
+                 {"pipeline": {"split": False, "rank": False, "addr": False, "offset": True, "bank": True, "mem_out": True,
+                               "mul_in": False, "product": False, "tree_levels": 2}}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 

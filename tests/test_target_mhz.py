@@ -44,7 +44,7 @@ def test_candidates_increase_strictly(n):
     # each candidate keeps every register of the previous one (one more cut each time)
     for a, b in zip(cands, cands[1:]):
         da, db = a.to_dict(), b.to_dict()
-        assert all(db[k] or not da[k] for k in ("split", "rank", "mem_out", "product", "addr", "mul_in"))
+        assert all(db[k] or not da[k] for k in ("split", "rank", "mem_out", "product", "addr", "mul_in", "offset", "bank"))
     assert cands[-1] == Pipeline.cast("max")  # the deepest candidate: every register
     assert lat[-1] == Pipeline.cast("max").latency(n)
 

@@ -294,7 +294,7 @@ def build_design(
     memory : {"banked", "replicated"}
         Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words.
     pipeline : str, Pipeline or dict, optional
-        Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``balanced``, ``max``), or the
+        Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``short``, ``balanced``, ``max``), or the
         registers themselves (a :class:`~pwas_hdl.hdl.params.Pipeline` or its ``to_dict()``).
     goal : {"latency", "balanced", "throughput"}, optional
         Pick the pipeline by what matters (:data:`pwas_hdl.hdl.params.GOALS`): ``latency`` (fewest

@@ -85,13 +85,16 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
         9       split         (input -> scale / split -> rank)                     131
         10      tree (1/level)                                                     131
         11      mul_in        (added with issue 14)
+        12      offset        (issue 14: rank -> offset tables | address adders)
+        13      bank          (issue 14: bank rotation | memory address pins)
 
     That table was measured before the multiplier and block-RAM registers were packed into the
     hard blocks (:mod:`pwas_hdl.flow.hard_registers`, issue 14), when from 7 cycles on the 18x18
     multiplier was the critical path. Packed, candidate 7 (the ``balanced`` preset) reaches
-    ~114 MHz (critical path: the products -> adder tree) and the last one (the ``max`` preset,
-    11 cycles) ~158 MHz (the vertex addresses); ``benchmarks/hw_tables.py`` has the current
-    figures. On iCE40 HX8K (multipliers in LUTs) the core goes from 42 MHz (2 cycles) to
+    ~114 MHz (critical path: the products -> adder tree) and the 11-cycle one ~158 MHz (the vertex
+    addresses); with the ``offset`` and ``bank`` registers (and the core's rank register holding the
+    comparison bits) the last one, the ``max`` preset of 13 cycles, ~206 MHz (seed 1);
+    ``benchmarks/hw_tables.py`` has the current figures. On iCE40 HX8K (multipliers in LUTs) the core goes from 42 MHz (2 cycles) to
     ~85-94 MHz, limited by the LUT multipliers.
     """
     n = int(n)
@@ -104,7 +107,7 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
             tree.append(t)
     steps = [("product", True), ("rank", True), ("mem_out", True), ("tree_levels", tree[0]), ("addr", True)]
     steps += [("tree_levels", t) for t in tree[1:2]] + [("split", True)] + [("tree_levels", t) for t in tree[2:]]
-    steps += [("mul_in", True)]
+    steps += [("mul_in", True), ("offset", True), ("bank", True)]
     out = [Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0)]
     for key, val in steps:
         d = out[-1].to_dict()
@@ -116,10 +119,10 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
 
 
 def _label(p: Pipeline, n: int) -> str:
-    for name in ("min", "balanced", "max"):
+    for name in ("min", "short", "balanced", "max"):
         if Pipeline.cast(name) == p:
             return name
-    on = [k for k in ("split", "rank", "addr", "mem_out", "product") if getattr(p, k, False)]
+    on = [k for k in ("split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "product") if getattr(p, k, False)]
     if p.tree_levels:
         on.append(f"tree/{p.tree_levels}")
     return "+".join(on) or "min"

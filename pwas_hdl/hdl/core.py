@@ -131,7 +131,7 @@ class PWASCore(wiring.Component):
     ----------
     params : CoreParams
     memory : {"banked", "replicated"}
-    pipeline : Pipeline, preset name ("min", "balanced", "max") or None (balanced)
+    pipeline : Pipeline, preset name ("min", "short", "balanced", "max") or None (balanced)
     round_output : bool
         ``False``: no rounding or saturation; the output register holds the exact accumulator,
         ``acc_width + 1`` signed bits per target (``out_field_width``), for a design that adds
