@@ -9,7 +9,7 @@ import pytest
 
 from pwas_hdl.cli import main
 from pwas_hdl.design.generate import build_design
-from pwas_hdl.hdl.params import GOALS, PIPELINE_PRESETS, Pipeline
+from pwas_hdl.hdl.params import GOALS, PIPELINE_PRESETS, Pipeline, goal_preset
 
 
 def _run(capsys, *args):
@@ -28,6 +28,10 @@ def test_goals_name_presets():
     mx = Pipeline.cast(GOALS["throughput"])
     assert all(mx.to_dict()[k] for k in ("split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "product")) and mx.tree_levels == 1
     assert Pipeline.cast(GOALS["latency"]) == Pipeline.cast("short")  # min + the multipliers' output register
+    assert goal_preset("throughput", "ice40") == "max-lut" and goal_preset("throughput", "ecp5") == "max"
+    assert all(goal_preset(g) == GOALS[g] for g in GOALS)
+    with pytest.raises(ValueError, match="unknown goal 'fast'"):
+        goal_preset("fast", "ice40")
 
 
 def test_goal_builds_the_preset(lorenz_tiny):

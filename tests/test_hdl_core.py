@@ -104,7 +104,8 @@ def test_core_odd_formats(fb, lo, sh, rnd):
 @pytest.mark.parametrize("pipe", ["min", "balanced", "max", Pipeline(split=True, rank=False, mem_out=True, product=False, tree_levels=1),
                                   Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=True, product=True, tree_levels=0),
                                   "short", Pipeline(split=False, rank=True, addr=False, offset=True, bank=True, mem_out=False, product=False, tree_levels=0),
-                                  Pipeline(split=True, rank=False, addr=True, offset=True, bank=False, tree_levels=2)])
+                                  Pipeline(split=True, rank=False, addr=True, offset=True, bank=False, tree_levels=2),
+                                  Pipeline(mul_halves=True), "max-lut"])
 def test_latency_exact_and_ii_1(pipe):
     """Without stalls one sample enters every clock and leaves exactly `latency` cycles later."""
     model = make_model([3, 2, 4, 1], seed=2, nz=2)
@@ -125,6 +126,7 @@ def test_latency_formula():
         assert Pipeline.cast("balanced").latency(n) == 6 + (levels + 2) // 3
         assert Pipeline.cast("max").latency(n) == 10 + levels
         assert Pipeline.cast("short").latency(n) == 3
+        assert Pipeline.cast("max-lut").latency(n) == 11 + levels
         assert Pipeline() == Pipeline.cast("balanced") == Pipeline.cast(None)
 
 

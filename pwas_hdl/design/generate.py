@@ -309,7 +309,8 @@ def build_design(
         Raises :class:`~pwas_hdl.flow.timing_closure.TimingNotMet` (a ``ValueError``) when even the
         deepest pipeline misses the target. Takes one place-and-route run per candidate tried.
     fpga_target : {"ecp5", "ice40"}
-        FPGA family of the timing closure (devices: ECP5 LFE5U-45F, iCE40 HX8K).
+        FPGA family of the timing closure (devices: ECP5 LFE5U-45F, iCE40 HX8K) and of ``goal``
+        (:func:`pwas_hdl.hdl.params.goal_preset`: ``throughput`` on ``ice40`` is ``max-lut``).
     timing_seed : int
         nextpnr placer seed of the timing closure (same inputs and seed: same choice).
     prescreen : bool
@@ -361,15 +362,14 @@ def build_design(
     for kind, names in zip(("input", "output", "target"), sensor.signal_names()):
         check_signal_names(names, f"{kind} signal")
     if goal is not None:
-        from pwas_hdl.hdl.params import GOALS
+        from pwas_hdl.hdl.params import goal_preset
 
-        if goal not in GOALS:
-            raise ValueError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
+        preset = goal_preset(goal, fpga_target)  # ValueError for an unknown goal
         given = [k for k, v in (("pipeline (--pipeline)", pipeline), ("target_mhz (--clock-mhz)", target_mhz)) if v is not None]
         if given:
             raise ValueError(f"give one of goal (--goal), pipeline (--pipeline) or target_mhz (--clock-mhz), not goal with {given[0]}: "
                              "each chooses the pipeline")
-        pipeline = GOALS[goal]
+        pipeline = preset
     additive = _is_additive(sensor)
     if additive and target_mhz is not None:
         raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")

@@ -174,7 +174,7 @@ def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[
     return name, text, nff
 
 
-_STAGE_RE = re.compile(r"^(s_(?:split|rank|addr|memout|mulin|mem|prod|tree\d+))_")
+_STAGE_RE = re.compile(r"^(s_(?:split|rank|voff|addr|bank|memout|mulin|mem|pp|prod|tree\d+))_")
 
 
 def _stage_of_cell(cell: str) -> str:

@@ -492,13 +492,38 @@ class PWASCore(wiring.Component):
 
         # ---------------------------------------------------------- E: multiply (in bank order)
         prods = []
-        for z in range(nz):
-            for k in range(nb):
-                w = vdata[k][z * bw : (z + 1) * bw].as_signed()
+        if pl.mul_halves:
+            # two half-width partial products per weight (low half unsigned, high half signed),
+            # registered, then one addition: mu * w = (mu * w_hi) * 2**kl + mu * w_lo, exactly
+            kl = bw // 2
+            parts = []
+            for z in range(nz):
+                for k in range(nb):
+                    word = vdata[k][z * bw : (z + 1) * bw]
+                    lo = 0  # a 1-bit weight has no low half
+                    if kl:
+                        lo = Signal(unsigned(dw + kl), name=f"pplo{z}_{k}")
+                        m.d.comb += lo.eq(mus[k] * word[:kl])
+                    hi = Signal(signed(dw + bw - kl + 1), name=f"pphi{z}_{k}")
+                    m.d.comb += hi.eq(mus[k] * word[kl:].as_signed())
+                    parts += [lo, hi]
+            valid, r = pipe.stage("s_pp", True, valid, {"pp": parts, "oor": oor})
+            oor = r["oor"]
+            for i in range(nz * nb):
+                z, k = divmod(i, nb)
+                lo, hi = r["pp"][2 * i], r["pp"][2 * i + 1].as_signed()
                 pr = Signal(signed(dw + bw), name=f"prod{z}_{k}")
-                m.d.comb += pr.eq(mus[k] * w)
+                m.d.comb += pr.eq((Cat(Const(0, kl), hi).as_signed() + lo) if kl else hi)
                 sink_unused(m, pr[accw], f"prod{z}_{k}_top")
                 prods.append(pr[:accw])
+        else:
+            for z in range(nz):
+                for k in range(nb):
+                    w = vdata[k][z * bw : (z + 1) * bw].as_signed()
+                    pr = Signal(signed(dw + bw), name=f"prod{z}_{k}")
+                    m.d.comb += pr.eq(mus[k] * w)
+                    sink_unused(m, pr[accw], f"prod{z}_{k}_top")
+                    prods.append(pr[:accw])
         valid, r = pipe.stage("s_prod", pl.product, valid, {"p": prods, "oor": oor})
         prods, oor = r["p"], r["oor"]
         terms = [prods[z * nb : (z + 1) * nb] for z in range(nz)]

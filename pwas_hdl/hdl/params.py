@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from pwas_hdl.fit.geometry import Grid
     from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout
 
-__all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS", "GOALS"]
+__all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS", "GOALS", "GOALS_BY_FPGA", "goal_preset"]
 
 
 def _bits_for(v: int) -> int:
@@ -205,6 +205,9 @@ class Pipeline:
     ``mem_out``  extra register on the memory read data (on ECP5 the DP16KD output register)
     ``mul_in``   register on the multiplier operands (``mu`` and the read data; on ECP5 the
                  MULT18X18D input registers)
+    ``mul_halves`` each product as two half-width partial products (``mu`` times the weight's low and
+                 high halves), registered, then added: multipliers built from LUTs (iCE40 HX, no DSP)
+                 of half the depth per stage; on FPGAs with DSP blocks it takes twice as many
     ``product``  register after the ``mu_k * w`` multipliers (on ECP5 the MULT18X18D output register)
     ``tree``     a register after every ``tree_levels`` adder-tree levels (0: none)
     output *     rounding / saturation, then the output register (the stream's payload)
@@ -224,6 +227,7 @@ class Pipeline:
     mul_in: bool = False
     offset: bool = False
     bank: bool = False
+    mul_halves: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -250,6 +254,7 @@ class Pipeline:
             + 1
             + int(self.mem_out)
             + int(self.mul_in)
+            + int(self.mul_halves)
             + int(self.product)
             + self.tree_registers(n)
             + 1
@@ -262,7 +267,7 @@ class Pipeline:
         if isinstance(value, Pipeline):
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
-            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank"}
+            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -287,6 +292,7 @@ class Pipeline:
             "mul_in": self.mul_in,
             "offset": self.offset,
             "bank": self.bank,
+            "mul_halves": self.mul_halves,
         }
 
 
@@ -303,19 +309,41 @@ class Pipeline:
 #: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
 #:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
 #: * ``max``: every register (13 cycles for n = 4): each stage holds at most one carry chain or a
-#:   few LUT levels -- the highest clock.
+#:   few LUT levels -- the highest clock;
+#: * ``max-lut``: ``max`` with the products split into half-width partial products (``mul_halves``,
+#:   14 cycles for n = 4): the highest clock where the multipliers are LUTs (iCE40 HX); on an FPGA
+#:   with DSP blocks it takes twice as many.
 PIPELINE_PRESETS: dict[str, Pipeline] = {
     "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
     "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0),
     "balanced": Pipeline(),
     "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
                     offset=True, bank=True),
+    "max-lut": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
+                        offset=True, bank=True, mul_halves=True),
 }
 
 #: ``generate --goal``: what matters -> the pipeline preset that gives it (see PIPELINE_PRESETS):
 #: ``latency`` -> ``short`` (the fewest nanoseconds, by the rule above), ``balanced`` -> ``balanced``,
 #: ``throughput`` -> ``max`` (the highest clock).
 GOALS: dict[str, str] = {"latency": "short", "balanced": "balanced", "throughput": "max"}
+
+#: FPGA families whose goals differ from :data:`GOALS`: iCE40 HX has no DSP blocks, so the
+#: throughput build splits its LUT multipliers (``max-lut``).
+GOALS_BY_FPGA: dict[str, dict[str, str]] = {"ice40": {"throughput": "max-lut"}}
+
+
+def goal_preset(goal: str, fpga: str | None = None) -> str:
+    """The pipeline preset of ``generate --goal goal`` for the FPGA family ``fpga`` (None: ECP5's).
+
+    Raises
+    ------
+    ValueError
+        ``goal`` is not one of :data:`GOALS`.
+    """
+    if goal not in GOALS:
+        raise ValueError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
+    return GOALS_BY_FPGA.get(fpga or "", {}).get(goal, GOALS[goal])
 
 
 # ---------------------------------------------------------------------------------------------

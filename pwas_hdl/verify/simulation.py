@@ -338,12 +338,12 @@ def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, 
 
 _PROBE_RE = re.compile(
     r"^\s*reg\s+(?:signed\s+)?(?:\[(\d+):(\d+)\]\s+)?"
-    r"(s_(?:split|rank|addr|memout|mulin|mem|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload|m_axis_tdata)\s*;",
+    r"(s_(?:split|rank|voff|addr|bank|memout|mulin|mem|pp|prod|tree\d+)_[a-z]+\d*|vdata\d+|out__payload|m_axis_tdata)\s*;",
     re.M,
 )
 #: The output payload register under the two port namings (``generate --ports amaranth|axis``).
 _OUT_REGS = ("out__payload", "m_axis_tdata")
-_STAGE_ORDER = ("s_split", "s_rank", "s_addr", "s_mem", "s_memout", "s_mulin", "s_prod")
+_STAGE_ORDER = ("s_split", "s_rank", "s_voff", "s_addr", "s_bank", "s_mem", "s_memout", "s_mulin", "s_pp", "s_prod")
 
 
 def stage_probes(verilog: str) -> dict[str, int]:
@@ -391,7 +391,7 @@ def _stage_of(name: str) -> str:
         return "vdata"
     if name in _OUT_REGS:
         return "out"
-    mo = re.match(r"(s_(?:split|rank|addr|memout|mulin|mem|prod|tree\d+))_", name)
+    mo = re.match(r"(s_(?:split|rank|voff|addr|bank|memout|mulin|mem|pp|prod|tree\d+))_", name)
     return mo.group(1) if mo else name
 
 
@@ -439,7 +439,7 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
     mo = re.match(r"vdata(\d+)$", name)
     if mo:
         return pack(tr["w"][int(mo.group(1))], bw)
-    mo = re.match(r"s_(split|rank|addr|memout|mulin|mem|prod|tree(\d+))_([a-z]+)(\d*)$", name)
+    mo = re.match(r"s_(split|rank|voff|addr|bank|memout|mulin|mem|pp|prod|tree(\d+))_([a-z]+)(\d*)$", name)
     if not mo:
         return None
     stage, lvl, what, idx = mo.group(1), mo.group(2), mo.group(3), mo.group(4)
@@ -454,10 +454,16 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
         return int(tr["cell"][i])
     if what == "d":
         return int(tr["frac"][i])
-    if what == "oor":
-        return int(tr["out_of_range"])
-    if what == "rot":
-        return int(tr["rot"])
+    if what == "oor":  # s_split keeps one flag per dimension (oor<j>), joined after it
+        return int(tr["out_of_range"]) if i is None else None
+    if what == "rot":  # s_rank keeps the first level of the rotation sum (rot<i>): not modelled
+        return int(tr["rot"]) if i is None else None
+    if what == "ge":  # the rank register: comparison bits d_a >= d_b of the pairs a < b in order
+        pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
+        a, b = pairs[i]
+        return int(int(tr["frac"][a]) >= int(tr["frac"][b]))
+    if what == "ds":  # the offset register: d_(k+1), the fraction of rank k
+        return int(tr["frac"][int(np.flatnonzero(np.asarray(tr["rank"]) == i)[0])])
     if what == "mu":
         return int(mu[i])
     if what == "lt":
