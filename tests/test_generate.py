@@ -85,6 +85,17 @@ def test_verilog_is_lint_clean(lorenz_model, tmp_path, design, init):
     assert res.returncode == 0 and "%Warning" not in res.stderr, res.stderr[-3000:]
 
 
+@pytest.mark.rtl  # runs Verilator's linter
+@pytest.mark.parametrize("pipeline", ["short", "max", "max-lut"])
+def test_issue14_pipelines_are_lint_clean(lorenz_tiny, tmp_path, pipeline):
+    """The latency / throughput presets of issue 14 (product register only; offset, bank and split
+    multipliers) keep the Verilog clean under verilator -Wall, in the core and the sensor top."""
+    for design in ("core", "sensor"):
+        gd = generate(lorenz_tiny.model, tmp_path / design, design=design, pipeline=pipeline)
+        res = lint_verilog(tmp_path / design / f"{gd.top}.v", gd.top)
+        assert res.returncode == 0 and "%Warning" not in res.stderr, res.stderr[-3000:]
+
+
 def test_bad_options_write_nothing(lorenz_model, tmp_path):
     out = tmp_path / "x"
     for args, msg in [

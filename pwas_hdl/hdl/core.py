@@ -504,17 +504,33 @@ class PWASCore(wiring.Component):
                     if kl:
                         lo = Signal(unsigned(dw + kl), name=f"pplo{z}_{k}")
                         m.d.comb += lo.eq(mus[k] * word[:kl])
-                    hi = Signal(signed(dw + bw - kl + 1), name=f"pphi{z}_{k}")
-                    m.d.comb += hi.eq(mus[k] * word[kl:].as_signed())
+                    prod_hi = mus[k] * word[kl:].as_signed()
+                    hi = Signal(prod_hi.shape(), name=f"pphi{z}_{k}")  # the cell's own width
+                    m.d.comb += hi.eq(prod_hi)
                     parts += [lo, hi]
             valid, r = pipe.stage("s_pp", True, valid, {"pp": parts, "oor": oor})
             oor = r["oor"]
             for i in range(nz * nb):
                 z, k = divmod(i, nb)
-                lo, hi = r["pp"][2 * i], r["pp"][2 * i + 1].as_signed()
-                pr = Signal(signed(dw + bw), name=f"prod{z}_{k}")
-                m.d.comb += pr.eq((Cat(Const(0, kl), hi).as_signed() + lo) if kl else hi)
-                sink_unused(m, pr[accw], f"prod{z}_{k}_top")
+                lo, hi = r["pp"][2 * i], r["pp"][2 * i + 1]
+                if not kl:
+                    prods.append(hi[:accw])
+                    sink_unused(m, hi[accw:], f"prod{z}_{k}_top")
+                    continue
+                # hi * 2**kl + lo without operands of unequal widths (see _lintsafe): the low kl
+                # bits are lo's; lo's upper dw bits are added to hi's lower dw bits (carry c); hi's
+                # upper bits are taken + c (a constant addition and a multiplexer)
+                lo_up, hi_lo, hi_up = lo[kl:], hi[:dw], hi[dw:]
+                mid = Signal(unsigned(dw + 1), name=f"ppmid{z}_{k}")
+                m.d.comb += mid.eq(hi_lo + lo_up)
+                inc = add_const_wrap(m, hi_up, 1, f"ppinc{z}_{k}")
+                up = Signal(unsigned(len(hi_up)), name=f"ppup{z}_{k}")
+                with m.If(mid[dw]):
+                    m.d.comb += up.eq(inc)
+                with m.Else():
+                    m.d.comb += up.eq(hi_up)
+                pr = Cat(lo[:kl], mid[:dw], up)  # the exact product, at least accw + 1 bits
+                sink_unused(m, pr[accw:], f"prod{z}_{k}_top")
                 prods.append(pr[:accw])
         else:
             for z in range(nz):
