@@ -19,9 +19,10 @@ Designs (12-bit inputs, weights in the fewest bits that hold them, as ``pwas-hdl
 Every design is generated as the core (``design="core"``, banked memory) in the builds of
 ``generate --goal`` (:data:`pwas_hdl.hdl.params.GOALS`):
 
-* ``latency``: ``--goal latency`` (fewest nanoseconds);
+* ``latency``: ``--goal latency`` (fewest nanoseconds; the ``short`` preset);
 * ``default``: no option (``--goal balanced``, the ``balanced`` preset);
-* ``throughput``: ``--goal throughput`` (highest clock);
+* ``throughput``: ``--goal throughput --fpga F`` (highest clock; ``max`` on ECP5, ``max-lut`` on iCE40,
+  :func:`pwas_hdl.hdl.params.goal_preset`);
 
 ECP5 gets all three, iCE40 the throughput build. Each is placed and routed with nextpnr
 (``--freq`` 150 MHz on ECP5 LFE5U-45F speed 6, 100 MHz on iCE40 HX8K) by
@@ -152,7 +153,7 @@ def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, m
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.flow.timing_closure import measure_design
 
-    gd = build_design(model_path, pipeline=pipeline, memory=memory, memory_init=memory_init, goal=goal)
+    gd = build_design(model_path, pipeline=pipeline, memory=memory, memory_init=memory_init, goal=goal, fpga_target=fpga)
     man = gd.manifest
     base = {"fpga": fpga, "memory": memory, "memory_init": memory_init, "goal": goal, "seed": seed,
             "pipeline": man["pipeline"], "latency_cycles": man["latency_cycles"],
@@ -204,12 +205,12 @@ def aggregate(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def simulate_ii(model_path: Path, goal: str | None, samples: int = 300) -> dict[str, Any]:
-    """Amaranth simulation without stalls of the ``generate --goal`` build: measured II and latency, bit-exact check."""
+def simulate_ii(model_path: Path, goal: str | None, samples: int = 300, fpga: str = "ecp5") -> dict[str, Any]:
+    """Amaranth simulation without stalls of the ``generate --goal`` build (for ``fpga``): measured II and latency, bit-exact check."""
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
 
-    gd = build_design(model_path, goal=goal)
+    gd = build_design(model_path, goal=goal, fpga_target=fpga)
     fxm, dut = gd.model, gd.component
     p = dut.params
     rng = np.random.default_rng(0)
@@ -466,7 +467,8 @@ def _run(args: argparse.Namespace, ex) -> int:
             "A row 'does not fit' is a nextpnr refusal; the bracketed numbers are what Yosys mapped.",
             "BRAM 0: Yosys put the small weight banks in LUTs (ROM logic), which also removes the block RAM's long "
             "clock-to-output from the critical path (hence the higher fmax of the small designs).",
-            "The pipelines of the three builds are the presets of pwas_hdl.hdl.params.GOALS (the manifest's pipeline); "
+            "The pipelines of the three builds are the presets of pwas_hdl.hdl.params.goal_preset(goal, fpga) (the manifest's "
+            "pipeline: latency = short, default = balanced, throughput = max on ECP5 and max-lut on iCE40); "
             "the ECP5 multiplier and block-RAM registers are packed by pwas_hdl.flow.hard_registers (hard_registers in "
             "the JSON counts them per build).",
             "Weights inline in the Verilog, except the replicated-memory builds, which load them with $readmemh "
@@ -560,6 +562,9 @@ def _run(args: argparse.Namespace, ex) -> int:
             for name in ("default",) if args.quick else tuple(GOAL_OF_BUILD):
                 log(f"{d['key']}: Amaranth simulation of the {name} build ...")
                 sims[name] = simulate_ii(model_path, builds[name])
+            if not args.quick and "ice40" in fpgas:  # --goal throughput --fpga ice40 is its own pipeline (max-lut)
+                log(f"{d['key']}: Amaranth simulation of the iCE40 throughput build ...")
+                sims["throughput-ice40"] = simulate_ii(model_path, "throughput", fpga="ice40")
             d["simulation"] = sims
             res["must_show"] = must_show(d, sims)
             res["runtime_s"] = round(time.monotonic() - t_start, 1)
