@@ -304,8 +304,9 @@ class Pipeline:
 #:   pays only where it costs no fabric (the MULT18X18D output register) and cuts the longest stage
 #:   of ``min`` (memory -> multipliers -> adder tree -> output) into two parts that are each shorter
 #:   than the front (input -> scale / rank / address -> memory), which no hard-block register can
-#:   cut; every further register adds a cycle of at least the front's length. Measured 40.8 ns
-#:   (3 x 13.6 ns, the front) against 43.1 ns for ``min`` (2 x 21.7 ns);
+#:   cut; every further register adds a cycle of at least the front's length. Measured 40.6 ns
+#:   (3 seeds; 3 x 13.5 ns, the front) against 43.1 ns for ``min`` (2 x 21.7 ns); rank + product
+#:   44.0 ns, mem_out + product 52.5 ns, mem_out alone 51.9 ns (seed 1);
 #: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
 #:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
 #: * ``max``: every register (13 cycles for n = 4): each stage holds at most one carry chain or a
