@@ -635,6 +635,7 @@ def generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
                     architecture=architecture, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding, goal=goal,
+                    fpga_target=fpga,
                 )
         else:
             with _executor(workers, scheduler) as ex:

@@ -61,3 +61,16 @@ def test_cli_goal_and_contradictions(capsys, tmp_path, lorenz_tiny):
     code, _, err = _run(capsys, "generate", model, "-o", tmp_path / "x", "--goal", "fast")
     assert code == 2 and "unknown goal 'fast'" in err and "latency, balanced, throughput" in err
     assert not (tmp_path / "x").exists()
+
+
+def test_cli_goal_follows_fpga(capsys, tmp_path, lorenz_tiny):
+    """--goal throughput --fpga ice40 builds the split-multiplier preset (no DSP blocks on the HX8K)."""
+    code, _, err = _run(capsys, "generate", lorenz_tiny.model, "-o", tmp_path / "i", "--goal", "throughput", "--fpga", "ice40")
+    assert code == 0, err
+    man = json.loads((tmp_path / "i" / "manifest.json").read_text())
+    assert man["pipeline"] == Pipeline.cast("max-lut").to_dict() and man["pipeline"]["mul_halves"] is True
+    assert man["latency_cycles"] == Pipeline.cast("max-lut").latency(man["lags"]["My"])
+    code, _, err = _run(capsys, "generate", lorenz_tiny.model, "-o", tmp_path / "j", "--goal", "throughput", "--fpga", "vhdl")
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and "unknown FPGA family 'vhdl'" in lines[0], err
+    assert not (tmp_path / "j").exists()

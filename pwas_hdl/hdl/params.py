@@ -340,10 +340,12 @@ def goal_preset(goal: str, fpga: str | None = None) -> str:
     Raises
     ------
     ValueError
-        ``goal`` is not one of :data:`GOALS`.
+        ``goal`` is not one of :data:`GOALS`, or ``fpga`` is not ``ecp5`` / ``ice40``.
     """
     if goal not in GOALS:
         raise ValueError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
+    if fpga is not None and fpga not in ("ecp5", "ice40"):
+        raise ValueError(f"unknown FPGA family {fpga!r} for the goal; choose ecp5 or ice40")
     return GOALS_BY_FPGA.get(fpga or "", {}).get(goal, GOALS[goal])
 
 
