@@ -444,9 +444,8 @@ def build_design(
     elif bank_model is not None:
         from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
 
-        if architecture != "parallel":
-            raise InputError("the observer-bank sensor top has a parallel core only; use --architecture parallel")
-        comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top)
+        # --architecture serial: the time-multiplexed bank and the serial core (pwas_hdl.hdl.serial_observer_bank)
+        comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture)
     else:
         comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier,
                             architecture=architecture)

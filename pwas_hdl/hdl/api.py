@@ -158,6 +158,8 @@ def design_info(component, ports: str = "axis") -> dict:
 
     if hasattr(core, "flow_control"):  # the serial core's input throttle
         info["flow_control"].update(core.flow_control(nm))
+    if component is not core and hasattr(component, "flow_control"):  # a top's own input throttle (serial observer bank)
+        info["flow_control"].update(component.flow_control(nm))
     info["architecture"] = {**architecture_info(core), "ii": int(component.ii)}  # the design's II (a top may add to it)
     info.update(getattr(component, "extra_info", {}))
     if classifier is not None:

@@ -32,6 +32,7 @@ from pwas_hdl.hdl.observer_bank import build_observer_bank
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
 from pwas_hdl.hdl.sensor_top import sample_fields
+from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY, build_serial_front_end, plan_serial_bank
 
 __all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor"]
 
@@ -56,19 +57,32 @@ class ObserverSensorTop(wiring.Component):
 
     kind = "observer-sensor"
 
-    def __init__(self, bank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, bank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
         self._MustUse__silence = True
+        if architecture not in ("parallel", "serial"):
+            raise ValueError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
         if params.n != bank.n_models:
             raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features")
         if params.in_width != bank.input_bits_core:
             raise ValueError("the core's input width differs from the feature code width")
         self.bank = bank
-        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.architecture = architecture
+        if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
+            from pwas_hdl.hdl.serial_core import SerialPWASCore
+
+            self.core = SerialPWASCore(params, pipeline=pipeline)
+            self.plan = plan_serial_bank(bank, lanes, isqrt_every, self.core.ii)
+            self.stages_before_core = self.plan.stages_before_core
+            self.ii = self.cycles_per_sample = self.plan.cycles_per_sample
+        else:
+            self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+            self.plan = None
+            self.stages_before_core = FRONT_END_STAGES
+            self.ii = self.cycles_per_sample = 1
         self.core._MustUse__silence = True
         self.params = params
-        self.latency = FRONT_END_STAGES + self.core.latency
-        self.ii = 1
-        self.cycles_per_sample = 1
+        self.latency = self.stages_before_core + self.core.latency
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = bank.first_output
@@ -92,10 +106,15 @@ class ObserverSensorTop(wiring.Component):
     def extra_info(self) -> dict:
         fe = {
             "kind": "observer-bank",
-            "architecture": "parallel constant multipliers, one state update of every observer per input transfer",
+            "architecture": ("parallel constant multipliers, one state update of every observer per input transfer"
+                             if self.plan is None else
+                             f"time-multiplexed: {len(self.plan.lanes)} state-update unit(s) (lanes), one state update per lane "
+                             "per clock, rotating state chains, one squarer / square root / code multiplier per lane"),
+            "bank": self.architecture,
             "cycles_per_sample": self.cycles_per_sample,
             "ii": self.ii,
-            "stages_before_core": FRONT_END_STAGES,
+            "stages_before_core": self.stages_before_core,
+            **({"schedule": self.plan.to_dict()} if self.plan is not None else {}),
             **self.bank.to_dict(),
         }
         fe["error_bound"] = {**fe["error_bound"], "estimate": self.estimate_bound}
@@ -108,6 +127,15 @@ class ObserverSensorTop(wiring.Component):
                 "after reset produce no output, every later transfer produces one",
             },
         }
+
+    def flow_control(self, names: dict) -> dict:
+        """The handshake rules in words (``names``: port names by role); the serial bank throttles the input."""
+        if self.plan is None:
+            return {}
+        ir, ov, orr = names["in.ready"], names["out.valid"], names["out.ready"]
+        return {ir: f"bank idle or in its last cycle, and the previous sample's feature codes taken by the core: one transfer "
+                    f"every {self.ii} cycles at most (II = cycles_per_sample); low while the bank is busy or while "
+                    f"{ov} & ~{orr} holds the core"}
 
     def expected_outputs(self, n_samples: int) -> int:
         return max(0, n_samples - self.warmup)
@@ -132,6 +160,8 @@ class ObserverSensorTop(wiring.Component):
         with m.If(transfer & ~self.warm):
             m.d.sync += cnt.eq(inc)
 
+        if self.plan is not None:
+            return self._elaborate_serial(m, cur, inp, transfer)
         residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
         sink_unused(m, _sat, "state_saturated_flag")
         sums = build_window_sums(m, bank, residuals, transfer)
@@ -153,9 +183,28 @@ class ObserverSensorTop(wiring.Component):
         self.core.build_into(m, Cat(*codes), v2, advance, self.out)
         return m
 
+    def _elaborate_serial(self, m, cur, inp, transfer):
+        """Time-multiplexed bank: in.ready = bank free & (no pending codes | the core takes them now)."""
+        sample_warm = Signal(name="bank_sample_warm")
+        with m.If(transfer):
+            m.d.sync += sample_warm.eq(self.warm)
+        codes, done, free = build_serial_front_end(m, self.bank, self.plan, cur, transfer, sample_warm)
+        pending = Signal(name="features_valid")
+        core_adv = Signal(name="core_advance")
+        take = Signal(name="features_taken")
+        m.d.comb += take.eq(pending & core_adv)
+        with m.If(take):
+            m.d.sync += pending.eq(0)
+        with m.If(done):
+            m.d.sync += pending.eq(1)
+        m.d.comb += inp.ready.eq(free & (~pending | take))
+        self.core.build_into(m, Cat(*codes), pending, core_adv, self.out)
+        return m
+
 
 def build_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                          name: str = "pwas_sensor") -> ObserverSensorTop:
+                          name: str = "pwas_sensor", architecture: str = "parallel", lanes: int = 1,
+                          isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> ObserverSensorTop:
     """The observer-bank sensor top of a bit-true :class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`.
 
     Returns
@@ -166,7 +215,8 @@ def build_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline |
     from pwas_hdl.hdl.api import _check_name
 
     name = _check_name(name)
-    top = ObserverSensorTop(model.bank, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline)
+    top = ObserverSensorTop(model.bank, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline,
+                            architecture=architecture, lanes=lanes, isqrt_every=isqrt_every)
     top.module_name = name
     top._MustUse__silence = True
     top.core.input_names = list(model.core.regressor_names)

@@ -1,0 +1,398 @@
+"""The time-multiplexed ("serial") observer bank and feature unit of seed 004 (issue 12, item 2).
+
+Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank`, as the parallel
+bank (:mod:`pwas_hdl.hdl.observer_bank`), but with **one state-update unit per lane** shared over
+the ``M`` states of the lane's observers, one state update per clock:
+
+* the ``N_theta`` observers are split into ``lanes`` contiguous groups (``ceil(N / lanes)``
+  observers in the first ones); a lane holds its states in one **rotating chain** of
+  ``n_L * M`` registers in the order ``(j, 0), (j, 1), .., (j + 1, 0), ..``: in step ``s``
+  the head is ``x_{j,i}`` and the next register ``x_{j,i+1}`` (0 for ``i = M - 1``), the new
+  state goes to the tail and the chain shifts, so after ``n_L M`` steps it is in order again
+  and no wide read multiplexer is needed. ``x_{j,0}`` before the update is held for the
+  observer's later steps;
+* the update ``acc_i = A0_i x_0 + ((sum_c Bc_ic qu_c + Lc_i qy) << (F_s - F_in)) + Dc_i +
+  2**(F_c-1) + (x_{i+1} << F_c)``, ``x_i' = sat((acc_i) >> F_c)`` with the coefficients from a
+  table indexed by the step (``nu + 2`` variable multipliers per lane instead of
+  ``N M (nu + 2)`` constant ones). The sum is an exact integer sum in the declared accumulator
+  width, so its order does not matter and the rounding / saturation are the bit-true model's;
+* at step ``i = 0`` of observer ``j``: the residual ``e_j = x_{j,0} - (qy << (F_s - F_in))``,
+  ``e_j**2`` (one squarer per lane), the observer's window record (running sum ``S_j`` and its
+  delay line of ``l + 1`` squares) rotates like the states; the new ``S_j`` enters a
+  free-running feature pipeline: register, integer square root (11b; a register after every
+  ``isqrt_every`` digit steps) or ``S`` itself (11b-sq), root register, the affine map to the
+  core's input code with the constants from a table (one multiplier per lane), and the code
+  register of feature ``j``.
+
+Schedule (transfer of sample ``k`` in cycle ``t``; the inputs are latched): step ``s`` of every
+lane in cycle ``t + 1 + s`` (``s < n_L M``); feature ``j`` (step ``s_j = (j - j_L) M`` in its
+lane) is in its code register from cycle ``t + 1 + s_j + 3 + R`` (``R``: the square root's
+internal registers); all codes from ``t + stages_before_core``, ``stages_before_core = 4 + R +
+(n_max - 1) M``. ``cycles_per_sample = max(n_max M, stages_before_core, core II)``:
+``in.ready`` is high when the bank is idle or in its last cycle, and the previous sample's
+feature codes have been taken by the core (or are taken in this cycle). II = cycles_per_sample.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+
+from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused
+from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
+
+__all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
+           "DEFAULT_ISQRT_EVERY"]
+
+#: Digit steps of the integer square root between two pipeline registers (serial bank).
+DEFAULT_ISQRT_EVERY = 8
+
+
+@dataclass(frozen=True)
+class SerialBankPlan:
+    """Schedule of the time-multiplexed bank (all counts in clock cycles).
+
+    Attributes
+    ----------
+    lanes : tuple of tuples of int
+        The observers of each lane (contiguous, the first lanes the longest).
+    steps : int
+        ``n_max * M``: state-update steps per sample of the longest lane.
+    isqrt_regs : int
+        ``R``: registers inside the square root (0 for 11b-sq or ``isqrt_every`` None).
+    stages_before_core : int
+        Cycles from the input transfer to the core's input valid (``4 + R + (n_max - 1) M``).
+    cycles_per_sample : int
+        The II: ``max(steps, stages_before_core, core_ii)``.
+    """
+
+    lanes: tuple
+    order: int
+    steps: int
+    isqrt_every: int | None
+    isqrt_regs: int
+    stages_before_core: int
+    cycles_per_sample: int
+
+    def to_dict(self) -> dict:
+        return {"lanes": len(self.lanes), "observers_per_lane": [len(ln) for ln in self.lanes], "steps": self.steps,
+                "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
+                "stages_before_core": self.stages_before_core, "cycles_per_sample": self.cycles_per_sample}
+
+
+def _isqrt_regs(width: int, every: int | None) -> int:
+    pairs = (width + 1) // 2
+    return 0 if not every else len([i for i in range(1, pairs) if i % every == 0])
+
+
+def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY, core_ii: int = 1) -> SerialBankPlan:
+    """The schedule of a serial bank of ``lanes`` state-update units for ``bank`` (a FixedPointObserverBank).
+
+    Raises
+    ------
+    ValueError
+        ``lanes`` not in ``1 .. N_theta`` or ``isqrt_every`` not a positive integer / None.
+    """
+    n, mo = bank.n_models, bank.order
+    if isinstance(lanes, bool) or not isinstance(lanes, int) or not 1 <= lanes <= n:
+        raise ValueError(f"bank lanes must be an integer in 1 .. {n} (the number of observers), got {lanes!r}")
+    if isqrt_every is not None and (isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1):
+        raise ValueError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
+    per = math.ceil(n / lanes)
+    groups = tuple(tuple(range(s, min(n, s + per))) for s in range(0, n, per))
+    n_max = len(groups[0])
+    r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
+    sbc = 4 + r + (n_max - 1) * mo
+    cps = max(n_max * mo, sbc, int(core_ii))
+    return SerialBankPlan(groups, mo, n_max * mo, isqrt_every if bank.feature_map == "11b" else None, r, sbc, cps)
+
+
+def var_product(m: Module, coef, x, width: int, name: str):
+    """``coef * x`` (two signed nets) as a named product net of exactly ``width`` bits.
+
+    The multiplier cell's output is the named net; give ``coef`` ``width - len(x)`` bits (a table
+    of that width, :func:`_table`) so that the cell's natural width is the product width (no
+    extension in front of the adders: lint-clean, as ``const_product``).
+    """
+    if len(coef) + len(x) > width:
+        raise ValueError(f"a {len(coef)} x {len(x)}-bit product does not fit {width} bits (product {name})")
+    p = Signal(signed(width), name=name)
+    m.d.comb += p.eq(coef.as_signed() * x.as_signed())
+    return p
+
+
+def _table(m: Module, sel, values: list[int], name: str, width: int | None = None):
+    """Signed table ``values[sel]`` as a signed net of the values' width or ``width`` (a Const when all equal)."""
+    w = width or max(_cbits(int(v)) for v in values)
+    if max(_cbits(int(v)) for v in values) > w:
+        raise ValueError(f"a constant of table {name} does not fit {w} bits")
+    t = rom(m, sel, [int(v) % (1 << w) for v in values], w, name)
+    if isinstance(t, int):
+        return Const(int(values[0]), signed(w))
+    return t.as_signed()
+
+
+def build_isqrt_pipelined(m: Module, value, name: str, every: int | None):
+    """``floor(sqrt(value))`` digit by digit as :func:`pwas_hdl.hdl.residual_features.build_isqrt`,
+    with a (free-running, reset-less) register after every ``every`` digit steps.
+
+    Returns ``(root, registers)``: an unsigned ``ceil(len / 2)``-bit net, valid ``registers``
+    cycles after ``value``.
+    """
+    w = len(value)
+    pairs = (w + 1) // 2
+    v = Cat(value, Const(0, 2 * pairs - w)) if 2 * pairs > w else value
+    two0 = v[2 * pairs - 2 : 2 * pairs]
+    b0 = Signal(name=f"{name}_b0")
+    m.d.comb += b0.eq(two0.any())
+    rem = rom(m, two0, [0, 0, 1, 2], 2, f"{name}_m0")  # two - (two != 0)
+    if isinstance(rem, int):
+        rem = Const(rem, 2)
+    bits = [b0]
+    regs = 0
+    for i in range(1, pairs):
+        if every and i % every == 0:  # pipeline register: the input bits still to come, the remainder, the root so far
+            lo_need = 2 * (pairs - i)
+            vr = Signal(unsigned(lo_need), name=f"{name}_r{regs}_v", reset_less=True)
+            rr = Signal(unsigned(len(rem)), name=f"{name}_r{regs}_m", reset_less=True)
+            br = Signal(unsigned(len(bits)), name=f"{name}_r{regs}_b", reset_less=True)
+            m.d.sync += [vr.eq(v[:lo_need]), rr.eq(rem), br.eq(Cat(*bits))]
+            v, rem, bits = vr, rr, [br[k] for k in range(len(bits))]
+            regs += 1
+        lo = 2 * (pairs - 1 - i)
+        two = v[lo : lo + 2]
+        root = Cat(*reversed(bits))
+        trial = Cat(Const(1, 2), root)
+        cur_lo = Cat(two, rem[:i])
+        diff = Signal(unsigned(i + 3), name=f"{name}_d{i}")
+        m.d.comb += diff.eq(cur_lo - trial)
+        bit = Signal(name=f"{name}_b{i}")
+        m.d.comb += bit.eq(rem[i] | ~diff[i + 2])
+        nrem = Signal(unsigned(i + 2), name=f"{name}_m{i}")
+        m.d.comb += nrem.eq(Mux(bit, diff[: i + 2], cur_lo))
+        rem = nrem
+        bits.append(bit)
+    sink_unused(m, rem, f"{name}_rem")
+    return Cat(*reversed(bits)), regs
+
+
+def eq_const(x, k: int):
+    """``x == k`` for an unsigned net and a constant (lint-clean: the constant at the net's width)."""
+    if k == 0:
+        return ~x.any()
+    if k >= 1 << len(x):
+        return Const(0, 1)
+    kb = int(k).bit_length()
+    low = x[:kb] == Const(k, kb)  # at the constant's own width (as ge_const)
+    return low if kb == len(x) else low & ~x[kb:].any()
+
+
+def _delay(m: Module, sig, n: int, name: str, reset_less: bool):
+    for d in range(n):
+        r = Signal(len(sig), name=f"{name}_d{d}", reset_less=reset_less)
+        m.d.sync += r.eq(sig)
+        sig = r
+    return sig
+
+
+def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, transfer, sample_warm):
+    """Add the time-multiplexed bank and feature unit to ``m``.
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+    plan : SerialBankPlan
+    cur : list of signed ``B_in``-bit values ``u0 .. y0`` (the input payload; latched on ``transfer``)
+    transfer : 1-bit, the input transfer
+    sample_warm : 1-bit register, the sample being processed yields an output (set by the caller at the transfer)
+
+    Returns
+    -------
+    codes : list (N) of signed core-input-code registers
+    done : 1-bit, high in the cycle the last feature code of a warm sample is written
+    free : 1-bit, the bank is idle or in its last cycle (a transfer may start the next sample)
+    """
+    fmt = bank.formats
+    mo, nu = bank.order, bank.nu
+    fc, fs, fin = fmt.coef_frac, fmt.state_frac, fmt.input_frac
+    bs, accw, rb, sumb = fmt.state_bits, fmt.acc_bits, fmt.residual_bits, fmt.sum_bits
+    sh_in = fs - fin
+    lw = bank.window
+    t_cps = plan.cycles_per_sample
+
+    # ---- inputs latched at the transfer
+    lat = [Signal(signed(bank.input_bits), name=f"bank_in{c}", reset_less=True) for c in range(len(cur))]
+    with m.If(transfer):
+        m.d.sync += [r.eq(c) for r, c in zip(lat, cur)]
+    qu, qy = lat[:nu], lat[nu]
+
+    # ---- step counter: busy for cycles t+1 .. t+cps
+    stw = bits_for(t_cps - 1)
+    st = Signal(unsigned(stw), name="bank_step")
+    busy = Signal(name="bank_busy")
+    last = Signal(name="bank_last")
+    m.d.comb += last.eq(busy & eq_const(st, t_cps - 1))
+    sw_i = bits_for(mo - 1)
+    si = Signal(unsigned(sw_i), name="bank_state_index")  # i of the step
+    ow = bits_for(max(len(g) for g in plan.lanes) - 1)
+    oj = Signal(unsigned(ow), name="bank_observer_index")  # observer within the lane
+    with m.If(transfer):
+        m.d.sync += [st.eq(0), busy.eq(1), si.eq(0), oj.eq(0)]
+    with m.Elif(busy):
+        with m.If(last):
+            m.d.sync += busy.eq(0)
+        with m.Else():
+            m.d.sync += st.eq(add_const_wrap(m, st, 1, "bank_step_inc"))
+        if mo > 1:
+            with m.If(eq_const(si, mo - 1)):
+                m.d.sync += [si.eq(0), oj.eq(add_const_wrap(m, oj, 1, "bank_obs_inc"))]
+            with m.Else():
+                m.d.sync += si.eq(add_const_wrap(m, si, 1, "bank_si_inc"))
+        else:
+            m.d.sync += oj.eq(add_const_wrap(m, oj, 1, "bank_obs_inc"))
+    free = Signal(name="bank_free")
+    m.d.comb += free.eq(~busy | last)
+    first_state = Signal(name="bank_first_state")
+    m.d.comb += first_state.eq(eq_const(si, 0)) if mo > 1 else first_state.eq(1)
+    last_state = Signal(name="bank_last_state")
+    m.d.comb += last_state.eq(eq_const(si, mo - 1)) if mo > 1 else last_state.eq(1)
+
+    qy_al = const_product(m, 1 << sh_in, qy, rb, "bank_y_aligned")
+    codes = [Signal(signed(bank.input_bits_core), name=f"feat{j}_code", reset_less=True) for j in range(bank.n_models)]
+    done = Signal(name="bank_features_done")
+    sat_flags = []
+    for ln, group in enumerate(plan.lanes):
+        nl = len(group)
+        steps = nl * mo
+        pre = f"lane{ln}"
+        active = Signal(name=f"{pre}_active")
+        m.d.comb += active.eq(busy & ~ge_const(st, steps) if steps < (1 << stw) else busy)
+        # ---- state chain
+        chain = [Signal(signed(bs), name=f"{pre}_x{k}") for k in range(steps)]
+        head = chain[0]
+        nxt = Signal(signed(bs), name=f"{pre}_x_next")
+        if steps > 1:
+            m.d.comb += nxt.eq(Mux(last_state, 0, chain[1]))
+        else:
+            m.d.comb += nxt.eq(0)
+        # coefficients of step (j, i) in lane order
+        order = [(j, i) for j in group for i in range(mo)]
+        a0 = [int(bank.a0_codes[j, i]) for j, i in order]
+        terms = []
+        if any(a0):  # x_{j,0} before the update: the head in step i = 0, held for the later steps
+            x0_hold = Signal(signed(bs), name=f"{pre}_first_hold", reset_less=True)
+            x0 = Signal(signed(bs), name=f"{pre}_first")
+            m.d.comb += x0.eq(Mux(first_state, head, x0_hold))
+            with m.If(active & first_state):
+                m.d.sync += x0_hold.eq(head)
+            terms.append(var_product(m, _table(m, st, a0, f"{pre}_a0", width=accw - bs), x0, accw, f"{pre}_pa"))
+        inj = []  # the input alignment << (F_s - F_in) folded into the tabled coefficients (as the parallel bank)
+        for c in range(nu):
+            bv = [int(bank.b_codes[j, i, c]) << sh_in for j, i in order]
+            if any(bv):
+                inj.append(var_product(m, _table(m, st, bv, f"{pre}_b{c}", width=accw - len(qu[c])), qu[c], accw, f"{pre}_pb{c}"))
+        lv = [int(bank.l_codes[j, i]) << sh_in for j, i in order]
+        if any(lv):
+            inj.append(var_product(m, _table(m, st, lv, f"{pre}_l", width=accw - len(qy)), qy, accw, f"{pre}_pl"))
+        terms += inj
+        terms.append(const_product(m, 1 << fc, nxt, accw, f"{pre}_px"))
+        dh = [int(bank.d_codes[j, i]) + (1 << (fc - 1)) for j, i in order]  # the rounding term folded in
+        if all(v == dh[0] for v in dh):
+            acc = add_const_signed(m, _sum(m, terms, accw, f"{pre}_acc"), dh[0], f"{pre}_acc_d")
+        else:
+            w = max(_cbits(v) for v in dh)
+            if w > accw:
+                raise ValueError("observer constant wider than the accumulator")
+            dnet = _table(m, st, dh, f"{pre}_d", width=accw)
+            acc = _sum(m, terms + [dnet], accw, f"{pre}_acc")
+        sink_unused(m, acc[:fc], f"{pre}_acc_frac")
+        new, flag = saturate(m, acc[fc:].as_signed(), bs, f"{pre}_new")
+        sat_flags.append(flag & active)
+        with m.If(active):
+            m.d.sync += [chain[k].eq(chain[k + 1]) for k in range(steps - 1)] + [chain[-1].eq(new)]
+
+        # ---- residual, square, window record (rotates once per observer)
+        xh = const_product(m, 1, head, rb, f"{pre}_yhat")
+        e = Signal(signed(rb + 1), name=f"{pre}_e_full")
+        m.d.comb += e.eq(xh - qy_al)
+        sink_unused(m, e[rb], f"{pre}_e_top")
+        p = Signal(signed(2 * rb), name=f"{pre}_sq")
+        m.d.comb += p.eq(e[:rb].as_signed() * e[:rb].as_signed())
+        sq = p.as_unsigned()
+        sums = [Signal(unsigned(sumb), name=f"{pre}_sum{o}") for o in range(nl)]
+        dls = [[Signal(unsigned(sumb), name=f"{pre}_dl{o}_{i}") for i in range(lw + 1)] for o in range(nl)]
+        added = add_wrap(m, sums[0], sq, f"{pre}_sum_add")
+        s_new = _sub_wrap(m, added, dls[0][lw], f"{pre}_sum_next")
+        rot = active & first_state
+        with m.If(rot):
+            for o in range(nl - 1):
+                m.d.sync += [sums[o].eq(sums[o + 1])] + [dls[o][i].eq(dls[o + 1][i]) for i in range(lw + 1)]
+            m.d.sync += [sums[-1].eq(s_new), dls[-1][0].eq(sq)] + [dls[-1][i].eq(dls[0][i - 1]) for i in range(1, lw + 1)]
+
+        # ---- feature pipeline: S register -> isqrt (R registers) -> root register -> code register
+        s_reg = Signal(unsigned(sumb), name=f"{pre}_fs_sum", reset_less=True)
+        tok = Signal(name=f"{pre}_fs_tok")
+        idx = Signal(unsigned(ow), name=f"{pre}_fs_idx", reset_less=True)
+        m.d.sync += [s_reg.eq(s_new), tok.eq(rot), idx.eq(oj)]
+        if bank.feature_map == "11b":
+            r, nreg = build_isqrt_pipelined(m, s_reg, f"{pre}_isqrt", plan.isqrt_every)
+            assert nreg == plan.isqrt_regs, (nreg, plan.isqrt_regs)
+        else:
+            r, nreg = s_reg, 0
+        tok_r = _delay(m, tok, nreg, f"{pre}_tok", reset_less=False)
+        idx_r = _delay(m, idx, nreg, f"{pre}_idx", reset_less=True)
+        root = Signal(unsigned(len(r)), name=f"{pre}_root", reset_less=True)
+        tok2 = Signal(name=f"{pre}_root_tok")
+        idx2 = Signal(unsigned(ow), name=f"{pre}_root_idx", reset_less=True)
+        m.d.sync += [root.eq(r), tok2.eq(tok_r), idx2.eq(idx_r)]
+        q = _affine(m, bank, group, root, idx2, pre)
+        for o, j in enumerate(group):
+            with m.If(tok2 & eq_const(idx2, o)):
+                m.d.sync += codes[j].eq(q)
+        if ln == 0:
+            m.d.comb += done.eq(tok2 & eq_const(idx2, nl - 1) & sample_warm)
+    sat = Signal(name="state_saturated")
+    m.d.comb += sat.eq(Cat(*sat_flags).any())
+    sink_unused(m, sat, "state_saturated_flag")
+    return codes, done, free
+
+
+def _sub_wrap(m: Module, a, b, name: str):
+    from pwas_hdl.hdl.residual_features import sub_wrap
+
+    return sub_wrap(m, a, b, name)
+
+
+def _affine(m: Module, bank, group, root, idx, pre: str):
+    """``sat((min(r >> t, cap_j) * K_j + C_j) >> R)`` with the constants of the lane's observer ``idx``."""
+    t, sh = bank.root_shift, bank.scale_shift
+    bcore = bank.input_bits_core
+    swd = bank.widths["scale_product"]
+    if t:
+        sink_unused(m, root[:t], f"{pre}_root_low")
+    rs = root[t:] if t else root
+    caps = [int(bank.root_cap[j]) for j in group]
+    capw = max(1, max(c.bit_length() for c in caps))
+    rw = len(rs)
+    assert capw <= rw, (capw, rw)  # cap_j <= the largest r >> t
+    cap = rom(m, idx, caps, rw, f"{pre}_cap")  # at the root's width: one comparator
+    if isinstance(cap, int):
+        cap = Const(cap, unsigned(rw))
+    capped = Signal(unsigned(capw), name=f"{pre}_capped")
+    with m.If(rs > cap):
+        m.d.comb += capped.eq(cap[:capw])
+    with m.Else():
+        m.d.comb += capped.eq(rs[:capw])
+    kmul = _table(m, idx, [int(bank.scale_mul[j]) for j in group], f"{pre}_kmul", width=swd - capw - 1)
+    prod = var_product(m, kmul, Cat(capped, Const(0, 1)), swd, f"{pre}_fprod")
+    adds = [int(bank.scale_add[j]) for j in group]
+    if all(a == adds[0] for a in adds):
+        tot = add_const_signed(m, prod, adds[0], f"{pre}_faffine")
+    else:
+        cn = _table(m, idx, adds, f"{pre}_fadd", width=swd)
+        tot = _sum(m, [prod, cn], swd, f"{pre}_faffine")
+    sink_unused(m, tot[:sh], f"{pre}_faffine_frac")
+    qv, _ = saturate(m, tot[sh:].as_signed(), bcore, f"{pre}_fq", flag=False)
+    return qv
