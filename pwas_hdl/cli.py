@@ -600,7 +600,8 @@ def generate(
     pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="Pipeline preset: min, short, balanced (default), max or max-lut (the registers themselves; see --goal).")] = None,
     goal: Annotated[Optional[str], typer.Option("--goal", help="Choose the pipeline by what matters: latency (fewest ns input to output), throughput (highest clock, II = 1) or balanced (the default). Each is a pipeline preset measured on ECP5 (README hardware tables). One of --goal, --pipeline, --clock-mhz.")] = None,
     memory_init: Annotated[str, typer.Option("--memory-init", help="inline: weights inside the Verilog; readmemh: the Verilog loads the .hex files (relative names).")] = "inline",
-    architecture: Annotated[str, typer.Option("--architecture", help="parallel: n+1 memories and multipliers per target, one sample per clock (II = 1); serial: one multiplier per target and one memory of N words, n+1 clocks per sample (II = n+1), bit-exact with parallel, for small FPGAs (iCE40 UP5K). Not with --clock-mhz.")] = "parallel",
+    architecture: Annotated[str, typer.Option("--architecture", help="parallel: n+1 memories and multipliers per target, one sample per clock (II = 1); serial: one multiplier per target and one memory of N words, n+1 clocks per sample (II = n+1), bit-exact with parallel, for small FPGAs (iCE40 UP5K); for an observer-bank sensor also the time-multiplexed bank (--bank-lanes state-update units, II = the manifest's front_end.cycles_per_sample). Not with --clock-mhz.")] = "parallel",
+    bank_lanes: Annotated[Optional[int], typer.Option("--bank-lanes", help="Observer-bank sensor with --architecture serial: state-update units sharing the N_theta x M observer updates (1 .. N_theta; default 1: about N_theta*M clocks per sample).")] = None,
     ports: Annotated[str, typer.Option("--ports", help="Port names: axis (aclk, aresetn active low, s_axis_tvalid/tready/tdata, m_axis_tvalid/tready/tdata) or amaranth (clk, rst active high, in__*, out__*).")] = "axis",
     input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes (of a non-uniform model: the codes in front of the warp).")] = 12,
     input_fill: Annotated[float, typer.Option("--input-fill", help="Largest fraction of the input code range the domain may take (the rest detects out-of-range).")] = 0.9,
@@ -633,7 +634,7 @@ def generate(
             with _progress("building the design"):
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
-                    architecture=architecture, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
+                    architecture=architecture, bank_lanes=bank_lanes, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding, goal=goal,
                     fpga_target=fpga,
                 )
@@ -641,7 +642,7 @@ def generate(
             with _executor(workers, scheduler) as ex:
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
-                    architecture=architecture, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
+                    architecture=architecture, bank_lanes=bank_lanes, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                     target_mhz=target_mhz, fpga_target=fpga, goal=goal,
                     progress=_say, executor=ex,

@@ -273,6 +273,7 @@ def build_design(
     progress: Callable[[str], None] | None = None,
     executor: Any = None,
     architecture: str = "parallel",
+    bank_lanes: int | None = None,
     **formats: Any,
 ) -> GeneratedDesign:
     """Build the RTL and all artifacts in memory.
@@ -333,6 +334,12 @@ def build_design(
         ``serial``: one multiplier per target, one memory of N words, ``n + 1`` cycles per
         sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`);
         ``memory`` then only selects the bit-true model's layout. Not with ``target_mhz``.
+        For an observer-bank sensor, ``serial`` also time-multiplexes the bank
+        (:mod:`pwas_hdl.hdl.serial_observer_bank`: ``bank_lanes`` state-update units, the II is
+        the manifest's ``front_end.cycles_per_sample``).
+    bank_lanes : int, optional
+        Observer-bank sensors with ``architecture="serial"``: state-update units sharing the
+        ``N_theta x M`` updates (1 .. N_theta, default 1: ``N_theta M`` cycles per sample or a few more).
     **formats
         Fixed-point options (:data:`FORMAT_OPTIONS`); ``None`` means the data-driven default.
 
@@ -385,6 +392,8 @@ def build_design(
                 raise InputError(f"{what} is not available with a non-uniform partition (--breakpoints) yet; "
                                  "fit with equal intervals or leave the option out")
     bank_model = None  # observer-bank front end (issue 12): pwas_hdl.fixedpoint.observer_bank
+    if bank_lanes is not None and (getattr(sensor, "front_end_", None) is None or architecture != "serial" or design != "sensor"):
+        raise InputError("--bank-lanes applies to observer-bank sensors with --design sensor --architecture serial only")
     if getattr(sensor, "front_end_", None) is not None:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
 
@@ -445,7 +454,8 @@ def build_design(
         from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
 
         # --architecture serial: the time-multiplexed bank and the serial core (pwas_hdl.hdl.serial_observer_bank)
-        comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture)
+        comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture,
+                                     lanes=1 if bank_lanes is None else bank_lanes)
     else:
         comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier,
                             architecture=architecture)
@@ -484,6 +494,8 @@ def build_design(
                **{k: formats.get(k) for k in FORMAT_OPTIONS}}
     if architecture != "parallel":
         options["architecture"] = architecture
+    if bank_lanes is not None:
+        options["bank_lanes"] = bank_lanes
     if bank_model is not None:
         from pwas_hdl.fixedpoint.observer_bank import BANK_FORMAT_OPTIONS
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused
 from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
 
@@ -92,14 +93,14 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
 
     Raises
     ------
-    ValueError
+    InputError
         ``lanes`` not in ``1 .. N_theta`` or ``isqrt_every`` not a positive integer / None.
     """
     n, mo = bank.n_models, bank.order
     if isinstance(lanes, bool) or not isinstance(lanes, int) or not 1 <= lanes <= n:
-        raise ValueError(f"bank lanes must be an integer in 1 .. {n} (the number of observers), got {lanes!r}")
+        raise InputError(f"bank lanes (--bank-lanes) must be an integer in 1 .. {n} (the number of observers), got {lanes!r}")
     if isqrt_every is not None and (isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1):
-        raise ValueError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
+        raise InputError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
     per = math.ceil(n / lanes)
     groups = tuple(tuple(range(s, min(n, s + per))) for s in range(0, n, per))
     n_max = len(groups[0])
@@ -378,13 +379,28 @@ def _affine(m: Module, bank, group, root, idx, pre: str):
     rw = len(rs)
     assert capw <= rw, (capw, rw)  # cap_j <= the largest r >> t
     cap = rom(m, idx, caps, rw, f"{pre}_cap")  # at the root's width: one comparator
-    if isinstance(cap, int):
-        cap = Const(cap, unsigned(rw))
     capped = Signal(unsigned(capw), name=f"{pre}_capped")
+    if isinstance(cap, int):  # one observer in the lane (or equal caps): a constant compare, as the parallel unit
+        over = ge_const(rs, cap + 1)
+        if isinstance(over, bool):
+            m.d.comb += capped.eq(cap if over else rs[:capw])
+        else:
+            with m.If(over):
+                m.d.comb += capped.eq(cap)
+            with m.Else():
+                m.d.comb += capped.eq(rs[:capw])
+        return _affine_tail(m, bank, group, capped, capw, idx, pre)
     with m.If(rs > cap):
         m.d.comb += capped.eq(cap[:capw])
     with m.Else():
         m.d.comb += capped.eq(rs[:capw])
+    return _affine_tail(m, bank, group, capped, capw, idx, pre)
+
+
+def _affine_tail(m: Module, bank, group, capped, capw: int, idx, pre: str):
+    sh = bank.scale_shift
+    bcore = bank.input_bits_core
+    swd = bank.widths["scale_product"]
     kmul = _table(m, idx, [int(bank.scale_mul[j]) for j in group], f"{pre}_kmul", width=swd - capw - 1)
     prod = var_product(m, kmul, Cat(capped, Const(0, 1)), swd, f"{pre}_fprod")
     adds = [int(bank.scale_add[j]) for j in group]
