@@ -1,19 +1,34 @@
-"""Resources, fmax and latency of observer-bank sensors on ECP5 and iCE40 (issue 12), one place and route each.
+"""Resources, fmax, latency and samples/s of observer-bank sensors on ECP5 and iCE40 (issue 12), one place and route each.
 
 Designs (fitted on the seed 004 pv-benchmark data, seed 0): the P-feat sensor of the benches
 (N_theta = 5, M = 5, l = 7, 11b, p = 6: 16 807 vertices), and a small one (N_theta = 3, p = 3,
-64 vertices) that also fits an iCE40 HX8K, plus its 11b-sq twin (no square root). Every design
-goes through ``generate --design sensor`` and :func:`pwas_hdl.flow.synthesis.synthesize`
-(Yosys + nextpnr, seed 1) for ECP5 (LFE5U-45F, then LFE5U-85F if it does not fit) and iCE40
-(HX8K); a design that does not fit a device is recorded with the reason. Samples/s = fmax / II (one sample per clock).
+64 vertices) plus its 11b-sq twin (no square root). Each is generated with ``generate --design
+sensor`` as the **serial** design (``--architecture serial``: the time-multiplexed bank of
+:mod:`pwas_hdl.hdl.serial_observer_bank`, one lane, and the serial core) and, for reference, the
+**parallel** one (constant multipliers, II = 1), and goes through
+:func:`pwas_hdl.flow.synthesis.synthesize` (Yosys + nextpnr, seed 1) on ECP5 LFE5U-45F and on
+iCE40 HX8K (no DSPs; 32 block RAMs of 4 kbit: a design whose weight memory is larger is not run
+there, reason recorded). Every run is a child process with a wall-clock limit (``--limit-min``,
+default 20); a run that does not finish is recorded as such. Samples/s = fmax / II.
 
-``python -m pwas_hdl.benchmarks.observer_bank_synth [--quick]`` writes
-``results/observer_bank_synth.{json,md}`` (``--quick``: the small design on ECP5 only).
+Where the cost is (step 1 of the issue's item 2): every design row also carries the multiplier
+inventory of its Verilog (:func:`multiplier_inventory`: each ``*`` by its net name and operand
+widths, grouped as observer-bank / squares / feature scale / core), so the DSP count of a run can
+be traced to the parts that need it.
+
+``python -m pwas_hdl.benchmarks.observer_bank_synth [--quick] [--limit-min M] [--only serial|parallel]``
+writes ``results/observer_bank_synth.{json,md}`` (``--quick``: the small serial design on ECP5 only,
+``..._quick.{json,md}``).
 """
 
 from __future__ import annotations
 
 import json
+import math
+import os
+import re
+import signal
+import subprocess
 import sys
 import tempfile
 import time
@@ -27,12 +42,15 @@ DESIGNS = {
     "small-n3-p3-11b-sq": dict(n_models=3, features="11b-sq", partitions=3, n_train=3000),
     "pfeat-n5-p6-11b": dict(n_models=5, features="11b", partitions=6, n_train=25000),
 }
+BANKS = ("serial", "parallel")
 #: iCE40 HX8K block RAM: 32 x 4 kbit; a design whose weight memory is larger is not run on it.
 ICE40_BRAM_BITS = 32 * 4096
-#: Parts tried in order per family (the next one only when a design does not fit).
-FALLBACK = {"ecp5": ("45k", "85k"), "ice40": ("hx8k",)}
+TARGETS = {"ecp5": "45k", "ice40": "hx8k"}
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "logic_cells", "fmax_mhz", "latency_cycles", "latency_ns", "ii",
         "throughput_msps", "runtime_s")
+#: Net-name prefixes of the multipliers -> part of the design.
+PARTS = (("bank", re.compile(r"^(obs\d+_p|lane\d+_p)")), ("square", re.compile(r"_sq$")),
+         ("feature scale", re.compile(r"(feat\d+_prod|lane\d+_fprod)$")))
 
 
 def _sensor(cfg: dict):
@@ -45,62 +63,137 @@ def _sensor(cfg: dict):
     return PWASVirtualSensor(mu=0, my=0, partitions=cfg["partitions"], gamma=1.0, front_end=fe).fit(tr.u, tr.y, tr.z)
 
 
-def run(quick: bool = False) -> dict:
+def multiplier_inventory(verilog: str) -> dict:
+    """The ``*`` operators of a generated Verilog file, by part, with their operand widths.
+
+    Returns ``{part: {"count": .., "operand_bits": [[a, b], ..], "mult18x18_estimate": ..}}`` where
+    constant operands count with the width of their literal, and ``mult18x18_estimate`` is
+    ``sum ceil(a / 18) * ceil(b / 18)`` over the non-power-of-two products (what a DSP mapping of
+    full products would need; synthesis may do better for small constants).
+    """
+    widths: dict[str, int] = {}
+    for mt in re.finditer(r"^\s*(?:wire|reg)\s+(?:signed\s+)?(?:\[(\d+):0\]\s+)?\\?([\w$]+)", verilog, re.M):
+        widths[mt.group(2)] = int(mt.group(1)) + 1 if mt.group(1) else 1
+    out: dict[str, dict] = {}
+    for mt in re.finditer(r"assign\s+\\?([\w$]+)\s*=\s*([^;*]+?)\s*\*\s*([^;]+);", verilog):
+        name, ops = mt.group(1), []
+        pow2 = False
+        for op in (mt.group(2), mt.group(3)):
+            op = op.strip()
+            if op.startswith("$signed(") and op.endswith(")"):
+                op = op[8:-1].strip()
+            lit = re.match(r"^(\d+)'s?h([0-9a-fA-F]+)$", op)
+            if lit:  # a constant: its own two's-complement width, not the literal's
+                w, v = int(lit.group(1)), int(lit.group(2), 16)
+                v = v - (1 << w) if v >> (w - 1) else v
+                ops.append(max(2, (v.bit_length() if v >= 0 else (-v - 1).bit_length()) + 1))
+                pow2 = pow2 or (v > 0 and v & (v - 1) == 0)
+            elif op.startswith("{"):
+                ops.append(sum(int(w) for w in re.findall(r"(\d+)'h", op)) + sum(widths.get(n, 1) for n in re.findall(r"\b([a-zA-Z_]\w*)\b", op)))
+            else:
+                sl = re.match(r"^\\?([\w$]+)\s*\[(\d+)(?::(\d+))?\]$", op)
+                ops.append(int(sl.group(2)) - int(sl.group(3) or sl.group(2)) + 1 if sl else widths.get(op.lstrip("\\").strip(), 0))
+        if pow2:
+            continue  # a shift (alignment), not a multiplier
+        part = next((p for p, rx in PARTS if rx.search(name)), "core")
+        e = out.setdefault(part, {"count": 0, "operand_bits": [], "mult18x18_estimate": 0})
+        e["count"] += 1
+        e["operand_bits"].append(ops)
+        e["mult18x18_estimate"] += math.ceil(max(ops[0], 1) / 18) * math.ceil(max(ops[1], 1) / 18)
+    return out
+
+
+def _one_run(folder: str, target: str, device: str, limit_s: float) -> dict:
+    """:func:`synthesize` in a child process (own process group), killed after ``limit_s`` seconds."""
+    code = ("import json,sys; from pwas_hdl.flow.synthesis import synthesize\n"
+            "try:\n r = synthesize(sys.argv[1], sys.argv[2], device=sys.argv[3]); print('RESULT ' + json.dumps(r, default=str))\n"
+            "except (ValueError, RuntimeError) as e:\n print('FAILED ' + str(e).splitlines()[0][:300])\n")
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-c", code, folder, target, device], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=limit_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        return {"fits": None, "finished": False, "reason": f"not finished within the limit of {limit_s / 60:.0f} min wall clock "
+                f"(killed; shared 2-core machine)", "wall_s": round(time.perf_counter() - t0, 1)}
+    wall = round(time.perf_counter() - t0, 1)
+    for line in out.splitlines():
+        if line.startswith("RESULT "):
+            res = json.loads(line[7:])
+            return {**{k: res.get(k) for k in KEYS}, "device": res.get("part"), "fits": True, "finished": True, "wall_s": wall}
+        if line.startswith("FAILED "):
+            return {"fits": False, "finished": True, "reason": line[7:], "wall_s": wall}
+    return {"fits": None, "finished": False, "reason": f"the run failed: {(err or out).strip().splitlines()[-1][:300] if (err or out).strip() else 'no output'}",
+            "wall_s": wall}
+
+
+def run(quick: bool = False, limit_min: float = 20.0, only: str | None = None) -> dict:
     from pwas_hdl.design.generate import generate
-    from pwas_hdl.flow.synthesis import synthesize
 
     t0 = time.perf_counter()
     names = ["small-n3-p3-11b"] if quick else list(DESIGNS)
-    targets = ["ecp5"] if quick else ["ecp5", "ice40"]
+    targets = ["ecp5"] if quick else list(TARGETS)
+    banks = ["serial"] if quick else [b for b in BANKS if only in (None, b)]
     rows = []
-    for name in names:
-        s = _sensor(DESIGNS[name])
-        with tempfile.TemporaryDirectory(prefix="pwas-obs-synth-") as tmp:
-            g = generate(s, Path(tmp) / "d", design="sensor")
-            fe = g.manifest["front_end"]
-            for target in targets:
-                print(f"{name} on {target} ...", flush=True)
-                if target == "ice40" and g.manifest["memory"]["bits"] > ICE40_BRAM_BITS:
-                    rows.append({"design": name, "target": target, "device": "hx8k", "n_vertices": g.manifest["domain"]["n_vertices"],
-                                 "memory_bits": g.manifest["memory"]["bits"], "fits": False,
-                                 "reason": f"not run: {g.manifest['memory']['bits']} bits of weight memory > the "
-                                           f"{ICE40_BRAM_BITS} bits of block RAM of an HX8K"})
-                    continue
-                row = {"design": name, "target": target, "n_vertices": g.manifest["domain"]["n_vertices"],
-                       "memory_bits": g.manifest["memory"]["bits"], "formats": fe["formats"], "feature_map": fe["feature_map"],
-                       "cycles_per_sample": fe["cycles_per_sample"]}
-                for device in FALLBACK.get(target, (None,)):  # a larger part when the default does not fit
-                    r = dict(row)
-                    try:
-                        res = synthesize(Path(tmp) / "d", target, device=device)
-                        r.update({k: res.get(k) for k in KEYS}, device=res.get("part"), fits=True)
-                    except (ValueError, RuntimeError) as exc:  # does not fit the device, or a tool failed
-                        r.update(fits=False, device=device, reason=str(exc).splitlines()[0][:300])
-                    print(json.dumps({k: r.get(k) for k in ("design", "target", "device", "luts", "ffs", "dsp", "bram", "fmax_mhz",
-                                                            "fits", "reason")}), flush=True)
-                    rows.append(r)
-                    if r["fits"]:
-                        break
-    return {"bench": "observer-bank-synth", "quick": quick, "rows": rows, "elapsed_s": round(time.perf_counter() - t0, 1)}
+    for bank in banks:
+        for name in names:
+            s = _sensor(DESIGNS[name])
+            with tempfile.TemporaryDirectory(prefix="pwas-obs-synth-") as tmp:
+                folder = Path(tmp) / "d"
+                g = generate(s, folder, design="sensor", architecture=bank)
+                fe = g.manifest["front_end"]
+                inv = multiplier_inventory((folder / f"{g.top}.v").read_text())
+                base = {"design": name, "bank": bank, "n_vertices": g.manifest["domain"]["n_vertices"],
+                        "memory_bits": g.manifest["memory"]["bits"], "feature_map": fe["feature_map"],
+                        "cycles_per_sample": fe["cycles_per_sample"], "ii_manifest": g.manifest["ii"],
+                        "latency_manifest": g.manifest["latency_cycles"], "multipliers": inv}
+                for target in targets:
+                    device = TARGETS[target]
+                    row = {**base, "target": target, "device": device}
+                    if target == "ice40" and g.manifest["memory"]["bits"] > ICE40_BRAM_BITS:
+                        row.update(fits=False, finished=True, reason=f"not run: {g.manifest['memory']['bits']} bits of weight memory > "
+                                   f"the {ICE40_BRAM_BITS} bits of block RAM of an HX8K")
+                    else:
+                        print(f"{name} ({bank}) on {target} {device} ...", flush=True)
+                        row.update(_one_run(str(folder), target, device, limit_min * 60))
+                    print(json.dumps({k: row.get(k) for k in ("design", "bank", "target", "device", "luts", "ffs", "dsp", "bram",
+                                                                "fmax_mhz", "ii", "fits", "reason", "wall_s")}), flush=True)
+                    rows.append(row)
+    return {"bench": "observer-bank-synth", "quick": quick, "limit_min": limit_min, "rows": rows,
+            "elapsed_s": round(time.perf_counter() - t0, 1)}
+
+
+def _dsp_est(r: dict) -> str:
+    return " / ".join(f"{p} {v['count']}x ~{v['mult18x18_estimate']}" for p, v in r["multipliers"].items())
 
 
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors: resources on ECP5 and iCE40{' (QUICK)' if doc['quick'] else ''}", "",
-             "| design | part | N | LUT4 | FF | carry | DSP | BRAM | fmax MHz | latency (cycles / ns) | Msamples/s | note |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---|"]
-    # device in the target column
+             f"One Yosys + nextpnr run each (seed 1, time limit {doc['limit_min']:.0f} min wall per run), "
+             "`benchmarks/observer_bank_synth.py`; designs fitted on pv-benchmark data (seed 0). "
+             "serial = `generate --architecture serial` (time-multiplexed bank, 1 lane, serial core); "
+             "parallel = constant multipliers, II 1. DSP = MULT18X18D (ECP5); iCE40 HX8K has none. "
+             "Multipliers (RTL `*` by part, count x estimated 18x18 blocks) from the Verilog.", "",
+             "| design | bank | part | LUT4 | FF | DSP | BRAM | fmax MHz | latency (cycles / ns) | cycles/sample (II) | Msamples/s | multipliers in the RTL | note |",
+             "|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|---|---|"]
     for r in doc["rows"]:
-        if r["fits"]:
-            lines.append(f"| {r['design']} | {r['device']} | {r['n_vertices']} | {r['luts']} | {r['ffs']} | {r['carry']} | {r['dsp']} | "
-                         f"{r['bram']} | {r['fmax_mhz']:.1f} | {r['latency_cycles']} / {r['latency_ns']:.0f} | {r['throughput_msps']:.1f} | |")
+        head = f"| {r['design']} | {r['bank']} | {r['target']} {r.get('device') or ''} |"
+        if r.get("fits"):
+            lines.append(f"{head} {r['luts']} | {r['ffs']} | {r['dsp']} | {r['bram']} | {r['fmax_mhz']:.1f} | "
+                         f"{r['latency_cycles']} / {r['latency_ns']:.0f} | {r['ii']} | {r['throughput_msps']:.3f} | {_dsp_est(r)} | |")
         else:
-            lines.append(f"| {r['design']} | {r['target']} {r.get('device') or ''} | {r['n_vertices']} | | | | | | | | | {r['reason']} |")
+            lines.append(f"{head} | | | | | {r['latency_manifest']} / | {r['ii_manifest']} | | {_dsp_est(r)} | {r['reason']} |")
     return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
-    quick = "--quick" in sys.argv[1:]
-    doc = run(quick)
+    args = sys.argv[1:]
+    quick = "--quick" in args
+    limit = float(args[args.index("--limit-min") + 1]) if "--limit-min" in args else 20.0
+    only = args[args.index("--only") + 1] if "--only" in args else None
+    doc = run(quick, limit, only)
     out = benchmarks_dir() / "results"
     stem = "observer_bank_synth_quick" if quick else "observer_bank_synth"
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
