@@ -105,6 +105,73 @@ def test_rtl_bit_exact(pv_small, tmp_path, sim_cache, simulator, config):
         assert r.within_bound  # the core's bound at the feature codes
 
 
+def test_serial_bank_manifest_and_refusals(bank_sensor, tmp_path):
+    """--architecture serial: the time-multiplexed bank's II in the design info (front_end and top) without
+    elaborating; bad --bank-lanes refused before anything is written (the manifest itself: the rtl tests)."""
+    from typer.testing import CliRunner
+
+    from pwas_hdl.cli import app
+    from pwas_hdl.errors import InputError
+    from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
+    from pwas_hdl.hdl.api import design_info
+    from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
+
+    top = build_observer_sensor(observer_bank_model(bank_sensor), architecture="serial")
+    info = design_info(top, "axis")
+    fe = info["front_end"]
+    sch = fe["schedule"]
+    assert fe["bank"] == "serial" and sch["lanes"] == 1 and sch["steps"] == 3 * 5
+    # N M steps, or the feature pipeline's tail, or the serial core's n + 1
+    assert fe["cycles_per_sample"] == fe["ii"] == info["ii"] == max(15, sch["stages_before_core"], 3 + 1)
+    assert info["latency"] == fe["stages_before_core"] + top.core.latency
+    assert "bank idle" in info["flow_control"]["s_axis_tready"]
+    two = build_observer_sensor(observer_bank_model(bank_sensor), architecture="serial", lanes=2)
+    assert two.plan.lanes == ((0, 1), (2,)) and two.ii < top.ii
+    with pytest.raises(InputError, match="bank lanes"):
+        build_design(bank_sensor, design="sensor", architecture="serial", bank_lanes=4)
+    with pytest.raises(InputError, match="--architecture serial"):
+        build_design(bank_sensor, design="sensor", bank_lanes=2)
+    model = tmp_path / "bank.json"
+    bank_sensor.save(model)
+    r = CliRunner().invoke(app, ["generate", str(model), "--design", "sensor", "--architecture", "serial", "--bank-lanes", "0",
+                                 "-o", str(tmp_path / "bad")])
+    assert r.exit_code == 2 and r.output.strip().startswith("error:") and "bank lanes" in r.output and not (tmp_path / "bad").exists()
+
+
+SERIAL_CONFIGS = {  # the time-multiplexed bank: a0 != 0, saturating states, 11b-sq; 2 lanes, 11b, isqrt pipeline
+    # (CI: Icarus; benchmarks/observer_bank_rtl.py runs the serial configurations on Verilator too)
+    "serial-n2-m3-kalman-11bsq-saturating": dict(n_models=2, observer="kalman:1", features="11b-sq", order=3, state_bits=14, bank_lanes=1),
+    "serial-n3-m3-poles-11b-2lanes": dict(n_models=3, observer="poles:0.4", features="11b", order=3, bank_lanes=2),
+}
+
+
+@pytest.mark.rtl
+@pytest.mark.parametrize("simulator,config", [("icarus", "serial-n2-m3-kalman-11bsq-saturating"),
+                                              ("icarus", "serial-n3-m3-poles-11b-2lanes")])
+def test_serial_bank_rtl_bit_exact(pv_small, tmp_path, sim_cache, simulator, config):
+    from pwas_hdl.flow.toolchain import lint_verilog
+
+    cfg = dict(SERIAL_CONFIGS[config])
+    opts = {k: cfg.pop(k) for k in ("state_bits", "bank_lanes") if k in cfg}
+    s = _fit(pv_small, **cfg)
+    g = generate(s, tmp_path / "d", design="sensor", architecture="serial", **opts)
+    if "state_bits" in opts:  # byte-identical reruns
+        assert build_design(s, design="sensor", architecture="serial", **opts).files == g.files
+    lint = lint_verilog(tmp_path / "d" / f"{g.top}.v", g.top)
+    assert lint.returncode == 0 and "%Warning" not in lint.stderr, lint.stderr[:2000]
+    d = load_design(tmp_path / "d")
+    ii = d.manifest["ii"]
+    assert ii == d.manifest["front_end"]["cycles_per_sample"] > 1
+    _, te, _ = pv_small
+    data, _ = d.bank.quantize_signals(te.u, te.y)
+    codes = sim_module("pwas_stimulus").observer_codes(d.bank.bank, 200, seed=4, data=data)
+    assert d.bank.bank.trace(codes)["state_saturated"].any() == ("state_bits" in opts)
+    r = run_rtl(d, standard_runs(d, codes), simulator, cache_dir=sim_cache)
+    assert r.passed, r.report()
+    assert r.mismatches == 0 and r.outputs > 500
+    assert set(r.latencies) == {d.latency} and r.ii == float(ii)  # in.ready honours the II at full speed
+
+
 @pytest.mark.rtl
 @pytest.mark.parametrize("window", [1, 3])
 def test_seed003_estimator_rtl_bit_exact_and_lint(tmp_path, window):

@@ -72,6 +72,7 @@ class ObserverSensorTop(wiring.Component):
             from pwas_hdl.hdl.serial_core import SerialPWASCore
 
             self.core = SerialPWASCore(params, pipeline=pipeline)
+            self.core._MustUse__silence = True
             self.plan = plan_serial_bank(bank, lanes, isqrt_every, self.core.ii)
             self.stages_before_core = self.plan.stages_before_core
             self.ii = self.cycles_per_sample = self.plan.cycles_per_sample
