@@ -1,6 +1,7 @@
 """Bit-exactness of observer-bank sensors on both simulators (issue 12): >= 6 configurations.
 
-Each configuration (N_theta, M, gain, feature map, optional narrow states) is fitted on seed 004
+Each configuration (N_theta, M, gain, feature map, optional narrow states, parallel or serial
+bank with its lanes) is fitted on seed 004
 pv-benchmark data (2 000 training samples, p = 3, seed 0), generated with ``generate --design
 sensor`` and replayed by the manifest-driven cocotb bench (``sim/pwas_tb.py``) on Icarus and on
 Verilator: the three standard runs (full speed; random bubbles and backpressure; a reset in the
@@ -31,6 +32,14 @@ CONFIGS = [
     dict(name="n7-m5-kalman0.1-11b", n_models=7, order=5, observer="kalman:0.1", features="11b"),
     dict(name="n3-m2-poles0.4-11b-sq", n_models=3, order=2, observer="poles:0.4", features="11b-sq"),
     dict(name="n2-m3-kalman1-11b-sq-saturating", n_models=2, order=3, observer="kalman:1", features="11b-sq", state_bits=14),
+    # the time-multiplexed bank (generate --architecture serial [--bank-lanes L]): II = cycles per sample
+    dict(name="serial-n3-m5-deadbeat-11b", n_models=3, order=5, observer="deadbeat", features="11b", architecture="serial"),
+    dict(name="serial-n5-m4-kalman1-11b-sq-2lanes", n_models=5, order=4, observer="kalman:1", features="11b-sq",
+         architecture="serial", bank_lanes=2),
+    dict(name="serial-n7-m2-kalman0.1-11b-3lanes", n_models=7, order=2, observer="kalman:0.1", features="11b",
+         architecture="serial", bank_lanes=3),
+    dict(name="serial-n2-m3-kalman1-11b-sq-saturating", n_models=2, order=3, observer="kalman:1", features="11b-sq", state_bits=14,
+         architecture="serial"),
 ]
 SIMULATORS = ("icarus", "verilator")
 
@@ -46,10 +55,10 @@ def run(quick: bool = False) -> dict:
     tr, te, _ = make_pv_dataset("pv-benchmark", 2000, 400, seed=0)
     stim = sim_module("pwas_stimulus")
     rows = []
-    for cfg in CONFIGS[:2] if quick else CONFIGS:
+    for cfg in [CONFIGS[0], CONFIGS[7]] if quick else CONFIGS:
         fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
         s = PWASVirtualSensor(mu=0, my=0, partitions=3, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
-        opts = {"state_bits": cfg["state_bits"]} if "state_bits" in cfg else {}
+        opts = {k: cfg[k] for k in ("state_bits", "architecture", "bank_lanes") if k in cfg}
         with tempfile.TemporaryDirectory(prefix="pwas-obs-rtl-") as tmp:
             generate(s, Path(tmp) / "d", design="sensor", **opts)
             d = load_design(Path(tmp) / "d")
@@ -62,7 +71,9 @@ def run(quick: bool = False) -> dict:
                 row = {"config": cfg["name"], "simulator": sim, "n_models": d.bank.bank.n_models, "order": d.bank.bank.order,
                        "observer": cfg["observer"], "features": cfg["features"], "state_bits": d.bank.bank.formats.state_bits,
                        "stimulus_state_saturations": sat, "outputs": r.outputs, "mismatches": r.mismatches, "passed": r.passed,
+                       "bank": cfg.get("architecture", "parallel"), "bank_lanes": cfg.get("bank_lanes", 1 if "architecture" in cfg else None),
                        "latency_measured": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
+                       "ii_manifest": int(d.manifest["ii"]),
                        "failures": r.failures[:3], "wall_s": round(time.perf_counter() - t1, 1)}
                 print(json.dumps(row), flush=True)
                 rows.append(row)
@@ -71,11 +82,13 @@ def run(quick: bool = False) -> dict:
 
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors: bit-exact RTL on Icarus and Verilator{' (QUICK)' if doc['quick'] else ''}", "",
-             "| configuration | simulator | state bits | state saturations in stimulus | outputs | mismatches | latency (measured / manifest) | II |",
-             "|---|---|---:|---:|---:|---:|---|---:|"]
+             "| configuration | bank | simulator | state bits | state saturations in stimulus | outputs | mismatches | "
+             "latency (measured / manifest) | II (measured / manifest) |",
+             "|---|---|---|---:|---:|---:|---:|---|---|"]
     for r in doc["rows"]:
-        lines.append(f"| {r['config']} | {r['simulator']} | {r['state_bits']} | {r['stimulus_state_saturations']} | {r['outputs']} | "
-                     f"{r['mismatches']} | {r['latency_measured']} / {r['latency_manifest']} | {r['ii']} |")
+        bank = r.get("bank", "parallel") + (f", {r['bank_lanes']} lane(s)" if r.get("bank_lanes") else "")
+        lines.append(f"| {r['config']} | {bank} | {r['simulator']} | {r['state_bits']} | {r['stimulus_state_saturations']} | {r['outputs']} | "
+                     f"{r['mismatches']} | {r['latency_measured']} / {r['latency_manifest']} | {r['ii']} / {r.get('ii_manifest', 1)} |")
     return "\n".join(lines) + "\n"
 
 

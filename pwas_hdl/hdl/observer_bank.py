@@ -2,8 +2,9 @@
 
 Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank` (see its module for
 the arithmetic). Architecture: **parallel constant multipliers**, one state update of every
-observer per input transfer (1 cycle per sample, II = 1). Time-multiplexing over ``M`` cycles
-would save multipliers but cut the sample rate by ``M``; the multipliers are by constants (the
+observer per input transfer (1 cycle per sample, II = 1). The time-multiplexed alternative
+(``--architecture serial``) is :mod:`pwas_hdl.hdl.serial_observer_bank`: ``nu + 2`` multipliers
+per lane instead of up to ``N M (nu + 2)``, at ``~N M / lanes`` cycles per sample; the multipliers are by constants (the
 coefficient codes), which synthesis turns into shift-add trees or DSP blocks, and zero
 coefficients (``a0`` of a deadbeat gain) cost nothing. Per observer and state: ``nu + 1``
 constant multiplications by the input codes and one by the first state (when ``a0 != 0``).

@@ -13,6 +13,14 @@ Pipeline (one global enable ``advance = ~out.valid | out.ready``, ``in.ready = a
   (:meth:`pwas_hdl.hdl.core.PWASCore.build_into`), whose latency follows.
 
 ``latency = 2 + core latency`` cycles, II = 1, one cycle per sample (parallel multipliers).
+
+``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the
+time-multiplexed bank and feature unit of :mod:`pwas_hdl.hdl.serial_observer_bank` (``L``
+state-update units, rotating state chains, pipelined square root) and the serial core
+(:class:`pwas_hdl.hdl.serial_core.SerialPWASCore`); ``in.ready`` = bank idle or in its last
+cycle, and the previous sample's feature codes taken by the core (``features_valid``); II =
+``cycles_per_sample`` (manifest ``front_end.cycles_per_sample`` / ``ii`` / ``schedule``),
+``latency = stages_before_core + core latency``. The same bit-true model, bit for bit.
 Warm-up: the first ``M + l`` transfers after reset produce no output (their windows hold observer
 start-up residuals; the float front end has no features for them either); ``warm`` is 1 once they
 have been taken. ``rst`` (synchronous) clears states, delay lines, sums, the warm-up counter and
@@ -52,7 +60,16 @@ class ObserverSensorTop(wiring.Component):
     Ports: ``clk``, ``rst``, ``in__valid/ready/payload`` (``(nu+1) B_in`` bits), ``out__valid/ready/payload``
     (as the core), ``warm``.
 
-    Attributes: ``core``, ``latency``, ``ii`` (1), ``cycles_per_sample`` (1), ``warmup`` (``M + l``).
+    architecture : {"parallel", "serial"}
+        Parallel constant-multiplier bank + parallel core (II 1), or the time-multiplexed bank
+        + serial core.
+    lanes : int
+        Serial bank: state-update units (1 .. N_theta).
+    isqrt_every : int or None
+        Serial bank: digit steps of the square root between pipeline registers.
+
+    Attributes: ``core``, ``latency``, ``ii`` and ``cycles_per_sample`` (1 parallel, the schedule's
+    serial), ``plan`` (:class:`~pwas_hdl.hdl.serial_observer_bank.SerialBankPlan` or None), ``warmup`` (``M + l``).
     """
 
     kind = "observer-sensor"

@@ -17,8 +17,11 @@ the ``M`` states of the lane's observers, one state update per clock:
   ``N M (nu + 2)`` constant ones). The sum is an exact integer sum in the declared accumulator
   width, so its order does not matter and the rounding / saturation are the bit-true model's;
 * at step ``i = 0`` of observer ``j``: the residual ``e_j = x_{j,0} - (qy << (F_s - F_in))``,
-  ``e_j**2`` (one squarer per lane), the observer's window record (running sum ``S_j`` and its
-  delay line of ``l + 1`` squares) rotates like the states; the new ``S_j`` enters a
+  ``e_j**2`` (one squarer per lane), the running sum ``S_j`` (a rotating chain like the states)
+  and the delay line of ``l + 1`` squares: one memory per lane (block / distributed RAM instead
+  of ``N (l + 1)`` registers), word ``(j, slot)``, ``slot`` = sample number mod ``l + 1``; the
+  oldest square is read one cycle before the step and counts as 0 until ``l + 1`` samples have
+  been taken since reset (the bit-true delay line is 0 after reset); the new ``S_j`` enters a
   free-running feature pipeline: register, integer square root (11b; a register after every
   ``isqrt_every`` digit steps) or ``S`` itself (11b-sq), root register, the affine map to the
   core's input code with the constants from a table (one multiplier per lane), and the code
@@ -39,6 +42,7 @@ import math
 from dataclasses import dataclass
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.lib.memory import Memory
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused
@@ -260,6 +264,24 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
     last_state = Signal(name="bank_last_state")
     m.d.comb += last_state.eq(eq_const(si, mo - 1)) if mo > 1 else last_state.eq(1)
 
+    # ---- delay-line slot of the sample (circular, l + 1 slots) and whether it was written since reset
+    slw = bits_for(lw)
+    wptr = Signal(unsigned(slw), name="bank_dl_next_slot")
+    slot = Signal(unsigned(slw), name="bank_dl_slot")
+    cnt = Signal(unsigned(bits_for(lw + 1)), name="bank_dl_count")
+    old_valid = Signal(name="bank_dl_old_valid")
+    slot_now = Signal(unsigned(slw), name="bank_dl_slot_now")
+    m.d.comb += slot_now.eq(Mux(transfer, wptr, slot))
+    with m.If(transfer):
+        wrap = eq_const(wptr, lw)
+        m.d.sync += [slot.eq(wptr), wptr.eq(Mux(wrap, 0, add_const_wrap(m, wptr, 1, "bank_dl_slot_inc"))),
+                     old_valid.eq(ge_const(cnt, lw + 1))]
+        with m.If(~ge_const(cnt, lw + 1)):
+            m.d.sync += cnt.eq(add_const_wrap(m, cnt, 1, "bank_dl_count_inc"))
+    # the observer whose oldest square is read now (synchronous read: used in the next cycle)
+    rd_obs = Signal(unsigned(ow), name="bank_dl_read_obs")
+    m.d.comb += rd_obs.eq(Mux(transfer, 0, add_const_wrap(m, oj, 1, "bank_dl_obs_inc")))
+
     qy_al = const_product(m, 1 << sh_in, qy, rb, "bank_y_aligned")
     codes = [Signal(signed(bank.input_bits_core), name=f"feat{j}_code", reset_less=True) for j in range(bank.n_models)]
     done = Signal(name="bank_features_done")
@@ -323,14 +345,23 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
         m.d.comb += p.eq(e[:rb].as_signed() * e[:rb].as_signed())
         sq = p.as_unsigned()
         sums = [Signal(unsigned(sumb), name=f"{pre}_sum{o}") for o in range(nl)]
-        dls = [[Signal(unsigned(sumb), name=f"{pre}_dl{o}_{i}") for i in range(lw + 1)] for o in range(nl)]
-        added = add_wrap(m, sums[0], sq, f"{pre}_sum_add")
-        s_new = _sub_wrap(m, added, dls[0][lw], f"{pre}_sum_next")
+        # the delay lines: one memory per lane, word (observer o, slot) = Cat(o, slot); the square of
+        # sample k - l - 1 is read one cycle before observer o's step (0 while not written since reset)
+        mem = Memory(shape=unsigned(sumb), depth=(1 << ow) * (lw + 1), init=[])
+        m.submodules[f"{pre}_dlmem"] = mem
+        rp = mem.read_port(domain="sync")
+        rp.addr = Cat(rd_obs, slot_now)
+        wp = mem.write_port()
         rot = active & first_state
+        wp.addr = Cat(oj, slot)
+        wp.data = sq
+        wp.en = rot
+        oldest = Signal(unsigned(sumb), name=f"{pre}_dl_oldest")
+        m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
+        added = add_wrap(m, sums[0], sq, f"{pre}_sum_add")
+        s_new = _sub_wrap(m, added, oldest, f"{pre}_sum_next")
         with m.If(rot):
-            for o in range(nl - 1):
-                m.d.sync += [sums[o].eq(sums[o + 1])] + [dls[o][i].eq(dls[o + 1][i]) for i in range(lw + 1)]
-            m.d.sync += [sums[-1].eq(s_new), dls[-1][0].eq(sq)] + [dls[-1][i].eq(dls[0][i - 1]) for i in range(1, lw + 1)]
+            m.d.sync += [sums[o].eq(sums[o + 1]) for o in range(nl - 1)] + [sums[-1].eq(s_new)]
 
         # ---- feature pipeline: S register -> isqrt (R registers) -> root register -> code register
         s_reg = Signal(unsigned(sumb), name=f"{pre}_fs_sum", reset_less=True)
