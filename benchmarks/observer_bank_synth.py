@@ -185,6 +185,12 @@ def markdown(doc: dict) -> str:
                          f"{r['latency_cycles']} / {r['latency_ns']:.0f} | {r['ii']} | {r['throughput_msps']:.3f} | {_dsp_est(r)} | |")
         else:
             lines.append(f"{head} | | | | | {r['latency_manifest']} / | {r['ii_manifest']} | | {_dsp_est(r)} | {r['reason']} |")
+    if not any(r["bank"] == "parallel" for r in doc["rows"]):
+        lines += ["", "The parallel bank was not re-run here (`--only serial`). The earlier run of this script "
+                  "(commit be0d869, `results/observer_bank_synth.md` there) measured the parallel small-n3-p3-11b on an "
+                  "LFE5U-85F: 6778 LUT4, 2009 FF, 80 MULT18X18D, fmax 11.4 MHz, II 1; it does not fit the LFE5U-45F "
+                  "(80 multipliers, 72 there), nor does the parallel P-feat sensor (129); its iCE40 HX8K synthesis "
+                  "did not finish in 22 CPU-minutes."]
     return "\n".join(lines) + "\n"
 
 
