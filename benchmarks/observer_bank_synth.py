@@ -16,7 +16,8 @@ inventory of its Verilog (:func:`multiplier_inventory`: each ``*`` by its net na
 widths, grouped as observer-bank / squares / feature scale / core), so the DSP count of a run can
 be traced to the parts that need it.
 
-``python -m pwas_hdl.benchmarks.observer_bank_synth [--quick] [--limit-min M] [--only serial|parallel]``
+``python -m pwas_hdl.benchmarks.observer_bank_synth [--quick] [--limit-min M] [--only serial|parallel]
+[--designs a,b] [--targets ecp5,ice40]`` (the last two re-run those rows and replace them in the results)
 writes ``results/observer_bank_synth.{json,md}`` (``--quick``: the small serial design on ECP5 only,
 ``..._quick.{json,md}``).
 """
@@ -129,12 +130,13 @@ def _one_run(folder: str, target: str, device: str, limit_s: float) -> dict:
             "wall_s": wall}
 
 
-def run(quick: bool = False, limit_min: float = 20.0, only: str | None = None) -> dict:
+def run(quick: bool = False, limit_min: float = 20.0, only: str | None = None, designs: list | None = None,
+        targets: list | None = None) -> dict:
     from pwas_hdl.design.generate import generate
 
     t0 = time.perf_counter()
-    names = ["small-n3-p3-11b"] if quick else list(DESIGNS)
-    targets = ["ecp5"] if quick else list(TARGETS)
+    names = ["small-n3-p3-11b"] if quick else list(designs or DESIGNS)
+    targets = ["ecp5"] if quick else list(targets or TARGETS)
     banks = ["serial"] if quick else [b for b in BANKS if only in (None, b)]
     rows = []
     for bank in banks:
@@ -199,9 +201,16 @@ if __name__ == "__main__":
     quick = "--quick" in args
     limit = float(args[args.index("--limit-min") + 1]) if "--limit-min" in args else 20.0
     only = args[args.index("--only") + 1] if "--only" in args else None
-    doc = run(quick, limit, only)
+    designs = args[args.index("--designs") + 1].split(",") if "--designs" in args else None
+    targets = args[args.index("--targets") + 1].split(",") if "--targets" in args else None
+    doc = run(quick, limit, only, designs, targets)
     out = benchmarks_dir() / "results"
     stem = "observer_bank_synth_quick" if quick else "observer_bank_synth"
+    if (designs or targets) and (out / f"{stem}.json").exists():  # a re-run of some rows: replace them in the results
+        old = json.loads((out / f"{stem}.json").read_text())
+        key = lambda r: (r["design"], r["bank"], r["target"])  # noqa: E731
+        new = {key(r): r for r in doc["rows"]}
+        doc["rows"] = [new.pop(key(r), r) for r in old["rows"]] + list(new.values())
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))
