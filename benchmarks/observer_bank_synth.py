@@ -173,7 +173,7 @@ def _dsp_est(r: dict) -> str:
 
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors: resources on ECP5 and iCE40{' (QUICK)' if doc['quick'] else ''}", "",
-             f"One Yosys + nextpnr run each (seed 1, time limit {doc['limit_min']:.0f} min wall per run), "
+             f"One Yosys + nextpnr run each (seed 1, time limit {doc['limit_min']} min wall per run), "
              "`benchmarks/observer_bank_synth.py`; designs fitted on pv-benchmark data (seed 0). "
              "serial = `generate --architecture serial` (time-multiplexed bank, 1 lane, serial core); "
              "parallel = constant multipliers, II 1. DSP = MULT18X18D (ECP5); iCE40 HX8K has none. "
@@ -211,6 +211,7 @@ if __name__ == "__main__":
         key = lambda r: (r["design"], r["bank"], r["target"])  # noqa: E731
         new = {key(r): r for r in doc["rows"]}
         doc["rows"] = [new.pop(key(r), r) for r in old["rows"]] + list(new.values())
+        doc["limit_min"] = f"{old['limit_min']} (re-run rows: {limit:g})"
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))
