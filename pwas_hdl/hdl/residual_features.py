@@ -11,9 +11,9 @@ PWAS core's input code ``q = sat((min(r >> t, cap) * K + C) >> R)``.
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
 
-from pwas_hdl.hdl._lintsafe import add_wrap, ge_const, rom, sink_unused
+from pwas_hdl.hdl._lintsafe import add_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
 
 __all__ = ["build_window_sums", "build_isqrt", "build_feature_codes", "sub_wrap"]
@@ -58,32 +58,10 @@ def build_isqrt(m: Module, value, name: str):
     (``i + 2`` bits); ``bit = cur >= trial`` = ``cur[i+2] | no borrow of cur[:i+2] - trial``;
     ``rem = bit ? cur - trial : cur`` (both ``< 2**(i+2)``). Returns an unsigned ``ceil(len / 2)``-bit net.
     """
-    w = len(value)
-    pairs = (w + 1) // 2
-    v = Cat(value, Const(0, 2 * pairs - w)) if 2 * pairs > w else value
-    two0 = v[2 * pairs - 2 : 2 * pairs]
-    b0 = Signal(name=f"{name}_b0")
-    m.d.comb += b0.eq(two0.any())
-    rem = rom(m, two0, [0, 0, 1, 2], 2, f"{name}_m0")  # two - (two != 0)
-    if isinstance(rem, int):
-        rem = Const(rem, 2)
-    bits = [b0]
-    for i in range(1, pairs):
-        lo = 2 * (pairs - 1 - i)
-        two = v[lo : lo + 2]
-        root = Cat(*reversed(bits))  # i bits, latest bit lowest
-        trial = Cat(Const(1, 2), root)  # i + 2 bits
-        cur_lo = Cat(two, rem[:i])  # i + 2 low bits of cur
-        diff = Signal(unsigned(i + 3), name=f"{name}_d{i}")
-        m.d.comb += diff.eq(cur_lo - trial)
-        bit = Signal(name=f"{name}_b{i}")
-        m.d.comb += bit.eq(rem[i] | ~diff[i + 2])
-        nrem = Signal(unsigned(i + 2), name=f"{name}_m{i}")
-        m.d.comb += nrem.eq(Mux(bit, diff[: i + 2], cur_lo))
-        rem = nrem
-        bits.append(bit)
-    sink_unused(m, rem, f"{name}_rem")
-    return Cat(*reversed(bits))
+    from pwas_hdl.hdl.serial_observer_bank import build_isqrt_pipelined  # the one digit-by-digit root (no registers here)
+
+    root, _ = build_isqrt_pipelined(m, value, name, None)
+    return root
 
 
 def build_feature_codes(m: Module, bank, roots: list) -> list:
