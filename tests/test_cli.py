@@ -413,9 +413,26 @@ def test_console_script_process_exit_statuses(tmp_path):
     assert lines[0].startswith("error: No such option: --bogus") and lines[0].endswith("(see `pwas-hdl fit --help`)")
     r = run("info", tmp_path / "missing.json")
     assert r.returncode == 2 and r.stderr.startswith("error: ") and len(r.stderr.strip().splitlines()) == 1
-    # a command with a progress bar, piped: no bar and no blank line before its messages
+
+
+def test_no_progress_bar_or_blank_line_when_not_a_terminal(tmp_path, monkeypatch):
+    """Commands with a progress bar (fit, generate), their stderr captured: no bar and no blank line
+    before their messages, so an ``error:`` line is the first line."""
+    import io
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from pwas_hdl.cli import main
+
+    monkeypatch.chdir(tmp_path)
     (tmp_path / "d.csv").write_text("y,z\n" + "".join(f"{k * 0.1},{k * 0.2}\n" for k in range(40)))
-    r = run("fit", "d.csv", "-o", "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2)
-    assert r.returncode == 0 and r.stderr.startswith("fitted ") and "\n\n" not in r.stderr, r.stderr
-    r = run("generate", "m.json", "-o", "g", "--goal", "latency", "--pipeline", "max")
-    assert r.returncode == 2 and r.stderr.startswith("error: ") and len(r.stderr.splitlines()) == 1, r.stderr
+
+    def run(*args):
+        out, err = io.StringIO(), io.StringIO()
+        with redirect_stdout(out), redirect_stderr(err):
+            code = main([str(a) for a in args])
+        return code, err.getvalue()
+
+    code, err = run("fit", "d.csv", "-o", "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2)
+    assert code == 0 and err.startswith("fitted ") and "\n\n" not in err, err
+    code, err = run("generate", "m.json", "-o", "g", "--goal", "latency", "--pipeline", "max")
+    assert code == 2 and err.startswith("error: ") and len(err.splitlines()) == 1, err
