@@ -648,6 +648,13 @@ def generate(
                     progress=_say, executor=ex,
                 )
         man = gd.manifest
+        if man["design"] == "estimator":  # seed 003's estimator (an estimator file): no PWAS core
+            e = man["estimator"]
+            _say(f"{man['top']}: seed 003 estimator, {e['modes']} modes, {e['states']} states, latency {man['latency_cycles']} "
+                 f"cycle, II {man['ii']}, states s{e['formats']['state_bits']}.{e['formats']['state_frac']}, "
+                 f"|x_hat - float| <= {e['error_bound']['state']:.4g} where the modes agree")
+            _say(f"wrote {outdir}/ ({len(gd.files)} files)")
+            return
         eb = man["error_bound"]
         mem = man["memory"]
         _say(
@@ -965,37 +972,43 @@ def make_data_helicopter(
     _write_plant_data(helicopter, samples, test_samples, seed, out=out, test_out=test_out)
 
 
-def _plant_outputs(output: Path, test_output: Optional[Path]) -> OutputSet:
-    """The outputs of a make-data command, checked before the data are made."""
+def _plant_outputs(output: Path, test_output: Optional[Path], extra: Optional[tuple] = None) -> OutputSet:
+    """The outputs of a make-data command, checked before the data are made (``extra``: (path, option, text maker))."""
     outset = OutputSet()
     outset.add(output, "-o/--out")
     if test_output is not None:
         outset.add(test_output, "--test-out")
+    if extra is not None:
+        outset.add(extra[0], extra[1])
     return outset
 
 
-def _write_plant(output: Path, test_output: Optional[Path], train, test, what: str) -> None:
-    with _plant_outputs(output, test_output) as outset:  # both files or neither
+def _write_plant(output: Path, test_output: Optional[Path], train, test, what: str, extra: Optional[tuple] = None) -> None:
+    with _plant_outputs(output, test_output, extra) as outset:  # all files or none
         outset.write_text(output, format_csv(train.columns()))
         if test_output is not None and test is not None:
             outset.write_text(test_output, format_csv(test.columns()))
+        if extra is not None:
+            outset.write_text(extra[0], extra[2]())
     _say(f"wrote {output} ({what})")
     if test_output is not None and test is not None:
         _say(f"wrote {test_output} (test run)")
+    if extra is not None:
+        _say(f"wrote {extra[0]} ({extra[3]})")
 
 
 def _write_runs(out: Optional[Path], test_out: Optional[Path], samples: int, runs: int, noise: float, seed: int,
-               make_train, make_test) -> None:
+               make_train, make_test, extra: Optional[tuple] = None) -> None:
     """``make-data`` of a multi-run plant: options checked, paths checked, then the data made and written."""
     with _user_errors():
         output = _required(out, "-o/--out", "the CSV file to write")
         if samples < 1 or runs < 1 or noise < 0 or seed < 0:
             raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
-        _plant_outputs(output, test_out)  # the paths are checked before the work
+        _plant_outputs(output, test_out, extra)  # the paths are checked before the work
         check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
         train = make_train()
         test = make_test() if test_out is not None else None
-        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}")
+        _write_plant(output, test_out, train, test, f"{runs} runs x {samples} samples, seed {seed}", extra)
 
 
 @data_app.command("three-tank")
@@ -1025,13 +1038,23 @@ def make_data_switched_linear(
     input_kind: Annotated[str, typer.Option("--input-signal", help="Input: step, prbs or sine.")] = "prbs",
     test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the paper-replica run here (100 samples, dwell 34, step input).", show_default=False)] = None,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (input, dwell times, x0, noise).")] = 0,
+    estimator_out: Annotated[Optional[Path], typer.Option("--estimator-out", help="Also write the plant's seed 003 estimator here (estimator file pwas-hdl-estimator v1: per-mode A, B, C and observer gains K for the poles 0.3, 0.4, detector window 1); `pwas-hdl generate FILE -o DIR` turns it into RTL.", show_default=False)] = None,
 ) -> None:
     """The switched linear plant of seed 003 (eq. 11), three modes; see pwas_hdl.systems.switched_linear."""
     from pwas_hdl.systems.switched_linear import switched_paper_run, switched_training_runs
 
+    extra = None
+    if estimator_out is not None:
+        def estimator_text_of_plant() -> str:
+            from pwas_hdl.fit.estimator_file import estimator_text
+            from pwas_hdl.systems.switched_observer import estimator_config
+
+            return estimator_text(estimator_config())
+
+        extra = (estimator_out, "--estimator-out", estimator_text_of_plant, "seed 003 estimator, poles 0.3, 0.4")
     _write_runs(out, test_out, samples, runs, noise, seed,
                 lambda: switched_training_runs(runs, samples, seed=seed, switching=switching, input_kind=input_kind, noise=noise),
-                lambda: switched_paper_run(seed=seed, switching=switching, noise=noise))
+                lambda: switched_paper_run(seed=seed, switching=switching, noise=noise), extra)
 
 
 def _bench_outputs(json_out: Path, markdown: Optional[Path], plot: Optional[Path]) -> OutputSet:

@@ -195,6 +195,7 @@ def test_seed003_estimator_rtl_bit_exact_and_lint(tmp_path, window):
     res = simulate_estimator(top, codes, p_valid=0.7, p_ready=0.6, seed=window)
     assert np.array_equal(res["x_hat"], tr["x_hat"]) and np.array_equal(res["y_hat"], tr["y_hat"])
     assert np.array_equal(res["theta"], tr["theta"])
+    assert np.array_equal(res["state_saturated"], tr["state_saturated"])
 
 
 @pytest.mark.rtl

@@ -281,6 +281,10 @@ def build_design(
     Parameters
     ----------
     model : PWASVirtualSensor or path of a model file
+        An estimator file (``pwas-hdl-estimator``, :mod:`pwas_hdl.fit.estimator_file`) or a
+        :class:`~pwas_hdl.fit.estimator_file.SwitchedEstimatorConfig` builds seed 003's estimator
+        instead (:func:`pwas_hdl.design.estimator.build_estimator_design`: options ``name``, ``ports``
+        and its formats ``input_bits``, ``input_headroom``, ``state_bits``, ``state_frac``, ``coef_frac``).
     design : {"core", "sensor", "recurrent"}
         The PWAS core alone (input = regressor codes) or the virtual-sensor top (input = one
         (u, y) sample per transfer, lag bank inside). For a recurrent model (``Mz >= 1``: fit
@@ -347,6 +351,11 @@ def build_design(
     -------
     GeneratedDesign
     """
+    from pwas_hdl.design.estimator import build_estimator_design, is_estimator
+
+    if is_estimator(model):  # an estimator file (seed 003's switched observer): pwas_hdl.design.estimator
+        return build_estimator_design(model, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
+                                      ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, **formats)
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
     from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 

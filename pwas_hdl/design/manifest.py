@@ -9,7 +9,8 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
     {
       "$schema": "urn:pwas-hdl:schema:manifest-v2", "format": "pwas-hdl-manifest", "version": 2,
       "generator": {"pwas_hdl": "0.1.0", "options": {design, memory, pipeline, memory_init, input_bits, ...}},
-      "design": "core" | "sensor" | "recurrent",  # PWAS core alone, lag bank + core, or + feedback
+      "design": "core" | "sensor" | "recurrent" | "estimator",  # PWAS core alone, lag bank + core, + feedback;
+                                                 # or seed 003's estimator (pwas_hdl.design.estimator)
       "top": "pwas_core",                        # Verilog module name
       "files": {"verilog": "pwas_core.v", "model": "model.json", "manifest": "manifest.json",
                 "report": "report.md", "instance_template": "pwas_core_inst.v", "fusesoc_core": "pwas_core.core",
@@ -56,6 +57,10 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
       "warp": {"kind": "pow2", "input_bits": B_in, "core_input_bits": W, "latency_cycles": 1,  # only for a
                "dimensions": [{"regressor", "breakpoints", "code_breaks", "exps", "f0", "F", "lo_u",  # non-uniform
                                "width", "shifts"}, ..], "rule": .., "register": .., "meaning": ..},   # partition
+      "estimator": {...},                        # only for design "estimator" (seed 003's switched observer from an
+                                                 # estimator file): kind, modes, states, window, signals, formats,
+                                                 # coefficients, widths, bounds, detector; it has no formats, domain,
+                                                 # lags, error_bound, memory, pipeline, arithmetic (no PWAS core)
       "front_end": {...}                         # only for observer-bank sensors: kind, cycles_per_sample,
                                                  # ii, stages_before_core, signals, formats, coefficients,
                                                  # feature_scale, widths, error_bound (FixedPointObserverBank.to_dict)
@@ -87,7 +92,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MANIFEST_FORMAT", "MANIFEST_VERSION", "MANIFEST_SCHEMA", "MANIFEST_SCHEMA_ID", "MANIFEST_FILE", "STREAM_ROLES",
-    "build_manifest", "manifest_text", "manifest_errors", "validate_manifest", "load_manifest", "port", "field",
+    "build_manifest", "build_estimator_manifest", "manifest_text", "manifest_errors", "validate_manifest", "load_manifest", "port", "field",
 ]
 
 MANIFEST_FORMAT = "pwas-hdl-manifest"
@@ -252,6 +257,53 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
     return man
 
 
+def build_estimator_manifest(top: str, info: dict[str, Any], files: dict[str, Any], options: dict[str, Any],
+                             estimator: dict[str, Any]) -> dict[str, Any]:
+    """The manifest of the estimator design (seed 003's switched observer, :mod:`pwas_hdl.design.estimator`).
+
+    No PWAS core: the keys of the PWAS designs (``formats``, ``domain``, ``lags``, ``error_bound``,
+    ``memory``, ``pipeline``, ``arithmetic``) are absent; ``estimator`` holds the formats,
+    coefficient codes, widths, bounds and detector; the payload fields carry their formats.
+
+    Raises
+    ------
+    InternalError
+        The manifest does not satisfy its own schema (a bug in the generator).
+    """
+    from pwas_hdl import __version__
+
+    man: dict[str, Any] = {
+        "$schema": MANIFEST_SCHEMA_ID, "format": MANIFEST_FORMAT, "version": MANIFEST_VERSION,
+        "generator": {"pwas_hdl": __version__, "options": options},
+        "design": "estimator", "top": top, "files": files,
+        "clock": info["clock"], "reset": info["reset"],
+        "latency_cycles": int(info["latency"]), "ii": int(info["ii"]), "flow_control": info["flow_control"],
+        "ports": info["ports"], "estimator": estimator,
+    }
+    errs = manifest_errors(man)
+    if errs:
+        raise InternalError(f"the generated manifest of {top} breaks its schema: {errs[0]}")
+    return man
+
+
+def _estimator_errors(m: dict[str, Any]) -> list[str]:
+    """The estimator design: its block and its payload fields agree (``m`` is schema-valid)."""
+    e = m["estimator"]
+    errs = []
+    if len(e["signals"]["states"]) != e["states"]:
+        errs.append(f"estimator.signals.states names {len(e['signals']['states'])} states for estimator.states = {e['states']}")
+    if not (e["ii"] == m["ii"] and e["cycles_per_sample"] <= m["ii"]):
+        errs.append(f"estimator.ii {e['ii']} differs from ii {m['ii']}")
+    ins = [f["name"] for p in m["ports"] if p["role"] == "in.payload" for f in p.get("fields", [])]
+    if ins != [e["signals"]["input"], e["signals"]["output"]]:
+        errs.append(f"the input payload fields {ins} are not the estimator's signals {[e['signals']['input'], e['signals']['output']]}")
+    outs = [f["name"] for p in m["ports"] if p["role"] == "out.payload" for f in p.get("fields", [])]
+    want = [f"{s}_hat" for s in e["signals"]["states"]] + [f"{e['signals']['output']}_hat", "mode_index", "state_saturated"]
+    if outs != want:
+        errs.append(f"the output payload fields {outs} are not {want}")
+    return errs
+
+
 def _recurrence_entry(rm: Any, info: dict[str, Any], sensor: "PWASVirtualSensor", ports: list[dict]) -> dict[str, Any]:
     """The ``recurrence`` block: which output field feeds which regressors, the requantisation
     rule, the reset codes, II and the flow control (:mod:`pwas_hdl.design.recurrent`)."""
@@ -288,6 +340,7 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
     """What the schema cannot say (``m`` is schema-valid)."""
     errs = []
     names = [p["name"] for p in m["ports"]]
+    estimator = m["design"] == "estimator"  # no PWAS core (pwas_hdl.design.estimator)
     if len(set(names)) != len(names):
         errs.append(f"ports has repeated names {sorted({n for n in names if names.count(n) > 1})}")
     for key in ("clock", "reset"):
@@ -312,9 +365,15 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
         for j, f in enumerate(p.get("fields", [])):
             if p["role"] == "out.payload" and (f["name"] == "out_of_range" or "classes" in f):
                 continue
+            if estimator and p["role"] == "out.payload" and "meaning" in f and "format" not in f:
+                continue  # a flag (state_saturated), described in words
             for key in need:
                 if key not in f:
                     errs.append(f"ports[{i}].fields[{j}].{key} is missing (every field of {p['role']} has one)")
+    if estimator:
+        return errs + _estimator_errors(m)
+    if "estimator" in m:
+        errs.append(f"estimator is given for a {m['design']} design (only the estimator design has one)")
     n = len(m["lags"]["regressors"])
     for key in ("lo", "hi", "partitions", "lo_code", "frac_bits"):
         if len(m["domain"][key]) != n:

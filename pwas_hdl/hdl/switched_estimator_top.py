@@ -9,7 +9,9 @@ One (u, y) sample per input transfer; per transfer (one clock, II = 1): the resi
 bank, their window sums, the detected mode (argmin, ties to the lowest mode), the switched
 observer's output for the sample (``x_hat``, ``y_hat`` from its state before the update) and the
 updates of every state. The output register holds ``x_hat`` (``n`` codes ``s<B_s>.<F_s>``),
-``y_hat`` (``F_s`` fraction bits, :func:`estimator_widths`) and the mode index (``theta - 1``, ``index_width`` bits), LSB first;
+``y_hat`` (``F_s`` fraction bits, :func:`estimator_widths`), the mode index (``theta - 1``, ``index_width`` bits)
+and ``state_saturated`` (1 bit: a state of the bank or of the switched observer saturated in this
+sample's update, the bit-true trace's ``state_saturated``), LSB first;
 latency 1 cycle, one output per transfer, no warm-up (the estimator starts at 0, A6).
 """
 
@@ -57,7 +59,9 @@ class SwitchedEstimatorTop(wiring.Component):
         self.latency = 1
         self.ii = 1
         self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
-                           + [("mode_index", self.index_width)])
+                           + [("mode_index", self.index_width), ("state_saturated", 1)])
+        #: unsigned output fields (the others are signed codes)
+        self.unsigned_fields = ("mode_index", "state_saturated")
         super().__init__({
             "in": In(stream.Signature(unsigned(2 * est.input_bits))),
             "out": Out(stream.Signature(unsigned(sum(w for _, w in self.out_fields)))),
@@ -146,27 +150,28 @@ class SwitchedEstimatorTop(wiring.Component):
         for j in range(s):
             nx, fl = self._update(m, est.f_codes[j], est.g_codes[j], est.l_codes[j], xo, qu, qy, f"obs_m{j}")
             updates.append(nx)
-            sat_flags += fl
+            sat_flags.append(Cat(*fl).any())
+        obs_sat = Signal(name="obs_saturated")  # the selected mode's update saturated
         with m.Switch(theta):
             for j in range(s):
                 with m.Case(j):
                     m.d.comb += [d.eq(v) for d, v in zip(nxt, updates[j])]
-                    m.d.comb += yh.eq(cands[j])
+                    m.d.comb += [yh.eq(cands[j]), obs_sat.eq(sat_flags[j])]
             with m.Default():
                 m.d.comb += [d.eq(x) for d, x in zip(nxt, xo)]
-                m.d.comb += yh.eq(0)
-        sink_unused(m, Cat(*sat_flags), "obs_saturated")
+                m.d.comb += [yh.eq(0), obs_sat.eq(0)]
         bank_flags = []
         for j in range(s):
             nb, fl = self._update(m, est.f_codes[j], est.g_codes[j], est.l_codes[j], bank[j], qu, qy, f"bank{j}")
             bank_flags += fl
             with m.If(transfer):
                 m.d.sync += [d.eq(v) for d, v in zip(bank[j], nb)]
-        sink_unused(m, Cat(*bank_flags), "bank_saturated")
+        sat = Signal(name="state_saturated")
+        m.d.comb += sat.eq(obs_sat | Cat(*bank_flags).any())
         with m.If(transfer):
             m.d.sync += [d.eq(v) for d, v in zip(xo, nxt)]
         with m.If(advance):
-            m.d.sync += [self.out.valid.eq(inp.valid), self.out.payload.eq(Cat(*xo, yh, theta))]
+            m.d.sync += [self.out.valid.eq(inp.valid), self.out.payload.eq(Cat(*xo, yh, theta, sat))]
         return m
 
 
@@ -174,8 +179,8 @@ def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0
     """Replay (u, y) codes (T, 2) through ``top`` in Amaranth's simulator (the netlist the Verilog is
     emitted from), with random bubbles (``p_valid``) and backpressure (``p_ready``).
 
-    Returns ``x_hat`` (T, n), ``y_hat`` (T,), ``theta`` (T,) 1-based, as the bit-true
-    :meth:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator.trace`, and ``cycles``.
+    Returns ``x_hat`` (T, n), ``y_hat`` (T,), ``theta`` (T,) 1-based, ``state_saturated`` (T,) bool, as
+    the bit-true :meth:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator.trace`, and ``cycles``.
     """
     import numpy as np
     from amaranth.sim import Simulator
@@ -212,11 +217,12 @@ def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0
         out, lsb = [], 0
         for nm, w in top.out_fields:
             x = (v >> lsb) & ((1 << w) - 1)
-            if nm != "mode_index" and x >> (w - 1):
+            if nm not in top.unsigned_fields and x >> (w - 1):
                 x -= 1 << w
             out.append(x)
             lsb += w
         rows.append(out)
     a = np.array(rows, dtype=np.int64).reshape(-1, len(top.out_fields))
     n = top.est.n
-    return {"x_hat": a[:, :n], "y_hat": a[:, n], "theta": a[:, n + 1] + 1, "cycles": cycles[0]}
+    return {"x_hat": a[:, :n], "y_hat": a[:, n], "theta": a[:, n + 1] + 1, "state_saturated": a[:, n + 2].astype(bool),
+            "cycles": cycles[0]}

@@ -166,3 +166,14 @@ def mode_scores(true: np.ndarray, pred: np.ndarray, labels: Sequence[int] = (1, 
 
     sc = class_scores(true, pred, labels)
     return {"accuracy": sc["accuracy"], "f1": {int(c): v for c, v in zip(labels, sc["f1"])}}
+
+
+def estimator_config(poles: Sequence[float] = DEFAULT_POLES, window: int = 1):
+    """The estimator file content of this plant (:class:`pwas_hdl.fit.estimator_file.SwitchedEstimatorConfig`):
+    eq. (11)'s ``A_i, B_i, C_i`` and the gains :func:`observer_gains` ``(poles)``, detector window ``window``."""
+    from pwas_hdl.fit.estimator_file import SwitchedEstimatorConfig
+
+    return SwitchedEstimatorConfig(list(SWITCHED_A), list(SWITCHED_B), list(SWITCHED_C), list(observer_gains(poles)), window=window,
+                                   input_name="u", output_name="y", state_names=["x1", "x2"],
+                                   source={"system": "switched-linear", "equation": "seed 003 eq. (11)",
+                                           "poles": [float(p) for p in poles], "gains": "scipy.signal.place_poles (A4)"})

@@ -1,0 +1,115 @@
+"""Seed 003's estimator as a generated design (issue 12): the estimator file, generate, manifest, lint.
+
+The fast tests check the file format and the refusals (no design is built); the ``rtl`` tests
+build the folder once (module fixture), lint it and check byte-identical reruns.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.estimator_file import SwitchedEstimatorConfig, estimator_text, read_estimator, write_estimator
+from pwas_hdl.systems.switched_observer import estimator_config
+
+
+def test_estimator_file_round_trip_is_exact(tmp_path):
+    cfg = estimator_config()
+    p = write_estimator(cfg, tmp_path / "est.json")
+    back = read_estimator(p)
+    for a, b in zip(cfg.A + cfg.B + cfg.C + cfg.K, back.A + back.B + back.C + back.K):
+        assert np.array_equal(a, b)
+    assert estimator_text(back) == p.read_text()
+    assert back.signal_names() == (["u"], ["y"], ["x1", "x2"]) and back.window == 1 and back.n_modes == 3
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d.update(extra=1), "extra"),
+    (lambda d: d["modes"][1].update(B=[1.0]), "modes[1].B has 1 values"),
+    (lambda d: d["modes"][0]["A"][0].append(0.5), "modes[0].A[0] has 3 values"),
+    (lambda d: d.update(window=0), "window"),
+    (lambda d: d.update(version=2), "version 2 is not supported"),
+    (lambda d: d["signals"].update(states=["x1", "u"]), "distinct"),
+])
+def test_estimator_file_refuses_bad_content(tmp_path, edit, words):
+    d = json.loads(estimator_text(estimator_config()))
+    edit(d)
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(d))
+    with pytest.raises(InputError, match="bad.json") as ei:
+        read_estimator(p)
+    assert words in str(ei.value)
+
+
+def test_estimator_file_refuses_an_infinite_number(tmp_path):
+    d = json.loads(estimator_text(estimator_config()))
+    d["modes"][0]["K"][0] = 12345.5
+    p = tmp_path / "inf.json"
+    p.write_text(json.dumps(d).replace("12345.5", "1e999"))  # valid JSON that parses to inf
+    with pytest.raises(InputError, match=r"modes\[0\]\.K holds a value that is not a finite number"):
+        read_estimator(p)
+
+
+def test_generate_refuses_pwas_options_and_unstable_gains(tmp_path):
+    from pwas_hdl.design.generate import build_design
+
+    cfg = estimator_config()
+    with pytest.raises(InputError, match="memory = 'replicated' belongs to the PWAS designs"):
+        build_design(cfg, memory="replicated")
+    with pytest.raises(InputError, match="design recurrent does not apply"):
+        build_design(cfg, design="recurrent")
+    with pytest.raises(InputError, match="state_bits must be an integer in 2..48"):
+        build_design(cfg, state_bits=1)
+    bad = SwitchedEstimatorConfig(cfg.A, cfg.B, cfg.C, [np.full(2, 50.0)] * 3)  # poles of A - K C far outside
+    with pytest.raises(InputError, match="not stable"):
+        build_design(bad)
+
+
+def test_cli_make_data_writes_the_estimator_and_refuses_a_bad_path(tmp_path):
+    from typer.testing import CliRunner
+
+    from pwas_hdl.cli import app
+
+    r = CliRunner().invoke(app, ["make-data", "switched-linear", "-o", str(tmp_path / "d.csv"), "--runs", "1", "--samples", "50",
+                                 "--estimator-out", str(tmp_path / "est.json")])
+    assert r.exit_code == 0, r.output
+    assert read_estimator(tmp_path / "est.json").source["poles"] == [0.3, 0.4]
+    r = CliRunner().invoke(app, ["make-data", "switched-linear", "-o", str(tmp_path / "e.csv"), "--runs", "1", "--samples", "50",
+                                 "--estimator-out", str(tmp_path / "nofolder" / "est.json")])
+    assert r.exit_code == 2 and "error:" in r.output and not (tmp_path / "e.csv").exists()
+
+
+# ------------------------------------------------------------------------------------------ rtl: the built folder
+@pytest.fixture(scope="module")
+def est_folder(tmp_path_factory):
+    from pwas_hdl.design.generate import generate
+
+    out = tmp_path_factory.mktemp("est") / "hw"
+    path = write_estimator(estimator_config(), out.parent / "est.json")
+    return path, generate(path, out)
+
+
+@pytest.mark.rtl
+def test_generate_estimator_folder_manifest_lint_reruns(est_folder, tmp_path):
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.design.manifest import load_manifest
+    from pwas_hdl.flow.toolchain import lint_verilog
+
+    path, gd = est_folder
+    man = load_manifest(gd.outdir)
+    assert man["design"] == "estimator" and man["latency_cycles"] == 1 == man["ii"] and man["files"]["hex"] == []
+    e = man["estimator"]
+    assert (e["modes"], e["states"], e["window"]) == (3, 2, 1) and e["formats"]["state_bits"] == gd.model.state_bits
+    outs = [f["name"] for p in man["ports"] if p["role"] == "out.payload" for f in p["fields"]]
+    assert outs == ["x1_hat", "x2_hat", "y_hat", "mode_index", "state_saturated"]
+    mode = next(f for p in man["ports"] for f in p.get("fields", []) if f["name"] == "mode_index")
+    assert mode["format"]["offset"] == 1.0 and not mode["signed"]
+    again = generate(path, tmp_path / "hw2")
+    assert again.files == gd.files  # byte-identical reruns
+    text = gd.files["pwas_estimator.v"]
+    assert "/tmp" not in text and "seed 003 switched-observer estimator generated by pwas-hdl" in text
+    r = lint_verilog(gd.outdir / "pwas_estimator.v", "pwas_estimator")
+    assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
