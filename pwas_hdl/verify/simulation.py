@@ -827,6 +827,9 @@ def simulate_data(
         raise ValueError(f"--stall must be in [0, 1), got {stall}")
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
     sources = [] if isinstance(data, Table) else [(data, "DATA")]
+    if _is_estimator_folder(outdir):  # seed 003's estimator (issue 12): pwas_hdl.verify.estimator_simulation
+        return _simulate_estimator(outdir, data, output, spath, sources, simulator=simulator, engine=engine, traj_col=traj_col,
+                                   stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say, blank_rows=blank_rows)
     outset = OutputSet(inputs=sources + [(Path(outdir) / "manifest.json", "the manifest"),
                                          (Path(outdir) / "model.json", "the model")])
     outset.add(output, "-o")
@@ -1064,6 +1067,32 @@ def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: 
             summary[f"scores_{name}"] = fc.class_scores(truth, lab, classes)
         summary["reference_column"] = t
     return summary, cols
+
+
+def _is_estimator_folder(outdir: str | os.PathLike) -> bool:
+    """True when ``outdir`` holds a valid manifest of the estimator design (others: the usual path and its errors)."""
+    try:
+        return load_manifest(outdir)["design"] == "estimator"
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def _simulate_estimator(outdir, data, output, spath, sources, *, blank_rows: str, waves: bool, cache_dir, **kw) -> dict:
+    from pwas_hdl.io.atomic import OutputSet, check_output_path
+    from pwas_hdl.io.csv_table import Table, read_csv
+    from pwas_hdl.verify.estimator_simulation import simulate_estimator_data
+
+    man = load_manifest(outdir)
+    outset = OutputSet(inputs=sources + [(Path(outdir) / "manifest.json", "the manifest"),
+                                         (Path(outdir) / man["files"]["model"], "the estimator file")])
+    outset.add(output, "-o")
+    outset.add(spath, "the summary (-o with .json)")
+    if waves:
+        outset.add(Path(output).resolve().parent / f"{Path(output).stem}_waves", "the --waves folder", kind="folder")
+    if cache_dir is not None:
+        check_output_path(cache_dir, "--build-dir", kind="folder")
+    table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
+    return simulate_estimator_data(outdir, table, output, spath, outset, waves=waves, cache_dir=cache_dir, **kw)
 
 
 def simulate_arrays(
