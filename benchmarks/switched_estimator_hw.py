@@ -13,6 +13,11 @@ bit-true model: ``mismatches`` in the row config). Also the number of samples wh
 differs from the float detector's, and how many of those had a float margin above ``2 dS`` (the
 stated bound: must be 0).
 
+The full run replays every set (replica and long runs) through the Verilog of the generated folder
+(``pwas-hdl generate`` of the plant's estimator file) on Verilator under cocotb, at full speed and
+with bubbles and backpressure, a reset before every set; ``--quick`` keeps the Amaranth-netlist
+replay of the replica (no simulator).
+
 ``python -m pwas_hdl.benchmarks.switched_estimator_hw [--runs 3] [--quick]``.
 """
 
@@ -33,25 +38,87 @@ PAPER_MSE = 0.0966  # Table 1, unknown mode
 NOISES = (0.0, 0.01, 0.02, 0.05)
 
 
-def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print) -> tuple[dict, dict]:
-    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+def _rtl_replays(design, sets: dict, simulator: str, progress) -> dict:
+    """Every test set through the generated Verilog on ``simulator`` in one cocotb job: each set one
+    segment after a reset, at full speed (latency and II measured) and again with bubbles (p_valid
+    0.8) and backpressure (p_ready 0.7). Returns per key the decoded RTL outputs of the stalled pass
+    and the counts (mismatches over both passes, outputs, latencies, spacings)."""
+    import numpy as np
+
+    from pwas_hdl.verify.estimator_simulation import replay_estimator
+
+    keys = list(sets)
+    codes = np.concatenate([sets[k] for k in keys])
+    bounds, a = [], 0
+    for k in keys:
+        bounds.append((a, a + len(sets[k])))
+        a += len(sets[k])
+    plans = [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": 0,
+              "segments": [{"rows": b, "drain": True, "record": False} for b in bounds]},
+             {"name": "stalls", "p_valid": 0.8, "p_ready": 0.7, "seed": 1,
+              "segments": [{"rows": b, "drain": True, "record": True} for b in bounds]}]
+    if progress:
+        progress(f"RTL: {len(codes)} samples x 2 passes through {design.top} on {simulator} (cocotb) ...")
+    res = replay_estimator(design, codes, simulator, runs=plans)
+    out = {}
+    for i, k in enumerate(keys):
+        segs = [r["segments"][i] for r in res["runs"]]
+        out[k] = {"hw": res["rtl"]["stalls"][i], "mismatches": sum(s["mismatches"] for s in segs),
+                  "outputs": sum(s["outputs"] for s in segs), "failures": res.get("failures", [])}
+    out["_summary"] = {"latency": res["latency"], "ii": res["ii"], "passed": res["passed"], "wall_s": res.get("wall_s"),
+                       "simulator": simulator, "samples": int(len(codes))}
+    return out
+
+
+def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print,
+        simulator: str | None = "auto") -> tuple[dict, dict]:
+    """``simulator``: ``"icarus"`` / ``"verilator"``: the ``rtl`` rows replay every test set (replica and
+    long runs) through the Verilog of the generated estimator folder (``pwas-hdl generate`` of the
+    plant's estimator file) under cocotb; ``None``: the replica through the Amaranth netlist only
+    (no simulator needed); ``"auto"``: ``None`` with ``quick``, else ``"verilator"``."""
+    import tempfile
+
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.fit.estimator_file import write_estimator
     from pwas_hdl.hdl.switched_estimator_top import SwitchedEstimatorTop, simulate_estimator
+    from pwas_hdl.systems.switched_observer import estimator_config
+    from pwas_hdl.verify.estimator_simulation import load_estimator_design
 
     t0 = time.perf_counter()
+    if simulator == "auto":
+        simulator = None if quick else "verilator"
     noises = (0.0, 0.02) if quick else NOISES
     long_n = 300 if quick else 2000
-    est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, SWITCHED_C, observer_gains())
-    top = SwitchedEstimatorTop(est)
+    design = None
+    tmpdir = tempfile.TemporaryDirectory(prefix="pwas-est-bench-")
+    if simulator is not None:  # the generated folder: what `pwas-hdl generate EST.json` writes
+        cfgp = write_estimator(estimator_config(), f"{tmpdir.name}/estimator.json")
+        generate(cfgp, f"{tmpdir.name}/hw")
+        design = load_estimator_design(f"{tmpdir.name}/hw")
+        est = design.est
+    else:
+        from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+
+        est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, SWITCHED_C, observer_gains())
+    top = SwitchedEstimatorTop(est) if design is None else None
+    latency, ii = (top.latency, top.ii) if top is not None else (design.latency, design.ii)
     vals: dict[tuple, list[float]] = {}
     extra: dict[tuple, dict] = {}
 
     def put(key, v):
         vals.setdefault(key, []).append(float(v))
 
+    data = {(noise, r): {"replica": switched_paper_run(seed=r, switching="time", input_kind="step", noise=noise),
+                         "long": switched_training_runs(1, long_n, seed=5000 + r, switching="time", noise=noise)}
+            for noise in noises for r in range(runs)}
+    rtl = None
+    if design is not None:
+        rtl = _rtl_replays(design, {(nr, t): est.quantize_signals(d.u, d.y) for nr, tests in data.items() for t, d in tests.items()},
+                           simulator, progress)
+    tmpdir.cleanup()
     for noise in noises:
         for r in range(runs):
-            tests = {"replica": switched_paper_run(seed=r, switching="time", input_kind="step", noise=noise),
-                     "long": switched_training_runs(1, long_n, seed=5000 + r, switching="time", noise=noise)}
+            tests = data[(noise, r)]
             for tname, d in tests.items():
                 y = d.y[:, 0]
                 codes = est.quantize_signals(d.u, d.y)
@@ -59,7 +126,15 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
                 tr = est.trace(codes)
                 stages = {"float": (fl.x_hat, fl.y_hat, fl.theta_hat),
                           "bittrue": (est.to_physical_state(tr["x_hat"]), tr["y_hat"] * 2.0**-est.state_frac, tr["theta"])}
-                if tname == "replica":
+                if rtl is not None:
+                    got = rtl[((noise, r), tname)]
+                    hw = got["hw"]
+                    mism = int(got["mismatches"])  # exact word compare in the bench, both passes
+                    stages["rtl"] = (est.to_physical_state(hw["x_hat"]), hw["y_hat"] * 2.0**-est.state_frac, hw["theta"])
+                    ex = extra.setdefault((tname, noise), {"mismatches": 0, "rtl_outputs": 0})
+                    ex["mismatches"] += mism
+                    ex["rtl_outputs"] += int(got["outputs"])
+                elif tname == "replica":
                     hw = simulate_estimator(top, codes, p_valid=0.8, p_ready=0.7, seed=r)
                     mism = int(np.sum((hw["theta"] != tr["theta"]) | (hw["y_hat"] != tr["y_hat"])
                                       | np.any(hw["x_hat"] != tr["x_hat"], axis=1)))
@@ -89,21 +164,40 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
         if stage != "float":
             cfg |= {k: extra[(tname, noise)][k] for k in ("mode_differs", "mode_differs_beyond_bound")}
             cfg |= {"error_bound": est.to_dict()["error_bound"]}
-        if stage == "rtl":
+        if stage == "rtl" and rtl is None:
             cfg |= {"simulator": "amaranth (the netlist of the emitted Verilog)", "mismatches": extra[(tname, noise)]["mismatches"],
-                    "rtl_outputs": extra[(tname, noise)]["rtl_outputs"], "latency_cycles": top.latency, "ii": top.ii,
+                    "rtl_outputs": extra[(tname, noise)]["rtl_outputs"], "latency_cycles": latency, "ii": ii,
                     "stalls": {"p_valid": 0.8, "p_ready": 0.7}}
+        elif stage == "rtl":
+            sm = rtl["_summary"]
+            cfg |= {"simulator": f"{sm['simulator']} (cocotb, the generated folder's Verilog)",
+                    "mismatches": extra[(tname, noise)]["mismatches"], "rtl_outputs": extra[(tname, noise)]["rtl_outputs"],
+                    "latency_cycles": latency, "ii": ii, "latency_measured": sm["latency"], "ii_measured": sm["ii"],
+                    "bench_passed": sm["passed"],
+                    "passes": "full speed, then p_valid 0.8 / p_ready 0.7 (values of the stalled pass); a reset before every set"}
         paper = PAPER_MSE if (tname == "replica" and tgt == "y" and metric == "mse" and noise == 0.0) else None
         rows.append(br.row_from_values(SYSTEM, tgt, "switched-observer", stage, metric, v, paper, cfg))
     doc = br.make_results("switched-estimator-hw", rows, SWITCHED_ASSUMPTIONS,
-                          config={"runs": runs, "noises": list(noises), "long_samples": long_n, "switching": "time"},
+                          config={"runs": runs, "noises": list(noises), "long_samples": long_n, "switching": "time",
+                                  "rtl": rtl["_summary"] if rtl is not None else "amaranth netlist, replica only"},
                           description="Seed 003's switched observer: float, bit-true and RTL", quick=quick,
                           elapsed_s=time.perf_counter() - t0)
     return doc, {}
 
 
+def _rtl_note(doc: dict) -> str:
+    r = doc["config"].get("rtl")
+    if not isinstance(r, dict):
+        return "RTL: the replica through the Amaranth netlist of the emitted Verilog (bubbles and backpressure)."
+    return (f"RTL: every set through the generated folder's Verilog on {r['simulator']} (cocotb), a reset before each, at full "
+            f"speed and with bubbles (p_valid 0.8) and backpressure (p_ready 0.7): {r['samples']} samples x 2 passes, latency "
+            f"{r['latency']} cycles and II {r['ii']} measured at full speed, bench passed: {r['passed']}; "
+            "the rtl column is the stalled pass, mismatches count both passes.")
+
+
 def markdown(doc: dict) -> str:
     lines = [f"# Seed 003 estimator in hardware (runs = {doc['config']['runs']}{', QUICK' if doc.get('quick') else ''})", "",
+             _rtl_note(doc), "",
              "| test | noise | metric | float | bit-true | rtl | modes differing (beyond bound) | rtl mismatches |",
              "|---|---|---|---|---|---|---|---|"]
     for tname in ("replica", "long"):
