@@ -53,8 +53,16 @@ ASSUMPTIONS_E3 = ASSUMPTIONS | {
 }
 
 
-def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None, executor=None) -> dict:
-    """Run E3; return the results document (plus ``_traces`` of run 0 for :func:`plot`)."""
+def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None, executor=None,
+        rtl: str | None = None) -> dict:
+    """Run E3; return the results document (plus ``_traces`` of run 0 for :func:`plot`).
+
+    ``rtl`` (``"verilator"`` or ``"icarus"``): also generate the PWAS P-feat sensor's hardware (observer
+    bank + residual features + the ``i_k, v_k`` taps + core, :mod:`pwas_hdl.hdl.observer_tap_sensor_top`)
+    and replay the whole test trajectory through it (:func:`~pwas_hdl.benchmarks.seed004_common.rtl_estimates`):
+    rows ``stage: rtl`` for ``pwas-feat`` with the mismatches against the bit-true model, the measured
+    latency / II and the largest |RTL - float| beside the stated bound.
+    """
     if runs < 1:
         raise InputError("--runs must be >= 1")
     t0 = time.perf_counter()
@@ -78,6 +86,24 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
         for name, cfg, tmpl in (("pwas-feat", PFEAT_B, copy.deepcopy(fe)), ("pwas-raw", PRAW_B, None)):
             model, tm = fit_pwas(cfg, tmpl, tr.u, tr.y, tr.z)
             est[name] = (model.memory - 1, norm.invert("z", model.predict(te.u, te.y))[:, 0], tm)
+            if rtl is not None and name == "pwas-feat":  # the same sensor through its generated RTL
+                import tempfile
+                from pathlib import Path
+
+                from pwas_hdl.benchmarks.seed004_common import rtl_estimates
+
+                with tempfile.TemporaryDirectory(prefix="pwas-battery-rtl-") as tmp:
+                    hw = rtl_estimates(model, te.u, te.y, Path(tmp), simulator=rtl)
+                est["pwas-feat@rtl"] = (model.memory - 1, norm.invert("z", hw["zhat"])[:, 0], tm)
+                for k in ("mismatches", "outputs"):
+                    col.add(("pwas-feat@rtl", f"_{k}"), float(hw[k]))
+                col.add(("pwas-feat@rtl", "_latency"), float(hw["latency"][0]) if hw["latency"] else float("nan"))
+                col.add(("pwas-feat@rtl", "_latency_manifest"), float(hw["latency_manifest"]))
+                col.add(("pwas-feat@rtl", "_ii"), float(hw["ii"]) if hw["ii"] is not None else float("nan"))
+                col.add(("pwas-feat@rtl", "_err_max"), hw["err_max"])
+                col.add(("pwas-feat@rtl", "_bound"), hw["bound"])
+                say(progress, f"run {r + 1}: pwas-feat RTL ({rtl}): {hw['outputs']} outputs, {hw['mismatches']} mismatches, "
+                              f"latency {hw['latency']}, II {hw['ii']}, |rtl - float| {hw['err_max']:.4g} (bound {hw['bound']:.4g})")
         cur = norm.invert("u", te.u)[:, 0]
         volt = norm.invert("y", te.y)[:, 0]
         r0 = float((0.03 * norm.std["y"][0]) ** 2)
@@ -107,8 +133,22 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
         traces = traces or tr
     rows = []
     for (name, metric), vals in col.values.items():
+        if metric.startswith("_"):  # RTL meta values: in the rtl rows' config
+            continue
         cfg = {"n_train": n_train, "n_test": n_test, "units": "SoC fraction" if metric == "rmse" else "1"}
         cfg |= col.timing_of((name,))
+        if name == "pwas-feat@rtl":
+            g = lambda k: col.values[(name, f"_{k}")]  # noqa: E731
+            cfg |= {"front_end": "observer-bank", "n_models": 5, "observer": "kalman:0.1", "features": "11b+u,y", "pwas": PFEAT_B,
+                    "simulator": f"{rtl} ({'native' if rtl == 'verilator' else 'cocotb'} engine), the generated folder's Verilog",
+                    "mismatches": int(sum(g("mismatches"))), "rtl_outputs": int(sum(g("outputs"))),
+                    "latency_cycles": float(max(g("latency"))), "latency_manifest": float(max(g("latency_manifest"))),
+                    "ii": float(max(g("ii"))), "abs_err_max_vs_float_normalised": float(max(g("err_max"))),
+                    "error_bound_normalised": float(max(g("bound"))),
+                    "note": "the P-feat sensor's whole test trajectory through its RTL (taps i_k, v_k beside the bank features); "
+                            "errors in normalised SoC units (the sensor's target), metrics in SoC fraction"}
+            rows.append(br.row_from_values(SYSTEM, "soc", "pwas-feat", "rtl", metric, vals, None, cfg))
+            continue
         if name == "rfr":
             cfg |= {"front_end": "observer-bank", "n_models": 5, "observer": "kalman:0.1", "features": "11b+u,y"}
         elif name == "pwas-feat":
@@ -139,10 +179,18 @@ def markdown(doc: dict) -> str:
              "| estimator | SoC RMSE | FIT | NRMSE | train [s] | setting |", "|---|---|---|---|---:|---|"]
     names = []
     for r in doc["rows"]:
-        if r["estimator"] not in names:
-            names.append(r["estimator"])
-    for n in names:
-        rs = {m: br.find_rows(doc, estimator=n, metric=m)[0] for m in ("rmse", "fit", "nrmse")}
+        if (r["estimator"], r["stage"]) not in names:
+            names.append((r["estimator"], r["stage"]))
+    for n, stage in names:
+        rs = {m: br.find_rows(doc, estimator=n, metric=m, stage=stage)[0] for m in ("rmse", "fit", "nrmse")}
+        if stage != "float":
+            k = rs["rmse"]["config"]
+            lines.append(f"| {n} ({stage}: {k['simulator']}) | {rs['rmse']['value']:.4f}"
+                         + (f" ± {rs['rmse']['std']:.4f}" if rs["rmse"]["std"] is not None else "")
+                         + f" | {cell(rs['fit'])} | {cell(rs['nrmse'])} | | {k['mismatches']} mismatches / {k['rtl_outputs']} "
+                         f"outputs, latency {k['latency_cycles']:g} (manifest {k['latency_manifest']:g}), II {k['ii']:g}, "
+                         f"max abs(rtl - float) {k['abs_err_max_vs_float_normalised']:.3g} <= bound {k['error_bound_normalised']:.3g} |")
+            continue
         cfg = rs["rmse"]["config"]
         setting = (f"Q = diag{tuple(cfg['Q_diag'])}, R = {cfg['R_over_noise_var']:g} x noise var" if "Q_diag" in cfg
                    else f"{cfg.get('front_end')}, {cfg.get('observer', '')} {cfg.get('pwas', '')}".strip())
@@ -181,3 +229,21 @@ def plot(doc: dict, path) -> None:
     fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
     plt.close(fig)
     atomic_write_bytes(path, buf.getvalue())
+
+
+if __name__ == "__main__":  # python -m pwas_hdl.benchmarks.battery [--runs N] [--quick] --rtl verilator: battery_rtl.{json,md}
+    import argparse
+
+    from pwas_hdl.io.atomic import atomic_write_text
+
+    ap = argparse.ArgumentParser(description="Seed 004 E3 with the PWAS P-feat sensor through its RTL")
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--rtl", default="verilator", choices=["verilator", "icarus"])
+    ap.add_argument("--outdir", type=str, default=str(br.default_outdir()))
+    a = ap.parse_args()
+    d = run(a.runs, a.quick, progress=print, rtl=a.rtl)
+    stem = f"{a.outdir}/battery_rtl" + ("_quick" if a.quick else "")
+    br.write_results(f"{stem}.json", {k: v for k, v in d.items() if not k.startswith("_")})
+    atomic_write_text(f"{stem}.md", markdown(d))
+    print(markdown(d))

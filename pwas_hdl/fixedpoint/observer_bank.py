@@ -527,8 +527,8 @@ class ObserverBankSensorModel:
         if fe is None:
             raise InputError("the model has no observer-bank front end")
         if getattr(sensor, "lags_", None) is not None:
-            raise InputError("hardware for observer-bank sensors with u/y lag taps (mu, my > 0) is not implemented; "
-                             "fit the bank sensor with --mu 0 --my 0 (the P-feat predictor)")
+            raise InputError("this model has u/y lag taps (mu, my > 0): its bit-true model is "
+                             "pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel (observer_bank_model picks it)")
         names = fe.feature_names()
         given = {k: v for k, v in core_formats.items() if v is not None}
         if input_headroom is None:
@@ -590,6 +590,10 @@ def observer_bank_model(sensor, memory: str = "banked", **formats) -> ObserverBa
     if "input_scale" in given and given["input_scale"] != "pow2":
         raise InputError("observer-bank sensors use the pow2 input scale of the core (their feature codes are scaled already)")
     try:
+        if getattr(sensor, "lags_", None) is not None:  # u/y taps beside the features (pwas_hdl.fixedpoint.bank_taps)
+            from pwas_hdl.fixedpoint.bank_taps import TappedObserverBankSensorModel
+
+            return TappedObserverBankSensorModel.from_sensor(sensor, layout=memory, **bank, **given)
         return ObserverBankSensorModel.from_sensor(sensor, layout=memory, **bank, **given)
     except TypeError as exc:
         raise InputError(f"unknown format option for an observer-bank sensor: {exc}") from None

@@ -302,7 +302,11 @@ def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segm
         if len(c) <= w:
             q = np.empty((0, design.model.n), dtype=np.int64)
         elif design.bank is not None:  # observer bank: q = the feature codes the bank gives the core
-            q = design.bank.bank.trace(c)["feature_codes"][w:]
+            tr = design.bank.bank.trace(c)
+            q = tr["feature_codes"]
+            if hasattr(design.bank, "taps"):  # u/y taps beside the features (pwas_hdl.fixedpoint.bank_taps)
+                q = np.hstack([q, design.bank.taps.codes(c)])
+            q = q[w:]
         else:
             cu, cy = _signal_columns(design, c)
             q = design.sensor.lags_.build(cu, cy).astype(np.int64)

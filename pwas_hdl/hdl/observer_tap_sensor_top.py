@@ -1,0 +1,177 @@
+"""Observer-bank sensor top with u/y taps (issue 12): bank features and lag taps side by side into the core.
+
+Bit for bit :class:`pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`. The same front
+end as :class:`pwas_hdl.hdl.observer_sensor_top.ObserverSensorTop` (built from the same pieces:
+:func:`~pwas_hdl.hdl.observer_bank.build_observer_bank`, the window sums, the integer square
+root, the feature codes), plus a lag bank of the input codes (payload fields
+:func:`pwas_hdl.hdl.sensor_top.sample_fields`, the bank's normalised ``s<B_in>.<F_in>`` codes):
+
+* per tapped signal with largest lag ``L``, ``L + 1`` registers shifted on every input transfer
+  (after the transfer of sample ``k`` register ``d`` holds sample ``k - d``; 0 after reset) -- in
+  step with the window-sum registers;
+* the tap's affine map to the core's input code (``sat((qn * K + C) >> R)``, constants of
+  :class:`~pwas_hdl.fixedpoint.bank_taps.BankTaps`), registered with the square-root stage;
+* the core takes ``Cat(feature codes, tap codes)``, the regressor order of the model.
+
+``latency = 2 + core latency``, II 1, one cycle per sample; warm-up ``max(M + l, memory - 1)``
+transfers (output ``warm``).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Signal, signed, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
+from pwas_hdl.hdl.core import PWASCore, core_output_layout
+from pwas_hdl.hdl.observer_bank import add_const_signed, build_observer_bank, const_product, saturate
+from pwas_hdl.hdl.observer_sensor_top import FRONT_END_STAGES
+from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
+from pwas_hdl.hdl.sensor_top import sample_fields
+
+__all__ = ["ObserverTapSensorTop", "build_tapped_observer_sensor"]
+
+
+class ObserverTapSensorTop(wiring.Component):
+    """Observer bank + residual features + u/y taps + PWAS core (ports as :class:`ObserverSensorTop`)."""
+
+    kind = "observer-sensor"
+
+    def __init__(self, model, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+        self._MustUse__silence = True
+        bank, taps = model.bank, model.taps
+        if params.n != bank.n_models + len(taps.dims):
+            raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features and {len(taps.dims)} taps")
+        self.model = model
+        self.bank = bank
+        self.taps = taps
+        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core._MustUse__silence = True
+        self.params = params
+        self.latency = FRONT_END_STAGES + self.core.latency
+        self.ii = 1
+        self.cycles_per_sample = 1
+        self.memory_plan = self.core.memory_plan
+        self.pipeline = self.core.pipeline
+        self.warmup = int(model.first_output)
+        self.signals = list(bank.signal_names)
+        self.estimate_bound = None
+        super().__init__({
+            "in": In(stream.Signature(unsigned(len(self.signals) * bank.input_bits))),
+            "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+            "warm": Out(1),
+        })
+        self._MustUse__silence = False
+
+    @property
+    def input_fields(self) -> list[dict]:
+        return sample_fields(self.signals, self.bank.input_bits)
+
+    @property
+    def extra_info(self) -> dict:
+        fe = {
+            "kind": "observer-bank",
+            "architecture": "parallel constant multipliers, one state update of every observer per input transfer; "
+                            "u/y taps from a lag bank of the input codes, requantised to the core's tap inputs",
+            "cycles_per_sample": self.cycles_per_sample,
+            "ii": self.ii,
+            "stages_before_core": FRONT_END_STAGES,
+            **self.bank.to_dict(),
+            "taps": self.taps.to_dict(),
+        }
+        fe["first_output_sample"] = self.warmup
+        fe["error_bound"] = {**fe["error_bound"], "taps": list(self.taps.error_bound), "estimate": self.estimate_bound}
+        return {
+            "front_end": fe,
+            "warmup": {
+                "samples_without_output": self.warmup,
+                "port": "warm",
+                "meaning": f"warm = 1 once max(M + l, memory - 1) = {self.warmup} samples have been taken since reset; the first "
+                           f"{self.warmup} transfers after reset produce no output, every later transfer produces one",
+            },
+        }
+
+    def expected_outputs(self, n_samples: int) -> int:
+        return max(0, n_samples - self.warmup)
+
+    def _tap_codes(self, m: Module, cur: list, transfer, advance) -> list:
+        """Lag registers of the tapped signals (shift on transfer) and the registered tap codes."""
+        taps, b = self.taps, self.bank.input_bits
+        depth: dict[int, int] = {}
+        for s, lag in taps.dims:
+            depth[s] = max(depth.get(s, 0), lag)
+        regs = {s: [Signal(signed(b), name=f"tap_{self.signals[s]}_d{d}") for d in range(n + 1)] for s, n in depth.items()}
+        with m.If(transfer):
+            for s, rr in regs.items():
+                m.d.sync += rr[0].eq(cur[s])
+                m.d.sync += [rr[d].eq(rr[d - 1]) for d in range(1, len(rr))]
+        out = []
+        for j, ((s, lag), k, c) in enumerate(zip(taps.dims, taps.mul, taps.add)):
+            prod = const_product(m, int(k), regs[s][lag], taps.product_bits, f"tap{j}_prod")
+            tot = add_const_signed(m, prod, int(c), f"tap{j}_affine")
+            sink_unused(m, tot[: taps.shift], f"tap{j}_affine_frac")
+            q, _ = saturate(m, tot[taps.shift :].as_signed(), taps.core_bits, f"tap{j}_q", flag=False)
+            reg = Signal(signed(taps.core_bits), name=f"s_root_tap{j}", reset_less=True)
+            with m.If(advance):
+                m.d.sync += reg.eq(q)
+            out.append(reg)
+        return out
+
+    def elaborate(self, platform):
+        m = Module()
+        bank = self.bank
+        b = bank.input_bits
+        inp = getattr(self, "in")
+        cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(self.signals))]
+        advance = inp.ready  # the core drives it: ~out.valid | out.ready
+        transfer = Signal(name="transfer")
+        m.d.comb += transfer.eq(inp.valid & advance)
+
+        wu = self.warmup
+        cw = max(1, wu.bit_length())
+        cnt = Signal(unsigned(cw), name="warmup_count")
+        full = ge_const(cnt, wu)
+        m.d.comb += self.warm.eq(full)
+        inc = add_const_wrap(m, cnt, 1, "warmup_inc")
+        with m.If(transfer & ~self.warm):
+            m.d.sync += cnt.eq(inc)
+
+        residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
+        sink_unused(m, _sat, "state_saturated_flag")
+        sums = build_window_sums(m, bank, residuals, transfer)
+        v1 = Signal(name="s_sum_valid")
+        with m.If(advance):
+            m.d.sync += v1.eq(transfer & self.warm)
+        roots = []
+        for j, s in enumerate(sums):
+            r = build_isqrt(m, s, f"feat{j}_isqrt") if bank.feature_map == "11b" else s
+            reg = Signal(unsigned(len(r)), name=f"s_root_r{j}", reset_less=True)
+            with m.If(advance):
+                m.d.sync += reg.eq(r)
+            roots.append(reg)
+        v2 = Signal(name="s_root_valid")
+        with m.If(advance):
+            m.d.sync += v2.eq(v1)
+        codes = build_feature_codes(m, bank, roots)
+        taps = self._tap_codes(m, cur, transfer, advance)
+        self.core.build_into(m, Cat(*codes, *taps), v2, advance, self.out)
+        return m
+
+
+def build_tapped_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                                 name: str = "pwas_sensor") -> ObserverTapSensorTop:
+    """The top of a bit-true :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`."""
+    from pwas_hdl.hdl.api import _check_name
+
+    name = _check_name(name)
+    top = ObserverTapSensorTop(model, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline)
+    top.module_name = name
+    top._MustUse__silence = True
+    top.core.input_names = list(model.core.regressor_names)
+    top.core.target_names = list(model.core.target_names)
+    top.estimate_bound = {"physical": list(model.error_bound), "lipschitz": model.lipschitz.tolist(),
+                          "rule": "core bound + sum_j G_j * (feature or tap) bound_j (G_j: largest edge slope along j)",
+                          "against": "float sensor (front end + taps + PWAS) at the physical signals the input codes represent"}
+    return top
