@@ -1,0 +1,90 @@
+"""Observer-bank sensors with u/y taps on both simulators (issue 12): bit-exact RTL, several tap layouts.
+
+Each configuration (N_theta, M, gain, feature map, taps ``--mu/--my``, optional narrow states) is
+fitted on seed 004 pv-benchmark data (two inputs u1, u2; 2 000 training samples, p = 2, seed 0),
+generated with ``generate --design sensor`` (the tapped top, :mod:`pwas_hdl.hdl.observer_tap_sensor_top`)
+and replayed by the manifest-driven cocotb bench (``sim/pwas_tb.py``) on Icarus and on Verilator:
+the standard runs (full speed; random bubbles and backpressure; a reset in the middle of a
+stream) over 400 transfers of :func:`sim.pwas_stimulus.observer_codes` (the quantised test
+trajectory, steps, full-scale out-of-range codes, saturating alternations, silence). Recorded as
+:mod:`pwas_hdl.benchmarks.observer_bank_rtl` (same table), plus the taps.
+
+``python -m pwas_hdl.benchmarks.bank_taps_rtl [--quick]`` writes ``results/bank_taps_rtl.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from pwas_hdl.io.atomic import atomic_write_text
+from pwas_hdl.resources import benchmarks_dir
+
+CONFIGS = [
+    dict(name="n2-m5-deadbeat-11b-mu1-my1", n_models=2, order=5, observer="deadbeat", features="11b", mu=1, my=1),
+    dict(name="n3-m3-kalman0.1-11b-mu2-my0", n_models=3, order=3, observer="kalman:0.1", features="11b", mu=2, my=0),
+    dict(name="n2-m2-poles0.4-11b-sq-mu0-my3", n_models=2, order=2, observer="poles:0.4", features="11b-sq", mu=0, my=3),
+    dict(name="n2-m3-kalman1-11b-sq-mu1-my2-saturating", n_models=2, order=3, observer="kalman:1", features="11b-sq", mu=1, my=2,
+         state_bits=14),
+]
+SIMULATORS = ("icarus", "verilator")
+
+
+def run(quick: bool = False) -> dict:
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+    from pwas_hdl.verify.simulation import load_design, run_rtl, sim_module, standard_runs
+
+    t0 = time.perf_counter()
+    tr, te, _ = make_pv_dataset("pv-benchmark", 2000, 400, seed=0)
+    stim = sim_module("pwas_stimulus")
+    rows = []
+    for cfg in CONFIGS[:1] if quick else CONFIGS:
+        fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
+        s = PWASVirtualSensor(mu=cfg["mu"], my=cfg["my"], partitions=2, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+        opts = {"state_bits": cfg["state_bits"]} if "state_bits" in cfg else {}
+        with tempfile.TemporaryDirectory(prefix="pwas-taps-rtl-") as tmp:
+            generate(s, Path(tmp) / "d", design="sensor", **opts)
+            d = load_design(Path(tmp) / "d")
+            data, _ = d.bank.quantize_signals(te.u, te.y)
+            codes = stim.observer_codes(d.bank.bank, 400, seed=5, data=data)
+            sat = int(d.bank.bank.trace(codes)["state_saturated"].sum())
+            for sim in SIMULATORS[:1] if quick else SIMULATORS:
+                t1 = time.perf_counter()
+                r = run_rtl(d, standard_runs(d, codes), sim)
+                row = {"config": cfg["name"], "simulator": sim, "n_models": d.bank.bank.n_models, "order": d.bank.bank.order,
+                       "observer": cfg["observer"], "features": cfg["features"], "mu": cfg["mu"], "my": cfg["my"],
+                       "taps": d.manifest["lags"]["regressors"][d.bank.bank.n_models:],
+                       "state_bits": d.bank.bank.formats.state_bits, "warmup": d.warmup,
+                       "stimulus_state_saturations": sat, "outputs": r.outputs, "mismatches": r.mismatches, "passed": r.passed,
+                       "latency_measured": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
+                       "failures": r.failures[:3], "wall_s": round(time.perf_counter() - t1, 1)}
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    return {"bench": "bank-taps-rtl", "quick": quick, "rows": rows, "elapsed_s": round(time.perf_counter() - t0, 1)}
+
+
+def markdown(doc: dict) -> str:
+    lines = [f"# Observer-bank sensors with u/y taps: bit-exact RTL on Icarus and Verilator{' (QUICK)' if doc['quick'] else ''}", "",
+             "| configuration | taps | simulator | state bits | state saturations in stimulus | outputs | mismatches | "
+             "latency (measured / manifest) | II | warm-up |",
+             "|---|---|---|---:|---:|---:|---:|---|---:|---:|"]
+    for r in doc["rows"]:
+        lines.append(f"| {r['config']} | {', '.join(r['taps'])} | {r['simulator']} | {r['state_bits']} | {r['stimulus_state_saturations']} | "
+                     f"{r['outputs']} | {r['mismatches']} | {r['latency_measured']} / {r['latency_manifest']} | {r['ii']} | {r['warmup']} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    quick = "--quick" in sys.argv[1:]
+    doc = run(quick)
+    stem = "bank_taps_rtl_quick" if quick else "bank_taps_rtl"
+    out = benchmarks_dir() / "results"
+    atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(out / f"{stem}.md", markdown(doc))
+    print(markdown(doc))
