@@ -170,3 +170,9 @@ def test_simulate_estimator_folder_writes_hw_beside_bittrue_and_float(est_folder
     assert {"mode_hat_hw", "mode_hat_bittrue", "mode_hat_float", "x1_hat_hw", "x2_hat_float", "y_hat_hw"} <= set(hw.dtype.names)
     assert np.array_equal(hw["mode_hat_hw"], hw["mode_hat_bittrue"])
     assert "mode_accuracy_hw" in s["metrics"] and "x1_rmse_float" in s["metrics"]
+    from pwas_hdl.design.report import collect_report, report_markdown
+
+    rep = collect_report(gd.outdir, [res["summary_path"]])
+    text = report_markdown(rep)
+    assert rep["design"]["kind"] == "estimator" and rep["fit"] is None
+    assert "| icarus | 120 | 0 | 1..1 | 1 |" in text and "mode accuracy hw / float" in text

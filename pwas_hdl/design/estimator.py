@@ -82,7 +82,9 @@ def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | 
         An option out of range or an unstable observer (``A_i - K_i C_i`` with a pole on or outside
         the unit circle).
     """
-    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator, l1_gain
+    import numpy as np
+
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
 
     _check_int("input_bits", input_bits, 4, 24)
     _check_int("state_bits", state_bits, 2, 48)
@@ -91,10 +93,11 @@ def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | 
     if input_headroom is not None and not (isinstance(input_headroom, (int, float)) and not isinstance(input_headroom, bool)
                                            and 0 < float(input_headroom) < 1e6):
         raise InputError(f"input_headroom must be a positive number, got {input_headroom!r}")
-    for a, k, c in zip(config.A, config.K, config.C):
-        import numpy as np
-
-        l1_gain(a - np.outer(k, c), np.eye(a.shape[0]))  # InputError for an unstable observer
+    for i, (a, k, c) in enumerate(zip(config.A, config.K, config.C)):
+        rho = float(np.max(np.abs(np.linalg.eigvals(a - np.outer(k, c)))))
+        if not rho < 1.0:
+            raise InputError(f"the observer of mode {i + 1} is not stable (A - K C has a pole of modulus {rho:.4g} >= 1); "
+                             "choose gains K that place the poles inside the unit circle")
     est = FixedPointSwitchedEstimator(config.A, config.B, config.C, config.K, window=config.window,
                                       input_bits=12 if input_bits is None else input_bits,
                                       input_headroom=8.0 if input_headroom is None else float(input_headroom),

@@ -118,7 +118,23 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
     return rep
 
 
-def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+def _estimator_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], None]:
+    """The design summary of an estimator folder (seed 003's switched observer: no PWAS fit)."""
+    from pwas_hdl.fit.estimator_file import read_estimator
+
+    cfg = read_estimator(out / man["files"]["model"])  # the configuration must still be readable
+    e = man["estimator"]
+    f = e["formats"]
+    return {"top": man["top"], "kind": "estimator", "modes": e["modes"], "states": e["states"], "window": e["window"],
+            "signals": e["signals"], "latency_cycles": man["latency_cycles"], "ii": man["ii"],
+            "formats": f"inputs s{f['input_bits']}.{f['input_frac']}, states s{f['state_bits']}.{f['state_frac']}, "
+                       f"coefficients {f['coef_frac']} fraction bits",
+            "error_bound": e["error_bound"], "source": cfg.source}, None
+
+
+def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    if man["design"] == "estimator":
+        return _estimator_summary(out, man)
     model = PWASVirtualSensor.load(out / man["files"]["model"])
     fit = model.to_dict()["fit"]
     fmt = man["formats"]
@@ -162,6 +178,7 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
                 "within_error_bound": s.get("within_error_bound"),
                 "samples_per_second": s.get("samples_per_second"),
                 "stale": _is_stale(s, man),
+                **({"modes": s.get("modes"), "metrics": s.get("metrics")} if man["design"] == "estimator" else {}),
                 "targets": {
                     t: {k: v.get(k) for k in ("reference_column", "rmsee_float", "rmsee_hw", "rmsee_increase_hw_vs_float_percent")}
                     for t, v in s.get("targets", {}).items()
@@ -178,7 +195,7 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
         "format": "pwas-hdl-report",
         "version": 1,
         "design": design,
-        "fit": {k: fit[k] for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")},
+        "fit": {k: fit[k] for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")} if fit is not None else None,
         "simulation": sims,
         "synthesis": synth,
     }
@@ -192,8 +209,38 @@ def _fmt(v: Any, spec: str = ".4g") -> str:
     return str(v)
 
 
+def _estimator_lines(rep: dict[str, Any]) -> list[str]:
+    """Design and simulation lines of an estimator folder (seed 003's switched observer)."""
+    d = rep["design"]
+    eb = d["error_bound"]
+    lines = [f"# {d['top']} (estimator): accuracy, latency, resources", "",
+             f"Seed 003's switched-observer estimator: {d['modes']} modes, {d['states']} states "
+             f"({', '.join(d['signals']['states'])}), detector window {d['window']}; {d['formats']}. Latency "
+             f"{d['latency_cycles']} cycle, II {d['ii']}. Bounds against the float estimator: modes equal where the float margin "
+             f"exceeds {_fmt(2 * eb['window_sum'])}; then |x_hat - float| <= {_fmt(eb['state'])}, |y_hat - float| <= "
+             f"{_fmt(eb['y_hat'])}.", ""]
+    if rep["simulation"]:
+        lines += ["## Simulation (RTL against the bit-true and float estimators)", "",
+                  "| simulator | samples | mismatches | latency (meas.) | II (meas.) | modes differing from float (beyond bound) | "
+                  "mode accuracy hw / float | output MSE hw / float |", "|---|---:|---:|---:|---:|---:|---|---|"]
+        for s in rep["simulation"]:
+            lat, mo, me = s["latency_measured"], s.get("modes") or {}, s.get("metrics") or {}
+            yn = d["signals"]["output"]
+            lines.append(f"| {s['simulator']} | {s['samples']} | {s['mismatches']} | {lat[0]}..{lat[1]} | {_fmt(s['ii_measured'])} | "
+                         f"{_fmt(mo.get('differ_from_float'))} ({_fmt(mo.get('differ_beyond_bound'))}) | "
+                         f"{_fmt(me.get('mode_accuracy_hw'))} / {_fmt(me.get('mode_accuracy_float'))} | "
+                         f"{_fmt(me.get(f'{yn}_mse_hw'))} / {_fmt(me.get(f'{yn}_mse_float'))} |")
+        lines += _stale_lines(rep["simulation"], "simulate")
+        lines.append("")
+    return lines
+
+
 def report_markdown(rep: dict[str, Any]) -> str:
     """Markdown rendering of :func:`collect_report`."""
+    if rep["design"]["kind"] == "estimator":
+        lines = _estimator_lines(rep)
+        lines += _synth_lines(rep)
+        return "\n".join(lines)
     d, f = rep["design"], rep["fit"]
     lines = [
         f"# {d['top']} ({d['kind']}): accuracy, latency, resources",
@@ -223,6 +270,12 @@ def report_markdown(rep: dict[str, Any]) -> str:
                 )
         lines += _stale_lines(rep["simulation"], "simulate")
         lines.append("")
+    lines += _synth_lines(rep)
+    return "\n".join(lines)
+
+
+def _synth_lines(rep: dict[str, Any]) -> list[str]:
+    lines: list[str] = []
     if rep["synthesis"]:
         lines += ["## Synthesis (Yosys + nextpnr)", "",
                   "| target | part | LUT | FF | carry | DSP | BRAM (bits) | fmax (MHz) | latency (ns) | Msamples/s |",
@@ -235,7 +288,7 @@ def report_markdown(rep: dict[str, Any]) -> str:
             )
         lines += _stale_lines(rep["synthesis"], "synth")
         lines.append("")
-    return "\n".join(lines)
+    return lines
 
 
 def _stale_lines(entries: list[dict[str, Any]], command: str) -> list[str]:
