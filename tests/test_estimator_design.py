@@ -69,9 +69,8 @@ def test_generate_refuses_pwas_options_and_unstable_gains(tmp_path):
 
 
 def test_cli_make_data_writes_the_estimator_and_refuses_a_bad_path(tmp_path):
-    from typer.testing import CliRunner
-
     from pwas_hdl.cli import app
+    from helpers.cli import CliRunner
 
     r = CliRunner().invoke(app, ["make-data", "switched-linear", "-o", str(tmp_path / "d.csv"), "--runs", "1", "--samples", "50",
                                  "--estimator-out", str(tmp_path / "est.json")])
