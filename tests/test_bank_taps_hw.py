@@ -51,7 +51,7 @@ def test_tapped_bittrue_within_bound_and_manifest(tapped, tmp_path):
     assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
 
 
-@pytest.mark.parametrize("simulator, state_bits", [("icarus", None), ("icarus", 10)])  # Verilator: benchmarks/bank_taps_rtl.py
+@pytest.mark.parametrize("simulator, state_bits", [("icarus", 10)])  # both simulators, more layouts: benchmarks/bank_taps_rtl.py
 def test_tapped_rtl_bit_exact(tapped, simulator, state_bits, tmp_path, sim_cache):
     """Full speed, stalls with a reset mid-stream, full-scale out-of-range inputs; 10-bit states saturate."""
     from pwas_hdl.design.generate import generate

@@ -127,7 +127,7 @@ def _stimulus(est, n=150, seed=7, noise=0.02):
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("simulator, state_bits", [("icarus", None), ("icarus", 12)])  # Verilator: benchmarks/switched_estimator_hw.py
+@pytest.mark.parametrize("simulator, state_bits", [("icarus", None), ("icarus", 12)])  # Verilator: the simulate test below
 def test_estimator_rtl_bit_exact_stalls_reset_out_of_range_saturation(simulator, state_bits, est_folder, tmp_path, sim_cache):
     """cocotb on both simulators, driven by the manifest: full speed (latency and II measured), random
     bubbles and backpressure with a reset mid-stream, out-of-range inputs; 12-bit states saturate."""
@@ -159,7 +159,7 @@ def test_simulate_estimator_folder_writes_hw_beside_bittrue_and_float(est_folder
     _, gd = est_folder
     d = switched_training_runs(2, 60, seed=3, switching="time", noise=0.02)
     write_csv(tmp_path / "data.csv", d.columns())
-    res = simulate_data(gd.outdir, tmp_path / "data.csv", tmp_path / "hw.csv", simulator="icarus", traj_col="run",
+    res = simulate_data(gd.outdir, tmp_path / "data.csv", tmp_path / "hw.csv", simulator="verilator", traj_col="run",
                         cache_dir=sim_cache)
     s = res["summary"]
     assert s["checks"]["passed"] and s["mismatches"] == 0 and s["samples"] == 120 and s["trajectories"] == 2
@@ -174,4 +174,4 @@ def test_simulate_estimator_folder_writes_hw_beside_bittrue_and_float(est_folder
     rep = collect_report(gd.outdir, [res["summary_path"]])
     text = report_markdown(rep)
     assert rep["design"]["kind"] == "estimator" and rep["fit"] is None
-    assert "| icarus | 120 | 0 | 1..1 | 1 |" in text and "mode accuracy hw / float" in text
+    assert "| verilator | 120 | 0 | 1..1 | 1 |" in text and "mode accuracy hw / float" in text
