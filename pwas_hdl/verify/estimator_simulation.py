@@ -241,7 +241,7 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     from pwas_hdl.fit.classifier import class_scores
     from pwas_hdl.io.csv_table import format_csv, split_trajectories
     from pwas_hdl.systems.switched_observer import run_switched_observer
-    from pwas_hdl.verify.simulation import _checks, _json_default
+    from pwas_hdl.verify.simulation import _checks, _json_default, sim_module
 
     if engine != "cocotb":
         raise InputError("--engine native drives the PWAS designs only; simulate an estimator design with --engine cocotb")
@@ -267,7 +267,7 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
                                                           "segments": segs}]}
     n = int(sum(len(s["expected"]) for s in segs))
     say(f"simulating {n} samples of {table.path} through the estimator {design.top} on {simulator} (cocotb) ...")
-    runner = __import__("pwas_hdl.verify.simulation", fromlist=["sim_module"]).sim_module("pwas_runner")
+    runner = sim_module("pwas_runner")
     t0 = time.perf_counter()
     b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
     wd = (Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else Path(tempfile.mkdtemp(prefix=f"pwas-esim-{simulator}-"))
