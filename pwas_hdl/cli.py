@@ -652,7 +652,8 @@ def generate(
             e = man["estimator"]
             _say(f"{man['top']}: seed 003 estimator, {e['modes']} modes, {e['states']} states, latency {man['latency_cycles']} "
                  f"cycle, II {man['ii']}, states s{e['formats']['state_bits']}.{e['formats']['state_frac']}, "
-                 f"|x_hat - float| <= {e['error_bound']['state']:.4g} where the modes agree")
+                 + (f"|x_hat - float| <= {e['error_bound']['state']:.4g} where the modes agree" if e["error_bound"]["state"] is not None
+                    else "no state bound (max_i ||A_i - K_i C_i||_inf >= 1)"))
             _say(f"wrote {outdir}/ ({len(gd.files)} files)")
             return
         eb = man["error_bound"]

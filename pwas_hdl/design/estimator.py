@@ -210,6 +210,11 @@ def _header(man: dict, config_sha: str) -> str:
     return "".join(f"// {ln}".rstrip() + "\n" for ln in lines) + "\n"
 
 
+def _bound_text(v) -> str:
+    """A state / y_hat bound, or why there is none (``max_i ||A_i - K_i C_i||_inf >= 1``: no contraction to sum)."""
+    return f"{v:.4g}" if v is not None else "(no bound: max_i ||A_i - K_i C_i||_inf >= 1)"
+
+
 def _report(man: dict) -> str:
     e = man["estimator"]
     f, eb = e["formats"], e["error_bound"]
@@ -232,8 +237,8 @@ def _report(man: dict) -> str:
         f"(saturating; flagged by `state_saturated`), coefficients with {f['coef_frac']} fraction bits.", "",
         f"Against the float estimator at the represented inputs: residuals within {eb['residual']:.4g}, window sums within "
         f"{eb['window_sum']:.4g}; the detected mode equals the float one wherever the float margin exceeds "
-        f"{2 * eb['window_sum']:.4g}; with equal modes |x_hat - float| <= {eb['state']:.4g} and |y_hat - float| <= "
-        f"{eb['y_hat']:.4g} (unless a state saturates).", "",
+        f"{2 * eb['window_sum']:.4g}; with equal modes |x_hat - float| <= {_bound_text(eb['state'])} and |y_hat - float| <= "
+        f"{_bound_text(eb['y_hat'])} (unless a state saturates).", "",
         "## Files", "", *[f"- `{v}`" for k, v in sorted(man["files"].items()) if isinstance(v, str)], ""])
 
 
