@@ -160,45 +160,11 @@ class ObserverSensorTop(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        bank = self.bank
-        b = bank.input_bits
-        inp = getattr(self, "in")
-        cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(self.signals))]
-        advance = inp.ready  # the core drives it: ~out.valid | out.ready (one net, no alias)
-        transfer = Signal(name="transfer")
-        m.d.comb += transfer.eq(inp.valid & advance)
-
-        # warm-up counter 0 .. M + l (saturating)
-        wu = self.warmup
-        cw = max(1, wu.bit_length())
-        cnt = Signal(unsigned(cw), name="warmup_count")
-        full = ge_const(cnt, wu)
-        m.d.comb += self.warm.eq(full)
-        inc = add_const_wrap(m, cnt, 1, "warmup_inc")
-        with m.If(transfer & ~self.warm):
-            m.d.sync += cnt.eq(inc)
-
+        cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:
             return self._elaborate_serial(m, cur, inp, transfer)
-        residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
-        sink_unused(m, _sat, "state_saturated_flag")
-        sums = build_window_sums(m, bank, residuals, transfer)
-        v1 = Signal(name="s_sum_valid")
-        with m.If(advance):
-            m.d.sync += v1.eq(transfer & self.warm)
-        # stage s_root
-        roots = []
-        for j, s in enumerate(sums):
-            r = build_isqrt(m, s, f"feat{j}_isqrt") if bank.feature_map == "11b" else s
-            reg = Signal(unsigned(len(r)), name=f"s_root_r{j}", reset_less=True)
-            with m.If(advance):
-                m.d.sync += reg.eq(r)
-            roots.append(reg)
-        v2 = Signal(name="s_root_valid")
-        with m.If(advance):
-            m.d.sync += v2.eq(v1)
-        codes = build_feature_codes(m, bank, roots)
-        self.core.build_into(m, Cat(*codes), v2, advance, self.out)
+        codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm)
+        self.core.build_into(m, Cat(*codes), valid, advance, self.out)
         return m
 
     def _elaborate_serial(self, m, cur, inp, transfer):
@@ -243,3 +209,51 @@ def build_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline |
                           "rule": "core bound + sum_j G_j * feature bound_j (G_j: largest edge slope along j)",
                           "against": "float sensor (front end + PWAS) at the physical signals the input codes represent"}
     return top
+
+
+def inputs_and_warmup(m: Module, top) -> tuple[list, object, object, Signal]:
+    """The input side shared by the observer-bank tops: the payload's signed sample codes ``cur``
+    (one per signal of ``top.signals``, ``top.bank.input_bits`` each), ``advance`` (= ``in.ready``,
+    driven by the core), ``transfer`` (``in.valid & advance``) and the saturating warm-up counter
+    0 .. ``top.warmup`` that drives ``top.warm``. Returns ``(cur, in, advance, transfer)``."""
+    b = top.bank.input_bits
+    inp = getattr(top, "in")
+    cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(top.signals))]
+    advance = inp.ready  # the core drives it: ~out.valid | out.ready (one net, no alias)
+    transfer = Signal(name="transfer")
+    m.d.comb += transfer.eq(inp.valid & advance)
+
+    # warm-up counter 0 .. M + l (saturating)
+    wu = top.warmup
+    cw = max(1, wu.bit_length())
+    cnt = Signal(unsigned(cw), name="warmup_count")
+    full = ge_const(cnt, wu)
+    m.d.comb += top.warm.eq(full)
+    inc = add_const_wrap(m, cnt, 1, "warmup_inc")
+    with m.If(transfer & ~top.warm):
+        m.d.sync += cnt.eq(inc)
+    return cur, inp, advance, transfer
+
+
+def parallel_feature_codes(m: Module, bank, cur: list, transfer, advance, warm) -> tuple[list, Signal]:
+    """The parallel bank's feature path (:data:`FRONT_END_STAGES` registers): observer bank,
+    window sums (stage ``s_sum``), square root or not and its register (stage ``s_root``), feature
+    codes. Returns ``(codes, valid)``: the core's feature inputs and their valid bit."""
+    residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
+    sink_unused(m, _sat, "state_saturated_flag")
+    sums = build_window_sums(m, bank, residuals, transfer)
+    v1 = Signal(name="s_sum_valid")
+    with m.If(advance):
+        m.d.sync += v1.eq(transfer & warm)
+    # stage s_root
+    roots = []
+    for j, s in enumerate(sums):
+        r = build_isqrt(m, s, f"feat{j}_isqrt") if bank.feature_map == "11b" else s
+        reg = Signal(unsigned(len(r)), name=f"s_root_r{j}", reset_less=True)
+        with m.If(advance):
+            m.d.sync += reg.eq(r)
+        roots.append(reg)
+    v2 = Signal(name="s_root_valid")
+    with m.If(advance):
+        m.d.sync += v2.eq(v1)
+    return build_feature_codes(m, bank, roots), v2

@@ -23,12 +23,11 @@ from amaranth.hdl import Cat, Module, Signal, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
+from pwas_hdl.hdl._lintsafe import sink_unused
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
-from pwas_hdl.hdl.observer_bank import add_const_signed, build_observer_bank, const_product, saturate
-from pwas_hdl.hdl.observer_sensor_top import FRONT_END_STAGES
+from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
+from pwas_hdl.hdl.observer_sensor_top import FRONT_END_STAGES, inputs_and_warmup, parallel_feature_codes
 from pwas_hdl.hdl.params import CoreParams, Pipeline
-from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
 from pwas_hdl.hdl.sensor_top import sample_fields
 
 __all__ = ["ObserverTapSensorTop", "build_tapped_observer_sensor"]
@@ -121,42 +120,10 @@ class ObserverTapSensorTop(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        bank = self.bank
-        b = bank.input_bits
-        inp = getattr(self, "in")
-        cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(self.signals))]
-        advance = inp.ready  # the core drives it: ~out.valid | out.ready
-        transfer = Signal(name="transfer")
-        m.d.comb += transfer.eq(inp.valid & advance)
-
-        wu = self.warmup
-        cw = max(1, wu.bit_length())
-        cnt = Signal(unsigned(cw), name="warmup_count")
-        full = ge_const(cnt, wu)
-        m.d.comb += self.warm.eq(full)
-        inc = add_const_wrap(m, cnt, 1, "warmup_inc")
-        with m.If(transfer & ~self.warm):
-            m.d.sync += cnt.eq(inc)
-
-        residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
-        sink_unused(m, _sat, "state_saturated_flag")
-        sums = build_window_sums(m, bank, residuals, transfer)
-        v1 = Signal(name="s_sum_valid")
-        with m.If(advance):
-            m.d.sync += v1.eq(transfer & self.warm)
-        roots = []
-        for j, s in enumerate(sums):
-            r = build_isqrt(m, s, f"feat{j}_isqrt") if bank.feature_map == "11b" else s
-            reg = Signal(unsigned(len(r)), name=f"s_root_r{j}", reset_less=True)
-            with m.If(advance):
-                m.d.sync += reg.eq(r)
-            roots.append(reg)
-        v2 = Signal(name="s_root_valid")
-        with m.If(advance):
-            m.d.sync += v2.eq(v1)
-        codes = build_feature_codes(m, bank, roots)
+        cur, _inp, advance, transfer = inputs_and_warmup(m, self)
+        codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm)
         taps = self._tap_codes(m, cur, transfer, advance)
-        self.core.build_into(m, Cat(*codes, *taps), v2, advance, self.out)
+        self.core.build_into(m, Cat(*codes, *taps), valid, advance, self.out)
         return m
 
 
