@@ -34,6 +34,8 @@ Nothing here asserts on times.
 
 from __future__ import annotations
 
+import sys
+
 import argparse
 import json
 import time
@@ -367,4 +369,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

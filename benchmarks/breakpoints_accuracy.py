@@ -33,6 +33,8 @@ the mismatches against the bit-true model.
 
 from __future__ import annotations
 
+import sys
+
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -324,4 +326,6 @@ def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - scrip
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

@@ -145,4 +145,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

@@ -322,4 +322,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

@@ -579,4 +579,6 @@ def _run(args: argparse.Namespace, ex) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

@@ -13,6 +13,8 @@ Writes ``input_scale_cost.json`` and ``input_scale_cost.md`` into ``--outdir``.
 
 from __future__ import annotations
 
+import sys
+
 import argparse
 import json
 import tempfile
@@ -67,4 +69,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

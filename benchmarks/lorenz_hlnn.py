@@ -24,6 +24,8 @@ Usage: ``python benchmarks/lorenz_hlnn.py [--runs 5] [--quick]`` or
 
 from __future__ import annotations
 
+import sys
+
 import math
 import time
 from pathlib import Path
@@ -208,4 +210,6 @@ def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - scrip
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

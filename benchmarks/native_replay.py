@@ -21,6 +21,8 @@ Writes ``native_replay.json`` and ``native_replay.md`` into ``--outdir``.
 
 from __future__ import annotations
 
+import sys
+
 import argparse
 import json
 import platform
@@ -143,4 +145,6 @@ def write_md(result: dict, outdir: Path) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

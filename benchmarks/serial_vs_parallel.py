@@ -15,6 +15,8 @@ into ``--outdir`` (``--quick``: My = 2, p = 4, ``serial_vs_parallel_quick.*``).
 
 from __future__ import annotations
 
+import sys
+
 import argparse
 import json
 import tempfile
@@ -81,4 +83,6 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

@@ -32,6 +32,8 @@ Usage: ``python benchmarks/switched_linear.py [--runs 5] [--quick]`` or
 
 from __future__ import annotations
 
+import sys
+
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -329,4 +331,6 @@ def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - scrip
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

@@ -26,6 +26,8 @@ or ``pwas-hdl bench three-tank --json OUT.json [--md OUT.md] [--plot OUT.png] [-
 
 from __future__ import annotations
 
+import sys
+
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -242,4 +244,6 @@ def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - scrip
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

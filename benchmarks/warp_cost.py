@@ -14,6 +14,8 @@ Writes ``warp_cost.json`` and ``warp_cost.md``.
 
 from __future__ import annotations
 
+import sys
+
 import argparse
 import json
 import tempfile
@@ -64,4 +66,6 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main))

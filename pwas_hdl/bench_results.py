@@ -39,6 +39,7 @@ from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.resources import schemas_dir
 
 __all__ = [
+    "script_main",
     "RESULTS_FORMAT",
     "RESULTS_VERSION",
     "STAGES",
@@ -368,6 +369,24 @@ def default_outdir() -> Path:
     if (here.parent / "pyproject.toml").is_file() and (here / "results").is_dir():
         return here / "results"
     return Path.cwd() / "benchmarks-results"
+
+
+def script_main(main: Any, argv: Sequence[str] | None = None) -> int:
+    """Run a benchmark script's ``main(argv)`` under the command line's error contract.
+
+    Bad input (an :class:`~pwas_hdl.errors.InputError`, an OS error, a missing tool) gives one
+    ``error:`` line and exit status 2 instead of a traceback; a bug a traceback and 3
+    (:func:`pwas_hdl.cli.report_error`). ``main`` returning None counts as success.
+    """
+    from pwas_hdl.cli import report_error
+
+    try:
+        rv = main(argv) if argv is not None else main()
+    except SystemExit:
+        raise
+    except Exception as exc:  # noqa: BLE001 - mapped to an exit status like the CLI's
+        return report_error(exc)
+    return int(rv or 0)
 
 
 def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: Any, markdown: Any, plot: Any,

@@ -104,6 +104,14 @@ def _os_message(exc: OSError) -> str:
     return str(exc)
 
 
+def report_error(exc: BaseException) -> int:
+    """Print what the user needs to see about ``exc`` on stderr (one ``error:`` line; a traceback
+    only for a bug or under ``-v``) and return the exit status of the mapping above (2 for bad
+    input, an OS error or a missing tool, 1 for a failed check, 3 for a bug). Also used by the
+    benchmark scripts (:func:`pwas_hdl.bench_results.script_main`)."""
+    return _report_error(exc)
+
+
 def _report_error(exc: BaseException) -> int:
     """Print what the user needs to see about ``exc`` and return the exit status (the mapping above)."""
     verbose = _STATE["verbose"]

@@ -1,0 +1,46 @@
+"""The benchmark scripts keep the command line's error contract (pwas_hdl.bench_results.script_main):
+bad input is one ``error:`` line, exit status 2 and nothing written, not a traceback."""
+
+from __future__ import annotations
+
+import importlib
+import re
+
+import pytest
+
+from pwas_hdl.bench_results import script_main
+from pwas_hdl.resources import benchmarks_dir
+
+
+@pytest.mark.parametrize("script, args", [
+    ("distributed_speedup", ["--quick", "--scheduler", "nohost"]),
+    ("hw_tables", ["--scheduler", "localhost:1"]),
+])
+def test_bad_option_is_one_error_line_and_nothing_written(tmp_path, capsys, script, args):
+    bench = importlib.import_module(f"pwas_hdl.benchmarks.{script}")
+    out = tmp_path / "out"
+    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: --scheduler must be an address like tcp://HOST:PORT"), err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_a_bug_is_a_traceback_and_status_3(capsys):
+    def broken(argv=None):
+        raise KeyError("x")
+
+    assert script_main(broken, []) == 3
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "internal error" in err
+
+
+def test_every_script_entry_uses_script_main():
+    """A script whose ``__main__`` block only calls ``main`` goes through script_main."""
+    plain = []
+    for path in sorted(benchmarks_dir().glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        block = text.split('if __name__ == "__main__":', 1)[1] if 'if __name__ == "__main__":' in text else ""
+        if re.search(r"^\s+(sys\.exit\(|raise SystemExit\()?main\(\)\)?\s*$", block, re.M):
+            plain.append(path.name)
+    assert plain == []
