@@ -53,6 +53,21 @@ def test_estimator_file_refuses_an_infinite_number(tmp_path):
         read_estimator(p)
 
 
+@pytest.mark.parametrize("damage", ["truncated", "nan"])
+def test_generate_names_the_estimator_hint_for_a_broken_estimator_file(tmp_path, capsys, damage):
+    """A truncated / NaN estimator file through `generate`: one error line with the estimator's hint
+    (not the model file's `pwas-hdl fit`), exit 2, nothing written."""
+    from pwas_hdl.cli import main
+
+    text = estimator_text(estimator_config())
+    bad = text[: len(text) // 2] if damage == "truncated" else text.replace("]", ", NaN]", 1)
+    (tmp_path / "est.json").write_text(bad)
+    assert main(["generate", str(tmp_path / "est.json"), "-o", str(tmp_path / "g")]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "--estimator-out" in lines[0], lines
+    assert "pwas-hdl fit" not in lines[0] and not (tmp_path / "g").exists()
+
+
 def test_generate_refuses_pwas_options_and_unstable_gains(tmp_path):
     from pwas_hdl.design.generate import build_design
 

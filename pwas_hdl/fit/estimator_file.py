@@ -215,19 +215,25 @@ def read_estimator(path: str | os.PathLike) -> SwitchedEstimatorConfig:
 
 
 def is_estimator_file(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a file whose JSON ``format`` is ``pwas-hdl-estimator`` (no validation;
-    a file that cannot be read is not one: the model reader then reports it)."""
+    """True when ``path`` is a file whose JSON ``format`` is ``pwas-hdl-estimator`` (no validation).
+
+    A file that cannot be read is not one (the model reader then reports it); a file that names
+    the estimator format in its first 4 kB but is not valid JSON (truncated, NaN, not UTF-8) is
+    one, so that :func:`read_estimator` reports it with the estimator's own hint."""
     try:
         p = Path(path)
         if not p.is_file() or p.stat().st_size > (64 << 20):
             return False
         with open(p, "rb") as f:
             head = f.read(4096)
-        if b'"pwas-hdl-estimator"' not in head:
-            return False
+    except OSError:
+        return False
+    if b'"pwas-hdl-estimator"' not in head:
+        return False
+    try:
         d = json.loads(p.read_text(encoding="utf-8"))
     except (OSError, ValueError, UnicodeDecodeError):
-        return False
+        return True
     return isinstance(d, dict) and d.get("format") == ESTIMATOR_FORMAT
 
 
