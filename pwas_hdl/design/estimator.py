@@ -13,7 +13,10 @@ The bit-true model is :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointSwitch
 format options (``input_bits``, ``input_headroom``, ``state_bits``, ``state_frac``, ``coef_frac``)
 are recorded in ``generator.options`` so that :func:`fixed_point_estimator` rebuilds it exactly.
 
-Ports (one (u, y) sample per input transfer, latency 1, II 1, no warm-up): input payload fields
+``--architecture serial`` builds :class:`~pwas_hdl.hdl.switched_estimator_top.SerialSwitchedEstimatorTop`
+instead (the same ports and fields; II = ``manifest.estimator.cycles_per_sample``, latency II + 1).
+
+Ports (one (u, y) sample per input transfer, parallel: latency 1, II 1, no warm-up): input payload fields
 ``u`` (the input signal's name) and ``y`` (``s<B_in>.<F_in>`` of the physical value), output
 payload fields ``<state>_hat`` (``s<B_s>.<F_s>``), ``y_hat`` (``F_s`` fraction bits),
 ``mode_index`` (the detected mode minus 1; physical mode = 1 + code) and ``state_saturated``.
@@ -35,11 +38,13 @@ __all__ = ["ESTIMATOR_OPTIONS", "ESTIMATOR_FILE", "fixed_point_estimator", "buil
 
 #: Format options of the estimator design (None: the default of the noise budget).
 ESTIMATOR_OPTIONS = ("input_bits", "input_headroom", "state_bits", "state_frac", "coef_frac")
+#: Architectures of the estimator design (``generate --architecture``).
+ESTIMATOR_ARCHITECTURES = ("parallel", "serial")
 #: Name of the configuration inside the generated folder.
 ESTIMATOR_FILE = "estimator.json"
 #: generate options that belong to the PWAS designs, with the value that means "not given".
 _PWAS_DEFAULTS = {"memory": "banked", "pipeline": None, "memory_init": "inline", "goal": None, "target_mhz": None,
-                  "architecture": "parallel", "input_fill": 0.9, "input_scale": "pow2", "weight_bits": None,
+                  "input_fill": 0.9, "input_scale": "pow2", "weight_bits": None,
                   "weight_frac": None, "output_bits": None, "output_frac": None, "overflow": "error", "rounding": "half_up"}
 
 
@@ -148,17 +153,28 @@ def estimator_info(top, config: SwitchedEstimatorConfig, ports: str) -> dict:
         elif p["role"] == "out.payload":
             p["fields"] = out_fields
     rst = f"~{nm['reset']}" if ports == "axis" else nm["reset"]
+    serial = getattr(top, "architecture", "parallel") == "serial"
+    flow = {
+        "advance": f"~{nm['out.valid']} | {nm['out.ready']}",
+        nm["in.ready"]: "advance",
+    }
+    if serial:
+        cps = int(top.ii)
+        flow = {
+            "advance": f"~{nm['out.valid']} | {nm['out.ready']} (the output register can take a result)",
+            nm["in.ready"]: f"the row unit is idle, or in its last step ({cps - 1}) and advance holds: one transfer every "
+                            f"{cps} clocks at most (II = cycles_per_sample = {cps}); the last step waits while advance is low",
+        }
     return {
         "ports": plist,
         "clock": {"port": nm["clock"], "edge": "rising"},
         "reset": {"port": nm["reset"], "polarity": "low" if ports == "axis" else "high", "kind": "synchronous"},
         "latency": int(top.latency), "ii": int(top.ii),
         "flow_control": {
-            "advance": f"~{nm['out.valid']} | {nm['out.ready']}",
-            nm["in.ready"]: "advance",
+            **flow,
             "reset": f"{nm['reset']}: synchronous, active {'low' if ports == 'axis' else 'high'} (the design resets while "
                      f"{rst} is 1); clears the valid bit, every observer state and the window sums (the estimator starts at 0)",
-            "latency": f"a transfer on the input stream in cycle t gives {nm['out.valid']} with its result in cycle t + 1 "
+            "latency": f"a transfer on the input stream in cycle t gives {nm['out.valid']} with its result in cycle t + {int(top.latency)} "
                        f"when {nm['out.ready']} stays high; every transfer yields one output (no warm-up)",
         },
     }
@@ -176,12 +192,21 @@ def _estimator_block(est, config: SwitchedEstimatorConfig, top) -> dict:
                          "L": est.l_codes.tolist(), "H": est.h_codes.tolist(),
                          "meaning": "codes with frac fraction bits (half up) of F_i = A_i - K_i C_i, G_i = B_i, L_i = K_i, H_i = C_i"},
         "widths": {k: int(v) for k, v in top.widths.items()},
-        "cycles_per_sample": 1, "ii": int(top.ii), "warmup_samples": 0,
+        "cycles_per_sample": int(top.ii), "ii": int(top.ii), "warmup_samples": 0,
+        "architecture": getattr(top, "architecture", "parallel"),
+        **({"schedule": top.schedule} if hasattr(top, "schedule") else {}),
         "detector": {"select": "min", "tie_rule": "lowest mode (numpy.argmin)", "compare_tree": "pwas_hdl.hdl.argmax.ArgmaxStage",
                      "scores": "window sums of the squared residuals r_i = y - C_i x_i of the bank"},
         "bit_true": "pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator",
         "float_reference": "pwas_hdl.systems.switched_observer.run_switched_observer (bank 'practical') at the represented signals",
     }
+
+
+def _rate(man: dict) -> str:
+    if man["ii"] == 1:
+        return "one sample per clock"
+    return (f"one sample every {man['ii']} clocks: serial architecture, every row of the estimator on one unit of "
+            f"{man['estimator']['schedule']['row_unit_multipliers']} variable multipliers")
 
 
 def _header(man: dict, config_sha: str) -> str:
@@ -192,7 +217,8 @@ def _header(man: dict, config_sha: str) -> str:
              f"{e['modes']} modes, {e['states']} states ({', '.join(e['signals']['states'])}), detector window {e['window']}: "
              "bank of per-mode observers with output injection, argmin of the residual window sums (ties to the lowest mode), "
              "switched observer",
-             f"latency {man['latency_cycles']} cycle, II {man['ii']} (one sample per clock), no warm-up",
+             f"latency {man['latency_cycles']} cycle{'s' if man['latency_cycles'] != 1 else ''}, II {man['ii']} "
+             f"({_rate(man)}), no warm-up",
              f"inputs s{f['input_bits']}.{f['input_frac']} (physical), states s{f['state_bits']}.{f['state_frac']} (saturating), "
              f"coefficients {f['coef_frac']} fraction bits",
              f"|x_hat - float| <= {eb['state']!r}, |y_hat - float| <= {eb['y_hat']!r} where the modes agree; the modes agree "
@@ -229,7 +255,8 @@ def _report(man: dict) -> str:
         "## Interface", "",
         f"- Clock `{man['clock']['port']}` (rising edge), reset `{man['reset']['port']}` ({man['reset']['kind']}, active "
         f"{man['reset']['polarity']}); the reset clears every observer state and window sum.",
-        f"- Latency **{man['latency_cycles']} cycle**, II **{man['ii']}** (one sample per clock), one output per input "
+        f"- Latency **{man['latency_cycles']} cycle{'s' if man['latency_cycles'] != 1 else ''}**, II **{man['ii']}** "
+        f"({_rate(man)}), one output per input "
         "transfer, valid/ready backpressure on both streams.", "",
         "| port | dir | width | fields (LSB first) |", "|---|---|---|---|", *rows, "",
         "## Formats and bounds", "",
@@ -244,7 +271,8 @@ def _report(man: dict) -> str:
 
 def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *, design: str = "core", name: str | None = None,
                            ports: str = "axis", progress: Any = None, executor: Any = None, timing_seed: int = 1,
-                           prescreen: bool = True, fpga_target: str = "ecp5", **options: Any):
+                           prescreen: bool = True, fpga_target: str = "ecp5", architecture: str = "parallel",
+                           bank_lanes: int | None = None, **options: Any):
     """Build the estimator's folder in memory (called by :func:`pwas_hdl.design.generate.build_design`).
 
     Parameters
@@ -255,6 +283,14 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     name : str, optional
         Verilog module name (default ``pwas_estimator``).
     ports : {"axis", "amaranth"}
+    architecture : {"parallel", "serial"}
+        ``parallel`` (default): :class:`~pwas_hdl.hdl.switched_estimator_top.SwitchedEstimatorTop`, every
+        row its own constant multipliers, one sample per clock (II 1, latency 1). ``serial``:
+        :class:`~pwas_hdl.hdl.switched_estimator_top.SerialSwitchedEstimatorTop`, every row on one unit
+        of ``n + 2`` variable multipliers and a squarer, II = ``s + s n + 1 + n`` clocks, latency II + 1;
+        bit-exact with parallel, for FPGAs without enough multipliers (LFE5U-45F, iCE40).
+    bank_lanes : int, optional
+        Serial only: 1 (the one row unit; more lanes are not available for the estimator).
     **options
         :data:`ESTIMATOR_OPTIONS`; the PWAS options of ``generate`` are refused unless they have
         their default value (they have no meaning here).
@@ -268,7 +304,7 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     from pwas_hdl.design.manifest import build_estimator_manifest, manifest_text
     from pwas_hdl.design.names import check_module_name
     from pwas_hdl.hdl.emit import emit_verilog
-    from pwas_hdl.hdl.switched_estimator_top import SwitchedEstimatorTop
+    from pwas_hdl.hdl.switched_estimator_top import SerialSwitchedEstimatorTop, SwitchedEstimatorTop
 
     if design not in ("core", "sensor", "estimator"):
         raise InputError(f"an estimator file has one design (the estimator top); --design {design} does not apply")
@@ -282,17 +318,27 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
         raise InputError(f"unknown option(s) {sorted(unknown)} for an estimator design; known: {', '.join(ESTIMATOR_OPTIONS)}")
     if ports not in ("axis", "amaranth"):
         raise InputError(f"ports must be 'axis' or 'amaranth', got {ports!r}")
+    if architecture not in ESTIMATOR_ARCHITECTURES:
+        raise InputError(f"architecture (--architecture) must be one of {', '.join(ESTIMATOR_ARCHITECTURES)}, got {architecture!r}")
+    if bank_lanes is not None:
+        if architecture != "serial":
+            raise InputError("--bank-lanes applies to --architecture serial only")
+        if isinstance(bank_lanes, bool) or not isinstance(bank_lanes, int) or bank_lanes != 1:
+            raise InputError(f"the serial estimator has one row unit (all rows of the bank, the detector and the switched "
+                             f"observer share it): --bank-lanes must be 1, got {bank_lanes!r}")
     if name is not None:
         check_module_name(name)
     config = load_estimator_config(model)
     top_name = name or "pwas_estimator"
     est_opts = {k: options.get(k) for k in ESTIMATOR_OPTIONS}
     est = fixed_point_estimator(config, **est_opts)
-    comp = SwitchedEstimatorTop(est)
+    comp = SwitchedEstimatorTop(est) if architecture == "parallel" else SerialSwitchedEstimatorTop(est)
     info = estimator_info(comp, config, ports)
     files = {"verilog": f"{top_name}.v", "model": ESTIMATOR_FILE, "manifest": "manifest.json", "report": "report.md",
              "instance_template": f"{top_name}_inst.v", "fusesoc_core": f"{top_name}.core", "hex": []}
     gen_opts = {"design": "estimator", "ports": ports, **est_opts}
+    if architecture != "parallel":  # the parallel folder's options are unchanged (byte-identical reruns of old folders)
+        gen_opts["architecture"] = architecture
     man = build_estimator_manifest(top_name, info, files, gen_opts, _estimator_block(est, config, comp))
     cfg_text = estimator_text(config)
     verilog = _header(man, hashlib.sha256(cfg_text.encode("utf-8")).hexdigest()) + emit_verilog(comp, top_name, ports=ports)

@@ -355,7 +355,8 @@ def build_design(
 
     if is_estimator(model):  # an estimator file (seed 003's switched observer): pwas_hdl.design.estimator
         return build_estimator_design(model, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
-                                      ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, **formats)
+                                      ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
+                                      **formats)
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
     from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 

@@ -49,7 +49,7 @@ from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const,
 from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
 
 __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
-           "DEFAULT_ISQRT_EVERY"]
+           "table_mac", "DEFAULT_ISQRT_EVERY"]
 
 #: Digit steps of the integer square root between two pipeline registers (serial bank).
 DEFAULT_ISQRT_EVERY = 8
@@ -137,6 +137,30 @@ def _table(m: Module, sel, values: list[int], name: str, width: int | None = Non
     if isinstance(t, int):
         return Const(int(values[0]), signed(w))
     return t.as_signed()
+
+
+def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str):
+    """``sum_k columns[k][sel] * operands[k]``: one variable multiplier per operand with its
+    coefficient from a table indexed by ``sel`` (the step of a time-multiplexed unit), summed exactly
+    in ``width`` bits (the caller's bound; the order of an exact sum does not matter).
+
+    Parameters
+    ----------
+    sel : unsigned net, the table index (entries beyond a column's length are 0)
+    columns : list of lists of int, one coefficient column per operand
+    operands : list of signed nets
+    width : int, the accumulator width (every product is a ``width``-bit net, :func:`var_product`)
+
+    Returns
+    -------
+    The signed ``width``-bit sum, or None when every column is 0.
+    """
+    terms = []
+    for k, (col, x) in enumerate(zip(columns, operands)):
+        if any(int(v) for v in col):
+            terms.append(var_product(m, _table(m, sel, [int(v) for v in col], f"{name}_c{k}", width=width - len(x)), x,
+                                     width, f"{name}_p{k}"))
+    return _sum(m, terms, width, f"{name}_acc") if terms else None
 
 
 def build_isqrt_pipelined(m: Module, value, name: str, every: int | None):

@@ -17,7 +17,8 @@ latency 1 cycle, one output per transfer, no warm-up (the estimator starts at 0,
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.lib.memory import Memory
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -28,7 +29,8 @@ from pwas_hdl.hdl.observer_bank import _sum, add_const_signed, const_product, sa
 from pwas_hdl.hdl.residual_features import sub_wrap
 from pwas_hdl.hdl._lintsafe import add_wrap  # noqa: E402
 
-__all__ = ["SwitchedEstimatorTop", "estimator_widths", "simulate_estimator"]
+__all__ = ["SwitchedEstimatorTop", "SerialSwitchedEstimatorTop", "serial_estimator_schedule", "estimator_widths",
+           "simulate_estimator"]
 
 
 def estimator_widths(est) -> dict:
@@ -226,3 +228,248 @@ def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0
     n = top.est.n
     return {"x_hat": a[:, :n], "y_hat": a[:, n], "theta": a[:, n + 1] + 1, "state_saturated": a[:, n + 2].astype(bool),
             "cycles": cycles[0]}
+
+
+# ---------------------------------------------------------------------------------------------
+# time-multiplexed ("serial") estimator: ``generate EST.json --architecture serial``
+
+
+def serial_estimator_schedule(est) -> dict:
+    """The step schedule of :class:`SerialSwitchedEstimatorTop` (counts in clock cycles).
+
+    Steps ``0 .. s-1``: the residual rows of the bank's modes (mode ``j`` in step ``j``); steps
+    ``s .. s + s n - 1``: the bank's state-update rows (mode ``(step - s) // n``, state
+    ``(step - s) % n``); step ``P = s + s n``: the switched observer's ``y_hat`` row with the
+    coefficients of the detected mode; steps ``P + 1 .. P + n``: its state-update rows. The square,
+    the window sum and the running argmin of mode ``j`` take step ``j + 1`` (the detected mode is
+    final after step ``s <= P - 2``). ``cycles_per_sample = s + s n + 1 + n`` (= II); latency
+    ``cycles_per_sample + 1`` (the input is latched in the transfer cycle, the output register is
+    written in the last step).
+    """
+    s, n = est.n_modes, est.n
+    cps = s + s * n + 1 + n
+    return {"row_unit_multipliers": n + 2, "squarers": 1, "rows": {"residual": s, "bank_update": s * n, "y_hat": 1,
+            "observer_update": n}, "observer_first_step": s + s * n, "cycles_per_sample": cps, "latency": cps + 1}
+
+
+class SerialSwitchedEstimatorTop(wiring.Component):
+    """Seed 003's estimator time-multiplexed over one row unit (``--architecture serial``).
+
+    Bit for bit :class:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator`, as
+    :class:`SwitchedEstimatorTop` (the same ports, payload fields and widths), but every affine row
+    of the estimator -- the residual ``(qy << (sh + F_c)) - H_j x_j``, the bank update
+    ``F_j x_j + (G_j qu + L_j qy) << sh``, the switched observer's ``H_theta x`` and its update
+    -- runs on one unit of ``n + 2`` variable multipliers whose coefficients come from tables
+    indexed by the step (and, for the switched observer's rows, the detected mode):
+    :func:`pwas_hdl.hdl.serial_observer_bank.table_mac`. Each row adds ``2**(F_c-1)`` and takes
+    ``>> F_c`` exactly as the bit-true model (the state rows saturate); the sum is exact in the
+    accumulator width ``max(acc, racc)`` (:func:`estimator_widths`), so the result does not depend
+    on the sharing.
+
+    The bank's states are one rotating chain of ``s`` state vectors (the head feeds the unit: no
+    mode multiplexer); new states go to a row register and the whole vector to the tail after its
+    last row, so every row of a mode reads the states before the update. One squarer, the window
+    sums as a rotating chain and (window > 1) one delay-line memory of ``s * window`` words
+    (word (mode, slot), read one step ahead, 0 until ``window`` samples since reset, as the serial
+    observer bank); the detector is a running argmin (strictly smaller replaces: ties to the
+    lowest mode, as ``numpy.argmin``).
+
+    Handshake: ``in.ready`` is high when the unit is idle, or in its last step when the output
+    register can take the result (``~out.valid | out.ready``); otherwise the last step waits. II =
+    ``cycles_per_sample`` (:func:`serial_estimator_schedule`), latency ``cycles_per_sample + 1``.
+    """
+
+    kind = "switched-estimator"
+    architecture = "serial"
+
+    def __init__(self, est):
+        self._MustUse__silence = True
+        self.est = est
+        self.widths = estimator_widths(est)
+        self.index_width = index_width(est.n_modes)
+        self.schedule = serial_estimator_schedule(est)
+        self.ii = self.schedule["cycles_per_sample"]
+        self.latency = self.schedule["latency"]
+        self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
+                           + [("mode_index", self.index_width), ("state_saturated", 1)])
+        self.unsigned_fields = ("mode_index", "state_saturated")
+        super().__init__({
+            "in": In(stream.Signature(unsigned(2 * est.input_bits))),
+            "out": Out(stream.Signature(unsigned(sum(w for _, w in self.out_fields)))),
+        })
+        self._MustUse__silence = False
+
+    def _columns(self, stw: int, ib: int):
+        """Coefficient columns (state 0..n-1, qu, qy) indexed by ``Cat(step, theta)``."""
+        est = self.est
+        s, n, fc = est.n_modes, est.n, est.coef_frac
+        sh = est.state_frac - est.input_frac
+        p0 = self.schedule["observer_first_step"]
+        cps = self.ii
+
+        def row(step: int, th: int):
+            z = [0] * n
+            if step < s:  # residual of mode `step`: (qy << (sh + F_c)) - H x
+                return [-int(v) for v in est.h_codes[step]], 0, 1 << (sh + fc)
+            if step < p0:
+                j, i = divmod(step - s, n)
+                return [int(v) for v in est.f_codes[j][i]], int(est.g_codes[j][i]) << sh, int(est.l_codes[j][i]) << sh
+            if th >= s or step >= cps:
+                return z, 0, 0
+            if step == p0:  # y_hat = H_theta x
+                return [int(v) for v in est.h_codes[th]], 0, 0
+            i = step - p0 - 1
+            return [int(v) for v in est.f_codes[th][i]], int(est.g_codes[th][i]) << sh, int(est.l_codes[th][i]) << sh
+
+        cols = [[] for _ in range(n + 2)]
+        for th in range(1 << ib):
+            for step in range(1 << stw):
+                xs, gu, ly = row(step, th) if step < cps else ([0] * n, 0, 0)
+                for k in range(n):
+                    cols[k].append(xs[k])
+                cols[n].append(gu)
+                cols[n + 1].append(ly)
+        return cols
+
+    def elaborate(self, platform):
+        from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, rom
+        from pwas_hdl.hdl.serial_observer_bank import eq_const, table_mac, var_product
+
+        m = Module()
+        est, wd = self.est, self.widths
+        s, n, b, fc, bs = est.n_modes, est.n, est.input_bits, est.coef_frac, est.state_bits
+        rb, sw = wd["residual"], wd["sum"]
+        accw = max(wd["acc"], wd["racc"])
+        cps = self.ii
+        p0 = self.schedule["observer_first_step"]
+        inp = getattr(self, "in")
+
+        # ---- handshake and step counter (steps 0 .. cps-1 in the cycles after the transfer)
+        stw = bits_for(cps - 1)
+        st = Signal(unsigned(stw), name="step")
+        busy = Signal(name="busy")
+        last = Signal(name="last_step")
+        m.d.comb += last.eq(busy & eq_const(st, cps - 1))
+        out_free = Signal(name="out_free")
+        m.d.comb += out_free.eq(~self.out.valid | self.out.ready)
+        go = Signal(name="step_go")  # the current step takes effect (only the last one can wait)
+        m.d.comb += go.eq(busy & (~last | out_free))
+        m.d.comb += inp.ready.eq(~busy | (last & out_free))
+        transfer = Signal(name="transfer")
+        m.d.comb += transfer.eq(inp.valid & inp.ready)
+        qu = Signal(signed(b), name="in_u", reset_less=True)
+        qy = Signal(signed(b), name="in_y", reset_less=True)
+        with m.If(transfer):
+            m.d.sync += [qu.eq(inp.payload[:b].as_signed()), qy.eq(inp.payload[b : 2 * b].as_signed()), st.eq(0), busy.eq(1)]
+        with m.Elif(go):
+            with m.If(last):
+                m.d.sync += busy.eq(0)
+            with m.Else():
+                m.d.sync += st.eq(add_const_wrap(m, st, 1, "step_inc"))
+
+        def flag(values, name):
+            v = rom(m, st, [int(x) for x in values] + [0] * ((1 << stw) - len(values)), 1, name)
+            return Const(int(v), 1) if isinstance(v, int) else v
+
+        steps = range(cps)
+        in_res = flag([k < s for k in steps], "phase_residual")
+        in_bank = flag([s <= k < p0 for k in steps], "phase_bank")
+        bank_last_row = flag([s <= k < p0 and (k - s) % n == n - 1 for k in steps], "bank_last_row")
+        obs_y = flag([k == p0 for k in steps], "phase_y_hat")
+        in_obs = flag([k > p0 for k in steps], "phase_observer")
+        row_sel = [flag([(s <= k < p0 and (k - s) % n == i) or (k > p0 and k - p0 - 1 == i) for k in steps], f"row_is_{i}")
+                   for i in range(n - 1)]
+
+        # ---- states: the bank as a rotating chain of s vectors, the switched observer
+        chain = [[Signal(signed(bs), name=f"bank{j}_x{i}") for i in range(n)] for j in range(s)]
+        xo = [Signal(signed(bs), name=f"obs_x{i}") for i in range(n)]
+        tmp = [Signal(signed(bs), name=f"row_x{i}", reset_less=True) for i in range(n - 1)]
+        theta = Signal(unsigned(self.index_width), name="theta")
+        vec = [Signal(signed(bs), name=f"unit_x{i}") for i in range(n)]
+        m.d.comb += [v.eq(Mux(obs_y | in_obs, o, h)) for v, o, h in zip(vec, xo, chain[0])]
+
+        # ---- the row unit
+        ib = max(1, self.index_width)
+        sel = Cat(st, theta) if s > 1 else st
+        cols = self._columns(stw, ib if s > 1 else 0)
+        acc0 = table_mac(m, sel, cols, vec + [qu, qy], accw, "unit")
+        acc = add_const_signed(m, acc0, 1 << (fc - 1), "unit_rnd")
+        sink_unused(m, acc[:fc], "unit_frac")
+        hi = acc[fc:].as_signed()
+        low = Signal(signed(rb), name="unit_out")  # residual / y_hat rows: exact in rb bits
+        m.d.comb += low.eq(hi[:rb])
+        if len(hi) > rb:
+            sink_unused(m, hi[rb:], "unit_out_top")
+        new, row_sat = saturate(m, hi, bs, "unit_next")
+        sat_acc = Signal(name="sat_acc")
+        with m.If(transfer):
+            m.d.sync += sat_acc.eq(0)
+        with m.Elif(go & (in_bank | in_obs) & row_sat):
+            m.d.sync += sat_acc.eq(1)
+        with m.If(go & (in_bank | in_obs)):
+            for i in range(n - 1):
+                with m.If(row_sel[i]):
+                    m.d.sync += tmp[i].eq(new)
+        with m.If(go & (in_res | (in_bank & bank_last_row))):  # rotate (residual rows) / push the new vector
+            for j in range(s - 1):
+                m.d.sync += [d.eq(v) for d, v in zip(chain[j], chain[j + 1])]
+            with m.If(in_res):
+                m.d.sync += [d.eq(v) for d, v in zip(chain[-1], chain[0])]
+            with m.Else():
+                m.d.sync += [d.eq(v) for d, v in zip(chain[-1], tmp + [new])]
+
+        # ---- residual register -> square, window sum, running argmin (step j + 1 for mode j)
+        res = Signal(signed(rb), name="res_reg", reset_less=True)
+        wtok = Signal(name="win_tok")
+        mw = bits_for(s - 1)
+        wj = Signal(unsigned(mw), name="win_mode")
+        m.d.sync += [wtok.eq(go & in_res), wj.eq(st[:mw])]
+        with m.If(go & in_res):
+            m.d.sync += res.eq(low)
+        sqs = var_product(m, res, res, sw, "win_sq")
+        sq = sqs.as_unsigned()
+        sums = [Signal(unsigned(sw), name=f"win_sum{j}") for j in range(s)]
+        if est.window == 1:
+            s_new = sq
+        else:
+            lw = est.window
+            slw = bits_for(lw - 1)
+            wptr = Signal(unsigned(slw), name="dl_next_slot")
+            slot = Signal(unsigned(slw), name="dl_slot")
+            cnt = Signal(unsigned(bits_for(lw)), name="dl_count")
+            old_valid = Signal(name="dl_old_valid")
+            with m.If(transfer):
+                m.d.sync += [slot.eq(wptr), wptr.eq(Mux(eq_const(wptr, lw - 1), 0, add_const_wrap(m, wptr, 1, "dl_slot_inc"))),
+                             old_valid.eq(ge_const(cnt, lw))]
+                with m.If(~ge_const(cnt, lw)):
+                    m.d.sync += cnt.eq(add_const_wrap(m, cnt, 1, "dl_count_inc"))
+            mem = Memory(shape=unsigned(sw), depth=(1 << mw) * lw, init=[])
+            m.submodules.dlmem = mem
+            rp = mem.read_port(domain="sync")
+            rp.addr = Cat(st[:mw], slot)  # mode j's oldest square, read in its residual step j
+            wp = mem.write_port()
+            wp.addr = Cat(wj, slot)
+            wp.data = sq
+            wp.en = wtok
+            oldest = Signal(unsigned(sw), name="dl_oldest")
+            m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
+            s_new = sub_wrap(m, add_wrap(m, sums[0], sq, "win_sum_add"), oldest, "win_sum_next")
+        best = Signal(unsigned(sw), name="det_best", reset_less=True)
+        with m.If(wtok):
+            m.d.sync += [sums[j].eq(sums[j + 1]) for j in range(s - 1)] + [sums[-1].eq(s_new)]
+            with m.If(~wj.any() | (s_new < best)):
+                m.d.sync += [best.eq(s_new), theta.eq(wj)]
+        if est.window == 1:
+            for j in range(s):  # the sums are not needed with a window of one sample
+                sink_unused(m, sums[j], f"win_sum{j}")
+
+        # ---- y_hat, the switched observer's commit and the output register
+        yh = Signal(signed(wd["y_hat"]), name="y_hat_reg", reset_less=True)
+        with m.If(go & obs_y):
+            m.d.sync += yh.eq(low)
+        with m.If(self.out.ready):
+            m.d.sync += self.out.valid.eq(0)
+        with m.If(go & last):
+            m.d.sync += [d.eq(v) for d, v in zip(xo, tmp + [new])]
+            m.d.sync += [self.out.valid.eq(1), self.out.payload.eq(Cat(*xo, yh, theta, sat_acc | row_sat))]
+        return m
