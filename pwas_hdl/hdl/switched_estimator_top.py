@@ -396,8 +396,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         acc = add_const_signed(m, acc0, 1 << (fc - 1), "unit_rnd")
         sink_unused(m, acc[:fc], "unit_frac")
         hi = acc[fc:].as_signed()
-        low = Signal(signed(rb), name="unit_out")  # residual / y_hat rows: exact in rb bits
-        m.d.comb += low.eq(hi[:rb])
+        low = hi[:rb]  # residual / y_hat rows: exact in rb bits
         if len(hi) > rb:
             sink_unused(m, hi[rb:], "unit_out_top")
         new, row_sat = saturate(m, hi, bs, "unit_next")
