@@ -3,7 +3,9 @@
 The estimator of Morales-Morales et al. (bank (8) with injection, single-sample residual detector
 (9) as argmin, switched observer (10), poles {0.3, 0.4}, A3/A4/A6 of ``seed_003.md``) as
 :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator` (default formats: 12-bit
-inputs with 8 units of head room) and :class:`pwas_hdl.hdl.switched_estimator_top.SwitchedEstimatorTop`.
+inputs with 8 units of head room) and :class:`pwas_hdl.hdl.switched_estimator_top.SwitchedEstimatorTop`
+(``--architecture parallel``) / :class:`~pwas_hdl.hdl.switched_estimator_top.SerialSwitchedEstimatorTop`
+(``--architecture serial``): one set of ``rtl`` rows per architecture (``config.architecture``).
 Test sets as :mod:`pwas_hdl.benchmarks.switched_linear`: the paper replica (100 samples, step
 u = 1, time switching) and a long run (2000 samples, PRBS, dwell 20-50), noise on y 0 .. 0.05.
 Stages: ``float`` (the float estimator on the unquantised signals), ``bittrue`` (the fixed-point
@@ -36,6 +38,8 @@ from pwas_hdl.systems.switched_observer import mode_scores, observer_gains, run_
 SYSTEM = "switched-linear"
 PAPER_MSE = 0.0966  # Table 1, unknown mode
 NOISES = (0.0, 0.01, 0.02, 0.05)
+#: The designs replayed: ``generate EST.json --architecture parallel`` (II 1) and ``serial`` (one row unit).
+ARCHITECTURES = ("parallel", "serial")
 
 
 def _rtl_replays(design, sets: dict, simulator: str, progress) -> dict:
@@ -71,16 +75,18 @@ def _rtl_replays(design, sets: dict, simulator: str, progress) -> dict:
 
 
 def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print,
-        simulator: str | None = "auto") -> tuple[dict, dict]:
+        simulator: str | None = "auto", architectures: tuple = ARCHITECTURES) -> tuple[dict, dict]:
     """``simulator``: ``"icarus"`` / ``"verilator"``: the ``rtl`` rows replay every test set (replica and
     long runs) through the Verilog of the generated estimator folder (``pwas-hdl generate`` of the
     plant's estimator file) under cocotb; ``None``: the replica through the Amaranth netlist only
-    (no simulator needed); ``"auto"``: ``None`` with ``quick``, else ``"verilator"``."""
+    (no simulator needed); ``"auto"``: ``None`` with ``quick``, else ``"verilator"``.
+    ``architectures``: the ``generate --architecture`` values replayed (one set of ``rtl`` rows each,
+    ``config.architecture``)."""
     import tempfile
 
     from pwas_hdl.design.generate import generate
     from pwas_hdl.fit.estimator_file import write_estimator
-    from pwas_hdl.hdl.switched_estimator_top import SwitchedEstimatorTop, simulate_estimator
+    from pwas_hdl.hdl.switched_estimator_top import SerialSwitchedEstimatorTop, SwitchedEstimatorTop, simulate_estimator
     from pwas_hdl.systems.switched_observer import estimator_config
     from pwas_hdl.verify.estimator_simulation import load_estimator_design
 
@@ -89,19 +95,22 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
         simulator = None if quick else "verilator"
     noises = (0.0, 0.02) if quick else NOISES
     long_n = 300 if quick else 2000
-    design = None
+    archs = tuple(architectures)
+    designs: dict = {}
+    tops: dict = {}
     tmpdir = tempfile.TemporaryDirectory(prefix="pwas-est-bench-")
-    if simulator is not None:  # the generated folder: what `pwas-hdl generate EST.json` writes
+    if simulator is not None:  # the generated folders: what `pwas-hdl generate EST.json [--architecture serial]` writes
         cfgp = write_estimator(estimator_config(), f"{tmpdir.name}/estimator.json")
-        generate(cfgp, f"{tmpdir.name}/hw")
-        design = load_estimator_design(f"{tmpdir.name}/hw")
-        est = design.est
+        for arch in archs:
+            generate(cfgp, f"{tmpdir.name}/hw_{arch}", architecture=arch)
+            designs[arch] = load_estimator_design(f"{tmpdir.name}/hw_{arch}")
+        est = designs[archs[0]].est
     else:
         from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
 
         est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, SWITCHED_C, observer_gains())
-    top = SwitchedEstimatorTop(est) if design is None else None
-    latency, ii = (top.latency, top.ii) if top is not None else (design.latency, design.ii)
+        tops = {a: (SwitchedEstimatorTop if a == "parallel" else SerialSwitchedEstimatorTop)(est) for a in archs}
+    timing = {a: ((tops[a].latency, tops[a].ii) if a in tops else (designs[a].latency, designs[a].ii)) for a in archs}
     vals: dict[tuple, list[float]] = {}
     extra: dict[tuple, dict] = {}
 
@@ -112,9 +121,9 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
                          "long": switched_training_runs(1, long_n, seed=5000 + r, switching="time", noise=noise)}
             for noise in noises for r in range(runs)}
     rtl = None
-    if design is not None:
-        rtl = _rtl_replays(design, {(nr, t): est.quantize_signals(d.u, d.y) for nr, tests in data.items() for t, d in tests.items()},
-                           simulator, progress)
+    if designs:
+        sets = {(nr, t): est.quantize_signals(d.u, d.y) for nr, tests in data.items() for t, d in tests.items()}
+        rtl = {a: _rtl_replays(designs[a], sets, simulator, progress) for a in archs}
     tmpdir.cleanup()
     for noise in noises:
         for r in range(runs):
@@ -126,27 +135,27 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
                 tr = est.trace(codes)
                 stages = {"float": (fl.x_hat, fl.y_hat, fl.theta_hat),
                           "bittrue": (est.to_physical_state(tr["x_hat"]), tr["y_hat"] * 2.0**-est.state_frac, tr["theta"])}
-                if rtl is not None:
-                    got = rtl[((noise, r), tname)]
-                    hw = got["hw"]
-                    mism = int(got["mismatches"])  # exact word compare in the bench, both passes
-                    stages["rtl"] = (est.to_physical_state(hw["x_hat"]), hw["y_hat"] * 2.0**-est.state_frac, hw["theta"])
-                    ex = extra.setdefault((tname, noise), {"mismatches": 0, "rtl_outputs": 0})
+                for arch in archs:
+                    if rtl is not None:
+                        got = rtl[arch][((noise, r), tname)]
+                        hw = got["hw"]
+                        mism, n_out = int(got["mismatches"]), int(got["outputs"])  # exact word compare in the bench, both passes
+                    elif tname == "replica":
+                        hw = simulate_estimator(tops[arch], codes, p_valid=0.8, p_ready=0.7, seed=r)
+                        mism = int(np.sum((hw["theta"] != tr["theta"]) | (hw["y_hat"] != tr["y_hat"])
+                                          | np.any(hw["x_hat"] != tr["x_hat"], axis=1)))
+                        n_out = len(hw["theta"])
+                    else:
+                        continue
+                    stages[("rtl", arch)] = (est.to_physical_state(hw["x_hat"]), hw["y_hat"] * 2.0**-est.state_frac, hw["theta"])
+                    ex = extra.setdefault((tname, noise, arch), {"mismatches": 0, "rtl_outputs": 0})
                     ex["mismatches"] += mism
-                    ex["rtl_outputs"] += int(got["outputs"])
-                elif tname == "replica":
-                    hw = simulate_estimator(top, codes, p_valid=0.8, p_ready=0.7, seed=r)
-                    mism = int(np.sum((hw["theta"] != tr["theta"]) | (hw["y_hat"] != tr["y_hat"])
-                                      | np.any(hw["x_hat"] != tr["x_hat"], axis=1)))
-                    stages["rtl"] = (est.to_physical_state(hw["x_hat"]), hw["y_hat"] * 2.0**-est.state_frac, hw["theta"])
-                    ex = extra.setdefault((tname, noise), {"mismatches": 0, "rtl_outputs": 0})
-                    ex["mismatches"] += mism
-                    ex["rtl_outputs"] += len(hw["theta"])
+                    ex["rtl_outputs"] += n_out
                 ref = est.reference(codes)  # float at the represented signals: the bound's reference
                 ws = np.sort(ref.residuals, axis=1)
                 margin = ws[:, 1] - ws[:, 0]
                 differ = tr["theta"] != ref.theta_hat
-                ex = extra.setdefault((tname, noise), {"mismatches": 0, "rtl_outputs": 0})
+                ex = extra.setdefault((tname, noise), {})
                 ex["mode_differs"] = ex.get("mode_differs", 0) + int(differ.sum())
                 ex["mode_differs_beyond_bound"] = ex.get("mode_differs_beyond_bound", 0) + int(np.sum(differ & (margin > 2 * est.sum_error_bound)))
                 for stage, (xh, yh, th) in stages.items():
@@ -156,22 +165,26 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
                         put((tname, tgt, stage, "rmse", noise), float(np.sqrt(np.mean((xh[:, col] - d.z_true[:, col]) ** 2))))
             if progress:
                 progress(f"noise {noise} run {r + 1}/{runs}: replica MSE float {vals[('replica', 'y', 'float', 'mse', noise)][-1]:.5f} "
-                         f"rtl {vals[('replica', 'y', 'rtl', 'mse', noise)][-1]:.5f}; long accuracy float "
+                         f"rtl {vals[('replica', 'y', ('rtl', archs[0]), 'mse', noise)][-1]:.5f}; long accuracy float "
                          f"{vals[('long', 'mode', 'float', 'accuracy', noise)][-1]:.4f} bittrue {vals[('long', 'mode', 'bittrue', 'accuracy', noise)][-1]:.4f}")
     rows = []
-    for (tname, tgt, stage, metric, noise), v in vals.items():
+    for (tname, tgt, stage_key, metric, noise), v in vals.items():
+        stage, arch = stage_key if isinstance(stage_key, tuple) else (stage_key, None)
         cfg = {"test": tname, "switching": "time", "noise_y": noise, "estimator_formats": est.to_dict()["formats"]}
+        if arch is not None:
+            latency, ii = timing[arch]
+            cfg["architecture"] = arch
         if stage != "float":
             cfg |= {k: extra[(tname, noise)][k] for k in ("mode_differs", "mode_differs_beyond_bound")}
             cfg |= {"error_bound": est.to_dict()["error_bound"]}
         if stage == "rtl" and rtl is None:
-            cfg |= {"simulator": "amaranth (the netlist of the emitted Verilog)", "mismatches": extra[(tname, noise)]["mismatches"],
-                    "rtl_outputs": extra[(tname, noise)]["rtl_outputs"], "latency_cycles": latency, "ii": ii,
+            cfg |= {"simulator": "amaranth (the netlist of the emitted Verilog)", "mismatches": extra[(tname, noise, arch)]["mismatches"],
+                    "rtl_outputs": extra[(tname, noise, arch)]["rtl_outputs"], "latency_cycles": latency, "ii": ii,
                     "stalls": {"p_valid": 0.8, "p_ready": 0.7}}
         elif stage == "rtl":
-            sm = rtl["_summary"]
+            sm = rtl[arch]["_summary"]
             cfg |= {"simulator": f"{sm['simulator']} (cocotb, the generated folder's Verilog)",
-                    "mismatches": extra[(tname, noise)]["mismatches"], "rtl_outputs": extra[(tname, noise)]["rtl_outputs"],
+                    "mismatches": extra[(tname, noise, arch)]["mismatches"], "rtl_outputs": extra[(tname, noise, arch)]["rtl_outputs"],
                     "latency_cycles": latency, "ii": ii, "latency_measured": sm["latency"], "ii_measured": sm["ii"],
                     "bench_passed": sm["passed"],
                     "passes": "full speed, then p_valid 0.8 / p_ready 0.7 (values of the stalled pass); a reset before every set"}
@@ -179,7 +192,9 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
         rows.append(br.row_from_values(SYSTEM, tgt, "switched-observer", stage, metric, v, paper, cfg))
     doc = br.make_results("switched-estimator-hw", rows, SWITCHED_ASSUMPTIONS,
                           config={"runs": runs, "noises": list(noises), "long_samples": long_n, "switching": "time",
-                                  "rtl": rtl["_summary"] if rtl is not None else "amaranth netlist, replica only"},
+                                  "architectures": list(archs),
+                                  "rtl": ({a: rtl[a]["_summary"] for a in archs} if rtl is not None
+                                          else "amaranth netlist, replica only")},
                           description="Seed 003's switched observer: float, bit-true and RTL", quick=quick,
                           elapsed_s=time.perf_counter() - t0)
     return doc, {}
@@ -189,28 +204,37 @@ def _rtl_note(doc: dict) -> str:
     r = doc["config"].get("rtl")
     if not isinstance(r, dict):
         return "RTL: the replica through the Amaranth netlist of the emitted Verilog (bubbles and backpressure)."
-    return (f"RTL: every set through the generated folder's Verilog on {r['simulator']} (cocotb), a reset before each, at full "
-            f"speed and with bubbles (p_valid 0.8) and backpressure (p_ready 0.7): {r['samples']} samples x 2 passes, latency "
-            f"{r['latency']} cycles and II {r['ii']} measured at full speed, bench passed: {r['passed']}; "
-            "the rtl column is the stalled pass, mismatches count both passes.")
+    if "simulator" in r:  # a results file of one architecture (before the serial design)
+        r = {"parallel": r}
+    parts = [f"{a}: latency {x['latency']} cycles and II {x['ii']} measured at full speed, bench passed: {x['passed']}"
+             for a, x in r.items()]
+    x = next(iter(r.values()))
+    return (f"RTL: every set through the generated folders' Verilog (`generate --architecture parallel` / `serial`) on "
+            f"{x['simulator']} (cocotb), a reset before each, at full speed and with bubbles (p_valid 0.8) and backpressure "
+            f"(p_ready 0.7): {x['samples']} samples x 2 passes each; {'; '.join(parts)}; "
+            "the rtl columns are the stalled pass, mismatches count both passes.")
 
 
 def markdown(doc: dict) -> str:
     lines = [f"# Seed 003 estimator in hardware (runs = {doc['config']['runs']}{', QUICK' if doc.get('quick') else ''})", "",
              _rtl_note(doc), "",
-             "| test | noise | metric | float | bit-true | rtl | modes differing (beyond bound) | rtl mismatches |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| test | noise | metric | float | bit-true | rtl parallel | rtl serial | modes differing (beyond bound) "
+             "| rtl mismatches parallel | rtl mismatches serial |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for tname in ("replica", "long"):
         for noise in doc["config"]["noises"]:
             for tgt, metric in (("y", "mse"), ("mode", "accuracy"), ("x1", "rmse"), ("x2", "rmse")):
                 get = lambda st: br.find_rows(doc, target=tgt, stage=st, metric=metric, config={"test": tname, "noise_y": noise})  # noqa: E731
-                f, b, r = get("float"), get("bittrue"), get("rtl")
+                f, b = get("float"), get("bittrue")
                 if not f:
                     continue
-                c = lambda rr: f"{rr[0]['value']:.5f}" if rr else "—"  # noqa: E731
+                rr = get("rtl")
+                ra = {a: [x for x in rr if x["config"].get("architecture", "parallel") == a] for a in ARCHITECTURES}
+                c = lambda x: f"{x[0]['value']:.5f}" if x else "—"  # noqa: E731
                 k = b[0]["config"]
-                mm = f"{r[0]['config']['mismatches']} / {r[0]['config']['rtl_outputs']}" if r else "—"
-                lines.append(f"| {tname} | {noise} | {tgt} {metric} | {c(f)} | {c(b)} | {c(r)} | {k['mode_differs']} ({k['mode_differs_beyond_bound']}) | {mm} |")
+                mm = lambda x: f"{x[0]['config']['mismatches']} / {x[0]['config']['rtl_outputs']}" if x else "—"  # noqa: E731
+                lines.append(f"| {tname} | {noise} | {tgt} {metric} | {c(f)} | {c(b)} | {c(ra['parallel'])} | {c(ra['serial'])} "
+                             f"| {k['mode_differs']} ({k['mode_differs_beyond_bound']}) | {mm(ra['parallel'])} | {mm(ra['serial'])} |")
     return "\n".join(lines) + "\n"
 
 
