@@ -139,7 +139,7 @@ def _table(m: Module, sel, values: list[int], name: str, width: int | None = Non
     return t.as_signed()
 
 
-def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str):
+def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str, registered: bool = False):
     """``sum_k columns[k][sel] * operands[k]``: one variable multiplier per operand with its
     coefficient from a table indexed by ``sel`` (the step of a time-multiplexed unit), summed exactly
     in ``width`` bits (the caller's bound; the order of an exact sum does not matter).
@@ -150,6 +150,9 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
     columns : list of lists of int, one coefficient column per operand
     operands : list of signed nets
     width : int, the accumulator width (every product is a ``width``-bit net, :func:`var_product`)
+    registered : bool
+        The coefficients from (reset-less) registers loaded with ``columns[k][sel]`` in every
+        cycle: give the *next* cycle's index as ``sel`` (the table decode leaves the datapath).
 
     Returns
     -------
@@ -158,8 +161,12 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
     terms = []
     for k, (col, x) in enumerate(zip(columns, operands)):
         if any(int(v) for v in col):
-            terms.append(var_product(m, _table(m, sel, [int(v) for v in col], f"{name}_c{k}", width=width - len(x)), x,
-                                     width, f"{name}_p{k}"))
+            c = _table(m, sel, [int(v) for v in col], f"{name}_c{k}", width=width - len(x))
+            if registered and not isinstance(c, Const):
+                r = Signal(signed(len(c)), name=f"{name}_c{k}_reg", reset_less=True)
+                m.d.sync += r.eq(c)
+                c = r
+            terms.append(var_product(m, c, x, width, f"{name}_p{k}"))
     return _sum(m, terms, width, f"{name}_acc") if terms else None
 
 

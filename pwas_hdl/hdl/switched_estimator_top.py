@@ -357,6 +357,14 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         m.d.comb += inp.ready.eq(~busy | (last & out_free))
         transfer = Signal(name="transfer")
         m.d.comb += transfer.eq(inp.valid & inp.ready)
+        # the coefficient registers hold the row of the next step (theta is final from step s + 1 <= P - 1)
+        st_next = Signal(unsigned(stw), name="step_next")
+        with m.If(transfer):
+            m.d.comb += st_next.eq(0)
+        with m.Elif(go & ~last):
+            m.d.comb += st_next.eq(add_const_wrap(m, st, 1, "step_next_inc"))
+        with m.Else():
+            m.d.comb += st_next.eq(st)
         qu = Signal(signed(b), name="in_u", reset_less=True)
         qy = Signal(signed(b), name="in_y", reset_less=True)
         with m.If(transfer):
@@ -365,11 +373,15 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             with m.If(last):
                 m.d.sync += busy.eq(0)
             with m.Else():
-                m.d.sync += st.eq(add_const_wrap(m, st, 1, "step_inc"))
+                m.d.sync += st.eq(st_next)
 
-        def flag(values, name):
-            v = rom(m, st, [int(x) for x in values] + [0] * ((1 << stw) - len(values)), 1, name)
-            return Const(int(v), 1) if isinstance(v, int) else v
+        def flag(values, name):  # a registered decode of the step (loaded from the next step's index)
+            v = rom(m, st_next, [int(x) for x in values] + [0] * ((1 << stw) - len(values)), 1, f"{name}_next")
+            if isinstance(v, int):
+                return Const(int(v), 1)
+            r = Signal(name=name)
+            m.d.sync += r.eq(v)
+            return r
 
         steps = range(cps)
         in_res = flag([k < s for k in steps], "phase_residual")
@@ -390,9 +402,9 @@ class SerialSwitchedEstimatorTop(wiring.Component):
 
         # ---- the row unit
         ib = max(1, self.index_width)
-        sel = Cat(st, theta) if s > 1 else st
-        cols = self._columns(stw, ib if s > 1 else 0)
-        acc0 = table_mac(m, sel, cols, vec + [qu, qy], accw, "unit")
+        sel = Cat(st_next, theta)
+        cols = self._columns(stw, ib)
+        acc0 = table_mac(m, sel, cols, vec + [qu, qy], accw, "unit", registered=True)
         acc = add_const_signed(m, acc0, 1 << (fc - 1), "unit_rnd")
         sink_unused(m, acc[:fc], "unit_frac")
         hi = acc[fc:].as_signed()
