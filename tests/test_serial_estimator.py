@@ -68,22 +68,27 @@ def test_serial_estimator_schedule_counts():
     from pwas_hdl.design.estimator import fixed_point_estimator
     from pwas_hdl.hdl.switched_estimator_top import serial_estimator_schedule
 
-    sch = serial_estimator_schedule(fixed_point_estimator(estimator_config()))
-    # 3 modes, 2 states: 3 residual rows + 6 bank rows + y_hat + 2 observer rows
-    assert sch["cycles_per_sample"] == 12 and sch["latency"] == 13 and sch["row_unit_multipliers"] == 4
+    est = fixed_point_estimator(estimator_config())
+    sch = serial_estimator_schedule(est)
+    # 3 modes, 2 states: 3 residual rows + 6 bank rows + y_hat + 2 observer rows + 1 (the product register)
+    assert sch["cycles_per_sample"] == 13 and sch["latency"] == 14 and sch["row_unit_multipliers"] == 4
+    assert sch["mac_pipeline"] == 1 and serial_estimator_schedule(est, 0)["cycles_per_sample"] == 12
+    with pytest.raises(ValueError, match="mac_pipeline"):
+        serial_estimator_schedule(est, 2)
 
 
 # ------------------------------------------------------------------------------------------ rtl
-_CONFIGS = [  # (modes, states, window, state_bits, seed)
-    (2, 3, 1, None, 1),
-    (4, 2, 3, None, 2),
-    (3, 3, 4, 10, 3),  # 10-bit states: saturate
+_CONFIGS = [  # (modes, states, window, state_bits, seed, mac_pipeline)
+    (2, 3, 1, None, 1, 1),
+    (4, 2, 3, None, 2, 1),
+    (3, 3, 4, 10, 3, 1),  # 10-bit states: saturate
+    (3, 2, 2, 11, 4, 0),  # without the product register
 ]
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("modes, states, window, state_bits, seed", _CONFIGS)
-def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, seed):
+@pytest.mark.parametrize("modes, states, window, state_bits, seed, mac_pipeline", _CONFIGS)
+def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, seed, mac_pipeline):
     from pwas_hdl.design.estimator import fixed_point_estimator
     from pwas_hdl.hdl.switched_estimator_top import SerialSwitchedEstimatorTop, simulate_estimator
 
@@ -93,7 +98,8 @@ def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, 
     if state_bits is not None:
         assert tr["state_saturated"].any()
     assert len(set(tr["theta"].tolist())) > 1  # the detector switches
-    top = SerialSwitchedEstimatorTop(est)
+    top = SerialSwitchedEstimatorTop(est, mac_pipeline=mac_pipeline)
+    assert top.ii == modes + modes * states + 1 + states + mac_pipeline
     res = simulate_estimator(top, codes, p_valid=0.7, p_ready=0.5, seed=seed)
     assert np.array_equal(res["theta"], tr["theta"])
     assert np.array_equal(res["x_hat"], tr["x_hat"]) and np.array_equal(res["y_hat"], tr["y_hat"])
@@ -123,14 +129,14 @@ def test_serial_estimator_folder_manifest_lint_reruns(serial_folders, tmp_path):
     path, opts, gd = serial_folders["seed003"]
     man = load_manifest(gd.outdir)
     e = man["estimator"]
-    assert e["architecture"] == "serial" and man["ii"] == e["cycles_per_sample"] == 12 and man["latency_cycles"] == 13
+    assert e["architecture"] == "serial" and man["ii"] == e["cycles_per_sample"] == 13 and man["latency_cycles"] == 14
     assert man["generator"]["options"]["architecture"] == "serial"
     again = generate(path, tmp_path / "again", architecture="serial", **opts)
     assert again.files == gd.files
     for p, _, g in serial_folders.values():
         r = lint_verilog(g.outdir / "pwas_estimator.v", "pwas_estimator")
         assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
-    assert "one sample every 12 clocks" in gd.files["pwas_estimator.v"]
+    assert "one sample every 13 clocks" in gd.files["pwas_estimator.v"]
 
 
 @pytest.mark.rtl

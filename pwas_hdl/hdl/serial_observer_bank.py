@@ -139,7 +139,8 @@ def _table(m: Module, sel, values: list[int], name: str, width: int | None = Non
     return t.as_signed()
 
 
-def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str, registered: bool = False):
+def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str, registered: bool = False,
+              product_enable=None):
     """``sum_k columns[k][sel] * operands[k]``: one variable multiplier per operand with its
     coefficient from a table indexed by ``sel`` (the step of a time-multiplexed unit), summed exactly
     in ``width`` bits (the caller's bound; the order of an exact sum does not matter).
@@ -153,6 +154,9 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
     registered : bool
         The coefficients from (reset-less) registers loaded with ``columns[k][sel]`` in every
         cycle: give the *next* cycle's index as ``sel`` (the table decode leaves the datapath).
+    product_enable : 1-bit net, optional
+        Register every product (loaded when the net is high): the sum is then one cycle behind the
+        operands (a pipelined MAC).
 
     Returns
     -------
@@ -166,7 +170,13 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
                 r = Signal(signed(len(c)), name=f"{name}_c{k}_reg", reset_less=True)
                 m.d.sync += r.eq(c)
                 c = r
-            terms.append(var_product(m, c, x, width, f"{name}_p{k}"))
+            p = var_product(m, c, x, width, f"{name}_p{k}")
+            if product_enable is not None:
+                pr = Signal(signed(width), name=f"{name}_p{k}_reg", reset_less=True)
+                with m.If(product_enable):
+                    m.d.sync += pr.eq(p)
+                p = pr
+            terms.append(p)
     return _sum(m, terms, width, f"{name}_acc") if terms else None
 
 

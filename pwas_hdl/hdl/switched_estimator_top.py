@@ -234,22 +234,33 @@ def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0
 # time-multiplexed ("serial") estimator: ``generate EST.json --architecture serial``
 
 
-def serial_estimator_schedule(est) -> dict:
+def default_mac_pipeline(est) -> int:
+    """1 (a register after the row unit's multipliers) where the schedule allows it (``n >= 2``), else 0."""
+    return 1 if est.n >= 2 else 0
+
+
+def serial_estimator_schedule(est, mac_pipeline: int | None = None) -> dict:
     """The step schedule of :class:`SerialSwitchedEstimatorTop` (counts in clock cycles).
 
-    Steps ``0 .. s-1``: the residual rows of the bank's modes (mode ``j`` in step ``j``); steps
-    ``s .. s + s n - 1``: the bank's state-update rows (mode ``(step - s) // n``, state
-    ``(step - s) % n``); step ``P = s + s n``: the switched observer's ``y_hat`` row with the
-    coefficients of the detected mode; steps ``P + 1 .. P + n``: its state-update rows. The square,
-    the window sum and the running argmin of mode ``j`` take step ``j + 1`` (the detected mode is
-    final after step ``s <= P - 2``). ``cycles_per_sample = s + s n + 1 + n`` (= II); latency
-    ``cycles_per_sample + 1`` (the input is latched in the transfer cycle, the output register is
-    written in the last step).
+    A row is *issued* in a step (its operands and coefficients enter the multipliers) and its
+    result (sum, rounding, saturation) is written ``d = mac_pipeline`` steps later. Issue steps
+    ``0 .. s-1``: the residual rows of the bank's modes (mode ``j`` in step ``j``); ``s .. s + s n - 1``:
+    the bank's state-update rows (mode ``(step - s) // n``, state ``(step - s) % n``); ``P = s + s n``:
+    the switched observer's ``y_hat`` row with the coefficients of the detected mode; ``P + 1 ..
+    P + n``: its state-update rows. The square, the window sum and the running argmin of mode ``j``
+    take step ``j + 1 + d``; the detected mode is final after step ``s + d``, before the table of
+    step ``P`` is read in step ``P - 1`` (``s n >= 2 + d``). ``cycles_per_sample = s + s n + 1 + n + d``
+    (= II); latency ``cycles_per_sample + 1`` (the input is latched in the transfer cycle, the output
+    register is written in the last step).
     """
     s, n = est.n_modes, est.n
-    cps = s + s * n + 1 + n
-    return {"row_unit_multipliers": n + 2, "squarers": 1, "rows": {"residual": s, "bank_update": s * n, "y_hat": 1,
-            "observer_update": n}, "observer_first_step": s + s * n, "cycles_per_sample": cps, "latency": cps + 1}
+    d = default_mac_pipeline(est) if mac_pipeline is None else int(mac_pipeline)
+    if d not in (0, 1) or (d == 1 and n < 2):
+        raise ValueError(f"mac_pipeline must be 0 or 1 (1 needs n >= 2 states), got {mac_pipeline!r} with n = {n}")
+    cps = s + s * n + 1 + n + d
+    return {"row_unit_multipliers": n + 2, "squarers": 1, "mac_pipeline": d,
+            "rows": {"residual": s, "bank_update": s * n, "y_hat": 1, "observer_update": n},
+            "observer_first_step": s + s * n, "cycles_per_sample": cps, "latency": cps + 1}
 
 
 class SerialSwitchedEstimatorTop(wiring.Component):
@@ -261,33 +272,37 @@ class SerialSwitchedEstimatorTop(wiring.Component):
     ``F_j x_j + (G_j qu + L_j qy) << sh``, the switched observer's ``H_theta x`` and its update
     -- runs on one unit of ``n + 2`` variable multipliers whose coefficients come from tables
     indexed by the step (and, for the switched observer's rows, the detected mode):
-    :func:`pwas_hdl.hdl.serial_observer_bank.table_mac`. Each row adds ``2**(F_c-1)`` and takes
-    ``>> F_c`` exactly as the bit-true model (the state rows saturate); the sum is exact in the
-    accumulator width ``max(acc, racc)`` (:func:`estimator_widths`), so the result does not depend
-    on the sharing.
+    :func:`pwas_hdl.hdl.serial_observer_bank.table_mac` (coefficients registered from the next
+    step's index; with ``mac_pipeline = 1`` the products registered too). Each row adds
+    ``2**(F_c-1)`` and takes ``>> F_c`` exactly as the bit-true model (the state rows saturate);
+    the sum is exact in the accumulator width ``max(acc, racc)`` (:func:`estimator_widths`), so
+    the result does not depend on the sharing.
 
     The bank's states are one rotating chain of ``s`` state vectors (the head feeds the unit: no
-    mode multiplexer); new states go to a row register and the whole vector to the tail after its
-    last row, so every row of a mode reads the states before the update. One squarer, the window
-    sums as a rotating chain and (window > 1) one delay-line memory of ``s * window`` words
-    (word (mode, slot), read one step ahead, 0 until ``window`` samples since reset, as the serial
-    observer bank); the detector is a running argmin (strictly smaller replaces: ties to the
+    mode multiplexer); new states go to row registers and the whole vector to the tail when its
+    last row is issued (with ``mac_pipeline = 1`` the last state is written into the tail one
+    step later), so every row of a mode reads the states before the update. One squarer, the
+    window sums as a rotating chain and (window > 1) one delay-line memory of ``s * window``
+    words (word (mode, slot), read one step ahead, 0 until ``window`` samples since reset, as the
+    serial observer bank); the detector is a running argmin (strictly smaller replaces: ties to the
     lowest mode, as ``numpy.argmin``).
 
     Handshake: ``in.ready`` is high when the unit is idle, or in its last step when the output
-    register can take the result (``~out.valid | out.ready``); otherwise the last step waits. II =
-    ``cycles_per_sample`` (:func:`serial_estimator_schedule`), latency ``cycles_per_sample + 1``.
+    register can take the result (``~out.valid | out.ready``); otherwise the last step (which
+    issues no row) waits. II = ``cycles_per_sample`` (:func:`serial_estimator_schedule`), latency
+    ``cycles_per_sample + 1``.
     """
 
     kind = "switched-estimator"
     architecture = "serial"
 
-    def __init__(self, est):
+    def __init__(self, est, mac_pipeline: int | None = None):
         self._MustUse__silence = True
         self.est = est
         self.widths = estimator_widths(est)
         self.index_width = index_width(est.n_modes)
-        self.schedule = serial_estimator_schedule(est)
+        self.schedule = serial_estimator_schedule(est, mac_pipeline)
+        self.mac_pipeline = self.schedule["mac_pipeline"]
         self.ii = self.schedule["cycles_per_sample"]
         self.latency = self.schedule["latency"]
         self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
@@ -300,12 +315,11 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         self._MustUse__silence = False
 
     def _columns(self, stw: int, ib: int):
-        """Coefficient columns (state 0..n-1, qu, qy) indexed by ``Cat(step, theta)``."""
+        """Coefficient columns (state 0..n-1, qu, qy) indexed by ``Cat(issue step, theta)``."""
         est = self.est
         s, n, fc = est.n_modes, est.n, est.coef_frac
         sh = est.state_frac - est.input_frac
         p0 = self.schedule["observer_first_step"]
-        cps = self.ii
 
         def row(step: int, th: int):
             z = [0] * n
@@ -314,7 +328,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             if step < p0:
                 j, i = divmod(step - s, n)
                 return [int(v) for v in est.f_codes[j][i]], int(est.g_codes[j][i]) << sh, int(est.l_codes[j][i]) << sh
-            if th >= s or step >= cps:
+            if th >= s or step > p0 + n:
                 return z, 0, 0
             if step == p0:  # y_hat = H_theta x
                 return [int(v) for v in est.h_codes[th]], 0, 0
@@ -324,7 +338,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         cols = [[] for _ in range(n + 2)]
         for th in range(1 << ib):
             for step in range(1 << stw):
-                xs, gu, ly = row(step, th) if step < cps else ([0] * n, 0, 0)
+                xs, gu, ly = row(step, th)
                 for k in range(n):
                     cols[k].append(xs[k])
                 cols[n].append(gu)
@@ -340,7 +354,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         s, n, b, fc, bs = est.n_modes, est.n, est.input_bits, est.coef_frac, est.state_bits
         rb, sw = wd["residual"], wd["sum"]
         accw = max(wd["acc"], wd["racc"])
-        cps = self.ii
+        cps, dly = self.ii, self.mac_pipeline
         p0 = self.schedule["observer_first_step"]
         inp = getattr(self, "in")
 
@@ -352,13 +366,12 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         m.d.comb += last.eq(busy & eq_const(st, cps - 1))
         out_free = Signal(name="out_free")
         m.d.comb += out_free.eq(~self.out.valid | self.out.ready)
-        go = Signal(name="step_go")  # the current step takes effect (only the last one can wait)
+        go = Signal(name="step_go")  # the current step takes effect (only the last one, which issues no row, can wait)
         m.d.comb += go.eq(busy & (~last | out_free))
         m.d.comb += inp.ready.eq(~busy | (last & out_free))
         transfer = Signal(name="transfer")
         m.d.comb += transfer.eq(inp.valid & inp.ready)
-        # the coefficient registers hold the row of the next step (theta is final from step s + 1 <= P - 1)
-        st_next = Signal(unsigned(stw), name="step_next")
+        st_next = Signal(unsigned(stw), name="step_next")  # the step of the next cycle (indexes the registered tables)
         with m.If(transfer):
             m.d.comb += st_next.eq(0)
         with m.Elif(go & ~last):
@@ -375,22 +388,33 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             with m.Else():
                 m.d.sync += st.eq(st_next)
 
-        def flag(values, name):  # a registered decode of the step (loaded from the next step's index)
+        steps = range(cps)
+
+        def flag(values, name, result=True):
+            """Registered decode of the issue step (loaded from the next step's index) and, with
+            ``mac_pipeline``, its copy for the row's result step (advanced with ``go`` only)."""
             v = rom(m, st_next, [int(x) for x in values] + [0] * ((1 << stw) - len(values)), 1, f"{name}_next")
             if isinstance(v, int):
-                return Const(int(v), 1)
-            r = Signal(name=name)
+                c = Const(int(v), 1)
+                return c, c
+            r = Signal(name=f"{name}_issue")
             m.d.sync += r.eq(v)
-            return r
+            if not dly or not result:
+                return r, r
+            q = Signal(name=f"{name}_result")
+            with m.If(go):
+                m.d.sync += q.eq(r)
+            return r, q
 
-        steps = range(cps)
-        in_res = flag([k < s for k in steps], "phase_residual")
-        in_bank = flag([s <= k < p0 for k in steps], "phase_bank")
-        bank_last_row = flag([s <= k < p0 and (k - s) % n == n - 1 for k in steps], "bank_last_row")
-        obs_y = flag([k == p0 for k in steps], "phase_y_hat")
-        in_obs = flag([k > p0 for k in steps], "phase_observer")
-        row_sel = [flag([(s <= k < p0 and (k - s) % n == i) or (k > p0 and k - p0 - 1 == i) for k in steps], f"row_is_{i}")
-                   for i in range(n - 1)]
+        res_i, res_r = flag([k < s for k in steps], "row_residual")
+        bank_i, bank_r = flag([s <= k < p0 for k in steps], "row_bank")
+        blast_i, blast_r = flag([s <= k < p0 and (k - s) % n == n - 1 for k in steps], "row_bank_last")
+        _, y_r = flag([k == p0 for k in steps], "row_y_hat")
+        _, obs_r = flag([p0 < k <= p0 + n for k in steps], "row_observer")
+        obs_all_i, _ = flag([p0 <= k <= p0 + n for k in steps], "row_uses_observer", result=False)
+        row_is = [flag([(s <= k < p0 and (k - s) % n == i) or (p0 < k <= p0 + n and k - p0 - 1 == i) for k in steps],
+                       f"row_state{i}")[1] for i in range(n - 1)]
+        _, olast_r = flag([k == p0 + n for k in steps], "row_observer_last")
 
         # ---- states: the bank as a rotating chain of s vectors, the switched observer
         chain = [[Signal(signed(bs), name=f"bank{j}_x{i}") for i in range(n)] for j in range(s)]
@@ -398,13 +422,12 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         tmp = [Signal(signed(bs), name=f"row_x{i}", reset_less=True) for i in range(n - 1)]
         theta = Signal(unsigned(self.index_width), name="theta")
         vec = [Signal(signed(bs), name=f"unit_x{i}") for i in range(n)]
-        m.d.comb += [v.eq(Mux(obs_y | in_obs, o, h)) for v, o, h in zip(vec, xo, chain[0])]
+        m.d.comb += [v.eq(Mux(obs_all_i, o, h)) for v, o, h in zip(vec, xo, chain[0])]
 
-        # ---- the row unit
+        # ---- the row unit (theta is final from step s + 1 + d <= P - 1)
         ib = max(1, self.index_width)
-        sel = Cat(st_next, theta)
-        cols = self._columns(stw, ib)
-        acc0 = table_mac(m, sel, cols, vec + [qu, qy], accw, "unit", registered=True)
+        acc0 = table_mac(m, Cat(st_next, theta), self._columns(stw, ib), vec + [qu, qy], accw, "unit", registered=True,
+                         product_enable=go if dly else None)
         acc = add_const_signed(m, acc0, 1 << (fc - 1), "unit_rnd")
         sink_unused(m, acc[:fc], "unit_frac")
         hi = acc[fc:].as_signed()
@@ -415,27 +438,40 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         sat_acc = Signal(name="sat_acc")
         with m.If(transfer):
             m.d.sync += sat_acc.eq(0)
-        with m.Elif(go & (in_bank | in_obs) & row_sat):
+        with m.Elif(go & (bank_r | obs_r) & row_sat):
             m.d.sync += sat_acc.eq(1)
-        with m.If(go & (in_bank | in_obs)):
+        with m.If(go & (bank_r | obs_r)):
             for i in range(n - 1):
-                with m.If(row_sel[i]):
+                with m.If(row_is[i]):
                     m.d.sync += tmp[i].eq(new)
-        with m.If(go & (in_res | (in_bank & bank_last_row))):  # rotate (residual rows) / push the new vector
+        # rotate (residual rows) / push the mode's new vector when its last row is issued
+        if dly:  # the last row's result is written into the tail in the next step; row n-2's result is `new` now
+            tail = tmp[: n - 2] + [new, chain[0][n - 1]]
+            with m.If(go & bank_r & blast_r):
+                m.d.sync += chain[-1][n - 1].eq(new)
+        else:
+            tail = tmp + [new]
+        with m.If(go & (res_i | (bank_i & blast_i))):
             for j in range(s - 1):
                 m.d.sync += [d.eq(v) for d, v in zip(chain[j], chain[j + 1])]
-            with m.If(in_res):
+            with m.If(res_i):
                 m.d.sync += [d.eq(v) for d, v in zip(chain[-1], chain[0])]
             with m.Else():
-                m.d.sync += [d.eq(v) for d, v in zip(chain[-1], tmp + [new])]
+                m.d.sync += [d.eq(v) for d, v in zip(chain[-1], tail)]
 
-        # ---- residual register -> square, window sum, running argmin (step j + 1 for mode j)
+        # ---- residual register -> square, window sum, running argmin (step j + 1 + d for mode j)
+        mw = bits_for(s - 1)
+        if dly:
+            r_mode = Signal(unsigned(mw), name="row_mode_result")
+            with m.If(go):
+                m.d.sync += r_mode.eq(st[:mw])
+        else:
+            r_mode = st[:mw]
         res = Signal(signed(rb), name="res_reg", reset_less=True)
         wtok = Signal(name="win_tok")
-        mw = bits_for(s - 1)
         wj = Signal(unsigned(mw), name="win_mode")
-        m.d.sync += [wtok.eq(go & in_res), wj.eq(st[:mw])]
-        with m.If(go & in_res):
+        m.d.sync += [wtok.eq(go & res_r), wj.eq(r_mode)]
+        with m.If(go & res_r):
             m.d.sync += res.eq(low)
         sqs = var_product(m, res, res, sw, "win_sq")
         sq = sqs.as_unsigned()
@@ -457,7 +493,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             mem = Memory(shape=unsigned(sw), depth=(1 << mw) * lw, init=[])
             m.submodules.dlmem = mem
             rp = mem.read_port(domain="sync")
-            rp.addr = Cat(st[:mw], slot)  # mode j's oldest square, read in its residual step j
+            rp.addr = Cat(r_mode, slot)  # mode j's oldest square, read in its result step (used in the next one)
             wp = mem.write_port()
             wp.addr = Cat(wj, slot)
             wp.data = sq
@@ -474,13 +510,13 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             for j in range(s):  # the sums are not needed with a window of one sample
                 sink_unused(m, sums[j], f"win_sum{j}")
 
-        # ---- y_hat, the switched observer's commit and the output register
+        # ---- y_hat, the switched observer's commit and the output register (in the last step)
         yh = Signal(signed(wd["y_hat"]), name="y_hat_reg", reset_less=True)
-        with m.If(go & obs_y):
+        with m.If(go & y_r):
             m.d.sync += yh.eq(low)
         with m.If(self.out.ready):
             m.d.sync += self.out.valid.eq(0)
         with m.If(go & last):
             m.d.sync += [d.eq(v) for d, v in zip(xo, tmp + [new])]
-            m.d.sync += [self.out.valid.eq(1), self.out.payload.eq(Cat(*xo, yh, theta, sat_acc | row_sat))]
+            m.d.sync += [self.out.valid.eq(1), self.out.payload.eq(Cat(*xo, yh, theta, sat_acc | (row_sat & olast_r)))]
         return m
