@@ -83,6 +83,7 @@ _CONFIGS = [  # (modes, states, window, state_bits, seed, mac_pipeline)
     (4, 2, 3, None, 2, 1),
     (3, 3, 4, 10, 3, 1),  # 10-bit states: saturate
     (3, 2, 2, 11, 4, 0),  # without the product register
+    (2, 1, 2, None, 5, 0),  # one state: an idle step before the switched observer (the detector's latency)
 ]
 
 
@@ -99,7 +100,7 @@ def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, 
         assert tr["state_saturated"].any()
     assert len(set(tr["theta"].tolist())) > 1  # the detector switches
     top = SerialSwitchedEstimatorTop(est, mac_pipeline=mac_pipeline)
-    assert top.ii == modes + modes * states + 1 + states + mac_pipeline
+    assert top.ii == max(modes + modes * states, modes + mac_pipeline + 3) + 1 + states + mac_pipeline
     res = simulate_estimator(top, codes, p_valid=0.7, p_ready=0.5, seed=seed)
     assert np.array_equal(res["theta"], tr["theta"])
     assert np.array_equal(res["x_hat"], tr["x_hat"]) and np.array_equal(res["y_hat"], tr["y_hat"])

@@ -140,7 +140,7 @@ def _table(m: Module, sel, values: list[int], name: str, width: int | None = Non
 
 
 def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str, registered: bool = False,
-              product_enable=None):
+              product_enable=None, shifts: list | None = None):
     """``sum_k columns[k][sel] * operands[k]``: one variable multiplier per operand with its
     coefficient from a table indexed by ``sel`` (the step of a time-multiplexed unit), summed exactly
     in ``width`` bits (the caller's bound; the order of an exact sum does not matter).
@@ -157,26 +157,31 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
     product_enable : 1-bit net, optional
         Register every product (loaded when the net is high): the sum is then one cycle behind the
         operands (a pipelined MAC).
+    shifts : list of int, optional
+        Per operand: the product is ``(columns[k][sel] * operands[k]) << shifts[k]`` (a narrower
+        multiplier for coefficients with ``shifts[k]`` trailing zero bits: give the columns unshifted).
 
     Returns
     -------
     The signed ``width``-bit sum, or None when every column is 0.
     """
     terms = []
+    shifts = list(shifts) if shifts is not None else [0] * len(operands)
     for k, (col, x) in enumerate(zip(columns, operands)):
         if any(int(v) for v in col):
-            c = _table(m, sel, [int(v) for v in col], f"{name}_c{k}", width=width - len(x))
+            pw = width - shifts[k]  # the product's width before the shift
+            c = _table(m, sel, [int(v) for v in col], f"{name}_c{k}", width=pw - len(x))
             if registered and not isinstance(c, Const):
                 r = Signal(signed(len(c)), name=f"{name}_c{k}_reg", reset_less=True)
                 m.d.sync += r.eq(c)
                 c = r
-            p = var_product(m, c, x, width, f"{name}_p{k}")
+            p = var_product(m, c, x, pw, f"{name}_p{k}")
             if product_enable is not None:
-                pr = Signal(signed(width), name=f"{name}_p{k}_reg", reset_less=True)
+                pr = Signal(signed(pw), name=f"{name}_p{k}_reg", reset_less=True)
                 with m.If(product_enable):
                     m.d.sync += pr.eq(p)
                 p = pr
-            terms.append(p)
+            terms.append(Cat(Const(0, shifts[k]), p).as_signed() if shifts[k] else p)
     return _sum(m, terms, width, f"{name}_acc") if terms else None
 
 

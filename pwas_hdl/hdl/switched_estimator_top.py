@@ -247,20 +247,22 @@ def serial_estimator_schedule(est, mac_pipeline: int | None = None) -> dict:
     ``0 .. s-1``: the residual rows of the bank's modes (mode ``j`` in step ``j``); ``s .. s + s n - 1``:
     the bank's state-update rows (mode ``(step - s) // n``, state ``(step - s) % n``); ``P = s + s n``:
     the switched observer's ``y_hat`` row with the coefficients of the detected mode; ``P + 1 ..
-    P + n``: its state-update rows. The square, the window sum and the running argmin of mode ``j``
-    take step ``j + 1 + d``; the detected mode is final after step ``s + d``, before the table of
-    step ``P`` is read in step ``P - 1`` (``s n >= 2 + d``). ``cycles_per_sample = s + s n + 1 + n + d``
-    (= II); latency ``cycles_per_sample + 1`` (the input is latched in the transfer cycle, the output
-    register is written in the last step).
+    P + n``: its state-update rows. The residual of mode ``j`` is registered in step ``j + d``, its
+    square in step ``j + d + 1``, the window sum and the running argmin in step ``j + d + 2``; the
+    detected mode is final after step ``s + d + 1``, before the table of step ``P`` is read in step
+    ``P - 1``: ``P = max(s + s n, s + d + 3)``. ``cycles_per_sample = P + 1 + n + d`` (= II; ``s + s n
+    + 1 + n + d`` for ``s n >= d + 3``); latency ``cycles_per_sample + 1`` (the input is latched in
+    the transfer cycle, the output register is written in the last step).
     """
     s, n = est.n_modes, est.n
     d = default_mac_pipeline(est) if mac_pipeline is None else int(mac_pipeline)
     if d not in (0, 1) or (d == 1 and n < 2):
         raise ValueError(f"mac_pipeline must be 0 or 1 (1 needs n >= 2 states), got {mac_pipeline!r} with n = {n}")
-    cps = s + s * n + 1 + n + d
+    p0 = max(s + s * n, s + d + 3)  # idle steps before P only where the detector is not final yet (s n < d + 3)
+    cps = p0 + 1 + n + d
     return {"row_unit_multipliers": n + 2, "squarers": 1, "mac_pipeline": d,
             "rows": {"residual": s, "bank_update": s * n, "y_hat": 1, "observer_update": n},
-            "observer_first_step": s + s * n, "cycles_per_sample": cps, "latency": cps + 1}
+            "bank_end_step": s + s * n, "observer_first_step": p0, "cycles_per_sample": cps, "latency": cps + 1}
 
 
 class SerialSwitchedEstimatorTop(wiring.Component):
@@ -315,25 +317,27 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         self._MustUse__silence = False
 
     def _columns(self, stw: int, ib: int):
-        """Coefficient columns (state 0..n-1, qu, qy) indexed by ``Cat(issue step, theta)``."""
+        """Coefficient columns (state 0..n-1, qu, qy) indexed by ``Cat(issue step, theta)``; the qu and qy
+        columns without the alignment ``<< sh`` (the unit shifts those products)."""
         est = self.est
         s, n, fc = est.n_modes, est.n, est.coef_frac
         sh = est.state_frac - est.input_frac
         p0 = self.schedule["observer_first_step"]
+        pb = self.schedule["bank_end_step"]
 
         def row(step: int, th: int):
             z = [0] * n
             if step < s:  # residual of mode `step`: (qy << (sh + F_c)) - H x
-                return [-int(v) for v in est.h_codes[step]], 0, 1 << (sh + fc)
-            if step < p0:
+                return [-int(v) for v in est.h_codes[step]], 0, 1 << fc
+            if step < pb:
                 j, i = divmod(step - s, n)
-                return [int(v) for v in est.f_codes[j][i]], int(est.g_codes[j][i]) << sh, int(est.l_codes[j][i]) << sh
-            if th >= s or step > p0 + n:
+                return [int(v) for v in est.f_codes[j][i]], int(est.g_codes[j][i]), int(est.l_codes[j][i])
+            if th >= s or step > p0 + n or step < p0:
                 return z, 0, 0
             if step == p0:  # y_hat = H_theta x
                 return [int(v) for v in est.h_codes[th]], 0, 0
             i = step - p0 - 1
-            return [int(v) for v in est.f_codes[th][i]], int(est.g_codes[th][i]) << sh, int(est.l_codes[th][i]) << sh
+            return [int(v) for v in est.f_codes[th][i]], int(est.g_codes[th][i]), int(est.l_codes[th][i])
 
         cols = [[] for _ in range(n + 2)]
         for th in range(1 << ib):
@@ -355,7 +359,9 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         rb, sw = wd["residual"], wd["sum"]
         accw = max(wd["acc"], wd["racc"])
         cps, dly = self.ii, self.mac_pipeline
+        sh_in = est.state_frac - est.input_frac
         p0 = self.schedule["observer_first_step"]
+        pb = self.schedule["bank_end_step"]
         inp = getattr(self, "in")
 
         # ---- handshake and step counter (steps 0 .. cps-1 in the cycles after the transfer)
@@ -407,12 +413,12 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             return r, q
 
         res_i, res_r = flag([k < s for k in steps], "row_residual")
-        bank_i, bank_r = flag([s <= k < p0 for k in steps], "row_bank")
-        blast_i, blast_r = flag([s <= k < p0 and (k - s) % n == n - 1 for k in steps], "row_bank_last")
+        bank_i, bank_r = flag([s <= k < pb for k in steps], "row_bank")
+        blast_i, blast_r = flag([s <= k < pb and (k - s) % n == n - 1 for k in steps], "row_bank_last")
         _, y_r = flag([k == p0 for k in steps], "row_y_hat")
         _, obs_r = flag([p0 < k <= p0 + n for k in steps], "row_observer")
         obs_all_i, _ = flag([p0 <= k <= p0 + n for k in steps], "row_uses_observer", result=False)
-        row_is = [flag([(s <= k < p0 and (k - s) % n == i) or (p0 < k <= p0 + n and k - p0 - 1 == i) for k in steps],
+        row_is = [flag([(s <= k < pb and (k - s) % n == i) or (p0 < k <= p0 + n and k - p0 - 1 == i) for k in steps],
                        f"row_state{i}")[1] for i in range(n - 1)]
         _, olast_r = flag([k == p0 + n for k in steps], "row_observer_last")
 
@@ -424,10 +430,10 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         vec = [Signal(signed(bs), name=f"unit_x{i}") for i in range(n)]
         m.d.comb += [v.eq(Mux(obs_all_i, o, h)) for v, o, h in zip(vec, xo, chain[0])]
 
-        # ---- the row unit (theta is final from step s + 1 + d <= P - 1)
+        # ---- the row unit (theta is final from step s + d + 2 <= P - 1)
         ib = max(1, self.index_width)
         acc0 = table_mac(m, Cat(st_next, theta), self._columns(stw, ib), vec + [qu, qy], accw, "unit", registered=True,
-                         product_enable=go if dly else None)
+                         product_enable=go if dly else None, shifts=[0] * n + [sh_in, sh_in])
         acc = add_const_signed(m, acc0, 1 << (fc - 1), "unit_rnd")
         sink_unused(m, acc[:fc], "unit_frac")
         hi = acc[fc:].as_signed()
@@ -459,7 +465,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             with m.Else():
                 m.d.sync += [d.eq(v) for d, v in zip(chain[-1], tail)]
 
-        # ---- residual register -> square, window sum, running argmin (step j + 1 + d for mode j)
+        # ---- residual register (step j + d for mode j) -> square register -> window sum and running argmin
         mw = bits_for(s - 1)
         if dly:
             r_mode = Signal(unsigned(mw), name="row_mode_result")
@@ -474,7 +480,12 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         with m.If(go & res_r):
             m.d.sync += res.eq(low)
         sqs = var_product(m, res, res, sw, "win_sq")
-        sq = sqs.as_unsigned()
+        sq = Signal(unsigned(sw), name="win_sq_reg", reset_less=True)  # the square stage
+        wtok2 = Signal(name="win_sum_tok")
+        wj2 = Signal(unsigned(mw), name="win_sum_mode")
+        m.d.sync += [wtok2.eq(wtok), wj2.eq(wj)]
+        with m.If(wtok):
+            m.d.sync += sq.eq(sqs.as_unsigned())
         sums = [Signal(unsigned(sw), name=f"win_sum{j}") for j in range(s)]
         if est.window == 1:
             s_new = sq
@@ -493,19 +504,19 @@ class SerialSwitchedEstimatorTop(wiring.Component):
             mem = Memory(shape=unsigned(sw), depth=(1 << mw) * lw, init=[])
             m.submodules.dlmem = mem
             rp = mem.read_port(domain="sync")
-            rp.addr = Cat(r_mode, slot)  # mode j's oldest square, read in its result step (used in the next one)
+            rp.addr = Cat(wj, slot)  # mode j's oldest square, read in its square step (used in the next one)
             wp = mem.write_port()
-            wp.addr = Cat(wj, slot)
+            wp.addr = Cat(wj2, slot)
             wp.data = sq
-            wp.en = wtok
+            wp.en = wtok2
             oldest = Signal(unsigned(sw), name="dl_oldest")
             m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
             s_new = sub_wrap(m, add_wrap(m, sums[0], sq, "win_sum_add"), oldest, "win_sum_next")
         best = Signal(unsigned(sw), name="det_best", reset_less=True)
-        with m.If(wtok):
+        with m.If(wtok2):
             m.d.sync += [sums[j].eq(sums[j + 1]) for j in range(s - 1)] + [sums[-1].eq(s_new)]
-            with m.If(~wj.any() | (s_new < best)):
-                m.d.sync += [best.eq(s_new), theta.eq(wj)]
+            with m.If(~wj2.any() | (s_new < best)):
+                m.d.sync += [best.eq(s_new), theta.eq(wj2)]
         if est.window == 1:
             for j in range(s):  # the sums are not needed with a window of one sample
                 sink_unused(m, sums[j], f"win_sum{j}")
