@@ -294,6 +294,8 @@ def _estimator_errors(m: dict[str, Any]) -> list[str]:
         errs.append(f"estimator.signals.states names {len(e['signals']['states'])} states for estimator.states = {e['states']}")
     if not (e["ii"] == m["ii"] and e["cycles_per_sample"] <= m["ii"]):
         errs.append(f"estimator.ii {e['ii']} differs from ii {m['ii']}")
+    if e.get("architecture") == "serial" and (e.get("schedule") or {}).get("cycles_per_sample") != m["ii"]:
+        errs.append(f"the serial estimator's schedule gives {(e.get('schedule') or {}).get('cycles_per_sample')} cycles per sample, ii is {m['ii']}")
     ins = [f["name"] for p in m["ports"] if p["role"] == "in.payload" for f in p.get("fields", [])]
     if ins != [e["signals"]["input"], e["signals"]["output"]]:
         errs.append(f"the input payload fields {ins} are not the estimator's signals {[e['signals']['input'], e['signals']['output']]}")
