@@ -81,8 +81,8 @@ def test_serial_estimator_schedule_counts():
 _CONFIGS = [  # (modes, states, window, state_bits, seed, mac_pipeline)
     (2, 3, 1, None, 1, 1),
     (4, 2, 3, None, 2, 1),
-    (3, 3, 4, 10, 3, 1),  # 10-bit states: saturate
-    (3, 2, 2, 11, 4, 0),  # without the product register
+    (3, 3, 4, 22, 3, 1),  # 22-bit states: saturate in 1/3 of the samples (bank only in 17, switched observer only in 21)
+    (3, 2, 2, 19, 4, 0),  # without the product register; saturating (bank only in 7 samples, observer only in 3)
     (2, 1, 2, None, 5, 0),  # one state: an idle step before the switched observer (the detector's latency)
 ]
 
@@ -96,8 +96,8 @@ def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, 
     est = fixed_point_estimator(_random_config(modes, states, window, seed), state_bits=state_bits)
     codes = _stimulus(est, 90, seed)
     tr = est.trace(codes)
-    if state_bits is not None:
-        assert tr["state_saturated"].any()
+    if state_bits is not None:  # some samples saturate, not all (the flag must follow the bank's and the observer's)
+        assert 0 < tr["state_saturated"].sum() < len(codes)
     assert len(set(tr["theta"].tolist())) > 1  # the detector switches
     top = SerialSwitchedEstimatorTop(est, mac_pipeline=mac_pipeline)
     assert top.ii == max(modes + modes * states, modes + mac_pipeline + 3) + 1 + states + mac_pipeline
@@ -115,7 +115,7 @@ def serial_folders(tmp_path_factory):
     root = tmp_path_factory.mktemp("serial_est")
     out = {}
     for name, cfg, opts in (("seed003", estimator_config(window=1), {}),
-                            ("m4w3sat", _random_config(4, 3, 3, 5), {"state_bits": 11, "ports": "amaranth"})):
+                            ("m4w3sat", _random_config(4, 3, 3, 5), {"state_bits": 22, "ports": "amaranth"})):
         path = write_estimator(cfg, root / f"{name}.json")
         out[name] = (path, opts, generate(path, root / name, architecture="serial", **opts))
     return out
@@ -150,7 +150,8 @@ def test_serial_estimator_rtl_bit_exact_stalls_reset_ii(serial_folders, name, si
     codes = _stimulus(design.est, 100, 11)
     assert np.abs(codes).max() == 1 << (design.est.input_bits - 1)  # out-of-range inputs reach the extreme codes
     tr = design.est.trace(codes)
-    assert bool(tr["state_saturated"].any()) == ("state_bits" in opts)
+    if "state_bits" in opts:
+        assert 0 < tr["state_saturated"].sum() < len(codes)
     res = replay_estimator(design, codes, simulator, cache_dir=sim_cache)
     assert res["passed"], res.get("failures")
     assert res["mismatches"] == 0 and res["outputs_compared"] > 2 * len(codes)
