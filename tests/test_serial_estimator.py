@@ -141,7 +141,8 @@ def test_serial_estimator_folder_manifest_lint_reruns(serial_folders, tmp_path):
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("name, simulator", [("seed003", "icarus"), ("m4w3sat", "verilator")])
+@pytest.mark.parametrize("name, simulator", [("seed003", "icarus"), ("seed003", "verilator"), ("m4w3sat", "icarus"),
+                                             ("m4w3sat", "verilator")])
 def test_serial_estimator_rtl_bit_exact_stalls_reset_ii(serial_folders, name, simulator, sim_cache):
     from pwas_hdl.verify.estimator_simulation import load_estimator_design, replay_estimator
 
