@@ -56,8 +56,8 @@ def test_serial_estimator_option_refusals():
     from pwas_hdl.design.generate import build_design
 
     cfg = estimator_config()
-    with pytest.raises(InputError, match="--bank-lanes must be 1"):
-        build_design(cfg, architecture="serial", bank_lanes=2)
+    with pytest.raises(InputError, match=r"--bank-lanes must be an integer in 1 \.\. 3"):
+        build_design(cfg, architecture="serial", bank_lanes=4)
     with pytest.raises(InputError, match="--bank-lanes applies to --architecture serial only"):
         build_design(cfg, bank_lanes=1)
     with pytest.raises(InputError, match="architecture"):
@@ -78,18 +78,21 @@ def test_serial_estimator_schedule_counts():
 
 
 # ------------------------------------------------------------------------------------------ rtl
-_CONFIGS = [  # (modes, states, window, state_bits, seed, mac_pipeline)
-    (2, 3, 1, None, 1, 1),
-    (4, 2, 3, None, 2, 1),
-    (3, 3, 4, 22, 3, 1),  # 22-bit states: saturate in 1/3 of the samples (bank only in 17, switched observer only in 21)
-    (3, 2, 2, 19, 4, 0),  # without the product register; saturating (bank only in 7 samples, observer only in 3)
-    (2, 1, 2, None, 5, 0),  # one state: an idle step before the switched observer (the detector's latency)
+_CONFIGS = [  # (modes, states, window, state_bits, seed, mac_pipeline, lanes)
+    (2, 3, 1, None, 1, 1, 1),
+    (4, 2, 3, None, 2, 1, 1),
+    (3, 3, 4, 22, 3, 1, 1),  # 22-bit states: saturate in 1/3 of the samples (bank only in 17, switched observer only in 21)
+    (3, 2, 2, 19, 4, 0, 1),  # without the product register; saturating (bank only in 7 samples, observer only in 3)
+    (2, 1, 2, None, 5, 0, 1),  # one state: an idle step before the switched observer (the detector's latency)
+    (4, 2, 3, None, 2, 1, 2),  # two lanes of 2 modes
+    (3, 3, 4, 22, 3, 1, 3),  # one lane per mode, saturating
+    (3, 2, 1, 19, 4, 0, 2),  # lanes of 2 and 1 modes, without the product register
 ]
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("modes, states, window, state_bits, seed, mac_pipeline", _CONFIGS)
-def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, seed, mac_pipeline):
+@pytest.mark.parametrize("modes, states, window, state_bits, seed, mac_pipeline, lanes", _CONFIGS)
+def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, seed, mac_pipeline, lanes):
     from pwas_hdl.design.estimator import fixed_point_estimator
     from pwas_hdl.hdl.switched_estimator_top import SerialSwitchedEstimatorTop, simulate_estimator
 
@@ -99,8 +102,9 @@ def test_serial_estimator_amaranth_bit_exact(modes, states, window, state_bits, 
     if state_bits is not None:  # some samples saturate, not all (the flag must follow the bank's and the observer's)
         assert 0 < tr["state_saturated"].sum() < len(codes)
     assert len(set(tr["theta"].tolist())) > 1  # the detector switches
-    top = SerialSwitchedEstimatorTop(est, mac_pipeline=mac_pipeline)
-    assert top.ii == max(modes + modes * states, modes + mac_pipeline + 3) + 1 + states + mac_pipeline
+    top = SerialSwitchedEstimatorTop(est, mac_pipeline=mac_pipeline, lanes=lanes)
+    s0 = -(-modes // lanes)
+    assert top.ii == max(s0 + s0 * states, s0 + mac_pipeline + 3) + 1 + states + mac_pipeline
     res = simulate_estimator(top, codes, p_valid=0.7, p_ready=0.5, seed=seed)
     assert np.array_equal(res["theta"], tr["theta"])
     assert np.array_equal(res["x_hat"], tr["x_hat"]) and np.array_equal(res["y_hat"], tr["y_hat"])
@@ -159,3 +163,21 @@ def test_serial_estimator_rtl_bit_exact_stalls_reset_ii(serial_folders, name, si
     assert res["latency"] == [design.latency] and res["ii"] == [design.ii] and design.ii > 1
     hw = res["rtl"]["full-speed"][0]
     assert np.array_equal(hw["theta"], tr["theta"]) and np.array_equal(hw["x_hat"], tr["x_hat"])
+
+
+@pytest.mark.rtl
+def test_serial_estimator_lanes_tie_to_the_lowest_mode():
+    """Modes 2 and 3 identical (always equal window sums), lanes (1, 2) and (3, 4): mode 3 is compared a
+    step before mode 2, so the tie must be broken by the mode number (numpy.argmin), not by the order."""
+    from pwas_hdl.design.estimator import fixed_point_estimator
+    from pwas_hdl.hdl.switched_estimator_top import SerialSwitchedEstimatorTop, simulate_estimator
+
+    cfg = _random_config(4, 2, 2, 6)
+    for arr in (cfg.A, cfg.B, cfg.C, cfg.K):
+        arr[2] = arr[1].copy()
+    est = fixed_point_estimator(cfg)
+    codes = _stimulus(est, 80, 6)
+    tr = est.trace(codes)
+    assert 2 in tr["theta"] and 3 not in tr["theta"]  # the tie happens and goes to mode 2
+    res = simulate_estimator(SerialSwitchedEstimatorTop(est, lanes=2), codes, p_valid=0.8, p_ready=0.7, seed=6)
+    assert np.array_equal(res["theta"], tr["theta"]) and np.array_equal(res["x_hat"], tr["x_hat"])

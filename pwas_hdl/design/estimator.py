@@ -205,8 +205,10 @@ def _estimator_block(est, config: SwitchedEstimatorConfig, top) -> dict:
 def _rate(man: dict) -> str:
     if man["ii"] == 1:
         return "one sample per clock"
-    return (f"one sample every {man['ii']} clocks: serial architecture, every row of the estimator on one unit of "
-            f"{man['estimator']['schedule']['row_unit_multipliers']} variable multipliers")
+    sch = man["estimator"]["schedule"]
+    units = "one unit" if sch["lanes"] == 1 else f"{sch['lanes']} units (lanes)"
+    return (f"one sample every {man['ii']} clocks: serial architecture, every row of the estimator on {units} of "
+            f"{sch['row_unit_multipliers']} variable multipliers")
 
 
 def _header(man: dict, config_sha: str) -> str:
@@ -287,10 +289,11 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
         ``parallel`` (default): :class:`~pwas_hdl.hdl.switched_estimator_top.SwitchedEstimatorTop`, every
         row its own constant multipliers, one sample per clock (II 1, latency 1). ``serial``:
         :class:`~pwas_hdl.hdl.switched_estimator_top.SerialSwitchedEstimatorTop`, every row on one unit
-        of ``n + 2`` variable multipliers and a squarer, II = ``s + s n + 1 + n`` clocks, latency II + 1;
+        of ``n + 2`` variable multipliers and a squarer (per lane), II = ``s + s n + 2 + n`` clocks (one lane), latency II + 1;
         bit-exact with parallel, for FPGAs without enough multipliers (LFE5U-45F, iCE40).
     bank_lanes : int, optional
-        Serial only: 1 (the one row unit; more lanes are not available for the estimator).
+        Serial only: row units ``1 .. s`` sharing the bank's modes (default 1); lane 0 also runs the
+        switched observer. II = ``max(s_0 + s_0 n, s_0 + d + 3) + 1 + n + d`` with ``s_0 = ceil(s / L)``.
     **options
         :data:`ESTIMATOR_OPTIONS`; the PWAS options of ``generate`` are refused unless they have
         their default value (they have no meaning here).
@@ -320,25 +323,24 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
         raise InputError(f"ports must be 'axis' or 'amaranth', got {ports!r}")
     if architecture not in ESTIMATOR_ARCHITECTURES:
         raise InputError(f"architecture (--architecture) must be one of {', '.join(ESTIMATOR_ARCHITECTURES)}, got {architecture!r}")
-    if bank_lanes is not None:
-        if architecture != "serial":
-            raise InputError("--bank-lanes applies to --architecture serial only")
-        if isinstance(bank_lanes, bool) or not isinstance(bank_lanes, int) or bank_lanes != 1:
-            raise InputError(f"the serial estimator has one row unit (all rows of the bank, the detector and the switched "
-                             f"observer share it): --bank-lanes must be 1, got {bank_lanes!r}")
+    if bank_lanes is not None and architecture != "serial":
+        raise InputError("--bank-lanes applies to --architecture serial only")
     if name is not None:
         check_module_name(name)
     config = load_estimator_config(model)
     top_name = name or "pwas_estimator"
     est_opts = {k: options.get(k) for k in ESTIMATOR_OPTIONS}
     est = fixed_point_estimator(config, **est_opts)
-    comp = SwitchedEstimatorTop(est) if architecture == "parallel" else SerialSwitchedEstimatorTop(est)
+    comp = (SwitchedEstimatorTop(est) if architecture == "parallel"
+            else SerialSwitchedEstimatorTop(est, lanes=1 if bank_lanes is None else bank_lanes))  # InputError: lanes out of range
     info = estimator_info(comp, config, ports)
     files = {"verilog": f"{top_name}.v", "model": ESTIMATOR_FILE, "manifest": "manifest.json", "report": "report.md",
              "instance_template": f"{top_name}_inst.v", "fusesoc_core": f"{top_name}.core", "hex": []}
     gen_opts = {"design": "estimator", "ports": ports, **est_opts}
     if architecture != "parallel":  # the parallel folder's options are unchanged (byte-identical reruns of old folders)
         gen_opts["architecture"] = architecture
+    if bank_lanes is not None:
+        gen_opts["bank_lanes"] = bank_lanes
     man = build_estimator_manifest(top_name, info, files, gen_opts, _estimator_block(est, config, comp))
     cfg_text = estimator_text(config)
     verilog = _header(man, hashlib.sha256(cfg_text.encode("utf-8")).hexdigest()) + emit_verilog(comp, top_name, ports=ports)

@@ -49,7 +49,7 @@ from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const,
 from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
 
 __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
-           "table_mac", "DEFAULT_ISQRT_EVERY"]
+           "table_mac", "lane_groups", "DEFAULT_ISQRT_EVERY"]
 
 #: Digit steps of the integer square root between two pipeline registers (serial bank).
 DEFAULT_ISQRT_EVERY = 8
@@ -92,6 +92,13 @@ def _isqrt_regs(width: int, every: int | None) -> int:
     return 0 if not every else len([i for i in range(1, pairs) if i % every == 0])
 
 
+def lane_groups(n: int, lanes: int) -> tuple:
+    """``n`` units split into contiguous groups of ``ceil(n / lanes)`` (the first ones the longest; fewer
+    groups than ``lanes`` where ``lanes`` does not divide evenly, e.g. 4 in 3 lanes: (0, 1), (2, 3))."""
+    per = math.ceil(n / lanes)
+    return tuple(tuple(range(s, min(n, s + per))) for s in range(0, n, per))
+
+
 def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY, core_ii: int = 1) -> SerialBankPlan:
     """The schedule of a serial bank of ``lanes`` state-update units for ``bank`` (a FixedPointObserverBank).
 
@@ -105,8 +112,7 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
         raise InputError(f"bank lanes (--bank-lanes) must be an integer in 1 .. {n} (the number of observers), got {lanes!r}")
     if isqrt_every is not None and (isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1):
         raise InputError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
-    per = math.ceil(n / lanes)
-    groups = tuple(tuple(range(s, min(n, s + per))) for s in range(0, n, per))
+    groups = lane_groups(n, lanes)
     n_max = len(groups[0])
     r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
     sbc = 4 + r + (n_max - 1) * mo

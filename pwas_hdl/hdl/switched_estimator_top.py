@@ -235,76 +235,96 @@ def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0
 
 
 def default_mac_pipeline(est) -> int:
-    """1 (a register after the row unit's multipliers) where the schedule allows it (``n >= 2``), else 0."""
+    """1 (a register after the row units' multipliers) where the schedule allows it (``n >= 2``), else 0."""
     return 1 if est.n >= 2 else 0
 
 
-def serial_estimator_schedule(est, mac_pipeline: int | None = None) -> dict:
+def serial_estimator_schedule(est, mac_pipeline: int | None = None, lanes: int = 1) -> dict:
     """The step schedule of :class:`SerialSwitchedEstimatorTop` (counts in clock cycles).
 
-    A row is *issued* in a step (its operands and coefficients enter the multipliers) and its
-    result (sum, rounding, saturation) is written ``d = mac_pipeline`` steps later. Issue steps
-    ``0 .. s-1``: the residual rows of the bank's modes (mode ``j`` in step ``j``); ``s .. s + s n - 1``:
-    the bank's state-update rows (mode ``(step - s) // n``, state ``(step - s) % n``); ``P = s + s n``:
-    the switched observer's ``y_hat`` row with the coefficients of the detected mode; ``P + 1 ..
-    P + n``: its state-update rows. The residual of mode ``j`` is registered in step ``j + d``, its
-    square in step ``j + d + 1``, the window sum and the running argmin in step ``j + d + 2``; the
-    detected mode is final after step ``s + d + 1``, before the table of step ``P`` is read in step
-    ``P - 1``: ``P = max(s + s n, s + d + 3)``. ``cycles_per_sample = P + 1 + n + d`` (= II; ``s + s n
-    + 1 + n + d`` for ``s n >= d + 3``); latency ``cycles_per_sample + 1`` (the input is latched in
-    the transfer cycle, the output register is written in the last step).
+    The ``s`` modes of the bank are split into ``lanes`` contiguous groups
+    (:func:`pwas_hdl.hdl.serial_observer_bank.lane_groups`; ``s_0`` modes in the first, the longest),
+    one row unit per group; the switched observer's rows run on lane 0. A row is *issued* in a step
+    (its operands and coefficients enter the multipliers) and its result (sum, rounding,
+    saturation) is written ``d = mac_pipeline`` steps later. Lane issue steps ``0 .. s_l-1``: the
+    residual rows of the lane's modes; ``s_l .. s_l + s_l n - 1``: their state-update rows; lane 0
+    also ``P``: the switched observer's ``y_hat`` row with the coefficients of the detected mode,
+    ``P + 1 .. P + n``: its state-update rows. The residual of a lane's ``k``-th mode is registered in
+    step ``k + d``, its square in step ``k + d + 1``, the window sum and the running argmin (over the
+    lanes: smaller sum, or equal sum and lower mode) in step ``k + d + 2``; the detected mode is
+    final after step ``s_0 + d + 1``, before the table of step ``P`` is read in step ``P - 1``:
+    ``P = max(s_0 + s_0 n, s_0 + d + 3)``. ``cycles_per_sample = P + 1 + n + d`` (= II); latency
+    ``cycles_per_sample + 1`` (the input is latched in the transfer cycle, the output register is
+    written in the last step).
+
+    Raises
+    ------
+    InputError
+        ``lanes`` not an integer in ``1 .. s``.
+    ValueError
+        ``mac_pipeline`` not 0 / 1 (1 needs ``n >= 2``).
     """
+    from pwas_hdl.errors import InputError
+    from pwas_hdl.hdl.serial_observer_bank import lane_groups
+
     s, n = est.n_modes, est.n
+    if isinstance(lanes, bool) or not isinstance(lanes, int) or not 1 <= lanes <= s:
+        raise InputError(f"--bank-lanes must be an integer in 1 .. {s} (the number of modes) for this estimator, got {lanes!r}")
     d = default_mac_pipeline(est) if mac_pipeline is None else int(mac_pipeline)
     if d not in (0, 1) or (d == 1 and n < 2):
         raise ValueError(f"mac_pipeline must be 0 or 1 (1 needs n >= 2 states), got {mac_pipeline!r} with n = {n}")
-    p0 = max(s + s * n, s + d + 3)  # idle steps before P only where the detector is not final yet (s n < d + 3)
+    groups = lane_groups(s, lanes)
+    s0 = len(groups[0])
+    p0 = max(s0 + s0 * n, s0 + d + 3)  # idle steps before P only where the detector is not final yet
     cps = p0 + 1 + n + d
-    return {"row_unit_multipliers": n + 2, "squarers": 1, "mac_pipeline": d,
+    return {"lanes": len(groups), "modes_per_lane": [list(g) for g in groups], "row_unit_multipliers": n + 2,
+            "multipliers": len(groups) * (n + 2), "squarers": len(groups), "mac_pipeline": d,
             "rows": {"residual": s, "bank_update": s * n, "y_hat": 1, "observer_update": n},
-            "bank_end_step": s + s * n, "observer_first_step": p0, "cycles_per_sample": cps, "latency": cps + 1}
+            "bank_end_step": s0 + s0 * n, "observer_first_step": p0, "cycles_per_sample": cps, "latency": cps + 1}
 
 
 class SerialSwitchedEstimatorTop(wiring.Component):
-    """Seed 003's estimator time-multiplexed over one row unit (``--architecture serial``).
+    """Seed 003's estimator time-multiplexed over a few row units (``--architecture serial [--bank-lanes L]``).
 
     Bit for bit :class:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator`, as
     :class:`SwitchedEstimatorTop` (the same ports, payload fields and widths), but every affine row
     of the estimator -- the residual ``(qy << (sh + F_c)) - H_j x_j``, the bank update
     ``F_j x_j + (G_j qu + L_j qy) << sh``, the switched observer's ``H_theta x`` and its update
-    -- runs on one unit of ``n + 2`` variable multipliers whose coefficients come from tables
+    -- runs on a row unit of ``n + 2`` variable multipliers whose coefficients come from tables
     indexed by the step (and, for the switched observer's rows, the detected mode):
     :func:`pwas_hdl.hdl.serial_observer_bank.table_mac` (coefficients registered from the next
-    step's index; with ``mac_pipeline = 1`` the products registered too). Each row adds
-    ``2**(F_c-1)`` and takes ``>> F_c`` exactly as the bit-true model (the state rows saturate);
-    the sum is exact in the accumulator width ``max(acc, racc)`` (:func:`estimator_widths`), so
-    the result does not depend on the sharing.
+    step's index; with ``mac_pipeline = 1`` the products registered too). ``lanes`` row units share
+    the bank's modes (:func:`serial_estimator_schedule`); lane 0 also runs the switched observer.
+    Each row adds ``2**(F_c-1)`` and takes ``>> F_c`` exactly as the bit-true model (the state rows
+    saturate); the sum is exact in the accumulator width ``max(acc, racc)``
+    (:func:`estimator_widths`), so the result does not depend on the sharing.
 
-    The bank's states are one rotating chain of ``s`` state vectors (the head feeds the unit: no
+    A lane's states are one rotating chain of its modes' state vectors (the head feeds the unit: no
     mode multiplexer); new states go to row registers and the whole vector to the tail when its
     last row is issued (with ``mac_pipeline = 1`` the last state is written into the tail one
-    step later), so every row of a mode reads the states before the update. One squarer, the
-    window sums as a rotating chain and (window > 1) one delay-line memory of ``s * window``
-    words (word (mode, slot), read one step ahead, 0 until ``window`` samples since reset, as the
-    serial observer bank); the detector is a running argmin (strictly smaller replaces: ties to the
-    lowest mode, as ``numpy.argmin``).
+    step later), so every row of a mode reads the states before the update. One squarer per lane,
+    the window sums as a rotating chain and (window > 1) one delay-line memory per lane (word
+    (mode, slot), read one step ahead, 0 until ``window`` samples since reset, as the serial
+    observer bank); the detector is a running argmin over the lanes' window sums (a candidate
+    replaces the best if its sum is smaller, or equal with a lower mode: ties to the lowest mode, as
+    ``numpy.argmin``).
 
-    Handshake: ``in.ready`` is high when the unit is idle, or in its last step when the output
+    Handshake: ``in.ready`` is high when the units are idle, or in their last step when the output
     register can take the result (``~out.valid | out.ready``); otherwise the last step (which
-    issues no row) waits. II = ``cycles_per_sample`` (:func:`serial_estimator_schedule`), latency
-    ``cycles_per_sample + 1``.
+    issues no row) waits. II = ``cycles_per_sample``, latency ``cycles_per_sample + 1``.
     """
 
     kind = "switched-estimator"
     architecture = "serial"
 
-    def __init__(self, est, mac_pipeline: int | None = None):
+    def __init__(self, est, mac_pipeline: int | None = None, lanes: int = 1):
         self._MustUse__silence = True
         self.est = est
         self.widths = estimator_widths(est)
         self.index_width = index_width(est.n_modes)
-        self.schedule = serial_estimator_schedule(est, mac_pipeline)
+        self.schedule = serial_estimator_schedule(est, mac_pipeline, lanes)
         self.mac_pipeline = self.schedule["mac_pipeline"]
+        self.lanes = self.schedule["lanes"]
         self.ii = self.schedule["cycles_per_sample"]
         self.latency = self.schedule["latency"]
         self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
@@ -316,23 +336,24 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         })
         self._MustUse__silence = False
 
-    def _columns(self, stw: int, ib: int):
-        """Coefficient columns (state 0..n-1, qu, qy) indexed by ``Cat(issue step, theta)``; the qu and qy
-        columns without the alignment ``<< sh`` (the unit shifts those products)."""
+    def _columns(self, group, observer: bool, stw: int, ib: int):
+        """Coefficient columns (state 0..n-1, qu, qy) of the lane of modes ``group`` indexed by
+        ``Cat(issue step, theta)`` (``ib`` theta bits; the switched observer's rows if ``observer``);
+        the qu and qy columns without the alignment ``<< sh`` (the unit shifts those products)."""
         est = self.est
-        s, n, fc = est.n_modes, est.n, est.coef_frac
-        sh = est.state_frac - est.input_frac
+        n, fc = est.n, est.coef_frac
+        sl = len(group)
         p0 = self.schedule["observer_first_step"]
-        pb = self.schedule["bank_end_step"]
 
         def row(step: int, th: int):
             z = [0] * n
-            if step < s:  # residual of mode `step`: (qy << (sh + F_c)) - H x
-                return [-int(v) for v in est.h_codes[step]], 0, 1 << fc
-            if step < pb:
-                j, i = divmod(step - s, n)
+            if step < sl:  # residual of mode group[step]: (qy << (sh + F_c)) - H x
+                return [-int(v) for v in est.h_codes[group[step]]], 0, 1 << fc
+            if step < sl + sl * n:
+                jl, i = divmod(step - sl, n)
+                j = group[jl]
                 return [int(v) for v in est.f_codes[j][i]], int(est.g_codes[j][i]), int(est.l_codes[j][i])
-            if th >= s or step > p0 + n or step < p0:
+            if not observer or th >= est.n_modes or step > p0 + n or step < p0:
                 return z, 0, 0
             if step == p0:  # y_hat = H_theta x
                 return [int(v) for v in est.h_codes[th]], 0, 0
@@ -361,7 +382,8 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         cps, dly = self.ii, self.mac_pipeline
         sh_in = est.state_frac - est.input_frac
         p0 = self.schedule["observer_first_step"]
-        pb = self.schedule["bank_end_step"]
+        groups = self.schedule["modes_per_lane"]
+        iw = self.index_width
         inp = getattr(self, "in")
 
         # ---- handshake and step counter (steps 0 .. cps-1 in the cycles after the transfer)
@@ -412,122 +434,164 @@ class SerialSwitchedEstimatorTop(wiring.Component):
                 m.d.sync += q.eq(r)
             return r, q
 
-        res_i, res_r = flag([k < s for k in steps], "row_residual")
-        bank_i, bank_r = flag([s <= k < pb for k in steps], "row_bank")
-        blast_i, blast_r = flag([s <= k < pb and (k - s) % n == n - 1 for k in steps], "row_bank_last")
-        _, y_r = flag([k == p0 for k in steps], "row_y_hat")
-        _, obs_r = flag([p0 < k <= p0 + n for k in steps], "row_observer")
-        obs_all_i, _ = flag([p0 <= k <= p0 + n for k in steps], "row_uses_observer", result=False)
-        row_is = [flag([(s <= k < pb and (k - s) % n == i) or (p0 < k <= p0 + n and k - p0 - 1 == i) for k in steps],
-                       f"row_state{i}")[1] for i in range(n - 1)]
-        _, olast_r = flag([k == p0 + n for k in steps], "row_observer_last")
+        theta = Signal(unsigned(iw), name="theta")
+        best = Signal(unsigned(sw), name="det_best", reset_less=True)
+        sat_terms = []
+        cands = []  # per lane: (valid, window sum, global mode, first window step)
+        lane0 = {}
+        for ln, group in enumerate(groups):
+            pre = "" if len(groups) == 1 else f"lane{ln}_"
+            sl = len(group)
+            pb = sl + sl * n
+            obs = ln == 0
+            res_i, res_r = flag([k < sl for k in steps], f"{pre}row_residual")
+            bank_i, bank_r = flag([sl <= k < pb for k in steps], f"{pre}row_bank")
+            blast_i, blast_r = flag([sl <= k < pb and (k - sl) % n == n - 1 for k in steps], f"{pre}row_bank_last")
+            row_is = [flag([(sl <= k < pb and (k - sl) % n == i) or (obs and p0 < k <= p0 + n and k - p0 - 1 == i) for k in steps],
+                           f"{pre}row_state{i}")[1] for i in range(n - 1)]
+            # ---- the lane's modes as a rotating chain of state vectors
+            chain = [[Signal(signed(bs), name=f"bank{j}_x{i}") for i in range(n)] for j in group]
+            tmp = [Signal(signed(bs), name=f"{pre}row_x{i}", reset_less=True) for i in range(n - 1)]
+            if obs:
+                _, y_r = flag([k == p0 for k in steps], "row_y_hat")
+                _, obs_r = flag([p0 < k <= p0 + n for k in steps], "row_observer")
+                obs_all_i, _ = flag([p0 <= k <= p0 + n for k in steps], "row_uses_observer", result=False)
+                _, olast_r = flag([k == p0 + n for k in steps], "row_observer_last")
+                xo = [Signal(signed(bs), name=f"obs_x{i}") for i in range(n)]
+                vec = [Signal(signed(bs), name=f"unit_x{i}") for i in range(n)]
+                m.d.comb += [v.eq(Mux(obs_all_i, o, h)) for v, o, h in zip(vec, xo, chain[0])]
+                sel, ib = Cat(st_next, theta), max(1, iw)  # theta is final from step s_0 + d + 2 <= P - 1
+            else:
+                obs_r = Const(0, 1)
+                vec, sel, ib = chain[0], st_next, 0
+            # ---- the row unit
+            acc0 = table_mac(m, sel, self._columns(group, obs, stw, ib), vec + [qu, qy], accw, f"{pre}unit", registered=True,
+                             product_enable=go if dly else None, shifts=[0] * n + [sh_in, sh_in])
+            acc = add_const_signed(m, acc0, 1 << (fc - 1), f"{pre}unit_rnd")
+            sink_unused(m, acc[:fc], f"{pre}unit_frac")
+            hi = acc[fc:].as_signed()
+            low = hi[:rb]  # residual / y_hat rows: exact in rb bits
+            if len(hi) > rb:
+                sink_unused(m, hi[rb:], f"{pre}unit_out_top")
+            new, row_sat = saturate(m, hi, bs, f"{pre}unit_next")
+            sat_terms.append(go & (bank_r | obs_r) & row_sat)
+            with m.If(go & (bank_r | obs_r)):
+                for i in range(n - 1):
+                    with m.If(row_is[i]):
+                        m.d.sync += tmp[i].eq(new)
+            # rotate (residual rows) / push the mode's new vector when its last row is issued
+            if dly:  # the last row's result is written into the tail in the next step; row n-2's result is `new` now
+                tail = tmp[: n - 2] + [new, chain[0][n - 1]]
+                with m.If(go & bank_r & blast_r):
+                    m.d.sync += chain[-1][n - 1].eq(new)
+            else:
+                tail = tmp + [new]
+            with m.If(go & (res_i | (bank_i & blast_i))):
+                for j in range(sl - 1):
+                    m.d.sync += [d.eq(v) for d, v in zip(chain[j], chain[j + 1])]
+                with m.If(res_i):
+                    m.d.sync += [d.eq(v) for d, v in zip(chain[-1], chain[0])]
+                with m.Else():
+                    m.d.sync += [d.eq(v) for d, v in zip(chain[-1], tail)]
 
-        # ---- states: the bank as a rotating chain of s vectors, the switched observer
-        chain = [[Signal(signed(bs), name=f"bank{j}_x{i}") for i in range(n)] for j in range(s)]
-        xo = [Signal(signed(bs), name=f"obs_x{i}") for i in range(n)]
-        tmp = [Signal(signed(bs), name=f"row_x{i}", reset_less=True) for i in range(n - 1)]
-        theta = Signal(unsigned(self.index_width), name="theta")
-        vec = [Signal(signed(bs), name=f"unit_x{i}") for i in range(n)]
-        m.d.comb += [v.eq(Mux(obs_all_i, o, h)) for v, o, h in zip(vec, xo, chain[0])]
+            # ---- residual register (step k + d) -> square register -> window sum (step k + d + 2)
+            mw = bits_for(sl - 1)
+            if dly:
+                r_mode = Signal(unsigned(mw), name=f"{pre}row_mode_result")
+                with m.If(go):
+                    m.d.sync += r_mode.eq(st[:mw])
+            else:
+                r_mode = st[:mw]
+            res = Signal(signed(rb), name=f"{pre}res_reg", reset_less=True)
+            wtok = Signal(name=f"{pre}win_tok")
+            wj = Signal(unsigned(mw), name=f"{pre}win_mode")
+            m.d.sync += [wtok.eq(go & res_r), wj.eq(r_mode)]
+            with m.If(go & res_r):
+                m.d.sync += res.eq(low)
+            sqs = var_product(m, res, res, sw, f"{pre}win_sq")
+            sq = Signal(unsigned(sw), name=f"{pre}win_sq_reg", reset_less=True)  # the square stage
+            wtok2 = Signal(name=f"{pre}win_sum_tok")
+            wj2 = Signal(unsigned(mw), name=f"{pre}win_sum_mode")
+            m.d.sync += [wtok2.eq(wtok), wj2.eq(wj)]
+            with m.If(wtok):
+                m.d.sync += sq.eq(sqs.as_unsigned())
+            sums = [Signal(unsigned(sw), name=f"win_sum{j}") for j in group]
+            if est.window == 1:
+                s_new = sq
+            else:
+                s_new = self._window_sum(m, sq, sums[0], wj, wj2, wtok2, transfer, mw, pre)
+            with m.If(wtok2):
+                m.d.sync += [sums[j].eq(sums[j + 1]) for j in range(sl - 1)] + [sums[-1].eq(s_new)]
+            if est.window == 1:
+                for j, sm in zip(group, sums):  # the sums are not needed with a window of one sample
+                    sink_unused(m, sm, f"win_sum{j}")
+            gm = rom(m, wj2, [group[0] + k for k in range(sl)], iw, f"{pre}win_global_mode")
+            cands.append((wtok2, s_new, Const(gm, iw) if isinstance(gm, int) else gm, ~wj2.any()))
+            if obs:
+                lane0 = {"y_r": y_r, "olast_r": olast_r, "xo": xo, "tmp": tmp, "new": new, "low": low, "row_sat": row_sat}
 
-        # ---- the row unit (theta is final from step s + d + 2 <= P - 1)
-        ib = max(1, self.index_width)
-        acc0 = table_mac(m, Cat(st_next, theta), self._columns(stw, ib), vec + [qu, qy], accw, "unit", registered=True,
-                         product_enable=go if dly else None, shifts=[0] * n + [sh_in, sh_in])
-        acc = add_const_signed(m, acc0, 1 << (fc - 1), "unit_rnd")
-        sink_unused(m, acc[:fc], "unit_frac")
-        hi = acc[fc:].as_signed()
-        low = hi[:rb]  # residual / y_hat rows: exact in rb bits
-        if len(hi) > rb:
-            sink_unused(m, hi[rb:], "unit_out_top")
-        new, row_sat = saturate(m, hi, bs, "unit_next")
+        # ---- detector: running argmin over the lanes (smaller sum, or equal sum and lower mode)
+        first = cands[0][3]  # lane 0 has the most modes: its first window step is the sample's
+        cur_b, cur_t, have = best, theta, ~first
+        for ln, (v, sn, gmode, _) in enumerate(cands):
+            if ln == 0:
+                take = v & (~have | (sn < cur_b))  # lane 0's mode is the lowest of this step
+            else:
+                lower = (gmode < cur_t) if not isinstance(gmode, Const) else ge_const(cur_t, gmode.value + 1)
+                take = v & (~have | (sn < cur_b) | ((sn == cur_b) & lower))
+            nb = Signal(unsigned(sw), name=f"det_best_{ln}")
+            nt = Signal(unsigned(iw), name=f"det_theta_{ln}")
+            nh = Signal(name=f"det_have_{ln}")
+            m.d.comb += [nb.eq(Mux(take, sn, cur_b)), nt.eq(Mux(take, gmode, cur_t)), nh.eq(have | take)]
+            cur_b, cur_t, have = nb, nt, nh
+        sink_unused(m, have, "det_have")
+        with m.If(cands[0][0]):
+            m.d.sync += [best.eq(cur_b), theta.eq(cur_t)]
+
+        # ---- saturation, y_hat, the switched observer's commit and the output register (in the last step)
         sat_acc = Signal(name="sat_acc")
+        any_sat = Signal(name="row_saturated")
+        m.d.comb += any_sat.eq(Cat(*sat_terms).any())
         with m.If(transfer):
             m.d.sync += sat_acc.eq(0)
-        with m.Elif(go & (bank_r | obs_r) & row_sat):
+        with m.Elif(any_sat):
             m.d.sync += sat_acc.eq(1)
-        with m.If(go & (bank_r | obs_r)):
-            for i in range(n - 1):
-                with m.If(row_is[i]):
-                    m.d.sync += tmp[i].eq(new)
-        # rotate (residual rows) / push the mode's new vector when its last row is issued
-        if dly:  # the last row's result is written into the tail in the next step; row n-2's result is `new` now
-            tail = tmp[: n - 2] + [new, chain[0][n - 1]]
-            with m.If(go & bank_r & blast_r):
-                m.d.sync += chain[-1][n - 1].eq(new)
-        else:
-            tail = tmp + [new]
-        with m.If(go & (res_i | (bank_i & blast_i))):
-            for j in range(s - 1):
-                m.d.sync += [d.eq(v) for d, v in zip(chain[j], chain[j + 1])]
-            with m.If(res_i):
-                m.d.sync += [d.eq(v) for d, v in zip(chain[-1], chain[0])]
-            with m.Else():
-                m.d.sync += [d.eq(v) for d, v in zip(chain[-1], tail)]
-
-        # ---- residual register (step j + d for mode j) -> square register -> window sum and running argmin
-        mw = bits_for(s - 1)
-        if dly:
-            r_mode = Signal(unsigned(mw), name="row_mode_result")
-            with m.If(go):
-                m.d.sync += r_mode.eq(st[:mw])
-        else:
-            r_mode = st[:mw]
-        res = Signal(signed(rb), name="res_reg", reset_less=True)
-        wtok = Signal(name="win_tok")
-        wj = Signal(unsigned(mw), name="win_mode")
-        m.d.sync += [wtok.eq(go & res_r), wj.eq(r_mode)]
-        with m.If(go & res_r):
-            m.d.sync += res.eq(low)
-        sqs = var_product(m, res, res, sw, "win_sq")
-        sq = Signal(unsigned(sw), name="win_sq_reg", reset_less=True)  # the square stage
-        wtok2 = Signal(name="win_sum_tok")
-        wj2 = Signal(unsigned(mw), name="win_sum_mode")
-        m.d.sync += [wtok2.eq(wtok), wj2.eq(wj)]
-        with m.If(wtok):
-            m.d.sync += sq.eq(sqs.as_unsigned())
-        sums = [Signal(unsigned(sw), name=f"win_sum{j}") for j in range(s)]
-        if est.window == 1:
-            s_new = sq
-        else:
-            lw = est.window
-            slw = bits_for(lw - 1)
-            wptr = Signal(unsigned(slw), name="dl_next_slot")
-            slot = Signal(unsigned(slw), name="dl_slot")
-            cnt = Signal(unsigned(bits_for(lw)), name="dl_count")
-            old_valid = Signal(name="dl_old_valid")
-            with m.If(transfer):
-                m.d.sync += [slot.eq(wptr), wptr.eq(Mux(eq_const(wptr, lw - 1), 0, add_const_wrap(m, wptr, 1, "dl_slot_inc"))),
-                             old_valid.eq(ge_const(cnt, lw))]
-                with m.If(~ge_const(cnt, lw)):
-                    m.d.sync += cnt.eq(add_const_wrap(m, cnt, 1, "dl_count_inc"))
-            mem = Memory(shape=unsigned(sw), depth=(1 << mw) * lw, init=[])
-            m.submodules.dlmem = mem
-            rp = mem.read_port(domain="sync")
-            rp.addr = Cat(wj, slot)  # mode j's oldest square, read in its square step (used in the next one)
-            wp = mem.write_port()
-            wp.addr = Cat(wj2, slot)
-            wp.data = sq
-            wp.en = wtok2
-            oldest = Signal(unsigned(sw), name="dl_oldest")
-            m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
-            s_new = sub_wrap(m, add_wrap(m, sums[0], sq, "win_sum_add"), oldest, "win_sum_next")
-        best = Signal(unsigned(sw), name="det_best", reset_less=True)
-        with m.If(wtok2):
-            m.d.sync += [sums[j].eq(sums[j + 1]) for j in range(s - 1)] + [sums[-1].eq(s_new)]
-            with m.If(~wj2.any() | (s_new < best)):
-                m.d.sync += [best.eq(s_new), theta.eq(wj2)]
-        if est.window == 1:
-            for j in range(s):  # the sums are not needed with a window of one sample
-                sink_unused(m, sums[j], f"win_sum{j}")
-
-        # ---- y_hat, the switched observer's commit and the output register (in the last step)
         yh = Signal(signed(wd["y_hat"]), name="y_hat_reg", reset_less=True)
-        with m.If(go & y_r):
-            m.d.sync += yh.eq(low)
+        with m.If(go & lane0["y_r"]):
+            m.d.sync += yh.eq(lane0["low"])
         with m.If(self.out.ready):
             m.d.sync += self.out.valid.eq(0)
         with m.If(go & last):
-            m.d.sync += [d.eq(v) for d, v in zip(xo, tmp + [new])]
-            m.d.sync += [self.out.valid.eq(1), self.out.payload.eq(Cat(*xo, yh, theta, sat_acc | (row_sat & olast_r)))]
+            m.d.sync += [d.eq(v) for d, v in zip(lane0["xo"], lane0["tmp"] + [lane0["new"]])]
+            m.d.sync += [self.out.valid.eq(1),
+                         self.out.payload.eq(Cat(*lane0["xo"], yh, theta, sat_acc | (lane0["row_sat"] & lane0["olast_r"])))]
         return m
+
+    def _window_sum(self, m, sq, head, wj, wj2, wtok2, transfer, mw: int, pre: str):
+        """Delay line (one memory per lane, word (mode, slot)) and the running window sum ``S + sq - oldest``."""
+        from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const
+        from pwas_hdl.hdl.serial_observer_bank import eq_const
+
+        sw = len(sq)
+        lw = self.est.window
+        slw = bits_for(lw - 1)
+        wptr = Signal(unsigned(slw), name=f"{pre}dl_next_slot")
+        slot = Signal(unsigned(slw), name=f"{pre}dl_slot")
+        cnt = Signal(unsigned(bits_for(lw)), name=f"{pre}dl_count")
+        old_valid = Signal(name=f"{pre}dl_old_valid")
+        with m.If(transfer):
+            m.d.sync += [slot.eq(wptr), wptr.eq(Mux(eq_const(wptr, lw - 1), 0, add_const_wrap(m, wptr, 1, f"{pre}dl_slot_inc"))),
+                         old_valid.eq(ge_const(cnt, lw))]
+            with m.If(~ge_const(cnt, lw)):
+                m.d.sync += cnt.eq(add_const_wrap(m, cnt, 1, f"{pre}dl_count_inc"))
+        mem = Memory(shape=unsigned(sw), depth=(1 << mw) * lw, init=[])
+        m.submodules[f"{pre}dlmem"] = mem
+        rp = mem.read_port(domain="sync")
+        rp.addr = Cat(wj, slot)  # the mode's oldest square, read in its square step (used in the next one)
+        wp = mem.write_port()
+        wp.addr = Cat(wj2, slot)
+        wp.data = sq
+        wp.en = wtok2
+        oldest = Signal(unsigned(sw), name=f"{pre}dl_oldest")
+        m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
+        return sub_wrap(m, add_wrap(m, head, sq, f"{pre}win_sum_add"), oldest, f"{pre}win_sum_next")
