@@ -119,7 +119,8 @@ def serial_folders(tmp_path_factory):
     root = tmp_path_factory.mktemp("serial_est")
     out = {}
     for name, cfg, opts in (("seed003", estimator_config(window=1), {}),
-                            ("m4w3sat", _random_config(4, 3, 3, 5), {"state_bits": 22, "ports": "amaranth"})):
+                            ("m4w3sat", _random_config(4, 3, 3, 5), {"state_bits": 22, "ports": "amaranth", "bank_lanes": 2}),
+                            ("m3lanes3", _random_config(3, 2, 1, 7), {"bank_lanes": 3})):  # lint only
         path = write_estimator(cfg, root / f"{name}.json")
         out[name] = (path, opts, generate(path, root / name, architecture="serial", **opts))
     return out
@@ -135,7 +136,9 @@ def test_serial_estimator_folder_manifest_lint_reruns(serial_folders, tmp_path):
     man = load_manifest(gd.outdir)
     e = man["estimator"]
     assert e["architecture"] == "serial" and man["ii"] == e["cycles_per_sample"] == 13 and man["latency_cycles"] == 14
-    assert man["generator"]["options"]["architecture"] == "serial"
+    assert man["generator"]["options"]["architecture"] == "serial" and e["schedule"]["lanes"] == 1
+    lanes = load_manifest(serial_folders["m4w3sat"][2].outdir)
+    assert lanes["estimator"]["schedule"]["modes_per_lane"] == [[0, 1], [2, 3]] and lanes["ii"] == 2 + 2 * 3 + 1 + 3 + 1
     again = generate(path, tmp_path / "again", architecture="serial", **opts)
     assert again.files == gd.files
     for p, _, g in serial_folders.values():

@@ -437,7 +437,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         theta = Signal(unsigned(iw), name="theta")
         best = Signal(unsigned(sw), name="det_best", reset_less=True)
         sat_terms = []
-        cands = []  # per lane: (valid, window sum, global mode, first window step)
+        cands = []  # per lane: (valid, window sum, global mode)
         lane0 = {}
         for ln, group in enumerate(groups):
             pre = "" if len(groups) == 1 else f"lane{ln}_"
@@ -496,7 +496,9 @@ class SerialSwitchedEstimatorTop(wiring.Component):
 
             # ---- residual register (step k + d) -> square register -> window sum (step k + d + 2)
             mw = bits_for(sl - 1)
-            if dly:
+            if sl == 1:  # one mode in the lane: its index is 0
+                r_mode = Const(0, 1)
+            elif dly:
                 r_mode = Signal(unsigned(mw), name=f"{pre}row_mode_result")
                 with m.If(go):
                     m.d.sync += r_mode.eq(st[:mw])
@@ -504,15 +506,19 @@ class SerialSwitchedEstimatorTop(wiring.Component):
                 r_mode = st[:mw]
             res = Signal(signed(rb), name=f"{pre}res_reg", reset_less=True)
             wtok = Signal(name=f"{pre}win_tok")
-            wj = Signal(unsigned(mw), name=f"{pre}win_mode")
-            m.d.sync += [wtok.eq(go & res_r), wj.eq(r_mode)]
+            wj = Signal(unsigned(mw), name=f"{pre}win_mode") if sl > 1 else Const(0, 1)
+            m.d.sync += wtok.eq(go & res_r)
+            if sl > 1:
+                m.d.sync += wj.eq(r_mode)
             with m.If(go & res_r):
                 m.d.sync += res.eq(low)
             sqs = var_product(m, res, res, sw, f"{pre}win_sq")
             sq = Signal(unsigned(sw), name=f"{pre}win_sq_reg", reset_less=True)  # the square stage
             wtok2 = Signal(name=f"{pre}win_sum_tok")
-            wj2 = Signal(unsigned(mw), name=f"{pre}win_sum_mode")
-            m.d.sync += [wtok2.eq(wtok), wj2.eq(wj)]
+            wj2 = Signal(unsigned(mw), name=f"{pre}win_sum_mode") if sl > 1 else Const(0, 1)
+            m.d.sync += wtok2.eq(wtok)
+            if sl > 1:
+                m.d.sync += wj2.eq(wj)
             with m.If(wtok):
                 m.d.sync += sq.eq(sqs.as_unsigned())
             sums = [Signal(unsigned(sw), name=f"win_sum{j}") for j in group]
@@ -526,19 +532,28 @@ class SerialSwitchedEstimatorTop(wiring.Component):
                 for j, sm in zip(group, sums):  # the sums are not needed with a window of one sample
                     sink_unused(m, sm, f"win_sum{j}")
             gm = rom(m, wj2, [group[0] + k for k in range(sl)], iw, f"{pre}win_global_mode")
-            cands.append((wtok2, s_new, Const(gm, iw) if isinstance(gm, int) else gm, ~wj2.any()))
+            if ln == 0 and sl > 1:  # a later window step of the sample (lane 0 has the most modes: its first step is the sample's)
+                later = Signal(name="det_later_step")
+                m.d.comb += later.eq(wj2.any())
+            elif ln == 0:
+                later = Const(0, 1)
+            cands.append((wtok2, s_new, Const(gm, iw) if isinstance(gm, int) else gm))
             if obs:
                 lane0 = {"y_r": y_r, "olast_r": olast_r, "xo": xo, "tmp": tmp, "new": new, "low": low, "row_sat": row_sat}
 
         # ---- detector: running argmin over the lanes (smaller sum, or equal sum and lower mode)
-        first = cands[0][3]  # lane 0 has the most modes: its first window step is the sample's
-        cur_b, cur_t, have = best, theta, ~first
-        for ln, (v, sn, gmode, _) in enumerate(cands):
-            if ln == 0:
-                take = v & (~have | (sn < cur_b))  # lane 0's mode is the lowest of this step
-            else:
+        cur_b, cur_t, have = best, theta, later
+        for ln, (v, sn, gmode) in enumerate(cands):
+            if ln == 0 and len(groups[0]) == 1:  # one mode per lane: lane 0's only window step is the sample's first
+                take = v
+            elif len(cands) == 1:  # one lane: the best so far is from a lower mode, a tie keeps it
+                take = v & (~have | (sn < cur_b))
+            else:  # the best so far may be another lane's higher mode of an earlier step
                 lower = (gmode < cur_t) if not isinstance(gmode, Const) else ge_const(cur_t, gmode.value + 1)
-                take = v & (~have | (sn < cur_b) | ((sn == cur_b) & lower))
+                if isinstance(lower, bool):  # no mode above this constant one: a tie keeps the best
+                    take = v & (~have | (sn < cur_b))
+                else:
+                    take = v & (~have | (sn < cur_b) | ((sn == cur_b) & lower))
             nb = Signal(unsigned(sw), name=f"det_best_{ln}")
             nt = Signal(unsigned(iw), name=f"det_theta_{ln}")
             nh = Signal(name=f"det_have_{ln}")
