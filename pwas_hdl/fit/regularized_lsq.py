@@ -770,9 +770,11 @@ def solve_regularized(
         Tikhonov weight (``> 0``; unnormalised as in eq. 14).
     gamma : sparse array, shape (N, N)
         Regularisation matrix (symmetric positive definite, from :func:`tikhonov_matrix`).
-    method : {"auto", "direct", "cg"}
-        Sparse LU, or conjugate gradients to relative residual ``rtol``; ``auto`` by size (see
-        :data:`DIRECT_MAX_UNKNOWNS` for the rule, :data:`CG_RTOL` for the weight bound).
+    method : {"auto", "direct", "cg", "mg"}
+        Sparse Cholesky / LU, or conjugate gradients to relative residual ``rtol`` (Jacobi- or, ``mg``,
+        multigrid-preconditioned); ``auto`` by size and, first order, by the dominance of the
+        penalty (see :data:`DIRECT_MAX_UNKNOWNS` and :data:`MG_DOMINANCE` for the rule,
+        :data:`CG_RTOL` for the weight bound).
     x0 : ndarray, shape like the result, optional
         Warm start for CG.
     rtol : float
@@ -906,10 +908,12 @@ def cross_validate_sigma(
 
     Work is reused across folds and sigmas: ``H'H`` and ``H'z`` are formed once and each fold's
     normal equations are the total minus the fold's part (``H_k'H_k = H'H - H_v'H_v``). With the
-    direct method there is one sparse factorisation per (fold, sigma). With CG the sigmas of a
-    fold are solved from the largest down, each warm-started from the previous sigma's weights,
-    and the preconditioner is built from the full-data ``H'H`` and shared by all folds (see
-    :class:`NormalEquationSolver`).
+    direct method there is one sparse factorisation per (fold, sigma); with multigrid (first order,
+    see :data:`MG_DOMINANCE`) the levels of a fold are built once and each sigma is an axpy per
+    level, a small coarsest factorisation and the V-cycle PCG. The sigmas of a fold are solved
+    from the largest down, each iterative solve warm-started from the previous sigma's weights;
+    the Jacobi/AMG preconditioner of CG is built from the full-data ``H'H`` and shared by all
+    folds (see :class:`NormalEquationSolver`).
 
     Parameters
     ----------
@@ -927,8 +931,8 @@ def cross_validate_sigma(
         Seed of the shuffle.
     progress : callable(done, total), optional
         Called after each solve.
-    method : {"auto", "direct", "cg"}
-        Solver (see :func:`choose_method`).
+    method : {"auto", "direct", "cg", "mg"}
+        Solver (see :func:`choose_method` and :class:`NormalEquationSolver`).
     rtol : float
         CG relative-residual tolerance.
     max_memory : int or str, optional
