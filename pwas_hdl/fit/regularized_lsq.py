@@ -362,9 +362,12 @@ def estimate_fit_memory(
             if chosen == "direct"
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
         ),
-        # the multigrid levels: fine operator on the union pattern and its two value arrays, the
-        # coarse levels (< 1/3 more) and the prolongations
-        "multigrid": 3.0 * _sparse_bytes(nnz_a, nv) if use_mg else 0.0,
+        # the multigrid levels: the fine operator on the union pattern and its two value arrays
+        # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
+        # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled
+        "multigrid": (3.0 * _sparse_bytes(nnz_a, nv) + 2 * _sparse_bytes(float(nv) * 2 ** (k - 1), nv)
+                      + 3.0 * _sparse_bytes(float(nv) * 3 ** (k - 1) / (2 ** (k - 1) - 1), nv))
+        if use_mg else 0.0,
         "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
     }
     est["total"] = float(sum(est.values()))
