@@ -162,3 +162,12 @@ def test_memory_estimate_counts_the_levels():
     assert est["multigrid"] > 0
     assert estimate_fit_memory(10**5, 10**6, 2, 1, 0)["multigrid"] == 0
     assert estimate_fit_memory(10**3, 10**3, 2, 1, 1)["multigrid"] == 0
+
+
+def test_auto_uses_multigrid_only_in_the_measured_dimensions(monkeypatch):
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    for shape, expect in [((400,), False), ((20, 20), True), ((8, 8, 8), True), ((5, 5, 5, 5), False)]:
+        grid = Grid(np.zeros(len(shape)), np.ones(len(shape)), [s - 1 for s in shape])
+        gam = tikhonov_matrix(grid, 1)
+        hth = sparse.identity(gam.shape[0], format="csr") * 0.1
+        assert NormalEquationSolver(hth, gam, len(shape)).uses_mg(hth, 1e3) is expect, shape

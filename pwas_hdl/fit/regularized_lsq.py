@@ -34,6 +34,7 @@ __all__ = [
     "MG_DOMINANCE",
     "MG_MIN_UNKNOWNS",
     "MG_DOMINANCE_CG",
+    "MG_AUTO_DIMS",
     "CG_RTOL",
     "solve_regularized",
     "cross_validate_sigma",
@@ -155,6 +156,11 @@ MG_DOMINANCE_CG = 0.05
 #: Multigrid is used by ``auto`` from this many unknowns (below, a factorisation takes well under
 #: a second: measured 0.8 s CPU for the whole first-order CV at n = 2, N = 10^4).
 MG_MIN_UNKNOWNS = 50_000
+
+#: Regressor dimensions in which ``auto`` uses multigrid: those measured. In 1-D the factor is
+#: banded and cheaper than any V-cycle; from 4-D the prolongation has 2^n and the coarse levels up
+#: to 3^n entries a row (not measured; ``method="mg"`` still works there).
+MG_AUTO_DIMS = (2, 3)
 
 #: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
 #: Since ``A = H'H + sigma Gamma >= sigma * lambda_min(Gamma) I`` this guarantees
@@ -352,7 +358,7 @@ def estimate_fit_memory(
     nnz_a = nnz_hth + nnz_gam
     unknowns = min(nv, nnz_h) if order == 0 else nv
     chosen = choose_method(unknowns, n_dims, order, method)
-    use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS))
+    use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS))
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
@@ -569,7 +575,8 @@ class NormalEquationSolver:
         self.rtol, self.maxiter = float(rtol), int(maxiter)
         #: the vertex-grid shape for multigrid (first order on a full grid), None where not used
         self._mg_shape = None
-        if self.order == 1 and self.keep is None and (method == "mg" or (method == "auto" and self.n >= MG_MIN_UNKNOWNS)):
+        if self.order == 1 and self.keep is None and (method == "mg" or (
+                method == "auto" and self.n >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS)):
             self._mg_shape = grid_shape_of(gamma, n_dims)
         if self._mg_shape is None and method == "mg":
             raise InputError("solver method 'mg' needs the first-order Gamma of a full vertex grid (tikhonov_matrix)")
