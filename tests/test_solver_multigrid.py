@@ -171,3 +171,13 @@ def test_auto_uses_multigrid_only_in_the_measured_dimensions(monkeypatch):
         gam = tikhonov_matrix(grid, 1)
         hth = sparse.identity(gam.shape[0], format="csr") * 0.1
         assert NormalEquationSolver(hth, gam, len(shape)).uses_mg(hth, 1e3) is expect, shape
+
+
+def test_explicit_zeros_of_the_fold_matrix_are_not_outside_the_pattern():
+    grid, h, z, gam = _fold()
+    m = sparse.csr_matrix(h.T @ h)
+    m.data[: 7] = 0.0  # entries that cancelled exactly, kept as explicit zeros
+    fold = mg.GridHierarchy(grid.shape, gam, coarsest_max=30).for_matrix(m)
+    fold.set_sigma(1.0)
+    m.eliminate_zeros()
+    assert abs(sparse.csr_array(fold.ops[0]) - sparse.csr_array(m + gam)).max() <= 1e-12

@@ -137,8 +137,13 @@ def _csr(m) -> sparse.csr_matrix:
 
 
 def _aligned(pattern: sparse.csr_matrix, m) -> np.ndarray:
-    """Values of ``m`` at the entries of ``pattern`` (which must contain ``m``'s)."""
+    """Values of ``m`` at the entries of ``pattern`` (which must contain ``m``'s non-zeros).
+
+    Explicit zeros of ``m`` (e.g. ``H'H - H_v'H_v`` cancelling exactly) are dropped first: the
+    union pattern does not hold them.
+    """
     m = _csr(m)
+    m.eliminate_zeros()
     n = pattern.shape[1]
     keys_p = np.repeat(np.arange(pattern.shape[0], dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
     keys_m = np.repeat(np.arange(m.shape[0], dtype=np.int64), np.diff(m.indptr)) * n + m.indices
