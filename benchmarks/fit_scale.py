@@ -6,11 +6,13 @@ Each point is a regressor dimension ``n`` and partition ``p`` (``N = (p + 1)^n``
 job is what ``PWASVirtualSensor.fit`` does with ``sigma=None``: the basis matrix ``H``, ``Gamma``,
 5-fold cross-validation (contiguous blocks) over the default grid of 21 sigmas and the final solve
 at the chosen sigma, with the solver that ``method="auto"`` picks
-(:func:`pwas_hdl.fit.regularized_lsq.choose_method`).
+(:func:`pwas_hdl.fit.regularized_lsq.choose_method`; first order: multigrid-PCG for the
+penalty-dominated sigmas, see :data:`pwas_hdl.fit.regularized_lsq.MG_DOMINANCE`).
 
 Every point runs in its own subprocess (so that ``ru_maxrss`` is the peak resident memory of that
 fit alone) with a wall-time limit; wall and CPU seconds are both recorded, because the machine is
-shared with other jobs and wall time then overstates the cost. Where the solver is CG, a second
+shared with other jobs and wall time then overstates the cost. Where the final solve is iterative
+(CG or multigrid-PCG), a second
 subprocess solves the final system again with the direct sparse solve (under its own time limit)
 and the largest weight difference ``max |w_cg - w_direct|`` is recorded beside the bound the CG
 solve guarantees (``||r|| / (sigma lambda_min(Gamma))``).
@@ -102,6 +104,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         "cv_max_rel_residual": cv.solver["max_rel_residual"],
         "cv_all_converged": cv.solver["all_converged"],
         "cv_direct_fallbacks": cv.solver["direct_fallbacks"],
+        "cv_solves_by_method": cv.solver.get("solves_by_method", {}),
         "best_sigma": cv.best_sigma,
         "best_cv_mse": float(cv.mse.min()),
         "final": info.to_dict(),
@@ -155,7 +158,7 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
                     rows.append(row)
                     continue
                 row.update(_run_child(["--worker", "fit", json.dumps([n, p, order, t, wfile, workers])], limit))
-                if row["status"] == "ok" and row["method"] == "cg":
+                if row["status"] == "ok" and (row["method"] == "cg" or row["final"]["method"] in ("cg", "mg")):
                     d = _run_child(
                         ["--worker", "direct", json.dumps([n, p, order, t, row["best_sigma"], wfile])], direct_limit
                     )
@@ -238,7 +241,7 @@ def markdown(res: dict) -> str:
            "CPU includes the workers', peak RSS is this process's plus workers x the largest worker's."
            if s.get("workers", 1) > 1 else ""),
         "",
-        "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU |",
+        "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG/MG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU |",
         "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     by_key = {(r["n"], r["p"], r["order"]): r for r in res["rows"]}
@@ -259,8 +262,15 @@ def markdown(res: dict) -> str:
         r0 = by_key.get((r["n"], r["p"], 0))
         if r["order"] == 1 and r0 is not None and r0["status"] == "ok":
             ratio = f"{r['cpu_s'] / r0['cpu_s']:.2f}"
-        bound = f"{r['final']['weight_bound']:.1e}" if r["method"] == "cg" else "-"
-        solver = r["method"] + (f" ({r['direct_backend']})" if r["method"] == "direct" and "direct_backend" in r else "")
+        iterative = r["method"] == "cg" or r["final"]["method"] in ("cg", "mg")
+        bound = f"{r['final']['weight_bound']:.1e}" if iterative else "-"
+        by = r.get("cv_solves_by_method") or {}
+        if len(by) > 1:  # auto mixed the methods over the sigmas (first order: multigrid + another)
+            solver = " + ".join(f"{k} {v}" for k, v in sorted(by.items()))
+        else:
+            solver = r["method"]
+        if "direct_backend" in r and ("direct" in by or r["method"] == "direct"):
+            solver += f" ({r['direct_backend']})"
         if r.get("cv_direct_fallbacks"):
             solver += f" ({r['cv_direct_fallbacks']} direct fallbacks)"
         if not r["cv_all_converged"] or not r["final"]["converged"]:

@@ -18,6 +18,7 @@ from scipy.sparse import linalg as splinalg
 
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
 from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky, cholmod_available
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 
@@ -30,6 +31,10 @@ __all__ = [
     "check_fit_memory",
     "memory_limit",
     "DIRECT_MAX_UNKNOWNS",
+    "MG_DOMINANCE",
+    "MG_MIN_UNKNOWNS",
+    "MG_DOMINANCE_CG",
+    "MG_AUTO_DIMS",
     "CG_RTOL",
     "solve_regularized",
     "cross_validate_sigma",
@@ -125,6 +130,38 @@ DIRECT_MAX_UNKNOWNS: dict[tuple[int, int], int] = {
 #: touched vertices was measured and does not pay (``benchmarks/results/fit_scale.md``).
 DIRECT_MAX_UNKNOWNS_CHOLMOD: dict[tuple[int, int], int] = {**DIRECT_MAX_UNKNOWNS, (1, 2): 2_000_000}
 
+#: First order, ``method="auto"``: a system ``(M + sigma Gamma) w = b`` whose penalty dominates its
+#: data term, ``rho = sigma * mean(diag Gamma) / mean(rowsum M) >= MG_DOMINANCE`` (``mean(rowsum M)``
+#: is the training samples per vertex, ``T_k / N``, as every row of ``H`` sums to 1), is solved by
+#: conjugate gradients preconditioned by one geometric-multigrid V-cycle
+#: (:mod:`pwas_hdl.fit.multigrid`) instead of a sparse factorisation; below it by the direct solve
+#: (where :func:`choose_method` picks it), since there the V-cycle misses the smooth error that the
+#: data term leaves nearly unpenalised (the iterations grow like ``rho ** -0.45``). Measured, one
+#: fold, T = 10^5, rtol 1e-10, warm starts, CPU (``benchmarks/results/fit_scale.md``): n = 2,
+#: N = 10^6 (rho = 50 sigma): 8-10 iterations (0.5-0.65 s) for rho >= 5, 12 (0.71 s) at rho = 1.6,
+#: 19 (1.13 s) at 0.5, 34 (2.1 s) at 0.16, 151 at 0.005, against 1.5-1.9 s per CHOLMOD
+#: factorisation; n = 3, N = 262 144 (rho = 0.75 sigma): 9-10 iterations (0.2 s) for rho >= 7,
+#: 12 at 0.75, 17 at 0.24, 28 at 0.075, 228 at 0.00075 (one CHOLMOD factorisation there: 46 s). The
+#: cross-over in 2-D lies between rho = 0.16 and 0.5; 0.3 is taken. Where the direct solve is not
+#: picked (too large) the base method is Jacobi-CG and the threshold :data:`MG_DOMINANCE_CG`.
+MG_DOMINANCE = 0.3
+
+#: The same cross-over against Jacobi-preconditioned CG, the base method where the direct solve is
+#: not picked (n = 3, N = 262 144, T = 10^5, one fold, CPU: a multigrid-PCG iteration ~20 ms, a
+#: Jacobi one ~3.6 ms): multigrid 12 / 28 / 47 / 228 iterations at rho = 0.75 / 0.075 / 0.024 /
+#: 0.00075 against Jacobi's 166 / 190 / 203 / 663, i.e. 0.23 / 0.56 / 0.94 / 4.5 s against
+#: 0.6 / 0.7 / 0.7 / 2.4 s: the cross-over lies between rho = 0.024 and 0.075.
+MG_DOMINANCE_CG = 0.05
+
+#: Multigrid is used by ``auto`` from this many unknowns (below, a factorisation takes well under
+#: a second: measured 0.8 s CPU for the whole first-order CV at n = 2, N = 10^4).
+MG_MIN_UNKNOWNS = 50_000
+
+#: Regressor dimensions in which ``auto`` uses multigrid: those measured. In 1-D the factor is
+#: banded and cheaper than any V-cycle; from 4-D the prolongation has 2^n and the coarse levels up
+#: to 3^n entries a row (not measured; ``method="mg"`` still works there).
+MG_AUTO_DIMS = (2, 3)
+
 #: Relative residual at which conjugate gradients stop: ``||b - A w|| <= CG_RTOL * ||b||``.
 #: Since ``A = H'H + sigma Gamma >= sigma * lambda_min(Gamma) I`` this guarantees
 #: ``||w - w_direct||_2 <= CG_RTOL * ||b||_2 / (sigma * lambda_min(Gamma))`` (the *weight bound*,
@@ -162,7 +199,7 @@ MEMORY_FRACTION = 0.8
 #: the grids of this project) used by :func:`estimate_fit_memory`.
 DIRECT_FILL_FACTOR = 40.0
 
-Method = Literal["auto", "direct", "cg"]
+Method = Literal["auto", "direct", "cg", "mg"]
 
 
 @dataclass
@@ -171,7 +208,8 @@ class SolveInfo:
 
     Attributes
     ----------
-    method : {"direct", "cg", "direct-fallback"}
+    method : {"direct", "cg", "mg", "direct-fallback"}
+        ``mg``: CG preconditioned by a geometric-multigrid V-cycle (:mod:`pwas_hdl.fit.multigrid`).
         ``direct-fallback``: CG did not converge within :data:`CG_MAXITER`, the direct solve was used.
     iterations : int
         CG iterations (summed over target columns); 0 for the direct solve.
@@ -266,13 +304,15 @@ def _sparse_bytes(nnz: float, rows: int) -> float:
 
 
 def choose_method(n_unknowns: int, n_dims: int, order: int = 1, method: Method = "auto") -> str:
-    """``"direct"`` or ``"cg"``.
+    """``"direct"``, ``"cg"`` or ``"mg"``: the base method of a system of this size.
 
     ``auto`` picks direct up to ``DIRECT_MAX_UNKNOWNS[(order, min(n_dims, 5))]`` unknowns, CG above
-    (:data:`DIRECT_MAX_UNKNOWNS_CHOLMOD` where CHOLMOD is available).
+    (:data:`DIRECT_MAX_UNKNOWNS_CHOLMOD` where CHOLMOD is available). First-order problems of at
+    least :data:`MG_MIN_UNKNOWNS` unknowns then also use multigrid per sigma (see
+    :data:`MG_DOMINANCE` and :class:`NormalEquationSolver`).
     """
-    if method not in ("auto", "direct", "cg"):
-        raise InputError(f"solver method must be 'auto', 'direct' or 'cg', got {method!r}")
+    if method not in ("auto", "direct", "cg", "mg"):
+        raise InputError(f"solver method must be 'auto', 'direct', 'cg' or 'mg', got {method!r}")
     if method == "auto":
         limit = _direct_limits()[(1 if order else 0, min(max(int(n_dims), 1), 5))]
         return "direct" if n_unknowns <= limit else "cg"
@@ -301,15 +341,15 @@ def estimate_fit_memory(
         Target columns ``nz``.
     order : {0, 1}
         Tikhonov order.
-    method : {"auto", "direct", "cg"}
+    method : {"auto", "direct", "cg", "mg"}
 
     Returns
     -------
     dict
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
-        twice ``A``, or a diagonal), ``vectors`` (weights, right-hand sides, CG work vectors) and
-        ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
+        twice ``A``, or a diagonal), ``multigrid`` (its levels, where first order uses it),
+        ``vectors`` (weights, right-hand sides, CG work vectors) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
     """
     t, nv, k = int(n_samples), int(n_vertices), int(n_dims) + 1
     nnz_h = t * k
@@ -318,6 +358,7 @@ def estimate_fit_memory(
     nnz_a = nnz_hth + nnz_gam
     unknowns = min(nv, nnz_h) if order == 0 else nv
     chosen = choose_method(unknowns, n_dims, order, method)
+    use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS))
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
@@ -325,12 +366,18 @@ def estimate_fit_memory(
         "factor": (
             _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv)
             if chosen == "direct"
-            else (2 * _sparse_bytes(nnz_a, nv) if order == 1 else 8.0 * nv)
+            else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
         ),
+        # the multigrid levels: the fine operator on the union pattern and its two value arrays
+        # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
+        # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled
+        "multigrid": (3.0 * _sparse_bytes(nnz_a, nv) + 2 * _sparse_bytes(float(nv) * 2 ** (k - 1), nv)
+                      + 3.0 * _sparse_bytes(float(nv) * 3 ** (k - 1) / (2 ** (k - 1) - 1), nv))
+        if use_mg else 0.0,
         "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
     }
     est["total"] = float(sum(est.values()))
-    est["method"] = 1.0 if chosen == "cg" else 0.0
+    est["method"] = 1.0 if chosen in ("cg", "mg") else 0.0
     return est
 
 
@@ -361,7 +408,7 @@ def check_fit_memory(
     est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method)
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
-        parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "vectors"))
+        parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors"))
         raise ResourceLimit(
             f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
             f"N = {n_vertices} weights, over the limit of {limit / 2**20:.0f} MiB ({source}); use fewer partitions "
@@ -484,8 +531,11 @@ class NormalEquationSolver:
     gamma : sparse array, shape (N, N)
     n_dims : int
         Regressor dimension ``n`` (for the ``auto`` rule).
-    method : {"auto", "direct", "cg"}
-        See :func:`choose_method`.
+    method : {"auto", "direct", "cg", "mg"}
+        See :func:`choose_method`. First order, ``auto``: from :data:`MG_MIN_UNKNOWNS` unknowns on
+        a vertex grid, the sigmas whose penalty dominates (:data:`MG_DOMINANCE`) are solved by
+        multigrid-preconditioned CG (all sigmas where the base method is not direct); ``mg``:
+        every sigma by multigrid.
     rtol : float
         CG relative-residual tolerance (default :data:`CG_RTOL`).
     maxiter : int
@@ -523,6 +573,16 @@ class NormalEquationSolver:
             (self.order, min(max(int(n_dims), 1), 5))
         ]
         self.rtol, self.maxiter = float(rtol), int(maxiter)
+        #: the vertex-grid shape for multigrid (first order on a full grid), None where not used
+        self._mg_shape = None
+        if self.order == 1 and self.keep is None and (method == "mg" or (
+                method == "auto" and self.n >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS)):
+            self._mg_shape = grid_shape_of(gamma, n_dims)
+        if self._mg_shape is None and method == "mg":
+            raise InputError("solver method 'mg' needs the first-order Gamma of a full vertex grid (tikhonov_matrix)")
+        self._full_mean_row = float(hth.sum()) / max(self.n, 1)
+        self._mg_hier: GridHierarchy | None = None
+        self._mg_cache: tuple | None = None
         if self.method == "cg":
             lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
             self._pre = _Preconditioner(lumped, self.gamma, self.order)
@@ -544,8 +604,60 @@ class NormalEquationSolver:
     def __getstate__(self) -> dict:
         """Pickled (e.g. shipped to a Dask worker) without the CHOLMOD factors, which cannot be."""
         state = dict(self.__dict__)
-        state["_m_cache"] = state["_shared_chol"] = None
+        state["_m_cache"] = state["_shared_chol"] = state["_mg_cache"] = None
         return state
+
+    def uses_mg(self, m: sparse.csr_array, sigma: float) -> bool:
+        """True when ``(m + sigma Gamma) w = b`` is solved by multigrid-preconditioned CG.
+
+        ``mg`` as the method: always. With multigrid available (``auto``, first order, at least
+        :data:`MG_MIN_UNKNOWNS` unknowns) when the penalty dominates,
+        ``rho = sigma * mean(diag Gamma) / mean(rowsum m)`` at least :data:`MG_DOMINANCE` (base
+        method direct) or :data:`MG_DOMINANCE_CG` (base method Jacobi-preconditioned CG).
+        """
+        if self._mg_shape is None:
+            return False
+        if self.method == "mg":
+            return True
+        limit = MG_DOMINANCE if self.method == "direct" else MG_DOMINANCE_CG
+        return sigma * self._gamma_diag_mean() >= limit * self._mg_fold(m)[1]
+
+    def full_data_uses_mg(self, sigma: float) -> bool:
+        """:meth:`uses_mg` for the full-data normal matrix (a lower bound of every fold's rho)."""
+        return self._mg_shape is not None and (
+            self.method == "mg"
+            or sigma * self._gamma_diag_mean() >= (MG_DOMINANCE if self.method == "direct" else MG_DOMINANCE_CG)
+            * self._full_mean_row)
+
+    def _gamma_diag_mean(self) -> float:
+        return float(self.gamma.diagonal().mean())
+
+    def _mg_fold(self, m: sparse.csr_array) -> tuple:
+        """``(m, mean(rowsum m), FoldMultigrid or None)`` for this ``m``, kept until the next ``m``."""
+        if self._mg_cache is None or self._mg_cache[0] is not m:
+            self._mg_cache = (m, float(m.sum()) / max(m.shape[0], 1), None)
+        return self._mg_cache
+
+    def _mg_solve(self, m: sparse.csr_array, bk: np.ndarray, sigma: float, x0k) -> tuple[np.ndarray, SolveInfo]:
+        """Multigrid-preconditioned CG, column by column, to :attr:`rtol` (see :func:`_cg`)."""
+        _, mean_row, fold = self._mg_fold(m)
+        if fold is None:
+            if self._mg_hier is None:
+                self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
+            self._mg_cache = None  # free the previous fold's levels first
+            fold = self._mg_hier.for_matrix(m)
+            self._mg_cache = (m, mean_row, fold)
+        b2 = np.asarray(bk, dtype=float).reshape(self.n, -1)
+        x2 = None if x0k is None else np.asarray(x0k, dtype=float).reshape(b2.shape)
+        w = np.zeros_like(b2)
+        its, worst_rel, worst_abs, ok = 0, 0.0, 0.0, True
+        for j in range(b2.shape[1]):
+            w[:, j], mi = fold.solve(b2[:, j], sigma, None if x2 is None else x2[:, j], self.rtol, self.maxiter)
+            its += mi.iterations
+            worst_rel, worst_abs = max(worst_rel, mi.rel_residual), max(worst_abs, mi.abs_residual)
+            ok = ok and mi.converged
+        bound = worst_abs / (sigma * self.lam_gamma) if self.lam_gamma > 0 else float("inf")
+        return w.reshape(np.shape(bk)), SolveInfo("mg", its, worst_rel, bound, ok)
 
     def _restrict(self, m: sparse.sparray) -> sparse.csr_array:
         m = sparse.csr_array(m)
@@ -621,7 +733,13 @@ class NormalEquationSolver:
         """
         b = np.asarray(b, dtype=float)
         bk = b if self.keep is None else b[self.keep]
-        if self.method == "direct":
+        if self.uses_mg(m, sigma):
+            x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
+            wk, info = self._mg_solve(m, bk, sigma, x0k)
+            if not info.converged and self.fallback:
+                wk = self._direct(m, bk, sigma)
+                info = SolveInfo("direct-fallback", info.iterations)
+        elif self.method == "direct":
             wk = self._direct(m, bk, sigma)
             info = SolveInfo("direct")
         else:
@@ -662,9 +780,11 @@ def solve_regularized(
         Tikhonov weight (``> 0``; unnormalised as in eq. 14).
     gamma : sparse array, shape (N, N)
         Regularisation matrix (symmetric positive definite, from :func:`tikhonov_matrix`).
-    method : {"auto", "direct", "cg"}
-        Sparse LU, or conjugate gradients to relative residual ``rtol``; ``auto`` by size (see
-        :data:`DIRECT_MAX_UNKNOWNS` for the rule, :data:`CG_RTOL` for the weight bound).
+    method : {"auto", "direct", "cg", "mg"}
+        Sparse Cholesky / LU, or conjugate gradients to relative residual ``rtol`` (Jacobi- or, ``mg``,
+        multigrid-preconditioned); ``auto`` by size and, first order, by the dominance of the
+        penalty (see :data:`DIRECT_MAX_UNKNOWNS` and :data:`MG_DOMINANCE` for the rule,
+        :data:`CG_RTOL` for the weight bound).
     x0 : ndarray, shape like the result, optional
         Warm start for CG.
     rtol : float
@@ -716,8 +836,9 @@ class CVResult:
         Validation MSE of each fold and candidate.
     solver : dict
         How the systems were solved: ``method``, ``solves``, CG ``iterations`` in total,
-        ``max_rel_residual``, ``all_converged``, ``direct_fallbacks``, ``superlu_fallbacks`` (CHOLMOD
-        pivots that were not positive) and ``weight_bound`` (folds, S), the bound of each
+        ``max_rel_residual``, ``all_converged``, ``direct_fallbacks``, ``solves_by_method`` (count per
+        :attr:`SolveInfo.method`: ``auto`` mixes multigrid and the direct solve in first order),
+        ``superlu_fallbacks`` (CHOLMOD pivots that were not positive) and ``weight_bound`` (folds, S), the bound of each
         solve on ``max_col ||w - w_exact||_2`` (zero for the direct solve); not written to the model
         file.
     """
@@ -757,9 +878,11 @@ def _folds_independent(solver: "NormalEquationSolver", sigmas: np.ndarray) -> bo
     built lazily and reused across folds, so a fold solved elsewhere could get another
     preconditioner (weights equal only to the CG tolerance, not bit for bit).
     """
-    if solver.method == "direct":
-        return True
-    return not any(solver._pre.use_amg(float(s)) for s in sigmas)
+    if solver.method in ("direct", "mg"):
+        return True  # multigrid levels: built from Gamma and the fold's matrix alone
+    # a fold's rho exceeds the full data's (fewer rows in its normal matrix): where the AMG
+    # hierarchy would be used, multigrid takes over if rho of the full data already reaches it
+    return not any(solver._pre.use_amg(float(s)) and not solver.full_data_uses_mg(float(s)) for s in sigmas)
 
 
 def _map_folds(fn: Callable, folds: int, executor, independent: bool, n_sigmas: int,
@@ -795,10 +918,12 @@ def cross_validate_sigma(
 
     Work is reused across folds and sigmas: ``H'H`` and ``H'z`` are formed once and each fold's
     normal equations are the total minus the fold's part (``H_k'H_k = H'H - H_v'H_v``). With the
-    direct method there is one sparse factorisation per (fold, sigma). With CG the sigmas of a
-    fold are solved from the largest down, each warm-started from the previous sigma's weights,
-    and the preconditioner is built from the full-data ``H'H`` and shared by all folds (see
-    :class:`NormalEquationSolver`).
+    direct method there is one sparse factorisation per (fold, sigma); with multigrid (first order,
+    see :data:`MG_DOMINANCE`) the levels of a fold are built once and each sigma is an axpy per
+    level, a small coarsest factorisation and the V-cycle PCG. The sigmas of a fold are solved
+    from the largest down, each iterative solve warm-started from the previous sigma's weights;
+    the Jacobi/AMG preconditioner of CG is built from the full-data ``H'H`` and shared by all
+    folds (see :class:`NormalEquationSolver`).
 
     Parameters
     ----------
@@ -816,8 +941,8 @@ def cross_validate_sigma(
         Seed of the shuffle.
     progress : callable(done, total), optional
         Called after each solve.
-    method : {"auto", "direct", "cg"}
-        Solver (see :func:`choose_method`).
+    method : {"auto", "direct", "cg", "mg"}
+        Solver (see :func:`choose_method` and :class:`NormalEquationSolver`).
     rtol : float
         CG relative-residual tolerance.
     max_memory : int or str, optional
@@ -886,6 +1011,7 @@ def cross_validate_sigma(
         "max_rel_residual": float(max((i.rel_residual for i in infos), default=0.0)),
         "all_converged": bool(all(i.converged for i in infos)),
         "direct_fallbacks": int(sum(i.method == "direct-fallback" for i in infos)),
+        "solves_by_method": {k: int(sum(i.method == k for i in infos)) for k in sorted({i.method for i in infos})},
         "superlu_fallbacks": int(solver.superlu_fallbacks),
         "weight_bound": weight_bound,
     }

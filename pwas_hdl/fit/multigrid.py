@@ -1,0 +1,288 @@
+"""Geometric multigrid on the Kuhn vertex grid, for ``(M + sigma Gamma) w = b`` over many sigmas.
+
+Cross-validation of sigma solves ``A(sigma) = M_k + sigma Gamma`` for every fold ``k`` and each of
+the candidate sigmas. With nested grids and prolongations ``P_l`` (tensor products of 1-D linear
+interpolation, fine level ``0``), the Galerkin operator of level ``l`` is
+``Q_l' A Q_l = Q_l' M_k Q_l + sigma Q_l' Gamma Q_l`` (``Q_l = P_0 ... P_{l-1}``): a *linear
+combination of two matrices*, one per fold and one for all folds. :class:`GridHierarchy` builds the
+prolongations and the coarse ``Gamma`` once; :meth:`GridHierarchy.for_matrix` the coarse ``M_k`` of
+one fold, each level's sum stored on the union pattern, so that setting a sigma
+(:meth:`FoldMultigrid.set_sigma`) is one vector axpy per level and a small sparse factorisation of
+the coarsest level. One V-cycle (forward Gauss-Seidel before, backward after, from pyamg's C++
+kernels; a symmetric preconditioner) preconditions conjugate gradients
+(:meth:`FoldMultigrid.solve`, stopping on the residual computed afresh).
+
+The grid shape is that of the vertex numbering of :mod:`pwas_hdl.fit.geometry` (C order, the last
+dimension fastest); :func:`grid_shape_of` recovers it from a first-order ``Gamma``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import linalg as splinalg
+
+__all__ = [
+    "COARSEST_MAX",
+    "interpolation_1d",
+    "prolongation",
+    "grid_shape_of",
+    "GridHierarchy",
+    "FoldMultigrid",
+    "MGInfo",
+]
+
+#: Coarsening stops once a level has at most this many unknowns (it is then factorised directly,
+#: once per sigma).
+COARSEST_MAX = 4096
+
+
+def interpolation_1d(m: int) -> sparse.csr_array:
+    """Linear interpolation from a coarse 1-D vertex set onto ``m`` fine vertices, shape (m, mc).
+
+    The coarse vertices are the even fine indices ``0, 2, 4, ...`` and, when ``m`` is even, also the
+    last index ``m - 1`` (so both ends are kept): ``mc = m // 2 + 1``. An even fine vertex is a
+    coarse one (weight 1); an odd one between two coarse ones takes 1/2 of each, except the
+    last-but-one of an even ``m``, which lies between coarse neighbours at distances 1 and 1 too.
+
+    Parameters
+    ----------
+    m : int
+        Fine vertex count (``>= 3``).
+
+    Returns
+    -------
+    scipy.sparse.csr_array, shape (m, m // 2 + 1), rows summing to 1
+    """
+    if m < 3:
+        raise ValueError(f"a 1-D level needs at least 3 vertices to coarsen, got {m}")
+    coarse = list(range(0, m, 2))
+    if m % 2 == 0:
+        coarse.append(m - 1)
+    pos = np.asarray(coarse, dtype=float)
+    mc = len(coarse)
+    rows, cols, vals = [], [], []
+    for i in range(m):
+        k = int(np.searchsorted(pos, i))
+        if k < mc and pos[k] == i:
+            rows.append(i), cols.append(k), vals.append(1.0)
+            continue
+        lo, hi = pos[k - 1], pos[k]
+        t = (i - lo) / (hi - lo)
+        rows += [i, i]
+        cols += [k - 1, k]
+        vals += [1.0 - t, t]
+    return sparse.csr_array((vals, (rows, cols)), shape=(m, mc))
+
+
+def prolongation(shape: tuple[int, ...]) -> tuple[sparse.csr_array, tuple[int, ...]]:
+    """Multilinear interpolation from the next coarser grid onto a grid of ``shape`` vertices.
+
+    Dimensions with fewer than 3 vertices are not coarsened. The vertex numbering is C order
+    (the last dimension fastest), as in :class:`pwas_hdl.fit.geometry.Grid`, so the prolongation
+    is the Kronecker product of the 1-D interpolations in dimension order.
+
+    Returns
+    -------
+    P : scipy.sparse.csr_array, shape (prod(shape), prod(coarse_shape))
+    coarse_shape : tuple of int
+    """
+    p = sparse.csr_array(np.ones((1, 1)))
+    coarse = []
+    for m in shape:
+        pj = interpolation_1d(m) if m >= 3 else sparse.csr_array(sparse.identity(m, format="csr"))
+        coarse.append(pj.shape[1])
+        p = sparse.csr_array(sparse.kron(p, pj, format="csr"))
+    return p, tuple(coarse)
+
+
+def grid_shape_of(gamma: sparse.sparray, n_dims: int) -> tuple[int, ...] | None:
+    """The vertex-grid shape of a first-order ``Gamma`` (:func:`~pwas_hdl.fit.regularized_lsq.tikhonov_matrix`).
+
+    Vertex 0 is coupled to vertex ``stride_j`` along every axis ``j``; the strides give the shape
+    (``shape[j] = stride_{j-1} / stride_j``, ``shape[0] = N / stride_0``). The result is checked
+    against the number of non-zeros of the grid Laplacian of that shape; ``None`` when ``Gamma``
+    is not such a matrix (e.g. zero order, or a grid with a dimension of one interval... whose
+    pattern does not identify the strides).
+    """
+    g = sparse.csr_array(gamma)
+    n_v = g.shape[0]
+    cols = np.sort(g.indices[g.indptr[0]:g.indptr[1]])
+    strides = sorted((int(c) for c in cols if c != 0), reverse=True)
+    if len(strides) != n_dims or n_v == 0:
+        return None
+    shape = []
+    prev = n_v
+    for s in strides:
+        if s <= 0 or prev % s:
+            return None
+        shape.append(prev // s)
+        prev = s
+    if prev != 1:
+        return None
+    edges = sum(n_v // m * (m - 1) for m in shape)
+    if g.nnz != n_v + 2 * edges:
+        return None
+    return tuple(shape)
+
+
+def _csr(m) -> sparse.csr_matrix:
+    """A canonical scipy ``csr_matrix`` (sorted, summed duplicates): the type pyamg's kernels take."""
+    out = sparse.csr_matrix(m)
+    out.sum_duplicates()
+    out.sort_indices()
+    return out
+
+
+def _aligned(pattern: sparse.csr_matrix, m) -> np.ndarray:
+    """Values of ``m`` at the entries of ``pattern`` (which must contain ``m``'s non-zeros).
+
+    Explicit zeros of ``m`` (e.g. ``H'H - H_v'H_v`` cancelling exactly) are dropped first: the
+    union pattern does not hold them.
+    """
+    m = _csr(m)
+    m.eliminate_zeros()
+    n = pattern.shape[1]
+    keys_p = np.repeat(np.arange(pattern.shape[0], dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
+    keys_m = np.repeat(np.arange(m.shape[0], dtype=np.int64), np.diff(m.indptr)) * n + m.indices
+    pos = np.searchsorted(keys_p, keys_m)
+    if keys_m.size and (pos.max() >= keys_p.size or np.any(keys_p[pos] != keys_m)):
+        raise ValueError("matrix has non-zeros outside the pattern")
+    out = np.zeros(keys_p.size)
+    out[pos] = m.data
+    return out
+
+
+def _union_pattern(a, b) -> sparse.csr_matrix:
+    s = _csr(abs(_csr(a)) + abs(_csr(b)))
+    s.data[:] = 1.0
+    return s
+
+
+class GridHierarchy:
+    """Prolongations and the Galerkin ``Gamma`` of every level, built once for all folds and sigmas.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Vertex counts per dimension of the fine grid.
+    gamma : sparse array, shape (prod(shape), prod(shape))
+    coarsest_max : int, optional
+        Stop coarsening at this many unknowns (default :data:`COARSEST_MAX`).
+    """
+
+    def __init__(self, shape: tuple[int, ...], gamma: sparse.sparray, coarsest_max: int | None = None):
+        coarsest_max = COARSEST_MAX if coarsest_max is None else int(coarsest_max)
+        self.shape = tuple(int(s) for s in shape)
+        g = _csr(gamma)
+        if g.shape[0] != int(np.prod(self.shape)):
+            raise ValueError(f"Gamma has {g.shape[0]} rows, the grid {int(np.prod(self.shape))} vertices")
+        self.p: list[sparse.csr_matrix] = []
+        self.r: list[sparse.csr_matrix] = []
+        self.gammas: list[sparse.csr_matrix] = [g]
+        self.shapes = [self.shape]
+        cur = self.shape
+        while int(np.prod(cur)) > coarsest_max and max(cur) >= 3:
+            p, cur = prolongation(cur)
+            p = _csr(p)
+            self.p.append(p)
+            self.r.append(_csr(p.T))
+            self.gammas.append(_csr(self.r[-1] @ self.gammas[-1] @ p))
+            self.shapes.append(cur)
+
+    @property
+    def levels(self) -> int:
+        return len(self.gammas)
+
+    def coarsen(self, m: sparse.sparray) -> list[sparse.csr_matrix]:
+        """``[m, P_0' m P_0, ...]``: the Galerkin operators of ``m`` on every level."""
+        out = [_csr(m)]
+        for p, r in zip(self.p, self.r):
+            out.append(_csr(r @ out[-1] @ p))
+        return out
+
+    def for_matrix(self, m: sparse.sparray) -> "FoldMultigrid":
+        """The multigrid solver of ``m + sigma Gamma`` (``m`` one fold's normal matrix)."""
+        return FoldMultigrid(self, self.coarsen(m))
+
+
+@dataclass
+class MGInfo:
+    """One multigrid-preconditioned CG solve: iterations and the residual computed afresh."""
+
+    iterations: int
+    rel_residual: float
+    abs_residual: float
+    converged: bool
+
+
+class FoldMultigrid:
+    """V-cycle preconditioned CG for ``(m + sigma Gamma) w = b`` of one ``m`` and any sigma.
+
+    Parameters
+    ----------
+    hier : GridHierarchy
+    ms : list of sparse matrices
+        ``m`` on every level (:meth:`GridHierarchy.coarsen`).
+    """
+
+    def __init__(self, hier: GridHierarchy, ms: list[sparse.csr_matrix]):
+        self.hier = hier
+        self.ops: list[sparse.csr_matrix] = []
+        self._m_vals: list[np.ndarray] = []
+        self._g_vals: list[np.ndarray] = []
+        for m, g in zip(ms, hier.gammas):
+            pat = _union_pattern(m, g)
+            self._m_vals.append(_aligned(pat, m))
+            self._g_vals.append(_aligned(pat, g))
+            self.ops.append(pat)
+        self.sigma: float | None = None
+        self._coarse = None
+
+    def set_sigma(self, sigma: float) -> None:
+        """Every level's operator ``m_l + sigma Gamma_l`` (in place) and the coarsest factor."""
+        if self.sigma == sigma:
+            return
+        for a, mv, gv in zip(self.ops, self._m_vals, self._g_vals):
+            np.add(mv, sigma * gv, out=a.data)
+        self._coarse = splinalg.splu(
+            sparse.csc_matrix(self.ops[-1]), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
+        self.sigma = sigma
+
+    def vcycle(self, b: np.ndarray, level: int = 0) -> np.ndarray:
+        """One V-cycle from a zero initial guess: an SPD approximation of ``A^{-1} b``."""
+        from pyamg.relaxation.relaxation import gauss_seidel
+
+        if level == len(self.ops) - 1:
+            return self._coarse.solve(np.asarray(b, dtype=float))
+        a = self.ops[level]
+        x = np.zeros_like(b)
+        gauss_seidel(a, x, b, iterations=1, sweep="forward")
+        r = b - a @ x
+        x += self.hier.p[level] @ self.vcycle(self.hier.r[level] @ r, level + 1)
+        gauss_seidel(a, x, b, iterations=1, sweep="backward")
+        return x
+
+    def solve(self, b: np.ndarray, sigma: float, x0: np.ndarray | None = None, rtol: float = 1e-10,
+              maxiter: int = 500) -> tuple[np.ndarray, MGInfo]:
+        """``(m + sigma Gamma)^{-1} b`` by PCG to ``||b - A w|| <= rtol ||b||`` (one column ``b``)."""
+        self.set_sigma(float(sigma))
+        a = self.ops[0]
+        b = np.asarray(b, dtype=float)
+        nb = float(np.linalg.norm(b))
+        if nb == 0.0:
+            return np.zeros_like(b), MGInfo(0, 0.0, 0.0, True)
+        pre = splinalg.LinearOperator(a.shape, matvec=self.vcycle, dtype=float)
+        count = [0]
+
+        def _cb(_xk):
+            count[0] += 1
+
+        w, flag = splinalg.cg(a, b, x0=None if x0 is None else np.asarray(x0, dtype=float), rtol=rtol, atol=0.0,
+                              maxiter=maxiter, M=pre, callback=_cb)
+        r = float(np.linalg.norm(b - a @ w))
+        return w, MGInfo(count[0], r / nb, r, flag == 0 and r <= rtol * nb)

@@ -1,0 +1,183 @@
+"""Geometric multigrid for the first-order CV (issue 18): the prolongation, the sigma-linear
+Galerkin levels, the V-cycle's contraction, and the weights within the stated bound of the direct
+solve when ``auto`` mixes multigrid and the factorisation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit import multigrid as mg
+from pwas_hdl.fit import regularized_lsq as rl
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regularized_lsq import (
+    NormalEquationSolver,
+    cross_validate_sigma,
+    estimate_fit_memory,
+    solve_regularized,
+    tikhonov_matrix,
+)
+
+
+def _fold(shape=(23, 30), t=300, seed=0):
+    """A first-order problem on a non-square grid (a swapped Kronecker order would show)."""
+    rng = np.random.default_rng(seed)
+    grid = Grid(np.full(len(shape), -1.2), np.full(len(shape), 1.2), [s - 1 for s in shape])
+    x = rng.uniform(-1.0, 1.0, (t, len(shape)))
+    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
+    h = grid.basis_matrix(x)
+    return grid, h, z, tikhonov_matrix(grid, 1)
+
+
+@pytest.mark.parametrize("m", [3, 4, 9, 10])
+def test_interpolation_1d_is_exact_on_linear_functions(m):
+    p = mg.interpolation_1d(m)
+    assert p.shape == (m, m // 2 + 1)
+    np.testing.assert_allclose(p.sum(axis=1), 1.0)
+    coarse_pos = np.r_[np.arange(0, m, 2), [m - 1] if m % 2 == 0 else []]
+    np.testing.assert_allclose(p @ (2.0 * coarse_pos + 1.0), 2.0 * np.arange(m) + 1.0)
+
+
+def test_prolongation_reproduces_multilinear_functions_in_c_order():
+    shape = (5, 8, 3)
+    p, cshape = mg.prolongation(shape)
+    assert cshape == (3, 5, 2)
+    fine = np.stack(np.unravel_index(np.arange(int(np.prod(shape))), shape), axis=1).astype(float)
+    coarse = np.stack(np.unravel_index(np.arange(int(np.prod(cshape))), cshape), axis=1).astype(float)
+    # coarse coordinates in fine units: even indices, the last one kept for an even count
+    for j, m in enumerate(shape):
+        pos = np.r_[np.arange(0, m, 2), [m - 1] if m % 2 == 0 else []]
+        coarse[:, j] = pos[coarse[:, j].astype(int)]
+
+    def f(c):
+        return 1.0 + 2.0 * c[:, 0] - c[:, 1] + 0.5 * c[:, 2] + 0.25 * c[:, 0] * c[:, 1]
+
+    np.testing.assert_allclose(p @ f(coarse), f(fine), atol=1e-12)
+
+
+def test_grid_shape_from_gamma():
+    for shape in [(23, 30), (4, 5, 6), (2, 7)]:
+        grid = Grid(np.zeros(len(shape)), np.ones(len(shape)), [s - 1 for s in shape])
+        assert mg.grid_shape_of(tikhonov_matrix(grid, 1), len(shape)) == shape
+        assert mg.grid_shape_of(tikhonov_matrix(grid, 0), len(shape)) is None
+    # a Laplacian with an edge removed is not a full grid's
+    g = sparse.lil_array(tikhonov_matrix(Grid([0, 0], [1, 1], [4, 4]), 1))
+    g[3, 4] = g[4, 3] = 0.0
+    assert mg.grid_shape_of(sparse.csr_array(g.tocsr()), 2) is None
+
+
+def test_levels_are_the_galerkin_operators_of_every_sigma():
+    """Each level's m_l + sigma Gamma_l (kept on the union pattern) equals Q_l' (M + sigma Gamma) Q_l."""
+    grid, h, z, gam = _fold()
+    m = sparse.csr_array(h.T @ h)
+    hier = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
+    assert hier.levels >= 3
+    fold = hier.for_matrix(m)
+    for sigma in (1e-4, 3.0):
+        fold.set_sigma(sigma)
+        a = sparse.csr_array(m + sigma * gam)
+        for level, op in enumerate(fold.ops):
+            assert abs(sparse.csr_array(op) - a).max() <= 1e-12 * abs(a).max()
+            if level < len(hier.p):
+                a = sparse.csr_array(hier.p[level].T @ a @ hier.p[level])
+
+
+def test_vcycle_contracts_and_a_wrong_prolongation_does_not():
+    """As a stationary iteration, x <- x + V(b - A x) reduces the error about 5x a cycle (at least 3x) at a
+    penalty-dominated sigma; with the coarse columns of P shuffled, the coarse correction is useless
+    and the rate is near the smoother's alone (1 - O(h^2))."""
+    grid, h, z, gam = _fold(shape=(47, 62), t=800)
+    m = sparse.csr_array(h.T @ h)
+    sigma = 10.0
+    a = sparse.csr_array(m + sigma * gam)
+    rng = np.random.default_rng(1)
+    x_true = rng.standard_normal(a.shape[0])
+    b = a @ x_true
+
+    def rate(fold):
+        fold.set_sigma(sigma)
+        x = np.zeros_like(b)
+        errs = []
+        for _ in range(6):
+            x = x + fold.vcycle(b - a @ x)
+            errs.append(np.linalg.norm(x - x_true))
+        return (errs[-1] / errs[1]) ** (1 / 4)
+
+    hier = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
+    good = rate(hier.for_matrix(m))
+    assert good < 0.35, good
+    bad = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
+    perm = rng.permutation(bad.p[0].shape[1])
+    bad.p[0] = mg._csr(bad.p[0][:, perm])
+    bad.r[0] = mg._csr(bad.p[0].T)
+    bad.gammas = [bad.gammas[0]]
+    for p, r in zip(bad.p, bad.r):
+        bad.gammas.append(mg._csr(r @ bad.gammas[-1] @ p))
+    worse = rate(bad.for_matrix(m))
+    assert worse > 3 * good, (good, worse)
+
+
+def test_mg_solve_within_the_stated_bound_of_the_direct_solve():
+    grid, h, z, gam = _fold(shape=(31, 31), t=400, seed=3)
+    for sigma in (1e-3, 1.0, 1e3):
+        wd = solve_regularized(h, z, sigma, gam, method="direct")
+        wm, info = solve_regularized(h, z, sigma, gam, method="mg", return_info=True)
+        assert info.method == "mg" and info.converged and info.rel_residual <= rl.CG_RTOL
+        assert float(np.linalg.norm(wm - wd)) <= info.weight_bound
+
+
+def test_auto_mixes_multigrid_and_direct_by_dominance(monkeypatch):
+    """Above MG_MIN_UNKNOWNS, first order: the penalty-dominated sigmas by multigrid, the others by
+    the factorisation; the fold errors those of the direct CV to the bound's precision."""
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+    grid, h, z, gam = _fold(shape=(31, 31), t=600, seed=4)
+    sig = np.logspace(-4, 2, 5)
+    ca = cross_validate_sigma(h, z, gam, sig, folds=3)
+    cd = cross_validate_sigma(h, z, gam, sig, folds=3, method="direct")
+    by = ca.solver["solves_by_method"]
+    assert by.get("mg", 0) > 0 and by.get("direct", 0) > 0 and sum(by.values()) == 15
+    assert ca.solver["all_converged"] and ca.solver["iterations"] > 0
+    assert ca.best_sigma == cd.best_sigma
+    np.testing.assert_allclose(ca.fold_mse, cd.fold_mse, rtol=1e-6)
+    # the rule: rho = sigma mean(diag Gamma) / mean(rowsum M) against MG_DOMINANCE
+    hth = sparse.csr_array(h.T @ h)
+    solver = NormalEquationSolver(hth, gam, 2)
+    rho = sig * gam.diagonal().mean() / (hth.sum() / hth.shape[0])
+    assert [solver.uses_mg(hth, s) for s in sig] == list(rho >= rl.MG_DOMINANCE)
+
+
+def test_mg_needs_a_first_order_grid_gamma():
+    grid, h, z, gam = _fold()
+    with pytest.raises(InputError, match="'mg'"):
+        solve_regularized(h, z, 1.0, tikhonov_matrix(grid, 0), method="mg")
+    with pytest.raises(InputError, match="'mg'"):
+        solve_regularized(h, z, 1.0, sparse.identity(gam.shape[0], format="csr") * 2.0, method="mg")
+
+
+def test_memory_estimate_counts_the_levels():
+    est = estimate_fit_memory(10**5, 10**6, 2, 1, 1)
+    assert est["multigrid"] > 0
+    assert estimate_fit_memory(10**5, 10**6, 2, 1, 0)["multigrid"] == 0
+    assert estimate_fit_memory(10**3, 10**3, 2, 1, 1)["multigrid"] == 0
+
+
+def test_auto_uses_multigrid_only_in_the_measured_dimensions(monkeypatch):
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    for shape, expect in [((400,), False), ((20, 20), True), ((8, 8, 8), True), ((5, 5, 5, 5), False)]:
+        grid = Grid(np.zeros(len(shape)), np.ones(len(shape)), [s - 1 for s in shape])
+        gam = tikhonov_matrix(grid, 1)
+        hth = sparse.identity(gam.shape[0], format="csr") * 0.1
+        assert NormalEquationSolver(hth, gam, len(shape)).uses_mg(hth, 1e3) is expect, shape
+
+
+def test_explicit_zeros_of_the_fold_matrix_are_not_outside_the_pattern():
+    grid, h, z, gam = _fold()
+    m = sparse.csr_matrix(h.T @ h)
+    m.data[: 7] = 0.0  # entries that cancelled exactly, kept as explicit zeros
+    fold = mg.GridHierarchy(grid.shape, gam, coarsest_max=30).for_matrix(m)
+    fold.set_sigma(1.0)
+    m.eliminate_zeros()
+    assert abs(sparse.csr_array(fold.ops[0]) - sparse.csr_array(m + gam)).max() <= 1e-12
