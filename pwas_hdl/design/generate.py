@@ -466,10 +466,8 @@ def build_design(
         if hasattr(bank_model, "taps"):  # u/y taps beside the features (pwas_hdl.hdl.observer_tap_sensor_top)
             from pwas_hdl.hdl.observer_tap_sensor_top import build_tapped_observer_sensor
 
-            if architecture != "parallel" or bank_lanes is not None:
-                raise InputError("observer-bank sensors with u/y taps have the parallel bank and core only; "
-                                 "use --architecture parallel (no --bank-lanes)")
-            comp = build_tapped_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top)
+            comp = build_tapped_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture,
+                                                lanes=1 if bank_lanes is None else bank_lanes)
         else:
             # --architecture serial: the time-multiplexed bank and the serial core (pwas_hdl.hdl.serial_observer_bank)
             comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture,

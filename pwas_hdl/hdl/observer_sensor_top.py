@@ -42,7 +42,8 @@ from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, bui
 from pwas_hdl.hdl.sensor_top import sample_fields
 from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY, build_serial_front_end, plan_serial_bank
 
-__all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor"]
+__all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor", "attach_core_and_schedule",
+           "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes"]
 
 #: Pipeline stages in front of the core (the sum registers and the root register).
 FRONT_END_STAGES = 2
@@ -77,28 +78,13 @@ class ObserverSensorTop(wiring.Component):
     def __init__(self, bank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                  architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
         self._MustUse__silence = True
-        if architecture not in ("parallel", "serial"):
-            raise ValueError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
         if params.n != bank.n_models:
             raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features")
         if params.in_width != bank.input_bits_core:
             raise ValueError("the core's input width differs from the feature code width")
         self.bank = bank
-        self.architecture = architecture
-        if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
-            from pwas_hdl.hdl.serial_core import SerialPWASCore
-
-            self.core = SerialPWASCore(params, pipeline=pipeline)
-            self.core._MustUse__silence = True
-            self.plan = plan_serial_bank(bank, lanes, isqrt_every, self.core.ii)
-            self.stages_before_core = self.plan.stages_before_core
-            self.ii = self.cycles_per_sample = self.plan.cycles_per_sample
-        else:
-            self.core = PWASCore(params, memory=memory, pipeline=pipeline)
-            self.plan = None
-            self.stages_before_core = FRONT_END_STAGES
-            self.ii = self.cycles_per_sample = 1
-        self.core._MustUse__silence = True
+        attach_core_and_schedule(self, bank, params, memory=memory, pipeline=pipeline, architecture=architecture,
+                                 lanes=lanes, isqrt_every=isqrt_every)
         self.params = params
         self.latency = self.stages_before_core + self.core.latency
         self.memory_plan = self.core.memory_plan
@@ -148,12 +134,7 @@ class ObserverSensorTop(wiring.Component):
 
     def flow_control(self, names: dict) -> dict:
         """The handshake rules in words (``names``: port names by role); the serial bank throttles the input."""
-        if self.plan is None:
-            return {}
-        ir, ov, orr = names["in.ready"], names["out.valid"], names["out.ready"]
-        return {ir: f"bank idle or in its last cycle, and the previous sample's feature codes taken by the core: one transfer "
-                    f"every {self.ii} cycles at most (II = cycles_per_sample); low while the bank is busy or while "
-                    f"{ov} & ~{orr} holds the core"}
+        return serial_flow_control(self, names)
 
     def expected_outputs(self, n_samples: int) -> int:
         return max(0, n_samples - self.warmup)
@@ -162,27 +143,10 @@ class ObserverSensorTop(wiring.Component):
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:
-            return self._elaborate_serial(m, cur, inp, transfer)
+            serial_sensor_path(m, self, cur, inp, transfer)
+            return m
         codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm)
         self.core.build_into(m, Cat(*codes), valid, advance, self.out)
-        return m
-
-    def _elaborate_serial(self, m, cur, inp, transfer):
-        """Time-multiplexed bank: in.ready = bank free & (no pending codes | the core takes them now)."""
-        sample_warm = Signal(name="bank_sample_warm")
-        with m.If(transfer):
-            m.d.sync += sample_warm.eq(self.warm)
-        codes, done, free = build_serial_front_end(m, self.bank, self.plan, cur, transfer, sample_warm)
-        pending = Signal(name="features_valid")
-        core_adv = Signal(name="core_advance")
-        take = Signal(name="features_taken")
-        m.d.comb += take.eq(pending & core_adv)
-        with m.If(take):
-            m.d.sync += pending.eq(0)
-        with m.If(done):
-            m.d.sync += pending.eq(1)
-        m.d.comb += inp.ready.eq(free & (~pending | take))
-        self.core.build_into(m, Cat(*codes), pending, core_adv, self.out)
         return m
 
 
@@ -257,3 +221,64 @@ def parallel_feature_codes(m: Module, bank, cur: list, transfer, advance, warm) 
     with m.If(advance):
         m.d.sync += v2.eq(v1)
     return build_feature_codes(m, bank, roots), v2
+
+
+def attach_core_and_schedule(top, bank, params: CoreParams, *, memory: str, pipeline, architecture: str, lanes: int,
+                             isqrt_every: int | None) -> None:
+    """Set the core and the schedule of an observer-bank top (``top.architecture``, ``core``, ``plan``,
+    ``stages_before_core``, ``ii``, ``cycles_per_sample``): the parallel core behind the
+    :data:`FRONT_END_STAGES` registers (II 1), or the serial core behind the time-multiplexed bank
+    (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`: II = cycles_per_sample)."""
+    if architecture not in ("parallel", "serial"):
+        raise ValueError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
+    top.architecture = architecture
+    if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
+        from pwas_hdl.hdl.serial_core import SerialPWASCore
+
+        top.core = SerialPWASCore(params, pipeline=pipeline)
+        top.core._MustUse__silence = True
+        top.plan = plan_serial_bank(bank, lanes, isqrt_every, top.core.ii)
+        top.stages_before_core = top.plan.stages_before_core
+        top.ii = top.cycles_per_sample = top.plan.cycles_per_sample
+    else:
+        top.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        top.plan = None
+        top.stages_before_core = FRONT_END_STAGES
+        top.ii = top.cycles_per_sample = 1
+    top.core._MustUse__silence = True
+
+
+def serial_flow_control(top, names: dict) -> dict:
+    """``in.ready``'s rule in words for a top with the serial bank (``{}`` for the parallel one)."""
+    if top.plan is None:
+        return {}
+    ir, ov, orr = names["in.ready"], names["out.valid"], names["out.ready"]
+    return {ir: f"bank idle or in its last cycle, and the previous sample's feature codes taken by the core: one transfer "
+                f"every {top.ii} cycles at most (II = cycles_per_sample); low while the bank is busy or while "
+                f"{ov} & ~{orr} holds the core"}
+
+
+def serial_sensor_path(m: Module, top, cur: list, inp, transfer, extra_codes=None) -> None:
+    """The serial top's body: time-multiplexed bank (:func:`build_serial_front_end`), the pending
+    feature codes and the serial core; ``in.ready`` = bank free & (no pending codes | the core takes
+    them now).
+
+    ``extra_codes(done)``, if given, returns more core inputs (after the feature codes, in the
+    core's input order) that must be valid from the cycle after ``done`` (the last feature code of
+    a warm sample written) until the core takes them: e.g. the u/y tap codes registered on ``done``.
+    """
+    sample_warm = Signal(name="bank_sample_warm")
+    with m.If(transfer):
+        m.d.sync += sample_warm.eq(top.warm)
+    codes, done, free = build_serial_front_end(m, top.bank, top.plan, cur, transfer, sample_warm)
+    extra = list(extra_codes(done)) if extra_codes is not None else []
+    pending = Signal(name="features_valid")
+    core_adv = Signal(name="core_advance")
+    take = Signal(name="features_taken")
+    m.d.comb += take.eq(pending & core_adv)
+    with m.If(take):
+        m.d.sync += pending.eq(0)
+    with m.If(done):
+        m.d.sync += pending.eq(1)
+    m.d.comb += inp.ready.eq(free & (~pending | take))
+    top.core.build_into(m, Cat(*codes, *extra), pending, core_adv, top.out)

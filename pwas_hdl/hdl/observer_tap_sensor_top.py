@@ -15,6 +15,16 @@ root, the feature codes), plus a lag bank of the input codes (payload fields
 
 ``latency = 2 + core latency``, II 1, one cycle per sample; warm-up ``max(M + l, memory - 1)``
 transfers (output ``warm``).
+
+``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the serial
+observer-sensor top's body (:func:`pwas_hdl.hdl.observer_sensor_top.serial_sensor_path`: the
+time-multiplexed bank, the pending feature codes, the serial core) with the same lag registers
+(shifted on the input transfer, so in step with the serial schedule: they hold sample ``k`` from
+the cycle after its transfer until the next transfer, which waits for the core to take sample
+``k``'s inputs) and the tap codes registered in the cycle the bank writes its last feature code
+(``bank_features_done``), held with the feature codes until the core takes them. II =
+``cycles_per_sample`` of the schedule (the serial core now has ``N_theta + taps + 1`` cycles per
+sample), ``latency = stages_before_core + core latency``. The bit-true model is the same.
 """
 
 from __future__ import annotations
@@ -24,21 +34,37 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.hdl._lintsafe import sink_unused
-from pwas_hdl.hdl.core import PWASCore, core_output_layout
+from pwas_hdl.hdl.core import core_output_layout
 from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
-from pwas_hdl.hdl.observer_sensor_top import FRONT_END_STAGES, inputs_and_warmup, parallel_feature_codes
+from pwas_hdl.hdl.observer_sensor_top import (
+    attach_core_and_schedule,
+    inputs_and_warmup,
+    parallel_feature_codes,
+    serial_flow_control,
+    serial_sensor_path,
+)
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import sample_fields
+from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
 __all__ = ["ObserverTapSensorTop", "build_tapped_observer_sensor"]
 
 
 class ObserverTapSensorTop(wiring.Component):
-    """Observer bank + residual features + u/y taps + PWAS core (ports as :class:`ObserverSensorTop`)."""
+    """Observer bank + residual features + u/y taps + PWAS core (ports as :class:`ObserverSensorTop`).
+
+    Parameters
+    ----------
+    model : TappedObserverBankSensorModel
+    params : CoreParams of the core on ``[features, taps]``
+    memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+    architecture, lanes, isqrt_every : as :class:`~pwas_hdl.hdl.observer_sensor_top.ObserverSensorTop`
+    """
 
     kind = "observer-sensor"
 
-    def __init__(self, model, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, model, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
         self._MustUse__silence = True
         bank, taps = model.bank, model.taps
         if params.n != bank.n_models + len(taps.dims):
@@ -46,12 +72,10 @@ class ObserverTapSensorTop(wiring.Component):
         self.model = model
         self.bank = bank
         self.taps = taps
-        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
-        self.core._MustUse__silence = True
+        attach_core_and_schedule(self, bank, params, memory=memory, pipeline=pipeline, architecture=architecture,
+                                 lanes=lanes, isqrt_every=isqrt_every)
         self.params = params
-        self.latency = FRONT_END_STAGES + self.core.latency
-        self.ii = 1
-        self.cycles_per_sample = 1
+        self.latency = self.stages_before_core + self.core.latency
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = int(model.first_output)
@@ -72,11 +96,16 @@ class ObserverTapSensorTop(wiring.Component):
     def extra_info(self) -> dict:
         fe = {
             "kind": "observer-bank",
-            "architecture": "parallel constant multipliers, one state update of every observer per input transfer; "
-                            "u/y taps from a lag bank of the input codes, requantised to the core's tap inputs",
+            "architecture": ("parallel constant multipliers, one state update of every observer per input transfer; "
+                             if self.plan is None else
+                             f"time-multiplexed: {len(self.plan.lanes)} state-update unit(s) (lanes), one state update per lane "
+                             "per clock, rotating state chains, one squarer / square root / code multiplier per lane; ")
+                            + "u/y taps from a lag bank of the input codes, requantised to the core's tap inputs",
+            "bank": self.architecture,
             "cycles_per_sample": self.cycles_per_sample,
             "ii": self.ii,
-            "stages_before_core": FRONT_END_STAGES,
+            "stages_before_core": self.stages_before_core,
+            **({"schedule": self.plan.to_dict()} if self.plan is not None else {}),
             **self.bank.to_dict(),
             "taps": self.taps.to_dict(),
         }
@@ -92,11 +121,15 @@ class ObserverTapSensorTop(wiring.Component):
             },
         }
 
+    def flow_control(self, names: dict) -> dict:
+        """The handshake rules in words (``names``: port names by role); the serial bank throttles the input."""
+        return serial_flow_control(self, names)
+
     def expected_outputs(self, n_samples: int) -> int:
         return max(0, n_samples - self.warmup)
 
     def _tap_codes(self, m: Module, cur: list, transfer, advance) -> list:
-        """Lag registers of the tapped signals (shift on transfer) and the registered tap codes."""
+        """Lag registers of the tapped signals (shift on transfer) and the tap codes, registered when ``advance``."""
         taps, b = self.taps, self.bank.input_bits
         depth: dict[int, int] = {}
         for s, lag in taps.dims:
@@ -120,7 +153,10 @@ class ObserverTapSensorTop(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        cur, _inp, advance, transfer = inputs_and_warmup(m, self)
+        cur, inp, advance, transfer = inputs_and_warmup(m, self)
+        if self.plan is not None:  # serial bank: the tap codes registered with the last feature code (done)
+            serial_sensor_path(m, self, cur, inp, transfer, lambda done: self._tap_codes(m, cur, transfer, done))
+            return m
         codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm)
         taps = self._tap_codes(m, cur, transfer, advance)
         self.core.build_into(m, Cat(*codes, *taps), valid, advance, self.out)
@@ -128,12 +164,15 @@ class ObserverTapSensorTop(wiring.Component):
 
 
 def build_tapped_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                                 name: str = "pwas_sensor") -> ObserverTapSensorTop:
-    """The top of a bit-true :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`."""
+                                 name: str = "pwas_sensor", architecture: str = "parallel", lanes: int = 1,
+                                 isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> ObserverTapSensorTop:
+    """The top of a bit-true :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`
+    (``architecture="serial"``: the time-multiplexed bank with ``lanes`` state-update units)."""
     from pwas_hdl.hdl.api import _check_name
 
     name = _check_name(name)
-    top = ObserverTapSensorTop(model, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline)
+    top = ObserverTapSensorTop(model, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline,
+                               architecture=architecture, lanes=lanes, isqrt_every=isqrt_every)
     top.module_name = name
     top._MustUse__silence = True
     top.core.input_names = list(model.core.regressor_names)
