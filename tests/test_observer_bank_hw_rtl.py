@@ -119,8 +119,8 @@ def test_serial_bank_manifest_and_refusals(bank_sensor, tmp_path):
     fe = info["front_end"]
     sch = fe["schedule"]
     assert fe["bank"] == "serial" and sch["lanes"] == 1 and sch["steps"] == 3 * 5
-    # N M steps, or the feature pipeline's tail, or the serial core's n + 1
-    assert fe["cycles_per_sample"] == fe["ii"] == info["ii"] == max(15, sch["stages_before_core"], 3 + 1)
+    # N M steps + the flush of the pipelined update, or the feature pipeline's tail, or the serial core's n + 1
+    assert fe["cycles_per_sample"] == fe["ii"] == info["ii"] == max(15 + 1, sch["stages_before_core"], 3 + 1)
     assert info["latency"] == fe["stages_before_core"] + top.core.latency
     assert "bank idle" in info["flow_control"]["s_axis_tready"]
     two = build_observer_sensor(observer_bank_model(bank_sensor), architecture="serial", lanes=2)

@@ -8,14 +8,19 @@ the ``M`` states of the lane's observers, one state update per clock:
   observers in the first ones); a lane holds its states in one **rotating chain** of
   ``n_L * M`` registers in the order ``(j, 0), (j, 1), .., (j + 1, 0), ..``: in step ``s``
   the head is ``x_{j,i}`` and the next register ``x_{j,i+1}`` (0 for ``i = M - 1``), the new
-  state goes to the tail and the chain shifts, so after ``n_L M`` steps it is in order again
+  state goes to the tail and the chain shifts, so after ``n_L M`` steps (+ 1 flush, below) it is in order again
   and no wide read multiplexer is needed. ``x_{j,0}`` before the update is held for the
   observer's later steps;
 * the update ``acc_i = A0_i x_0 + ((sum_c Bc_ic qu_c + Lc_i qy) << (F_s - F_in)) + Dc_i +
   2**(F_c-1) + (x_{i+1} << F_c)``, ``x_i' = sat((acc_i) >> F_c)`` with the coefficients from a
   table indexed by the step (``nu + 2`` variable multipliers per lane instead of
   ``N M (nu + 2)`` constant ones). The sum is an exact integer sum in the declared accumulator
-  width, so its order does not matter and the rounding / saturation are the bit-true model's;
+  width, so its order does not matter and the rounding / saturation are the bit-true model's.
+  The update is pipelined (:data:`MAC_STAGES` = 2): the tables are read one cycle ahead into
+  coefficient registers, the products (and ``x_{i+1}``, ``Dc_i``) are registered in the step's
+  cycle, the sum, rounding and saturation follow in the next cycle and enter the chain's tail;
+  the chain shifts ``n_L M + 1`` times per sample (the extra *flush* shift drops the one stale
+  tail entry of the first step and brings the last update in), so it is in order again;
 * at step ``i = 0`` of observer ``j``: the residual ``e_j = x_{j,0} - (qy << (F_s - F_in))``,
   ``e_j**2`` (one squarer per lane), the running sum ``S_j`` (a rotating chain like the states)
   and the delay line of ``l + 1`` squares: one memory per lane (block / distributed RAM instead
@@ -31,7 +36,8 @@ Schedule (transfer of sample ``k`` in cycle ``t``; the inputs are latched): step
 lane in cycle ``t + 1 + s`` (``s < n_L M``); feature ``j`` (step ``s_j = (j - j_L) M`` in its
 lane) is in its code register from cycle ``t + 1 + s_j + 3 + R`` (``R``: the square root's
 internal registers); all codes from ``t + stages_before_core``, ``stages_before_core = 4 + R +
-(n_max - 1) M``. ``cycles_per_sample = max(n_max M, stages_before_core, core II)``:
+(n_max - 1) M``. ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
+the flush of the state-update pipeline):
 ``in.ready`` is high when the bank is idle or in its last cycle, and the previous sample's
 feature codes have been taken by the core (or are taken in this cycle). II = cycles_per_sample.
 """
@@ -53,6 +59,8 @@ __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "buil
 
 #: Digit steps of the integer square root between two pipeline registers (serial bank).
 DEFAULT_ISQRT_EVERY = 8
+#: Register stages of a lane's state update (products registered, then sum / round / saturate).
+MAC_STAGES = 2
 
 
 @dataclass(frozen=True)
@@ -70,7 +78,7 @@ class SerialBankPlan:
     stages_before_core : int
         Cycles from the input transfer to the core's input valid (``4 + R + (n_max - 1) M``).
     cycles_per_sample : int
-        The II: ``max(steps, stages_before_core, core_ii)``.
+        The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``.
     """
 
     lanes: tuple
@@ -83,7 +91,7 @@ class SerialBankPlan:
 
     def to_dict(self) -> dict:
         return {"lanes": len(self.lanes), "observers_per_lane": [len(ln) for ln in self.lanes], "steps": self.steps,
-                "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
+                "mac_stages": MAC_STAGES, "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
                 "stages_before_core": self.stages_before_core, "cycles_per_sample": self.cycles_per_sample}
 
 
@@ -116,7 +124,7 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
     n_max = len(groups[0])
     r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
     sbc = 4 + r + (n_max - 1) * mo
-    cps = max(n_max * mo, sbc, int(core_ii))
+    cps = max(n_max * mo + MAC_STAGES - 1, sbc, int(core_ii))  # + the flush of the state-update pipeline
     return SerialBankPlan(groups, mo, n_max * mo, isqrt_every if bank.feature_map == "11b" else None, r, sbc, cps)
 
 
@@ -254,6 +262,25 @@ def _delay(m: Module, sig, n: int, name: str, reset_less: bool):
     return sig
 
 
+def _coef_reg(m: Module, sel, values: list[int], name: str, width: int):
+    """``values[sel]`` registered (free-running, reset-less) as a signed ``width``-bit net; a
+    Const when the table is constant (nothing to register)."""
+    t = _table(m, sel, values, f"{name}_tab", width=width)
+    if isinstance(t, Const):
+        return t
+    r = Signal(signed(width), name=name, reset_less=True)
+    m.d.sync += r.eq(t)
+    return r
+
+
+def _product_reg(m: Module, coef, x, width: int, name: str):
+    """``coef * x`` (:func:`var_product`) in a free-running register (MAC stage 1 -> stage 2)."""
+    p = var_product(m, coef, x, width, name)
+    r = Signal(signed(width), name=f"{name}_r", reset_less=True)
+    m.d.sync += r.eq(p)
+    return r
+
+
 def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, transfer, sample_warm):
     """Add the time-multiplexed bank and feature unit to ``m``.
 
@@ -311,6 +338,8 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.sync += oj.eq(add_const_wrap(m, oj, 1, "bank_obs_inc"))
     free = Signal(name="bank_free")
     m.d.comb += free.eq(~busy | last)
+    st_next = Signal(unsigned(stw), name="bank_step_next")  # the step of the next cycle: tables read ahead
+    m.d.comb += st_next.eq(Mux(transfer, 0, add_const_wrap(m, st, 1, "bank_step_ahead")))
     first_state = Signal(name="bank_first_state")
     m.d.comb += first_state.eq(eq_const(si, 0)) if mo > 1 else first_state.eq(1)
     last_state = Signal(name="bank_last_state")
@@ -352,7 +381,9 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.comb += nxt.eq(Mux(last_state, 0, chain[1]))
         else:
             m.d.comb += nxt.eq(0)
-        # coefficients of step (j, i) in lane order
+        # coefficients of step (j, i) in lane order, read one cycle ahead (st_next) into registers;
+        # the products are registered (MAC stage 1, the step's cycle), the sum, rounding and
+        # saturation follow in the next cycle (stage 2) and go to the chain's tail
         order = [(j, i) for j in group for i in range(mo)]
         a0 = [int(bank.a0_codes[j, i]) for j, i in order]
         terms = []
@@ -362,17 +393,20 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.comb += x0.eq(Mux(first_state, head, x0_hold))
             with m.If(active & first_state):
                 m.d.sync += x0_hold.eq(head)
-            terms.append(var_product(m, _table(m, st, a0, f"{pre}_a0", width=accw - bs), x0, accw, f"{pre}_pa"))
+            terms.append(_product_reg(m, _coef_reg(m, st_next, a0, f"{pre}_a0", accw - bs), x0, accw, f"{pre}_pa"))
         inj = []  # the input alignment << (F_s - F_in) folded into the tabled coefficients (as the parallel bank)
         for c in range(nu):
             bv = [int(bank.b_codes[j, i, c]) << sh_in for j, i in order]
             if any(bv):
-                inj.append(var_product(m, _table(m, st, bv, f"{pre}_b{c}", width=accw - len(qu[c])), qu[c], accw, f"{pre}_pb{c}"))
+                inj.append(_product_reg(m, _coef_reg(m, st_next, bv, f"{pre}_b{c}", accw - len(qu[c])), qu[c], accw,
+                                        f"{pre}_pb{c}"))
         lv = [int(bank.l_codes[j, i]) << sh_in for j, i in order]
         if any(lv):
-            inj.append(var_product(m, _table(m, st, lv, f"{pre}_l", width=accw - len(qy)), qy, accw, f"{pre}_pl"))
+            inj.append(_product_reg(m, _coef_reg(m, st_next, lv, f"{pre}_l", accw - len(qy)), qy, accw, f"{pre}_pl"))
         terms += inj
-        terms.append(const_product(m, 1 << fc, nxt, accw, f"{pre}_px"))
+        nxt_r = Signal(signed(bs), name=f"{pre}_x_next_r", reset_less=True)
+        m.d.sync += nxt_r.eq(nxt)
+        terms.append(const_product(m, 1 << fc, nxt_r, accw, f"{pre}_px"))
         dh = [int(bank.d_codes[j, i]) + (1 << (fc - 1)) for j, i in order]  # the rounding term folded in
         if all(v == dh[0] for v in dh):
             acc = add_const_signed(m, _sum(m, terms, accw, f"{pre}_acc"), dh[0], f"{pre}_acc_d")
@@ -380,12 +414,18 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             w = max(_cbits(v) for v in dh)
             if w > accw:
                 raise ValueError("observer constant wider than the accumulator")
-            dnet = _table(m, st, dh, f"{pre}_d", width=accw)
+            dnet = _coef_reg(m, st, dh, f"{pre}_d", accw)  # registered at the step: stage 2's term
             acc = _sum(m, terms + [dnet], accw, f"{pre}_acc")
         sink_unused(m, acc[:fc], f"{pre}_acc_frac")
         new, flag = saturate(m, acc[fc:].as_signed(), bs, f"{pre}_new")
-        sat_flags.append(flag & active)
-        with m.If(active):
+        stage2 = Signal(name=f"{pre}_mac_valid")  # stage 2 holds a state update of this sample
+        m.d.sync += stage2.eq(active)
+        sat_flags.append(flag & stage2)
+        shift = busy  # the steps and one flush cycle (the last update enters the tail); busy when that is the whole II
+        if steps + 1 < (1 << stw):
+            shift = Signal(name=f"{pre}_shift")
+            m.d.comb += shift.eq(busy & ~ge_const(st, steps + 1))
+        with m.If(shift):
             m.d.sync += [chain[k].eq(chain[k + 1]) for k in range(steps - 1)] + [chain[-1].eq(new)]
 
         # ---- residual, square, window record (rotates once per observer)
