@@ -6,7 +6,9 @@ generated with ``generate --design sensor`` (the tapped top, :mod:`pwas_hdl.hdl.
 and replayed by the manifest-driven cocotb bench (``sim/pwas_tb.py``) on Icarus and on Verilator:
 the standard runs (full speed; random bubbles and backpressure; a reset in the middle of a
 stream) over 400 transfers of :func:`sim.pwas_stimulus.observer_codes` (the quantised test
-trajectory, steps, full-scale out-of-range codes, saturating alternations, silence). Recorded as
+trajectory, steps, full-scale out-of-range codes, saturating alternations, silence). The ``serial-``
+configurations are generated with ``--architecture serial --bank-lanes L`` (the time-multiplexed
+bank; II = the manifest's cycles_per_sample, measured at full speed). Recorded as
 :mod:`pwas_hdl.benchmarks.observer_bank_rtl` (same table), plus the taps.
 
 ``python -m pwas_hdl.benchmarks.bank_taps_rtl [--quick]`` writes ``results/bank_taps_rtl.{json,md}``.
@@ -29,6 +31,13 @@ CONFIGS = [
     dict(name="n2-m2-poles0.4-11b-sq-mu0-my3", n_models=2, order=2, observer="poles:0.4", features="11b-sq", mu=0, my=3),
     dict(name="n2-m3-kalman1-11b-sq-mu1-my2-saturating", n_models=2, order=3, observer="kalman:1", features="11b-sq", mu=1, my=2,
          state_bits=14),
+    # the serial (time-multiplexed) bank with the taps: generate --architecture serial --bank-lanes L
+    dict(name="serial-n2-m5-deadbeat-11b-mu1-my1-1lane", n_models=2, order=5, observer="deadbeat", features="11b", mu=1, my=1,
+         architecture="serial", bank_lanes=1),
+    dict(name="serial-n3-m3-kalman0.1-11b-mu2-my0-3lanes", n_models=3, order=3, observer="kalman:0.1", features="11b", mu=2,
+         my=0, architecture="serial", bank_lanes=3),
+    dict(name="serial-n2-m3-kalman1-11b-sq-mu1-my2-saturating-2lanes", n_models=2, order=3, observer="kalman:1",
+         features="11b-sq", mu=1, my=2, state_bits=14, architecture="serial", bank_lanes=2),
 ]
 SIMULATORS = ("icarus", "verilator")
 
@@ -47,7 +56,7 @@ def run(quick: bool = False) -> dict:
     for cfg in CONFIGS[:1] if quick else CONFIGS:
         fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
         s = PWASVirtualSensor(mu=cfg["mu"], my=cfg["my"], partitions=2, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
-        opts = {"state_bits": cfg["state_bits"]} if "state_bits" in cfg else {}
+        opts = {k: cfg[k] for k in ("state_bits", "architecture", "bank_lanes") if k in cfg}
         with tempfile.TemporaryDirectory(prefix="pwas-taps-rtl-") as tmp:
             generate(s, Path(tmp) / "d", design="sensor", **opts)
             d = load_design(Path(tmp) / "d")
@@ -59,6 +68,8 @@ def run(quick: bool = False) -> dict:
                 r = run_rtl(d, standard_runs(d, codes), sim)
                 row = {"config": cfg["name"], "simulator": sim, "n_models": d.bank.bank.n_models, "order": d.bank.bank.order,
                        "observer": cfg["observer"], "features": cfg["features"], "mu": cfg["mu"], "my": cfg["my"],
+                       "bank": cfg.get("architecture", "parallel"), "bank_lanes": cfg.get("bank_lanes"),
+                       "ii_manifest": d.manifest["ii"],
                        "taps": d.manifest["lags"]["regressors"][d.bank.bank.n_models:],
                        "state_bits": d.bank.bank.formats.state_bits, "warmup": d.warmup,
                        "stimulus_state_saturations": sat, "outputs": r.outputs, "mismatches": r.mismatches, "passed": r.passed,
@@ -72,11 +83,12 @@ def run(quick: bool = False) -> dict:
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors with u/y taps: bit-exact RTL on Icarus and Verilator{' (QUICK)' if doc['quick'] else ''}", "",
              "| configuration | taps | simulator | state bits | state saturations in stimulus | outputs | mismatches | "
-             "latency (measured / manifest) | II | warm-up |",
-             "|---|---|---|---:|---:|---:|---:|---|---:|---:|"]
+             "latency (measured / manifest) | II (measured / manifest) | warm-up |",
+             "|---|---|---|---:|---:|---:|---:|---|---|---:|"]
     for r in doc["rows"]:
         lines.append(f"| {r['config']} | {', '.join(r['taps'])} | {r['simulator']} | {r['state_bits']} | {r['stimulus_state_saturations']} | "
-                     f"{r['outputs']} | {r['mismatches']} | {r['latency_measured']} / {r['latency_manifest']} | {r['ii']} | {r['warmup']} |")
+                     f"{r['outputs']} | {r['mismatches']} | {r['latency_measured']} / {r['latency_manifest']} | "
+                     f"{r['ii']} / {r.get('ii_manifest', 1)} | {r['warmup']} |")
     return "\n".join(lines) + "\n"
 
 

@@ -54,14 +54,15 @@ ASSUMPTIONS_E3 = ASSUMPTIONS | {
 
 
 def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | None = None, executor=None,
-        rtl: str | None = None) -> dict:
+        rtl: str | None = None, architecture: str = "parallel", bank_lanes: int | None = None) -> dict:
     """Run E3; return the results document (plus ``_traces`` of run 0 for :func:`plot`).
 
     ``rtl`` (``"verilator"`` or ``"icarus"``): also generate the PWAS P-feat sensor's hardware (observer
     bank + residual features + the ``i_k, v_k`` taps + core, :mod:`pwas_hdl.hdl.observer_tap_sensor_top`)
     and replay the whole test trajectory through it (:func:`~pwas_hdl.benchmarks.seed004_common.rtl_estimates`):
     rows ``stage: rtl`` for ``pwas-feat`` with the mismatches against the bit-true model, the measured
-    latency / II and the largest |RTL - float| beside the stated bound.
+    latency / II and the largest |RTL - float| beside the stated bound. ``architecture="serial"``
+    (``bank_lanes``): the same sensor on the time-multiplexed bank (``generate --architecture serial``).
     """
     if runs < 1:
         raise InputError("--runs must be >= 1")
@@ -93,7 +94,8 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
                 from pwas_hdl.benchmarks.seed004_common import rtl_estimates
 
                 with tempfile.TemporaryDirectory(prefix="pwas-battery-rtl-") as tmp:
-                    hw = rtl_estimates(model, te.u, te.y, Path(tmp), simulator=rtl)
+                    hw = rtl_estimates(model, te.u, te.y, Path(tmp), simulator=rtl, architecture=architecture,
+                                       bank_lanes=bank_lanes)
                 est["pwas-feat@rtl"] = (model.memory - 1, norm.invert("z", hw["zhat"])[:, 0], tm)
                 for k in ("mismatches", "outputs"):
                     col.add(("pwas-feat@rtl", f"_{k}"), float(hw[k]))
@@ -141,6 +143,7 @@ def run(runs: int = 10, quick: bool = False, progress: Callable[[str], None] | N
             g = lambda k: col.values[(name, f"_{k}")]  # noqa: E731
             cfg |= {"front_end": "observer-bank", "n_models": 5, "observer": "kalman:0.1", "features": "11b+u,y", "pwas": PFEAT_B,
                     "simulator": f"{rtl} ({'native' if rtl == 'verilator' else 'cocotb'} engine), the generated folder's Verilog",
+                    "architecture": architecture, "bank_lanes": bank_lanes,
                     "mismatches": int(sum(g("mismatches"))), "rtl_outputs": int(sum(g("outputs"))),
                     "latency_cycles": float(max(g("latency"))), "latency_manifest": float(max(g("latency_manifest"))),
                     "ii": float(max(g("ii"))), "abs_err_max_vs_float_normalised": float(max(g("err_max"))),
@@ -185,7 +188,8 @@ def markdown(doc: dict) -> str:
         rs = {m: br.find_rows(doc, estimator=n, metric=m, stage=stage)[0] for m in ("rmse", "fit", "nrmse")}
         if stage != "float":
             k = rs["rmse"]["config"]
-            lines.append(f"| {n} ({stage}: {k['simulator']}) | {rs['rmse']['value']:.4f}"
+            bank = f"{k['architecture']} bank, " if k.get("architecture") else ""
+            lines.append(f"| {n} ({stage}: {bank}{k['simulator']}) | {rs['rmse']['value']:.4f}"
                          + (f" ± {rs['rmse']['std']:.4f}" if rs["rmse"]["std"] is not None else "")
                          + f" | {cell(rs['fit'])} | {cell(rs['nrmse'])} | | {k['mismatches']} mismatches / {k['rtl_outputs']} "
                          f"outputs, latency {k['latency_cycles']:g} (manifest {k['latency_manifest']:g}), II {k['ii']:g}, "
@@ -240,10 +244,13 @@ if __name__ == "__main__":  # python -m pwas_hdl.benchmarks.battery [--runs N] [
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--rtl", default="verilator", choices=["verilator", "icarus"])
+    ap.add_argument("--architecture", default="parallel", choices=["parallel", "serial"],
+                    help="the sensor's hardware: parallel bank (II 1) or the time-multiplexed bank (battery_rtl_serial.*)")
+    ap.add_argument("--bank-lanes", type=int, default=None, help="state-update units of the serial bank (default 1)")
     ap.add_argument("--outdir", type=str, default=str(br.default_outdir()))
     a = ap.parse_args()
-    d = run(a.runs, a.quick, progress=print, rtl=a.rtl)
-    stem = f"{a.outdir}/battery_rtl" + ("_quick" if a.quick else "")
+    d = run(a.runs, a.quick, progress=print, rtl=a.rtl, architecture=a.architecture, bank_lanes=a.bank_lanes)
+    stem = f"{a.outdir}/battery_rtl" + ("_serial" if a.architecture == "serial" else "") + ("_quick" if a.quick else "")
     br.write_results(f"{stem}.json", {k: v for k, v in d.items() if not k.startswith("_")})
     atomic_write_text(f"{stem}.md", markdown(d))
     print(markdown(d))

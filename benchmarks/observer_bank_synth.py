@@ -2,7 +2,9 @@
 
 Designs (fitted on the seed 004 pv-benchmark data, seed 0): the P-feat sensor of the benches
 (N_theta = 5, M = 5, l = 7, 11b, p = 6: 16 807 vertices), and a small one (N_theta = 3, p = 3,
-64 vertices) plus its 11b-sq twin (no square root). Each is generated with ``generate --design
+64 vertices) plus its 11b-sq twin (no square root); and the tapped battery sensor of the tests
+(seed 004 E3 data, seed 0: 3 Kalman observers, taps ``u0[t], y0[t-1], y0[t]``, p = 2, 729
+vertices; the tapped top :mod:`pwas_hdl.hdl.observer_tap_sensor_top`). Each is generated with ``generate --design
 sensor`` as the **serial** design (``--architecture serial``: the time-multiplexed bank of
 :mod:`pwas_hdl.hdl.serial_observer_bank`, one lane, and the serial core) and, for reference, the
 **parallel** one (constant multipliers, II = 1), and goes through
@@ -42,13 +44,17 @@ DESIGNS = {
     "small-n3-p3-11b": dict(n_models=3, features="11b", partitions=3, n_train=3000),
     "small-n3-p3-11b-sq": dict(n_models=3, features="11b-sq", partitions=3, n_train=3000),
     "pfeat-n5-p6-11b": dict(n_models=5, features="11b", partitions=6, n_train=25000),
+    # the tapped battery sensor of tests/test_bank_taps_hw.py (seed 004 E3 data: 3 Kalman observers M = 5,
+    # l = 7, 11b, taps u0[t], y0[t-1], y0[t] (--mu 1 --my 2), p = 2: 729 vertices)
+    "battery-taps-n3-p2-11b": dict(system="battery", n_models=3, observer="kalman:0.1", features="11b", partitions=2,
+                                   mu=1, my=2, n_train=3000),
 }
 BANKS = ("serial", "parallel")
 #: iCE40 HX8K block RAM: 32 x 4 kbit; a design whose weight memory is larger is not run on it.
 ICE40_BRAM_BITS = 32 * 4096
 TARGETS = {"ecp5": "45k", "ice40": "hx8k"}
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "logic_cells", "fmax_mhz", "latency_cycles", "latency_ns", "ii",
-        "throughput_msps", "runtime_s")
+        "throughput_msps", "runtime_s", "critical_path")
 #: Net-name prefixes of the multipliers -> part of the design.
 PARTS = (("bank", re.compile(r"^(obs\d+_p|lane\d+_p)")), ("square", re.compile(r"_sq$")),
          ("feature scale", re.compile(r"(feat\d+_prod|lane\d+_fprod)$")))
@@ -59,6 +65,14 @@ def _sensor(cfg: dict):
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
     from pwas_hdl.systems.pv_benchmark import make_pv_dataset
 
+    if cfg.get("system") == "battery":  # the tapped sensor (u/y taps beside the bank features)
+        from pwas_hdl.systems.battery import make_battery_dataset
+
+        tr, _, _ = make_battery_dataset(cfg["n_train"], 300, seed=0)
+        fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"])
+        fe = fe.fit([tr.u], [tr.y], [tr.z])
+        return PWASVirtualSensor(mu=cfg["mu"], my=cfg["my"], partitions=cfg["partitions"], gamma=1.0, front_end=fe,
+                                 sigma=1e-3).fit(tr.u, tr.y, tr.z)
     tr, _, _ = make_pv_dataset("pv-benchmark", cfg["n_train"], 200, seed=0)
     fe = ObserverBankFrontEnd(n_models=cfg["n_models"], features=cfg["features"])
     return PWASVirtualSensor(mu=0, my=0, partitions=cfg["partitions"], gamma=1.0, front_end=fe).fit(tr.u, tr.y, tr.z)
@@ -178,15 +192,17 @@ def markdown(doc: dict) -> str:
              "serial = `generate --architecture serial` (time-multiplexed bank, 1 lane, serial core); "
              "parallel = constant multipliers, II 1. DSP = MULT18X18D (ECP5); iCE40 HX8K has none. "
              "Multipliers (RTL `*` by part, count x estimated 18x18 blocks) from the Verilog.", "",
-             "| design | bank | part | LUT4 | FF | DSP | BRAM | fmax MHz | latency (cycles / ns) | cycles/sample (II) | Msamples/s | multipliers in the RTL | note |",
-             "|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|---|---|"]
+             "| design | bank | part | LUT4 | FF | DSP | BRAM | fmax MHz | latency (cycles / ns) | cycles/sample (II) | Msamples/s | multipliers in the RTL | critical path (nextpnr) | note |",
+             "|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|---|---|---|"]
     for r in doc["rows"]:
         head = f"| {r['design']} | {r['bank']} | {r['target']} {r.get('device') or ''} |"
+        cp = r.get("critical_path")
+        cps = f"{cp['from']} -> {cp['to']} ({cp['delay_ns']:.1f} ns, routing {cp['routing_ns']:.1f})" if cp else ""
         if r.get("fits"):
             lines.append(f"{head} {r['luts']} | {r['ffs']} | {r['dsp']} | {r['bram']} | {r['fmax_mhz']:.1f} | "
-                         f"{r['latency_cycles']} / {r['latency_ns']:.0f} | {r['ii']} | {r['throughput_msps']:.3f} | {_dsp_est(r)} | |")
+                         f"{r['latency_cycles']} / {r['latency_ns']:.0f} | {r['ii']} | {r['throughput_msps']:.3f} | {_dsp_est(r)} | {cps} | |")
         else:
-            lines.append(f"{head} | | | | | {r['latency_manifest']} / | {r['ii_manifest']} | | {_dsp_est(r)} | {r['reason']} |")
+            lines.append(f"{head} | | | | | {r['latency_manifest']} / | {r['ii_manifest']} | | {_dsp_est(r)} | | {r['reason']} |")
     if not any(r["bank"] == "parallel" for r in doc["rows"]):
         lines += ["", "The parallel bank was not re-run here (`--only serial`). The earlier run of this script "
                   "(commit be0d869, `results/observer_bank_synth.md` there) measured the parallel small-n3-p3-11b on an "

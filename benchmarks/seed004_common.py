@@ -119,7 +119,8 @@ def say(progress: Callable[[str], None] | None, msg: str) -> None:
         progress(msg)
 
 
-def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator: str = "verilator") -> dict:
+def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator: str = "verilator",
+                  architecture: str = "parallel", bank_lanes: int | None = None) -> dict:
     """Generate the sensor's hardware and replay one trajectory through it.
 
     Returns
@@ -129,12 +130,14 @@ def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator
     at the represented signals|, physical) and ``bound`` (the manifest's estimate bound), ``manifest``.
     Bank sensors with u/y taps (battery: ``i_k, v_k``) get the tapped top
     (:mod:`pwas_hdl.hdl.observer_tap_sensor_top`); rows then start at ``max(M + l, memory - 1)``.
+    ``architecture`` / ``bank_lanes``: as ``generate --architecture serial --bank-lanes L`` (the
+    time-multiplexed bank; ``ii`` is then its cycles per sample, measured).
     """
     from pwas_hdl.design.generate import generate
     from pwas_hdl.verify.simulation import Run, load_design, run_rtl, segment
 
     out = workdir / "design"
-    generate(sensor, out, design="sensor")
+    generate(sensor, out, design="sensor", architecture=architecture, bank_lanes=bank_lanes)
     d = load_design(out)
     codes, _ = d.bank.quantize_signals(u, y)
     engine = "native" if simulator == "verilator" else "cocotb"

@@ -29,14 +29,14 @@ the ``M`` states of the lane's observers, one state update per clock:
   been taken since reset (the bit-true delay line is 0 after reset); the new ``S_j`` enters a
   free-running feature pipeline: register, integer square root (11b; a register after every
   ``isqrt_every`` digit steps) or ``S`` itself (11b-sq), root register, the affine map to the
-  core's input code with the constants from a table (one multiplier per lane), and the code
-  register of feature ``j``.
+  core's input code with the constants from a table (one multiplier per lane; the capped root and
+  the product registered: :data:`AFFINE_REGS` = 2), and the code register of feature ``j``.
 
 Schedule (transfer of sample ``k`` in cycle ``t``; the inputs are latched): step ``s`` of every
 lane in cycle ``t + 1 + s`` (``s < n_L M``); feature ``j`` (step ``s_j = (j - j_L) M`` in its
-lane) is in its code register from cycle ``t + 1 + s_j + 3 + R`` (``R``: the square root's
-internal registers); all codes from ``t + stages_before_core``, ``stages_before_core = 4 + R +
-(n_max - 1) M``. ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
+lane) is in its code register from cycle ``t + 1 + s_j + 3 + R + A`` (``R``: the square root's
+internal registers, ``A`` = :data:`AFFINE_REGS`); all codes from ``t + stages_before_core``,
+``stages_before_core = 4 + R + A + (n_max - 1) M``. ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
 the flush of the state-update pipeline):
 ``in.ready`` is high when the bank is idle or in its last cycle, and the previous sample's
 feature codes have been taken by the core (or are taken in this cycle). II = cycles_per_sample.
@@ -61,6 +61,8 @@ __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "buil
 DEFAULT_ISQRT_EVERY = 8
 #: Register stages of a lane's state update (products registered, then sum / round / saturate).
 MAC_STAGES = 2
+#: Registers inside the feature unit's affine map (the capped root; the product).
+AFFINE_REGS = 2
 
 
 @dataclass(frozen=True)
@@ -76,7 +78,7 @@ class SerialBankPlan:
     isqrt_regs : int
         ``R``: registers inside the square root (0 for 11b-sq or ``isqrt_every`` None).
     stages_before_core : int
-        Cycles from the input transfer to the core's input valid (``4 + R + (n_max - 1) M``).
+        Cycles from the input transfer to the core's input valid (``4 + R + AFFINE_REGS + (n_max - 1) M``).
     cycles_per_sample : int
         The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``.
     """
@@ -91,7 +93,7 @@ class SerialBankPlan:
 
     def to_dict(self) -> dict:
         return {"lanes": len(self.lanes), "observers_per_lane": [len(ln) for ln in self.lanes], "steps": self.steps,
-                "mac_stages": MAC_STAGES, "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
+                "mac_stages": MAC_STAGES, "affine_registers": AFFINE_REGS, "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
                 "stages_before_core": self.stages_before_core, "cycles_per_sample": self.cycles_per_sample}
 
 
@@ -123,7 +125,7 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
     groups = lane_groups(n, lanes)
     n_max = len(groups[0])
     r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
-    sbc = 4 + r + (n_max - 1) * mo
+    sbc = 4 + r + AFFINE_REGS + (n_max - 1) * mo
     cps = max(n_max * mo + MAC_STAGES - 1, sbc, int(core_ii))  # + the flush of the state-update pipeline
     return SerialBankPlan(groups, mo, n_max * mo, isqrt_every if bank.feature_map == "11b" else None, r, sbc, cps)
 
@@ -471,12 +473,12 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
         tok2 = Signal(name=f"{pre}_root_tok")
         idx2 = Signal(unsigned(ow), name=f"{pre}_root_idx", reset_less=True)
         m.d.sync += [root.eq(r), tok2.eq(tok_r), idx2.eq(idx_r)]
-        q = _affine(m, bank, group, root, idx2, pre)
+        q, tok_q, idx_q = _affine(m, bank, group, root, idx2, tok2, pre)
         for o, j in enumerate(group):
-            with m.If(tok2 & eq_const(idx2, o)):
+            with m.If(tok_q & eq_const(idx_q, o)):
                 m.d.sync += codes[j].eq(q)
         if ln == 0:
-            m.d.comb += done.eq(tok2 & eq_const(idx2, nl - 1) & sample_warm)
+            m.d.comb += done.eq(tok_q & eq_const(idx_q, nl - 1) & sample_warm)
     sat = Signal(name="state_saturated")
     m.d.comb += sat.eq(Cat(*sat_flags).any())
     sink_unused(m, sat, "state_saturated_flag")
@@ -489,8 +491,18 @@ def _sub_wrap(m: Module, a, b, name: str):
     return sub_wrap(m, a, b, name)
 
 
-def _affine(m: Module, bank, group, root, idx, pre: str):
-    """``sat((min(r >> t, cap_j) * K_j + C_j) >> R)`` with the constants of the lane's observer ``idx``."""
+def _stage(m: Module, tok, idx, pre: str, k: int):
+    """The feature pipeline's token and observer index one register later (stage ``k`` of the affine map)."""
+    t = Signal(name=f"{pre}_fa{k}_tok")
+    i = Signal(unsigned(len(idx)), name=f"{pre}_fa{k}_idx", reset_less=True)
+    m.d.sync += [t.eq(tok), i.eq(idx)]
+    return t, i
+
+
+def _affine(m: Module, bank, group, root, idx, tok, pre: str):
+    """``sat((min(r >> t, cap_j) * K_j + C_j) >> R)`` with the constants of the lane's observer ``idx``,
+    in :data:`AFFINE_REGS` register stages (the capped root, then the product). Returns
+    ``(code, tok, idx)``: the code net and the token / index of its cycle."""
     t, sh = bank.root_shift, bank.scale_shift
     bcore = bank.input_bits_core
     swd = bank.widths["scale_product"]
@@ -512,26 +524,32 @@ def _affine(m: Module, bank, group, root, idx, pre: str):
                 m.d.comb += capped.eq(cap)
             with m.Else():
                 m.d.comb += capped.eq(rs[:capw])
-        return _affine_tail(m, bank, group, capped, capw, idx, pre)
-    with m.If(rs > cap):
-        m.d.comb += capped.eq(cap[:capw])
-    with m.Else():
-        m.d.comb += capped.eq(rs[:capw])
-    return _affine_tail(m, bank, group, capped, capw, idx, pre)
+    else:
+        with m.If(rs > cap):
+            m.d.comb += capped.eq(cap[:capw])
+        with m.Else():
+            m.d.comb += capped.eq(rs[:capw])
+    capped_r = Signal(unsigned(capw), name=f"{pre}_capped_r", reset_less=True)  # stage 1: the capped root
+    m.d.sync += capped_r.eq(capped)
+    tok, idx = _stage(m, tok, idx, pre, 1)
+    return _affine_tail(m, bank, group, capped_r, capw, idx, tok, pre)
 
 
-def _affine_tail(m: Module, bank, group, capped, capw: int, idx, pre: str):
+def _affine_tail(m: Module, bank, group, capped, capw: int, idx, tok, pre: str):
     sh = bank.scale_shift
     bcore = bank.input_bits_core
     swd = bank.widths["scale_product"]
     kmul = _table(m, idx, [int(bank.scale_mul[j]) for j in group], f"{pre}_kmul", width=swd - capw - 1)
     prod = var_product(m, kmul, Cat(capped, Const(0, 1)), swd, f"{pre}_fprod")
+    prod_r = Signal(signed(swd), name=f"{pre}_fprod_r", reset_less=True)  # stage 2: the product
+    m.d.sync += prod_r.eq(prod)
+    tok, idx = _stage(m, tok, idx, pre, 2)
     adds = [int(bank.scale_add[j]) for j in group]
     if all(a == adds[0] for a in adds):
-        tot = add_const_signed(m, prod, adds[0], f"{pre}_faffine")
+        tot = add_const_signed(m, prod_r, adds[0], f"{pre}_faffine")
     else:
         cn = _table(m, idx, adds, f"{pre}_fadd", width=swd)
-        tot = _sum(m, [prod, cn], swd, f"{pre}_faffine")
+        tot = _sum(m, [prod_r, cn], swd, f"{pre}_faffine")
     sink_unused(m, tot[:sh], f"{pre}_faffine_frac")
     qv, _ = saturate(m, tot[sh:].as_signed(), bcore, f"{pre}_fq", flag=False)
-    return qv
+    return qv, tok, idx
