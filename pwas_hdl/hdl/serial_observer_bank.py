@@ -34,9 +34,10 @@ the ``M`` states of the lane's observers, one state update per clock:
 
 Schedule (transfer of sample ``k`` in cycle ``t``; the inputs are latched): step ``s`` of every
 lane in cycle ``t + 1 + s`` (``s < n_L M``); feature ``j`` (step ``s_j = (j - j_L) M`` in its
-lane) is in its code register from cycle ``t + 1 + s_j + 3 + R + A`` (``R``: the square root's
+lane) is in its code register from cycle ``t + 1 + s_j + 3 + Q + R + A`` (``R``: the square root's
 internal registers, ``A`` = :data:`AFFINE_REGS`); all codes from ``t + stages_before_core``,
-``stages_before_core = 4 + R + A + (n_max - 1) M``. ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
+``stages_before_core = 4 + Q + R + A + (n_max - 1) M`` (``Q`` = :data:`SQUARE_REGS`: the
+square and the oldest square registered before the window sum). ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
 the flush of the state-update pipeline):
 ``in.ready`` is high when the bank is idle or in its last cycle, and the previous sample's
 feature codes have been taken by the core (or are taken in this cycle). II = cycles_per_sample.
@@ -63,6 +64,8 @@ DEFAULT_ISQRT_EVERY = 8
 MAC_STAGES = 2
 #: Registers inside the feature unit's affine map (the capped root; the product).
 AFFINE_REGS = 2
+#: Registers between a residual's square and the window sum.
+SQUARE_REGS = 1
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,7 @@ class SerialBankPlan:
     isqrt_regs : int
         ``R``: registers inside the square root (0 for 11b-sq or ``isqrt_every`` None).
     stages_before_core : int
-        Cycles from the input transfer to the core's input valid (``4 + R + AFFINE_REGS + (n_max - 1) M``).
+        Cycles from the input transfer to the core's input valid (``4 + SQUARE_REGS + R + AFFINE_REGS + (n_max - 1) M``).
     cycles_per_sample : int
         The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``.
     """
@@ -93,7 +96,8 @@ class SerialBankPlan:
 
     def to_dict(self) -> dict:
         return {"lanes": len(self.lanes), "observers_per_lane": [len(ln) for ln in self.lanes], "steps": self.steps,
-                "mac_stages": MAC_STAGES, "affine_registers": AFFINE_REGS, "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
+                "mac_stages": MAC_STAGES, "affine_registers": AFFINE_REGS, "square_registers": SQUARE_REGS,
+                "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
                 "stages_before_core": self.stages_before_core, "cycles_per_sample": self.cycles_per_sample}
 
 
@@ -125,7 +129,7 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
     groups = lane_groups(n, lanes)
     n_max = len(groups[0])
     r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
-    sbc = 4 + r + AFFINE_REGS + (n_max - 1) * mo
+    sbc = 4 + SQUARE_REGS + r + AFFINE_REGS + (n_max - 1) * mo
     cps = max(n_max * mo + MAC_STAGES - 1, sbc, int(core_ii))  # + the flush of the state-update pipeline
     return SerialBankPlan(groups, mo, n_max * mo, isqrt_every if bank.feature_map == "11b" else None, r, sbc, cps)
 
@@ -447,21 +451,29 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
         rp.addr = Cat(rd_obs, slot_now)
         wp = mem.write_port()
         rot = active & first_state
-        wp.addr = Cat(oj, slot)
-        wp.data = sq
-        wp.en = rot
         oldest = Signal(unsigned(sumb), name=f"{pre}_dl_oldest")
         m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
-        added = add_wrap(m, sums[0], sq, f"{pre}_sum_add")
-        s_new = _sub_wrap(m, added, oldest, f"{pre}_sum_next")
-        with m.If(rot):
+        # the square and the oldest square registered (SQUARE_REGS = 1): the window sum, its memory
+        # write and the feature pipeline follow one cycle after the step (window >= 1: l + 1 >= 2
+        # slots, so the write never meets the next sample's read of the same word)
+        sq_r = Signal(unsigned(2 * rb), name=f"{pre}_sq_r", reset_less=True)
+        old_r = Signal(unsigned(sumb), name=f"{pre}_dl_oldest_r", reset_less=True)
+        rot_d = Signal(name=f"{pre}_sq_valid")
+        oj_d = Signal(unsigned(ow), name=f"{pre}_sq_obs", reset_less=True)
+        m.d.sync += [sq_r.eq(sq), old_r.eq(oldest), rot_d.eq(rot), oj_d.eq(oj)]
+        wp.addr = Cat(oj_d, slot)
+        wp.data = sq_r
+        wp.en = rot_d
+        added = add_wrap(m, sums[0], sq_r, f"{pre}_sum_add")
+        s_new = _sub_wrap(m, added, old_r, f"{pre}_sum_next")
+        with m.If(rot_d):
             m.d.sync += [sums[o].eq(sums[o + 1]) for o in range(nl - 1)] + [sums[-1].eq(s_new)]
 
         # ---- feature pipeline: S register -> isqrt (R registers) -> root register -> code register
         s_reg = Signal(unsigned(sumb), name=f"{pre}_fs_sum", reset_less=True)
         tok = Signal(name=f"{pre}_fs_tok")
         idx = Signal(unsigned(ow), name=f"{pre}_fs_idx", reset_less=True)
-        m.d.sync += [s_reg.eq(s_new), tok.eq(rot), idx.eq(oj)]
+        m.d.sync += [s_reg.eq(s_new), tok.eq(rot_d), idx.eq(oj_d)]
         if bank.feature_map == "11b":
             r, nreg = build_isqrt_pipelined(m, s_reg, f"{pre}_isqrt", plan.isqrt_every)
             assert nreg == plan.isqrt_regs, (nreg, plan.isqrt_regs)
