@@ -37,7 +37,7 @@ lane in cycle ``t + 1 + s`` (``s < n_L M``); feature ``j`` (step ``s_j = (j - j_
 lane) is in its code register from cycle ``t + 1 + s_j + 3 + Q + R + A`` (``R``: the square root's
 internal registers, ``A`` = :data:`AFFINE_REGS`); all codes from ``t + stages_before_core``,
 ``stages_before_core = 4 + Q + R + A + (n_max - 1) M`` (``Q`` = :data:`SQUARE_REGS`: the
-square and the oldest square registered before the window sum). ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
+residual, then its square registered before the window sum). ``cycles_per_sample = max(n_max M + 1, stages_before_core, core II)`` (``+ 1``:
 the flush of the state-update pipeline):
 ``in.ready`` is high when the bank is idle or in its last cycle, and the previous sample's
 feature codes have been taken by the core (or are taken in this cycle). II = cycles_per_sample.
@@ -58,14 +58,18 @@ from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_pro
 __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
            "table_mac", "lane_groups", "DEFAULT_ISQRT_EVERY"]
 
-#: Digit steps of the integer square root between two pipeline registers (serial bank).
-DEFAULT_ISQRT_EVERY = 8
+#: Digit steps of the integer square root between two pipeline registers (serial bank). 3: with the
+#: state update, the square and the affine map pipelined, a register every 8 digits (the earlier
+#: default) left the square root the critical path of the N3 11b design on the LFE5U-45F (8 digit
+#: steps, 32.5 ns); every 3 steps it measured 76.1 MHz at II 26 (13.1 ns, still the square root),
+#: the most samples/s of 2..4 by the estimate fmax / II (benchmarks/results/observer_bank_synth.md).
+DEFAULT_ISQRT_EVERY = 3
 #: Register stages of a lane's state update (products registered, then sum / round / saturate).
 MAC_STAGES = 2
 #: Registers inside the feature unit's affine map (the capped root; the product).
 AFFINE_REGS = 2
-#: Registers between a residual's square and the window sum.
-SQUARE_REGS = 1
+#: Registers between a residual and the window sum (the residual; its square).
+SQUARE_REGS = 2
 
 
 @dataclass(frozen=True)
@@ -435,13 +439,6 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.sync += [chain[k].eq(chain[k + 1]) for k in range(steps - 1)] + [chain[-1].eq(new)]
 
         # ---- residual, square, window record (rotates once per observer)
-        xh = const_product(m, 1, head, rb, f"{pre}_yhat")
-        e = Signal(signed(rb + 1), name=f"{pre}_e_full")
-        m.d.comb += e.eq(xh - qy_al)
-        sink_unused(m, e[rb], f"{pre}_e_top")
-        p = Signal(signed(2 * rb), name=f"{pre}_sq")
-        m.d.comb += p.eq(e[:rb].as_signed() * e[:rb].as_signed())
-        sq = p.as_unsigned()
         sums = [Signal(unsigned(sumb), name=f"{pre}_sum{o}") for o in range(nl)]
         # the delay lines: one memory per lane, word (observer o, slot) = Cat(o, slot); the square of
         # sample k - l - 1 is read one cycle before observer o's step (0 while not written since reset)
@@ -450,17 +447,29 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
         rp = mem.read_port(domain="sync")
         rp.addr = Cat(rd_obs, slot_now)
         wp = mem.write_port()
+        xh = const_product(m, 1, head, rb, f"{pre}_yhat")
+        e = Signal(signed(rb + 1), name=f"{pre}_e_full")
+        m.d.comb += e.eq(xh - qy_al)
+        sink_unused(m, e[rb], f"{pre}_e_top")
         rot = active & first_state
         oldest = Signal(unsigned(sumb), name=f"{pre}_dl_oldest")
         m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
-        # the square and the oldest square registered (SQUARE_REGS = 1): the window sum, its memory
-        # write and the feature pipeline follow one cycle after the step (window >= 1: l + 1 >= 2
-        # slots, so the write never meets the next sample's read of the same word)
+        # SQUARE_REGS = 2: the residual registered, then its square, with the oldest square, the
+        # step's valid bit and the observer index alongside; the window sum, its memory write and
+        # the feature pipeline follow 2 cycles after the step (window >= 1: l + 1 >= 2 slots, so the
+        # write never meets the next sample's read of the same word)
+        e_r = Signal(signed(rb), name=f"{pre}_e_r", reset_less=True)
+        old_1 = Signal(unsigned(sumb), name=f"{pre}_dl_oldest_1", reset_less=True)
+        rot_1 = Signal(name=f"{pre}_e_valid")
+        oj_1 = Signal(unsigned(ow), name=f"{pre}_e_obs", reset_less=True)
+        m.d.sync += [e_r.eq(e[:rb].as_signed()), old_1.eq(oldest), rot_1.eq(rot), oj_1.eq(oj)]
+        p = Signal(signed(2 * rb), name=f"{pre}_sq")
+        m.d.comb += p.eq(e_r * e_r)
         sq_r = Signal(unsigned(2 * rb), name=f"{pre}_sq_r", reset_less=True)
         old_r = Signal(unsigned(sumb), name=f"{pre}_dl_oldest_r", reset_less=True)
         rot_d = Signal(name=f"{pre}_sq_valid")
         oj_d = Signal(unsigned(ow), name=f"{pre}_sq_obs", reset_less=True)
-        m.d.sync += [sq_r.eq(sq), old_r.eq(oldest), rot_d.eq(rot), oj_d.eq(oj)]
+        m.d.sync += [sq_r.eq(p.as_unsigned()), old_r.eq(old_1), rot_d.eq(rot_1), oj_d.eq(oj_1)]
         wp.addr = Cat(oj_d, slot)
         wp.data = sq_r
         wp.en = rot_d
