@@ -16,16 +16,15 @@ the ``M`` states of the lane's observers, one state update per clock:
   table indexed by the step (``nu + 2`` variable multipliers per lane instead of
   ``N M (nu + 2)`` constant ones). The sum is an exact integer sum in the declared accumulator
   width, so its order does not matter and the rounding / saturation are the bit-true model's.
-  The update is pipelined (:data:`MAC_STAGES` = 2): the tables are read one cycle ahead into
-  coefficient registers, the products (and ``x_{i+1}``, ``Dc_i``) are registered in the step's
-  cycle, the sum, rounding and saturation follow in the next cycle and enter the chain's tail;
+  The update is pipelined (:data:`MAC_STAGES` = 2): the products (and ``x_{i+1}``, ``Dc_i``)
+  are registered in the step's cycle, the sum, rounding and saturation follow in the next cycle and enter the chain's tail;
   the chain shifts ``n_L M + 1`` times per sample (the extra *flush* shift drops the one stale
   tail entry of the first step and brings the last update in), so it is in order again;
 * at step ``i = 0`` of observer ``j``: the residual ``e_j = x_{j,0} - (qy << (F_s - F_in))``,
   ``e_j**2`` (one squarer per lane), the running sum ``S_j`` (a rotating chain like the states)
   and the delay line of ``l + 1`` squares: one memory per lane (block / distributed RAM instead
   of ``N (l + 1)`` registers), word ``(j, slot)``, ``slot`` = sample number mod ``l + 1``; the
-  oldest square is read one cycle before the step and counts as 0 until ``l + 1`` samples have
+  oldest square is read one cycle before the window sum's update and counts as 0 until ``l + 1`` samples have
   been taken since reset (the bit-true delay line is 0 after reset); the new ``S_j`` enters a
   free-running feature pipeline: register, integer square root (11b; a register after every
   ``isqrt_every`` digit steps) or ``S`` itself (11b-sq), root register, the affine map to the
@@ -348,8 +347,6 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.sync += oj.eq(add_const_wrap(m, oj, 1, "bank_obs_inc"))
     free = Signal(name="bank_free")
     m.d.comb += free.eq(~busy | last)
-    st_next = Signal(unsigned(stw), name="bank_step_next")  # the step of the next cycle: tables read ahead
-    m.d.comb += st_next.eq(Mux(transfer, 0, add_const_wrap(m, st, 1, "bank_step_ahead")))
     first_state = Signal(name="bank_first_state")
     m.d.comb += first_state.eq(eq_const(si, 0)) if mo > 1 else first_state.eq(1)
     last_state = Signal(name="bank_last_state")
@@ -361,17 +358,12 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
     slot = Signal(unsigned(slw), name="bank_dl_slot")
     cnt = Signal(unsigned(bits_for(lw + 1)), name="bank_dl_count")
     old_valid = Signal(name="bank_dl_old_valid")
-    slot_now = Signal(unsigned(slw), name="bank_dl_slot_now")
-    m.d.comb += slot_now.eq(Mux(transfer, wptr, slot))
     with m.If(transfer):
         wrap = eq_const(wptr, lw)
         m.d.sync += [slot.eq(wptr), wptr.eq(Mux(wrap, 0, add_const_wrap(m, wptr, 1, "bank_dl_slot_inc"))),
                      old_valid.eq(ge_const(cnt, lw + 1))]
         with m.If(~ge_const(cnt, lw + 1)):
             m.d.sync += cnt.eq(add_const_wrap(m, cnt, 1, "bank_dl_count_inc"))
-    # the observer whose oldest square is read now (synchronous read: used in the next cycle)
-    rd_obs = Signal(unsigned(ow), name="bank_dl_read_obs")
-    m.d.comb += rd_obs.eq(Mux(transfer, 0, add_const_wrap(m, oj, 1, "bank_dl_obs_inc")))
 
     qy_al = const_product(m, 1 << sh_in, qy, rb, "bank_y_aligned")
     codes = [Signal(signed(bank.input_bits_core), name=f"feat{j}_code", reset_less=True) for j in range(bank.n_models)]
@@ -391,9 +383,9 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.comb += nxt.eq(Mux(last_state, 0, chain[1]))
         else:
             m.d.comb += nxt.eq(0)
-        # coefficients of step (j, i) in lane order, read one cycle ahead (st_next) into registers;
-        # the products are registered (MAC stage 1, the step's cycle), the sum, rounding and
-        # saturation follow in the next cycle (stage 2) and go to the chain's tail
+        # coefficients of step (j, i) in lane order (tables indexed by the step); the products are
+        # registered (MAC stage 1, the step's cycle), the sum, rounding and saturation follow in the
+        # next cycle (stage 2) and go to the chain's tail
         order = [(j, i) for j in group for i in range(mo)]
         a0 = [int(bank.a0_codes[j, i]) for j, i in order]
         terms = []
@@ -403,16 +395,16 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
             m.d.comb += x0.eq(Mux(first_state, head, x0_hold))
             with m.If(active & first_state):
                 m.d.sync += x0_hold.eq(head)
-            terms.append(_product_reg(m, _coef_reg(m, st_next, a0, f"{pre}_a0", accw - bs), x0, accw, f"{pre}_pa"))
+            terms.append(_product_reg(m, _table(m, st, a0, f"{pre}_a0", width=accw - bs), x0, accw, f"{pre}_pa"))
         inj = []  # the input alignment << (F_s - F_in) folded into the tabled coefficients (as the parallel bank)
         for c in range(nu):
             bv = [int(bank.b_codes[j, i, c]) << sh_in for j, i in order]
             if any(bv):
-                inj.append(_product_reg(m, _coef_reg(m, st_next, bv, f"{pre}_b{c}", accw - len(qu[c])), qu[c], accw,
+                inj.append(_product_reg(m, _table(m, st, bv, f"{pre}_b{c}", width=accw - len(qu[c])), qu[c], accw,
                                         f"{pre}_pb{c}"))
         lv = [int(bank.l_codes[j, i]) << sh_in for j, i in order]
         if any(lv):
-            inj.append(_product_reg(m, _coef_reg(m, st_next, lv, f"{pre}_l", accw - len(qy)), qy, accw, f"{pre}_pl"))
+            inj.append(_product_reg(m, _table(m, st, lv, f"{pre}_l", width=accw - len(qy)), qy, accw, f"{pre}_pl"))
         terms += inj
         nxt_r = Signal(signed(bs), name=f"{pre}_x_next_r", reset_less=True)
         m.d.sync += nxt_r.eq(nxt)
@@ -441,35 +433,35 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
         # ---- residual, square, window record (rotates once per observer)
         sums = [Signal(unsigned(sumb), name=f"{pre}_sum{o}") for o in range(nl)]
         # the delay lines: one memory per lane, word (observer o, slot) = Cat(o, slot); the square of
-        # sample k - l - 1 is read one cycle before observer o's step (0 while not written since reset)
+        # sample k - l - 1 is read one cycle before the window sum's update (0 while not written since reset)
         mem = Memory(shape=unsigned(sumb), depth=(1 << ow) * (lw + 1), init=[])
         m.submodules[f"{pre}_dlmem"] = mem
         rp = mem.read_port(domain="sync")
-        rp.addr = Cat(rd_obs, slot_now)
         wp = mem.write_port()
         xh = const_product(m, 1, head, rb, f"{pre}_yhat")
         e = Signal(signed(rb + 1), name=f"{pre}_e_full")
         m.d.comb += e.eq(xh - qy_al)
         sink_unused(m, e[rb], f"{pre}_e_top")
         rot = active & first_state
-        oldest = Signal(unsigned(sumb), name=f"{pre}_dl_oldest")
-        m.d.comb += oldest.eq(Mux(old_valid, rp.data, 0))
-        # SQUARE_REGS = 2: the residual registered, then its square, with the oldest square, the
-        # step's valid bit and the observer index alongside; the window sum, its memory write and
-        # the feature pipeline follow 2 cycles after the step (window >= 1: l + 1 >= 2 slots, so the
-        # write never meets the next sample's read of the same word)
+        # SQUARE_REGS = 2: the residual registered, then its square, with the step's valid bit and
+        # the observer index alongside; the window sum, its memory write and the feature pipeline
+        # follow 2 cycles after the step. The oldest square of observer o is read in the cycle
+        # before (word (o, slot), synchronous read: no register of its own) and written over in
+        # the sum's cycle (read first; window >= 1: l + 1 >= 2 slots, so no other sample's access
+        # meets the word)
         e_r = Signal(signed(rb), name=f"{pre}_e_r", reset_less=True)
-        old_1 = Signal(unsigned(sumb), name=f"{pre}_dl_oldest_1", reset_less=True)
         rot_1 = Signal(name=f"{pre}_e_valid")
         oj_1 = Signal(unsigned(ow), name=f"{pre}_e_obs", reset_less=True)
-        m.d.sync += [e_r.eq(e[:rb].as_signed()), old_1.eq(oldest), rot_1.eq(rot), oj_1.eq(oj)]
+        m.d.sync += [e_r.eq(e[:rb].as_signed()), rot_1.eq(rot), oj_1.eq(oj)]
+        rp.addr = Cat(oj_1, slot)
         p = Signal(signed(2 * rb), name=f"{pre}_sq")
         m.d.comb += p.eq(e_r * e_r)
         sq_r = Signal(unsigned(2 * rb), name=f"{pre}_sq_r", reset_less=True)
-        old_r = Signal(unsigned(sumb), name=f"{pre}_dl_oldest_r", reset_less=True)
         rot_d = Signal(name=f"{pre}_sq_valid")
         oj_d = Signal(unsigned(ow), name=f"{pre}_sq_obs", reset_less=True)
-        m.d.sync += [sq_r.eq(p.as_unsigned()), old_r.eq(old_1), rot_d.eq(rot_1), oj_d.eq(oj_1)]
+        m.d.sync += [sq_r.eq(p.as_unsigned()), rot_d.eq(rot_1), oj_d.eq(oj_1)]
+        old_r = Signal(unsigned(sumb), name=f"{pre}_dl_oldest")
+        m.d.comb += old_r.eq(Mux(old_valid, rp.data, 0))
         wp.addr = Cat(oj_d, slot)
         wp.data = sq_r
         wp.en = rot_d
