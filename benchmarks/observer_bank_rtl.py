@@ -44,7 +44,8 @@ CONFIGS = [
 SIMULATORS = ("icarus", "verilator")
 
 
-def run(quick: bool = False) -> dict:
+def run(quick: bool = False, only: str | None = None) -> dict:
+    """All configurations (``only="serial"`` / ``"parallel"``: those of that bank only) on both simulators."""
     from pwas_hdl.design.generate import generate
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -55,7 +56,7 @@ def run(quick: bool = False) -> dict:
     tr, te, _ = make_pv_dataset("pv-benchmark", 2000, 400, seed=0)
     stim = sim_module("pwas_stimulus")
     rows = []
-    for cfg in [CONFIGS[0], CONFIGS[7]] if quick else CONFIGS:
+    for cfg in [CONFIGS[0], CONFIGS[7]] if quick else [c for c in CONFIGS if only in (None, c.get("architecture", "parallel"))]:
         fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
         s = PWASVirtualSensor(mu=0, my=0, partitions=3, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
         opts = {k: cfg[k] for k in ("state_bits", "architecture", "bank_lanes") if k in cfg}
@@ -93,10 +94,15 @@ def markdown(doc: dict) -> str:
 
 
 if __name__ == "__main__":
-    quick = "--quick" in sys.argv[1:]
-    doc = run(quick)
+    quick = "--quick" in sys.argv[1:]  # --only serial|parallel: re-run those rows and replace them in the results
+    only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv[1:] else None
+    doc = run(quick, only)
     stem = "observer_bank_rtl_quick" if quick else "observer_bank_rtl"
     out = benchmarks_dir() / "results"
+    if only and (out / f"{stem}.json").exists():
+        old = json.loads((out / f"{stem}.json").read_text())
+        new = {(r["config"], r["simulator"]): r for r in doc["rows"]}
+        doc["rows"] = [new.pop((r["config"], r["simulator"]), r) for r in old["rows"]] + list(new.values())
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))
