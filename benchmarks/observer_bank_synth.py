@@ -188,7 +188,8 @@ def _dsp_est(r: dict) -> str:
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors: resources on ECP5 and iCE40{' (QUICK)' if doc['quick'] else ''}", "",
              f"One Yosys + nextpnr run each (seed 1, time limit {doc['limit_min']} min wall per run), "
-             "`benchmarks/observer_bank_synth.py`; designs fitted on pv-benchmark data (seed 0). "
+             "`benchmarks/observer_bank_synth.py`; designs fitted on pv-benchmark data (seed 0), battery-taps on the "
+             "seed 004 E3 battery data (seed 0; u/y taps beside the bank features, the tapped top). "
              "serial = `generate --architecture serial` (time-multiplexed bank, 1 lane, serial core); "
              "parallel = constant multipliers, II 1. DSP = MULT18X18D (ECP5); iCE40 HX8K has none. "
              "Multipliers (RTL `*` by part, count x estimated 18x18 blocks) from the Verilog.", "",
@@ -203,6 +204,8 @@ def markdown(doc: dict) -> str:
                          f"{r['latency_cycles']} / {r['latency_ns']:.0f} | {r['ii']} | {r['throughput_msps']:.3f} | {_dsp_est(r)} | {cps} | |")
         else:
             lines.append(f"{head} | | | | | {r['latency_manifest']} / | {r['ii_manifest']} | | {_dsp_est(r)} | | {r['reason']} |")
+    for note in doc.get("notes", []):  # measured context recorded with the results (e.g. before / after a change)
+        lines += ["", note]
     if not any(r["bank"] == "parallel" for r in doc["rows"]):
         lines += ["", "The parallel bank was not re-run here (`--only serial`). The earlier run of this script "
                   "(commit be0d869, `results/observer_bank_synth.md` there) measured the parallel small-n3-p3-11b on an "
