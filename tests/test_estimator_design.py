@@ -190,3 +190,4 @@ def test_simulate_estimator_folder_writes_hw_beside_bittrue_and_float(est_folder
     text = report_markdown(rep)
     assert rep["design"]["kind"] == "estimator" and rep["fit"] is None
     assert "| verilator | 120 | 0 | 1..1 | 1 |" in text and "mode accuracy hw / float" in text
+    assert "Latency 1 cycle, II 1." in text

@@ -216,7 +216,7 @@ def _estimator_lines(rep: dict[str, Any]) -> list[str]:
     lines = [f"# {d['top']} (estimator): accuracy, latency, resources", "",
              f"Seed 003's switched-observer estimator: {d['modes']} modes, {d['states']} states "
              f"({', '.join(d['signals']['states'])}), detector window {d['window']}; {d['formats']}. Latency "
-             f"{d['latency_cycles']} cycle, II {d['ii']}. Bounds against the float estimator: modes equal where the float margin "
+             f"{d['latency_cycles']} cycle{'' if d['latency_cycles'] == 1 else 's'}, II {d['ii']}. Bounds against the float estimator: modes equal where the float margin "
              f"exceeds {_fmt(2 * eb['window_sum'])}; then |x_hat - float| <= {_fmt(eb['state'])}, |y_hat - float| <= "
              f"{_fmt(eb['y_hat'])}.", ""]
     if rep["simulation"]:
