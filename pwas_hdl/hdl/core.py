@@ -329,27 +329,40 @@ class PWASCore(wiring.Component):
         aw = plan.addr_width
         base_part, wrap, rot_part = [], 0, []
         rbits = bits_for(n)
+        # banked: the bank addresses as bit fields c_j + step (no adder) where the layout allows it
+        fields = self._address_fields() if self.memory_kind == "banked" else None
         if self.memory_kind == "banked":
             rst = plan.layout.row_strides  # address weight of c_j, j < n-1
             p_last = p.partitions[n - 1]
-            if aw:
+            if aw and fields is None:
                 terms = [rom(m, cs[j], [i * rst[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n - 1)]
                 terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
                 base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
                 wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
             res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
             table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
-            rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
+            if fields is not None or aw == 0 or True:
+                # the whole rotation before the rank register: the per-bank step / selection tables
+                # after it are then functions of registered bits only
+                rot_part = [self._modsum(m, res, nb, rbits, "rot")]
+            else:
+                rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
             terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
             base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
 
         valid, r = pipe.stage(
-            "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part}
+            "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part,
+                                       "c": cs if fields is not None else []}
         )
         ds, oor, wrap = r["d"], r["oor"], r["wrap"]
         ge = dict(zip(pairs, r["ge"]))
+        if self.memory_kind == "banked":
+            base = sum_wrap(m, r["base"], aw, "base") if aw and fields is None else 0
+            rot = self._modsum(m, r["rot"], nb, rbits, "rot")
+            return self._bank_direct(m, pipe, valid, ge, ds, oor, r["c"] if fields is not None else cs, base, wrap, rot,
+                                     fields)
         lt = []
         if n > 1:
             therm = []
@@ -439,13 +452,177 @@ class PWASCore(wiring.Component):
         addr, mus, rot, oor = r["addr"], r["mu"], r["rot"], r["oor"]
         return valid, addr, mus, rot, oor
 
+    def _address_fields(self):
+        """Bit fields of the banked address, or None when the layout's address needs adders.
+
+        ``addr(v) = sum_{j<n-1} v_j * row_strides[j] + v_{n-1} // (n+1)``: when every
+        ``row_strides[j]`` is a power of two ``2**e_j`` and the fields ``[e_j, e_j + width(p_j))``
+        and ``[0, width(p_{n-1} // (n+1)))`` are disjoint inside the address, the sum is their
+        concatenation (e.g. ``p_j + 1`` a power of two for ``0 < j < n-1``, as p = 7). Returns
+        ``[(e, width, j), ...]`` (``j = n-1``: the last dimension's ``// (n+1)`` field).
+        """
+        p, plan = self.params, self.memory_plan
+        aw, n, nb = plan.addr_width, p.n, p.n + 1
+        if not aw:
+            return None
+        spans = []
+        for j, s in enumerate(plan.layout.row_strides):
+            if s < 1 or s & (s - 1):
+                return None
+            spans.append((s.bit_length() - 1, bits_for(p.partitions[j]), j))
+        if p.partitions[n - 1] // nb:
+            spans.append((0, bits_for(p.partitions[n - 1] // nb), n - 1))
+        used = 0
+        for e, w, _j in spans:
+            mask = ((1 << w) - 1) << e
+            if used & mask or e + w > aw:
+                return None
+            used |= mask
+        return spans
+
+    @staticmethod
+    def _table(m: Module, inputs, f, width: int, name: str, keep: bool = False):
+        """``f(*values)`` as a case table over the non-constant ``inputs`` (``[(value or int, width)]``);
+        an int when it is constant (unreachable input codes give whatever ``f`` returns, or 0)."""
+        var = [(v, w) for v, w in inputs if not isinstance(v, (int, bool))]
+        table = []
+        for x in range(1 << sum(w for _v, w in var)):
+            args, pos = [], 0
+            for v, w in inputs:
+                if isinstance(v, (int, bool)):
+                    args.append(int(v))
+                else:
+                    args.append((x >> pos) & ((1 << w) - 1))
+                    pos += w
+            table.append(int(f(*args)) % (1 << width))
+        if not var:
+            return table[0]
+        out = rom(m, Cat(*[v for v, _w in var]), table, width, name)
+        if keep and not isinstance(out, int):
+            out.attrs["keep"] = 1
+        return out
+
+    def _bank_direct(self, m: Module, pipe: _Pipe, valid, ge, ds, oor, cs, base, wrap, rot, fields):
+        """Banked memories without a bank rotation: bank ``b``'s step bits, address and ``mu``.
+
+        Bank ``b`` reads vertex ``k_b = (b - rot) mod (n+1)``. Its step bits
+        ``s_bj = [rank_j < k_b]`` are small tables of ``(rank_j, rot)``; its address is built from
+        them (bit fields ``c_j + s_bj`` when :meth:`_address_fields` allows, else the shared base plus
+        a table of the step bits, one adder per bank); its ``mu`` is ``e_b - g_{b+1}`` with
+        ``g_b = d_j`` for ``rank_j = k_b - 1`` (0 when ``k_b = 0``) and ``e_b = g_b``, or ``2**F``
+        when ``k_b = 0`` (so ``mu`` of ``k_b = 0`` is ``2**F - d_(1)``, of ``k_b = n`` is ``d_(n) - 0``):
+        one one-hot selection of the fractions per bank. Returns what :meth:`_vertices` returns, in
+        bank order (``rot = 0``).
+        """
+        p, pl, plan = self.params, self.pipeline, self.memory_plan
+        n, big_f = p.n, p.frac
+        nb, dw, aw = n + 1, big_f + 1, plan.addr_width
+        rbits, kw = bits_for(n), bits_for(n - 1)
+        cw = [bits_for(pj - 1) for pj in p.partitions]
+        rot_in = (rot, rbits)
+        ranks = []
+        for j in range(n):
+            if n == 1:
+                ranks.append(0)
+                continue
+            bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
+            ranks.append(rom(m, Cat(*bits), [bin(v).count("1") for v in range(1 << (n - 1))], kw, f"rank{j}"))
+
+        def kb(b, t):
+            return (b - t) % nb
+
+        step = [[self._table(m, [(ranks[j], kw), rot_in], lambda r, t, b=b: t < nb and r < kb(b, t), 1, f"step{b}_{j}")
+                 for j in range(n)] for b in range(nb)]
+        # d_(k), k = 1..n: the fraction of rank k - 1 (one-hot selection by tables of the comparison bits)
+        dsorted = [Const(0, dw)]
+        for k in range(1, n + 1):
+            acc = None
+            for j in range(n):
+                if n == 1:
+                    e = 1
+                else:
+                    bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
+                    e = rom(m, Cat(*bits), [int(bin(v).count("1") == k - 1) for v in range(1 << (n - 1))], 1, f"req{k}_{j}")
+                term = ds[j] if isinstance(e, int) and e else (None if isinstance(e, int) else Mux(e, ds[j], Const(0, dw)))
+                if term is not None:
+                    acc = term if acc is None else acc | term
+            dsorted.append(self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+        gs = dsorted[1:]  # in vertex order: mu is rotated after the addr register (_banks)
+
+        # address pieces: bit fields (no carry chain) or a per-bank offset table
+        pieces = []
+        if aw:
+            full = 1 << aw
+            for b in range(nb):
+                if fields is not None:
+                    fb = []
+                    for e, w, j in fields:
+                        if j < n - 1:
+                            f = self._table(m, [(cs[j], cw[j]), (step[b][j], 1)], lambda c, s: c + s, w, f"af{b}_{j}")
+                        else:
+                            f = self._table(m, [(cs[j], cw[j]), (step[b][j], 1)], lambda c, s: (c + s) // nb, w, f"af{b}_{j}")
+                        fb.append(f)
+                    pieces.append(fb)
+                else:
+                    rst = plan.layout.row_strides
+                    ins = [(step[b][j], 1) for j in range(n - 1)] + [(step[b][n - 1], 1), (wrap, 1)]
+                    wts = list(rst)
+                    pieces.append([self._table(m, ins, lambda *v, wts=wts: sum(x * w for x, w in zip(v, wts)) + (v[-1] & v[-2]),
+                                               aw, f"boff{b}")])
+        # optional register on the address pieces, the base, the selected fractions and k_b = 0:
+        # before the mu subtractions (and the address adders of a layout without bit fields)
+        valid, r = pipe.stage("s_voff", pl.offset, valid,
+                              {"f": [x for pc in pieces for x in pc], "base": base, "g": gs,
+                               "rot": rot, "oor": oor})
+        flat, base, gs, rot, oor = r["f"], r["base"], r["g"], r["rot"], r["oor"]
+        addr = []
+        if aw:
+            per = len(pieces[0])
+            for b in range(nb):
+                pb = flat[b * per : (b + 1) * per]
+                if fields is not None:
+                    parts, pos = [], 0
+                    for (e, w, _j), f in sorted(zip(fields, pb), key=lambda t: t[0][0]):
+                        if e > pos:  # bits no field covers
+                            parts.append(Const(0, e - pos))
+                        parts.append(Const(f, w) if isinstance(f, int) else f)
+                        pos = e + w
+                    if pos < aw:
+                        parts.append(Const(0, aw - pos))
+                    addr.append(self._name(m, Cat(*parts), f"baddr{b}", unsigned(aw)))
+                else:
+                    off = pb[0]
+                    addr.append(sum_wrap(m, [base, off], aw, f"baddr{b}"))
+        mus = []
+        for k in range(nb):
+            if k == n:
+                mus.append(gs[n - 1])
+                continue
+            hi = Const(1 << big_f, dw) if k == 0 else gs[k - 1]
+            diff = Signal(signed(dw + 1), name=f"mu{k}")
+            m.d.comb += diff.eq(hi - gs[k])
+            sink_unused(m, diff[dw], f"mu{k}_sign")
+            mus.append(diff[:dw])
+        valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
+        return valid, r["addr"], r["mu"], r["rot"], r["oor"]
+
     def _banks(self, m: Module, pipe: _Pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan):
         """Bank rotation and the memory read (the memory register)."""
         n = nb - 1
         # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
         # same way instead of the read data back (the sum of products does not depend on the
         # order; mu is narrower than nz weights and needs no rot downstream).
-        if not isinstance(rot, int):
+        if self.memory_kind == "banked":  # _bank_direct: the addresses are in bank order, mu in vertex order
+            bank_addr = addr
+            if isinstance(rot, int):
+                bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
+            else:
+                bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
+                with m.Switch(rot):
+                    for s in range(nb):
+                        with (m.Case(s) if s < n else m.Default()):
+                            m.d.comb += [bank_mu[b].eq(mus[(b - s) % nb]) for b in range(nb)]
+        elif not isinstance(rot, int):
             bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)] if aw else []
             bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
             with m.Switch(rot):
