@@ -429,7 +429,7 @@ class PWASCore(wiring.Component):
                 else:
                     term = Mux(sj, ds[j], Const(0, dw))
                 acc = term if acc is None else acc | term
-            dsorted.append(self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+            dsorted.append(acc if isinstance(acc, Signal) else self._name(m, acc, f"dsorted{k}", unsigned(dw)))
         # optional register on the offsets and the selected fractions, before the address adders and
         # the mu subtractions (it splits stage C in two: tables / one-hot selection, then carry chains)
         valid, r = pipe.stage("s_voff", pl.offset, valid,
@@ -546,7 +546,7 @@ class PWASCore(wiring.Component):
                 term = ds[j] if isinstance(e, int) and e else (None if isinstance(e, int) else Mux(e, ds[j], Const(0, dw)))
                 if term is not None:
                     acc = term if acc is None else acc | term
-            dsorted.append(self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+            dsorted.append(acc if isinstance(acc, Signal) else self._name(m, acc, f"dsorted{k}", unsigned(dw)))
         gs = dsorted[1:]  # in vertex order: mu is rotated after the addr register (_banks)
 
         # address pieces: bit fields (no carry chain) or a per-bank offset table
@@ -589,22 +589,44 @@ class PWASCore(wiring.Component):
                         pos = e + w
                     if pos < aw:
                         parts.append(Const(0, aw - pos))
-                    addr.append(self._name(m, Cat(*parts), f"baddr{b}", unsigned(aw)))
+                    addr.append(Cat(*parts))  # wiring only (a named copy would be an unused alias)
                 else:
                     off = pb[0]
                     addr.append(sum_wrap(m, [base, off], aw, f"baddr{b}"))
-        mus = []
-        for k in range(nb):
-            if k == n:
-                mus.append(gs[n - 1])
-                continue
-            hi = Const(1 << big_f, dw) if k == 0 else gs[k - 1]
-            diff = Signal(signed(dw + 1), name=f"mu{k}")
-            m.d.comb += diff.eq(hi - gs[k])
-            sink_unused(m, diff[dw], f"mu{k}_sign")
-            mus.append(diff[:dw])
+        # mu_late: the sorted fractions travel to the memory register; mu and its rotation are
+        # computed in the memory-read cycle (_banks)
+        mus = gs if pl.mu_late else self._mu_of_sorted(m, gs)
         valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
         return valid, r["addr"], r["mu"], r["rot"], r["oor"]
+
+    def _mu_of_sorted(self, m: Module, ds_sorted):
+        """``mu_0 = 2**F - d_(1)``, ``mu_k = d_(k) - d_(k+1)``, ``mu_n = d_(n)`` (vertex order)."""
+        big_f = self.params.frac
+        n, dw = len(ds_sorted), big_f + 1
+        mus = []
+        for k in range(n + 1):
+            if k == n:
+                mus.append(ds_sorted[n - 1])
+                continue
+            hi = Const(1 << big_f, dw) if k == 0 else ds_sorted[k - 1]
+            diff = Signal(signed(dw + 1), name=f"mu{k}")
+            m.d.comb += diff.eq(hi - ds_sorted[k])
+            sink_unused(m, diff[dw], f"mu{k}_sign")
+            mus.append(diff[:dw])
+        return mus
+
+    @staticmethod
+    def _rotate(m: Module, values, rot, width: int, name: str):
+        """``out[b] = values[(b - rot) mod len(values)]`` (a case table of ``rot``)."""
+        nb = len(values)
+        if isinstance(rot, int):
+            return [values[(b - rot) % nb] for b in range(nb)]
+        out = [Signal(unsigned(width), name=f"{name}{b}") for b in range(nb)]
+        with m.Switch(rot):
+            for s in range(nb):
+                with (m.Case(s) if s < nb - 1 else m.Default()):
+                    m.d.comb += [out[b].eq(values[(b - s) % nb]) for b in range(nb)]
+        return out
 
     def _banks(self, m: Module, pipe: _Pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan):
         """Bank rotation and the memory read (the memory register)."""
@@ -612,16 +634,10 @@ class PWASCore(wiring.Component):
         # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
         # same way instead of the read data back (the sum of products does not depend on the
         # order; mu is narrower than nz weights and needs no rot downstream).
+        late = self.memory_kind == "banked" and self.pipeline.mu_late
         if self.memory_kind == "banked":  # _bank_direct: the addresses are in bank order, mu in vertex order
             bank_addr = addr
-            if isinstance(rot, int):
-                bank_mu = [mus[(b - rot) % nb] for b in range(nb)]
-            else:
-                bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
-                with m.Switch(rot):
-                    for s in range(nb):
-                        with (m.Case(s) if s < n else m.Default()):
-                            m.d.comb += [bank_mu[b].eq(mus[(b - s) % nb]) for b in range(nb)]
+            bank_mu = mus if late else self._rotate(m, mus, rot, dw, "bank_mu")
         elif not isinstance(rot, int):
             bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)] if aw else []
             bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
@@ -637,8 +653,9 @@ class PWASCore(wiring.Component):
 
         # optional register on the rotated addresses and mu: the memories' address pins are then
         # driven by flip-flops (no logic between them and the block RAMs)
-        valid, r = pipe.stage("s_bank", self.pipeline.bank, valid, {"addr": bank_addr, "mu": bank_mu, "oor": oor})
-        bank_addr, bank_mu, oor = r["addr"], r["mu"], r["oor"]
+        valid, r = pipe.stage("s_bank", self.pipeline.bank, valid,
+                              {"addr": bank_addr, "mu": bank_mu, "oor": oor, "rot": rot if late else 0})
+        bank_addr, bank_mu, oor, rot = r["addr"], r["mu"], r["oor"], r["rot"]
 
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
@@ -652,8 +669,11 @@ class PWASCore(wiring.Component):
                 rp.addr = bank_addr[b]
             rp.en = pipe.advance
             mem_data.append(rp.data)
-        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor})
-        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"]}
+        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor, "rot": rot if late else 0})
+        bank_mu = r["mu"]
+        if late:  # mu and its rotation in the memory-read cycle (beside the block RAM's clock-to-output)
+            bank_mu = self._rotate(m, self._mu_of_sorted(m, bank_mu), r["rot"], dw, "bank_mu")
+        return valid, {"data": mem_data, "mu": bank_mu, "oor": r["oor"]}
 
     # ------------------------------------------------------------------ back end
     def _back(self, m: Module, pipe: _Pipe, valid, vals, advance):

@@ -228,6 +228,7 @@ class Pipeline:
     offset: bool = False
     bank: bool = False
     mul_halves: bool = False
+    mu_late: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -267,7 +268,8 @@ class Pipeline:
         if isinstance(value, Pipeline):
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
-            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves"}
+            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
+                     "mu_late"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -293,6 +295,7 @@ class Pipeline:
             "offset": self.offset,
             "bank": self.bank,
             "mul_halves": self.mul_halves,
+            "mu_late": self.mu_late,
         }
 
 
@@ -316,7 +319,8 @@ class Pipeline:
 #:   with DSP blocks it takes twice as many.
 PIPELINE_PRESETS: dict[str, Pipeline] = {
     "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
-    "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0),
+    "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0,
+                      mu_late=True),
     "balanced": Pipeline(),
     "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
                     offset=True, bank=True),
