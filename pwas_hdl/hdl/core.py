@@ -339,14 +339,9 @@ class PWASCore(wiring.Component):
                 terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
                 base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
                 wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
-            res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
-            table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
-            if fields is not None or aw == 0 or True:
-                # the whole rotation before the rank register: the per-bank step / selection tables
-                # after it are then functions of registered bits only
-                rot_part = [self._modsum(m, res, nb, rbits, "rot")]
-            else:
-                rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
+            # the whole rotation before the rank register: the per-bank step tables after it are then
+            # functions of registered bits only
+            rot_part = [self._rotation(m, cs, nb, rbits)]
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
             terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
@@ -830,6 +825,30 @@ class PWASCore(wiring.Component):
         nets = [v for v in values if not isinstance(v, int)]
         out = tree_level(nets, lambda a, b, _lvl, i: combine(a, b, i), 0) if len(nets) > 2 else nets
         return out + ([const] if const else [])
+
+    def _rotation(self, m: Module, cs, nb: int, rbits: int):
+        """``rot = |c| mod nb``: the cells' sum (an adder tree of equal-width operands) and one table,
+        when that sum has at most 6 bits; else the residues' tables (:meth:`_modsum`)."""
+        p = self.params
+        const = sum(c for c in cs if isinstance(c, int))
+        nets = [c for c in cs if not isinstance(c, int)]
+        total = const + sum(pj - 1 for pj, c in zip(p.partitions, cs) if not isinstance(c, int))
+
+        def width(a, b, _lvl, _i):  # the tree's operand widths (None: unequal somewhere)
+            return a + 1 if a is not None and a == b else None
+
+        def add(a, b, lvl, i):
+            s = Signal(unsigned(len(a) + 1), name=f"csum{lvl}_{i}")
+            m.d.comb += s.eq(a + b)
+            return s
+
+        if len(nets) >= 2 and bits_for(total) <= 6:
+            w = tree_reduce([len(c) for c in nets], width)
+            if w is not None and w <= 6:
+                sm = tree_reduce(nets, add)
+                return rom(m, sm, [(v + const) % nb for v in range(1 << len(sm))], rbits, "rot")
+        res = [rom(m, c, [i % nb for i in range(pj)], rbits, f"cres{j}") for j, (c, pj) in enumerate(zip(cs, p.partitions))]
+        return self._modsum(m, res, nb, rbits, "rot")
 
     @staticmethod
     def _modsum(m: Module, res, nb: int, rbits: int, name: str):
