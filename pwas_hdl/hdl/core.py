@@ -567,9 +567,9 @@ class PWASCore(wiring.Component):
         # optional register on the address pieces, the base, the selected fractions and k_b = 0:
         # before the mu subtractions (and the address adders of a layout without bit fields)
         valid, r = pipe.stage("s_voff", pl.offset, valid,
-                              {"f": [x for pc in pieces for x in pc], "base": base, "g": gs,
+                              {"f": [x for pc in pieces for x in pc], "base": base, "ds": gs,
                                "rot": rot, "oor": oor})
-        flat, base, gs, rot, oor = r["f"], r["base"], r["g"], r["rot"], r["oor"]
+        flat, base, gs, rot, oor = r["f"], r["base"], r["ds"], r["rot"], r["oor"]
         addr = []
         if aw:
             per = len(pieces[0])
@@ -590,9 +590,11 @@ class PWASCore(wiring.Component):
                     addr.append(sum_wrap(m, [base, off], aw, f"baddr{b}"))
         # mu_late: the sorted fractions travel to the memory register; mu and its rotation are
         # computed in the memory-read cycle (_banks)
+        # (register names: "baddr" = the addresses in bank order, "ds" = the sorted fractions d_(k+1))
+        mkey = "ds" if pl.mu_late else "mu"
         mus = gs if pl.mu_late else self._mu_of_sorted(m, gs)
-        valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
-        return valid, r["addr"], r["mu"], r["rot"], r["oor"]
+        valid, r = pipe.stage("s_addr", pl.addr, valid, {"baddr": addr, mkey: mus, "rot": rot, "oor": oor})
+        return valid, r["baddr"], r[mkey], r["rot"], r["oor"]
 
     def _mu_of_sorted(self, m: Module, ds_sorted):
         """``mu_0 = 2**F - d_(1)``, ``mu_k = d_(k) - d_(k+1)``, ``mu_n = d_(n)`` (vertex order)."""
@@ -648,9 +650,10 @@ class PWASCore(wiring.Component):
 
         # optional register on the rotated addresses and mu: the memories' address pins are then
         # driven by flip-flops (no logic between them and the block RAMs)
+        mkey = "ds" if late else "mu"  # late: the sorted fractions (vertex order), not mu yet
         valid, r = pipe.stage("s_bank", self.pipeline.bank, valid,
-                              {"addr": bank_addr, "mu": bank_mu, "oor": oor, "rot": rot if late else 0})
-        bank_addr, bank_mu, oor, rot = r["addr"], r["mu"], r["oor"], r["rot"]
+                              {"addr": bank_addr, mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
+        bank_addr, bank_mu, oor, rot = r["addr"], r[mkey], r["oor"], r["rot"]
 
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
@@ -664,8 +667,8 @@ class PWASCore(wiring.Component):
                 rp.addr = bank_addr[b]
             rp.en = pipe.advance
             mem_data.append(rp.data)
-        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor, "rot": rot if late else 0})
-        bank_mu = r["mu"]
+        valid, r = pipe.stage("s_mem", True, valid, {mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
+        bank_mu = r[mkey]
         if late:  # mu and its rotation in the memory-read cycle (beside the block RAM's clock-to-output)
             bank_mu = self._rotate(m, self._mu_of_sorted(m, bank_mu), r["rot"], dw, "bank_mu")
         return valid, {"data": mem_data, "mu": bank_mu, "oor": r["oor"]}
