@@ -24,12 +24,16 @@ Arithmetic (the bit-true specification, see :mod:`pwas_hdl.hdl.params`):
   table turns the ``n-1`` comparison bits of dimension ``j`` into the thermometer code
   ``lt_j[k-1] = (rank_j < k)`` (``k = 1..n-1``), which gives both the vertex steps and the one-hot
   selection of ``d_(k)``;
-* banked addresses: ``addr(v_k) = base + sum_{j<n-1} step_kj * S_j + (step_k,n-1 & wrap)`` where
-  ``S_j`` = ``BankedLayout.row_strides`` (:mod:`pwas_hdl.fixedpoint.memory_layout`) and
-  ``wrap = (c_{n-1} mod (n+1) == n)``; bank ``b`` reads vertex ``(b - rot) mod (n+1)`` with
-  ``rot = |c| mod (n+1)``; the ``mu_k`` are rotated the same way (bank ``b`` multiplies its word
-  by ``mu_{(b - rot) mod (n+1)}``), so the read data need no rotation back -- the exact sum of
-  products does not depend on the order of its terms;
+* banked addresses: bank ``b`` reads vertex ``k_b = (b - rot) mod (n+1)`` with
+  ``rot = |c| mod (n+1)``; its step bits ``s_bj = [rank_j < k_b]`` are small tables of
+  ``(rank_j, rot)`` and its address is computed from them directly (no rotation of finished
+  addresses): ``addr_b = sum_{j<n-1} (c_j + s_bj) * S_j + (c_{n-1} + s_b,n-1) // (n+1)``
+  (``S_j`` = ``BankedLayout.row_strides``, :mod:`pwas_hdl.fixedpoint.memory_layout`), the
+  concatenation of the bit fields ``c_j + s_bj`` when the strides are aligned powers of two
+  (:meth:`PWASCore._address_fields`), else ``base + table(s_b, wrap)`` with one adder per bank
+  (``wrap = (c_{n-1} mod (n+1) == n)``). The ``mu_k`` are computed in vertex order and rotated
+  (bank ``b`` multiplies its word by ``mu_{k_b}``), so the read data need no rotation back -- the
+  exact sum of products does not depend on the order of its terms;
 * widths: fractions and ``mu`` have ``F + 1`` bits (``mu_0 = 2**F`` is representable); products and
   partial sums are kept in ``F + B_w`` signed bits, the final sum in ``F + B_w + 1``: the ``mu_k``
   are non-negative and sum to ``2**F``, so every partial sum lies in
@@ -222,12 +226,13 @@ class PWASCore(wiring.Component):
         return self._banks(m, pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan)
 
     def _vertices(self, m: Module, pipe: _Pipe, payload, valid):
-        """Scale/clamp/split, rank, the n+1 vertex addresses (in vertex order) and mu.
+        """Scale/clamp/split, rank, the n+1 addresses and mu.
 
-        Returns ``(valid, addr, mu, rot, oor)`` after the optional ``addr`` register; ``addr[k]``
-        is vertex ``k``'s address in its memory (``[]`` when the memories have one word), ``rot``
-        the bank rotation (0 for the replicated layout). Shared with
-        :class:`pwas_hdl.hdl.serial_core.SerialPWASCore`.
+        Returns ``(valid, addr, mu, rot, oor)`` after the optional ``addr`` register. Replicated
+        layout: ``addr[k]`` is vertex ``k``'s address (``[]`` when the memories have one word),
+        ``rot = 0``. Banked: ``addr[b]`` is bank ``b``'s address (:meth:`_bank_direct`), ``mu`` in
+        vertex order and ``rot`` the bank rotation. Shared with
+        :class:`pwas_hdl.hdl.serial_core.SerialPWASCore` (replicated).
         """
         p, pl = self.params, self.pipeline
         n, big_f, bin_ = p.n, p.frac, p.in_width
@@ -368,7 +373,7 @@ class PWASCore(wiring.Component):
                 bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
                 lt.append(rom(m, Cat(*bits), therm, n - 1, f"lt{j}"))
         base = sum_wrap(m, r["base"], aw, "base") if aw else 0
-        rot = self._modsum(m, r["rot"], nb, rbits, "rot") if self.memory_kind == "banked" else 0
+        rot = 0
 
         # ---------------------------------------------------------- C: vertices, addresses, mu
         def step(k, j):
@@ -378,20 +383,15 @@ class PWASCore(wiring.Component):
                 return True
             return lt[j][k - 1]
 
+        # (replicated layout from here on; banked memories returned above)
         # vertex k's address offset from the base is a function of the n step bits of vertex k
-        # alone (sum_j step_kj * S_j, + the wrap bit on banked memories): one case table of at most
-        # 2**n words and one adder per vertex instead of an adder tree of n + 1 terms
+        # alone (sum_j step_kj * S_j): one case table of at most 2**n words and one adder per vertex
+        # instead of an adder tree of n + 1 terms
         addr, offs = [], []
         if aw:
             full = 1 << aw
             for k in range(nb):
-                if self.memory_kind == "banked":
-                    pairs = [(step(k, j), rst[j]) for j in range(n - 1)]
-                    if k > 0 and not isinstance(wrap, int):
-                        s = step(k, n - 1)
-                        pairs.append((wrap if s is True else (wrap & s), 1))
-                else:
-                    pairs = [(step(k, j), st[j]) for j in range(n)]
+                pairs = [(step(k, j), st[j]) for j in range(n)]
                 const = sum(w for b, w in pairs if b is True)
                 var = [(b, w) for b, w in pairs if not isinstance(b, bool)]
                 if var:
@@ -476,7 +476,7 @@ class PWASCore(wiring.Component):
         return spans
 
     @staticmethod
-    def _table(m: Module, inputs, f, width: int, name: str, keep: bool = False):
+    def _table(m: Module, inputs, f, width: int, name: str):
         """``f(*values)`` as a case table over the non-constant ``inputs`` (``[(value or int, width)]``);
         an int when it is constant (unreachable input codes give whatever ``f`` returns, or 0)."""
         var = [(v, w) for v, w in inputs if not isinstance(v, (int, bool))]
@@ -492,22 +492,19 @@ class PWASCore(wiring.Component):
             table.append(int(f(*args)) % (1 << width))
         if not var:
             return table[0]
-        out = rom(m, Cat(*[v for v, _w in var]), table, width, name)
-        if keep and not isinstance(out, int):
-            out.attrs["keep"] = 1
-        return out
+        return rom(m, Cat(*[v for v, _w in var]), table, width, name)
 
     def _bank_direct(self, m: Module, pipe: _Pipe, valid, ge, ds, oor, cs, base, wrap, rot, fields):
-        """Banked memories without a bank rotation: bank ``b``'s step bits, address and ``mu``.
+        """Banked memories without an address rotation: bank ``b``'s step bits and address, ``mu``.
 
         Bank ``b`` reads vertex ``k_b = (b - rot) mod (n+1)``. Its step bits
         ``s_bj = [rank_j < k_b]`` are small tables of ``(rank_j, rot)``; its address is built from
         them (bit fields ``c_j + s_bj`` when :meth:`_address_fields` allows, else the shared base plus
-        a table of the step bits, one adder per bank); its ``mu`` is ``e_b - g_{b+1}`` with
-        ``g_b = d_j`` for ``rank_j = k_b - 1`` (0 when ``k_b = 0``) and ``e_b = g_b``, or ``2**F``
-        when ``k_b = 0`` (so ``mu`` of ``k_b = 0`` is ``2**F - d_(1)``, of ``k_b = n`` is ``d_(n) - 0``):
-        one one-hot selection of the fractions per bank. Returns what :meth:`_vertices` returns, in
-        bank order (``rot = 0``).
+        a table of the step bits, one adder per bank). ``mu`` is computed in vertex order from the
+        sorted fractions (one-hot selection by the comparison bits) and rotated after the ``addr``
+        register (:meth:`_banks`; with ``mu_late`` after the memory register). Returns what
+        :meth:`_vertices` returns, the addresses in bank order, ``mu`` (or, ``mu_late``, the sorted
+        fractions) in vertex order.
         """
         p, pl, plan = self.params, self.pipeline, self.memory_plan
         n, big_f = p.n, p.frac
@@ -831,7 +828,9 @@ class PWASCore(wiring.Component):
 
     def _rotation(self, m: Module, cs, nb: int, rbits: int):
         """``rot = |c| mod nb``: the cells' sum (an adder tree of equal-width operands) and one table,
-        when that sum has at most 6 bits; else the residues' tables (:meth:`_modsum`)."""
+        when that sum has at most 6 bits; else, and behind a split register, the residues' tables
+        (:meth:`_modsum`: more LUTs, but no carry chain -- the split -> rank stage of the throughput
+        build measured 6.1 ns with the adder tree, 162.9 MHz, against >= 200 MHz with the tables)."""
         p = self.params
         const = sum(c for c in cs if isinstance(c, int))
         nets = [c for c in cs if not isinstance(c, int)]
@@ -845,7 +844,7 @@ class PWASCore(wiring.Component):
             m.d.comb += s.eq(a + b)
             return s
 
-        if len(nets) >= 2 and bits_for(total) <= 6:
+        if len(nets) >= 2 and bits_for(total) <= 6 and not self.pipeline.split:
             w = tree_reduce([len(c) for c in nets], width)
             if w is not None and w <= 6:
                 sm = tree_reduce(nets, add)
