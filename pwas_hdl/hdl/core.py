@@ -344,9 +344,17 @@ class PWASCore(wiring.Component):
                 terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
                 base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
                 wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
-            # the whole rotation before the rank register: the per-bank step tables after it are then
-            # functions of registered bits only
-            rot_part = [self._rotation(m, cs, nb, rbits)]
+            if pl.split and pl.rank:
+                # behind a split register (the throughput build) the split -> rank stage keeps the
+                # comparators and the first level of the residue tables, the rest follows the rank
+                # register (measured: the whole rotation there made it the critical stage)
+                res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
+                table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
+                rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
+            else:
+                # the whole rotation before the rank register: the per-bank step tables after it are
+                # then functions of registered bits only
+                rot_part = [self._rotation(m, cs, nb, rbits)]
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
             terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
@@ -542,10 +550,9 @@ class PWASCore(wiring.Component):
         gs = dsorted[1:]  # in vertex order: mu is rotated after the addr register (_banks)
 
         # address pieces: bit fields (no carry chain) or a per-bank offset table
-        pieces = []
-        if aw:
-            full = 1 << aw
-            for b in range(nb):
+        def address_pieces(step, cs):
+            pieces = []
+            for b in range(nb if aw else 0):
                 if fields is not None:
                     fb = []
                     for e, w, j in fields:
@@ -561,12 +568,22 @@ class PWASCore(wiring.Component):
                     wts = list(rst)
                     pieces.append([self._table(m, ins, lambda *v, wts=wts: sum(x * w for x, w in zip(v, wts)) + (v[-1] & v[-2]),
                                                aw, f"boff{b}")])
-        # optional register on the address pieces, the base, the selected fractions and k_b = 0:
-        # before the mu subtractions (and the address adders of a layout without bit fields)
+            return pieces
+
+        # optional register before the mu subtractions: on the address pieces and the base (a layout
+        # without bit fields: its adders come after it) or, bit fields, on the step bits and the cells
+        # (the fields' tables come after it, beside the mu subtractions), and on the sorted fractions
+        late_fields = fields is not None and pl.offset and aw
+        pieces = [] if late_fields else address_pieces(step, cs)
         valid, r = pipe.stage("s_voff", pl.offset, valid,
-                              {"f": [x for pc in pieces for x in pc], "base": base, "ds": gs,
-                               "rot": rot, "oor": oor})
+                              {"f": [x for pc in pieces for x in pc], "base": base, "ds": gs, "rot": rot, "oor": oor,
+                               "st": [x for row in step for x in row] if late_fields else [],
+                               "c": list(cs) if late_fields else []})
         flat, base, gs, rot, oor = r["f"], r["base"], r["ds"], r["rot"], r["oor"]
+        if late_fields:
+            step = [r["st"][b * n : (b + 1) * n] for b in range(nb)]
+            pieces = address_pieces(step, r["c"])
+            flat = [x for pc in pieces for x in pc]
         addr = []
         if aw:
             per = len(pieces[0])
@@ -828,9 +845,7 @@ class PWASCore(wiring.Component):
 
     def _rotation(self, m: Module, cs, nb: int, rbits: int):
         """``rot = |c| mod nb``: the cells' sum (an adder tree of equal-width operands) and one table,
-        when that sum has at most 6 bits; else, and behind a split register, the residues' tables
-        (:meth:`_modsum`: more LUTs, but no carry chain -- the split -> rank stage of the throughput
-        build measured 6.1 ns with the adder tree, 162.9 MHz, against >= 200 MHz with the tables)."""
+        when that sum has at most 6 bits; else the residues' tables (:meth:`_modsum`)."""
         p = self.params
         const = sum(c for c in cs if isinstance(c, int))
         nets = [c for c in cs if not isinstance(c, int)]
@@ -844,7 +859,7 @@ class PWASCore(wiring.Component):
             m.d.comb += s.eq(a + b)
             return s
 
-        if len(nets) >= 2 and bits_for(total) <= 6 and not self.pipeline.split:
+        if len(nets) >= 2 and bits_for(total) <= 6:
             w = tree_reduce([len(c) for c in nets], width)
             if w is not None and w <= 6:
                 sm = tree_reduce(nets, add)
