@@ -47,6 +47,9 @@ CASES = [
     ([3, 1, 2, 4, 2], 1, "banked", "balanced", {"rounding": "truncate", "input_fill": 1.0}),
     ([1, 2, 1, 2, 1, 3], 2, "banked", "balanced", {"input_bits": 10}),
     ([2, 2, 2, 2, 2, 2], 1, "replicated", "max", {"input_bits": 8}),
+    # issue 14: bit-field bank addresses (p + 1 = 4), the rotation from the cells' adder tree and mu
+    # in the memory-read cycle (short)
+    ([3, 3, 3, 3], 2, "banked", "short", {}),
 ]
 
 
@@ -208,3 +211,22 @@ def test_resource_numbers_lorenz_like():
     repl = MemoryPlan.build(p, "replicated")
     assert (banked.n_banks, banked.depth, banked.words) == (5, 1024, 5120)
     assert (repl.n_banks, repl.depth, repl.words) == (5, 4096, 20480)
+
+
+def test_banked_addresses_are_bit_fields_where_aligned():
+    """The rotation-free banked core (issue 14): bit fields when the strides are aligned powers of
+    two (p + 1 = 8, 4 in the middle dimensions), per-bank adders otherwise (p = 2)."""
+
+    def core(parts, pipe="balanced"):
+        n_v = int(np.prod([q + 1 for q in parts]))
+        p = CoreParams(tuple(parts), 12, (-1792,) * len(parts), (8,) * len(parts), 10, 4, 12, 4,
+                       np.arange(n_v, dtype=np.int64)[:, None] % 300 - 150)
+        c = PWASCore(p, pipeline=pipe)
+        c._MustUse__silence = True  # only its address layout is looked at
+        return c
+
+    assert core([7, 7, 7, 7])._address_fields() == [(7, 3, 0), (4, 3, 1), (1, 3, 2), (0, 1, 3)]
+    assert core([3, 3, 3, 3])._address_fields() == [(4, 2, 0), (2, 2, 1), (0, 2, 2)]  # 3 // 5 = 0: no last field
+    assert core([2, 2, 2])._address_fields() is None  # strides 3 * row_words: adders
+    assert Pipeline.cast(Pipeline(mu_late=True).to_dict()) == Pipeline(mu_late=True)
+    assert Pipeline.cast("short").mu_late and not Pipeline.cast("balanced").mu_late

@@ -71,6 +71,11 @@ DESIGNS = {
     "n4_p7_lorenz_like": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="balanced"),
     "n6_mixed_p": lambda: build_core(make_model([1, 2, 1, 2, 1, 3], seed=4, nz=2, input_bits=10), pipeline="balanced"),
     "odd_formats": lambda: PWASCore(odd_params(), pipeline="max"),
+    # issue 14: bit-field bank addresses with mu in the memory cycle (short), and the max pipeline on
+    # a layout whose addresses need the per-bank adders (p = 2: strides not powers of two)
+    "n4_p7_short_mu_late": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="short"),
+    "n4_p7_max": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="max"),
+    "n5_p2_max_adders": lambda: build_core(make_model([2, 2, 2, 2, 2], seed=5), pipeline="max"),
 }
 
 

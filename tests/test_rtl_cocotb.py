@@ -79,6 +79,12 @@ CONFIGS = [
     DesignConfig("s-y4-p3-offset-bank", S, 0, 4, 0, 1, 3, 1,
                  {"pipeline": {"split": False, "rank": False, "addr": False, "offset": True, "bank": True, "mem_out": True,
                                "mul_in": False, "product": False, "tree_levels": 2}}),
+    # the banked core without the address rotation (bank addresses as bit fields c_j + step, the
+    # rotation from the cells' adder tree): p + 1 a power of two in the middle dimensions; latency =
+    # mu in the memory cycle; p = 7, n = 3 has a last-dimension field (v // (n+1))
+    DesignConfig("c-n4-p3-goal-latency", C, 0, 4, 0, 1, 3, 1, {"goal": "latency"}),
+    DesignConfig("c-n3-p7-z2-goal-throughput", C, 0, 3, 0, 1, 7, 2, {"goal": "throughput"}),
+    DesignConfig("c-n3-p7-z2-goal-latency-b10", C, 0, 3, 0, 1, 7, 2, {"goal": "latency", "input_bits": 10}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 
@@ -140,7 +146,8 @@ def test_rtl_equals_bittrue_model(name, simulator, design_folder, sim_cache, tmp
 @pytest.mark.parametrize("name", ["c-n3-p4x4x4-z2-repl-sat", "c-n4-p2x3x2x3-addr-reg", "c-n5-p2x2x2x2x2-z2-trunc-max",
                                   "s-u2y3-p4-2-z2", "s-y3-p4-addr-reg-repl", "c-n1-p8-z2-repl-min-b8",
                                   "s-y2-p8-exact-scale-fill95-max", "c-n4-p3x2x5x2-goal-throughput",
-                                  "c-n3-p3x2x4-z2-max-lut", "s-y4-p3-offset-bank"])
+                                  "c-n3-p3x2x4-z2-max-lut", "s-y4-p3-offset-bank", "c-n3-p7-z2-goal-throughput",
+                                  "c-n4-p3-goal-latency"])
 @pytest.mark.rtl
 def test_debug_probes_agree_on_a_correct_design(name, design_folder, sim_cache, tmp_path):
     """The register/trace mapping used to name the failing stage is itself right: on a correct design

@@ -24,12 +24,16 @@ Arithmetic (the bit-true specification, see :mod:`pwas_hdl.hdl.params`):
   table turns the ``n-1`` comparison bits of dimension ``j`` into the thermometer code
   ``lt_j[k-1] = (rank_j < k)`` (``k = 1..n-1``), which gives both the vertex steps and the one-hot
   selection of ``d_(k)``;
-* banked addresses: ``addr(v_k) = base + sum_{j<n-1} step_kj * S_j + (step_k,n-1 & wrap)`` where
-  ``S_j`` = ``BankedLayout.row_strides`` (:mod:`pwas_hdl.fixedpoint.memory_layout`) and
-  ``wrap = (c_{n-1} mod (n+1) == n)``; bank ``b`` reads vertex ``(b - rot) mod (n+1)`` with
-  ``rot = |c| mod (n+1)``; the ``mu_k`` are rotated the same way (bank ``b`` multiplies its word
-  by ``mu_{(b - rot) mod (n+1)}``), so the read data need no rotation back -- the exact sum of
-  products does not depend on the order of its terms;
+* banked addresses: bank ``b`` reads vertex ``k_b = (b - rot) mod (n+1)`` with
+  ``rot = |c| mod (n+1)``; its step bits ``s_bj = [rank_j < k_b]`` are small tables of
+  ``(rank_j, rot)`` and its address is computed from them directly (no rotation of finished
+  addresses): ``addr_b = sum_{j<n-1} (c_j + s_bj) * S_j + (c_{n-1} + s_b,n-1) // (n+1)``
+  (``S_j`` = ``BankedLayout.row_strides``, :mod:`pwas_hdl.fixedpoint.memory_layout`), the
+  concatenation of the bit fields ``c_j + s_bj`` when the strides are aligned powers of two
+  (:meth:`PWASCore._address_fields`), else ``base + table(s_b, wrap)`` with one adder per bank
+  (``wrap = (c_{n-1} mod (n+1) == n)``). The ``mu_k`` are computed in vertex order and rotated
+  (bank ``b`` multiplies its word by ``mu_{k_b}``), so the read data need no rotation back -- the
+  exact sum of products does not depend on the order of its terms;
 * widths: fractions and ``mu`` have ``F + 1`` bits (``mu_0 = 2**F`` is representable); products and
   partial sums are kept in ``F + B_w`` signed bits, the final sum in ``F + B_w + 1``: the ``mu_k``
   are non-negative and sum to ``2**F``, so every partial sum lies in
@@ -222,12 +226,13 @@ class PWASCore(wiring.Component):
         return self._banks(m, pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan)
 
     def _vertices(self, m: Module, pipe: _Pipe, payload, valid):
-        """Scale/clamp/split, rank, the n+1 vertex addresses (in vertex order) and mu.
+        """Scale/clamp/split, rank, the n+1 addresses and mu.
 
-        Returns ``(valid, addr, mu, rot, oor)`` after the optional ``addr`` register; ``addr[k]``
-        is vertex ``k``'s address in its memory (``[]`` when the memories have one word), ``rot``
-        the bank rotation (0 for the replicated layout). Shared with
-        :class:`pwas_hdl.hdl.serial_core.SerialPWASCore`.
+        Returns ``(valid, addr, mu, rot, oor)`` after the optional ``addr`` register. Replicated
+        layout: ``addr[k]`` is vertex ``k``'s address (``[]`` when the memories have one word),
+        ``rot = 0``. Banked: ``addr[b]`` is bank ``b``'s address (:meth:`_bank_direct`), ``mu`` in
+        vertex order and ``rot`` the bank rotation. Shared with
+        :class:`pwas_hdl.hdl.serial_core.SerialPWASCore` (replicated).
         """
         p, pl = self.params, self.pipeline
         n, big_f, bin_ = p.n, p.frac, p.in_width
@@ -329,27 +334,43 @@ class PWASCore(wiring.Component):
         aw = plan.addr_width
         base_part, wrap, rot_part = [], 0, []
         rbits = bits_for(n)
+        # banked: the bank addresses as bit fields c_j + step (no adder) where the layout allows it
+        fields = self._address_fields() if self.memory_kind == "banked" else None
         if self.memory_kind == "banked":
             rst = plan.layout.row_strides  # address weight of c_j, j < n-1
             p_last = p.partitions[n - 1]
-            if aw:
+            if aw and fields is None:
                 terms = [rom(m, cs[j], [i * rst[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n - 1)]
                 terms.append(rom(m, cs[n - 1], [i // nb for i in range(p_last)], aw, f"a{n - 1}"))
                 base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
                 wrap = rom(m, cs[n - 1], [int(i % nb == n) for i in range(p_last)], 1, "wrap")
-            res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
-            table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
-            rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
+            if pl.split and pl.rank:
+                # behind a split register (the throughput build) the split -> rank stage keeps the
+                # comparators and the first level of the residue tables, the rest follows the rank
+                # register (measured: the whole rotation there made it the critical stage)
+                res = [rom(m, cs[j], [i % nb for i in range(p.partitions[j])], rbits, f"cres{j}") for j in range(n)]
+                table = [((x & ((1 << rbits) - 1)) + (x >> rbits)) % nb for x in range(1 << (2 * rbits))]
+                rot_part = self._first_level(res, lambda a, b, i: rom(m, Cat(a, b), table, rbits, f"rot0_{i}"), nb)
+            else:
+                # the whole rotation before the rank register: the per-bank step tables after it are
+                # then functions of registered bits only
+                rot_part = [self._rotation(m, cs, nb, rbits)]
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
             terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
             base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
 
         valid, r = pipe.stage(
-            "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part}
+            "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part,
+                                       "c": cs if fields is not None else []}
         )
         ds, oor, wrap = r["d"], r["oor"], r["wrap"]
         ge = dict(zip(pairs, r["ge"]))
+        if self.memory_kind == "banked":
+            base = sum_wrap(m, r["base"], aw, "base") if aw and fields is None else 0
+            rot = self._modsum(m, r["rot"], nb, rbits, "rot")
+            return self._bank_direct(m, pipe, valid, ge, ds, oor, r["c"] if fields is not None else cs, base, wrap, rot,
+                                     fields)
         lt = []
         if n > 1:
             therm = []
@@ -360,7 +381,7 @@ class PWASCore(wiring.Component):
                 bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
                 lt.append(rom(m, Cat(*bits), therm, n - 1, f"lt{j}"))
         base = sum_wrap(m, r["base"], aw, "base") if aw else 0
-        rot = self._modsum(m, r["rot"], nb, rbits, "rot") if self.memory_kind == "banked" else 0
+        rot = 0
 
         # ---------------------------------------------------------- C: vertices, addresses, mu
         def step(k, j):
@@ -370,20 +391,15 @@ class PWASCore(wiring.Component):
                 return True
             return lt[j][k - 1]
 
+        # (replicated layout from here on; banked memories returned above)
         # vertex k's address offset from the base is a function of the n step bits of vertex k
-        # alone (sum_j step_kj * S_j, + the wrap bit on banked memories): one case table of at most
-        # 2**n words and one adder per vertex instead of an adder tree of n + 1 terms
+        # alone (sum_j step_kj * S_j): one case table of at most 2**n words and one adder per vertex
+        # instead of an adder tree of n + 1 terms
         addr, offs = [], []
         if aw:
             full = 1 << aw
             for k in range(nb):
-                if self.memory_kind == "banked":
-                    pairs = [(step(k, j), rst[j]) for j in range(n - 1)]
-                    if k > 0 and not isinstance(wrap, int):
-                        s = step(k, n - 1)
-                        pairs.append((wrap if s is True else (wrap & s), 1))
-                else:
-                    pairs = [(step(k, j), st[j]) for j in range(n)]
+                pairs = [(step(k, j), st[j]) for j in range(n)]
                 const = sum(w for b, w in pairs if b is True)
                 var = [(b, w) for b, w in pairs if not isinstance(b, bool)]
                 if var:
@@ -416,7 +432,7 @@ class PWASCore(wiring.Component):
                 else:
                     term = Mux(sj, ds[j], Const(0, dw))
                 acc = term if acc is None else acc | term
-            dsorted.append(self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+            dsorted.append(acc if isinstance(acc, Signal) else self._name(m, acc, f"dsorted{k}", unsigned(dw)))
         # optional register on the offsets and the selected fractions, before the address adders and
         # the mu subtractions (it splits stage C in two: tables / one-hot selection, then carry chains)
         valid, r = pipe.stage("s_voff", pl.offset, valid,
@@ -439,13 +455,201 @@ class PWASCore(wiring.Component):
         addr, mus, rot, oor = r["addr"], r["mu"], r["rot"], r["oor"]
         return valid, addr, mus, rot, oor
 
+    def _address_fields(self):
+        """Bit fields of the banked address, or None when the layout's address needs adders.
+
+        ``addr(v) = sum_{j<n-1} v_j * row_strides[j] + v_{n-1} // (n+1)``: when every
+        ``row_strides[j]`` is a power of two ``2**e_j`` and the fields ``[e_j, e_j + width(p_j))``
+        and ``[0, width(p_{n-1} // (n+1)))`` are disjoint inside the address, the sum is their
+        concatenation (e.g. ``p_j + 1`` a power of two for ``0 < j < n-1``, as p = 7). Returns
+        ``[(e, width, j), ...]`` (``j = n-1``: the last dimension's ``// (n+1)`` field).
+        """
+        p, plan = self.params, self.memory_plan
+        aw, n, nb = plan.addr_width, p.n, p.n + 1
+        if not aw:
+            return None
+        spans = []
+        for j, s in enumerate(plan.layout.row_strides):
+            if s < 1 or s & (s - 1):
+                return None
+            spans.append((s.bit_length() - 1, bits_for(p.partitions[j]), j))
+        if p.partitions[n - 1] // nb:
+            spans.append((0, bits_for(p.partitions[n - 1] // nb), n - 1))
+        used = 0
+        for e, w, _j in spans:
+            mask = ((1 << w) - 1) << e
+            if used & mask or e + w > aw:
+                return None
+            used |= mask
+        return spans
+
+    @staticmethod
+    def _table(m: Module, inputs, f, width: int, name: str):
+        """``f(*values)`` as a case table over the non-constant ``inputs`` (``[(value or int, width)]``);
+        an int when it is constant (unreachable input codes give whatever ``f`` returns, or 0)."""
+        var = [(v, w) for v, w in inputs if not isinstance(v, (int, bool))]
+        table = []
+        for x in range(1 << sum(w for _v, w in var)):
+            args, pos = [], 0
+            for v, w in inputs:
+                if isinstance(v, (int, bool)):
+                    args.append(int(v))
+                else:
+                    args.append((x >> pos) & ((1 << w) - 1))
+                    pos += w
+            table.append(int(f(*args)) % (1 << width))
+        if not var:
+            return table[0]
+        return rom(m, Cat(*[v for v, _w in var]), table, width, name)
+
+    def _bank_direct(self, m: Module, pipe: _Pipe, valid, ge, ds, oor, cs, base, wrap, rot, fields):
+        """Banked memories without an address rotation: bank ``b``'s step bits and address, ``mu``.
+
+        Bank ``b`` reads vertex ``k_b = (b - rot) mod (n+1)``. Its step bits
+        ``s_bj = [rank_j < k_b]`` are small tables of ``(rank_j, rot)``; its address is built from
+        them (bit fields ``c_j + s_bj`` when :meth:`_address_fields` allows, else the shared base plus
+        a table of the step bits, one adder per bank). ``mu`` is computed in vertex order from the
+        sorted fractions (one-hot selection by the comparison bits) and rotated after the ``addr``
+        register (:meth:`_banks`; with ``mu_late`` after the memory register). Returns what
+        :meth:`_vertices` returns, the addresses in bank order, ``mu`` (or, ``mu_late``, the sorted
+        fractions) in vertex order.
+        """
+        p, pl, plan = self.params, self.pipeline, self.memory_plan
+        n, big_f = p.n, p.frac
+        nb, dw, aw = n + 1, big_f + 1, plan.addr_width
+        rbits, kw = bits_for(n), bits_for(n - 1)
+        cw = [bits_for(pj - 1) for pj in p.partitions]
+        rot_in = (rot, rbits)
+        ranks = []
+        for j in range(n):
+            if n == 1:
+                ranks.append(0)
+                continue
+            bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
+            ranks.append(rom(m, Cat(*bits), [bin(v).count("1") for v in range(1 << (n - 1))], kw, f"rank{j}"))
+
+        def kb(b, t):
+            return (b - t) % nb
+
+        step = [[self._table(m, [(ranks[j], kw), rot_in], lambda r, t, b=b: t < nb and r < kb(b, t), 1, f"step{b}_{j}")
+                 for j in range(n)] for b in range(nb)]
+        # d_(k), k = 1..n: the fraction of rank k - 1 (one-hot selection by tables of the comparison bits)
+        dsorted = [Const(0, dw)]
+        for k in range(1, n + 1):
+            acc = None
+            for j in range(n):
+                if n == 1:
+                    e = 1
+                else:
+                    bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
+                    e = rom(m, Cat(*bits), [int(bin(v).count("1") == k - 1) for v in range(1 << (n - 1))], 1, f"req{k}_{j}")
+                term = ds[j] if isinstance(e, int) and e else (None if isinstance(e, int) else Mux(e, ds[j], Const(0, dw)))
+                if term is not None:
+                    acc = term if acc is None else acc | term
+            dsorted.append(acc if isinstance(acc, Signal) else self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+        gs = dsorted[1:]  # in vertex order: mu is rotated after the addr register (_banks)
+
+        # address pieces: bit fields (no carry chain) or a per-bank offset table
+        def address_pieces(step, cs):
+            pieces = []
+            for b in range(nb if aw else 0):
+                if fields is not None:
+                    fb = []
+                    for e, w, j in fields:
+                        if j < n - 1:
+                            f = self._table(m, [(cs[j], cw[j]), (step[b][j], 1)], lambda c, s: c + s, w, f"af{b}_{j}")
+                        else:
+                            f = self._table(m, [(cs[j], cw[j]), (step[b][j], 1)], lambda c, s: (c + s) // nb, w, f"af{b}_{j}")
+                        fb.append(f)
+                    pieces.append(fb)
+                else:
+                    rst = plan.layout.row_strides
+                    ins = [(step[b][j], 1) for j in range(n - 1)] + [(step[b][n - 1], 1), (wrap, 1)]
+                    wts = list(rst)
+                    pieces.append([self._table(m, ins, lambda *v, wts=wts: sum(x * w for x, w in zip(v, wts)) + (v[-1] & v[-2]),
+                                               aw, f"boff{b}")])
+            return pieces
+
+        # optional register before the mu subtractions: on the address pieces and the base (a layout
+        # without bit fields: its adders come after it) or, bit fields, on the step bits and the cells
+        # (the fields' tables come after it, beside the mu subtractions), and on the sorted fractions
+        late_fields = fields is not None and pl.offset and aw
+        pieces = [] if late_fields else address_pieces(step, cs)
+        valid, r = pipe.stage("s_voff", pl.offset, valid,
+                              {"f": [x for pc in pieces for x in pc], "base": base, "ds": gs, "rot": rot, "oor": oor,
+                               "st": [x for row in step for x in row] if late_fields else [],
+                               "c": list(cs) if late_fields else []})
+        flat, base, gs, rot, oor = r["f"], r["base"], r["ds"], r["rot"], r["oor"]
+        if late_fields:
+            step = [r["st"][b * n : (b + 1) * n] for b in range(nb)]
+            pieces = address_pieces(step, r["c"])
+            flat = [x for pc in pieces for x in pc]
+        addr = []
+        if aw:
+            per = len(pieces[0])
+            for b in range(nb):
+                pb = flat[b * per : (b + 1) * per]
+                if fields is not None:
+                    parts, pos = [], 0
+                    for (e, w, _j), f in sorted(zip(fields, pb), key=lambda t: t[0][0]):
+                        if e > pos:  # bits no field covers
+                            parts.append(Const(0, e - pos))
+                        parts.append(Const(f, w) if isinstance(f, int) else f)
+                        pos = e + w
+                    if pos < aw:
+                        parts.append(Const(0, aw - pos))
+                    addr.append(Cat(*parts))  # wiring only (a named copy would be an unused alias)
+                else:
+                    off = pb[0]
+                    addr.append(sum_wrap(m, [base, off], aw, f"baddr{b}"))
+        # mu_late: the sorted fractions travel to the memory register; mu and its rotation are
+        # computed in the memory-read cycle (_banks)
+        # (register names: "baddr" = the addresses in bank order, "ds" = the sorted fractions d_(k+1))
+        mkey = "ds" if pl.mu_late else "mu"
+        mus = gs if pl.mu_late else self._mu_of_sorted(m, gs)
+        valid, r = pipe.stage("s_addr", pl.addr, valid, {"baddr": addr, mkey: mus, "rot": rot, "oor": oor})
+        return valid, r["baddr"], r[mkey], r["rot"], r["oor"]
+
+    def _mu_of_sorted(self, m: Module, ds_sorted):
+        """``mu_0 = 2**F - d_(1)``, ``mu_k = d_(k) - d_(k+1)``, ``mu_n = d_(n)`` (vertex order)."""
+        big_f = self.params.frac
+        n, dw = len(ds_sorted), big_f + 1
+        mus = []
+        for k in range(n + 1):
+            if k == n:
+                mus.append(ds_sorted[n - 1])
+                continue
+            hi = Const(1 << big_f, dw) if k == 0 else ds_sorted[k - 1]
+            diff = Signal(signed(dw + 1), name=f"mu{k}")
+            m.d.comb += diff.eq(hi - ds_sorted[k])
+            sink_unused(m, diff[dw], f"mu{k}_sign")
+            mus.append(diff[:dw])
+        return mus
+
+    @staticmethod
+    def _rotate(m: Module, values, rot, width: int, name: str):
+        """``out[b] = values[(b - rot) mod len(values)]`` (a case table of ``rot``)."""
+        nb = len(values)
+        if isinstance(rot, int):
+            return [values[(b - rot) % nb] for b in range(nb)]
+        out = [Signal(unsigned(width), name=f"{name}{b}") for b in range(nb)]
+        with m.Switch(rot):
+            for s in range(nb):
+                with (m.Case(s) if s < nb - 1 else m.Default()):
+                    m.d.comb += [out[b].eq(values[(b - s) % nb]) for b in range(nb)]
+        return out
+
     def _banks(self, m: Module, pipe: _Pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan):
         """Bank rotation and the memory read (the memory register)."""
         n = nb - 1
         # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
         # same way instead of the read data back (the sum of products does not depend on the
         # order; mu is narrower than nz weights and needs no rot downstream).
-        if not isinstance(rot, int):
+        late = self.memory_kind == "banked" and self.pipeline.mu_late
+        if self.memory_kind == "banked":  # _bank_direct: the addresses are in bank order, mu in vertex order
+            bank_addr = addr
+            bank_mu = mus if late else self._rotate(m, mus, rot, dw, "bank_mu")
+        elif not isinstance(rot, int):
             bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)] if aw else []
             bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
             with m.Switch(rot):
@@ -460,8 +664,10 @@ class PWASCore(wiring.Component):
 
         # optional register on the rotated addresses and mu: the memories' address pins are then
         # driven by flip-flops (no logic between them and the block RAMs)
-        valid, r = pipe.stage("s_bank", self.pipeline.bank, valid, {"addr": bank_addr, "mu": bank_mu, "oor": oor})
-        bank_addr, bank_mu, oor = r["addr"], r["mu"], r["oor"]
+        mkey = "ds" if late else "mu"  # late: the sorted fractions (vertex order), not mu yet
+        valid, r = pipe.stage("s_bank", self.pipeline.bank, valid,
+                              {"addr": bank_addr, mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
+        bank_addr, bank_mu, oor, rot = r["addr"], r[mkey], r["oor"], r["rot"]
 
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
@@ -475,8 +681,11 @@ class PWASCore(wiring.Component):
                 rp.addr = bank_addr[b]
             rp.en = pipe.advance
             mem_data.append(rp.data)
-        valid, r = pipe.stage("s_mem", True, valid, {"mu": bank_mu, "oor": oor})
-        return valid, {"data": mem_data, "mu": r["mu"], "oor": r["oor"]}
+        valid, r = pipe.stage("s_mem", True, valid, {mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
+        bank_mu = r[mkey]
+        if late:  # mu and its rotation in the memory-read cycle (beside the block RAM's clock-to-output)
+            bank_mu = self._rotate(m, self._mu_of_sorted(m, bank_mu), r["rot"], dw, "bank_mu")
+        return valid, {"data": mem_data, "mu": bank_mu, "oor": r["oor"]}
 
     # ------------------------------------------------------------------ back end
     def _back(self, m: Module, pipe: _Pipe, valid, vals, advance):
@@ -633,6 +842,30 @@ class PWASCore(wiring.Component):
         nets = [v for v in values if not isinstance(v, int)]
         out = tree_level(nets, lambda a, b, _lvl, i: combine(a, b, i), 0) if len(nets) > 2 else nets
         return out + ([const] if const else [])
+
+    def _rotation(self, m: Module, cs, nb: int, rbits: int):
+        """``rot = |c| mod nb``: the cells' sum (an adder tree of equal-width operands) and one table,
+        when that sum has at most 6 bits; else the residues' tables (:meth:`_modsum`)."""
+        p = self.params
+        const = sum(c for c in cs if isinstance(c, int))
+        nets = [c for c in cs if not isinstance(c, int)]
+        total = const + sum(pj - 1 for pj, c in zip(p.partitions, cs) if not isinstance(c, int))
+
+        def width(a, b, _lvl, _i):  # the tree's operand widths (None: unequal somewhere)
+            return a + 1 if a is not None and a == b else None
+
+        def add(a, b, lvl, i):
+            s = Signal(unsigned(len(a) + 1), name=f"csum{lvl}_{i}")
+            m.d.comb += s.eq(a + b)
+            return s
+
+        if len(nets) >= 2 and bits_for(total) <= 6:
+            w = tree_reduce([len(c) for c in nets], width)
+            if w is not None and w <= 6:
+                sm = tree_reduce(nets, add)
+                return rom(m, sm, [(v + const) % nb for v in range(1 << len(sm))], rbits, "rot")
+        res = [rom(m, c, [i % nb for i in range(pj)], rbits, f"cres{j}") for j, (c, pj) in enumerate(zip(cs, p.partitions))]
+        return self._modsum(m, res, nb, rbits, "rot")
 
     @staticmethod
     def _modsum(m: Module, res, nb: int, rbits: int, name: str):

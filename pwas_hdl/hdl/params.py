@@ -194,14 +194,21 @@ class Pipeline:
 
     ============ ========================================================================
     ``split``    register after scale / clamp / cell-fraction split
-    ``rank``     register after the rank extractor (and the address/bank precomputation)
-    ``offset``   register on the vertex-address offsets (case tables of the step bits), the base address
-                 and the one-hot selected fractions ``d_(k)``: before the address adders and the ``mu``
-                 subtractions (it cuts the rank -> address path between its tables and its carry chains)
-    ``addr``     register on the vertex addresses and ``mu`` (before the bank rotation and the memories)
-    ``bank``     register on the bank-rotated addresses and ``mu`` (the memories' address pins then come
-                 straight from flip-flops)
-    memory *     vertex addresses + ``mu`` feed the synchronous read ports (one register)
+    ``rank``     register after the rank extractor (and the address/bank precomputation; banked: the
+                 bank rotation ``|c| mod (n+1)`` and the cells)
+    ``offset``   register on the address offsets, the base address and the one-hot selected fractions
+                 ``d_(k)``: before the address adders and the ``mu`` subtractions (it cuts the rank ->
+                 address path between its tables and its carry chains). Banked memories: on bank
+                 ``b``'s address pieces (bit fields ``c_j + [rank_j < (b - rot) mod (n+1)]``, or a
+                 table of those step bits when the layout needs adders)
+    ``addr``     register on the addresses (banked: already in bank order, no rotation follows them)
+                 and ``mu`` (vertex order)
+    ``bank``     register on the addresses and the bank-rotated ``mu`` (the memories' address pins then
+                 come straight from flip-flops)
+    ``mu_late``  (no register) banked: the sorted fractions ``d_(k)`` instead of ``mu`` go through the
+                 registers up to the memory register; ``mu`` and its rotation are computed in the
+                 memory-read cycle, beside the block RAM's clock-to-output (off the front's path)
+    memory *     bank addresses + ``mu`` feed the synchronous read ports (one register)
     ``mem_out``  extra register on the memory read data (on ECP5 the DP16KD output register)
     ``mul_in``   register on the multiplier operands (``mu`` and the read data; on ECP5 the
                  MULT18X18D input registers)
@@ -228,6 +235,7 @@ class Pipeline:
     offset: bool = False
     bank: bool = False
     mul_halves: bool = False
+    mu_late: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -267,7 +275,8 @@ class Pipeline:
         if isinstance(value, Pipeline):
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
-            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves"}
+            known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
+                     "mu_late"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -293,6 +302,7 @@ class Pipeline:
             "offset": self.offset,
             "bank": self.bank,
             "mul_halves": self.mul_halves,
+            "mu_late": self.mu_late,
         }
 
 
@@ -300,13 +310,18 @@ class Pipeline:
 #: harness, hard-block registers packed; benchmarks/hw_tables.py has the current figures):
 #:
 #: * ``min``: 2 registers (memory + output), the fewest cycles;
-#: * ``short``: ``min`` + the product register (3 cycles for every n). The rule behind it: a register
-#:   pays only where it costs no fabric (the MULT18X18D output register) and cuts the longest stage
-#:   of ``min`` (memory -> multipliers -> adder tree -> output) into two parts that are each shorter
-#:   than the front (input -> scale / rank / address -> memory), which no hard-block register can
-#:   cut; every further register adds a cycle of at least the front's length. Measured 40.6 ns
-#:   (3 seeds; 3 x 13.5 ns, the front) against 43.1 ns for ``min`` (2 x 21.7 ns); rank + product
-#:   44.0 ns, mem_out + product 52.5 ns, mem_out alone 51.9 ns (seed 1);
+#: * ``short``: ``min`` + the product register + ``mu_late`` (3 cycles for every n). The rule behind
+#:   it: a register pays only where it costs no fabric (the MULT18X18D output register) and cuts the
+#:   longest stage of ``min`` (memory -> multipliers -> adder tree -> output) into two parts that are
+#:   each shorter than the front (input -> scale / rank / address -> memory), which no hard-block
+#:   register can cut; logic that does not feed the addresses (``mu``) moves out of the front into
+#:   the memory-read cycle; every further register adds a cycle of at least the front's length.
+#:   Seed 1, rotation-free banked core (issue 14): 33.8 ns = 3 x 11.3 ns (the front: input ->
+#:   clamp / split -> comparators -> step tables -> bit-field address -> memory), with the memory ->
+#:   multiplier stage at 11.0 ns (DP16KD clock-to-output 5.6 ns + routing 1.9 + MULT18X18D setup
+#:   3.5), which bounds every 3-cycle structure at 33 ns; before: 40.6 ns (3 seeds, 3 x 13.5 ns)
+#:   against 43.1 ns for ``min`` (2 x 21.7 ns); rank + product 44.0 ns, mem_out + product 52.5 ns,
+#:   mem_out alone 51.9 ns (seed 1);
 #: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
 #:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
 #: * ``max``: every register (13 cycles for n = 4): each stage holds at most one carry chain or a
@@ -316,7 +331,8 @@ class Pipeline:
 #:   with DSP blocks it takes twice as many.
 PIPELINE_PRESETS: dict[str, Pipeline] = {
     "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
-    "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0),
+    "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0,
+                      mu_late=True),
     "balanced": Pipeline(),
     "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
                     offset=True, bank=True),

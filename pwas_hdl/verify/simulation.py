@@ -477,6 +477,8 @@ def _expected_probe(name: str, tr: dict, model: FixedPointModel, out_fields: lis
         return pack(tr["w_by_bank"][i], bw)
     if what == "addr":  # vertex i's address (register before the memories) or memory i's
         return int(tr["addr_by_bank"][i] if bank_order else tr["addr"][i])
+    if what == "baddr":  # memory i's address (banked core without the address rotation, issue 14)
+        return int(tr["addr_by_bank"][i])
     if what == "p":
         return int(products[i % nb, i // nb])
     if what == "t" and lvl is not None:
