@@ -23,7 +23,7 @@ Floats are written in Python's shortest round-trip form, so write/read is bit-ex
 refuses (one :class:`~pwas_hdl.errors.InputError` naming the file and the key) invalid JSON, another
 format or version, a key the schema does not allow, and what a schema cannot say: ``A_i`` square of
 one order ``n`` in every mode, ``B_i``, ``C_i``, ``K_i`` of length ``n``, finite numbers, distinct
-signal names, one state name per state.
+signal names, one state name per state, an output row ``C_i`` with a non-zero entry.
 """
 
 from __future__ import annotations
@@ -122,6 +122,12 @@ class SwitchedEstimatorConfig:
         return [self.input_name], [self.output_name], list(self.state_names)
 
 
+def _zero_c(i: int) -> str:
+    """The message for a mode whose output row ``C_i`` is all zero."""
+    return (f"modes[{i}].C is all zero: the output y = C x of mode {i + 1} would not depend on the state, "
+            "so no observer or residual can tell the mode; give C a non-zero entry")
+
+
 def _config_errors(c: SwitchedEstimatorConfig) -> list[str]:
     errs = []
     s = len(c.A)
@@ -137,6 +143,8 @@ def _config_errors(c: SwitchedEstimatorConfig) -> list[str]:
         for key, v in (("A", c.A[i]), ("B", c.B[i]), ("C", c.C[i]), ("K", c.K[i])):
             if not np.all(np.isfinite(v)):
                 errs.append(f"modes[{i}].{key} holds a value that is not a finite number")
+        if c.C[i].shape == (n,) and not np.any(c.C[i]):
+            errs.append(_zero_c(i))
     if not isinstance(c.window, (int, np.integer)) or isinstance(c.window, bool) or not 1 <= int(c.window) <= 64:
         errs.append(f"window must be an integer in 1..64, got {c.window!r}")
     names = [c.input_name, c.output_name, *c.state_names]
@@ -172,6 +180,8 @@ def validate_estimator(d: Any, source: str = "estimator") -> None:
             vals = [v for row in e[key] for v in row] if key == "A" else e[key]
             if not all(math.isfinite(float(v)) for v in vals):
                 raise InputError(f"{source}: modes[{i}].{key} holds a value that is not a finite number; {_HINT}")
+        if not any(float(v) != 0.0 for v in e["C"]):
+            raise InputError(f"{source}: {_zero_c(i)}; {_HINT}")
     sig = d["signals"]
     names = [sig["input"], sig["output"], *sig["states"]]
     if len(sig["states"]) != n:

@@ -186,6 +186,21 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
     return PWASVirtualSensor.load(model), str(model)
 
 
+def _check_supported(sensor: PWASVirtualSensor) -> None:
+    """Refuse, with one :class:`InputError` naming the fit option, the models whose fixed-point model
+    is not :class:`FixedPointModel` on the lag regressors (the sweep evaluates only that one)."""
+    kinds = (
+        (getattr(sensor.grid_, "subsets", None) is not None, "additive sensors (fit --additive)"),
+        (getattr(sensor, "front_end_", None) is not None, "observer-bank sensors (fit --front-end observer-bank)"),
+        (sensor.lags_ is not None and sensor.lags_.recurrent, "recurrent sensors (fit --mz, fit-map --state)"),
+        (getattr(sensor, "classifier_", None) is not None, "classifiers (fit --classify)"),
+    )
+    for bad, what in kinds:
+        if bad:
+            raise InputError(f"explore is not available for {what} yet; give the formats to `pwas-hdl generate` "
+                             "(--input-bits, --weight-frac, --output-frac)")
+
+
 def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
     """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
     ins, outs, tgts = sensor.signal_names()
@@ -477,8 +492,7 @@ def explore(
     if workdir is not None:
         check_output_path(workdir, "--synth-dir", kind="folder")
     sensor, model_path = _load_sensor(model)
-    if getattr(sensor.grid_, "subsets", None) is not None:  # pwas_hdl.fit.additive
-        raise InputError("explore is not available for additive sensors (--additive) yet; give the formats to generate")
+    _check_supported(sensor)
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]

@@ -81,6 +81,18 @@ def read_json(path: str | os.PathLike, hint: str) -> Any:
         raise InputError(f"{p} is not valid JSON ({exc}); {hint}") from exc
 
 
+#: The file formats of pwas-hdl (their ``format`` names; each module owns its own) and what each is
+#: for, so that a file given to the wrong command is named for what it is.
+FILE_KINDS = {
+    "pwas-hdl-model": "a fitted model of `pwas-hdl fit`: predict, info, generate and explore take it",
+    "pwas-hdl-estimator": "seed 003's estimator of `make-data switched-linear --estimator-out`: `pwas-hdl generate` takes it",
+    "pwas-hdl-manifest": "the manifest of a `pwas-hdl generate` folder: simulate, synth, report and export-testbench take the folder",
+    "pwas-hdl-breakpoints": "cuts for `pwas-hdl fit --breakpoints FILE`",
+    "pwas-hdl-bench-results": "results of `pwas-hdl bench`",
+    "pwas-hdl-explore": "results of `pwas-hdl explore`",
+}
+
+
 def check_header(d: Any, fmt: str, version: int, source: str, hint: str) -> None:
     """Check ``format`` and ``version`` before the schema (an old file gets a version message, not a key list).
 
@@ -90,6 +102,9 @@ def check_header(d: Any, fmt: str, version: int, source: str, hint: str) -> None
         ``d`` is not an object with ``"format": fmt``, or its version is not ``version``.
     """
     if not isinstance(d, dict) or d.get("format") != fmt:
+        other = d.get("format") if isinstance(d, dict) else None
+        if isinstance(other, str) and other in FILE_KINDS:  # another pwas-hdl file given where this one belongs
+            raise InputError(f"{source} is a {other} file ({FILE_KINDS[other]}), not a {fmt} file; {hint}")
         raise InputError(f'{source} is not a {fmt} file (missing "format": "{fmt}"); {hint}')
     v = d.get("version")
     if type(v) is not int or v != version:

@@ -1,0 +1,108 @@
+"""The demanding user's pass over the newer paths (estimator files, explore on every model kind,
+a file of one pwas-hdl format given where another belongs): one ``error:`` line that says what is
+wrong and how to fix it, exit status 2, nothing written. In-process CLI calls (tests/helpers/cli.py)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import pwas_hdl.cli as cli
+from helpers.cli import CliRunner
+from helpers.folders import tree
+from pwas_hdl.errors import InputError
+from pwas_hdl.fit.estimator_file import estimator_text, read_estimator
+from pwas_hdl.systems.switched_observer import estimator_config
+
+RUNNER = CliRunner()
+
+
+def _refused(args: list[str], root, *words: str) -> str:
+    """Run ``pwas-hdl ARGS`` in ``root``: exit 2, one ``error:`` line holding ``words``, no traceback,
+    the file tree unchanged. Returns the error line."""
+    before = tree(root)
+    res = RUNNER.invoke(cli.app, args)
+    out = res.output
+    lines = [ln for ln in out.splitlines() if ln.startswith("error:")]
+    assert res.exit_code == 2, (args, res.exit_code, out)
+    assert len(lines) == 1 and "Traceback" not in out, out
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    assert tree(root) == before
+    return lines[0]
+
+
+@pytest.fixture
+def in_tmp(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+# ------------------------------------------------------------------ estimator files
+@pytest.mark.parametrize("c", [[0.0, 0.0], [-0.0, 0.0]])
+def test_estimator_with_an_all_zero_output_row_is_refused_by_the_reader(in_tmp, c):
+    """C_i = 0 made generate crash in the RTL builder (an adder over no terms, exit 3)."""
+    d = json.loads(estimator_text(estimator_config()))
+    d["modes"][1]["C"] = c
+    (in_tmp / "est.json").write_text(json.dumps(d), encoding="utf-8")
+    with pytest.raises(InputError, match=r"modes\[1\]\.C is all zero"):
+        read_estimator(in_tmp / "est.json")
+    _refused(["generate", "est.json", "-o", "hw"], in_tmp, "est.json", "modes[1].C is all zero", "non-zero entry")
+
+
+@pytest.mark.parametrize("command", [["predict", "est.json", "d.csv", "-o", "p.csv"], ["info", "est.json"],
+                                     ["explore", "est.json", "d.csv", "-o", "ex"]])
+def test_an_estimator_file_given_for_a_model_is_named_for_what_it_is(in_tmp, command):
+    """It was 'not a pwas-hdl-model file (missing "format": ...)' although the file has a format."""
+    (in_tmp / "est.json").write_text(estimator_text(estimator_config()), encoding="utf-8")
+    (in_tmp / "d.csv").write_text("u,y,z\n1,2,3\n4,5,6\n", encoding="utf-8")
+    _refused(command, in_tmp, "est.json is a pwas-hdl-estimator file", "pwas-hdl generate", "not a pwas-hdl-model file")
+
+
+def test_a_manifest_given_for_a_model_is_named_for_what_it_is(in_tmp, lorenz_tiny):
+    (in_tmp / "manifest.json").write_text(json.dumps({"format": "pwas-hdl-manifest", "version": 2}), encoding="utf-8")
+    _refused(["info", "manifest.json"], in_tmp, "is a pwas-hdl-manifest file", "take the folder")
+
+
+# ------------------------------------------------------------------ explore on every model kind
+def _tiny_sensor(lorenz_tiny, **kw):
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+    tr = lorenz_tiny.train
+    return PWASVirtualSensor(my=2, partitions=2, gamma=1.2, sigma=1e-3, output_names=["y"], target_names=["z"],
+                             **kw).fit(None, tr.y[:300], tr.z[:300])
+
+
+def test_explore_refuses_a_recurrent_model_by_its_fit_option(in_tmp, lorenz_tiny):
+    """It said 'use predict() (or LagStructure.build_series_parallel ...)': API names for a CLI user."""
+    _tiny_sensor(lorenz_tiny, mz=1).save(in_tmp / "rec.json")
+    _refused(["explore", "rec.json", str(lorenz_tiny.test_csv), "-o", "ex"], in_tmp,
+             "explore is not available for recurrent sensors (fit --mz", "pwas-hdl generate")
+
+
+def test_explore_refuses_an_observer_bank_model(lorenz_tiny):
+    """An observer-bank model crashed explore (AttributeError on the lag structure, exit 3) or, with
+    u/y taps, got 'need 5 regressor names/signals, got 3/3'. The check runs before the data are read."""
+    from pwas_hdl.flow.explore import explore
+
+    s = _tiny_sensor(lorenz_tiny)
+    s.front_end_ = object()  # what marks an observer-bank sensor (fit --front-end observer-bank)
+    with pytest.raises(InputError, match=r"not available for observer-bank sensors \(fit --front-end observer-bank\)"):
+        explore(s, lorenz_tiny.test_csv, input_bits=[12])
+
+
+def test_explore_refuses_a_classifier(in_tmp, lorenz_tiny):
+    """A classifier got "no column 'mode=1_true' or 'mode=1'" (its one-hot score targets)."""
+    import numpy as np
+
+    from pwas_hdl.io.csv_table import write_csv
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=300)
+    mode = (y > 0).astype(int) + 1
+    write_csv(in_tmp / "c.csv", {"y": y, "mode": mode})
+    res = RUNNER.invoke(cli.app, ["fit", "c.csv", "-o", "cls.json", "-y", "y", "-z", "mode", "--classify", "--my", "1",
+                                  "-p", "2", "--sigma", "1e-3"])
+    assert res.exit_code == 0, res.output
+    _refused(["explore", "cls.json", "c.csv", "-o", "ex"], in_tmp, "not available for classifiers (fit --classify)")
