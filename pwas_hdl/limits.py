@@ -37,6 +37,7 @@ __all__ = [
     "MAX_CSV_FIELD",
     "MAX_CSV_BYTES",
     "MAX_NAME_LENGTH",
+    "MAX_LATENCY_CYCLES",
     "check_limit",
     "check_vertices",
 ]
@@ -57,6 +58,9 @@ MAX_CSV_FIELD = 128 * 1024
 MAX_CSV_BYTES = 2**30
 #: Longest Verilog module name.
 MAX_NAME_LENGTH = 200
+#: Largest ``latency_cycles`` a manifest may state (the benches wait that long for an output; the
+#: deepest generated design has a few dozen cycles).
+MAX_LATENCY_CYCLES = 2**16
 
 
 def check_limit(what: str, value: int, limit: int, hint: str) -> int:

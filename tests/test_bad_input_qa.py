@@ -106,3 +106,47 @@ def test_explore_refuses_a_classifier(in_tmp, lorenz_tiny):
                                   "-p", "2", "--sigma", "1e-3"])
     assert res.exit_code == 0, res.output
     _refused(["explore", "cls.json", "c.csv", "-o", "ex"], in_tmp, "not available for classifiers (fit --classify)")
+
+
+# ------------------------------------------------------------------ manifests edited by hand
+@pytest.fixture(scope="module")
+def tiny_folder(tmp_path_factory, lorenz_fit):
+    from conftest import TINY
+    from pwas_hdl.design.generate import generate
+
+    fit = lorenz_fit(**TINY)
+    out = tmp_path_factory.mktemp("qa-design") / "hw"
+    generate(fit.model, out, design="sensor")
+    return out, fit
+
+
+def _edited(tiny_folder, tmp_path, edit):
+    import shutil
+
+    src, _ = tiny_folder
+    dst = tmp_path / "hw"
+    shutil.copytree(src, dst)
+    m = json.loads((dst / "manifest.json").read_text(encoding="utf-8"))
+    edit(m)
+    (dst / "manifest.json").write_text(json.dumps(m, indent=1), encoding="utf-8")
+    return dst
+
+
+def test_a_hand_edited_huge_latency_is_refused_before_simulating(tiny_folder, in_tmp):
+    """latency_cycles = 10^12 passed the schema (minimum 0 only) and simulate then waited for an output for
+    10^12 cycles (it ran > 20 min until killed); a moderately wrong latency stays a failed check (exit 1)."""
+    from pwas_hdl.design.manifest import load_manifest
+    from pwas_hdl.limits import MAX_LATENCY_CYCLES
+
+    hw = _edited(tiny_folder, in_tmp, lambda m: m.__setitem__("latency_cycles", 10**12))
+    with pytest.raises(InputError, match=f"latency_cycles 1000000000000 exceeds the limit of {MAX_LATENCY_CYCLES}"):
+        load_manifest(hw)
+    (in_tmp / "d.csv").write_text(tiny_folder[1].test_csv.read_text(encoding="utf-8"), encoding="utf-8")
+    _refused(["simulate", "hw", "d.csv", "-o", "s.csv", "--simulator", "icarus"], in_tmp,
+             "latency_cycles 1000000000000 exceeds the limit", "re-run `pwas-hdl generate`")
+    ok = json.loads((tiny_folder[0] / "manifest.json").read_text(encoding="utf-8"))
+    assert ok["latency_cycles"] <= MAX_LATENCY_CYCLES
+    ok["latency_cycles"] = MAX_LATENCY_CYCLES
+    from pwas_hdl.design.manifest import validate_manifest
+
+    validate_manifest(ok)  # the limit itself is allowed

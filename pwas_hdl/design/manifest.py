@@ -85,6 +85,7 @@ from typing import TYPE_CHECKING, Any
 
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
+from pwas_hdl.limits import MAX_LATENCY_CYCLES
 
 if TYPE_CHECKING:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -341,6 +342,8 @@ def manifest_text(manifest: dict[str, Any]) -> str:
 def _consistency_errors(m: dict[str, Any]) -> list[str]:
     """What the schema cannot say (``m`` is schema-valid)."""
     errs = []
+    if m["latency_cycles"] > MAX_LATENCY_CYCLES:  # a hand edit: simulate would wait that many cycles for an output
+        errs.append(f"latency_cycles {m['latency_cycles']} exceeds the limit of {MAX_LATENCY_CYCLES} cycles")
     names = [p["name"] for p in m["ports"]]
     estimator = m["design"] == "estimator"  # no PWAS core (pwas_hdl.design.estimator)
     if len(set(names)) != len(names):
