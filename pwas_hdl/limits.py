@@ -38,6 +38,7 @@ __all__ = [
     "MAX_CSV_BYTES",
     "MAX_NAME_LENGTH",
     "MAX_LATENCY_CYCLES",
+    "MAX_PORT_BITS",
     "check_limit",
     "check_vertices",
 ]
@@ -61,6 +62,8 @@ MAX_NAME_LENGTH = 200
 #: Largest ``latency_cycles`` a manifest may state (the benches wait that long for an output; the
 #: deepest generated design has a few dozen cycles).
 MAX_LATENCY_CYCLES = 2**16
+#: Widest port a manifest may state, in bits (a payload packs at most 20 regressors or a few outputs).
+MAX_PORT_BITS = 2**16
 
 
 def check_limit(what: str, value: int, limit: int, hint: str) -> int:

@@ -150,3 +150,23 @@ def test_a_hand_edited_huge_latency_is_refused_before_simulating(tiny_folder, in
     from pwas_hdl.design.manifest import validate_manifest
 
     validate_manifest(ok)  # the limit itself is allowed
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda m: _port(m, "in.payload").__setitem__("width", 10**8), "100000000 bits wide, more than the limit of 65536"),
+    (lambda m: _port(m, "out.payload").__setitem__("width", 1000), "1000 bits wide but its fields end at bit"),
+    (lambda m: _port(m, "in.valid").__setitem__("width", 2), "must be 1 bit wide, got 2"),
+    (lambda m: (_port(m, "out.payload")["fields"][0].__setitem__("width", 10**12),
+                _port(m, "out.payload").__setitem__("width", 10**12 + 1)), "more than the limit of 65536"),
+])
+def test_a_hand_edited_port_width_is_refused_before_anything_is_sized_by_it(tiny_folder, in_tmp, edit, words):
+    """A payload edited to 10^8 bits passed validation: simulate ignored it, export-testbench sized its
+    vectors by it (14 GB resident, killed after 2 min); a 10^12-bit field made the validator's own
+    overlap mask that big."""
+    _edited(tiny_folder, in_tmp, edit)
+    _refused(["export-testbench", "hw", "-o", "tb"], in_tmp, words, "re-run `pwas-hdl generate`")
+    _refused(["report", "hw"], in_tmp, words)
+
+
+def _port(m: dict, role: str) -> dict:
+    return next(p for p in m["ports"] if p["role"] == role)

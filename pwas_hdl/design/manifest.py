@@ -85,7 +85,7 @@ from typing import TYPE_CHECKING, Any
 
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
-from pwas_hdl.limits import MAX_LATENCY_CYCLES
+from pwas_hdl.limits import MAX_LATENCY_CYCLES, MAX_PORT_BITS
 
 if TYPE_CHECKING:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -108,6 +108,8 @@ MANIFEST_FILE = "manifest.json"
 STREAM_ROLES = ("in.payload", "in.valid", "in.ready", "out.payload", "out.valid", "out.ready")
 
 _HINT = "re-run `pwas-hdl generate` to write the design folder again"
+#: Roles of the single-bit ports (clock, reset, handshakes, the sensor top's ``warm``).
+_ONE_BIT_ROLES = ("clock", "reset", "in.valid", "in.ready", "out.valid", "out.ready", "warm")
 
 
 # ------------------------------------------------------------------------------ construction
@@ -356,13 +358,26 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
         if roles.count(role) != 1:
             errs.append(f"ports must have exactly one port with role {role!r}, found {roles.count(role)}")
     for i, p in enumerate(m["ports"]):
+        if p["role"] in _ONE_BIT_ROLES and p["width"] != 1:
+            errs.append(f"ports[{i}] ({p['name']}, role {p['role']}) must be 1 bit wide, got {p['width']}")
+        if p["width"] > MAX_PORT_BITS:
+            errs.append(f"ports[{i}] ({p['name']}) is {p['width']} bits wide, more than the limit of {MAX_PORT_BITS}")
+            continue
+        fields = p.get("fields", [])
+        if fields and p["width"] > max(f["lsb"] + f["width"] for f in fields):
+            # the fields are packed from bit 0 with no spare bits; a wider port is a hand edit
+            # (export-testbench would size its vectors by it: 10^8 bits took 14 GB)
+            errs.append(f"ports[{i}] ({p['name']}) is {p['width']} bits wide but its fields end at bit "
+                        f"{max(f['lsb'] + f['width'] for f in fields) - 1}")
+            continue
         used = 0
-        for j, f in enumerate(p.get("fields", [])):
-            mask = ((1 << f["width"]) - 1) << f["lsb"]
+        for j, f in enumerate(fields):
             if f["lsb"] + f["width"] > p["width"]:
                 errs.append(f"ports[{i}].fields[{j}] ({f['name']}) reaches bit {f['lsb'] + f['width'] - 1} "
                             f"of the {p['width']}-bit port {p['name']}")
-            elif used & mask:
+                continue
+            mask = ((1 << f["width"]) - 1) << f["lsb"]
+            if used & mask:
                 errs.append(f"ports[{i}].fields[{j}] ({f['name']}) overlaps another field of {p['name']}")
             used |= mask
     for i, p in enumerate(m["ports"]):
