@@ -170,3 +170,39 @@ def test_a_hand_edited_port_width_is_refused_before_anything_is_sized_by_it(tiny
 
 def _port(m: dict, role: str) -> dict:
     return next(p for p in m["ports"] if p["role"] == role)
+
+
+# ------------------------------------------------------------------ error texts name the CLI options
+@pytest.mark.parametrize("args, words, api_words", [
+    (["generate", "{model}", "-o", "hw", "--goal", "latency", "--clock-mhz", "50"],
+     "give one of --goal, --pipeline or --clock-mhz, not --goal with --clock-mhz", "target_mhz"),
+    (["generate", "{model}", "-o", "hw", "--goal", "latency", "--pipeline", "min"],
+     "not --goal with --pipeline", "pipeline (--pipeline)"),
+    (["generate", "{model}", "-o", "hw", "--input-bits", "1"], "--input-bits (input_bits) = 1", None),
+    (["generate", "{model}", "-o", "hw", "--input-fill", "2"], "--input-fill (input_fill) = 2.0", None),
+    (["generate", "{model}", "-o", "hw", "--input-scale", "odd"], "--input-scale (input_scale) must be", None),
+    (["generate", "{model}", "-o", "hw", "--clock-mhz", "-5"], "--clock-mhz (target_mhz) must be a positive", None),
+    (["generate", "{est}", "-o", "hw", "--clock-mhz", "50"], "--clock-mhz 50.0 belongs to the PWAS designs", "option target_mhz"),
+    (["generate", "{est}", "-o", "hw", "--memory", "replicated"], "--memory 'replicated' belongs to the PWAS designs", None),
+    (["explore", "{model}", "{data}", "-o", "ex", "--input-bits", "0"], "--input-bits (input_bits) must be >= 2", None),
+    (["explore", "{model}", "{data}", "-o", "ex", "--measure-max", "0"], "--measure-max (measure_max) must be", None),
+    (["explore", "{model}", "{data}", "-o", "ex", "--cost", "area"], "--cost must be one of", None),
+])
+def test_error_texts_name_the_cli_options(in_tmp, lorenz_tiny, args, words, api_words):
+    """Messages said 'give one of goal (--goal), pipeline (--pipeline) or target_mhz (--clock-mhz)',
+    'option target_mhz = 50.0 belongs ...', 'input_bits = 1: ...', 'measure_max must be ...'."""
+    (in_tmp / "est.json").write_text(estimator_text(estimator_config()), encoding="utf-8")
+    args = [a.format(model=lorenz_tiny.model, est="est.json", data=lorenz_tiny.test_csv) for a in args]
+    line = _refused(args, in_tmp, words)
+    if api_words:
+        assert api_words not in line, line
+
+
+def test_breakpoint_errors_print_plain_numbers(in_tmp, lorenz_tiny):
+    """'b[0] = np.float64(20.37...) >= b[1] = np.float64(10.1...)': numpy reprs in a user's error line."""
+    d = json.loads(lorenz_tiny.model.read_text(encoding="utf-8"))
+    lo, hi = d["grid"]["lo"][0], d["grid"]["hi"][0]
+    d["grid"]["breakpoints"] = [[hi, (lo + hi) / 2, (lo + hi) / 3, lo], None]
+    (in_tmp / "w.json").write_text(json.dumps(d), encoding="utf-8")
+    line = _refused(["info", "w.json"], in_tmp, "breakpoints of dimension 0 must increase strictly", f"b[0] = {hi!r}")
+    assert "np.float64" not in line

@@ -72,7 +72,7 @@ def test_generate_refuses_pwas_options_and_unstable_gains(tmp_path):
     from pwas_hdl.design.generate import build_design
 
     cfg = estimator_config()
-    with pytest.raises(InputError, match="memory = 'replicated' belongs to the PWAS designs"):
+    with pytest.raises(InputError, match="--memory 'replicated' belongs to the PWAS designs"):
         build_design(cfg, memory="replicated")
     with pytest.raises(InputError, match="design recurrent does not apply"):
         build_design(cfg, design="recurrent")

@@ -53,11 +53,11 @@ def test_cli_goal_and_contradictions(capsys, tmp_path, lorenz_tiny):
     man = json.loads((tmp_path / "t" / "manifest.json").read_text())
     assert man["pipeline"] == Pipeline.cast("max").to_dict()
     assert man["latency_cycles"] == Pipeline.cast("max").latency(man["lags"]["My"])
-    for extra, word in ((["--pipeline", "min"], "pipeline"), (["--clock-mhz", "50"], "target_mhz")):
+    for extra, word in ((["--pipeline", "min"], "pipeline"), (["--clock-mhz", "50"], "--clock-mhz")):
         code, _, err = _run(capsys, "generate", model, "-o", tmp_path / "x", "--goal", "latency", *extra)
         lines = [ln for ln in err.splitlines() if ln.strip()]
         assert code == 2 and len(lines) == 1 and lines[0].startswith("error: "), err
-        assert "not goal with" in lines[0] and word in lines[0]
+        assert "not --goal with" in lines[0] and word in lines[0]
     code, _, err = _run(capsys, "generate", model, "-o", tmp_path / "x", "--goal", "fast")
     assert code == 2 and "unknown goal 'fast'" in err and "latency, balanced, throughput" in err
     assert not (tmp_path / "x").exists()

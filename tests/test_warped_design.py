@@ -73,7 +73,7 @@ def test_warped_lags_of_one_signal_need_one_input_code(warped_sensor):
 
 
 @pytest.mark.parametrize("extra, msg", [(["--clock-mhz", "50"], "non-uniform partition"),
-                                        (["--input-scale", "exact"], "input_scale must be 'pow2'")])
+                                        (["--input-scale", "exact"], "--input-scale must be 'pow2'")])
 def test_generate_warped_refusals_are_one_error_line(extra, msg, warped_sensor, tmp_path):
     from pwas_hdl.cli import app
 

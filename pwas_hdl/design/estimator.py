@@ -314,8 +314,9 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     given = {k: v for k, v in options.items() if k in _PWAS_DEFAULTS and v != _PWAS_DEFAULTS[k]}
     if given:
         k = sorted(given)[0]
-        raise InputError(f"option {k} = {given[k]!r} belongs to the PWAS designs; the estimator file takes "
-                         f"{', '.join(ESTIMATOR_OPTIONS)} (and --name, --ports) only")
+        opt = "--clock-mhz" if k == "target_mhz" else "--" + k.replace("_", "-")  # the generate option of API name k
+        raise InputError(f"{opt} {given[k]!r} belongs to the PWAS designs; the estimator file takes --name, --ports and "
+                         f"--input-bits only (through the API also {', '.join(ESTIMATOR_OPTIONS[1:])})")
     unknown = set(options) - set(_PWAS_DEFAULTS) - set(ESTIMATOR_OPTIONS)
     if unknown:
         raise InputError(f"unknown option(s) {sorted(unknown)} for an estimator design; known: {', '.join(ESTIMATOR_OPTIONS)}")

@@ -369,7 +369,7 @@ def build_design(
     if architecture not in ARCHITECTURES:
         raise ValueError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
     if architecture == "serial" and target_mhz is not None:
-        raise ValueError("the timing closure (target_mhz / --clock-mhz) chooses among parallel pipelines; "
+        raise ValueError("the timing closure (--clock-mhz) chooses among parallel pipelines; "
                          "give --pipeline with --architecture serial")
     if name is not None:
         check_module_name(name)
@@ -382,9 +382,9 @@ def build_design(
         from pwas_hdl.hdl.params import goal_preset
 
         preset = goal_preset(goal, fpga_target)  # ValueError for an unknown goal
-        given = [k for k, v in (("pipeline (--pipeline)", pipeline), ("target_mhz (--clock-mhz)", target_mhz)) if v is not None]
+        given = [k for k, v in (("--pipeline", pipeline), ("--clock-mhz", target_mhz)) if v is not None]
         if given:
-            raise ValueError(f"give one of goal (--goal), pipeline (--pipeline) or target_mhz (--clock-mhz), not goal with {given[0]}: "
+            raise ValueError(f"give one of --goal, --pipeline or --clock-mhz, not --goal with {given[0]}: "
                              "each chooses the pipeline")
         pipeline = preset
     additive = _is_additive(sensor)

@@ -132,10 +132,10 @@ def _as_breakpoints(bps, lo: np.ndarray, hi: np.ndarray, parts: tuple[int, ...])
             raise ValueError(f"breakpoints of dimension {j} contain NaN or infinite values")
         if not np.all(np.diff(arr) > 0):
             k = int(np.flatnonzero(~(np.diff(arr) > 0))[0])
-            raise ValueError(f"breakpoints of dimension {j} must increase strictly: b[{k}] = {arr[k]!r} >= b[{k + 1}] = {arr[k + 1]!r}")
+            raise ValueError(f"breakpoints of dimension {j} must increase strictly: b[{k}] = {float(arr[k])!r} >= b[{k + 1}] = {float(arr[k + 1])!r}")
         if arr[0] != lo[j] or arr[-1] != hi[j]:
-            raise ValueError(f"breakpoints of dimension {j} must start at lo = {lo[j]!r} and end at hi = {hi[j]!r}, "
-                             f"got {arr[0]!r} .. {arr[-1]!r}")
+            raise ValueError(f"breakpoints of dimension {j} must start at lo = {float(lo[j])!r} and end at hi = {float(hi[j])!r}, "
+                             f"got {float(arr[0])!r} .. {float(arr[-1])!r}")
         out.append(arr)
     return tuple(out) if any(b is not None for b in out) else None
 

@@ -606,13 +606,13 @@ class InputFormat:
         if not _is_int(partitions) or partitions < 1:
             raise ValueError(f"p{tag} = {partitions!r}: need an integer number of intervals >= 1")
         if not _is_int(bits) or not 2 <= bits <= 40:
-            raise ValueError(f"input_bits = {bits!r}: need an integer in [2, 40]")
+            raise ValueError(f"--input-bits (input_bits) = {bits!r}: need an integer in [2, 40]")
         if not (isinstance(fill, (int, float, np.floating)) and 0 < float(fill) <= 1):
-            raise ValueError(f"input_fill = {fill!r}: need a number in (0, 1]")
+            raise ValueError(f"--input-fill (input_fill) = {fill!r}: need a number in (0, 1]")
         fill = float(fill)
         p = int(partitions)
         if scale not in ("pow2", "exact"):
-            raise ValueError(f"input_scale must be 'pow2' or 'exact', got {scale!r}")
+            raise ValueError(f"--input-scale (input_scale) must be 'pow2' or 'exact', got {scale!r}")
         if scale == "exact":
             smax = int(min(Fraction(fill) * (1 << int(bits)), Fraction((1 << int(bits)) - 1)))
             if smax < p:

@@ -216,12 +216,12 @@ class WarpedFixedPointModel:
         from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 
         if core_options.get("input_scale", "pow2") not in ("pow2", None):
-            raise InputError("the power-of-two warp feeds a pow2 core: input_scale must be 'pow2'")
+            raise InputError("the power-of-two warp feeds a pow2 core: --input-scale must be 'pow2'")
         core_options.pop("input_scale", None)
         if not (isinstance(input_bits, (int, np.integer)) and 2 <= input_bits <= 32):
-            raise InputError(f"input_bits must be an integer in 2..32, got {input_bits!r}")
+            raise InputError(f"--input-bits must be an integer in 2..32, got {input_bits!r}")
         if not (0 < input_fill <= 1):
-            raise InputError(f"input_fill must be in (0, 1], got {input_fill!r}")
+            raise InputError(f"--input-fill must be in (0, 1], got {input_fill!r}")
         self.grid = grid
         self.n = grid.n
         self.input_bits = int(input_bits)

@@ -247,6 +247,11 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
     return xi, z, desc
 
 
+def _option(what: str) -> str:
+    """``input_bits`` -> ``--input-bits (input_bits)``: the explore option first, for the CLI user."""
+    return f"--{what.replace('_', '-')} ({what})"
+
+
 def _int_values(values, what: str, lo: int | None = None) -> list[int]:
     if values is None:
         return []
@@ -257,12 +262,12 @@ def _int_values(values, what: str, lo: int | None = None) -> list[int]:
     out = []
     for v in values:
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            raise ValueError(f"{what} must be integers, got {v!r}")
+            raise ValueError(f"{_option(what)} must be integers, got {v!r}")
         if lo is not None and v < lo:
-            raise ValueError(f"{what} must be >= {lo}, got {v}")
+            raise ValueError(f"{_option(what)} must be >= {lo}, got {v}")
         out.append(int(v))
     if not out:
-        raise ValueError(f"{what}: the sweep is empty; give at least one value")
+        raise ValueError(f"{_option(what)}: the sweep is empty; give at least one value")
     return sorted(set(out))
 
 
@@ -482,13 +487,13 @@ def explore(
         Synthesis was asked for and every synthesis run failed (the message quotes the first error).
     """
     if resources not in RESOURCE_MODES:
-        raise ValueError(f"resources must be one of {', '.join(RESOURCE_MODES)}, got {resources!r}")
+        raise ValueError(f"--fpga / resources must be one of {', '.join(RESOURCE_MODES)}, got {resources!r}")
     if cost not in COST_KEYS:
-        raise ValueError(f"cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
+        raise ValueError(f"--cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
     if isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1:
-        raise ValueError(f"measure_max must be an integer >= 1, got {measure_max!r}")
+        raise ValueError(f"--measure-max (measure_max) must be an integer >= 1, got {measure_max!r}")
     if workdir is not None:
         check_output_path(workdir, "--synth-dir", kind="folder")
     sensor, model_path = _load_sensor(model)

@@ -208,7 +208,7 @@ def synthesize(
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     if freq_mhz is not None:
         if isinstance(freq_mhz, bool) or not isinstance(freq_mhz, (int, float)) or not math.isfinite(freq_mhz) or freq_mhz <= 0:
-            raise ValueError(f"freq_mhz must be a positive number of MHz, got {freq_mhz!r}")
+            raise ValueError(f"--clock-mhz (freq_mhz) must be a positive number of MHz, got {freq_mhz!r}")
     dev, pkg, part, family, has_dsp = _resolve_device(target, device, package, freq_mhz)
     if harness is None:
         harness = target != "generic"

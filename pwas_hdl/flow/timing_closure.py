@@ -341,9 +341,9 @@ def close_timing(
         Bad target or FPGA family; a design that does not fit the device.
     """
     if fpga not in FPGA_TARGETS:
-        raise ValueError(f"fpga_target must be one of {', '.join(FPGA_TARGETS)}, got {fpga!r}")
+        raise ValueError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga!r}")
     if isinstance(target_mhz, bool) or not isinstance(target_mhz, (int, float)) or not target_mhz > 0 or target_mhz == float("inf"):
-        raise ValueError(f"target_mhz must be a positive number of MHz, got {target_mhz!r}")
+        raise ValueError(f"--clock-mhz (target_mhz) must be a positive number of MHz, got {target_mhz!r}")
     target = float(target_mhz)
     cands = list(candidates) if candidates is not None else pipeline_candidates(n)
     lat = [p.latency(n) for p in cands]
