@@ -206,3 +206,35 @@ def test_breakpoint_errors_print_plain_numbers(in_tmp, lorenz_tiny):
     (in_tmp / "w.json").write_text(json.dumps(d), encoding="utf-8")
     line = _refused(["info", "w.json"], in_tmp, "breakpoints of dimension 0 must increase strictly", f"b[0] = {hi!r}")
     assert "np.float64" not in line
+
+
+# ------------------------------------------------------------------ domains at the ends of the float range
+def test_a_domain_wider_than_a_float_is_refused(in_tmp, lorenz_tiny):
+    """--domain -1e308:1e308 (or a breakpoints file spanning it) was accepted: hi - lo = inf, step = inf."""
+    from pwas_hdl.fit.geometry import Grid
+
+    with pytest.raises(ValueError, match=r"domain dimension 1 .* is wider than a float can hold"):
+        Grid([0.0, -1e308], [1.0, 1e308], 2)
+    (in_tmp / "bp.json").write_text(json.dumps({"format": "pwas-hdl-breakpoints", "version": 1,
+                                                "breakpoints": [[-25, 25], [-1e308, 1e308]]}), encoding="utf-8")
+    _refused(["fit", str(lorenz_tiny.test_csv), "-o", "m.json", "-y", "y", "-z", "z", "--my", "2", "--sigma", "1e-3",
+              "--breakpoints", "bp.json"], in_tmp, "is wider than a float can hold", "--domain")
+
+
+def test_points_far_outside_a_tiny_cell_are_clamped_without_a_warning():
+    """A cell of 1e-320 (a --domain or a breakpoints file) printed numpy's 'RuntimeWarning: overflow
+    encountered in divide' with a source line to the user; the coordinate is clamped like any outside point."""
+    import warnings
+
+    import numpy as np
+
+    from pwas_hdl.fit.geometry import Grid
+
+    uniform = Grid([0.0, 0.0], [1e-320, 1.0], 2)
+    warped = Grid([0.0, 0.0], [1.0, 1.0], [2, 1], breakpoints=[[0.0, 5e-324, 1.0], None])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for g, x in ((uniform, [[50.0, 0.5], [-50.0, 0.5]]), (warped, [[0.9, 0.5], [-3.0, 0.5]])):
+            s, out = g.to_grid_units(np.array(x))
+            assert np.all(np.isfinite(s)) and np.all((s >= 0) & (s <= g.partitions))
+    np.testing.assert_array_equal(uniform.to_grid_units(np.array([[50.0, 0.5]]))[0], [[2.0, 1.0]])

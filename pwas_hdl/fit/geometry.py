@@ -175,6 +175,12 @@ class Grid:
                 f"domain dimension {j} has zero or negative width ([{lo_a[j]}, {hi_a[j]}]); "
                 "a constant regressor cannot be partitioned: drop that signal or give an explicit domain"
             )
+        with np.errstate(over="ignore"):
+            wide = np.flatnonzero(~np.isfinite(hi_a - lo_a))
+        if wide.size:
+            j = int(wide[0])
+            raise ValueError(f"domain dimension {j} ([{lo_a[j]}, {hi_a[j]}]) is wider than a float can hold; "
+                             "give a narrower domain (--domain) or rescale the signal")
         check_limit("the regressor dimension n", lo_a.size, MAX_REGRESSORS, "use fewer lags or signals")
         parts = _as_partitions(partitions, lo_a.size)
         check_vertices(parts)  # before any int64 array: N and the strides fit in int64 below the limit
@@ -280,13 +286,14 @@ class Grid:
             raise ValueError(f"points have {xa.shape[1]} coordinates but the grid has n = {self.n} dimensions")
         if not np.all(np.isfinite(xa)):
             raise ValueError("points contain NaN or infinite values; clean the data before evaluating")
-        s = (xa - self.lo) / self.step
-        bps = getattr(self, "breakpoints", None)  # pwas_hdl.fit.additive.AdditiveGrid calls this with its own box
-        if bps is not None:
-            for j, b in enumerate(bps):
-                if b is not None:  # piecewise-linear warp: cell c, then the fraction within it
-                    c = np.clip(np.searchsorted(b, xa[:, j], side="right") - 1, 0, b.size - 2)
-                    s[:, j] = c + (xa[:, j] - b[c]) / (b[c + 1] - b[c])
+        with np.errstate(over="ignore"):  # a point far outside a tiny cell: s = +-inf, clamped below like any outside point
+            s = (xa - self.lo) / self.step
+            bps = getattr(self, "breakpoints", None)  # pwas_hdl.fit.additive.AdditiveGrid calls this with its own box
+            if bps is not None:
+                for j, b in enumerate(bps):
+                    if b is not None:  # piecewise-linear warp: cell c, then the fraction within it
+                        c = np.clip(np.searchsorted(b, xa[:, j], side="right") - 1, 0, b.size - 2)
+                        s[:, j] = c + (xa[:, j] - b[c]) / (b[c + 1] - b[c])
         out = np.any((s < 0) | (s > self.partitions), axis=1)
         np.clip(s, 0, self.partitions, out=s)
         return s, out
