@@ -1011,8 +1011,9 @@ def _write_runs(out: Optional[Path], test_out: Optional[Path], samples: int, run
     """``make-data`` of a multi-run plant: options checked, paths checked, then the data made and written."""
     with _user_errors():
         output = _required(out, "-o/--out", "the CSV file to write")
-        if samples < 1 or runs < 1 or noise < 0 or seed < 0:
-            raise InputError("--samples and --runs must be >= 1, --noise and --seed >= 0")
+        if samples < 1 or runs < 1 or not 0 <= noise < np.inf or seed < 0:  # NaN / inf noise: NaN / inf data
+            raise InputError(f"--samples and --runs must be >= 1, --noise a finite number >= 0 and --seed >= 0, got "
+                             f"--samples {samples}, --runs {runs}, --noise {noise}, --seed {seed}")
         _plant_outputs(output, test_out, extra)  # the paths are checked before the work
         check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
         train = make_train()
@@ -1146,8 +1147,8 @@ def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out
     output = _required(out, "-o/--out", "the CSV file to write")
     if samples < 1 or (test_out is not None and test_samples < 1):
         raise InputError("--samples and --test-samples must be >= 1")
-    if not noise >= 0:
-        raise InputError(f"--noise must be >= 0 (a standard deviation in normalised units), got {noise}")
+    if not 0 <= noise < np.inf:
+        raise InputError(f"--noise must be a finite number >= 0 (a standard deviation in normalised units), got {noise}")
     n_test = test_samples if test_out is not None else 1
     if system == "battery":
         train, test, _ = make_battery_dataset(samples, n_test, seed, noise)

@@ -110,14 +110,15 @@ def test_explore_refuses_a_classifier(in_tmp, lorenz_tiny):
 
 # ------------------------------------------------------------------ manifests edited by hand
 @pytest.fixture(scope="module")
-def tiny_folder(tmp_path_factory, lorenz_fit):
-    from conftest import TINY
+def tiny_folder(tmp_path_factory):
+    """The folder of seed 003's estimator (the one generated design of this file: ~1 s) and a CSV for it."""
     from pwas_hdl.design.generate import generate
 
-    fit = lorenz_fit(**TINY)
-    out = tmp_path_factory.mktemp("qa-design") / "hw"
-    generate(fit.model, out, design="sensor")
-    return out, fit
+    root = tmp_path_factory.mktemp("qa-design")
+    (root / "est.json").write_text(estimator_text(estimator_config()), encoding="utf-8")
+    generate(root / "est.json", root / "hw")
+    (root / "d.csv").write_text("u,y,run\n" + "".join(f"{i % 3 - 1},{(i % 5) / 4},0\n" for i in range(20)), encoding="utf-8")
+    return root / "hw", root / "d.csv"
 
 
 def _edited(tiny_folder, tmp_path, edit):
@@ -141,8 +142,8 @@ def test_a_hand_edited_huge_latency_is_refused_before_simulating(tiny_folder, in
     hw = _edited(tiny_folder, in_tmp, lambda m: m.__setitem__("latency_cycles", 10**12))
     with pytest.raises(InputError, match=f"latency_cycles 1000000000000 exceeds the limit of {MAX_LATENCY_CYCLES}"):
         load_manifest(hw)
-    (in_tmp / "d.csv").write_text(tiny_folder[1].test_csv.read_text(encoding="utf-8"), encoding="utf-8")
-    _refused(["simulate", "hw", "d.csv", "-o", "s.csv", "--simulator", "icarus"], in_tmp,
+    (in_tmp / "d.csv").write_text(tiny_folder[1].read_text(encoding="utf-8"), encoding="utf-8")
+    _refused(["simulate", "hw", "d.csv", "-o", "s.csv", "--simulator", "icarus", "--traj-col", "run"], in_tmp,
              "latency_cycles 1000000000000 exceeds the limit", "re-run `pwas-hdl generate`")
     ok = json.loads((tiny_folder[0] / "manifest.json").read_text(encoding="utf-8"))
     assert ok["latency_cycles"] <= MAX_LATENCY_CYCLES
@@ -238,3 +239,17 @@ def test_points_far_outside_a_tiny_cell_are_clamped_without_a_warning():
             s, out = g.to_grid_units(np.array(x))
             assert np.all(np.isfinite(s)) and np.all((s >= 0) & (s <= g.partitions))
     np.testing.assert_array_equal(uniform.to_grid_units(np.array([[50.0, 0.5]]))[0], [[2.0, 1.0]])
+
+
+@pytest.mark.parametrize("args", [["make-data", "three-tank", "-o", "d.csv", "--runs", "1", "--samples", "5", "--noise", "nan"],
+                                  ["make-data", "switched-linear", "-o", "d.csv", "--runs", "1", "--samples", "5", "--noise", "inf"],
+                                  ["make-data", "pv-benchmark", "-o", "d.csv", "--samples", "50", "--noise", "inf"]])
+def test_make_data_refuses_a_noise_that_is_not_a_finite_number(in_tmp, args):
+    """--noise inf wrote a CSV of inf outputs (and nan one of NaN or noise-free data) that every later command refuses."""
+    _refused(args, in_tmp, "--noise", "finite number >= 0")
+
+
+def test_export_testbench_names_the_estimator_design_it_does_not_support(tiny_folder):
+    """It said 'estd/estimator.json is ... not a pwas-hdl-model file; re-run `pwas-hdl fit`'."""
+    _refused(["export-testbench", str(tiny_folder[0]), "-o", str(tiny_folder[0].parent / "tb")], tiny_folder[0].parent,
+             "does not support the estimator design", "pwas-hdl simulate")

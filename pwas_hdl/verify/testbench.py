@@ -96,6 +96,11 @@ def export_testbench(
         raise ResourceLimit(f"--samples {samples} is more than the limit of {MAX_SAMPLES} vectors an exported testbench holds")
     if not 0.0 <= float(stall) < 1.0:
         raise InputError(f"--stall must be in [0, 1), got {stall}")
+    from pwas_hdl.design.manifest import load_manifest
+
+    if load_manifest(design_dir)["design"] == "estimator":  # no PWAS model for load_design: its folder holds estimator.json
+        raise InputError(f"{design_dir}: export-testbench does not support the estimator design (seed 003) yet; verify it "
+                         "with `pwas-hdl simulate DIR DATA.csv --traj-col run`")
     design = load_design(design_dir)
     if design.kind == "recurrent":  # its expected words come from the recurrence (pwas_hdl.verify.recurrent_simulation)
         raise InputError(f"{design_dir}: export-testbench does not support recurrent designs yet; verify them with "
