@@ -197,6 +197,29 @@ def test_seed003_estimator_rtl_bit_exact_and_lint(tmp_path, window):
 
 
 @pytest.mark.rtl
+def test_estimator_whose_output_row_quantises_to_zero_builds_and_is_bit_exact():
+    """A mode with a tiny C (every code of the row rounds to 0) made the RTL builder add over no
+    terms (IndexError, exit 3 from generate); the row is the constant 0, as in the bit-true model."""
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+    from pwas_hdl.hdl.switched_estimator_top import SwitchedEstimatorTop, simulate_estimator
+    from pwas_hdl.systems.switched_linear import SWITCHED_A, SWITCHED_B, SWITCHED_C, switched_training_runs
+    from pwas_hdl.systems.switched_observer import observer_gains
+
+    c = [np.array(ci, dtype=float) for ci in SWITCHED_C]
+    k = [np.array(ki, dtype=float) for ki in observer_gains()]
+    c[0] = np.array([1e-9, 0.0]).reshape(c[0].shape)
+    k[0] = np.zeros_like(k[0])
+    est = FixedPointSwitchedEstimator(SWITCHED_A, SWITCHED_B, c, k, window=1)
+    assert not np.any(est.h_codes[0])
+    d = switched_training_runs(1, 60, seed=2, switching="time", noise=0.01)
+    codes = est.quantize_signals(d.u, d.y)
+    tr = est.trace(codes)
+    res = simulate_estimator(SwitchedEstimatorTop(est), codes, p_valid=0.8, p_ready=0.7, seed=1)
+    assert np.array_equal(res["x_hat"], tr["x_hat"]) and np.array_equal(res["y_hat"], tr["y_hat"])
+    assert np.array_equal(res["theta"], tr["theta"])
+
+
+@pytest.mark.rtl
 def test_cli_simulate_observer_sensor(bank_sensor, pv_small, tmp_path, sim_cache, monkeypatch):
     monkeypatch.setenv("PWAS_HDL_SIM_CACHE", str(sim_cache))
     _, te, _ = pv_small

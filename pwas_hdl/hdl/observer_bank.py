@@ -41,7 +41,12 @@ def saturate(m: Module, rv, width: int, name: str, flag: bool = True):
 
 
 def _sum(m: Module, terms: list, width: int, name: str):
-    """Balanced sum of signed ``width``-bit nets, result kept at ``width`` bits (no overflow by construction)."""
+    """Balanced sum of signed ``width``-bit nets, result kept at ``width`` bits (no overflow by construction).
+
+    No terms (every coefficient of the row quantised to 0) is the constant 0.
+    """
+    if not terms:
+        return Const(0, signed(width))
     level = 0
     while len(terms) > 1:
         nxt = []
