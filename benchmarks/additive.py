@@ -335,12 +335,12 @@ def hardware_markdown(hw: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     from pwas_hdl.io.atomic import atomic_write_text
-    from pwas_hdl.resources import benchmarks_dir
+    from pwas_hdl.bench_results import default_outdir
 
     ap = argparse.ArgumentParser(description="full vs additive PWAS sensors (issue 15)")
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--outdir", type=Path, default=benchmarks_dir() / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--hardware", action="store_true", help="the My = 8 additive sensors in RTL (writes additive_hw.json/.md)")
     ap.add_argument("--synth", action="store_true", help="with --hardware: one ECP5 place and route of the pairs core")
     ap.add_argument("--workdir", type=Path, default=None)

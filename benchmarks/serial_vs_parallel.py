@@ -22,7 +22,6 @@ import json
 import tempfile
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "logic_cells", "fmax_mhz", "latency_cycles", "latency_ns", "ii",
         "throughput_msps", "utilization")
 
@@ -70,9 +69,10 @@ def markdown(doc: dict) -> str:
 def main(argv=None) -> None:
     from pwas_hdl.io.atomic import atomic_write_text
 
+    from pwas_hdl.bench_results import default_outdir
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a small sensor (My = 2, p = 4); writes serial_vs_parallel_quick.*")
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     a = ap.parse_args(argv)
     doc = run(a.quick)
     a.outdir.mkdir(parents=True, exist_ok=True)

@@ -21,7 +21,6 @@ import json
 import tempfile
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "fmax_mhz", "latency_cycles")
 
 
@@ -33,8 +32,9 @@ def main(argv=None) -> None:
     from pwas_hdl.io.atomic import atomic_write_text
     from pwas_hdl.systems.lorenz import lorenz
 
+    from pwas_hdl.bench_results import default_outdir
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--outdir", type=Path, default=HERE / "results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir())
     a = ap.parse_args(argv)
     root = Path(tempfile.mkdtemp(prefix="pwas-warp-"))
     train, _ = lorenz(6000, seed=0).split(6000)
