@@ -48,6 +48,23 @@ def estimator_widths(est) -> dict:
     return {"acc": max(acc, bs + 2, b_in + sh + fc + 2), "racc": racc, "residual": rb, "sum": 2 * rb, "y_hat": rb}
 
 
+def _estimator_ports(top: wiring.Component, est) -> None:
+    """The output fields and the stream ports shared by both estimator tops (called last in ``__init__``).
+
+    ``out_fields``: ``x<i>_hat`` (``state_bits`` each), ``y_hat``, ``mode_index``, ``state_saturated``,
+    LSB first; ``unsigned_fields`` the unsigned ones (the others are signed codes); ``in`` one (u, y)
+    code pair per transfer (``2 input_bits``).
+    """
+    top.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", top.widths["y_hat"])]
+                      + [("mode_index", top.index_width), ("state_saturated", 1)])
+    top.unsigned_fields = ("mode_index", "state_saturated")
+    wiring.Component.__init__(top, {
+        "in": In(stream.Signature(unsigned(2 * est.input_bits))),
+        "out": Out(stream.Signature(unsigned(sum(w for _, w in top.out_fields)))),
+    })
+    top._MustUse__silence = False
+
+
 class SwitchedEstimatorTop(wiring.Component):
     """The estimator of seed 003 as one stream component (see the module docstring)."""
 
@@ -60,15 +77,7 @@ class SwitchedEstimatorTop(wiring.Component):
         self.index_width = index_width(est.n_modes)
         self.latency = 1
         self.ii = 1
-        self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
-                           + [("mode_index", self.index_width), ("state_saturated", 1)])
-        #: unsigned output fields (the others are signed codes)
-        self.unsigned_fields = ("mode_index", "state_saturated")
-        super().__init__({
-            "in": In(stream.Signature(unsigned(2 * est.input_bits))),
-            "out": Out(stream.Signature(unsigned(sum(w for _, w in self.out_fields)))),
-        })
-        self._MustUse__silence = False
+        _estimator_ports(self, est)
 
     def _update(self, m, fc_rows, gc, lc, x, qu, qy, name):
         """``sat((F x + (G qu + L qy) << sh + 2**(F_c-1)) >> F_c)`` per state; returns (next states, saturation flags)."""
@@ -327,14 +336,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         self.lanes = self.schedule["lanes"]
         self.ii = self.schedule["cycles_per_sample"]
         self.latency = self.schedule["latency"]
-        self.out_fields = ([(f"x{i + 1}_hat", est.state_bits) for i in range(est.n)] + [("y_hat", self.widths["y_hat"])]
-                           + [("mode_index", self.index_width), ("state_saturated", 1)])
-        self.unsigned_fields = ("mode_index", "state_saturated")
-        super().__init__({
-            "in": In(stream.Signature(unsigned(2 * est.input_bits))),
-            "out": Out(stream.Signature(unsigned(sum(w for _, w in self.out_fields)))),
-        })
-        self._MustUse__silence = False
+        _estimator_ports(self, est)
 
     def _columns(self, group, observer: bool, stw: int, ib: int):
         """Coefficient columns (state 0..n-1, qu, qy) of the lane of modes ``group`` indexed by
