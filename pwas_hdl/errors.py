@@ -86,3 +86,12 @@ class CheckFailed(PwasError):
 
 class InternalError(PwasError, RuntimeError):
     """A consistency check inside pwas-hdl failed: a bug, not bad input."""
+
+
+def option_text(param: str) -> str:
+    """How an error names an API parameter that is also a command-line option.
+
+    ``"weight_frac"`` -> ``"--weight-frac (weight_frac)"``: the option first, for the CLI user, the
+    parameter in brackets for the API caller (who gets the same text).
+    """
+    return f"--{param.replace('_', '-')} ({param})"

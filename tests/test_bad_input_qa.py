@@ -188,6 +188,9 @@ def _port(m: dict, role: str) -> dict:
     (["explore", "{model}", "{data}", "-o", "ex", "--input-bits", "0"], "--input-bits (input_bits) must be >= 2", None),
     (["explore", "{model}", "{data}", "-o", "ex", "--measure-max", "0"], "--measure-max (measure_max) must be", None),
     (["explore", "{model}", "{data}", "-o", "ex", "--cost", "area"], "--cost must be one of", None),
+    (["generate", "{model}", "-o", "hw", "--weight-bits", "100000"], "--weight-bits (weight_bits) = 100000: need", "exceeds"),
+    (["generate", "{model}", "-o", "hw", "--output-bits", "0"], "--output-bits (output_bits) = 0: need", None),
+    (["generate", "{model}", "-o", "hw", "--weight-frac", "-100"], "use a larger --weight-frac (--weight-frac", None),
 ])
 def test_error_texts_name_the_cli_options(in_tmp, lorenz_tiny, args, words, api_words):
     """Messages said 'give one of goal (--goal), pipeline (--pipeline) or target_mhz (--clock-mhz)',

@@ -468,9 +468,9 @@ def test_suggested_weight_frac_keeps_a_weight(work):
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 
     m = PWASVirtualSensor.load(work / "m.json")
-    with pytest.raises(InputError, match=r"weight_frac = (-?\d+) keeps") as exc:
+    with pytest.raises(InputError, match=r"--weight-frac (-?\d+) keeps") as exc:
         FixedPointModel.from_sensor(m, weight_frac=-100)
-    fw = int(str(exc.value).split("weight_frac = ")[-1].split()[0])
+    fw = int(str(exc.value).split("--weight-frac ")[-1].split()[0])
     assert np.any(FixedPointModel.from_sensor(m, weight_frac=fw).weight_codes)
     with pytest.raises(InputError):
         FixedPointModel.from_sensor(m, weight_frac=fw - 2)

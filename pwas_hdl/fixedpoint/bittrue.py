@@ -79,7 +79,7 @@ from typing import Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fixedpoint.formats import _MAX_ABS_FRAC
 from pwas_hdl.fixedpoint.formats import (
     FixedFormat,
@@ -263,7 +263,9 @@ class FixedPointModel:
             raise ValueError(f"rounding must be 'half_up' or 'truncate', got {rounding!r}")
         for nm, v in (("weight_bits", weight_bits), ("weight_frac", weight_frac), ("output_bits", output_bits), ("output_frac", output_frac)):
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
-                raise ValueError(f"{nm} must be an integer or None, got {v!r}")
+                raise ValueError(f"{option_text(nm)} must be an integer or None, got {v!r}")
+            if nm.endswith("_bits") and v is not None and not 1 <= v <= 64:  # before any format is built with it
+                raise InputError(f"{option_text(nm)} = {v}: need an integer in [1, 64] (codes are held in numpy.int64)")
         self.grid = grid
         self.n = grid.n
         self.nz = int(w.shape[1])
@@ -308,12 +310,12 @@ class FixedPointModel:
         fo = int(output_frac) if output_frac is not None else fw + 1
         for nm, v in (("weight_frac", fw), ("output_frac", fo)):
             if abs(v) > _MAX_ABS_FRAC:  # before the shifts below (1 << 10**20 never ends)
-                raise InputError(f"{nm} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
+                raise InputError(f"{option_text(nm)} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
         sh = self.F + fw - fo
         if sh < 0:
             raise ValueError(
-                f"output_frac = {fo} is finer than the exact product (F + weight_frac = {self.F} + {fw} = {self.F + fw}); "
-                f"the output would need padding bits: use output_frac <= {self.F + fw}"
+                f"{option_text('output_frac')} = {fo} is finer than the exact product (F + weight_frac = {self.F} + {fw} = "
+                f"{self.F + fw}); the output would need padding bits: use --output-frac <= {self.F + fw}"
             )
         self.shift = sh
 
@@ -326,8 +328,8 @@ class FixedPointModel:
         self._out_reach = (_py_shift_round(wmin << self.F, sh, rounding), _py_shift_round(wmax << self.F, sh, rounding))
         if self._out_reach == (0, 0) and np.any(self.weight_codes):
             raise InputError(
-                f"output_frac = {fo} (LSB 2^{-fo}) rounds every output to 0 (weights reach {wmin}..{wmax} codes at "
-                f"weight_frac = {fw}); use a larger output_frac (e.g. {fw - max(abs(wmin), abs(wmax)).bit_length() + 1})"
+                f"{option_text('output_frac')} = {fo} (LSB 2^{-fo}) rounds every output to 0 (weights reach {wmin}..{wmax} "
+                f"codes at --weight-frac {fw}); use a larger --output-frac (e.g. {fw - max(abs(wmin), abs(wmax)).bit_length() + 1})"
             )
         b_out = int(output_bits) if output_bits is not None else signed_bits_needed(list(self._out_reach))
         self.output_format = FixedFormat(b_out, fo, True, rounding, "saturate")
@@ -412,8 +414,8 @@ class FixedPointModel:
             # a format whose LSB is above every weight: the design would compute 0 for every input
             least = math.ceil(-math.log2(wmax)) if math.isfinite(math.log2(wmax)) else fw
             raise InputError(
-                f"weight_frac = {fw} (LSB 2^{-fw}) rounds every weight to 0 (the largest |weight| is {wmax:.6g}); "
-                f"use a larger weight_frac (weight_frac = {least} keeps the largest weight)"
+                f"{option_text('weight_frac')} = {fw} (LSB 2^{-fw}) rounds every weight to 0 (the largest |weight| is "
+                f"{wmax:.6g}); use a larger --weight-frac (--weight-frac {least} keeps the largest weight)"
             )
         need = signed_bits_needed(codes_free)
         if weight_bits is None:
@@ -430,7 +432,7 @@ class FixedPointModel:
             raise ValueError(
                 f"{what} does not fit the weight format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}], "
                 f"lsb {fmt.lsb!r}); {int(sat.sum())} weight(s) overflow, {need} bits are needed at {fw} fraction bits. "
-                "Use weight_bits >= %d, fewer weight_frac bits, or overflow='saturate'" % need
+                "Use --weight-bits (weight_bits) >= %d, fewer --weight-frac bits, or overflow='saturate'" % need
             )
         warnings.warn(
             f"{int(sat.sum())} weight(s) saturated to the format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}]); "

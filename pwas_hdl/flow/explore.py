@@ -91,11 +91,10 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pwas_hdl import __version__
-from pwas_hdl.errors import InputError, ToolFailed, ToolMissing
+from pwas_hdl.errors import InputError, ToolFailed, ToolMissing, option_text
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.io.csv_table import Table, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
-from pwas_hdl.errors import InputError
 from pwas_hdl.io.atomic import check_output_path, make_temp_dir
 from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit
 
@@ -247,9 +246,7 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
     return xi, z, desc
 
 
-def _option(what: str) -> str:
-    """``input_bits`` -> ``--input-bits (input_bits)``: the explore option first, for the CLI user."""
-    return f"--{what.replace('_', '-')} ({what})"
+_option = option_text  # ``input_bits`` -> ``--input-bits (input_bits)``: the explore option first
 
 
 def _int_values(values, what: str, lo: int | None = None) -> list[int]:
