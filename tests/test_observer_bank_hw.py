@@ -107,6 +107,11 @@ def test_refusals(pv_data):
         l1_gain(np.array([[1.0]]), np.ones((1, 1)))
 
 
+def test_input_width_refusal_names_the_option(sensor_11b):
+    with pytest.raises(InputError, match=r"--input-bits \(input_bits\) = 30: an observer-bank design needs 4\.\.24"):
+        ObserverBankSensorModel.from_sensor(sensor_11b, input_bits=30)
+
+
 def test_seed003_estimator_bittrue_within_bounds():
     from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
     from pwas_hdl.systems.switched_linear import SWITCHED_A, SWITCHED_B, SWITCHED_C, switched_paper_run, switched_training_runs

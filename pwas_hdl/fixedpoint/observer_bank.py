@@ -83,7 +83,7 @@ from typing import Any
 
 import numpy as np
 
-from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.errors import InputError, InternalError, option_text
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, FixedPointModel
 from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat, PortFormat, SignalScaling, signed_bits_needed
 from pwas_hdl.fit.observer_bank import FRONT_END_KIND, ObserverBankFrontEnd, canonical_form
@@ -196,7 +196,7 @@ class FixedPointObserverBank:
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
                 raise InputError(f"{nm} must be an integer, got {v!r}")
         if not 4 <= input_bits <= 24:
-            raise InputError(f"input_bits must be in 4..24, got {input_bits}")
+            raise InputError(f"{option_text('input_bits')} = {input_bits}: an observer-bank design needs 4..24")
         if not (math.isfinite(input_headroom) and input_headroom > 0):
             raise InputError(f"input_headroom must be a positive number, got {input_headroom!r}")
         fe = front_end
