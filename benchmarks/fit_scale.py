@@ -69,11 +69,15 @@ def _problem(n: int, p: int, t: int, seed: int = 0):
 def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: int = 0) -> dict:
     """The timed fit (runs in a subprocess); saves the weights for the direct comparison.
 
-    ``workers >= 2``: the CV folds run on a local Dask cluster of that many single-threaded
-    processes (:class:`pwas_hdl.flow.executor.Executor`; its start-up is timed too). CPU time is
-    then this process's plus the workers' (``RUSAGE_CHILDREN`` after the cluster is shut down);
-    the peak memory is this process's plus that of the largest worker, times the worker count
-    (an upper bound of the sum: ``ru_maxrss`` of the children is their maximum, not their sum).
+    ``workers >= 2``: the CV folds run as ``fit --workers N`` runs them
+    (:class:`pwas_hdl.flow.executor.Executor`; from ``FORK_MIN_UNKNOWNS`` unknowns on that many
+    forked processes, below on a local Dask cluster; start-up timed too). CPU time is then this
+    process's plus the workers' (``RUSAGE_CHILDREN`` after they are shut down); the peak memory is
+    this process's plus that of the largest worker, times the worker count (an upper bound of the
+    sum: ``ru_maxrss`` of the children is their maximum, not their sum, and counts the pages they
+    share with the parent copy-on-write). ``critical_cpu_s``: this process's CPU plus that of
+    the busiest forked worker (sum of its tasks' CPU), the wall time the run would take on two
+    otherwise idle cores (derived from CPU times, not a wall measurement).
     """
     from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, solve_regularized, tikhonov_matrix
     from pwas_hdl.fit.sparse_cholesky import cholmod_available
@@ -91,7 +95,12 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     own_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     np.save(weights_out, w)
+    per_worker: dict[int, float] = {}
+    for task in cv.solver.get("fork_tasks", []):
+        per_worker[task["pid"]] = per_worker.get(task["pid"], 0.0) + task["cpu_s"]
     return {
+        "fork_worker_cpu_s": sorted(per_worker.values()),
+        "critical_cpu_s": cpu + max(per_worker.values()) if per_worker else None,
         "wall_s": wall,
         "cpu_s": cpu + (kids.ru_utime + kids.ru_stime if workers >= 2 else 0.0),
         "workers": workers if workers >= 2 else 1,
@@ -237,19 +246,22 @@ def markdown(res: dict) -> str:
         f"{s['direct_limit_s']:.0f} s per direct reference solve. **The 2-core machine was shared with other "
         f"engineers' jobs** (load average {s['load_average_at_start']:.1f} at the start): wall times are "
         "inflated, CPU times are the fairer measure."
-        + (f" The CV folds ran on a local Dask cluster of {s['workers']} processes (`--workers {s['workers']}`): "
-           "CPU includes the workers', peak RSS is this process's plus workers x the largest worker's."
+        + (f" The CV folds ran as `fit --workers {s['workers']}` runs them (from 50 000 unknowns on "
+           f"{s['workers']} forked processes, below on a local Dask cluster): CPU includes the workers', peak RSS "
+           "is this process's plus workers x the largest worker's (an upper bound: shared pages counted in each); "
+           "`critical CPU` = this process's CPU + the busiest forked worker's, the wall time on idle cores "
+           "(derived from CPU times)."
            if s.get("workers", 1) > 1 else ""),
         "",
-        "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG/MG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU |",
-        "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG/MG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU | critical CPU (s) |",
+        "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     by_key = {(r["n"], r["p"], r["order"]): r for r in res["rows"]}
     for r in res["rows"]:
         pre = f"| {r['n']} | {r['p']} | {r['N']} | {r['order']} "
         if r["status"] != "ok":
             what = f"timeout (> {r['limit_s']:.0f} s)" if r["status"] == "timeout" else r["status"]
-            out.append(pre + f"| {what} |" + " |" * 10)
+            out.append(pre + f"| {what} |" + " |" * 11)
             continue
         d = r.get("direct", {})
         if "max_abs_weight_diff" in d:
@@ -277,7 +289,8 @@ def markdown(res: dict) -> str:
             solver += " NOT all converged"
         out.append(
             pre + f"| {solver} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['peak_rss_mib']:.0f} | "
-            f"{r['estimated_mib']:.0f} | {r['cv_cg_iterations']} | {r['best_sigma']:.2g} | {diff} | {bound} | {dcpu} | {ratio} |"
+            f"{r['estimated_mib']:.0f} | {r['cv_cg_iterations']} | {r['best_sigma']:.2g} | {diff} | {bound} | {dcpu} | {ratio} | "
+            + (f"{r['critical_cpu_s']:.1f} |" if r.get("critical_cpu_s") is not None else "- |")
         )
     env = res["environment"]
     out += [

@@ -1,0 +1,120 @@
+"""The first-order CV at scale (issue 18, second pass): the data-dominated sigmas of a fold by PCG
+preconditioned with the factor of a smaller sigma (within the stated weight bound, refactorising
+by the documented rule), and the folds on forked worker processes (the serial result)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from pwas_hdl.fit import fork_map as fm
+from pwas_hdl.fit import multigrid as mg
+from pwas_hdl.fit import regularized_lsq as rl
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_sigma, tikhonov_matrix
+from pwas_hdl.fit.sparse_cholesky import cholmod_available
+from pwas_hdl.flow.executor import Executor
+
+pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
+
+SIGMAS = np.logspace(-7, 2, 10)
+
+
+@pytest.fixture()
+def large_rules(monkeypatch):
+    """The size rules of a large problem on a tiny one (31 x 31 vertices)."""
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+
+
+def _problem(t=600, seed=4):
+    rng = np.random.default_rng(seed)
+    grid = Grid(np.full(2, -1.2), np.full(2, 1.2), 30)
+    x = rng.uniform(-1.0, 1.0, (t, 2))
+    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
+    return sparse.csr_array(grid.basis_matrix(x)), z, tikhonov_matrix(grid, 1)
+
+
+def test_factor_pcg_within_the_stated_bound_of_the_direct_solve(large_rules):
+    h, z, gam = _problem(t=300)
+    hth = sparse.csr_array(h.T @ h)
+    b = h.T @ z
+    solver = NormalEquationSolver(hth, gam, 2)
+    assert solver.factor_pcg and solver.method == "direct"
+    small = [i for i in solver.sweep_order(hth, SIGMAS) if not solver.uses_mg(hth, SIGMAS[i])]
+    assert small == sorted(small) and len(small) >= 3  # the data-dominated sigmas from the smallest up
+    w, methods = None, []
+    for i in small:
+        w, info = solver.solve(hth, b, float(SIGMAS[i]), x0=w)
+        methods.append(info.method)
+        wd = rl._solve_spd((hth + SIGMAS[i] * gam).tocsc(), b)
+        if info.method == "factor-pcg":
+            assert info.converged and info.rel_residual <= rl.CG_RTOL
+            assert 0 < info.iterations <= rl.FACTOR_PCG_MAXITER
+            assert float(np.linalg.norm(w - wd)) <= info.weight_bound
+        else:
+            np.testing.assert_allclose(w, wd, rtol=1e-8, atol=1e-10)
+    assert methods[0] == "direct" and methods[1] == "factor-pcg"
+
+
+def test_factor_pcg_refactorises_at_the_cap_and_stops_trying(large_rules, monkeypatch):
+    h, z, gam = _problem(t=300)
+    hth = sparse.csr_array(h.T @ h)
+    monkeypatch.setattr(rl, "FACTOR_PCG_MAXITER", 1)  # no PCG solve converges in one iteration
+    solver = NormalEquationSolver(hth, gam, 2)
+    small = [i for i in solver.sweep_order(hth, SIGMAS) if not solver.uses_mg(hth, SIGMAS[i])]
+    w = None
+    for i in small:
+        w, info = solver.solve(hth, h.T @ z, float(SIGMAS[i]), x0=w)
+        assert info.method == "direct"
+    assert solver.factor_pcg_failures == 1  # one failed attempt, then every sigma factorised
+
+
+def test_cv_with_factor_pcg_matches_the_direct_cv(large_rules):
+    h, z, gam = _problem()
+    ca = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    cd = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, method="direct")
+    by = ca.solver["solves_by_method"]
+    assert by.get("factor-pcg", 0) > 0 and by.get("direct", 0) > 0 and by.get("mg", 0) > 0
+    assert sum(by.values()) == 3 * SIGMAS.size and ca.solver["all_converged"]
+    assert ca.best_sigma == cd.best_sigma
+    np.testing.assert_allclose(ca.fold_mse, cd.fold_mse, rtol=1e-6)
+
+
+def test_forked_folds_give_the_serial_result(large_rules):
+    h, z, gam = _problem()
+    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    with Executor(workers=2) as ex:
+        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex)
+        assert ex._client is None  # the Dask cluster was not started
+    assert forked.best_sigma == serial.best_sigma
+    np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(forked.mse, serial.mse, rtol=0, atol=1e-12)
+    assert forked.solver["solves_by_method"] == serial.solver["solves_by_method"]
+    assert forked.solver["iterations"] == serial.solver["iterations"]
+    tasks = forked.solver["fork_tasks"]
+    assert len(tasks) == 6 and len({t["pid"] for t in tasks}) <= 2  # two parts per fold, two workers
+    assert serial.solver["fork_tasks"] == []
+
+
+def test_fork_rule_by_size_and_executor(monkeypatch):
+    local = Executor(workers=2)
+    assert rl.fork_workers(local, rl.FORK_MIN_UNKNOWNS) == (2 if fm.fork_available() else 0)
+    assert rl.fork_workers(local, rl.FORK_MIN_UNKNOWNS - 1) == 0
+    assert rl.fork_workers(Executor(), 10**6) == 0
+    assert rl.fork_workers(None, 10**6) == 0
+
+
+def test_fork_map_order_and_errors():
+    assert fm.fork_map(lambda x: x * x, range(7), 2) == [x * x for x in range(7)]
+
+    def boom(x):
+        if x == 3:
+            raise ValueError("task 3")
+        return x
+
+    with pytest.raises(ValueError, match="task 3"):
+        fm.fork_map(boom, range(5), 2)
+    assert fm._TASK is None
