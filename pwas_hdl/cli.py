@@ -297,7 +297,8 @@ def fit(
     """Fit a PWAS virtual sensor to DATA and write the model file.
 
     With --workers / --scheduler the cross-validation folds (each fold's sigma sweep) run as Dask
-    tasks; the chosen sigma and the weights are the serial run's.
+    tasks; from 50 000 unknowns --workers N instead runs them on N forked processes that share
+    the data (no cluster start-up); the chosen sigma and the weights are the serial run's.
     """
     from pwas_hdl.fit import classifier as clf
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd, parse_observer

@@ -118,3 +118,11 @@ def test_fork_map_order_and_errors():
     with pytest.raises(ValueError, match="task 3"):
         fm.fork_map(boom, range(5), 2)
     assert fm._TASK is None
+
+
+def test_memory_estimate_counts_each_forked_worker():
+    one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1)
+    two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2)
+    assert one["workers"] == 0
+    per = one["HtH"] * 2 / 3 + one["factor"] + one["multigrid"] + one["vectors"]
+    assert two["total"] == pytest.approx(one["total"] + per)

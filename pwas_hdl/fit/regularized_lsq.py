@@ -351,7 +351,8 @@ def _direct_limits() -> dict[tuple[int, int], int]:
 
 
 def estimate_fit_memory(
-    n_samples: int, n_vertices: int, n_dims: int, n_targets: int = 1, order: int = 0, method: Method = "auto"
+    n_samples: int, n_vertices: int, n_dims: int, n_targets: int = 1, order: int = 0, method: Method = "auto",
+    processes: int = 1,
 ) -> dict[str, float]:
     """Estimated peak bytes of a fit (with CV), before anything is allocated.
 
@@ -368,6 +369,10 @@ def estimate_fit_memory(
     order : {0, 1}
         Tikhonov order.
     method : {"auto", "direct", "cg", "mg"}
+    processes : int
+        Processes that solve folds at the same time (forked workers, see :func:`fork_workers`):
+        each holds its own fold matrices, factor, multigrid levels and vectors (``H``, ``H'H`` and
+        ``Gamma`` are inherited, shared).
 
     Returns
     -------
@@ -402,6 +407,8 @@ def estimate_fit_memory(
         if use_mg else 0.0,
         "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
     }
+    per_process = est["HtH"] * 2 / 3 + est["factor"] + est["multigrid"] + est["vectors"]
+    est["workers"] = per_process * (max(int(processes), 1) - 1)
     est["total"] = float(sum(est.values()))
     est["method"] = 1.0 if chosen in ("cg", "mg") else 0.0
     return est
@@ -415,6 +422,7 @@ def check_fit_memory(
     order: int = 0,
     method: Method = "auto",
     max_memory: int | str | None = None,
+    processes: int = 1,
 ) -> dict[str, float]:
     """Refuse a fit whose estimated memory exceeds the limit, before allocating anything.
 
@@ -431,10 +439,11 @@ def check_fit_memory(
     ResourceLimit
         Naming the estimate, its largest parts and the limit.
     """
-    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method)
+    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, processes)
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
-        parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors"))
+        parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
+                                                                    "workers") if k != "workers" or est[k] > 0)
         raise ResourceLimit(
             f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
             f"N = {n_vertices} weights, over the limit of {limit / 2**20:.0f} MiB ({source}); use fewer partitions "
@@ -1072,7 +1081,8 @@ def cross_validate_sigma(
     h = sparse.csr_array(h)
     z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
     labels = fold_labels(h.shape[0], folds, shuffle, seed)
-    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory)
+    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory,
+                     processes=max(fork_workers(executor, h.shape[1]), 1))
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2
