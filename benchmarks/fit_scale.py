@@ -66,6 +66,51 @@ def _problem(n: int, p: int, t: int, seed: int = 0):
     return grid, x, z
 
 
+class _PssPeak:
+    """Peak proportional set size (PSS) of this process and its children, sampled every ``period`` s.
+
+    The sum of PSS counts pages shared copy-on-write with forked workers once (``ru_maxrss`` of
+    each counts them in every process): the machine's memory actually used. ``None`` without
+    psutil or ``/proc/<pid>/smaps_rollup``. Sampling runs in a thread of this process (its CPU is
+    in this process's CPU time; a sample every 0.5 s).
+    """
+
+    def __init__(self, period: float = 0.5):
+        import threading
+
+        self.period, self.peak, self._stop = period, None, threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _sample(self):
+        import psutil
+
+        me = psutil.Process()
+        total = 0
+        for proc in [me, *me.children(recursive=True)]:
+            try:
+                total += proc.memory_full_info().pss
+            except (psutil.Error, AttributeError):
+                pass
+        return total
+
+    def _loop(self):
+        try:
+            while not self._stop.is_set():
+                v = self._sample()
+                self.peak = v if self.peak is None else max(self.peak, v)
+                self._stop.wait(self.period)
+        except Exception:  # no psutil / no smaps: no figure
+            self.peak = None
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+
+
 def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: int = 0) -> dict:
     """The timed fit (runs in a subprocess); saves the weights for the direct comparison.
 
@@ -86,7 +131,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     grid, x, z = _problem(n, p, t)
     c0, w0 = time.process_time(), time.perf_counter()
     est = check_fit_memory(t, grid.n_vertices, n, 1, order)
-    with Executor(workers=workers if workers >= 2 else None) as ex:
+    with _PssPeak() as pss, Executor(workers=workers if workers >= 2 else None) as ex:
         h = grid.basis_matrix(x)
         gam = tikhonov_matrix(grid, order)
         cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex)
@@ -99,6 +144,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     for task in cv.solver.get("fork_tasks", []):
         per_worker[task["pid"]] = per_worker.get(task["pid"], 0.0) + task["cpu_s"]
     return {
+        "peak_pss_mib": None if pss.peak is None else pss.peak / 2**20,
         "fork_worker_cpu_s": sorted(per_worker.values()),
         "critical_cpu_s": cpu + max(per_worker.values()) if per_worker else None,
         "wall_s": wall,
@@ -251,17 +297,20 @@ def markdown(res: dict) -> str:
            "is this process's plus workers x the largest worker's (an upper bound: shared pages counted in each); "
            "`critical CPU` = this process's CPU + the busiest forked worker's, the wall time on idle cores "
            "(derived from CPU times)."
+           if s.get("workers", 1) > 1 else "")
+        + (" `peak PSS`: the largest sum of the proportional set sizes of the fit's process and its "
+           "workers, sampled every 0.5 s (shared pages counted once: the memory actually used)."
            if s.get("workers", 1) > 1 else ""),
         "",
-        "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG/MG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU | critical CPU (s) |",
-        "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG/MG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU | critical CPU (s) | peak PSS (MiB) |",
+        "|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     by_key = {(r["n"], r["p"], r["order"]): r for r in res["rows"]}
     for r in res["rows"]:
         pre = f"| {r['n']} | {r['p']} | {r['N']} | {r['order']} "
         if r["status"] != "ok":
             what = f"timeout (> {r['limit_s']:.0f} s)" if r["status"] == "timeout" else r["status"]
-            out.append(pre + f"| {what} |" + " |" * 11)
+            out.append(pre + f"| {what} |" + " |" * 12)
             continue
         d = r.get("direct", {})
         if "max_abs_weight_diff" in d:
@@ -291,6 +340,7 @@ def markdown(res: dict) -> str:
             pre + f"| {solver} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['peak_rss_mib']:.0f} | "
             f"{r['estimated_mib']:.0f} | {r['cv_cg_iterations']} | {r['best_sigma']:.2g} | {diff} | {bound} | {dcpu} | {ratio} | "
             + (f"{r['critical_cpu_s']:.1f} |" if r.get("critical_cpu_s") is not None else "- |")
+            + (f" {r['peak_pss_mib']:.0f} |" if r.get("peak_pss_mib") is not None else " - |")
         )
     env = res["environment"]
     out += [
