@@ -71,14 +71,16 @@ class _PssPeak:
 
     The sum of PSS counts pages shared copy-on-write with forked workers once (``ru_maxrss`` of
     each counts them in every process): the machine's memory actually used. ``None`` without
-    psutil or ``/proc/<pid>/smaps_rollup``. Sampling runs in a thread of this process (its CPU is
-    in this process's CPU time; a sample every 0.5 s).
+    psutil or ``/proc/<pid>/smaps_rollup``. Sampling runs in a thread of this process; reading the
+    large processes' page maps is not free (measured ~10 s CPU over a 160 s first-order run at
+    2 samples a second), so the thread's own CPU seconds (:attr:`cpu`) are subtracted from the
+    fit's CPU time by the caller.
     """
 
-    def __init__(self, period: float = 0.5):
+    def __init__(self, period: float = 1.0):
         import threading
 
-        self.period, self.peak, self._stop = period, None, threading.Event()
+        self.period, self.peak, self.cpu, self._stop = period, None, 0.0, threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
 
     def _sample(self):
@@ -98,9 +100,11 @@ class _PssPeak:
             while not self._stop.is_set():
                 v = self._sample()
                 self.peak = v if self.peak is None else max(self.peak, v)
+                self.cpu = time.thread_time()
                 self._stop.wait(self.period)
         except Exception:  # no psutil / no smaps: no figure
             self.peak = None
+        self.cpu = time.thread_time()
 
     def __enter__(self):
         self._thread.start()
@@ -136,7 +140,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         gam = tikhonov_matrix(grid, order)
         cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex)
         w, info = solve_regularized(h, z, cv.best_sigma, gam, return_info=True)
-    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0 - pss.cpu  # without the sampler's CPU
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     own_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     np.save(weights_out, w)
@@ -299,7 +303,8 @@ def markdown(res: dict) -> str:
            "(derived from CPU times)."
            if s.get("workers", 1) > 1 else "")
         + (" `peak PSS`: the largest sum of the proportional set sizes of the fit's process and its "
-           "workers, sampled every 0.5 s (shared pages counted once: the memory actually used)."
+           "workers, sampled every second (shared pages counted once: the memory actually used; the sampler's "
+           "CPU is not in the CPU columns)."
            if s.get("workers", 1) > 1 else ""),
         "",
         "| n | p | N | order | solver | wall (s) | CPU (s) | peak RSS (MiB) | estimate (MiB) | CV CG/MG iterations | sigma | max abs w - w_direct | CG bound | direct CPU (s) | order1/order0 CPU | critical CPU (s) | peak PSS (MiB) |",
