@@ -120,6 +120,22 @@ def test_fork_map_order_and_errors():
     assert fm._TASK is None
 
 
+def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
+    """A killed worker (e.g. by the out-of-memory killer) left multiprocessing.Pool waiting for ever."""
+    import os
+
+    from pwas_hdl.errors import ResourceLimit
+
+    def die(x):
+        if x == 2:
+            os._exit(9)
+        return x
+
+    with pytest.raises(ResourceLimit, match="fewer --workers"):
+        fm.fork_map(die, range(4), 2)
+    assert fm._TASK is None
+
+
 def test_memory_estimate_counts_each_forked_worker():
     one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1)
     two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2)

@@ -13,8 +13,12 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 import time
 from typing import Any, Callable, Sequence
+
+from pwas_hdl.errors import ResourceLimit
 
 __all__ = ["fork_available", "fork_map"]
 
@@ -58,7 +62,8 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
     Returns
     -------
     list
-        The results, as the serial loop would return them. An exception in a task is raised here.
+        The results, as the serial loop would return them. An exception in a task is raised here;
+        a worker that dies raises :class:`~pwas_hdl.errors.ResourceLimit`.
     """
     global _TASK
     items = list(items)
@@ -71,12 +76,18 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
     info: list = [None] * len(items)
     _TASK = fn
     try:
-        with ctx.Pool(max(1, min(int(processes), len(items)))) as pool:
-            for done, (index, result, cpu, pid) in enumerate(
-                    pool.imap_unordered(_run, list(enumerate(items)), chunksize=1), 1):
+        # a worker that dies (killed, out of memory) raises BrokenProcessPool here instead of
+        # leaving the parent waiting for ever (multiprocessing.Pool would)
+        with ProcessPoolExecutor(max_workers=max(1, min(int(processes), len(items))), mp_context=ctx) as pool:
+            futures = [pool.submit(_run, (i, x)) for i, x in enumerate(items)]
+            for done, fut in enumerate(as_completed(futures), 1):
+                index, result, cpu, pid = fut.result()
                 out[index], info[index] = result, (cpu, pid)
                 if progress is not None:
                     progress(done, len(items))
+    except BrokenProcessPool:
+        raise ResourceLimit(f"a worker process of the {processes} forked ones died (killed, e.g. out of memory); "
+                            "run with fewer --workers or on a machine with more memory") from None
     finally:
         _TASK = None
     if stats is not None:
