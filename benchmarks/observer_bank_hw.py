@@ -15,8 +15,13 @@ the unquantised signals) and ``stage: rtl``, with the latency and II measured, a
 Battery (P-feat with the u/y taps i_k, v_k) and seed 003 are not here: the hardware has no lag
 taps behind the bank yet, and seed 003's switched observer is not built (see the report).
 
-``python -m pwas_hdl.benchmarks.observer_bank_hw [--runs 3] [--quick]`` writes
-``results/observer_bank_hw.{json,md}``.
+``--architecture serial [--bank-lanes L]``: the same sensors on the time-multiplexed bank
+(``generate --architecture serial``, :mod:`pwas_hdl.hdl.serial_observer_bank`, and the serial
+core): the design that fits an LFE5U-45F (the parallel one needs 129 multipliers); II is then its
+cycles per sample, measured.
+
+``python -m pwas_hdl.benchmarks.observer_bank_hw [--runs 3] [--quick] [--architecture parallel|serial]
+[--bank-lanes L]`` writes ``results/observer_bank_hw.{json,md}`` (serial: ``observer_bank_hw_serial.*``).
 """
 
 from __future__ import annotations
@@ -40,11 +45,36 @@ BENCH = "observer-bank-hw"
 SYSTEMS = ("pv-benchmark", "switching-4")
 
 
+#: The issue's must-show: |rtl - float| of pv-benchmark's FIT and of switching-4's per-mode F1.
+MUST_SHOW = {("pv-benchmark", "fit"): 0.01, ("switching-4", "f1"): 0.005}
+ARCHITECTURES = ("parallel", "serial")
+
+
 def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | None = print,
-        systems: tuple = SYSTEMS) -> tuple[dict, dict]:
-    """Run the hardware rows; returns ``(doc, traces)`` for :func:`pwas_hdl.bench_results.bench_main`."""
+        systems: tuple = SYSTEMS, architecture: str = "parallel", bank_lanes: int | None = None) -> tuple[dict, dict]:
+    """Run the hardware rows; returns ``(doc, traces)`` (written by :func:`main`).
+
+    Parameters
+    ----------
+    runs : int
+        Runs (seed = run index), >= 1.
+    quick : bool
+        3 000 / 1 000 samples instead of 25 000 / 5 000.
+    systems : tuple of str
+        Subset of :data:`SYSTEMS`.
+    architecture : {"parallel", "serial"}
+        The bank of the generated sensor (``generate --architecture``).
+    bank_lanes : int, optional
+        State-update units of the serial bank (default 1); serial only.
+    """
     if runs < 1:
         raise InputError("--runs must be >= 1")
+    if architecture not in ARCHITECTURES:
+        raise InputError(f"--architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+    if bank_lanes is not None and (architecture != "serial" or bank_lanes < 1):
+        raise InputError("--bank-lanes needs --architecture serial and a value >= 1")
+    if not systems or any(s not in SYSTEMS for s in systems):
+        raise InputError(f"systems must be among {', '.join(SYSTEMS)}, got {list(systems)}")
     t0 = time.perf_counter()
     n_train, n_test = (3000, 1000) if quick else (25000, 5000)
     col = Collector()
@@ -57,7 +87,7 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
             zf = model.predict(te.u, te.y)[:, 0]
             zt = te.z_true[model.memory - 1 :, 0]
             with tempfile.TemporaryDirectory(prefix="pwas-obs-hw-") as tmp:
-                hw = rtl_estimates(model, te.u, te.y, Path(tmp))
+                hw = rtl_estimates(model, te.u, te.y, Path(tmp), architecture=architecture, bank_lanes=bank_lanes)
             if not hw["passed"] or hw["mismatches"]:
                 raise AssertionError(f"{system} run {r}: the RTL differs from the bit-true model ({hw['mismatches']} mismatches)")
             zh = hw["zhat"][:, 0]
@@ -93,7 +123,8 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
                "n_train": n_train, "n_test": n_test}
         if stage == "rtl":
             g = lambda k: col.values[(system, "rtl", "meta", k)]  # noqa: E731
-            cfg |= {"simulator": "verilator (native engine)", "rtl_outputs": int(sum(g("outputs"))),
+            cfg |= {"simulator": "verilator (native engine)", "bank": architecture,
+                    "bank_lanes": (bank_lanes or 1) if architecture == "serial" else None, "rtl_outputs": int(sum(g("outputs"))),
                     "mismatches": int(sum(g("mismatches"))), "latency_cycles": int(max(g("latency"))),
                     "ii": float(max(g("ii"))), "abs_err_max_vs_float": float(max(col.values[(system, 'rtl', 'abs', 'err_max')])),
                     "estimate_bound": float(max(g("bound"))), **hw_info[system]}
@@ -104,7 +135,8 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
         rows.append(br.row_from_values(system, target, "pwas-feat", stage, metric, vals, None, cfg))
     doc = br.make_results(
         BENCH, rows, ASSUMPTIONS,
-        config={"runs": runs, "n_train": n_train, "n_test": n_test, "systems": list(systems), "pfeat": PFEAT},
+        config={"runs": runs, "n_train": n_train, "n_test": n_test, "systems": list(systems), "pfeat": PFEAT,
+                "architecture": architecture, "bank_lanes": bank_lanes},
         description="Seed 004 P-feat sensors through the generated RTL (observer bank + residual features + PWAS core): "
                     "hardware FIT / NRMSE / F1 beside float",
         quick=quick, elapsed_s=time.perf_counter() - t0,
@@ -115,8 +147,11 @@ def run(runs: int = 3, quick: bool = False, progress: Callable[[str], None] | No
 def markdown(doc: dict) -> str:
     """Float vs RTL per system and metric."""
     c = doc["config"]
-    lines = [f"# Seed 004 P-feat through the RTL (runs = {c['runs']}{', QUICK' if doc.get('quick') else ''})", "",
-             "Observer bank (N_theta = 5, deadbeat, M = 5, l = 7, 11b with an integer square root) + PWAS core, "
+    arch = c.get("architecture", "parallel")
+    bank = ("parallel bank (constant multipliers, II 1)" if arch == "parallel" else
+            f"serial bank (`generate --architecture serial`, {c.get('bank_lanes') or 1} lane(s), serial core)")
+    lines = [f"# Seed 004 P-feat through the RTL, {arch} bank (runs = {c['runs']}{', QUICK' if doc.get('quick') else ''})", "",
+             f"Observer bank (N_theta = 5, deadbeat, M = 5, l = 7, 11b with an integer square root) + PWAS core, {bank}, "
              "whole test trajectory replayed on Verilator; hardware metrics from the RTL's output codes.", "",
              "| system | target | metric | float | rtl | rtl - float | mismatches | latency | II |", "|---|---|---|---|---|---|---|---|---|"]
     for system in c["systems"]:
@@ -131,6 +166,13 @@ def markdown(doc: dict) -> str:
         f = r["formats"]
         lines.append(f"| {system} | {r['abs_err_max_vs_float']:.4g} | {r['estimate_bound']:.4g} | states s{f['state_bits']}.{f['state_frac']}, "
                      f"coefficients .{f['coef_frac']}, inputs s{f['input_bits']}.{f['input_frac']} |")
+    lines += ["", "| must-show (issue 12) | largest abs(rtl - float) of the means | limit | met |", "|---|---|---|---|"]
+    for (system, metric), lim in MUST_SHOW.items():
+        if system not in c["systems"]:
+            continue
+        d = max(abs(r["value"] - br.find_rows(doc, system=system, stage="float", target=r["target"], metric=metric)[0]["value"])
+                for r in br.find_rows(doc, system=system, stage="rtl", metric=metric))
+        lines.append(f"| {system} {metric.upper()} | {d:.5f} | {lim:g} | {'yes' if d <= lim else 'NO'} |")
     return "\n".join(lines) + "\n"
 
 
@@ -138,8 +180,29 @@ def plot(traces: dict, path) -> None:  # no figure for this bench
     return None
 
 
+def main(argv: list[str] | None = None) -> None:
+    """The script: ``--runs``, ``--quick``, ``--outdir``, ``--architecture``, ``--bank-lanes``; writes JSON and Markdown."""
+    import argparse
+
+    from pwas_hdl.io.atomic import atomic_write_text
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--outdir", type=Path, default=br.default_outdir())
+    ap.add_argument("--architecture", default="parallel", choices=list(ARCHITECTURES),
+                    help="the sensor's bank: parallel (II 1) or the time-multiplexed one (observer_bank_hw_serial.*)")
+    ap.add_argument("--bank-lanes", type=int, default=None, help="state-update units of the serial bank (default 1)")
+    a = ap.parse_args(argv)
+    doc, _ = run(a.runs, a.quick, progress=print, architecture=a.architecture, bank_lanes=a.bank_lanes)
+    a.outdir.mkdir(parents=True, exist_ok=True)
+    name = "observer_bank_hw" + ("_serial" if a.architecture == "serial" else "") + ("_quick" if a.quick else "")
+    br.write_results(a.outdir / f"{name}.json", doc)
+    atomic_write_text(a.outdir / f"{name}.md", markdown(doc))
+    print(markdown(doc))
+
+
 if __name__ == "__main__":
     import sys
 
-    br.bench_main(sys.argv[1:], stem="observer_bank_hw", description=__doc__.splitlines()[0], run=run, markdown=markdown,
-                  plot=plot, default_runs=3)
+    sys.exit(br.script_main(main, sys.argv[1:]))

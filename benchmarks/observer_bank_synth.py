@@ -1,7 +1,8 @@
 """Resources, fmax, latency and samples/s of observer-bank sensors on ECP5 and iCE40 (issue 12), one place and route each.
 
 Designs (fitted on the seed 004 pv-benchmark data, seed 0): the P-feat sensor of the benches
-(N_theta = 5, M = 5, l = 7, 11b, p = 6: 16 807 vertices), and a small one (N_theta = 3, p = 3,
+(N_theta = 5, M = 5, l = 7, 11b, p = 6: 16 807 vertices; also fitted on the switching-4 data,
+``switching4-pfeat-n5-p6-11b``), and a small one (N_theta = 3, p = 3,
 64 vertices) plus its 11b-sq twin (no square root); and the tapped battery sensor of the tests
 (seed 004 E3 data, seed 0: 3 Kalman observers, taps ``u0[t], y0[t-1], y0[t]``, p = 2, 729
 vertices; the tapped top :mod:`pwas_hdl.hdl.observer_tap_sensor_top`). Each is generated with ``generate --design
@@ -44,6 +45,8 @@ DESIGNS = {
     "small-n3-p3-11b": dict(n_models=3, features="11b", partitions=3, n_train=3000),
     "small-n3-p3-11b-sq": dict(n_models=3, features="11b-sq", partitions=3, n_train=3000),
     "pfeat-n5-p6-11b": dict(n_models=5, features="11b", partitions=6, n_train=25000),
+    # the switching-4 P-feat sensor of observer_bank_hw.py's run 0 (seed 004 E2 data, seed 0): same structure
+    "switching4-pfeat-n5-p6-11b": dict(system="switching-4", n_models=5, features="11b", partitions=6, n_train=25000),
     # the tapped battery sensor of tests/test_bank_taps_hw.py (seed 004 E3 data: 3 Kalman observers M = 5,
     # l = 7, 11b, taps u0[t], y0[t-1], y0[t] (--mu 1 --my 2), p = 2: 729 vertices)
     "battery-taps-n3-p2-11b": dict(system="battery", n_models=3, observer="kalman:0.1", features="11b", partitions=2,
@@ -73,7 +76,7 @@ def _sensor(cfg: dict):
         fe = fe.fit([tr.u], [tr.y], [tr.z])
         return PWASVirtualSensor(mu=cfg["mu"], my=cfg["my"], partitions=cfg["partitions"], gamma=1.0, front_end=fe,
                                  sigma=1e-3).fit(tr.u, tr.y, tr.z)
-    tr, _, _ = make_pv_dataset("pv-benchmark", cfg["n_train"], 200, seed=0)
+    tr, _, _ = make_pv_dataset(cfg.get("system", "pv-benchmark"), cfg["n_train"], 200, seed=0)
     fe = ObserverBankFrontEnd(n_models=cfg["n_models"], features=cfg["features"])
     return PWASVirtualSensor(mu=0, my=0, partitions=cfg["partitions"], gamma=1.0, front_end=fe).fit(tr.u, tr.y, tr.z)
 
@@ -188,7 +191,7 @@ def _dsp_est(r: dict) -> str:
 def markdown(doc: dict) -> str:
     lines = [f"# Observer-bank sensors: resources on ECP5 and iCE40{' (QUICK)' if doc['quick'] else ''}", "",
              f"One Yosys + nextpnr run each (seed 1, time limit {doc['limit_min']} min wall per run), "
-             "`benchmarks/observer_bank_synth.py`; designs fitted on pv-benchmark data (seed 0), battery-taps on the "
+             "`benchmarks/observer_bank_synth.py`; designs fitted on pv-benchmark data (seed 0; switching4-* on the switching-4 data, seed 0), battery-taps on the "
              "seed 004 E3 battery data (seed 0; u/y taps beside the bank features, the tapped top). "
              "serial = `generate --architecture serial` (time-multiplexed bank, 1 lane, serial core); "
              "parallel = constant multipliers, II 1. DSP = MULT18X18D (ECP5); iCE40 HX8K has none. "
