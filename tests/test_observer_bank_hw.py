@@ -140,3 +140,19 @@ def test_seed003_estimator_bittrue_within_bounds():
     y = rep.y[:, 0]
     m_hw, m_f = np.mean((y - tr["y_hat"] * 2.0**-est.state_frac) ** 2), np.mean((y - ref.y_hat) ** 2)
     assert abs(m_hw - m_f) <= 2 * math.sqrt(m_f) * est.output_error_bound + est.output_error_bound**2
+
+
+def test_observer_bank_hw_bench_refuses_bad_options(tmp_path, capsys):
+    """benchmarks/observer_bank_hw.py (--architecture serial, --bank-lanes): bad values refused before any
+    fit; the script gives one error: line, exit 2 and writes nothing."""
+    from pwas_hdl import bench_results as br
+    from pwas_hdl.benchmarks import observer_bank_hw as ob
+
+    for kw, msg in ((dict(architecture="bogus"), "--architecture"), (dict(bank_lanes=2), "--bank-lanes"),
+                    (dict(architecture="serial", bank_lanes=0), "--bank-lanes"), (dict(runs=0), "--runs"),
+                    (dict(systems=("battery",)), "systems")):
+        with pytest.raises(InputError, match=msg):
+            ob.run(progress=None, **kw)
+    rc = br.script_main(ob.main, ["--architecture", "serial", "--bank-lanes", "0", "--outdir", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("error:") and not (tmp_path / "o").exists()

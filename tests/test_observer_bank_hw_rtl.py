@@ -119,8 +119,11 @@ def test_serial_bank_manifest_and_refusals(bank_sensor, tmp_path):
     fe = info["front_end"]
     sch = fe["schedule"]
     assert fe["bank"] == "serial" and sch["lanes"] == 1 and sch["steps"] == 3 * 5
-    # N M steps + the flush of the pipelined update, or the feature pipeline's tail, or the serial core's n + 1
-    assert fe["cycles_per_sample"] == fe["ii"] == info["ii"] == max(15 + 1, sch["stages_before_core"], 3 + 1)
+    # N M steps + the flush of the pipelined update, or half the feature pipeline's tail (double-buffered
+    # codes: two samples between input and core), or the last window sum's read of the slot, or the core's n + 1
+    assert sch["double_buffered_codes"] is True
+    ii = max(15 + 1, -(-sch["stages_before_core"] // 2), 2 * 5 + 3, 3 + 1)
+    assert fe["cycles_per_sample"] == fe["ii"] == info["ii"] == ii == 16 < sch["stages_before_core"]
     assert info["latency"] == fe["stages_before_core"] + top.core.latency
     assert "bank idle" in info["flow_control"]["s_axis_tready"]
     two = build_observer_sensor(observer_bank_model(bank_sensor), architecture="serial", lanes=2)

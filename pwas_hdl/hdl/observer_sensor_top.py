@@ -84,7 +84,7 @@ class ObserverSensorTop(wiring.Component):
             raise ValueError("the core's input width differs from the feature code width")
         self.bank = bank
         attach_core_and_schedule(self, bank, params, memory=memory, pipeline=pipeline, architecture=architecture,
-                                 lanes=lanes, isqrt_every=isqrt_every)
+                                 lanes=lanes, isqrt_every=isqrt_every, double_buffered=True)
         self.params = params
         self.latency = self.stages_before_core + self.core.latency
         self.memory_plan = self.core.memory_plan
@@ -224,11 +224,12 @@ def parallel_feature_codes(m: Module, bank, cur: list, transfer, advance, warm) 
 
 
 def attach_core_and_schedule(top, bank, params: CoreParams, *, memory: str, pipeline, architecture: str, lanes: int,
-                             isqrt_every: int | None) -> None:
+                             isqrt_every: int | None, double_buffered: bool = False) -> None:
     """Set the core and the schedule of an observer-bank top (``top.architecture``, ``core``, ``plan``,
     ``stages_before_core``, ``ii``, ``cycles_per_sample``): the parallel core behind the
     :data:`FRONT_END_STAGES` registers (II 1), or the serial core behind the time-multiplexed bank
-    (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`: II = cycles_per_sample)."""
+    (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`: II = cycles_per_sample;
+    ``double_buffered``: the feature codes double-buffered, :func:`serial_sensor_path`)."""
     if architecture not in ("parallel", "serial"):
         raise ValueError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
     top.architecture = architecture
@@ -237,7 +238,7 @@ def attach_core_and_schedule(top, bank, params: CoreParams, *, memory: str, pipe
 
         top.core = SerialPWASCore(params, pipeline=pipeline)
         top.core._MustUse__silence = True
-        top.plan = plan_serial_bank(bank, lanes, isqrt_every, top.core.ii)
+        top.plan = plan_serial_bank(bank, lanes, isqrt_every, top.core.ii, double_buffered=double_buffered)
         top.stages_before_core = top.plan.stages_before_core
         top.ii = top.cycles_per_sample = top.plan.cycles_per_sample
     else:
@@ -265,12 +266,26 @@ def serial_sensor_path(m: Module, top, cur: list, inp, transfer, extra_codes=Non
 
     ``extra_codes(done)``, if given, returns more core inputs (after the feature codes, in the
     core's input order) that must be valid from the cycle after ``done`` (the last feature code of
-    a warm sample written) until the core takes them: e.g. the u/y tap codes registered on ``done``.
+    a warm sample written) until the core takes them: e.g. the u/y tap codes registered on ``done``
+    (single-buffered plans only).
+
+    Double-buffered plan (``top.plan.double_buffered``): the core reads a second set of code
+    registers, loaded at ``done`` when it is free (or taken in that cycle), else held in the
+    staging registers (``features_held``) and loaded in the cycle the core takes the previous
+    codes; ``in.ready`` = bank free & (fewer than 2 warm samples between the input and the core's
+    take | the core takes one now), so no sample's codes are overwritten under backpressure.
     """
     sample_warm = Signal(name="bank_sample_warm")
     with m.If(transfer):
         m.d.sync += sample_warm.eq(top.warm)
-    codes, done, free = build_serial_front_end(m, top.bank, top.plan, cur, transfer, sample_warm)
+    db = top.plan.double_buffered
+    if db and extra_codes is not None:
+        raise ValueError("extra core inputs need the single-buffered serial plan")
+    load = Signal(name="features_load") if db else None
+    codes, done, free = build_serial_front_end(m, top.bank, top.plan, cur, transfer, sample_warm, buffer_load=load)
+    if db:
+        _double_buffer_control(m, top, inp, transfer, codes, done, free, load)
+        return
     extra = list(extra_codes(done)) if extra_codes is not None else []
     pending = Signal(name="features_valid")
     core_adv = Signal(name="core_advance")
@@ -282,3 +297,33 @@ def serial_sensor_path(m: Module, top, cur: list, inp, transfer, extra_codes=Non
         m.d.sync += pending.eq(1)
     m.d.comb += inp.ready.eq(free & (~pending | take))
     top.core.build_into(m, Cat(*codes, *extra), pending, core_adv, top.out)
+
+
+def _double_buffer_control(m: Module, top, inp, transfer, codes: list, done, free, load) -> None:
+    """Flow control of the double-buffered codes (:func:`serial_sensor_path`): ``features_valid``
+    (the buffer holds codes the core has not taken), ``features_held`` (a sample's complete codes
+    wait in the staging registers), ``features_outstanding`` (warm samples transferred and not yet
+    taken, 0 .. 2)."""
+    pending = Signal(name="features_valid")
+    held = Signal(name="features_held")
+    core_adv = Signal(name="core_advance")
+    take = Signal(name="features_taken")
+    m.d.comb += take.eq(pending & core_adv)
+    m.d.comb += load.eq((done & (~pending | take)) | (held & take))
+    with m.If(load):
+        m.d.sync += pending.eq(1)
+    with m.Elif(take):
+        m.d.sync += pending.eq(0)
+    with m.If(held & take):
+        m.d.sync += held.eq(0)
+    with m.Elif(done & pending & ~take):
+        m.d.sync += held.eq(1)
+    out_n = Signal(unsigned(2), name="features_outstanding")
+    enter = Signal(name="warm_transfer")
+    m.d.comb += enter.eq(transfer & top.warm)
+    with m.If(enter & ~take):
+        m.d.sync += out_n.eq(add_const_wrap(m, out_n, 1, "features_outstanding_inc"))
+    with m.Elif(take & ~enter):
+        m.d.sync += out_n.eq(add_const_wrap(m, out_n, -1, "features_outstanding_dec"))
+    m.d.comb += inp.ready.eq(free & (~out_n[1] | take))
+    top.core.build_into(m, Cat(*codes), pending, core_adv, top.out)

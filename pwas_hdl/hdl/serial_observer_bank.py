@@ -86,7 +86,11 @@ class SerialBankPlan:
     stages_before_core : int
         Cycles from the input transfer to the core's input valid (``4 + SQUARE_REGS + R + AFFINE_REGS + (n_max - 1) M``).
     cycles_per_sample : int
-        The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``.
+        The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``; with double-buffered
+        feature codes ``max(steps + MAC_STAGES - 1, ceil(stages_before_core / 2), core_ii)``.
+    double_buffered : bool
+        The feature codes are double-buffered (:func:`build_serial_front_end` with ``buffer_load``):
+        the next sample may enter while the previous one is still in the feature pipeline.
     """
 
     lanes: tuple
@@ -96,12 +100,14 @@ class SerialBankPlan:
     isqrt_regs: int
     stages_before_core: int
     cycles_per_sample: int
+    double_buffered: bool = False
 
     def to_dict(self) -> dict:
         return {"lanes": len(self.lanes), "observers_per_lane": [len(ln) for ln in self.lanes], "steps": self.steps,
                 "mac_stages": MAC_STAGES, "affine_registers": AFFINE_REGS, "square_registers": SQUARE_REGS,
                 "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,
-                "stages_before_core": self.stages_before_core, "cycles_per_sample": self.cycles_per_sample}
+                "stages_before_core": self.stages_before_core, "cycles_per_sample": self.cycles_per_sample,
+                "double_buffered_codes": self.double_buffered}
 
 
 def _isqrt_regs(width: int, every: int | None) -> int:
@@ -116,8 +122,17 @@ def lane_groups(n: int, lanes: int) -> tuple:
     return tuple(tuple(range(s, min(n, s + per))) for s in range(0, n, per))
 
 
-def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY, core_ii: int = 1) -> SerialBankPlan:
+def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY, core_ii: int = 1,
+                     double_buffered: bool = False) -> SerialBankPlan:
     """The schedule of a serial bank of ``lanes`` state-update units for ``bank`` (a FixedPointObserverBank).
+
+    ``double_buffered``: the feature codes written by the lanes (staging) are copied into a second
+    set of registers that the core reads, and at most two warm samples are between the input and
+    the core's take (one in the core's buffer, one in the bank or held in staging): the II is then
+    ``max(steps + 1, ceil(stages_before_core / 2), core_ii)`` instead of the feature pipeline's
+    whole tail (a sample's staging writes span ``(n_max - 1) M + 1 <= steps`` cycles, so two
+    samples' writes never meet; sample ``k + 2`` enters no earlier than the cycle the core takes
+    sample ``k``, ``stages_before_core`` cycles after sample ``k``'s transfer).
 
     Raises
     ------
@@ -133,8 +148,12 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
     n_max = len(groups[0])
     r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
     sbc = 4 + SQUARE_REGS + r + AFFINE_REGS + (n_max - 1) * mo
-    cps = max(n_max * mo + MAC_STAGES - 1, sbc, int(core_ii))  # + the flush of the state-update pipeline
-    return SerialBankPlan(groups, mo, n_max * mo, isqrt_every if bank.feature_map == "11b" else None, r, sbc, cps)
+    # double-buffered: half the tail, and the sample's slot / oldest-square flag (updated at the next
+    # transfer) are read up to its last observer's window sum, (n_max - 1) M + SQUARE_REGS + 1 cycles on
+    tail = max(-(-sbc // 2), (n_max - 1) * mo + SQUARE_REGS + 1) if double_buffered else sbc
+    cps = max(n_max * mo + MAC_STAGES - 1, tail, int(core_ii))  # + the flush of the state-update pipeline
+    return SerialBankPlan(groups, mo, n_max * mo, isqrt_every if bank.feature_map == "11b" else None, r, sbc, cps,
+                          bool(double_buffered))
 
 
 def var_product(m: Module, coef, x, width: int, name: str):
@@ -290,7 +309,7 @@ def _product_reg(m: Module, coef, x, width: int, name: str):
     return r
 
 
-def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, transfer, sample_warm):
+def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, transfer, sample_warm, buffer_load=None):
     """Add the time-multiplexed bank and feature unit to ``m``.
 
     Parameters
@@ -300,10 +319,15 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
     cur : list of signed ``B_in``-bit values ``u0 .. y0`` (the input payload; latched on ``transfer``)
     transfer : 1-bit, the input transfer
     sample_warm : 1-bit register, the sample being processed yields an output (set by the caller at the transfer)
+    buffer_load : 1-bit net, optional
+        Double-buffered codes (``plan.double_buffered``): the returned ``codes`` are a second set of
+        registers loaded when the net is high with the staging codes (``feat{j}_code``), the one
+        being written in that cycle taken from its write (so a load in ``done``'s cycle holds the
+        sample's complete codes).
 
     Returns
     -------
-    codes : list (N) of signed core-input-code registers
+    codes : list (N) of signed core-input-code registers (the buffer when ``buffer_load`` is given)
     done : 1-bit, high in the cycle the last feature code of a warm sample is written
     free : 1-bit, the bank is idle or in its last cycle (a transfer may start the next sample)
     """
@@ -368,6 +392,10 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
     qy_al = const_product(m, 1 << sh_in, qy, rb, "bank_y_aligned")
     codes = [Signal(signed(bank.input_bits_core), name=f"feat{j}_code", reset_less=True) for j in range(bank.n_models)]
     done = Signal(name="bank_features_done")
+    if (buffer_load is not None) != plan.double_buffered:
+        raise ValueError("buffer_load is given exactly for a double-buffered plan")
+    buf = ([Signal(signed(bank.input_bits_core), name=f"feat{j}_code_buf", reset_less=True) for j in range(bank.n_models)]
+           if buffer_load is not None else None)
     sat_flags = []
     for ln, group in enumerate(plan.lanes):
         nl = len(group)
@@ -488,14 +516,23 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
         m.d.sync += [root.eq(r), tok2.eq(tok_r), idx2.eq(idx_r)]
         q, tok_q, idx_q = _affine(m, bank, group, root, idx2, tok2, pre)
         for o, j in enumerate(group):
-            with m.If(tok_q & eq_const(idx_q, o)):
+            wr = Signal(name=f"feat{j}_code_write")
+            m.d.comb += wr.eq(tok_q & eq_const(idx_q, o))
+            with m.If(wr):
                 m.d.sync += codes[j].eq(q)
+            if buf is not None:
+                with m.If(buffer_load):
+                    m.d.sync += buf[j].eq(Mux(wr, q, codes[j]))
         if ln == 0:
-            m.d.comb += done.eq(tok_q & eq_const(idx_q, nl - 1) & sample_warm)
+            # double-buffered: the next sample's transfer may come before this one's codes are done,
+            # so its warm bit travels with the token (sample_warm delayed from the last residual step)
+            w = (_delay(m, sample_warm, SQUARE_REGS + 2 + nreg + AFFINE_REGS, "bank_warm", reset_less=False)
+                 if buf is not None else sample_warm)
+            m.d.comb += done.eq(tok_q & eq_const(idx_q, nl - 1) & w)
     sat = Signal(name="state_saturated")
     m.d.comb += sat.eq(Cat(*sat_flags).any())
     sink_unused(m, sat, "state_saturated_flag")
-    return codes, done, free
+    return (buf if buf is not None else codes), done, free
 
 
 def _sub_wrap(m: Module, a, b, name: str):
