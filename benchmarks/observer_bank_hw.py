@@ -12,8 +12,9 @@ F1 (switching-4, minimum-distance classifier) at ``stage: float`` (the same sens
 the unquantised signals) and ``stage: rtl``, with the latency and II measured, and the largest
 |RTL - float| beside the stated bound.
 
-Battery (P-feat with the u/y taps i_k, v_k) and seed 003 are not here: the hardware has no lag
-taps behind the bank yet, and seed 003's switched observer is not built (see the report).
+Battery (P-feat with the u/y taps i_k, v_k) runs through its RTL in :mod:`pwas_hdl.benchmarks.battery`
+(``--rtl verilator [--architecture serial]``), seed 003's estimator in ``switched_estimator_hw``;
+:mod:`pwas_hdl.benchmarks.observer_bank_summary` puts the four systems in one table.
 
 ``--architecture serial [--bank-lanes L]``: the same sensors on the time-multiplexed bank
 (``generate --architecture serial``, :mod:`pwas_hdl.hdl.serial_observer_bank`, and the serial

@@ -51,6 +51,10 @@ DESIGNS = {
     # l = 7, 11b, taps u0[t], y0[t-1], y0[t] (--mu 1 --my 2), p = 2: 729 vertices)
     "battery-taps-n3-p2-11b": dict(system="battery", n_models=3, observer="kalman:0.1", features="11b", partitions=2,
                                    mu=1, my=2, n_train=3000),
+    # the P-feat sensor of battery.py (battery_rtl_serial.md's run 0: 5 Kalman observers, taps i_k, v_k (PFEAT_B:
+    # mu = my = 1, p = 3: 4^7 = 16 384 vertices), sigma by CV, 25 000 training samples, seed 0)
+    "battery-pfeat-n5-p3-11b": dict(system="battery", n_models=5, observer="kalman:0.1", features="11b", partitions=3,
+                                    mu=1, my=1, n_train=25000, sigma=None),
 }
 BANKS = ("serial", "parallel")
 #: iCE40 HX8K block RAM: 32 x 4 kbit; a design whose weight memory is larger is not run on it.
@@ -71,11 +75,11 @@ def _sensor(cfg: dict):
     if cfg.get("system") == "battery":  # the tapped sensor (u/y taps beside the bank features)
         from pwas_hdl.systems.battery import make_battery_dataset
 
-        tr, _, _ = make_battery_dataset(cfg["n_train"], 300, seed=0)
+        tr, _, _ = make_battery_dataset(cfg["n_train"], 300, seed=0, noise=0.03)
         fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"])
         fe = fe.fit([tr.u], [tr.y], [tr.z])
         return PWASVirtualSensor(mu=cfg["mu"], my=cfg["my"], partitions=cfg["partitions"], gamma=1.0, front_end=fe,
-                                 sigma=1e-3).fit(tr.u, tr.y, tr.z)
+                                 sigma=cfg.get("sigma", 1e-3)).fit(tr.u, tr.y, tr.z)
     tr, _, _ = make_pv_dataset(cfg.get("system", "pv-benchmark"), cfg["n_train"], 200, seed=0)
     fe = ObserverBankFrontEnd(n_models=cfg["n_models"], features=cfg["features"])
     return PWASVirtualSensor(mu=0, my=0, partitions=cfg["partitions"], gamma=1.0, front_end=fe).fit(tr.u, tr.y, tr.z)
@@ -234,6 +238,7 @@ if __name__ == "__main__":
         new = {key(r): r for r in doc["rows"]}
         doc["rows"] = [new.pop(key(r), r) for r in old["rows"]] + list(new.values())
         doc["limit_min"] = f"{old['limit_min']} (re-run rows: {limit:g})"
+        doc["notes"] = old.get("notes", [])  # the measured context recorded with the earlier rows
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))
