@@ -17,8 +17,9 @@ Pipeline (one global enable ``advance = ~out.valid | out.ready``, ``in.ready = a
 ``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the
 time-multiplexed bank and feature unit of :mod:`pwas_hdl.hdl.serial_observer_bank` (``L``
 state-update units, rotating state chains, pipelined square root) and the serial core
-(:class:`pwas_hdl.hdl.serial_core.SerialPWASCore`); ``in.ready`` = bank idle or in its last
-cycle, and the previous sample's feature codes taken by the core (``features_valid``); II =
+(:class:`pwas_hdl.hdl.serial_core.SerialPWASCore`); the feature codes double-buffered (staging
+registers, then the core's buffer), ``in.ready`` = bank idle or in its last cycle, and fewer than
+2 warm samples between the input and the core's take (``features_outstanding``); II =
 ``cycles_per_sample`` (manifest ``front_end.cycles_per_sample`` / ``ii`` / ``schedule``),
 ``latency = stages_before_core + core latency``. The same bit-true model, bit for bit.
 Warm-up: the first ``M + l`` transfers after reset produce no output (their windows hold observer

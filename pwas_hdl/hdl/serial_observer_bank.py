@@ -40,6 +40,11 @@ residual, then its square registered before the window sum). ``cycles_per_sample
 the flush of the state-update pipeline):
 ``in.ready`` is high when the bank is idle or in its last cycle, and the previous sample's
 feature codes have been taken by the core (or are taken in this cycle). II = cycles_per_sample.
+With double-buffered codes (``plan_serial_bank(..., double_buffered=True)``, the observer sensor
+top) the lanes write staging registers that are copied into the core's buffer (``buffer_load``),
+and the II drops to ``max(n_max M + 1, ceil(stages_before_core / 2), (n_max - 1) M + 3, core II)``
+(:func:`plan_serial_bank`; flow control in
+:func:`pwas_hdl.hdl.observer_sensor_top.serial_sensor_path`).
 """
 
 from __future__ import annotations
