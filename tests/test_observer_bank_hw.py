@@ -156,3 +156,29 @@ def test_observer_bank_hw_bench_refuses_bad_options(tmp_path, capsys):
     rc = br.script_main(ob.main, ["--architecture", "serial", "--bank-lanes", "0", "--outdir", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and err[0].startswith("error:") and not (tmp_path / "o").exists()
+
+
+def test_observer_bank_summary_reads_the_results_and_refuses_mixed_designs(tmp_path):
+    """benchmarks/observer_bank_summary.py: one row per system from the committed results; a synthesis
+    row whose II differs from the RTL bench's (results of different designs) is refused."""
+    import json
+    import shutil
+
+    from pwas_hdl.benchmarks import observer_bank_summary as sm
+    from pwas_hdl.resources import benchmarks_dir
+
+    rows = sm.collect()
+    assert [r["system"] for r in rows][:3] == ["pv-benchmark", "switching-4", "battery"]
+    assert all(r["synth"] is not None and r["mismatches"].startswith("0 /") for r in rows)
+    text = sm.markdown(rows)
+    assert text.count("\n") == 2 + len(rows)
+    for name in ("observer_bank_hw_serial.json", "observer_bank_synth.json", "battery_rtl_serial.json",
+                 "switched_estimator_hw.json", "switched_estimator_serial_synth_ecp5.json"):
+        shutil.copy(benchmarks_dir() / "results" / name, tmp_path / name)
+    doc = json.loads((tmp_path / "observer_bank_synth.json").read_text())
+    for r in doc["rows"]:
+        if r["design"] == "pfeat-n5-p6-11b" and r["target"] == "ecp5":
+            r["ii"] += 1
+    (tmp_path / "observer_bank_synth.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="pv-benchmark.*differs"):
+        sm.markdown(sm.collect(tmp_path))
