@@ -529,11 +529,25 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
                 with m.If(buffer_load):
                     m.d.sync += buf[j].eq(Mux(wr, q, codes[j]))
         if ln == 0:
-            # double-buffered: the next sample's transfer may come before this one's codes are done,
-            # so its warm bit travels with the token (sample_warm delayed from the last residual step)
-            w = (_delay(m, sample_warm, SQUARE_REGS + 2 + nreg + AFFINE_REGS, "bank_warm", reset_less=False)
-                 if buf is not None else sample_warm)
-            m.d.comb += done.eq(tok_q & eq_const(idx_q, nl - 1) & w)
+            last_tok = Signal(name="bank_last_token")  # the last feature token of a sample (warm or not)
+            m.d.comb += last_tok.eq(tok_q & eq_const(idx_q, nl - 1))
+            w = sample_warm
+            if buf is not None:
+                # double-buffered: the next sample's transfer may come before this one's last token, and
+                # then sample_warm is the newer sample's. Samples between transfer and last token: 0 .. 2
+                # (II >= ceil(stages_before_core / 2)); with 2 the token is the older one's: its warm bit
+                # is the one sample_warm held before the latest transfer
+                in_pipe = Signal(unsigned(2), name="bank_samples_in_pipe")
+                warm_prev = Signal(name="bank_sample_warm_prev")
+                with m.If(transfer):
+                    m.d.sync += warm_prev.eq(sample_warm)
+                with m.If(transfer & ~last_tok):
+                    m.d.sync += in_pipe.eq(add_const_wrap(m, in_pipe, 1, "bank_in_pipe_inc"))
+                with m.Elif(last_tok & ~transfer):
+                    m.d.sync += in_pipe.eq(add_const_wrap(m, in_pipe, -1, "bank_in_pipe_dec"))
+                w = Signal(name="bank_token_warm")
+                m.d.comb += w.eq(Mux(in_pipe[1], warm_prev, sample_warm))
+            m.d.comb += done.eq(last_tok & w)
     sat = Signal(name="state_saturated")
     m.d.comb += sat.eq(Cat(*sat_flags).any())
     sink_unused(m, sat, "state_saturated_flag")
