@@ -76,6 +76,10 @@ DESIGNS = {
     "n4_p7_short_mu_late": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="short"),
     "n4_p7_max": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="max"),
     "n5_p2_max_adders": lambda: build_core(make_model([2, 2, 2, 2, 2], seed=5), pipeline="max"),
+    # bit fields with no field for the last dimension (p_{n-1} = 3 < n + 1): its step bits and rank
+    # were built and left unused (UNUSEDSIGNAL step<b>_2, rank2)
+    "n3_p3_fields_no_last": lambda: build_core(make_model([3, 3, 3], seed=6), pipeline="balanced"),
+    "n3_p3_fields_no_last_short": lambda: build_core(make_model([3, 3, 3], seed=6), pipeline="short"),
 }
 
 

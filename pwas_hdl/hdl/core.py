@@ -520,9 +520,12 @@ class PWASCore(wiring.Component):
         rbits, kw = bits_for(n), bits_for(n - 1)
         cw = [bits_for(pj - 1) for pj in p.partitions]
         rot_in = (rot, rbits)
+        # the step bits the address uses: with bit fields only the dimensions that have one (the last
+        # dimension has none when p_{n-1} < n + 1: its vertex coordinate // (n+1) is always 0)
+        used_dims = set(range(n)) if fields is None else {j for _e, _w, j in fields}
         ranks = []
         for j in range(n):
-            if n == 1:
+            if n == 1 or j not in used_dims:
                 ranks.append(0)
                 continue
             bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
@@ -532,7 +535,7 @@ class PWASCore(wiring.Component):
             return (b - t) % nb
 
         step = [[self._table(m, [(ranks[j], kw), rot_in], lambda r, t, b=b: t < nb and r < kb(b, t), 1, f"step{b}_{j}")
-                 for j in range(n)] for b in range(nb)]
+                 if j in used_dims else 0 for j in range(n)] for b in range(nb)]
         # d_(k), k = 1..n: the fraction of rank k - 1 (one-hot selection by tables of the comparison bits)
         dsorted = [Const(0, dw)]
         for k in range(1, n + 1):
