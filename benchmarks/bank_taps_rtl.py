@@ -23,7 +23,6 @@ import time
 from pathlib import Path
 
 from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.resources import benchmarks_dir
 
 CONFIGS = [
     dict(name="n2-m5-deadbeat-11b-mu1-my1", n_models=2, order=5, observer="deadbeat", features="11b", mu=1, my=1),
@@ -92,11 +91,25 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":
-    quick = "--quick" in sys.argv[1:]
-    doc = run(quick)
-    stem = "bank_taps_rtl_quick" if quick else "bank_taps_rtl"
-    out = benchmarks_dir() / "results"
-    atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
-    atomic_write_text(out / f"{stem}.md", markdown(doc))
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pwas_hdl.benchmarks.bank_taps_rtl [--quick] [--outdir DIR]``."""
+    import argparse
+
+    from pwas_hdl.bench_results import default_outdir
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="the CI smoke: fewer layouts and samples")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder (default: %(default)s)")
+    a = ap.parse_args(argv)
+    doc = run(a.quick)
+    stem = "bank_taps_rtl_quick" if a.quick else "bank_taps_rtl"
+    atomic_write_text(a.outdir / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(a.outdir / f"{stem}.md", markdown(doc))
     print(markdown(doc))
+    return 0
+
+
+if __name__ == "__main__":
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main, sys.argv[1:]))

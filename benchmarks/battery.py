@@ -235,7 +235,8 @@ def plot(doc: dict, path) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-if __name__ == "__main__":  # python -m pwas_hdl.benchmarks.battery [--runs N] [--quick] --rtl verilator: battery_rtl.{json,md}
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pwas_hdl.benchmarks.battery [--runs N] [--quick] --rtl verilator``: battery_rtl.{json,md}."""
     import argparse
 
     from pwas_hdl.io.atomic import atomic_write_text
@@ -248,9 +249,16 @@ if __name__ == "__main__":  # python -m pwas_hdl.benchmarks.battery [--runs N] [
                     help="the sensor's hardware: parallel bank (II 1) or the time-multiplexed bank (battery_rtl_serial.*)")
     ap.add_argument("--bank-lanes", type=int, default=None, help="state-update units of the serial bank (default 1)")
     ap.add_argument("--outdir", type=str, default=str(br.default_outdir()))
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     d = run(a.runs, a.quick, progress=print, rtl=a.rtl, architecture=a.architecture, bank_lanes=a.bank_lanes)
     stem = f"{a.outdir}/battery_rtl" + ("_serial" if a.architecture == "serial" else "") + ("_quick" if a.quick else "")
     br.write_results(f"{stem}.json", {k: v for k, v in d.items() if not k.startswith("_")})
     atomic_write_text(f"{stem}.md", markdown(d))
     print(markdown(d))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(br.script_main(main, sys.argv[1:]))

@@ -22,7 +22,6 @@ import time
 from pathlib import Path
 
 from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.resources import benchmarks_dir
 
 CONFIGS = [
     dict(name="n2-m2-deadbeat-11b", n_models=2, order=2, observer="deadbeat", features="11b"),
@@ -93,16 +92,32 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":
-    quick = "--quick" in sys.argv[1:]  # --only serial|parallel: re-run those rows and replace them in the results
-    only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv[1:] else None
-    doc = run(quick, only)
-    stem = "observer_bank_rtl_quick" if quick else "observer_bank_rtl"
-    out = benchmarks_dir() / "results"
-    if only and (out / f"{stem}.json").exists():
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pwas_hdl.benchmarks.observer_bank_rtl [--quick] [--only serial|parallel] [--outdir DIR]``."""
+    import argparse
+
+    from pwas_hdl.bench_results import default_outdir
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="the CI smoke: two configurations")
+    ap.add_argument("--only", choices=["serial", "parallel"], default=None,
+                    help="re-run the configurations of that bank and replace their rows in the results")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder (default: %(default)s)")
+    a = ap.parse_args(argv)
+    doc = run(a.quick, a.only)
+    stem = "observer_bank_rtl_quick" if a.quick else "observer_bank_rtl"
+    out = a.outdir
+    if a.only and (out / f"{stem}.json").exists():
         old = json.loads((out / f"{stem}.json").read_text())
         new = {(r["config"], r["simulator"]): r for r in doc["rows"]}
         doc["rows"] = [new.pop((r["config"], r["simulator"]), r) for r in old["rows"]] + list(new.values())
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))
+    return 0
+
+
+if __name__ == "__main__":
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main, sys.argv[1:]))

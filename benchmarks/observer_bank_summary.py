@@ -119,11 +119,13 @@ def main(argv: list[str] | None = None) -> None:
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--results", type=Path, default=None, help="results folder (default: the committed results)")
+    from pwas_hdl.bench_results import default_outdir
+
+    ap.add_argument("--results", type=Path, default=None, help="results folder read (default: the committed results)")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="where observer_bank_summary.md goes (default: %(default)s)")
     a = ap.parse_args(argv)
     text = "# Issue 12's systems in hardware: the designs that fit the LFE5U-45F\n\n" + markdown(collect(a.results))
-    folder = a.results or benchmarks_dir() / "results"
-    atomic_write_text(Path(folder) / "observer_bank_summary.md", text)
+    atomic_write_text(a.outdir / "observer_bank_summary.md", text)
     print(text)
 
 

@@ -39,7 +39,6 @@ import time
 from pathlib import Path
 
 from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.resources import benchmarks_dir
 
 DESIGNS = {
     "small-n3-p3-11b": dict(n_models=3, features="11b", partitions=3, n_train=3000),
@@ -222,16 +221,29 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":
-    args = sys.argv[1:]
-    quick = "--quick" in args
-    limit = float(args[args.index("--limit-min") + 1]) if "--limit-min" in args else 20.0
-    only = args[args.index("--only") + 1] if "--only" in args else None
-    designs = args[args.index("--designs") + 1].split(",") if "--designs" in args else None
-    targets = args[args.index("--targets") + 1].split(",") if "--targets" in args else None
-    doc = run(quick, limit, only, designs, targets)
-    out = benchmarks_dir() / "results"
-    stem = "observer_bank_synth_quick" if quick else "observer_bank_synth"
+def main(argv: list[str] | None = None) -> int:
+    """The command line of the module docstring."""
+    import argparse
+
+    from pwas_hdl.bench_results import default_outdir
+    from pwas_hdl.errors import InputError
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="the small serial design on ECP5 only")
+    ap.add_argument("--limit-min", type=float, default=20.0, help="time limit per run in minutes (default 20)")
+    ap.add_argument("--only", choices=list(BANKS), default=None, help="the designs of that bank only")
+    ap.add_argument("--designs", default=None, help="comma list of designs to re-run (their rows are replaced)")
+    ap.add_argument("--targets", default=None, help="comma list of targets to re-run (their rows are replaced)")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder (default: %(default)s)")
+    a = ap.parse_args(argv)
+    if not (math.isfinite(a.limit_min) and a.limit_min > 0):
+        raise InputError(f"--limit-min must be a positive number of minutes, got {a.limit_min}")
+    limit = a.limit_min
+    designs = a.designs.split(",") if a.designs else None
+    targets = a.targets.split(",") if a.targets else None
+    doc = run(a.quick, limit, a.only, designs, targets)
+    out = a.outdir
+    stem = "observer_bank_synth_quick" if a.quick else "observer_bank_synth"
     if (designs or targets) and (out / f"{stem}.json").exists():  # a re-run of some rows: replace them in the results
         old = json.loads((out / f"{stem}.json").read_text())
         key = lambda r: (r["design"], r["bank"], r["target"])  # noqa: E731
@@ -242,3 +254,10 @@ if __name__ == "__main__":
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))
+    return 0
+
+
+if __name__ == "__main__":
+    from pwas_hdl.bench_results import script_main
+
+    sys.exit(script_main(main, sys.argv[1:]))

@@ -268,12 +268,24 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":  # merge partial result files: python -m pwas_hdl.benchmarks.pv_benchmark OUT.json OUT.md IN.json...
-    import sys
+def main(argv: list[str] | None = None) -> int:
+    """Merge partial result files: ``python -m pwas_hdl.benchmarks.pv_benchmark OUT.json OUT.md IN.json...``."""
+    import argparse
 
-    out_json, out_md, *ins = sys.argv[1:]
-    merged = merge([br.load_results(p) for p in ins])
-    br.write_results(out_json, merged)
     from pwas_hdl.io.atomic import atomic_write_text
 
-    atomic_write_text(out_md, markdown(merged))
+    ap = argparse.ArgumentParser(description="merge partial pv-benchmark result files (bench-results-v1)")
+    ap.add_argument("out_json")
+    ap.add_argument("out_md")
+    ap.add_argument("inputs", nargs="+", help="partial result files to merge")
+    a = ap.parse_args(argv)
+    merged = merge([br.load_results(p) for p in a.inputs])
+    br.write_results(a.out_json, merged)
+    atomic_write_text(a.out_md, markdown(merged))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(br.script_main(main, sys.argv[1:]))

@@ -44,3 +44,22 @@ def test_every_script_entry_uses_script_main():
         if re.search(r"^\s+(sys\.exit\(|raise SystemExit\()?main\(\)\)?\s*$", block, re.M):
             plain.append(path.name)
     assert plain == []
+
+
+def test_every_script_entry_keeps_the_contract_and_writes_outside_the_package():
+    """Every ``__main__`` block goes through script_main (or bench_main, which uses it), and no
+    script writes its results next to itself by default (from the wheel: into site-packages);
+    ``--outdir`` defaults to bench_results.default_outdir."""
+    bad_entry, bad_out = [], []
+    for path in sorted(benchmarks_dir().glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if 'if __name__ == "__main__":' in text:
+            block = text.split('if __name__ == "__main__":', 1)[1]
+            if "script_main(" not in block and "bench_main(" not in block:
+                bad_entry.append(path.name)
+        for m in re.finditer(r'add_argument\("--outdir"[^)]*default=([^,)]+)', text):
+            if "default_outdir(" not in m.group(1):
+                bad_out.append(f"{path.name}: --outdir default {m.group(1)}")
+        if re.search(r'^\s*(out|outdir) = (HERE|benchmarks_dir\(\)) / "results"\s*$', text, re.M):  # an output folder
+            bad_out.append(f"{path.name}: writes into its own folder")
+    assert bad_entry == [] and bad_out == [], (bad_entry, bad_out)
