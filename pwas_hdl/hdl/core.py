@@ -439,16 +439,7 @@ class PWASCore(wiring.Component):
                               {"off": offs, "base": base, "ds": dsorted, "rot": rot, "oor": oor})
         offs, base, dsorted, rot, oor = r["off"], r["base"], r["ds"], r["rot"], r["oor"]
         addr = [sum_wrap(m, [base, off], aw, f"vaddr{k}") for k, off in enumerate(offs)]
-        mus = []
-        for k in range(nb):
-            if k == n:
-                mus.append(dsorted[n - 1])
-                continue
-            hi = Const(1 << big_f, dw) if k == 0 else dsorted[k - 1]
-            diff = Signal(signed(dw + 1), name=f"mu{k}")
-            m.d.comb += diff.eq(hi - dsorted[k])
-            sink_unused(m, diff[dw], f"mu{k}_sign")
-            mus.append(diff[:dw])
+        mus = self._mu_of_sorted(m, dsorted)
 
         # optional register on the vertex addresses and mu, before the bank rotation
         valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
