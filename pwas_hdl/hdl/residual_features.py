@@ -19,6 +19,19 @@ from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
 __all__ = ["build_window_sums", "build_isqrt", "build_feature_codes", "sub_wrap"]
 
 
+
+def cap_const(m: Module, rs, cap: int, capped: Signal) -> None:
+    """``capped = min(rs, cap)`` for a constant ``cap`` (``capped`` holds ``cap``): one constant compare."""
+    capw = len(capped)
+    over = ge_const(rs, cap + 1)
+    if isinstance(over, bool):
+        m.d.comb += capped.eq(cap if over else rs[:capw])
+    else:
+        with m.If(over):
+            m.d.comb += capped.eq(cap)
+        with m.Else():
+            m.d.comb += capped.eq(rs[:capw])
+
 def sub_wrap(m: Module, a, b, name: str):
     """``(a - b) mod 2**w`` for two unsigned ``w``-bit nets."""
     assert len(a) == len(b), (len(a), len(b))
@@ -78,14 +91,7 @@ def build_feature_codes(m: Module, bank, roots: list) -> list:
         capw = max(1, cap.bit_length())
         capped = Signal(unsigned(capw), name=f"feat{j}_capped")
         if cap < (1 << len(rs)) - 1:
-            over = ge_const(rs, cap + 1)
-            if isinstance(over, bool):
-                m.d.comb += capped.eq(cap if over else rs[:capw])
-            else:
-                with m.If(over):
-                    m.d.comb += capped.eq(cap)
-                with m.Else():
-                    m.d.comb += capped.eq(rs[:capw])
+            cap_const(m, rs, cap, capped)
         else:
             m.d.comb += capped.eq(rs)
         prod = const_product(m, int(bank.scale_mul[j]), Cat(capped, Const(0, 1)), sw, f"feat{j}_prod")

@@ -58,6 +58,7 @@ from amaranth.lib.memory import Memory
 from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused
 from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
+from pwas_hdl.hdl.residual_features import cap_const
 
 __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
            "table_mac", "lane_groups", "DEFAULT_ISQRT_EVERY"]
@@ -585,14 +586,7 @@ def _affine(m: Module, bank, group, root, idx, tok, pre: str):
     cap = rom(m, idx, caps, rw, f"{pre}_cap")  # at the root's width: one comparator
     capped = Signal(unsigned(capw), name=f"{pre}_capped")
     if isinstance(cap, int):  # one observer in the lane (or equal caps): a constant compare, as the parallel unit
-        over = ge_const(rs, cap + 1)
-        if isinstance(over, bool):
-            m.d.comb += capped.eq(cap if over else rs[:capw])
-        else:
-            with m.If(over):
-                m.d.comb += capped.eq(cap)
-            with m.Else():
-                m.d.comb += capped.eq(rs[:capw])
+        cap_const(m, rs, cap, capped)
     else:
         with m.If(rs > cap):
             m.d.comb += capped.eq(cap[:capw])
