@@ -747,6 +747,12 @@ class PWASCore(wiring.Component):
         prods, oor = r["p"], r["oor"]
         terms = [prods[z * nb : (z + 1) * nb] for z in range(nz)]
 
+        if pl.flat_sum:  # one multi-operand sum per target (rounding constant included)
+            accs, k = zip(*(self._flat_sum(m, row, z) for z, row in enumerate(terms)))
+            if not self.round_output:
+                return list(accs), oor, valid
+            return self._round(m, list(accs), rounded=bool(k[0])), oor, valid
+
         # ---------------------------------------------------------- F: adder tree
         # the order of pwas_hdl.fixedpoint.reduction (as the bit-true model and the debug probes)
         levels = Pipeline.tree_depth(n)
@@ -775,9 +781,30 @@ class PWASCore(wiring.Component):
             return accs, oor, valid
         return self._round(m, accs), oor, valid
 
-    def _round(self, m: Module, accs):
+    def _flat_sum(self, m: Module, prods, z: int):
+        """``sum(prods) (+ 2**(sh-1))`` as one modular sum of ``accw + 1``-bit operands (``flat_sum``).
+
+        Every product (``accw`` signed bits) is sign-extended to ``W = accw + 1`` bits and every
+        addition is done at ``W`` bits with its carry dropped (:func:`~pwas_hdl.hdl._lintsafe.sum_wrap`,
+        the tree order of :mod:`pwas_hdl.fixedpoint.reduction`): no intermediate result is truncated
+        or re-extended, so Yosys' ``alumacc`` merges the additions into one ``$macc`` (a carry-save
+        tree of full adders and a single carry chain). Exact: the sum lies in the ``W``-bit signed
+        range with the half-up constant added (see :meth:`_round`), and a sum modulo ``2**W`` does
+        not depend on the order of its terms, so the result equals the tree sum plus the constant.
+
+        Returns ``(acc, k)``: the ``W``-bit sum (unsigned view) and the constant included (0 when
+        rounding is not half-up or ``sh`` is outside ``1 .. accw``; :meth:`_round` adds nothing more).
+        """
+        p = self.params
+        accw, sh = p.acc_width, p.shift
+        k = (1 << (sh - 1)) if p.rounding == "half_up" and 0 < sh <= accw and self.round_output else 0
+        ext = [Cat(t, t[accw - 1]) for t in prods]
+        return sum_wrap(m, ext + [k], accw + 1, f"fsum{z}"), k
+
+    def _round(self, m: Module, accs, rounded: bool = False):
         """Rounding and saturation of the ``accw + 1``-bit sums to the output codes (one per target).
 
+        ``rounded``: the half-up constant is already in the sums (:meth:`_flat_sum`).
         Shared with :class:`pwas_hdl.hdl.serial_core.SerialPWASCore`."""
         p = self.params
         nz, accw = p.nz, p.acc_width
@@ -798,7 +825,7 @@ class PWASCore(wiring.Component):
             elif sh > 0:
                 # exact in accw + 1 bits: acc + 2**(sh-1) <= 2**(accw-1) - 2**F + 2**(accw-1)
                 rs = a.as_unsigned()
-                if p.rounding == "half_up":
+                if p.rounding == "half_up" and not rounded:
                     rs = add_const_wrap(m, rs, 1 << (sh - 1), f"rnd{z}")
                 sink_unused(m, rs[:sh], f"rnd{z}_frac")
                 rv = rs[sh:].as_signed()
@@ -808,6 +835,10 @@ class PWASCore(wiring.Component):
                 rv = Cat(Const(0, -sh), a).as_signed()
             if len(rv) <= outw:
                 zs.append(rv)
+                continue
+            if getattr(self.pipeline, "prune_sat", False) and self._sat_unreachable(z):
+                sink_unused(m, rv[outw:], f"sat{z}_top")  # copies of the sign bit: never saturates
+                zs.append(rv[:outw].as_signed())
                 continue
             sign = rv[-1]
             upper = rv[outw - 1 : len(rv) - 1]
@@ -820,6 +851,27 @@ class PWASCore(wiring.Component):
                 m.d.comb += o.eq(rv[:outw])
             zs.append(o)
         return zs
+
+    def _sat_unreachable(self, z: int) -> bool:
+        """True when no input can make target ``z``'s rounded sum leave the ``B_out``-bit range.
+
+        ``mu_k >= 0`` and ``sum_k mu_k = 2**F`` (every input, clamped or not), so the exact sum lies
+        in ``[min_v w_vz, max_v w_vz] * 2**F`` over the weights in the memories; the rounding
+        (``(acc + 2**(sh-1)) >> sh``, ``acc >> sh`` or ``acc << -sh``) is monotonic. When both ends
+        map inside ``[-2**(B_out-1), 2**(B_out-1) - 1]`` the saturation never acts and
+        ``prune_sat`` leaves it out (the bit-true model's saturation is then the identity).
+        """
+        p = self.params
+        sh, outw, big_f = p.shift, p.out_width, p.frac
+        w = p.weights[:, z]
+
+        def out(acc: int) -> int:
+            if sh > 0:
+                return (acc + ((1 << (sh - 1)) if p.rounding == "half_up" else 0)) >> sh
+            return acc << -sh
+
+        lo, hi = out(int(w.min()) << big_f), out(int(w.max()) << big_f)
+        return -(1 << (outw - 1)) <= lo and hi <= (1 << (outw - 1)) - 1
 
     # ------------------------------------------------------------------ helpers
     @staticmethod

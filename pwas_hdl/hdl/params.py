@@ -217,6 +217,15 @@ class Pipeline:
                  of half the depth per stage; on FPGAs with DSP blocks it takes twice as many
     ``product``  register after the ``mu_k * w`` multipliers (on ECP5 the MULT18X18D output register)
     ``tree``     a register after every ``tree_levels`` adder-tree levels (0: none)
+    ``flat_sum`` (no register; needs ``tree_levels = 0``) the ``n + 1`` products and the rounding
+                 constant ``2**(sh-1)`` as one modular sum in ``F + B_w + 1`` bits, each addition at
+                 that full width, so that Yosys' ``alumacc`` merges them into one multi-operand
+                 adder (one carry-save tree of full adders, one carry chain) instead of one carry
+                 chain per tree level plus the rounding adder (:meth:`PWASCore._flat_sum`)
+    ``prune_sat`` (no register) leave out the saturation of a target whose weights cannot reach it
+                 (the sum is a convex combination of the weights times ``2**F``, so its range is known
+                 when the Verilog is generated; :meth:`PWASCore._sat_unreachable`): no saturation LUT
+                 level after the last carry chain
     output *     rounding / saturation, then the output register (the stream's payload)
     ============ ========================================================================
 
@@ -236,10 +245,14 @@ class Pipeline:
     bank: bool = False
     mul_halves: bool = False
     mu_late: bool = False
+    flat_sum: bool = False
+    prune_sat: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
             raise ValueError("tree_levels must be >= 0 (0 = no adder-tree registers)")
+        if self.flat_sum and self.tree_levels:
+            raise ValueError("flat_sum needs tree_levels = 0 (one sum without adder-tree registers)")
 
     @staticmethod
     def tree_depth(n: int) -> int:
@@ -276,7 +289,7 @@ class Pipeline:
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
             known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
-                     "mu_late"}
+                     "mu_late", "flat_sum", "prune_sat"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -303,6 +316,9 @@ class Pipeline:
             "bank": self.bank,
             "mul_halves": self.mul_halves,
             "mu_late": self.mu_late,
+            # only when set: the manifests of the pipelines without it stay as they were
+            **({"flat_sum": True} if self.flat_sum else {}),
+            **({"prune_sat": True} if self.prune_sat else {}),
         }
 
 
