@@ -159,3 +159,32 @@ def test_block_ram_output_register(tmp_path: Path):
     assert all(f"rd{i}" not in cells for i in range(11)) and all(f"ra{i}" in cells for i in range(4))
     for i, q in enumerate(outs):
         assert _driver(cells, q) == ("mem", f"DOA{i}")
+
+
+def _bram_reg_mult(tmp_path: Path) -> Path:
+    """block RAM -> one register (with the other operand's register beside it) -> multiplier."""
+    g = _Builder()
+    addr = [g.ff(f"ra{i}", g.net()) for i in range(4)]
+    do = g.bram("mem", addr)
+    b = [g.ff(f"rd{i}", do[i]) for i in range(3)]
+    a = [g.ff(f"rm{i}", g.net()) for i in range(3)]
+    p = g.mult("mul", a, b)
+    return g.write(tmp_path / "net.json", {"y": p[:6]})
+
+
+def test_one_register_between_block_ram_and_multiplier(tmp_path: Path):
+    """By default the block RAM's output register takes it (then only one operand of the multiplier
+    is registered: not packed); mult_first (a mul_in register without mem_out) gives it to the
+    multiplier's input registers, both operands."""
+    path = _bram_reg_mult(tmp_path)
+    stats = pack_ecp5_registers(path, "top")
+    assert (stats["bram_output_registers"], stats["mult_input_registers"], stats["ffs_absorbed"]) == (1, 0, 3)
+    assert "rm0" in _cells(path) and _cells(path)["mem"]["parameters"]["REGMODE_A"] == "OUTREG"
+
+    path = _bram_reg_mult(tmp_path)
+    stats = pack_ecp5_registers(path, "top", mult_first=True)
+    assert (stats["bram_output_registers"], stats["mult_input_registers"], stats["ffs_absorbed"]) == (0, 1, 6)
+    cells = _cells(path)
+    assert cells["mem"]["parameters"]["REGMODE_A"] == "NOREG" and not any(k.startswith(("rd", "rm")) for k in cells)
+    m = cells["mul"]
+    assert m["parameters"]["REG_INPUTB_CLK"] == "CLK0" and m["connections"]["B0"] == [_cells(path)["mem"]["connections"]["DOA0"][0]]

@@ -122,6 +122,50 @@ def test_latency_exact_and_ii_1(pipe):
     assert dut.latency == Pipeline.cast(pipe).latency(4)
 
 
+FLAT = Pipeline(rank=False, addr=False, mem_out=False, product=True, tree_levels=0, mu_late=True, flat_sum=True, prune_sat=True)
+
+
+@pytest.mark.parametrize("parts, nz, opts", [([3, 2, 4, 1], 2, {}), ([7, 3], 1, {"rounding": "truncate"})])
+def test_flat_sum_and_pruned_saturation_bit_exact(parts, nz, opts):
+    """flat_sum (one modular sum, rounding constant included) and prune_sat (no saturation the
+    weights cannot reach: these models' outputs never clip) against the bit-true model, with
+    bubbles and backpressure."""
+    model = make_model(parts, seed=7, nz=nz, **opts)
+    dut = build_core(model, pipeline=FLAT)
+    assert all(dut._sat_unreachable(z) for z in range(nz))
+    q = codes(model, 120, seed=4)
+    z, oor, _ = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=2)
+    ref, ref_oor = model.evaluate(q)
+    assert_same(q, z, ref)
+    assert np.array_equal(oor, ref_oor)
+    assert dut.latency == 3
+
+
+def test_flat_sum_keeps_a_reachable_saturation():
+    """Odd formats (sh < 0: the output is finer than the products, so large weights clip): the
+    saturation stays, and the results are the model's."""
+    rng = np.random.default_rng(7)
+    parts, fb, lo = (3, 5, 2), (4, 1, 2), (-40, -3, 7)
+    n_v = int(np.prod([p + 1 for p in parts]))
+    p = CoreParams(parts, 8, lo, fb, 9, 4, 10, max(fb) + 4 + 2, rng.integers(-256, 256, (n_v, 2)), "half_up")
+    dut = PWASCore(p, pipeline=FLAT)
+    assert not any(dut._sat_unreachable(z) for z in range(2))
+    q = rng.integers(-128, 128, (150, 3))
+    z, oor, _ = run_core(dut, p, q, seed=1, p_ready=0.8)
+    ref, ref_oor = reference_eval(p, q)
+    assert_same(q, z, ref)
+    assert (np.abs(ref) == 511).any() or (ref == -512).any()  # the saturation really acted
+    assert np.array_equal(oor, ref_oor)
+
+
+def test_flat_sum_options():
+    with pytest.raises(ValueError, match="tree_levels = 0"):
+        Pipeline(flat_sum=True)  # the default tree_levels = 3 has adder-tree registers
+    d = FLAT.to_dict()
+    assert d["flat_sum"] is True and d["prune_sat"] is True and Pipeline.cast(d) == FLAT
+    assert "flat_sum" not in Pipeline().to_dict() and "prune_sat" not in Pipeline().to_dict()
+
+
 def test_latency_formula():
     for n in range(1, 9):
         assert Pipeline.cast("min").latency(n) == 2

@@ -251,7 +251,7 @@ def _pack_mult(nl: _Netlist, stats: dict[str, int]) -> None:
             stats["ffs_absorbed"] += len(out_ffs)
 
 
-def pack_ecp5_registers(netlist: str | os.PathLike, top: str) -> dict[str, int]:
+def pack_ecp5_registers(netlist: str | os.PathLike, top: str, *, mult_first: bool = False) -> dict[str, int]:
     """Move flip-flops into the DP16KD output and MULT18X18D input/output registers, in place.
 
     Parameters
@@ -260,6 +260,12 @@ def pack_ecp5_registers(netlist: str | os.PathLike, top: str) -> dict[str, int]:
         Yosys JSON netlist after ``synth_ecp5`` (rewritten in place).
     top
         The top module's name.
+    mult_first
+        Pack the multipliers before the block RAMs. One register between a DP16KD and a
+        MULT18X18D qualifies as either block's; by default the block RAM's output register takes it
+        (``mem_out``), with ``mult_first`` the multiplier's input registers (``mul_in`` without
+        ``mem_out``, as :class:`~pwas_hdl.hdl.params.Pipeline` names it; ``pwas-hdl synth`` sets it
+        from the manifest's pipeline). Where both registers exist the result is the same.
 
     Returns
     -------
@@ -276,8 +282,8 @@ def pack_ecp5_registers(netlist: str | os.PathLike, top: str) -> dict[str, int]:
         raise KeyError(f"module {top!r} not in {path}")
     stats = {"bram_output_registers": 0, "mult_input_registers": 0, "mult_output_registers": 0, "ffs_absorbed": 0}
     nl = _Netlist(mod)
-    _pack_bram_outputs(nl, stats)
-    _pack_mult(nl, stats)
+    for step in ((_pack_mult, _pack_bram_outputs) if mult_first else (_pack_bram_outputs, _pack_mult)):
+        step(nl, stats)
     stats["dp16kd"] = sum(1 for c in mod["cells"].values() if c["type"] == "DP16KD")
     stats["mult18x18d"] = sum(1 for c in mod["cells"].values() if c["type"] == "MULT18X18D")
     if stats["ffs_absorbed"] or stats["bram_output_registers"] or stats["mult_input_registers"] or stats["mult_output_registers"]:

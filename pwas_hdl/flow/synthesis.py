@@ -303,7 +303,10 @@ def synthesize(
     if target == "ecp5" and pack_registers:
         from pwas_hdl.flow.hard_registers import pack_ecp5_registers
 
-        hr = pack_ecp5_registers(work / "netlist.json", synth_top)
+        pl = manifest.get("pipeline") or {}
+        # a mul_in register right after the read (no mem_out register) is the multipliers' (Pipeline)
+        hr = pack_ecp5_registers(work / "netlist.json", synth_top,
+                                 mult_first=bool(pl.get("mul_in")) and not pl.get("mem_out", True))
         result["hard_registers"] = hr
         result["ffs"] -= hr["ffs_absorbed"]  # the flip-flops left in the fabric
 
