@@ -75,6 +75,11 @@ DESIGNS = {
     # a layout whose addresses need the per-bank adders (p = 2: strides not powers of two)
     "n4_p7_short_mu_late": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="short"),
     "n4_p7_max": lambda: build_core(make_model([7, 7, 7, 7], seed=3), pipeline="max"),
+    # short's one-sum adder (flat_sum) with the saturation kept (odd formats) and left out
+    # (prune_sat; sh outside 1..accw too), and without the rounding (round_output=False)
+    "odd_formats_short": lambda: PWASCore(odd_params(), pipeline="short"),
+    "odd_formats_short_unrounded": lambda: PWASCore(odd_params(), pipeline="short", round_output=False),
+    "n1_p1_z2_short": lambda: build_core(make_model([1], seed=1, nz=2), pipeline="short"),
     "n5_p2_max_adders": lambda: build_core(make_model([2, 2, 2, 2, 2], seed=5), pipeline="max"),
     # bit fields with no field for the last dimension (p_{n-1} = 3 < n + 1): its step bits and rank
     # were built and left unused (UNUSEDSIGNAL step<b>_2, rank2)

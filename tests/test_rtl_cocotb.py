@@ -85,6 +85,10 @@ CONFIGS = [
     DesignConfig("c-n4-p3-goal-latency", C, 0, 4, 0, 1, 3, 1, {"goal": "latency"}),
     DesignConfig("c-n3-p7-z2-goal-throughput", C, 0, 3, 0, 1, 7, 2, {"goal": "throughput"}),
     DesignConfig("c-n3-p7-z2-goal-latency-b10", C, 0, 3, 0, 1, 7, 2, {"goal": "latency", "input_bits": 10}),
+    # the latency build's one-sum adder (flat_sum) with a saturation the weights reach (9-bit
+    # outputs: kept by prune_sat), and truncation (no rounding constant in the sum)
+    DesignConfig("c-n3-p4x4x4-z2-sat-goal-latency", C, 0, 3, 0, 1, [4, 4, 4], 2, {"goal": "latency", "output_bits": 9}),
+    DesignConfig("c-n2-p5x3-trunc-goal-latency", C, 0, 2, 0, 1, [5, 3], 1, {"goal": "latency", "rounding": "truncate"}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 

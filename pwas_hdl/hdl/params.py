@@ -337,7 +337,11 @@ class Pipeline:
 #:   multiplier stage at 11.0 ns (DP16KD clock-to-output 5.6 ns + routing 1.9 + MULT18X18D setup
 #:   3.5), which bounds every 3-cycle structure at 33 ns; before: 40.6 ns (3 seeds, 3 x 13.5 ns)
 #:   against 43.1 ns for ``min`` (2 x 21.7 ns); rank + product 44.0 ns, mem_out + product 52.5 ns,
-#:   mem_out alone 51.9 ns (seed 1);
+#:   mem_out alone 51.9 ns (seed 1). The product -> output stage is one multi-operand sum with the
+#:   rounding constant (``flat_sum``: one carry-save tree, one carry chain) without the saturation
+#:   the weights cannot reach (``prune_sat``): 7.7 ns alone (10.7 ns as a pairwise tree + rounding
+#:   adder + saturation; measured with every other stage cut by registers, seed 1), 3 seeds 33.7 ns
+#:   (34.1 before), the memory -> multiplier stage now the critical one on every seed;
 #: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
 #:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
 #: * ``max``: every register (13 cycles for n = 4): each stage holds at most one carry chain or a
@@ -348,7 +352,7 @@ class Pipeline:
 PIPELINE_PRESETS: dict[str, Pipeline] = {
     "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
     "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0,
-                      mu_late=True),
+                      mu_late=True, flat_sum=True, prune_sat=True),
     "balanced": Pipeline(),
     "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
                     offset=True, bank=True),
