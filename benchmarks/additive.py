@@ -338,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     from pwas_hdl.bench_results import default_outdir
 
     ap = argparse.ArgumentParser(description="full vs additive PWAS sensors (issue 15)")
-    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--runs", type=int, default=5, help="independent runs (1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--hardware", action="store_true", help="the My = 8 additive sensors in RTL (writes additive_hw.json/.md)")
@@ -347,6 +347,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--heli-hardware", action="store_true",
                     help="the additive helicopter Mu = My = 4 cores on ECP5, once (writes additive_heli_hw.json)")
     a = ap.parse_args(argv)
+    br.check_count("--runs", a.runs)
     a.outdir.mkdir(parents=True, exist_ok=True)
     if a.heli_hardware:
         hw = run_heli_hardware(workdir=a.workdir)

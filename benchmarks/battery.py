@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     from pwas_hdl.io.atomic import atomic_write_text
 
     ap = argparse.ArgumentParser(description="Seed 004 E3 with the PWAS P-feat sensor through its RTL")
-    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--runs", type=int, default=3, help="independent runs (1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--rtl", default="verilator", choices=["verilator", "icarus"])
     ap.add_argument("--architecture", default="parallel", choices=["parallel", "serial"],
@@ -250,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bank-lanes", type=int, default=None, help="state-update units of the serial bank (default 1)")
     ap.add_argument("--outdir", type=str, default=str(br.default_outdir()))
     a = ap.parse_args(argv)
+    br.check_count("--runs", a.runs)
     d = run(a.runs, a.quick, progress=print, rtl=a.rtl, architecture=a.architecture, bank_lanes=a.bank_lanes)
     stem = f"{a.outdir}/battery_rtl" + ("_serial" if a.architecture == "serial" else "") + ("_quick" if a.quick else "")
     br.write_results(f"{stem}.json", {k: v for k, v in d.items() if not k.startswith("_")})

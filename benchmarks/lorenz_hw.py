@@ -174,11 +174,14 @@ def markdown(res: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=5, help="seeds 0..K-1 for the per-seed table (default 5; 1 = seed 0 only)")
+    ap.add_argument("--seeds", type=int, default=5, help="seeds 0..K-1 for the per-seed table (default 5; 1 = seed 0 only; 1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--bits", default="8,10,12,14,16", help="input word lengths of the sweep ('' = none)")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the data, models, designs and outputs here")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
     args = ap.parse_args(argv)
+    from pwas_hdl.bench_results import check_count, portable_paths
+
+    check_count("--seeds", args.seeds)
     t_start = time.perf_counter()
     tmp = None
     if args.workdir is None:
@@ -227,7 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     res = {
         "format": "pwas-hdl-lorenz-hw",
         "version": 1,
-        "args": " ".join(argv if argv is not None else sys.argv[1:]),
+        # the command line without machine paths (--workdir /tmp/x is recorded as --workdir x)
+        "args": portable_paths(" ".join(argv if argv is not None else sys.argv[1:])),
         "recipe": "make-data lorenz --samples 6000 --test-output test.csv --test-samples 2003 (seed 0); fit --my 4 -p 7 "
                   "(gamma 1.2, sigma by 5-fold CV); generate --design sensor|core (12-bit inputs); simulate test.csv",
         "model": {"sigma": model["fit"]["sigma"], "train_rmse": model["fit"]["train_rmse"], "N": 4096},

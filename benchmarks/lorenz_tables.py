@@ -453,14 +453,15 @@ HERE = Path(__file__).resolve().parent
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=5, help="number of seeds 0..K-1 (default 5)")
+    ap.add_argument("--seeds", type=int, default=5, help="number of seeds 0..K-1 (default 5; 1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--quick", action="store_true", help="1 seed, baseline row only (CI smoke)")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder")
     ap.add_argument("--workers", type=int, default=None, help="run the seeds on a local Dask cluster of N workers")
     ap.add_argument("--scheduler", default=None, help="run the seeds on an existing Dask cluster (tcp://HOST:PORT)")
     args = ap.parse_args(argv)
-    if args.seeds < 1:
-        ap.error("--seeds must be >= 1")
+    from pwas_hdl.bench_results import check_count
+
+    check_count("--seeds", args.seeds)
     if args.quick:
         seeds, rows, stem = [0], ["My4-p7-g1.2"], "lorenz_tables_quick"
     else:

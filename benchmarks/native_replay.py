@@ -39,10 +39,15 @@ HERE = Path(__file__).resolve().parent
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--vectors", type=int, default=1_000_000)
+    ap.add_argument("--vectors", type=int, default=1_000_000,
+                    help="random input vectors (1..1000000, pwas_hdl.limits.MAX_SAMPLES)")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--md-only", action="store_true", help="rebuild native_replay.md from native_replay.json")
     args = ap.parse_args()
+    from pwas_hdl.bench_results import check_count
+    from pwas_hdl.limits import MAX_SAMPLES
+
+    check_count("--vectors", args.vectors, MAX_SAMPLES)
     if args.md_only:
         write_md(json.loads((args.outdir / "native_replay.json").read_text()), args.outdir)
         return

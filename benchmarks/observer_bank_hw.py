@@ -188,13 +188,14 @@ def main(argv: list[str] | None = None) -> None:
     from pwas_hdl.io.atomic import atomic_write_text
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--runs", type=int, default=3, help="independent runs (1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--outdir", type=Path, default=br.default_outdir())
     ap.add_argument("--architecture", default="parallel", choices=list(ARCHITECTURES),
                     help="the sensor's bank: parallel (II 1) or the time-multiplexed one (observer_bank_hw_serial.*)")
     ap.add_argument("--bank-lanes", type=int, default=None, help="state-update units of the serial bank (default 1)")
     a = ap.parse_args(argv)
+    br.check_count("--runs", a.runs)
     doc, _ = run(a.runs, a.quick, progress=print, architecture=a.architecture, bank_lanes=a.bank_lanes)
     a.outdir.mkdir(parents=True, exist_ok=True)
     name = "observer_bank_hw" + ("_serial" if a.architecture == "serial" else "") + ("_quick" if a.quick else "")

@@ -38,6 +38,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from pwas_hdl.bench_results import portable_paths
 from pwas_hdl.io.atomic import atomic_write_text
 
 DESIGNS = {
@@ -144,10 +145,10 @@ def _one_run(folder: str, target: str, device: str, limit_s: float) -> dict:
         if line.startswith("RESULT "):
             res = json.loads(line[7:])
             return {**{k: res.get(k) for k in KEYS}, "device": res.get("part"), "fits": True, "finished": True, "wall_s": wall}
-        if line.startswith("FAILED "):
-            return {"fits": False, "finished": True, "reason": line[7:], "wall_s": wall}
-    return {"fits": None, "finished": False, "reason": f"the run failed: {(err or out).strip().splitlines()[-1][:300] if (err or out).strip() else 'no output'}",
-            "wall_s": wall}
+        if line.startswith("FAILED "):  # the tool's log is named relative to the design folder (a temporary one)
+            return {"fits": False, "finished": True, "reason": portable_paths(line[7:], [folder]), "wall_s": wall}
+    last = (err or out).strip().splitlines()[-1][:300] if (err or out).strip() else "no output"
+    return {"fits": None, "finished": False, "reason": f"the run failed: {portable_paths(last, [folder])}", "wall_s": wall}
 
 
 def run(quick: bool = False, limit_min: float = 20.0, only: str | None = None, designs: list | None = None,

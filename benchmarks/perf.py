@@ -223,12 +223,13 @@ def _markdown(res: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement (median)")
+    ap.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement (median; 1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
     ap.add_argument("--child-fit", nargs=2, type=int, metavar=("MY", "P"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.repeats < 1:
-        ap.error("--repeats must be >= 1")
+    from pwas_hdl.bench_results import check_count
+
+    check_count("--repeats", args.repeats)
     if args.child_fit:
         print(json.dumps(child_fit(args.child_fit[0], args.child_fit[1], args.repeats)))
         return 0

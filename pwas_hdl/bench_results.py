@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import platform
+import re
 import sys
 from functools import lru_cache
 from importlib import metadata
@@ -59,6 +61,9 @@ __all__ = [
     "extend_lists",
     "execution_record",
     "default_outdir",
+    "portable_paths",
+    "MACHINE_PATH_PREFIXES",
+    "check_count",
 ]
 
 RESULTS_FORMAT = "pwas-hdl-bench-results"
@@ -356,6 +361,79 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
     return p
 
 
+#: Prefixes of absolute paths that name one machine's files (a results file must hold none of them).
+MACHINE_PATH_PREFIXES = ("/tmp/", "/work/", "/home/")
+#: An absolute POSIX path in running text: a ``/`` not preceded by a word character, ``.``, ``:`` or
+#: another ``/`` (so ``a/b``, ``1/2``, ``https://`` are left alone), up to white space, a bracket, a
+#: quote or a separator.
+_ABS_PATH = re.compile(r"(?<![\w.:/])/[^\s()\[\]{}'\"`,;|]+")
+
+
+def portable_paths(text: str, roots: Sequence[str | os.PathLike] = ()) -> str:
+    """``text`` with every absolute path made machine independent, for the text of a results file.
+
+    A path inside one of ``roots`` (e.g. the temporary folder a bench ran a tool in) becomes relative
+    to that root (``/tmp/pwas-x/d/synth/ice40/nextpnr.log`` with root ``/tmp/pwas-x/d`` ->
+    ``synth/ice40/nextpnr.log``); any other absolute path becomes its file name. Relative paths,
+    fractions (``1/2``) and URLs are left as they are.
+
+    Parameters
+    ----------
+    text : str
+        A message, a reason, a command line.
+    roots : sequence of path-like
+        Folders whose contents are named relative to them (the first that contains a path wins).
+
+    Returns
+    -------
+    str
+    """
+    bases = [str(r).rstrip("/") for r in roots if str(r).startswith("/")]
+    bases += [os.path.realpath(b) for b in bases if os.path.realpath(b) != b]
+
+    def fix(m: re.Match) -> str:
+        path = m.group(0)
+        for b in bases:
+            if path == b:
+                return "."
+            if path.startswith(b + "/"):
+                return path[len(b) + 1:]
+        return path.rstrip("/").rsplit("/", 1)[-1] or path
+
+    return _ABS_PATH.sub(fix, text)
+
+
+def check_count(option: str, value: Any, limit: int | None = None) -> int:
+    """A bench's count option (``--runs``, ``--seeds``, ...): an integer ``1 <= value <= limit``.
+
+    The one rule of every bench command and benchmark script.
+
+    Parameters
+    ----------
+    option : str
+        The option as the user typed it (``"--runs"``).
+    value : int
+    limit : int, optional
+        The upper limit (default :data:`pwas_hdl.limits.MAX_BENCH_COUNT`).
+
+    Returns
+    -------
+    int
+        ``value``.
+
+    Raises
+    ------
+    InputError
+        ``value`` is not an integer or below 1; :class:`~pwas_hdl.errors.ResourceLimit` above ``limit``.
+    """
+    from pwas_hdl.limits import MAX_BENCH_COUNT, check_limit
+
+    limit = MAX_BENCH_COUNT if limit is None else int(limit)
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise InputError(f"{option} must be an integer >= 1, got {value!r}")
+    return check_limit(option, int(value), limit, f"{option} counts independent runs; at most {limit}")
+
+
 def default_outdir() -> Path:
     """Default ``--outdir`` of the benchmark scripts.
 
@@ -402,10 +480,11 @@ def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: 
     from pwas_hdl.io.atomic import atomic_write_text
 
     ap = argparse.ArgumentParser(description=description)
-    ap.add_argument("--runs", type=int, default=default_runs)
+    ap.add_argument("--runs", type=int, default=default_runs, help="independent runs (1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
     a = ap.parse_args(argv)
+    check_count("--runs", a.runs)
     doc, traces = run(a.runs, a.quick, progress=print)
     a.outdir.mkdir(parents=True, exist_ok=True)
     name = f"{stem}_quick" if a.quick else stem

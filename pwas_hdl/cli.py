@@ -1088,8 +1088,7 @@ def _system_bench(module: str, json_out: Optional[Path], json_old: Optional[Path
 
     with _user_errors():
         json_out = _required(_merge("-o/--out", json_out, json=json_old), "-o/--out", "the JSON result file to write")
-        if runs < 1:
-            raise InputError("--runs must be >= 1")
+        bench_results.check_count("--runs", runs)
         mod = importlib.import_module(f"pwas_hdl.benchmarks.{module}")
         for p in (json_out, markdown, plot_out):
             if p is not None and not p.parent.is_dir():
@@ -1113,7 +1112,7 @@ BenchJson = Annotated[Optional[Path], typer.Option("-o", "--out", help="Result f
 BenchJsonOld = Annotated[Optional[Path], _hidden("--json")]
 BenchMd = Annotated[Optional[Path], typer.Option("--md", help="Also write the Markdown tables here.")]
 BenchPlot = Annotated[Optional[Path], typer.Option("--plot", help="Also write the figure (PNG) here.")]
-BenchRuns = Annotated[int, typer.Option("--runs", help="Independent runs (seeds 0..runs-1) to average over.")]
+BenchRuns = Annotated[int, typer.Option("--runs", help="Independent runs (seeds 0..runs-1) to average over; 1..1000.")]
 BenchQuick = Annotated[bool, typer.Option("--quick", help="A reduced smoke run (1 run, no noise study): not a result to quote.")]
 
 
@@ -1227,7 +1226,7 @@ def make_data_battery(
 def bench_lorenz(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Result file to write (format pwas-hdl-bench-results v1). Required.", show_default=False)] = None,
     markdown: Annotated[Optional[Path], typer.Option("--md", help="Also write a Markdown table here.")] = None,
-    seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds (0..seeds-1) to average over.")] = 5,
+    seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds (0..seeds-1) to average over; 1..1000.")] = 5,
     quick: Annotated[bool, typer.Option("--quick", help="Only the Table II row (My=4, p=7, gamma=1.2).")] = False,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
@@ -1238,8 +1237,9 @@ def bench_lorenz(
 
     with _user_errors():
         json_out = _required(_merge("-o/--out", out, json=json_old), "-o/--out", "the JSON file to write")
-        if seeds < 1:
-            raise InputError("--seeds must be >= 1")
+        from pwas_hdl.bench_results import check_count
+
+        check_count("--seeds", seeds)
         outset = OutputSet()
         outset.add(json_out, "-o/--out")
         if markdown is not None:
@@ -1265,8 +1265,7 @@ def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Pat
     from pwas_hdl import bench_results
 
     json_out = _required(_merge("-o/--out", json_out, json=json_old), "-o/--out", "the JSON result file to write")
-    if kw.get("runs", 1) < 1:
-        raise InputError("--runs must be >= 1")
+    bench_results.check_count("--runs", kw.get("runs", 1))
     for p in (json_out, markdown, plot):
         if p is not None and not p.parent.is_dir():
             raise InputError(f"folder {p.parent} does not exist; create it first")
@@ -1290,7 +1289,7 @@ def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Pat
 def bench_pv(
     json_out: BenchJson = None,
     markdown: BenchMd = None,
-    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1) per case; the paper averages 10.")] = 10,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1) per case; the paper averages 10; 1..1000.")] = 10,
     quick: Annotated[bool, typer.Option("--quick", help="Smoke run: base case, 3000/1000 samples, no ANN: not a result to quote.")] = False,
     tables: Annotated[Optional[str], typer.Option("--tables", help="Only these paper tables, comma list (T1..T7).")] = None,
     cases: Annotated[Optional[str], typer.Option("--cases", help="Only these cases, comma list (base, 11a, pp0.4, kf0.1, ntheta3, cosine, ...).")] = None,
@@ -1317,7 +1316,7 @@ def bench_pv(
 def bench_switching4(
     json_out: BenchJson = None,
     markdown: BenchMd = None,
-    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1); the paper averages 10.")] = 10,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1); the paper averages 10; 1..1000.")] = 10,
     quick: Annotated[bool, typer.Option("--quick", help="Smoke run: N_theta = 5 only, 3000/1000 samples, one run: not a result to quote.")] = False,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
@@ -1333,7 +1332,7 @@ def bench_battery(
     json_out: BenchJson = None,
     markdown: BenchMd = None,
     plot: Annotated[Optional[Path], typer.Option("--plot", help="Also write a Fig. 5-like plot (PNG) of run 0 here.")] = None,
-    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1).")] = 10,
+    runs: Annotated[int, typer.Option("--runs", help="Runs (fresh data, seeds 0..K-1); 1..1000.")] = 10,
     quick: Annotated[bool, typer.Option("--quick", help="Smoke run: 3000/1000 samples, one run: not a result to quote.")] = False,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,

@@ -18,6 +18,8 @@ constant                   value          what it bounds
 ``MAX_CSV_BYTES``          1 GiB          size of a CSV file read
 ``MAX_NAME_LENGTH``        200            Verilog module name (``--name``), so that the
                                           file names made from it fit a 255-byte name
+``MAX_BENCH_COUNT``        1 000          a bench's count options (``--runs``, ``--seeds``;
+                                          :func:`pwas_hdl.bench_results.check_count`)
 =========================  =============  ===============================================
 """
 
@@ -39,6 +41,7 @@ __all__ = [
     "MAX_NAME_LENGTH",
     "MAX_LATENCY_CYCLES",
     "MAX_PORT_BITS",
+    "MAX_BENCH_COUNT",
     "check_limit",
     "check_vertices",
 ]
@@ -59,6 +62,9 @@ MAX_CSV_FIELD = 128 * 1024
 MAX_CSV_BYTES = 2**30
 #: Longest Verilog module name.
 MAX_NAME_LENGTH = 200
+#: Largest value of a bench's count option (``--runs``, ``--seeds``, ...): the papers average 5-10 runs,
+#: no real use comes near it; a typo such as ``--runs 1000000000`` is refused instead of running for ever.
+MAX_BENCH_COUNT = 1000
 #: Largest ``latency_cycles`` a manifest may state (the benches wait that long for an output; the
 #: deepest generated design has a few dozen cycles).
 MAX_LATENCY_CYCLES = 2**16
