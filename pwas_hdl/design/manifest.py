@@ -70,8 +70,12 @@ Physical value of a field: ``physical = offset + scale * code * 2**-frac`` (its 
 Reading checks strict JSON, ``format`` / ``version`` (another version: "re-run `pwas-hdl
 generate`"), the schema (the message names the bad key, e.g. ``ports[2].width``) and what the
 schema cannot state (ports named by ``clock`` / ``reset`` exist, one port per stream role, fields
-inside their port, one domain entry per regressor). Readers then index keys directly: there are no
-fallbacks for missing or renamed keys.
+inside their port, one domain entry per regressor; ``lags`` against the regressor names
+(:meth:`~pwas_hdl.fit.regressors.LagStructure.names`), their formats, the input fields and the
+warm-up; ``files.hex`` against ``memory``; field widths against their formats; ``latency_cycles``
+against ``pipeline`` for a plain parallel core / sensor). :func:`load_manifest` also checks the
+folder: the listed files stay inside it and every hex file has ``depth`` words of ``width`` bits.
+Readers then index keys directly: there are no fallbacks for missing or renamed keys.
 
 Version history: 1 (no ``$schema``, no validation), 2 (this one).
 """
@@ -80,6 +84,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -412,6 +417,177 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
         errs.append(f"lags.warmup.port {warm['port']!r} is not one of the ports {names}")
     errs += _classifier_errors(m)
     errs += _recurrence_errors(m)
+    if errs:
+        return errs
+    return _lag_errors(m) + _memory_errors(m) + _width_errors(m) + _latency_errors(m)
+
+
+_Z_NAME = re.compile(r".+_hat\[t-[1-9][0-9]*\]$")
+
+
+def _lag_errors(m: dict[str, Any]) -> list[str]:
+    """``lags`` agrees with the regressors it names, their formats, the input fields and the warm-up.
+
+    The regressor names are rebuilt from ``Mu``, ``My``, the signals and (recurrent designs) the fed-back
+    estimates by :meth:`pwas_hdl.fit.regressors.LagStructure.names`, the one rule that names them; an
+    observer-bank sensor's feature regressors come first (``front_end``).
+    """
+    from pwas_hdl.fit.regressors import LagStructure
+
+    lg, regs = m["lags"], m["lags"]["regressors"]
+    ins, outs, tgts = lg["inputs"], lg["outputs"], lg["targets"]
+    if m.get("recurrence") is not None:
+        mz = m["recurrence"]["Mz"]
+    else:  # a core of a recurrent model: its past estimates end the regressor
+        n_z = len(regs) - next((k for k in range(len(regs), 0, -1) if not _Z_NAME.match(regs[k - 1])), 0)
+        mz = n_z // len(tgts) if n_z % len(tgts) == 0 else -1
+        if mz < 0:
+            return [f"lags.regressors ends with {n_z} past estimates, not a multiple of the {len(tgts)} lags.targets"]
+    io_dim = len(ins) * lg["Mu"] + len(outs) * lg["My"]
+    if io_dim + len(tgts) * mz > len(regs):  # also bounds Mu, My before any list of that size is made
+        return [f"lags Mu = {lg['Mu']}, My = {lg['My']} with {len(ins)} inputs and {len(outs)} outputs need "
+                f"{io_dim + len(tgts) * mz} regressors, lags.regressors has {len(regs)}"]
+    want: list[str] = []
+    if io_dim + len(tgts) * mz:
+        try:
+            want = LagStructure(lg["Mu"], lg["My"], len(ins), len(outs), mz, len(tgts) if mz else 0).names(ins, outs, tgts)
+        except ValueError as exc:
+            return [f"lags: {exc}"]
+    front = len(regs) - len(want)  # the observer bank's features
+    errs = []
+    if front and "front_end" not in m:
+        errs.append(f"lags.regressors has {len(regs)} names, lags Mu = {lg['Mu']}, My = {lg['My']} give {len(want)}: {want}")
+    elif regs[front:] != want:
+        errs.append(f"lags.regressors {regs[front:]} are not the regressors {want} of lags Mu = {lg['Mu']}, My = {lg['My']}"
+                    f" (inputs {ins}, outputs {outs})")
+    for j, (r, f) in enumerate(zip(regs, m["formats"]["inputs"])):
+        if f.get("name", r) != r:
+            errs.append(f"formats.inputs[{j}].name {f['name']!r} differs from lags.regressors[{j}] {r!r}")
+    warm = lg.get("warmup")
+    memory = max(lg["Mu"] if ins else 0, lg["My"] if outs else 0)
+    if warm is not None and "front_end" not in m and warm["samples_without_output"] != max(memory - 1, 0):
+        errs.append(f"lags.warmup.samples_without_output is {warm['samples_without_output']}, the lag bank of "
+                    f"Mu = {lg['Mu']}, My = {lg['My']} fills after {max(memory - 1, 0)} samples")
+    inp = port(m, "in.payload")
+    fields = inp.get("fields", [])
+    if m["design"] == "core" and "warp" not in m:
+        got = [f.get("regressor") for f in fields]
+        if got != regs:
+            errs.append(f"the input payload fields carry the regressors {got}, lags.regressors is {regs}")
+    elif m["design"] in ("sensor", "recurrent") and "front_end" not in m:
+        got = [f.get("signal") for f in fields]
+        used = [s for s in ins if lg["Mu"]] + [s for s in outs if lg["My"]]
+        if got != used:
+            errs.append(f"the input payload fields carry the signals {got}, the lag bank of lags Mu = {lg['Mu']}, "
+                        f"My = {lg['My']} takes {used}")
+    return errs
+
+
+def _memory_errors(m: dict[str, Any]) -> list[str]:
+    """``files.hex`` agrees with ``memory`` (one file per memory, its depth and word width) and its
+    fields with the weight format."""
+    mem, hexes = m["memory"], m["files"]["hex"]
+    errs = []
+    if mem["words"] != mem["memories"] * mem["depth"] or mem["words"] < mem["n_vertices"]:
+        errs.append(f"memory.words {mem['words']} is not memories x depth = {mem['memories']} x {mem['depth']} "
+                    f"or holds fewer than n_vertices = {mem['n_vertices']} words")
+    wbits = m["formats"]["weight"]["bits"]
+    for i, h in enumerate(hexes):
+        used = 0
+        for j, f in enumerate(h["fields"]):
+            mask = ((1 << f["width"]) - 1) << f["lsb"] if f["lsb"] + f["width"] <= h["width"] else -1
+            if mask < 0 or used & mask:
+                errs.append(f"files.hex[{i}].fields[{j}] ({f['target']}) is outside its {h['width']}-bit word or overlaps another field")
+                break
+            used |= mask
+            if f["target"] not in m["lags"]["targets"]:
+                errs.append(f"files.hex[{i}].fields[{j}].target {f['target']!r} is not one of lags.targets")
+            elif "additive" not in m and f["width"] != wbits:
+                errs.append(f"files.hex[{i}].fields[{j}] ({f['target']}) is {f['width']} bits wide, formats.weight.bits is {wbits}")
+    if "additive" in m:  # every part has its own memories (additive.parts[].memory)
+        return errs
+    if hexes and len(hexes) != mem["memories"]:
+        errs.append(f"files.hex lists {len(hexes)} files for memory.memories = {mem['memories']}")
+    for i, h in enumerate(hexes):
+        if (h["depth"], h["width"]) != (mem["depth"], mem["word_bits"]):
+            errs.append(f"files.hex[{i}] ({h['file']}) has depth {h['depth']} and width {h['width']}, memory has depth "
+                        f"{mem['depth']} and word_bits {mem['word_bits']}")
+        elif h["bank"] != i:
+            errs.append(f"files.hex[{i}] ({h['file']}) is bank {h['bank']}, not {i}")
+    return errs
+
+
+def _width_errors(m: dict[str, Any]) -> list[str]:
+    """Every payload field is as wide as its format, in the signedness of its format, and the output
+    fields are the output format of ``formats``."""
+    errs = []
+    out_fmt = m["formats"]["output"]
+    for i, p in enumerate(m["ports"]):
+        for j, f in enumerate(p.get("fields", [])):
+            fmt = f.get("format")
+            if fmt is None:
+                continue
+            if f["width"] != fmt["bits"] or f["signed"] != fmt["signed"]:
+                errs.append(f"ports[{i}].fields[{j}] ({f['name']}) is {f['width']} bits "
+                            f"{'signed' if f['signed'] else 'unsigned'}, its format {fmt.get('str')} is {fmt['bits']} bits "
+                            f"{'signed' if fmt['signed'] else 'unsigned'}")
+            elif "domain_codes" in f and not fmt["min_code"] <= f["domain_codes"][0] <= f["domain_codes"][1] <= fmt["max_code"]:
+                errs.append(f"ports[{i}].fields[{j}].domain_codes {f['domain_codes']} are outside the codes "
+                            f"[{fmt['min_code']}, {fmt['max_code']}] of {fmt.get('str')}")
+            elif p["role"] == "out.payload" and "target" in f and "additive" not in m and (fmt["bits"], fmt["frac"]) != (out_fmt["bits"], out_fmt["frac"]):
+                errs.append(f"ports[{i}].fields[{j}] ({f['name']}) has the format {fmt.get('str')}, formats.output is "
+                            f"s{out_fmt['bits']}.{out_fmt['frac']}")
+    return errs
+
+
+def _latency_errors(m: dict[str, Any]) -> list[str]:
+    """``latency_cycles`` of a plain parallel core or lag-bank sensor is the latency of its ``pipeline``
+    (:meth:`pwas_hdl.hdl.params.Pipeline.latency`, plus the classifier's argmax stage)."""
+    from pwas_hdl.hdl.params import Pipeline
+
+    if (m["design"] not in ("core", "sensor") or m.get("architecture", {}).get("kind", "parallel") != "parallel"
+            or any(k in m for k in ("warp", "additive", "front_end", "recurrence"))):
+        return []  # these add stages of their own (the designs' manifests state them)
+    try:
+        want = Pipeline.cast(m["pipeline"]).latency(len(m["lags"]["regressors"]))
+    except (TypeError, ValueError) as exc:
+        return [f"pipeline: {exc}"]
+    want += m["classifier"]["stage_latency_cycles"] if "classifier" in m else 0
+    if m["latency_cycles"] != want:
+        return [f"latency_cycles is {m['latency_cycles']}, the pipeline {m['pipeline']} gives {want} cycles"]
+    return []
+
+
+def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
+    """The files on disk agree with the manifest: listed files stay inside the folder; every hex file
+    there has ``depth`` lines of one word of ``width`` bits; a ``$readmemh`` design has its hex files."""
+    errs = []
+    root = folder.resolve()
+    f = m["files"]
+    names = [v for k, v in f.items() if isinstance(v, str)] + [n for n in (f["verilog"] if isinstance(f["verilog"], list) else [])]
+    names += [h["file"] for h in f["hex"]]
+    for nm in names:
+        p = folder / nm
+        if p.exists() and root not in p.resolve().parents:
+            errs.append(f"files: {nm} leads outside the folder (to {p.resolve()})")
+    if errs:
+        return errs
+    readmemh = (m.get("memory", {}).get("init") or {}).get("kind") == "readmemh"
+    for i, h in enumerate(f["hex"]):
+        p = folder / h["file"]
+        if not p.is_file():
+            if readmemh:
+                errs.append(f"files.hex[{i}]: {h['file']} is missing (the Verilog reads it with $readmemh)")
+            continue
+        lines = [ln.strip() for ln in p.read_text(encoding="ascii", errors="replace").splitlines() if ln.strip()]
+        if len(lines) != h["depth"]:
+            errs.append(f"files.hex[{i}]: {h['file']} has {len(lines)} words, files.hex[{i}].depth is {h['depth']}")
+            continue
+        digits = -(-h["width"] // 4)
+        bad = next((k for k, ln in enumerate(lines) if len(ln) > digits or not all(c in "0123456789abcdefABCDEF" for c in ln)
+                    or int(ln, 16) >> h["width"]), None)
+        if bad is not None:
+            errs.append(f"files.hex[{i}]: line {bad + 1} of {h['file']} ({lines[bad][:20]!r}) is not a {h['width']}-bit hex word")
     return errs
 
 
@@ -514,6 +690,9 @@ def load_manifest(outdir_or_file: str | os.PathLike) -> dict[str, Any]:
         raise FileNotFoundError(f"{p} does not exist; run `pwas-hdl generate MODEL -o DIR` first")
     d = read_json(p, _HINT)
     validate_manifest(d, str(p))
+    errs = _folder_errors(d, p.parent)
+    if errs:
+        raise InputError(f"{p}: {errs[0]}; {_HINT}")
     return d
 
 
