@@ -268,6 +268,11 @@ def _report(man: dict) -> str:
         f"{eb['window_sum']:.4g}; the detected mode equals the float one wherever the float margin exceeds "
         f"{2 * eb['window_sum']:.4g}; with equal modes |x_hat - float| <= {_bound_text(eb['state'])} and |y_hat - float| <= "
         f"{_bound_text(eb['y_hat'])} (unless a state saturates).", "",
+        (f"States within +-{e['state_bound']:.4g} for every input code and every sequence of detected modes (invariant box of "
+         "the quantised arithmetic): the states never saturate." if not e["state_may_saturate"] else
+         f"**The states may saturate** (`estimator.state_may_saturate`): s{f['state_bits']}.{f['state_frac']} does not hold "
+         "a proven bound of the switched observer's states (narrower than the bound, or no invariant box: the modes' |F_i| "
+         "have no common contraction); `state_saturated` flags each sample where one did."), "",
         "## Files", "", *[f"- `{v}`" for k, v in sorted(man["files"].items()) if isinstance(v, str)], ""])
 
 

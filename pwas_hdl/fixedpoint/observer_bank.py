@@ -104,6 +104,44 @@ BANK_TRACE_STAGES = ("codes", "state", "state_saturated", "residual", "square", 
                      "feature_codes")
 
 
+def switched_state_bound(f: np.ndarray, c: np.ndarray, max_steps: int = 100_000) -> np.ndarray | None:
+    """A componentwise bound of the states of a switched system, whatever the mode sequence.
+
+    For ``x_{t+1} = F_{theta_t} x_t + e_t`` with ``|e_t| <= c_{theta_t}`` (elementwise) and ``x_0 = 0``
+    the iteration ``b_{k+1} = max_i (|F_i| b_k + c_i)`` (``b_0 = 0``) bounds ``|x_k|`` by induction;
+    it is monotone, so its limit ``b*`` bounds every state of every mode sequence. The limit is
+    accepted only when ``v = b* (1 + 1e-9)`` verifies ``max_i (|F_i| v + c_i) <= v``: then ``v`` is an
+    invariant box (``|x_t| <= v`` implies ``|x_{t+1}| <= v``) -- a proof, not an estimate. The
+    per-mode l1 gain bounds only the bank (one mode each); a switched observer can go further.
+
+    Parameters
+    ----------
+    f : ndarray (s, n, n)
+        The modes' state matrices (as the arithmetic uses them: quantised).
+    c : ndarray (s, n)
+        Per mode, the elementwise bound of everything added in one step (inputs, rounding).
+
+    Returns
+    -------
+    ndarray (n,) or None
+        The invariant box ``v``; None when there is none (the switched system can grow without
+        bound, e.g. no common contraction of the ``|F_i|``).
+    """
+    fa = np.abs(np.asarray(f, float))
+    ca = np.abs(np.asarray(c, float))
+    b = np.zeros(fa.shape[1])
+    for _ in range(max_steps):
+        nb = np.max(np.einsum("smn,n->sm", fa, b) + ca, axis=0)
+        if not np.all(np.isfinite(nb)) or np.max(nb) > 2.0**60:
+            return None
+        if np.max(nb - b) <= 1e-12 * max(1.0, float(np.max(nb))):
+            b = nb
+            break
+        b = nb
+    v = b * (1 + 1e-9) + 1e-12
+    return v if np.all(np.max(np.einsum("smn,n->sm", fa, v) + ca, axis=0) <= v) else None
+
+
 def isqrt_floor(a: np.ndarray) -> np.ndarray:
     """Elementwise ``floor(sqrt(a))`` of non-negative int64 (exact, corrected float guess)."""
     a = np.asarray(a, dtype=np.int64)
@@ -624,6 +662,15 @@ class FixedPointSwitchedEstimator:
     wherever the float detector's margin (runner-up minus best window sum) exceeds ``2 dS``; with
     the same modes, ``|x_hw - x_float| <= dx = eta / (1 - rho)`` (``rho = max_i ||F_i||_inf < 1``)
     and ``|y_hat_hw - y_hat| <= ||H||_1 dx + 2**-(F_s+1)``.
+
+    State width: ``state_bound`` is the invariant box of :func:`switched_state_bound` over the
+    quantised coefficients (every mode sequence, every input code, the rounding of each step), so
+    the default ``B_s`` (the fewest bits holding ``+-ceil(state_bound * 2**F_s)``) cannot saturate the
+    bank or the switched observer for inputs in the code range. The per-mode l1 gain
+    (``bank_state_bound``) bounds the bank only: sized by it, a switched observer that alternates
+    modes can saturate. When no box exists (the ``|F_i|`` have no common contraction),
+    ``state_bound_proven`` is False, the width holds the per-mode bound and ``state_may_saturate``
+    is True (manifest ``estimator.state_may_saturate``; the ``state_saturated`` output flags it).
     """
 
     def __init__(self, A, B, C, K, *, window: int = 1, input_bits: int = 12, input_headroom: float = 8.0,
@@ -645,10 +692,14 @@ class FixedPointSwitchedEstimator:
         self.F = [a - np.outer(k, c) for a, k, c in zip(self.A, self.K, self.C)]
         # state bound (inputs within the code range), residual gain, switched contraction
         xb = [l1_gain(f, np.column_stack([b, k])).sum(axis=1) * h_in for f, b, k in zip(self.F, self.B, self.K)]
-        self.state_bound = float(np.max(xb))
+        self.bank_state_bound = float(np.max(xb))  # each bank observer runs one mode: its l1 gain bounds it
         self.residual_gain = max(float(np.abs(l1_gain(f.T, c[:, None])).sum()) for f, c in zip(self.F, self.C))
         self.rho = max(float(np.abs(f).sum(axis=1).max()) for f in self.F)
-        x0 = self.state_bound + 1.0
+        # the switched observer changes mode: bound it over every mode sequence (float coefficients here,
+        # to choose F_c; proven with the quantised ones below)
+        inj = np.array([(np.abs(b) + np.abs(k)) * h_in for b, k in zip(self.B, self.K)])
+        sw = switched_state_bound(np.array(self.F), inj)
+        x0 = max(self.bank_state_bound, float(np.max(sw)) if sw is not None else 0.0) + 1.0
         target = budget * 2.0**-fin
         g = max(self.residual_gain, 1.0 / (1.0 - self.rho) if self.rho < 1 else self.residual_gain)
         fs = fin if state_frac is None else int(state_frac)
@@ -667,9 +718,21 @@ class FixedPointSwitchedEstimator:
                   float(np.max(np.abs(self.g_codes * 2.0**-fc - np.array(self.B)))),
                   float(np.max(np.abs(self.l_codes * 2.0**-fc - np.array(self.K)))),
                   float(np.max(np.abs(self.h_codes * 2.0**-fc - np.array(self.C)))))
-        need = signed_bits_needed(np.array([math.ceil(x0 * 2.0**fs), -math.ceil(x0 * 2.0**fs)]))
+        # the state bound the width is derived from: the invariant box of the quantised arithmetic
+        # (x' = F^ x + G^ u + L^ y rounded half up: |e| <= (|G^| + |L^|) h_in + 2**-(F_s+1)), which holds
+        # for the bank and the switched observer whatever the detected modes, for every input code
+        step = np.array([(np.abs(g) + np.abs(lc)) * 2.0**-fc * h_in + 2.0 ** -(fs + 1)
+                         for g, lc in zip(self.g_codes, self.l_codes)])
+        box = switched_state_bound(self.f_codes * 2.0**-fc, step)
+        #: True when the box exists: the default state width then cannot saturate for inputs in range
+        self.state_bound_proven = box is not None
+        self.state_bound = float(np.max(box)) if box is not None else x0 - 1.0
+        x0 = max(x0, self.state_bound)
+        top = math.ceil(self.state_bound * 2.0**fs)
+        need = signed_bits_needed(np.array([top, -top]))
         self.state_bits = int(state_bits) if state_bits is not None else int(need)
-        self.state_may_saturate = self.state_bits < need
+        # no proven box: the width holds the per-mode bound only and the switched observer may saturate
+        self.state_may_saturate = self.state_bits < need or not self.state_bound_proven
         # bounds (normalised = physical here)
         eta = 2.0 ** -(fs + 1) + eps * (n * x0 + 2 * h_in)
         self.residual_error_bound = self.residual_gain * eta + 2.0 ** -(fs + 1) + eps * n * x0
