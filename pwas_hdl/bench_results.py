@@ -430,7 +430,7 @@ def check_count(option: str, value: Any, limit: int | None = None) -> int:
 
     limit = MAX_BENCH_COUNT if limit is None else int(limit)
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise InputError(f"{option} must be an integer >= 1, got {value!r}")
+        raise InputError(f"{option} must be >= 1 and an integer, got {value!r}")
     return check_limit(option, int(value), limit, f"{option} counts independent runs; at most {limit}")
 
 

@@ -640,6 +640,7 @@ def generate(
         outdir = _required(_merge("-o/--out", out, outdir=outdir_old), "-o/--out", "the folder to write")
         target_mhz = _merge("--clock-mhz", clock_mhz, target_mhz=target_mhz_old)
         if target_mhz is None:
+            _executor(workers, scheduler)  # checks --workers / --scheduler (unused without --clock-mhz: still refused when bad)
             with _progress("building the design"):
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
@@ -692,7 +693,7 @@ def synth(
     device: Annotated[Optional[str], typer.Option("--device", help="Device (ice40: hx8k, hx1k, lp8k, up5k, ...; ecp5: 25k, 45k, 85k, ...). Default: ice40 hx8k, ecp5 45k.")] = None,
     package: Annotated[Optional[str], typer.Option("--package", help="Package (default per device).")] = None,
     clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Clock constraint in MHz for place and route (default: nextpnr's).")] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Placer seed.")] = 1,
+    seed: Annotated[int, typer.Option("--seed", help="Placer seed, 0 .. 2^63-1.")] = 1,
     harness: Annotated[bool, typer.Option("--harness/--no-harness", help="Place and route inside the timing harness that registers every port (default), so fmax covers the input and output paths, as generate --clock-mhz and benchmarks/hw_tables.py measure it; --no-harness: the bare design, register-to-register paths only.")] = True,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Also copy the JSON report here.")] = None,
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for the tool files and results (default OUTDIR/synth/FPGA, where `report` finds them).", show_default=False)] = None,
@@ -707,9 +708,12 @@ def synth(
     from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 
     with _user_errors():
-        family = _merge("--fpga", fpga, target=target_old) or "ecp5"
+        family = _merge("--fpga", fpga, target=target_old)
+        family = "ecp5" if family is None else family  # an empty --fpga is refused by synthesize, not taken for ecp5
         freq = _merge("--clock-mhz", clock_mhz, freq=freq_old)
-        outset = OutputSet(inputs=[(outdir / "manifest.json", "the manifest")])
+        from pwas_hdl.design.manifest import folder_inputs
+
+        outset = OutputSet(inputs=folder_inputs(outdir))  # no --json over the Verilog or a hex file it reads
         if json_out is not None:
             outset.add(json_out, "--json")
         if out is not None:
@@ -732,7 +736,7 @@ def simulate(
     summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: the -o/--out file with the suffix .json).")] = None,
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit (the sensor design is reset between trajectories).")] = None,
     stall: Annotated[float, typer.Option("--stall", help="Probability of a random bubble on the input and of backpressure on the output in each cycle (0 = none: latency and II are measured at full speed).")] = 0.0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the random stalls.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the random stalls (an integer >= 0).")] = 0,
     build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.")] = None,
     waves: Annotated[bool, typer.Option("--waves", help="Record waveforms (Icarus: FST, Verilator: VCD) next to the build; the path is in the summary.")] = False,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
@@ -899,9 +903,13 @@ def report(
     from pwas_hdl.design.report import collect_report, report_markdown
 
     with _user_errors():
+        from pwas_hdl.design.report import report_inputs
+
         markdown = _merge("-o/--out", out, md=md_old)
         sims = _names(sim)
-        outset = OutputSet(inputs=[(outdir / "manifest.json", "the manifest"), *((p, "--sim") for p in sims)])
+        if sim and not sims:
+            raise InputError("--sim is empty; give the path of a `simulate` JSON summary")
+        outset = OutputSet(inputs=report_inputs(outdir, sims))
         for path, what in ((json_out, "--json"), (markdown, "-o/--out")):
             if path is not None:
                 outset.add(path, what)
@@ -942,7 +950,7 @@ def _write_plant_data(plant, samples: int, test_samples: int, seed: int, *, out:
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         test_output = _merge("--test-out", test_out, test_output=test_output_old)
-        if samples < 1 or (test_output is not None and test_samples < 1):
+        if samples < 1 or test_samples < 1:  # --test-samples too without --test-out: a bad value is refused, not ignored
             raise InputError("--samples and --test-samples must be >= 1")
         outset = OutputSet()
         outset.add(output, "-o/--out")
@@ -1145,8 +1153,9 @@ def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out
     from pwas_hdl.systems.pv_benchmark import make_pv_dataset
 
     output = _required(out, "-o/--out", "the CSV file to write")
-    if samples < 1 or (test_out is not None and test_samples < 1):
+    if samples < 1 or test_samples < 1:  # --test-samples too without --test-out: a bad value is refused, not ignored
         raise InputError("--samples and --test-samples must be >= 1")
+    check_limit("--test-samples", test_samples, MAX_SAMPLES, "ask for fewer samples")
     if not 0 <= noise < np.inf:
         raise InputError(f"--noise must be a finite number >= 0 (a standard deviation in normalised units), got {noise}")
     n_test = test_samples if test_out is not None else 1

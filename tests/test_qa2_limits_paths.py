@@ -42,7 +42,7 @@ def test_check_count_is_one_rule():
     with pytest.raises(ResourceLimit, match=r"--runs = 1001 exceeds the limit of 1000"):
         check_count("--runs", MAX_BENCH_COUNT + 1)
     for bad in (0, -3, True, 2.5):
-        with pytest.raises(InputError, match="--seeds must be an integer >= 1"):
+        with pytest.raises(InputError, match="--seeds must be >= 1 and an integer"):
             check_count("--seeds", bad)
 
 

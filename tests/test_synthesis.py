@@ -124,7 +124,7 @@ def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_d
         "flow_control": {"in__ready": "always 1"},
         "design_hash": DESIGN_HASH,
         "ports": [{"name": n, "direction": d, "width": w, "signed": n in ("in_a", "out_y"), "role": r} for n, d, w, r in ports],
-        "formats": {"inputs": [{"name": "a", "signal": "a", "lag": 0, **inp}], "signals": {"a": inp},
+        "formats": {"inputs": [{"name": "a[t]", "signal": "a", "lag": 0, **inp}], "signals": {"a": inp},
                     "weight": {**fmt12, "n_saturated": 0}, "output": {**fmt12, "targets": ["z"], "shift": 11, "may_saturate": True},
                     "mu_frac": 0, "widths": {}, "rounding": "half_up"},
         "domain": {"lo": [-1800.0], "hi": [1800.0], "partitions": [1], "lo_code": [-1800], "frac_bits": [0],
@@ -134,7 +134,8 @@ def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_d
         "memory": {"kind": "replicated", "memories": 1, "depth": rom_depth, "word_bits": ROM_WIDTH,
                    "words": rom_depth, "bits": rom_depth * ROM_WIDTH, "n_vertices": rom_depth,
                    "layout_spec": {"kind": "replicated"}},
-        "pipeline": {},
+        # the registers of the Verilog above as PWAS pipeline stages (latency_cycles = Pipeline.latency = 4)
+        "pipeline": {"rank": False, "addr": False, "mem_out": False, "mul_in": True, "tree_levels": 0},
         "arithmetic": {},
     }
     validate_manifest(manifest, "tiny manifest")  # the runner only accepts valid manifests

@@ -99,6 +99,7 @@ if TYPE_CHECKING:
 __all__ = [
     "MANIFEST_FORMAT", "MANIFEST_VERSION", "MANIFEST_SCHEMA", "MANIFEST_SCHEMA_ID", "MANIFEST_FILE", "STREAM_ROLES",
     "build_manifest", "build_estimator_manifest", "manifest_text", "manifest_errors", "validate_manifest", "load_manifest", "port", "field",
+    "folder_inputs",
 ]
 
 MANIFEST_FORMAT = "pwas-hdl-manifest"
@@ -470,7 +471,9 @@ def _lag_errors(m: dict[str, Any]) -> list[str]:
                     f"Mu = {lg['Mu']}, My = {lg['My']} fills after {max(memory - 1, 0)} samples")
     inp = port(m, "in.payload")
     fields = inp.get("fields", [])
-    if m["design"] == "core" and "warp" not in m:
+    if not fields:  # a payload described without fields (the schema allows it): nothing to compare
+        pass
+    elif m["design"] == "core" and "warp" not in m:
         got = [f.get("regressor") for f in fields]
         if got != regs:
             errs.append(f"the input payload fields carry the regressors {got}, lags.regressors is {regs}")
@@ -694,6 +697,39 @@ def load_manifest(outdir_or_file: str | os.PathLike) -> dict[str, Any]:
     if errs:
         raise InputError(f"{p}: {errs[0]}; {_HINT}")
     return d
+
+
+def folder_inputs(outdir: str | os.PathLike) -> list[tuple[Path, str]]:
+    """Every file of a generated folder that its readers read: the manifest and the files it lists.
+
+    For the ``inputs`` of an :class:`~pwas_hdl.io.atomic.OutputSet`, so that no command writes an
+    output over the Verilog, the model or a hex file of the design it reads.
+
+    Returns
+    -------
+    list of (Path, str)
+        ``(path, "the manifest")``, ``(path, "the design's model file")``, ...
+
+    Without a manifest only its path is listed (the reader reports the missing folder itself).
+
+    Raises
+    ------
+    InputError
+        As :func:`load_manifest` for a manifest that is there.
+    """
+    folder = Path(outdir)
+    if not (folder / MANIFEST_FILE).exists():
+        return [(folder / MANIFEST_FILE, "the manifest")]
+    m = load_manifest(folder)
+    f = m["files"]
+    res = [(folder / MANIFEST_FILE, "the manifest")]
+    for key, v in f.items():
+        if key == "hex":
+            res += [(folder / h["file"], "a weight memory of the design") for h in v]
+        elif key != "manifest":
+            what = "the estimator file" if key == "model" and m["design"] == "estimator" else f"the design's {key.replace('_', ' ')} file"
+            res += [(folder / n, what) for n in ([v] if isinstance(v, str) else v)]
+    return res
 
 
 # ------------------------------------------------------------------------------ access

@@ -51,6 +51,19 @@ def stale_results(outdir: str | os.PathLike) -> list[str]:
     return stale
 
 
+def report_inputs(outdir: str | os.PathLike, sims: list[str | os.PathLike] = ()) -> list[tuple[Path, str]]:
+    """Every file :func:`collect_report` reads: the folder's files (:func:`~pwas_hdl.design.manifest.folder_inputs`),
+    its ``sim/*.json`` and ``synth/*/synth.json`` and the extra summaries ``sims`` -- the ``inputs`` of
+    the report's :class:`~pwas_hdl.io.atomic.OutputSet` (``--json`` / ``-o`` never replace one)."""
+    from pwas_hdl.design.manifest import folder_inputs
+
+    out = Path(outdir)
+    res = folder_inputs(out)
+    res += [(p, "a simulation summary of the design") for p in sorted(out.glob("sim/*.json"))]
+    res += [(p, "a synthesis result of the design") for p in sorted(out.glob("synth/*/synth.json"))]
+    return res + [(Path(p), "--sim") for p in sims]
+
+
 def _read_json(path: Path) -> dict[str, Any]:
     try:
         return json.loads(path.read_text(encoding="utf-8"))

@@ -93,6 +93,10 @@ _TOOLS = {
 # Capacity of one block RAM in bits (data bits, parity included where the primitive has it).
 _BRAM_BITS = {"SB_RAM40_4K": 4096, "DP16KD": 18432, "PDPW16KD": 18432, "SB_SPRAM256KA": 262144}
 
+#: Largest placer seed accepted (a signed 64-bit integer; measured with yowasp nextpnr-ecp5: 2**63 still
+#: places, 2**64 stops nextpnr with exit status 125 after Yosys has run).
+MAX_PLACER_SEED = 2**63 - 1
+
 # nextpnr bel types, in words, for "does not fit" messages and the summary.
 _RESOURCE_NAMES = {
     "ICESTORM_LC": "logic cells (LUT4 + FF)",
@@ -204,8 +208,11 @@ def synthesize(
     """
     if target not in TARGETS:
         raise ValueError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_PLACER_SEED:
+        raise ValueError(f"--seed (seed) must be an integer in 0..{MAX_PLACER_SEED} (nextpnr's placer seed), got {seed!r}")
+    for opt, val in (("--device (device)", device), ("--package (package)", package)):
+        if val is not None and not str(val).strip():
+            raise ValueError(f"{opt} is empty; omit it for the default or name one (see `pwas-hdl synth --help`)")
     if freq_mhz is not None:
         if isinstance(freq_mhz, bool) or not isinstance(freq_mhz, (int, float)) or not math.isfinite(freq_mhz) or freq_mhz <= 0:
             raise ValueError(f"--clock-mhz (freq_mhz) must be a positive number of MHz, got {freq_mhz!r}")

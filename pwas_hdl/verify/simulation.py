@@ -831,13 +831,18 @@ def simulate_data(
         raise ValueError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
     if not 0.0 <= stall < 1.0:
         raise ValueError(f"--stall must be in [0, 1), got {stall}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:  # a seed of the stalls, as numpy takes it
+        raise InputError(f"--seed must be an integer >= 0, got {seed!r}")
+    check_output_path(output, "-o")  # before its .json sibling is made from it
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
     sources = [] if isinstance(data, Table) else [(data, "DATA")]
     if _is_estimator_folder(outdir):  # seed 003's estimator (issue 12): pwas_hdl.verify.estimator_simulation
         return _simulate_estimator(outdir, data, output, spath, sources, simulator=simulator, engine=engine, traj_col=traj_col,
                                    stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say, blank_rows=blank_rows)
-    outset = OutputSet(inputs=sources + [(Path(outdir) / "manifest.json", "the manifest"),
-                                         (Path(outdir) / "model.json", "the model")])
+    from pwas_hdl.design.manifest import folder_inputs
+
+    # every file of the design (manifest, Verilog, model, hex files): no output replaces one
+    outset = OutputSet(inputs=sources + folder_inputs(outdir))
     outset.add(output, "-o")
     outset.add(spath, "--json" if summary_path is not None else "the summary (-o with .json)")
     waves_dir = Path(output).resolve().parent / f"{Path(output).stem}_waves"
@@ -1088,9 +1093,9 @@ def _simulate_estimator(outdir, data, output, spath, sources, *, blank_rows: str
     from pwas_hdl.io.csv_table import Table, read_csv
     from pwas_hdl.verify.estimator_simulation import simulate_estimator_data
 
-    man = load_manifest(outdir)
-    outset = OutputSet(inputs=sources + [(Path(outdir) / "manifest.json", "the manifest"),
-                                         (Path(outdir) / man["files"]["model"], "the estimator file")])
+    from pwas_hdl.design.manifest import folder_inputs
+
+    outset = OutputSet(inputs=sources + folder_inputs(outdir))  # the manifest, the estimator file, the Verilog
     outset.add(output, "-o")
     outset.add(spath, "the summary (-o with .json)")
     if waves:
