@@ -126,3 +126,4 @@ def test_every_reader_refuses_an_inconsistent_manifest(folders, tmp_path, comman
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert res.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and "need 4 regressors" in lines[0], res.output
     assert tree(tmp_path) == before
+

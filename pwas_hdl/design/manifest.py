@@ -312,6 +312,20 @@ def _estimator_errors(m: dict[str, Any]) -> list[str]:
     want = [f"{s}_hat" for s in e["signals"]["states"]] + [f"{e['signals']['output']}_hat", "mode_index", "state_saturated"]
     if outs != want:
         errs.append(f"the output payload fields {outs} are not {want}")
+        return errs
+    # widths: the fields against their formats and the estimator's formats; latency against the architecture
+    f = e["formats"]
+    width = {nm: f["input_bits"] for nm in ins} | {f"{s}_hat": f["state_bits"] for s in e["signals"]["states"]}
+    for p in m["ports"]:
+        for fl in p.get("fields", []):
+            fmt = fl.get("format")
+            if fmt is not None and (fl["width"] != fmt["bits"] or fl["signed"] != fmt["signed"]):
+                errs.append(f"the field {fl['name']} of {p['name']} is {fl['width']} bits, its format {fmt.get('str')} {fmt['bits']}")
+            elif fl["name"] in width and fl["width"] != width[fl["name"]]:
+                errs.append(f"the field {fl['name']} of {p['name']} is {fl['width']} bits, estimator.formats gives {width[fl['name']]}")
+    lat = 1 if e.get("architecture", "parallel") == "parallel" else m["ii"] + 1
+    if m["latency_cycles"] != lat:
+        errs.append(f"latency_cycles is {m['latency_cycles']}, the {e.get('architecture', 'parallel')} estimator's is {lat}")
     return errs
 
 
