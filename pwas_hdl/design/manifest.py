@@ -548,13 +548,19 @@ def _width_errors(m: dict[str, Any]) -> list[str]:
                 errs.append(f"ports[{i}].fields[{j}] ({f['name']}) is {f['width']} bits "
                             f"{'signed' if f['signed'] else 'unsigned'}, its format {fmt.get('str')} is {fmt['bits']} bits "
                             f"{'signed' if fmt['signed'] else 'unsigned'}")
-            elif "domain_codes" in f and not fmt["min_code"] <= f["domain_codes"][0] <= f["domain_codes"][1] <= fmt["max_code"]:
+            elif "domain_codes" in f and not _code_range(fmt)[0] <= f["domain_codes"][0] <= f["domain_codes"][1] <= _code_range(fmt)[1]:
                 errs.append(f"ports[{i}].fields[{j}].domain_codes {f['domain_codes']} are outside the codes "
-                            f"[{fmt['min_code']}, {fmt['max_code']}] of {fmt.get('str')}")
+                            f"{list(_code_range(fmt))} of {fmt.get('str')}")
             elif p["role"] == "out.payload" and "target" in f and "additive" not in m and (fmt["bits"], fmt["frac"]) != (out_fmt["bits"], out_fmt["frac"]):
                 errs.append(f"ports[{i}].fields[{j}] ({f['name']}) has the format {fmt.get('str')}, formats.output is "
                             f"s{out_fmt['bits']}.{out_fmt['frac']}")
     return errs
+
+
+def _code_range(fmt: dict[str, Any]) -> tuple[int, int]:
+    """Smallest and largest code of a fixed-point format (from ``bits`` and ``signed``)."""
+    b = fmt["bits"]
+    return (-(1 << (b - 1)), (1 << (b - 1)) - 1) if fmt["signed"] else (0, (1 << b) - 1)
 
 
 def _latency_errors(m: dict[str, Any]) -> list[str]:
@@ -585,8 +591,11 @@ def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
     names += [h["file"] for h in f["hex"]]
     for nm in names:
         p = folder / nm
-        if p.exists() and root not in p.resolve().parents:
-            errs.append(f"files: {nm} leads outside the folder (to {p.resolve()})")
+        try:
+            if p.exists() and root not in p.resolve().parents:
+                errs.append(f"files: {nm} leads outside the folder (to {p.resolve()})")
+        except (OSError, RuntimeError) as exc:  # a symlink loop, a path that cannot be resolved
+            errs.append(f"files: {nm} cannot be resolved ({exc})")
     if errs:
         return errs
     readmemh = (m.get("memory", {}).get("init") or {}).get("kind") == "readmemh"
@@ -596,11 +605,15 @@ def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
             if readmemh:
                 errs.append(f"files.hex[{i}]: {h['file']} is missing (the Verilog reads it with $readmemh)")
             continue
+        digits = -(-h["width"] // 4)
+        if p.stat().st_size > h["depth"] * (digits + 2) + 4096:  # read nothing bigger than depth words could be
+            errs.append(f"files.hex[{i}]: {h['file']} has {p.stat().st_size} bytes, more than {h['depth']} words of "
+                        f"{h['width']} bits take")
+            continue
         lines = [ln.strip() for ln in p.read_text(encoding="ascii", errors="replace").splitlines() if ln.strip()]
         if len(lines) != h["depth"]:
             errs.append(f"files.hex[{i}]: {h['file']} has {len(lines)} words, files.hex[{i}].depth is {h['depth']}")
             continue
-        digits = -(-h["width"] // 4)
         bad = next((k for k, ln in enumerate(lines) if len(ln) > digits or not all(c in "0123456789abcdefABCDEF" for c in ln)
                     or int(ln, 16) >> h["width"]), None)
         if bad is not None:
