@@ -62,6 +62,7 @@ def _out_index(man):
     (("files", "hex", 0, "fields", 0, "target"), "zz", "files.hex[0].fields[0].target 'zz' is not one of lags.targets"),
     (("memory", "words"), 10, "memory.words 10 is not memories x depth"),
     (("latency_cycles",), 9, "latency_cycles is 9, the pipeline"),
+    (("ii",), 2, "ii is 2, architecture (parallel) gives ii 1"),
     (("files", "model"), "..", "files.model"),
 ])
 def test_inconsistent_sensor_manifest_is_refused(folders, tmp_path, path, value, message):

@@ -73,7 +73,8 @@ schema cannot state (ports named by ``clock`` / ``reset`` exist, one port per st
 inside their port, one domain entry per regressor; ``lags`` against the regressor names
 (:meth:`~pwas_hdl.fit.regressors.LagStructure.names`), their formats, the input fields and the
 warm-up; ``files.hex`` against ``memory``; field widths against their formats; ``latency_cycles``
-against ``pipeline`` for a plain parallel core / sensor). :func:`load_manifest` also checks the
+against ``pipeline`` for a plain parallel core / sensor; ``ii`` against ``architecture`` /
+``front_end``; the estimator's field widths and latency). :func:`load_manifest` also checks the
 folder: the listed files stay inside it and every hex file has ``depth`` words of ``width`` bits.
 Readers then index keys directly: there are no fallbacks for missing or renamed keys.
 
@@ -434,7 +435,21 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
     errs += _recurrence_errors(m)
     if errs:
         return errs
-    return _lag_errors(m) + _memory_errors(m) + _width_errors(m) + _latency_errors(m)
+    return _lag_errors(m) + _memory_errors(m) + _width_errors(m) + _latency_errors(m) + _rate_errors(m)
+
+
+def _rate_errors(m: dict[str, Any]) -> list[str]:
+    """``ii`` agrees with the block that sets it: ``front_end.ii`` of an observer-bank sensor, else
+    ``architecture.ii`` and its ``cycles_per_sample`` (a recurrent design: II = latency, checked above)."""
+    if "front_end" in m:
+        fe = m["front_end"]
+        return [] if fe.get("ii", m["ii"]) == m["ii"] else [f"ii is {m['ii']}, front_end.ii is {fe['ii']}"]
+    a = m.get("architecture")
+    if a is None or "recurrence" in m:
+        return []
+    if not (a["ii"] == a["cycles_per_sample"] == m["ii"]):
+        return [f"ii is {m['ii']}, architecture ({a['kind']}) gives ii {a['ii']} and {a['cycles_per_sample']} cycles per sample"]
+    return []
 
 
 _Z_NAME = re.compile(r".+_hat\[t-[1-9][0-9]*\]$")
