@@ -134,8 +134,9 @@ def make_design(folder: Path, *, wide: bool = False, broken: bool = False, rom_d
         "memory": {"kind": "replicated", "memories": 1, "depth": rom_depth, "word_bits": ROM_WIDTH,
                    "words": rom_depth, "bits": rom_depth * ROM_WIDTH, "n_vertices": rom_depth,
                    "layout_spec": {"kind": "replicated"}},
-        # the registers of the Verilog above as PWAS pipeline stages (latency_cycles = Pipeline.latency = 4)
-        "pipeline": {"rank": False, "addr": False, "mem_out": False, "mul_in": True, "tree_levels": 0},
+        # the registers of the Verilog above as PWAS pipeline stages (clamp/address, read, product, output:
+        # latency_cycles = Pipeline.latency = 4; no mul_in, so synth packs the multiplier as before)
+        "pipeline": {"rank": False, "addr": True, "mem_out": False, "product": True, "tree_levels": 0},
         "arithmetic": {},
     }
     validate_manifest(manifest, "tiny manifest")  # the runner only accepts valid manifests
