@@ -307,11 +307,11 @@ def fit(
         if front_end not in ("lags", "observer-bank"):
             raise InputError(f"--front-end must be lags or observer-bank, got {front_end!r}")
         bank = front_end == "observer-bank"
-        fe = "lags"
-        if bank:
-            parse_observer(observer)
-            fe = ObserverBankFrontEnd(n_models=models, observer=observer, window=window, features=features, order=order)
-            fe.check_params()
+        # every option value is checked, whether this front end uses it or not (a typo is an error)
+        parse_observer(observer)
+        bank_fe = ObserverBankFrontEnd(n_models=models, observer=observer, window=window, features=features, order=order)
+        bank_fe.check_params()
+        fe: Any = bank_fe if bank else "lags"
         output = _required(_merge("-o/--out", out, output_model=output_model), "-o/--out", "the model file to write")
         outset = OutputSet(inputs=[(data, "DATA")])
         outset.add(output, "-o/--out")

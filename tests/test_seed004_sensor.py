@@ -124,8 +124,8 @@ def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):
         (["--observer", "poles:2"], "observer must be"),
         (["--features", "11c"], "features must be 11a or 11b"),
         (["--front-end", "bank"], "--front-end must be"),
-        (["--models", "0"], "n_models must be an integer >= 1"),
-        (["--window", "0"], "window must be"),
+        (["--models", "0"], "--models (n_models) must be an integer >= 1"),
+        (["--window", "0"], "--window (window) must be"),
         (["-y", "y,u1"], "exactly one measured output"),
     ],
 )

@@ -448,10 +448,12 @@ class ObserverBankFrontEnd:
 
     def check_params(self) -> None:
         """Raise :class:`InputError` for an impossible setting (before any work)."""
-        for nm, lo in (("n_models", 1), ("window", 1), ("order", 1), ("n_knots", 2)):
+        for nm, opt, lo in (("n_models", "--models", 1), ("window", "--window", 1), ("order", "--order", 1),
+                            ("n_knots", None, 2)):
             v = getattr(self, nm)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
-                raise InputError(f"observer bank: {nm} must be an integer >= {lo}, got {v!r}")
+                what = f"{opt} ({nm})" if opt else nm
+                raise InputError(f"observer bank: {what} must be an integer >= {lo}, got {v!r}")
         if self.features not in FEATURE_MAPS:
             raise InputError(f"observer bank: features must be 11a or 11b (or 11b-sq, the squared 11b), got {self.features!r}")
         parse_observer(self.observer)

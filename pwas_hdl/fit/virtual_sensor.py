@@ -179,6 +179,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise ValueError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
             raise ValueError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
+        if not isinstance(self.cv_folds, (int, np.integer)) or isinstance(self.cv_folds, bool) or self.cv_folds < 2:
+            raise InputError(f"cv_folds (--folds) must be an integer >= 2, got {self.cv_folds!r}")
         if isinstance(self.front_end, ObserverBankFrontEnd):
             self.front_end.check_params()
         elif self.front_end != "lags":
