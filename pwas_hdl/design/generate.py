@@ -296,8 +296,9 @@ def build_design(
         ``target_mhz``, ``memory_init="readmemh"`` or a classifier.
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
-    memory : {"banked", "replicated"}
-        Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words.
+    memory : {"banked", "replicated", "corner"}
+        Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words, or
+        ``2**n`` corner banks addressed by the cell alone (:mod:`pwas_hdl.hdl.corner`).
     pipeline : str, Pipeline or dict, optional
         Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``short``, ``balanced``, ``max``), or the
         registers themselves (a :class:`~pwas_hdl.hdl.params.Pipeline` or its ``to_dict()``).
@@ -362,8 +363,8 @@ def build_design(
 
     if design not in ("core", "sensor", "recurrent"):
         raise ValueError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
-    if memory not in ("banked", "replicated"):
-        raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+    if memory not in ("banked", "replicated", "corner"):
+        raise ValueError(f"memory must be 'banked', 'replicated' or 'corner', got {memory!r}")
     from pwas_hdl.hdl.serial_core import ARCHITECTURES
 
     if architecture not in ARCHITECTURES:

@@ -183,7 +183,7 @@ class FixedPointModel:
     reference_error : float, optional
         The accuracy the output lsb is chosen against (``from_sensor`` passes the training
         RMSE). Default/invalid: ``(max w - min w) / 2**10`` (or 1.0 if all weights are equal).
-    layout : {"banked", "replicated"}
+    layout : {"banked", "replicated", "corner"}
         Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`).
     regressor_names : sequence of str, optional
         Names of the ``n`` dimensions (default ``x0 ..``).
@@ -547,8 +547,9 @@ class FixedPointModel:
         # summed as the RTL sums: memory b multiplies the word it read, the adder tree of
         # pwas_hdl.fixedpoint.reduction pairs the memories (0, 1), (2, 3), ... (exact either way)
         rows = np.arange(m)[:, None]
+        slot = self.layout.product_slots(bank)  # the products' order in the adder tree (bank, or vertex for "corner")
         by_bank = np.empty_like(products)
-        by_bank[rows, bank] = products
+        by_bank[rows, slot] = products
         acc = tree_reduce([by_bank[:, b, :] for b in range(by_bank.shape[1])], lambda a, b, _lvl, _i: a + b)
         acc_r = shift_round(acc, self.shift, self.rounding)
         fo = self.output_format
@@ -558,9 +559,9 @@ class FixedPointModel:
         res = {"out": out, "out_of_range": oor}
         if full:
             addr_by_bank = np.zeros_like(addr)
-            addr_by_bank[rows, bank] = addr
+            addr_by_bank[rows, slot] = addr
             w_by_bank = np.zeros_like(w)
-            w_by_bank[rows, bank, :] = w
+            w_by_bank[rows, slot, :] = w
             res.update(
                 q=qa,
                 t=t,

@@ -34,6 +34,19 @@ e_perm[k-1]``, whose coordinate sums are ``|c| + k``: vertex ``k`` is in bank
 ``(|c| + k) mod (n+1)`` -- the ``n + 1`` vertices hit the ``n + 1`` banks once each (a rotation
 by ``|c| mod (n+1)``).
 
+Corner layout (:class:`CornerLayout`, comparator-free addresses)
+-----------------------------------------------------------------
+``2**n`` banks, one per cube corner ``s`` (bit ``j`` of ``s`` = the offset ``0 / 1`` in dimension
+``j``), all addressed by the cell alone: bank ``s`` holds ``W[c + s]`` at address
+``a(c) = sum_j c_j * 2**e_j``, the concatenation of the cells' bit fields (``width(p_j - 1)`` bits
+each, the last dimension in the least significant bits; ``e_{n-1} = 0``,
+``e_j = e_{j+1} + width(p_{j+1} - 1)``). Vertex ``k`` of the Kuhn simplex of cell ``c`` is corner
+``s_k = sum_j [rank_j < k] 2**j``, read from bank ``s_k`` at ``a(c)``: the address needs no
+comparison of the fractions (those only choose, after the read, which of the ``C(n, k)`` corner
+words with ``k`` set bits vertex ``k`` takes). Depth ``2**sum_j width(p_j - 1)`` (addresses with a
+``c_j >= p_j`` hold 0), ``2**n * depth`` words: e.g. 16 x 4096 x 11 bits for n = 4, p = 7 against
+5 x 1024 for the banked layout.
+
 Replicated layout (:class:`ReplicatedLayout`, for comparison)
 -------------------------------------------------------------
 ``n + 1`` identical copies of the whole weight vector (depth ``N``, address = linear vertex
@@ -56,9 +69,9 @@ import numpy as np
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.bitfields import pack_rows, to_unsigned
 
-__all__ = ["BankedLayout", "ReplicatedLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
+__all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
 
-LAYOUT_KINDS = ("banked", "replicated")
+LAYOUT_KINDS = ("banked", "replicated", "corner")
 
 
 def _as_weight_matrix(weight_codes, n_vertices: int) -> np.ndarray:
@@ -126,6 +139,11 @@ class _LayoutBase:
             b, a = self.bank_addr(idx, slot) if slot is not None else self.bank_addr(idx)
             out[b, a, :] = w
         return out
+
+    def product_slots(self, bank: np.ndarray) -> np.ndarray:
+        """Position of each product in the adder tree (:mod:`pwas_hdl.fixedpoint.reduction`): the
+        bank that read its word (each bank multiplies its own word)."""
+        return bank
 
     def used_mask(self) -> np.ndarray:
         """Boolean ``(n_banks, depth)``: True where a vertex is stored."""
@@ -261,12 +279,121 @@ class ReplicatedLayout(_LayoutBase):
         return self.bank_addr(v, np.arange(v.shape[-1], dtype=np.int64))
 
 
-def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLayout:
-    """Layout by name: ``"banked"`` (default) or ``"replicated"``."""
+class CornerLayout(_LayoutBase):
+    """``2**n`` corner banks addressed by the cell's bit fields (see the module docstring).
+
+    Parameters
+    ----------
+    grid : Grid
+
+    Attributes
+    ----------
+    n_banks : int
+        ``2**n``: bank ``s`` holds the corner ``c + s`` of every cell ``c`` (bit ``j`` of ``s`` is
+        the offset in dimension ``j``).
+    cell_bits : tuple of int
+        ``width(p_j - 1)`` (0 when ``p_j = 1``): the bits of cell coordinate ``j`` in the address.
+    field_shifts : tuple of int
+        ``e_j``: cell coordinate ``j`` sits at address bits ``[e_j, e_j + cell_bits[j])``.
+    depth : int
+        ``2**sum(cell_bits)`` (at least 1).
+    """
+
+    kind = "corner"
+
+    def __init__(self, grid: Grid):
+        super().__init__(grid)
+        self.n_banks = 1 << self.n
+        parts = [int(v) for v in grid.partitions]
+        self.cell_bits = tuple((pj - 1).bit_length() for pj in parts)
+        shifts, pos = [0] * self.n, 0
+        for j in reversed(range(self.n)):
+            shifts[j] = pos
+            pos += self.cell_bits[j]
+        self.field_shifts = tuple(shifts)
+        self.depth = 1 << pos
+
+    def cell_addr(self, cells) -> np.ndarray:
+        """Address of cells (integer coordinates ``0 <= c_j < p_j``, shape ``(..., n)``)."""
+        c = np.asarray(cells, dtype=np.int64)
+        if c.shape[-1:] != (self.n,):
+            raise ValueError(f"cell coordinates must have shape (..., {self.n}), got {c.shape}")
+        if c.size and (np.any(c < 0) or np.any(c >= self.grid.partitions)):
+            raise ValueError("cell coordinates outside the grid")
+        return np.asarray(c @ (np.int64(1) << np.array(self.field_shifts, dtype=np.int64)), dtype=np.int64)
+
+    def bank_addr(self, vertex, slot=None) -> tuple[np.ndarray, np.ndarray]:
+        """Bank and address of vertices as corner ``slot`` (a bank number ``s``) of a cell.
+
+        Parameters
+        ----------
+        vertex : int, array of int (linear indices) or tuple of n ints (coordinates)
+        slot : int or array of int, optional
+            The corner ``s`` the vertex is read as (default 0: the vertex as its own cell's
+            corner 0, valid for vertices with every ``v_j < p_j``); the cell is ``v - s``.
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape of the indices
+        """
+        v = self.grid.vertex_coords(self._index(vertex))
+        s = np.asarray(0 if slot is None else slot, dtype=np.int64)
+        bits = (s[..., None] >> np.arange(self.n)) & 1
+        bank = np.broadcast_to(s, v.shape[:-1]).copy()
+        return bank, self.cell_addr(v - bits)
+
+    def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
+        """Bank (the corner ``s_k``) and address (the cell's) of each vertex of simplices.
+
+        Parameters
+        ----------
+        vertices : ndarray of int, shape (m, n + 1)
+            Linear indices, ``vertices[:, 0]`` the cell's corner 0 (as :meth:`Grid.simplex_vertices`).
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape (m, n + 1)
+        """
+        v = np.asarray(vertices, dtype=np.int64)
+        coords = self.grid.vertex_coords(self._index(v))  # (m, n+1, n)
+        off = coords - coords[:, :1, :]
+        bank = off @ (np.int64(1) << np.arange(self.n, dtype=np.int64))
+        addr = np.broadcast_to(self.cell_addr(coords[:, 0, :])[:, None], bank.shape).copy()
+        return bank.astype(np.int64), addr
+
+    def product_slots(self, bank: np.ndarray) -> np.ndarray:
+        """Position of each product in the adder tree: vertex order (the RTL selects vertex ``k``'s
+        word among the corners, then multiplies and adds in vertex order)."""
+        return np.broadcast_to(np.arange(bank.shape[-1], dtype=np.int64), bank.shape)
+
+    def contents(self, weight_codes) -> np.ndarray:
+        """ROM contents, shape ``(2**n, depth, nz)``: ``out[s, a(c), t] = W[c + s, t]``, 0 elsewhere."""
+        w = _as_weight_matrix(weight_codes, self.grid.n_vertices)
+        out = np.zeros((self.n_banks, self.depth, w.shape[1]), dtype=np.int64)
+        parts = np.asarray(self.grid.partitions, dtype=np.int64)
+        cells = np.stack(np.meshgrid(*[np.arange(pj) for pj in parts], indexing="ij"), axis=-1).reshape(-1, self.n)
+        a = self.cell_addr(cells)
+        for s in range(self.n_banks):
+            bits = (s >> np.arange(self.n)) & 1
+            out[s, a, :] = w[self.grid.vertex_index(cells + bits)]
+        return out
+
+    def to_dict(self) -> dict:
+        d = super().to_dict()
+        d.update({"cell_bits": list(self.cell_bits), "field_shifts": list(self.field_shifts),
+                  "bank": "corner s of the cell (bit j of s: offset in dimension j)",
+                  "addr": "sum_j c_j * 2**field_shifts[j] (the cell's bit fields)"})
+        return d
+
+
+def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLayout | CornerLayout:
+    """Layout by name: ``"banked"`` (default), ``"replicated"`` or ``"corner"``."""
     if kind == "banked":
         return BankedLayout(grid)
     if kind == "replicated":
         return ReplicatedLayout(grid)
+    if kind == "corner":
+        return CornerLayout(grid)
     raise ValueError(f"memory layout must be one of {LAYOUT_KINDS}, got {kind!r}")
 
 

@@ -134,7 +134,8 @@ class PWASCore(wiring.Component):
     Parameters
     ----------
     params : CoreParams
-    memory : {"banked", "replicated"}
+    memory : {"banked", "replicated", "corner"}
+        ``corner``: :mod:`pwas_hdl.hdl.corner` (``2**n`` banks addressed by the cells alone).
     pipeline : Pipeline, preset name ("min", "short", "balanced", "max") or None (balanced)
     round_output : bool
         ``False``: no rounding or saturation; the output register holds the exact accumulator,
@@ -221,6 +222,10 @@ class PWASCore(wiring.Component):
     def _front(self, m: Module, pipe: _Pipe, payload, valid):
         """Scale/clamp/split, rank, addresses and mu (up to the memory address)."""
         valid, addr, mus, rot, oor = self._vertices(m, pipe, payload, valid)
+        if self.memory_kind == "corner":  # addr / mus: the cells / fractions (pwas_hdl.hdl.corner)
+            from pwas_hdl.hdl.corner import corner_read
+
+            return corner_read(self, m, pipe, valid, addr, mus, oor)
         p, plan = self.params, self.memory_plan
         nb, dw, aw = p.n + 1, p.frac + 1, plan.addr_width
         return self._banks(m, pipe, valid, addr, mus, rot, oor, nb, dw, aw, plan)
@@ -320,6 +325,8 @@ class PWASCore(wiring.Component):
         oor = False
         for f in r["oor"]:
             oor = _or(oor, f)
+        if self.memory_kind == "corner":  # the cells address the corner banks directly (_front)
+            return valid, cs, ds, 0, oor
 
         # ---------------------------------------------------------- B: rank + address precompute
         # the n(n-1)/2 comparison bits are what the rank register holds; the case tables that turn
@@ -690,6 +697,11 @@ class PWASCore(wiring.Component):
         bw, accw = p.weight_width, p.acc_width
 
         valid, r = pipe.stage("s_memout", pl.mem_out, valid, vals)
+        if "sel" in r:  # corner banks: vertex k's word among its corners (pwas_hdl.hdl.corner)
+            from pwas_hdl.hdl.corner import select_corners
+
+            r = {k: v for k, v in r.items() if k != "sel"} | {"data": select_corners(m, n, r["data"], r["sel"],
+                                                                                    self.memory_plan.word_bits)}
         valid, r = pipe.stage("s_mulin", pl.mul_in, valid, r)
         vdata, mus, oor = r["data"], r["mu"], r["oor"]
 
