@@ -249,6 +249,7 @@ class PWASCore(wiring.Component):
 
         # ---------------------------------------------------------- A: scale / clamp / split
         cs, ds, oor_j = [], [], []
+        raw = []  # raw_compare: (top, under, fraction bit field of the input) per dimension, or None
         for j in range(n):
             pj, fj = p.partitions[j], p.frac_bits[j]
             q = payload[j * bin_ : (j + 1) * bin_]
@@ -276,6 +277,8 @@ class PWASCore(wiring.Component):
             if not isinstance(over, bool):
                 over = self._name(m, over, f"over{j}")
             oor_j.append(_or(under, over))
+            if pl.raw_compare and not pl.split:
+                raw.append(self._raw_fraction(m, qu, big_l, fj, sc, top, under, j))
             # inside: (qu - L) mod 2**W holds the cell (upper bits) and the fraction (lower bits)
             t = add_const_wrap(m, qu[:w], -big_l, f"t{j}")
             if sc:  # exact scale: t in [0, S) -> t' = (t * K) >> R in [0, p * 2**F_j), cell and fraction
@@ -332,7 +335,10 @@ class PWASCore(wiring.Component):
         # the n(n-1)/2 comparison bits are what the rank register holds; the case tables that turn
         # them into thermometer codes come after it (one carry chain per stage)
         pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
-        ge_bits = [self._name(m, ds[i] >= ds[j], f"ge_{i}_{j}") for i, j in pairs]  # ties go to i < j
+        if raw and all(x is not None for x in raw):  # raw_compare: the comparators on the input bits
+            ge_bits = [self._raw_ge(m, raw[i], raw[j], big_f, f"ge_{i}_{j}") for i, j in pairs]
+        else:
+            ge_bits = [self._name(m, ds[i] >= ds[j], f"ge_{i}_{j}") for i, j in pairs]  # ties go to i < j
 
         # the base address and the bank rotation are sums over the dimensions: their first tree level
         # is computed here, the rest after the rank register (so that the rank stage holds one carry
@@ -361,7 +367,7 @@ class PWASCore(wiring.Component):
             else:
                 # the whole rotation before the rank register: the per-bank step tables after it are
                 # then functions of registered bits only
-                rot_part = [self._rotation(m, cs, nb, rbits)]
+                rot_part = [self._rotation(m, cs, nb, rbits, tables=pl.raw_compare and not pl.split)]
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
             terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
@@ -452,6 +458,33 @@ class PWASCore(wiring.Component):
         valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "mu": mus, "rot": rot, "oor": oor})
         addr, mus, rot, oor = r["addr"], r["mu"], r["rot"], r["oor"]
         return valid, addr, mus, rot, oor
+
+    def _raw_fraction(self, m: Module, qu, big_l: int, fj: int, sc, top, under, j: int):
+        """``raw_compare``: ``(top, under, r, z)`` with ``r`` the fraction ``(qu - L) mod 2**F_j`` as a
+        bit field of ``qu`` (bit ``F_j - 1`` inverted when ``L mod 2**F_j = 2**(F_j-1)``) and ``z``
+        the net ``r == 0``; None when the fraction is not such a bit field (exact scale, other ``L``)."""
+        low = big_l % (1 << fj) if fj else 0
+        if sc or fj == 0 or low not in (0, 1 << (fj - 1)):
+            return None
+        r = Signal(unsigned(fj), name=f"rfrac{j}")
+        m.d.comb += r.eq(Cat(qu[: fj - 1], ~qu[fj - 1]) if low else qu[:fj])
+        return top, under, r, self._name(m, r == 0, f"rzero{j}")
+
+    def _raw_ge(self, m: Module, a, b, big_f: int, name: str):
+        """``d_a >= d_b`` from the raw fractions and the clamp flags (see Pipeline ``raw_compare``)."""
+        ta, ua, ra, _za = a
+        tb, ub, rb, zb = b
+        wa, wb = len(ra), len(rb)
+        if wa == wb:
+            cmp = ra >= rb
+        else:  # aligned to F bits (fractions of F_j < F bits are shifted up)
+            cmp = Cat(Const(0, big_f - wa), ra) >= Cat(Const(0, big_f - wb), rb)
+        rawge = self._name(m, cmp, f"{name}_raw")
+        inner = rawge if ua is False else Mux(ua, zb, rawge)
+        inner = _or(ub, inner)
+        if tb is not False:
+            inner = ~tb & inner
+        return self._name(m, _or(ta, inner), name)
 
     def _address_fields(self):
         """Bit fields of the banked address, or None when the layout's address needs adders.
@@ -901,9 +934,10 @@ class PWASCore(wiring.Component):
         out = tree_level(nets, lambda a, b, _lvl, i: combine(a, b, i), 0) if len(nets) > 2 else nets
         return out + ([const] if const else [])
 
-    def _rotation(self, m: Module, cs, nb: int, rbits: int):
+    def _rotation(self, m: Module, cs, nb: int, rbits: int, tables: bool = False):
         """``rot = |c| mod nb``: the cells' sum (an adder tree of equal-width operands) and one table,
-        when that sum has at most 6 bits; else the residues' tables (:meth:`_modsum`)."""
+        when that sum has at most 6 bits and not ``tables``; else the residues' tables
+        (:meth:`_modsum`: no carry chain)."""
         p = self.params
         const = sum(c for c in cs if isinstance(c, int))
         nets = [c for c in cs if not isinstance(c, int)]
@@ -917,7 +951,7 @@ class PWASCore(wiring.Component):
             m.d.comb += s.eq(a + b)
             return s
 
-        if len(nets) >= 2 and bits_for(total) <= 6:
+        if len(nets) >= 2 and bits_for(total) <= 6 and not tables:
             w = tree_reduce([len(c) for c in nets], width)
             if w is not None and w <= 6:
                 sm = tree_reduce(nets, add)

@@ -208,6 +208,13 @@ class Pipeline:
     ``mu_late``  (no register) banked: the sorted fractions ``d_(k)`` instead of ``mu`` go through the
                  registers up to the memory register; ``mu`` and its rotation are computed in the
                  memory-read cycle, beside the block RAM's clock-to-output (off the front's path)
+    ``raw_compare`` (no register; without ``split``) the rank comparators read the fractions as bit
+                 fields of the input codes, when the domain's lower bound makes them so
+                 (``L_j mod 2**F_j`` is 0 or ``2**(F_j-1)``, no exact scale), and the clamp enters
+                 after their carry chains: ``d_i >= d_j = top_i | ~top_j & (under_j | (under_i ?
+                 r_j == 0 : r_i >= r_j))`` (the same bits; the clamp / split LUTs leave the
+                 comparators' path; other grids: plain comparators); the bank rotation
+                 ``|c| mod (n+1)`` then comes from the cells' residue tables (no carry chain)
     memory *     bank addresses + ``mu`` feed the synchronous read ports (one register)
     ``mem_out``  extra register on the memory read data (on ECP5 the DP16KD output register)
     ``mul_in``   register on the multiplier operands (``mu`` and the read data; on ECP5 the
@@ -247,6 +254,7 @@ class Pipeline:
     mu_late: bool = False
     flat_sum: bool = False
     prune_sat: bool = False
+    raw_compare: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -289,7 +297,7 @@ class Pipeline:
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
             known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
-                     "mu_late", "flat_sum", "prune_sat"}
+                     "mu_late", "flat_sum", "prune_sat", "raw_compare"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -319,6 +327,7 @@ class Pipeline:
             # only when set: the manifests of the pipelines without it stay as they were
             **({"flat_sum": True} if self.flat_sum else {}),
             **({"prune_sat": True} if self.prune_sat else {}),
+            **({"raw_compare": True} if self.raw_compare else {}),
         }
 
 
