@@ -336,7 +336,8 @@ class PWASCore(wiring.Component):
         # them into thermometer codes come after it (one carry chain per stage)
         pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
         if raw and all(x is not None for x in raw):  # raw_compare: the comparators on the input bits
-            ge_bits = [self._raw_ge(m, raw[i], raw[j], big_f, f"ge_{i}_{j}") for i, j in pairs]
+            zeros: dict = {}
+            ge_bits = [self._raw_ge(m, raw[i], raw[j], big_f, f"ge_{i}_{j}", zeros) for i, j in pairs]
         else:
             ge_bits = [self._name(m, ds[i] >= ds[j], f"ge_{i}_{j}") for i, j in pairs]  # ties go to i < j
 
@@ -460,27 +461,38 @@ class PWASCore(wiring.Component):
         return valid, addr, mus, rot, oor
 
     def _raw_fraction(self, m: Module, qu, big_l: int, fj: int, sc, top, under, j: int):
-        """``raw_compare``: ``(top, under, r, z)`` with ``r`` the fraction ``(qu - L) mod 2**F_j`` as a
-        bit field of ``qu`` (bit ``F_j - 1`` inverted when ``L mod 2**F_j = 2**(F_j-1)``) and ``z``
-        the net ``r == 0``; None when the fraction is not such a bit field (exact scale, other ``L``)."""
+        """``raw_compare``: ``(top, under, r, j)`` with ``r`` the fraction ``(qu - L) mod 2**F_j`` as a
+        bit field of ``qu`` (bit ``F_j - 1`` inverted when ``L mod 2**F_j = 2**(F_j-1)``); None when
+        the fraction is not such a bit field (exact scale, other ``L``)."""
         low = big_l % (1 << fj) if fj else 0
         if sc or fj == 0 or low not in (0, 1 << (fj - 1)):
             return None
-        r = Signal(unsigned(fj), name=f"rfrac{j}")
-        m.d.comb += r.eq(Cat(qu[: fj - 1], ~qu[fj - 1]) if low else qu[:fj])
-        return top, under, r, self._name(m, r == 0, f"rzero{j}")
+        if low:  # the inverted top bit is a named net (a cell output); the rest is wiring
+            inv = Signal(name=f"rfrac{j}_msb_n")
+            m.d.comb += inv.eq(~qu[fj - 1])
+            r = Cat(qu[: fj - 1], inv)
+        else:
+            r = qu[:fj]
+        return top, under, r, j
 
-    def _raw_ge(self, m: Module, a, b, big_f: int, name: str):
+    def _raw_zero(self, m: Module, x, cache: dict):
+        """``r == 0`` of a raw fraction (one named net per dimension, made when first needed)."""
+        _top, _under, r, j = x
+        if j not in cache:
+            cache[j] = self._name(m, ~r.any(), f"rzero{j}")
+        return cache[j]
+
+    def _raw_ge(self, m: Module, a, b, big_f: int, name: str, zeros: dict):
         """``d_a >= d_b`` from the raw fractions and the clamp flags (see Pipeline ``raw_compare``)."""
-        ta, ua, ra, _za = a
-        tb, ub, rb, zb = b
+        ta, ua, ra, _ja = a
+        tb, ub, rb, _jb = b
         wa, wb = len(ra), len(rb)
         if wa == wb:
             cmp = ra >= rb
         else:  # aligned to F bits (fractions of F_j < F bits are shifted up)
             cmp = Cat(Const(0, big_f - wa), ra) >= Cat(Const(0, big_f - wb), rb)
         rawge = self._name(m, cmp, f"{name}_raw")
-        inner = rawge if ua is False else Mux(ua, zb, rawge)
+        inner = rawge if ua is False else Mux(ua, self._raw_zero(m, b, zeros), rawge)
         inner = _or(ub, inner)
         if tb is not False:
             inner = ~tb & inner
