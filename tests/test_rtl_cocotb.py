@@ -89,6 +89,15 @@ CONFIGS = [
     # outputs: kept by prune_sat), and truncation (no rounding constant in the sum)
     DesignConfig("c-n3-p4x4x4-z2-sat-goal-latency", C, 0, 3, 0, 1, [4, 4, 4], 2, {"goal": "latency", "output_bits": 9}),
     DesignConfig("c-n2-p5x3-trunc-goal-latency", C, 0, 2, 0, 1, [5, 3], 1, {"goal": "latency", "rounding": "truncate"}),
+    # issue 14, the latency-first front (opt-in, no preset): corner banks (2**n memories addressed by
+    # the cells; vertex k's word chosen among its corners after the memory's output register) and the
+    # comparators on the input bits with the rotation from residue tables (raw_compare)
+    DesignConfig("c-n3-p3x2x4-z2-corner-memout", C, 0, 3, 0, 1, [3, 2, 4], 2,
+                 {"memory": "corner", "pipeline": {"split": False, "rank": False, "addr": False, "mem_out": True, "mul_in": False,
+                                                   "product": True, "tree_levels": 0, "mu_late": True}}),
+    DesignConfig("s-y3-p3-raw-compare", S, 0, 3, 0, 1, 3, 1,
+                 {"pipeline": {"split": False, "rank": False, "addr": False, "mem_out": False, "mul_in": False, "product": True,
+                               "tree_levels": 0, "mu_late": True, "raw_compare": True}}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 
