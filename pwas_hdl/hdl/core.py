@@ -277,7 +277,7 @@ class PWASCore(wiring.Component):
             if not isinstance(over, bool):
                 over = self._name(m, over, f"over{j}")
             oor_j.append(_or(under, over))
-            if pl.raw_compare and not pl.split:
+            if pl.raw_compare and not pl.split and n > 1 and self.memory_kind != "corner":  # (corner: its own comparators)
                 raw.append(self._raw_fraction(m, qu, big_l, fj, sc, top, under, j))
             # inside: (qu - L) mod 2**W holds the cell (upper bits) and the fraction (lower bits)
             t = add_const_wrap(m, qu[:w], -big_l, f"t{j}")

@@ -214,7 +214,8 @@ class Pipeline:
                  after their carry chains: ``d_i >= d_j = top_i | ~top_j & (under_j | (under_i ?
                  r_j == 0 : r_i >= r_j))`` (the same bits; the clamp / split LUTs leave the
                  comparators' path; other grids: plain comparators); the bank rotation
-                 ``|c| mod (n+1)`` then comes from the cells' residue tables (no carry chain)
+                 ``|c| mod (n+1)`` then comes from the cells' residue tables (no carry chain). No
+                 effect for n = 1 and the corner memory (its comparators are off the address path)
     memory *     bank addresses + ``mu`` feed the synchronous read ports (one register)
     ``mem_out``  extra register on the memory read data (on ECP5 the DP16KD output register)
     ``mul_in``   register on the multiplier operands (``mu`` and the read data; on ECP5 the
@@ -335,7 +336,7 @@ class Pipeline:
 #: harness, hard-block registers packed; benchmarks/hw_tables.py has the current figures):
 #:
 #: * ``min``: 2 registers (memory + output), the fewest cycles;
-#: * ``short``: ``min`` + the product register + ``mu_late`` (3 cycles for every n). The rule behind
+#: * ``short``: ``min`` + one multiplier register + ``mu_late`` (3 cycles for every n). The rule behind
 #:   it: a register pays only where it costs no fabric (the MULT18X18D output register) and cuts the
 #:   longest stage of ``min`` (memory -> multipliers -> adder tree -> output) into two parts that are
 #:   each shorter than the front (input -> scale / rank / address -> memory), which no hard-block
@@ -350,7 +351,14 @@ class Pipeline:
 #:   rounding constant (``flat_sum``: one carry-save tree, one carry chain) without the saturation
 #:   the weights cannot reach (``prune_sat``): 7.7 ns alone (10.7 ns as a pairwise tree + rounding
 #:   adder + saturation; measured with every other stage cut by registers, seed 1), 3 seeds 33.7 ns
-#:   (34.1 before), the memory -> multiplier stage now the critical one on every seed;
+#:   (34.1 before), the memory -> multiplier stage now the critical one on every seed. Now the one
+#:   register after the read is the multipliers' input register (``mul_in``; ``synth`` packs it into the
+#:   MULT18X18D input registers, :mod:`pwas_hdl.flow.hard_registers` ``mult_first``) instead of their
+#:   output register: memory -> multiplier ~8 ns (setup 0.08 ns instead of 3.5), the multiplier's
+#:   clock-to-output (3.86 ns) joins the one-sum stage (10.4-11.0 ns), and the front, then the longest
+#:   stage, is trimmed by ``raw_compare`` (comparators on the input bits, the rotation from residue
+#:   tables: 11.5 -> 10.2 ns alone): 3 seeds 31.8 ns (33.7 before), the front and the sum stage both
+#:   at 10.4-10.9 ns (``benchmarks/results/hw_tables_latency_experiments.md``, c9');
 #: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
 #:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
 #: * ``max``: every register (13 cycles for n = 4): each stage holds at most one carry chain or a
@@ -360,8 +368,8 @@ class Pipeline:
 #:   with DSP blocks it takes twice as many.
 PIPELINE_PRESETS: dict[str, Pipeline] = {
     "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
-    "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=True, tree_levels=0,
-                      mu_late=True, flat_sum=True, prune_sat=True),
+    "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=True, product=False, tree_levels=0,
+                      mu_late=True, flat_sum=True, prune_sat=True, raw_compare=True),
     "balanced": Pipeline(),
     "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
                     offset=True, bank=True),
