@@ -95,7 +95,17 @@ def test_forked_folds_give_the_serial_result(large_rules):
     assert forked.solver["solves_by_method"] == serial.solver["solves_by_method"]
     assert forked.solver["iterations"] == serial.solver["iterations"]
     tasks = forked.solver["fork_tasks"]
-    assert len(tasks) == 6 and len({t["pid"] for t in tasks}) <= 2  # two parts per fold, two workers
+    # one task per segment of every fold's sweep: its multigrid chain, its factor-PCG chain, and
+    # every larger data-dominated sigma alone
+    hth = sparse.csr_array(h.T @ h)
+    solver = NormalEquationSolver(hth, gam, 2)
+    labels = rl.fold_labels(h.shape[0], 3)
+    segs = []
+    for f in range(3):
+        hv = h[np.flatnonzero(labels == f)]
+        segs.append(solver.sweep_segments((hth - sparse.csr_array(hv.T @ hv)).tocsr(), SIGMAS))
+    assert all(len(s) >= 3 for s in segs)
+    assert len(tasks) == sum(len(s) for s in segs) and len({t["pid"] for t in tasks}) <= 2  # two workers
     assert serial.solver["fork_tasks"] == []
 
 

