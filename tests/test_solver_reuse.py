@@ -152,3 +152,31 @@ def test_memory_estimate_counts_each_forked_worker():
     assert one["workers"] == 0
     per = one["HtH"] * 2 / 3 + one["factor"] + one["multigrid"] + one["vectors"]
     assert two["total"] == pytest.approx(one["total"] + per)
+
+
+def test_sweep_segments_cover_every_sigma_once_by_the_rule(large_rules):
+    """A fold's sweep in independent segments: its multigrid sigmas from the largest down, then its
+    FACTOR_PCG_SEGMENT smallest data-dominated sigmas from the smallest up (the factor-PCG chain),
+    then every other data-dominated sigma alone; a segment starts without the previous one's factor."""
+    h, z, gam = _problem()
+    hth = sparse.csr_array(h.T @ h)
+    sig = np.logspace(-7, 2, 19)
+    solver = NormalEquationSolver(hth, gam, 2)
+    segs = solver.sweep_segments(hth, sig)
+    mg_idx = [i for i in range(sig.size) if solver.uses_mg(hth, float(sig[i]))]
+    small = [i for i in range(sig.size) if i not in mg_idx]
+    assert len(small) > rl.FACTOR_PCG_SEGMENT + 1 and mg_idx  # the rule has all three kinds here
+    assert segs[0] == sorted(mg_idx, key=lambda i: -sig[i])
+    assert segs[1] == sorted(small, key=lambda i: sig[i])[: rl.FACTOR_PCG_SEGMENT]
+    assert segs[2:] == [[i] for i in sorted(small, key=lambda i: sig[i])[rl.FACTOR_PCG_SEGMENT:]]
+    # the chain's second sigma reuses the factor; a segment started after it neither reuses
+    # nor tries to (no factor-PCG attempt, no failure counted)
+    b = h.T @ z
+    solver.start_segment()
+    w, i0 = solver.solve(hth, b, float(sig[segs[1][0]]))
+    _, i1 = solver.solve(hth, b, float(sig[segs[1][1]]), x0=w)
+    assert (i0.method, i1.method) == ("direct", "factor-pcg")
+    w, _ = solver.solve(hth, b, float(sig[segs[1][0]]))  # a fresh factor, reuse not stopped
+    solver.start_segment()
+    _, i2 = solver.solve(hth, b, float(sig[segs[2][0]]), x0=w)
+    assert i2.method == "direct" and solver.factor_pcg_failures == 0
