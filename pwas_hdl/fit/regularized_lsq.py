@@ -397,7 +397,9 @@ def estimate_fit_memory(
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
         twice ``A``, or a diagonal), ``multigrid`` (its levels, where first order uses it),
-        ``vectors`` (weights, right-hand sides, CG work vectors) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
+        ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
+        process holds), ``fold_matrices`` (with forked workers: the parent's normal matrices of
+        the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
     """
     t, nv, k = int(n_samples), int(n_vertices), int(n_dims) + 1
     nnz_h = t * k
@@ -426,6 +428,8 @@ def estimate_fit_memory(
     }
     per_process = est["HtH"] * 2 / 3 + est["factor"] + est["multigrid"] + est["vectors"]
     est["workers"] = per_process * (max(int(processes), 1) - 1)
+    # forked workers: the parent holds every fold's normal matrix (5 folds; one is in "HtH")
+    est["fold_matrices"] = 4 * _sparse_bytes(nnz_hth, nv) if int(processes) > 1 else 0.0
     est["total"] = float(sum(est.values()))
     est["method"] = 1.0 if chosen in ("cg", "mg") else 0.0
     return est
@@ -460,7 +464,8 @@ def check_fit_memory(
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
         parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
-                                                                    "workers") if k != "workers" or est[k] > 0)
+                                                                    "workers", "fold_matrices")
+                          if k not in ("workers", "fold_matrices") or est[k] > 0)
         raise ResourceLimit(
             f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
             f"N = {n_vertices} weights, over the limit of {limit / 2**20:.0f} MiB ({source}); use fewer partitions "
