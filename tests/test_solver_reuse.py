@@ -149,9 +149,12 @@ def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
 def test_memory_estimate_counts_each_forked_worker():
     one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1)
     two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2)
-    assert one["workers"] == 0
+    assert one["workers"] == 0 and one["fold_matrices"] == 0
     per = one["HtH"] * 2 / 3 + one["factor"] + one["multigrid"] + one["vectors"]
-    assert two["total"] == pytest.approx(one["total"] + per)
+    # and the parent holds the other four folds' normal matrices (H'H's pattern each), inherited
+    fold = rl._sparse_bytes(min(10.0**12, 10**5 * 9.0), 10**6)
+    assert two["fold_matrices"] == pytest.approx(4 * fold)
+    assert two["total"] == pytest.approx(one["total"] + per + 4 * fold)
 
 
 def test_sweep_segments_cover_every_sigma_once_by_the_rule(large_rules):
