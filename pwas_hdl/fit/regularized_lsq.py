@@ -1037,7 +1037,8 @@ def _folds_independent(solver: "NormalEquationSolver", sigmas: np.ndarray) -> bo
 
 def fork_workers(executor, n_unknowns: int) -> int:
     """Forked processes for the CV folds: the executor's local ``workers`` (``>= 2``, no scheduler)
-    from :data:`FORK_MIN_UNKNOWNS` unknowns where the system can fork, else 0 (see :func:`_map_folds`)."""
+    from :data:`FORK_MIN_UNKNOWNS` unknowns where the system can fork, else 0 (see
+    :func:`_fork_segments`)."""
     if executor is None or getattr(executor, "scheduler", None) is not None:
         return 0
     workers = getattr(executor, "workers", None) or 0
@@ -1143,7 +1144,8 @@ def cross_validate_sigma(
         Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is distributed
         and the folds are independent, or, with local ``workers >= 2`` and at least
         :data:`FORK_MIN_UNKNOWNS` unknowns, on that many forked processes that inherit the data
-        (see :func:`_map_folds`); the result is the serial one.
+        (one task per segment of a fold's sweep, see :func:`_fork_segments`); the result is the
+        serial one.
 
     Returns
     -------
@@ -1240,7 +1242,8 @@ def cross_validate_sigma(
         "solves_by_method": {k: int(sum(i.method == k for i in infos)) for k in sorted({i.method for i in infos})},
         "superlu_fallbacks": int(solver.superlu_fallbacks),
         "weight_bound": weight_bound,
-        # forked workers (see _map_folds): per task its CPU seconds and the worker's pid
+        # forked workers (see _fork_segments): per segment task, in (fold, segment) order, its CPU
+        # seconds and the worker's pid
         "fork_tasks": [{"cpu_s": float(c), "pid": int(p)} for c, p in task_stats],
     }
     return CVResult(sig, mse, best, folds, fold_mse, summary)
