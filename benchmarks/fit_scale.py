@@ -190,15 +190,25 @@ def worker_direct(n: int, p: int, order: int, t: int, sigma: float, weights_in: 
 
 
 def _run_child(args: list[str], limit: float) -> dict:
+    """Run one point in a subprocess of its own session; on timeout kill the whole session (the
+    fit's forked CV workers too: killing the fit process alone left them running as orphans)."""
+    import signal
+
     cmd = [sys.executable, str(Path(__file__).resolve()), *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        out = subprocess.run(cmd, capture_output=True, text=True, timeout=limit, check=False)
+        stdout, stderr = proc.communicate(timeout=limit)
     except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:  # pragma: no cover - already gone
+            pass
+        proc.communicate()
         return {"status": "timeout", "limit_s": limit}
-    if out.returncode != 0:
-        tail = (out.stderr or "").strip().splitlines()[-1:] or ["?"]
+    if proc.returncode != 0:
+        tail = (stderr or "").strip().splitlines()[-1:] or ["?"]
         return {"status": "failed", "error": tail[0]}
-    res = json.loads(out.stdout.strip().splitlines()[-1])
+    res = json.loads(stdout.strip().splitlines()[-1])
     res["status"] = "ok"
     return res
 

@@ -181,3 +181,50 @@ def test_explicit_zeros_of_the_fold_matrix_are_not_outside_the_pattern():
     fold.set_sigma(1.0)
     m.eliminate_zeros()
     assert abs(sparse.csr_array(fold.ops[0]) - sparse.csr_array(m + gam)).max() <= 1e-12
+
+
+def test_union_by_markers_equals_the_key_search():
+    """The union pattern and both matrices' values on it, by one marker addition, are those of the
+    key search, with explicit zeros of either matrix dropped."""
+    rng = np.random.default_rng(7)
+    for trial in range(12):
+        n = int(rng.integers(1, 30))
+        a = sparse.random(n, n, density=rng.uniform(0, 0.5), random_state=trial, format="csr")
+        b = sparse.random(n, n, density=rng.uniform(0, 0.5), random_state=trial + 50, format="csr")
+        a.data[::3] = 0.0
+        pat, va, vb = mg._union_aligned(a, b)
+        ref = mg._union_pattern(a, b)
+        assert np.array_equal(pat.indptr, ref.indptr) and np.array_equal(pat.indices, ref.indices)
+        assert np.array_equal(va, mg._aligned(ref, a)) and np.array_equal(vb, mg._aligned(ref, b))
+        np.testing.assert_array_equal(pat.toarray() * 0 + sparse.csr_matrix((va, pat.indices, pat.indptr),
+                                                                            shape=pat.shape).toarray(), a.toarray())
+
+
+def _gamma_by_edge_blocks(grid):
+    """Gamma as defined: the per-edge 2 x 2 blocks summed (COO), plus the ridge."""
+    cell = float(np.prod(grid.step))
+    rows, cols, vals = [], [], []
+    for j in range(grid.n):
+        a, b = grid.axis_edges(j)
+        w = cell / grid.step[j] ** 2
+        rows += [a, b, a, b]
+        cols += [a, b, b, a]
+        vals += [np.full(a.size, w), np.full(a.size, w), np.full(a.size, -w), np.full(a.size, -w)]
+    n_v = grid.n_vertices
+    lap = sparse.coo_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_v, n_v)).tocsc()
+    eps = rl.FIRST_ORDER_RIDGE * float(lap.diagonal().mean())
+    return (lap + eps * sparse.identity(n_v, format="csc")).tocsc()
+
+
+@pytest.mark.parametrize("lo,hi,p", [([0, 0], [1, 3.7], [22, 29]), ([0, 0, 0], [1, 2.3, 0.7], [3, 4, 5]), ([0], [1.3], [17]),
+                                     ([0, 0, 0, 0], [1, 2.1, 0.37, 5], [3, 2, 4, 3]), ([0] * 5, [1, 2.1, 0.37, 5, 0.9], [2, 3, 2, 2, 3])])
+def test_first_order_gamma_is_the_sum_of_its_edge_blocks(lo, hi, p):
+    """Built entry by entry, Gamma equals the summed per-edge blocks: bit for bit up to n = 4 (the
+    order in which the blocks' duplicates are added), within an ulp beyond."""
+    grid = Grid(np.asarray(lo, float), np.asarray(hi, float), p)
+    got, ref = tikhonov_matrix(grid, 1), _gamma_by_edge_blocks(grid)
+    assert got.has_canonical_format and np.array_equal(got.indptr, ref.indptr) and np.array_equal(got.indices, ref.indices)
+    if grid.n <= 4:
+        assert np.array_equal(got.data, ref.data)
+    else:
+        np.testing.assert_allclose(got.data, ref.data, rtol=4e-16, atol=0)

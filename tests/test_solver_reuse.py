@@ -95,7 +95,17 @@ def test_forked_folds_give_the_serial_result(large_rules):
     assert forked.solver["solves_by_method"] == serial.solver["solves_by_method"]
     assert forked.solver["iterations"] == serial.solver["iterations"]
     tasks = forked.solver["fork_tasks"]
-    assert len(tasks) == 6 and len({t["pid"] for t in tasks}) <= 2  # two parts per fold, two workers
+    # one task per segment of every fold's sweep: its multigrid chain, its factor-PCG chain, and
+    # every larger data-dominated sigma alone
+    hth = sparse.csr_array(h.T @ h)
+    solver = NormalEquationSolver(hth, gam, 2)
+    labels = rl.fold_labels(h.shape[0], 3)
+    segs = []
+    for f in range(3):
+        hv = h[np.flatnonzero(labels == f)]
+        segs.append(solver.sweep_segments((hth - sparse.csr_array(hv.T @ hv)).tocsr(), SIGMAS))
+    assert all(len(s) >= 3 for s in segs)
+    assert len(tasks) == sum(len(s) for s in segs) and len({t["pid"] for t in tasks}) <= 2  # two workers
     assert serial.solver["fork_tasks"] == []
 
 
@@ -139,6 +149,37 @@ def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
 def test_memory_estimate_counts_each_forked_worker():
     one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1)
     two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2)
-    assert one["workers"] == 0
+    assert one["workers"] == 0 and one["fold_matrices"] == 0
     per = one["HtH"] * 2 / 3 + one["factor"] + one["multigrid"] + one["vectors"]
-    assert two["total"] == pytest.approx(one["total"] + per)
+    # and the parent holds the other four folds' normal matrices (H'H's pattern each), inherited
+    fold = rl._sparse_bytes(min(10.0**12, 10**5 * 9.0), 10**6)
+    assert two["fold_matrices"] == pytest.approx(4 * fold)
+    assert two["total"] == pytest.approx(one["total"] + per + 4 * fold)
+
+
+def test_sweep_segments_cover_every_sigma_once_by_the_rule(large_rules):
+    """A fold's sweep in independent segments: its multigrid sigmas from the largest down, then its
+    FACTOR_PCG_SEGMENT smallest data-dominated sigmas from the smallest up (the factor-PCG chain),
+    then every other data-dominated sigma alone; a segment starts without the previous one's factor."""
+    h, z, gam = _problem()
+    hth = sparse.csr_array(h.T @ h)
+    sig = np.logspace(-7, 2, 19)
+    solver = NormalEquationSolver(hth, gam, 2)
+    segs = solver.sweep_segments(hth, sig)
+    mg_idx = [i for i in range(sig.size) if solver.uses_mg(hth, float(sig[i]))]
+    small = [i for i in range(sig.size) if i not in mg_idx]
+    assert len(small) > rl.FACTOR_PCG_SEGMENT + 1 and mg_idx  # the rule has all three kinds here
+    assert segs[0] == sorted(mg_idx, key=lambda i: -sig[i])
+    assert segs[1] == sorted(small, key=lambda i: sig[i])[: rl.FACTOR_PCG_SEGMENT]
+    assert segs[2:] == [[i] for i in sorted(small, key=lambda i: sig[i])[rl.FACTOR_PCG_SEGMENT:]]
+    # the chain's second sigma reuses the factor; a segment started after it neither reuses
+    # nor tries to (no factor-PCG attempt, no failure counted)
+    b = h.T @ z
+    solver.start_segment()
+    w, i0 = solver.solve(hth, b, float(sig[segs[1][0]]))
+    _, i1 = solver.solve(hth, b, float(sig[segs[1][1]]), x0=w)
+    assert (i0.method, i1.method) == ("direct", "factor-pcg")
+    w, _ = solver.solve(hth, b, float(sig[segs[1][0]]))  # a fresh factor, reuse not stopped
+    solver.start_segment()
+    _, i2 = solver.solve(hth, b, float(sig[segs[2][0]]), x0=w)
+    assert i2.method == "direct" and solver.factor_pcg_failures == 0

@@ -155,6 +155,40 @@ def _aligned(pattern: sparse.csr_matrix, m) -> np.ndarray:
     return out
 
 
+def _union_aligned(a, b) -> tuple[sparse.csr_matrix, np.ndarray, np.ndarray]:
+    """The union pattern of ``a`` and ``b`` and the values of each on it (zeros where it has none).
+
+    One sparse addition of *position markers* instead of a key search per matrix: entry ``i`` of
+    ``a`` carries ``i + 1``, entry ``j`` of ``b`` carries ``(j + 1) * 2^k`` (``2^k > nnz(a)``), so
+    every sum is positive (no entry of the union cancels) and exact in double precision while
+    ``2^k (nnz(b) + 2) < 2^53``; the sum says which entries of ``a`` and ``b`` meet
+    there. Explicit zeros are dropped first (as in :func:`_aligned`). Measured at n = 2,
+    N = 10^6 (5 levels of one fold): 0.1 s instead of 1.1-1.5 s with :func:`_aligned` twice.
+    """
+    a, b = _csr(a), _csr(b)
+    a.eliminate_zeros()
+    b.eliminate_zeros()
+    shift = int(np.ceil(np.log2(a.nnz + 2)))
+    big = float(2**shift)
+    if big * (b.nnz + 2) >= 2.0**53:  # pragma: no cover - beyond any grid of this project
+        pat = _union_pattern(a, b)
+        return pat, _aligned(pat, a), _aligned(pat, b)
+    ma = sparse.csr_matrix((np.arange(1, a.nnz + 1, dtype=float), a.indices, a.indptr), shape=a.shape)
+    mb = sparse.csr_matrix((np.arange(1, b.nnz + 1, dtype=float) * big, b.indices, b.indptr), shape=b.shape)
+    pat = _csr(ma + mb)
+    code = pat.data.astype(np.int64)
+    # position 0 (no entry) picks the appended 0.0
+    va = np.append(a.data, 0.0)[(code & (2**shift - 1)) - 1]
+    vb = np.append(b.data, 0.0)[(code >> shift) - 1]
+    pat.data[:] = 1.0
+    return pat, va, vb
+
+
+def _single(m: sparse.csr_matrix) -> sparse.csr_matrix:
+    """``m`` with its values in single precision (index arrays shared, not copied)."""
+    return sparse.csr_matrix((m.data.astype(np.float32), m.indices, m.indptr), shape=m.shape)
+
+
 def _union_pattern(a, b) -> sparse.csr_matrix:
     s = _csr(abs(_csr(a)) + abs(_csr(b)))
     s.data[:] = 1.0
@@ -221,6 +255,14 @@ class MGInfo:
 class FoldMultigrid:
     """V-cycle preconditioned CG for ``(m + sigma Gamma) w = b`` of one ``m`` and any sigma.
 
+    The V-cycle runs in single precision (every level's values and the prolongations cast, the
+    index arrays shared; the coarsest solve in double): it is only the preconditioner, while CG,
+    its products with the fine operator and the stopping test on the residual computed afresh
+    stay in double precision, so the weight bound is unchanged. Half the bytes of values to
+    stream per Gauss-Seidel sweep and product: measured at n = 2, N = 10^6, T = 10^5 (one fold,
+    its 11 multigrid sigmas, loaded machine, CPU): 6.7 s instead of 7.9 s, the same iteration
+    counts (9 9 8 8 8 8 8 9 10 12 19).
+
     Parameters
     ----------
     hier : GridHierarchy
@@ -234,10 +276,13 @@ class FoldMultigrid:
         self._m_vals: list[np.ndarray] = []
         self._g_vals: list[np.ndarray] = []
         for m, g in zip(ms, hier.gammas):
-            pat = _union_pattern(m, g)
-            self._m_vals.append(_aligned(pat, m))
-            self._g_vals.append(_aligned(pat, g))
+            pat, m_vals, g_vals = _union_aligned(m, g)
+            self._m_vals.append(m_vals)
+            self._g_vals.append(g_vals)
             self.ops.append(pat)
+        self._ops32 = [_single(a) for a in self.ops]
+        self._p32 = [_single(p) for p in hier.p]
+        self._r32 = [_single(r) for r in hier.r]
         self.sigma: float | None = None
         self._coarse = None
 
@@ -245,25 +290,32 @@ class FoldMultigrid:
         """Every level's operator ``m_l + sigma Gamma_l`` (in place) and the coarsest factor."""
         if self.sigma == sigma:
             return
-        for a, mv, gv in zip(self.ops, self._m_vals, self._g_vals):
+        for a, a32, mv, gv in zip(self.ops, self._ops32, self._m_vals, self._g_vals):
             np.add(mv, sigma * gv, out=a.data)
+            np.copyto(a32.data, a.data, casting="same_kind")
         self._coarse = splinalg.splu(
             sparse.csc_matrix(self.ops[-1]), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
             options={"SymmetricMode": True},
         )
         self.sigma = sigma
 
-    def vcycle(self, b: np.ndarray, level: int = 0) -> np.ndarray:
-        """One V-cycle from a zero initial guess: an SPD approximation of ``A^{-1} b``."""
+    def vcycle(self, b: np.ndarray) -> np.ndarray:
+        """One V-cycle from a zero initial guess: an SPD approximation of ``A^{-1} b``.
+
+        ``b`` and the result in double precision, the cycle itself in single (see the class).
+        """
+        return self._vcycle(np.asarray(b, dtype=np.float32), 0).astype(float)
+
+    def _vcycle(self, b: np.ndarray, level: int) -> np.ndarray:
         from pyamg.relaxation.relaxation import gauss_seidel
 
         if level == len(self.ops) - 1:
-            return self._coarse.solve(np.asarray(b, dtype=float))
-        a = self.ops[level]
+            return self._coarse.solve(b.astype(float)).astype(np.float32)
+        a = self._ops32[level]
         x = np.zeros_like(b)
         gauss_seidel(a, x, b, iterations=1, sweep="forward")
         r = b - a @ x
-        x += self.hier.p[level] @ self.vcycle(self.hier.r[level] @ r, level + 1)
+        x += self._p32[level] @ self._vcycle(self._r32[level] @ r, level + 1)
         gauss_seidel(a, x, b, iterations=1, sweep="backward")
         return x
 

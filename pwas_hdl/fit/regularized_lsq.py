@@ -38,6 +38,7 @@ __all__ = [
     "MG_AUTO_DIMS",
     "CG_RTOL",
     "FACTOR_PCG_MAXITER",
+    "FACTOR_PCG_SEGMENT",
     "FORK_MIN_UNKNOWNS",
     "solve_regularized",
     "cross_validate_sigma",
@@ -80,20 +81,28 @@ def tikhonov_matrix(grid: Grid, order: int = 0) -> sparse.csc_array:
     if order != 1:
         raise ValueError(f"Tikhonov order must be 0 or 1, got {order!r}")
     cell_volume = float(np.prod(grid.step))
+    # built directly with one entry per (row, column): the diagonal accumulates each vertex's edge
+    # weights axis by axis, as its end ``a`` then as its end ``b`` (adding 0.0 where it is not one),
+    # the order in which summing the per-edge 2 x 2 blocks adds them; measured at N = 10^6:
+    # 0.2 s instead of 1.0-1.3 s through the 8 * N-entry COO form of those blocks
     rows, cols, vals = [], [], []
+    diag = np.zeros(n_v)
     for j in range(grid.n):
         a, b = grid.axis_edges(j)
         wgt = cell_volume / grid.step[j] ** 2
-        # (w_b - w_a)^2 * wgt -> [[wgt, -wgt], [-wgt, wgt]] on (a, b)
-        rows += [a, b, a, b]
-        cols += [a, b, b, a]
-        vals += [np.full(a.size, wgt), np.full(a.size, wgt), np.full(a.size, -wgt), np.full(a.size, -wgt)]
-    lap = sparse.coo_array(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_v, n_v)
-    ).tocsc()
-    diag = lap.diagonal()
+        for end in (a, b):
+            part = np.zeros(n_v)
+            part[end] = wgt
+            diag += part
+        rows += [a, b]
+        cols += [b, a]
+        vals += [np.full(2 * a.size, -wgt)]
     eps = FIRST_ORDER_RIDGE * float(diag.mean()) if diag.size and diag.mean() > 0 else FIRST_ORDER_RIDGE
-    return (lap + eps * sparse.identity(n_v, format="csc")).tocsc()
+    idx = np.arange(n_v, dtype=np.int64)
+    return sparse.coo_array(
+        (np.concatenate(vals + [diag + eps]), (np.concatenate(rows + [idx]), np.concatenate(cols + [idx]))),
+        shape=(n_v, n_v),
+    ).tocsc()
 
 
 # ------------------------------------------------------------------ solver choice and bounds
@@ -179,6 +188,14 @@ MG_AUTO_DIMS = (2, 3)
 #: break-even). So it pays only where ``H'H``'s null space makes the preconditioned spectrum two
 #: clusters (the smallest sigmas).
 FACTOR_PCG_MAXITER = 10
+
+#: The factor-PCG chain of a fold (:data:`FACTOR_PCG_MAXITER`) covers only its this many smallest
+#: data-dominated sigmas; every larger one is factorised in a segment of its own
+#: (:meth:`NormalEquationSolver.sweep_segments`), a task that any worker process can take
+#: (:func:`cross_validate_sigma`). Measured (n = 2, N = 10^6, T = 10^5, warm-started from the
+#: factor at 1e-7): 3 / 6 / 9 / 13 iterations at 10^-6.5 / -6 / -5.5 / -5, so the chain's rule
+#: (stop once an attempt needs more than half the cap) ends it by the third or fourth sigma anyway.
+FACTOR_PCG_SEGMENT = 4
 
 #: :func:`cross_validate_sigma` with an executor of ``workers >= 2`` local processes (no scheduler)
 #: runs the folds' sigma sweeps on that many *forked* processes (:mod:`pwas_hdl.fit.fork_map`:
@@ -380,7 +397,9 @@ def estimate_fit_memory(
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
         twice ``A``, or a diagonal), ``multigrid`` (its levels, where first order uses it),
-        ``vectors`` (weights, right-hand sides, CG work vectors) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
+        ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
+        process holds), ``fold_matrices`` (with forked workers: the parent's normal matrices of
+        the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
     """
     t, nv, k = int(n_samples), int(n_vertices), int(n_dims) + 1
     nnz_h = t * k
@@ -409,6 +428,8 @@ def estimate_fit_memory(
     }
     per_process = est["HtH"] * 2 / 3 + est["factor"] + est["multigrid"] + est["vectors"]
     est["workers"] = per_process * (max(int(processes), 1) - 1)
+    # forked workers: the parent holds every fold's normal matrix (5 folds; one is in "HtH")
+    est["fold_matrices"] = 4 * _sparse_bytes(nnz_hth, nv) if int(processes) > 1 else 0.0
     est["total"] = float(sum(est.values()))
     est["method"] = 1.0 if chosen in ("cg", "mg") else 0.0
     return est
@@ -443,7 +464,8 @@ def check_fit_memory(
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
         parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
-                                                                    "workers") if k != "workers" or est[k] > 0)
+                                                                    "workers", "fold_matrices")
+                          if k not in ("workers", "fold_matrices") or est[k] > 0)
         raise ResourceLimit(
             f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
             f"N = {n_vertices} weights, over the limit of {limit / 2**20:.0f} MiB ({source}); use fewer partitions "
@@ -618,6 +640,7 @@ class NormalEquationSolver:
         self._full_mean_row = float(hth.sum()) / max(self.n, 1)
         self._mg_hier: GridHierarchy | None = None
         self._mg_cache: tuple | None = None
+        self._gamma_diag: float | None = None
         if self.method == "cg":
             lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
             self._pre = _Preconditioner(lumped, self.gamma, self.order)
@@ -673,7 +696,9 @@ class NormalEquationSolver:
             * self._full_mean_row)
 
     def _gamma_diag_mean(self) -> float:
-        return float(self.gamma.diagonal().mean())
+        if self._gamma_diag is None:  # one pass over Gamma, not one per (fold, sigma) query
+            self._gamma_diag = float(self.gamma.diagonal().mean())
+        return self._gamma_diag
 
     def _mg_fold(self, m: sparse.csr_array) -> tuple:
         """``(m, mean(rowsum m), FoldMultigrid or None)`` for this ``m``, kept until the next ``m``."""
@@ -714,6 +739,52 @@ class NormalEquationSolver:
             return descending
         iterative = [i for i in descending if self.uses_mg(m, float(sigmas[i]))]
         return iterative + [i for i in reversed(descending) if i not in set(iterative)]
+
+    def sweep_segments(self, m: sparse.csr_matrix, sigmas: np.ndarray) -> list[list[int]]:
+        """:meth:`sweep_order` cut into independent segments (indices into ``sigmas``).
+
+        Each segment starts afresh (no warm start, no factor of another segment; see
+        :meth:`start_segment`), so the segments of all folds can run in any order and on any
+        process with the results of the serial sweep. Where the base method is the direct one and
+        multigrid is used: the multigrid sigmas (one warm-started chain), then with
+        :attr:`factor_pcg` the :data:`FACTOR_PCG_SEGMENT` smallest data-dominated sigmas (the
+        factor-PCG chain), then every other data-dominated sigma alone (a factorisation each).
+        Otherwise the whole sweep is one segment.
+        """
+        order = self.sweep_order(m, sigmas)
+        if not (self.method == "direct" and self._mg_shape is not None):
+            return [order]
+        mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
+        rest = [i for i in order if i not in set(mg)]
+        segments = [mg] if mg else []
+        head = FACTOR_PCG_SEGMENT if self.factor_pcg else 1
+        if rest:
+            segments.append(rest[:head])
+        return segments + [[i] for i in rest[head:]]
+
+    def start_segment(self) -> None:
+        """Forget the factor-PCG state of the previous segment (see :meth:`sweep_segments`)."""
+        self._reuse = None
+
+    def prepare_shared(self) -> None:
+        """Build now the work that every fold and sigma shares, so that forked workers inherit it.
+
+        The multigrid prolongations and coarse ``Gamma`` levels (:class:`GridHierarchy`), and for
+        first order with CHOLMOD the symbolic analysis of the full-data pattern (see
+        :meth:`_cholmod_solve`); otherwise each worker process would build its own (measured
+        2-4 s CPU each at n = 2, N = 10^6). Serial solves build them lazily.
+        """
+        if self._mg_shape is not None and self._mg_hier is None:
+            self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
+        if self.method == "direct" and self.backend == "cholmod":
+            self._shared_pattern()
+
+    def _shared_pattern(self) -> tuple | None:
+        """``(PatternCholesky, Gamma's values)`` of the full-data pattern (first order), built once."""
+        if self._shared_hth is not None and self._shared_chol is None:
+            chol = PatternCholesky(abs(self._shared_hth) + abs(self.gamma))
+            self._shared_chol = (chol, chol.align(self.gamma))
+        return self._shared_chol
 
     def _direct_or_factor_pcg(self, m: sparse.csr_array, bk: np.ndarray, sigma: float,
                               x0k: np.ndarray | None) -> tuple[np.ndarray, SolveInfo]:
@@ -773,10 +844,7 @@ class NormalEquationSolver:
         if self._m_cache is None or self._m_cache[0] is not m:
             self._m_cache = None  # free the previous factor first
             if self._shared_hth is not None:
-                if self._shared_chol is None:
-                    chol = PatternCholesky(abs(self._shared_hth) + abs(self.gamma))
-                    self._shared_chol = (chol, chol.align(self.gamma))
-                chol, g_vals = self._shared_chol
+                chol, g_vals = self._shared_pattern()
                 try:
                     self._m_cache = (m, chol, chol.align(m), g_vals)
                 except ValueError:  # not a fold of the full-data matrix: its own analysis
@@ -969,7 +1037,8 @@ def _folds_independent(solver: "NormalEquationSolver", sigmas: np.ndarray) -> bo
 
 def fork_workers(executor, n_unknowns: int) -> int:
     """Forked processes for the CV folds: the executor's local ``workers`` (``>= 2``, no scheduler)
-    from :data:`FORK_MIN_UNKNOWNS` unknowns where the system can fork, else 0 (see :func:`_map_folds`)."""
+    from :data:`FORK_MIN_UNKNOWNS` unknowns where the system can fork, else 0 (see
+    :func:`_fork_segments`)."""
     if executor is None or getattr(executor, "scheduler", None) is not None:
         return 0
     workers = getattr(executor, "workers", None) or 0
@@ -979,40 +1048,49 @@ def fork_workers(executor, n_unknowns: int) -> int:
 
 
 def _map_folds(fn: Callable, folds: int, executor, independent: bool, n_sigmas: int,
-               progress: Callable[[int, int], None] | None, n_unknowns: int = 0,
-               split: bool = False, stats: list | None = None) -> list:
+               progress: Callable[[int, int], None] | None) -> list:
     """``[fn(f) for f in range(folds)]``: the map hook of :func:`cross_validate_sigma`.
 
-    With an executor of ``workers >= 2`` local processes and at least :data:`FORK_MIN_UNKNOWNS`
-    unknowns (:func:`fork_workers`) the tasks run on that many forked processes
-    (:func:`pwas_hdl.fit.fork_map.fork_map`; the Dask cluster is not started): one per fold, or
-    with ``split`` two per fold (``fn(f, part="mg" | "direct")``, merged here). Otherwise on
-    ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold
-    when the folds are ``independent``; otherwise in this process, in fold order, with
-    ``fn``'s own per-solve progress. Either way the results are those of the serial loop.
+    On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold
+    when the folds are ``independent``; otherwise in this process, in fold order, with ``fn``'s
+    own per-solve progress. Either way the results are those of the serial loop. (Forked local
+    workers take the folds' segments instead, see :func:`_fork_segments`.)
     """
-    procs = fork_workers(executor, n_unknowns) if independent and folds >= 2 else 0
-    if procs:
-        # forked workers inherit the data; with ``split`` a fold is two tasks, its multigrid sigmas
-        # and its factorised ones (independent: the first solve of each part starts afresh), the
-        # larger (factorised) parts first so that the two processes finish together
-        tasks = ([(f, "direct") for f in range(folds)] + [(f, "mg") for f in range(folds)]) if split else [
-            (f, None) for f in range(folds)]
-        report = None if progress is None else (
-            lambda done, total: progress(done * folds * n_sigmas // total, folds * n_sigmas))
-        out = fork_map(lambda task: fn(task[0], part=task[1], progress=None), tasks, procs, report, stats)
-        if not split:
-            return out
-        merged = []
-        for f in range(folds):
-            d, m = out[f], out[folds + f]
-            merged.append((d[0] + m[0], d[1] + m[1], m[2] + d[2], d[3] + m[3]))  # serial order: mg, then direct
-        return merged
     if executor is None or not getattr(executor, "distributed", False) or not independent or folds < 2:
         return [fn(f) for f in range(folds)]
     report = None if progress is None else (lambda done, total: progress(done * n_sigmas, total * n_sigmas))
     return executor.map(partial(fn, progress=None), range(folds), labels=[f"cv fold {f}" for f in range(folds)],
                         progress=report)
+
+
+#: Relative cost of a multigrid-solved sigma against a factorised one, for the longest-first order
+#: of the forked segments (:func:`_fork_segments`; measured at n = 2, N = 10^6: 0.5-1.1 s per
+#: multigrid solve against 1.5-1.9 s per factorisation and solve).
+_MG_COST = 0.4
+
+
+def _fork_segments(run: Callable, segments: list[list[list[int]]], uses_mg: Callable[[int, int], bool],
+                   procs: int, n_sigmas: int, progress, stats: list | None) -> list[list]:
+    """Every fold's sweep segments (:meth:`NormalEquationSolver.sweep_segments`) on ``procs`` forked
+    workers (:func:`pwas_hdl.fit.fork_map.fork_map`: the data are inherited, not pickled).
+
+    The segments are independent tasks handed out longest first (estimated cost: a factorised
+    sigma 1, a multigrid one :data:`_MG_COST`), so that the workers finish within about one
+    factorisation of each other. ``run(f, segment)`` returns that segment's results; the
+    return value is ``[[result of each segment of fold f, in segment order] for f]``.
+    """
+    tasks = [(f, k) for f, segs in enumerate(segments) for k in range(len(segs))]
+    cost = {t: sum(_MG_COST if uses_mg(t[0], i) else 1.0 for i in segments[t[0]][t[1]]) for t in tasks}
+    tasks.sort(key=lambda t: -cost[t])  # stable: equal costs stay in fold order
+    total = len(segments) * n_sigmas
+    report = None if progress is None else (lambda done, n: progress(done * total // n, total))
+    out = fork_map(lambda t: run(t[0], segments[t[0]][t[1]]), tasks, procs, report, stats)
+    by_task = dict(zip(tasks, out))
+    if stats is not None:  # fork_map gives them in the order of ``tasks``: back to (fold, segment)
+        info = dict(zip(tasks, stats[-len(tasks):]))
+        del stats[-len(tasks):]
+        stats.extend(info[t] for t in sorted(tasks))
+    return [[by_task[(f, k)] for k in range(len(segs))] for f, segs in enumerate(segments)]
 
 
 def cross_validate_sigma(
@@ -1066,7 +1144,8 @@ def cross_validate_sigma(
         Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is distributed
         and the folds are independent, or, with local ``workers >= 2`` and at least
         :data:`FORK_MIN_UNKNOWNS` unknowns, on that many forked processes that inherit the data
-        (see :func:`_map_folds`); the result is the serial one.
+        (one task per segment of a fold's sweep, see :func:`_fork_segments`); the result is the
+        serial one.
 
     Returns
     -------
@@ -1092,34 +1171,60 @@ def cross_validate_sigma(
     weight_bound = np.zeros((folds, sig.size))
     total, done = folds * sig.size, 0
 
-    def one_fold(f: int, part: str | None = None, progress=progress) -> tuple[np.ndarray, np.ndarray, list]:
-        nonlocal done
-        first, fallbacks = len(solver.infos), solver.superlu_fallbacks
-        mse_f, bound_f = np.zeros(sig.size), np.zeros(sig.size)
+    def fold_data(f: int) -> tuple:
+        """The fold's validation rows, their basis rows, and its training normal equations."""
         val = labels == f
         hv = h[np.flatnonzero(val)]
         hvt = hv.T.tocsr()
         a_tr = (hth_r - solver.restrict_matrix(hvt @ hv)).tocsr()
-        b_tr = htz - hvt @ z2[val]
-        w = None
-        order = solver.sweep_order(a_tr, sig)
-        if part is not None:  # one of the two independent parts of the sweep (see _map_folds)
-            order = [i for i in order if solver.uses_mg(a_tr, float(sig[i])) == (part == "mg")]
-        for i in order:
+        return val, hv, a_tr, htz - hvt @ z2[val]
+
+    def run_segment(data: tuple, segment: list[int], progress=None) -> tuple:
+        """Solve one segment of a fold's sweep (it starts afresh: see ``sweep_segments``)."""
+        nonlocal done
+        val, hv, a_tr, b_tr = data
+        first, fallbacks = len(solver.infos), solver.superlu_fallbacks
+        solver.start_segment()
+        w, mse_s, bound_s = None, [], []
+        for i in segment:
             w, info = solver.solve(a_tr, b_tr, float(sig[i]), x0=w)
-            bound_f[i] = info.weight_bound
-            resid = z2[val] - hv @ w
-            mse_f[i] = float(np.mean(resid**2))
+            bound_s.append(info.weight_bound)
+            mse_s.append(float(np.mean((z2[val] - hv @ w) ** 2)))
             done += 1
             if progress is not None:
                 progress(done, total)
-        return mse_f, bound_f, solver.infos[first:], solver.superlu_fallbacks - fallbacks
+        return segment, mse_s, bound_s, solver.infos[first:], solver.superlu_fallbacks - fallbacks
 
-    # one fold = one task: the counts a fold leaves in the solver come back with its results
-    split = solver.factor_pcg or (solver.method == "direct" and solver._mg_shape is not None)
+    def merge(results: list) -> tuple[np.ndarray, np.ndarray, list, int]:
+        mse_f, bound_f, infos_f, fb = np.zeros(sig.size), np.zeros(sig.size), [], 0
+        for segment, mse_s, bound_s, infos_s, fb_s in results:
+            mse_f[segment], bound_f[segment] = mse_s, bound_s
+            infos_f += infos_s
+            fb += fb_s
+        return mse_f, bound_f, infos_f, fb
+
+    def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list, int]:
+        data = fold_data(f)
+        return merge([run_segment(data, seg, progress) for seg in solver.sweep_segments(data[2], sig)])
+
+    # one fold = one task (serial, Dask) or one segment = one task (forked workers); the counts a
+    # task leaves in the solver come back with its results
     task_stats: list = []
-    parts = _map_folds(one_fold, folds, executor, _folds_independent(solver, sig), sig.size, progress,
-                       solver.n if solver.keep is None else solver.keep.size, split, task_stats)
+    independent = _folds_independent(solver, sig)
+    procs = fork_workers(executor, solver.n if solver.keep is None else solver.keep.size) if (
+        independent and folds >= 2) else 0
+    if procs:
+        # the forked workers inherit every fold's matrices and the shared analysis (built here once)
+        datas = [fold_data(f) for f in range(folds)]
+        segments = [solver.sweep_segments(d[2], sig) for d in datas]
+        solver.prepare_shared()
+        per_fold = _fork_segments(lambda f, seg: run_segment(datas[f], seg), segments,
+                                  lambda f, i: solver.uses_mg(datas[f][2], float(sig[i])), procs, sig.size, progress,
+                                  task_stats)
+        del datas
+        parts = [merge(r) for r in per_fold]
+    else:
+        parts = _map_folds(one_fold, folds, executor, independent, sig.size, progress)
     for f, (mse_f, bound_f, _, _) in enumerate(parts):
         fold_mse[f], weight_bound[f] = mse_f, bound_f
     solver.infos = [i for part in parts for i in part[2]]
@@ -1137,7 +1242,8 @@ def cross_validate_sigma(
         "solves_by_method": {k: int(sum(i.method == k for i in infos)) for k in sorted({i.method for i in infos})},
         "superlu_fallbacks": int(solver.superlu_fallbacks),
         "weight_bound": weight_bound,
-        # forked workers (see _map_folds): per task its CPU seconds and the worker's pid
+        # forked workers (see _fork_segments): per segment task, in (fold, segment) order, its CPU
+        # seconds and the worker's pid
         "fork_tasks": [{"cpu_s": float(c), "pid": int(p)} for c, p in task_stats],
     }
     return CVResult(sig, mse, best, folds, fold_mse, summary)
