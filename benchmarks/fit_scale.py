@@ -128,7 +128,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     the busiest forked worker (sum of its tasks' CPU), the wall time the run would take on two
     otherwise idle cores (derived from CPU times, not a wall measurement).
     """
-    from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, solve_regularized, tikhonov_matrix
+    from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, tikhonov_matrix
     from pwas_hdl.fit.sparse_cholesky import cholmod_available
     from pwas_hdl.flow.executor import Executor
 
@@ -138,8 +138,8 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     with _PssPeak() as pss, Executor(workers=workers if workers >= 2 else None) as ex:
         h = grid.basis_matrix(x)
         gam = tikhonov_matrix(grid, order)
-        cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex)
-        w, info = solve_regularized(h, z, cv.best_sigma, gam, return_info=True)
+        cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex, final_solve=True)
+        w, info = cv.final_weights, cv.final_info  # as fit does: the CV's solver solves the full data
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0 - pss.cpu  # without the sampler's CPU
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     own_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

@@ -999,6 +999,10 @@ class CVResult:
     folds: int
     fold_mse: np.ndarray = field(repr=False, default_factory=lambda: np.empty(0))
     solver: dict = field(repr=False, default_factory=dict)
+    #: with ``final_solve=True``: the full-data weights at :attr:`best_sigma`, shape (N,) or (N, nz)
+    #: as :func:`solve_regularized` returns them, and their :class:`SolveInfo`; else None
+    final_weights: np.ndarray | None = field(repr=False, default=None, compare=False)
+    final_info: "SolveInfo | None" = field(repr=False, default=None, compare=False)
 
     def to_dict(self) -> dict:
         return {
@@ -1106,6 +1110,7 @@ def cross_validate_sigma(
     rtol: float = CG_RTOL,
     max_memory: int | str | None = None,
     executor=None,
+    final_solve: bool = False,
 ) -> CVResult:
     """Choose sigma by k-fold cross-validation over a grid of candidates.
 
@@ -1146,6 +1151,12 @@ def cross_validate_sigma(
         :data:`FORK_MIN_UNKNOWNS` unknowns, on that many forked processes that inherit the data
         (one task per segment of a fold's sweep, see :func:`_fork_segments`); the result is the
         serial one.
+    final_solve : bool
+        Also solve the full-data system at the chosen sigma with this CV's solver
+        (:attr:`CVResult.final_weights`): the same weights as ``solve_regularized(h, z, best_sigma,
+        gamma, method, rtol=rtol)`` (same solver, same arithmetic) without forming ``H'H`` again or
+        rebuilding the shared analysis / multigrid hierarchy (measured ~1-2 s CPU at n = 2, N = 10^6,
+        first order).
 
     Returns
     -------
@@ -1246,4 +1257,8 @@ def cross_validate_sigma(
         # seconds and the worker's pid
         "fork_tasks": [{"cpu_s": float(c), "pid": int(p)} for c, p in task_stats],
     }
-    return CVResult(sig, mse, best, folds, fold_mse, summary)
+    final_w = final_info = None
+    if final_solve:
+        solver.start_segment()
+        final_w, final_info = solver.solve(hth_r, htz[:, 0] if np.ndim(z) == 1 else htz, best)
+    return CVResult(sig, mse, best, folds, fold_mse, summary, final_w, final_info)

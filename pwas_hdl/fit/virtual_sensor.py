@@ -421,11 +421,13 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             method = additive_solver_method(grid, self.tikhonov_order)
         if self.sigma is None:
             cv = cross_validate_sigma(h, zt, gam, self.sigma_grid, self.cv_folds, self.cv_shuffle, progress=progress,
-                                      executor=executor, method=method)
+                                      executor=executor, method=method, final_solve=True)
             sigma = cv.best_sigma
+            # the full-data solve by the CV's own solver (= solve_regularized, without a second H'H / analysis)
+            w, cv.final_weights, cv.final_info = cv.final_weights.reshape(grid.n_vertices, nz), None, None
         else:
             cv, sigma = None, float(self.sigma)
-        w = solve_regularized(h, zt, sigma, gam, method=method).reshape(grid.n_vertices, nz)
+            w = solve_regularized(h, zt, sigma, gam, method=method).reshape(grid.n_vertices, nz)
         rec_info = None
         if self.mz:
             from pwas_hdl.fit.recurrent import refine_closed_loop
