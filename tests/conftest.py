@@ -20,6 +20,15 @@ budgets with the profile (tests/test_fuzz_cli.py, ``FUZZ_SCALE``).
 from __future__ import annotations
 
 import os
+import sys
+
+# PYTHONDONTWRITEBYTECODE=1 (set in some containers) makes every test process recompile the package and
+# re-run pytest's assertion rewriting of every test module (about 5 s CPU per xdist worker, and the same
+# again in every CLI subprocess and Dask worker): the test run writes its bytecode to __pycache__ (git
+# ignores it) unless PWAS_HDL_TEST_BYTECODE=0. Set before anything of the package is imported.
+if sys.dont_write_bytecode and os.environ.get("PWAS_HDL_TEST_BYTECODE", "1") != "0":
+    sys.dont_write_bytecode = False
+
 from dataclasses import dataclass
 from pathlib import Path
 

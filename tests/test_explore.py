@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -155,6 +156,38 @@ def test_resource_estimate_is_the_generators(tiny, small_result):
     # wider weights cost more memory and more multiplier bits
     q = next(q for q in small_result["points"] if q["input_bits"] == 8 and q["weight_offset"] == 1 and q["output_offset"] == 1)
     assert q["resources"]["memory_bits"] > r["memory_bits"] and q["resources"]["mult_bit_products"] > r["mult_bit_products"]
+
+
+def test_register_bits_cache_is_exact_and_shared_across_calls(tiny, monkeypatch):
+    """The register bits are cached per process by the hardware's shape (explore._register_key): a
+    second sweep elaborates nothing and gives the same points; points sharing a key (fixed widths,
+    other shifts, other rounding) have the register bits of their own fresh elaboration."""
+    import pwas_hdl.flow.explore as ex
+    from pwas_hdl.hdl import build_core
+
+    m, _ = tiny
+    tab = read_csv(tiny[1] / "test.csv")
+    data = (None, tab.numeric(["y"]), tab.numeric(["z_true"]))
+    monkeypatch.setattr(ex, "_REGISTER_BITS", type(ex._REGISTER_BITS)())
+    elaborated = []
+    real = ex._register_bits
+    monkeypatch.setattr(ex, "_register_bits", lambda core: elaborated.append(ex._register_key(core)) or real(core))
+    kw = dict(input_bits=[10], weight_frac=[-1, 1], output_frac=[0, 2], weight_bits=14, output_bits=12)
+    a = explore(m, data, **kw)
+    assert len(elaborated) == len(set(elaborated)) == len(ex._REGISTER_BITS) == 2  # the swept key + the default
+    b = explore(m, data, **kw, rounding="truncate")
+    assert len(elaborated) == 2 and [p["resources"] for p in b["points"]] == [p["resources"] for p in a["points"]]
+    for p in a["points"] + b["points"]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # outputs that may saturate: explore records that warning
+            fxm = FixedPointModel.from_sensor(m, rounding="truncate" if p in b["points"] else "half_up",
+                                              **{k: p[k] for k in ("input_bits", "weight_frac", "output_frac", "weight_bits", "output_bits")})
+        assert real(build_core(fxm)) == p["resources"]["register_bits"]
+    assert len({(p["shift"], p["weight_frac"]) for p in a["points"]}) >= 3  # several shifts share one key
+    # a bounded cache: the oldest entry goes first
+    monkeypatch.setattr(ex, "_REGISTER_BITS_MAX", 1)
+    explore(m, data, input_bits=[9], weight_frac=[0], output_frac=[0])
+    assert len(ex._REGISTER_BITS) == 1
 
 
 def test_refused_combinations_are_recorded(tiny):

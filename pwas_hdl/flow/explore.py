@@ -85,6 +85,7 @@ import os
 import shutil
 import tempfile
 import warnings
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -299,9 +300,50 @@ def _register_bits(core) -> int | None:
         return None
 
 
-def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None,
-                       _register_cache: dict | None = None) -> dict[str, Any]:
-    """The resource estimate of the core the generator builds for ``fxm`` (see the module notes)."""
+#: Register bits of elaborated cores by :func:`_register_key`, shared by every call in the process
+#: (an explore sweep elaborates each hardware shape once; a second sweep of the same model -- another
+#: cost key, a measured run after an estimate, a narrower range -- elaborates nothing it has seen).
+_REGISTER_BITS: "OrderedDict[tuple, int | None]" = OrderedDict()
+#: At most this many entries are kept (least recently used dropped first; an entry is a few ints).
+_REGISTER_BITS_MAX = 4096
+
+
+def _register_key(core) -> tuple | None:
+    """What the core's register widths depend on: everything of its structure except the weight values,
+    the rounding mode and the shift (the weights, the rounding constant and the output alignment are
+    combinational; the registers hold the same widths). ``None`` for a core this cache does not
+    describe (an extra input stage, or unhashable parameters)."""
+    if getattr(core, "input_stage", None) is not None:
+        return None
+    p = core.params
+    key = (type(core).__module__, type(core).__qualname__, getattr(core, "memory_kind", None), core.pipeline,
+           getattr(core, "round_output", True), p.partitions, p.nz, p.in_width, p.lo_code, p.frac_bits,
+           p.weight_width, p.out_width, p.scaling)
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _cached_register_bits(core) -> int | None:
+    key = _register_key(core)
+    if key is None:
+        return _register_bits(core)
+    if key in _REGISTER_BITS:
+        _REGISTER_BITS.move_to_end(key)
+        return _REGISTER_BITS[key]
+    regs = _REGISTER_BITS[key] = _register_bits(core)
+    while len(_REGISTER_BITS) > _REGISTER_BITS_MAX:
+        _REGISTER_BITS.popitem(last=False)
+    return regs
+
+
+def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None) -> dict[str, Any]:
+    """The resource estimate of the core the generator builds for ``fxm`` (see the module notes).
+
+    The register bits come from an elaboration of the core, cached per process by the parameters
+    that shape the hardware (:func:`_register_key`)."""
     from pwas_hdl.hdl import build_core, design_info
 
     with warnings.catch_warnings():
@@ -316,13 +358,7 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
     acc = f + bw + 1
     adder = 2 * n * (bin_ + 1) + n * (n - 1) // 2 * (f + 1) + n * (f + 2) + nz * n * acc + nz * acc
     # the registers depend on the widths only (not on the weights, the shift or the rounding)
-    rkey = (memory, str(pipeline), bin_, tuple(ar["frac_bits"]), bw, int(ar["out_width"]))
-    if _register_cache is not None and rkey in _register_cache:
-        regs = _register_cache[rkey]
-    else:
-        regs = _register_bits(core)
-        if _register_cache is not None:
-            _register_cache[rkey] = regs
+    regs = _cached_register_bits(core)
     logic = mult_bits + adder
     return {
         "memory_words": int(mem["words"]),
@@ -526,7 +562,6 @@ def explore(
     points: list[dict] = []
     refused: list[dict] = []
     errors: dict[int, np.ndarray] = {}
-    reg_cache: dict[tuple, int | None] = {}
     total = len(combos)
     for i, (b, fw, fo, is_default) in enumerate(combos):
         given = {"input_bits": b, "weight_frac": fw, "output_frac": fo}
@@ -542,7 +577,7 @@ def explore(
                 progress("sweep", i + 1, total)
             continue
         acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
-        res = estimate_resources(fxm, memory, pipeline, reg_cache)
+        res = estimate_resources(fxm, memory, pipeline)
         pt = {
             "input_bits": fxm.input_bits,
             "input_frac": fxm.F,
