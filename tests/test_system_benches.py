@@ -4,11 +4,34 @@ Each writes a valid pwas-hdl-bench-results document, the Markdown tables and the
 assertions are properties the quick runs must show whatever the machine's speed (no timing).
 """
 
+import copy
+
 import pytest
 from helpers.cli import CliRunner
 
 from pwas_hdl import bench_results as br
 from pwas_hdl.cli import app
+
+#: (doc, traces) of the real ``run_lorenz_hlnn(quick=True)`` of this module, once: the all-or-nothing
+#: test needs a bench that computes and then fails writing, not a second computation of the same run.
+_HLNN_QUICK: list = []
+
+
+@pytest.fixture
+def hlnn_quick_once(monkeypatch):
+    """``lorenz_hlnn.run_lorenz_hlnn`` that computes the quick run once per module (the real function,
+    called with the CLI's arguments) and hands out copies of its result afterwards."""
+    from pwas_hdl.benchmarks import lorenz_hlnn
+
+    real = lorenz_hlnn.run_lorenz_hlnn
+
+    def once(**kw):
+        assert kw["quick"] and kw["runs"] == 5 and kw["executor"].kind == "serial"  # the CLI's quick call
+        if not _HLNN_QUICK:
+            _HLNN_QUICK.append(real(**kw))
+        return copy.deepcopy(_HLNN_QUICK[0])
+
+    monkeypatch.setattr(lorenz_hlnn, "run_lorenz_hlnn", once)
 
 
 def _bench(tmp_path, name):
@@ -62,7 +85,7 @@ def test_bench_switched_linear_quick(tmp_path):
 
 
 @pytest.mark.slow
-def test_bench_lorenz_hlnn_quick(tmp_path):
+def test_bench_lorenz_hlnn_quick(tmp_path, hlnn_quick_once):
     doc = _bench(tmp_path, "lorenz-hlnn")
     for system, paper in (("lorenz", 24.0), ("helicopter-surrogate", 2.62)):
         rows = br.find_rows(doc, system=system, estimator="hlnn")
@@ -79,7 +102,7 @@ def test_bench_refuses_bad_runs_and_missing_folder(tmp_path):
     assert not (tmp_path / "x.json").exists()
 
 
-def test_bench_outputs_are_all_or_nothing(tmp_path, monkeypatch):
+def test_bench_outputs_are_all_or_nothing(tmp_path, monkeypatch, hlnn_quick_once):
     """A bench whose figure fails leaves neither the JSON nor the Markdown (one OutputSet)."""
     from pwas_hdl.benchmarks import lorenz_hlnn  # the cheapest system bench (no simulator run)
 
