@@ -34,19 +34,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import settings
 
-from pwas_hdl.fit.geometry import Grid
 
-#: Examples per property of the profiles (hypothesis' own default is 100).
-settings.register_profile("ci", max_examples=200, derandomize=True, database=None, deadline=None, print_blob=True)
-settings.register_profile("dev", max_examples=100, deadline=None)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE")
-                      or ("ci" if os.environ.get("CI", "").strip().lower() in ("true", "1", "yes") else "dev"))
+def _load_hypothesis_profile() -> None:
+    """Register the profiles and load the chosen one (before any test module is imported)."""
+    from hypothesis import settings
+
+    #: Examples per property of the profiles (hypothesis' own default is 100).
+    settings.register_profile("ci", max_examples=200, derandomize=True, database=None, deadline=None, print_blob=True)
+    settings.register_profile("dev", max_examples=100, deadline=None)
+    settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE")
+                          or ("ci" if os.environ.get("CI", "").strip().lower() in ("true", "1", "yes") else "dev"))
 
 
 def pytest_configure(config):
-    """In a pytest-xdist worker, limit BLAS / OpenMP to one thread (two workers share two cores)."""
+    """Load the Hypothesis profile where tests run (not in the xdist controller, which runs none: its
+    import costs ~0.7 s there for nothing). In a pytest-xdist worker, limit BLAS / OpenMP to one
+    thread (two workers share two cores)."""
+    if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", None):
+        _load_hypothesis_profile()
     if os.environ.get("PYTEST_XDIST_WORKER"):
         from threadpoolctl import threadpool_limits
 
@@ -75,6 +81,8 @@ def make_grid(rng):
     ``unit=True`` gives ``lo = 0`` and ``hi = p`` (step 1), so physical coordinates are grid units
     exactly and fractional parts can be constructed without rounding.
     """
+
+    from pwas_hdl.fit.geometry import Grid  # here: the xdist controller imports this file too
 
     def _make(p, n: int | None = None, unit: bool = False) -> Grid:
         parts = np.atleast_1d(np.asarray(p, dtype=np.int64))
