@@ -42,7 +42,6 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 import scipy.optimize
-import scipy.signal
 import scipy.sparse as sp
 
 from pwas_hdl.errors import InputError, ResourceLimit
@@ -352,6 +351,8 @@ def bank_residuals(models: np.ndarray, gains: np.ndarray, order: int, u: np.ndar
     ndarray, shape (T, N_theta)
         ``e^j_k = yhat^j_k - y_k``.
     """
+    import scipy.signal  # here, not at module level: ~0.5 s to import, only the float bank uses it
+
     nu = u.shape[1]
     t_len = y.shape[0]
     inputs = np.column_stack([u, y[:, 0], np.ones(t_len)])
