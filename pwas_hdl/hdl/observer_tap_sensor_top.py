@@ -17,7 +17,7 @@ root, the feature codes), plus a lag bank of the input codes (payload fields
 transfers (output ``warm``).
 
 ``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the serial
-observer-sensor top's body (:func:`pwas_hdl.hdl.observer_sensor_top.serial_sensor_path`: the
+observer-sensor top's body (:func:`pwas_hdl.hdl.observer_bank_top.serial_sensor_path`: the
 time-multiplexed bank, the pending feature codes, the serial core) with the same lag registers
 (shifted on the input transfer, so in step with the serial schedule: they hold sample ``k`` from
 the cycle after its transfer until the next transfer, which waits for the core to take sample
@@ -29,28 +29,24 @@ sample), ``latency = stages_before_core + core latency``. The bit-true model is 
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal, signed, unsigned
-from amaranth.lib import stream, wiring
-from amaranth.lib.wiring import In, Out
+from amaranth.hdl import Cat, Module, Signal, signed
 
 from pwas_hdl.hdl._lintsafe import sink_unused
-from pwas_hdl.hdl.core import core_output_layout
 from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
-from pwas_hdl.hdl.observer_sensor_top import (
-    attach_core_and_schedule,
+from pwas_hdl.hdl.observer_bank_top import (
+    ObserverBankTopBase,
+    build_observer_bank_top,
     inputs_and_warmup,
     parallel_feature_codes,
-    serial_flow_control,
     serial_sensor_path,
 )
 from pwas_hdl.hdl.params import CoreParams, Pipeline
-from pwas_hdl.hdl.sensor_top import sample_fields
 from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
 __all__ = ["ObserverTapSensorTop", "build_tapped_observer_sensor"]
 
 
-class ObserverTapSensorTop(wiring.Component):
+class ObserverTapSensorTop(ObserverBankTopBase):
     """Observer bank + residual features + u/y taps + PWAS core (ports as :class:`ObserverSensorTop`).
 
     Parameters
@@ -59,74 +55,35 @@ class ObserverTapSensorTop(wiring.Component):
     params : CoreParams of the core on ``[features, taps]``
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture, lanes, isqrt_every : as :class:`~pwas_hdl.hdl.observer_sensor_top.ObserverSensorTop`
-    """
 
-    kind = "observer-sensor"
+    The constructor and the manifest parts are :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`'s;
+    this top adds the taps (``front_end.taps``, their error bound) and its warm-up
+    ``max(M + l, memory - 1)``.
+    """
 
     def __init__(self, model, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                  architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
-        self._MustUse__silence = True
+        self._MustUse__silence = True  # no UnusedElaboratable warning when the check refuses
         bank, taps = model.bank, model.taps
         if params.n != bank.n_models + len(taps.dims):
             raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features and {len(taps.dims)} taps")
         self.model = model
-        self.bank = bank
         self.taps = taps
-        attach_core_and_schedule(self, bank, params, memory=memory, pipeline=pipeline, architecture=architecture,
-                                 lanes=lanes, isqrt_every=isqrt_every)
-        self.params = params
-        self.latency = self.stages_before_core + self.core.latency
-        self.memory_plan = self.core.memory_plan
-        self.pipeline = self.core.pipeline
-        self.warmup = int(model.first_output)
-        self.signals = list(bank.signal_names)
-        self.estimate_bound = None
-        super().__init__({
-            "in": In(stream.Signature(unsigned(len(self.signals) * bank.input_bits))),
-            "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
-            "warm": Out(1),
-        })
-        self._MustUse__silence = False
+        super().__init__(bank, params, memory=memory, pipeline=pipeline, architecture=architecture, lanes=lanes,
+                         isqrt_every=isqrt_every, warmup=int(model.first_output))
 
-    @property
-    def input_fields(self) -> list[dict]:
-        return sample_fields(self.signals, self.bank.input_bits)
+    def _architecture_more(self) -> str:
+        return "u/y taps from a lag bank of the input codes, requantised to the core's tap inputs"
 
-    @property
-    def extra_info(self) -> dict:
-        fe = {
-            "kind": "observer-bank",
-            "architecture": ("parallel constant multipliers, one state update of every observer per input transfer; "
-                             if self.plan is None else
-                             f"time-multiplexed: {len(self.plan.lanes)} state-update unit(s) (lanes), one state update per lane "
-                             "per clock, rotating state chains, one squarer / square root / code multiplier per lane; ")
-                            + "u/y taps from a lag bank of the input codes, requantised to the core's tap inputs",
-            "bank": self.architecture,
-            "cycles_per_sample": self.cycles_per_sample,
-            "ii": self.ii,
-            "stages_before_core": self.stages_before_core,
-            **({"schedule": self.plan.to_dict()} if self.plan is not None else {}),
-            **self.bank.to_dict(),
-            "taps": self.taps.to_dict(),
-        }
-        fe["first_output_sample"] = self.warmup
-        fe["error_bound"] = {**fe["error_bound"], "taps": list(self.taps.error_bound), "estimate": self.estimate_bound}
-        return {
-            "front_end": fe,
-            "warmup": {
-                "samples_without_output": self.warmup,
-                "port": "warm",
-                "meaning": f"warm = 1 once max(M + l, memory - 1) = {self.warmup} samples have been taken since reset; the first "
-                           f"{self.warmup} transfers after reset produce no output, every later transfer produces one",
-            },
-        }
+    def _front_end_more(self) -> dict:
+        return {"taps": self.taps.to_dict()}
 
-    def flow_control(self, names: dict) -> dict:
-        """The handshake rules in words (``names``: port names by role); the serial bank throttles the input."""
-        return serial_flow_control(self, names)
+    def _error_bound_more(self) -> dict:
+        return {"taps": list(self.taps.error_bound)}
 
-    def expected_outputs(self, n_samples: int) -> int:
-        return max(0, n_samples - self.warmup)
+    def _warmup_meaning(self) -> str:
+        return (f"warm = 1 once max(M + l, memory - 1) = {self.warmup} samples have been taken since reset; the first "
+                f"{self.warmup} transfers after reset produce no output, every later transfer produces one")
 
     def _tap_codes(self, m: Module, cur: list, transfer, advance) -> list:
         """Lag registers of the tapped signals (shift on transfer) and the tap codes, registered when ``advance``."""
@@ -168,16 +125,8 @@ def build_tapped_observer_sensor(model, *, memory: str = "banked", pipeline: Pip
                                  isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> ObserverTapSensorTop:
     """The top of a bit-true :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`
     (``architecture="serial"``: the time-multiplexed bank with ``lanes`` state-update units)."""
-    from pwas_hdl.hdl.api import _check_name
-
-    name = _check_name(name)
-    top = ObserverTapSensorTop(model, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline,
-                               architecture=architecture, lanes=lanes, isqrt_every=isqrt_every)
-    top.module_name = name
-    top._MustUse__silence = True
-    top.core.input_names = list(model.core.regressor_names)
-    top.core.target_names = list(model.core.target_names)
-    top.estimate_bound = {"physical": list(model.error_bound), "lipschitz": model.lipschitz.tolist(),
-                          "rule": "core bound + sum_j G_j * (feature or tap) bound_j (G_j: largest edge slope along j)",
-                          "against": "float sensor (front end + taps + PWAS) at the physical signals the input codes represent"}
-    return top
+    return build_observer_bank_top(
+        ObserverTapSensorTop, model, model, memory=memory, pipeline=pipeline, name=name, architecture=architecture,
+        lanes=lanes, isqrt_every=isqrt_every,
+        bound_rule="core bound + sum_j G_j * (feature or tap) bound_j (G_j: largest edge slope along j)",
+        bound_against="float sensor (front end + taps + PWAS) at the physical signals the input codes represent")
