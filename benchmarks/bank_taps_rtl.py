@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -42,40 +41,15 @@ SIMULATORS = ("icarus", "verilator")
 
 
 def run(quick: bool = False) -> dict:
-    from pwas_hdl.design.generate import generate
-    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
-    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
-    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
-    from pwas_hdl.verify.simulation import load_design, run_rtl, sim_module, standard_runs
+    """All layouts on both simulators (``quick``: the first on Icarus)."""
+    from pwas_hdl.benchmarks.seed004_common import observer_rtl_rows
 
     t0 = time.perf_counter()
-    tr, te, _ = make_pv_dataset("pv-benchmark", 2000, 400, seed=0)
-    stim = sim_module("pwas_stimulus")
-    rows = []
-    for cfg in CONFIGS[:1] if quick else CONFIGS:
-        fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
-        s = PWASVirtualSensor(mu=cfg["mu"], my=cfg["my"], partitions=2, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
-        opts = {k: cfg[k] for k in ("state_bits", "architecture", "bank_lanes") if k in cfg}
-        with tempfile.TemporaryDirectory(prefix="pwas-taps-rtl-") as tmp:
-            generate(s, Path(tmp) / "d", design="sensor", **opts)
-            d = load_design(Path(tmp) / "d")
-            data, _ = d.bank.quantize_signals(te.u, te.y)
-            codes = stim.observer_codes(d.bank.bank, 400, seed=5, data=data)
-            sat = int(d.bank.bank.trace(codes)["state_saturated"].sum())
-            for sim in SIMULATORS[:1] if quick else SIMULATORS:
-                t1 = time.perf_counter()
-                r = run_rtl(d, standard_runs(d, codes), sim)
-                row = {"config": cfg["name"], "simulator": sim, "n_models": d.bank.bank.n_models, "order": d.bank.bank.order,
-                       "observer": cfg["observer"], "features": cfg["features"], "mu": cfg["mu"], "my": cfg["my"],
-                       "bank": cfg.get("architecture", "parallel"), "bank_lanes": cfg.get("bank_lanes"),
-                       "ii_manifest": d.manifest["ii"],
-                       "taps": d.manifest["lags"]["regressors"][d.bank.bank.n_models:],
-                       "state_bits": d.bank.bank.formats.state_bits, "warmup": d.warmup,
-                       "stimulus_state_saturations": sat, "outputs": r.outputs, "mismatches": r.mismatches, "passed": r.passed,
-                       "latency_measured": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
-                       "failures": r.failures[:3], "wall_s": round(time.perf_counter() - t1, 1)}
-                print(json.dumps(row), flush=True)
-                rows.append(row)
+    rows = observer_rtl_rows(
+        CONFIGS[:1] if quick else CONFIGS, SIMULATORS[:1] if quick else SIMULATORS,
+        mu=lambda cfg: cfg["mu"], my=lambda cfg: cfg["my"], partitions=2, prefix="pwas-taps-rtl-",
+        extra=lambda cfg, d: {"mu": cfg["mu"], "my": cfg["my"], "taps": d.manifest["lags"]["regressors"][d.bank.bank.n_models:],
+                              "warmup": d.warmup})
     return {"bench": "bank-taps-rtl", "quick": quick, "rows": rows, "elapsed_s": round(time.perf_counter() - t0, 1)}
 
 

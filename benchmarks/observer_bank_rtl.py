@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -45,38 +44,11 @@ SIMULATORS = ("icarus", "verilator")
 
 def run(quick: bool = False, only: str | None = None) -> dict:
     """All configurations (``only="serial"`` / ``"parallel"``: those of that bank only) on both simulators."""
-    from pwas_hdl.design.generate import generate
-    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
-    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
-    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
-    from pwas_hdl.verify.simulation import load_design, run_rtl, sim_module, standard_runs
+    from pwas_hdl.benchmarks.seed004_common import observer_rtl_rows
 
     t0 = time.perf_counter()
-    tr, te, _ = make_pv_dataset("pv-benchmark", 2000, 400, seed=0)
-    stim = sim_module("pwas_stimulus")
-    rows = []
-    for cfg in [CONFIGS[0], CONFIGS[7]] if quick else [c for c in CONFIGS if only in (None, c.get("architecture", "parallel"))]:
-        fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
-        s = PWASVirtualSensor(mu=0, my=0, partitions=3, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
-        opts = {k: cfg[k] for k in ("state_bits", "architecture", "bank_lanes") if k in cfg}
-        with tempfile.TemporaryDirectory(prefix="pwas-obs-rtl-") as tmp:
-            generate(s, Path(tmp) / "d", design="sensor", **opts)
-            d = load_design(Path(tmp) / "d")
-            data, _ = d.bank.quantize_signals(te.u, te.y)
-            codes = stim.observer_codes(d.bank.bank, 400, seed=5, data=data)
-            sat = int(d.bank.bank.trace(codes)["state_saturated"].sum())
-            for sim in SIMULATORS[:1] if quick else SIMULATORS:
-                t1 = time.perf_counter()
-                r = run_rtl(d, standard_runs(d, codes), sim)
-                row = {"config": cfg["name"], "simulator": sim, "n_models": d.bank.bank.n_models, "order": d.bank.bank.order,
-                       "observer": cfg["observer"], "features": cfg["features"], "state_bits": d.bank.bank.formats.state_bits,
-                       "stimulus_state_saturations": sat, "outputs": r.outputs, "mismatches": r.mismatches, "passed": r.passed,
-                       "bank": cfg.get("architecture", "parallel"), "bank_lanes": cfg.get("bank_lanes", 1 if "architecture" in cfg else None),
-                       "latency_measured": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
-                       "ii_manifest": int(d.manifest["ii"]),
-                       "failures": r.failures[:3], "wall_s": round(time.perf_counter() - t1, 1)}
-                print(json.dumps(row), flush=True)
-                rows.append(row)
+    configs = [CONFIGS[0], CONFIGS[7]] if quick else [c for c in CONFIGS if only in (None, c.get("architecture", "parallel"))]
+    rows = observer_rtl_rows(configs, SIMULATORS[:1] if quick else SIMULATORS, partitions=3, prefix="pwas-obs-rtl-")
     return {"bench": "observer-bank-rtl", "quick": quick, "rows": rows, "elapsed_s": round(time.perf_counter() - t0, 1)}
 
 
@@ -107,10 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     doc = run(a.quick, a.only)
     stem = "observer_bank_rtl_quick" if a.quick else "observer_bank_rtl"
     out = a.outdir
-    if a.only and (out / f"{stem}.json").exists():
-        old = json.loads((out / f"{stem}.json").read_text())
-        new = {(r["config"], r["simulator"]): r for r in doc["rows"]}
-        doc["rows"] = [new.pop((r["config"], r["simulator"]), r) for r in old["rows"]] + list(new.values())
+    if a.only:  # a re-run of one bank's rows: replace them in the results
+        from pwas_hdl.benchmarks.seed004_common import replace_rows
+
+        doc["rows"], _ = replace_rows(out / f"{stem}.json", doc["rows"], lambda r: (r["config"], r["simulator"]))
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))

@@ -245,13 +245,13 @@ def main(argv: list[str] | None = None) -> int:
     doc = run(a.quick, limit, a.only, designs, targets)
     out = a.outdir
     stem = "observer_bank_synth_quick" if a.quick else "observer_bank_synth"
-    if (designs or targets) and (out / f"{stem}.json").exists():  # a re-run of some rows: replace them in the results
-        old = json.loads((out / f"{stem}.json").read_text())
-        key = lambda r: (r["design"], r["bank"], r["target"])  # noqa: E731
-        new = {key(r): r for r in doc["rows"]}
-        doc["rows"] = [new.pop(key(r), r) for r in old["rows"]] + list(new.values())
-        doc["limit_min"] = f"{old['limit_min']} (re-run rows: {limit:g})"
-        doc["notes"] = old.get("notes", [])  # the measured context recorded with the earlier rows
+    if designs or targets:  # a re-run of some rows: replace them in the results
+        from pwas_hdl.benchmarks.seed004_common import replace_rows
+
+        doc["rows"], old = replace_rows(out / f"{stem}.json", doc["rows"], lambda r: (r["design"], r["bank"], r["target"]))
+        if old is not None:
+            doc["limit_min"] = f"{old['limit_min']} (re-run rows: {limit:g})"
+            doc["notes"] = old.get("notes", [])  # the measured context recorded with the earlier rows
     atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / f"{stem}.md", markdown(doc))
     print(markdown(doc))

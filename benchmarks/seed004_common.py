@@ -149,3 +149,90 @@ def rtl_estimates(sensor, u: np.ndarray, y: np.ndarray, workdir: Path, simulator
             "latency": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
             "err_max": float(np.max(np.abs(zhat - ref))) if len(zhat) else 0.0,
             "bound": float(d.manifest["front_end"]["error_bound"]["estimate"]["physical"][0]), "manifest": d.manifest}
+
+
+def observer_rtl_rows(configs: list[dict], simulators: tuple[str, ...], *, mu: Callable[[dict], int] = lambda cfg: 0,
+                      my: Callable[[dict], int] = lambda cfg: 0, partitions: int, prefix: str,
+                      extra: Callable[[dict, Any], dict] | None = None) -> list[dict]:
+    """The observer-bank RTL benches' loop (observer_bank_rtl.py, bank_taps_rtl.py): per configuration
+    fit, generate, simulate on each simulator, compare with the bit-true model.
+
+    Each configuration (``name``, ``n_models``, ``order``, ``observer``, ``features``; optional
+    ``state_bits``, ``architecture``, ``bank_lanes``: the ``generate`` options) is fitted on seed 004
+    pv-benchmark data (2 000 training samples, seed 0; ``mu(cfg)`` / ``my(cfg)`` taps, ``partitions``
+    per dimension, gamma 1, sigma 1e-3), generated with ``generate --design sensor`` in a temporary
+    folder (``prefix``) and replayed by the manifest-driven cocotb bench: the standard runs over 400
+    transfers of :func:`sim.pwas_stimulus.observer_codes` (the quantised test trajectory, steps,
+    out-of-range codes, saturating alternations, silence; seed 5).
+
+    Parameters
+    ----------
+    configs : list of dict
+    simulators : tuple of {"icarus", "verilator"}
+    mu, my : callable (cfg -> int)
+        The u / y taps of the fit (0: the bank's features only, P-feat).
+    partitions : int
+        ``p`` of every dimension.
+    prefix : str
+        Prefix of the temporary design folders.
+    extra : callable (cfg, design -> dict), optional
+        More entries of the row (after the common ones).
+
+    Returns
+    -------
+    list of dict
+        One row per (configuration, simulator), printed as JSON as it is made: the configuration,
+        bank, state bits, state saturations of the stimulus, outputs, mismatches, passed, latency
+        measured / manifest (cycles), II measured / manifest, the first failures, ``wall_s`` (s).
+    """
+    import json
+    import tempfile
+
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+    from pwas_hdl.verify.simulation import load_design, run_rtl, sim_module, standard_runs
+
+    tr, te, _ = make_pv_dataset("pv-benchmark", 2000, 400, seed=0)
+    stim = sim_module("pwas_stimulus")
+    rows = []
+    for cfg in configs:
+        fe = ObserverBankFrontEnd(n_models=cfg["n_models"], observer=cfg["observer"], features=cfg["features"], order=cfg["order"])
+        s = PWASVirtualSensor(mu=mu(cfg), my=my(cfg), partitions=partitions, gamma=1.0, front_end=fe,
+                              sigma=1e-3).fit(tr.u, tr.y, tr.z)
+        opts = {k: cfg[k] for k in ("state_bits", "architecture", "bank_lanes") if k in cfg}
+        with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+            generate(s, Path(tmp) / "d", design="sensor", **opts)
+            d = load_design(Path(tmp) / "d")
+            data, _ = d.bank.quantize_signals(te.u, te.y)
+            codes = stim.observer_codes(d.bank.bank, 400, seed=5, data=data)
+            sat = int(d.bank.bank.trace(codes)["state_saturated"].sum())
+            for sim in simulators:
+                t1 = time.perf_counter()
+                r = run_rtl(d, standard_runs(d, codes), sim)
+                row = {"config": cfg["name"], "simulator": sim, "n_models": d.bank.bank.n_models, "order": d.bank.bank.order,
+                       "observer": cfg["observer"], "features": cfg["features"], "state_bits": d.bank.bank.formats.state_bits,
+                       "stimulus_state_saturations": sat, "outputs": r.outputs, "mismatches": r.mismatches, "passed": r.passed,
+                       "bank": cfg.get("architecture", "parallel"), "bank_lanes": cfg.get("bank_lanes", 1 if "architecture" in cfg else None),
+                       "latency_measured": sorted(set(r.latencies)), "latency_manifest": d.latency, "ii": r.ii,
+                       "ii_manifest": int(d.manifest["ii"]),
+                       "failures": r.failures[:3], "wall_s": round(time.perf_counter() - t1, 1)}
+                if extra is not None:
+                    row.update(extra(cfg, d))
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    return rows
+
+
+def replace_rows(path: Path, rows: list[dict], key: Callable[[dict], tuple]) -> tuple[list[dict], dict | None]:
+    """A re-run of some rows of a bench: ``rows`` replace the rows of the results file ``path`` that have
+    the same ``key`` (in place), the others are kept; new keys go at the end.
+
+    Returns ``(merged rows, the old document)``, or ``(rows, None)`` when ``path`` does not exist.
+    """
+    import json
+
+    if not path.exists():
+        return rows, None
+    old = json.loads(path.read_text())
+    new = {key(r): r for r in rows}
+    return [new.pop(key(r), r) for r in old["rows"]] + list(new.values()), old
