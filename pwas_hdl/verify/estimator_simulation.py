@@ -19,21 +19,27 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import CheckFailed, InputError
+from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+from pwas_hdl.verify.segment_bench import (
+    TEST_MODULE,
+    count_outputs,
+    plan_job_runs,
+    replay_segments,
+    replay_summary,
+    rmse,
+    segment_job_ports,
+    standard_segment_runs,
+)
 
 __all__ = ["EstimatorDesign", "load_estimator_design", "estimator_job_ports", "expected_words", "replay_estimator",
            "standard_estimator_runs", "simulate_estimator_data"]
-
-#: The cocotb module that replays the estimator (segments of words after a reset).
-TEST_MODULE = "pwas_recurrent_tb"
 
 
 @dataclass
@@ -112,11 +118,7 @@ def load_estimator_design(outdir, manifest: dict | None = None, verilog=None) ->
 
 def estimator_job_ports(manifest: dict) -> dict:
     """Port names of the bench's job, from the manifest's roles and reset polarity (no ``warm``: no warm-up)."""
-    by_role = {p["role"]: p["name"] for p in manifest["ports"]}
-    return {"clock": manifest["clock"]["port"], "reset": manifest["reset"]["port"],
-            "reset_on": 1 if manifest["reset"]["polarity"] == "high" else 0,
-            "in_valid": by_role["in.valid"], "in_ready": by_role["in.ready"], "in_payload": by_role["in.payload"],
-            "out_valid": by_role["out.valid"], "out_ready": by_role["out.ready"], "out_payload": by_role["out.payload"]}
+    return segment_job_ports(manifest)
 
 
 def _trace_rows(tr: dict) -> np.ndarray:
@@ -135,12 +137,8 @@ def expected_words(design: EstimatorDesign, codes: np.ndarray) -> tuple[list[int
 
 def standard_estimator_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[dict]:
     """Run plans over ``n`` samples: full speed (latency and II checked), then random bubbles and
-    backpressure with a reset after about a third of the samples, then the whole run again."""
-    cut = max(1, n // 3)
-    return [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": seed,
-             "segments": [{"rows": (0, n), "drain": True, "record": True}]},
-            {"name": "stalls-reset", "p_valid": stalls[0], "p_ready": stalls[1], "seed": seed + 1,
-             "segments": [{"rows": (0, cut), "drain": False, "hold": 3}, {"rows": (0, n), "drain": True, "record": True}]}]
+    backpressure with a reset after about a third of the samples, then the whole run again (recorded)."""
+    return standard_segment_runs(n, seed, stalls, record_reset_run=True)
 
 
 def _decode(design: EstimatorDesign, words: Sequence[int]) -> dict[str, np.ndarray]:
@@ -178,17 +176,7 @@ def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str 
     plans = list(runs) if runs is not None else standard_estimator_runs(codes.shape[0])
     job: dict = {"ports": estimator_job_ports(design.manifest), "latency": design.latency, "ii": design.ii, "warmup": 0,
                  "clock_ns": 10.0, "reset_cycles": 2, "runs": []}
-    cache: dict = {}
-    for plan in plans:
-        segs = []
-        for seg in plan["segments"]:
-            a, b = seg["rows"]
-            if (a, b) not in cache:
-                cache[(a, b)] = expected_words(design, codes[a:b])
-            ins, outs, _ = cache[(a, b)]
-            segs.append({"words": ins, "expected": outs, "drain": bool(seg.get("drain", True)), "hold": int(seg.get("hold", 0)),
-                         "record": bool(seg.get("record", False))})
-        job["runs"].append({k: plan[k] for k in ("name", "p_valid", "p_ready", "seed")} | {"segments": segs})
+    job["runs"], _ = plan_job_runs(plans, lambda a, b: expected_words(design, codes[a:b]))
     runner = sim_module("pwas_runner")
     bld = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
     tmp = Path(tempfile.mkdtemp(prefix=f"pwas-est-{simulator}-")) if work_dir is None else Path(work_dir)
@@ -200,9 +188,7 @@ def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str 
     res["rtl"] = {}
     for plan, rr in zip(plans, res.get("runs", [])):
         res["rtl"][plan["name"]] = [_decode(design, s["words"]) if s.get("words") is not None else None for s in rr["segments"]]
-    segs = [s for r in res.get("runs", []) for s in r["segments"]]
-    res["mismatches"] = int(sum(s["mismatches"] for s in segs))
-    res["outputs_compared"] = int(sum(min(s["outputs"], s["expected"]) for s in segs))
+    count_outputs(res)
     full = [s for p, r in zip(plans, res.get("runs", [])) if p["p_valid"] >= 1 and p["p_ready"] >= 1 for s in r["segments"]]
     res["latency"] = sorted({v for s in full for v in s["latencies"]})
     res["ii"] = sorted({v for s in full for v in s["spacings"]})
@@ -210,11 +196,6 @@ def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str 
     res["simulator"] = simulator
     res["passed"] = bool(res.get("passed")) and not res.get("failures")
     return res
-
-
-def _rmse(a, b) -> float | None:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    return float(np.sqrt(np.mean((a - b) ** 2))) if a.size else None
 
 
 def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any, *, simulator: str, engine: str,
@@ -241,7 +222,7 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     from pwas_hdl.fit.classifier import class_scores
     from pwas_hdl.io.csv_table import format_csv, split_trajectories
     from pwas_hdl.systems.switched_observer import run_switched_observer
-    from pwas_hdl.verify.simulation import _checks, _json_default, sim_module
+    from pwas_hdl.verify.simulation import _checks, _json_default
 
     if engine != "cocotb":
         raise InputError("--engine native drives the PWAS designs only; simulate an estimator design with --engine cocotb")
@@ -261,25 +242,12 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
         bts.append(tr)
         fls.append(run_switched_observer(u, y, K=cfg.K, window=cfg.window, A=cfg.A, B=cfg.B, C=cfg.C))
         codes_all.append(codes)
-    p = 1.0 - stall
-    job = {"ports": estimator_job_ports(design.manifest), "latency": design.latency, "ii": design.ii, "warmup": 0,
-           "clock_ns": 10.0, "reset_cycles": 2, "runs": [{"name": "replay", "p_valid": p, "p_ready": p, "seed": int(seed),
-                                                          "segments": segs}]}
     n = int(sum(len(s["expected"]) for s in segs))
     say(f"simulating {n} samples of {table.path} through the estimator {design.top} on {simulator} (cocotb) ...")
-    runner = sim_module("pwas_runner")
-    t0 = time.perf_counter()
-    b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
-    wd = (Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else Path(tempfile.mkdtemp(prefix=f"pwas-esim-{simulator}-"))
-    try:
-        raw = runner.run_job(b, job, wd, test_module=TEST_MODULE)
-    finally:
-        if not waves:
-            shutil.rmtree(wd, ignore_errors=True)
-    wall = time.perf_counter() - t0
-    rsegs = raw["runs"][0]["segments"] if raw.get("runs") else []
-    if len(rsegs) != len(segs) or any(len(r["words"] or []) != len(s["expected"]) for r, s in zip(rsegs, segs)):
-        raise CheckFailed("the RTL did not produce every output: " + "; ".join(raw.get("failures", [])[:3]))
+    rep = replay_segments(design.verilog_path, design.top, segs, ports=estimator_job_ports(design.manifest),
+                          latency=design.latency, ii=design.ii, warmup=0, simulator=simulator, stall=stall, seed=seed,
+                          cache_dir=cache_dir, waves=waves, output=output, prefix="pwas-esim")
+    raw, rsegs = rep.raw, rep.segments
     hw = [_decode(design, r["words"]) for r in rsegs]
     cat = lambda key, src: np.concatenate([d[key] for d in src])  # noqa: E731
     th_hw, th_bt = cat("theta", hw), cat("theta", bts)
@@ -328,24 +296,22 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
             if ref in table.header:
                 xt = table.numeric([ref])[:, 0]
                 for st, v in (("hw", xs_hw[:, i]), ("bittrue", xs_bt[:, i]), ("float", x_fl[:, i])):
-                    metrics[f"{nm}_rmse_{st}"] = _rmse(v, xt)
+                    metrics[f"{nm}_rmse_{st}"] = rmse(v, xt)
                 metrics[f"{nm}_reference_column"] = ref
                 break
     for st, v in (("hw", ys_hw), ("bittrue", ys_bt), ("float", y_fl)):
         metrics[f"{yn}_mse_{st}"] = float(np.mean((y_all - v) ** 2))
-    lats = sorted({v for r in rsegs for v in r["latencies"]})
-    gaps = sorted({v for r in rsegs for v in r["spacings"]})
     lsb = 2.0**-fs
     first = None
     if mism.any():
         k = int(np.flatnonzero(mism)[0])
         first = {"row": int(rows[k]), "expected": [int(th_bt[k]), int(y_bt[k]), *x_bt[k].tolist()],
                  "actual": [int(th_hw[k]), int(y_hw[k]), *x_hw[k].tolist()], "order": "mode, y_hat, x_hat codes"}
+    head, tail = replay_summary(rep, design=design, kind="estimator", table=table, simulator=simulator, engine=engine,
+                                samples=n, input_transfers=n, latency=design.latency, ii=design.ii, stall=stall,
+                                ii_note="cycles between accepted samples at full speed")
     summary = {
-        "design": design.top, "design_hash": design.manifest.get("design_hash"), "kind": "estimator",
-        "outdir": str(design.outdir), "data": str(table.path), "simulator": simulator, "engine": engine,
-        "simulator_version": runner.tool_versions(simulator),
-        "samples": n, "input_transfers": n, "trajectories": len(segs),
+        **head,
         "mismatches": int(mism.sum()), "first_mismatch": first,
         "state_saturated": int(sat_hw.sum()),
         "output_lsb": lsb,
@@ -360,19 +326,8 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
         "modes": {"differ_from_float": int(differ.sum()), "differ_beyond_bound": beyond,
                   "margin_bound": 2 * float(eb["window_sum"])},
         "metrics": metrics,
-        "latency_cycles": {"manifest": design.latency, "measured_min": lats[0] if lats else None,
-                           "measured_max": lats[-1] if lats else None,
-                           "note": "from the input transfer to out.valid" + ("" if stall == 0 else "; not checked with stalls")},
-        "ii": {"manifest": design.ii, "measured": (gaps[0] if len(gaps) == 1 else None) if stall == 0 else None, "spacings": gaps,
-               "note": "cycles between accepted samples at full speed" if stall == 0 else "not measured with stalls (--stall > 0)"},
-        "stall": stall, "cycles": int(rsegs[-1]["cycles"]) if rsegs else 0, "clock_ns": 10.0,
-        "simulation_seconds": float(raw.get("wall_s", 0.0)),
-        "samples_per_second": n / float(raw["wall_s"]) if raw.get("wall_s") else None,
-        "build_seconds": float(b.build_seconds), "build_reused": bool(b.reused), "total_seconds": wall,
-        "testbench_failures": list(raw.get("failures", [])), "waves": raw.get("waves"),
+        **tail,
     }
-    if not raw.get("passed") and not summary["testbench_failures"]:
-        summary["testbench_failures"] = ["the cocotb test failed (see the simulator log)"]
     summary["checks"] = _checks(summary, stall)
     if beyond:
         summary["checks"]["passed"] = False

@@ -19,6 +19,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+from pwas_hdl.verify.segment_bench import TEST_MODULE, count_outputs, plan_job_runs, standard_segment_runs
 
 __all__ = ["RecurrentDesign", "build_recurrent_design", "replay", "standard_recurrent_runs"]
 
@@ -89,11 +90,7 @@ def build_recurrent_design(sensor, *, input_bits: int = 16, pipeline=None, name:
 def standard_recurrent_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[dict]:
     """Run plans for ``n`` samples: full speed (checks II and latency), and random bubbles and
     stalls with a reset after about a third of the samples (then the whole trajectory again)."""
-    cut = max(1, n // 3)
-    return [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": seed,
-             "segments": [{"rows": (0, n), "drain": True, "record": True}]},
-            {"name": "stalls-reset", "p_valid": stalls[0], "p_ready": stalls[1], "seed": seed + 1,
-             "segments": [{"rows": (0, cut), "drain": False, "hold": 3}, {"rows": (0, n), "drain": True}]}]
+    return standard_segment_runs(n, seed, stalls)
 
 
 def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus", *, runs: Sequence[dict] | None = None,
@@ -134,24 +131,14 @@ def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus"
                            "in_ready": nm["in.ready"], "in_payload": nm["in.payload"], "out_valid": nm["out.valid"],
                            "out_ready": nm["out.ready"], "out_payload": nm["out.payload"], "warm": "warm"},
                  "latency": design.latency, "ii": design.ii, "warmup": int(design.top.warmup), "runs": []}
-    cache: dict = {}
-    for plan in plans:
-        segs = []
-        for seg in plan["segments"]:
-            a, b = seg["rows"]
-            if (a, b) not in cache:
-                cache[(a, b)] = design.words(codes[a:b])
-            ins, outs, oc = cache[(a, b)]
-            segs.append({"words": ins, "expected": outs, "drain": bool(seg.get("drain", True)), "hold": int(seg.get("hold", 0)),
-                         "record": bool(seg.get("record", False))})
-        job["runs"].append({k: plan[k] for k in ("name", "p_valid", "p_ready", "seed")} | {"segments": segs})
+    job["runs"], cache = plan_job_runs(plans, lambda a, b: design.words(codes[a:b]))
     with tempfile.TemporaryDirectory(prefix="pwas-rec-") as tmp:
         wd = Path(work_dir) if work_dir is not None else Path(tmp)
         wd.mkdir(parents=True, exist_ok=True)
         vpath = wd / f"{design.name}.v"
         vpath.write_text(design.verilog, encoding="utf-8")
         bld = pwas_runner.build(vpath, design.name, simulator, cache_dir=cache_dir)
-        res = pwas_runner.run_job(bld, job, wd / f"run-{simulator}", test_module="pwas_recurrent_tb")
+        res = pwas_runner.run_job(bld, job, wd / f"run-{simulator}", test_module=TEST_MODULE)
     first = plans[0]["segments"][-1]["rows"]
     seg0 = res["runs"][0]["segments"][-1] if res.get("runs") else None
     _, outs_exp, oc = cache[tuple(first)]
@@ -162,7 +149,6 @@ def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus"
     res["build_s"] = bld.build_seconds
     res["simulator"] = simulator
     res["n_samples"] = int(codes.shape[0])
-    res["mismatches"] = int(sum(s["mismatches"] for r in res.get("runs", []) for s in r["segments"]))
-    res["outputs_compared"] = int(sum(min(s["outputs"], s["expected"]) for r in res.get("runs", []) for s in r["segments"]))
+    count_outputs(res)
     res["passed"] = bool(res.get("passed")) and not res.get("failures")
     return res

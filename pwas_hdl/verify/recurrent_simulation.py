@@ -23,32 +23,21 @@ refused here with a plain message.
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
-import time
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from pwas_hdl.errors import CheckFailed, InputError
+from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+from pwas_hdl.verify.segment_bench import replay_segments, replay_summary, rmse, segment_job_ports
 
 __all__ = ["recurrent_job_ports", "simulate_recurrent"]
 
 
 def recurrent_job_ports(manifest: dict) -> dict:
     """The port names of the recurrent bench's job, from the manifest's roles and reset polarity."""
-    by_role = {p["role"]: p["name"] for p in manifest["ports"]}
-    return {"clock": manifest["clock"]["port"], "reset": manifest["reset"]["port"],
-            "reset_on": 1 if manifest["reset"]["polarity"] == "high" else 0,
-            "in_valid": by_role["in.valid"], "in_ready": by_role["in.ready"], "in_payload": by_role["in.payload"],
-            "out_valid": by_role["out.valid"], "out_ready": by_role["out.ready"], "out_payload": by_role["out.payload"],
-            "warm": manifest["lags"]["warmup"]["port"]}
-
-
-def _rmse(a: np.ndarray, b: np.ndarray) -> float | None:
-    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2))) if len(a) else None
+    return segment_job_ports(manifest, warm=True)
 
 
 def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path, outset: Any, *, simulator: str,
@@ -83,8 +72,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     """
     from pwas_hdl.design.recurrent import recurrent_model
     from pwas_hdl.io.csv_table import format_csv, split_trajectories
-    from pwas_hdl.io.atomic import make_temp_dir
-    from pwas_hdl.verify.simulation import _checks, _json_default, sim_module
+    from pwas_hdl.verify.simulation import _checks, _json_default
 
     if engine != "cocotb":
         raise InputError("--engine native drives the feed-forward designs only; simulate a recurrent design with "
@@ -117,28 +105,14 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         zf = np.asarray(sensor.predict(u, y), dtype=float).reshape(-1, len(tgts))
         segs.append({"words": words, "expected": exp, "bt": res["out"], "bt_oor": res["out_of_range"], "float": zf,
                      "rows": np.arange(sl.start + m_hist - 1, sl.stop), "stop": sl.stop})
-    p = 1.0 - stall
-    job = {"ports": recurrent_job_ports(man), "latency": design.latency, "ii": int(man["ii"]), "warmup": design.warmup,
-           "clock_ns": 10.0, "reset_cycles": 2,
-           "runs": [{"name": "replay", "p_valid": p, "p_ready": p, "seed": int(seed),
-                     "segments": [{"words": s["words"], "expected": s["expected"], "drain": True, "hold": 0, "record": True}
-                                  for s in segs]}]}
     n = int(sum(len(s["expected"]) for s in segs))
     say(f"simulating {n} samples of {table.path} through the recurrent {design.top} on {simulator} (cocotb) ...")
-    runner = sim_module("pwas_runner")
-    t0 = time.perf_counter()
-    b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
-    wd = (Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else \
-        make_temp_dir(tempfile.gettempdir(), f"pwas-rsim-{simulator}")
-    try:
-        raw = runner.run_job(b, job, wd, files=design.runtime_files, test_module="pwas_recurrent_tb")
-    finally:
-        if not waves:
-            shutil.rmtree(wd, ignore_errors=True)
-    wall = time.perf_counter() - t0
-    rsegs = raw["runs"][0]["segments"] if raw.get("runs") else []
-    if len(rsegs) != len(segs) or any(len(r["words"] or []) != len(s["expected"]) for r, s in zip(rsegs, segs)):
-        raise CheckFailed("the RTL did not produce every output: " + "; ".join(raw.get("failures", [])[:3]))
+    rep = replay_segments(design.verilog_path, design.top,
+                          [{"words": s["words"], "expected": s["expected"], "drain": True, "hold": 0, "record": True} for s in segs],
+                          ports=recurrent_job_ports(man), latency=design.latency, ii=int(man["ii"]), warmup=design.warmup,
+                          simulator=simulator, stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, output=output,
+                          files=design.runtime_files, prefix="pwas-rsim")
+    raw, rsegs = rep.raw, rep.segments
     nz = fxm.nz
     dec = [np.array([unpack_fields(w, out_fields) for w in r["words"]], dtype=np.int64).reshape(-1, nz + 1) for r in rsegs]
     hw = np.concatenate([d[:, :nz] for d in dec]) if dec else np.empty((0, nz), dtype=np.int64)
@@ -158,15 +132,15 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     targets = {}
     for i, t in enumerate(tgts):
         entry: dict[str, Any] = {"max_error_vs_float_recurrence": float(e_float[:, i].max(initial=0.0)),
-                                 "rms_error_vs_float_recurrence": _rmse(zhw[:, i], zf[:, i])}
+                                 "rms_error_vs_float_recurrence": rmse(zhw[:, i], zf[:, i])}
         for ref in (f"{t}_true", t):
             if ref in table.header:
                 zt = table.numeric([ref])[:, 0]
                 ok = np.concatenate([s["rows"] + lead < s["stop"] for s in segs])  # the reference row exists
                 r_ok = row[ok] + lead
                 entry.update(reference_column=ref, reference_rows=int(ok.sum()),
-                             rmsee_hw=_rmse(zhw[ok, i], zt[r_ok]), rmsee_bittrue=_rmse(zbt[ok, i], zt[r_ok]),
-                             rmsee_float=_rmse(zf[ok, i], zt[r_ok]))
+                             rmsee_hw=rmse(zhw[ok, i], zt[r_ok]), rmsee_bittrue=rmse(zbt[ok, i], zt[r_ok]),
+                             rmsee_float=rmse(zf[ok, i], zt[r_ok]))
                 if entry["rmsee_hw"] is not None and entry["rmsee_float"]:
                     entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
                 break
@@ -175,21 +149,13 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     if mism.any():
         k = int(np.flatnonzero(mism)[0])
         first = {"row": int(row[k]), "expected": bt[k].tolist() + [int(bt_oor[k])], "actual": hw[k].tolist() + [int(oor[k])]}
-    lats = sorted({v for r in rsegs for v in r["latencies"]})
-    gaps = sorted({v for r in rsegs for v in r["spacings"]})
     lsb = 2.0 ** -fxm.output_format.frac
+    head, tail = replay_summary(rep, design=design, kind=design.kind, table=table, simulator=simulator, engine=engine,
+                                samples=n, input_transfers=int(sum(len(s["words"]) for s in segs)), latency=design.latency,
+                                ii=int(man["ii"]), stall=stall, process_seconds=True,
+                                ii_note="cycles between accepted samples at full speed (one sample in flight: II = latency)")
     summary = {
-        "design": design.top,
-        "design_hash": man.get("design_hash"),
-        "kind": design.kind,
-        "outdir": str(design.outdir),
-        "data": str(table.path),
-        "simulator": simulator,
-        "engine": engine,
-        "simulator_version": runner.tool_versions(simulator),
-        "samples": n,
-        "input_transfers": int(sum(len(s["words"]) for s in segs)),
-        "trajectories": len(segs),
+        **head,
         "mismatches": int(mism.sum()),
         "first_mismatch": first,
         "out_of_range": int(oor.sum()),
@@ -205,27 +171,8 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         "targets": targets,
         "recurrence": {"Mz": int(man["recurrence"]["Mz"]), "lead": lead,
                        "note": f"row t estimates z(t + {lead}); each trajectory starts after a reset from the reset state codes"},
-        "latency_cycles": {"manifest": design.latency, "measured_min": lats[0] if lats else None,
-                           "measured_max": lats[-1] if lats else None,
-                           "note": "from the input transfer to out.valid" + ("" if stall == 0 else "; not checked with stalls")},
-        "ii": {"manifest": int(man["ii"]), "measured": (gaps[0] if len(gaps) == 1 else None) if stall == 0 else None,
-               "spacings": gaps,
-               "note": "cycles between accepted samples at full speed (one sample in flight: II = latency)" if stall == 0
-               else "not measured with stalls (--stall > 0)"},
-        "stall": stall,
-        "cycles": int(rsegs[-1]["cycles"]) if rsegs else 0,
-        "clock_ns": 10.0,
-        "simulation_seconds": float(raw.get("wall_s", 0.0)),
-        "samples_per_second": n / float(raw["wall_s"]) if raw.get("wall_s") else None,
-        "simulator_process_seconds": float(raw.get("wall_s", 0.0)),
-        "build_seconds": float(b.build_seconds),
-        "build_reused": bool(b.reused),
-        "total_seconds": wall,
-        "testbench_failures": list(raw.get("failures", [])),
-        "waves": raw.get("waves"),
+        **tail,
     }
-    if not raw.get("passed") and not summary["testbench_failures"]:
-        summary["testbench_failures"] = ["the cocotb test failed (see the simulator log)"]
     summary["checks"] = _checks(summary, stall)
     outset.write_text(output, format_csv(cols))
     outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
