@@ -44,6 +44,7 @@ import numpy as np
 from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, NOISE_BUDGET, FixedPointModel, _py_shift_round
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling, grid_input_formats, shift_round, signed_bits_needed
+from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
 
 __all__ = ["AdditiveFixedPointModel", "additive_weight_frac"]
 
@@ -114,13 +115,7 @@ class AdditiveFixedPointModel(FixedPointModel):
 
         if not isinstance(grid, AdditiveGrid):
             raise TypeError(f"grid must be a pwas_hdl.fit.additive.AdditiveGrid, got {type(grid).__name__}")
-        w = np.asarray(weights, dtype=float)
-        if w.ndim == 1:
-            w = w[:, None]
-        if w.ndim != 2 or w.shape[0] != grid.n_vertices or w.shape[1] < 1:
-            raise ValueError(f"weights must have shape (N, nz) with N = {grid.n_vertices}, got {np.shape(weights)}")
-        if not np.all(np.isfinite(w)):
-            raise ValueError("weights contain NaN or infinite values")
+        w = weight_matrix(weights, grid.n_vertices)
         for nm, v in (("weight_bits", weight_bits), ("weight_frac", weight_frac), ("output_bits", output_bits), ("output_frac", output_frac)):
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
                 raise ValueError(f"{nm} must be an integer or None, got {v!r}")
@@ -131,34 +126,18 @@ class AdditiveFixedPointModel(FixedPointModel):
         self.weights = w
         self.rounding = rounding
         self.overflow = overflow
-        self.regressor_names = list(regressor_names) if regressor_names is not None else [f"x{j}" for j in range(self.n)]
-        self.regressor_signals = ([(str(s), int(lag)) for s, lag in regressor_signals] if regressor_signals is not None
-                                  else [(nm, 0) for nm in self.regressor_names])
-        self.target_names = list(target_names) if target_names is not None else [f"z{i}" for i in range(self.nz)]
-        if len(self.regressor_names) != self.n or len(self.regressor_signals) != self.n:
-            raise ValueError(f"need {self.n} regressor names/signals, got {len(self.regressor_names)}/{len(self.regressor_signals)}")
-        if len(self.target_names) != self.nz:
-            raise ValueError(f"need {self.nz} target names, got {len(self.target_names)}")
+        self.regressor_names, self.regressor_signals, self.target_names = model_names(
+            self.n, self.nz, regressor_names, regressor_signals, target_names)
 
         # ---- inputs: one format per regressor of the shared box (what the parts see too)
         self.inputs = grid_input_formats(grid.lo, grid.hi, grid.partitions, input_bits, input_fill, input_scale)
         self.input_bits, self.input_fill, self.input_scale = int(input_bits), float(input_fill), str(input_scale)
         self.F = max(f.frac for f in self.inputs)
-        self._lo_code = np.array([f.lo_code for f in self.inputs], dtype=np.int64)
-        self._fj = np.array([f.frac for f in self.inputs], dtype=np.int64)
-        self._span = np.array([f.input_span for f in self.inputs], dtype=np.int64)
-        self._kmul = np.array([f.scale_mul for f in self.inputs], dtype=np.int64)
-        self._rsh = np.array([f.scale_shift for f in self.inputs], dtype=np.int64)
-        self._qmin = np.array([f.format.min_code for f in self.inputs], dtype=np.int64)
-        self._qmax = np.array([f.format.max_code for f in self.inputs], dtype=np.int64)
+        self._lo_code, self._fj, self._span, self._kmul, self._rsh, self._qmin, self._qmax = input_code_arrays(self.inputs)
 
         # ---- the output lsb from the reference error, with k weight roundings in the sum
         k = grid.n_parts
-        if reference_error is not None and math.isfinite(reference_error) and reference_error > 0:
-            ref, ref_src = float(reference_error), "given"
-        else:
-            rng = float(w.max() - w.min())
-            ref, ref_src = (rng / 2**10, "weight_range") if rng > 0 else (1.0, "constant_weights")
+        ref, ref_src = output_reference(reference_error, w)
         self.reference_error, self.reference_error_source = ref, ref_src
         fw = int(weight_frac) if weight_frac is not None else additive_weight_frac(ref, k)
         fo = int(output_frac) if output_frac is not None else fw + 1
@@ -276,45 +255,23 @@ class AdditiveFixedPointModel(FixedPointModel):
     # ------------------------------------------------------------- reporting
     def to_dict(self) -> dict:
         """As :meth:`FixedPointModel.to_dict`, plus ``additive`` (the parts) and ``layout`` per part."""
-        try:
-            signals = {k: v.to_dict() for k, v in self.signal_input_formats().items()}
-        except ValueError:
-            signals = None
-        return {
-            "n": self.n,
-            "nz": self.nz,
-            "F": self.F,
-            "rounding": self.rounding,
-            "weight_overflow": self.overflow,
-            "inputs": [{"name": nm, "signal": sig, "lag": lag, **f.to_dict()}
-                       for nm, (sig, lag), f in zip(self.regressor_names, self.regressor_signals, self.inputs)],
-            "signals": signals,
-            "weights": {**self.weight_format.to_dict(), "scale": 1.0, "offset": 0.0, "n_saturated": self.n_weights_saturated,
-                        "max_abs_error": self.weight_error_max},
-            "output": {**self.output_port.to_dict(), "targets": list(self.target_names), "shift": self.shift,
-                       "reachable_codes": [int(self._out_reach[0]), int(self._out_reach[1])], "may_saturate": self.output_may_saturate},
-            "widths": dict(self.widths),
-            "layout": {"kind": self.layout.kind, "parts": [p.layout.to_dict() for p in self.parts]},
-            "additive": {
-                "parts": [
-                    {"regressors": [int(j) for j in s], "names": [self.regressor_names[j] for j in s],
-                     "n_vertices": int(p.grid.n_vertices), "F": int(p.F), "align_shift": int(a),
-                     "acc_bits": int(p.widths["acc"]), "weight_term": float(p.error_bound_weight)}
-                    for s, p, a in zip(self.subsets, self.parts, self.align)
-                ],
-                "sum": "acc = sum_i acc_i << align_shift_i (exact), then one rounding by shift and saturation to the output format",
-            },
-            "error_bound": {
-                "physical": self.error_bound,
-                "lsb": self.error_bound_lsb,
-                "weight_term": self.error_bound_weight,
-                "output_term": self.error_bound_output,
-                "includes_weight_saturation": bool(self.n_weights_saturated),
-                "holds_unless_output_saturates": True,
-                "against": "float additive model (sum of the parts), unquantised weights, at the physical input the code represents",
-            },
-            "reference_error": {"value": self.reference_error, "source": self.reference_error_source},
+        d = super().to_dict()
+        d["layout"] = {"kind": self.layout.kind, "parts": [p.layout.to_dict() for p in self.parts]}
+        bound = d.pop("error_bound")
+        ref = d.pop("reference_error")
+        d["additive"] = {
+            "parts": [
+                {"regressors": [int(j) for j in s], "names": [self.regressor_names[j] for j in s],
+                 "n_vertices": int(p.grid.n_vertices), "F": int(p.F), "align_shift": int(a),
+                 "acc_bits": int(p.widths["acc"]), "weight_term": float(p.error_bound_weight)}
+                for s, p, a in zip(self.subsets, self.parts, self.align)
+            ],
+            "sum": "acc = sum_i acc_i << align_shift_i (exact), then one rounding by shift and saturation to the output format",
         }
+        d["error_bound"] = {**bound, "against": "float additive model (sum of the parts), unquantised weights, at the physical "
+                                                 "input the code represents"}
+        d["reference_error"] = ref
+        return d
 
     def __repr__(self) -> str:
         return (f"AdditiveFixedPointModel(n={self.n}, parts={len(self.parts)}, nz={self.nz}, F={self.F}, "

@@ -92,6 +92,7 @@ from pwas_hdl.fixedpoint.formats import (
 )
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.memory_layout import make_layout
+from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
 from pwas_hdl.fixedpoint.reduction import tree_reduce
 
 __all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES", "NOISE_BUDGET", "default_weight_frac"]
@@ -250,13 +251,7 @@ class FixedPointModel:
             raise InputError("the fixed-point model needs a uniform grid; a model fitted with --breakpoints "
                              "(non-uniform partition) has the warped model of generate / simulate "
                              "(pwas_hdl.fixedpoint.warp), not available in this command yet")
-        w = np.asarray(weights, dtype=float)
-        if w.ndim == 1:
-            w = w[:, None]
-        if w.ndim != 2 or w.shape[0] != grid.n_vertices or w.shape[1] < 1:
-            raise ValueError(f"weights must have shape (N, nz) with N = {grid.n_vertices}, got {np.shape(weights)}")
-        if not np.all(np.isfinite(w)):
-            raise ValueError("weights contain NaN or infinite values")
+        w = weight_matrix(weights, grid.n_vertices)
         if overflow not in ("error", "saturate"):
             raise ValueError(f"weight overflow policy must be 'error' or 'saturate', got {overflow!r}")
         if rounding not in ("half_up", "truncate"):
@@ -274,15 +269,8 @@ class FixedPointModel:
         self.overflow = overflow
 
         # ---- names
-        self.regressor_names = list(regressor_names) if regressor_names is not None else [f"x{j}" for j in range(self.n)]
-        self.regressor_signals = (
-            [(str(s), int(lag)) for s, lag in regressor_signals] if regressor_signals is not None else [(nm, 0) for nm in self.regressor_names]
-        )
-        self.target_names = list(target_names) if target_names is not None else [f"z{i}" for i in range(self.nz)]
-        if len(self.regressor_names) != self.n or len(self.regressor_signals) != self.n:
-            raise ValueError(f"need {self.n} regressor names/signals, got {len(self.regressor_names)}/{len(self.regressor_signals)}")
-        if len(self.target_names) != self.nz:
-            raise ValueError(f"need {self.nz} target names, got {len(self.target_names)}")
+        self.regressor_names, self.regressor_signals, self.target_names = model_names(
+            self.n, self.nz, regressor_names, regressor_signals, target_names)
 
         # ---- inputs
         self.inputs: list[InputFormat] = grid_input_formats(grid.lo, grid.hi, grid.partitions, input_bits, input_fill, input_scale)
@@ -290,20 +278,11 @@ class FixedPointModel:
         self.input_fill = float(input_fill)
         self.input_scale = str(input_scale)
         self.F = max(f.frac for f in self.inputs)
-        self._lo_code = np.array([f.lo_code for f in self.inputs], dtype=np.int64)
-        self._fj = np.array([f.frac for f in self.inputs], dtype=np.int64)
-        self._span = np.array([f.input_span for f in self.inputs], dtype=np.int64)  # clamp range, input codes
-        self._kmul = np.array([f.scale_mul for f in self.inputs], dtype=np.int64)
-        self._rsh = np.array([f.scale_shift for f in self.inputs], dtype=np.int64)
-        self._qmin = np.array([f.format.min_code for f in self.inputs], dtype=np.int64)
-        self._qmax = np.array([f.format.max_code for f in self.inputs], dtype=np.int64)
+        # _span: the clamp range, input codes
+        self._lo_code, self._fj, self._span, self._kmul, self._rsh, self._qmin, self._qmax = input_code_arrays(self.inputs)
 
         # ---- output lsb from the reference error
-        if reference_error is not None and math.isfinite(reference_error) and reference_error > 0:
-            ref, ref_src = float(reference_error), "given"
-        else:
-            rng = float(w.max() - w.min())
-            ref, ref_src = (rng / 2**10, "weight_range") if rng > 0 else (1.0, "constant_weights")
+        ref, ref_src = output_reference(reference_error, w)
         self.reference_error = ref
         self.reference_error_source = ref_src
         fw = int(weight_frac) if weight_frac is not None else default_weight_frac(ref)

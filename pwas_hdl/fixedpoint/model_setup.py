@@ -1,0 +1,79 @@
+"""What every fixed-point PWAS model's constructor does first, written once.
+
+Used by :class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel` (one grid) and
+:class:`pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` (a sum of parts on one box):
+
+* :func:`weight_matrix`: the weights as an (N, nz) float array, checked;
+* :func:`model_names`: regressor names, regressor signals ``(signal, lag)`` and target names, with
+  their defaults (``x0..``, ``(name, 0)``, ``z0..``), checked against ``n`` and ``nz``;
+* :func:`input_code_arrays`: the per-regressor constants of the input formats as int64 arrays;
+* :func:`output_reference`: the reference error that sets the output LSB, and where it came from.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["weight_matrix", "model_names", "input_code_arrays", "output_reference"]
+
+
+def weight_matrix(weights, n_vertices: int) -> np.ndarray:
+    """The weights as a float array of shape (N, nz) (a 1-D array is one target).
+
+    Raises
+    ------
+    ValueError
+        Not N rows (``n_vertices``), no column, or NaN / infinite values.
+    """
+    w = np.asarray(weights, dtype=float)
+    if w.ndim == 1:
+        w = w[:, None]
+    if w.ndim != 2 or w.shape[0] != n_vertices or w.shape[1] < 1:
+        raise ValueError(f"weights must have shape (N, nz) with N = {n_vertices}, got {np.shape(weights)}")
+    if not np.all(np.isfinite(w)):
+        raise ValueError("weights contain NaN or infinite values")
+    return w
+
+
+def model_names(n: int, nz: int, regressor_names: Sequence[str] | None, regressor_signals: Sequence[tuple[str, int]] | None,
+                target_names: Sequence[str] | None) -> tuple[list[str], list[tuple[str, int]], list[str]]:
+    """``(regressor names, regressor signals, target names)`` of a model with ``n`` regressors and ``nz`` targets.
+
+    Defaults: ``x0 .. x{n-1}``; each regressor its own signal at lag 0; ``z0 .. z{nz-1}``.
+
+    Raises
+    ------
+    ValueError
+        A list of the wrong length.
+    """
+    names = list(regressor_names) if regressor_names is not None else [f"x{j}" for j in range(n)]
+    signals = [(str(s), int(lag)) for s, lag in regressor_signals] if regressor_signals is not None else [(nm, 0) for nm in names]
+    targets = list(target_names) if target_names is not None else [f"z{i}" for i in range(nz)]
+    if len(names) != n or len(signals) != n:
+        raise ValueError(f"need {n} regressor names/signals, got {len(names)}/{len(signals)}")
+    if len(targets) != nz:
+        raise ValueError(f"need {nz} target names, got {len(targets)}")
+    return names, signals, targets
+
+
+def input_code_arrays(inputs: Sequence) -> tuple[np.ndarray, ...]:
+    """The constants of the input formats (:class:`~pwas_hdl.fixedpoint.formats.InputFormat`, one per
+    regressor) as int64 arrays (n,): ``(lo_code, frac, input_span, scale_mul, scale_shift, min_code, max_code)``."""
+    def col(get) -> np.ndarray:
+        return np.array([get(f) for f in inputs], dtype=np.int64)
+
+    return (col(lambda f: f.lo_code), col(lambda f: f.frac), col(lambda f: f.input_span), col(lambda f: f.scale_mul),
+            col(lambda f: f.scale_shift), col(lambda f: f.format.min_code), col(lambda f: f.format.max_code))
+
+
+def output_reference(reference_error: float | None, w: np.ndarray) -> tuple[float, str]:
+    """The reference error of the output LSB and its source: ``reference_error`` when a positive
+    finite number ("given"), else the weight range / 2**10 ("weight_range"), or 1.0 for constant
+    weights ("constant_weights")."""
+    if reference_error is not None and math.isfinite(reference_error) and reference_error > 0:
+        return float(reference_error), "given"
+    rng = float(w.max() - w.min())
+    return (rng / 2**10, "weight_range") if rng > 0 else (1.0, "constant_weights")
