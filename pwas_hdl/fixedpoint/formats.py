@@ -56,6 +56,8 @@ __all__ = [
     "PortFormat",
     "InputFormat",
     "grid_input_formats",
+    "quantize_input",
+    "input_to_physical",
     "signed_bits_needed",
     "unsigned_bits_needed",
     "shift_round",
@@ -698,15 +700,11 @@ class InputFormat:
         q : ndarray of int64
         saturated : ndarray of bool (only with ``return_saturated``)
         """
-        v = np.asarray(x, dtype=float)
-        if np.isnan(v).any():
-            raise ValueError("input values contain NaN; cannot quantize")
-        scaled = self.lo_code + (v - self.lo) / self.lsb
-        return self.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
+        return quantize_input(self, x, return_saturated)
 
     def to_physical(self, q) -> np.ndarray:
         """Physical value a code represents: ``lo + lsb * (q - lo_code)`` (= ``offset + lsb*q``)."""
-        return self.lo + self.lsb * (np.asarray(q, dtype=np.int64) - self.lo_code).astype(float)
+        return input_to_physical(self, q)
 
     def grid_units(self, q) -> np.ndarray:
         """Unclamped grid coordinate the hardware computes for codes, ``scaled(q - lo_code) / 2**F``
@@ -737,6 +735,30 @@ class InputFormat:
             "scale": self.step,
             "physical": "offset + lsb * code = offset + scale * code * 2**-F",
         }
+
+
+def quantize_input(f, x, return_saturated: bool = False):
+    """The input codes of physical values ``x`` for an input format ``f`` (:class:`InputFormat`, or
+    :class:`~pwas_hdl.fixedpoint.warp.WarpInputFormat`: anything with ``lo``, ``lo_code``, ``lsb`` and
+    a saturating ``format``): ``floor(lo_code + (x - lo) / lsb + 1/2)`` in float64, saturated to
+    ``f.format`` (see :meth:`InputFormat.quantize`; ``saturated`` mask with ``return_saturated``).
+
+    Raises
+    ------
+    ValueError
+        ``x`` contains NaN.
+    """
+    v = np.asarray(x, dtype=float)
+    if np.isnan(v).any():
+        raise ValueError("input values contain NaN; cannot quantize")
+    scaled = f.lo_code + (v - f.lo) / f.lsb
+    return f.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
+
+
+def input_to_physical(f, q) -> np.ndarray:
+    """The physical values input codes ``q`` represent for an input format ``f`` (as
+    :func:`quantize_input`): ``lo + lsb * (q - lo_code)``, float64."""
+    return f.lo + f.lsb * (np.asarray(q, dtype=np.int64) - f.lo_code).astype(float)
 
 
 def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Sequence[int], bits: int = 12, fill: float = 0.9,

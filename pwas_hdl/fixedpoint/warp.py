@@ -154,17 +154,15 @@ class WarpInputFormat:
         """Input codes of physical values: ``floor(lo_code + (x - lo) / lsb + 1/2)``, saturated to
         ``bits`` (as :meth:`pwas_hdl.fixedpoint.formats.InputFormat.quantize`: ``x = lo`` gives
         ``lo_code`` exactly)."""
-        from pwas_hdl.fixedpoint.formats import _round_scaled
+        from pwas_hdl.fixedpoint.formats import quantize_input
 
-        v = np.asarray(x, dtype=float)
-        if np.isnan(v).any():
-            raise ValueError("input values contain NaN; cannot quantize")
-        scaled = self.lo_code + (v - self.lo) / self.lsb
-        return self.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
+        return quantize_input(self, x, return_saturated)
 
     def to_physical(self, q) -> np.ndarray:
         """``lo + lsb * (q - lo_code)``."""
-        return self.lo + self.lsb * (np.asarray(q, dtype=np.int64) - self.lo_code).astype(float)
+        from pwas_hdl.fixedpoint.formats import input_to_physical
+
+        return input_to_physical(self, q)
 
     def to_dict(self) -> dict[str, Any]:
         fmt = self.format
