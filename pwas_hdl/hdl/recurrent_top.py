@@ -30,7 +30,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _not, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
-from pwas_hdl.hdl.sensor_top import _ident, sample_fields
+from pwas_hdl.hdl.sensor_top import lag_bank, sample_fields
 
 __all__ = ["PWASRecurrentTop", "build_recurrent_sensor"]
 
@@ -188,15 +188,7 @@ class PWASRecurrentTop(wiring.Component):
             m.d.comb += self.warm.eq(1)
         core_valid = Signal(name="core_valid")
         m.d.comb += core_valid.eq(transfer & warm)
-        hist = []
-        for i, (nm, k) in enumerate(self.signals):
-            regs = [Signal(b, name=f"lag_{_ident(nm)}_{lag}", reset_less=True) for lag in range(1, k)]
-            with m.If(transfer):
-                if regs:
-                    m.d.sync += regs[0].eq(cur[i])
-                for lag in range(1, len(regs)):
-                    m.d.sync += regs[lag].eq(regs[lag - 1])
-            hist.append(regs)
+        hist = lag_bank(m, self.signals, cur, transfer, b)
         outw = p.out_width
         zin = {}
         for c, fb in enumerate(self.feedback):

@@ -30,7 +30,7 @@ from pwas_hdl.fit.regressors import LagStructure
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
-__all__ = ["PWASSensorTop", "lag_plan"]
+__all__ = ["PWASSensorTop", "lag_plan", "lag_bank"]
 
 
 def lag_plan(model, lags: LagStructure | None = None):
@@ -98,6 +98,23 @@ def sample_fields(names, width: int) -> list[dict]:
 def _ident(name: str) -> str:
     s = re.sub(r"[^A-Za-z0-9_]", "_", name)
     return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
+
+
+def lag_bank(m: Module, signals, cur: list, transfer, width: int) -> list[list[Signal]]:
+    """The lag bank of a sensor top: per signal ``(name, k)`` the ``k - 1`` registers
+    ``lag_<name>_1 .. lag_<name>_{k-1}`` (``width`` bits, no reset), shifted on ``transfer``
+    (after the transfer of sample ``t``, ``lag_<name>_d`` holds sample ``t - d``; ``cur[i]`` is
+    the current code of signal ``i``). Returns the registers per signal (``hist[i][d - 1]`` = lag ``d``)."""
+    hist = []
+    for i, (nm, k) in enumerate(signals):
+        regs = [Signal(width, name=f"lag_{_ident(nm)}_{lag}", reset_less=True) for lag in range(1, k)]
+        with m.If(transfer):
+            if regs:
+                m.d.sync += regs[0].eq(cur[i])
+            for lag in range(1, len(regs)):
+                m.d.sync += regs[lag].eq(regs[lag - 1])
+        hist.append(regs)
+    return hist
 
 
 class PWASSensorTop(wiring.Component):
@@ -228,15 +245,7 @@ class PWASSensorTop(wiring.Component):
             warm = Const(1, 1)
             m.d.comb += self.warm.eq(1)
         transfer = inp.valid & inp.ready
-        hist = []
-        for i, (nm, k) in enumerate(self.signals):
-            regs = [Signal(b, name=f"lag_{_ident(nm)}_{lag}", reset_less=True) for lag in range(1, k)]
-            with m.If(transfer):
-                if regs:
-                    m.d.sync += regs[0].eq(cur[i])
-                for lag in range(1, len(regs)):
-                    m.d.sync += regs[lag].eq(regs[lag - 1])
-            hist.append(regs)
+        hist = lag_bank(m, self.signals, cur, transfer, b)
         if fill:
             with m.If(transfer):
                 m.d.sync += [fill[0].eq(1)] + [fill[i].eq(fill[i - 1]) for i in range(1, len(fill))]
