@@ -17,7 +17,6 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
 from pwas_hdl.verify.segment_bench import TEST_MODULE, count_outputs, plan_job_runs, standard_segment_runs
 
@@ -64,24 +63,25 @@ def build_recurrent_design(sensor, *, input_bits: int = 16, pipeline=None, name:
         every step, see :mod:`pwas_hdl.fixedpoint.recurrence`).
     pipeline, name : as :func:`pwas_hdl.hdl.api.build_sensor`
     **formats : more :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` options.
+
+    Raises
+    ------
+    InputError
+        Not recurrent, a measured initial state, or lags of one signal in different formats
+        (:func:`pwas_hdl.design.recurrent.recurrent_model`, as ``generate``).
     """
+    from pwas_hdl.design.recurrent import recurrent_model
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
-    from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
     from pwas_hdl.hdl.emit import emit_verilog
     from pwas_hdl.hdl.recurrent_top import build_recurrent_sensor
+    from pwas_hdl.hdl.sensor_top import sample_fields
 
-    lags = sensor.lags_
-    if lags is None or not lags.recurrent:
-        raise InputError("the model is not recurrent (Mz = 0): use the lag sensor top (generate --design sensor)")
-    if sensor.initial_state_rule_ != "value":
-        raise InputError("the hardware starts from constant initial states: fit with an initial_state value or 'mean', "
-                         "not 'measured'")
     fxm = FixedPointModel.from_sensor(sensor, input_bits=input_bits, **formats)
-    rm = RecurrentFixedPointModel(fxm, lags, sensor.initial_values_)
+    rm = recurrent_model(sensor, fxm)  # the recurrent hardware's conditions: Mz >= 1, constant initial states, one format per signal
     top = build_recurrent_sensor(rm, pipeline=pipeline, name=name)
     verilog = emit_verilog(top, name)
     b, ow = fxm.input_bits, fxm.output_format.bits
-    in_fields = [{"name": s, "lsb": i * b, "width": b, "signed": True} for i, s in enumerate(rm.signals)]
+    in_fields = sample_fields(rm.signals, b)
     out_fields = [{"name": t, "lsb": i * ow, "width": ow, "signed": True} for i, t in enumerate(fxm.target_names)]
     out_fields.append({"name": "out_of_range", "lsb": fxm.nz * ow, "width": 1, "signed": False})
     return RecurrentDesign(rm, top, verilog, name, in_fields, out_fields)
