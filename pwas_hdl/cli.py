@@ -559,12 +559,11 @@ def predict(
             cols["out_of_domain"] = flags
             with outset:
                 outset.write_text(output, format_csv(cols))
-            for ref in (f"{ct}_true", ct):
-                if ref in table.header:
-                    sc = clf.class_scores(table.numeric([ref])[rows, 0], label, classes)
-                    f1 = ", ".join(f"{clf.label_text(c)}: {v:.4f}" for c, v in zip(classes, sc["f1"]))
-                    _say(f"accuracy of {ct}_hat against column {ref}: {sc['accuracy']:.4f} over {rows.size} samples; F1 per class {f1}")
-                    break
+            ref = table.reference_column(ct)
+            if ref is not None:
+                sc = clf.class_scores(table.numeric([ref])[rows, 0], label, classes)
+                f1 = ", ".join(f"{clf.label_text(c)}: {v:.4f}" for c, v in zip(classes, sc["f1"]))
+                _say(f"accuracy of {ct}_hat against column {ref}: {sc['accuracy']:.4f} over {rows.size} samples; F1 per class {f1}")
             tgts = []
         else:
             for i, t in enumerate(tgts):
@@ -573,13 +572,12 @@ def predict(
             with outset:
                 outset.write_text(output, format_csv(cols))
         for i, t in enumerate(tgts):
-            for ref in (f"{t}_true", t):
-                if ref in table.header:
-                    ztrue = table.numeric([ref])[rows[scored] + lead, 0]
-                    rmse = float(np.sqrt(np.mean((zhat[scored, i] - ztrue) ** 2)))
-                    shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
-                    _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
-                    break
+            ref = table.reference_column(t)
+            if ref is not None:
+                ztrue = table.numeric([ref])[rows[scored] + lead, 0]
+                rmse = float(np.sqrt(np.mean((zhat[scored, i] - ztrue) ** 2)))
+                shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
+                _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
         if flags.any():
             _warn(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")
         _say(f"wrote {output} ({rows.size} rows)")

@@ -105,6 +105,11 @@ class Table:
         c = self.column_index(name)
         return [row[c].strip() for row in self.rows]
 
+    def reference_column(self, name: str) -> str | None:
+        """The column with the reference (measured or true) values of quantity ``name``:
+        ``<name>_true`` if the file has it, else ``<name>``, else None."""
+        return next((c for c in (f"{name}_true", name) if c in self.header), None)
+
     def column_index(self, name: str) -> int:
         try:
             return self.header.index(name)

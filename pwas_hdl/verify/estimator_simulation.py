@@ -292,13 +292,12 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
         for st, th in (("hw", th_hw), ("bittrue", th_bt), ("float", th_fl)):
             metrics[f"mode_accuracy_{st}"] = float(class_scores(mode, th.astype(float), sorted(set(mode.tolist())))["accuracy"])
     for i, nm in enumerate(cfg.state_names):
-        for ref in (f"{nm}_true", nm):
-            if ref in table.header:
-                xt = table.numeric([ref])[:, 0]
-                for st, v in (("hw", xs_hw[:, i]), ("bittrue", xs_bt[:, i]), ("float", x_fl[:, i])):
-                    metrics[f"{nm}_rmse_{st}"] = rmse(v, xt)
-                metrics[f"{nm}_reference_column"] = ref
-                break
+        ref = table.reference_column(nm)
+        if ref is not None:
+            xt = table.numeric([ref])[:, 0]
+            for st, v in (("hw", xs_hw[:, i]), ("bittrue", xs_bt[:, i]), ("float", x_fl[:, i])):
+                metrics[f"{nm}_rmse_{st}"] = rmse(v, xt)
+            metrics[f"{nm}_reference_column"] = ref
     for st, v in (("hw", ys_hw), ("bittrue", ys_bt), ("float", y_fl)):
         metrics[f"{yn}_mse_{st}"] = float(np.mean((y_all - v) ** 2))
     lsb = 2.0**-fs

@@ -133,17 +133,16 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     for i, t in enumerate(tgts):
         entry: dict[str, Any] = {"max_error_vs_float_recurrence": float(e_float[:, i].max(initial=0.0)),
                                  "rms_error_vs_float_recurrence": rmse(zhw[:, i], zf[:, i])}
-        for ref in (f"{t}_true", t):
-            if ref in table.header:
-                zt = table.numeric([ref])[:, 0]
-                ok = np.concatenate([s["rows"] + lead < s["stop"] for s in segs])  # the reference row exists
-                r_ok = row[ok] + lead
-                entry.update(reference_column=ref, reference_rows=int(ok.sum()),
-                             rmsee_hw=rmse(zhw[ok, i], zt[r_ok]), rmsee_bittrue=rmse(zbt[ok, i], zt[r_ok]),
-                             rmsee_float=rmse(zf[ok, i], zt[r_ok]))
-                if entry["rmsee_hw"] is not None and entry["rmsee_float"]:
-                    entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
-                break
+        ref = table.reference_column(t)
+        if ref is not None:
+            zt = table.numeric([ref])[:, 0]
+            ok = np.concatenate([s["rows"] + lead < s["stop"] for s in segs])  # the reference row exists
+            r_ok = row[ok] + lead
+            entry.update(reference_column=ref, reference_rows=int(ok.sum()),
+                         rmsee_hw=rmse(zhw[ok, i], zt[r_ok]), rmsee_bittrue=rmse(zbt[ok, i], zt[r_ok]),
+                         rmsee_float=rmse(zf[ok, i], zt[r_ok]))
+            if entry["rmsee_hw"] is not None and entry["rmsee_float"]:
+                entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
         targets[t] = entry
     first = None
     if mism.any():

@@ -969,13 +969,12 @@ def simulate_data(
             "max_error_vs_float_model": float(e_float[:, i].max()) if len(e_float) else 0.0,
             "max_error_vs_float_model_lsb": float(e_float[:, i].max() / lsb) if len(e_float) else 0.0,
         }
-        for ref in (f"{t}_true", t):
-            if ref in table.header:
-                ztrue = table.numeric([ref])[row, 0]
-                entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
-                             rmsee_float=_rmse(zf[:, i], ztrue), rmsee_float_at_codes=_rmse(zref[:, i], ztrue))
-                entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
-                break
+        ref = table.reference_column(t)
+        if ref is not None:
+            ztrue = table.numeric([ref])[row, 0]
+            entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
+                         rmsee_float=_rmse(zf[:, i], ztrue), rmsee_float_at_codes=_rmse(zref[:, i], ztrue))
+            entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
         targets[t] = entry
     first = None
     if mism.any():
