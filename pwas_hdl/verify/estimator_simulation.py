@@ -27,6 +27,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+from pwas_hdl.verify.simulation import ManifestView
 from pwas_hdl.verify.segment_bench import (
     TEST_MODULE,
     count_outputs,
@@ -43,8 +44,9 @@ __all__ = ["EstimatorDesign", "load_estimator_design", "estimator_job_ports", "e
 
 
 @dataclass
-class EstimatorDesign:
-    """A generated estimator folder: manifest, configuration, bit-true estimator, Verilog path."""
+class EstimatorDesign(ManifestView):
+    """A generated estimator folder: manifest, configuration, bit-true estimator, Verilog path
+    (top, latency, ports and fields: :class:`~pwas_hdl.verify.simulation.ManifestView`)."""
 
     outdir: Path
     manifest: dict
@@ -53,31 +55,12 @@ class EstimatorDesign:
     verilog_path: Path
 
     @property
-    def top(self) -> str:
-        return self.manifest["top"]
-
-    @property
     def kind(self) -> str:
         return "estimator"
 
     @property
-    def latency(self) -> int:
-        return int(self.manifest["latency_cycles"])
-
-    @property
     def ii(self) -> int:
         return int(self.manifest["ii"])
-
-    def _port(self, role: str) -> dict:
-        return next(p for p in self.manifest["ports"] if p["role"] == role)
-
-    @property
-    def in_fields(self) -> list[dict]:
-        return self._port("in.payload")["fields"]
-
-    @property
-    def out_fields(self) -> list[dict]:
-        return self._port("out.payload")["fields"]
 
 
 def load_estimator_design(outdir, manifest: dict | None = None, verilog=None) -> EstimatorDesign:

@@ -93,36 +93,21 @@ def sim_module(name: str):
 # ---------------------------------------------------------------------------------------------------- design
 
 
-@dataclass
-class Design:
-    """A generated design folder and the bit-true model it must match."""
+class ManifestView:
+    """What a replay reads of a generated folder's manifest (``self.manifest``, ``self.outdir``):
+    the top's name, the latency, the ports by role and the payload bit fields. Shared by
+    :class:`Design` and :class:`~pwas_hdl.verify.estimator_simulation.EstimatorDesign`."""
 
-    outdir: Path
     manifest: dict
-    sensor: Any  # PWASVirtualSensor
-    model: FixedPointModel
-    verilog_path: Path
-    #: observer-bank sensors (manifest ``front_end``): the bit-true bank + core
-    #: (:class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`); ``model`` is its core
-    bank: Any = None
+    outdir: Path
 
     @property
     def top(self) -> str:
         return self.manifest["top"]
 
     @property
-    def kind(self) -> str:
-        return self.manifest["design"]
-
-    @property
     def latency(self) -> int:
         return int(self.manifest["latency_cycles"])
-
-    @property
-    def warmup(self) -> int:
-        if self.kind not in ("sensor", "recurrent"):
-            return 0
-        return int(self.manifest["lags"]["warmup"]["samples_without_output"])  # the schema requires it for a sensor
 
     def port(self, role: str) -> dict:
         for p in self.manifest["ports"]:
@@ -137,6 +122,30 @@ class Design:
     @property
     def out_fields(self) -> list[dict]:
         return self.port("out.payload")["fields"]
+
+
+@dataclass
+class Design(ManifestView):
+    """A generated design folder and the bit-true model it must match (the manifest's facts: :class:`ManifestView`)."""
+
+    outdir: Path
+    manifest: dict
+    sensor: Any  # PWASVirtualSensor
+    model: FixedPointModel
+    verilog_path: Path
+    #: observer-bank sensors (manifest ``front_end``): the bit-true bank + core
+    #: (:class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`); ``model`` is its core
+    bank: Any = None
+
+    @property
+    def kind(self) -> str:
+        return self.manifest["design"]
+
+    @property
+    def warmup(self) -> int:
+        if self.kind not in ("sensor", "recurrent"):
+            return 0
+        return int(self.manifest["lags"]["warmup"]["samples_without_output"])  # the schema requires it for a sensor
 
     @property
     def verilog(self) -> str:
