@@ -1,6 +1,7 @@
 """cocotb testbench of the recurrent sensor top (:mod:`pwas_hdl.hdl.recurrent_top`), issue 13.
 
-Driven by a JSON job (``PWAS_TB_JOB``, written by :mod:`pwas_hdl.verify.recurrent_replay`)::
+Driven by a JSON job (``PWAS_TB_JOB``, built by :mod:`pwas_hdl.verify.segment_bench` for the recurrent top's
+replays and seed 003's estimator's)::
 
     {"result": "/abs/result.json", "ports": {"clock", "reset", "reset_on", "in_valid", "in_ready",
      "in_payload", "out_valid", "out_ready", "out_payload", "warm"}, "latency": L, "ii": II, "warmup": W,
