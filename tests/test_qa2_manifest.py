@@ -128,3 +128,24 @@ def test_every_reader_refuses_an_inconsistent_manifest(folders, tmp_path, comman
     assert res.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and "need 4 regressors" in lines[0], res.output
     assert tree(tmp_path) == before
 
+
+
+def _additive_memory(part_words=(6, 12, 60, 12)):
+    parts = [{"memory": {"memories": mm, "depth": d, "words": w}}
+             for mm, d, w in zip((2, 3, 4, 3), (3, 4, 15, 4), part_words)]
+    return {"memory": {"memories": 12, "depth": 15, "words": 90, "n_vertices": 74, "word_bits": 20},
+            "files": {"hex": []}, "formats": {"weight": {"bits": 10}}, "lags": {"targets": ["z"]},
+            "additive": {"parts": parts}}
+
+
+def test_additive_memory_is_checked_part_by_part():
+    """An additive design's memory is its parts' (a-c-n4-z2-max-trunc: 12 memories, largest depth 15, 90
+    words): the plain rule words = memories x depth refused every additive design whose parts differ in
+    depth (generate raised InternalError on its own manifest)."""
+    from pwas_hdl.design.manifest import _memory_errors
+
+    assert _memory_errors(_additive_memory()) == []
+    bad = _additive_memory((6, 12, 61, 12))
+    errs = _memory_errors(bad)
+    assert any("additive.parts[2].memory.words 61 is not memories x depth = 4 x 15" in e for e in errs)
+    assert any("not the sum of the additive parts" in e for e in errs)

@@ -520,9 +520,17 @@ def _memory_errors(m: dict[str, Any]) -> list[str]:
     fields with the weight format."""
     mem, hexes = m["memory"], m["files"]["hex"]
     errs = []
-    if mem["words"] != mem["memories"] * mem["depth"] or mem["words"] < mem["n_vertices"]:
-        errs.append(f"memory.words {mem['words']} is not memories x depth = {mem['memories']} x {mem['depth']} "
-                    f"or holds fewer than n_vertices = {mem['n_vertices']} words")
+    parts = [p["memory"] for p in m["additive"]["parts"] if "memory" in p] if "additive" in m else [mem]
+    for k, pm in enumerate(parts):  # an additive design: every part has its own memories of its own depth
+        if pm["words"] != pm["memories"] * pm["depth"]:
+            where = f"additive.parts[{k}].memory" if "additive" in m else "memory"
+            errs.append(f"{where}.words {pm['words']} is not memories x depth = {pm['memories']} x {pm['depth']}")
+    if "additive" in m and parts and (mem["words"], mem["memories"], mem["depth"]) != (
+            sum(pm["words"] for pm in parts), sum(pm["memories"] for pm in parts), max(pm["depth"] for pm in parts)):
+        errs.append(f"memory (words {mem['words']}, memories {mem['memories']}, depth {mem['depth']}) is not the sum of "
+                    "the additive parts' words and memories and their largest depth")
+    if mem["words"] < mem["n_vertices"]:
+        errs.append(f"memory.words {mem['words']} holds fewer than n_vertices = {mem['n_vertices']} words")
     wbits = m["formats"]["weight"]["bits"]
     for i, h in enumerate(hexes):
         used = 0
