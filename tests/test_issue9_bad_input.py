@@ -506,6 +506,10 @@ def test_simulate_exits_1_when_latency_disagrees_with_the_manifest(tmp_path, des
         (g / f.name).write_bytes(f.read_bytes())
     man = json.loads((g / "manifest.json").read_text())
     man["latency_cycles"] -= 1
+    # a self-consistent manifest (one register fewer in its pipeline, as the latency says) over the
+    # unchanged Verilog: only the measurement can tell (an inconsistent one is refused when read, exit 2)
+    stage = next(k for k in ("rank", "addr", "mem_out", "product") if man["pipeline"].get(k))
+    man["pipeline"][stage] = False
     (g / "manifest.json").write_text(json.dumps(man))
     res = invoke("simulate", g, files / "t.csv", "-o", tmp_path / "s.csv", "--build-dir", sim_cache)
     assert res.exit_code == 1, res.output
