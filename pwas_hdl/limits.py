@@ -42,6 +42,7 @@ __all__ = [
     "MAX_LATENCY_CYCLES",
     "MAX_PORT_BITS",
     "MAX_BENCH_COUNT",
+    "MAX_MEMORY_WORDS",
     "check_limit",
     "check_vertices",
 ]
@@ -70,6 +71,10 @@ MAX_BENCH_COUNT = 1000
 MAX_LATENCY_CYCLES = 2**16
 #: Widest port a manifest may state, in bits (a payload packs at most 20 regressors or a few outputs).
 MAX_PORT_BITS = 2**16
+#: Most words a weight-memory layout may hold over all its banks (the corner layout's ``2**n`` banks
+#: of ``2**sum(cell bits)`` words grow far faster than ``N``: n = 10, p = 3 would be 2**30 words);
+#: 4 Mi words is about 12 times what the largest ECP5 (LFE5U-85F, 208 x 18 kbit of block RAM) holds at 11 bits.
+MAX_MEMORY_WORDS = 2**22
 
 
 def check_limit(what: str, value: int, limit: int, hint: str) -> int:

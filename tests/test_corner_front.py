@@ -75,3 +75,31 @@ def test_raw_compare_in_manifest_only_when_set():
     assert "raw_compare" not in Pipeline().to_dict()
     d = _pipe("short", raw_compare=True).to_dict()
     assert d["raw_compare"] is True and Pipeline.cast(d) == _pipe("short", raw_compare=True)
+
+
+def test_a_corner_memory_too_large_is_refused_before_it_is_built():
+    """2**n corner banks of 2**(cell bits) words grow far faster than N: n = 10, p = 3 (N = 4**10)
+    would be 2**30 words; the layout refuses it (ResourceLimit, an InputError: the CLI's error line,
+    exit 2) before any table or content is allocated."""
+    from pwas_hdl.errors import ResourceLimit
+    from pwas_hdl.fit.geometry import Grid
+
+    with pytest.raises(ResourceLimit, match=r"corner memory's words .* = 1073741824 exceeds the limit"):
+        CornerLayout(Grid(np.zeros(10), np.ones(10), [3] * 10))
+
+
+@pytest.mark.slow
+def test_generate_refuses_a_too_large_corner_memory(tmp_path):
+    """The same through the CLI: one error line, exit 2, nothing written (~2.5 s: a 65 536-weight model)."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+    from pwas_hdl.verify.simulation import sim_module
+
+    model = tmp_path / "m.json"  # n = 8, p = 3: N = 65 536 (banked fine), corner 256 x 65 536 words
+    model.write_text(sim_module("pwas_designs").synthetic_model(0, 8, 0, 1, 3).to_json())
+    out = tmp_path / "hw"
+    res = CliRunner().invoke(app, ["generate", str(model), "--memory", "corner", "-o", str(out)])
+    assert res.exit_code == 2, res.output
+    assert res.output.count("error:") == 1 and "use the banked memory" in res.output and "Traceback" not in res.output
+    assert not out.exists()

@@ -68,6 +68,7 @@ import numpy as np
 
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.bitfields import pack_rows, to_unsigned
+from pwas_hdl.limits import MAX_MEMORY_WORDS, check_limit
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
 
@@ -311,6 +312,9 @@ class CornerLayout(_LayoutBase):
             shifts[j] = pos
             pos += self.cell_bits[j]
         self.field_shifts = tuple(shifts)
+        # refused before any table or content of 2**n x 2**pos words is built
+        check_limit("the corner memory's words (2**n banks x 2**(cell address bits))", self.n_banks << pos,
+                    MAX_MEMORY_WORDS, "use the banked memory (--memory banked) for this grid")
         self.depth = 1 << pos
 
     def cell_addr(self, cells) -> np.ndarray:
