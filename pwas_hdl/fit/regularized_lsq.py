@@ -20,7 +20,7 @@ from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.fit.fork_map import fork_available, fork_map
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
-from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky, cholmod_available
+from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky, cholmod_available, grid_nested_dissection
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 
 __all__ = [
@@ -39,6 +39,9 @@ __all__ = [
     "CG_RTOL",
     "FACTOR_PCG_MAXITER",
     "FACTOR_PCG_SEGMENT",
+    "FACTOR_DOMINANCE_CG",
+    "FACTOR_PCG_MAXITER_CG",
+    "FACTOR_CHAIN_DIMS",
     "FORK_MIN_UNKNOWNS",
     "solve_regularized",
     "cross_validate_sigma",
@@ -196,6 +199,32 @@ FACTOR_PCG_MAXITER = 10
 #: factor at 1e-7): 3 / 6 / 9 / 13 iterations at 10^-6.5 / -6 / -5.5 / -5, so the chain's rule
 #: (stop once an attempt needs more than half the cap) ends it by the third or fourth sigma anyway.
 FACTOR_PCG_SEGMENT = 4
+
+#: First order, base method Jacobi-CG (the direct solve not picked: n = 3, N = 262 144), ``auto``,
+#: CHOLMOD, at least :data:`MG_MIN_UNKNOWNS` unknowns, n in :data:`FACTOR_CHAIN_DIMS`: the sigmas of
+#: a fold with ``rho < FACTOR_DOMINANCE_CG`` (``rho`` as in :data:`MG_DOMINANCE`) are the *factor
+#: chain*: swept from the smallest up, the smallest factorised by CHOLMOD with the geometric
+#: nested-dissection ordering (:func:`~pwas_hdl.fit.sparse_cholesky.grid_nested_dissection`), each
+#: next one by CG preconditioned with that factor and warm-started from the previous sigma (at most
+#: :data:`FACTOR_PCG_MAXITER_CG` iterations; the rule of :data:`FACTOR_PCG_MAXITER` otherwise). There
+#: Jacobi-CG needs the most iterations and stops at the cap (2000) unconverged. Measured (n = 3,
+#: p = 63, T = 10^5, fold 0, one BLAS thread, CPU s): Jacobi-CG warm-started downwards 914 / 1492 /
+#: 2418 / > 4000 iterations (3.4 / 6.1 / 8.3 / > 15 s) at sigma = 3.2e-4 / 1e-4 / 3.2e-5 / 1e-5;
+#: the factor at 1e-7 14.3 s (symbolic 1.0 s, solve 0.26 s), then factor-PCG 3 / 4 / 5 / 9 / 14 / 21
+#: / 36 / 63 iterations (~0.245 s each) at 10^-6.5 / -6 / -5.5 / -5 / -4.5 / -4 / -3.5 / -3. So
+#: 1e-4 (rho ~ 7.5e-5: 5.2 s by PCG, 6.1 s by Jacobi) is in the chain, 3.2e-4 (rho ~ 2.4e-4: 8.7 s
+#: against 3.4 s) is not: the threshold lies between, 1.5e-4 is taken.
+FACTOR_DOMINANCE_CG = 1.5e-4
+
+#: Iteration cap of a factor-PCG attempt in the factor chain of :data:`FACTOR_DOMINANCE_CG`: the
+#: cost of one nested-dissection factorisation plus its solve in PCG iterations (n = 3, N = 262 144:
+#: 14.3 + 0.26 s against ~0.245 s an iteration, ~60); the chain refactorises once an attempt hits
+#: the cap or the previous one needed more than half of it (the 2-D rule, :data:`FACTOR_PCG_MAXITER`).
+FACTOR_PCG_MAXITER_CG = 60
+
+#: Regressor dimensions where the factor chain of :data:`FACTOR_DOMINANCE_CG` is used: those
+#: measured (in 4-D and up the nested-dissection separators of a grid, and so the factor, grow faster).
+FACTOR_CHAIN_DIMS = (3,)
 
 #: :func:`cross_validate_sigma` with an executor of ``workers >= 2`` local processes (no scheduler)
 #: runs the folds' sigma sweeps on that many *forked* processes (:mod:`pwas_hdl.fit.fork_map`:
@@ -409,6 +438,10 @@ def estimate_fit_memory(
     unknowns = min(nv, nnz_h) if order == 0 else nv
     chosen = choose_method(unknowns, n_dims, order, method)
     use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS))
+    # Jacobi-CG base with the factor chain (FACTOR_DOMINANCE_CG): a nested-dissection factor too
+    # (measured n = 3, N = 262 144, T = 10^5: 1.8 GiB resident, ~37 x nnz(A) entries)
+    chain = (use_mg and chosen == "cg" and method == "auto" and int(n_dims) in FACTOR_CHAIN_DIMS
+             and cholmod_available())
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
@@ -417,7 +450,7 @@ def estimate_fit_memory(
             _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv)
             if chosen == "direct"
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
-        ),
+        ) + (_sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv) if chain else 0.0),
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
         # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
         # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled
@@ -653,6 +686,14 @@ class NormalEquationSolver:
         #: (see :data:`FACTOR_PCG_MAXITER`): first order, ``auto``, CHOLMOD, full grid, large
         self.factor_pcg = (method == "auto" and self.method == "direct" and self.order == 1 and self.keep is None
                            and self.backend == "cholmod" and self.n >= MG_MIN_UNKNOWNS)
+        #: base method Jacobi-CG: the smallest sigmas by the factor chain (:data:`FACTOR_DOMINANCE_CG`);
+        #: a Jacobi- or multigrid-CG solve that stops unconverged is re-done by the factorisation
+        self.factor_chain = (method == "auto" and self.method == "cg" and self._mg_shape is not None
+                             and self.backend == "cholmod" and int(n_dims) in FACTOR_CHAIN_DIMS)
+        if self.factor_chain:
+            self.factor_pcg = True
+            self.fallback = True
+        self._factor_pcg_cap = FACTOR_PCG_MAXITER_CG if self.factor_chain else FACTOR_PCG_MAXITER
         #: the fold's factor reuse: ``{"m": m, "last": iterations of the last PCG, "stopped": bool}``
         self._reuse: dict | None = None
         self._m_cache: tuple | None = None
@@ -687,6 +728,21 @@ class NormalEquationSolver:
             return True
         limit = MG_DOMINANCE if self.method == "direct" else MG_DOMINANCE_CG
         return sigma * self._gamma_diag_mean() >= limit * self._mg_fold(m)[1]
+
+    def uses_factor_chain(self, m: sparse.csr_array, sigma: float) -> bool:
+        """True when the base method is Jacobi-CG and this sigma is in the fold's factor chain
+        (``rho < FACTOR_DOMINANCE_CG``, see :data:`FACTOR_DOMINANCE_CG`)."""
+        if not self.factor_chain:
+            return False
+        return sigma * self._gamma_diag_mean() < FACTOR_DOMINANCE_CG * self._mg_fold(m)[1]
+
+    def segment_cost(self, m: sparse.csr_array, sigma: float) -> float:
+        """Relative cost of this sigma in a segment, for the order of the forked tasks
+        (:func:`_fork_segments`): :data:`_MG_COST` by multigrid, :data:`_CHAIN_COST` in the factor
+        chain, else 1."""
+        if self.uses_mg(m, sigma):
+            return _MG_COST
+        return _CHAIN_COST if self.uses_factor_chain(m, sigma) else 1.0
 
     def full_data_uses_mg(self, sigma: float) -> bool:
         """:meth:`uses_mg` for the full-data normal matrix (a lower bound of every fold's rho)."""
@@ -737,6 +793,9 @@ class NormalEquationSolver:
         descending = [int(i) for i in np.argsort(-np.asarray(sigmas, dtype=float), kind="stable")]
         if not self.factor_pcg:
             return descending
+        if self.factor_chain:  # multigrid and Jacobi-CG down, then the factor chain up
+            iterative = [i for i in descending if not self.uses_factor_chain(m, float(sigmas[i]))]
+            return iterative + [i for i in reversed(descending) if i not in set(iterative)]
         iterative = [i for i in descending if self.uses_mg(m, float(sigmas[i]))]
         return iterative + [i for i in reversed(descending) if i not in set(iterative)]
 
@@ -752,6 +811,10 @@ class NormalEquationSolver:
         Otherwise the whole sweep is one segment.
         """
         order = self.sweep_order(m, sigmas)
+        if self.factor_chain:  # multigrid + Jacobi-CG (one warm-started chain), the factor chain
+            chain = [i for i in order if self.uses_factor_chain(m, float(sigmas[i]))]
+            rest = [i for i in order if i not in set(chain)]
+            return [seg for seg in (rest, chain) if seg]
         if not (self.method == "direct" and self._mg_shape is not None):
             return [order]
         mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
@@ -776,13 +839,15 @@ class NormalEquationSolver:
         """
         if self._mg_shape is not None and self._mg_hier is None:
             self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
-        if self.method == "direct" and self.backend == "cholmod":
+        if (self.method == "direct" or self.factor_chain) and self.backend == "cholmod":
             self._shared_pattern()
 
     def _shared_pattern(self) -> tuple | None:
         """``(PatternCholesky, Gamma's values)`` of the full-data pattern (first order), built once."""
         if self._shared_hth is not None and self._shared_chol is None:
-            chol = PatternCholesky(abs(self._shared_hth) + abs(self.gamma))
+            pattern = abs(self._shared_hth) + abs(self.gamma)
+            chol = (PatternCholesky(pattern, grid_nested_dissection(self._mg_shape)) if self.factor_chain
+                    else PatternCholesky(pattern))
             self._shared_chol = (chol, chol.align(self.gamma))
         return self._shared_chol
 
@@ -795,11 +860,11 @@ class NormalEquationSolver:
             chol = self._m_cache[1]
             a = (m + sigma * self.gamma).tocsr()
             pre = splinalg.LinearOperator(a.shape, matvec=chol.solve, dtype=float)
-            wk, info = _cg(a, bk, pre, x0k, sigma, self.lam_gamma, self.rtol, FACTOR_PCG_MAXITER)
+            wk, info = _cg(a, bk, pre, x0k, sigma, self.lam_gamma, self.rtol, self._factor_pcg_cap)
             # converged on the residual computed afresh, else refactorise (the iterate is dropped)
             if info.converged and info.rel_residual <= self.rtol:
                 st["last"] = info.iterations
-                st["stopped"] = info.iterations > FACTOR_PCG_MAXITER // 2
+                st["stopped"] = info.iterations > self._factor_pcg_cap // 2
                 return wk, SolveInfo("factor-pcg", info.iterations, info.rel_residual, info.weight_bound, True)
             st["stopped"] = True
             self.factor_pcg_failures += 1
@@ -888,7 +953,7 @@ class NormalEquationSolver:
             if not info.converged and self.fallback:
                 wk = self._direct(m, bk, sigma)
                 info = SolveInfo("direct-fallback", info.iterations)
-        elif self.method == "direct":
+        elif self.method == "direct" or self.uses_factor_chain(m, sigma):
             x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
             wk, info = self._direct_or_factor_pcg(m, bk, sigma, x0k)
         else:
@@ -1072,19 +1137,25 @@ def _map_folds(fn: Callable, folds: int, executor, independent: bool, n_sigmas: 
 #: multigrid solve against 1.5-1.9 s per factorisation and solve).
 _MG_COST = 0.4
 
+#: The same for a sigma of the factor chain (:data:`FACTOR_DOMINANCE_CG`) against a Jacobi-CG one:
+#: measured at n = 3, N = 262 144, fold 0: the chain of 7 sigmas ~29 s (its factorisation 14-17 s),
+#: the 5 Jacobi-CG sigmas 8.4 s, the 9 multigrid ones 2.6 s.
+_CHAIN_COST = 2.5
 
-def _fork_segments(run: Callable, segments: list[list[list[int]]], uses_mg: Callable[[int, int], bool],
+
+def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Callable[[int, int], float],
                    procs: int, n_sigmas: int, progress, stats: list | None) -> list[list]:
     """Every fold's sweep segments (:meth:`NormalEquationSolver.sweep_segments`) on ``procs`` forked
     workers (:func:`pwas_hdl.fit.fork_map.fork_map`: the data are inherited, not pickled).
 
-    The segments are independent tasks handed out longest first (estimated cost: a factorised
-    sigma 1, a multigrid one :data:`_MG_COST`), so that the workers finish within about one
+    The segments are independent tasks handed out longest first (estimated cost
+    ``cost_of(f, i)`` per sigma ``i`` of fold ``f``: a factorised or Jacobi-CG sigma 1, a multigrid
+    one :data:`_MG_COST`, one of the factor chain :data:`_CHAIN_COST`), so that the workers finish within about one
     factorisation of each other. ``run(f, segment)`` returns that segment's results; the
     return value is ``[[result of each segment of fold f, in segment order] for f]``.
     """
     tasks = [(f, k) for f, segs in enumerate(segments) for k in range(len(segs))]
-    cost = {t: sum(_MG_COST if uses_mg(t[0], i) else 1.0 for i in segments[t[0]][t[1]]) for t in tasks}
+    cost = {t: sum(cost_of(t[0], i) for i in segments[t[0]][t[1]]) for t in tasks}
     tasks.sort(key=lambda t: -cost[t])  # stable: equal costs stay in fold order
     total = len(segments) * n_sigmas
     report = None if progress is None else (lambda done, n: progress(done * total // n, total))
@@ -1230,8 +1301,8 @@ def cross_validate_sigma(
         segments = [solver.sweep_segments(d[2], sig) for d in datas]
         solver.prepare_shared()
         per_fold = _fork_segments(lambda f, seg: run_segment(datas[f], seg), segments,
-                                  lambda f, i: solver.uses_mg(datas[f][2], float(sig[i])), procs, sig.size, progress,
-                                  task_stats)
+                                  lambda f, i: solver.segment_cost(datas[f][2], float(sig[i])), procs, sig.size,
+                                  progress, task_stats)
         del datas
         parts = [merge(r) for r in per_fold]
     else:

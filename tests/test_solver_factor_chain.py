@@ -1,0 +1,122 @@
+"""The first-order CV at scale in 3-D (issue 18, fifth pass): where the base method is Jacobi-CG,
+the smallest sigmas of a fold are the *factor chain* (a nested-dissection CHOLMOD factorisation of
+the smallest, factor-PCG upwards), and a Jacobi- or multigrid-CG solve that stops unconverged is
+re-done by the factorisation, so every CV solve converges (the stopping rule unchanged)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from pwas_hdl.fit import multigrid as mg
+from pwas_hdl.fit import regularized_lsq as rl
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_sigma, tikhonov_matrix
+from pwas_hdl.fit.sparse_cholesky import PatternCholesky, cholmod_available, grid_nested_dissection
+from pwas_hdl.flow.executor import Executor
+
+pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
+
+SIGMAS = np.logspace(-7, 2, 10)
+
+
+@pytest.fixture()
+def rules_3d(monkeypatch):
+    """The size rules of n = 3, p = 63 (Jacobi-CG base, multigrid, the factor chain) on 10^3 vertices."""
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+    monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS_CHOLMOD, (1, 3), 100)
+
+
+def _problem(t=800, seed=5):
+    rng = np.random.default_rng(seed)
+    grid = Grid(np.full(3, -1.2), np.full(3, 1.2), 9)
+    x = rng.uniform(-1.0, 1.0, (t, 3))
+    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
+    return sparse.csr_array(grid.basis_matrix(x)), z, tikhonov_matrix(grid, 1)
+
+
+def test_grid_nested_dissection_is_a_permutation_that_factorises():
+    perm = grid_nested_dissection((7, 5, 6), leaf=8)
+    assert sorted(perm.tolist()) == list(range(7 * 5 * 6))
+    # the last eliminated vertices are the first separator: the mid-plane of the longest axis
+    last = np.unravel_index(perm[-5 * 6:], (7, 5, 6))[0]
+    assert np.all(last == 3)
+    grid = Grid(np.full(3, -1.0), np.full(3, 1.0), 6)
+    gam = tikhonov_matrix(grid, 1)
+    a = (gam + sparse.identity(gam.shape[0])).tocsc()
+    chol = PatternCholesky(a, grid_nested_dissection(grid.shape))
+    chol.factorize(chol.align(a))
+    b = np.arange(a.shape[0], dtype=float)
+    np.testing.assert_allclose(a @ chol.solve(b), b, rtol=1e-10, atol=1e-9)
+    with pytest.raises(ValueError, match="permutation"):
+        PatternCholesky(a, np.zeros(a.shape[0], dtype=int))
+
+
+def test_factor_chain_by_the_rule_within_the_bound_of_the_direct_solve(rules_3d):
+    h, z, gam = _problem()
+    hth = sparse.csr_array(h.T @ h)
+    b = h.T @ z
+    solver = NormalEquationSolver(hth, gam, 3)
+    assert solver.method == "cg" and solver.factor_chain and solver.fallback
+    chain = [i for i in range(SIGMAS.size) if solver.uses_factor_chain(hth, float(SIGMAS[i]))]
+    rho = SIGMAS * float(gam.diagonal().mean()) / (float(hth.sum()) / hth.shape[0])
+    assert chain == [i for i in range(SIGMAS.size) if rho[i] < rl.FACTOR_DOMINANCE_CG] and len(chain) >= 3
+    segs = solver.sweep_segments(hth, SIGMAS)
+    rest = [i for i in range(SIGMAS.size) if i not in chain]
+    # multigrid and Jacobi-CG from the largest sigma down, then the chain from the smallest up
+    assert segs == [sorted(rest, key=lambda i: -SIGMAS[i]), chain]
+    assert [solver.segment_cost(hth, float(SIGMAS[i])) for i in chain] == [rl._CHAIN_COST] * len(chain)
+    solver.start_segment()
+    w, methods = None, []
+    for i in chain:
+        w, info = solver.solve(hth, b, float(SIGMAS[i]), x0=w)
+        methods.append(info.method)
+        wd = rl._solve_spd((hth + SIGMAS[i] * gam).tocsc(), b)
+        if info.method == "factor-pcg":
+            assert info.converged and info.rel_residual <= rl.CG_RTOL
+            assert 0 < info.iterations <= rl.FACTOR_PCG_MAXITER_CG
+            assert float(np.linalg.norm(w - wd)) <= info.weight_bound
+        else:
+            np.testing.assert_allclose(w, wd, rtol=1e-8, atol=1e-10)
+    assert methods[0] == "direct" and methods[1] == "factor-pcg"
+
+
+def test_unconverged_cg_is_redone_by_the_factorisation(rules_3d):
+    h, z, gam = _problem()
+    hth = sparse.csr_array(h.T @ h)
+    b = h.T @ z
+    solver = NormalEquationSolver(hth, gam, 3, maxiter=3)  # no Jacobi-CG converges in 3 iterations
+    rest = solver.sweep_segments(hth, SIGMAS)[0]
+    jacobi = [i for i in rest if not solver.uses_mg(hth, float(SIGMAS[i]))]
+    assert jacobi
+    w, info = solver.solve(hth, b, float(SIGMAS[jacobi[0]]))
+    assert info.method == "direct-fallback" and info.converged
+    np.testing.assert_allclose(w, rl._solve_spd((hth + SIGMAS[jacobi[0]] * gam).tocsc(), b), rtol=1e-8, atol=1e-10)
+
+
+def test_cv_3d_all_converged_and_forked_gives_the_serial_result(rules_3d):
+    h, z, gam = _problem()
+    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    by = serial.solver["solves_by_method"]
+    assert serial.solver["all_converged"] and serial.solver["max_rel_residual"] <= rl.CG_RTOL
+    assert by.get("factor-pcg", 0) > 0 and by.get("direct", 0) == 3 and by.get("mg", 0) > 0 and by.get("cg", 0) > 0
+    direct = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, method="direct")
+    assert direct.best_sigma == serial.best_sigma
+    np.testing.assert_allclose(serial.fold_mse, direct.fold_mse, rtol=1e-6)
+    with Executor(workers=2) as ex:
+        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex)
+    assert forked.best_sigma == serial.best_sigma
+    np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
+    assert forked.solver["solves_by_method"] == by and forked.solver["iterations"] == serial.solver["iterations"]
+    assert len(forked.solver["fork_tasks"]) == 3 * 2  # two segments a fold
+
+
+def test_memory_estimate_counts_the_chain_factor(monkeypatch):
+    with_chain = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1)
+    monkeypatch.setattr(rl, "FACTOR_CHAIN_DIMS", ())
+    without = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1)
+    nnz_a = 10**5 * 16.0 + 64**3 * 7.0
+    assert with_chain["factor"] - without["factor"] == pytest.approx(rl._sparse_bytes(rl.DIRECT_FILL_FACTOR * nnz_a, 64**3))
