@@ -126,7 +126,8 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     sum: ``ru_maxrss`` of the children is their maximum, not their sum, and counts the pages they
     share with the parent copy-on-write). ``critical_cpu_s``: this process's CPU plus that of
     the busiest forked worker (sum of its tasks' CPU), the wall time the run would take on two
-    otherwise idle cores (derived from CPU times, not a wall measurement).
+    otherwise idle cores (derived from CPU times, not a wall measurement); the CPU this process
+    spends while the workers run (``parent_overlap_cpu_s``, the final solve's set-up) is not added.
     """
     from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, tikhonov_matrix
     from pwas_hdl.fit.sparse_cholesky import cholmod_available
@@ -144,13 +145,17 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     own_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     np.save(weights_out, w)
+    overlap = float(cv.solver.get("parent_overlap_cpu_s", 0.0))
     per_worker: dict[int, float] = {}
     for task in cv.solver.get("fork_tasks", []):
         per_worker[task["pid"]] = per_worker.get(task["pid"], 0.0) + task["cpu_s"]
     return {
         "peak_pss_mib": None if pss.peak is None else pss.peak / 2**20,
         "fork_worker_cpu_s": sorted(per_worker.values()),
-        "critical_cpu_s": cpu + max(per_worker.values()) if per_worker else None,
+        # this process's CPU outside the workers' run plus the busiest worker's (or this process's
+        # own work during the run, if longer: cross_validate_sigma's parent_overlap_cpu_s)
+        "critical_cpu_s": (cpu - overlap + max(max(per_worker.values()), overlap)) if per_worker else None,
+        "parent_overlap_cpu_s": overlap,
         "wall_s": wall,
         "cpu_s": cpu + (kids.ru_utime + kids.ru_stime if workers >= 2 else 0.0),
         "workers": workers if workers >= 2 else 1,
@@ -321,8 +326,8 @@ def markdown(res: dict) -> str:
         + (f" The CV folds ran as `fit --workers {s['workers']}` runs them (from 50 000 unknowns on "
            f"{s['workers']} forked processes, below on a local Dask cluster): CPU includes the workers', peak RSS "
            "is this process's plus workers x the largest worker's (an upper bound: shared pages counted in each); "
-           "`critical CPU` = this process's CPU + the busiest forked worker's, the wall time on idle cores "
-           "(derived from CPU times)."
+           "`critical CPU` = this process's CPU + the busiest forked worker's (without what this process did "
+           "while the workers ran), the wall time on idle cores (derived from CPU times)."
            if s.get("workers", 1) > 1 else "")
         + (" `peak PSS`: the largest sum of the proportional set sizes of the fit's process and its "
            "workers, sampled every second (shared pages counted once: the memory actually used; the sampler's "

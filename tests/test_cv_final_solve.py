@@ -35,3 +35,36 @@ def test_without_final_solve_nothing_is_kept():
     grid, h, z = _problem((9, 9), 100, 1)
     cv = cross_validate_sigma(h, z, tikhonov_matrix(grid, 1), np.logspace(-3, 1, 3), folds=2)
     assert cv.final_weights is None and cv.final_info is None
+
+
+def test_forked_cv_prepares_the_final_multigrid_while_the_workers_run(monkeypatch):
+    """Forked folds (issue 18, fifth pass): the parent builds the final solve's multigrid levels
+    while the workers run; the final weights stay those of a separate solve, bit for bit."""
+    from pwas_hdl.fit import fork_map
+    from pwas_hdl.fit import multigrid as mg
+    from pwas_hdl.fit import regularized_lsq as rl
+    from pwas_hdl.flow.executor import Executor
+
+    if not fork_map.fork_available():
+        pytest.skip("needs fork")
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+    grid, h, z = _problem((31, 31), 600, 1, seed=4)
+    gam = tikhonov_matrix(grid, 1)
+    sig = np.logspace(-1, 2, 4)  # all by multigrid (rho >= MG_DOMINANCE), and so the final solve
+    built, for_matrix = [], mg.GridHierarchy.for_matrix
+
+    def recording(self, m):  # in this process: was the map still running (its function set)?
+        built.append(fork_map._TASK is not None)
+        return for_matrix(self, m)
+
+    monkeypatch.setattr(mg.GridHierarchy, "for_matrix", recording)
+    with Executor(workers=2) as ex:
+        cv = cross_validate_sigma(h, z, gam, sig, folds=3, executor=ex, final_solve=True)
+    monkeypatch.setattr(mg.GridHierarchy, "for_matrix", for_matrix)
+    assert cv.solver["fork_tasks"] and cv.solver["parent_overlap_cpu_s"] > 0
+    assert built == [True]  # the final solve's levels, built during the map and not again after it
+    assert cv.final_info.method == "mg"
+    w_ref = solve_regularized(h, z, cv.best_sigma, gam)
+    np.testing.assert_array_equal(cv.final_weights, w_ref)

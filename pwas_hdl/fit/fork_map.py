@@ -41,7 +41,8 @@ def _run(item: tuple[int, Any]) -> tuple[int, Any, float, int]:
 
 
 def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
-             progress: Callable[[int, int], None] | None = None, stats: list | None = None) -> list:
+             progress: Callable[[int, int], None] | None = None, stats: list | None = None,
+             parent_work: Callable[[], Any] | None = None) -> list:
     """``[fn(x) for x in items]`` on ``processes`` forked workers, results in the order of ``items``.
 
     Parameters
@@ -58,6 +59,9 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
     stats : list, optional
         Gets one ``(cpu_s, pid)`` per task, in the order of ``items``: the task's CPU seconds in
         its worker and the worker's process id (for the benchmarks' load accounting).
+    parent_work : callable, optional
+        Called once in the parent after the workers are started, while they run (the parent
+        would otherwise only wait): work for after the map, e.g. the set-up of a final solve.
 
     Returns
     -------
@@ -80,6 +84,8 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
         # leaving the parent waiting for ever (multiprocessing.Pool would)
         with ProcessPoolExecutor(max_workers=max(1, min(int(processes), len(items))), mp_context=ctx) as pool:
             futures = [pool.submit(_run, (i, x)) for i, x in enumerate(items)]
+            if parent_work is not None:  # the fork context starts every worker at the first submit
+                parent_work()
             for done, fut in enumerate(as_completed(futures), 1):
                 index, result, cpu, pid = fut.result()
                 out[index], info[index] = result, (cpu, pid)

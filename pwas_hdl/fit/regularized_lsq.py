@@ -8,6 +8,7 @@ sparse: ``H`` has ``n + 1`` non-zeros per row and ``H'H`` couples only vertices 
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable, Literal, Sequence
@@ -764,13 +765,8 @@ class NormalEquationSolver:
 
     def _mg_solve(self, m: sparse.csr_array, bk: np.ndarray, sigma: float, x0k) -> tuple[np.ndarray, SolveInfo]:
         """Multigrid-preconditioned CG, column by column, to :attr:`rtol` (see :func:`_cg`)."""
-        _, mean_row, fold = self._mg_fold(m)
-        if fold is None:
-            if self._mg_hier is None:
-                self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
-            self._mg_cache = None  # free the previous fold's levels first
-            fold = self._mg_hier.for_matrix(m)
-            self._mg_cache = (m, mean_row, fold)
+        self.prepare_multigrid(m)  # the levels of m (built once, freeing the previous fold's first)
+        fold = self._mg_cache[2]
         b2 = np.asarray(bk, dtype=float).reshape(self.n, -1)
         x2 = None if x0k is None else np.asarray(x0k, dtype=float).reshape(b2.shape)
         w = np.zeros_like(b2)
@@ -824,6 +820,19 @@ class NormalEquationSolver:
         if rest:
             segments.append(rest[:head])
         return segments + [[i] for i in rest[head:]]
+
+    def prepare_multigrid(self, m: sparse.csr_array) -> None:
+        """Build now the multigrid levels of ``m`` (kept for the next solve with this ``m``; see
+        :meth:`_mg_solve`): :func:`cross_validate_sigma` does so for the final solve while its
+        forked workers run (measured ~1 s CPU at n = 2, N = 10^6 off the critical path)."""
+        if self._mg_shape is None:
+            return
+        _, mean_row, fold = self._mg_fold(m)
+        if fold is None:
+            if self._mg_hier is None:
+                self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
+            self._mg_cache = None
+            self._mg_cache = (m, mean_row, self._mg_hier.for_matrix(m))
 
     def start_segment(self) -> None:
         """Forget the factor-PCG state of the previous segment (see :meth:`sweep_segments`)."""
@@ -1144,14 +1153,16 @@ _CHAIN_COST = 2.5
 
 
 def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Callable[[int, int], float],
-                   procs: int, n_sigmas: int, progress, stats: list | None) -> list[list]:
+                   procs: int, n_sigmas: int, progress, stats: list | None,
+                   parent_work: Callable[[], object] | None = None) -> list[list]:
     """Every fold's sweep segments (:meth:`NormalEquationSolver.sweep_segments`) on ``procs`` forked
     workers (:func:`pwas_hdl.fit.fork_map.fork_map`: the data are inherited, not pickled).
 
     The segments are independent tasks handed out longest first (estimated cost
     ``cost_of(f, i)`` per sigma ``i`` of fold ``f``: a factorised or Jacobi-CG sigma 1, a multigrid
     one :data:`_MG_COST`, one of the factor chain :data:`_CHAIN_COST`), so that the workers finish within about one
-    factorisation of each other. ``run(f, segment)`` returns that segment's results; the
+    factorisation of each other. ``parent_work`` runs in the parent meanwhile (see
+    :func:`~pwas_hdl.fit.fork_map.fork_map`). ``run(f, segment)`` returns that segment's results; the
     return value is ``[[result of each segment of fold f, in segment order] for f]``.
     """
     tasks = [(f, k) for f, segs in enumerate(segments) for k in range(len(segs))]
@@ -1159,7 +1170,7 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
     tasks.sort(key=lambda t: -cost[t])  # stable: equal costs stay in fold order
     total = len(segments) * n_sigmas
     report = None if progress is None else (lambda done, n: progress(done * total // n, total))
-    out = fork_map(lambda t: run(t[0], segments[t[0]][t[1]]), tasks, procs, report, stats)
+    out = fork_map(lambda t: run(t[0], segments[t[0]][t[1]]), tasks, procs, report, stats, parent_work)
     by_task = dict(zip(tasks, out))
     if stats is not None:  # fork_map gives them in the order of ``tasks``: back to (fold, segment)
         info = dict(zip(tasks, stats[-len(tasks):]))
@@ -1292,6 +1303,7 @@ def cross_validate_sigma(
     # one fold = one task (serial, Dask) or one segment = one task (forked workers); the counts a
     # task leaves in the solver come back with its results
     task_stats: list = []
+    overlap = [0.0]  # CPU seconds of this process spent while forked workers ran
     independent = _folds_independent(solver, sig)
     procs = fork_workers(executor, solver.n if solver.keep is None else solver.keep.size) if (
         independent and folds >= 2) else 0
@@ -1300,9 +1312,17 @@ def cross_validate_sigma(
         datas = [fold_data(f) for f in range(folds)]
         segments = [solver.sweep_segments(d[2], sig) for d in datas]
         solver.prepare_shared()
+
+        def prepare_final() -> None:
+            """While the workers run: the final solve's multigrid levels (its sigma is not known yet)."""
+            c0 = time.process_time()
+            if final_solve and any(solver.full_data_uses_mg(float(s)) for s in sig):
+                solver.prepare_multigrid(hth_r)
+            overlap[0] = time.process_time() - c0
+
         per_fold = _fork_segments(lambda f, seg: run_segment(datas[f], seg), segments,
                                   lambda f, i: solver.segment_cost(datas[f][2], float(sig[i])), procs, sig.size,
-                                  progress, task_stats)
+                                  progress, task_stats, prepare_final)
         del datas
         parts = [merge(r) for r in per_fold]
     else:
@@ -1327,6 +1347,8 @@ def cross_validate_sigma(
         # forked workers (see _fork_segments): per segment task, in (fold, segment) order, its CPU
         # seconds and the worker's pid
         "fork_tasks": [{"cpu_s": float(c), "pid": int(p)} for c, p in task_stats],
+        # CPU seconds this process spent while the forked workers ran (off the critical path)
+        "parent_overlap_cpu_s": float(overlap[0]),
     }
     final_w = final_info = None
     if final_solve:
