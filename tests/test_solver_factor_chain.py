@@ -119,4 +119,4 @@ def test_memory_estimate_counts_the_chain_factor(monkeypatch):
     monkeypatch.setattr(rl, "FACTOR_CHAIN_DIMS", ())
     without = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1)
     nnz_a = 10**5 * 16.0 + 64**3 * 7.0
-    assert with_chain["factor"] - without["factor"] == pytest.approx(rl._sparse_bytes(rl.DIRECT_FILL_FACTOR * nnz_a, 64**3))
+    assert with_chain["factor"] - without["factor"] == pytest.approx(rl._sparse_bytes(rl.FACTOR_CHAIN_FILL * nnz_a, 64**3))

@@ -227,6 +227,11 @@ FACTOR_PCG_MAXITER_CG = 60
 #: measured (in 4-D and up the nested-dissection separators of a grid, and so the factor, grow faster).
 FACTOR_CHAIN_DIMS = (3,)
 
+#: Fill factor ``nnz(L) / nnz(A)`` of the factor chain's nested-dissection factor for
+#: :func:`estimate_fit_memory` (``nnz(A)`` as estimated there): measured n = 3, N = 262 144,
+#: T = 10^5: 1.8-1.95 GiB resident for the factor, ~48 x 12 bytes per estimated entry of ``A``.
+FACTOR_CHAIN_FILL = 50.0
+
 #: :func:`cross_validate_sigma` with an executor of ``workers >= 2`` local processes (no scheduler)
 #: runs the folds' sigma sweeps on that many *forked* processes (:mod:`pwas_hdl.fit.fork_map`:
 #: the data are inherited, not pickled) from this many unknowns; below, the existing path (Dask
@@ -241,7 +246,8 @@ FORK_MIN_UNKNOWNS = 50_000
 CG_RTOL = 1e-10
 
 #: Iteration cap of one CG solve. A solve that hits it is re-done by the direct method when the
-#: system has at most ``FALLBACK_FACTOR`` times the ``auto`` limit of unknowns, and otherwise
+#: system has at most ``FALLBACK_FACTOR`` times the ``auto`` limit of unknowns or the factor chain of
+#: :data:`FACTOR_DOMINANCE_CG` is used (then by its nested-dissection factorisation), and otherwise
 #: reported as not converged (:attr:`SolveInfo.converged`, ``CVResult.solver["all_converged"]``).
 CG_MAXITER = 2000
 
@@ -426,7 +432,8 @@ def estimate_fit_memory(
     dict
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
-        twice ``A``, or a diagonal), ``multigrid`` (its levels, where first order uses it),
+        twice ``A``, or a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
+        used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid`` (its levels, where first order uses it),
         ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
         process holds), ``fold_matrices`` (with forked workers: the parent's normal matrices of
         the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
@@ -440,7 +447,6 @@ def estimate_fit_memory(
     chosen = choose_method(unknowns, n_dims, order, method)
     use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS))
     # Jacobi-CG base with the factor chain (FACTOR_DOMINANCE_CG): a nested-dissection factor too
-    # (measured n = 3, N = 262 144, T = 10^5: 1.8 GiB resident, ~37 x nnz(A) entries)
     chain = (use_mg and chosen == "cg" and method == "auto" and int(n_dims) in FACTOR_CHAIN_DIMS
              and cholmod_available())
     est = {
@@ -451,7 +457,7 @@ def estimate_fit_memory(
             _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv)
             if chosen == "direct"
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
-        ) + (_sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv) if chain else 0.0),
+        ) + (_sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0),
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
         # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
         # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled
@@ -625,7 +631,9 @@ class NormalEquationSolver:
     method : {"auto", "direct", "cg", "mg"}
         See :func:`choose_method`. First order, ``auto``: from :data:`MG_MIN_UNKNOWNS` unknowns on
         a vertex grid, the sigmas whose penalty dominates (:data:`MG_DOMINANCE`) are solved by
-        multigrid-preconditioned CG (all sigmas where the base method is not direct); ``mg``:
+        multigrid-preconditioned CG (all sigmas where the base method is not direct); where the base
+        method is Jacobi-CG (3-D), the smallest sigmas by the factor chain
+        (:data:`FACTOR_DOMINANCE_CG`) and an unconverged CG solve again by the factorisation; ``mg``:
         every sigma by multigrid.
     rtol : float
         CG relative-residual tolerance (default :data:`CG_RTOL`).
