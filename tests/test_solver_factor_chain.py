@@ -65,9 +65,11 @@ def test_factor_chain_by_the_rule_within_the_bound_of_the_direct_solve(rules_3d)
     rho = SIGMAS * float(gam.diagonal().mean()) / (float(hth.sum()) / hth.shape[0])
     assert chain == [i for i in range(SIGMAS.size) if rho[i] < rl.FACTOR_DOMINANCE_CG] and len(chain) >= 3
     segs = solver.sweep_segments(hth, SIGMAS)
-    rest = [i for i in range(SIGMAS.size) if i not in chain]
-    # multigrid and Jacobi-CG from the largest sigma down, then the chain from the smallest up
-    assert segs == [sorted(rest, key=lambda i: -SIGMAS[i]), chain]
+    mg_idx = [i for i in range(SIGMAS.size) if solver.uses_mg(hth, float(SIGMAS[i]))]
+    jacobi = [i for i in range(SIGMAS.size) if i not in chain and i not in mg_idx]
+    assert mg_idx and jacobi
+    # multigrid, then Jacobi-CG, from the largest sigma down, then the chain from the smallest up
+    assert segs == [sorted(mg_idx, key=lambda i: -SIGMAS[i]), sorted(jacobi, key=lambda i: -SIGMAS[i]), chain]
     assert [solver.segment_cost(hth, float(SIGMAS[i])) for i in chain] == [rl._CHAIN_COST] * len(chain)
     solver.start_segment()
     w, methods = None, []
@@ -89,8 +91,8 @@ def test_unconverged_cg_is_redone_by_the_factorisation(rules_3d):
     hth = sparse.csr_array(h.T @ h)
     b = h.T @ z
     solver = NormalEquationSolver(hth, gam, 3, maxiter=3)  # no Jacobi-CG converges in 3 iterations
-    rest = solver.sweep_segments(hth, SIGMAS)[0]
-    jacobi = [i for i in rest if not solver.uses_mg(hth, float(SIGMAS[i]))]
+    jacobi = solver.sweep_segments(hth, SIGMAS)[1]
+    assert not any(solver.uses_mg(hth, float(SIGMAS[i])) for i in jacobi)
     assert jacobi
     w, info = solver.solve(hth, b, float(SIGMAS[jacobi[0]]))
     assert info.method == "direct-fallback" and info.converged
@@ -111,7 +113,7 @@ def test_cv_3d_all_converged_and_forked_gives_the_serial_result(rules_3d):
     assert forked.best_sigma == serial.best_sigma
     np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
     assert forked.solver["solves_by_method"] == by and forked.solver["iterations"] == serial.solver["iterations"]
-    assert len(forked.solver["fork_tasks"]) == 3 * 2  # two segments a fold
+    assert len(forked.solver["fork_tasks"]) == 3 * 3  # three segments a fold
 
 
 def test_memory_estimate_counts_the_chain_factor(monkeypatch):

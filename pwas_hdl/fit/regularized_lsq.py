@@ -812,13 +812,17 @@ class NormalEquationSolver:
         multigrid is used: the multigrid sigmas (one warm-started chain), then with
         :attr:`factor_pcg` the :data:`FACTOR_PCG_SEGMENT` smallest data-dominated sigmas (the
         factor-PCG chain), then every other data-dominated sigma alone (a factorisation each).
+        With :attr:`factor_chain` (base method Jacobi-CG): the multigrid sigmas, the Jacobi-CG ones
+        (each a warm-started chain from the largest down; three tasks a fold balance the forked
+        workers better than two), then the factor chain (from the smallest up).
         Otherwise the whole sweep is one segment.
         """
         order = self.sweep_order(m, sigmas)
-        if self.factor_chain:  # multigrid + Jacobi-CG (one warm-started chain), the factor chain
+        if self.factor_chain:  # multigrid, Jacobi-CG (each a warm-started chain), the factor chain
             chain = [i for i in order if self.uses_factor_chain(m, float(sigmas[i]))]
-            rest = [i for i in order if i not in set(chain)]
-            return [seg for seg in (rest, chain) if seg]
+            mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
+            jacobi = [i for i in order if i not in set(chain) | set(mg)]
+            return [seg for seg in (mg, jacobi, chain) if seg]
         if not (self.method == "direct" and self._mg_shape is not None):
             return [order]
         mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
