@@ -43,6 +43,7 @@ __all__ = [
     "FACTOR_DOMINANCE_CG",
     "FACTOR_PCG_MAXITER_CG",
     "FACTOR_CHAIN_DIMS",
+    "FACTOR_CHAIN_FILL",
     "FORK_MIN_UNKNOWNS",
     "solve_regularized",
     "cross_validate_sigma",
@@ -437,7 +438,8 @@ def estimate_fit_memory(
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
         twice ``A``, or a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
-        used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid`` (its levels, where first order uses it),
+        used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
+        (its levels, where first order uses it),
         ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
         process holds), ``fold_matrices`` (with forked workers: the parent's normal matrices of
         the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
@@ -1079,8 +1081,9 @@ class CVResult:
         :attr:`SolveInfo.method`: ``auto`` mixes multigrid and the direct solve in first order),
         ``superlu_fallbacks`` (CHOLMOD pivots that were not positive), ``weight_bound`` (folds, S), the bound of each
         solve on ``max_col ||w - w_exact||_2`` (zero for the direct solve), and ``fork_tasks`` (the CPU
-        seconds and worker pid of each task on forked workers, else empty); not written to the model
-        file.
+        seconds and worker pid of each task on forked workers, else empty) and
+        ``parent_overlap_cpu_s`` (this process's CPU seconds while they ran: the final solve's
+        multigrid levels); not written to the model file.
     """
 
     sigmas: np.ndarray
@@ -1176,8 +1179,8 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
 
     The segments are independent tasks handed out longest first (estimated cost
     ``cost_of(f, i)`` per sigma ``i`` of fold ``f``: a factorised or Jacobi-CG sigma 1, a multigrid
-    one :data:`_MG_COST`, one of the factor chain :data:`_CHAIN_COST`), so that the workers finish within about one
-    factorisation of each other. ``parent_work`` runs in the parent meanwhile (see
+    one :data:`_MG_COST`, one of the factor chain :data:`_CHAIN_COST`), so that the workers finish
+    within about one factorisation of each other. ``parent_work`` runs in the parent meanwhile (see
     :func:`~pwas_hdl.fit.fork_map.fork_map`). ``run(f, segment)`` returns that segment's results; the
     return value is ``[[result of each segment of fold f, in segment order] for f]``.
     """
