@@ -98,6 +98,11 @@ CONFIGS = [
     DesignConfig("s-y3-p3-raw-compare", S, 0, 3, 0, 1, 3, 1,
                  {"pipeline": {"split": False, "rank": False, "addr": False, "mem_out": False, "mul_in": False, "product": True,
                                "tree_levels": 0, "mu_late": True, "raw_compare": True}}),
+    # hw14e (opt-in, no preset): the latency build's one sum through column counters (counter_sum)
+    DesignConfig("c-n4-p3x2x3x2-z2-counter-sum", C, 0, 4, 0, 1, [3, 2, 3, 2], 2,
+                 {"pipeline": {"split": False, "rank": False, "addr": False, "mem_out": False, "mul_in": True, "product": False,
+                               "tree_levels": 0, "mu_late": True, "flat_sum": True, "prune_sat": True, "raw_compare": True,
+                               "counter_sum": True}}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 

@@ -856,7 +856,36 @@ class PWASCore(wiring.Component):
         accw, sh = p.acc_width, p.shift
         k = (1 << (sh - 1)) if p.rounding == "half_up" and 0 < sh <= accw and self.round_output else 0
         ext = [Cat(t, t[accw - 1]) for t in prods]
+        if self.pipeline.counter_sum and 3 < len(ext) <= 6:
+            return self._counter_sum(m, ext, k, accw + 1, f"fsum{z}"), k
         return sum_wrap(m, ext + [k], accw + 1, f"fsum{z}"), k
+
+    @staticmethod
+    def _counter_sum(m: Module, ops, k: int, width: int, name: str):
+        """``(sum(ops) + k) mod 2**width`` through one level of column counters (``counter_sum``).
+
+        Column ``c``'s bits of the ``len(ops) <= 6`` operands and bit ``c`` of the constant ``k`` are
+        counted by a case table (a 4- to 6-input function per count bit: one wide LUT on ECP5); the
+        count bits of weight ``2**i`` form the ``i``-th of ``ceil(log2(len(ops) + 2))`` words (shifted
+        by ``i``), which one multi-operand sum adds (:func:`~pwas_hdl.hdl._lintsafe.sum_wrap`: a
+        carry-save level and one carry chain). Exact modulo ``2**width``: column by column, the
+        words add up to the operands plus ``k``.
+        """
+        nv = len(ops)
+        cb = bits_for(nv + 1)
+        words = [[] for _ in range(cb)]
+        for c in range(width):
+            kb = (k >> c) & 1
+            cnt = rom(m, Cat(*[o[c] for o in ops]), [bin(v).count("1") + kb for v in range(1 << nv)], cb, f"{name}_n{c}")
+            for i in range(cb):
+                words[i].append(cnt[i])
+        terms = []
+        for i in range(cb):
+            if width - i < len(words[i]):  # the count bits shifted out of the sum
+                sink_unused(m, Cat(*words[i][width - i:]), f"{name}_w{i}_top")
+            bits = words[i][: width - i]
+            terms.append(Cat(Const(0, i), *bits) if i else Cat(*bits))
+        return sum_wrap(m, terms, width, name)
 
     def _round(self, m: Module, accs, rounded: bool = False):
         """Rounding and saturation of the ``accw + 1``-bit sums to the output codes (one per target).

@@ -230,6 +230,11 @@ class Pipeline:
                  that full width, so that Yosys' ``alumacc`` merges them into one multi-operand
                  adder (one carry-save tree of full adders, one carry chain) instead of one carry
                  chain per tree level plus the rounding adder (:meth:`PWASCore._flat_sum`)
+    ``counter_sum`` (no register; needs ``flat_sum``) the one sum's carry-save part as one level of
+                 column counters: each bit column of the ``n + 1`` products (4 to 6; else no effect) and the rounding
+                 constant counted by a case table (one wide LUT per count bit), then the 3 count words
+                 in one sum (one full-adder level, one carry chain; :meth:`PWASCore._counter_sum`)
+                 instead of Yosys' full-adder tree of 3 levels
     ``prune_sat`` (no register) leave out the saturation of a target whose weights cannot reach it
                  (the sum is a convex combination of the weights times ``2**F``, so its range is known
                  when the Verilog is generated; :meth:`PWASCore._sat_unreachable`): no saturation LUT
@@ -256,12 +261,15 @@ class Pipeline:
     flat_sum: bool = False
     prune_sat: bool = False
     raw_compare: bool = False
+    counter_sum: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
             raise ValueError("tree_levels must be >= 0 (0 = no adder-tree registers)")
         if self.flat_sum and self.tree_levels:
             raise ValueError("flat_sum needs tree_levels = 0 (one sum without adder-tree registers)")
+        if self.counter_sum and not self.flat_sum:
+            raise ValueError("counter_sum needs flat_sum (it is a way of adding the one sum)")
 
     @staticmethod
     def tree_depth(n: int) -> int:
@@ -298,7 +306,7 @@ class Pipeline:
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
             known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
-                     "mu_late", "flat_sum", "prune_sat", "raw_compare"}
+                     "mu_late", "flat_sum", "prune_sat", "raw_compare", "counter_sum"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -329,6 +337,7 @@ class Pipeline:
             **({"flat_sum": True} if self.flat_sum else {}),
             **({"prune_sat": True} if self.prune_sat else {}),
             **({"raw_compare": True} if self.raw_compare else {}),
+            **({"counter_sum": True} if self.counter_sum else {}),
         }
 
 
