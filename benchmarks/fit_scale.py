@@ -129,14 +129,16 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     otherwise idle cores (derived from CPU times, not a wall measurement); the CPU this process
     spends while the workers run (``parent_overlap_cpu_s``, the final solve's set-up) is not added.
     """
-    from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, tikhonov_matrix
+    from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, fork_workers, tikhonov_matrix
     from pwas_hdl.fit.sparse_cholesky import cholmod_available
     from pwas_hdl.flow.executor import Executor
 
     grid, x, z = _problem(n, p, t)
     c0, w0 = time.process_time(), time.perf_counter()
-    est = check_fit_memory(t, grid.n_vertices, n, 1, order)
     with _PssPeak() as pss, Executor(workers=workers if workers >= 2 else None) as ex:
+        # the estimate fit makes for this run (cross_validate_sigma checks it again): with forked
+        # workers, each worker's own solver state counted too
+        est = check_fit_memory(t, grid.n_vertices, n, 1, order, processes=max(fork_workers(ex, grid.n_vertices), 1))
         h = grid.basis_matrix(x)
         gam = tikhonov_matrix(grid, order)
         cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex, final_solve=True)
