@@ -83,6 +83,16 @@ def test_battery_jacobians_are_exact():
         assert np.allclose(grad, ng, rtol=1e-5, atol=1e-7)
 
 
+def test_battery_step_is_bitwise_rk4s_state():
+    # the simulator's step (no Jacobians) does rk4's floating-point operations in rk4's order
+    m = BatteryModel()
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        x = np.array([rng.uniform(0.05, 1.0), rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1)])
+        i, h = rng.uniform(-0.2, 0.8), rng.choice([5.0, 0.37])
+        assert np.array_equal(m.step(x, i, h), m.rk4(x, i, h)[0])
+
+
 def test_ekf_tracks_soc_from_noisy_voltage():
     tr, te, norm = make_battery_dataset(3000, 1500, seed=0)  # 1500 test samples: before the first reset
     cur = norm.invert("u", te.u)[:, 0]
