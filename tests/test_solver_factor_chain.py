@@ -16,6 +16,8 @@ from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_si
 from pwas_hdl.fit.sparse_cholesky import PatternCholesky, cholmod_available, grid_nested_dissection
 from pwas_hdl.flow.executor import Executor
 
+from helpers.factor_sweep import sweep_against_direct
+
 pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
 
 SIGMAS = np.logspace(-7, 2, 10)
@@ -72,17 +74,7 @@ def test_factor_chain_by_the_rule_within_the_bound_of_the_direct_solve(rules_3d)
     assert segs == [sorted(mg_idx, key=lambda i: -SIGMAS[i]), sorted(jacobi, key=lambda i: -SIGMAS[i]), chain]
     assert [solver.segment_cost(hth, float(SIGMAS[i])) for i in chain] == [rl._CHAIN_COST] * len(chain)
     solver.start_segment()
-    w, methods = None, []
-    for i in chain:
-        w, info = solver.solve(hth, b, float(SIGMAS[i]), x0=w)
-        methods.append(info.method)
-        wd = rl._solve_spd((hth + SIGMAS[i] * gam).tocsc(), b)
-        if info.method == "factor-pcg":
-            assert info.converged and info.rel_residual <= rl.CG_RTOL
-            assert 0 < info.iterations <= rl.FACTOR_PCG_MAXITER_CG
-            assert float(np.linalg.norm(w - wd)) <= info.weight_bound
-        else:
-            np.testing.assert_allclose(w, wd, rtol=1e-8, atol=1e-10)
+    methods = sweep_against_direct(solver, hth, b, gam, SIGMAS, chain, rl.FACTOR_PCG_MAXITER_CG)
     assert methods[0] == "direct" and methods[1] == "factor-pcg"
 
 

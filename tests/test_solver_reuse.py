@@ -16,6 +16,8 @@ from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_si
 from pwas_hdl.fit.sparse_cholesky import cholmod_available
 from pwas_hdl.flow.executor import Executor
 
+from helpers.factor_sweep import sweep_against_direct
+
 pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
 
 SIGMAS = np.logspace(-7, 2, 10)
@@ -45,17 +47,7 @@ def test_factor_pcg_within_the_stated_bound_of_the_direct_solve(large_rules):
     assert solver.factor_pcg and solver.method == "direct"
     small = [i for i in solver.sweep_order(hth, SIGMAS) if not solver.uses_mg(hth, SIGMAS[i])]
     assert small == sorted(small) and len(small) >= 3  # the data-dominated sigmas from the smallest up
-    w, methods = None, []
-    for i in small:
-        w, info = solver.solve(hth, b, float(SIGMAS[i]), x0=w)
-        methods.append(info.method)
-        wd = rl._solve_spd((hth + SIGMAS[i] * gam).tocsc(), b)
-        if info.method == "factor-pcg":
-            assert info.converged and info.rel_residual <= rl.CG_RTOL
-            assert 0 < info.iterations <= rl.FACTOR_PCG_MAXITER
-            assert float(np.linalg.norm(w - wd)) <= info.weight_bound
-        else:
-            np.testing.assert_allclose(w, wd, rtol=1e-8, atol=1e-10)
+    methods = sweep_against_direct(solver, hth, b, gam, SIGMAS, small, rl.FACTOR_PCG_MAXITER)
     assert methods[0] == "direct" and methods[1] == "factor-pcg"
 
 
