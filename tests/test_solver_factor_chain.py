@@ -9,14 +9,13 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from pwas_hdl.fit import multigrid as mg
 from pwas_hdl.fit import regularized_lsq as rl
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_sigma, tikhonov_matrix
 from pwas_hdl.fit.sparse_cholesky import PatternCholesky, cholmod_available, grid_nested_dissection
 from pwas_hdl.flow.executor import Executor
 
-from helpers.factor_sweep import sweep_against_direct
+from helpers.factor_sweep import large_problem_rules, random_problem, sweep_against_direct
 
 pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
 
@@ -26,18 +25,12 @@ SIGMAS = np.logspace(-7, 2, 10)
 @pytest.fixture()
 def rules_3d(monkeypatch):
     """The size rules of n = 3, p = 63 (Jacobi-CG base, multigrid, the factor chain) on 10^3 vertices."""
-    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
-    monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
-    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+    large_problem_rules(monkeypatch)
     monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS_CHOLMOD, (1, 3), 100)
 
 
 def _problem(t=800, seed=5):
-    rng = np.random.default_rng(seed)
-    grid = Grid(np.full(3, -1.2), np.full(3, 1.2), 9)
-    x = rng.uniform(-1.0, 1.0, (t, 3))
-    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
-    return sparse.csr_array(grid.basis_matrix(x)), z, tikhonov_matrix(grid, 1)
+    return random_problem(3, 9, t, seed)
 
 
 def test_grid_nested_dissection_is_a_permutation_that_factorises():

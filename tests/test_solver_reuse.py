@@ -9,14 +9,12 @@ import pytest
 from scipy import sparse
 
 from pwas_hdl.fit import fork_map as fm
-from pwas_hdl.fit import multigrid as mg
 from pwas_hdl.fit import regularized_lsq as rl
-from pwas_hdl.fit.geometry import Grid
-from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_sigma, tikhonov_matrix
+from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_sigma
 from pwas_hdl.fit.sparse_cholesky import cholmod_available
 from pwas_hdl.flow.executor import Executor
 
-from helpers.factor_sweep import sweep_against_direct
+from helpers.factor_sweep import large_problem_rules, random_problem, sweep_against_direct
 
 pytestmark = pytest.mark.skipif(not cholmod_available(), reason="needs CHOLMOD (cvxopt)")
 
@@ -26,17 +24,11 @@ SIGMAS = np.logspace(-7, 2, 10)
 @pytest.fixture()
 def large_rules(monkeypatch):
     """The size rules of a large problem on a tiny one (31 x 31 vertices)."""
-    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
-    monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
-    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+    large_problem_rules(monkeypatch)
 
 
 def _problem(t=600, seed=4):
-    rng = np.random.default_rng(seed)
-    grid = Grid(np.full(2, -1.2), np.full(2, 1.2), 30)
-    x = rng.uniform(-1.0, 1.0, (t, 2))
-    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
-    return sparse.csr_array(grid.basis_matrix(x)), z, tikhonov_matrix(grid, 1)
+    return random_problem(2, 30, t, seed)
 
 
 def test_factor_pcg_within_the_stated_bound_of_the_direct_solve(large_rules):

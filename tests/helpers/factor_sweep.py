@@ -23,3 +23,26 @@ def sweep_against_direct(solver, hth, b, gam, sigmas, order, cap: int) -> list[s
         else:
             np.testing.assert_allclose(w, wd, rtol=1e-8, atol=1e-10)
     return methods
+
+
+def random_problem(n: int, p: int, t: int, seed: int):
+    """``(H, z, Gamma)``: ``t`` uniform samples of ``sum_j sin(3 x_j)`` + noise on an ``n``-D grid
+    of ``p`` partitions per axis over [-1.2, 1.2]^n, first-order Tikhonov."""
+    from scipy import sparse
+
+    from pwas_hdl.fit.geometry import Grid
+
+    rng = np.random.default_rng(seed)
+    grid = Grid(np.full(n, -1.2), np.full(n, 1.2), p)
+    x = rng.uniform(-1.0, 1.0, (t, n))
+    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
+    return sparse.csr_array(grid.basis_matrix(x)), z, rl.tikhonov_matrix(grid, 1)
+
+
+def large_problem_rules(monkeypatch) -> None:
+    """The size rules of a large problem (multigrid, forked workers) on a tiny one."""
+    from pwas_hdl.fit import multigrid as mg
+
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
