@@ -140,8 +140,50 @@ def test_memory_estimate_grows_with_size():
     big = estimate_fit_memory(10**5, 10**6, 2, 1, 1, "cg")
     assert 0 < small["total"] < big["total"]
     assert big["total"] == pytest.approx(sum(big[k] for k in ("H", "HtH", "Gamma", "factor", "vectors")))
-    # the direct factor is charged its fill
-    assert estimate_fit_memory(10**5, 10**4, 2, 1, 1, "direct")["factor"] > estimate_fit_memory(10**5, 10**4, 2, 1, 1, "cg")["factor"]
+    # the direct factor is charged its fill (at N = 10^4 with T = 10^5 samples the grid bound of a
+    # 2-D factor, ~10 MB, is below CG's charge for its operators, so the comparison is made at 10^6)
+    assert estimate_fit_memory(10**5, 10**6, 2, 1, 1, "direct")["factor"] > estimate_fit_memory(10**5, 10**6, 2, 1, 1, "cg")["factor"]
+    assert estimate_fit_memory(10**5, 10**4, 4, 1, 1, "direct")["factor"] > estimate_fit_memory(10**5, 10**4, 4, 1, 1, "cg")["factor"]
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="the grid bound is CHOLMOD's (no cvxopt here)")
+@pytest.mark.parametrize("n,p,t,order", [(2, 63, 2000, 0), (2, 63, 30000, 0), (2, 127, 5000, 1), (2, 63, 30000, 1),
+                                         (3, 15, 3000, 0), (3, 15, 30000, 0), (3, 15, 5000, 1), (3, 11, 30000, 1)])
+def test_grid_factor_bound_holds_for_the_real_factor(n, p, t, order):
+    """The bound that the memory estimate charges a direct factor (GRID_FACTOR_BOUND) is above the
+    entries of CHOLMOD's factor of a CV fold's system, sparse and dense data, both orders."""
+    from cvxopt import cholmod
+
+    from pwas_hdl.fit.regularized_lsq import grid_factor_bound
+    from pwas_hdl.fit.sparse_cholesky import PatternCholesky
+
+    grid, h, _z = _problem(n, p, t)
+    hf = h[np.arange(t) % 5 != 0]  # a fold's training rows
+    m = (hf.T @ hf).tocsc()
+    gam = tikhonov_matrix(grid, order)
+    if order == 0:  # zero order is solved on the data-supported vertices (as the solver reduces it)
+        keep = np.flatnonzero(np.asarray(abs(h).sum(axis=0)).ravel() > 0)
+        m, gam = m[keep][:, keep], gam[keep][:, keep]
+    chol = PatternCholesky(abs(m) + abs(gam))
+    chol.factorize(chol.align(m + 1e-7 * gam))
+    nnz_l = len(cholmod.getfactor(chol._factor).V)
+    bound, nbytes = grid_factor_bound(m.shape[0], n)
+    assert nnz_l <= bound
+    assert nbytes >= 12 * bound
+    # and the estimate charges no more than the fill rule (the bound only tightens it)
+    est = estimate_fit_memory(t, grid.n_vertices, n, 1, order, "direct")
+    assert est["factor"] <= 40.0 * (8 + 4) * (min(grid.n_vertices**2, t * (n + 1) ** 2) + grid.n_vertices * (
+        1 if order == 0 else 2 * n + 1)) + 4 * (grid.n_vertices + 1)
+
+
+def test_grid_factor_bound_is_for_the_measured_dimensions_only():
+    from pwas_hdl.fit.regularized_lsq import GRID_FACTOR_BOUND, grid_factor_bound
+
+    assert set(GRID_FACTOR_BOUND) == {2, 3}
+    assert grid_factor_bound(10**4, 4) is None and grid_factor_bound(10**4, 1) is None
+    nnz_2, _ = grid_factor_bound(10**6, 2)
+    assert nnz_2 == pytest.approx(4.25 * 10**6 * np.log2(10**6))
+    assert grid_factor_bound(3, 3)[0] <= 6  # never more than a dense triangle
 
 
 def test_memory_limit_refuses_before_solving(monkeypatch):

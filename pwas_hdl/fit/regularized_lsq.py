@@ -39,6 +39,8 @@ __all__ = [
     "MG_AUTO_DIMS",
     "CG_RTOL",
     "FACTOR_PCG_MAXITER",
+    "GRID_FACTOR_BOUND",
+    "grid_factor_bound",
     "FACTOR_PCG_SEGMENT",
     "FACTOR_DOMINANCE_CG",
     "FACTOR_PCG_MAXITER_CG",
@@ -281,6 +283,23 @@ MEMORY_FRACTION = 0.8
 #: the grids of this project) used by :func:`estimate_fit_memory`.
 DIRECT_FILL_FACTOR = 40.0
 
+#: Grid bound of the CHOLMOD factor for :func:`estimate_fit_memory` (regressor dimension ``n`` ->
+#: ``(C, e, B, U0)``): ``nnz(L) <= C * U * log2(U)`` in 2-D and ``C * U**e`` above (the
+#: nested-dissection fill of an ``n``-dimensional grid graph: ``U log U``, ``U**(4/3)``; ``U`` the
+#: unknowns), held in ``B`` bytes an entry of ``L`` plus ``U0`` bytes an unknown (the symbolic
+#: analysis: 190-330 measured). The estimate takes the smaller of this and the
+#: ``DIRECT_FILL_FACTOR`` rule, which overstates the 2-D factors 3-20-fold. Measured (one CV fold,
+#: uniform data on a grid 1.2 x wider, T = 10^5 and 3 x 10^5, orders 0 and 1, CHOLMOD's own
+#: ordering or the nested dissection of the factor chain, symbolic and numeric resident set,
+#: 2026-12-02): beyond ``U0 * U``, 18.5-42.3 bytes per ``U log2 U`` at n = 2 (U = 45 793 .. 10^6;
+#: ``nnz(L) / (U log2 U)`` 0.13-3.37) and 104-156 bytes per ``U**(4/3)`` at n = 3 (U = 21 782 ..
+#: 262 144; ``nnz(L) / U**(4/3)`` 0.8-13.3). ``C * B`` is the largest with a 20 % margin (51, 192);
+#: dimensions not measured keep the fill rule alone.
+GRID_FACTOR_BOUND: dict[int, tuple[float, float, float, float]] = {
+    2: (4.25, 1.0, 12.0, 330.0),
+    3: (16.0, 4.0 / 3.0, 12.0, 330.0),
+}
+
 Method = Literal["auto", "direct", "cg", "mg"]
 
 
@@ -387,6 +406,18 @@ def _sparse_bytes(nnz: float, rows: int) -> float:
     return nnz * (8 + idx) + (rows + 1) * idx
 
 
+def grid_factor_bound(n_unknowns: int, n_dims: int) -> tuple[float, float] | None:
+    """``(nnz(L), bytes)``: the bound of :data:`GRID_FACTOR_BOUND` on the CHOLMOD factor of a
+    system of ``n_unknowns`` grid vertices in ``n_dims`` dimensions, or None where not measured."""
+    if int(n_dims) not in GRID_FACTOR_BOUND:
+        return None
+    c, e, per_entry, per_unknown = GRID_FACTOR_BOUND[int(n_dims)]
+    u = max(float(n_unknowns), 2.0)
+    nnz_l = c * u * np.log2(u) if int(n_dims) == 2 else c * u**e
+    nnz_l = min(nnz_l, u * (u + 1) / 2)  # a dense triangle at most
+    return nnz_l, per_entry * nnz_l + per_unknown * u
+
+
 def choose_method(n_unknowns: int, n_dims: int, order: int = 1, method: Method = "auto") -> str:
     """``"direct"``, ``"cg"`` or ``"mg"``: the base method of a system of this size.
 
@@ -436,7 +467,8 @@ def estimate_fit_memory(
     -------
     dict
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
-        ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``; CG: the AMG hierarchy, about
+        ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``, or with CHOLMOD the smaller grid
+        bound of :data:`GRID_FACTOR_BOUND`; CG: the AMG hierarchy, about
         twice ``A``, or a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
         used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
         (its levels, where first order uses it),
@@ -460,7 +492,7 @@ def estimate_fit_memory(
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
         "Gamma": _sparse_bytes(nnz_gam, nv),
         "factor": (
-            _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv)
+            _direct_factor_bytes(nnz_a, nv, unknowns, int(n_dims))
             if chosen == "direct"
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
         ) + (_sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0),
@@ -479,6 +511,14 @@ def estimate_fit_memory(
     est["total"] = float(sum(est.values()))
     est["method"] = 1.0 if chosen in ("cg", "mg") else 0.0
     return est
+
+
+def _direct_factor_bytes(nnz_a: float, n_vertices: int, unknowns: int, n_dims: int) -> float:
+    """The direct factor's bytes: the fill rule (``DIRECT_FILL_FACTOR`` x ``nnz(A)``), or with CHOLMOD
+    the grid bound (:func:`grid_factor_bound`) where that is smaller."""
+    rule = _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, n_vertices)
+    bound = grid_factor_bound(unknowns, n_dims) if cholmod_available() else None
+    return rule if bound is None else min(rule, bound[1])
 
 
 def check_fit_memory(
