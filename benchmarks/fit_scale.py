@@ -171,6 +171,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         "cv_all_converged": cv.solver["all_converged"],
         "cv_direct_fallbacks": cv.solver["direct_fallbacks"],
         "cv_solves_by_method": cv.solver.get("solves_by_method", {}),
+        "memory_plan": cv.solver.get("memory_plan"),
         "best_sigma": cv.best_sigma,
         "best_cv_mse": float(cv.mse.min()),
         "final": info.to_dict(),
@@ -370,6 +371,10 @@ def markdown(res: dict) -> str:
             solver += f" ({r['cv_direct_fallbacks']} direct fallbacks)"
         if not r["cv_all_converged"] or not r["final"]["converged"]:
             solver += " NOT all converged"
+        mp = r.get("memory_plan") or {}
+        if mp.get("reason"):  # the memory limit changed the plan (plan_fit_memory)
+            solver += (f" [memory limit: {mp['processes']} process{'es' if mp['processes'] > 1 else ''}"
+                       f"{', one factor at a time' if mp.get('one_factor') else ''}]")
         out.append(
             pre + f"| {solver} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['peak_rss_mib']:.0f} | "
             f"{r['estimated_mib']:.0f} | {r['cv_cg_iterations']} | {r['best_sigma']:.2g} | {diff} | {bound} | {dcpu} | {ratio} | "

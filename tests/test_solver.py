@@ -207,6 +207,54 @@ def test_memory_limit_refuses_before_solving(monkeypatch):
     assert sensor.weights_.shape == (1681, 1)
 
 
+def test_memory_plan_tries_all_workers_then_one_factor_then_fewer(monkeypatch):
+    """plan_fit_memory (issue 18): the requested forked workers when they fit, then the factors one at
+    a time, then fewer processes; a refusal only when one process does not fit."""
+    from pwas_hdl.fit.regularized_lsq import plan_fit_memory
+
+    monkeypatch.delenv(MAX_MEMORY_ENV, raising=False)
+    args = (10**5, 10**6, 2, 1, 1, "auto")
+    full = estimate_fit_memory(*args, processes=2)
+    single = estimate_fit_memory(*args, processes=1)["total"]
+    one_factor = full["total"] - full["worker_factor"]
+    assert single < one_factor < full["total"]
+    as_asked = plan_fit_memory(*args, max_memory=int(full["total"]) + 1, processes=2)
+    assert (as_asked["processes"], as_asked["one_factor"], as_asked["reason"]) == (2, False, None)
+    assert as_asked["estimate"]["total"] == full["total"]
+    mid = plan_fit_memory(*args, max_memory=int(one_factor) + 1, processes=2)
+    assert mid["processes"] == 2 and mid["one_factor"] and mid["estimate"]["total"] == pytest.approx(one_factor)
+    assert "2 processes need an estimated" in mid["reason"] and "one factor at a time" in mid["reason"]
+    low = plan_fit_memory(*args, max_memory=int(single) + 1, processes=2)
+    assert (low["processes"], low["one_factor"]) == (1, False) and "runs on 1 process" in low["reason"]
+    with pytest.raises(ResourceLimit, match=r"over the limit of \d+ MiB \(max_memory\)"):
+        plan_fit_memory(*args, max_memory=int(single) - 1, processes=2)
+    serial = plan_fit_memory(*args, max_memory=int(single) + 1, processes=1)
+    assert (serial["processes"], serial["reason"]) == (1, None)
+
+
+def test_fit_says_when_the_memory_limit_changed_the_workers(monkeypatch, tmp_path):
+    """``fit`` prints the plan's reason as a note (the CV records it in ``solver["memory_plan"]``)."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+    from pwas_hdl.fit import regularized_lsq as rl
+
+    real = rl.plan_fit_memory
+
+    def plan(*a, **k):
+        out = real(*a, **k)
+        return {**out, "reason": "2 processes need an estimated 9 MiB, over the limit of 8 MiB (max_memory): the CV runs on 1 process (5 MiB)"}
+
+    monkeypatch.setattr(rl, "plan_fit_memory", plan)
+    rng = np.random.default_rng(1)
+    y = rng.uniform(-1, 1, 400)
+    (tmp_path / "d.csv").write_text("y,z\n" + "".join(f"{float(a)!r},{float(a * a)!r}\n" for a in y))
+    r = CliRunner().invoke(app, ["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z",
+                                 "--my", "1", "-p", "8"])
+    assert r.exit_code == 0, r.output
+    assert "note: 2 processes need an estimated 9 MiB" in r.output
+
+
 def test_default_limit_is_a_fraction_of_available_ram(monkeypatch):
     monkeypatch.delenv(MAX_MEMORY_ENV, raising=False)
     limit, source = memory_limit()

@@ -107,3 +107,69 @@ def test_memory_estimate_counts_the_chain_factor(monkeypatch):
     without = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1)
     nnz_a = 10**5 * 16.0 + 64**3 * 7.0
     assert with_chain["factor"] - without["factor"] == pytest.approx(rl._sparse_bytes(rl.FACTOR_CHAIN_FILL * nnz_a, 64**3))
+
+
+def _limit_between(low: float, high: float) -> int:
+    assert low < high
+    return int((low + high) / 2)
+
+
+def test_memory_limit_holds_the_factors_one_at_a_time_with_the_serial_result(rules_3d):
+    """Under a memory limit that two factors exceed but one does not, ``--workers 2`` keeps both
+    workers: every fold's factor chain runs in one task, one factor resident at a time (issue 18),
+    and the CV is the serial one."""
+    h, z, gam = _problem()
+    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2)
+    one = full["total"] - full["worker_factor"]
+    limit = _limit_between(one, full["total"])
+    plan = rl.plan_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, max_memory=limit, processes=2)
+    assert plan["processes"] == 2 and plan["one_factor"] and "one factor at a time" in plan["reason"]
+    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    with Executor(workers=2) as ex:
+        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex, max_memory=limit)
+    mp = forked.solver["memory_plan"]
+    assert mp["processes"] == 2 and mp["requested"] == 2 and mp["one_factor"] and mp["reason"] == plan["reason"]
+    np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
+    assert forked.best_sigma == serial.best_sigma
+    assert forked.solver["solves_by_method"] == serial.solver["solves_by_method"]
+    # three segments a fold (multigrid, Jacobi-CG, the chain): the three chains are one task
+    assert len(forked.solver["fork_tasks"]) == 3 * 3 - 2
+    # without the limit, the plan is the request and each chain is a task of its own
+    with Executor(workers=2) as ex:
+        free = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex)
+    assert free.solver["memory_plan"] == {**free.solver["memory_plan"], "processes": 2, "one_factor": False, "reason": None}
+    assert len(free.solver["fork_tasks"]) == 3 * 3
+
+
+def test_memory_limit_below_one_factor_falls_back_to_one_process(rules_3d):
+    h, z, gam = _problem()
+    one_proc = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=1)["total"]
+    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2)
+    limit = _limit_between(one_proc, full["total"] - full["worker_factor"])
+    with Executor(workers=2) as ex:
+        cv = cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, executor=ex, max_memory=limit)
+        assert ex._client is None  # nor on Dask workers: in this process
+    mp = cv.solver["memory_plan"]
+    assert mp["processes"] == 1 and not mp["one_factor"] and "the CV runs on 1 process" in mp["reason"]
+    assert cv.solver["fork_tasks"] == []  # serial, in this process
+    with pytest.raises(rl.ResourceLimit, match="over the limit"):
+        cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, max_memory=int(one_proc * 0.9))
+
+
+def test_a_fallback_under_the_factor_lock_frees_its_factor(rules_3d):
+    """One factor at a time: the direct solve after an unconverged CG holds the lock and does not keep
+    its factor (the chain's worker may hold one meanwhile)."""
+    import threading
+
+    h, z, gam = _problem()
+    hth = sparse.csr_array(h.T @ h)
+    b = h.T @ z
+    solver = NormalEquationSolver(hth, gam, 3)
+    solver.maxiter = 1  # every CG solve stops at its cap: the fallback
+    solver.factor_lock = threading.RLock()
+    sigma = float(SIGMAS[-1])
+    w, info = solver.solve(hth, b, sigma)
+    assert info.method == "direct-fallback" and info.converged
+    assert solver._m_cache is None
+    assert solver.factor_lock.acquire(blocking=False)  # released
+    np.testing.assert_allclose(w, rl._solve_spd((hth + sigma * gam).tocsc(), b), rtol=1e-8, atol=1e-10)

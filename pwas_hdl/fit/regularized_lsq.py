@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable, Literal, Sequence
@@ -17,7 +18,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
-from pwas_hdl.errors import InputError, ResourceLimit
+from pwas_hdl.errors import InputError, InternalError, ResourceLimit
 from pwas_hdl.fit.fork_map import fork_available, fork_map
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
@@ -31,6 +32,7 @@ __all__ = [
     "choose_method",
     "estimate_fit_memory",
     "check_fit_memory",
+    "plan_fit_memory",
     "memory_limit",
     "DIRECT_MAX_UNKNOWNS",
     "MG_DOMINANCE",
@@ -474,7 +476,9 @@ def estimate_fit_memory(
         (its levels, where first order uses it),
         ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
         process holds), ``fold_matrices`` (with forked workers: the parent's normal matrices of
-        the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg).
+        the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg);
+        ``worker_factor`` (not in ``total`` again): the factor bytes of each further process in
+        ``workers`` (without the shared symbolic analysis of a first-order CHOLMOD factor).
     """
     t, nv, k = int(n_samples), int(n_vertices), int(n_dims) + 1
     nnz_h = t * k
@@ -504,12 +508,22 @@ def estimate_fit_memory(
         if use_mg else 0.0,
         "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
     }
-    per_process = est["HtH"] * 2 / 3 + est["factor"] + est["multigrid"] + est["vectors"]
+    # first order with CHOLMOD: the symbolic analysis of the full-data pattern is made once, in the
+    # parent before the fork (NormalEquationSolver.prepare_shared); the workers share its pages, so
+    # each holds only its numeric factor (the grid bound's per-unknown part is the analysis)
+    shared = 0.0
+    if chosen == "direct" and order == 1 and cholmod_available() and grid_factor_bound(unknowns, int(n_dims)) is not None:
+        bound = grid_factor_bound(unknowns, int(n_dims))
+        if bound[1] <= _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv):  # the bound is the charge
+            shared = GRID_FACTOR_BOUND[int(n_dims)][3] * max(float(unknowns), 2.0)
+    worker_factor = est["factor"] - shared
+    per_process = est["HtH"] * 2 / 3 + worker_factor + est["multigrid"] + est["vectors"]
     est["workers"] = per_process * (max(int(processes), 1) - 1)
     # forked workers: the parent holds every fold's normal matrix (5 folds; one is in "HtH")
     est["fold_matrices"] = 4 * _sparse_bytes(nnz_hth, nv) if int(processes) > 1 else 0.0
     est["total"] = float(sum(est.values()))
     est["method"] = 1.0 if chosen in ("cg", "mg") else 0.0
+    est["worker_factor"] = worker_factor  # of "workers": each worker's own factor (not in the sum again)
     return est
 
 
@@ -558,6 +572,62 @@ def check_fit_memory(
             f"or samples, or raise the limit with max_memory / ${MAX_MEMORY_ENV}"
         )
     return est
+
+
+def plan_fit_memory(
+    n_samples: int,
+    n_vertices: int,
+    n_dims: int,
+    n_targets: int = 1,
+    order: int = 0,
+    method: Method = "auto",
+    max_memory: int | str | None = None,
+    processes: int = 1,
+) -> dict:
+    """How many processes a fit with CV can use within the memory limit, before allocating anything.
+
+    The requested ``processes`` (forked CV workers, see :func:`fork_workers`) are tried first with
+    every worker holding its own factor, then (``processes >= 2``) with the factorising segments of
+    all folds run by one worker after another (``one_factor``: one factor resident at a time, see
+    :func:`cross_validate_sigma`), then fewer processes, down to one.
+
+    Parameters are those of :func:`check_fit_memory`.
+
+    Returns
+    -------
+    dict
+        ``processes`` (to use, ``>= 1``), ``requested``, ``one_factor`` (bool), ``estimate`` (the
+        :func:`estimate_fit_memory` dict of that plan, ``total`` in bytes), ``limit`` (bytes or None)
+        and ``reason`` (None when the request fits as asked, else why the plan differs).
+
+    Raises
+    ------
+    ResourceLimit
+        Even one process does not fit (the message of :func:`check_fit_memory`).
+    """
+    requested = max(int(processes), 1)
+    limit, source = memory_limit(max_memory)
+    for procs in range(requested, 0, -1):
+        est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, procs)
+        candidates = [(False, est)]
+        if procs > 1 and est["worker_factor"] > 0:
+            one = dict(est)
+            one["workers"] = est["workers"] - (procs - 1) * est["worker_factor"]
+            one["total"] = est["total"] - (procs - 1) * est["worker_factor"]
+            candidates.append((True, one))
+        for one_factor, e in candidates:
+            if limit is None or e["total"] <= limit:
+                reason = None
+                if procs < requested or one_factor:
+                    asked = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, requested)
+                    how = (f"{procs} process{'es' if procs > 1 else ''}" + (", one factor at a time" if one_factor else ""))
+                    reason = (f"{requested} processes need an estimated {asked['total'] / 2**20:.0f} MiB, over the limit of "
+                              f"{limit / 2**20:.0f} MiB ({source}): the CV runs on {how} ({e['total'] / 2**20:.0f} MiB)")
+                return {"processes": procs, "requested": requested, "one_factor": one_factor, "estimate": e,
+                        "limit": limit, "reason": reason}
+    # not even one process: the refusal names the one-process estimate
+    check_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, max_memory, 1)
+    raise InternalError("plan_fit_memory: one process over the limit was not refused")  # pragma: no cover
 
 
 def _order_of(gamma: sparse.sparray) -> int:
@@ -762,12 +832,34 @@ class NormalEquationSolver:
         #: factor-PCG attempts that hit :data:`FACTOR_PCG_MAXITER` (then refactorised)
         self.factor_pcg_failures = 0
         self.infos: list[SolveInfo] = []
+        #: one factor at a time (cross_validate_sigma under a memory limit, see plan_fit_memory): a
+        #: lock shared by the forked workers; a fallback factorisation holds it and frees its factor
+        self.factor_lock = None
 
     def __getstate__(self) -> dict:
         """Pickled (e.g. shipped to a Dask worker) without the CHOLMOD factors, which cannot be."""
         state = dict(self.__dict__)
         state["_m_cache"] = state["_shared_chol"] = state["_mg_cache"] = state["_reuse"] = None
+        state["factor_lock"] = None
         return state
+
+    def factorises(self, m: sparse.csr_array, sigma: float) -> bool:
+        """True when the solve at ``sigma`` factorises ``m + sigma Gamma`` (the direct method or the
+        factor chain; a fallback of an unconverged CG solve aside)."""
+        if self.uses_mg(m, sigma):
+            return False
+        return self.method == "direct" or self.uses_factor_chain(m, sigma)
+
+    def _fallback_direct(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
+        """The direct solve after CG stopped at its cap; with :attr:`factor_lock` under the lock, the
+        factor freed before it is released."""
+        if self.factor_lock is None:
+            return self._direct(m, bk, sigma)
+        with self.factor_lock:
+            try:
+                return self._direct(m, bk, sigma)
+            finally:
+                self._m_cache = None
 
     def uses_mg(self, m: sparse.csr_array, sigma: float) -> bool:
         """True when ``(m + sigma Gamma) w = b`` is solved by multigrid-preconditioned CG.
@@ -1018,7 +1110,7 @@ class NormalEquationSolver:
             x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
             wk, info = self._mg_solve(m, bk, sigma, x0k)
             if not info.converged and self.fallback:
-                wk = self._direct(m, bk, sigma)
+                wk = self._fallback_direct(m, bk, sigma)
                 info = SolveInfo("direct-fallback", info.iterations)
         elif self.method == "direct" or self.uses_factor_chain(m, sigma):
             x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
@@ -1028,7 +1120,7 @@ class NormalEquationSolver:
             x0k = None if x0 is None else (x0 if self.keep is None else np.asarray(x0)[self.keep])
             wk, info = _cg(a, bk, self._pre.get(a, sigma), x0k, sigma, self.lam_gamma, self.rtol, self.maxiter)
             if not info.converged and self.fallback:
-                wk = self._direct(m, bk, sigma)
+                wk = self._fallback_direct(m, bk, sigma)
                 info = SolveInfo("direct-fallback", info.iterations)
         self.infos.append(info)
         if self.keep is None:
@@ -1213,7 +1305,8 @@ _CHAIN_COST = 2.5
 
 def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Callable[[int, int], float],
                    procs: int, n_sigmas: int, progress, stats: list | None,
-                   parent_work: Callable[[], object] | None = None) -> list[list]:
+                   parent_work: Callable[[], object] | None = None,
+                   heavy: Callable[[int, int], bool] | None = None, factor_lock=None) -> list[list]:
     """Every fold's sweep segments (:meth:`NormalEquationSolver.sweep_segments`) on ``procs`` forked
     workers (:func:`pwas_hdl.fit.fork_map.fork_map`: the data are inherited, not pickled).
 
@@ -1222,20 +1315,37 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
     one :data:`_MG_COST`, one of the factor chain :data:`_CHAIN_COST`), so that the workers finish
     within about one factorisation of each other. ``parent_work`` runs in the parent meanwhile (see
     :func:`~pwas_hdl.fit.fork_map.fork_map`). ``run(f, segment)`` returns that segment's results; the
-    return value is ``[[result of each segment of fold f, in segment order] for f]``.
+    return value is ``[[result of each segment of fold f, in segment order] for f]``. With ``heavy(f, k)``
+    (segment ``k`` of fold ``f`` factorises) the factorising segments of all folds form one task that
+    holds ``factor_lock`` (one factor resident at a time, see :func:`plan_fit_memory`).
     """
-    tasks = [(f, k) for f, segs in enumerate(segments) for k in range(len(segs))]
-    cost = {t: sum(cost_of(t[0], i) for i in segments[t[0]][t[1]]) for t in tasks}
+    # a task is a tuple of (fold, segment) pairs run one after another; one segment each, except
+    # that with ``heavy`` (one factor at a time) every factorising segment is in one task, which
+    # holds ``factor_lock`` while it runs
+    tasks = [((f, k),) for f, segs in enumerate(segments) for k in range(len(segs))]
+    group: tuple = ()
+    if heavy is not None:
+        group = tuple(t[0] for t in tasks if heavy(*t[0]))
+        if group:
+            tasks = [group] + [t for t in tasks if t[0] not in set(group)]
+    cost = {t: sum(cost_of(f, i) for f, k in t for i in segments[f][k]) for t in tasks}
     tasks.sort(key=lambda t: -cost[t])  # stable: equal costs stay in fold order
+
+    def run_task(t: tuple) -> list:
+        if t is group or (group and t == group):
+            with factor_lock if factor_lock is not None else nullcontext():
+                return [run(f, segments[f][k]) for f, k in t]
+        return [run(f, segments[f][k]) for f, k in t]
+
     total = len(segments) * n_sigmas
     report = None if progress is None else (lambda done, n: progress(done * total // n, total))
-    out = fork_map(lambda t: run(t[0], segments[t[0]][t[1]]), tasks, procs, report, stats, parent_work)
-    by_task = dict(zip(tasks, out))
+    out = fork_map(run_task, tasks, procs, report, stats, parent_work)
+    by_seg = {pair: r for t, res in zip(tasks, out) for pair, r in zip(t, res)}
     if stats is not None:  # fork_map gives them in the order of ``tasks``: back to (fold, segment)
         info = dict(zip(tasks, stats[-len(tasks):]))
         del stats[-len(tasks):]
         stats.extend(info[t] for t in sorted(tasks))
-    return [[by_task[(f, k)] for k in range(len(segs))] for f, segs in enumerate(segments)]
+    return [[by_seg[(f, k)] for k in range(len(segs))] for f, segs in enumerate(segments)]
 
 
 def cross_validate_sigma(
@@ -1312,8 +1422,8 @@ def cross_validate_sigma(
     h = sparse.csr_array(h)
     z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
     labels = fold_labels(h.shape[0], folds, shuffle, seed)
-    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory,
-                     processes=max(fork_workers(executor, h.shape[1]), 1))
+    mem_plan = plan_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory,
+                               processes=max(fork_workers(executor, h.shape[1]), 1))
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2
@@ -1366,7 +1476,16 @@ def cross_validate_sigma(
     independent = _folds_independent(solver, sig)
     procs = fork_workers(executor, solver.n if solver.keep is None else solver.keep.size) if (
         independent and folds >= 2) else 0
+    procs = min(procs, mem_plan["processes"]) if procs else 0  # the memory limit's plan (plan_fit_memory)
+    one_factor = bool(procs > 1 and mem_plan["one_factor"])
+    if procs == 1:
+        procs = 0  # one process: this one, serially
     if procs:
+        import multiprocessing
+
+        # one factor at a time: the factorising segments run in one task, holding this lock; a
+        # fallback factorisation elsewhere waits for it (NormalEquationSolver.factor_lock)
+        solver.factor_lock = multiprocessing.get_context("fork").RLock() if one_factor else None
         # the forked workers inherit every fold's matrices and the shared analysis (built here once)
         datas = [fold_data(f) for f in range(folds)]
         segments = [solver.sweep_segments(d[2], sig) for d in datas]
@@ -1379,13 +1498,17 @@ def cross_validate_sigma(
                 solver.prepare_multigrid(hth_r)
             overlap[0] = time.process_time() - c0
 
+        heavy = (lambda f, k: any(solver.factorises(datas[f][2], float(sig[i])) for i in segments[f][k])) if one_factor else None
         per_fold = _fork_segments(lambda f, seg: run_segment(datas[f], seg), segments,
                                   lambda f, i: solver.segment_cost(datas[f][2], float(sig[i])), procs, sig.size,
-                                  progress, task_stats, prepare_final)
+                                  progress, task_stats, prepare_final, heavy=heavy, factor_lock=solver.factor_lock)
+        solver.factor_lock = None
         del datas
         parts = [merge(r) for r in per_fold]
     else:
-        parts = _map_folds(one_fold, folds, executor, independent, sig.size, progress)
+        # the memory limit allows one process (plan_fit_memory): the folds run here, not on Dask workers
+        serial_only = mem_plan["processes"] == 1 and mem_plan["requested"] > 1
+        parts = _map_folds(one_fold, folds, None if serial_only else executor, independent, sig.size, progress)
     for f, (mse_f, bound_f, _, _) in enumerate(parts):
         fold_mse[f], weight_bound[f] = mse_f, bound_f
     solver.infos = [i for part in parts for i in part[2]]
@@ -1408,6 +1531,10 @@ def cross_validate_sigma(
         "fork_tasks": [{"cpu_s": float(c), "pid": int(p)} for c, p in task_stats],
         # CPU seconds this process spent while the forked workers ran (off the critical path)
         "parent_overlap_cpu_s": float(overlap[0]),
+        # the memory limit's plan (plan_fit_memory): the forked processes used, whether the factors
+        # were held one at a time, and why the plan differs from the request (None: as asked)
+        "memory_plan": {"processes": max(procs, 1), "requested": mem_plan["requested"], "one_factor": one_factor,
+                        "estimate_mib": mem_plan["estimate"]["total"] / 2**20, "reason": mem_plan["reason"]},
     }
     final_w = final_info = None
     if final_solve:
