@@ -129,16 +129,17 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
     otherwise idle cores (derived from CPU times, not a wall measurement); the CPU this process
     spends while the workers run (``parent_overlap_cpu_s``, the final solve's set-up) is not added.
     """
-    from pwas_hdl.fit.regularized_lsq import check_fit_memory, cross_validate_sigma, fork_workers, tikhonov_matrix
+    from pwas_hdl.fit.regularized_lsq import cross_validate_sigma, fork_workers, plan_fit_memory, tikhonov_matrix
     from pwas_hdl.fit.sparse_cholesky import cholmod_available
     from pwas_hdl.flow.executor import Executor
 
     grid, x, z = _problem(n, p, t)
     c0, w0 = time.process_time(), time.perf_counter()
     with _PssPeak() as pss, Executor(workers=workers if workers >= 2 else None) as ex:
-        # the estimate fit makes for this run (cross_validate_sigma checks it again): with forked
-        # workers, each worker's own solver state counted too
-        est = check_fit_memory(t, grid.n_vertices, n, 1, order, processes=max(fork_workers(ex, grid.n_vertices), 1))
+        # the estimate of the plan fit makes for this run under the memory limit (cross_validate_sigma
+        # makes the same plan again): with forked workers, each worker's own solver state counted
+        # too, or one factor at a time, or fewer processes (plan_fit_memory; a refusal fails the point)
+        est = plan_fit_memory(t, grid.n_vertices, n, 1, order, processes=max(fork_workers(ex, grid.n_vertices), 1))["estimate"]
         h = grid.basis_matrix(x)
         gam = tikhonov_matrix(grid, order)
         cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex, final_solve=True)
@@ -252,7 +253,7 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
             "folds": 5,
             "sigma_grid": "logspace(-7, 3, 21) (DEFAULT_SIGMA_GRID)",
             "data": "x uniform in [-1, 1]^n, z = sum_j sin(3 x_j) + 0.1 N(0, 1), domain [-1.2, 1.2]^n",
-            "timed": "check_fit_memory + H + Gamma + 5-fold CV over 21 sigmas + final solve, method auto",
+            "timed": "plan_fit_memory + H + Gamma + 5-fold CV over 21 sigmas + final solve, method auto",
             "limit_s": limit,
             "direct_limit_s": direct_limit,
             "budget_s": budget if budget != float("inf") else None,

@@ -139,7 +139,7 @@ def test_memory_estimate_counts_each_forked_worker():
     assert two["worker_factor"] == one["worker_factor"] < one["factor"]
     shared = rl.GRID_FACTOR_BOUND[2][3] * 10**6 if rl.cholmod_available() else 0.0
     assert one["factor"] - one["worker_factor"] == pytest.approx(shared)
-    per = one["HtH"] * 2 / 3 + one["worker_factor"] + one["multigrid"] + one["vectors"]
+    per = one["HtH"] * 2 / 3 + one["worker_factor"] + one["multigrid"] + one["vectors"] + rl.FORK_WORKER_OVERHEAD
     # and the parent holds the other four folds' normal matrices (H'H's pattern each), inherited
     fold = rl._sparse_bytes(min(10.0**12, 10**5 * 9.0), 10**6)
     assert two["fold_matrices"] == pytest.approx(4 * fold)

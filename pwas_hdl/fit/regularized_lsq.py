@@ -275,6 +275,12 @@ AMG_DOMINANCE = 10.0
 #: ``[1 / ratio, ratio]`` of the one it was built for, see :func:`_Preconditioner`).
 AMG_REUSE_RATIO = 10.0
 
+#: Bytes each further forked CV worker holds beyond its solver state in :func:`estimate_fit_memory`
+#: (pages copied on write, the allocator's arenas): measured ~110 MiB not in the estimate with the
+#: factors held one at a time (n = 3, N = 262 144, first order, 2 workers: 2849 MiB PSS against
+#: 2740 MiB estimated without this term, 2026-12-02); 128 MiB per worker.
+FORK_WORKER_OVERHEAD = 128 * 2**20
+
 #: Environment variable with the memory limit in bytes (suffixes K, M, G accepted).
 MAX_MEMORY_ENV = "PWAS_HDL_MAX_MEMORY"
 
@@ -491,6 +497,7 @@ def estimate_fit_memory(
     # Jacobi-CG base with the factor chain (FACTOR_DOMINANCE_CG): a nested-dissection factor too
     chain = (use_mg and chosen == "cg" and method == "auto" and int(n_dims) in FACTOR_CHAIN_DIMS
              and cholmod_available())
+    chain_factor = _sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
@@ -499,7 +506,7 @@ def estimate_fit_memory(
             _direct_factor_bytes(nnz_a, nv, unknowns, int(n_dims))
             if chosen == "direct"
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
-        ) + (_sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0),
+        ) + chain_factor,
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
         # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
         # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled
@@ -516,9 +523,11 @@ def estimate_fit_memory(
         bound = grid_factor_bound(unknowns, int(n_dims))
         if bound[1] <= _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv):  # the bound is the charge
             shared = GRID_FACTOR_BOUND[int(n_dims)][3] * max(float(unknowns), 2.0)
-    worker_factor = est["factor"] - shared
-    per_process = est["HtH"] * 2 / 3 + worker_factor + est["multigrid"] + est["vectors"]
+    per_process = est["HtH"] * 2 / 3 + est["factor"] - shared + est["multigrid"] + est["vectors"] + FORK_WORKER_OVERHEAD
     est["workers"] = per_process * (max(int(processes), 1) - 1)
+    # what one factor at a time saves a worker (plan_fit_memory): its direct factor, or the factor
+    # chain's (the Jacobi-CG / multigrid state of the chain's sweep it keeps)
+    worker_factor = chain_factor if chain else (est["factor"] - shared if chosen == "direct" else 0.0)
     # forked workers: the parent holds every fold's normal matrix (5 folds; one is in "HtH")
     est["fold_matrices"] = 4 * _sparse_bytes(nnz_hth, nv) if int(processes) > 1 else 0.0
     est["total"] = float(sum(est.values()))
