@@ -262,6 +262,8 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
             "shared_machine": _load() is None or _load() >= IDLE_LOAD,
             "load_average_at_start": _load(),
             "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+            # the memory limit the fits planned for (plan_fit_memory): bytes and where it came from
+            "memory_limit": _memory_limit(),
         },
         "environment": _environment(),
         "rows": rows,
@@ -314,14 +316,23 @@ def _line(r: dict) -> str:
     )
 
 
+def _memory_limit() -> dict:
+    from pwas_hdl.fit.regularized_lsq import memory_limit
+
+    limit, source = memory_limit()
+    return {"bytes": limit, "source": source}
+
+
 def markdown(res: dict) -> str:
     s = res["setup"]
+    ml = s.get("memory_limit") or {}
     out = [
         "# Fits at scale: fit + 5-fold CV (issue 18)",
         "",
         f"T = {s['T']} random regressors, 5-fold CV over 21 sigmas (1e-7 .. 1e3) + final solve, solver chosen "
         f"by `method=\"auto\"`. Each point in its own process; limit {s['limit_s']:.0f} s wall per fit and "
         f"{s['direct_limit_s']:.0f} s per direct reference solve. "
+        + (f"Memory limit {ml['bytes'] / 2**20:.0f} MiB ({ml['source']}). " if ml.get("bytes") else "")
         + ("**The 2-core machine was shared with other engineers' jobs** (load average "
            f"{s['load_average_at_start'] or float('nan'):.1f} at the start): wall times are inflated, CPU times are "
            "the fairer measure." if s.get("shared_machine", True) else

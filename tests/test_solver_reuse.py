@@ -114,6 +114,41 @@ def test_fork_map_order_and_errors():
     assert fm._TASK is None
 
 
+def test_forked_segments_one_factor_at_a_time_run_in_one_task_under_the_lock():
+    """_fork_segments with ``heavy``: every factorising segment of every fold in one task that holds
+    the lock (and calls ``after_group`` before it lets go), the others a task each; results in
+    (fold, segment) order as without the grouping."""
+    import multiprocessing
+    import os
+
+    if not fm.fork_available():
+        pytest.skip("needs fork")
+    ctx = multiprocessing.get_context("fork")
+    lock, freed = ctx.Lock(), ctx.Value("i", 0)
+    segments = [[[0, 1], [2]], [[0], [1, 2]], [[2], [0, 1]]]  # 3 folds; segment 1 of each is heavy
+
+    def run(f, seg):
+        held = not lock.acquire(block=False)
+        if not held:
+            lock.release()
+        return f, tuple(seg), held, os.getpid()
+
+    def after():
+        with freed.get_lock():
+            freed.value += 1
+
+    stats: list = []
+    out = rl._fork_segments(run, segments, lambda f, i: 1.0, 2, 3, None, stats, heavy=lambda f, k: k == 1,
+                            factor_lock=lock, after_group=after)
+    assert [[(r[0], r[1]) for r in fold] for fold in out] == [[(f, tuple(s)) for s in segs] for f, segs in enumerate(segments)]
+    # the heavy ones under the lock (a light one may run while the other worker holds it)
+    assert [fold[1][2] for fold in out] == [True] * 3
+    assert len({fold[1][3] for fold in out}) == 1  # one task: one process ran every heavy segment
+    assert freed.value == 1 and len(stats) == 1 + 3
+    plain = rl._fork_segments(run, segments, lambda f, i: 1.0, 2, 3, None, None)
+    assert [[(r[0], r[1]) for r in fold] for fold in plain] == [[(r[0], r[1]) for r in fold] for fold in out]
+
+
 def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
     """A killed worker (e.g. by the out-of-memory killer) left multiprocessing.Pool waiting for ever."""
     import os

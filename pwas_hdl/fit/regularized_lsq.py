@@ -859,6 +859,13 @@ class NormalEquationSolver:
             return False
         return self.method == "direct" or self.uses_factor_chain(m, sigma)
 
+    def drop_factor(self) -> None:
+        """Free the factor this process keeps for the next solve of the same matrix (and its
+        factor-PCG state): one factor at a time, the worker of the factorising segments lets go
+        of its last one before another worker may factorise."""
+        self._m_cache = None
+        self._reuse = None
+
     def _fallback_direct(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
         """The direct solve after CG stopped at its cap; with :attr:`factor_lock` under the lock, the
         factor freed before it is released."""
@@ -868,7 +875,7 @@ class NormalEquationSolver:
             try:
                 return self._direct(m, bk, sigma)
             finally:
-                self._m_cache = None
+                self.drop_factor()
 
     def uses_mg(self, m: sparse.csr_array, sigma: float) -> bool:
         """True when ``(m + sigma Gamma) w = b`` is solved by multigrid-preconditioned CG.
@@ -1315,7 +1322,8 @@ _CHAIN_COST = 2.5
 def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Callable[[int, int], float],
                    procs: int, n_sigmas: int, progress, stats: list | None,
                    parent_work: Callable[[], object] | None = None,
-                   heavy: Callable[[int, int], bool] | None = None, factor_lock=None) -> list[list]:
+                   heavy: Callable[[int, int], bool] | None = None, factor_lock=None,
+                   after_group: Callable[[], object] | None = None) -> list[list]:
     """Every fold's sweep segments (:meth:`NormalEquationSolver.sweep_segments`) on ``procs`` forked
     workers (:func:`pwas_hdl.fit.fork_map.fork_map`: the data are inherited, not pickled).
 
@@ -1326,7 +1334,8 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
     :func:`~pwas_hdl.fit.fork_map.fork_map`). ``run(f, segment)`` returns that segment's results; the
     return value is ``[[result of each segment of fold f, in segment order] for f]``. With ``heavy(f, k)``
     (segment ``k`` of fold ``f`` factorises) the factorising segments of all folds form one task that
-    holds ``factor_lock`` (one factor resident at a time, see :func:`plan_fit_memory`).
+    holds ``factor_lock`` (one factor resident at a time, see :func:`plan_fit_memory`) and calls
+    ``after_group()`` before it releases it.
     """
     # a task is a tuple of (fold, segment) pairs run one after another; one segment each, except
     # that with ``heavy`` (one factor at a time) every factorising segment is in one task, which
@@ -1341,9 +1350,12 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
     tasks.sort(key=lambda t: -cost[t])  # stable: equal costs stay in fold order
 
     def run_task(t: tuple) -> list:
-        if t is group or (group and t == group):
+        if group and t == group:
             with factor_lock if factor_lock is not None else nullcontext():
-                return [run(f, segments[f][k]) for f, k in t]
+                out = [run(f, segments[f][k]) for f, k in t]
+                if after_group is not None:
+                    after_group()  # e.g. free the last factor before the lock is released
+                return out
         return [run(f, segments[f][k]) for f, k in t]
 
     total = len(segments) * n_sigmas
@@ -1510,7 +1522,8 @@ def cross_validate_sigma(
         heavy = (lambda f, k: any(solver.factorises(datas[f][2], float(sig[i])) for i in segments[f][k])) if one_factor else None
         per_fold = _fork_segments(lambda f, seg: run_segment(datas[f], seg), segments,
                                   lambda f, i: solver.segment_cost(datas[f][2], float(sig[i])), procs, sig.size,
-                                  progress, task_stats, prepare_final, heavy=heavy, factor_lock=solver.factor_lock)
+                                  progress, task_stats, prepare_final, heavy=heavy, factor_lock=solver.factor_lock,
+                                  after_group=solver.drop_factor)
         solver.factor_lock = None
         del datas
         parts = [merge(r) for r in per_fold]
