@@ -63,3 +63,21 @@ def test_every_script_entry_keeps_the_contract_and_writes_outside_the_package():
         if re.search(r'^\s*(out|outdir) = (HERE|benchmarks_dir\(\)) / "results"\s*$', text, re.M):  # an output folder
             bad_out.append(f"{path.name}: writes into its own folder")
     assert bad_entry == [] and bad_out == [], (bad_entry, bad_out)
+
+
+def test_fit_scale_quick_smoke_records_the_memory_plan(tmp_path, monkeypatch):
+    """benchmarks/fit_scale.py (issue 18) end to end on its smallest point: both orders fitted in child
+    processes, the direct reference, and the memory plan and limit in the results."""
+    import json
+
+    monkeypatch.setenv("PWAS_HDL_MAX_MEMORY", "2G")
+    bench = importlib.import_module("pwas_hdl.benchmarks.fit_scale")
+    assert script_main(bench.main, ["--quick", "--points", "2:7", "--outdir", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "fit_scale_quick.json").read_text())
+    assert res["setup"]["memory_limit"] == {"bytes": 2 * 2**30, "source": "$PWAS_HDL_MAX_MEMORY"}
+    rows = res["rows"]
+    assert [(r["n"], r["p"], r["order"], r["status"]) for r in rows] == [(2, 7, 0, "ok"), (2, 7, 1, "ok")]
+    for r in rows:
+        assert r["memory_plan"]["processes"] == 1 and r["memory_plan"]["reason"] is None
+        assert r["estimated_mib"] > 0 and r["direct"]["status"] in ("ok", "is the direct solve")
+    assert "Memory limit 2048 MiB ($PWAS_HDL_MAX_MEMORY)" in (tmp_path / "fit_scale_quick.md").read_text()
