@@ -170,6 +170,7 @@ def measure(model_path: Path, fpga: str, pipeline, memory: str, workdir: Path, m
         fits=True, part=r["part"], fmax_mhz=r["fmax_mhz"], latency_ns=r["latency_ns"], luts=r["luts"], carry=r["carry"],
         ffs_core=r["ffs_core"], ffs_with_harness=r["ffs"], dsp=r["dsp"], bram=r["bram"], bram_bits=r["bram_bits"],
         logic_cells=r["logic_cells"], critical_path=r["critical_path"], hard_registers=r.get("hard_registers"),
+        floorplan=r.get("floorplan"),
         utilization_pct={k: v["percent"] for k, v in util.items() if v["used"]},
         tools=r["tools"], runtime_s=round(time.monotonic() - t0, 1),
     )
@@ -471,6 +472,9 @@ def _run(args: argparse.Namespace, ex) -> int:
             "pipeline: latency = short, default = balanced, throughput = max on ECP5 and max-lut on iCE40); "
             "the ECP5 multiplier and block-RAM registers are packed by pwas_hdl.flow.hard_registers (hard_registers in "
             "the JSON counts them per build).",
+            "Hard-block floorplan (pwas-hdl synth --floorplan auto, pwas_hdl.flow.floorplan): the latency build's 5 block RAMs "
+            "on fixed sites of the LFE5U-45F's central EBR row (Y34) and its 5 multipliers on the DSP row Y46, bank k on "
+            "site k; every other build (mem_out, or no mul_in) is placed freely by nextpnr (floorplan in the JSON per build).",
             "Weights inline in the Verilog, except the replicated-memory builds, which load them with $readmemh "
             "(Yosys parses (n+1) N inline initialisers very slowly); the memory contents are the same.",
             "Fixed-point formats are generate's defaults (the noise-budget rule of pwas_hdl.fixedpoint.bittrue); the weight width "

@@ -147,6 +147,7 @@ def synthesize(
     progress: Progress | None = None,
     pack_registers: bool = True,
     harness: bool | None = None,
+    floorplan: str = "auto",
 ) -> dict[str, Any]:
     """Synthesise (and for FPGA targets place and route) the design generated in ``outdir``.
 
@@ -179,6 +180,11 @@ def synthesize(
         ``benchmarks/hw_tables.py`` measure it). Default: on for ``ice40`` / ``ecp5``; the
         ``generic`` target has no fmax and takes no harness. ``ffs`` excludes the harness
         flip-flops (``harness.ffs``); ``fmax_basis`` says which paths fmax covers.
+    floorplan
+        ECP5: ``"auto"`` (default) fixes the block RAMs and multipliers to sites of the part's site
+        table where the rule of :mod:`pwas_hdl.flow.floorplan` applies (the latency-first pipeline,
+        ``mul_in`` without ``mem_out``, on the LFE5U-45F); ``"none"``: nextpnr places them freely.
+        ``floorplan`` in the result records the plan (cells, sites) or why there is none.
 
     Returns
     -------
@@ -192,7 +198,8 @@ def synthesize(
         memory in the RTL), ``logic_cells`` (nextpnr ICESTORM_LC / TRELLIS_COMB), ``utilization``
         (nextpnr bel type -> used / available / percent), ``clock``, ``fmax_mhz``, ``freq_mhz``,
         ``timing_met``, ``latency_cycles``, ``latency_ns``, ``ii``, ``throughput_msps``,
-        ``runtime_s`` and ``files``.
+        ``runtime_s``, ``files``, ``hard_registers`` (ECP5 packing counts) and ``floorplan`` (ECP5:
+        :func:`pwas_hdl.flow.floorplan.plan_sites`'s record; None for other targets).
 
     Raises
     ------
@@ -216,6 +223,9 @@ def synthesize(
     if freq_mhz is not None:
         if isinstance(freq_mhz, bool) or not isinstance(freq_mhz, (int, float)) or not math.isfinite(freq_mhz) or freq_mhz <= 0:
             raise ValueError(f"--clock-mhz (freq_mhz) must be a positive number of MHz, got {freq_mhz!r}")
+    from pwas_hdl.flow.floorplan import apply_floorplan, check_floorplan
+
+    check_floorplan(floorplan)
     dev, pkg, part, family, has_dsp = _resolve_device(target, device, package, freq_mhz)
     if harness is None:
         harness = target != "generic"
@@ -316,6 +326,10 @@ def synthesize(
                                  mult_first=bool(pl.get("mul_in")) and not pl.get("mem_out", True))
         result["hard_registers"] = hr
         result["ffs"] -= hr["ffs_absorbed"]  # the flip-flops left in the fabric
+    result["floorplan"] = None
+    if target == "ecp5":  # after the packing (it keeps the cells), before nextpnr
+        result["floorplan"] = apply_floorplan(work / "netlist.json", synth_top, dev, mode=floorplan,
+                                              pipeline=manifest.get("pipeline"), part=part)
 
     # ---- nextpnr
     if target != "generic":
@@ -423,6 +437,13 @@ def synth_summary_text(result: dict[str, Any]) -> str:
             lines.append(f"  hard-block registers: DP16KD output {hr['bram_output_registers']}/{hr['dp16kd']}, "
                          f"MULT18X18D input {hr['mult_input_registers']}/{hr['mult18x18d']}, "
                          f"output {hr['mult_output_registers']}/{hr['mult18x18d']} ({hr['ffs_absorbed']} FF absorbed)")
+        fp = r.get("floorplan")
+        if fp:
+            if fp.get("applied"):
+                rows = ", ".join(f"{t} -> row {y}" for t, y in (fp.get("rows") or {}).items())
+                lines.append(f"  floorplan: {len(fp.get('cells') or {})} hard blocks on fixed sites ({rows})")
+            else:
+                lines.append(f"  floorplan: none ({fp.get('reason')})")
     lat, ii = r.get("latency_cycles"), r.get("ii")
     timing = f"  latency {n(lat)} cycles"
     if r.get("latency_ns") is not None:

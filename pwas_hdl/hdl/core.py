@@ -566,9 +566,12 @@ class PWASCore(wiring.Component):
         # the step bits the address uses: with bit fields only the dimensions that have one (the last
         # dimension has none when p_{n-1} < n + 1: its vertex coordinate // (n+1) is always 0)
         used_dims = set(range(n)) if fields is None else {j for _e, _w, j in fields}
+        # late_select: the address fields are chosen by the comparison bits among values precomputed
+        # from the cells and the rotation (:meth:`_late_fields`): no rank or step tables
+        late = bool(pl.late_select and fields is not None and aw and not pl.offset and n > 1)
         ranks = []
         for j in range(n):
-            if n == 1 or j not in used_dims:
+            if n == 1 or j not in used_dims or late:
                 ranks.append(0)
                 continue
             bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
@@ -578,7 +581,7 @@ class PWASCore(wiring.Component):
             return (b - t) % nb
 
         step = [[self._table(m, [(ranks[j], kw), rot_in], lambda r, t, b=b: t < nb and r < kb(b, t), 1, f"step{b}_{j}")
-                 if j in used_dims else 0 for j in range(n)] for b in range(nb)]
+                 if j in used_dims and not late else 0 for j in range(n)] for b in range(nb)]
         # d_(k), k = 1..n: the fraction of rank k - 1 (one-hot selection by tables of the comparison bits)
         dsorted = [Const(0, dw)]
         for k in range(1, n + 1):
@@ -599,7 +602,9 @@ class PWASCore(wiring.Component):
         def address_pieces(step, cs):
             pieces = []
             for b in range(nb if aw else 0):
-                if fields is not None:
+                if late:
+                    pieces.append([self._late_field(m, ge, cs, rot_in, b, w, j) for _e, w, j in fields])
+                elif fields is not None:
                     fb = []
                     for e, w, j in fields:
                         if j < n - 1:
@@ -655,6 +660,46 @@ class PWASCore(wiring.Component):
         mus = gs if pl.mu_late else self._mu_of_sorted(m, gs)
         valid, r = pipe.stage("s_addr", pl.addr, valid, {"baddr": addr, mkey: mus, "rot": rot, "oor": oor})
         return valid, r["baddr"], r[mkey], r["rot"], r["oor"]
+
+    def _late_field(self, m: Module, ge, cs, rot_in, b: int, w: int, j: int):
+        """``late_select``: bank ``b``'s address field of dimension ``j`` (``w`` bits) as a late select.
+
+        The field is ``c_j + s_bj`` (``j < n-1``; ``(c_j + s_bj) // (n+1)`` for the last dimension)
+        with ``s_bj = [rank_j < k_b(rot)]`` and ``rank_j`` the count of the ``n-1`` comparison
+        bits of dimension ``j`` (``d_i >= d_j``, i < j; ``d_j > d_i``, i > j). For each rank ``r``
+        the field's value depends on ``c_j`` and ``rot`` only, which are known before the
+        comparators' carry chains end: the ``n`` candidates are case tables of ``(c_j, rot)``, and
+        each field bit is a case table of the comparison bits that selects among them (a Shannon
+        expansion on the late inputs) instead of rank table -> step table -> field table.
+        """
+        p = self.params
+        n, nb = p.n, p.n + 1
+        cw = bits_for(p.partitions[j] - 1)
+        g = [ge[i, j] for i in range(j)] + [ge[j, i] for i in range(j + 1, n)]
+        low = (1 << j) - 1  # the bits that count when set (d_i >= d_j, i < j); the others when clear
+
+        def rank(v: int) -> int:
+            return bin(v & low).count("1") + bin(~v & ((1 << (n - 1)) - 1) & ~low).count("1")
+
+        def value(c: int, t: int, r: int) -> int:
+            s = int(t < nb and r < (b - t) % nb)
+            return c + s if j < n - 1 else (c + s) // nb
+
+        bits = []
+        for i in range(w):
+            cand = [self._table(m, [(cs[j], cw), rot_in], lambda c, t, r=r, i=i: (value(c, t, r) >> i) & 1, 1,
+                                f"lsv{b}_{j}_{i}_{r}") for r in range(n)]
+            if all(isinstance(x, int) for x in cand) and len(set(cand)) == 1:
+                bits.append(Const(cand[0], 1))
+                continue
+            out = Signal(name=f"ls{b}_{j}_{i}")
+            with m.Switch(Cat(*g)):
+                for v in range(1 << (n - 1)):
+                    with m.Case(v):
+                        x = cand[rank(v)]
+                        m.d.comb += out.eq(Const(x, 1) if isinstance(x, int) else x)
+            bits.append(out)
+        return Cat(*bits)
 
     def _mu_of_sorted(self, m: Module, ds_sorted):
         """``mu_0 = 2**F - d_(1)``, ``mu_k = d_(k) - d_(k+1)``, ``mu_n = d_(n)`` (vertex order)."""

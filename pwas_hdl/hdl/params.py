@@ -235,6 +235,10 @@ class Pipeline:
                  constant counted by a case table (one wide LUT per count bit), then the 3 count words
                  in one sum (one full-adder level, one carry chain; :meth:`PWASCore._counter_sum`)
                  instead of Yosys' full-adder tree of 3 levels
+    ``late_select`` (no register; banked bit-field addresses) each bank-address field bit as a case
+                 table of dimension ``j``'s ``n - 1`` comparison bits selecting among ``n`` values
+                 precomputed from ``(c_j, rot)`` (one per rank; :meth:`PWASCore._late_field`) instead of
+                 rank table -> step table -> field table. Opt-in, in no preset: measured slower (hw14f)
     ``prune_sat`` (no register) leave out the saturation of a target whose weights cannot reach it
                  (the sum is a convex combination of the weights times ``2**F``, so its range is known
                  when the Verilog is generated; :meth:`PWASCore._sat_unreachable`): no saturation LUT
@@ -262,6 +266,7 @@ class Pipeline:
     prune_sat: bool = False
     raw_compare: bool = False
     counter_sum: bool = False
+    late_select: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -306,7 +311,7 @@ class Pipeline:
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
             known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
-                     "mu_late", "flat_sum", "prune_sat", "raw_compare", "counter_sum"}
+                     "mu_late", "flat_sum", "prune_sat", "raw_compare", "counter_sum", "late_select"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -338,6 +343,7 @@ class Pipeline:
             **({"prune_sat": True} if self.prune_sat else {}),
             **({"raw_compare": True} if self.raw_compare else {}),
             **({"counter_sum": True} if self.counter_sum else {}),
+            **({"late_select": True} if self.late_select else {}),
         }
 
 
@@ -367,7 +373,12 @@ class Pipeline:
 #:   clock-to-output (3.86 ns) joins the one-sum stage (10.4-11.0 ns), and the front, then the longest
 #:   stage, is trimmed by ``raw_compare`` (comparators on the input bits, the rotation from residue
 #:   tables: 11.5 -> 10.2 ns alone): 3 seeds 31.8 ns (33.7 before), the front and the sum stage both
-#:   at 10.4-10.9 ns (``benchmarks/results/hw_tables_latency_experiments.md``, c9');
+#:   at 10.4-10.9 ns (``benchmarks/results/hw_tables_latency_experiments.md``, c9'). The sum is
+#:   counted by column counters (``counter_sum``: the multiplier -> output stage 10.4-10.5 -> 9.9 ns),
+#:   and ``pwas-hdl synth`` fixes this structure's block RAMs to the central EBR row and its
+#:   multipliers to the DSP row below (:mod:`pwas_hdl.flow.floorplan`, ``--floorplan auto``): 3 seeds
+#:   30.13 ns (31.98 ns with counter_sum and no plan, 31.65 ns with the plan and no counter_sum);
+#:   seeds 1-5 30.50 ns (hw14f);
 #: * ``balanced`` (default, ``Pipeline()``): rank, addr, mem_out, product and one adder-tree register
 #:   every 3 levels (7 cycles for n = 4): >= 100 MHz and <= 65 ns;
 #: * ``max``: every register (13 cycles for n = 4): each stage holds at most one carry chain or a
@@ -378,7 +389,7 @@ class Pipeline:
 PIPELINE_PRESETS: dict[str, Pipeline] = {
     "min": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=False, product=False, tree_levels=0),
     "short": Pipeline(split=False, rank=False, addr=False, mem_out=False, mul_in=True, product=False, tree_levels=0,
-                      mu_late=True, flat_sum=True, prune_sat=True, raw_compare=True),
+                      mu_late=True, flat_sum=True, prune_sat=True, raw_compare=True, counter_sum=True),
     "balanced": Pipeline(),
     "max": Pipeline(split=True, rank=True, addr=True, mem_out=True, mul_in=True, product=True, tree_levels=1,
                     offset=True, bank=True),

@@ -1,0 +1,181 @@
+"""Floorplan of the ECP5 hard blocks: fixed sites for the block RAMs and multipliers before nextpnr.
+
+nextpnr's ECP5 placer puts the core's DP16KD block RAMs and MULT18X18D multipliers where its
+analytic placement lands them (on the LFE5U-45F: the first EBR row Y10 and the DSP row Y22, with
+the logic between them). In the latency-first build (``generate --goal latency``, the ``short``
+pipeline: the block-RAM read feeds the multipliers' input registers in the same cycle as the
+front's address logic) that puts the front (input -> comparators -> tables -> block-RAM address)
+and the multiplier -> sum -> output logic into the same rows of fabric. Fixing the block RAMs to
+the central EBR row and the multipliers to the DSP row below it (measured:
+``benchmarks/results/hw_tables_latency_experiments.md``, sections "Floorplans of the hard blocks"
+and hw14f) separates the two: 30.13 ns against 32.0 ns over nextpnr seeds 1-3 for
+``short`` + ``counter_sum``.
+
+:func:`apply_floorplan` runs between :func:`pwas_hdl.flow.hard_registers.pack_ecp5_registers` and
+nextpnr (:func:`pwas_hdl.flow.synthesis.synthesize`): it gives every DP16KD and MULT18X18D cell of
+the netlist a nextpnr ``BEL`` attribute, cell ``k`` (natural order of the cell names: bank 0, 1,
+...; ``prod0_0``, ``prod0_1``, ...) on site ``k`` of the part's site table. The rule:
+
+* ``floorplan="auto"`` plans only the structure it was measured on: a pipeline with the multiplier
+  input register right after the read (``mul_in`` without ``mem_out``; ``short`` is the preset
+  that has it). Every other pipeline (``min``, ``balanced``, ``max``, ...) keeps nextpnr's free
+  placement, so their netlists, and fmax, are unchanged. ``"none"``: never.
+* Only parts with a site table (:data:`SITE_TABLES`: the LFE5U-45F, ``--device 45k``) get a plan;
+  other parts: none, and the result says so.
+* A design with more block RAMs or multipliers than the chosen row holds (36 each on the 45F) gets
+  no plan (no second row was measured).
+
+The site table of the 45F comes from the Project Trellis tile grid shipped with nextpnr (tiles
+``MIB_EBR0..8`` and ``MIB_DSP0..8`` in groups of 9 columns; nextpnr names DP16KD ``k`` of a group
+``X<c + 2k>/Y<row>/EBR<k>`` and its MULT18X18D ``X<c + j>/Y<row>/MULT18_<j>``, j = 0, 1, 4, 5). The
+sites are listed from the central group (X42) outward, right side first; the first five of each
+row were measured, the names of all 36 checked by nextpnr (``--pack-only``).
+
+The result (``floorplan`` in ``synth.json``): ``mode``, ``applied``, ``part``, ``rows``
+(resource -> row), ``cells`` (cell -> site) and ``reason`` (why no plan, else None).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["FLOORPLANS", "SITE_TABLES", "SiteTable", "check_floorplan", "plan_sites", "apply_floorplan",
+           "applies_to_pipeline"]
+
+#: ``synth --floorplan`` values: ``auto`` (the rule of this module) or ``none`` (never).
+FLOORPLANS = ("auto", "none")
+
+#: The cell types that get sites.
+HARD_BLOCKS = ("DP16KD", "MULT18X18D")
+
+
+@dataclass(frozen=True)
+class SiteTable:
+    """The sites of one part for the plan: one row per hard-block type, in assignment order.
+
+    Attributes
+    ----------
+    part
+        The part's name (as :func:`pwas_hdl.flow.synthesis.synthesize` reports it, without package).
+    rows
+        Cell type -> the row's name (``"Y34"``), for the record.
+    sites
+        Cell type -> nextpnr BEL names, in the order cells are assigned to them.
+    """
+
+    part: str
+    rows: dict[str, str]
+    sites: dict[str, tuple[str, ...]]
+
+
+def _ecp5_45f() -> SiteTable:
+    groups = (42, 51, 31, 60, 22, 69, 13, 78, 4)  # first columns of the 9-column EBR / DSP groups, centre outward
+    ebr_row, dsp_row = 34, 46
+    ebr = tuple(f"X{c + 2 * k}/Y{ebr_row}/EBR{k}" for c in groups for k in range(4))
+    mult = tuple(f"X{c + j}/Y{dsp_row}/MULT18_{j}" for c in groups for j in (0, 1, 4, 5))
+    return SiteTable(part="LFE5U-45F", rows={"DP16KD": f"Y{ebr_row}", "MULT18X18D": f"Y{dsp_row}"},
+                     sites={"DP16KD": ebr, "MULT18X18D": mult})
+
+
+#: nextpnr-ecp5 device option (``synthesize(device=...)``) -> its site table. Only the part measured.
+SITE_TABLES: dict[str, SiteTable] = {"45k": _ecp5_45f()}
+
+
+def check_floorplan(value: Any) -> str:
+    """``value`` if it is one of :data:`FLOORPLANS`, else ValueError (bad input: CLI exit 2)."""
+    if not isinstance(value, str) or value not in FLOORPLANS:
+        raise ValueError(f"--floorplan (floorplan) must be one of {', '.join(FLOORPLANS)}, got {value!r}")
+    return value
+
+
+def applies_to_pipeline(pipeline: dict[str, Any] | None) -> bool:
+    """Whether ``auto`` plans a design of this manifest pipeline (``mul_in`` without ``mem_out``)."""
+    pl = pipeline or {}
+    return bool(pl.get("mul_in")) and not pl.get("mem_out", True)
+
+
+def _natural(name: str) -> tuple:
+    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name))
+
+
+def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
+               pipeline: dict[str, Any] | None = None, part: str | None = None) -> dict[str, Any]:
+    """The floorplan of a netlist's hard blocks (pure: no file, no tool).
+
+    Parameters
+    ----------
+    cells
+        Cell name -> cell type, of the netlist's top module (other types are ignored).
+    device
+        nextpnr-ecp5 device (``"45k"``, ...); None or a part without a site table: no plan.
+    mode
+        ``"auto"`` or ``"none"`` (:data:`FLOORPLANS`).
+    pipeline
+        The manifest's pipeline (:func:`applies_to_pipeline` decides for ``auto``).
+    part
+        The part's full name, for the record (default: the site table's).
+
+    Returns
+    -------
+    dict
+        ``mode``, ``applied`` (bool), ``part``, ``rows`` (cell type -> row, or None), ``cells``
+        (cell name -> BEL, sorted by cell; empty without a plan), ``counts`` (cell type -> cells in
+        the netlist) and ``reason`` (None when applied, else why not).
+    """
+    check_floorplan(mode)
+    blocks = {t: sorted((n for n, ty in cells.items() if ty == t), key=_natural) for t in HARD_BLOCKS}
+    table = SITE_TABLES.get(device or "")
+    rec: dict[str, Any] = {"mode": mode, "applied": False, "part": part or (table.part if table else None),
+                           "rows": None, "cells": {}, "counts": {t: len(v) for t, v in blocks.items()}, "reason": None}
+    if mode == "none":
+        rec["reason"] = "--floorplan none"
+        return rec
+    if not applies_to_pipeline(pipeline):
+        rec["reason"] = ("auto: the pipeline does not read the block RAMs into the multipliers' input registers "
+                         "(mul_in without mem_out, the short / latency-first structure); the plan was measured only there")
+        return rec
+    if table is None:
+        known = ", ".join(f"{t.part} (--device {d})" for d, t in SITE_TABLES.items())
+        rec["reason"] = f"auto: no site table for {part or device}; known: {known}"
+        return rec
+    if not any(blocks.values()):
+        rec["reason"] = "auto: no DP16KD or MULT18X18D in the netlist"
+        return rec
+    for t, names in blocks.items():
+        if len(names) > len(table.sites[t]):
+            rec["reason"] = (f"auto: {len(names)} {t} cells, more than the {len(table.sites[t])} sites of row "
+                             f"{table.rows[t]} on {table.part}")
+            return rec
+    plan = {n: table.sites[t][k] for t, names in blocks.items() for k, n in enumerate(names)}
+    rec.update(applied=True, rows={t: table.rows[t] for t, names in blocks.items() if names},
+               cells=dict(sorted(plan.items(), key=lambda kv: _natural(kv[0]))))
+    return rec
+
+
+def apply_floorplan(netlist: str | os.PathLike, top: str, device: str | None, *, mode: str = "auto",
+                    pipeline: dict[str, Any] | None = None, part: str | None = None) -> dict[str, Any]:
+    """Give the hard blocks of a Yosys JSON netlist their sites (nextpnr ``BEL`` attributes), in place.
+
+    Parameters as :func:`plan_sites` (``netlist``: the file after hard-register packing; ``top``:
+    its top module). The netlist is rewritten only when a plan applies. Returns the record of
+    :func:`plan_sites`.
+    """
+    path = Path(netlist)
+    data = json.loads(path.read_text(encoding="utf-8"))
+    mods = data["modules"]
+    mod = mods.get(top) or mods.get("\\" + top)
+    if mod is None:
+        raise KeyError(f"module {top!r} not in {path}")
+    rec = plan_sites({n: c["type"] for n, c in mod["cells"].items()}, device, mode=mode, pipeline=pipeline, part=part)
+    if rec["applied"]:
+        for name, bel in rec["cells"].items():
+            mod["cells"][name].setdefault("attributes", {})["BEL"] = bel
+        tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(data), encoding="utf-8")
+        os.replace(tmp, path)
+    return rec

@@ -1,0 +1,155 @@
+"""Issue 14 (hw14f): the ECP5 hard-block floorplan (pwas_hdl.flow.floorplan) and ``synth --floorplan``.
+
+The site assignment, its fallbacks and the report run without nextpnr; one ``synth`` test runs the
+flow (Yosys, packing, the plan, nextpnr) on the hand-made design of test_synthesis.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from helpers.cli import CliRunner
+from pwas_hdl.cli import app
+from pwas_hdl.errors import ToolFailed
+from pwas_hdl.flow.floorplan import FLOORPLANS, SITE_TABLES, apply_floorplan, applies_to_pipeline, plan_sites
+from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
+from pwas_hdl.hdl.params import PIPELINE_PRESETS
+from test_synthesis import make_design
+
+SHORT = PIPELINE_PRESETS["short"].to_dict()
+#: the plan measured in benchmarks/results/hw_tables_latency_experiments.md (V6): bank k on site k
+MEASURED_EBR = ["X42/Y34/EBR0", "X44/Y34/EBR1", "X46/Y34/EBR2", "X48/Y34/EBR3", "X51/Y34/EBR0"]
+MEASURED_MULT = ["X42/Y46/MULT18_0", "X43/Y46/MULT18_1", "X46/Y46/MULT18_4", "X47/Y46/MULT18_5", "X51/Y46/MULT18_0"]
+
+
+def _core_cells(n_mem: int = 5, n_mult: int = 5) -> dict[str, str]:
+    cells = {f"core.wmem{k}.0.0": "DP16KD" for k in range(n_mem)}
+    cells.update({f"core.prod0_{k}_MULT18X18D_P9": "MULT18X18D" for k in range(n_mult)})
+    cells.update({"core.s_out_TRELLIS_FF_Q": "TRELLIS_FF", "core.lut_1": "LUT4"})
+    return dict(sorted(cells.items(), reverse=True))  # the netlist's order must not matter
+
+
+def test_site_table_of_the_45f():
+    t = SITE_TABLES["45k"]
+    assert t.part == "LFE5U-45F" and t.rows == {"DP16KD": "Y34", "MULT18X18D": "Y46"}
+    for kind in ("DP16KD", "MULT18X18D"):
+        sites = t.sites[kind]
+        assert len(sites) == len(set(sites)) == 36  # 108 DP16KD in 3 rows, 72 MULT18X18D in 2
+    assert list(t.sites["DP16KD"][:5]) == MEASURED_EBR and list(t.sites["MULT18X18D"][:5]) == MEASURED_MULT
+    assert set(SITE_TABLES) == {"45k"}  # only the part measured
+
+
+def test_bank_k_goes_to_site_k():
+    cells = _core_cells(11, 5)  # wmem10 after wmem9 (natural order), not after wmem1
+    rec = plan_sites(cells, "45k", pipeline=SHORT, part="LFE5U-45F-6CABGA381")
+    assert rec["applied"] and rec["reason"] is None and rec["mode"] == "auto"
+    assert rec["part"] == "LFE5U-45F-6CABGA381" and rec["rows"] == {"DP16KD": "Y34", "MULT18X18D": "Y46"}
+    assert rec["counts"] == {"DP16KD": 11, "MULT18X18D": 5}
+    sites = SITE_TABLES["45k"].sites
+    assert [rec["cells"][f"core.wmem{k}.0.0"] for k in range(11)] == list(sites["DP16KD"][:11])
+    assert [rec["cells"][f"core.prod0_{k}_MULT18X18D_P9"] for k in range(5)] == MEASURED_MULT
+    assert len(rec["cells"]) == 16  # the fabric cells get no site
+
+
+@pytest.mark.parametrize("kw, reason", [
+    ({"mode": "none"}, "--floorplan none"),
+    ({"pipeline": PIPELINE_PRESETS["balanced"].to_dict()}, "mul_in without mem_out"),  # mem_out: not the measured structure
+    ({"pipeline": PIPELINE_PRESETS["max"].to_dict()}, "mul_in without mem_out"),
+    ({"pipeline": PIPELINE_PRESETS["min"].to_dict()}, "mul_in without mem_out"),
+    ({"pipeline": None}, "mul_in without mem_out"),  # e.g. the estimator design
+    ({"device": "85k", "part": "LFE5U-85F-6CABGA381"}, "no site table for LFE5U-85F-6CABGA381; known: LFE5U-45F (--device 45k)"),
+    ({"device": "um-45k"}, "no site table for um-45k"),
+    ({"cells": _core_cells(37, 5)}, "37 DP16KD cells, more than the 36 sites of row Y34"),
+    ({"cells": _core_cells(5, 40)}, "40 MULT18X18D cells, more than the 36 sites of row Y46"),
+    ({"cells": {"a": "LUT4"}}, "no DP16KD or MULT18X18D"),
+])
+def test_fallbacks_say_why(kw, reason):
+    args = {"cells": _core_cells(), "device": "45k", "pipeline": SHORT, **kw}
+    rec = plan_sites(args.pop("cells"), args.pop("device"), **args)
+    assert not rec["applied"] and rec["cells"] == {} and rec["rows"] is None
+    assert reason in rec["reason"]
+
+
+def test_the_rule_is_the_latency_builds_structure():
+    assert applies_to_pipeline(SHORT)
+    assert [k for k, p in PIPELINE_PRESETS.items() if applies_to_pipeline(p.to_dict())] == ["short"]
+
+
+def test_bad_mode_is_refused():
+    assert FLOORPLANS == ("auto", "none")
+    for bad in ("on", "", None, 1):
+        with pytest.raises(ValueError, match=r"--floorplan \(floorplan\) must be one of auto, none"):
+            plan_sites({}, "45k", mode=bad, pipeline=SHORT)
+
+
+def _netlist(path: Path, cells: dict[str, str]) -> Path:
+    mod = {"cells": {n: {"type": t, "attributes": {"src": "x.v:1"}, "connections": {}} for n, t in cells.items()}}
+    path.write_text(json.dumps({"creator": "test", "modules": {"top_h": mod}}))
+    return path
+
+
+def test_apply_writes_bel_attributes(tmp_path: Path):
+    p = _netlist(tmp_path / "netlist.json", _core_cells())
+    rec = apply_floorplan(p, "top_h", "45k", pipeline=SHORT, part="LFE5U-45F-6CABGA381")
+    cells = json.loads(p.read_text())["modules"]["top_h"]["cells"]
+    assert {n: c["attributes"]["BEL"] for n, c in cells.items() if "BEL" in c["attributes"]} == rec["cells"]
+    assert cells["core.wmem0.0.0"]["attributes"] == {"src": "x.v:1", "BEL": "X42/Y34/EBR0"}
+    # no plan: the file is not rewritten
+    q = _netlist(tmp_path / "n2.json", _core_cells())
+    before = q.read_bytes()
+    assert not apply_floorplan(q, "top_h", "45k", pipeline=PIPELINE_PRESETS["balanced"].to_dict())["applied"]
+    assert q.read_bytes() == before
+    with pytest.raises(KeyError, match="other"):
+        apply_floorplan(q, "other", "45k", pipeline=SHORT)
+
+
+def test_summary_lines():
+    base = {"target": "ecp5", "top": "t", "part": "LFE5U-45F-6CABGA381", "seed": 1, "fmax_mhz": 100.0, "clock": "clk"}
+    on = plan_sites(_core_cells(), "45k", pipeline=SHORT)
+    txt = synth_summary_text({**base, "floorplan": on})
+    assert "floorplan: 10 hard blocks on fixed sites (DP16KD -> row Y34, MULT18X18D -> row Y46)" in txt
+    off = plan_sites(_core_cells(), "45k", mode="none", pipeline=SHORT)
+    assert "floorplan: none (--floorplan none)" in synth_summary_text({**base, "floorplan": off})
+
+
+def test_synth_refuses_a_bad_floorplan_before_any_tool(tmp_path: Path):
+    d = make_design(tmp_path / "gen")
+    with pytest.raises(ValueError, match="--floorplan"):
+        synthesize(d, "ecp5", floorplan="center")
+    r = CliRunner().invoke(app, ["synth", str(d), "--floorplan", "center"])
+    assert r.exit_code == 2
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and "--floorplan" in lines[0], r.output
+    assert not (d / "synth").exists()
+
+
+@pytest.mark.synth
+def test_synth_places_the_latency_structure_on_the_plan(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    d = make_design(tmp_path / "gen")
+    man = json.loads((d / "manifest.json").read_text())
+    # the hand-made design as if its one register after the read were the multiplier's (short's structure)
+    man["pipeline"] = {**man["pipeline"], "mul_in": True, "mem_out": False}
+    (d / "manifest.json").write_text(json.dumps(man))
+    r = synthesize(d, "ecp5", workdir=tmp_path / "on")
+    fp = r["floorplan"]
+    assert fp["applied"] and fp["counts"] == {"DP16KD": 1, "MULT18X18D": 1}
+    assert sorted(fp["cells"].values()) == ["X42/Y34/EBR0", "X42/Y46/MULT18_0"]
+    net = json.loads((tmp_path / "on" / "netlist.json").read_text())["modules"]["tiny_core_timing_harness"]["cells"]
+    assert {n: c["attributes"]["BEL"] for n, c in net.items() if "BEL" in c.get("attributes", {})} == fp["cells"]
+    assert r["fmax_mhz"] and "floorplan: 2 hard blocks on fixed sites" in (tmp_path / "on" / "synth.txt").read_text()
+    assert "ERROR" not in (tmp_path / "on" / "nextpnr.log").read_text()
+    r2 = synthesize(d, "ecp5", workdir=tmp_path / "off", floorplan="none")
+    assert not r2["floorplan"]["applied"] and r2["floorplan"]["reason"] == "--floorplan none"
+    net2 = json.loads((tmp_path / "off" / "netlist.json").read_text())["modules"]["tiny_core_timing_harness"]["cells"]
+    assert not any("BEL" in c.get("attributes", {}) for c in net2.values())
+    # nextpnr reads the attribute: a site the part does not have stops it
+    t = SITE_TABLES["45k"]
+    bad = dataclasses.replace(t, sites={**t.sites, "DP16KD": ("X43/Y34/EBR0",) + t.sites["DP16KD"][1:]})
+    monkeypatch.setitem(SITE_TABLES, "45k", bad)
+    with pytest.raises(ToolFailed) as ei:
+        synthesize(d, "ecp5", workdir=tmp_path / "bad")
+    assert "No Bel named 'X43/Y34/EBR0'" in ei.value.tail
