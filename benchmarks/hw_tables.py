@@ -28,7 +28,9 @@ ECP5 gets all three, iCE40 the throughput build. Each is placed and routed with 
 (``--freq`` 150 MHz on ECP5 LFE5U-45F speed 6, 100 MHz on iCE40 HX8K) by
 :func:`pwas_hdl.flow.synthesis.synthesize` inside its timing harness (every port registered, so the
 input and output paths count in fmax; the harness ``pwas-hdl synth`` and ``generate --clock-mhz``
-use), with the ECP5 multiplier / block-RAM registers packed (:mod:`pwas_hdl.flow.hard_registers`).
+use), with the ECP5 multiplier / block-RAM registers packed (:mod:`pwas_hdl.flow.hard_registers`) and
+synth's default floorplan (:mod:`pwas_hdl.flow.floorplan`: the latency build's block RAMs and multipliers
+on fixed sites of the LFE5U-45F; the other builds placed freely).
 The N = 4096 Lorenz core is placed with nextpnr seeds 1, 2, 3 and its figures are the seed
 averages (fmax is the mean; latency = cycles / mean fmax); the other designs use seed 1. Reported: cycles, fmax, latency in ns (cycles / fmax), LUT4 / FF (core,
 harness excluded) / DSP / BRAM, beside the paper's L (ns) and SO (Spartan-3 xc3s200 slice

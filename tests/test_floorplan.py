@@ -131,8 +131,8 @@ def test_synth_refuses_a_bad_floorplan_before_any_tool(tmp_path: Path):
 def test_synth_places_the_latency_structure_on_the_plan(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     d = make_design(tmp_path / "gen")
     man = json.loads((d / "manifest.json").read_text())
-    # the hand-made design as if its one register after the read were the multiplier's (short's structure)
-    man["pipeline"] = {**man["pipeline"], "mul_in": True, "mem_out": False}
+    # the hand-made design's registers described as short's structure (mul_in right after the read, no mem_out)
+    man["pipeline"] = {**man["pipeline"], "addr": False, "mul_in": True, "mem_out": False}
     (d / "manifest.json").write_text(json.dumps(man))
     r = synthesize(d, "ecp5", workdir=tmp_path / "on")
     fp = r["floorplan"]

@@ -30,6 +30,11 @@ Targets and default devices:
   memories of more than 64 words stay memories (block-RAM candidates) instead of being expanded
   into logic; ``dsp`` is the number of RTL multipliers.
 
+On ECP5, between Yosys and nextpnr, the flip-flops around the hard blocks are packed into their
+registers (:mod:`pwas_hdl.flow.hard_registers`) and, where :mod:`pwas_hdl.flow.floorplan`'s rule
+applies (``floorplan="auto"``: the latency-first pipeline on the LFE5U-45F), the block RAMs and
+multipliers get fixed sites (nextpnr ``BEL`` attributes in ``netlist.json``).
+
 nextpnr always runs with ``--timing-allow-fail``: a missed ``freq_mhz`` target is reported
 (``timing_met``), not raised. Without ``freq_mhz`` nextpnr's own default target (12 MHz) applies.
 
