@@ -34,7 +34,8 @@ def test_report_collects_sim_and_synth(tmp_path):
     (out / "synth" / "ecp5").mkdir(parents=True)
     (out / "synth" / "ecp5" / "synth.json").write_text(json.dumps({
         "target": "ecp5", "part": "LFE5U-45F", "luts": 123, "ffs": 45, "carry": 6, "dsp": 3, "bram": 3,
-        "bram_bits": 55296, "fmax_mhz": 99.5, "latency_ns": 70.35, "throughput_msps": 99.5, "timing_met": True}))
+        "bram_bits": 55296, "fmax_mhz": 99.5, "latency_ns": 70.35, "throughput_msps": 99.5, "timing_met": True,
+        "floorplan": {"mode": "auto", "applied": True, "rows": {"DP16KD": "Y34", "MULT18X18D": "Y46"}, "cells": {}, "reason": None}}))
     res = runner.invoke(app, ["report", str(out), "--json", str(tmp_path / "r.json")])
     assert res.exit_code == 0, res.output
     rep = json.loads((tmp_path / "r.json").read_text())
@@ -43,6 +44,8 @@ def test_report_collects_sim_and_synth(tmp_path):
     assert rep["synthesis"][0]["luts"] == 123
     assert "| icarus | 10 | 0 | 7..7 |" in res.output
     assert "| ecp5 | LFE5U-45F | 123 | 45 |" in res.output
+    assert rep["synthesis"][0]["floorplan"] == {"applied": True, "rows": {"DP16KD": "Y34", "MULT18X18D": "Y46"}, "reason": None}
+    assert "Floorplan (ecp5): block RAMs and multipliers on fixed sites (DP16KD in row Y34, MULT18X18D in row Y46" in res.output
 
 
 def test_report_refuses_a_foreign_summary(tmp_path):

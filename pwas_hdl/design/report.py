@@ -204,6 +204,10 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
         synth.append({k: r.get(k) for k in ("target", "part", "luts", "ffs", "carry", "dsp", "bram", "bram_bits",
                                              "fmax_mhz", "latency_ns", "throughput_msps", "timing_met")})
         synth[-1].update(file=p.relative_to(out).as_posix(), stale=_is_stale(r, man))
+        fp = r.get("floorplan")  # ECP5: the hard-block sites of pwas_hdl.flow.floorplan (None before hw14f / other targets)
+        synth[-1]["floorplan"] = ({"applied": bool(fp.get("applied")),
+                                   "rows": fp.get("rows") if isinstance(fp.get("rows"), dict) else None,
+                                   "reason": fp.get("reason")} if isinstance(fp, dict) else None)
     return {
         "format": "pwas-hdl-report",
         "version": 1,
@@ -299,6 +303,11 @@ def _synth_lines(rep: dict[str, Any]) -> list[str]:
                 f"{_fmt(s['bram'])} ({_fmt(s['bram_bits'])}) | {_fmt(s['fmax_mhz'], '.1f')} | {_fmt(s['latency_ns'], '.1f')} | "
                 f"{_fmt(s['throughput_msps'], '.1f')} |"
             )
+        for s in rep["synthesis"]:
+            fp = s.get("floorplan")
+            if fp and fp.get("applied"):
+                rows = ", ".join(f"{t} in row {y}" for t, y in (fp.get("rows") or {}).items())
+                lines.append(f"Floorplan ({s['target']}): block RAMs and multipliers on fixed sites ({rows}; `synth --floorplan`).")
         lines += _stale_lines(rep["synthesis"], "synth")
         lines.append("")
     return lines
