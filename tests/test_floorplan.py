@@ -66,6 +66,8 @@ def test_bank_k_goes_to_site_k():
     ({"cells": _core_cells(37, 5)}, "37 DP16KD cells, more than the 36 sites of row Y34"),
     ({"cells": _core_cells(5, 40)}, "40 MULT18X18D cells, more than the 36 sites of row Y46"),
     ({"cells": {"a": "LUT4"}}, "no DP16KD or MULT18X18D"),
+    ({"memory": "replicated"}, "weight memory 'replicated'; the plan was measured only with the banked layout"),
+    ({"memory": "single"}, "weight memory 'single'"),  # the serial architecture
 ])
 def test_fallbacks_say_why(kw, reason):
     args = {"cells": _core_cells(), "device": "45k", "pipeline": SHORT, **kw}
@@ -133,6 +135,7 @@ def test_synth_places_the_latency_structure_on_the_plan(tmp_path: Path, monkeypa
     man = json.loads((d / "manifest.json").read_text())
     # the hand-made design's registers described as short's structure (mul_in right after the read, no mem_out)
     man["pipeline"] = {**man["pipeline"], "addr": False, "mul_in": True, "mem_out": False}
+    man["memory"]["kind"] = "banked"  # (one bank)
     (d / "manifest.json").write_text(json.dumps(man))
     r = synthesize(d, "ecp5", workdir=tmp_path / "on")
     fp = r["floorplan"]

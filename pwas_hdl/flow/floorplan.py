@@ -18,7 +18,8 @@ the netlist a nextpnr ``BEL`` attribute, cell ``k`` (natural order of the cell n
 
 * ``floorplan="auto"`` plans only the structure it was measured on: a pipeline with the multiplier
   input register right after the read (``mul_in`` without ``mem_out``; ``short`` is the preset
-  that has it). Every other pipeline (``min``, ``balanced``, ``max``, ...) keeps nextpnr's free
+  that has it) and the banked weight memory (manifest ``memory.kind = "banked"``; the replicated,
+  corner and serial layouts were not measured with a plan). Every other pipeline (``min``, ``balanced``, ``max``, ...) keeps nextpnr's free
   placement, so their netlists, and fmax, are unchanged. ``"none"``: never.
 * Only parts with a site table (:data:`SITE_TABLES`: the LFE5U-45F, ``--device 45k``) get a plan;
   other parts: none, and the result says so.
@@ -104,7 +105,8 @@ def _natural(name: str) -> tuple:
 
 
 def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
-               pipeline: dict[str, Any] | None = None, part: str | None = None) -> dict[str, Any]:
+               pipeline: dict[str, Any] | None = None, memory: str | None = "banked",
+               part: str | None = None) -> dict[str, Any]:
     """The floorplan of a netlist's hard blocks (pure: no file, no tool).
 
     Parameters
@@ -117,6 +119,8 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
         ``"auto"`` or ``"none"`` (:data:`FLOORPLANS`).
     pipeline
         The manifest's pipeline (:func:`applies_to_pipeline` decides for ``auto``).
+    memory
+        The manifest's ``memory.kind``; ``auto`` plans ``"banked"`` only.
     part
         The part's full name, for the record (default: the site table's).
 
@@ -139,6 +143,9 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
         rec["reason"] = ("auto: the pipeline does not read the block RAMs into the multipliers' input registers "
                          "(mul_in without mem_out, the short / latency-first structure); the plan was measured only there")
         return rec
+    if memory != "banked":
+        rec["reason"] = f"auto: weight memory {memory!r}; the plan was measured only with the banked layout"
+        return rec
     if table is None:
         known = ", ".join(f"{t.part} (--device {d})" for d, t in SITE_TABLES.items())
         rec["reason"] = f"auto: no site table for {part or device}; known: {known}"
@@ -158,7 +165,8 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
 
 
 def apply_floorplan(netlist: str | os.PathLike, top: str, device: str | None, *, mode: str = "auto",
-                    pipeline: dict[str, Any] | None = None, part: str | None = None) -> dict[str, Any]:
+                    pipeline: dict[str, Any] | None = None, memory: str | None = "banked",
+                    part: str | None = None) -> dict[str, Any]:
     """Give the hard blocks of a Yosys JSON netlist their sites (nextpnr ``BEL`` attributes), in place.
 
     Parameters as :func:`plan_sites` (``netlist``: the file after hard-register packing; ``top``:
@@ -171,7 +179,8 @@ def apply_floorplan(netlist: str | os.PathLike, top: str, device: str | None, *,
     mod = mods.get(top) or mods.get("\\" + top)
     if mod is None:
         raise KeyError(f"module {top!r} not in {path}")
-    rec = plan_sites({n: c["type"] for n, c in mod["cells"].items()}, device, mode=mode, pipeline=pipeline, part=part)
+    rec = plan_sites({n: c["type"] for n, c in mod["cells"].items()}, device, mode=mode, pipeline=pipeline, memory=memory,
+                     part=part)
     if rec["applied"]:
         for name, bel in rec["cells"].items():
             mod["cells"][name].setdefault("attributes", {})["BEL"] = bel

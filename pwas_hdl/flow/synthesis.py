@@ -188,7 +188,8 @@ def synthesize(
     floorplan
         ECP5: ``"auto"`` (default) fixes the block RAMs and multipliers to sites of the part's site
         table where the rule of :mod:`pwas_hdl.flow.floorplan` applies (the latency-first pipeline,
-        ``mul_in`` without ``mem_out``, on the LFE5U-45F); ``"none"``: nextpnr places them freely.
+        ``mul_in`` without ``mem_out``, banked memory, on the LFE5U-45F); ``"none"``: nextpnr places
+        them freely.
         ``floorplan`` in the result records the plan (cells, sites) or why there is none.
 
     Returns
@@ -334,7 +335,8 @@ def synthesize(
     result["floorplan"] = None
     if target == "ecp5":  # after the packing (it keeps the cells), before nextpnr
         result["floorplan"] = apply_floorplan(work / "netlist.json", synth_top, dev, mode=floorplan,
-                                              pipeline=manifest.get("pipeline"), part=part)
+                                              pipeline=manifest.get("pipeline"),
+                                              memory=(manifest.get("memory") or {}).get("kind"), part=part)
 
     # ---- nextpnr
     if target != "generic":
