@@ -567,7 +567,7 @@ class PWASCore(wiring.Component):
         # dimension has none when p_{n-1} < n + 1: its vertex coordinate // (n+1) is always 0)
         used_dims = set(range(n)) if fields is None else {j for _e, _w, j in fields}
         # late_select: the address fields are chosen by the comparison bits among values precomputed
-        # from the cells and the rotation (:meth:`_late_fields`): no rank or step tables
+        # from the cells and the rotation (:meth:`_late_field`): no rank or step tables
         late = bool(pl.late_select and fields is not None and aw and not pl.offset and n > 1)
         ranks = []
         for j in range(n):
