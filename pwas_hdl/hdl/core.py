@@ -582,21 +582,12 @@ class PWASCore(wiring.Component):
 
         step = [[self._table(m, [(ranks[j], kw), rot_in], lambda r, t, b=b: t < nb and r < kb(b, t), 1, f"step{b}_{j}")
                  if j in used_dims and not late else 0 for j in range(n)] for b in range(nb)]
-        # d_(k), k = 1..n: the fraction of rank k - 1 (one-hot selection by tables of the comparison bits)
-        dsorted = [Const(0, dw)]
-        for k in range(1, n + 1):
-            acc = None
-            for j in range(n):
-                if n == 1:
-                    e = 1
-                else:
-                    bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
-                    e = rom(m, Cat(*bits), [int(bin(v).count("1") == k - 1) for v in range(1 << (n - 1))], 1, f"req{k}_{j}")
-                term = ds[j] if isinstance(e, int) and e else (None if isinstance(e, int) else Mux(e, ds[j], Const(0, dw)))
-                if term is not None:
-                    acc = term if acc is None else acc | term
-            dsorted.append(acc if isinstance(acc, Signal) else self._name(m, acc, f"dsorted{k}", unsigned(dw)))
-        gs = dsorted[1:]  # in vertex order: mu is rotated after the addr register (_banks)
+        if pl.sort_late and pl.mu_late and n > 1:
+            # sort_late: the fractions in dimension order and the comparison bits travel to the memory
+            # register; the sort is made in the memory-read cycle (_banks)
+            gs = list(ds) + [Cat(*[_bit(ge[ij]) for ij in self._pairs(n)])]
+        else:
+            gs = self._sorted_fractions(m, ge, ds)  # in vertex order: mu is rotated after the addr register (_banks)
 
         # address pieces: bit fields (no carry chain) or a per-bank offset table
         def address_pieces(step, cs):
@@ -701,6 +692,30 @@ class PWASCore(wiring.Component):
             bits.append(out)
         return Cat(*bits)
 
+    @staticmethod
+    def _pairs(n: int) -> list[tuple[int, int]]:
+        """The comparison pairs ``(i, j)``, ``i < j``, in the order of the comparison bits."""
+        return [(i, j) for i in range(n) for j in range(i + 1, n)]
+
+    def _sorted_fractions(self, m: Module, ge, ds):
+        """``d_(k)``, k = 1..n: the fraction of rank ``k - 1`` (one-hot selection by case tables of
+        the comparison bits ``ge[i, j] = d_i >= d_j``; ``ds`` in dimension order, ``F + 1`` bits each)."""
+        n, dw = len(ds), self.params.frac + 1
+        dsorted = []
+        for k in range(1, n + 1):
+            acc = None
+            for j in range(n):
+                if n == 1:
+                    e = 1
+                else:
+                    bits = [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
+                    e = rom(m, Cat(*bits), [int(bin(v).count("1") == k - 1) for v in range(1 << (n - 1))], 1, f"req{k}_{j}")
+                term = ds[j] if isinstance(e, int) and e else (None if isinstance(e, int) else Mux(e, ds[j], Const(0, dw)))
+                if term is not None:
+                    acc = term if acc is None else acc | term
+            dsorted.append(acc if isinstance(acc, Signal) else self._name(m, acc, f"dsorted{k}", unsigned(dw)))
+        return dsorted
+
     def _mu_of_sorted(self, m: Module, ds_sorted):
         """``mu_0 = 2**F - d_(1)``, ``mu_k = d_(k) - d_(k+1)``, ``mu_n = d_(n)`` (vertex order)."""
         big_f = self.params.frac
@@ -775,6 +790,10 @@ class PWASCore(wiring.Component):
         valid, r = pipe.stage("s_mem", True, valid, {mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
         bank_mu = r[mkey]
         if late:  # mu and its rotation in the memory-read cycle (beside the block RAM's clock-to-output)
+            if self.pipeline.sort_late and n > 1:  # and the sort: d_j in dimension order + the comparison bits
+                gebits = bank_mu[n]
+                ge = {ij: gebits[i] for i, ij in enumerate(self._pairs(n))}
+                bank_mu = self._sorted_fractions(m, ge, bank_mu[:n])
             bank_mu = self._rotate(m, self._mu_of_sorted(m, bank_mu), r["rot"], dw, "bank_mu")
         return valid, {"data": mem_data, "mu": bank_mu, "oor": r["oor"]}
 

@@ -239,6 +239,11 @@ class Pipeline:
                  table of dimension ``j``'s ``n - 1`` comparison bits selecting among ``n`` values
                  precomputed from ``(c_j, rot)`` (one per rank; :meth:`PWASCore._late_field`) instead of
                  rank table -> step table -> field table. Opt-in, in no preset: measured slower (hw14f)
+    ``sort_late`` (no register; needs ``mu_late``, banked) the fractions in dimension order and the
+                 ``n(n-1)/2`` comparison bits (instead of the sorted fractions) go through the
+                 registers up to the memory register; the one-hot selection of the sorted fractions
+                 ``d_(k)`` is made in the memory-read cycle, before ``mu`` (:meth:`PWASCore._sorted_fractions`):
+                 the comparison bits then drive only the address tables in the front's cycle
     ``prune_sat`` (no register) leave out the saturation of a target whose weights cannot reach it
                  (the sum is a convex combination of the weights times ``2**F``, so its range is known
                  when the Verilog is generated; :meth:`PWASCore._sat_unreachable`): no saturation LUT
@@ -267,6 +272,7 @@ class Pipeline:
     raw_compare: bool = False
     counter_sum: bool = False
     late_select: bool = False
+    sort_late: bool = False
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
@@ -275,6 +281,8 @@ class Pipeline:
             raise ValueError("flat_sum needs tree_levels = 0 (one sum without adder-tree registers)")
         if self.counter_sum and not self.flat_sum:
             raise ValueError("counter_sum needs flat_sum (it is a way of adding the one sum)")
+        if self.sort_late and not self.mu_late:
+            raise ValueError("sort_late needs mu_late (the sort moves into the memory-read cycle beside mu)")
 
     @staticmethod
     def tree_depth(n: int) -> int:
@@ -311,7 +319,8 @@ class Pipeline:
             return value
         if isinstance(value, dict):  # as written by to_dict() (a manifest's "pipeline")
             known = {"split", "rank", "mem_out", "product", "tree_levels", "addr", "mul_in", "offset", "bank", "mul_halves",
-                     "mu_late", "flat_sum", "prune_sat", "raw_compare", "counter_sum", "late_select"}
+                     "mu_late", "flat_sum", "prune_sat", "raw_compare", "counter_sum", "late_select",
+                     "sort_late"}
             bad = set(value) - known
             if bad:
                 raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
@@ -344,6 +353,7 @@ class Pipeline:
             **({"raw_compare": True} if self.raw_compare else {}),
             **({"counter_sum": True} if self.counter_sum else {}),
             **({"late_select": True} if self.late_select else {}),
+            **({"sort_late": True} if self.sort_late else {}),
         }
 
 
