@@ -16,7 +16,7 @@ from pwas_hdl.fixedpoint.memory_layout import CornerLayout, make_layout
 from pwas_hdl.hdl import build_core
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.params import PIPELINE_PRESETS, Pipeline
-from test_hdl_core import assert_same, run_core
+from test_hdl_core import assert_bittrue_with_stalls
 
 
 def _pipe(name: str, **kw) -> Pipeline:
@@ -62,11 +62,8 @@ def test_matches_bittrue_with_stalls(parts, nz, mem, pipe, monkeypatch):
     opts = {"input_bits": 10} if len(parts) == 4 and parts[1] == 1 else {}
     model = make_model(parts, seed=len(parts) * 10 + nz, nz=nz, **opts)
     dut = build_core(model, memory=mem, pipeline=pipe)
-    q = codes(model, 120, seed=3)
-    z, oor, _ = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=5)
-    ref, ref_oor = model.evaluate(q)
-    assert_same(q, z, ref)
-    assert np.array_equal(oor, ref_oor) and oor.any() and not oor.all()
+    oor, _ = assert_bittrue_with_stalls(model, dut, 120, seed=3, stall_seed=5)
+    assert oor.any() and not oor.all()
     assert bool(used) == (Pipeline.cast(pipe).raw_compare and len(parts) > 1 and mem != "corner")  # raw comparators built
     assert dut.memory_plan.n_banks == (1 << len(parts) if mem == "corner" else len(parts) + 1)
 

@@ -9,16 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pytest
 
-from helpers.hdl_models import codes, make_model
+from helpers.hdl_models import make_model
 from pwas_hdl.hdl import build_core
 from pwas_hdl.hdl.core import PWASCore
-from pwas_hdl.hdl.emit import emit_verilog
 from pwas_hdl.hdl.params import PIPELINE_PRESETS, Pipeline
-from test_hdl_core import assert_same, run_core
-from test_hdl_verilog import VERILATOR, lint
+from test_hdl_core import assert_bittrue_with_stalls
+from test_hdl_verilog import VERILATOR, assert_core_lint_clean
 
 CSUM = dataclasses.replace(PIPELINE_PRESETS["short"], counter_sum=True)
 
@@ -36,11 +34,8 @@ def test_counter_sum_matches_bittrue_with_stalls(parts, nz, opts, counted, monke
     monkeypatch.setattr(PWASCore, "_counter_sum", staticmethod(lambda *a: used.append(1) or orig(*a)))
     model = make_model(parts, seed=len(parts) * 5 + nz, nz=nz, **opts)
     dut = build_core(model, pipeline=CSUM)
-    q = codes(model, 120, seed=7)
-    z, oor, _ = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=8)
-    ref, ref_oor = model.evaluate(q)
-    assert_same(q, z, ref)
-    assert np.array_equal(oor, ref_oor) and oor.any() and not oor.all()
+    oor, _ = assert_bittrue_with_stalls(model, dut, 120, seed=7, stall_seed=8)
+    assert oor.any() and not oor.all()
     assert bool(used) == counted
 
 
@@ -57,7 +52,4 @@ def test_counter_sum_option():
 @pytest.mark.rtl  # runs Verilator's linter
 @pytest.mark.skipif(VERILATOR is None, reason="verilator not installed")
 def test_counter_sum_lint_clean(tmp_path):
-    for i, (parts, nz) in enumerate((([7, 7, 7, 7], 2), ([3, 2, 4], 1))):
-        text = emit_verilog(build_core(make_model(parts, seed=3, nz=nz), pipeline=CSUM), "pwas_core")
-        (tmp_path / f"d{i}").mkdir()
-        assert lint(text, "pwas_core", tmp_path / f"d{i}") == []
+    assert_core_lint_clean(CSUM, (([7, 7, 7, 7], 2), ([3, 2, 4], 1)), tmp_path)

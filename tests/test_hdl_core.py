@@ -32,6 +32,18 @@ def assert_same(q, got, ref):
     assert bad.size == 0, f"{bad.size} mismatches; first: q={q[bad[0]].tolist()} rtl={got[bad[0]].tolist()} model={ref[bad[0]].tolist()}"
 
 
+def assert_bittrue_with_stalls(model, dut, n: int, seed: int, stall_seed: int):
+    """``n`` input codes (``seed``) through ``dut`` with bubbles and backpressure (valid 0.8, ready
+    0.7, ``stall_seed``): every output and out-of-range flag equals the bit-true model's. Returns
+    ``(oor, run)`` for further checks."""
+    q = codes(model, n, seed=seed)
+    z, oor, r = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=stall_seed)
+    ref, ref_oor = model.evaluate(q)
+    assert_same(q, z, ref)
+    assert np.array_equal(oor, ref_oor)
+    return oor, r
+
+
 CASES = [
     # (partitions, nz, memory, pipeline, model options)
     ([5], 1, "banked", "balanced", {}),
@@ -58,11 +70,7 @@ def test_core_matches_bittrue(case):
     parts, nz, mem, pipe, opts = case
     model = make_model(parts, seed=len(parts) * 10 + nz, nz=nz, **opts)
     dut = build_core(model, memory=mem, pipeline=pipe)
-    q = codes(model, 150, seed=3)
-    z, oor, r = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=5)
-    ref, ref_oor = model.evaluate(q)
-    assert_same(q, z, ref)
-    assert np.array_equal(oor, ref_oor)
+    oor, r = assert_bittrue_with_stalls(model, dut, 150, seed=3, stall_seed=5)
     assert not oor.all()
     assert oor.any() or opts.get("input_fill") == 1.0  # fill = 1 may cover every input code
 
@@ -133,11 +141,7 @@ def test_flat_sum_and_pruned_saturation_bit_exact(parts, nz, opts):
     model = make_model(parts, seed=7, nz=nz, **opts)
     dut = build_core(model, pipeline=FLAT)
     assert all(dut._sat_unreachable(z) for z in range(nz))
-    q = codes(model, 120, seed=4)
-    z, oor, _ = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=2)
-    ref, ref_oor = model.evaluate(q)
-    assert_same(q, z, ref)
-    assert np.array_equal(oor, ref_oor)
+    oor, _ = assert_bittrue_with_stalls(model, dut, 120, seed=4, stall_seed=2)
     assert dut.latency == 3
 
 

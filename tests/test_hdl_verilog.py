@@ -58,6 +58,15 @@ def lint(text: str, name: str, tmp_path: Path) -> list[str]:
     return [line for line in r.stderr.splitlines() if line.startswith("%")] + ([] if r.returncode == 0 else [f"rc={r.returncode}"])
 
 
+def assert_core_lint_clean(pipeline, cases, tmp_path: Path) -> None:
+    """The core of each ``(partitions, nz)`` model case with ``pipeline`` is lint-clean under
+    ``verilator --lint-only -Wall`` (the pipeline options' tests share it)."""
+    for i, (parts, nz) in enumerate(cases):
+        text = emit_verilog(build_core(make_model(parts, seed=3, nz=nz), pipeline=pipeline), "pwas_core")
+        (tmp_path / f"d{i}").mkdir()
+        assert lint(text, "pwas_core", tmp_path / f"d{i}") == [], (parts, nz)
+
+
 def odd_params():
     rng = np.random.default_rng(7)
     parts = (3, 5, 2)

@@ -11,15 +11,14 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pytest
 
-from helpers.hdl_models import codes, make_model
+from helpers.hdl_models import make_model
 from pwas_hdl.hdl import build_core
 from pwas_hdl.hdl.emit import emit_verilog
 from pwas_hdl.hdl.params import PIPELINE_PRESETS, Pipeline
-from test_hdl_core import assert_same, run_core
-from test_hdl_verilog import VERILATOR, lint
+from test_hdl_core import assert_bittrue_with_stalls
+from test_hdl_verilog import VERILATOR, assert_core_lint_clean
 
 SL = dataclasses.replace(PIPELINE_PRESETS["short"], sort_late=True)
 
@@ -34,11 +33,7 @@ def test_sort_late_matches_bittrue_with_stalls(parts, nz, opts):
     model = make_model(parts, seed=len(parts) * 5 + nz, nz=nz, **opts)
     dut = build_core(model, pipeline=SL)
     assert dut.latency == PIPELINE_PRESETS["short"].latency(len(parts))  # no register added
-    q = codes(model, 60, seed=7)
-    z, oor, _ = run_core(dut, dut.params, q, p_valid=0.8, p_ready=0.7, seed=8)
-    ref, ref_oor = model.evaluate(q)
-    assert_same(q, z, ref)
-    assert np.array_equal(oor, ref_oor)
+    oor, _ = assert_bittrue_with_stalls(model, dut, 60, seed=7, stall_seed=8)
 
 
 def test_sort_late_option_and_registers():
@@ -58,7 +53,4 @@ def test_sort_late_option_and_registers():
 @pytest.mark.rtl  # runs Verilator's linter
 @pytest.mark.skipif(VERILATOR is None, reason="verilator not installed")
 def test_sort_late_lint_clean(tmp_path):
-    for i, (parts, nz) in enumerate((([7, 7, 7, 7], 2), ([7, 3, 3], 1))):
-        text = emit_verilog(build_core(make_model(parts, seed=3, nz=nz), pipeline=SL), "pwas_core")
-        (tmp_path / f"d{i}").mkdir()
-        assert lint(text, "pwas_core", tmp_path / f"d{i}") == []
+    assert_core_lint_clean(SL, (([7, 7, 7, 7], 2), ([7, 3, 3], 1)), tmp_path)

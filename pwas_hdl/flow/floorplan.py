@@ -38,12 +38,12 @@ The result (``floorplan`` in ``synth.json``): ``mode``, ``applied``, ``part``, `
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
+
+from pwas_hdl.flow.netlist_json import read_top, write_netlist
 
 __all__ = ["FLOORPLANS", "SITE_TABLES", "SiteTable", "check_floorplan", "plan_sites", "apply_floorplan",
            "applies_to_pipeline"]
@@ -173,18 +173,11 @@ def apply_floorplan(netlist: str | os.PathLike, top: str, device: str | None, *,
     its top module). The netlist is rewritten only when a plan applies. Returns the record of
     :func:`plan_sites`.
     """
-    path = Path(netlist)
-    data = json.loads(path.read_text(encoding="utf-8"))
-    mods = data["modules"]
-    mod = mods.get(top) or mods.get("\\" + top)
-    if mod is None:
-        raise KeyError(f"module {top!r} not in {path}")
+    data, mod = read_top(netlist, top)
     rec = plan_sites({n: c["type"] for n, c in mod["cells"].items()}, device, mode=mode, pipeline=pipeline, memory=memory,
                      part=part)
     if rec["applied"]:
         for name, bel in rec["cells"].items():
             mod["cells"][name].setdefault("attributes", {})["BEL"] = bel
-        tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data), encoding="utf-8")
-        os.replace(tmp, path)
+        write_netlist(netlist, data)
     return rec

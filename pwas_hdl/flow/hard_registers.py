@@ -30,11 +30,11 @@ configuration at 0 like the flip-flops they replace (``GSR`` disabled, no reset)
 
 from __future__ import annotations
 
-import json
 import os
 from collections import defaultdict
-from pathlib import Path
 from typing import Any
+
+from pwas_hdl.flow.netlist_json import read_top, write_netlist
 
 __all__ = ["pack_ecp5_registers"]
 
@@ -274,12 +274,7 @@ def pack_ecp5_registers(netlist: str | os.PathLike, top: str, *, mult_first: boo
         ``mult_input_registers`` / ``mult_output_registers`` (MULT18X18D with registered operands /
         product), ``ffs_absorbed`` (TRELLIS_FF removed), ``dp16kd`` and ``mult18x18d`` (totals).
     """
-    path = Path(netlist)
-    data = json.loads(path.read_text(encoding="utf-8"))
-    mods = data["modules"]
-    mod = mods.get(top) or mods.get("\\" + top)
-    if mod is None:
-        raise KeyError(f"module {top!r} not in {path}")
+    data, mod = read_top(netlist, top)
     stats = {"bram_output_registers": 0, "mult_input_registers": 0, "mult_output_registers": 0, "ffs_absorbed": 0}
     nl = _Netlist(mod)
     for step in ((_pack_mult, _pack_bram_outputs) if mult_first else (_pack_bram_outputs, _pack_mult)):
@@ -287,7 +282,5 @@ def pack_ecp5_registers(netlist: str | os.PathLike, top: str, *, mult_first: boo
     stats["dp16kd"] = sum(1 for c in mod["cells"].values() if c["type"] == "DP16KD")
     stats["mult18x18d"] = sum(1 for c in mod["cells"].values() if c["type"] == "MULT18X18D")
     if stats["ffs_absorbed"] or stats["bram_output_registers"] or stats["mult_input_registers"] or stats["mult_output_registers"]:
-        tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data), encoding="utf-8")
-        os.replace(tmp, path)
+        write_netlist(netlist, data)
     return stats
