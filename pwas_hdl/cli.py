@@ -404,9 +404,10 @@ def fit(
             parse_additive(additive, LagStructure(mu, my, len(ins) if mu else 0, len(outs) if my else 0).signal_of_dimension())
         with _progress("cross-validating sigma" if sigma is None else "solving") as update, _executor(workers, scheduler) as ex:
             model.fit(u, y, z, progress=update, executor=ex)
-        mem_reason = ((getattr(model, "cv_", None) and model.cv_.solver.get("memory_plan")) or {}).get("reason")
-        if mem_reason:  # fewer workers or one factor at a time than --workers asked (the memory limit)
-            _say(f"note: {mem_reason}")
+        cv = getattr(model, "cv_", None)
+        plan = cv.solver.get("memory_plan") if cv is not None else None
+        if plan and plan["reason"]:  # fewer workers, or one factor at a time, than --workers asked (the memory limit)
+            _say(f"note: {plan['reason']}")
         if bp_names is not None and bp_names != model.to_dict()["regressors"]:
             raise InputError(f"--breakpoints {breakpoints}: the file is for regressors {bp_names}, the fit has "
                              f"{model.to_dict()['regressors']}")

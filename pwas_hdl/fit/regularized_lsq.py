@@ -498,12 +498,13 @@ def estimate_fit_memory(
     chain = (use_mg and chosen == "cg" and method == "auto" and int(n_dims) in FACTOR_CHAIN_DIMS
              and cholmod_available())
     chain_factor = _sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0
+    direct_factor, analysis = _direct_factor_bytes(nnz_a, nv, unknowns, int(n_dims)) if chosen == "direct" else (0.0, 0.0)
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
         "Gamma": _sparse_bytes(nnz_gam, nv),
         "factor": (
-            _direct_factor_bytes(nnz_a, nv, unknowns, int(n_dims))
+            direct_factor
             if chosen == "direct"
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
         ) + chain_factor,
@@ -517,12 +518,8 @@ def estimate_fit_memory(
     }
     # first order with CHOLMOD: the symbolic analysis of the full-data pattern is made once, in the
     # parent before the fork (NormalEquationSolver.prepare_shared); the workers share its pages, so
-    # each holds only its numeric factor (the grid bound's per-unknown part is the analysis)
-    shared = 0.0
-    if chosen == "direct" and order == 1 and cholmod_available() and grid_factor_bound(unknowns, int(n_dims)) is not None:
-        bound = grid_factor_bound(unknowns, int(n_dims))
-        if bound[1] <= _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, nv):  # the bound is the charge
-            shared = GRID_FACTOR_BOUND[int(n_dims)][3] * max(float(unknowns), 2.0)
+    # each holds only its numeric factor
+    shared = analysis if order == 1 else 0.0
     per_process = est["HtH"] * 2 / 3 + est["factor"] - shared + est["multigrid"] + est["vectors"] + FORK_WORKER_OVERHEAD
     est["workers"] = per_process * (max(int(processes), 1) - 1)
     # what one factor at a time saves a worker (plan_fit_memory): its direct factor, or the factor
@@ -536,12 +533,15 @@ def estimate_fit_memory(
     return est
 
 
-def _direct_factor_bytes(nnz_a: float, n_vertices: int, unknowns: int, n_dims: int) -> float:
-    """The direct factor's bytes: the fill rule (``DIRECT_FILL_FACTOR`` x ``nnz(A)``), or with CHOLMOD
-    the grid bound (:func:`grid_factor_bound`) where that is smaller."""
+def _direct_factor_bytes(nnz_a: float, n_vertices: int, unknowns: int, n_dims: int) -> tuple[float, float]:
+    """``(bytes, analysis)``: the direct factor's bytes, the fill rule (``DIRECT_FILL_FACTOR`` x
+    ``nnz(A)``) or with CHOLMOD the grid bound (:func:`grid_factor_bound`) where that is smaller, and
+    of those the symbolic analysis's (the bound's per-unknown part; 0 under the fill rule)."""
     rule = _sparse_bytes(DIRECT_FILL_FACTOR * nnz_a, n_vertices)
     bound = grid_factor_bound(unknowns, n_dims) if cholmod_available() else None
-    return rule if bound is None else min(rule, bound[1])
+    if bound is None or bound[1] > rule:
+        return rule, 0.0
+    return bound[1], GRID_FACTOR_BOUND[n_dims][3] * max(float(unknowns), 2.0)
 
 
 def check_fit_memory(
@@ -616,8 +616,10 @@ def plan_fit_memory(
     """
     requested = max(int(processes), 1)
     limit, source = memory_limit(max_memory)
+    asked = None
     for procs in range(requested, 0, -1):
         est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, procs)
+        asked = asked or est
         candidates = [(False, est)]
         if procs > 1 and est["worker_factor"] > 0:
             one = dict(est)
@@ -628,7 +630,6 @@ def plan_fit_memory(
             if limit is None or e["total"] <= limit:
                 reason = None
                 if procs < requested or one_factor:
-                    asked = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, requested)
                     how = (f"{procs} process{'es' if procs > 1 else ''}" + (", one factor at a time" if one_factor else ""))
                     reason = (f"{requested} processes need an estimated {asked['total'] / 2**20:.0f} MiB, over the limit of "
                               f"{limit / 2**20:.0f} MiB ({source}): the CV runs on {how} ({e['total'] / 2**20:.0f} MiB)")

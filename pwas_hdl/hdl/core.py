@@ -334,7 +334,7 @@ class PWASCore(wiring.Component):
         # ---------------------------------------------------------- B: rank + address precompute
         # the n(n-1)/2 comparison bits are what the rank register holds; the case tables that turn
         # them into thermometer codes come after it (one carry chain per stage)
-        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+        pairs = self._pairs(n)
         if raw and all(x is not None for x in raw):  # raw_compare: the comparators on the input bits
             zeros: dict = {}
             ge_bits = [self._raw_ge(m, raw[i], raw[j], big_f, f"ge_{i}_{j}", zeros) for i, j in pairs]

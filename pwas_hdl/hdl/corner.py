@@ -71,7 +71,7 @@ def corner_read(core, m: Module, pipe, valid, cs, ds, oor):
     lay = plan.layout
     n, big_f = p.n, p.frac
     dw, aw = big_f + 1, plan.addr_width
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    pairs = core._pairs(n)
     ge_bits = [core._name(m, ds[i] >= ds[j], f"ge_{i}_{j}") for i, j in pairs]  # ties go to i < j
     addr = []
     if aw:  # the cells' bit fields (CornerLayout.field_shifts), last dimension in the LSBs
