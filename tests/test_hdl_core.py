@@ -62,6 +62,12 @@ CASES = [
     # issue 14: bit-field bank addresses (p + 1 = 4), the rotation from the cells' adder tree and mu
     # in the memory-read cycle (short)
     ([3, 3, 3, 3], 2, "banked", "short", {}),
+    # hw14h: replicated + short: bit-field vertex addresses (p + 1 = 4, 8; p_0 = 5 only in the top
+    # field), mu after the read; p = 2: strides not powers of two, the base + offset adders
+    ([3, 3, 3, 3], 2, "replicated", "short", {}),
+    ([5, 7, 3], 1, "replicated", "short", {"rounding": "truncate"}),
+    ([1, 3], 2, "replicated", "short", {}),
+    ([2, 3, 2], 1, "replicated", "short", {}),
 ]
 
 

@@ -94,6 +94,11 @@ DESIGNS = {
     # were built and left unused (UNUSEDSIGNAL step<b>_2, rank2)
     "n3_p3_fields_no_last": lambda: build_core(make_model([3, 3, 3], seed=6), pipeline="balanced"),
     "n3_p3_fields_no_last_short": lambda: build_core(make_model([3, 3, 3], seed=6), pipeline="short"),
+    # hw14h: replicated + short (bit-field vertex addresses, mu after the read), p_j = 1 (a constant
+    # cell) and a grid without fields (p = 2: the adders, mu after the read all the same)
+    "n4_p7_replicated_short": lambda: build_core(make_model([7, 7, 7, 7], seed=3), memory="replicated", pipeline="short"),
+    "n3_p1_replicated_short": lambda: build_core(make_model([1, 3, 1], seed=4, nz=2), memory="replicated", pipeline="short"),
+    "n3_p2_replicated_short": lambda: build_core(make_model([2, 3, 2], seed=4), memory="replicated", pipeline="short"),
 }
 
 

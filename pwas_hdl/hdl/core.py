@@ -371,12 +371,14 @@ class PWASCore(wiring.Component):
                 rot_part = [self._rotation(m, cs, nb, rbits, tables=pl.raw_compare and not pl.split)]
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
-            terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
-            base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
+            if self._vertex_fields() is None:
+                terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
+                base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
 
+        vfields = self._vertex_fields() if self.memory_kind == "replicated" else None
         valid, r = pipe.stage(
             "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part,
-                                       "c": cs if fields is not None else []}
+                                       "c": cs if fields is not None or vfields is not None else []}
         )
         ds, oor, wrap = r["d"], r["oor"], r["wrap"]
         ge = dict(zip(pairs, r["ge"]))
@@ -385,6 +387,8 @@ class PWASCore(wiring.Component):
             rot = self._modsum(m, r["rot"], nb, rbits, "rot")
             return self._bank_direct(m, pipe, valid, ge, ds, oor, r["c"] if fields is not None else cs, base, wrap, rot,
                                      fields)
+        if vfields is not None:
+            return self._vertex_direct(m, pipe, valid, ge, ds, oor, r["c"], vfields)
         lt = []
         if n > 1:
             therm = []
@@ -497,6 +501,81 @@ class PWASCore(wiring.Component):
         if tb is not False:
             inner = ~tb & inner
         return self._name(m, _or(ta, inner), name)
+
+    #: whether the replicated front may hand the sorted fractions (not ``mu``) to the memory register
+    #: (``mu_late``; the serial core's vertex shift register takes ``mu``)
+    _replicated_mu_late = True
+
+    def _vertex_fields(self):
+        """Bit fields of the replicated layout's vertex address, or None (then base + offset adders).
+
+        Only with ``mu_late`` (and no ``offset`` register, n > 1: the latency-first front), for
+        :class:`PWASCore`. The address of a vertex ``v`` is ``sum_j v_j * strides[j]`` (the linear
+        vertex index); when every stride is a power of two ``2**e_j`` and the fields
+        ``[e_j, e_j + width(p_j))`` are disjoint inside the address (``p_j + 1`` a power of two for
+        ``j > 0``, as p = 7), the sum is their concatenation. Returns ``[(e, width, j), ...]``.
+        """
+        p, pl, plan = self.params, self.pipeline, self.memory_plan
+        aw, n = plan.addr_width, p.n
+        if not (self._replicated_mu_late and pl.mu_late and not pl.offset and n > 1 and aw):
+            return None
+        spans, used = [], 0
+        for j, s in enumerate(int(v) for v in plan.layout.grid.strides):
+            if s < 1 or s & (s - 1):
+                return None
+            e, w = s.bit_length() - 1, bits_for(p.partitions[j])
+            mask = ((1 << w) - 1) << e
+            if used & mask or e + w > aw:
+                return None
+            used |= mask
+            spans.append((e, w, j))
+        return spans
+
+    def _vertex_direct(self, m: Module, pipe: _Pipe, valid, ge, ds, oor, cs, fields):
+        """Replicated memories with bit-field vertex addresses (:meth:`_vertex_fields`).
+
+        Vertex ``k``'s coordinate in dimension ``j`` is ``c_j + [rank_j < k]``, ``rank_j`` the count
+        of dimension ``j``'s ``n - 1`` comparison bits: each field one case table of ``(c_j``, those
+        bits``)`` (vertex 0: ``c_j``; vertex ``n``: ``c_j + 1``), the address their concatenation
+        (no adder). The sorted fractions go on to the memory register (``mu_late``: ``mu`` follows
+        the read, :meth:`_banks`). Returns what :meth:`_vertices` returns (copy ``k`` = vertex ``k``,
+        ``rot = 0``).
+        """
+        p, pl, plan = self.params, self.pipeline, self.memory_plan
+        n, nb, aw = p.n, p.n + 1, plan.addr_width
+        mask = (1 << (n - 1)) - 1
+        addr = []
+        for k in range(nb):
+            parts, pos = [], 0
+            for e, w, j in sorted(fields):
+                c = cs[j]
+                g = [ge[i, j] for i in range(j)] + [ge[j, i] for i in range(j + 1, n)]
+                low = (1 << j) - 1  # d_i >= d_j (i < j) counts when set, d_j >= d_i (i > j) when clear
+
+                def value(cv, v=0, k=k, low=low):
+                    rank = bin(v & low).count("1") + bin(~v & mask & ~low).count("1")
+                    return cv + int(rank < k)
+
+                if k == 0:
+                    f = c
+                else:  # vertex n: c_j + 1 whatever the comparison bits
+                    ins = [(c, bits_for(p.partitions[j] - 1))] + ([(Cat(*g), n - 1)] if k < n else [])
+                    f = self._table(m, ins, value, w, f"vf{k}_{j}")
+                if e > pos:  # bits no field covers
+                    parts.append(Const(0, e - pos))
+                if isinstance(f, int):
+                    parts.append(Const(f, w))
+                elif len(f) < w:
+                    parts.append(Cat(f, Const(0, w - len(f))))
+                else:
+                    parts.append(f)
+                pos = e + w
+            if pos < aw:
+                parts.append(Const(0, aw - pos))
+            addr.append(Cat(*parts))  # wiring only
+        gs = self._sorted_fractions(m, ge, ds)
+        valid, r = pipe.stage("s_addr", pl.addr, valid, {"addr": addr, "ds": gs, "oor": oor})
+        return valid, r["addr"], r["ds"], 0, r["oor"]
 
     def _address_fields(self):
         """Bit fields of the banked address, or None when the layout's address needs adders.
@@ -751,10 +830,12 @@ class PWASCore(wiring.Component):
         # Bank b reads vertex (b - rot) mod (n+1): rotate the addresses, and rotate the mu's the
         # same way instead of the read data back (the sum of products does not depend on the
         # order; mu is narrower than nz weights and needs no rot downstream).
-        late = self.memory_kind == "banked" and self.pipeline.mu_late
+        late = self.pipeline.mu_late and (self.memory_kind == "banked" or self._vertex_fields() is not None)
         if self.memory_kind == "banked":  # _bank_direct: the addresses are in bank order, mu in vertex order
             bank_addr = addr
             bank_mu = mus if late else self._rotate(m, mus, rot, dw, "bank_mu")
+        elif late:  # _vertex_direct: copy k = vertex k, the sorted fractions (mu after the read)
+            bank_addr, bank_mu = addr, mus
         elif not isinstance(rot, int):
             bank_addr = [Signal(unsigned(aw), name=f"bank_addr{b}") for b in range(nb)] if aw else []
             bank_mu = [Signal(unsigned(dw), name=f"bank_mu{b}") for b in range(nb)]
@@ -790,7 +871,7 @@ class PWASCore(wiring.Component):
         valid, r = pipe.stage("s_mem", True, valid, {mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
         bank_mu = r[mkey]
         if late:  # mu and its rotation in the memory-read cycle (beside the block RAM's clock-to-output)
-            if self.pipeline.sort_late and n > 1:  # and the sort: d_j in dimension order + the comparison bits
+            if self.pipeline.sort_late and n > 1 and self.memory_kind == "banked":  # and the sort: d_j in dimension order + the comparison bits
                 gebits = bank_mu[n]
                 ge = {ij: gebits[i] for i, ij in enumerate(self._pairs(n))}
                 bank_mu = self._sorted_fractions(m, ge, bank_mu[:n])

@@ -207,7 +207,10 @@ class Pipeline:
                  come straight from flip-flops)
     ``mu_late``  (no register) banked: the sorted fractions ``d_(k)`` instead of ``mu`` go through the
                  registers up to the memory register; ``mu`` and its rotation are computed in the
-                 memory-read cycle, beside the block RAM's clock-to-output (off the front's path)
+                 memory-read cycle, beside the block RAM's clock-to-output (off the front's path).
+                 Replicated memories (without ``offset``, n > 1, grid strides powers of two): the same,
+                 and vertex ``k``'s address is bit fields ``c_j + [rank_j < k]``, each one case table of
+                 ``c_j`` and dimension ``j``'s comparison bits (no adder; :meth:`PWASCore._vertex_direct`)
     ``raw_compare`` (no register; without ``split``) the rank comparators read the fractions as bit
                  fields of the input codes, when the domain's lower bound makes them so
                  (``L_j mod 2**F_j`` is 0 or ``2**(F_j-1)``, no exact scale), and the clamp enters

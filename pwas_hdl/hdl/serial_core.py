@@ -126,6 +126,9 @@ class SerialPWASCore(PWASCore):
 
     architecture = "serial"
 
+    #: the vertex shift register takes mu (PWASCore._vertex_fields)
+    _replicated_mu_late = False
+
     def __init__(self, params: CoreParams, *, pipeline: Pipeline | str | None = None, memory: str = "single"):
         self._MustUse__silence = True
         if memory != "single":
