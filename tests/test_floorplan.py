@@ -66,7 +66,7 @@ def test_bank_k_goes_to_site_k():
     ({"cells": _core_cells(37, 5)}, "37 DP16KD cells, more than the 36 sites of row Y34"),
     ({"cells": _core_cells(5, 40)}, "40 MULT18X18D cells, more than the 36 sites of row Y46"),
     ({"cells": {"a": "LUT4"}}, "no DP16KD or MULT18X18D"),
-    ({"memory": "replicated"}, "weight memory 'replicated'; the plan was measured only with the banked layout"),
+    ({"memory": "corner"}, "weight memory 'corner'; the plan was measured only with the banked and replicated layouts"),
     ({"memory": "single"}, "weight memory 'single'"),  # the serial architecture
 ])
 def test_fallbacks_say_why(kw, reason):
@@ -182,3 +182,23 @@ def test_site_table_matches_the_parts_tile_grid():
         row = int(SITE_TABLES["45k"].rows[kind][1:])
         first = "MIB_EBR0" if kind == "DP16KD" else "MIB_DSP0"
         assert len(sites) == 4 * sum(1 for (r, _c), t in at.items() if r == row and t == first)  # the whole row
+
+
+def _replicated_cells(copies=5, blocks=3, mults=5):
+    cells = {f"core.wmem{k}.0.{i}": "DP16KD" for k in range(copies) for i in range(blocks)}
+    cells.update({f"core.prod0_{k}_MULT18X18D_P9": "MULT18X18D" for k in range(mults)})
+    cells["core.lut"] = "LUT4"
+    return cells
+
+
+def test_replicated_copies_on_the_same_site_table():
+    """hw14h: auto plans the replicated memory too, its blocks in natural order (copy k's adjacent)."""
+    rec = plan_sites(_replicated_cells(), "45k", pipeline=SHORT, memory="replicated")
+    assert rec["applied"] and rec["reason"] is None and rec["counts"] == {"DP16KD": 15, "MULT18X18D": 5}
+    ebr = SITE_TABLES["45k"].sites["DP16KD"]
+    assert [rec["cells"][f"core.wmem{k}.0.{i}"] for k in range(5) for i in range(3)] == list(ebr[:15])
+    assert rec["cells"]["core.wmem0.0.0"] == "X42/Y34/EBR0" and rec["cells"]["core.wmem1.0.0"] == "X48/Y34/EBR3"
+    assert rec["cells"]["core.prod0_4_MULT18X18D_P9"] == "X51/Y46/MULT18_0"
+    # more copies' blocks than the row holds: no plan, and why
+    big = plan_sites(_replicated_cells(copies=6, blocks=7), "45k", pipeline=SHORT, memory="replicated")
+    assert not big["applied"] and "42 DP16KD cells, more than the 36 sites of row Y34" in big["reason"]

@@ -18,9 +18,13 @@ the netlist a nextpnr ``BEL`` attribute, cell ``k`` (natural order of the cell n
 
 * ``floorplan="auto"`` plans only the structure it was measured on: a pipeline with the multiplier
   input register right after the read (``mul_in`` without ``mem_out``; ``short`` is the preset
-  that has it) and the banked weight memory (manifest ``memory.kind = "banked"``; the replicated,
-  corner and serial layouts were not measured with a plan). Every other pipeline (``min``, ``balanced``, ``max``, ...) keeps nextpnr's free
-  placement, so their netlists, and fmax, are unchanged. ``"none"``: never.
+  that has it) and the banked or replicated weight memory (manifest ``memory.kind``; the corner and
+  serial layouts were not measured with a plan). The replicated memory's copies use the same rule:
+  its DP16KD cells ``wmem<k>.0.<i>`` (copy ``k`` = vertex ``k``; 3 blocks of 4096 x 4 bits for a
+  4096 x 11-bit copy) in natural order on the same site table, so each copy's blocks are adjacent
+  (hw14h: 29.84 ns against 30.55 ns banked over seeds 1-10 for lorenz_my4_p7). Every other pipeline
+  (``min``, ``balanced``, ``max``, ...) keeps nextpnr's free placement, so their netlists, and fmax,
+  are unchanged. ``"none"``: never.
 * Only parts with a site table (:data:`SITE_TABLES`: the LFE5U-45F, ``--device 45k``) get a plan;
   other parts: none, and the result says so.
 * A design with more block RAMs or multipliers than the chosen row holds (36 each on the 45F) gets
@@ -50,6 +54,9 @@ __all__ = ["FLOORPLANS", "SITE_TABLES", "SiteTable", "check_floorplan", "plan_si
 
 #: ``synth --floorplan`` values: ``auto`` (the rule of this module) or ``none`` (never).
 FLOORPLANS = ("auto", "none")
+
+#: The weight-memory layouts (manifest ``memory.kind``) that ``auto`` plans (the measured ones).
+PLANNED_MEMORIES = ("banked", "replicated")
 
 #: The cell types that get sites.
 HARD_BLOCKS = ("DP16KD", "MULT18X18D")
@@ -120,7 +127,7 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
     pipeline
         The manifest's pipeline (:func:`applies_to_pipeline` decides for ``auto``).
     memory
-        The manifest's ``memory.kind``; ``auto`` plans ``"banked"`` only.
+        The manifest's ``memory.kind``; ``auto`` plans ``"banked"`` and ``"replicated"`` only.
     part
         The part's full name, for the record (default: the site table's).
 
@@ -143,8 +150,9 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
         rec["reason"] = ("auto: the pipeline does not read the block RAMs into the multipliers' input registers "
                          "(mul_in without mem_out, the short / latency-first structure); the plan was measured only there")
         return rec
-    if memory != "banked":
-        rec["reason"] = f"auto: weight memory {memory!r}; the plan was measured only with the banked layout"
+    if memory not in PLANNED_MEMORIES:
+        rec["reason"] = (f"auto: weight memory {memory!r}; the plan was measured only with the "
+                         f"{' and '.join(PLANNED_MEMORIES)} layouts")
         return rec
     if table is None:
         known = ", ".join(f"{t.part} (--device {d})" for d, t in SITE_TABLES.items())
