@@ -103,6 +103,10 @@ CONFIGS = [
                  {"pipeline": {"split": False, "rank": False, "addr": False, "mem_out": False, "mul_in": True, "product": False,
                                "tree_levels": 0, "mu_late": True, "flat_sum": True, "prune_sat": True, "raw_compare": True,
                                "counter_sum": True}}),
+    # hw14h: the latency build with the replicated memory (bit-field vertex addresses, mu after the
+    # read; p + 1 = 4, 8 with the first dimension's p = 5 in the top field), and a sensor top
+    DesignConfig("c-n3-p5x7x3-z2-repl-goal-latency", C, 0, 3, 0, 1, [5, 7, 3], 2, {"memory": "replicated", "goal": "latency"}),
+    DesignConfig("s-y4-p3-repl-goal-latency", S, 0, 4, 0, 1, 3, 1, {"memory": "replicated", "goal": "latency"}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 
