@@ -350,6 +350,8 @@ class PWASCore(wiring.Component):
         rbits = bits_for(n)
         # banked: the bank addresses as bit fields c_j + step (no adder) where the layout allows it
         fields = self._address_fields() if self.memory_kind == "banked" else None
+        # replicated: the vertex addresses as bit fields c_j + [rank_j < k] where the grid allows it
+        vfields = self._vertex_fields() if self.memory_kind == "replicated" else None
         if self.memory_kind == "banked":
             rst = plan.layout.row_strides  # address weight of c_j, j < n-1
             p_last = p.partitions[n - 1]
@@ -371,11 +373,10 @@ class PWASCore(wiring.Component):
                 rot_part = [self._rotation(m, cs, nb, rbits, tables=pl.raw_compare and not pl.split)]
         else:
             st = [int(v) for v in plan.layout.grid.strides]  # replicated: address = linear vertex index
-            if self._vertex_fields() is None:
+            if vfields is None:
                 terms = [rom(m, cs[j], [i * st[j] for i in range(p.partitions[j])], aw, f"a{j}") for j in range(n)]
                 base_part = self._first_level(terms, lambda a, b, i: add_wrap(m, a, b, f"base0_{i}"), 1 << aw)
 
-        vfields = self._vertex_fields() if self.memory_kind == "replicated" else None
         valid, r = pipe.stage(
             "s_rank", pl.rank, valid, {"ge": ge_bits, "d": ds, "oor": oor, "base": base_part, "wrap": wrap, "rot": rot_part,
                                        "c": cs if fields is not None or vfields is not None else []}
