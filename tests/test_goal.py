@@ -74,3 +74,80 @@ def test_cli_goal_follows_fpga(capsys, tmp_path, lorenz_tiny):
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert code == 2 and len(lines) == 1 and "unknown FPGA family 'vhdl'" in lines[0], err
     assert not (tmp_path / "j").exists()
+
+
+# ------------------------------------------------------------------ the goal's memory (issue 14)
+def test_goal_latency_takes_the_replicated_memory(lorenz_tiny):
+    """--goal latency without --memory on ECP5 builds exactly --memory replicated --goal latency; every
+    other goal, --fpga ice40 and an explicit --memory keep their memory (banked by default)."""
+    gd = build_design(lorenz_tiny.model, goal="latency")
+    assert gd.manifest["generator"]["options"]["memory"] == "replicated"
+    grid = lorenz_tiny.sensor.grid_
+    assert gd.manifest["memory"]["memories"] == grid.n + 1 and gd.manifest["memory"]["depth"] == grid.n_vertices
+    same = build_design(lorenz_tiny.model, goal="latency", memory="replicated")
+    assert gd.files == same.files
+    for kw, mem in (({"goal": "latency", "memory": "banked"}, "banked"), ({"goal": "latency", "fpga_target": "ice40"}, "banked"),
+                    ({"goal": "balanced"}, "banked"), ({"goal": "throughput"}, "banked"), ({}, "banked"),
+                    ({"goal": "latency", "architecture": "serial"}, "banked")):
+        assert build_design(lorenz_tiny.model, **kw).manifest["generator"]["options"]["memory"] == mem, kw
+
+
+def _fxm(partitions, nz=1):
+    import numpy as np
+
+    from pwas_hdl.fit.geometry import Grid
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+
+    n = len(partitions)
+    grid = Grid([0.0] * n, [1.0] * n, partitions)
+    w = np.random.default_rng(0).normal(size=(grid.n_vertices, nz))
+    return FixedPointModel(grid, w)
+
+
+@pytest.mark.parametrize("partitions, nz, plain, goal, fpga, expected", [
+    ((7, 7, 7, 7), 1, True, "latency", "ecp5", "replicated"),   # the Lorenz core: 5 x 3 DP16KD, 5 MULT
+    ((3, 3), 1, True, "latency", None, "replicated"),
+    ((7, 7, 7, 7), 1, False, "latency", "ecp5", "banked"),      # not a plain parallel core / sensor
+    ((7, 7, 7, 7), 1, True, "latency", "ice40", "banked"),
+    ((7, 7, 7, 7), 1, True, "throughput", "ecp5", "banked"),
+    ((7, 7, 7, 7), 1, True, None, "ecp5", "banked"),
+    ((7, 5, 7), 1, True, "latency", "ecp5", "banked"),          # stride 48: the address needs adders
+    ((5, 7, 7), 1, True, "latency", "ecp5", "replicated"),      # strides 64, 8, 1 (p_0 is free)
+    ((7,), 1, True, "latency", "ecp5", "banked"),               # n = 1: no fields form
+    ((15, 15, 15, 15), 1, True, "latency", "ecp5", "banked"),   # 5 copies of 65 536 words: > 36 DP16KD
+    ((7, 7, 7, 7), 8, True, "latency", "ecp5", "banked"),       # 40 multipliers: > 36 MULT18X18D
+])
+def test_goal_memory_rule(partitions, nz, plain, goal, fpga, expected):
+    from pwas_hdl.design.goal_memory import goal_memory
+
+    assert goal_memory(goal, fpga, _fxm(partitions, nz), plain=plain) == expected
+
+
+def test_goal_memory_counts_the_rows():
+    """The rule's block counts are the floorplan row's: a model just under and just over the 36 DP16KD."""
+    from pwas_hdl.design.goal_memory import goal_memory
+    from pwas_hdl.fixedpoint.memory_layout import make_layout
+    from pwas_hdl.flow.explore import bram18k_blocks
+    from pwas_hdl.flow.floorplan import SITE_TABLES
+
+    rows = len(SITE_TABLES["45k"].sites["DP16KD"])
+    for nz in range(1, 8):
+        fxm = _fxm((7, 7, 7, 7), nz)
+        lay = make_layout(fxm.grid, "replicated")
+        brams = lay.n_banks * bram18k_blocks(lay.depth, nz * fxm.weight_format.bits)
+        mem = goal_memory("latency", "ecp5", fxm, plain=True)
+        assert (mem == "replicated") == (brams <= rows and lay.n_banks * nz <= 36), (nz, brams, mem)
+
+
+def test_cli_goal_latency_memory(capsys, tmp_path, lorenz_tiny):
+    code, _, err = _run(capsys, "generate", lorenz_tiny.model, "-o", tmp_path / "r", "--goal", "latency")
+    assert code == 0, err
+    man = json.loads((tmp_path / "r" / "manifest.json").read_text())
+    assert man["generator"]["options"]["memory"] == "replicated"
+    code, _, err = _run(capsys, "generate", lorenz_tiny.model, "-o", tmp_path / "b", "--goal", "latency", "--memory", "banked")
+    assert code == 0, err
+    assert json.loads((tmp_path / "b" / "manifest.json").read_text())["generator"]["options"]["memory"] == "banked"
+    code, _, err = _run(capsys, "generate", lorenz_tiny.model, "-o", tmp_path / "x", "--goal", "latency", "--memory", "fastest")
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and "memory must be" in lines[0], err
+    assert not (tmp_path / "x").exists()

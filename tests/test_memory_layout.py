@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout, hex_files, make_layout, pack_words, readmemh_text
@@ -170,3 +172,30 @@ def test_hex_files_and_packing():
     lo = [(w & 63) - 64 if (w & 63) >= 32 else (w & 63) for w in words]
     hi = [(w >> 6) - 64 if (w >> 6) >= 32 else (w >> 6) for w in words]
     assert lo == rom[1, :, 0].tolist() and hi == rom[1, :, 1].tolist()
+
+
+@settings(deadline=None)
+@given(parts=st.lists(st.integers(1, 17), min_size=1, max_size=4), seed=st.integers(0, 2**16))
+def test_replicated_address_fields_concatenate_to_the_linear_index(parts, seed):
+    """Where ReplicatedLayout.address_fields exists, OR-ing each coordinate into its field is the
+    layout's address (the linear vertex index) of every vertex; where it is None, some stride is not a
+    power of two or two fields would overlap."""
+    lay = ReplicatedLayout(Grid([0.0] * len(parts), [1.0] * len(parts), parts))
+    fields = lay.address_fields()
+    strides = [int(s) for s in lay.grid.strides]
+    if fields is None:
+        pow2 = all(s & (s - 1) == 0 for s in strides)
+        spans = [(s.bit_length() - 1, max(1, p.bit_length())) for s, p in zip(strides, parts)]
+        overlap = any(a < c + d and c < a + b for i, (a, b) in enumerate(spans) for c, d in spans[i + 1:])
+        assert not pow2 or overlap or any(e + w > lay.addr_bits for e, w in spans)
+        return
+    assert [j for _, _, j in fields] == list(range(len(parts)))
+    rng = np.random.default_rng(seed)
+    coords = np.stack([rng.integers(0, p + 1, size=64) for p in parts], axis=1)
+    word = np.zeros(64, dtype=np.int64)
+    for e, w, j in fields:
+        assert int(coords[:, j].max()) < (1 << w)
+        word |= coords[:, j] << e
+    _, addr = lay.bank_addr(lay.grid.vertex_index(coords))
+    np.testing.assert_array_equal(word, addr)
+    assert int(word.max()) < (1 << lay.addr_bits)

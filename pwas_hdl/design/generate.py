@@ -261,7 +261,7 @@ def build_design(
     *,
     design: str = "core",
     name: str | None = None,
-    memory: str = "banked",
+    memory: str | None = None,
     pipeline: str | Pipeline | dict | None = None,
     memory_init: str = "inline",
     ports: str = "axis",
@@ -296,9 +296,11 @@ def build_design(
         ``target_mhz``, ``memory_init="readmemh"`` or a classifier.
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
-    memory : {"banked", "replicated", "corner"}
+    memory : {"banked", "replicated", "corner"}, optional
         Weight memory: ``n + 1`` banks holding about N words, or ``n + 1`` copies of the N words, or
-        ``2**n`` corner banks addressed by the cell alone (:mod:`pwas_hdl.hdl.corner`).
+        ``2**n`` corner banks addressed by the cell alone (:mod:`pwas_hdl.hdl.corner`). None (default):
+        the goal's memory (:func:`pwas_hdl.design.goal_memory.goal_memory`): replicated for
+        ``goal="latency"`` on ECP5 where its bit-field addresses and block RAMs fit, else banked.
     pipeline : str, Pipeline or dict, optional
         Pipeline preset of :mod:`pwas_hdl.hdl.params` (``min``, ``short``, ``balanced``, ``max``), or the
         registers themselves (a :class:`~pwas_hdl.hdl.params.Pipeline` or its ``to_dict()``).
@@ -354,8 +356,10 @@ def build_design(
     """
     from pwas_hdl.design.estimator import build_estimator_design, is_estimator
 
+    from pwas_hdl.design.goal_memory import DEFAULT_MEMORY, goal_memory
+
     if is_estimator(model):  # an estimator file (seed 003's switched observer): pwas_hdl.design.estimator
-        return build_estimator_design(model, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init,
+        return build_estimator_design(model, design=design, name=name, memory=memory or DEFAULT_MEMORY, pipeline=pipeline, memory_init=memory_init,
                                       ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
                                       **formats)
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
@@ -363,7 +367,7 @@ def build_design(
 
     if design not in ("core", "sensor", "recurrent"):
         raise ValueError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
-    if memory not in ("banked", "replicated", "corner"):
+    if memory is not None and memory not in ("banked", "replicated", "corner"):
         raise ValueError(f"memory must be 'banked', 'replicated' or 'corner', got {memory!r}")
     from pwas_hdl.hdl.serial_core import ARCHITECTURES
 
@@ -412,10 +416,17 @@ def build_design(
             raise InputError("--clock-mhz (timing closure) is not supported for observer-bank sensors yet; give --pipeline")
         if design == "recurrent":
             raise InputError("hardware for a recurrent observer-bank sensor is not available")
-        bank_model = observer_bank_model(sensor, memory=memory, **formats)
+        bank_model = observer_bank_model(sensor, memory=memory or DEFAULT_MEMORY, **formats)
         fxm = bank_model.core
+        memory = memory or DEFAULT_MEMORY
     else:
-        fxm = fixed_point_model(sensor, memory=memory, **formats)
+        fxm = fixed_point_model(sensor, memory=memory or DEFAULT_MEMORY, **formats)
+        if memory is None:  # the goal's memory (pwas_hdl.design.goal_memory)
+            plain = (not additive and not warped and design in ("core", "sensor") and architecture == "parallel"
+                     and getattr(sensor, "classifier_", None) is None)
+            memory = goal_memory(goal, fpga_target, fxm, plain=plain)
+            if memory != DEFAULT_MEMORY:
+                fxm = fixed_point_model(sensor, memory=memory, **formats)
     timing = None
     if target_mhz is not None:
         from pwas_hdl.flow.timing_closure import close_timing

@@ -279,6 +279,31 @@ class ReplicatedLayout(_LayoutBase):
         v = np.asarray(vertices, dtype=np.int64)
         return self.bank_addr(v, np.arange(v.shape[-1], dtype=np.int64))
 
+    def address_fields(self) -> list[tuple[int, int, int]] | None:
+        """The address (linear vertex index) as a concatenation of bit fields, or None.
+
+        The address of vertex ``v`` is ``sum_j v_j * strides[j]``. When every stride is a power of
+        two ``2**e_j`` and the fields ``[e_j, e_j + w_j)`` (``w_j`` the bits of ``0 .. p_j``) are
+        disjoint inside :attr:`addr_bits` (``p_j + 1`` a power of two for ``j > 0``, as p = 7), the sum
+        is their concatenation: no adder (what the latency-first core's front uses,
+        :meth:`pwas_hdl.hdl.core.PWASCore._vertex_fields`).
+
+        Returns
+        -------
+        list of (e_j, w_j, j) in dimension order, or None
+        """
+        spans, used, aw = [], 0, self.addr_bits if self.depth > 1 else 0
+        for j, s in enumerate(int(v) for v in self.grid.strides):
+            if s < 1 or s & (s - 1):
+                return None
+            e, w = s.bit_length() - 1, max(1, int(self.grid.partitions[j]).bit_length())
+            mask = ((1 << w) - 1) << e
+            if used & mask or e + w > aw:
+                return None
+            used |= mask
+            spans.append((e, w, j))
+        return spans
+
 
 class CornerLayout(_LayoutBase):
     """``2**n`` corner banks addressed by the cell's bit fields (see the module docstring).

@@ -109,6 +109,8 @@ __all__ = [
     "COST_KEYS",
     "explore",
     "pareto_front",
+    "bram18k_blocks",
+    "mult18_blocks",
     "plot_exploration",
     "format_table",
 ]
@@ -270,7 +272,13 @@ def _int_values(values, what: str, lo: int | None = None) -> list[int]:
 
 
 # ------------------------------------------------------------------------------------ resources
-def _bram18k(depth: int, width: int) -> int:
+def mult18_blocks(f: int, weight_bits: int) -> int:
+    """18x18 multiplier blocks of one product ``u(F+1) x s(B_w)`` (the fraction times the weight)."""
+    return math.ceil((f + 2) / 18) * math.ceil(weight_bits / 18)
+
+
+def bram18k_blocks(depth: int, width: int) -> int:
+    """18-kbit block RAMs (ECP5 DP16KD, any of its aspect ratios) that hold ``depth`` words of ``width`` bits."""
     return min(math.ceil(depth / d) * math.ceil(width / w) for d, w in _BRAM18_SHAPES)
 
 
@@ -373,8 +381,8 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
         "logic_bits": logic,
         "register_bits": regs,
         "total_bits": int(mem["bits"]) + logic + (regs or 0),
-        "dsp18": mults * math.ceil((f + 2) / 18) * math.ceil(bw / 18),
-        "bram18k": nb * _bram18k(int(mem["depth"]), int(mem["word_bits"])),
+        "dsp18": mults * mult18_blocks(f, bw),
+        "bram18k": nb * bram18k_blocks(int(mem["depth"]), int(mem["word_bits"])),
         "latency_cycles": int(info["latency"]),
         "acc_bits": int(ar["sum_bits"]),
     }

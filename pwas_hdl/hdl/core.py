@@ -511,26 +511,14 @@ class PWASCore(wiring.Component):
         """Bit fields of the replicated layout's vertex address, or None (then base + offset adders).
 
         Only with ``mu_late`` (and no ``offset`` register, n > 1: the latency-first front), for
-        :class:`PWASCore`. The address of a vertex ``v`` is ``sum_j v_j * strides[j]`` (the linear
-        vertex index); when every stride is a power of two ``2**e_j`` and the fields
-        ``[e_j, e_j + width(p_j))`` are disjoint inside the address (``p_j + 1`` a power of two for
-        ``j > 0``, as p = 7), the sum is their concatenation. Returns ``[(e, width, j), ...]``.
+        :class:`PWASCore`, where the layout's address is a concatenation of fields
+        (:meth:`pwas_hdl.fixedpoint.memory_layout.ReplicatedLayout.address_fields`). Returns
+        ``[(e, width, j), ...]``.
         """
         p, pl, plan = self.params, self.pipeline, self.memory_plan
-        aw, n = plan.addr_width, p.n
-        if not (self._replicated_mu_late and pl.mu_late and not pl.offset and n > 1 and aw):
+        if not (self._replicated_mu_late and pl.mu_late and not pl.offset and p.n > 1 and plan.addr_width):
             return None
-        spans, used = [], 0
-        for j, s in enumerate(int(v) for v in plan.layout.grid.strides):
-            if s < 1 or s & (s - 1):
-                return None
-            e, w = s.bit_length() - 1, bits_for(p.partitions[j])
-            mask = ((1 << w) - 1) << e
-            if used & mask or e + w > aw:
-                return None
-            used |= mask
-            spans.append((e, w, j))
-        return spans
+        return plan.layout.address_fields()
 
     def _vertex_direct(self, m: Module, pipe: _Pipe, valid, ge, ds, oor, cs, fields):
         """Replicated memories with bit-field vertex addresses (:meth:`_vertex_fields`).
