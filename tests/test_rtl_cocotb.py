@@ -82,13 +82,14 @@ CONFIGS = [
     # the banked core without the address rotation (bank addresses as bit fields c_j + step, the
     # rotation from the cells' adder tree): p + 1 a power of two in the middle dimensions; latency =
     # mu in the memory cycle; p = 7, n = 3 has a last-dimension field (v // (n+1))
-    DesignConfig("c-n4-p3-goal-latency", C, 0, 4, 0, 1, 3, 1, {"goal": "latency"}),
+    # (--memory banked: these grids' goal memory is the replicated one, below)
+    DesignConfig("c-n4-p3-goal-latency", C, 0, 4, 0, 1, 3, 1, {"goal": "latency", "memory": "banked"}),
     DesignConfig("c-n3-p7-z2-goal-throughput", C, 0, 3, 0, 1, 7, 2, {"goal": "throughput"}),
-    DesignConfig("c-n3-p7-z2-goal-latency-b10", C, 0, 3, 0, 1, 7, 2, {"goal": "latency", "input_bits": 10}),
+    DesignConfig("c-n3-p7-z2-goal-latency-b10", C, 0, 3, 0, 1, 7, 2, {"goal": "latency", "input_bits": 10, "memory": "banked"}),
     # the latency build's one-sum adder (flat_sum) with a saturation the weights reach (9-bit
     # outputs: kept by prune_sat), and truncation (no rounding constant in the sum)
     DesignConfig("c-n3-p4x4x4-z2-sat-goal-latency", C, 0, 3, 0, 1, [4, 4, 4], 2, {"goal": "latency", "output_bits": 9}),
-    DesignConfig("c-n2-p5x3-trunc-goal-latency", C, 0, 2, 0, 1, [5, 3], 1, {"goal": "latency", "rounding": "truncate"}),
+    DesignConfig("c-n2-p5x3-trunc-goal-latency", C, 0, 2, 0, 1, [5, 3], 1, {"goal": "latency", "rounding": "truncate"}),  # the goal's memory: replicated
     # issue 14, the latency-first front (opt-in, no preset): corner banks (2**n memories addressed by
     # the cells; vertex k's word chosen among its corners after the memory's output register) and the
     # comparators on the input bits with the rotation from residue tables (raw_compare)
@@ -107,6 +108,8 @@ CONFIGS = [
     # read; p + 1 = 4, 8 with the first dimension's p = 5 in the top field), and a sensor top
     DesignConfig("c-n3-p5x7x3-z2-repl-goal-latency", C, 0, 3, 0, 1, [5, 7, 3], 2, {"memory": "replicated", "goal": "latency"}),
     DesignConfig("s-y4-p3-repl-goal-latency", S, 0, 4, 0, 1, 3, 1, {"memory": "replicated", "goal": "latency"}),
+    # --goal latency without --memory: the goal's memory (replicated: power-of-two strides, pwas_hdl.design.goal_memory), n = 4
+    DesignConfig("c-n4-p3x3x3x7-goal-latency-goal-memory", C, 0, 4, 0, 1, [3, 3, 3, 7], 1, {"goal": "latency"}),
 ]
 BY_NAME = {c.name: c for c in CONFIGS}
 
