@@ -36,9 +36,6 @@ __all__ = ["DEFAULT_MEMORY", "goal_memory"]
 #: ``generate --memory`` when neither it nor a goal that chooses another is given.
 DEFAULT_MEMORY = "banked"
 
-#: The floorplan's part (:data:`pwas_hdl.flow.floorplan.SITE_TABLES` key) whose rows bound the replicated copies.
-_FLOORPLAN_DEVICE = "45k"
-
 
 def goal_memory(goal: str | None, fpga: str | None, fxm: "FixedPointModel", *, plain: bool) -> str:
     """The weight memory (``"banked"`` or ``"replicated"``) for ``goal`` on ``fpga`` (see the module notes).
@@ -59,11 +56,12 @@ def goal_memory(goal: str | None, fpga: str | None, fxm: "FixedPointModel", *, p
     from pwas_hdl.fixedpoint.memory_layout import make_layout
     from pwas_hdl.flow.explore import bram18k_blocks, mult18_blocks
     from pwas_hdl.flow.floorplan import SITE_TABLES
+    from pwas_hdl.flow.synthesis import DEFAULT_DEVICE
 
     layout = make_layout(fxm.grid, "replicated")
     if layout.address_fields() is None:
         return DEFAULT_MEMORY
-    sites = SITE_TABLES[_FLOORPLAN_DEVICE].sites
+    sites = SITE_TABLES[DEFAULT_DEVICE["ecp5"]].sites  # synth's default part, the one the floorplan knows
     bw = fxm.weight_format.bits
     brams = layout.n_banks * bram18k_blocks(layout.depth, fxm.nz * bw)
     mults = layout.n_banks * fxm.nz * mult18_blocks(fxm.F, bw)
