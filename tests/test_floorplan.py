@@ -15,7 +15,8 @@ import pytest
 from helpers.cli import CliRunner
 from pwas_hdl.cli import app
 from pwas_hdl.errors import ToolFailed
-from pwas_hdl.flow.floorplan import FLOORPLANS, SITE_TABLES, apply_floorplan, applies_to_pipeline, plan_sites
+from pwas_hdl.flow.floorplan import (FLOORPLANS, SITE_TABLES, apply_floorplan, applies_to_pipeline, plan_sites,
+                                     replicated_sites)
 from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 from pwas_hdl.hdl.params import PIPELINE_PRESETS
 from test_synthesis import make_design
@@ -191,14 +192,33 @@ def _replicated_cells(copies=5, blocks=3, mults=5):
     return cells
 
 
-def test_replicated_copies_on_the_same_site_table():
-    """hw14h: auto plans the replicated memory too, its blocks in natural order (copy k's adjacent)."""
+#: hw14i: the replicated memory's 15 DP16KD, copy 0 .. copy 4 left to right over the groups X31, X42, X51, X60
+MEASURED_REPLICATED_EBR = [f"X{c + 2 * k}/Y34/EBR{k}" for c in (31, 42, 51, 60) for k in range(4)][:15]
+
+
+def test_replicated_copies_left_to_right():
+    """hw14h / hw14i: auto plans the replicated memory too, its blocks in natural order (copy k's
+    adjacent) on the central groups left to right (copy 0 and copy n at the ends)."""
     rec = plan_sites(_replicated_cells(), "45k", pipeline=SHORT, memory="replicated")
     assert rec["applied"] and rec["reason"] is None and rec["counts"] == {"DP16KD": 15, "MULT18X18D": 5}
-    ebr = SITE_TABLES["45k"].sites["DP16KD"]
-    assert [rec["cells"][f"core.wmem{k}.0.{i}"] for k in range(5) for i in range(3)] == list(ebr[:15])
-    assert rec["cells"]["core.wmem0.0.0"] == "X42/Y34/EBR0" and rec["cells"]["core.wmem1.0.0"] == "X48/Y34/EBR3"
-    assert rec["cells"]["core.prod0_4_MULT18X18D_P9"] == "X51/Y46/MULT18_0"
+    assert [rec["cells"][f"core.wmem{k}.0.{i}"] for k in range(5) for i in range(3)] == MEASURED_REPLICATED_EBR
+    assert rec["cells"]["core.wmem0.0.0"] == "X31/Y34/EBR0" and rec["cells"]["core.wmem4.0.2"] == "X64/Y34/EBR2"
+    assert [rec["cells"][f"core.prod0_{k}_MULT18X18D_P9"] for k in range(5)] == MEASURED_MULT  # as banked
+    # the banked memory keeps the centre-outward order (its plan unchanged)
+    banked = plan_sites(_core_cells(11, 5), "45k", pipeline=SHORT)
+    assert [banked["cells"][f"core.wmem{k}.0.0"] for k in range(11)] == list(SITE_TABLES["45k"].sites["DP16KD"][:11])
     # more copies' blocks than the row holds: no plan, and why
     big = plan_sites(_replicated_cells(copies=6, blocks=7), "45k", pipeline=SHORT, memory="replicated")
     assert not big["applied"] and "42 DP16KD cells, more than the 36 sites of row Y34" in big["reason"]
+
+
+@pytest.mark.parametrize("count", [1, 4, 5, 15, 16, 17, 36])
+def test_replicated_sites_whole_groups_left_to_right(count):
+    t = SITE_TABLES["45k"]
+    got = replicated_sites(t, "DP16KD", count)
+    assert len(got) == len(set(got)) == count
+    groups = -(-count // 4)
+    assert set(got) <= set(t.sites["DP16KD"][: 4 * groups])  # only the central groups that hold them
+    cols = [t.columns[s] for s in got]
+    assert cols == sorted(cols)  # left to right
+    assert set(t.columns) == set(t.sites["DP16KD"]) | set(t.sites["MULT18X18D"])

@@ -19,10 +19,15 @@ the netlist a nextpnr ``BEL`` attribute, cell ``k`` (natural order of the cell n
 * ``floorplan="auto"`` plans only the structure it was measured on: a pipeline with the multiplier
   input register right after the read (``mul_in`` without ``mem_out``; ``short`` is the preset
   that has it) and the banked or replicated weight memory (manifest ``memory.kind``; the corner and
-  serial layouts were not measured with a plan). The replicated memory's copies use the same rule:
+  serial layouts were not measured with a plan). The replicated memory's copies get the same rows,
   its DP16KD cells ``wmem<k>.0.<i>`` (copy ``k`` = vertex ``k``; 3 blocks of 4096 x 4 bits for a
-  4096 x 11-bit copy) in natural order on the same site table, so each copy's blocks are adjacent
-  (hw14h: 29.84 ns against 30.55 ns banked over seeds 1-10 for lorenz_my4_p7). Every other pipeline
+  4096 x 11-bit copy) in natural order on the sites of :func:`replicated_sites`: the whole tile
+  groups nearest the centre that hold them, left to right, so that each copy's blocks are adjacent
+  and the copies whose addresses need the comparison bits (``1 .. n-1``) sit in the middle, between
+  copy 0 (the cells alone) and copy ``n`` (cells + 1). hw14i, lorenz_my4_p7 ``short`` inline: 29.58 /
+  29.54 ns over seeds 1-10 / 1-20 against 29.99 / 29.79 ns for hw14h's centre-outward order (which
+  split copy 2 across the centre and put copy 4 at the far right); the front (input -> memory) then
+  limits 2 of 20 seeds instead of 11. The multipliers keep the centre-outward order. Every other pipeline
   (``min``, ``balanced``, ``max``, ...) keeps nextpnr's free placement, so their netlists, and fmax,
   are unchanged. ``"none"``: never.
 * Only parts with a site table (:data:`SITE_TABLES`: the LFE5U-45F, ``--device 45k``) get a plan;
@@ -50,7 +55,7 @@ from typing import Any
 from pwas_hdl.flow.netlist_json import read_top, write_netlist
 
 __all__ = ["FLOORPLANS", "SITE_TABLES", "SiteTable", "check_floorplan", "plan_sites", "apply_floorplan",
-           "applies_to_pipeline"]
+           "applies_to_pipeline", "replicated_sites"]
 
 #: ``synth --floorplan`` values: ``auto`` (the rule of this module) or ``none`` (never).
 FLOORPLANS = ("auto", "none")
@@ -73,12 +78,19 @@ class SiteTable:
     rows
         Cell type -> the row's name (``"Y34"``), for the record.
     sites
-        Cell type -> nextpnr BEL names, in the order cells are assigned to them.
+        Cell type -> nextpnr BEL names, in the order cells are assigned to them (whole tile groups of
+        ``group`` sites each, the central group first).
+    columns
+        BEL name -> its column (``X``), for :func:`replicated_sites`' left-to-right order.
+    group
+        Sites per tile group (consecutive in ``sites``).
     """
 
     part: str
     rows: dict[str, str]
     sites: dict[str, tuple[str, ...]]
+    columns: dict[str, int]
+    group: int = 4
 
 
 def _ecp5_45f() -> SiteTable:
@@ -86,8 +98,9 @@ def _ecp5_45f() -> SiteTable:
     ebr_row, dsp_row = 34, 46
     ebr = tuple(f"X{c + 2 * k}/Y{ebr_row}/EBR{k}" for c in groups for k in range(4))
     mult = tuple(f"X{c + j}/Y{dsp_row}/MULT18_{j}" for c in groups for j in (0, 1, 4, 5))
+    columns = {s: int(s[1:s.index("/")]) for s in ebr + mult}
     return SiteTable(part="LFE5U-45F", rows={"DP16KD": f"Y{ebr_row}", "MULT18X18D": f"Y{dsp_row}"},
-                     sites={"DP16KD": ebr, "MULT18X18D": mult})
+                     sites={"DP16KD": ebr, "MULT18X18D": mult}, columns=columns)
 
 
 #: nextpnr-ecp5 device option (``synthesize(device=...)``) -> its site table. Only the part measured.
@@ -109,6 +122,20 @@ def applies_to_pipeline(pipeline: dict[str, Any] | None) -> bool:
 
 def _natural(name: str) -> tuple:
     return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name))
+
+
+def replicated_sites(table: SiteTable, kind: str, count: int) -> tuple[str, ...]:
+    """The sites of ``count`` cells of type ``kind`` for the replicated memory: the fewest whole tile
+    groups of the table's centre-outward order that hold them, their sites left to right, the first
+    ``count`` of those (for 15 DP16KD on the 45F: X31 .. X64 of row Y34, groups X31, X42, X51, X60).
+
+    With the cells in natural order (copy 0's blocks, copy 1's, ...) each copy's blocks are adjacent
+    and the copies run left to right, copy 0 and copy ``n`` at the ends.
+    """
+    sites = table.sites[kind]
+    g = table.group
+    chosen = sites[: -(-count // g) * g]
+    return tuple(sorted(chosen, key=lambda s: table.columns[s]))[:count]
 
 
 def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
@@ -166,7 +193,10 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
             rec["reason"] = (f"auto: {len(names)} {t} cells, more than the {len(table.sites[t])} sites of row "
                              f"{table.rows[t]} on {table.part}")
             return rec
-    plan = {n: table.sites[t][k] for t, names in blocks.items() for k, n in enumerate(names)}
+    order = {t: table.sites[t] for t in HARD_BLOCKS}
+    if memory == "replicated":  # the copies left to right over the central groups (replicated_sites)
+        order["DP16KD"] = replicated_sites(table, "DP16KD", len(blocks["DP16KD"]))
+    plan = {n: order[t][k] for t, names in blocks.items() for k, n in enumerate(names)}
     rec.update(applied=True, rows={t: table.rows[t] for t, names in blocks.items() if names},
                cells=dict(sorted(plan.items(), key=lambda kv: _natural(kv[0]))))
     return rec
