@@ -16,9 +16,10 @@
     LFE5U-45F).
 
   Measured (Lorenz My = 4, p = 7, N = 4096, ECP5-45F speed 6, nextpnr seeds 1-3,
-  ``benchmarks/results/hw_tables_latency_experiments.md`` section hw14h): 30.05 ns replicated
-  against 30.13 ns banked (seeds 1-20: 29.79 against 30.66 ns), 704 against 924 LUT4, 15 against
-  5 DP16KD.
+  ``benchmarks/results/hw_tables_latency_experiments.md`` sections hw14h, hw14i; ``hw_tables.md``):
+  29.62 ns replicated with the floorplan's left-to-right copies (30.05 ns with hw14h's order)
+  against 30.13 ns banked (seeds 1-20: 29.54 / 29.79 against 30.66 ns), 704 against 924 LUT4, 15
+  against 5 DP16KD.
 * every other goal, FPGA or design, and no goal: the banked memory (:data:`DEFAULT_MEMORY`).
 
 The choice is recorded as the manifest's ``generator.options.memory`` (what rebuilds the design).
