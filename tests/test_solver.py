@@ -214,21 +214,21 @@ def test_memory_plan_tries_all_workers_then_one_factor_then_fewer(monkeypatch):
 
     monkeypatch.delenv(MAX_MEMORY_ENV, raising=False)
     args = (10**5, 10**6, 2, 1, 1, "auto")
-    full = estimate_fit_memory(*args, processes=2)
-    single = estimate_fit_memory(*args, processes=1)["total"]
+    full = estimate_fit_memory(*args, processes=2, block_smoother=False)  # the rule with first-order factors
+    single = estimate_fit_memory(*args, processes=1, block_smoother=False)["total"]
     one_factor = full["total"] - full["worker_factor"]
     assert single < one_factor < full["total"]
-    as_asked = plan_fit_memory(*args, max_memory=int(full["total"]) + 1, processes=2)
+    as_asked = plan_fit_memory(*args, max_memory=int(full["total"]) + 1, processes=2, block_smoother=False)
     assert (as_asked["processes"], as_asked["one_factor"], as_asked["reason"]) == (2, False, None)
     assert as_asked["estimate"]["total"] == full["total"]
-    mid = plan_fit_memory(*args, max_memory=int(one_factor) + 1, processes=2)
+    mid = plan_fit_memory(*args, max_memory=int(one_factor) + 1, processes=2, block_smoother=False)
     assert mid["processes"] == 2 and mid["one_factor"] and mid["estimate"]["total"] == pytest.approx(one_factor)
     assert "2 processes need an estimated" in mid["reason"] and "one factor at a time" in mid["reason"]
-    low = plan_fit_memory(*args, max_memory=int(single) + 1, processes=2)
+    low = plan_fit_memory(*args, max_memory=int(single) + 1, processes=2, block_smoother=False)
     assert (low["processes"], low["one_factor"]) == (1, False) and "runs on 1 process" in low["reason"]
     with pytest.raises(ResourceLimit, match=r"over the limit of \d+ MiB \(max_memory\)"):
-        plan_fit_memory(*args, max_memory=int(single) - 1, processes=2)
-    serial = plan_fit_memory(*args, max_memory=int(single) + 1, processes=1)
+        plan_fit_memory(*args, max_memory=int(single) - 1, processes=2, block_smoother=False)
+    serial = plan_fit_memory(*args, max_memory=int(single) + 1, processes=1, block_smoother=False)
     assert (serial["processes"], serial["reason"]) == (1, None)
 
 

@@ -54,7 +54,7 @@ def test_factor_chain_by_the_rule_within_the_bound_of_the_direct_solve(rules_3d)
     h, z, gam = _problem()
     hth = sparse.csr_array(h.T @ h)
     b = h.T @ z
-    solver = NormalEquationSolver(hth, gam, 3)
+    solver = NormalEquationSolver(hth, gam, 3, block_smoother=False)
     assert solver.method == "cg" and solver.factor_chain and solver.fallback
     chain = [i for i in range(SIGMAS.size) if solver.uses_factor_chain(hth, float(SIGMAS[i]))]
     rho = SIGMAS * float(gam.diagonal().mean()) / (float(hth.sum()) / hth.shape[0])
@@ -75,7 +75,7 @@ def test_unconverged_cg_is_redone_by_the_factorisation(rules_3d):
     h, z, gam = _problem()
     hth = sparse.csr_array(h.T @ h)
     b = h.T @ z
-    solver = NormalEquationSolver(hth, gam, 3, maxiter=3)  # no Jacobi-CG converges in 3 iterations
+    solver = NormalEquationSolver(hth, gam, 3, maxiter=3, block_smoother=False)  # no Jacobi-CG converges in 3 iterations
     jacobi = solver.sweep_segments(hth, SIGMAS)[1]
     assert not any(solver.uses_mg(hth, float(SIGMAS[i])) for i in jacobi)
     assert jacobi
@@ -86,15 +86,15 @@ def test_unconverged_cg_is_redone_by_the_factorisation(rules_3d):
 
 def test_cv_3d_all_converged_and_forked_gives_the_serial_result(rules_3d):
     h, z, gam = _problem()
-    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, block_smoother=False)
     by = serial.solver["solves_by_method"]
     assert serial.solver["all_converged"] and serial.solver["max_rel_residual"] <= rl.CG_RTOL
     assert by.get("factor-pcg", 0) > 0 and by.get("direct", 0) == 3 and by.get("mg", 0) > 0 and by.get("cg", 0) > 0
-    direct = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, method="direct")
+    direct = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, method="direct", block_smoother=False)
     assert direct.best_sigma == serial.best_sigma
     np.testing.assert_allclose(serial.fold_mse, direct.fold_mse, rtol=1e-6)
     with Executor(workers=2) as ex:
-        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex)
+        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex, block_smoother=False)
     assert forked.best_sigma == serial.best_sigma
     np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
     assert forked.solver["solves_by_method"] == by and forked.solver["iterations"] == serial.solver["iterations"]
@@ -102,9 +102,9 @@ def test_cv_3d_all_converged_and_forked_gives_the_serial_result(rules_3d):
 
 
 def test_memory_estimate_counts_the_chain_factor(monkeypatch):
-    with_chain = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1)
+    with_chain = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1, block_smoother=False)
     monkeypatch.setattr(rl, "FACTOR_CHAIN_DIMS", ())
-    without = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1)
+    without = rl.estimate_fit_memory(10**5, 64**3, 3, 1, 1, block_smoother=False)
     nnz_a = 10**5 * 16.0 + 64**3 * 7.0
     assert with_chain["factor"] - without["factor"] == pytest.approx(rl._sparse_bytes(rl.FACTOR_CHAIN_FILL * nnz_a, 64**3))
 
@@ -119,14 +119,14 @@ def test_memory_limit_holds_the_factors_one_at_a_time_with_the_serial_result(rul
     workers: every fold's factor chain runs in one task, one factor resident at a time (issue 18),
     and the CV is the serial one."""
     h, z, gam = _problem()
-    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2)
+    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2, block_smoother=False)
     one = full["total"] - full["worker_factor"]
     limit = _limit_between(one, full["total"])
-    plan = rl.plan_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, max_memory=limit, processes=2)
+    plan = rl.plan_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, max_memory=limit, processes=2, block_smoother=False)
     assert plan["processes"] == 2 and plan["one_factor"] and "one factor at a time" in plan["reason"]
-    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, block_smoother=False)
     with Executor(workers=2) as ex:
-        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex, max_memory=limit)
+        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex, max_memory=limit, block_smoother=False)
     mp = forked.solver["memory_plan"]
     assert mp["processes"] == 2 and mp["requested"] == 2 and mp["one_factor"] and mp["reason"] == plan["reason"]
     np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
@@ -136,24 +136,24 @@ def test_memory_limit_holds_the_factors_one_at_a_time_with_the_serial_result(rul
     assert len(forked.solver["fork_tasks"]) == 3 * 3 - 2
     # without the limit, the plan is the request and each chain is a task of its own
     with Executor(workers=2) as ex:
-        free = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex)
+        free = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex, block_smoother=False)
     assert free.solver["memory_plan"] == {**free.solver["memory_plan"], "processes": 2, "one_factor": False, "reason": None}
     assert len(free.solver["fork_tasks"]) == 3 * 3
 
 
 def test_memory_limit_below_one_factor_falls_back_to_one_process(rules_3d):
     h, z, gam = _problem()
-    one_proc = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=1)["total"]
-    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2)
+    one_proc = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=1, block_smoother=False)["total"]
+    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2, block_smoother=False)
     limit = _limit_between(one_proc, full["total"] - full["worker_factor"])
     with Executor(workers=2) as ex:
-        cv = cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, executor=ex, max_memory=limit)
+        cv = cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, executor=ex, max_memory=limit, block_smoother=False)
         assert ex._client is None  # nor on Dask workers: in this process
     mp = cv.solver["memory_plan"]
     assert mp["processes"] == 1 and not mp["one_factor"] and "the CV runs on 1 process" in mp["reason"]
     assert cv.solver["fork_tasks"] == []  # serial, in this process
     with pytest.raises(rl.ResourceLimit, match="over the limit"):
-        cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, max_memory=int(one_proc * 0.9))
+        cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, max_memory=int(one_proc * 0.9), block_smoother=False)
 
 
 def test_a_fallback_under_the_factor_lock_frees_its_factor(rules_3d):
@@ -164,7 +164,7 @@ def test_a_fallback_under_the_factor_lock_frees_its_factor(rules_3d):
     h, z, gam = _problem()
     hth = sparse.csr_array(h.T @ h)
     b = h.T @ z
-    solver = NormalEquationSolver(hth, gam, 3)
+    solver = NormalEquationSolver(hth, gam, 3, block_smoother=False)
     solver.maxiter = 1  # every CG solve stops at its cap: the fallback
     solver.factor_lock = threading.RLock()
     sigma = float(SIGMAS[-1])

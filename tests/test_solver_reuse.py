@@ -35,7 +35,7 @@ def test_factor_pcg_within_the_stated_bound_of_the_direct_solve(large_rules):
     h, z, gam = _problem(t=300)
     hth = sparse.csr_array(h.T @ h)
     b = h.T @ z
-    solver = NormalEquationSolver(hth, gam, 2)
+    solver = NormalEquationSolver(hth, gam, 2, block_smoother=False)
     assert solver.factor_pcg and solver.method == "direct"
     small = [i for i in solver.sweep_order(hth, SIGMAS) if not solver.uses_mg(hth, SIGMAS[i])]
     assert small == sorted(small) and len(small) >= 3  # the data-dominated sigmas from the smallest up
@@ -47,7 +47,7 @@ def test_factor_pcg_refactorises_at_the_cap_and_stops_trying(large_rules, monkey
     h, z, gam = _problem(t=300)
     hth = sparse.csr_array(h.T @ h)
     monkeypatch.setattr(rl, "FACTOR_PCG_MAXITER", 1)  # no PCG solve converges in one iteration
-    solver = NormalEquationSolver(hth, gam, 2)
+    solver = NormalEquationSolver(hth, gam, 2, block_smoother=False)
     small = [i for i in solver.sweep_order(hth, SIGMAS) if not solver.uses_mg(hth, SIGMAS[i])]
     w = None
     for i in small:
@@ -58,8 +58,8 @@ def test_factor_pcg_refactorises_at_the_cap_and_stops_trying(large_rules, monkey
 
 def test_cv_with_factor_pcg_matches_the_direct_cv(large_rules):
     h, z, gam = _problem()
-    ca = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
-    cd = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, method="direct")
+    ca = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, block_smoother=False)
+    cd = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, method="direct", block_smoother=False)
     by = ca.solver["solves_by_method"]
     assert by.get("factor-pcg", 0) > 0 and by.get("direct", 0) > 0 and by.get("mg", 0) > 0
     assert sum(by.values()) == 3 * SIGMAS.size and ca.solver["all_converged"]
@@ -69,9 +69,9 @@ def test_cv_with_factor_pcg_matches_the_direct_cv(large_rules):
 
 def test_forked_folds_give_the_serial_result(large_rules):
     h, z, gam = _problem()
-    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3)
+    serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, block_smoother=False)
     with Executor(workers=2) as ex:
-        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex)
+        forked = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, executor=ex, block_smoother=False)
         assert ex._client is None  # the Dask cluster was not started
     assert forked.best_sigma == serial.best_sigma
     np.testing.assert_allclose(forked.fold_mse, serial.fold_mse, rtol=0, atol=1e-12)
@@ -82,7 +82,7 @@ def test_forked_folds_give_the_serial_result(large_rules):
     # one task per segment of every fold's sweep: its multigrid chain, its factor-PCG chain, and
     # every larger data-dominated sigma alone
     hth = sparse.csr_array(h.T @ h)
-    solver = NormalEquationSolver(hth, gam, 2)
+    solver = NormalEquationSolver(hth, gam, 2, block_smoother=False)
     labels = rl.fold_labels(h.shape[0], 3)
     segs = []
     for f in range(3):
@@ -166,8 +166,8 @@ def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
 
 
 def test_memory_estimate_counts_each_forked_worker():
-    one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1)
-    two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2)
+    one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, block_smoother=False)
+    two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2, block_smoother=False)
     assert one["workers"] == 0 and one["fold_matrices"] == 0
     # each worker: its fold's matrices, its own numeric factor (the first-order CHOLMOD analysis is
     # the parent's, shared: worker_factor is the factor without it), multigrid levels, vectors
@@ -188,7 +188,7 @@ def test_sweep_segments_cover_every_sigma_once_by_the_rule(large_rules):
     h, z, gam = _problem()
     hth = sparse.csr_array(h.T @ h)
     sig = np.logspace(-7, 2, 19)
-    solver = NormalEquationSolver(hth, gam, 2)
+    solver = NormalEquationSolver(hth, gam, 2, block_smoother=False)
     segs = solver.sweep_segments(hth, sig)
     mg_idx = [i for i in range(sig.size) if solver.uses_mg(hth, float(sig[i]))]
     small = [i for i in range(sig.size) if i not in mg_idx]

@@ -12,6 +12,12 @@ the coarsest level. One V-cycle (forward Gauss-Seidel before, backward after, fr
 kernels; a symmetric preconditioner) preconditions conjugate gradients
 (:meth:`FoldMultigrid.solve`, stopping on the residual computed afresh).
 
+Where the data term dominates (small sigma) the V-cycle's fine level also solves exactly with
+``M_TT + sigma diag(Gamma)_TT`` on the vertices ``T`` that some sample touches
+(:class:`DataBlockSmoother`): Gauss-Seidel alone leaves the error in the null space of ``H'H`` (a
+simplex with one sample constrains one combination of its weights), which only ``sigma Gamma``
+damps and no coarse grid represents; the exact data block turns that part into Jacobi on ``Gamma``.
+
 The grid shape is that of the vertex numbering of :mod:`pwas_hdl.fit.geometry` (C order, the last
 dimension fastest); :func:`grid_shape_of` recovers it from a first-order ``Gamma``.
 """
@@ -31,6 +37,7 @@ __all__ = [
     "grid_shape_of",
     "GridHierarchy",
     "FoldMultigrid",
+    "DataBlockSmoother",
     "MGInfo",
 ]
 
@@ -272,6 +279,10 @@ class FoldMultigrid:
 
     def __init__(self, hier: GridHierarchy, ms: list[sparse.csr_matrix]):
         self.hier = hier
+        #: the data-block smoother of the fine level, built on the first :meth:`set_block`
+        self.block: DataBlockSmoother | None = None
+        self._fine_m = ms[0]
+        self._block_sigma: float | None = None
         self.ops: list[sparse.csr_matrix] = []
         self._m_vals: list[np.ndarray] = []
         self._g_vals: list[np.ndarray] = []
@@ -306,6 +317,47 @@ class FoldMultigrid:
         """
         return self._vcycle(np.asarray(b, dtype=np.float32), 0).astype(float)
 
+    def set_block(self, sigma: float) -> None:
+        """Factorise the data block ``M_TT + sigma diag(Gamma)_TT`` for :meth:`vcycle_block`.
+
+        Raises
+        ------
+        pwas_hdl.fit.sparse_cholesky.NotPositiveDefinite
+            The fold's data block is not numerically positive definite at this sigma.
+        """
+        if self.block is None:
+            self.block = DataBlockSmoother(self._fine_m, self.hier.gammas[0].diagonal())
+        if self._block_sigma != sigma:
+            self._block_sigma = None
+            self.block.factorize(sigma)
+            self._block_sigma = sigma
+
+    def vcycle_block(self, b: np.ndarray) -> np.ndarray:
+        """One V-cycle whose fine level is smoothed by Gauss-Seidel and the exact data block.
+
+        Forward Gauss-Seidel, then the data-block correction (:class:`DataBlockSmoother`), the
+        coarse-grid correction (the single-precision cycle of the coarser levels), the data-block
+        correction again and backward Gauss-Seidel: the post-smoothing is the adjoint of the
+        pre-smoothing, so the cycle is a symmetric preconditioner. The fine level stays in double
+        precision (in single the CG stalls at sigma = 1e-7: measured n = 3, N = 262 144). Call
+        :meth:`set_sigma` and :meth:`set_block` first.
+        """
+        from pyamg.relaxation.relaxation import gauss_seidel
+
+        a = self.ops[0]
+        b = np.asarray(b, dtype=float)
+        x = np.zeros_like(b)
+        gauss_seidel(a, x, b, iterations=1, sweep="forward")
+        x += self.block.solve(b - a @ x)
+        if len(self.ops) > 1:
+            r = (b - a @ x).astype(np.float32)
+            x += self._p32[0] @ self._vcycle(self._r32[0] @ r, 1)
+        else:  # pragma: no cover - a fine level at most COARSEST_MAX unknowns is not coarsened
+            x += self._coarse.solve(b - a @ x)
+        x += self.block.solve(b - a @ x)
+        gauss_seidel(a, x, b, iterations=1, sweep="backward")
+        return x
+
     def _vcycle(self, b: np.ndarray, level: int) -> np.ndarray:
         from pyamg.relaxation.relaxation import gauss_seidel
 
@@ -320,15 +372,26 @@ class FoldMultigrid:
         return x
 
     def solve(self, b: np.ndarray, sigma: float, x0: np.ndarray | None = None, rtol: float = 1e-10,
-              maxiter: int = 500) -> tuple[np.ndarray, MGInfo]:
-        """``(m + sigma Gamma)^{-1} b`` by PCG to ``||b - A w|| <= rtol ||b||`` (one column ``b``)."""
+              maxiter: int = 500, block: bool = False) -> tuple[np.ndarray, MGInfo]:
+        """``(m + sigma Gamma)^{-1} b`` by PCG to ``||b - A w|| <= rtol ||b||`` (one column ``b``).
+
+        ``block``: precondition with :meth:`vcycle_block` (the data-block smoother) instead of
+        :meth:`vcycle`.
+
+        Raises
+        ------
+        pwas_hdl.fit.sparse_cholesky.NotPositiveDefinite
+            ``block`` and the data block is not numerically positive definite (see :meth:`set_block`).
+        """
         self.set_sigma(float(sigma))
+        if block:
+            self.set_block(float(sigma))
         a = self.ops[0]
         b = np.asarray(b, dtype=float)
         nb = float(np.linalg.norm(b))
         if nb == 0.0:
             return np.zeros_like(b), MGInfo(0, 0.0, 0.0, True)
-        pre = splinalg.LinearOperator(a.shape, matvec=self.vcycle, dtype=float)
+        pre = splinalg.LinearOperator(a.shape, matvec=self.vcycle_block if block else self.vcycle, dtype=float)
         count = [0]
 
         def _cb(_xk):
@@ -338,3 +401,77 @@ class FoldMultigrid:
                               maxiter=maxiter, M=pre, callback=_cb)
         r = float(np.linalg.norm(b - a @ w))
         return w, MGInfo(count[0], r / nb, r, flag == 0 and r <= rtol * nb)
+
+
+class DataBlockSmoother:
+    """Exact solves with ``P = M_TT + sigma diag(Gamma)_TT`` on the vertices ``T`` that ``M`` touches.
+
+    ``M`` is one fold's normal matrix (``H_k'H_k``), ``T`` the vertices with a positive diagonal of
+    ``M``; elsewhere ``P`` is ``sigma diag(Gamma)`` alone. ``M_TT``'s pattern is analysed once (a
+    fold's own pattern: the validation samples' entries cancel in ``H'H - H_v'H_v``, so it is
+    smaller than the full data's), and each sigma is one numeric factorisation of a matrix without
+    ``Gamma``'s grid edges, whose fill is that of a zero-order fit (CHOLMOD choosing a simplicial or
+    supernodal factor; SuperLU without cvxopt).
+
+    As the fine-level smoother of :meth:`FoldMultigrid.vcycle_block` it makes the multigrid-PCG
+    iteration count nearly independent of sigma (fold 0 of T = 10^5, warm-started from the largest
+    sigma down, rtol 1e-10): 3-16 iterations at every sigma of 1e-7 .. 1e3 at n = 3, N = 262 144 and
+    6-11 at n = 2, N = 10^6, where Gauss-Seidel alone needs 10 -> > 4000 and 9 -> > 500.
+
+    Parameters
+    ----------
+    m : sparse array, shape (N, N)
+        The fold's normal matrix.
+    gamma_diag : ndarray, shape (N,)
+        The diagonal of ``Gamma`` (positive).
+    """
+
+    def __init__(self, m: sparse.sparray, gamma_diag: np.ndarray):
+        from pwas_hdl.fit.sparse_cholesky import PatternCholesky, cholmod_available
+
+        m = _csr(m)
+        m.eliminate_zeros()
+        self.n = m.shape[0]
+        self.gamma_diag = np.asarray(gamma_diag, dtype=float).reshape(-1)
+        if self.gamma_diag.shape != (self.n,) or not np.all(self.gamma_diag > 0):
+            raise ValueError("gamma_diag must be the positive diagonal of Gamma, one entry per vertex")
+        self.touched = np.flatnonzero(m.diagonal() > 0)
+        self._m_t = _csr(m[self.touched][:, self.touched])
+        g_t = sparse.diags(self.gamma_diag[self.touched])
+        self._g_t = _csr(g_t)
+        if cholmod_available():
+            self._chol = PatternCholesky(abs(self._m_t) + abs(self._g_t), supernodal=False)
+            self._m_vals, self._g_vals = self._chol.align(self._m_t), self._chol.align(self._g_t)
+        else:
+            self._chol = None
+        self._lu = None
+        self._inv: np.ndarray | None = None
+        self.factorizations = 0
+
+    def factorize(self, sigma: float) -> None:
+        """Factorise ``P`` at ``sigma``.
+
+        Raises
+        ------
+        pwas_hdl.fit.sparse_cholesky.NotPositiveDefinite
+        """
+        from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite
+
+        sigma = float(sigma)
+        self._inv = 1.0 / (sigma * self.gamma_diag)  # P's inverse off the touched vertices
+        if self._chol is not None:
+            self._chol.factorize(self._m_vals + sigma * self._g_vals)
+        else:
+            try:
+                self._lu = splinalg.splu(sparse.csc_matrix(self._m_t + sigma * self._g_t), permc_spec="MMD_AT_PLUS_A",
+                                         diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+            except RuntimeError as exc:  # an exactly singular pivot
+                raise NotPositiveDefinite(f"SuperLU: data block singular ({exc})") from None
+        self.factorizations += 1
+
+    def solve(self, r: np.ndarray) -> np.ndarray:
+        """``P^{-1} r`` with the last factorisation (``r`` shape (N,), double precision)."""
+        out = r * self._inv  # one pass over all vertices, then the touched ones overwritten
+        rt = r[self.touched]
+        out[self.touched] = self._chol.solve(rt) if self._chol is not None else self._lu.solve(rt)
+        return out

@@ -178,6 +178,26 @@ MG_DOMINANCE = 0.3
 #: 0.6 / 0.7 / 0.7 / 2.4 s: the cross-over lies between rho = 0.024 and 0.075.
 MG_DOMINANCE_CG = 0.05
 
+#: First order with multigrid (``auto`` or ``mg``, the data-block smoother on, the default): the
+#: sigmas of a fold with ``rho < MG_BLOCK_DOMINANCE`` (``rho`` as in :data:`MG_DOMINANCE`) are solved
+#: by the V-cycle whose fine level is smoothed by Gauss-Seidel *and* the exact data block
+#: ``M_TT + sigma diag(Gamma)_TT`` (:class:`~pwas_hdl.fit.multigrid.DataBlockSmoother`), every other
+#: sigma by the Gauss-Seidel V-cycle alone; no sigma is factorised with ``Gamma``'s grid edges (only
+#: a CG solve that stops at :data:`MG_BLOCK_MAXITER` is re-done so). Measured (fold 0, T = 10^5, one
+#: BLAS thread, CPU, warm-started from the largest sigma down, rtol 1e-10): n = 3, N = 262 144
+#: (rho = 0.75 sigma): the data-block cycle 3-16 iterations at every sigma (~65-75 ms each plus a
+#: 0.2 s factorisation of the block: 0.5-1.0 s a sigma), the Gauss-Seidel cycle 10 / 12 / 17 / 28 /
+#: 47 iterations (21 ms each) at log10 sigma = 3 / 0 / -0.5 / -1 / -1.5, i.e. 0.2 / 0.25 / 0.36 /
+#: 0.6 / 1.0 s; n = 2, N = 10^6 (rho = 50 sigma): the data-block cycle 6-11 iterations (~100 ms, 0.6-
+#: 1.1 s a sigma), the Gauss-Seidel cycle 8-12 at rho >= 1.6 (0.5-0.7 s), 19 / 34 / 56 at rho = 0.5 /
+#: 0.16 / 0.05 (1.0 / 1.8 / 3.0 s). The cross-over lies at rho ~ 0.1 in 3-D and ~0.5 in 2-D; 0.2
+#: is taken (no grid sigma of the two benchmark points falls between 0.1 and 0.5 in 2-D).
+MG_BLOCK_DOMINANCE = 0.2
+
+#: Iteration cap of a data-block multigrid-PCG solve (measured at most 16; a solve that hits the cap
+#: is re-done by the direct method, see :data:`MG_BLOCK_DOMINANCE`).
+MG_BLOCK_MAXITER = 200
+
 #: Multigrid is used by ``auto`` from this many unknowns (below, a factorisation takes well under
 #: a second: measured 0.8 s CPU for the whole first-order CV at n = 2, N = 10^4).
 MG_MIN_UNKNOWNS = 50_000
@@ -449,7 +469,7 @@ def _direct_limits() -> dict[tuple[int, int], int]:
 
 def estimate_fit_memory(
     n_samples: int, n_vertices: int, n_dims: int, n_targets: int = 1, order: int = 0, method: Method = "auto",
-    processes: int = 1,
+    processes: int = 1, block_smoother: bool = True,
 ) -> dict[str, float]:
     """Estimated peak bytes of a fit (with CV), before anything is allocated.
 
@@ -470,6 +490,10 @@ def estimate_fit_memory(
         Processes that solve folds at the same time (forked workers, see :func:`fork_workers`):
         each holds its own fold matrices, factor, multigrid levels and vectors (``H``, ``H'H`` and
         ``Gamma`` are inherited, shared).
+    block_smoother : bool
+        As in :class:`NormalEquationSolver`: with multigrid, the data-dominated sigmas by the
+        data-block cycle, whose factor (of ``H'H`` on the touched vertices, without ``Gamma``'s grid
+        edges) is charged as a zero-order one, instead of a first-order factor.
 
     Returns
     -------
@@ -495,17 +519,23 @@ def estimate_fit_memory(
     chosen = choose_method(unknowns, n_dims, order, method)
     use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS))
     # Jacobi-CG base with the factor chain (FACTOR_DOMINANCE_CG): a nested-dissection factor too
+    block = use_mg and bool(block_smoother) and method in ("auto", "mg")
     chain = (use_mg and chosen == "cg" and method == "auto" and int(n_dims) in FACTOR_CHAIN_DIMS
-             and cholmod_available())
+             and cholmod_available()) and not block
     chain_factor = _sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0
-    direct_factor, analysis = _direct_factor_bytes(nnz_a, nv, unknowns, int(n_dims)) if chosen == "direct" else (0.0, 0.0)
+    if block:  # the data block: H'H on at most T (n + 1) touched vertices plus a diagonal
+        touched = min(nv, nnz_h)
+        direct_factor, analysis = _direct_factor_bytes(nnz_hth + touched, nv, touched, int(n_dims))
+        chosen = "mg"
+    else:
+        direct_factor, analysis = _direct_factor_bytes(nnz_a, nv, unknowns, int(n_dims)) if chosen == "direct" else (0.0, 0.0)
     est = {
         "H": 2 * _sparse_bytes(nnz_h, t),  # H and its transpose
         "HtH": 3 * _sparse_bytes(nnz_a, nv),
         "Gamma": _sparse_bytes(nnz_gam, nv),
         "factor": (
             direct_factor
-            if chosen == "direct"
+            if chosen == "direct" or block
             else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
         ) + chain_factor,
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
@@ -519,12 +549,14 @@ def estimate_fit_memory(
     # first order with CHOLMOD: the symbolic analysis of the full-data pattern is made once, in the
     # parent before the fork (NormalEquationSolver.prepare_shared); the workers share its pages, so
     # each holds only its numeric factor
-    shared = analysis if order == 1 else 0.0
+    shared = analysis if order == 1 and not block else 0.0
     per_process = est["HtH"] * 2 / 3 + est["factor"] - shared + est["multigrid"] + est["vectors"] + FORK_WORKER_OVERHEAD
     est["workers"] = per_process * (max(int(processes), 1) - 1)
     # what one factor at a time saves a worker (plan_fit_memory): its direct factor, or the factor
     # chain's (the Jacobi-CG / multigrid state of the chain's sweep it keeps)
     worker_factor = chain_factor if chain else (est["factor"] - shared if chosen == "direct" else 0.0)
+    if block:  # a small factor: nothing to hold one at a time
+        worker_factor = 0.0
     # forked workers: the parent holds every fold's normal matrix (5 folds; one is in "HtH")
     est["fold_matrices"] = 4 * _sparse_bytes(nnz_hth, nv) if int(processes) > 1 else 0.0
     est["total"] = float(sum(est.values()))
@@ -553,6 +585,7 @@ def check_fit_memory(
     method: Method = "auto",
     max_memory: int | str | None = None,
     processes: int = 1,
+    block_smoother: bool = True,
 ) -> dict[str, float]:
     """Refuse a fit whose estimated memory exceeds the limit, before allocating anything.
 
@@ -569,7 +602,7 @@ def check_fit_memory(
     ResourceLimit
         Naming the estimate, its largest parts and the limit.
     """
-    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, processes)
+    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, processes, block_smoother)
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
         parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
@@ -592,6 +625,7 @@ def plan_fit_memory(
     method: Method = "auto",
     max_memory: int | str | None = None,
     processes: int = 1,
+    block_smoother: bool = True,
 ) -> dict:
     """How many processes a fit with CV can use within the memory limit, before allocating anything.
 
@@ -618,7 +652,7 @@ def plan_fit_memory(
     limit, source = memory_limit(max_memory)
     asked = None
     for procs in range(requested, 0, -1):
-        est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, procs)
+        est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, procs, block_smoother)
         asked = asked or est
         candidates = [(False, est)]
         if procs > 1 and est["worker_factor"] > 0:
@@ -636,7 +670,7 @@ def plan_fit_memory(
                 return {"processes": procs, "requested": requested, "one_factor": one_factor, "estimate": e,
                         "limit": limit, "reason": reason}
     # not even one process: the refusal names the one-process estimate
-    check_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, max_memory, 1)
+    check_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, max_memory, 1, block_smoother)
     raise InternalError("plan_fit_memory: one process over the limit was not refused")  # pragma: no cover
 
 
@@ -768,6 +802,11 @@ class NormalEquationSolver:
         The direct solve: CHOLMOD (:class:`~pwas_hdl.fit.sparse_cholesky.PatternCholesky`, one
         symbolic analysis per fold matrix, a numeric factorisation per sigma) where cvxopt is
         importable (``auto``), else SuperLU (:func:`_solve_spd`, a full factorisation per system).
+    block_smoother : bool
+        First order with multigrid (``auto``, ``mg``): solve the data-dominated sigmas by the
+        data-block multigrid cycle (:data:`MG_BLOCK_DOMINANCE`; the default). ``False`` keeps the
+        earlier rule (factorisations, factor-PCG and the factor chain at those sigmas), for
+        comparison.
     """
 
     def __init__(
@@ -779,6 +818,7 @@ class NormalEquationSolver:
         rtol: float = CG_RTOL,
         maxiter: int = CG_MAXITER,
         direct_backend: Literal["auto", "cholmod", "superlu"] = "auto",
+        block_smoother: bool = True,
     ):
         hth = sparse.csr_array(hth)
         gamma = sparse.csr_array(gamma)
@@ -828,6 +868,15 @@ class NormalEquationSolver:
         if self.factor_chain:
             self.factor_pcg = True
             self.fallback = True
+        #: first order with multigrid: the data-dominated sigmas by the data-block cycle
+        #: (:data:`MG_BLOCK_DOMINANCE`) instead of factorisations
+        self.block_mg = bool(block_smoother) and self._mg_shape is not None and method in ("auto", "mg")
+        #: the nested-dissection ordering for a first-order factorisation (3-D, see FACTOR_DOMINANCE_CG)
+        self._nd_order = self._mg_shape is not None and int(n_dims) in FACTOR_CHAIN_DIMS
+        if self.block_mg:
+            self.factor_pcg = self.factor_chain = False
+            # a data-block solve that stops at its cap is re-done by the factorisation
+            self.fallback = self.fallback or (method == "auto" and self.backend == "cholmod")
         self._factor_pcg_cap = FACTOR_PCG_MAXITER_CG if self.factor_chain else FACTOR_PCG_MAXITER
         #: the fold's factor reuse: ``{"m": m, "last": iterations of the last PCG, "stopped": bool}``
         self._reuse: dict | None = None
@@ -841,6 +890,8 @@ class NormalEquationSolver:
         self.superlu_fallbacks = 0
         #: factor-PCG attempts that hit :data:`FACTOR_PCG_MAXITER` (then refactorised)
         self.factor_pcg_failures = 0
+        #: data blocks (:data:`MG_BLOCK_DOMINANCE`) not positive definite (solved by Gauss-Seidel alone)
+        self.block_failures = 0
         self.infos: list[SolveInfo] = []
         #: one factor at a time (cross_validate_sigma under a memory limit, see plan_fit_memory): a
         #: lock shared by the forked workers; a fallback factorisation holds it and frees its factor
@@ -888,10 +939,17 @@ class NormalEquationSolver:
         """
         if self._mg_shape is None:
             return False
-        if self.method == "mg":
+        if self.method == "mg" or self.block_mg:
             return True
         limit = MG_DOMINANCE if self.method == "direct" else MG_DOMINANCE_CG
         return sigma * self._gamma_diag_mean() >= limit * self._mg_fold(m)[1]
+
+    def uses_block(self, m: sparse.csr_array, sigma: float) -> bool:
+        """True when this sigma is solved by the data-block multigrid cycle
+        (``rho < MG_BLOCK_DOMINANCE``, see :data:`MG_BLOCK_DOMINANCE`)."""
+        if not self.block_mg:
+            return False
+        return sigma * self._gamma_diag_mean() < MG_BLOCK_DOMINANCE * self._mg_fold(m)[1]
 
     def uses_factor_chain(self, m: sparse.csr_array, sigma: float) -> bool:
         """True when the base method is Jacobi-CG and this sigma is in the fold's factor chain
@@ -903,7 +961,9 @@ class NormalEquationSolver:
     def segment_cost(self, m: sparse.csr_array, sigma: float) -> float:
         """Relative cost of this sigma in a segment, for the order of the forked tasks
         (:func:`_fork_segments`): :data:`_MG_COST` by multigrid, :data:`_CHAIN_COST` in the factor
-        chain, else 1."""
+        chain, :data:`_MG_BLOCK_COST` by the data-block cycle, else 1."""
+        if self.uses_block(m, sigma):
+            return _MG_BLOCK_COST
         if self.uses_mg(m, sigma):
             return _MG_COST
         return _CHAIN_COST if self.uses_factor_chain(m, sigma) else 1.0
@@ -911,7 +971,7 @@ class NormalEquationSolver:
     def full_data_uses_mg(self, sigma: float) -> bool:
         """:meth:`uses_mg` for the full-data normal matrix (a lower bound of every fold's rho)."""
         return self._mg_shape is not None and (
-            self.method == "mg"
+            self.method == "mg" or self.block_mg
             or sigma * self._gamma_diag_mean() >= (MG_DOMINANCE if self.method == "direct" else MG_DOMINANCE_CG)
             * self._full_mean_row)
 
@@ -930,17 +990,25 @@ class NormalEquationSolver:
         """Multigrid-preconditioned CG, column by column, to :attr:`rtol` (see :func:`_cg`)."""
         self.prepare_multigrid(m)  # the levels of m (built once, freeing the previous fold's first)
         fold = self._mg_cache[2]
+        block = self.uses_block(m, sigma)
+        if block:
+            try:
+                fold.set_block(float(sigma))
+            except NotPositiveDefinite:  # rounding in H'H - H_v'H_v at a tiny sigma: Gauss-Seidel alone
+                self.block_failures += 1
+                block = False
+        maxiter = min(self.maxiter, MG_BLOCK_MAXITER) if block else self.maxiter
         b2 = np.asarray(bk, dtype=float).reshape(self.n, -1)
         x2 = None if x0k is None else np.asarray(x0k, dtype=float).reshape(b2.shape)
         w = np.zeros_like(b2)
         its, worst_rel, worst_abs, ok = 0, 0.0, 0.0, True
         for j in range(b2.shape[1]):
-            w[:, j], mi = fold.solve(b2[:, j], sigma, None if x2 is None else x2[:, j], self.rtol, self.maxiter)
+            w[:, j], mi = fold.solve(b2[:, j], sigma, None if x2 is None else x2[:, j], self.rtol, maxiter, block)
             its += mi.iterations
             worst_rel, worst_abs = max(worst_rel, mi.rel_residual), max(worst_abs, mi.abs_residual)
             ok = ok and mi.converged
         bound = worst_abs / (sigma * self.lam_gamma) if self.lam_gamma > 0 else float("inf")
-        return w.reshape(np.shape(bk)), SolveInfo("mg", its, worst_rel, bound, ok)
+        return w.reshape(np.shape(bk)), SolveInfo("mg-block" if block else "mg", its, worst_rel, bound, ok)
 
     def sweep_order(self, m: sparse.csr_array, sigmas: np.ndarray) -> list[int]:
         """Order in which a fold (normal matrix ``m``) solves its ``sigmas`` (indices).
@@ -967,12 +1035,17 @@ class NormalEquationSolver:
         multigrid is used: the multigrid sigmas (one warm-started chain), then with
         :attr:`factor_pcg` the :data:`FACTOR_PCG_SEGMENT` smallest data-dominated sigmas (the
         factor-PCG chain), then every other data-dominated sigma alone (a factorisation each).
+        With :attr:`block_mg`: the sigmas of the Gauss-Seidel cycle, then those of the data-block
+        cycle (:data:`MG_BLOCK_DOMINANCE`; each a warm-started chain from the largest down).
         With :attr:`factor_chain` (base method Jacobi-CG): the multigrid sigmas, the Jacobi-CG ones
         (each a warm-started chain from the largest down; three tasks a fold balance the forked
         workers better than two), then the factor chain (from the smallest up).
         Otherwise the whole sweep is one segment.
         """
         order = self.sweep_order(m, sigmas)
+        if self.block_mg:  # the Gauss-Seidel cycle's sigmas, the data-block cycle's (each largest down)
+            block = [i for i in order if self.uses_block(m, float(sigmas[i]))]
+            return [seg for seg in ([i for i in order if i not in set(block)], block) if seg]
         if self.factor_chain:  # multigrid, Jacobi-CG (each a warm-started chain), the factor chain
             chain = [i for i in order if self.uses_factor_chain(m, float(sigmas[i]))]
             mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
@@ -1015,15 +1088,15 @@ class NormalEquationSolver:
         """
         if self._mg_shape is not None and self._mg_hier is None:
             self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
-        if (self.method == "direct" or self.factor_chain) and self.backend == "cholmod":
+        if (self.method == "direct" or self.factor_chain) and self.backend == "cholmod" and not self.block_mg:
             self._shared_pattern()
 
     def _shared_pattern(self) -> tuple | None:
         """``(PatternCholesky, Gamma's values)`` of the full-data pattern (first order), built once."""
         if self._shared_hth is not None and self._shared_chol is None:
             pattern = abs(self._shared_hth) + abs(self.gamma)
-            chol = (PatternCholesky(pattern, grid_nested_dissection(self._mg_shape)) if self.factor_chain
-                    else PatternCholesky(pattern))
+            chol = (PatternCholesky(pattern, grid_nested_dissection(self._mg_shape)) if self._nd_order
+                    and (self.factor_chain or self.block_mg) else PatternCholesky(pattern))
             self._shared_chol = (chol, chol.align(self.gamma))
         return self._shared_chol
 
@@ -1319,6 +1392,10 @@ _MG_COST = 0.4
 #: the 5 Jacobi-CG sigmas 8.4 s, the 9 multigrid ones 2.6 s.
 _CHAIN_COST = 2.5
 
+#: The same for a sigma of the data-block multigrid cycle (:data:`MG_BLOCK_DOMINANCE`): measured
+#: 0.5-1.1 s at n = 2 and 3 (fold 0), about twice a Gauss-Seidel-cycle sigma.
+_MG_BLOCK_COST = 0.8
+
 
 def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Callable[[int, int], float],
                    procs: int, n_sigmas: int, progress, stats: list | None,
@@ -1384,6 +1461,7 @@ def cross_validate_sigma(
     max_memory: int | str | None = None,
     executor=None,
     final_solve: bool = False,
+    block_smoother: bool = True,
 ) -> CVResult:
     """Choose sigma by k-fold cross-validation over a grid of candidates.
 
@@ -1430,6 +1508,9 @@ def cross_validate_sigma(
         gamma, method, rtol=rtol)`` (same solver, same arithmetic) without forming ``H'H`` again or
         rebuilding the shared analysis / multigrid hierarchy (measured ~1-2 s CPU at n = 2, N = 10^6,
         first order).
+    block_smoother : bool
+        First order with multigrid: the data-dominated sigmas by the data-block cycle (the default;
+        see :data:`MG_BLOCK_DOMINANCE` and :class:`NormalEquationSolver`).
 
     Returns
     -------
@@ -1445,11 +1526,11 @@ def cross_validate_sigma(
     z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
     labels = fold_labels(h.shape[0], folds, shuffle, seed)
     mem_plan = plan_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory,
-                               processes=max(fork_workers(executor, h.shape[1]), 1))
+                               processes=max(fork_workers(executor, h.shape[1]), 1), block_smoother=block_smoother)
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2
-    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol)
+    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol, block_smoother=block_smoother)
     hth_r = solver.restrict_matrix(hth)
     fold_mse = np.zeros((folds, sig.size))
     weight_bound = np.zeros((folds, sig.size))
@@ -1467,7 +1548,7 @@ def cross_validate_sigma(
         """Solve one segment of a fold's sweep (it starts afresh: see ``sweep_segments``)."""
         nonlocal done
         val, hv, a_tr, b_tr = data
-        first, fallbacks = len(solver.infos), solver.superlu_fallbacks
+        first, fallbacks, block_fails = len(solver.infos), solver.superlu_fallbacks, solver.block_failures
         solver.start_segment()
         w, mse_s, bound_s = None, [], []
         for i in segment:
@@ -1477,17 +1558,19 @@ def cross_validate_sigma(
             done += 1
             if progress is not None:
                 progress(done, total)
-        return segment, mse_s, bound_s, solver.infos[first:], solver.superlu_fallbacks - fallbacks
+        return (segment, mse_s, bound_s, solver.infos[first:], solver.superlu_fallbacks - fallbacks,
+                solver.block_failures - block_fails)
 
-    def merge(results: list) -> tuple[np.ndarray, np.ndarray, list, int]:
-        mse_f, bound_f, infos_f, fb = np.zeros(sig.size), np.zeros(sig.size), [], 0
-        for segment, mse_s, bound_s, infos_s, fb_s in results:
+    def merge(results: list) -> tuple[np.ndarray, np.ndarray, list, int, int]:
+        mse_f, bound_f, infos_f, fb, bf = np.zeros(sig.size), np.zeros(sig.size), [], 0, 0
+        for segment, mse_s, bound_s, infos_s, fb_s, bf_s in results:
             mse_f[segment], bound_f[segment] = mse_s, bound_s
             infos_f += infos_s
             fb += fb_s
-        return mse_f, bound_f, infos_f, fb
+            bf += bf_s
+        return mse_f, bound_f, infos_f, fb, bf
 
-    def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list, int]:
+    def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list, int, int]:
         data = fold_data(f)
         return merge([run_segment(data, seg, progress) for seg in solver.sweep_segments(data[2], sig)])
 
@@ -1532,7 +1615,7 @@ def cross_validate_sigma(
         # the memory limit allows one process (plan_fit_memory): the folds run here, not on Dask workers
         serial_only = mem_plan["processes"] == 1 and mem_plan["requested"] > 1
         parts = _map_folds(one_fold, folds, None if serial_only else executor, independent, sig.size, progress)
-    for f, (mse_f, bound_f, _, _) in enumerate(parts):
+    for f, (mse_f, bound_f, *_) in enumerate(parts):
         fold_mse[f], weight_bound[f] = mse_f, bound_f
     solver.infos = [i for part in parts for i in part[2]]
     solver.superlu_fallbacks = sum(part[3] for part in parts)
@@ -1548,6 +1631,8 @@ def cross_validate_sigma(
         "direct_fallbacks": int(sum(i.method == "direct-fallback" for i in infos)),
         "solves_by_method": {k: int(sum(i.method == k for i in infos)) for k in sorted({i.method for i in infos})},
         "superlu_fallbacks": int(solver.superlu_fallbacks),
+        # data blocks that were not positive definite (those sigmas by the Gauss-Seidel cycle)
+        "block_failures": int(sum(part[4] for part in parts)),
         "weight_bound": weight_bound,
         # forked workers (see _fork_segments): per segment task, in (fold, segment) order, its CPU
         # seconds and the worker's pid
