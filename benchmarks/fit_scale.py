@@ -20,6 +20,7 @@ solve guarantees (``||r|| / (sigma lambda_min(Gamma))``).
 Usage::
 
     python benchmarks/fit_scale.py [--quick] [--outdir benchmarks/results] [--limit 300] [--budget S] [--workers N]
+                                   [--points n:p,...] [--no-block-smoother] [--stem NAME]
 
 writes ``fit_scale.json`` and ``fit_scale.md`` (``--quick``: ``T = 10^4``, small sizes only,
 ``fit_scale_quick.*``). Nothing here asserts on times.
@@ -115,7 +116,8 @@ class _PssPeak:
         self._thread.join()
 
 
-def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: int = 0) -> dict:
+def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: int = 0,
+               block_smoother: bool = True) -> dict:
     """The timed fit (runs in a subprocess); saves the weights for the direct comparison.
 
     ``workers >= 2``: the CV folds run as ``fit --workers N`` runs them
@@ -139,10 +141,11 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         # the estimate of the plan fit makes for this run under the memory limit (cross_validate_sigma
         # makes the same plan again): with forked workers, each worker's own solver state counted
         # too, or one factor at a time, or fewer processes (plan_fit_memory; a refusal fails the point)
-        est = plan_fit_memory(t, grid.n_vertices, n, 1, order, processes=max(fork_workers(ex, grid.n_vertices), 1))["estimate"]
+        est = plan_fit_memory(t, grid.n_vertices, n, 1, order, processes=max(fork_workers(ex, grid.n_vertices), 1),
+                              block_smoother=block_smoother)["estimate"]
         h = grid.basis_matrix(x)
         gam = tikhonov_matrix(grid, order)
-        cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex, final_solve=True)
+        cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex, final_solve=True, block_smoother=block_smoother)
         w, info = cv.final_weights, cv.final_info  # as fit does: the CV's solver solves the full data
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0 - pss.cpu  # without the sampler's CPU
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -171,6 +174,8 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         "cv_max_rel_residual": cv.solver["max_rel_residual"],
         "cv_all_converged": cv.solver["all_converged"],
         "cv_direct_fallbacks": cv.solver["direct_fallbacks"],
+        "block_smoother": block_smoother,
+        "cv_block_failures": cv.solver.get("block_failures", 0),
         "cv_solves_by_method": cv.solver.get("solves_by_method", {}),
         "memory_plan": cv.solver.get("memory_plan"),
         "best_sigma": cv.best_sigma,
@@ -223,7 +228,7 @@ def _run_child(args: list[str], limit: float) -> dict:
 
 
 def run(points, t: int, limit: float, direct_limit: float, budget: float = float("inf"), progress=print,
-        workers: int = 0) -> dict:
+        workers: int = 0, block_smoother: bool = True) -> dict:
     rows = []
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pwas-fit-scale-") as tmp:
@@ -235,8 +240,8 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
                     row.update({"status": "not run (time budget of the benchmark spent)"})
                     rows.append(row)
                     continue
-                row.update(_run_child(["--worker", "fit", json.dumps([n, p, order, t, wfile, workers])], limit))
-                if row["status"] == "ok" and (row["method"] == "cg" or row["final"]["method"] in ("cg", "mg")):
+                row.update(_run_child(["--worker", "fit", json.dumps([n, p, order, t, wfile, workers, block_smoother])], limit))
+                if row["status"] == "ok" and (row["method"] == "cg" or row["final"]["method"] in ("cg", "mg", "mg-block")):
                     d = _run_child(
                         ["--worker", "direct", json.dumps([n, p, order, t, row["best_sigma"], wfile])], direct_limit
                     )
@@ -258,6 +263,8 @@ def run(points, t: int, limit: float, direct_limit: float, budget: float = float
             "direct_limit_s": direct_limit,
             "budget_s": budget if budget != float("inf") else None,
             "workers": workers if workers >= 2 else 1,
+            # first order with multigrid: the data-dominated sigmas by the data-block cycle (the default)
+            "block_smoother": block_smoother,
             # shared: other jobs ran (1-minute load average >= IDLE_LOAD at the start, or unknown)
             "shared_machine": _load() is None or _load() >= IDLE_LOAD,
             "load_average_at_start": _load(),
@@ -332,6 +339,8 @@ def markdown(res: dict) -> str:
         f"T = {s['T']} random regressors, 5-fold CV over 21 sigmas (1e-7 .. 1e3) + final solve, solver chosen "
         f"by `method=\"auto\"`. Each point in its own process; limit {s['limit_s']:.0f} s wall per fit and "
         f"{s['direct_limit_s']:.0f} s per direct reference solve. "
+        + ("First order: the earlier rule (`--no-block-smoother`: factorisations at the data-dominated sigmas). "
+           if s.get("block_smoother") is False else "")
         + (f"Memory limit {ml['bytes'] / 2**20:.0f} MiB ({ml['source']}). " if ml.get("bytes") else "")
         + ("**The 2-core machine was shared with other engineers' jobs** (load average "
            f"{s['load_average_at_start'] or float('nan'):.1f} at the start): wall times are inflated, CPU times are "
@@ -420,6 +429,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--points", default=None, help="only these n:p points, comma-separated (e.g. 6:3,2:999)")
     ap.add_argument("--workers", type=int, default=0,
                     help="run the CV folds on a local Dask cluster of this many processes (default: serial)")
+    ap.add_argument("--no-block-smoother", action="store_true",
+                    help="first order: the earlier rule (factorisations at the data-dominated sigmas) instead of "
+                         "the data-block multigrid cycle, for comparison")
     ap.add_argument("--stem", default=None, help="output file stem (default fit_scale / fit_scale_quick)")
     args = ap.parse_args(argv)
     points, t, stem = (QUICK_POINTS, 10_000, "fit_scale_quick") if args.quick else (FULL_POINTS, 100_000, "fit_scale")
@@ -437,7 +449,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.workers < 0:
         ap.error("--workers must be 0 (serial) or a positive count")
     res = run(points, t, args.limit, args.direct_limit, args.budget, progress=lambda m: print(m, flush=True),
-              workers=args.workers)
+              workers=args.workers, block_smoother=not args.no_block_smoother)
     atomic_write_text(args.outdir / f"{stem}.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
     md = markdown(res)
     atomic_write_text(args.outdir / f"{stem}.md", md)

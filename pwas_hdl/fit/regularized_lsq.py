@@ -179,22 +179,24 @@ MG_DOMINANCE = 0.3
 MG_DOMINANCE_CG = 0.05
 
 #: First order with multigrid (``auto`` or ``mg``, the data-block smoother on, the default): the
-#: sigmas of a fold with ``rho < MG_BLOCK_DOMINANCE`` (``rho`` as in :data:`MG_DOMINANCE`) are solved
-#: by the V-cycle whose fine level is smoothed by Gauss-Seidel *and* the exact data block
-#: ``M_TT + sigma diag(Gamma)_TT`` (:class:`~pwas_hdl.fit.multigrid.DataBlockSmoother`), every other
-#: sigma by the Gauss-Seidel V-cycle alone; no sigma is factorised with ``Gamma``'s grid edges (only
-#: a CG solve that stops at :data:`MG_BLOCK_MAXITER` is re-done so). Measured (fold 0, T = 10^5, one
-#: BLAS thread, CPU, warm-started from the largest sigma down, rtol 1e-10): n = 3, N = 262 144
-#: (rho = 0.75 sigma): the data-block cycle 3-16 iterations at every sigma (~65-75 ms each plus a
-#: 0.2 s factorisation of the block: 0.5-1.0 s a sigma), the Gauss-Seidel cycle 10 / 12 / 17 / 28 /
-#: 47 iterations (21 ms each) at log10 sigma = 3 / 0 / -0.5 / -1 / -1.5, i.e. 0.2 / 0.25 / 0.36 /
-#: 0.6 / 1.0 s; n = 2, N = 10^6 (rho = 50 sigma): the data-block cycle 6-11 iterations (~100 ms, 0.6-
-#: 1.1 s a sigma), the Gauss-Seidel cycle 8-12 at rho >= 1.6 (0.5-0.7 s), 19 / 34 / 56 at rho = 0.5 /
-#: 0.16 / 0.05 (1.0 / 1.8 / 3.0 s). The cross-over lies at rho ~ 0.1 in 3-D and ~0.5 in 2-D; 0.2
-#: is taken (no grid sigma of the two benchmark points falls between 0.1 and 0.5 in 2-D).
-MG_BLOCK_DOMINANCE = 0.2
+#: sigmas of a fold with ``rho < MG_BLOCK_DOMINANCE[min(n, 3)]`` (``rho`` as in :data:`MG_DOMINANCE`,
+#: ``n`` the regressor dimension) are solved by the V-cycle whose fine level is smoothed by the exact
+#: data block ``M_TT + sigma diag(Gamma)_TT`` and Gauss-Seidel
+#: (:class:`~pwas_hdl.fit.multigrid.DataBlockSmoother`, :meth:`~pwas_hdl.fit.multigrid.FoldMultigrid.vcycle_block`),
+#: every other sigma by the Gauss-Seidel V-cycle alone; no sigma is factorised with ``Gamma``'s grid
+#: edges (only a CG solve that stops at :data:`MG_BLOCK_MAXITER` is re-done so). Measured (fold 0,
+#: T = 10^5, one BLAS thread, CPU s a sigma, warm-started from the next larger grid sigma, rtol
+#: 1e-10), data-block against Gauss-Seidel cycle: n = 3, N = 262 144 at rho = 0.74 / 0.23 / 0.074 /
+#: 0.023: 0.75 / 0.86 / 0.83 / 0.77 against 0.21 / 0.30 / 0.49 / 0.83 (11 iterations each against 12
+#: / 17 / 28 / 47; the block cycle's iterations stay at 1-15 down to sigma = 1e-7, where Gauss-Seidel
+#: needs > 4000); n = 2, N = 10^6 at rho = 5 / 1.6 / 0.5 / 0.16: 0.78 / 0.85 / 0.98 / 0.91 against
+#: 0.66 / 0.79 / 1.16 / 1.97 (Gauss-Seidel 10 / 12 / 19 / 34 iterations, > 500 below rho ~ 0.005).
+#: The cross-over lies near rho = 0.025 in 3-D and 1 in 2-D (a block solve is dearer against a
+#: V-cycle in 3-D: its factor has more fill); 1-D takes the 2-D value, 4-D and up the 3-D one (not
+#: measured).
+MG_BLOCK_DOMINANCE: dict[int, float] = {1: 1.0, 2: 1.0, 3: 0.05}
 
-#: Iteration cap of a data-block multigrid-PCG solve (measured at most 16; a solve that hits the cap
+#: Iteration cap of a data-block multigrid-PCG solve (measured at most 15; a solve that hits the cap
 #: is re-done by the direct method, see :data:`MG_BLOCK_DOMINANCE`).
 MG_BLOCK_MAXITER = 200
 
@@ -790,11 +792,12 @@ class NormalEquationSolver:
         Regressor dimension ``n`` (for the ``auto`` rule).
     method : {"auto", "direct", "cg", "mg"}
         See :func:`choose_method`. First order, ``auto``: from :data:`MG_MIN_UNKNOWNS` unknowns on
-        a vertex grid, the sigmas whose penalty dominates (:data:`MG_DOMINANCE`) are solved by
-        multigrid-preconditioned CG (all sigmas where the base method is not direct); where the base
-        method is Jacobi-CG (3-D), the smallest sigmas by the factor chain
-        (:data:`FACTOR_DOMINANCE_CG`) and an unconverged CG solve again by the factorisation; ``mg``:
-        every sigma by multigrid.
+        a vertex grid in 2-D or 3-D, every sigma by multigrid-preconditioned CG, the data-dominated
+        ones (:data:`MG_BLOCK_DOMINANCE`) with the data-block cycle, and a solve that stops
+        unconverged again by the factorisation; ``mg``: the same in any dimension. With
+        ``block_smoother=False`` the earlier rule: multigrid where the penalty dominates
+        (:data:`MG_DOMINANCE`), otherwise the factorisation and factor-PCG (2-D) or, where the
+        base method is Jacobi-CG (3-D), the factor chain (:data:`FACTOR_DOMINANCE_CG`).
     rtol : float
         CG relative-residual tolerance (default :data:`CG_RTOL`).
     maxiter : int
@@ -873,6 +876,8 @@ class NormalEquationSolver:
         self.block_mg = bool(block_smoother) and self._mg_shape is not None and method in ("auto", "mg")
         #: the nested-dissection ordering for a first-order factorisation (3-D, see FACTOR_DOMINANCE_CG)
         self._nd_order = self._mg_shape is not None and int(n_dims) in FACTOR_CHAIN_DIMS
+        #: the threshold of :meth:`uses_block` for this dimension (:data:`MG_BLOCK_DOMINANCE`)
+        self.block_dominance = MG_BLOCK_DOMINANCE[min(max(int(n_dims), 1), 3)]
         if self.block_mg:
             self.factor_pcg = self.factor_chain = False
             # a data-block solve that stops at its cap is re-done by the factorisation
@@ -946,10 +951,10 @@ class NormalEquationSolver:
 
     def uses_block(self, m: sparse.csr_array, sigma: float) -> bool:
         """True when this sigma is solved by the data-block multigrid cycle
-        (``rho < MG_BLOCK_DOMINANCE``, see :data:`MG_BLOCK_DOMINANCE`)."""
+        (``rho <`` :attr:`block_dominance`, see :data:`MG_BLOCK_DOMINANCE`)."""
         if not self.block_mg:
             return False
-        return sigma * self._gamma_diag_mean() < MG_BLOCK_DOMINANCE * self._mg_fold(m)[1]
+        return sigma * self._gamma_diag_mean() < self.block_dominance * self._mg_fold(m)[1]
 
     def uses_factor_chain(self, m: sparse.csr_array, sigma: float) -> bool:
         """True when the base method is Jacobi-CG and this sigma is in the fold's factor chain
