@@ -183,10 +183,9 @@ def test_cv_folds_on_two_workers_choose_the_serial_sigma_and_weights(cluster):
     assert np.array_equal(dist.cv_.fold_mse, serial.cv_.fold_mse) and dist.cv_.solver["solves"] == 45
     assert {k: v for k, v in dist.cv_.solver.items() if k != "weight_bound"} == {k: v for k, v in serial.cv_.solver.items() if k != "weight_bound"}
     assert seen[-1] == (45, 45) and all(d % 9 == 0 for d, _ in seen)  # per fold: the tasks ran on the cluster
-    # the map hook itself: distributed only when asked and when the folds are independent
+    # the map hook itself: distributed only when asked
     calls = []
-    assert rl._map_folds(lambda f: calls.append(f) or f, 3, None, True, 9, None) == [0, 1, 2] and calls == [0, 1, 2]
-    assert rl._map_folds(lambda f: -f, 3, cluster, False, 9, None) == [0, -1, -2]  # in process: a lambda is fine
+    assert rl._map_folds(lambda f: calls.append(f) or f, 3, None, 9, None) == [0, 1, 2] and calls == [0, 1, 2]
 
 
 def test_cli_fit_refuses_bad_workers(tmp_path):

@@ -7,6 +7,7 @@ sparse: ``H`` has ``n + 1`` non-zeros per row and ``H'H`` couples only vertices 
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from contextlib import nullcontext
@@ -224,6 +225,21 @@ MG_AUTO_DIMS = (2, 3)
 #: clusters (the smallest sigmas).
 FACTOR_PCG_MAXITER = 10
 
+#: A fold's sweep by CG alone (method ``cg`` without the factor chain: ``auto`` from n = 4 up) is
+#: cut into this many warm-started chains of consecutive sigmas (largest down, by count), so that
+#: the forked workers of :func:`cross_validate_sigma` get ten or more tasks of unequal cost rather
+#: than five equal ones (two workers then finish within a short chain of each other instead of one
+#: fold). Measured at n = 4, N = 104 976, first order, fold 0 (CPU): the seven smallest sigmas
+#: 26 s, the seven middle ones 4.7 s, the seven largest 3.5 s.
+CG_SEGMENTS = 3
+
+#: For the longest-first order of those chains: a Jacobi/AMG-CG sigma costs about
+#: ``1 / sqrt(max(rho, CG_COST_RHO_FLOOR))`` (CG iterations grow like the square root of the
+#: condition number, about ``1 / rho``; ``rho = sigma mean(diag Gamma) / mean(rowsum H'H)``), the
+#: floor standing for :data:`CG_MAXITER` (measured at n = 4, N ~ 10^5: 2000 iterations from rho
+#: ~ 1e-5 down, in both orders).
+CG_COST_RHO_FLOOR = 1e-5
+
 #: The factor-PCG chain of a fold (:data:`FACTOR_PCG_MAXITER`) covers only its this many smallest
 #: data-dominated sigmas; every larger one is factorised in a segment of its own
 #: (:meth:`NormalEquationSolver.sweep_segments`), a task that any worker process can take
@@ -292,10 +308,13 @@ FALLBACK_FACTOR = 4
 #: lumped surrogate is no better than the diagonal: measured at n = 3, N = 9261).
 AMG_DOMINANCE = 10.0
 
-#: The algebraic-multigrid hierarchy of the preconditioner, built for one sigma, is reused for
-#: the other sigmas within this ratio (the preconditioned spectrum then lies within
-#: ``[1 / ratio, ratio]`` of the one it was built for, see :func:`_Preconditioner`).
+#: The algebraic-multigrid hierarchy of the preconditioner serves a band of sigmas of this ratio
+#: (built at the band's geometric middle: the preconditioned spectrum then lies within
+#: ``[1 / sqrt(ratio), sqrt(ratio)]`` of the one it was built for, see :class:`_Preconditioner`).
 AMG_REUSE_RATIO = 10.0
+
+#: Seed of numpy's global generator while pyamg builds a hierarchy (see :class:`_Preconditioner`).
+AMG_SEED = 0
 
 #: Bytes each further forked CV worker holds beyond its solver state in :func:`estimate_fit_memory`
 #: (pages copied on write, the allocator's arenas): measured ~110 MiB not in the estimate with the
@@ -710,9 +729,14 @@ class _Preconditioner:
     the *lumped* surrogate ``diag(rowsum(H'H)) + sigma0 Gamma``, an M-matrix (a scaled grid
     Laplacian plus a positive diagonal); since ``H'H <= diag(rowsum(H'H))`` (each row of ``H`` is a
     probability vector) the surrogate bounds ``A`` from above. The hierarchy is built on the
-    full-data normal matrix and reused for every fold, and for every sigma within
-    ``AMG_REUSE_RATIO`` of ``sigma0``: surrogates of two sigmas are spectrally equivalent within
-    their ratio.
+    full-data normal matrix and reused for every fold, and for every sigma of its band: the AMG
+    sigmas are cut into bands of ratio ``AMG_REUSE_RATIO`` from the first one up (see
+    :meth:`anchor`), each with its hierarchy built at the band's geometric middle ``sigma0``
+    (surrogates of two sigmas are spectrally equivalent within their ratio, here at most
+    ``sqrt(AMG_REUSE_RATIO)`` either way). The preconditioner of a sigma is so a function of that
+    sigma alone, not of the solves before it: a fold gives the same weights in any process and
+    after any other fold (:func:`cross_validate_sigma` forks the folds of CG sweeps). One
+    hierarchy is held at a time (the last band's).
     """
 
     def __init__(self, lumped: np.ndarray, gamma: sparse.csr_array, order: int):
@@ -728,16 +752,37 @@ class _Preconditioner:
     def use_amg(self, sigma: float) -> bool:
         return self.order == 1 and sigma * self._gamma_diag >= AMG_DOMINANCE * self._data_diag
 
+    def anchor(self, sigma: float) -> float:
+        """The sigma at which the hierarchy used for ``sigma`` (an AMG sigma) is built.
+
+        The band ``[s1 R^k, s1 R^(k+1))`` that holds ``sigma`` (``s1`` the smallest AMG sigma,
+        ``AMG_DOMINANCE mean(diag H'H) / mean(diag Gamma)``; ``R = AMG_REUSE_RATIO``), at its
+        geometric middle ``s1 R^(k + 1/2)``.
+        """
+        s1 = AMG_DOMINANCE * self._data_diag / self._gamma_diag
+        k = math.floor(math.log(sigma / s1) / math.log(AMG_REUSE_RATIO))
+        return s1 * AMG_REUSE_RATIO ** (k + 0.5)
+
     def get(self, a: sparse.csr_array, sigma: float):
         if not self.use_amg(sigma):
             d = a.diagonal()
             return splinalg.LinearOperator(a.shape, matvec=lambda v: v / d if v.ndim == 1 else v / d[:, None], dtype=float)
-        if self._ml is None or not (1.0 / AMG_REUSE_RATIO <= sigma / self._sigma0 <= AMG_REUSE_RATIO):
+        sigma0 = self.anchor(sigma)
+        if self._ml is None or sigma0 != self._sigma0:
             import pyamg
 
-            m = (sparse.diags_array(self.lumped) + sigma * self.gamma).tocsr()
-            self._ml = pyamg.smoothed_aggregation_solver(sparse.csr_matrix(m), symmetry="symmetric")
-            self._sigma0 = sigma
+            m = (sparse.diags_array(self.lumped) + sigma0 * self.gamma).tocsr()
+            self._ml = None  # the previous band's hierarchy is freed before the next one is built
+            # pyamg starts its spectral-radius estimates (the prolongation smoother's omega) from
+            # numpy's global random generator: seeded here and restored, so that the hierarchy is a
+            # function of the matrix alone (the same in every process and after any other build)
+            state = np.random.get_state()
+            try:
+                np.random.seed(AMG_SEED)
+                self._ml = pyamg.smoothed_aggregation_solver(sparse.csr_matrix(m), symmetry="symmetric")
+            finally:
+                np.random.set_state(state)
+            self._sigma0 = sigma0
             self.builds += 1
         return self._ml.aspreconditioner(cycle="V")
 
@@ -966,11 +1011,15 @@ class NormalEquationSolver:
     def segment_cost(self, m: sparse.csr_array, sigma: float) -> float:
         """Relative cost of this sigma in a segment, for the order of the forked tasks
         (:func:`_fork_segments`): :data:`_MG_COST` by multigrid, :data:`_CHAIN_COST` in the factor
-        chain, :data:`_MG_BLOCK_COST` by the data-block cycle, else 1."""
+        chain, :data:`_MG_BLOCK_COST` by the data-block cycle, a sigma of a sweep by CG alone
+        ``sqrt(CG_COST_RHO_FLOOR / max(rho, CG_COST_RHO_FLOOR))``, else 1."""
         if self.uses_block(m, sigma):
             return _MG_BLOCK_COST
         if self.uses_mg(m, sigma):
             return _MG_COST
+        if self.method == "cg" and not self.factor_chain:  # CG alone: see CG_COST_RHO_FLOOR (at most 1)
+            rho = sigma * self._gamma_diag_mean() / max(self._full_mean_row, np.finfo(float).tiny)
+            return math.sqrt(CG_COST_RHO_FLOOR / max(rho, CG_COST_RHO_FLOOR))
         return _CHAIN_COST if self.uses_factor_chain(m, sigma) else 1.0
 
     def full_data_uses_mg(self, sigma: float) -> bool:
@@ -1045,7 +1094,9 @@ class NormalEquationSolver:
         With :attr:`factor_chain` (base method Jacobi-CG): the multigrid sigmas, the Jacobi-CG ones
         (each a warm-started chain from the largest down; three tasks a fold balance the forked
         workers better than two), then the factor chain (from the smallest up).
-        Otherwise the whole sweep is one segment.
+        With CG alone (base method ``cg`` without the factor chain): :data:`CG_SEGMENTS` chains of
+        consecutive sigmas (each warm-started largest down). Otherwise the whole sweep is one
+        segment.
         """
         order = self.sweep_order(m, sigmas)
         if self.block_mg:  # the Gauss-Seidel cycle's sigmas, the data-block cycle's (each largest down)
@@ -1056,6 +1107,9 @@ class NormalEquationSolver:
             mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
             jacobi = [i for i in order if i not in set(chain) | set(mg)]
             return [seg for seg in (mg, jacobi, chain) if seg]
+        if self.method == "cg":  # CG alone: CG_SEGMENTS chains of consecutive sigmas, each largest down
+            cuts = np.linspace(0, len(order), min(CG_SEGMENTS, len(order)) + 1).round().astype(int)
+            return [order[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
         if not (self.method == "direct" and self._mg_shape is not None):
             return [order]
         mg = [i for i in order if self.uses_mg(m, float(sigmas[i]))]
@@ -1345,20 +1399,6 @@ def fold_labels(n_rows: int, folds: int, shuffle: bool = False, seed: int = 0) -
     return labels
 
 
-def _folds_independent(solver: "NormalEquationSolver", sigmas: np.ndarray) -> bool:
-    """True when a fold's solves do not depend on the folds solved before it in this process.
-
-    The direct method and the Jacobi-preconditioned CG are stateless; the AMG hierarchy of CG is
-    built lazily and reused across folds, so a fold solved elsewhere could get another
-    preconditioner (weights equal only to the CG tolerance, not bit for bit).
-    """
-    if solver.method in ("direct", "mg"):
-        return True  # multigrid levels: built from Gamma and the fold's matrix alone
-    # a fold's rho exceeds the full data's (fewer rows in its normal matrix): where the AMG
-    # hierarchy would be used, multigrid takes over if rho of the full data already reaches it
-    return not any(solver._pre.use_amg(float(s)) and not solver.full_data_uses_mg(float(s)) for s in sigmas)
-
-
 def fork_workers(executor, n_unknowns: int) -> int:
     """Forked processes for the CV folds: the executor's local ``workers`` (``>= 2``, no scheduler)
     from :data:`FORK_MIN_UNKNOWNS` unknowns where the system can fork, else 0 (see
@@ -1371,16 +1411,15 @@ def fork_workers(executor, n_unknowns: int) -> int:
     return int(workers)
 
 
-def _map_folds(fn: Callable, folds: int, executor, independent: bool, n_sigmas: int,
+def _map_folds(fn: Callable, folds: int, executor, n_sigmas: int,
                progress: Callable[[int, int], None] | None) -> list:
     """``[fn(f) for f in range(folds)]``: the map hook of :func:`cross_validate_sigma`.
 
-    On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold
-    when the folds are ``independent``; otherwise in this process, in fold order, with ``fn``'s
-    own per-solve progress. Either way the results are those of the serial loop. (Forked local
+    On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold;
+    otherwise in this process, in fold order, with ``fn``'s own per-solve progress. Either way the results are those of the serial loop. (Forked local
     workers take the folds' segments instead, see :func:`_fork_segments`.)
     """
-    if executor is None or not getattr(executor, "distributed", False) or not independent or folds < 2:
+    if executor is None or not getattr(executor, "distributed", False) or folds < 2:
         return [fn(f) for f in range(folds)]
     report = None if progress is None else (lambda done, total: progress(done * n_sigmas, total * n_sigmas))
     return executor.map(partial(fn, progress=None), range(folds), labels=[f"cv fold {f}" for f in range(folds)],
@@ -1502,8 +1541,8 @@ def cross_validate_sigma(
     max_memory : int or str, optional
         Memory limit (see :func:`check_fit_memory`).
     executor : pwas_hdl.flow.executor.Executor, optional
-        Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is distributed
-        and the folds are independent, or, with local ``workers >= 2`` and at least
+        Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is
+        distributed, or, with local ``workers >= 2`` and at least
         :data:`FORK_MIN_UNKNOWNS` unknowns, on that many forked processes that inherit the data
         (one task per segment of a fold's sweep, see :func:`_fork_segments`); the result is the
         serial one.
@@ -1583,9 +1622,9 @@ def cross_validate_sigma(
     # task leaves in the solver come back with its results
     task_stats: list = []
     overlap = [0.0]  # CPU seconds of this process spent while forked workers ran
-    independent = _folds_independent(solver, sig)
-    procs = fork_workers(executor, solver.n if solver.keep is None else solver.keep.size) if (
-        independent and folds >= 2) else 0
+    # every fold is independent of the others (each solver state a fold's sweep uses is a function
+    # of that fold and sigma: see sweep_segments and _Preconditioner), so the folds may run anywhere
+    procs = fork_workers(executor, solver.n if solver.keep is None else solver.keep.size) if folds >= 2 else 0
     procs = min(procs, mem_plan["processes"]) if procs else 0  # the memory limit's plan (plan_fit_memory)
     one_factor = bool(procs > 1 and mem_plan["one_factor"])
     if procs == 1:
@@ -1619,7 +1658,7 @@ def cross_validate_sigma(
     else:
         # the memory limit allows one process (plan_fit_memory): the folds run here, not on Dask workers
         serial_only = mem_plan["processes"] == 1 and mem_plan["requested"] > 1
-        parts = _map_folds(one_fold, folds, None if serial_only else executor, independent, sig.size, progress)
+        parts = _map_folds(one_fold, folds, None if serial_only else executor, sig.size, progress)
     for f, (mse_f, bound_f, *_) in enumerate(parts):
         fold_mse[f], weight_bound[f] = mse_f, bound_f
     solver.infos = [i for part in parts for i in part[2]]
