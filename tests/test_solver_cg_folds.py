@@ -100,5 +100,5 @@ def test_forked_cg_folds_give_the_serial_result(monkeypatch, order):
     assert forked.best_sigma == serial.best_sigma
     assert forked.solver["iterations"] == serial.solver["iterations"]
     np.testing.assert_array_equal(forked.final_weights, serial.final_weights)
-    if order == 1:  # the AMG sigmas were solved in the workers
+    if order == 1:  # the problem has AMG sigmas: the workers built their bands' hierarchies themselves
         assert _amg_sigmas(NormalEquationSolver(sparse.csr_array(h.T @ h), gam, 4, method="cg"))

@@ -750,7 +750,8 @@ class _Preconditioner:
         self._gamma_diag = float(gamma.diagonal().mean()) if gamma.shape[0] else 0.0
 
     def use_amg(self, sigma: float) -> bool:
-        return self.order == 1 and sigma * self._gamma_diag >= AMG_DOMINANCE * self._data_diag
+        return (self.order == 1 and self._gamma_diag > 0
+                and sigma * self._gamma_diag >= AMG_DOMINANCE * self._data_diag)
 
     def anchor(self, sigma: float) -> float:
         """The sigma at which the hierarchy used for ``sigma`` (an AMG sigma) is built.
@@ -1416,8 +1417,9 @@ def _map_folds(fn: Callable, folds: int, executor, n_sigmas: int,
     """``[fn(f) for f in range(folds)]``: the map hook of :func:`cross_validate_sigma`.
 
     On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold;
-    otherwise in this process, in fold order, with ``fn``'s own per-solve progress. Either way the results are those of the serial loop. (Forked local
-    workers take the folds' segments instead, see :func:`_fork_segments`.)
+    otherwise in this process, in fold order, with ``fn``'s own per-solve progress. Either way the
+    results are those of the serial loop. (Forked local workers take the folds' segments instead,
+    see :func:`_fork_segments`.)
     """
     if executor is None or not getattr(executor, "distributed", False) or folds < 2:
         return [fn(f) for f in range(folds)]
