@@ -316,6 +316,15 @@ AMG_REUSE_RATIO = 10.0
 #: Seed of numpy's global generator while pyamg builds a hierarchy (see :class:`_Preconditioner`).
 AMG_SEED = 0
 
+#: Bytes of the AMG preconditioner of a first-order CG solve for :func:`estimate_fit_memory`, in
+#: units of the estimated sparse ``A`` (``nnz(H'H) + nnz(Gamma)`` entries as estimated there): the
+#: lumped surrogate, the hierarchy and pyamg's transient while it builds. Measured (the peak resident
+#: set's growth over one build, T = 10^5, first order, 2026-12-03): 750 / 965 / 1144 MiB at n = 4 / 5 /
+#: 6, N ~ 10^6 (the hierarchy alone 2.5-2.7 times the real ``A``), that is 5.2 / 5.3 / 5.4 estimated
+#: ``A``; 1.9-2.2 at N ~ 10^5. The largest with a 20 % margin. (Charged before: 2, and the fits at
+#: N ~ 10^6 measured 2786 / 3209 / 4075 MiB PSS with two workers against 1811 / 2217 / 2571 estimated.)
+AMG_MEMORY_FACTOR = 6.5
+
 #: Bytes each further forked CV worker holds beyond its solver state in :func:`estimate_fit_memory`
 #: (pages copied on write, the allocator's arenas): measured ~110 MiB not in the estimate with the
 #: factors held one at a time (n = 3, N = 262 144, first order, 2 workers: 2849 MiB PSS against
@@ -521,8 +530,8 @@ def estimate_fit_memory(
     dict
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``, or with CHOLMOD the smaller grid
-        bound of :data:`GRID_FACTOR_BOUND`; CG: the AMG hierarchy, about
-        twice ``A``, or a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
+        bound of :data:`GRID_FACTOR_BOUND`; first-order CG: the AMG preconditioner,
+        :data:`AMG_MEMORY_FACTOR` times ``A``; zero order: a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
         used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
         (its levels, where first order uses it),
         ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
@@ -557,7 +566,7 @@ def estimate_fit_memory(
         "factor": (
             direct_factor
             if chosen == "direct" or block
-            else (2 * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
+            else (AMG_MEMORY_FACTOR * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
         ) + chain_factor,
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
         # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
