@@ -81,3 +81,39 @@ def test_fit_scale_quick_smoke_records_the_memory_plan(tmp_path, monkeypatch):
         assert r["memory_plan"]["processes"] == 1 and r["memory_plan"]["reason"] is None
         assert r["estimated_mib"] > 0 and r["direct"]["status"] in ("ok", "is the direct solve")
     assert "Memory limit 2048 MiB ($PWAS_HDL_MAX_MEMORY)" in (tmp_path / "fit_scale_quick.md").read_text()
+
+
+def test_cg_preconditioners_quick_smoke(tmp_path):
+    """benchmarks/cg_preconditioners.py (issue 18) on its quick point: every preconditioner of each
+    order ran on fold 0, and the systems it reports converged have the solver's residual."""
+    import json
+
+    from pwas_hdl.fit.regularized_lsq import CG_RTOL
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.cg_preconditioners")
+    assert script_main(bench.main, ["--quick", "--outdir", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "cg_preconditioners_quick.json").read_text())
+    rows = res["rows"]
+    expected = [(0, s, name) for s in bench.QUICK_SIGMAS for name in bench.PRECONDITIONERS[0]]
+    expected += [(1, s, name) for s in bench.QUICK_SIGMAS for name in bench.PRECONDITIONERS[1]]
+    assert [(r["order"], r["sigma"], r["preconditioner"]) for r in rows] == expected
+    # zero order is restricted to the touched vertices, first order keeps the whole 6^4 grid
+    assert {r["rows"] for r in rows if r["order"] == 1} == {6**4}
+    assert all(r["rows"] < 6**4 for r in rows if r["order"] == 0)
+    assert all(r["rel_residual"] <= 10 * CG_RTOL for r in rows if r["converged"])
+    assert any(r["converged"] for r in rows) and (tmp_path / "cg_preconditioners_quick.md").is_file()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--points", "4"], "--points takes n:p pairs"),
+    (["--points", "9:9"], "--points: at most"),
+    (["--sigmas", "1e-2,-1"], "--sigmas takes positive numbers"),
+    (["--maxiter", "0"], "--maxiter must be a count"),
+])
+def test_cg_preconditioners_bad_option(tmp_path, capsys, args, message):
+    bench = importlib.import_module("pwas_hdl.benchmarks.cg_preconditioners")
+    out = tmp_path / "out"
+    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
+    assert not out.exists()
