@@ -37,14 +37,13 @@ iterations at most, ``cg_preconditioners_quick.*``).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir
+from pwas_hdl.bench_results import default_outdir, write_json_and_markdown
 
 #: (n, p) of the full run: the n = 4 point of the fit_scale table at N ~ 10^5.
 POINTS: list[tuple[int, int]] = [(4, 17)]
@@ -237,14 +236,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--stem", default=None, help="output file stem (default cg_preconditioners[_quick])")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     points, sigmas, t, maxiter, stem = _parse(args)
-    from pwas_hdl.io.atomic import atomic_write_text
-
     args.outdir.mkdir(parents=True, exist_ok=True)
     res = run(points, sigmas, t, maxiter, progress=lambda m: print(m, flush=True))
-    atomic_write_text(args.outdir / f"{stem}.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
-    md = markdown(res)
-    atomic_write_text(args.outdir / f"{stem}.md", md)
-    print(md)
+    write_json_and_markdown(args.outdir, stem, res, markdown(res))
     return 0
 
 

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir
+from pwas_hdl.bench_results import default_outdir, write_json_and_markdown
 
 HERE = Path(__file__).resolve().parent
 
@@ -443,17 +443,12 @@ def main(argv: list[str] | None = None) -> int:
         if any(len(pt) != 2 or pt[0] < 1 or pt[1] < 1 for pt in points):
             ap.error("--points takes n:p pairs with n, p >= 1, e.g. 6:3,2:999")
     stem = args.stem or stem
-    from pwas_hdl.io.atomic import atomic_write_text
-
     args.outdir.mkdir(parents=True, exist_ok=True)
     if args.workers < 0:
         ap.error("--workers must be 0 (serial) or a positive count")
     res = run(points, t, args.limit, args.direct_limit, args.budget, progress=lambda m: print(m, flush=True),
               workers=args.workers, block_smoother=not args.no_block_smoother)
-    atomic_write_text(args.outdir / f"{stem}.json", json.dumps(res, indent=1, allow_nan=False) + "\n")
-    md = markdown(res)
-    atomic_write_text(args.outdir / f"{stem}.md", md)
-    print(md)
+    write_json_and_markdown(args.outdir, stem, res, markdown(res))
     return 0
 
 

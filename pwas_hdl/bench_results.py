@@ -299,6 +299,15 @@ def write_results(path: str | Path, doc: dict) -> Path:
     return atomic_write_text(path, results_text(doc))
 
 
+def write_json_and_markdown(outdir: str | Path, stem: str, doc: dict, md: str) -> None:
+    """Write a benchmark's own (not results-format) ``STEM.json`` (indented, no NaN) and ``STEM.md``
+    atomically into ``outdir`` and print the Markdown."""
+    out = Path(outdir)
+    atomic_write_text(out / f"{stem}.json", json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    atomic_write_text(out / f"{stem}.md", md)
+    print(md)
+
+
 def load_results(path: str | Path) -> dict:
     """Read and validate a result file."""
     p = Path(path)
