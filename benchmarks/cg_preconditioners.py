@@ -22,16 +22,19 @@ residual :data:`~pwas_hdl.fit.regularized_lsq.CG_RTOL`:
 
 Zero-order systems are first restricted to the touched vertices, as the solver does. For every
 system the row count, entries a row and the CPU time of one ``A @ v`` (mean of repeats) are
-recorded too. CPU seconds (``time.process_time``, one BLAS thread advised) of the set-up and of CG;
+recorded too; the Markdown splits a CG iteration's CPU into that product and the rest (the
+preconditioner and CG's vector updates and dot products on vectors of ``rows`` entries). CPU seconds (``time.process_time``, one BLAS thread advised) of the set-up and of CG;
 nothing here asserts on times.
 
 Usage::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/cg_preconditioners.py [--quick] [--points 4:17,5:9]
-        [--sigmas 1e-2,1e-4] [--maxiter 3000] [--outdir DIR] [--stem NAME]
+        [--sigmas 1e-2,1e-4] [--preconditioners jacobi,sgs] [--maxiter 3000] [--outdir DIR] [--stem NAME]
 
 writes ``cg_preconditioners.json`` and ``.md`` (``--quick``: ``T = 10^4``, n = 4, p = 5, 300
-iterations at most, ``cg_preconditioners_quick.*``).
+iterations at most, ``cg_preconditioners_quick.*``). ``--preconditioners`` runs a subset (each order
+runs those of the subset that :data:`PRECONDITIONERS` lists for it), e.g. ``jacobi`` alone at
+``--points 4:31`` (N ~ 10^6, where the multigrid set-ups take minutes).
 """
 
 from __future__ import annotations
@@ -142,8 +145,12 @@ def _matvec_cpu(a, repeats: int = 50) -> float:
     return (time.process_time() - c) / repeats
 
 
-def run(points, sigmas, t: int, maxiter: int, progress=print) -> dict:
-    """Every (point, order, sigma, preconditioner) of fold 0; see the module docstring."""
+def run(points, sigmas, t: int, maxiter: int, progress=print, names: tuple[str, ...] | None = None) -> dict:
+    """Every (point, order, sigma, preconditioner) of fold 0; see the module docstring.
+
+    ``names``: the preconditioners to run (default all; each order runs those of them that
+    :data:`PRECONDITIONERS` lists for it).
+    """
     from scipy import sparse
     from scipy.sparse import linalg as splinalg
 
@@ -157,7 +164,7 @@ def run(points, sigmas, t: int, maxiter: int, progress=print) -> dict:
                 a = sparse.csr_array(system["m"] + sigma * system["gamma"])
                 base = {"n": n, "p": p, "N": (p + 1) ** n, "order": order, "sigma": sigma, "rows": a.shape[0],
                         "nnz_per_row": a.nnz / a.shape[0], "matvec_cpu_ms": 1e3 * _matvec_cpu(a)}
-                for name in PRECONDITIONERS[order]:
+                for name in (n_ for n_ in PRECONDITIONERS[order] if names is None or n_ in names):
                     c = time.process_time()
                     pre = preconditioner(name, a, system, sigma)
                     setup = time.process_time() - c
@@ -183,19 +190,24 @@ def markdown(res: dict) -> str:
         "# CG preconditioners from n = 4 up (issue 18)", "",
         f"CV fold 0 of 5 (T = {res['T']}, the problem of benchmarks/fit_scale.py), each system solved from zero "
         f"to a relative residual of {res['rtol']:g}, at most {res['maxiter']} iterations; CPU seconds.", "",
-        "| n | p | order | sigma | rows | entries a row | A @ v (ms) | preconditioner | set-up (s) | iterations | CG (s) |",
-        "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|",
+        "An iteration's CPU is split into the product `A @ v` (timed on its own) and the rest: the preconditioner "
+        "and CG's vector updates and dot products.", "",
+        "| n | p | order | sigma | rows | entries a row | A @ v (ms) | preconditioner | set-up (s) | iterations | CG (s) "
+        "| an iteration (ms) | of it not A @ v (ms) |",
+        "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in res["rows"]:
         its = f"{r['iterations']}" + ("" if r["converged"] else " (cap)")
+        per = 1e3 * r["cg_cpu_s"] / r["iterations"] if r["iterations"] else float("nan")
         out.append(f"| {r['n']} | {r['p']} | {r['order']} | {r['sigma']:.0e} | {r['rows']} | {r['nnz_per_row']:.1f} | "
                    f"{r['matvec_cpu_ms']:.2f} | {r['preconditioner']} | {r['setup_cpu_s']:.2f} | {its} | "
-                   f"{r['cg_cpu_s']:.2f} |")
+                   f"{r['cg_cpu_s']:.2f} | {per:.2f} | {per - r['matvec_cpu_ms']:.2f} |")
     return "\n".join(out) + "\n"
 
 
-def _parse(args) -> tuple[list[tuple[int, int]], tuple[float, ...], int, int, str]:
-    """Points, sigmas, T, iteration cap and file stem from the options; bad values raise InputError."""
+def _parse(args) -> tuple[list[tuple[int, int]], tuple[float, ...], int, int, str, tuple[str, ...] | None]:
+    """Points, sigmas, T, iteration cap, file stem and preconditioners from the options; bad values
+    raise InputError."""
     from pwas_hdl.errors import InputError
 
     points, sigmas, t, maxiter, stem = ((QUICK_POINTS, QUICK_SIGMAS, 10_000, 300, "cg_preconditioners_quick")
@@ -223,7 +235,14 @@ def _parse(args) -> tuple[list[tuple[int, int]], tuple[float, ...], int, int, st
             maxiter = 0
         if not 1 <= maxiter <= 100_000:
             raise InputError(f"--maxiter must be a count from 1 to 100000; got {args.maxiter!r}")
-    return points, sigmas, t, maxiter, args.stem or stem
+    names = None
+    if args.preconditioners is not None:
+        known = tuple(dict.fromkeys(PRECONDITIONERS[0] + PRECONDITIONERS[1]))
+        names = tuple(v.strip() for v in args.preconditioners.split(","))
+        if not names or any(v not in known for v in names):
+            raise InputError(f"--preconditioners takes names from {', '.join(known)}, comma-separated; "
+                             f"got {args.preconditioners!r}")
+    return points, sigmas, t, maxiter, args.stem or stem, names
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -231,13 +250,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="T = 10^4, n = 4, p = 5, at most 300 iterations (CI smoke)")
     ap.add_argument("--points", default=None, help="n:p points, comma-separated, n, p >= 2 (default 4:17)")
     ap.add_argument("--sigmas", default=None, help="sigmas, comma-separated (default 1e-2,1e-4)")
+    ap.add_argument("--preconditioners", default=None,
+                    help="a subset, comma-separated, of " + ", ".join(dict.fromkeys(PRECONDITIONERS[0] + PRECONDITIONERS[1]))
+                    + " (default all)")
     ap.add_argument("--maxiter", default=None, help="CG iteration cap (default 3000; --quick 300)")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder")
     ap.add_argument("--stem", default=None, help="output file stem (default cg_preconditioners[_quick])")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
-    points, sigmas, t, maxiter, stem = _parse(args)
+    points, sigmas, t, maxiter, stem, names = _parse(args)
     args.outdir.mkdir(parents=True, exist_ok=True)
-    res = run(points, sigmas, t, maxiter, progress=lambda m: print(m, flush=True))
+    res = run(points, sigmas, t, maxiter, progress=lambda m: print(m, flush=True), names=names)
     write_json_and_markdown(args.outdir, stem, res, markdown(res))
     return 0
 

@@ -104,11 +104,29 @@ def test_cg_preconditioners_quick_smoke(tmp_path):
     assert any(r["converged"] for r in rows) and (tmp_path / "cg_preconditioners_quick.md").is_file()
 
 
+def test_cg_preconditioners_subset(tmp_path):
+    """--preconditioners runs only the named ones, each order those it has (amg: first order only),
+    and the Markdown splits an iteration into A @ v and the rest."""
+    import json
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.cg_preconditioners")
+    args = ["--quick", "--sigmas", "1e-2", "--preconditioners", "jacobi,amg", "--outdir", str(tmp_path)]
+    assert script_main(bench.main, args) == 0
+    rows = json.loads((tmp_path / "cg_preconditioners_quick.json").read_text())["rows"]
+    assert [(r["order"], r["preconditioner"]) for r in rows] == [(0, "jacobi"), (1, "jacobi"), (1, "amg")]
+    md = (tmp_path / "cg_preconditioners_quick.md").read_text()
+    assert "| an iteration (ms) | of it not A @ v (ms) |" in md
+    r = rows[0]
+    per = 1e3 * r["cg_cpu_s"] / r["iterations"]
+    assert f"| {per:.2f} | {per - r['matvec_cpu_ms']:.2f} |" in md
+
+
 @pytest.mark.parametrize("args, message", [
     (["--points", "4"], "--points takes n:p pairs"),
     (["--points", "9:9"], "--points: at most"),
     (["--sigmas", "1e-2,-1"], "--sigmas takes positive numbers"),
     (["--maxiter", "0"], "--maxiter must be a count"),
+    (["--preconditioners", "jacobi,ilu"], "--preconditioners takes names from"),
 ])
 def test_cg_preconditioners_bad_option(tmp_path, capsys, args, message):
     bench = importlib.import_module("pwas_hdl.benchmarks.cg_preconditioners")

@@ -28,6 +28,34 @@ def _amg_sigmas(solver) -> list[float]:
     return [float(s) for s in SIGMAS if solver._pre.use_amg(float(s))]
 
 
+@pytest.fixture(autouse=True)
+def _amg_on_small_grids(monkeypatch):
+    """The AMG tests below run on a 5^4 grid, far below AMG_MIN_SIDE: AMG is allowed here."""
+    monkeypatch.setattr(rl, "AMG_MIN_SIDE", 2)
+
+
+def test_amg_only_on_a_grid_with_a_long_axis(monkeypatch):
+    """Below AMG_MIN_SIDE vertices on the longest axis the first-order CG is Jacobi at every sigma
+    (measured cheaper than AMG there), from it AMG takes the penalty-dominated sigmas; the memory
+    estimate charges the AMG hierarchy only where it may be built."""
+    monkeypatch.undo()
+    assert rl.AMG_MIN_SIDE == 128
+    assert rl.amg_allowed(None) and rl.amg_allowed(128) and not rl.amg_allowed(127)
+    h, z, gam = random_problem(4, 4, 900, 3)  # 5^4 vertices
+    solver = NormalEquationSolver(sparse.csr_array(h.T @ h), gam, 4, method="cg")
+    assert not solver._pre.amg and _amg_sigmas(solver) == []
+    w, info = solver.solve(solver.restrict_matrix(sparse.csr_array(h.T @ h)), h.T @ z, float(SIGMAS[-1]))
+    assert info.method == "cg" and info.converged and solver._pre.builds == 0
+    h2, z2, gam2 = random_problem(2, 127, 3000, 4)  # 128 x 128 vertices
+    solver2 = NormalEquationSolver(sparse.csr_array(h2.T @ h2), gam2, 2, method="cg")
+    assert solver2._pre.amg and _amg_sigmas(solver2)
+    on = rl.estimate_fit_memory(10**5, 32**4, 4, 1, 1, grid_side=None)
+    off = rl.estimate_fit_memory(10**5, 32**4, 4, 1, 1, grid_side=32)
+    assert off["factor"] == 8.0 * 32**4 and on["factor"] > 10 * off["factor"]
+    assert on["total"] - off["total"] == on["factor"] - off["factor"]
+    assert rl.estimate_fit_memory(10**5, 32**4, 4, 1, 1, grid_side=128)["factor"] == on["factor"]
+
+
 def test_amg_hierarchy_of_a_sigma_is_that_of_its_band_whatever_was_solved_before():
     h, z, gam = _problem()
     hth = sparse.csr_array(h.T @ h)

@@ -119,10 +119,12 @@ def test_memory_limit_holds_the_factors_one_at_a_time_with_the_serial_result(rul
     workers: every fold's factor chain runs in one task, one factor resident at a time (issue 18),
     and the CV is the serial one."""
     h, z, gam = _problem()
-    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2, block_smoother=False)
+    side = 10  # the 10^3 grid's longest axis, as cross_validate_sigma passes it (AMG_MIN_SIDE)
+    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2, block_smoother=False, grid_side=side)
     one = full["total"] - full["worker_factor"]
     limit = _limit_between(one, full["total"])
-    plan = rl.plan_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, max_memory=limit, processes=2, block_smoother=False)
+    plan = rl.plan_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, max_memory=limit, processes=2, block_smoother=False,
+                              grid_side=side)
     assert plan["processes"] == 2 and plan["one_factor"] and "one factor at a time" in plan["reason"]
     serial = cross_validate_sigma(h, z, gam, SIGMAS, folds=3, block_smoother=False)
     with Executor(workers=2) as ex:
@@ -143,8 +145,10 @@ def test_memory_limit_holds_the_factors_one_at_a_time_with_the_serial_result(rul
 
 def test_memory_limit_below_one_factor_falls_back_to_one_process(rules_3d):
     h, z, gam = _problem()
-    one_proc = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=1, block_smoother=False)["total"]
-    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2, block_smoother=False)
+    side = 10  # as above
+    one_proc = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=1, block_smoother=False,
+                                      grid_side=side)["total"]
+    full = rl.estimate_fit_memory(h.shape[0], h.shape[1], 3, 1, 1, processes=2, block_smoother=False, grid_side=side)
     limit = _limit_between(one_proc, full["total"] - full["worker_factor"])
     with Executor(workers=2) as ex:
         cv = cross_validate_sigma(h, z, gam, SIGMAS[::3], folds=2, executor=ex, max_memory=limit, block_smoother=False)

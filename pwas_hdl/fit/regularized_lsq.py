@@ -41,6 +41,8 @@ __all__ = [
     "MG_DOMINANCE_CG",
     "MG_AUTO_DIMS",
     "CG_RTOL",
+    "AMG_MIN_SIDE",
+    "amg_allowed",
     "FACTOR_PCG_MAXITER",
     "GRID_FACTOR_BOUND",
     "grid_factor_bound",
@@ -308,6 +310,24 @@ FALLBACK_FACTOR = 4
 #: lumped surrogate is no better than the diagonal: measured at n = 3, N = 9261).
 AMG_DOMINANCE = 10.0
 
+#: ... and only on a vertex grid whose longest axis has at least this many vertices (or whose shape
+#: :func:`~pwas_hdl.fit.multigrid.grid_shape_of` cannot tell, as before). Jacobi-CG needs about 4 to
+#: 10 times the longest side in iterations on the penalty-dominated system, an AMG V-cycle costs
+#: 25-90 Jacobi iterations and the solve takes 10-13 of them plus the hierarchy's build. Measured
+#: (``benchmarks/cg_preconditioners.py --preconditioners jacobi,amg-lumped``, T = 10^5, CV fold 0,
+#: sigma = 100 and 1000, cold, set-up + CG CPU, 2026-12-03): Jacobi cheaper at every point of n = 4
+#: (sides 18, 32), 5 (10, 16), 6 (7, 10), n = 3 side 32 and 64 (1.59 / 1.09 s against 2.04 / 1.52 s)
+#: and n = 2 side 64; AMG cheaper from n = 2 side 128 (0.06 against 0.08 s) and 256 (0.29 against
+#: 0.69 s). Under ``auto`` only n >= 4 solves by CG alone, whose grids of at most 2 million vertices
+#: have sides under 128; n = 2 and 3 solve their penalty-dominated sigmas by multigrid.
+AMG_MIN_SIDE = 128
+
+
+def amg_allowed(grid_side: int | None) -> bool:
+    """True when the first-order CG preconditioner may be AMG (:data:`AMG_MIN_SIDE`) on a vertex
+    grid whose longest axis has ``grid_side`` vertices (``None``: unknown, allowed)."""
+    return grid_side is None or int(grid_side) >= AMG_MIN_SIDE
+
 #: The algebraic-multigrid hierarchy of the preconditioner serves a band of sigmas of this ratio
 #: (built at the band's geometric middle: the preconditioned spectrum then lies within
 #: ``[1 / sqrt(ratio), sqrt(ratio)]`` of the one it was built for, see :class:`_Preconditioner`).
@@ -499,7 +519,7 @@ def _direct_limits() -> dict[tuple[int, int], int]:
 
 def estimate_fit_memory(
     n_samples: int, n_vertices: int, n_dims: int, n_targets: int = 1, order: int = 0, method: Method = "auto",
-    processes: int = 1, block_smoother: bool = True,
+    processes: int = 1, block_smoother: bool = True, grid_side: int | None = None,
 ) -> dict[str, float]:
     """Estimated peak bytes of a fit (with CV), before anything is allocated.
 
@@ -524,6 +544,10 @@ def estimate_fit_memory(
         As in :class:`NormalEquationSolver`: with multigrid, the data-dominated sigmas by the
         data-block cycle, whose factor (of ``H'H`` on the touched vertices, without ``Gamma``'s grid
         edges) is charged as a zero-order one, instead of a first-order factor.
+    grid_side : int, optional
+        Vertices on the longest axis of the vertex grid (first order): below :data:`AMG_MIN_SIDE`
+        CG is preconditioned by Jacobi alone and no AMG hierarchy is charged. Unknown (the
+        default): charged.
 
     Returns
     -------
@@ -531,7 +555,7 @@ def estimate_fit_memory(
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``, or with CHOLMOD the smaller grid
         bound of :data:`GRID_FACTOR_BOUND`; first-order CG: the AMG preconditioner,
-        :data:`AMG_MEMORY_FACTOR` times ``A``; zero order: a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
+        :data:`AMG_MEMORY_FACTOR` times ``A`` (a diagonal below :data:`AMG_MIN_SIDE`); zero order: a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
         used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
         (its levels, where first order uses it),
         ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
@@ -566,7 +590,8 @@ def estimate_fit_memory(
         "factor": (
             direct_factor
             if chosen == "direct" or block
-            else (AMG_MEMORY_FACTOR * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" else 8.0 * nv)
+            else (AMG_MEMORY_FACTOR * _sparse_bytes(nnz_a, nv) if order == 1 and chosen == "cg" and amg_allowed(grid_side)
+                  else 8.0 * nv)
         ) + chain_factor,
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
         # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
@@ -616,6 +641,7 @@ def check_fit_memory(
     max_memory: int | str | None = None,
     processes: int = 1,
     block_smoother: bool = True,
+    grid_side: int | None = None,
 ) -> dict[str, float]:
     """Refuse a fit whose estimated memory exceeds the limit, before allocating anything.
 
@@ -632,7 +658,8 @@ def check_fit_memory(
     ResourceLimit
         Naming the estimate, its largest parts and the limit.
     """
-    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, processes, block_smoother)
+    est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, processes, block_smoother,
+                              grid_side)
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
         parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
@@ -656,6 +683,7 @@ def plan_fit_memory(
     max_memory: int | str | None = None,
     processes: int = 1,
     block_smoother: bool = True,
+    grid_side: int | None = None,
 ) -> dict:
     """How many processes a fit with CV can use within the memory limit, before allocating anything.
 
@@ -682,7 +710,8 @@ def plan_fit_memory(
     limit, source = memory_limit(max_memory)
     asked = None
     for procs in range(requested, 0, -1):
-        est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, procs, block_smoother)
+        est = estimate_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, procs, block_smoother,
+                                  grid_side)
         asked = asked or est
         candidates = [(False, est)]
         if procs > 1 and est["worker_factor"] > 0:
@@ -700,7 +729,7 @@ def plan_fit_memory(
                 return {"processes": procs, "requested": requested, "one_factor": one_factor, "estimate": e,
                         "limit": limit, "reason": reason}
     # not even one process: the refusal names the one-process estimate
-    check_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, max_memory, 1, block_smoother)
+    check_fit_memory(n_samples, n_vertices, n_dims, n_targets, order, method, max_memory, 1, block_smoother, grid_side)
     raise InternalError("plan_fit_memory: one process over the limit was not refused")  # pragma: no cover
 
 
@@ -708,6 +737,14 @@ def _order_of(gamma: sparse.sparray) -> int:
     """0 when Gamma is the identity (zero order), else 1."""
     g = sparse.csr_array(gamma)
     return 0 if g.nnz == g.shape[0] and np.all(g.diagonal() == 1.0) else 1
+
+
+def _grid_side(gamma: sparse.sparray, n_dims: int) -> int | None:
+    """Vertices on the longest axis of a first-order ``Gamma``'s grid (None: zero order, or not a grid)."""
+    if _order_of(gamma) != 1:
+        return None
+    shape = grid_shape_of(gamma, n_dims)
+    return max(shape) if shape else None
 
 
 def _dims_of(h: sparse.sparray) -> int:
@@ -733,8 +770,8 @@ def _solve_spd(a: sparse.csc_array, b: np.ndarray) -> np.ndarray:
 class _Preconditioner:
     """Preconditioner of ``A = M_data + sigma Gamma`` for conjugate gradients.
 
-    Jacobi (``diag(A)^{-1}``) by default. First-order problems whose penalty dominates (see
-    :data:`AMG_DOMINANCE`) get one V-cycle of smoothed-aggregation algebraic multigrid (pyamg) on
+    Jacobi (``diag(A)^{-1}``) by default. First-order problems on a grid with a long enough axis
+    (``amg``, see :data:`AMG_MIN_SIDE`) whose penalty dominates (see :data:`AMG_DOMINANCE`) get one V-cycle of smoothed-aggregation algebraic multigrid (pyamg) on
     the *lumped* surrogate ``diag(rowsum(H'H)) + sigma0 Gamma``, an M-matrix (a scaled grid
     Laplacian plus a positive diagonal); since ``H'H <= diag(rowsum(H'H))`` (each row of ``H`` is a
     probability vector) the surrogate bounds ``A`` from above. The hierarchy is built on the
@@ -748,10 +785,12 @@ class _Preconditioner:
     hierarchy is held at a time (the last band's).
     """
 
-    def __init__(self, lumped: np.ndarray, gamma: sparse.csr_array, order: int):
+    def __init__(self, lumped: np.ndarray, gamma: sparse.csr_array, order: int, amg: bool = True):
         self.lumped = lumped
         self.gamma = gamma
         self.order = order
+        #: AMG allowed at all (:func:`amg_allowed` of the grid's longest side)
+        self.amg = bool(amg)
         self._sigma0: float | None = None
         self._ml = None
         self.builds = 0
@@ -759,7 +798,7 @@ class _Preconditioner:
         self._gamma_diag = float(gamma.diagonal().mean()) if gamma.shape[0] else 0.0
 
     def use_amg(self, sigma: float) -> bool:
-        return (self.order == 1 and self._gamma_diag > 0
+        return (self.amg and self.order == 1 and self._gamma_diag > 0
                 and sigma * self._gamma_diag >= AMG_DOMINANCE * self._data_diag)
 
     def anchor(self, sigma: float) -> float:
@@ -909,7 +948,7 @@ class NormalEquationSolver:
         self._gamma_diag: float | None = None
         if self.method == "cg":
             lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
-            self._pre = _Preconditioner(lumped, self.gamma, self.order)
+            self._pre = _Preconditioner(lumped, self.gamma, self.order, amg_allowed(_grid_side(gamma, n_dims)))
         if direct_backend not in ("auto", "cholmod", "superlu"):
             raise InputError(f"direct backend must be 'auto', 'cholmod' or 'superlu', got {direct_backend!r}")
         if direct_backend == "cholmod" and not cholmod_available():
@@ -1342,7 +1381,8 @@ def solve_regularized(
     z = np.asarray(z, dtype=float)
     nz = 1 if z.ndim == 1 else z.shape[1]
     h = sparse.csr_array(h)
-    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), nz, _order_of(gamma), method, max_memory)
+    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), nz, _order_of(gamma), method, max_memory,
+                     grid_side=_grid_side(gamma, _dims_of(h)))
     ht = h.T.tocsr()
     hth = ht @ h
     solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol)
@@ -1581,7 +1621,8 @@ def cross_validate_sigma(
     z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
     labels = fold_labels(h.shape[0], folds, shuffle, seed)
     mem_plan = plan_fit_memory(h.shape[0], h.shape[1], _dims_of(h), z2.shape[1], _order_of(gamma), method, max_memory,
-                               processes=max(fork_workers(executor, h.shape[1]), 1), block_smoother=block_smoother)
+                               processes=max(fork_workers(executor, h.shape[1]), 1), block_smoother=block_smoother,
+                               grid_side=_grid_side(gamma, _dims_of(h)))
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2

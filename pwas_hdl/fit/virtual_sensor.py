@@ -410,7 +410,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             basis_dims = grid.n
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
-        check_fit_memory(xi.shape[0], grid.n_vertices, basis_dims, nz, int(self.tikhonov_order))
+        check_fit_memory(xi.shape[0], grid.n_vertices, basis_dims, nz, int(self.tikhonov_order),
+                         grid_side=max(grid.shape) if self.additive is None else None)
         h = grid.basis_matrix(xi)
         gam = (additive_tikhonov_matrix(grid, self.tikhonov_order) if self.additive is not None
                else tikhonov_matrix(grid, self.tikhonov_order))
