@@ -142,7 +142,7 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         # makes the same plan again): with forked workers, each worker's own solver state counted
         # too, or one factor at a time, or fewer processes (plan_fit_memory; a refusal fails the point)
         est = plan_fit_memory(t, grid.n_vertices, n, 1, order, processes=max(fork_workers(ex, grid.n_vertices), 1),
-                              block_smoother=block_smoother)["estimate"]
+                              block_smoother=block_smoother, grid_side=max(grid.shape))["estimate"]
         h = grid.basis_matrix(x)
         gam = tikhonov_matrix(grid, order)
         cv = cross_validate_sigma(h, z, gam, folds=5, executor=ex, final_solve=True, block_smoother=block_smoother)

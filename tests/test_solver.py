@@ -139,7 +139,7 @@ def test_memory_estimate_grows_with_size():
     small = estimate_fit_memory(10**4, 10**4, 2, 1, 1, "cg")
     big = estimate_fit_memory(10**5, 10**6, 2, 1, 1, "cg")
     assert 0 < small["total"] < big["total"]
-    assert big["total"] == pytest.approx(sum(big[k] for k in ("H", "HtH", "Gamma", "factor", "vectors")))
+    assert big["total"] == pytest.approx(sum(big[k] for k in ("H", "HtH", "Gamma", "factor", "vectors", "shift")))
     # the direct factor is charged its fill (at N = 10^4 with T = 10^5 samples the grid bound of a
     # 2-D factor, ~10 MB, is below CG's charge for its operators, so the comparison is made at 10^6)
     assert estimate_fit_memory(10**5, 10**6, 2, 1, 1, "direct")["factor"] > estimate_fit_memory(10**5, 10**6, 2, 1, 1, "cg")["factor"]
@@ -419,10 +419,14 @@ def test_solver_pickles_without_its_factors():
     np.testing.assert_allclose(w2, w1, rtol=1e-12, atol=1e-14)
 
 
-@pytest.mark.parametrize("n, p, pss_mib", [(4, 31, 2786), (5, 15, 3209), (6, 9, 4075)])
-def test_memory_estimate_covers_the_measured_first_order_cg_fits(n, p, pss_mib):
-    """The first-order Jacobi/AMG-CG fits at N ~ 10^6 (T = 10^5, two forked workers) measured more
-    peak PSS than the estimate charged before AMG_MEMORY_FACTOR (benchmarks/results/
-    fit_scale_pass10_big.json): the estimate the memory check refuses by must cover them."""
-    est = estimate_fit_memory(10**5, (p + 1) ** n, n, 1, 1, processes=2)
+@pytest.mark.parametrize("n, p, side, pss_mib", [
+    (4, 31, None, 2786), (5, 15, None, 3209), (6, 9, None, 4075),  # with AMG (fit_scale_pass10_big.json)
+    (4, 31, 32, 1370), (5, 15, 16, 1524), (6, 9, 10, 1714),  # Jacobi alone (fit_scale_pass11_big.json)
+    (4, 17, 18, 355), (5, 9, 10, 417), (6, 6, 7, 543),  # Jacobi alone, N ~ 10^5 (fit_scale_pass11_mid.json)
+])
+def test_memory_estimate_covers_the_measured_first_order_cg_fits(n, p, side, pss_mib):
+    """The first-order CG fits at N ~ 10^6 (T = 10^5, two forked workers) measured more peak PSS
+    than the estimate charged before AMG_MEMORY_FACTOR (with AMG) and SHIFT_TRANSIENT_FACTOR
+    (Jacobi alone, below AMG_MIN_SIDE): the estimate the memory check refuses by must cover them."""
+    est = estimate_fit_memory(10**5, (p + 1) ** n, n, 1, 1, processes=2, grid_side=side)
     assert est["method"] == 1.0 and est["total"] >= pss_mib * 2**20

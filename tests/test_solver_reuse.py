@@ -170,11 +170,13 @@ def test_memory_estimate_counts_each_forked_worker():
     two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2, block_smoother=False)
     assert one["workers"] == 0 and one["fold_matrices"] == 0
     # each worker: its fold's matrices, its own numeric factor (the first-order CHOLMOD analysis is
-    # the parent's, shared: worker_factor is the factor without it), multigrid levels, vectors
+    # the parent's, shared: worker_factor is the factor without it), multigrid levels, vectors and
+    # the transient of forming the shifted matrix
     assert two["worker_factor"] == one["worker_factor"] < one["factor"]
     shared = rl.GRID_FACTOR_BOUND[2][3] * 10**6 if rl.cholmod_available() else 0.0
     assert one["factor"] - one["worker_factor"] == pytest.approx(shared)
-    per = one["HtH"] * 2 / 3 + one["worker_factor"] + one["multigrid"] + one["vectors"] + rl.FORK_WORKER_OVERHEAD
+    per = (one["HtH"] * 2 / 3 + one["worker_factor"] + one["multigrid"] + one["vectors"] + one["shift"]
+           + rl.FORK_WORKER_OVERHEAD)
     # and the parent holds the other four folds' normal matrices (H'H's pattern each), inherited
     fold = rl._sparse_bytes(min(10.0**12, 10**5 * 9.0), 10**6)
     assert two["fold_matrices"] == pytest.approx(4 * fold)

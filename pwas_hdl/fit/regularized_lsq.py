@@ -345,6 +345,14 @@ AMG_SEED = 0
 #: N ~ 10^6 measured 2786 / 3209 / 4075 MiB PSS with two workers against 1811 / 2217 / 2571 estimated.)
 AMG_MEMORY_FACTOR = 6.5
 
+#: The transient of forming a sigma's matrix ``M + sigma Gamma`` (the scaled copy of ``Gamma`` and the
+#: sum's work arrays, while ``M`` and the sum are held), in units of the bytes of ``Gamma``, for
+#: :func:`estimate_fit_memory`, each solving process. Measured (tracemalloc peak over the held
+#: result, first order, T = 10^5, 2026-12-03): 1.35-1.36 at n = 4 (N ~ 10^5 and 10^6), 5 and 6
+#: (N ~ 10^6); with a margin. (It was uncharged; the AMG charge hid it until AMG_MIN_SIDE: the
+#: Jacobi-CG fits at N ~ 10^6 then measured 1370 MiB PSS at n = 4 against 1265 estimated.)
+SHIFT_TRANSIENT_FACTOR = 1.5
+
 #: Bytes each further forked CV worker holds beyond its solver state in :func:`estimate_fit_memory`
 #: (pages copied on write, the allocator's arenas): measured ~110 MiB not in the estimate with the
 #: factors held one at a time (n = 3, N = 262 144, first order, 2 workers: 2849 MiB PSS against
@@ -558,7 +566,8 @@ def estimate_fit_memory(
         :data:`AMG_MEMORY_FACTOR` times ``A`` (a diagonal below :data:`AMG_MIN_SIDE`); zero order: a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
         used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
         (its levels, where first order uses it),
-        ``vectors`` (weights, right-hand sides, CG work vectors), ``workers`` (what each further
+        ``vectors`` (weights, right-hand sides, CG work vectors), ``shift`` (forming ``M + sigma
+        Gamma``, :data:`SHIFT_TRANSIENT_FACTOR`), ``workers`` (what each further
         process holds), ``fold_matrices`` (with forked workers: the parent's normal matrices of
         the other four folds, inherited by the workers) and ``total``, all in bytes; ``method`` the solver that ``auto`` would pick (as 1.0 = cg);
         ``worker_factor`` (not in ``total`` again): the factor bytes of each further process in
@@ -600,12 +609,14 @@ def estimate_fit_memory(
                       + 3.0 * _sparse_bytes(float(nv) * 3 ** (k - 1) / (2 ** (k - 1) - 1), nv))
         if use_mg else 0.0,
         "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
+        "shift": SHIFT_TRANSIENT_FACTOR * _sparse_bytes(nnz_gam, nv),
     }
     # first order with CHOLMOD: the symbolic analysis of the full-data pattern is made once, in the
     # parent before the fork (NormalEquationSolver.prepare_shared); the workers share its pages, so
     # each holds only its numeric factor
     shared = analysis if order == 1 and not block else 0.0
-    per_process = est["HtH"] * 2 / 3 + est["factor"] - shared + est["multigrid"] + est["vectors"] + FORK_WORKER_OVERHEAD
+    per_process = (est["HtH"] * 2 / 3 + est["factor"] - shared + est["multigrid"] + est["vectors"] + est["shift"]
+                   + FORK_WORKER_OVERHEAD)
     est["workers"] = per_process * (max(int(processes), 1) - 1)
     # what one factor at a time saves a worker (plan_fit_memory): its direct factor, or the factor
     # chain's (the Jacobi-CG / multigrid state of the chain's sweep it keeps)
@@ -663,7 +674,7 @@ def check_fit_memory(
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
         parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
-                                                                    "workers", "fold_matrices")
+                                                                    "shift", "workers", "fold_matrices")
                           if k not in ("workers", "fold_matrices") or est[k] > 0)
         raise ResourceLimit(
             f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
