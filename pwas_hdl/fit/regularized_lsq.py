@@ -312,13 +312,13 @@ AMG_DOMINANCE = 10.0
 
 #: ... and only on a vertex grid whose longest axis has at least this many vertices (or whose shape
 #: :func:`~pwas_hdl.fit.multigrid.grid_shape_of` cannot tell, as before). Jacobi-CG needs about 4 to
-#: 10 times the longest side in iterations on the penalty-dominated system, an AMG V-cycle costs
-#: 25-90 Jacobi iterations and the solve takes 10-13 of them plus the hierarchy's build. Measured
+#: 14 times the longest side in iterations on the penalty-dominated system, an AMG V-cycle costs
+#: 18-26 Jacobi iterations and the solve takes 8-13 of them plus the hierarchy's build. Measured
 #: (``benchmarks/cg_preconditioners.py --preconditioners jacobi,amg-lumped``, T = 10^5, CV fold 0,
 #: sigma = 100 and 1000, cold, set-up + CG CPU, 2026-12-03): Jacobi cheaper at every point of n = 4
-#: (sides 18, 32), 5 (10, 16), 6 (7, 10), n = 3 side 32 and 64 (1.59 / 1.09 s against 2.04 / 1.52 s)
-#: and n = 2 side 64; AMG cheaper from n = 2 side 128 (0.06 against 0.08 s) and 256 (0.29 against
-#: 0.69 s). Under ``auto`` only n >= 4 solves by CG alone, whose grids of at most 2 million vertices
+#: (sides 18, 32), 5 (10, 16), 6 (7, 10), n = 3 (sides 32 and 64; at 64 1.59 / 1.09 s against 2.04 /
+#: 1.52 s) and n = 2 side 64; AMG cheaper from n = 2 side 128 (0.06 against 0.08 s) and 256 (0.29
+#: against 0.69 s). Under ``auto`` only n >= 4 solves by CG alone, whose grids of at most 2 million vertices
 #: have sides under 128; n = 2 and 3 solve their penalty-dominated sigmas by multigrid.
 AMG_MIN_SIDE = 128
 
@@ -563,8 +563,8 @@ def estimate_fit_memory(
         ``H``, ``HtH`` (the normal matrix, counted three times: total, fold, shifted), ``Gamma``,
         ``factor`` (direct: ``DIRECT_FILL_FACTOR`` times ``nnz(A)``, or with CHOLMOD the smaller grid
         bound of :data:`GRID_FACTOR_BOUND`; first-order CG: the AMG preconditioner,
-        :data:`AMG_MEMORY_FACTOR` times ``A`` (a diagonal below :data:`AMG_MIN_SIDE`); zero order: a diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is
-        used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
+        :data:`AMG_MEMORY_FACTOR` times ``A`` (a diagonal below :data:`AMG_MIN_SIDE`); zero order: a
+        diagonal; plus, where the factor chain of :data:`FACTOR_DOMINANCE_CG` is used, its nested-dissection factor, ``FACTOR_CHAIN_FILL`` times ``nnz(A)``), ``multigrid``
         (its levels, where first order uses it),
         ``vectors`` (weights, right-hand sides, CG work vectors), ``shift`` (forming ``M + sigma
         Gamma``, :data:`SHIFT_TRANSIENT_FACTOR`), ``workers`` (what each further
@@ -782,9 +782,10 @@ class _Preconditioner:
     """Preconditioner of ``A = M_data + sigma Gamma`` for conjugate gradients.
 
     Jacobi (``diag(A)^{-1}``) by default. First-order problems on a grid with a long enough axis
-    (``amg``, see :data:`AMG_MIN_SIDE`) whose penalty dominates (see :data:`AMG_DOMINANCE`) get one V-cycle of smoothed-aggregation algebraic multigrid (pyamg) on
-    the *lumped* surrogate ``diag(rowsum(H'H)) + sigma0 Gamma``, an M-matrix (a scaled grid
-    Laplacian plus a positive diagonal); since ``H'H <= diag(rowsum(H'H))`` (each row of ``H`` is a
+    (``amg``, see :data:`AMG_MIN_SIDE`) whose penalty dominates (see :data:`AMG_DOMINANCE`) get one
+    V-cycle of smoothed-aggregation algebraic multigrid (pyamg) on the *lumped* surrogate
+    ``diag(rowsum(H'H)) + sigma0 Gamma``, an M-matrix (a scaled grid Laplacian plus a positive
+    diagonal); since ``H'H <= diag(rowsum(H'H))`` (each row of ``H`` is a
     probability vector) the surrogate bounds ``A`` from above. The hierarchy is built on the
     full-data normal matrix and reused for every fold, and for every sigma of its band: the AMG
     sigmas are cut into bands of ratio ``AMG_REUSE_RATIO`` from the first one up (see
