@@ -10,19 +10,37 @@ from pwas_hdl.fit import regularized_lsq as rl
 def sweep_against_direct(solver, hth, b, gam, sigmas, order, cap: int) -> list[str]:
     """Solve ``hth + sigma gam`` for ``sigmas[order]`` in that order, each warm-started from the
     previous solution; a factor-PCG solve must converge within ``cap`` iterations and the stated
-    weight bound of the direct solve, any other must equal it. Returns the methods used."""
+    weight bound of the direct solve, any other must be a direct solve as exact as SuperLU's.
+    Returns the methods used.
+
+    "As exact": a relative residual at the rounding level (``DIRECT_RESIDUAL``, which no CG solve
+    stopped at ``CG_RTOL`` reaches) and a distance from SuperLU's weights within what the two
+    residuals allow, ``(||r|| + ||r_superlu||) / (sigma lambda_min(Gamma))``. Element-wise equality
+    of two direct solvers is not a property of the solver: at sigma = 1e-7 the 3-D chain's system
+    has condition number 1.6e8, and CHOLMOD (nested dissection) and SuperLU (MMD) differ by
+    2.7e-8 relative on one weight on one CPU and by less on another, both with residuals ~3e-16."""
     w, methods = None, []
     for i in order:
         w, info = solver.solve(hth, b, float(sigmas[i]), x0=w)
         methods.append(info.method)
-        wd = rl._solve_spd((hth + sigmas[i] * gam).tocsc(), b)
+        a = (hth + sigmas[i] * gam).tocsc()
+        wd = rl._solve_spd(a, b)
         if info.method == "factor-pcg":
             assert info.converged and info.rel_residual <= rl.CG_RTOL
             assert 0 < info.iterations <= cap
             assert float(np.linalg.norm(w - wd)) <= info.weight_bound
         else:
-            np.testing.assert_allclose(w, wd, rtol=1e-8, atol=1e-10)
+            nb = float(np.linalg.norm(b))
+            r, rd = float(np.linalg.norm(b - a @ w)), float(np.linalg.norm(b - a @ wd))
+            assert r <= DIRECT_RESIDUAL * nb and rd <= DIRECT_RESIDUAL * nb
+            lam = float(sigmas[i]) * rl.gamma_min_eigenvalue(gam)
+            assert float(np.linalg.norm(w - wd)) <= (r + rd) / lam
     return methods
+
+
+#: Relative residual ``||b - A w|| / ||b||`` a direct solve must reach in :func:`sweep_against_direct`
+#: (measured 2-3e-16 for CHOLMOD and SuperLU on its problems; a CG solve stops at ``CG_RTOL`` = 1e-10).
+DIRECT_RESIDUAL = 1e-13
 
 
 def random_problem(n: int, p: int, t: int, seed: int):
