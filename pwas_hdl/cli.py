@@ -428,6 +428,10 @@ def fit(
                  f"{', '.join(f'{t}: {v:.4g}' for t, v in rf['series_parallel_rmse'].items())}; closed-loop RMSE "
                  f"{', '.join(f'{t}: {v:.4g}' for t, v in rf['closed_loop_rmse'].items())} "
                  f"({rf['iterations_used']} of {refine} refinement(s) kept)")
+        from pwas_hdl.fit.regularized_lsq import solve_warnings
+
+        for line in solve_warnings(getattr(model, "solve_", None), model.sigma_):
+            _warn(line)
         _say(f"wrote {output}")
 
 

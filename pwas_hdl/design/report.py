@@ -212,7 +212,8 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
         "format": "pwas-hdl-report",
         "version": 1,
         "design": design,
-        "fit": {k: fit[k] for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")} if fit is not None else None,
+        "fit": ({**{k: fit[k] for k in ("sigma", "tikhonov_order", "gamma", "n_train", "train_rmse")},
+                 "solve": fit.get("solve")} if fit is not None else None),
         "simulation": sims,
         "synthesis": synth,
     }
@@ -224,6 +225,20 @@ def _fmt(v: Any, spec: str = ".4g") -> str:
     if isinstance(v, float):
         return format(v, spec)
     return str(v)
+
+
+def _solve_sentence(solve: dict[str, Any] | None) -> str:
+    """The fit's solve (model file ``fit.solve``) in a sentence: only when a solve did not converge."""
+    if not solve:
+        return ""
+    out = ""
+    if not solve.get("converged", True):
+        out += (f" **The weights did not converge**: relative residual {_fmt(solve.get('rel_residual'), '.3g')}, "
+                f"within {_fmt(solve.get('weight_bound'), '.3g')} (2-norm) of the exact solution.")
+    if solve.get("cv_unconverged"):
+        out += (f" {solve['cv_unconverged']} of {solve.get('cv_solves')} CV solves stopped unconverged (the choice "
+                "of sigma is approximate).")
+    return out
 
 
 def _estimator_lines(rep: dict[str, Any]) -> list[str]:
@@ -265,7 +280,8 @@ def report_markdown(rep: dict[str, Any]) -> str:
         f"Model: n = {d['n']} ({', '.join(d['regressors'])}), N = {d['N']}, sigma = {_fmt(f['sigma'], '.3g')}, "
         f"Tikhonov order {f['tikhonov_order']}, gamma = {f['gamma']}, train RMSE "
         + ", ".join(f"{t} {_fmt(v)}" for t, v in (f.get("train_rmse") or {}).items())
-        + ".",
+        + "."
+        + _solve_sentence(f.get("solve")),
         "",
         f"Formats: inputs {', '.join(d['input_formats'])}, weights {d['weight_format']}, output {d['output_format']} "
         f"(LSB {_fmt(d['output_lsb'])}); error bound vs float {_fmt(d['error_bound_lsb'])} LSB = {_fmt(d['error_bound'])}.",

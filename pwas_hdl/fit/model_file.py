@@ -13,8 +13,17 @@
       "weights": {"<target>": [w_0, ..., w_{N-1}], ...},   # vertex order of pwas_hdl.fit.geometry
       "fit": {"sigma": ..., "sigma_given": bool, "tikhonov_order": 0 | 1, "gamma": ..., "domain_from":
               "data" | "explicit", "share_lag_domain": bool, "n_train": int, "n_trajectories": int,
-              "train_rmse": {"<target>": ...}, "cv": {"sigmas", "mse", "best_sigma", "folds"} | null}
+              "train_rmse": {"<target>": ...}, "cv": {"sigmas", "mse", "best_sigma", "folds"} | null,
+              "solve": {...}}     # optional, see below
     }
+
+Optional ``fit.solve`` block (issue 18; absent in earlier files and for dynamical sensors, which load
+as before -- no version bump): how well the weights solve the regularised normal equations at
+``sigma``, checked afresh from the weights (:func:`pwas_hdl.fit.regularized_lsq.solve_report`)::
+
+      "solve": {"method": str | null, "iterations": int | null, "converged": bool,
+                "rel_residual": float, "weight_bound": float | null,   # ||w - w_exact||_2 <= weight_bound
+                "cv_solves": int | null, "cv_unconverged": int | null}
 
 Optional ``recurrence`` block (issue 13, a dynamical sensor: :mod:`pwas_hdl.fit.recurrent`; absent
 for a static sensor, so files without it load as before -- no version bump)::
@@ -51,6 +60,7 @@ Version history: 1 (no ``$schema``; ``int()`` of the lags accepted 2.7 as 2), 2 
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -111,6 +121,7 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
             "n_trajectories": int(sensor.n_trajectories_),
             "train_rmse": {t: float(v) for t, v in zip(tgts, sensor.train_rmse_)},
             "cv": sensor.cv_.to_dict() if sensor.cv_ is not None else None,
+            **({"solve": _solve_to_dict(sensor.solve_)} if getattr(sensor, "solve_", None) is not None else {}),
             **({"breakpoints": sensor.breakpoints if isinstance(sensor.breakpoints, str) else "given"}
                if getattr(grid, "breakpoints", None) is not None else {}),
         },
@@ -394,6 +405,7 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     obj.sigma_ = float(fit["sigma"])
     obj.cv_ = (CVResult(np.array(cv["sigmas"], dtype=float), np.array(cv["mse"], dtype=float), float(cv["best_sigma"]),
                         int(cv["folds"])) if cv is not None else None)
+    obj.solve_ = dict(fit["solve"]) if "solve" in fit else None
     obj.n_train_ = int(fit["n_train"])
     obj.n_trajectories_ = int(fit["n_trajectories"])
     obj.train_rmse_ = np.array([fit["train_rmse"][t] for t in tgts], dtype=float)
@@ -404,6 +416,24 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     if "classifier" in d:
         obj.classifier_ = {"target": d["classifier"]["target"], "classes": [float(c) for c in d["classifier"]["classes"]]}
     return obj
+
+
+#: The keys of the optional ``fit.solve`` block, in file order (see :func:`pwas_hdl.fit.regularized_lsq.solve_report`).
+SOLVE_KEYS = ("method", "iterations", "converged", "rel_residual", "weight_bound", "cv_solves", "cv_unconverged")
+
+
+def _solve_to_dict(report: dict) -> dict:
+    """The ``fit.solve`` block: the solve report's keys in file order, numbers as plain floats and ints."""
+    out = {}
+    for k in SOLVE_KEYS:
+        v = report.get(k)
+        if v is None or isinstance(v, (bool, str)):
+            out[k] = v
+        elif k in ("iterations", "cv_solves", "cv_unconverged"):
+            out[k] = int(v)
+        else:
+            out[k] = float(v) if math.isfinite(float(v)) else None
+    return out
 
 
 def read_model(path: str | os.PathLike) -> "PWASVirtualSensor":

@@ -53,6 +53,8 @@ __all__ = [
     "FACTOR_CHAIN_FILL",
     "FORK_MIN_UNKNOWNS",
     "solve_regularized",
+    "solve_report",
+    "solve_warnings",
     "cross_validate_sigma",
     "CVResult",
     "DEFAULT_SIGMA_GRID",
@@ -906,7 +908,8 @@ class NormalEquationSolver:
         base method is Jacobi-CG (3-D), the factor chain (:data:`FACTOR_DOMINANCE_CG`).
     rtol : float
         CG relative-residual tolerance (default :data:`CG_RTOL`).
-    maxiter : int
+    maxiter : int, optional
+        CG iteration cap (default :data:`CG_MAXITER`, read when the solver is made).
     direct_backend : {"auto", "cholmod", "superlu"}
         The direct solve: CHOLMOD (:class:`~pwas_hdl.fit.sparse_cholesky.PatternCholesky`, one
         symbolic analysis per fold matrix, a numeric factorisation per sigma) where cvxopt is
@@ -925,7 +928,7 @@ class NormalEquationSolver:
         n_dims: int,
         method: Method = "auto",
         rtol: float = CG_RTOL,
-        maxiter: int = CG_MAXITER,
+        maxiter: int | None = None,
         direct_backend: Literal["auto", "cholmod", "superlu"] = "auto",
         block_smoother: bool = True,
     ):
@@ -946,7 +949,8 @@ class NormalEquationSolver:
         self.fallback = method == "auto" and unknowns <= FALLBACK_FACTOR * _direct_limits()[
             (self.order, min(max(int(n_dims), 1), 5))
         ]
-        self.rtol, self.maxiter = float(rtol), int(maxiter)
+        self.rtol = float(rtol)
+        self.maxiter = CG_MAXITER if maxiter is None else int(maxiter)
         #: the vertex-grid shape for multigrid (first order on a full grid), None where not used
         self._mg_shape = None
         if self.order == 1 and self.keep is None and (method == "mg" or (
@@ -1402,6 +1406,94 @@ def solve_regularized(
     return (w, info) if return_info else w
 
 
+def solve_report(
+    h: sparse.sparray,
+    z: np.ndarray,
+    w: np.ndarray,
+    sigma: float,
+    gamma: sparse.sparray,
+    info: SolveInfo | None = None,
+    cv: "CVResult | None" = None,
+) -> dict:
+    """How well the weights ``w`` solve ``(H'H + sigma Gamma) w = H'z``, checked afresh.
+
+    The residual ``r = H'z - (H'H + sigma Gamma) w`` is computed from ``h``, ``z`` and ``w``
+    themselves (not taken from the solver), so the report holds for whatever produced ``w``: a
+    factorisation, CG stopped at its tolerance, or CG stopped at its iteration cap. Since
+    ``H'H + sigma Gamma >= sigma lambda_min(Gamma) I``, ``||w - w_exact||_2 <= ||r||_2 /
+    (sigma lambda_min(Gamma))`` (:func:`gamma_min_eigenvalue`, a Gershgorin bound).
+
+    Parameters
+    ----------
+    h : sparse array, shape (T, N)
+    z : ndarray, shape (T,) or (T, nz)
+    w : ndarray, shape (N,) or (N, nz)
+    sigma : float
+    gamma : sparse array, shape (N, N)
+    info : SolveInfo, optional
+        The solver's own account of the solve (method, iterations, whether it met its stopping rule).
+    cv : CVResult, optional
+        The cross-validation that chose sigma: its count of solves and of those that stopped unconverged.
+
+    Returns
+    -------
+    dict
+        ``rel_residual`` (largest ``||r_j|| / ||H'z_j||`` over the target columns ``j``, 0 where
+        ``H'z_j = 0``), ``weight_bound`` (largest ``||r_j|| / (sigma lambda_min(Gamma))``, None where
+        Gershgorin gives no positive bound), ``converged`` (the solver's stopping rule met; with
+        no ``info``: ``rel_residual <= CG_RTOL``), ``method`` and ``iterations`` (from ``info``, else
+        None), ``cv_solves`` and ``cv_unconverged`` (from ``cv``, else None).
+    """
+    h = sparse.csr_array(h)
+    z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
+    w2 = np.asarray(w, dtype=float).reshape(h.shape[1], -1)
+    htz = h.T @ z2
+    r = htz - h.T @ (h @ w2) - float(sigma) * (gamma @ w2)
+    rn, bn = np.linalg.norm(r, axis=0), np.linalg.norm(htz, axis=0)
+    rel = float(max((a / b if b > 0 else 0.0) for a, b in zip(rn, bn))) if rn.size else 0.0
+    lam = float(sigma) * gamma_min_eigenvalue(gamma)
+    bound = float(rn.max(initial=0.0)) / lam if lam > 0 else None
+    out = {
+        "method": None if info is None else str(info.method),
+        "iterations": None if info is None else int(info.iterations),
+        "converged": bool(info.converged) if info is not None else rel <= CG_RTOL,
+        "rel_residual": rel,
+        "weight_bound": bound,
+        "cv_solves": None,
+        "cv_unconverged": None,
+    }
+    if cv is not None and "solves" in cv.solver:
+        out["cv_solves"] = int(cv.solver["solves"])
+        out["cv_unconverged"] = int(cv.solver.get("unconverged", 0))
+    return out
+
+
+def solve_warnings(report: dict | None, sigma: float) -> list[str]:
+    """The ``warning:`` lines a :func:`solve_report` calls for (none when every solve converged).
+
+    One line when the weights' own solve stopped unconverged (its residual and weight bound, and
+    what makes the system better conditioned), one when some of the CV's solves did (the CV errors
+    of those sigmas are then approximate, and so may be the choice of sigma).
+    """
+    if not report:
+        return []
+    out = []
+    if not report.get("converged", True):
+        its = report.get("iterations")
+        how = f"stopped after {its} iterations" if its else "stopped"
+        bound = report.get("weight_bound")
+        off = (f"the weights are within {bound:.3g} (2-norm) of the exact solution" if bound is not None
+               else "no bound on the weights' error is available")
+        out.append(f"warning: the weights did not converge: the solve at sigma = {sigma:.3g} {how} at relative "
+                   f"residual {report.get('rel_residual', float('nan')):.3g} (target {CG_RTOL:g}); {off}. A larger "
+                   "--sigma, fewer partitions (-p) or more samples per weight make the system better conditioned")
+    bad, total = report.get("cv_unconverged"), report.get("cv_solves")
+    if bad:
+        out.append(f"warning: {bad} of {total} cross-validation solves stopped unconverged: the CV errors at "
+                   "those sigmas, and so the choice of sigma, are approximate")
+    return out
+
+
 @dataclass
 class CVResult:
     """Outcome of the cross-validation of sigma.
@@ -1420,7 +1512,8 @@ class CVResult:
         Validation MSE of each fold and candidate.
     solver : dict
         How the systems were solved: ``method``, ``solves``, CG ``iterations`` in total,
-        ``max_rel_residual``, ``all_converged``, ``direct_fallbacks``, ``solves_by_method`` (count per
+        ``max_rel_residual``, ``all_converged``, ``unconverged`` (the count of solves that stopped
+        unconverged), ``direct_fallbacks``, ``solves_by_method`` (count per
         :attr:`SolveInfo.method`: ``auto`` mixes multigrid and the direct solve in first order),
         ``superlu_fallbacks`` (CHOLMOD pivots that were not positive), ``weight_bound`` (folds, S), the bound of each
         solve on ``max_col ||w - w_exact||_2`` (zero for the direct solve), and ``fork_tasks`` (the CPU
@@ -1736,6 +1829,7 @@ def cross_validate_sigma(
         "iterations": int(sum(i.iterations for i in infos)),
         "max_rel_residual": float(max((i.rel_residual for i in infos), default=0.0)),
         "all_converged": bool(all(i.converged for i in infos)),
+        "unconverged": int(sum(not i.converged for i in infos)),
         "direct_fallbacks": int(sum(i.method == "direct-fallback" for i in infos)),
         "solves_by_method": {k: int(sum(i.method == k for i in infos)) for k in sorted({i.method for i in infos})},
         "superlu_fallbacks": int(solver.superlu_fallbacks),

@@ -33,6 +33,7 @@ from pwas_hdl.fit.regularized_lsq import (
     check_fit_memory,
     cross_validate_sigma,
     solve_regularized,
+    solve_report,
     tikhonov_matrix,
 )
 
@@ -121,6 +122,11 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
     weights_ : ndarray, shape (N, nz)
     sigma_ : float
     cv_ : CVResult or None
+    solve_ : dict or None
+        How well ``weights_`` solve the regularised normal equations at ``sigma_``, checked afresh
+        (:func:`~pwas_hdl.fit.regularized_lsq.solve_report`: relative residual, weight bound,
+        converged, and the CV's unconverged solves); None for a dynamical sensor (``mz``), whose
+        weights are refined in closed loop.
     lags_ : LagStructure
     n_train_ : int  (number of regressor rows used)
     """
@@ -425,10 +431,15 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                                       executor=executor, method=method, final_solve=True)
             sigma = cv.best_sigma
             # the full-data solve by the CV's own solver (= solve_regularized, without a second H'H / analysis)
+            info = cv.final_info
             w, cv.final_weights, cv.final_info = cv.final_weights.reshape(grid.n_vertices, nz), None, None
         else:
             cv, sigma = None, float(self.sigma)
-            w = solve_regularized(h, zt, sigma, gam, method=method).reshape(grid.n_vertices, nz)
+            w, info = solve_regularized(h, zt, sigma, gam, method=method, return_info=True)
+            w = w.reshape(grid.n_vertices, nz)
+        # the solve checked afresh from the weights (residual, weight bound); a dynamical sensor's
+        # weights are then refined in closed loop and solve another system: no report there
+        self.solve_ = None if self.mz else solve_report(h, zt, w, sigma, gam, info, cv)
         rec_info = None
         if self.mz:
             from pwas_hdl.fit.recurrent import refine_closed_loop
