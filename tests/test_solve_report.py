@@ -38,7 +38,27 @@ def test_report_of_the_direct_solve_and_of_perturbed_weights(order):
     bad = solve_report(h, z, wrong, sigma, gam)
     assert not bad["converged"] and bad["rel_residual"] > rl.CG_RTOL and bad["method"] is None
     assert bad["weight_bound"] >= float(np.linalg.norm(wrong - w))
+    # the bound is exactly ||r|| / (sigma lambda_min(Gamma)) of the residual computed here
+    a = (h.T @ h + sigma * gam).tocsr()
+    r = h.T @ z - a @ wrong
+    assert bad["weight_bound"] == pytest.approx(np.linalg.norm(r) / (sigma * rl.gamma_min_eigenvalue(gam)), rel=1e-9)
+    assert bad["rel_residual"] == pytest.approx(np.linalg.norm(r) / np.linalg.norm(h.T @ z), rel=1e-9)
     assert solve_warnings(rep, sigma) == []
+    # the solver's word is not enough: a "converged" info with weights that do not solve the system
+    assert not solve_report(h, z, wrong, sigma, gam, info)["converged"]
+
+
+def test_non_finite_weights_are_not_converged_and_warn():
+    h, z, gam = _problem(1)
+    w = solve_regularized(h, np.column_stack([z, -z]), 1e-2, gam, method="direct")
+    w[3, 1] = np.nan  # the second target only: the report must not lose it
+    rep = solve_report(h, np.column_stack([z, -z]), w, 1e-2, gam)
+    assert not rep["converged"] and rep["rel_residual"] == np.inf and rep["weight_bound"] == np.inf
+    lines = solve_warnings(rep, 1e-2)
+    assert len(lines) == 1 and "no finite residual" in lines[0] and "no bound" in lines[0]
+    # as read back from a model file (non-finite written as null)
+    from_file = dict(rep, rel_residual=None, weight_bound=None, iterations=None)
+    assert "did not converge" in solve_warnings(from_file, 1e-2)[0]
 
 
 def test_unconverged_cg_is_reported_with_a_bound_that_holds():
@@ -112,3 +132,4 @@ def test_report_says_when_the_weights_did_not_converge():
     text = _solve_sentence(bad)
     assert "did not converge" in text and "4.1e-06" in text and "1.4e+04" in text
     assert "12 of 105 CV solves stopped unconverged" in text
+    assert "within" not in _solve_sentence(dict(bad, weight_bound=None))

@@ -233,8 +233,9 @@ def _solve_sentence(solve: dict[str, Any] | None) -> str:
         return ""
     out = ""
     if not solve.get("converged", True):
-        out += (f" **The weights did not converge**: relative residual {_fmt(solve.get('rel_residual'), '.3g')}, "
-                f"within {_fmt(solve.get('weight_bound'), '.3g')} (2-norm) of the exact solution.")
+        bound = solve.get("weight_bound")
+        out += (f" **The weights did not converge**: relative residual {_fmt(solve.get('rel_residual'), '.3g')}"
+                + (f", within {_fmt(bound, '.3g')} (2-norm) of the exact solution." if bound is not None else "."))
     if solve.get("cv_unconverged"):
         out += (f" {solve['cv_unconverged']} of {solve.get('cv_solves')} CV solves stopped unconverged (the choice "
                 "of sigma is approximate).")

@@ -18,8 +18,10 @@
     }
 
 Optional ``fit.solve`` block (issue 18; absent in earlier files and for dynamical sensors, which load
-as before -- no version bump): how well the weights solve the regularised normal equations at
-``sigma``, checked afresh from the weights (:func:`pwas_hdl.fit.regularized_lsq.solve_report`)::
+as before -- no version bump, but a reader from before the block refuses a file that has it, as
+``fit`` admits no unknown key): how well the weights solve the regularised normal equations at
+``sigma``, checked afresh from the weights (:func:`pwas_hdl.fit.regularized_lsq.solve_report`; a
+non-finite residual or bound is written as null)::
 
       "solve": {"method": str | null, "iterations": int | null, "converged": bool,
                 "rel_residual": float, "weight_bound": float | null,   # ||w - w_exact||_2 <= weight_bound

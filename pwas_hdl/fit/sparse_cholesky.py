@@ -82,7 +82,8 @@ def openblas_coretype(cpuinfo: str | None = None) -> str | None:
 
 def import_cholmod():
     """``cvxopt.cholmod``, imported with the OpenBLAS kernels of :func:`openblas_coretype` (see the
-    module) unless ``OPENBLAS_CORETYPE`` is set; ``ImportError`` where cvxopt is not installed."""
+    module) unless ``OPENBLAS_CORETYPE`` is set or cvxopt was imported before (its OpenBLAS then
+    keeps the kernels it has); ``ImportError`` where cvxopt is not installed."""
     import sys
 
     # cvxopt's every extension (base first) loads the OpenBLAS: once any is in, its kernels are set

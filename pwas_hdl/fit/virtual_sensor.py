@@ -439,7 +439,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             w = w.reshape(grid.n_vertices, nz)
         # the solve checked afresh from the weights (residual, weight bound); a dynamical sensor's
         # weights are then refined in closed loop and solve another system: no report there
-        self.solve_ = None if self.mz else solve_report(h, zt, w, sigma, gam, info, cv)
+        solve = None if self.mz else solve_report(h, zt, w, sigma, gam, info, cv)
         rec_info = None
         if self.mz:
             from pwas_hdl.fit.recurrent import refine_closed_loop
@@ -459,6 +459,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.weights_ = w
         self.sigma_ = sigma
         self.cv_ = cv
+        self.solve_ = solve
         self.n_train_ = int(xi.shape[0])
         self.train_rmse_ = np.sqrt(np.mean(resid**2, axis=0))
         self.n_trajectories_ = len(valid)

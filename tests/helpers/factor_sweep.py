@@ -13,12 +13,13 @@ def sweep_against_direct(solver, hth, b, gam, sigmas, order, cap: int) -> list[s
     weight bound of the direct solve, any other must be a direct solve as exact as SuperLU's.
     Returns the methods used.
 
-    "As exact": a relative residual at the rounding level (``DIRECT_RESIDUAL``, which no CG solve
-    stopped at ``CG_RTOL`` reaches) and a distance from SuperLU's weights within what the two
-    residuals allow, ``(||r|| + ||r_superlu||) / (sigma lambda_min(Gamma))``. Element-wise equality
-    of two direct solvers is not a property of the solver: at sigma = 1e-7 the 3-D chain's system
-    has condition number 1.6e8, and CHOLMOD (nested dissection) and SuperLU (MMD) differ by
-    2.7e-8 relative on one weight on one CPU and by less on another, both with residuals ~3e-16."""
+    "As exact": a relative residual at the rounding level, ``DIRECT_RESIDUAL``, as SuperLU's own. No
+    CG solve stopped at ``CG_RTOL`` reaches it, and the exact solution of the next sigma of the grid
+    (a stale factor) measured 1.3e-6 to 0.76 on these problems; any distance bound from SuperLU's weights
+    would follow from the two residuals, so none is added. Element-wise equality of two direct
+    solvers is not a property of the solver: at sigma = 1e-7 the 3-D chain's system has condition
+    number 1.6e8, and CHOLMOD (nested dissection) and SuperLU (MMD) differ by 2.7e-8 relative on
+    one weight on one CPU and by less on another, both with residuals ~3e-16."""
     w, methods = None, []
     for i in order:
         w, info = solver.solve(hth, b, float(sigmas[i]), x0=w)
@@ -33,8 +34,6 @@ def sweep_against_direct(solver, hth, b, gam, sigmas, order, cap: int) -> list[s
             nb = float(np.linalg.norm(b))
             r, rd = float(np.linalg.norm(b - a @ w)), float(np.linalg.norm(b - a @ wd))
             assert r <= DIRECT_RESIDUAL * nb and rd <= DIRECT_RESIDUAL * nb
-            lam = float(sigmas[i]) * rl.gamma_min_eigenvalue(gam)
-            assert float(np.linalg.norm(w - wd)) <= (r + rd) / lam
     return methods
 
 
