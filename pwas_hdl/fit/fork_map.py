@@ -32,6 +32,12 @@ def fork_available() -> bool:
     return "fork" in multiprocessing.get_all_start_methods()
 
 
+def _init_worker(processes: int) -> None:
+    from pwas_hdl.fit.blas_threads import worker_blas_threads
+
+    worker_blas_threads(processes)
+
+
 def _run(item: tuple[int, Any]) -> tuple[int, Any, float, int]:
     index, arg = item
     assert _TASK is not None
@@ -82,7 +88,10 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
     try:
         # a worker that dies (killed, out of memory) raises BrokenProcessPool here instead of
         # leaving the parent waiting for ever (multiprocessing.Pool would)
-        with ProcessPoolExecutor(max_workers=max(1, min(int(processes), len(items))), mp_context=ctx) as pool:
+        n_proc = max(1, min(int(processes), len(items)))
+        # each worker's BLAS threads at most its share of the cores (pwas_hdl.fit.blas_threads)
+        with ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx, initializer=_init_worker,
+                                 initargs=(n_proc,)) as pool:
             futures = [pool.submit(_run, (i, x)) for i, x in enumerate(items)]
             if parent_work is not None:  # the fork context starts every worker at the first submit
                 parent_work()

@@ -20,6 +20,7 @@ from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
 from pwas_hdl.errors import InputError, InternalError, ResourceLimit
+from pwas_hdl.fit.blas_threads import single_blas_thread
 from pwas_hdl.fit.fork_map import fork_available, fork_map
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
@@ -1345,6 +1346,7 @@ class NormalEquationSolver:
         return w, info
 
 
+@single_blas_thread()
 def solve_regularized(
     h: sparse.sparray,
     z: np.ndarray,
@@ -1664,6 +1666,7 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
     return [[by_seg[(f, k)] for k in range(len(segs))] for f, segs in enumerate(segments)]
 
 
+@single_blas_thread()
 def cross_validate_sigma(
     h: sparse.sparray,
     z: np.ndarray,
