@@ -1792,8 +1792,9 @@ def cross_validate_sigma(
         return mse_f, bound_f, infos_f, fb, bf
 
     def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list, int, int]:
-        data = fold_data(f)
-        return merge([run_segment(data, seg, progress) for seg in solver.sweep_segments(data[2], sig)])
+        with single_blas_thread():  # also on a Dask worker (a remote one need not limit its BLAS)
+            data = fold_data(f)
+            return merge([run_segment(data, seg, progress) for seg in solver.sweep_segments(data[2], sig)])
 
     # one fold = one task (serial, Dask) or one segment = one task (forked workers); the counts a
     # task leaves in the solver come back with its results
