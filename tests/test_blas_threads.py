@@ -46,11 +46,12 @@ def test_single_blas_thread_limits_and_restores(two_threads):
 def test_the_cv_and_the_solve_run_on_one_blas_thread(two_threads):
     h, z, gam = _problem()
     seen = []
-    cross_validate_sigma(h, z, gam, sigmas=[1e-3, 1e-1], folds=2, progress=lambda d, t: seen.append(blas_thread_counts()))
+    cross_validate_sigma(h, z, gam, sigmas=[1e-3, 1e-1], folds=2,
+                         progress=lambda d, t: seen.append(blas_thread_counts()))
     assert seen and all(set(c.values()) == {1} for c in seen)
     w = solve_regularized(h, z, 1e-2, gam)
     assert np.all(np.isfinite(w))
-    assert blas_thread_counts() == two_threads  # restored after either
+    assert blas_thread_counts() == two_threads  # restored after either (the solve's own count is not observable)
 
 
 @pytest.mark.skipif(not fork_available(), reason="needs fork")
