@@ -48,6 +48,7 @@ def test_forked_cv_prepares_the_final_multigrid_while_the_workers_run(monkeypatc
     if not fork_map.fork_available():
         pytest.skip("needs fork")
     monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(rl, "MG_BLOCK_MIN_DIRECT", 100)
     monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
     monkeypatch.setattr(mg, "COARSEST_MAX", 40)
     grid, h, z = _problem((31, 31), 600, 1, seed=4)

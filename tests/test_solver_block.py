@@ -186,3 +186,34 @@ def test_memory_estimate_charges_the_block_not_a_first_order_factor(n, nv):
     # the block's factor is charged as the zero-order fit's (H'H on at most T (n + 1) vertices)
     zero = rl.estimate_fit_memory(10**5, nv, n, 1, 0, "direct")
     assert new["factor"] == pytest.approx(zero["factor"], rel=0.05)
+
+
+def test_block_cycle_only_from_its_size_on_a_direct_base(monkeypatch):
+    """``auto`` on a direct base method (2-D with CHOLMOD) factorises the data-dominated sigmas below
+    MG_BLOCK_MIN_DIRECT unknowns (with factor-PCG from FACTOR_PCG_MIN_UNKNOWNS) and uses the
+    data-block cycle from it; ``mg`` and a Jacobi-CG base (3-D) use the cycle at any size; the
+    memory estimate follows the same rule."""
+    if not sc.cholmod_available():
+        pytest.skip("the direct base method of 2-D multigrid is CHOLMOD's")
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    h, z, gam = random_problem(2, 30, 600, 5)  # 961 unknowns
+    hth = sparse.csr_array(h.T @ h)
+    h3, _, gam3 = random_problem(3, 9, 600, 5)  # 1000 unknowns, Jacobi-CG base
+    hth3 = sparse.csr_array(h3.T @ h3)
+    for limit, block in [(962, False), (961, True)]:
+        monkeypatch.setattr(rl, "MG_BLOCK_MIN_DIRECT", limit)
+        solver = NormalEquationSolver(hth, gam, 2)
+        assert solver.method == "direct" and solver.block_mg is block
+        assert not solver.factor_pcg  # 961 < FACTOR_PCG_MIN_UNKNOWNS: the sigmas factorised
+        monkeypatch.setattr(rl, "FACTOR_PCG_MIN_UNKNOWNS", 961)  # the earlier rule's factor-PCG below
+        assert NormalEquationSolver(hth, gam, 2).factor_pcg is not block
+        monkeypatch.setattr(rl, "FACTOR_PCG_MIN_UNKNOWNS", 962)
+        assert NormalEquationSolver(hth, gam, 2, method="mg").block_mg
+        assert NormalEquationSolver(hth3, gam3, 3).block_mg
+        est = rl.estimate_fit_memory(600, 961, 2, 1, 1, processes=2)
+        old = rl.estimate_fit_memory(600, 961, 2, 1, 1, processes=2, block_smoother=False)
+        assert (est == old) is not block
+    monkeypatch.setattr(rl, "MG_BLOCK_MIN_DIRECT", 962)
+    cv = cross_validate_sigma(h, z, gam, np.logspace(-6, 2, 5), folds=3)
+    by = cv.solver["solves_by_method"]
+    assert "mg-block" not in by and by.get("direct", 0) > 0 and by.get("mg", 0) > 0

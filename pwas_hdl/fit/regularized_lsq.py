@@ -39,6 +39,8 @@ __all__ = [
     "DIRECT_MAX_UNKNOWNS",
     "MG_DOMINANCE",
     "MG_MIN_UNKNOWNS",
+    "MG_BLOCK_MIN_DIRECT",
+    "block_cycle_used",
     "MG_DOMINANCE_CG",
     "MG_AUTO_DIMS",
     "CG_RTOL",
@@ -203,6 +205,46 @@ MG_DOMINANCE_CG = 0.05
 #: measured).
 MG_BLOCK_DOMINANCE: dict[int, float] = {1: 1.0, 2: 1.0, 3: 0.05}
 
+#: First order, ``auto``, where the base method is the direct one (CHOLMOD in 2-D, see
+#: :data:`DIRECT_MAX_UNKNOWNS_CHOLMOD`): the data-block cycle of :data:`MG_BLOCK_DOMINANCE` is used
+#: only from this many unknowns; below, the data-dominated sigmas are factorised (with factor-PCG,
+#: :data:`FACTOR_PCG_MAXITER`), as with ``block_smoother=False``. A factorisation of the 2-D grid costs
+#: about ``N^1.5`` (nested-dissection separators), a data-block solve about ``N`` times its ~10
+#: iterations. Measured (``fit_scale.py --workers 2``, T = 10^5, the same hour, wall / CPU s of the
+#: whole first-order fit, data block against factorisations): N = 99 856: 4.7 / 9.0 against
+#: 4.1 / 7.8; N = 160 000: 6.4 / 12.2 against 6.4 / 12.3; N = 250 000: 9.5 / 17.8 against
+#: 10.0 / 19.2; serially, one fold's data-dominated sigma at N = 99 856 0.1 s against 0.068 s.
+MG_BLOCK_MIN_DIRECT = 150_000
+
+
+def block_cycle_used(unknowns: int, method: str, chosen: str, use_mg: bool, block_smoother: bool = True) -> bool:
+    """True when a first-order fit solves its data-dominated sigmas by the data-block cycle.
+
+    Parameters
+    ----------
+    unknowns : int
+        Weights solved for (the vertex count ``N``).
+    method : {"auto", "direct", "cg", "mg"}
+        The method asked for.
+    chosen : str
+        The base method :func:`choose_method` picks for this size.
+    use_mg : bool
+        Whether the fit uses multigrid at all (first order on a vertex grid of the sizes and
+        dimensions of :data:`MG_MIN_UNKNOWNS` and :data:`MG_AUTO_DIMS`, or ``method="mg"``).
+    block_smoother : bool
+        The caller's switch (``False``: never).
+
+    Returns
+    -------
+    bool
+        ``use_mg`` and ``block_smoother`` with ``method`` ``auto`` or ``mg``, except ``auto`` on a
+        direct base method below :data:`MG_BLOCK_MIN_DIRECT` unknowns.
+    """
+    if not (use_mg and block_smoother and method in ("auto", "mg")):
+        return False
+    return not (method == "auto" and chosen == "direct" and int(unknowns) < MG_BLOCK_MIN_DIRECT)
+
+
 #: Iteration cap of a data-block multigrid-PCG solve (measured at most 15; a solve that hits the cap
 #: is re-done by the direct method, see :data:`MG_BLOCK_DOMINANCE`).
 MG_BLOCK_MAXITER = 200
@@ -216,7 +258,7 @@ MG_MIN_UNKNOWNS = 50_000
 #: to 3^n entries a row (not measured; ``method="mg"`` still works there).
 MG_AUTO_DIMS = (2, 3)
 
-#: First order, direct base method (CHOLMOD), ``auto``, at least :data:`MG_MIN_UNKNOWNS` unknowns:
+#: First order, direct base method (CHOLMOD), ``auto``, at least :data:`FACTOR_PCG_MIN_UNKNOWNS` unknowns:
 #: the data-dominated sigmas of a fold (those not solved by multigrid) are swept from the smallest
 #: up; the smallest is factorised and each next one solved by CG preconditioned with the fold's
 #: last factor (of a smaller sigma), warm-started from the previous sigma's weights, with at most
@@ -230,6 +272,16 @@ MG_AUTO_DIMS = (2, 3)
 #: break-even). So it pays only where ``H'H``'s null space makes the preconditioned spectrum two
 #: clusters (the smallest sigmas).
 FACTOR_PCG_MAXITER = 10
+
+#: Factor-PCG (:data:`FACTOR_PCG_MAXITER`) on a direct base method from this many unknowns. A
+#: factorisation of the 2-D grid costs about ``N^1.5``, a PCG iteration with it about ``N log N``, so
+#: the iterations a factorisation is worth shrink with ``N``: at N = 99 856 (T = 10^5, one fold, serial
+#: CPU) a factorisation and its solve take 0.067 s and a PCG iteration 15 ms, while the attempt next to
+#: the chain's first factor needs 10-11 iterations (0.15 s; then it stops at the cap and refactorises:
+#: 0.74 s for the five folds' sigma = 10^-6.5 against 0.34 s by factorisation alone); at N = 250 000 the
+#: chain's sigmas took 1.19 s against 1.09 s factorised; at N = 10^6 it pays (3 / 6 / 9 iterations at
+#: 0.17-0.21 s against 1.6-2.5 s a factorisation). Below, every data-dominated sigma is factorised.
+FACTOR_PCG_MIN_UNKNOWNS = 500_000
 
 #: A fold's sweep by CG alone (method ``cg`` without the factor chain: ``auto`` from n = 4 up) is
 #: cut into this many warm-started chains of consecutive sigmas (largest down, by count), so that
@@ -586,7 +638,7 @@ def estimate_fit_memory(
     chosen = choose_method(unknowns, n_dims, order, method)
     use_mg = order == 1 and (chosen == "mg" or (method == "auto" and nv >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS))
     # Jacobi-CG base with the factor chain (FACTOR_DOMINANCE_CG): a nested-dissection factor too
-    block = use_mg and bool(block_smoother) and method in ("auto", "mg")
+    block = block_cycle_used(nv, method, chosen, use_mg, block_smoother)
     chain = (use_mg and chosen == "cg" and method == "auto" and int(n_dims) in FACTOR_CHAIN_DIMS
              and cholmod_available()) and not block
     chain_factor = _sparse_bytes(FACTOR_CHAIN_FILL * nnz_a, nv) if chain else 0.0
@@ -904,7 +956,8 @@ class NormalEquationSolver:
         See :func:`choose_method`. First order, ``auto``: from :data:`MG_MIN_UNKNOWNS` unknowns on
         a vertex grid in 2-D or 3-D, every sigma by multigrid-preconditioned CG, the data-dominated
         ones (:data:`MG_BLOCK_DOMINANCE`) with the data-block cycle, and a solve that stops
-        unconverged again by the factorisation; ``mg``: the same in any dimension. With
+        unconverged again by the factorisation (on a direct base method below
+        :data:`MG_BLOCK_MIN_DIRECT` unknowns, the earlier rule below instead: :func:`block_cycle_used`); ``mg``: the same in any dimension. With
         ``block_smoother=False`` the earlier rule: multigrid where the penalty dominates
         (:data:`MG_DOMINANCE`), otherwise the factorisation and factor-PCG (2-D) or, where the
         base method is Jacobi-CG (3-D), the factor chain (:data:`FACTOR_DOMINANCE_CG`).
@@ -975,7 +1028,7 @@ class NormalEquationSolver:
         #: the data-dominated sigmas of a fold by PCG with the factor of a smaller sigma
         #: (see :data:`FACTOR_PCG_MAXITER`): first order, ``auto``, CHOLMOD, full grid, large
         self.factor_pcg = (method == "auto" and self.method == "direct" and self.order == 1 and self.keep is None
-                           and self.backend == "cholmod" and self.n >= MG_MIN_UNKNOWNS)
+                           and self.backend == "cholmod" and self.n >= FACTOR_PCG_MIN_UNKNOWNS)
         #: base method Jacobi-CG: the smallest sigmas by the factor chain (:data:`FACTOR_DOMINANCE_CG`);
         #: a Jacobi- or multigrid-CG solve that stops unconverged is re-done by the factorisation
         self.factor_chain = (method == "auto" and self.method == "cg" and self._mg_shape is not None
@@ -985,7 +1038,7 @@ class NormalEquationSolver:
             self.fallback = True
         #: first order with multigrid: the data-dominated sigmas by the data-block cycle
         #: (:data:`MG_BLOCK_DOMINANCE`) instead of factorisations
-        self.block_mg = bool(block_smoother) and self._mg_shape is not None and method in ("auto", "mg")
+        self.block_mg = block_cycle_used(self.n, method, self.method, self._mg_shape is not None, bool(block_smoother))
         #: the nested-dissection ordering for a first-order factorisation (3-D, see FACTOR_DOMINANCE_CG)
         self._nd_order = self._mg_shape is not None and int(n_dims) in FACTOR_CHAIN_DIMS
         #: the threshold of :meth:`uses_block` for this dimension (:data:`MG_BLOCK_DOMINANCE`)
@@ -1236,8 +1289,10 @@ class NormalEquationSolver:
             a = (m + sigma * self.gamma).tocsr()
             pre = splinalg.LinearOperator(a.shape, matvec=chol.solve, dtype=float)
             wk, info = _cg(a, bk, pre, x0k, sigma, self.lam_gamma, self.rtol, self._factor_pcg_cap)
-            # converged on the residual computed afresh, else refactorise (the iterate is dropped)
-            if info.converged and info.rel_residual <= self.rtol:
+            # converged on the residual computed afresh (whatever CG's own recurrence said: it can
+            # stop at the cap a hair above the tolerance while the true residual is below), else
+            # refactorise (the iterate is dropped)
+            if info.rel_residual <= self.rtol:
                 st["last"] = info.iterations
                 st["stopped"] = info.iterations > self._factor_pcg_cap // 2
                 return wk, SolveInfo("factor-pcg", info.iterations, info.rel_residual, info.weight_bound, True)

@@ -61,5 +61,7 @@ def large_problem_rules(monkeypatch) -> None:
     from pwas_hdl.fit import multigrid as mg
 
     monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setattr(rl, "MG_BLOCK_MIN_DIRECT", 100)
+    monkeypatch.setattr(rl, "FACTOR_PCG_MIN_UNKNOWNS", 100)
     monkeypatch.setattr(rl, "FORK_MIN_UNKNOWNS", 100)
     monkeypatch.setattr(mg, "COARSEST_MAX", 40)
