@@ -187,8 +187,8 @@ MG_DOMINANCE = 0.3
 #: 0.6 / 0.7 / 0.7 / 2.4 s: the cross-over lies between rho = 0.024 and 0.075.
 MG_DOMINANCE_CG = 0.05
 
-#: First order with multigrid (``auto`` or ``mg``, the data-block smoother on, the default): the
-#: sigmas of a fold with ``rho < MG_BLOCK_DOMINANCE[min(n, 3)]`` (``rho`` as in :data:`MG_DOMINANCE`,
+#: First order with multigrid (``auto`` or ``mg``, the data-block smoother on, the default; ``auto``
+#: on a direct base method only from :data:`MG_BLOCK_MIN_DIRECT` unknowns): the sigmas of a fold with ``rho < MG_BLOCK_DOMINANCE[min(n, 3)]`` (``rho`` as in :data:`MG_DOMINANCE`,
 #: ``n`` the regressor dimension) are solved by the V-cycle whose fine level is smoothed by the exact
 #: data block ``M_TT + sigma diag(Gamma)_TT`` and Gauss-Seidel
 #: (:class:`~pwas_hdl.fit.multigrid.DataBlockSmoother`, :meth:`~pwas_hdl.fit.multigrid.FoldMultigrid.vcycle_block`),
