@@ -166,7 +166,9 @@ def worker_fit(n: int, p: int, order: int, t: int, weights_out: str, workers: in
         "cpu_s": cpu + (kids.ru_utime + kids.ru_stime if workers >= 2 else 0.0),
         "workers": workers if workers >= 2 else 1,
         "peak_rss_mib": own_peak + (workers * kids.ru_maxrss / 1024.0 if workers >= 2 else 0.0),
-        "estimated_mib": est["total"] / 2**20,
+        # the plan's estimate as the CV reports it: with a factor that the analysis of
+        # DIRECT_FLOPS_PER_ENTRY chose after the plan, charged to every process that may hold one
+        "estimated_mib": cv.solver.get("memory_plan", {}).get("estimate_mib", est["total"] / 2**20),
         "method": cv.solver["method"],
         "direct_backend": "cholmod" if cholmod_available() else "superlu",
         "cv_solves": cv.solver["solves"],

@@ -24,7 +24,13 @@ from pwas_hdl.fit.blas_threads import single_blas_thread
 from pwas_hdl.fit.fork_map import fork_available, fork_map
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
-from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky, cholmod_available, grid_nested_dissection
+from pwas_hdl.fit.sparse_cholesky import (
+    FactorCounts,
+    NotPositiveDefinite,
+    PatternCholesky,
+    cholmod_available,
+    grid_nested_dissection,
+)
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
 
 __all__ = [
@@ -152,6 +158,23 @@ DIRECT_MAX_UNKNOWNS: dict[tuple[int, int], int] = {
     (1, 4): 2_000,
     (1, 5): 2_000,
 }
+
+#: Zero order, ``auto``, CHOLMOD, where :data:`DIRECT_MAX_UNKNOWNS` picks CG: the full-data system
+#: (``H'H`` on the touched vertices plus ``sigma I``; every fold's pattern is part of it) is analysed
+#: first (CHOLMOD's symbolic analysis, :meth:`~pwas_hdl.fit.sparse_cholesky.PatternCholesky.counts`)
+#: and factorised instead when its factor costs at most this many multiply-adds per non-zero of the
+#: matrix's lower triangle (and fits the memory left, :class:`NormalEquationSolver` ``direct_headroom``):
+#: about what 100 CG iterations cost. The fill of a zero-order factor depends on how the samples
+#: connect the vertices, not only on their number: at N = 10^6 in 4-D (T / N = 0.1) the touched
+#: vertices stay in loosely joined pieces, in 5-D and 6-D, or at T / N >= 1, they do not. Measured
+#: (T = 10^5, CHOLMOD, one BLAS thread; flops / nnz, numeric CPU s, CG iterations of the same cost at
+#: ~2.4 ns per non-zero of ``A``): n = 4, N = 1 048 576: a fold's 584, 0.087 s (~18), the full data's
+#: 1.0e4 (~50), where CG stops at its cap of 2000 unconverged at the smallest sigmas; n = 4, N = 10 000:
+#: 5.1e4, 0.11 s (~250; CG needs 293 on average there); n = 6, N = 15 625: 2.3e5, 1.2 s (~840); n = 4,
+#: N = 104 976: 9.4e5, 6.9 s; n = 5, N = 1 048 576: 1.1e6, 18.5 s; n = 6, N = 10^6: 2.3e7 (lnz 1.4e9,
+#: out of memory). In 2-D and 3-D, where the table picks the direct method anyway, 38 (n = 2,
+#: N = 99 856) and 5.8e3 (n = 3, N = 262 144).
+DIRECT_FLOPS_PER_ENTRY = 2e4
 
 #: The ``auto`` limits where CHOLMOD is available (:mod:`pwas_hdl.fit.sparse_cholesky`; the table
 #: above is SuperLU's). Only first order in 2-D moves: measured at n = 2, N = 10^6, T = 10^5 (one
@@ -740,6 +763,21 @@ def check_fit_memory(
     return est
 
 
+def factor_holders(processes: int) -> int:
+    """Processes that may hold a factor at the same time when a CV runs on ``processes``: each
+    forked worker and the parent's final solve (one process: itself)."""
+    return int(processes) + 1 if int(processes) > 1 else 1
+
+
+def direct_headroom(limit: float | None, estimate: float, processes: int = 1) -> float | None:
+    """Bytes each process that may hold a factor (:func:`factor_holders` of ``processes``) may add
+    for a factor the estimate did not charge (see :data:`DIRECT_FLOPS_PER_ENTRY`): the limit less
+    the estimate, shared; ``None`` without a limit."""
+    if limit is None:
+        return None
+    return max(float(limit) - float(estimate), 0.0) / factor_holders(processes)
+
+
 def plan_fit_memory(
     n_samples: int,
     n_vertices: int,
@@ -974,6 +1012,15 @@ class NormalEquationSolver:
         data-block multigrid cycle (:data:`MG_BLOCK_DOMINANCE`; the default). ``False`` keeps the
         earlier rule (factorisations, factor-PCG and the factor chain at those sigmas), for
         comparison.
+    direct_headroom : float, optional
+        Bytes a zero-order factor chosen by :data:`DIRECT_FLOPS_PER_ENTRY` may take (the memory
+        limit less the fit's estimate, per solving process); ``None``: not limited.
+
+    Attributes
+    ----------
+    analysis : FactorCounts or None
+        The symbolic analysis behind the choice of :data:`DIRECT_FLOPS_PER_ENTRY` (zero order,
+        ``auto``, where the size table picked CG), else None.
     """
 
     def __init__(
@@ -986,6 +1033,7 @@ class NormalEquationSolver:
         maxiter: int | None = None,
         direct_backend: Literal["auto", "cholmod", "superlu"] = "auto",
         block_smoother: bool = True,
+        direct_headroom: float | None = None,
     ):
         hth = sparse.csr_array(hth)
         gamma = sparse.csr_array(gamma)
@@ -1017,14 +1065,19 @@ class NormalEquationSolver:
         self._mg_hier: GridHierarchy | None = None
         self._mg_cache: tuple | None = None
         self._gamma_diag: float | None = None
-        if self.method == "cg":
-            lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
-            self._pre = _Preconditioner(lumped, self.gamma, self.order, amg_allowed(_grid_side(gamma, n_dims)))
         if direct_backend not in ("auto", "cholmod", "superlu"):
             raise InputError(f"direct backend must be 'auto', 'cholmod' or 'superlu', got {direct_backend!r}")
         if direct_backend == "cholmod" and not cholmod_available():
             raise InputError("direct backend 'cholmod' needs cvxopt (pip install cvxopt)")
         self.backend = "superlu" if direct_backend == "superlu" or not cholmod_available() else "cholmod"
+        self.analysis: FactorCounts | None = None
+        #: the direct method chosen by the analysis (:data:`DIRECT_FLOPS_PER_ENTRY`), not by the table
+        self.direct_by_analysis = False
+        if method == "auto" and self.method == "cg" and self.order == 0 and self.backend == "cholmod":
+            self._direct_by_analysis(self._restrict(hth), direct_headroom)
+        if self.method == "cg":
+            lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
+            self._pre = _Preconditioner(lumped, self.gamma, self.order, amg_allowed(_grid_side(gamma, n_dims)))
         #: the data-dominated sigmas of a fold by PCG with the factor of a smaller sigma
         #: (see :data:`FACTOR_PCG_MAXITER`): first order, ``auto``, CHOLMOD, full grid, large
         self.factor_pcg = (method == "auto" and self.method == "direct" and self.order == 1 and self.keep is None
@@ -1066,6 +1119,18 @@ class NormalEquationSolver:
         #: one factor at a time (cross_validate_sigma under a memory limit, see plan_fit_memory): a
         #: lock shared by the forked workers; a fallback factorisation holds it and frees its factor
         self.factor_lock = None
+
+    def _direct_by_analysis(self, m: sparse.csr_array, headroom: float | None) -> None:
+        """Zero order: the direct method instead of CG where the factor of the full-data system is
+        cheap (:data:`DIRECT_FLOPS_PER_ENTRY`) and fits ``headroom`` bytes."""
+        chol = PatternCholesky(abs(m) + abs(self.gamma))
+        self.analysis = chol.counts()
+        if self.analysis is None:
+            return
+        cheap = self.analysis.flops <= DIRECT_FLOPS_PER_ENTRY * chol.nnz_lower
+        if cheap and (headroom is None or self.analysis.bytes <= headroom):
+            self.method = "direct"
+            self.direct_by_analysis = True
 
     def __getstate__(self) -> dict:
         """Pickled (e.g. shipped to a Dask worker) without the CHOLMOD factors, which cannot be."""
@@ -1455,11 +1520,12 @@ def solve_regularized(
     z = np.asarray(z, dtype=float)
     nz = 1 if z.ndim == 1 else z.shape[1]
     h = sparse.csr_array(h)
-    check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), nz, _order_of(gamma), method, max_memory,
-                     grid_side=_grid_side(gamma, _dims_of(h)))
+    est = check_fit_memory(h.shape[0], h.shape[1], _dims_of(h), nz, _order_of(gamma), method, max_memory,
+                           grid_side=_grid_side(gamma, _dims_of(h)))
     ht = h.T.tocsr()
     hth = ht @ h
-    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol)
+    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol,
+                                  direct_headroom=direct_headroom(memory_limit(max_memory)[0], est["total"]))
     w, info = solver.solve(solver.restrict_matrix(hth), ht @ z, float(sigma), x0)
     return (w, info) if return_info else w
 
@@ -1806,7 +1872,13 @@ def cross_validate_sigma(
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2
-    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol, block_smoother=block_smoother)
+    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol, block_smoother=block_smoother,
+                                  direct_headroom=direct_headroom(mem_plan["limit"], mem_plan["estimate"]["total"],
+                                                                  mem_plan["processes"]))
+    if solver.direct_by_analysis:  # the factor the plan did not charge, in every process that may hold one
+        extra = factor_holders(mem_plan["processes"]) * solver.analysis.bytes
+        est = mem_plan["estimate"]
+        mem_plan = dict(mem_plan, estimate=dict(est, factor=est["factor"] + extra, total=est["total"] + extra))
     hth_r = solver.restrict_matrix(hth)
     fold_mse = np.zeros((folds, sig.size))
     weight_bound = np.zeros((folds, sig.size))

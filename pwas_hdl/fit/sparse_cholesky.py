@@ -24,12 +24,13 @@ inherit the setting).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 
 __all__ = ["cholmod_available", "import_cholmod", "openblas_coretype", "PatternCholesky", "NotPositiveDefinite",
-           "grid_nested_dissection", "ND_LEAF"]
+           "grid_nested_dissection", "ND_LEAF", "FactorCounts"]
 
 
 class NotPositiveDefinite(ArithmeticError):
@@ -164,6 +165,96 @@ def grid_nested_dissection(shape: tuple[int, ...], leaf: int = ND_LEAF) -> np.nd
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
+@dataclass(frozen=True)
+class FactorCounts:
+    """What CHOLMOD's symbolic analysis says of a factor ``L`` before any numeric work.
+
+    Attributes
+    ----------
+    n : int
+        Order of the matrix.
+    lnz : int
+        Non-zeros of ``L`` (the column counts' sum, diagonal included).
+    flops : float
+        Sum of the squared column counts: the multiply-adds of the numeric factorisation, up to
+        a small factor.
+    stored : int
+        Values CHOLMOD allocates for ``L`` (supernodal: with the padding of its supernodes) plus the
+        row indices and the largest update matrix of the numeric factorisation.
+    """
+
+    n: int
+    lnz: int
+    flops: float
+    stored: int
+
+    @property
+    def bytes(self) -> float:
+        """Bytes the numeric factorisation holds (8 per stored value or index)."""
+        return 8.0 * self.stored
+
+
+def _factor_struct():
+    """``ctypes`` layout of CHOLMOD's public ``cholmod_factor`` struct (``cholmod_core.h``, CHOLMOD
+    3 to 5), the fields up to its flags."""
+    import ctypes
+
+    class CholmodFactor(ctypes.Structure):
+        _fields_ = ([(name, ctypes.c_size_t) for name in ("n", "minor")]
+                    + [(name, ctypes.c_void_p) for name in ("Perm", "ColCount", "IPerm")]
+                    + [("nzmax", ctypes.c_size_t)]
+                    + [(name, ctypes.c_void_p) for name in ("p", "i", "x", "z", "nz", "next", "prev")]
+                    + [(name, ctypes.c_size_t) for name in ("nsuper", "ssize", "xsize", "maxcsize", "maxesize")]
+                    + [(name, ctypes.c_void_p) for name in ("super", "pi", "px", "s")]
+                    + [(name, ctypes.c_int) for name in ("ordering", "is_ll", "is_super", "is_monotonic", "itype",
+                                                          "xtype", "dtype", "useGPU")])
+
+    return CholmodFactor
+
+
+def factor_counts(factor, n: int, nnz_lower: int) -> FactorCounts | None:
+    """The column counts of a symbolic CHOLMOD factor (a ``cvxopt.cholmod.symbolic`` result).
+
+    cvxopt returns the factor as a capsule around CHOLMOD's ``cholmod_factor``, whose column counts
+    (``ColCount``, set by the analysis) it does not expose; they are read from the struct here. The
+    result is checked against what must hold (the order ``n``; counts between 1 and the rows below
+    the diagonal; at least ``nnz_lower`` non-zeros, those of the lower triangle of the matrix) and
+    ``None`` is returned where the struct does not look like one (another CHOLMOD layout).
+
+    Parameters
+    ----------
+    factor : PyCapsule
+        ``cvxopt.cholmod.symbolic(A)``.
+    n : int
+        Order of ``A``.
+    nnz_lower : int
+        Non-zeros of the lower triangle of ``A``, diagonal included.
+    """
+    import ctypes
+
+    try:
+        name_of = ctypes.pythonapi.PyCapsule_GetName
+        name_of.restype, name_of.argtypes = ctypes.c_char_p, [ctypes.py_object]
+        pointer_of = ctypes.pythonapi.PyCapsule_GetPointer
+        pointer_of.restype, pointer_of.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
+        name = name_of(factor)
+        if not name or not name.startswith(b"CHOLMOD FACTOR"):
+            return None
+        f = _factor_struct().from_address(pointer_of(factor, name))
+        if f.n != n or f.itype not in (0, 2) or not f.ColCount or n == 0:
+            return None
+        ctype = ctypes.c_int32 if f.itype == 0 else ctypes.c_int64
+        counts = np.ctypeslib.as_array((ctype * n).from_address(f.ColCount)).astype(np.int64)
+    except (TypeError, ValueError, AttributeError):  # pragma: no cover - not a capsule of this kind
+        return None
+    rows_left = n - np.arange(n, dtype=np.int64)  # column j of L has at most n - j entries
+    lnz = int(counts.sum())
+    if np.any(counts < 1) or np.any(counts > rows_left) or lnz < nnz_lower:
+        return None
+    stored = (f.xsize + f.ssize + f.maxcsize) if f.is_super else 2 * lnz
+    return FactorCounts(n=n, lnz=lnz, flops=float(np.square(counts, dtype=float).sum()), stored=int(stored))
+
+
 class PatternCholesky:
     """Cholesky factorisations ``A = L L'`` of SPD matrices within one fixed sparsity pattern.
 
@@ -216,6 +307,16 @@ class PatternCholesky:
                 raise ValueError("perm must be a permutation of 0 .. N - 1")
             self._factor = cholmod.symbolic(self._a, p=matrix(perm))
         self.factorizations = 0
+
+    @property
+    def nnz_lower(self) -> int:
+        """Non-zeros of the pattern's lower triangle, diagonal included."""
+        return int(self._ccs.size)
+
+    def counts(self) -> FactorCounts | None:
+        """The factor's size and cost from the symbolic analysis (:func:`factor_counts`; ``None``
+        where CHOLMOD's struct cannot be read)."""
+        return factor_counts(self._factor, self.n, self.nnz_lower)
 
     def align(self, m: sparse.sparray) -> np.ndarray:
         """Values of ``m`` (lower triangle) at the pattern's entries (zeros where ``m`` has none).

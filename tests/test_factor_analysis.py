@@ -1,0 +1,93 @@
+"""The symbolic analysis of a CHOLMOD factor (column counts read from CHOLMOD's struct) and the zero-order
+``auto`` rule built on it (issue 18, fourteenth pass): where the size table picks CG, a factor that the
+analysis shows to be cheap is used instead, and within the memory left."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from pwas_hdl.fit import regularized_lsq as rl
+from pwas_hdl.fit import sparse_cholesky as sc
+from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.regularized_lsq import NormalEquationSolver, cross_validate_sigma, tikhonov_matrix
+
+pytestmark = pytest.mark.skipif(not sc.cholmod_available(), reason="needs CHOLMOD (cvxopt)")
+
+
+def _spd(n: int, density: float, seed: int) -> sparse.csc_array:
+    a = sparse.random(n, n, density=density, random_state=seed)
+    return sparse.csc_array(a + a.T + 10.0 * sparse.identity(n))
+
+
+@pytest.mark.parametrize("n, density, supernodal", [(300, 0.02, True), (300, 0.02, False), (50, 0.3, True),
+                                                     (400, 0.002, False)])
+def test_counts_are_those_of_the_numeric_factor(n, density, supernodal):
+    """lnz is the number of non-zeros of the factor CHOLMOD then computes, flops the sum of its squared
+    column counts, and the values it allocates are at least lnz."""
+    from cvxopt import cholmod
+
+    a = _spd(n, density, n)
+    chol = sc.PatternCholesky(a, supernodal=supernodal)
+    counts = chol.counts()
+    assert counts is not None and counts.n == n
+    chol.factorize(chol.align(a))
+    low = cholmod.getfactor(chol._factor)  # L as a sparse matrix (supernodal padding as explicit zeros)
+    values = np.array(low.V).ravel()
+    assert counts.lnz == int(np.count_nonzero(values))
+    cols = np.bincount(np.array(low.J).ravel()[values != 0], minlength=n)
+    assert counts.flops == pytest.approx(float(np.sum(cols.astype(float) ** 2)))
+    assert counts.stored >= counts.lnz and counts.bytes == 8.0 * counts.stored
+
+
+def test_counts_of_a_struct_that_does_not_fit_are_none():
+    a = _spd(100, 0.05, 1)
+    chol = sc.PatternCholesky(a)
+    assert sc.factor_counts(chol._factor, 101, chol.nnz_lower) is None  # another order
+    assert sc.factor_counts(chol._factor, 100, 10**6) is None  # fewer entries than the matrix has
+    assert sc.factor_counts(object(), 100, 1) is None  # not a capsule
+
+
+def _zero_order(n: int, p: int, t: int, seed: int = 3):
+    rng = np.random.default_rng(seed)
+    grid = Grid(np.full(n, -1.2), np.full(n, 1.2), p)
+    x = rng.uniform(-1.0, 1.0, (t, n))
+    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(t)
+    h = sparse.csr_array(grid.basis_matrix(x))
+    return h, z, tikhonov_matrix(grid, 0)
+
+
+def test_zero_order_auto_factorises_where_the_analysis_finds_it_cheap(monkeypatch):
+    h, z, gam = _zero_order(2, 40, 400)
+    hth = sparse.csr_array(h.T @ h)
+    monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS_CHOLMOD, (0, 2), 10)  # the size table says CG
+    solver = NormalEquationSolver(hth, gam, 2)
+    assert solver.method == "direct" and solver.analysis is not None
+    # a dearer factor than the rule allows, or no memory left for it: CG as the table says
+    monkeypatch.setattr(rl, "DIRECT_FLOPS_PER_ENTRY", 1e-3)
+    assert NormalEquationSolver(hth, gam, 2).method == "cg"
+    monkeypatch.undo()
+    monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS_CHOLMOD, (0, 2), 10)
+    assert NormalEquationSolver(hth, gam, 2, direct_headroom=0.0).method == "cg"
+    assert NormalEquationSolver(hth, gam, 2, direct_headroom=1e12).method == "direct"
+    # only zero order, only auto
+    assert NormalEquationSolver(hth, gam, 2, method="cg").method == "cg"
+    assert NormalEquationSolver(hth, gam, 2, method="cg").analysis is None
+    # the CV by the analysed choice is the direct CV
+    cv = cross_validate_sigma(h, z, gam, np.logspace(-5, 1, 4), folds=3)
+    cd = cross_validate_sigma(h, z, gam, np.logspace(-5, 1, 4), folds=3, method="direct")
+    assert cv.solver["method"] == "direct"
+    np.testing.assert_array_equal(cv.fold_mse, cd.fold_mse)
+    # the memory plan it reports charges the factor the size table did not
+    plan = rl.plan_fit_memory(h.shape[0], h.shape[1], 2, 1, 0)
+    analysed = NormalEquationSolver(hth, gam, 2).analysis
+    assert cv.solver["memory_plan"]["estimate_mib"] * 2**20 == pytest.approx(plan["estimate"]["total"] + analysed.bytes)
+
+
+def test_the_memory_left_is_shared_by_the_processes_that_may_hold_a_factor():
+    assert rl.factor_holders(1) == 1 and rl.factor_holders(2) == 3  # two forked workers and the parent
+    assert rl.direct_headroom(None, 5.0) is None
+    assert rl.direct_headroom(100.0, 40.0, 3) == 15.0
+    assert rl.direct_headroom(100.0, 40.0) == 60.0
+    assert rl.direct_headroom(100.0, 140.0) == 0.0
