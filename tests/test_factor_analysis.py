@@ -91,3 +91,39 @@ def test_the_memory_left_is_shared_by_the_processes_that_may_hold_a_factor():
     assert rl.direct_headroom(100.0, 40.0, 3) == 15.0
     assert rl.direct_headroom(100.0, 40.0) == 60.0
     assert rl.direct_headroom(100.0, 140.0) == 0.0
+
+
+def test_first_order_4d_uses_multigrid_where_the_data_block_is_cheap(monkeypatch):
+    """n = 4, first order, ``auto`` above the direct limit: CG alone by the tables; with a data block
+    that the analysis finds cheap, multigrid with the data-block cycle, whose CV errors are those of
+    the direct CV within the solves' tolerance; with the threshold at zero, CG alone again."""
+    rng = np.random.default_rng(2)
+    grid = Grid(np.full(4, -1.2), np.full(4, 1.2), 5)  # 1296 vertices
+    x = rng.uniform(-1.0, 1.0, (300, 4))
+    z = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(300)
+    h = sparse.csr_array(grid.basis_matrix(x))
+    gam = tikhonov_matrix(grid, 1)
+    hth = sparse.csr_array(h.T @ h)
+    monkeypatch.setattr(rl, "MG_MIN_UNKNOWNS", 100)
+    monkeypatch.setitem(rl.DIRECT_MAX_UNKNOWNS_CHOLMOD, (1, 4), 100)  # the table says CG
+    from pwas_hdl.fit import multigrid as mg
+
+    monkeypatch.setattr(mg, "COARSEST_MAX", 40)
+    solver = NormalEquationSolver(hth, gam, 4)
+    assert solver.mg_by_analysis and solver.block_mg and solver.method == "cg" and not solver.fallback
+    sig = np.logspace(-5, 1, 4)
+    cv = cross_validate_sigma(h, z, gam, sig, folds=3)
+    cd = cross_validate_sigma(h, z, gam, sig, folds=3, method="direct")
+    assert set(cv.solver["solves_by_method"]) <= {"mg", "mg-block"} and cv.solver["all_converged"]
+    # within the stated weight bound: |rmse - rmse_direct| <= ||H_v||_2 * bound / sqrt(m), ||H_v||_2 <=
+    # sqrt(max column sum) as every row of H sums to 1
+    labels = rl.fold_labels(h.shape[0], 3)
+    for f in range(3):
+        hv = h[np.flatnonzero(labels == f)]
+        limit = np.sqrt(float(np.asarray(hv.sum(axis=0)).max())) * cv.solver["weight_bound"][f] / np.sqrt(hv.shape[0])
+        assert np.all(np.abs(np.sqrt(cv.fold_mse[f]) - np.sqrt(cd.fold_mse[f])) <= limit)
+    np.testing.assert_allclose(cv.fold_mse, cd.fold_mse, rtol=1e-5)  # and in practice
+    monkeypatch.setattr(rl, "DIRECT_FLOPS_PER_ENTRY", 0.0)
+    other = NormalEquationSolver(hth, gam, 4)
+    assert not other.mg_by_analysis and other._mg_shape is None
+    assert not NormalEquationSolver(hth, gam, 4, analyse=False).mg_by_analysis

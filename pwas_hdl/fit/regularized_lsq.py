@@ -226,7 +226,20 @@ MG_DOMINANCE_CG = 0.05
 #: The cross-over lies near rho = 0.025 in 3-D and 1 in 2-D (a block solve is dearer against a
 #: V-cycle in 3-D: its factor has more fill); 1-D takes the 2-D value, 4-D and up the 3-D one (not
 #: measured).
-MG_BLOCK_DOMINANCE: dict[int, float] = {1: 1.0, 2: 1.0, 3: 0.05}
+MG_BLOCK_DOMINANCE: dict[int, float] = {1: 1.0, 2: 1.0, 3: 0.05, 4: 0.4}
+
+#: First order, ``auto``, from this regressor dimension on (outside :data:`MG_AUTO_DIMS`, where CG alone
+#: is the rule): multigrid with the data-block cycle is used where the data block of the full data
+#: factorises cheaply, by the symbolic analysis and the threshold of :data:`DIRECT_FLOPS_PER_ENTRY`
+#: (and fits the memory left); the block's fill, not the grid, is what decides. Measured (n = 4,
+#: N = 1 048 576, T = 10^5, fold 0, one BLAS thread, CPU s a sigma, iterations; warm-started down):
+#: Jacobi-CG 6.1 (311) / 2.6 (138) / 3.2 (162) / 19.6 (1011) / 40.6 (2000, unconverged) / 1.4 (65) at
+#: sigma = 1e3 / 10 / 0.1 / 1e-3 / 1e-5 / 1e-7, multigrid 2.7 (11, with the levels' set-up) / 1.05 (12)
+#: / 2.1 (12, block) / 1.7 (8) / 0.35 (1) / 0.36 (1); the block against the Gauss-Seidel cycle at rho =
+#: 0.063 / 0.2 / 0.63 / 6.3: 2.1 / ~2.1 / 2.1 / 2.3 s against 5.0 / 2.8 / 1.7 / 1.05 s (the 4-D value of
+#: :data:`MG_BLOCK_DOMINANCE`, 0.4). At n = 5, N = 1 048 576 the block costs 20-28 s a sigma (its
+#: factor: 18.5 s), and the analysis keeps CG alone there and wherever T / N >= 1 from n = 4 up.
+MG_BLOCK_ANALYSED_DIMS = (4,)
 
 #: First order, ``auto``, where the base method is the direct one (CHOLMOD in 2-D, see
 #: :data:`DIRECT_MAX_UNKNOWNS_CHOLMOD`): the data-block cycle of :data:`MG_BLOCK_DOMINANCE` is used
@@ -763,6 +776,29 @@ def check_fit_memory(
     return est
 
 
+def _analysed_solver(hth: sparse.sparray, gamma: sparse.sparray, n_dims: int, n_samples: int, n_targets: int,
+                     method: Method, rtol: float, block_smoother: bool, est: dict, limit: float | None,
+                     processes: int) -> tuple["NormalEquationSolver", dict]:
+    """The fit's solver, with the choices of a symbolic analysis (:data:`DIRECT_FLOPS_PER_ENTRY`,
+    :data:`MG_BLOCK_ANALYSED_DIMS`) charged to the memory estimate ``est`` (the plan of
+    :func:`plan_fit_memory` made before them): the analysed factor in every process that may hold
+    one, or what method ``mg`` holds beyond the plan; where that goes over ``limit``, the solver of
+    the size tables alone. Returns the solver and the estimate that holds for it."""
+    solver = NormalEquationSolver(hth, gamma, n_dims, method, rtol, block_smoother=block_smoother,
+                                  direct_headroom=direct_headroom(limit, est["total"], processes))
+    if not (solver.direct_by_analysis or solver.mg_by_analysis):
+        return solver, est
+    if solver.direct_by_analysis:
+        extra = factor_holders(processes) * solver.analysis.bytes
+    else:
+        extra = max(estimate_fit_memory(n_samples, hth.shape[0], n_dims, n_targets, 1, "mg", processes,
+                                        block_smoother)["total"] - est["total"], 0.0)
+    if limit is not None and est["total"] + extra > limit:
+        return NormalEquationSolver(hth, gamma, n_dims, method, rtol, block_smoother=block_smoother,
+                                    analyse=False), est
+    return solver, dict(est, factor=est["factor"] + extra, total=est["total"] + extra)
+
+
 def factor_holders(processes: int) -> int:
     """Processes that may hold a factor at the same time when a CV runs on ``processes``: each
     forked worker and the parent's final solve (one process: itself)."""
@@ -1013,8 +1049,11 @@ class NormalEquationSolver:
         earlier rule (factorisations, factor-PCG and the factor chain at those sigmas), for
         comparison.
     direct_headroom : float, optional
-        Bytes a zero-order factor chosen by :data:`DIRECT_FLOPS_PER_ENTRY` may take (the memory
-        limit less the fit's estimate, per solving process); ``None``: not limited.
+        Bytes a factor chosen by a symbolic analysis may take (:data:`DIRECT_FLOPS_PER_ENTRY`,
+        :data:`MG_BLOCK_ANALYSED_DIMS`; the memory limit less the fit's estimate, per process that
+        may hold one, :func:`direct_headroom`); ``None``: not limited.
+    analyse : bool
+        ``auto`` with CHOLMOD: make those analyses (the default); ``False``: the size tables alone.
 
     Attributes
     ----------
@@ -1034,6 +1073,7 @@ class NormalEquationSolver:
         direct_backend: Literal["auto", "cholmod", "superlu"] = "auto",
         block_smoother: bool = True,
         direct_headroom: float | None = None,
+        analyse: bool = True,
     ):
         hth = sparse.csr_array(hth)
         gamma = sparse.csr_array(gamma)
@@ -1054,27 +1094,35 @@ class NormalEquationSolver:
         ]
         self.rtol = float(rtol)
         self.maxiter = CG_MAXITER if maxiter is None else int(maxiter)
-        #: the vertex-grid shape for multigrid (first order on a full grid), None where not used
-        self._mg_shape = None
-        if self.order == 1 and self.keep is None and (method == "mg" or (
-                method == "auto" and self.n >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS)):
-            self._mg_shape = grid_shape_of(gamma, n_dims)
-        if self._mg_shape is None and method == "mg":
-            raise InputError("solver method 'mg' needs the first-order Gamma of a full vertex grid (tikhonov_matrix)")
-        self._full_mean_row = float(hth.sum()) / max(self.n, 1)
-        self._mg_hier: GridHierarchy | None = None
-        self._mg_cache: tuple | None = None
-        self._gamma_diag: float | None = None
         if direct_backend not in ("auto", "cholmod", "superlu"):
             raise InputError(f"direct backend must be 'auto', 'cholmod' or 'superlu', got {direct_backend!r}")
         if direct_backend == "cholmod" and not cholmod_available():
             raise InputError("direct backend 'cholmod' needs cvxopt (pip install cvxopt)")
         self.backend = "superlu" if direct_backend == "superlu" or not cholmod_available() else "cholmod"
         self.analysis: FactorCounts | None = None
-        #: the direct method chosen by the analysis (:data:`DIRECT_FLOPS_PER_ENTRY`), not by the table
+        #: the direct method (zero order) or multigrid with the data-block cycle (first order, n >= 4)
+        #: chosen by a symbolic analysis (:data:`DIRECT_FLOPS_PER_ENTRY`, :data:`MG_BLOCK_ANALYSED_DIMS`)
         self.direct_by_analysis = False
-        if method == "auto" and self.method == "cg" and self.order == 0 and self.backend == "cholmod":
+        self.mg_by_analysis = False
+        analyse = bool(analyse) and method == "auto" and self.backend == "cholmod"
+        if analyse and self.method == "cg" and self.order == 0:
             self._direct_by_analysis(self._restrict(hth), direct_headroom)
+        #: the vertex-grid shape for multigrid (first order on a full grid), None where not used
+        self._mg_shape = None
+        if self.order == 1 and self.keep is None and (method == "mg" or (
+                method == "auto" and self.n >= MG_MIN_UNKNOWNS and int(n_dims) in MG_AUTO_DIMS)):
+            self._mg_shape = grid_shape_of(gamma, n_dims)
+        elif (analyse and self.order == 1 and self.method == "cg" and self.n >= MG_MIN_UNKNOWNS
+              and int(n_dims) in MG_BLOCK_ANALYSED_DIMS and bool(block_smoother)):
+            shape = grid_shape_of(gamma, n_dims)
+            if shape is not None and self._cheap_data_block(hth, direct_headroom):
+                self._mg_shape, self.mg_by_analysis = shape, True
+        if self._mg_shape is None and method == "mg":
+            raise InputError("solver method 'mg' needs the first-order Gamma of a full vertex grid (tikhonov_matrix)")
+        self._full_mean_row = float(hth.sum()) / max(self.n, 1)
+        self._mg_hier: GridHierarchy | None = None
+        self._mg_cache: tuple | None = None
+        self._gamma_diag: float | None = None
         if self.method == "cg":
             lumped = np.asarray(self._restrict(hth).sum(axis=1)).reshape(-1)
             self._pre = _Preconditioner(lumped, self.gamma, self.order, amg_allowed(_grid_side(gamma, n_dims)))
@@ -1095,11 +1143,13 @@ class NormalEquationSolver:
         #: the nested-dissection ordering for a first-order factorisation (3-D, see FACTOR_DOMINANCE_CG)
         self._nd_order = self._mg_shape is not None and int(n_dims) in FACTOR_CHAIN_DIMS
         #: the threshold of :meth:`uses_block` for this dimension (:data:`MG_BLOCK_DOMINANCE`)
-        self.block_dominance = MG_BLOCK_DOMINANCE[min(max(int(n_dims), 1), 3)]
+        self.block_dominance = MG_BLOCK_DOMINANCE.get(max(int(n_dims), 1), MG_BLOCK_DOMINANCE[3])
         if self.block_mg:
             self.factor_pcg = self.factor_chain = False
             # a data-block solve that stops at its cap is re-done by the factorisation
             self.fallback = self.fallback or (method == "auto" and self.backend == "cholmod")
+        if self.mg_by_analysis:  # a first-order factorisation is out of reach there: unconverged is reported
+            self.fallback = False
         self._factor_pcg_cap = FACTOR_PCG_MAXITER_CG if self.factor_chain else FACTOR_PCG_MAXITER
         #: the fold's factor reuse: ``{"m": m, "last": iterations of the last PCG, "stopped": bool}``
         self._reuse: dict | None = None
@@ -1131,6 +1181,21 @@ class NormalEquationSolver:
         if cheap and (headroom is None or self.analysis.bytes <= headroom):
             self.method = "direct"
             self.direct_by_analysis = True
+
+    def _cheap_data_block(self, hth: sparse.csr_array, headroom: float | None) -> bool:
+        """First order from n = 4 (:data:`MG_BLOCK_ANALYSED_DIMS`): whether the data block of the
+        full data, ``H'H`` on the touched vertices plus a diagonal (every fold's block is part of
+        it), factorises cheaply (:data:`DIRECT_FLOPS_PER_ENTRY`) within ``headroom`` bytes."""
+        touched = np.flatnonzero(hth.diagonal() > 0)
+        if touched.size == 0:
+            return False
+        block = sparse.csr_array(hth[touched][:, touched])
+        chol = PatternCholesky(abs(block) + sparse.identity(touched.size, format="csr"))
+        self.analysis = chol.counts()
+        if self.analysis is None:
+            return False
+        cheap = self.analysis.flops <= DIRECT_FLOPS_PER_ENTRY * chol.nnz_lower
+        return bool(cheap and (headroom is None or self.analysis.bytes <= headroom))
 
     def __getstate__(self) -> dict:
         """Pickled (e.g. shipped to a Dask worker) without the CHOLMOD factors, which cannot be."""
@@ -1524,8 +1589,8 @@ def solve_regularized(
                            grid_side=_grid_side(gamma, _dims_of(h)))
     ht = h.T.tocsr()
     hth = ht @ h
-    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol,
-                                  direct_headroom=direct_headroom(memory_limit(max_memory)[0], est["total"]))
+    solver, _ = _analysed_solver(hth, gamma, _dims_of(h), h.shape[0], nz, method, rtol, True, est,
+                                 memory_limit(max_memory)[0], 1)
     w, info = solver.solve(solver.restrict_matrix(hth), ht @ z, float(sigma), x0)
     return (w, info) if return_info else w
 
@@ -1872,13 +1937,9 @@ def cross_validate_sigma(
     ht = h.T.tocsr()
     hth = (ht @ h).tocsr()
     htz = ht @ z2
-    solver = NormalEquationSolver(hth, gamma, _dims_of(h), method, rtol, block_smoother=block_smoother,
-                                  direct_headroom=direct_headroom(mem_plan["limit"], mem_plan["estimate"]["total"],
-                                                                  mem_plan["processes"]))
-    if solver.direct_by_analysis:  # the factor the plan did not charge, in every process that may hold one
-        extra = factor_holders(mem_plan["processes"]) * solver.analysis.bytes
-        est = mem_plan["estimate"]
-        mem_plan = dict(mem_plan, estimate=dict(est, factor=est["factor"] + extra, total=est["total"] + extra))
+    solver, est = _analysed_solver(hth, gamma, _dims_of(h), h.shape[0], z2.shape[1], method, rtol, block_smoother,
+                                   mem_plan["estimate"], mem_plan["limit"], mem_plan["processes"])
+    mem_plan = dict(mem_plan, estimate=est)
     hth_r = solver.restrict_matrix(hth)
     fold_mse = np.zeros((folds, sig.size))
     weight_bound = np.zeros((folds, sig.size))
