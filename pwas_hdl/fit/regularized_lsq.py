@@ -1170,32 +1170,32 @@ class NormalEquationSolver:
         #: lock shared by the forked workers; a fallback factorisation holds it and frees its factor
         self.factor_lock = None
 
-    def _direct_by_analysis(self, m: sparse.csr_array, headroom: float | None) -> None:
-        """Zero order: the direct method instead of CG where the factor of the full-data system is
-        cheap (:data:`DIRECT_FLOPS_PER_ENTRY`) and fits ``headroom`` bytes."""
-        chol = PatternCholesky(abs(m) + abs(self.gamma))
+    def _cheap_factor(self, pattern: sparse.sparray, headroom: float | None) -> bool:
+        """Whether CHOLMOD's symbolic analysis of ``pattern`` (kept in :attr:`analysis`) finds its
+        factor cheap (:data:`DIRECT_FLOPS_PER_ENTRY`) and within ``headroom`` bytes."""
+        chol = PatternCholesky(pattern)
         self.analysis = chol.counts()
         if self.analysis is None:
-            return
+            return False
         cheap = self.analysis.flops <= DIRECT_FLOPS_PER_ENTRY * chol.nnz_lower
-        if cheap and (headroom is None or self.analysis.bytes <= headroom):
+        return bool(cheap and (headroom is None or self.analysis.bytes <= headroom))
+
+    def _direct_by_analysis(self, m: sparse.csr_array, headroom: float | None) -> None:
+        """Zero order: the direct method instead of CG where the factor of the full-data system is
+        cheap (:meth:`_cheap_factor`)."""
+        if self._cheap_factor(abs(m) + abs(self.gamma), headroom):
             self.method = "direct"
             self.direct_by_analysis = True
 
     def _cheap_data_block(self, hth: sparse.csr_array, headroom: float | None) -> bool:
         """First order from n = 4 (:data:`MG_BLOCK_ANALYSED_DIMS`): whether the data block of the
         full data, ``H'H`` on the touched vertices plus a diagonal (every fold's block is part of
-        it), factorises cheaply (:data:`DIRECT_FLOPS_PER_ENTRY`) within ``headroom`` bytes."""
+        it), factorises cheaply (:meth:`_cheap_factor`)."""
         touched = np.flatnonzero(hth.diagonal() > 0)
         if touched.size == 0:
             return False
         block = sparse.csr_array(hth[touched][:, touched])
-        chol = PatternCholesky(abs(block) + sparse.identity(touched.size, format="csr"))
-        self.analysis = chol.counts()
-        if self.analysis is None:
-            return False
-        cheap = self.analysis.flops <= DIRECT_FLOPS_PER_ENTRY * chol.nnz_lower
-        return bool(cheap and (headroom is None or self.analysis.bytes <= headroom))
+        return self._cheap_factor(abs(block) + sparse.identity(touched.size, format="csr"), headroom)
 
     def __getstate__(self) -> dict:
         """Pickled (e.g. shipped to a Dask worker) without the CHOLMOD factors, which cannot be."""
