@@ -127,3 +127,75 @@ def test_first_order_4d_uses_multigrid_where_the_data_block_is_cheap(monkeypatch
     other = NormalEquationSolver(hth, gam, 4)
     assert not other.mg_by_analysis and other._mg_shape is None
     assert not NormalEquationSolver(hth, gam, 4, analyse=False).mg_by_analysis
+
+
+def _numeric_forbidden(monkeypatch):
+    def refuse(self, values):
+        raise AssertionError("a numeric factorisation was started")
+
+    monkeypatch.setattr(sc.PatternCholesky, "factorize", refuse)
+
+
+def test_direct_factor_over_the_limit_is_refused_before_the_numeric_factorisation(monkeypatch):
+    """From n = 4 the estimate has only the fill rule (no grid bound): the direct method's factor is
+    counted by the symbolic analysis before any numeric work, and a fit whose analysed factor does
+    not fit the limit is refused with the factor's size (measured case: n = 6, N = 10^6, zero order,
+    method "direct" passed the estimate and ran out of memory in CHOLMOD)."""
+    h, z, gam = _zero_order(4, 5, 3000)
+    monkeypatch.setattr(rl, "DIRECT_FILL_FACTOR", 1e-3)  # a fill rule that undercounts, as at N = 10^6
+    est = rl.check_fit_memory(h.shape[0], h.shape[1], 4, 1, 0, "direct")
+    hth = sparse.csr_array(h.T @ h)
+    solver = NormalEquationSolver(hth, gam, 4, "direct")
+    counts = sc.PatternCholesky(abs(solver.restrict_matrix(hth)) + abs(solver.gamma)).counts()
+    assert counts.bytes > est["factor"]  # the premise: the analysis counts more than the rule charged
+    limit = est["total"] + 0.5 * (counts.bytes - est["factor"])
+    _numeric_forbidden(monkeypatch)
+    with pytest.raises(rl.ResourceLimit, match=r"sparse Cholesky factor needs \d+ MiB \(CHOLMOD's symbolic analysis"):
+        rl.solve_regularized(h, z, 1e-3, gam, method="direct", max_memory=int(limit))
+    with pytest.raises(rl.ResourceLimit, match="over the limit"):
+        cross_validate_sigma(h, z, gam, sigmas=[1e-3], method="direct", max_memory=int(limit))
+
+
+def test_direct_factor_within_the_limit_is_charged_as_analysed(monkeypatch):
+    """Within the limit the analysed factor replaces the smaller fill-rule charge in the estimate the
+    CV reports, and the solve is the factorisation's."""
+    h, z, gam = _zero_order(4, 5, 3000)
+    monkeypatch.setattr(rl, "DIRECT_FILL_FACTOR", 1e-3)
+    hth = sparse.csr_array(h.T @ h)
+    est = rl.check_fit_memory(h.shape[0], h.shape[1], 4, 1, 0, "direct")
+    solver, checked = rl._analysed_solver(hth, gam, 4, h.shape[0], 1, "direct", rl.CG_RTOL, True, est, None, 1)
+    assert solver.analysis is not None
+    assert checked["factor"] == pytest.approx(solver.analysis.bytes)
+    assert checked["total"] == pytest.approx(est["total"] - est["factor"] + solver.analysis.bytes)
+    cv = cross_validate_sigma(h, z, gam, sigmas=[1e-3, 1e-1], method="direct")
+    assert cv.solver["memory_plan"]["estimate_mib"] * 2**20 == pytest.approx(
+        est["total"] - est["factor"] + solver.analysis.bytes, rel=1e-9)
+    assert cv.solver["solves_by_method"] == {"direct": 10}
+
+
+def test_grid_bounded_dimensions_are_not_analysed_again():
+    """2-D and 3-D keep the measured grid bound (no extra analysis of the direct factor)."""
+    rng = np.random.default_rng(0)
+    grid = Grid(np.full(2, -1.2), np.full(2, 1.2), 15)
+    h = sparse.csr_array(grid.basis_matrix(rng.uniform(-1, 1, (500, 2))))
+    gam = tikhonov_matrix(grid, 1)
+    hth = sparse.csr_array(h.T @ h)
+    est = rl.check_fit_memory(500, h.shape[1], 2, 1, 1, "direct")
+    solver, checked = rl._analysed_solver(hth, gam, 2, 500, 1, "direct", rl.CG_RTOL, True, est, None, 1)
+    assert solver.analysis is None and checked is est
+
+
+def test_cholmod_out_of_memory_is_a_resource_limit():
+    """The last guard: CHOLMOD failing to allocate the numeric factor is a ResourceLimit (one `error:`
+    line for fit), not a MemoryError traceback."""
+    import types
+
+    a = _spd(50, 0.1, 2)
+    chol = sc.PatternCholesky(a)
+
+    def numeric(matrix, factor):
+        raise MemoryError
+
+    chol._cholmod = types.SimpleNamespace(numeric=numeric)
+    with pytest.raises(rl.ResourceLimit, match="factor of 50 unknowns did not fit in memory"):
+        chol.factorize(chol.align(a))

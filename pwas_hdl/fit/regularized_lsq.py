@@ -184,7 +184,7 @@ DIRECT_FLOPS_PER_ENTRY = 2e4
 #: order the factor stays too dense (48 s per factorisation at N = 262 144, 12.7 s with a nested
 #: dissection ordering; 45.8 s on the full-data pattern shared by the folds), so CG is kept there.
 #: Solving the other sigmas from a neighbour's factor (PCG, multi-shift Lanczos) or reducing to the
-#: touched vertices was measured and does not pay (``benchmarks/results/fit_scale.md``).
+#: touched vertices was measured and does not pay (``benchmarks/results/fit_scale_notes.md``).
 DIRECT_MAX_UNKNOWNS_CHOLMOD: dict[tuple[int, int], int] = {**DIRECT_MAX_UNKNOWNS, (1, 2): 2_000_000}
 
 #: First order, ``method="auto"``: a system ``(M + sigma Gamma) w = b`` whose penalty dominates its
@@ -194,7 +194,7 @@ DIRECT_MAX_UNKNOWNS_CHOLMOD: dict[tuple[int, int], int] = {**DIRECT_MAX_UNKNOWNS
 #: (:mod:`pwas_hdl.fit.multigrid`) instead of a sparse factorisation; below it by the direct solve
 #: (where :func:`choose_method` picks it), since there the V-cycle misses the smooth error that the
 #: data term leaves nearly unpenalised (the iterations grow like ``rho ** -0.45``). Measured, one
-#: fold, T = 10^5, rtol 1e-10, warm starts, CPU (``benchmarks/results/fit_scale.md``): n = 2,
+#: fold, T = 10^5, rtol 1e-10, warm starts, CPU (``benchmarks/results/fit_scale_notes.md``): n = 2,
 #: N = 10^6 (rho = 50 sigma): 8-10 iterations (0.5-0.65 s) for rho >= 5, 12 (0.71 s) at rho = 1.6,
 #: 19 (1.13 s) at 0.5, 34 (2.1 s) at 0.16, 151 at 0.005, against 1.5-1.9 s per CHOLMOD
 #: factorisation; n = 3, N = 262 144 (rho = 0.75 sigma): 9-10 iterations (0.2 s) for rho >= 7,
@@ -787,7 +787,7 @@ def _analysed_solver(hth: sparse.sparray, gamma: sparse.sparray, n_dims: int, n_
     solver = NormalEquationSolver(hth, gamma, n_dims, method, rtol, block_smoother=block_smoother,
                                   direct_headroom=direct_headroom(limit, est["total"], processes))
     if not (solver.direct_by_analysis or solver.mg_by_analysis):
-        return solver, est
+        return solver, _checked_direct_factor(solver, hth, n_dims, est, limit, processes)
     if solver.direct_by_analysis:
         extra = factor_holders(processes) * solver.analysis.bytes
     else:
@@ -797,6 +797,42 @@ def _analysed_solver(hth: sparse.sparray, gamma: sparse.sparray, n_dims: int, n_
         return NormalEquationSolver(hth, gamma, n_dims, method, rtol, block_smoother=block_smoother,
                                     analyse=False), est
     return solver, dict(est, factor=est["factor"] + extra, total=est["total"] + extra)
+
+
+def _checked_direct_factor(solver: "NormalEquationSolver", hth: sparse.sparray, n_dims: int, est: dict,
+                           limit: float | None, processes: int) -> dict:
+    """The estimate ``est`` with the direct method's factor as CHOLMOD's symbolic analysis counts it,
+    where the estimate had only the fill rule (no :data:`GRID_FACTOR_BOUND` for this dimension).
+
+    Run before any numeric factorisation, on the full-data pattern (each CV fold's pattern is part
+    of it): from n = 4 the fill of ``DIRECT_FILL_FACTOR x nnz(A)`` can be far too small (measured:
+    n = 6, N = 10^6, T = 10^5, zero order: ``method="direct"`` passed the estimate and then ran out
+    of memory in CHOLMOD). The analysis's factor, in every process that may hold one, replaces the
+    charged factor where larger; over ``limit`` the fit is refused.
+
+    Raises
+    ------
+    ResourceLimit
+        The analysed factor does not fit the limit.
+    """
+    if (solver.method != "direct" or solver.backend != "cholmod" or int(n_dims) in GRID_FACTOR_BOUND
+            or solver.direct_by_analysis):
+        return est
+    if solver.analysis is None:
+        chol = PatternCholesky(abs(solver.restrict_matrix(hth)) + abs(solver.gamma))
+        solver.analysis = chol.counts()
+    if solver.analysis is None:  # the column counts could not be read: the fill rule stands
+        return est
+    extra = max(factor_holders(processes) * solver.analysis.bytes - est["factor"], 0.0)
+    if limit is not None and est["total"] + extra > limit:
+        raise ResourceLimit(
+            f"the direct solve's sparse Cholesky factor needs {solver.analysis.bytes / 2**20:.0f} MiB "
+            f"(CHOLMOD's symbolic analysis of N = {solver.analysis.n} unknowns, {solver.analysis.flops:.2g} "
+            f"multiply-adds) and the fit {(est['total'] + extra) / 2**20:.0f} MiB in all, over the limit of "
+            f"{limit / 2**20:.0f} MiB; use the iterative solver (method 'auto' or 'cg'), fewer partitions or "
+            f"samples, or raise the limit with max_memory / ${MAX_MEMORY_ENV}"
+        )
+    return dict(est, factor=est["factor"] + extra, total=est["total"] + extra)
 
 
 def factor_holders(processes: int) -> int:

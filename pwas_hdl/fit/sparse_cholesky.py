@@ -341,12 +341,21 @@ class PatternCholesky:
         Raises
         ------
         NotPositiveDefinite
+        pwas_hdl.errors.ResourceLimit
+            CHOLMOD could not allocate the factor (the callers check the analysed size against the
+            memory limit first where the estimate had no measured bound; this is the last guard).
         """
+        from pwas_hdl.errors import ResourceLimit
+
         self._a.V = self._matrix(np.ascontiguousarray(values, dtype=float))
         try:
             self._cholmod.numeric(self._a, self._factor)
         except ArithmeticError as exc:
             raise NotPositiveDefinite(f"CHOLMOD: matrix not positive definite (column {exc})") from None
+        except MemoryError:
+            raise ResourceLimit(
+                f"the sparse Cholesky factor of {self.n} unknowns did not fit in memory (CHOLMOD could not allocate "
+                f"it); use the iterative solver (method 'auto' or 'cg'), or fewer partitions or samples") from None
         self.factorizations += 1
 
     def solve(self, b: np.ndarray) -> np.ndarray:
