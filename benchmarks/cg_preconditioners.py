@@ -205,6 +205,30 @@ def markdown(res: dict) -> str:
     return "\n".join(out) + "\n"
 
 
+def parse_points(text: str | None, default: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The ``--points`` option: ``n:p`` pairs, comma-separated, ``n, p >= 2``, at most
+    :data:`MAX_VERTICES` vertices a point (``default`` when ``text`` is None).
+
+    Raises
+    ------
+    pwas_hdl.errors.InputError
+        A malformed pair, or a grid over the vertex limit.
+    """
+    from pwas_hdl.errors import InputError
+
+    if text is None:
+        return default
+    try:
+        points = [tuple(int(v) for v in item.split(":")) for item in text.split(",")]
+    except ValueError:
+        points = []
+    if not points or any(len(pt) != 2 or pt[0] < 2 or pt[1] < 2 for pt in points):
+        raise InputError(f"--points takes n:p pairs with n, p >= 2, e.g. 4:17,5:9; got {text!r}")
+    if any((p + 1) ** n > MAX_VERTICES for n, p in points):
+        raise InputError(f"--points: at most {MAX_VERTICES} vertices ((p + 1)^n) a point; got {text!r}")
+    return points
+
+
 def _parse(args) -> tuple[list[tuple[int, int]], tuple[float, ...], int, int, str, tuple[str, ...] | None]:
     """Points, sigmas, T, iteration cap, file stem and preconditioners from the options; bad values
     raise InputError."""
@@ -212,15 +236,7 @@ def _parse(args) -> tuple[list[tuple[int, int]], tuple[float, ...], int, int, st
 
     points, sigmas, t, maxiter, stem = ((QUICK_POINTS, QUICK_SIGMAS, 10_000, 300, "cg_preconditioners_quick")
                                         if args.quick else (POINTS, SIGMAS, 100_000, 3000, "cg_preconditioners"))
-    if args.points is not None:
-        try:
-            points = [tuple(int(v) for v in item.split(":")) for item in args.points.split(",")]
-        except ValueError:
-            points = []
-        if not points or any(len(pt) != 2 or pt[0] < 2 or pt[1] < 2 for pt in points):
-            raise InputError(f"--points takes n:p pairs with n, p >= 2, e.g. 4:17,5:9; got {args.points!r}")
-        if any((p + 1) ** n > MAX_VERTICES for n, p in points):
-            raise InputError(f"--points: at most {MAX_VERTICES} vertices ((p + 1)^n) a point; got {args.points!r}")
+    points = parse_points(args.points, points)
     if args.sigmas is not None:
         try:
             sigmas = tuple(float(v) for v in args.sigmas.split(","))

@@ -135,3 +135,35 @@ def test_cg_preconditioners_bad_option(tmp_path, capsys, args, message):
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
     assert not out.exists()
+
+
+def test_first_order_floor_quick_smoke(tmp_path):
+    """benchmarks/first_order_floor.py (issue 18) on its quick point: both orders' CV ran with the same
+    number of solves, the budget is twice the zero-order CPU a solve, and the kernels were measured on
+    the whole first-order grid."""
+    import json
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.first_order_floor")
+    assert script_main(bench.main, ["--quick", "--outdir", str(tmp_path)]) == 0
+    (row,) = json.loads((tmp_path / "first_order_floor_quick.json").read_text())["rows"]
+    assert (row["n"], row["p"], row["T"]) == (2, 127, 10_000)
+    assert row["zero"]["solves"] == row["first"]["solves"] == 5 * 21 + 1
+    assert row["budget_ms_per_solve"] == 2.0 * row["zero"]["cpu_ms_per_solve"]
+    k = row["kernels"]
+    assert k["rows"] == 128**2 and k["levels"] >= 2
+    assert all(k[key] > 0 for key in ("matvec_ms", "gauss_seidel_ms", "vcycle_ms", "vcycle_block_ms"))
+    assert row["iterations_in_budget"] == row["budget_ms_per_solve"] / (k["vcycle_ms"] + k["matvec_ms"])
+    assert "| 2 | 127 | 16384 |" in (tmp_path / "first_order_floor_quick.md").read_text()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--points", "2:x"], "--points takes n:p pairs"),
+    (["--points", "2:2000"], "--points: at most"),
+])
+def test_first_order_floor_bad_option(tmp_path, capsys, args, message):
+    bench = importlib.import_module("pwas_hdl.benchmarks.first_order_floor")
+    out = tmp_path / "out"
+    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
+    assert not out.exists()
