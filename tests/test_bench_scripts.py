@@ -121,15 +121,17 @@ def test_cg_preconditioners_subset(tmp_path):
     assert f"| {per:.2f} | {per - r['matvec_cpu_ms']:.2f} |" in md
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--points", "4"], "--points takes n:p pairs"),
-    (["--points", "9:9"], "--points: at most"),
-    (["--sigmas", "1e-2,-1"], "--sigmas takes positive numbers"),
-    (["--maxiter", "0"], "--maxiter must be a count"),
-    (["--preconditioners", "jacobi,ilu"], "--preconditioners takes names from"),
+@pytest.mark.parametrize("script, args, message", [
+    ("cg_preconditioners", ["--points", "4"], "--points takes n:p pairs"),
+    ("cg_preconditioners", ["--points", "9:9"], "--points: at most"),
+    ("cg_preconditioners", ["--sigmas", "1e-2,-1"], "--sigmas takes positive numbers"),
+    ("cg_preconditioners", ["--maxiter", "0"], "--maxiter must be a count"),
+    ("cg_preconditioners", ["--preconditioners", "jacobi,ilu"], "--preconditioners takes names from"),
+    ("first_order_floor", ["--points", "2:x"], "--points takes n:p pairs"),
+    ("first_order_floor", ["--points", "2:2000"], "--points: at most"),
 ])
-def test_cg_preconditioners_bad_option(tmp_path, capsys, args, message):
-    bench = importlib.import_module("pwas_hdl.benchmarks.cg_preconditioners")
+def test_cg_preconditioners_and_floor_bad_option(tmp_path, capsys, script, args, message):
+    bench = importlib.import_module(f"pwas_hdl.benchmarks.{script}")
     out = tmp_path / "out"
     assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
@@ -155,15 +157,3 @@ def test_first_order_floor_quick_smoke(tmp_path):
     assert row["iterations_in_budget"] == row["budget_ms_per_solve"] / (k["vcycle_ms"] + k["matvec_ms"])
     assert "| 2 | 127 | 16384 |" in (tmp_path / "first_order_floor_quick.md").read_text()
 
-
-@pytest.mark.parametrize("args, message", [
-    (["--points", "2:x"], "--points takes n:p pairs"),
-    (["--points", "2:2000"], "--points: at most"),
-])
-def test_first_order_floor_bad_option(tmp_path, capsys, args, message):
-    bench = importlib.import_module("pwas_hdl.benchmarks.first_order_floor")
-    out = tmp_path / "out"
-    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
-    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
-    assert not out.exists()
