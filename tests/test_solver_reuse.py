@@ -165,6 +165,36 @@ def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
     assert fm._TASK is None
 
 
+def test_fork_map_worker_that_ignores_sigterm_does_not_hang_the_parent():
+    """A worker that survives the broken pool's SIGTERM (here: it ignores it and blocks, as a worker
+    blocked on a queue lock the dead one held was seen to) is killed, so the parent gets its error.
+    Run in a child process: without the kill the parent would wait for ever (the timeout is only a
+    guard against that hang, generous on any machine)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import os, signal, threading
+        from pwas_hdl.fit import fork_map as fm
+        from pwas_hdl.errors import ResourceLimit
+
+        def task(x):
+            if x == 0:
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)
+                threading.Event().wait()
+            os._exit(9)
+
+        try:
+            fm.fork_map(task, range(2), 2)
+        except ResourceLimit as exc:
+            print("refused:", exc)
+    """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "refused: a worker process of the 2 forked ones died" in done.stdout
+
+
 def test_memory_estimate_counts_each_forked_worker():
     one = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, block_smoother=False)
     two = rl.estimate_fit_memory(10**5, 10**6, 2, 1, 1, processes=2, block_smoother=False)

@@ -46,6 +46,21 @@ def _run(item: tuple[int, Any]) -> tuple[int, Any, float, int]:
     return index, result, time.process_time() - c0, os.getpid()
 
 
+def _kill_workers(pool: ProcessPoolExecutor) -> None:
+    """SIGKILL the workers left in a broken pool.
+
+    CPython's own clean-up of a broken pool terminates the other workers and joins them; once (a
+    pytest-xdist run on the loaded 2-core machine, 2026-12-05) a surviving worker sat blocked on the
+    result queue's lock and the join, and with it the parent, waited for ever. Killed, it cannot.
+    The executor keeps its processes in a private attribute; without it nothing is done here.
+    """
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            proc.kill()
+        except (OSError, ValueError):  # pragma: no cover - already reaped or closed
+            pass
+
+
 def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
              progress: Callable[[int, int], None] | None = None, stats: list | None = None,
              parent_work: Callable[[], Any] | None = None) -> list:
@@ -85,26 +100,31 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], processes: int,
     out: list = [None] * len(items)
     info: list = [None] * len(items)
     _TASK = fn
+    # a worker that dies (killed, out of memory) raises BrokenProcessPool here instead of leaving
+    # the parent waiting for ever (multiprocessing.Pool would)
+    n_proc = max(1, min(int(processes), len(items)))
+    # each worker's BLAS threads at most its share of the cores (pwas_hdl.fit.blas_threads)
+    pool = ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx, initializer=_init_worker, initargs=(n_proc,))
+    broken = False
     try:
-        # a worker that dies (killed, out of memory) raises BrokenProcessPool here instead of
-        # leaving the parent waiting for ever (multiprocessing.Pool would)
-        n_proc = max(1, min(int(processes), len(items)))
-        # each worker's BLAS threads at most its share of the cores (pwas_hdl.fit.blas_threads)
-        with ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(n_proc,)) as pool:
-            futures = [pool.submit(_run, (i, x)) for i, x in enumerate(items)]
-            if parent_work is not None:  # the fork context starts every worker at the first submit
-                parent_work()
-            for done, fut in enumerate(as_completed(futures), 1):
-                index, result, cpu, pid = fut.result()
-                out[index], info[index] = result, (cpu, pid)
-                if progress is not None:
-                    progress(done, len(items))
+        futures = [pool.submit(_run, (i, x)) for i, x in enumerate(items)]
+        if parent_work is not None:  # the fork context starts every worker at the first submit
+            parent_work()
+        for done, fut in enumerate(as_completed(futures), 1):
+            index, result, cpu, pid = fut.result()
+            out[index], info[index] = result, (cpu, pid)
+            if progress is not None:
+                progress(done, len(items))
     except BrokenProcessPool:
+        broken = True
         raise ResourceLimit(f"a worker process of the {processes} forked ones died (killed, e.g. out of memory); "
                             "run with fewer --workers or on a machine with more memory") from None
     finally:
         _TASK = None
+        if broken:
+            _kill_workers(pool)
+        # a task's exception: the tasks not started are cancelled, the running ones finish
+        pool.shutdown(wait=not broken, cancel_futures=True)
     if stats is not None:
         stats.extend(info)
     return out
