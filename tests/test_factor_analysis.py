@@ -199,3 +199,24 @@ def test_cholmod_out_of_memory_is_a_resource_limit():
     chol._cholmod = types.SimpleNamespace(numeric=numeric)
     with pytest.raises(rl.ResourceLimit, match="factor of 50 unknowns did not fit in memory"):
         chol.factorize(chol.align(a))
+
+
+def test_first_order_direct_factor_is_analysed_once(monkeypatch):
+    """First order from n = 4 with the direct method: the memory check's analysis is the pattern the
+    folds share, so the CV makes one symbolic analysis in all, not one for the check and one for the
+    solves."""
+    rng = np.random.default_rng(1)
+    grid = Grid(np.full(4, -1.2), np.full(4, 1.2), 4)
+    h = sparse.csr_array(grid.basis_matrix(rng.uniform(-1, 1, (2000, 4))))
+    z = np.sin(3 * rng.uniform(-1, 1, 2000))
+    analyses = []
+    init = sc.PatternCholesky.__init__
+
+    def counted(self, *args, **kwargs):
+        analyses.append(1)
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(sc.PatternCholesky, "__init__", counted)
+    cv = cross_validate_sigma(h, z, tikhonov_matrix(grid, 1), sigmas=[1e-3, 1e-1], method="direct")
+    assert cv.solver["solves_by_method"] == {"direct": 10}
+    assert len(analyses) == 1

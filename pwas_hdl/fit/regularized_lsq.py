@@ -819,8 +819,7 @@ def _checked_direct_factor(solver: "NormalEquationSolver", hth: sparse.sparray, 
             or solver.direct_by_analysis):
         return est
     if solver.analysis is None:
-        chol = PatternCholesky(abs(solver.restrict_matrix(hth)) + abs(solver.gamma))
-        solver.analysis = chol.counts()
+        solver.analyse_direct_factor(hth)
     if solver.analysis is None:  # the column counts could not be read: the fill rule stands
         return est
     extra = max(factor_holders(processes) * solver.analysis.bytes - est["factor"], 0.0)
@@ -1206,11 +1205,27 @@ class NormalEquationSolver:
         #: lock shared by the forked workers; a fallback factorisation holds it and frees its factor
         self.factor_lock = None
 
+    def _analyse(self, pattern: sparse.sparray) -> PatternCholesky:
+        """CHOLMOD's symbolic analysis of ``pattern``; its counts kept in :attr:`analysis`."""
+        chol = PatternCholesky(pattern)
+        self.analysis = chol.counts()
+        return chol
+
+    def analyse_direct_factor(self, hth: sparse.sparray) -> FactorCounts | None:
+        """The counts of the factor the direct method makes, from the full-data system ``hth +
+        Gamma`` (every fold's pattern is part of it), kept in :attr:`analysis` (None where CHOLMOD's
+        struct could not be read). First order analyses the pattern the folds share
+        (:meth:`_shared_pattern`), so the solves do not analyse it again."""
+        if self._shared_hth is not None:
+            self.analysis = self._shared_pattern()[0].counts()
+        else:
+            self._analyse(abs(self._restrict(hth)) + abs(self.gamma))
+        return self.analysis
+
     def _cheap_factor(self, pattern: sparse.sparray, headroom: float | None) -> bool:
         """Whether CHOLMOD's symbolic analysis of ``pattern`` (kept in :attr:`analysis`) finds its
         factor cheap (:data:`DIRECT_FLOPS_PER_ENTRY`) and within ``headroom`` bytes."""
-        chol = PatternCholesky(pattern)
-        self.analysis = chol.counts()
+        chol = self._analyse(pattern)
         if self.analysis is None:
             return False
         cheap = self.analysis.flops <= DIRECT_FLOPS_PER_ENTRY * chol.nnz_lower
