@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir, write_json_and_markdown
+from pwas_hdl.bench_results import check_stem, default_outdir, write_json_and_markdown
 
 #: (n, p) of the full run: the n = 4 point of the fit_scale table at N ~ 10^5.
 POINTS: list[tuple[int, int]] = [(4, 17)]
@@ -258,7 +258,7 @@ def _parse(args) -> tuple[list[tuple[int, int]], tuple[float, ...], int, int, st
         if not names or any(v not in known for v in names):
             raise InputError(f"--preconditioners takes names from {', '.join(known)}, comma-separated; "
                              f"got {args.preconditioners!r}")
-    return points, sigmas, t, maxiter, args.stem or stem, names
+    return points, sigmas, t, maxiter, check_stem(args.stem or stem), names
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir, write_json_and_markdown
+from pwas_hdl.bench_results import check_stem, default_outdir, write_json_and_markdown
 
 #: (n, p) of the full run: the fit_scale points over 2x and the two named ones.
 POINTS: list[tuple[int, int]] = [(2, 999), (2, 315), (3, 63), (4, 31)]
@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
 
     points = parse_points(args.points, QUICK_POINTS if args.quick else POINTS)
     t = 10_000 if args.quick else 100_000
-    stem = args.stem or ("first_order_floor_quick" if args.quick else "first_order_floor")
+    stem = check_stem(args.stem or ("first_order_floor_quick" if args.quick else "first_order_floor"))
     args.outdir.mkdir(parents=True, exist_ok=True)
     res = run(points, t, progress=lambda m: print(m, flush=True))
     write_json_and_markdown(args.outdir, stem, res, markdown(res))

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir, write_json_and_markdown
+from pwas_hdl.bench_results import check_stem, default_outdir, write_json_and_markdown
 
 HERE = Path(__file__).resolve().parent
 
@@ -444,7 +444,7 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("--points takes n:p pairs, e.g. 6:3,2:999")
         if any(len(pt) != 2 or pt[0] < 1 or pt[1] < 1 for pt in points):
             ap.error("--points takes n:p pairs with n, p >= 1, e.g. 6:3,2:999")
-    stem = args.stem or stem
+    stem = check_stem(args.stem or stem)
     args.outdir.mkdir(parents=True, exist_ok=True)
     if args.workers < 0:
         ap.error("--workers must be 0 (serial) or a positive count")

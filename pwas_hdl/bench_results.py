@@ -299,6 +299,20 @@ def write_results(path: str | Path, doc: dict) -> Path:
     return atomic_write_text(path, results_text(doc))
 
 
+def check_stem(stem: str) -> str:
+    """A ``--stem`` option: a plain file name (no folder, not empty), checked before a benchmark runs.
+
+    Raises
+    ------
+    pwas_hdl.errors.InputError
+    """
+    from pwas_hdl.errors import InputError
+
+    if not stem or stem in (".", "..") or "/" in stem or "\\" in stem or "\0" in stem:
+        raise InputError(f"--stem must be a plain file name without a folder, e.g. my_run; got {stem!r}")
+    return stem
+
+
 def write_json_and_markdown(outdir: str | Path, stem: str, doc: dict, md: str) -> None:
     """Write a benchmark's own (not results-format) ``STEM.json`` (indented, no NaN) and ``STEM.md``
     atomically into ``outdir`` and print the Markdown."""

@@ -129,8 +129,11 @@ def test_cg_preconditioners_subset(tmp_path):
     ("cg_preconditioners", ["--preconditioners", "jacobi,ilu"], "--preconditioners takes names from"),
     ("first_order_floor", ["--points", "2:x"], "--points takes n:p pairs"),
     ("first_order_floor", ["--points", "2:2000"], "--points: at most"),
+    ("first_order_floor", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
+    ("cg_preconditioners", ["--quick", "--stem", ".."], "--stem must be a plain file name"),
+    ("fit_scale", ["--quick", "--stem", "../x"], "--stem must be a plain file name"),
 ])
-def test_cg_preconditioners_and_floor_bad_option(tmp_path, capsys, script, args, message):
+def test_issue18_benchmarks_bad_option(tmp_path, capsys, script, args, message):
     bench = importlib.import_module(f"pwas_hdl.benchmarks.{script}")
     out = tmp_path / "out"
     assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
