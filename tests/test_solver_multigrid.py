@@ -77,7 +77,7 @@ def test_levels_are_the_galerkin_operators_of_every_sigma():
     fold = hier.for_matrix(m)
     for sigma in (1e-4, 3.0):
         fold.set_sigma(sigma)
-        a = sparse.csr_array(m + sigma * gam)
+        a = sparse.csr_array(hier.internal(m + sigma * gam))  # the levels' vertex orders
         for level, op in enumerate(fold.ops):
             assert abs(sparse.csr_array(op) - a).max() <= 1e-12 * abs(a).max()
             if level < len(hier.p):
@@ -179,10 +179,11 @@ def test_explicit_zeros_of_the_fold_matrix_are_not_outside_the_pattern():
     grid, h, z, gam = _fold()
     m = sparse.csr_matrix(h.T @ h)
     m.data[: 7] = 0.0  # entries that cancelled exactly, kept as explicit zeros
-    fold = mg.GridHierarchy(grid.shape, gam, coarsest_max=30).for_matrix(m)
+    hier = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
+    fold = hier.for_matrix(m)
     fold.set_sigma(1.0)
     m.eliminate_zeros()
-    assert abs(sparse.csr_array(fold.ops[0]) - sparse.csr_array(m + gam)).max() <= 1e-12
+    assert abs(sparse.csr_array(fold.ops[0]) - sparse.csr_array(hier.internal(m + gam))).max() <= 1e-12
 
 
 def test_union_by_markers_equals_the_key_search():
@@ -230,3 +231,84 @@ def test_first_order_gamma_is_the_sum_of_its_edge_blocks(lo, hi, p):
         assert np.array_equal(got.data, ref.data)
     else:
         np.testing.assert_allclose(got.data, ref.data, rtol=4e-16, atol=0)
+
+
+@pytest.mark.parametrize("n, k", [(0, 16), (1, 16), (7, 16), (16, 16), (100, 16), (1001, 16), (30, 4)])
+def test_interleaved_order_is_a_permutation_of_interleaved_slabs(n, k):
+    order = mg.interleaved_order(n, k)
+    assert order.dtype == np.int64 and sorted(order.tolist()) == list(range(n))
+    step = -(-n // k) if n else 0
+    for pos, v in enumerate(order.tolist()[: 3 * k]):
+        # consecutive positions run through the slabs: vertex j * step + i at some position i * k + j
+        assert v % step * k + v // step >= pos if step else True
+    if n >= k:
+        first = [j * step for j in range(k) if j * step < n]  # position i = 0 of every slab
+        assert order[: len(first)].tolist() == first
+
+
+def test_levels_are_numbered_in_the_interleaved_order_and_solve_in_c_order():
+    """The hierarchy's fine level is Gamma permuted by the interleaved order; solve and vcycle take
+    and return C-order vectors (the weights equal the direct solve of the C-order system)."""
+    grid, h, z, gam = _fold(shape=(47, 62), t=900)
+    hier = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
+    order = hier.orders[0]
+    assert not np.array_equal(order, np.arange(order.size))
+    assert abs(sparse.csr_array(hier.gammas[0]) - sparse.csr_array(gam)[order][:, order]).max() == 0.0
+    m = sparse.csr_array(h.T @ h)
+    b = h.T @ z
+    fold = hier.for_matrix(m)
+    w, info = fold.solve(b, 0.3, rtol=rl.CG_RTOL)
+    wd = rl._solve_spd(sparse.csc_array(m + 0.3 * gam), b)
+    assert info.converged
+    assert float(np.linalg.norm(w - wd)) <= info.abs_residual / (0.3 * rl.gamma_min_eigenvalue(gam))
+    v = np.random.default_rng(3).standard_normal(b.size)
+    np.testing.assert_array_equal(hier.to_natural(hier.to_internal(v)), v)
+    np.testing.assert_allclose(fold.vcycle(v), hier.to_natural(fold._vcycle_fine(hier.to_internal(v))))
+
+
+def _reference_vcycle(fold, b, level):
+    """The V-cycle with every residual a full product, as before the half-product residuals."""
+    from pyamg.relaxation.relaxation import gauss_seidel
+
+    if level == len(fold.ops) - 1:
+        return fold._coarse.solve(b.astype(float)).astype(np.float32)
+    a = fold._ops32[level]
+    x = np.zeros_like(b)
+    gauss_seidel(a, x, b, iterations=1, sweep="forward")
+    r = b - a @ x
+    x += fold._p32[level] @ _reference_vcycle(fold, fold._r32[level] @ r, level + 1)
+    gauss_seidel(a, x, b, iterations=1, sweep="backward")
+    return x
+
+
+def _reference_block_cycle(fold, b):
+    from pyamg.relaxation.relaxation import gauss_seidel
+
+    a = fold.ops[0]
+    x = fold.block.solve(b)
+    gauss_seidel(a, x, b, iterations=1, sweep="forward")
+    x += fold._p32[0] @ _reference_vcycle(fold, fold._r32[0] @ (b - a @ x).astype(np.float32), 1)
+    gauss_seidel(a, x, b, iterations=1, sweep="backward")
+    return x + fold.block.solve(b - a @ x)
+
+
+@pytest.mark.parametrize("sigma", [1e-4, 0.5, 30.0])
+def test_half_product_residuals_equal_the_full_products(sigma):
+    """After a forward sweep from zero the residual is -U x, after a sweep from x0 it is -U (x - x0)
+    (forward) or -L (x - x0) (backward): the cycles equal the ones with full products (a wrong
+    triangle, or values of another sigma, would not)."""
+    grid, h, z, gam = _fold(shape=(47, 62), t=900)
+    fold = mg.GridHierarchy(grid.shape, gam, coarsest_max=30).for_matrix(sparse.csr_array(h.T @ h))
+    fold.set_sigma(2 * sigma)
+    fold.set_block(sigma)  # sets sigma itself, and the triangles' values with it
+    b = np.random.default_rng(4).standard_normal(gam.shape[0])
+    b32 = b.astype(np.float32)
+    # the same cycle up to rounding: single precision (a residual b - A x of nearly equal terms
+    # rounds differently from -U x), double in the data-block cycle's fine level
+    ref = _reference_vcycle(fold, b32, 0)
+    assert np.linalg.norm(fold._vcycle(b32, 0) - ref) <= 1e-5 * np.linalg.norm(ref)
+    ref = _reference_block_cycle(fold, b)
+    assert np.linalg.norm(fold._vcycle_block_fine(b) - ref) <= 1e-6 * np.linalg.norm(ref)
+    # a triangle of another sigma's values is not the same cycle
+    fold._neg_upper32[0].set_sigma(3 * sigma)
+    assert np.linalg.norm(fold._vcycle(b32, 0) - _reference_vcycle(fold, b32, 0)) > 1e-3 * np.linalg.norm(ref)

@@ -149,6 +149,42 @@ def test_forked_segments_one_factor_at_a_time_run_in_one_task_under_the_lock():
     assert [[(r[0], r[1]) for r in fold] for fold in plain] == [[(r[0], r[1]) for r in fold] for fold in out]
 
 
+def test_fold_tasks_keep_whole_folds_where_their_set_up_costs_more_than_the_balance():
+    """_fold_tasks: every segment in exactly one task; without a set-up cost one task per segment;
+    with the multigrid set-up of five equal folds on two workers some folds run whole (set up once),
+    with an estimated finish no later than one task per segment."""
+    segments = [[list(range(10)), list(range(10, 21))] for _ in range(5)]
+    cost = lambda f, i: 0.4 if i < 10 else 0.8  # noqa: E731 - Gauss-Seidel and data-block sigmas
+    plain = rl._fold_tasks(segments, cost, 2, lambda f, k: 0.0)
+    assert plain == [((f, k),) for f in range(5) for k in range(2)]
+    tasks = rl._fold_tasks(segments, cost, 2, lambda f, k: rl._MG_SETUP_COST)
+    assert sorted(pair for t in tasks for pair in t) == [(f, k) for f in range(5) for k in range(2)]
+    whole = [t for t in tasks if len(t) == 2]
+    assert whole and all(t[0][0] == t[1][0] for t in whole)
+
+    def span(ts):
+        return rl._makespan([sum(cost(f, i) for f, k in t for i in segments[f][k]) + rl._MG_SETUP_COST for t in ts], 2)
+
+    assert span(tasks) <= span(plain)
+    # many workers: splitting every fold balances best
+    assert rl._fold_tasks(segments, cost, 8, lambda f, k: rl._MG_SETUP_COST) == plain
+
+
+def test_forked_whole_folds_run_their_segments_in_one_process_in_order():
+    import os
+
+    if not fm.fork_available():
+        pytest.skip("needs fork")
+    segments = [[[0, 1], [2, 3, 4]] for _ in range(5)]
+
+    def run(f, seg):
+        return f, tuple(seg), os.getpid()
+
+    out = rl._fork_segments(run, segments, lambda f, i: 1.0, 2, 5, None, None, setup_of=lambda f, k: 3.0)
+    assert [[(r[0], r[1]) for r in fold] for fold in out] == [[(f, tuple(s)) for s in segs] for f, segs in enumerate(segments)]
+    assert any(fold[0][2] == fold[1][2] for fold in out)  # some fold ran whole in one worker
+
+
 def test_fork_map_worker_that_dies_is_an_error_not_a_hang():
     """A killed worker (e.g. by the out-of-memory killer) left multiprocessing.Pool waiting for ever."""
     import os

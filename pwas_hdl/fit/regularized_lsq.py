@@ -23,6 +23,7 @@ from pwas_hdl.errors import InputError, InternalError, ResourceLimit
 from pwas_hdl.fit.blas_threads import single_blas_thread
 from pwas_hdl.fit.fork_map import fork_available, fork_map
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.conjugate_gradients import pcg
 from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
 from pwas_hdl.fit.sparse_cholesky import (
     FactorCounts,
@@ -696,9 +697,13 @@ def estimate_fit_memory(
         ) + chain_factor,
         # the multigrid levels: the fine operator on the union pattern and its two value arrays
         # (3 x A), the prolongation and restriction (2^n entries a row), the coarse levels
-        # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled
-        "multigrid": (3.0 * _sparse_bytes(nnz_a, nv) + 2 * _sparse_bytes(float(nv) * 2 ** (k - 1), nv)
-                      + 3.0 * _sparse_bytes(float(nv) * 3 ** (k - 1) / (2 ** (k - 1) - 1), nv))
+        # (N / 2^n rows of at most 3^n entries, shrinking 2^n-fold per level) likewise tripled;
+        # the single-precision strict upper triangles of every level for the residuals (16 bytes a
+        # triangle entry with their values of m and Gamma: 8 a level entry, 2/3 of 12) and, with the
+        # data-block cycle, both of the fine level in double precision (28 bytes an entry, 7/3 of 12)
+        "multigrid": ((3.0 + 2.0 / 3.0 + (7.0 / 3.0 if block else 0.0)) * _sparse_bytes(nnz_a, nv)
+                      + 2 * _sparse_bytes(float(nv) * 2 ** (k - 1), nv)
+                      + (3.0 + 2.0 / 3.0) * _sparse_bytes(float(nv) * 3 ** (k - 1) / (2 ** (k - 1) - 1), nv))
         if use_mg else 0.0,
         "vectors": 8.0 * nv * (4 * int(n_targets) + 6) + 8.0 * t * 2 * int(n_targets),
         "shift": SHIFT_TRANSIENT_FACTOR * _sparse_bytes(nnz_gam, nv),
@@ -1032,18 +1037,13 @@ def _cg(
         if nb == 0.0:
             w[:, j] = 0.0
             continue
-        count = [0]
-
-        def _cb(_xk, count=count):
-            count[0] += 1
-
-        wj, info = splinalg.cg(a, b2[:, j], x0=w[:, j], rtol=rtol, atol=0.0, maxiter=maxiter, M=precond, callback=_cb)
+        wj, its_j, done = pcg(a, b2[:, j], precond, w[:, j], rtol, maxiter)
         w[:, j] = wj
-        its += count[0]
+        its += its_j
         r = float(np.linalg.norm(b2[:, j] - a @ wj))
         worst_rel = max(worst_rel, r / nb)
         worst_abs = max(worst_abs, r)
-        ok = ok and info == 0
+        ok = ok and done
     bound = worst_abs / (sigma * lam_gamma) if lam_gamma > 0 else float("inf")
     return w.reshape(np.shape(b)), SolveInfo("cg", its, worst_rel, bound, ok)
 
@@ -1853,11 +1853,60 @@ _CHAIN_COST = 2.5
 _MG_BLOCK_COST = 0.8
 
 
+#: What a worker spends on a fold before its first multigrid sigma, in the units of
+#: :data:`_MG_COST`: the fold's multigrid levels (:meth:`~pwas_hdl.fit.multigrid.GridHierarchy.for_matrix`)
+#: and, for the data-block cycle, the block's symbolic analysis. Measured at n = 2, N = 10^6
+#: (T = 10^5, a fold, CPU): 1.0 s for the levels on an idle core, 2.5 s beside two busy workers,
+#: against 0.5-1.1 s a multigrid sigma.
+_MG_SETUP_COST = 0.6
+
+
+def _makespan(task_costs: list[float], procs: int) -> float:
+    """The finish time of tasks handed out longest first to whichever of ``procs`` workers is free."""
+    loads = [0.0] * max(int(procs), 1)
+    for c in sorted(task_costs, reverse=True):
+        i = loads.index(min(loads))
+        loads[i] += c
+    return max(loads)
+
+
+def _fold_tasks(segments: list[list[list[int]]], cost_of: Callable[[int, int], float], procs: int,
+                setup_of: Callable[[int, int], float]) -> list[tuple]:
+    """Tasks of :func:`_fork_segments` where segment ``k`` of fold ``f`` needs ``setup_of(f, k)``
+    of set-up in every task it runs in (the largest of a task's segments counted once).
+
+    A fold whose segments run as one task is set up once, a fold split into one task per segment
+    once per segment (its tasks may run in different workers), but whole folds balance the
+    workers worse (five folds on two workers). The cheapest folds are split, as few as give the
+    shortest estimated finish (:func:`_makespan`, the set-up included); on a tie, more folds are
+    split.
+    """
+    fold_cost = [sum(cost_of(f, i) for seg in segs for i in seg) for f, segs in enumerate(segments)]
+    by_cost = sorted(range(len(segments)), key=lambda f: (fold_cost[f], f))
+    best, best_split = float("inf"), len(segments)
+    for n_split in range(len(segments) + 1):
+        split = set(by_cost[:n_split])
+        costs = []
+        for f, segs in enumerate(segments):
+            if f in split:
+                costs += [sum(cost_of(f, i) for i in seg) + setup_of(f, k) for k, seg in enumerate(segs)]
+            else:
+                costs.append(fold_cost[f] + max((setup_of(f, k) for k in range(len(segs))), default=0.0))
+        span = _makespan(costs, procs)
+        if span <= best * (1 + 1e-9):
+            best, best_split = min(best, span), n_split
+    split = set(by_cost[:best_split])
+    return [t for f, segs in enumerate(segments)
+            for t in ([((f, k),) for k in range(len(segs))] if f in split else [tuple((f, k) for k in range(len(segs)))])
+            if t]
+
+
 def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Callable[[int, int], float],
                    procs: int, n_sigmas: int, progress, stats: list | None,
                    parent_work: Callable[[], object] | None = None,
                    heavy: Callable[[int, int], bool] | None = None, factor_lock=None,
-                   after_group: Callable[[], object] | None = None) -> list[list]:
+                   after_group: Callable[[], object] | None = None,
+                   setup_of: Callable[[int, int], float] | None = None) -> list[list]:
     """Every fold's sweep segments (:meth:`NormalEquationSolver.sweep_segments`) on ``procs`` forked
     workers (:func:`pwas_hdl.fit.fork_map.fork_map`: the data are inherited, not pickled).
 
@@ -1869,17 +1918,22 @@ def _fork_segments(run: Callable, segments: list[list[list[int]]], cost_of: Call
     return value is ``[[result of each segment of fold f, in segment order] for f]``. With ``heavy(f, k)``
     (segment ``k`` of fold ``f`` factorises) the factorising segments of all folds form one task that
     holds ``factor_lock`` (one factor resident at a time, see :func:`plan_fit_memory`) and calls
-    ``after_group()`` before it releases it.
+    ``after_group()`` before it releases it. Otherwise, with ``setup_of(f, k)`` (what a worker
+    spends on fold ``f`` before segment ``k`` can start, in the units of ``cost_of``, once per
+    task; see :data:`_MG_SETUP_COST`) the segments of some folds run as one task (:func:`_fold_tasks`).
     """
     # a task is a tuple of (fold, segment) pairs run one after another; one segment each, except
     # that with ``heavy`` (one factor at a time) every factorising segment is in one task, which
-    # holds ``factor_lock`` while it runs
+    # holds ``factor_lock`` while it runs, and that with ``setup_of`` whole folds may be one task
+    # each (_fold_tasks)
     tasks = [((f, k),) for f, segs in enumerate(segments) for k in range(len(segs))]
     group: tuple = ()
     if heavy is not None:
         group = tuple(t[0] for t in tasks if heavy(*t[0]))
         if group:
             tasks = [group] + [t for t in tasks if t[0] not in set(group)]
+    elif setup_of is not None:
+        tasks = _fold_tasks(segments, cost_of, procs, setup_of)
     cost = {t: sum(cost_of(f, i) for f, k in t for i in segments[f][k]) for t in tasks}
     tasks.sort(key=lambda t: -cost[t])  # stable: equal costs stay in fold order
 
@@ -2068,7 +2122,9 @@ def cross_validate_sigma(
         per_fold = _fork_segments(lambda f, seg: run_segment(datas[f], seg), segments,
                                   lambda f, i: solver.segment_cost(datas[f][2], float(sig[i])), procs, sig.size,
                                   progress, task_stats, prepare_final, heavy=heavy, factor_lock=solver.factor_lock,
-                                  after_group=solver.drop_factor)
+                                  after_group=solver.drop_factor,
+                                  setup_of=lambda f, k: _MG_SETUP_COST if any(
+                                      solver.uses_mg(datas[f][2], float(sig[i])) for i in segments[f][k]) else 0.0)
         solver.factor_lock = None
         del datas
         parts = [merge(r) for r in per_fold]

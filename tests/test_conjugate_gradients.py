@@ -1,0 +1,62 @@
+"""The in-place PCG loop (issue 18): scipy's iteration, without temporaries."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+from scipy.sparse import linalg as splinalg
+
+from pwas_hdl.fit.conjugate_gradients import pcg
+
+
+def _spd(n=400, seed=0):
+    rng = np.random.default_rng(seed)
+    m = sparse.random(n, n, density=0.02, random_state=seed)
+    a = (m @ m.T + sparse.diags(rng.uniform(0.1, 10.0, n))).tocsr()
+    return a, rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("precond", ["none", "jacobi", "operator"])
+@pytest.mark.parametrize("warm", [False, True])
+def test_pcg_takes_scipys_iterations(precond, warm):
+    a, b = _spd()
+    d = a.diagonal()
+    op = splinalg.LinearOperator(a.shape, matvec=lambda r: r / d, dtype=float)
+    m = {"none": None, "jacobi": lambda r: r / d, "operator": op}[precond]
+    x0 = np.full(b.size, 0.1) if warm else None
+    keep = None if x0 is None else x0.copy()
+    count = [0]
+    xs, flag = splinalg.cg(a, b, x0=x0, rtol=1e-10, atol=0.0, maxiter=500,
+                           M=None if m is None else op,
+                           callback=lambda _x: count.__setitem__(0, count[0] + 1))
+    x, its, done = pcg(a, b, m, x0, 1e-10, 500)
+    assert flag == 0 and done
+    assert its == count[0]
+    # the same iterates up to rounding (BLAS daxpy against numpy's temporaries)
+    assert np.linalg.norm(x - xs) <= 1e-9 * np.linalg.norm(xs)
+    assert np.linalg.norm(b - a @ x) <= 1e-9 * np.linalg.norm(b)
+    if keep is not None:
+        np.testing.assert_array_equal(x0, keep)  # the initial guess is not modified
+
+
+def test_pcg_stops_at_maxiter_and_says_so():
+    a, b = _spd()
+    x, its, done = pcg(a, b, None, None, 1e-14, 3)
+    assert its == 3 and not done
+    assert np.linalg.norm(b - a @ x) < np.linalg.norm(b)
+
+
+def test_pcg_of_a_zero_right_hand_side_is_zero():
+    a, b = _spd()
+    x, its, done = pcg(a, np.zeros_like(b), None, np.ones_like(b), 1e-10, 10)
+    assert its == 0 and done and not x.any()
+
+
+def test_pcg_with_a_preconditioner_returning_its_argument():
+    """z may be r itself (an identity preconditioner): p must not alias r."""
+    a, b = _spd()
+    x, its, done = pcg(a, b, lambda r: r, None, 1e-10, 500)
+    xr, its_r, _ = pcg(a, b, None, None, 1e-10, 500)
+    assert done and its == its_r
+    np.testing.assert_allclose(x, xr, rtol=1e-12)
