@@ -60,3 +60,10 @@ def test_pcg_with_a_preconditioner_returning_its_argument():
     xr, its_r, _ = pcg(a, b, None, None, 1e-10, 500)
     assert done and its == its_r
     np.testing.assert_allclose(x, xr, rtol=1e-12)
+
+
+def test_pcg_breakdown_is_not_converged_and_not_an_exception():
+    """A preconditioner that returns zero for a non-zero residual (e.g. underflow): r'z = 0."""
+    a, b = _spd()
+    x, its, done = pcg(a, b, lambda r: np.zeros_like(r), None, 1e-10, 50)
+    assert not done and its == 0 and not x.any()

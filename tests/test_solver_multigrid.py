@@ -312,3 +312,25 @@ def test_half_product_residuals_equal_the_full_products(sigma):
     # a triangle of another sigma's values is not the same cycle
     fold._neg_upper32[0].set_sigma(3 * sigma)
     assert np.linalg.norm(fold._vcycle(b32, 0) - _reference_vcycle(fold, b32, 0)) > 1e-3 * np.linalg.norm(ref)
+
+
+def test_set_sigma_after_set_block_refreshes_every_triangle_and_the_coarse_factor_falls_back():
+    from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, cholmod_available
+
+    grid, h, z, gam = _fold(shape=(47, 62), t=900)
+    fold = mg.GridHierarchy(grid.shape, gam, coarsest_max=30).for_matrix(sparse.csr_array(h.T @ h))
+    fold.set_block(1e-3)
+    fold.set_sigma(0.1)
+    assert all(tri.sigma == 0.1 for tri in fold._neg_upper32 + fold._neg_tri64)
+    if not cholmod_available():
+        return
+
+    def fail(values):
+        raise NotPositiveDefinite("test")
+
+    fold._coarse_chol.factorize = fail
+    fold.set_sigma(2.0)  # SuperLU instead of the failing CHOLMOD factor
+    assert fold.sigma == 2.0 and fold._coarse is not fold._coarse_chol
+    b = np.random.default_rng(5).standard_normal(gam.shape[0])
+    w, info = fold.solve(b, 2.0, rtol=rl.CG_RTOL)
+    assert info.converged

@@ -53,7 +53,9 @@ def pcg(
     iterations : int
         Iterations done (scipy's callback count).
     converged : bool
-        The recurrence residual met the test (the caller checks the residual computed afresh).
+        The recurrence residual met the test before an iteration (the caller checks the residual
+        computed afresh); ``False`` at ``maxiter`` (as scipy) and on a breakdown (``r'z = 0`` or
+        ``p'Ap = 0``, where scipy would divide by zero).
     """
     apply = precond.matvec if hasattr(precond, "matvec") else precond
     b = np.ascontiguousarray(b, dtype=np.float64).reshape(-1)
@@ -69,21 +71,24 @@ def pcg(
         r = b - a @ x
     p = None
     rho_prev = 1.0
-    for it in range(int(maxiter) + 1):
+    for it in range(int(maxiter)):
         if float(blas.dnrm2(r)) < tol:
             return x, it, True
-        if it == maxiter:
-            break
         z = r if apply is None else np.asarray(apply(r), dtype=np.float64).reshape(-1)
         rho = float(blas.ddot(r, z))
+        if rho == 0.0 or not np.isfinite(rho):  # breakdown (z orthogonal to r): not converged
+            return x, it, False
         if p is None:
             p = np.array(z)  # a copy: z may be r itself, or a buffer of the preconditioner
         else:
             p *= rho / rho_prev
             p += z
         q = np.asarray(a @ p, dtype=np.float64).reshape(-1)
-        alpha = rho / float(blas.ddot(p, q))
+        pq = float(blas.ddot(p, q))
+        if pq == 0.0 or not np.isfinite(pq):
+            return x, it, False
+        alpha = rho / pq
         x = blas.daxpy(p, x, a=alpha)
         r = blas.daxpy(q, r, a=-alpha)
         rho_prev = rho
-    return x, int(maxiter), False
+    return x, int(maxiter), False  # as scipy: no test after the last iteration

@@ -124,8 +124,9 @@ def prolongation(shape: tuple[int, ...]) -> tuple[sparse.csr_array, tuple[int, .
 def interleaved_order(n: int, k: int = INTERLEAVE) -> np.ndarray:
     """The vertex order of a level: ``k`` consecutive slabs of ``0 .. n - 1`` interleaved.
 
-    Slab ``j`` holds the vertices ``j * s .. (j + 1) * s - 1`` (``s = ceil(n / k)``); position
-    ``i * k + j`` of the order holds vertex ``j * s + i`` (positions past ``n`` dropped).
+    Slab ``j`` holds the vertices ``j * s .. (j + 1) * s - 1`` (``s = ceil(n / k)``); the order runs
+    through ``i = 0, 1, ...`` and, for each, the slabs ``j = 0 .. k - 1``, giving vertex ``j * s + i``
+    (those ``>= n``, in the last slabs when ``k`` does not divide ``n``, skipped).
 
     Returns
     -------
@@ -407,11 +408,12 @@ class FoldMultigrid:
         """Every level's operator ``m_l + sigma Gamma_l`` (in place) and the coarsest factor."""
         if self.sigma == sigma:
             return
+        self.sigma = None  # until every level and the coarsest factor hold this sigma's values
         for a, a32, mv, gv in zip(self.ops, self._ops32, self._m_vals, self._g_vals):
             np.multiply(gv, sigma, out=a.data)  # in place: no temporary of the level's size
             a.data += mv
             np.copyto(a32.data, a.data, casting="same_kind")
-        for tri in self._neg_upper32:
+        for tri in self._neg_upper32 + (self._neg_tri64 or []):
             tri.set_sigma(sigma)
         self._coarse = self._coarse_solver()
         self.sigma = sigma
@@ -422,14 +424,17 @@ class FoldMultigrid:
         CHOLMOD on the level's pattern, analysed once (5.6 ms a numeric factorisation against
         SuperLU's 12.8 ms at n = 2, 4 096 unknowns); SuperLU without cvxopt.
         """
-        from pwas_hdl.fit.sparse_cholesky import PatternCholesky, cholmod_available
+        from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky, cholmod_available
 
         a = self.ops[-1]
         if cholmod_available():
             if self._coarse_chol is None:
                 self._coarse_chol = PatternCholesky(a)
-            self._coarse_chol.factorize(self._coarse_chol.align(a))
-            return self._coarse_chol
+            try:
+                self._coarse_chol.factorize(self._coarse_chol.align(a))
+                return self._coarse_chol
+            except NotPositiveDefinite:  # rounding in H'H - H_v'H_v at a tiny sigma: SuperLU as before
+                pass
         return splinalg.splu(sparse.csc_matrix(a), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                              options={"SymmetricMode": True})
 

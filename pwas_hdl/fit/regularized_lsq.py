@@ -1881,6 +1881,10 @@ def _fold_tasks(segments: list[list[list[int]]], cost_of: Callable[[int, int], f
     shortest estimated finish (:func:`_makespan`, the set-up included); on a tie, more folds are
     split.
     """
+    plain = [((f, k),) for f, segs in enumerate(segments) for k in range(len(segs))]
+    setups = [[float(setup_of(f, k)) for k in range(len(segs))] for f, segs in enumerate(segments)]
+    if not any(c > 0 for row in setups for c in row):
+        return plain  # nothing to save: one task per segment, as without set-up costs
     fold_cost = [sum(cost_of(f, i) for seg in segs for i in seg) for f, segs in enumerate(segments)]
     by_cost = sorted(range(len(segments)), key=lambda f: (fold_cost[f], f))
     best, best_split = float("inf"), len(segments)
@@ -1889,9 +1893,9 @@ def _fold_tasks(segments: list[list[list[int]]], cost_of: Callable[[int, int], f
         costs = []
         for f, segs in enumerate(segments):
             if f in split:
-                costs += [sum(cost_of(f, i) for i in seg) + setup_of(f, k) for k, seg in enumerate(segs)]
+                costs += [sum(cost_of(f, i) for i in seg) + setups[f][k] for k, seg in enumerate(segs)]
             else:
-                costs.append(fold_cost[f] + max((setup_of(f, k) for k in range(len(segs))), default=0.0))
+                costs.append(fold_cost[f] + max(setups[f], default=0.0))
         span = _makespan(costs, procs)
         if span <= best * (1 + 1e-9):
             best, best_split = min(best, span), n_split
@@ -2011,8 +2015,8 @@ def cross_validate_sigma(
         Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is
         distributed, or, with local ``workers >= 2`` and at least
         :data:`FORK_MIN_UNKNOWNS` unknowns, on that many forked processes that inherit the data
-        (one task per segment of a fold's sweep, see :func:`_fork_segments`); the result is the
-        serial one.
+        (one task per segment of a fold's sweep, or per whole fold where its multigrid set-up
+        outweighs the balance, see :func:`_fork_segments`); the result is the serial one.
     final_solve : bool
         Also solve the full-data system at the chosen sigma with this CV's solver
         (:attr:`CVResult.final_weights`): the same weights as ``solve_regularized(h, z, best_sigma,
@@ -2089,7 +2093,7 @@ def cross_validate_sigma(
             data = fold_data(f)
             return merge([run_segment(data, seg, progress) for seg in solver.sweep_segments(data[2], sig)])
 
-    # one fold = one task (serial, Dask) or one segment = one task (forked workers); the counts a
+    # one fold = one task (serial, Dask) or one segment or fold = one task (forked workers); the counts a
     # task leaves in the solver come back with its results
     task_stats: list = []
     overlap = [0.0]  # CPU seconds of this process spent while forked workers ran
@@ -2152,7 +2156,7 @@ def cross_validate_sigma(
         # data blocks that were not positive definite (those sigmas by the Gauss-Seidel cycle)
         "block_failures": int(sum(part[4] for part in parts)),
         "weight_bound": weight_bound,
-        # forked workers (see _fork_segments): per segment task, in (fold, segment) order, its CPU
+        # forked workers (see _fork_segments): per task (a segment or a whole fold), in (fold, segment) order, its CPU
         # seconds and the worker's pid
         "fork_tasks": [{"cpu_s": float(c), "pid": int(p)} for c, p in task_stats],
         # CPU seconds this process spent while the forked workers ran (off the critical path)
