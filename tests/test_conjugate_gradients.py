@@ -67,3 +67,37 @@ def test_pcg_breakdown_is_not_converged_and_not_an_exception():
     a, b = _spd()
     x, its, done = pcg(a, b, lambda r: np.zeros_like(r), None, 1e-10, 50)
     assert not done and its == 0 and not x.any()
+
+
+@pytest.mark.parametrize("fresh", [False, True])
+def test_pcg_direction_update_into_a_fresh_preconditioner_result(fresh):
+    """``fresh_result``: p = z + beta p is written into the preconditioner's new array; the
+    iterates are those of the two-pass update up to rounding."""
+    a, b = _spd()
+    d = a.diagonal()
+    calls, copies = [], []
+
+    def jacobi(r):
+        z = r / d  # a new array on every call
+        calls.append(z)
+        copies.append(z.copy())
+        return z
+
+    x, its, done = pcg(a, b, jacobi, None, 1e-10, 500, fresh_result=fresh)
+    xr, its_r, done_r = pcg(a, b, lambda r: r / d, None, 1e-10, 500)
+    assert done and done_r and its == its_r == len(calls)
+    # the same iterates up to rounding (daxpy may fuse the multiply-add), as against scipy above
+    assert np.linalg.norm(x - xr) <= 1e-9 * np.linalg.norm(xr)
+    assert np.linalg.norm(b - a @ x) <= 1e-9 * np.linalg.norm(b)
+    # fresh: every array after the first (which p copies) now holds a direction; else untouched
+    changed = [not np.array_equal(z, z0) for z, z0 in zip(calls, copies)]
+    assert changed == ([False] + [True] * (its - 1) if fresh else [False] * its)
+
+
+def test_pcg_fresh_result_without_a_preconditioner_leaves_r_alone():
+    """Without a preconditioner z is r itself: ``fresh_result`` must not write the direction into it."""
+    a, b = _spd()
+    x, its, done = pcg(a, b, None, None, 1e-10, 500, fresh_result=True)
+    xr, its_r, _ = pcg(a, b, None, None, 1e-10, 500)
+    assert done and its == its_r
+    np.testing.assert_allclose(x, xr, rtol=1e-12)

@@ -203,6 +203,27 @@ def test_union_by_markers_equals_the_key_search():
                                                                             shape=pat.shape).toarray(), a.toarray())
 
 
+def test_permuted_equals_fancy_indexing():
+    """Rows gathered and columns renumbered equal ``m[rows][:, cols]``, canonical, square and
+    rectangular (the prolongations), from unsorted input with duplicates and from a sparse array."""
+    rng = np.random.default_rng(3)
+    for trial in range(10):
+        n, k = int(rng.integers(1, 40)), int(rng.integers(1, 40))
+        coo = sparse.random(n, k, density=rng.uniform(0, 0.4), random_state=trial, format="coo")
+        dup = sparse.coo_matrix((np.concatenate([coo.data, coo.data[:3]]),
+                                 (np.concatenate([coo.row, coo.row[:3]]), np.concatenate([coo.col, coo.col[:3]]))),
+                                shape=coo.shape)
+        m = dup.tocsr() if trial % 2 else sparse.csr_array(dup)
+        rows, cols = rng.permutation(n), rng.permutation(k)
+        got = mg._permuted(m, rows, cols)
+        ref = sparse.csr_matrix(sparse.csr_matrix(m)[rows][:, cols])
+        ref.sum_duplicates()
+        ref.sort_indices()
+        assert isinstance(got, sparse.csr_matrix) and got.has_canonical_format
+        assert np.array_equal(got.indptr, ref.indptr) and np.array_equal(got.indices, ref.indices)
+        np.testing.assert_array_equal(got.data, ref.data)
+
+
 def _gamma_by_edge_blocks(grid):
     """Gamma as defined: the per-edge 2 x 2 blocks summed (COO), plus the ridge."""
     cell = float(np.prod(grid.step))

