@@ -1429,8 +1429,7 @@ class NormalEquationSolver:
             return
         _, mean_row, fold = self._mg_fold(m)
         if fold is None:
-            if self._mg_hier is None:
-                self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
+            self._shared_levels()
             self._mg_cache = None
             self._mg_cache = (m, mean_row, self._mg_hier.for_matrix(m))
 
@@ -1441,15 +1440,25 @@ class NormalEquationSolver:
     def prepare_shared(self) -> None:
         """Build now the work that every fold and sigma shares, so that forked workers inherit it.
 
-        The multigrid prolongations and coarse ``Gamma`` levels (:class:`GridHierarchy`), and for
+        The multigrid prolongations and coarse ``Gamma`` levels (:class:`GridHierarchy`) with the
+        full data's level patterns (:class:`~pwas_hdl.fit.multigrid.LevelPatterns`), and for
         first order with CHOLMOD the symbolic analysis of the full-data pattern (see
         :meth:`_cholmod_solve`); otherwise each worker process would build its own (measured
         2-4 s CPU each at n = 2, N = 10^6). Serial solves build them lazily.
         """
-        if self._mg_shape is not None and self._mg_hier is None:
-            self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
+        if self._mg_shape is not None:
+            self._shared_levels()
         if (self.method == "direct" or self.factor_chain) and self.backend == "cholmod" and not self.block_mg:
             self._shared_pattern()
+
+    def _shared_levels(self) -> GridHierarchy:
+        """The multigrid hierarchy, with the full data's level patterns that every fold's levels fit
+        (:meth:`~pwas_hdl.fit.multigrid.GridHierarchy.share`), built once."""
+        if self._mg_hier is None:
+            self._mg_hier = GridHierarchy(self._mg_shape, self.gamma)
+        if self._mg_hier.shared is None and self._shared_hth is not None:
+            self._mg_hier.share(self._shared_hth)
+        return self._mg_hier
 
     def _shared_pattern(self) -> tuple | None:
         """``(PatternCholesky, Gamma's values)`` of the full-data pattern (first order), built once."""
