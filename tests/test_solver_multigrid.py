@@ -68,21 +68,25 @@ def test_grid_shape_from_gamma():
     assert mg.grid_shape_of(sparse.csr_array(g.tocsr()), 2) is None
 
 
-@pytest.mark.parametrize("shared", [False, True])
+@pytest.mark.parametrize("shared", [None, "fold", "reference"])
 def test_levels_are_the_galerkin_operators_of_every_sigma(shared):
     """Each level's m_l + sigma Gamma_l (kept on the union pattern) equals Q_l' (M + sigma Gamma) Q_l:
-    in double precision on the fine level and the coarsest (CG's products, the factor), rounded
-    once to single between (only smoothed), and the fine level's single copy too. ``shared``: a
-    fold's matrix (part of the data) on the level patterns of the full data's."""
+    in double precision on the fine level and the coarsest (CG's products, the factor), in single
+    between (only smoothed: formed in single from Gamma's and m's single values, so within a few
+    roundings), and the fine level's single copy to one rounding. ``shared``: on the level
+    patterns of the full data's matrix, for a fold's matrix (part of the data) or for that
+    reference matrix itself (not coarsened again)."""
     grid, h, z, gam = _fold()
     m = sparse.csr_array(h.T @ h)
     hier = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
     assert hier.levels >= 3
     if shared:
         hier.share(m)
-        m = sparse.csr_array(h[: h.shape[0] // 2].T @ h[: h.shape[0] // 2])
+        if shared == "fold":
+            m = sparse.csr_array(h[: h.shape[0] // 2].T @ h[: h.shape[0] // 2])
     fold = hier.for_matrix(m)
-    assert (fold.shared is hier.shared) == shared
+    assert (fold.shared is hier.shared) == bool(shared)
+    assert hier.shared is None or hier.shared.is_reference(m) == (shared == "reference")
     eps32 = float(np.finfo(np.float32).eps)
     for sigma in (1e-4, 3.0):
         fold.set_sigma(sigma)

@@ -170,7 +170,8 @@ class _Triangle:
         rows = np.repeat(np.arange(pattern.shape[0], dtype=pattern.indices.dtype), np.diff(pattern.indptr))
         mask = pattern.indices > rows if upper else pattern.indices < rows
         keep = np.flatnonzero(mask)
-        self.keep = keep.astype(np.int32) if keep.size < 2**31 else keep
+        # positions in the pattern's values: int32 only where every one of them fits
+        self.keep = keep.astype(np.int32) if pattern.nnz < 2**31 else keep
         self.indices = pattern.indices[mask]
         self.indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[mask], minlength=pattern.shape[0]))]).astype(
             pattern.indptr.dtype)
