@@ -224,6 +224,10 @@ def _float_list(text: str, what: str) -> list[float]:
 
 WorkersOpt = Annotated[Optional[int], typer.Option("--workers", help="Run the independent tasks on a local Dask cluster of this many worker processes (default: serially).")]
 SchedulerOpt = Annotated[Optional[str], typer.Option("--scheduler", help="Run the independent tasks on an existing Dask cluster: its scheduler address tcp://HOST:PORT (default: $PWAS_HDL_SCHEDULER).")]
+# the same argument / option, with the same text, on several commands
+ModelArg = Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")]
+BlankRowsOpt = Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")]
+TrajColOpt = Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")]
 
 
 def _executor(workers: Optional[int], scheduler: Optional[str]):
@@ -286,7 +290,7 @@ def fit(
     window: Annotated[int, typer.Option("--window", help="observer-bank: window l of the feature map.")] = 7,
     features: Annotated[str, typer.Option("--features", help="observer-bank: feature map 11b (windowed residual RMS per observer), 11b-sq (its square: no square root in hardware) or 11a (all residual lags).")] = "11b",
     order: Annotated[int, typer.Option("--order", help="observer-bank: order M of the local ARX models.")] = 5,
-    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
+    blank_rows: BlankRowsOpt = "error",
     mz: Annotated[int, typer.Option("--mz", help="Mz: past estimates z_hat(t-1..t-Mz) of every target fed back as regressors (a dynamical sensor; fitted series-parallel, predict runs the recurrence). 0 = static.")] = 0,
     refine: Annotated[int, typer.Option("--refine", help="With --mz: up to K closed-loop refinements (refit on the simulated estimates while the closed-loop error improves).")] = 0,
     z0: Annotated[Optional[str], typer.Option("--z0", help="With --mz: initial past estimates, mean (training mean, default), measured (the measured z before the first estimate; predict then reads the target columns) or one value per target (comma list).")] = None,
@@ -522,12 +526,12 @@ def fit_map_cmd(
 
 @app.command()
 def predict(
-    model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
+    model_path: ModelArg,
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns.")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of estimates to write. Required.", show_default=False)] = None,
-    traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
+    traj_col: TrajColOpt = None,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
-    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
+    blank_rows: BlankRowsOpt = "error",
 ) -> None:
     """Estimate the targets for every row of DATA that has a full regressor.
 
@@ -751,7 +755,7 @@ def simulate(
     build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.")] = None,
     waves: Annotated[bool, typer.Option("--waves", help="Record waveforms (Icarus: FST, Verilator: VCD) next to the build; the path is in the summary.")] = False,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
-    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
+    blank_rows: BlankRowsOpt = "error",
 ) -> None:
     """Replay DATA through the generated RTL in a simulator (cocotb) and check it bit for bit.
 
@@ -808,10 +812,10 @@ def export_testbench(
 
 @app.command()
 def explore(
-    model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`.")],
+    model_path: ModelArg,
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for explore.json and explore.png (created if missing). Required.", show_default=False)] = None,
-    traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit.")] = None,
+    traj_col: TrajColOpt = None,
     input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
     weight_frac: Annotated[Optional[str], typer.Option("--weight-frac", help="Weight fraction bits to sweep (comma list or A:B; default: generate's default -7..+2).")] = None,
     output_frac: Annotated[Optional[str], typer.Option("--output-frac", help="Output fraction bits to sweep (comma list or A:B; default: generate's default -7..+2).")] = None,
@@ -831,7 +835,7 @@ def explore(
     scheduler: SchedulerOpt = None,
     outdir_old: Annotated[Optional[Path], _hidden("--outdir")] = None,
     resources_old: Annotated[Optional[str], _hidden("--resources")] = None,
-    blank_rows: Annotated[str, typer.Option("--blank-rows", help="A blank row in DATA: error, or break (it ends a trajectory).")] = "error",
+    blank_rows: BlankRowsOpt = "error",
 ) -> None:
     """Sweep input, weight and output word lengths: bit-true RMSEE against resources.
 
