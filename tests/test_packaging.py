@@ -112,8 +112,8 @@ def test_no_source_file_finds_files_relative_to_itself():
 # ------------------------------------------------------------------------------------------------ slow
 
 
-#: Top-level files of the sdist besides the package (MANIFEST.in adds the last three and tests/).
-SDIST_EXTRA_FILES = ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "run.sh", "constraints.txt")
+#: Files of the sdist besides the package (MANIFEST.in adds the last three, tests/ and benchmarks/results/).
+SDIST_EXTRA_FILES = ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "run.sh", "constraints.txt", ".ci/run")
 
 
 def _copy_source(dst: Path) -> Path:
@@ -121,8 +121,9 @@ def _copy_source(dst: Path) -> Path:
     src = dst / "src"
     src.mkdir()
     for name in SDIST_EXTRA_FILES:
+        (src / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / name, src / name)
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "results", "*.egg-info")
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info")
     for folder in {"pwas_hdl", "tests", *SETUPTOOLS.get("package-dir", {}).values()}:
         shutil.copytree(ROOT / folder, src / folder, ignore=ignore)
     return src
@@ -183,6 +184,9 @@ def test_wheel_and_sdist_carry_the_package_data(built):
         assert name in in_sdist, name
     for f in (ROOT / "tests").glob("*.py"):
         assert f"tests/{f.name}" in in_sdist, f.name
+    # ... and the committed results its tests read
+    results = sorted(p.name for p in (ROOT / "benchmarks" / "results").iterdir() if p.is_file())
+    assert results and all(f"benchmarks/results/{name}" in in_sdist for name in results)
     assert not any("__pycache__" in n for n in in_sdist | in_wheel)
     assert not any(n.startswith("tests/") for n in in_wheel)
     # The benchmark results are data of the repository, not of the package.
