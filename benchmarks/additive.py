@@ -250,6 +250,40 @@ def run_hardware(kinds=("pairs", "triples"), synth: bool = False, workdir: Path 
 HELI_FULL_DESIGN = "heli_mu2_my2_p3"
 
 
+def _results_name(path: Path) -> str:
+    """``path`` as the results say where a number came from: relative to the checkout, or to the working folder."""
+    from pwas_hdl.resources import benchmarks_dir
+
+    for base in (benchmarks_dir().parent, Path.cwd()):
+        try:
+            return path.resolve().relative_to(base.resolve()).as_posix()
+        except ValueError:
+            pass
+    return path.name
+
+
+def full_reference(say: Callable[[str], None] = print) -> dict[str, Any] | None:
+    """The full Table VI-size core's ECP5 build (:data:`HELI_FULL_DESIGN`) as ``hw_tables.json`` holds it.
+
+    Read from the results folder (:func:`pwas_hdl.bench_results.default_outdir`), not measured again;
+    None (and a line said) when that file does not hold it.
+    """
+    ref = br.default_outdir() / "hw_tables.json"  # the committed results in a checkout; from the wheel, where hw_tables wrote
+    try:
+        hwt = json.loads(ref.read_text())
+        full = next(d for d in hwt["designs"] if d["key"] == HELI_FULL_DESIGN)
+        b = full["builds"]["ecp5"]["default"]
+        return {"design": HELI_FULL_DESIGN, "source": _results_name(ref), "n": full["n"],
+                "N": full["N"], "weights_bits": full["memory"]["weight_bits"],
+                "memories": b["memory_plan"]["memories"], "words": b["memory_plan"]["words"],
+                **{k: b.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp",
+                                         "bram", "bram_bits")}}
+    except (OSError, ValueError, KeyError, StopIteration) as exc:
+        say(f"no full-core reference row: {ref} does not hold {HELI_FULL_DESIGN}'s ECP5 build ({type(exc).__name__}); "
+            "run benchmarks/hw_tables.py first for it")
+        return None
+
+
 def run_heli_hardware(kinds=("time", "pairs"), workdir: Path | None = None,
                       progress: Callable[[str], None] | None = print) -> dict[str, Any]:
     """The additive helicopter ``Mu = My = 4`` cores (seed 0, the accuracy protocol) placed and routed
@@ -259,7 +293,6 @@ def run_heli_hardware(kinds=("time", "pairs"), workdir: Path | None = None,
 
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.flow.timing_closure import measure_design
-    from pwas_hdl.resources import benchmarks_dir
     from pwas_hdl.systems.helicopter import helicopter
 
     say = progress or (lambda m: None)
@@ -281,17 +314,7 @@ def run_heli_hardware(kinds=("time", "pairs"), workdir: Path | None = None,
                "runtime_s": round(time.monotonic() - t0, 1)}
         say(f"helicopter Mu = My = 4 {kind} core on ECP5: {rec}")
         out["designs"].append(rec)
-    try:
-        hwt = json.loads((benchmarks_dir() / "results" / "hw_tables.json").read_text())
-        full = next(d for d in hwt["designs"] if d["key"] == HELI_FULL_DESIGN)
-        b = full["builds"]["ecp5"]["default"]
-        out["full_reference"] = {"design": HELI_FULL_DESIGN, "source": "benchmarks/results/hw_tables.json", "n": full["n"],
-                                 "N": full["N"], "weights_bits": full["memory"]["weight_bits"],
-                                 "memories": b["memory_plan"]["memories"], "words": b["memory_plan"]["words"],
-                                 **{k: b.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp",
-                                                          "bram", "bram_bits")}}
-    except (OSError, ValueError, KeyError, StopIteration):
-        out["full_reference"] = None
+    out["full_reference"] = full_reference(say)
     out["environment"] = br.environment()
     return out
 

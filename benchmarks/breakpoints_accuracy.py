@@ -297,32 +297,36 @@ def hardware_markdown(hw: dict) -> str:
     return "\n".join(out) + "\n"
 
 
+def _hardware_arguments(ap) -> None:
+    """The options of the RTL replay mode (``--hardware``)."""
+    g = ap.add_argument_group("hardware mode (the RTL replay of the two partitions; writes breakpoints_hw.json / .md)")
+    g.add_argument("--hardware", action="store_true", help="replay the Lorenz sensors of both partitions through the RTL "
+                   "instead of the accuracy bench")
+    g.add_argument("--simulator", default="verilator", choices=("icarus", "verilator"), help="simulator of the replay")
+    g.add_argument("--workdir", type=Path, default=None, help="folder of the generated designs (default: a new temporary one)")
+    g.add_argument("--synth", action="store_true", help="also place and route the two Lorenz sensor tops on ECP5, once")
+
+
+def _hardware_mode(a) -> bool:
+    """Run the RTL replay when ``--hardware`` is given (not a pwas-hdl-bench-results document)."""
+    if not a.hardware:
+        return False
+    import json
+    import tempfile
+
+    from pwas_hdl.io.atomic import atomic_write_text
+
+    hw = run_hardware(a.workdir or Path(tempfile.mkdtemp(prefix="pwas-bp-hw-")), a.simulator, synth=a.synth)
+    a.outdir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(a.outdir / "breakpoints_hw.json", json.dumps(hw, indent=1) + "\n")
+    atomic_write_text(a.outdir / "breakpoints_hw.md", hardware_markdown(hw))
+    print(hardware_markdown(hw))
+    return True
+
+
 def main(argv: Sequence[str] | None = None) -> None:  # pragma: no cover - script entry
-    import sys
-
-    args = list(sys.argv[1:] if argv is None else argv)
-    if "--hardware" in args:  # the RTL replay (not a pwas-hdl-bench-results document)
-        import argparse
-        import json
-        import tempfile
-
-        from pwas_hdl.io.atomic import atomic_write_text
-
-        ap = argparse.ArgumentParser(description="non-uniform vs uniform partitions through the RTL")
-        ap.add_argument("--hardware", action="store_true")
-        ap.add_argument("--simulator", default="verilator", choices=("icarus", "verilator"))
-        ap.add_argument("--outdir", type=Path, default=br.default_outdir())
-        ap.add_argument("--workdir", type=Path, default=None)
-        ap.add_argument("--synth", action="store_true", help="also place and route the two Lorenz sensor tops on ECP5, once")
-        a = ap.parse_args(args)
-        hw = run_hardware(a.workdir or Path(tempfile.mkdtemp(prefix="pwas-bp-hw-")), a.simulator, synth=a.synth)
-        a.outdir.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(a.outdir / "breakpoints_hw.json", json.dumps(hw, indent=1) + "\n")
-        atomic_write_text(a.outdir / "breakpoints_hw.md", hardware_markdown(hw))
-        print(hardware_markdown(hw))
-        return
     br.bench_main(argv, stem="breakpoints_accuracy", description=__doc__.splitlines()[0], run=run, markdown=markdown,
-                  plot=plot, default_runs=3)
+                  plot=plot, default_runs=3, add_arguments=_hardware_arguments, other_mode=_hardware_mode)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -24,7 +24,6 @@ from pathlib import Path
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.resources import benchmarks_dir
 
 SYNTH_KEYS = ("luts", "ffs", "dsp", "bram", "fmax_mhz", "latency_cycles", "latency_ns", "ii", "throughput_msps")
 
@@ -32,7 +31,7 @@ SYNTH_KEYS = ("luts", "ffs", "dsp", "bram", "fmax_mhz", "latency_cycles", "laten
 def _load(folder: Path, name: str) -> dict:
     p = folder / name
     if not p.is_file():
-        raise InputError(f"results file {p} not found (run its benchmark first)")
+        raise InputError(f"results file {p} not found: run its benchmark first (it writes there), or give --results FOLDER")
     return json.loads(p.read_text())
 
 
@@ -53,8 +52,14 @@ def _pm(r: dict | None, d: int = 3) -> str:
 
 
 def collect(folder: Path | None = None) -> list[dict]:
-    """The table's rows (dicts of strings and numbers) from the results in ``folder`` (default: the committed ones)."""
-    folder = Path(folder) if folder is not None else benchmarks_dir() / "results"
+    """The table's rows (dicts of strings and numbers) from the results in ``folder``.
+
+    Default: the folder the benchmarks write to (:func:`pwas_hdl.bench_results.default_outdir`): the
+    committed ``benchmarks/results/`` in a checkout, ``./benchmarks-results`` from an installed wheel.
+    """
+    from pwas_hdl.bench_results import default_outdir
+
+    folder = Path(folder) if folder is not None else default_outdir()
     hw = _load(folder, "observer_bank_hw_serial.json")
     syn = _load(folder, "observer_bank_synth.json")
     bat = _load(folder, "battery_rtl_serial.json")
@@ -121,7 +126,8 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     from pwas_hdl.bench_results import default_outdir
 
-    ap.add_argument("--results", type=Path, default=None, help="results folder read (default: the committed results)")
+    ap.add_argument("--results", type=Path, default=default_outdir(), help="results folder read (default: where the benchmarks write, "
+                    "%(default)s: the committed results in a checkout, ./benchmarks-results from the wheel)")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="where observer_bank_summary.md goes (default: %(default)s)")
     a = ap.parse_args(argv)
     text = "# Issue 12's systems in hardware: the designs that fit the LFE5U-45F\n\n" + markdown(collect(a.results))

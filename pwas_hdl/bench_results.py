@@ -491,12 +491,14 @@ def script_main(main: Any, argv: Sequence[str] | None = None) -> int:
 
 
 def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: Any, markdown: Any, plot: Any,
-               default_runs: int = 5) -> None:
+               default_runs: int = 5, add_arguments: Any = None, other_mode: Any = None) -> None:
     """The script entry of a system bench: ``--runs``, ``--quick``, ``--outdir``; writes JSON, Markdown and PNG.
 
     ``run(runs, quick, progress=print)`` returns ``(doc, traces)``; ``markdown(doc)`` the table text;
     ``plot(traces, path)`` the figure. ``--quick`` writes ``STEM_quick.*`` so a smoke run never
-    overwrites the committed results.
+    overwrites the committed results. A script with another mode declares its options with
+    ``add_arguments(parser)`` (so that ``--help`` lists them) and runs it in ``other_mode(args)``,
+    which returns True when it did (the bench above is then not run).
     """
     import argparse
 
@@ -504,9 +506,13 @@ def bench_main(argv: Sequence[str] | None, *, stem: str, description: str, run: 
 
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--runs", type=int, default=default_runs, help="independent runs (1..1000, pwas_hdl.limits.MAX_BENCH_COUNT)")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--outdir", type=Path, default=default_outdir())
+    ap.add_argument("--quick", action="store_true", help=f"a reduced smoke run, written as {stem}_quick.*: not a result to quote")
+    ap.add_argument("--outdir", type=Path, default=default_outdir(), help="folder of the result files (default: %(default)s)")
+    if add_arguments is not None:
+        add_arguments(ap)
     a = ap.parse_args(argv)
+    if other_mode is not None and other_mode(a):
+        return
     check_count("--runs", a.runs)
     doc, traces = run(a.runs, a.quick, progress=print)
     a.outdir.mkdir(parents=True, exist_ok=True)
