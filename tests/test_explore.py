@@ -314,3 +314,13 @@ def test_cli_explore(tiny, tmp_path):
         r = runner.invoke(app, ["explore", str(root / "model.json"), str(root / "test.csv"), "-o", str(bad), *args])
         assert r.exit_code == 2 and msg in r.output, r.output
         assert not bad.exists()
+
+
+def test_help_states_the_default_fraction_sweep():
+    """``explore --help`` gives the default sweep of DEFAULT_FRAC_OFFSETS, not another range."""
+    r = runner.invoke(app, ["explore", "--help"])
+    assert r.exit_code == 0
+    lo, hi = min(DEFAULT_FRAC_OFFSETS), max(DEFAULT_FRAC_OFFSETS)
+    said = " ".join(r.output.split())
+    for opt in ("--weight-frac", "--output-frac"):
+        assert f"default: generate's default {lo:+d}..{hi:+d}" in said.split(opt, 1)[1], opt
