@@ -37,8 +37,8 @@ from helpers.folders import tree
 
 
 #: Examples per command at scale 1 (fixed: the suite's run time is bounded).
-BUDGET = {"fit": 60, "predict": 50, "info": 50, "generate": 25, "simulate": 30, "synth": 25, "explore": 12,
-          "report": 40, "make-data": 40, "bench": 10, "limits": 8}
+BUDGET = {"fit": 60, "fit-map": 40, "predict": 50, "info": 50, "generate": 25, "simulate": 30, "synth": 25,
+          "export-testbench": 20, "explore": 12, "report": 40, "make-data": 40, "bench": 10, "limits": 8}
 #: Address-space limit of the subprocess runs (bytes).
 MEMORY_LIMIT = 3 * 2**30
 
@@ -362,6 +362,39 @@ def test_fuzz_fit(base, data):
         check_promise(res, before, tree(work), ok, args)
 
 
+@_settings("fit-map")
+@given(data=st.data())
+def test_fuzz_fit_map(base, data):
+    k = Knobs(data)
+    recurrent = data.draw(st.booleans(), "with --state?")
+    csv = k.csv(("a", "s", "f") if recurrent else ("a", "b", "f"))
+    args = ["fit-map", "samples.csv", "-o", k.out("m2.json"), "-u", "a", "-z", "f"]
+    args += ["--state", "s"] + k.option("--z0", ["0.5"], [None, "x", "1,2", "nan", ""]) if recurrent else \
+        k.option("-y", ["b", None], ["nope", "f", "a"])
+    args += k.option("-p", ["2", "3", "2,3", None], ["0", "-1", "x", "99999999999", "1.5", "", "2,2,2"])
+    args += k.option("--sigma", [1e-8, 1e-3, None], [0.0, -1.0, NAN, INF, "x"])
+    args += k.option("--test-fraction", [0.0, 0.2, None], [-0.1, 1.0, 1.5, NAN, "x"])
+    args += k.option("--seed", [0, 5, None], [-1, "x"])
+    args += k.option("--domain", [None, "-9:9,-9:9"], ["a", "0:1", "1:0,1:0", "nan:1,0:1"])
+    args += k.option("--blank-rows", ["error", "break", None], ["x"])
+    with scratch(base, ("d.csv",)) as work:
+        _prepare(work)
+        (work / "samples.csv").write_bytes(csv)
+        before = tree(work)
+        res = run(args, work)
+
+        def ok():
+            from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+            m = PWASVirtualSensor.load(work / args[3])
+            assert np.all(np.isfinite(m.weights_))
+            err = json.loads((work / args[3]).read_text())["map_fit"]
+            assert all(np.isfinite(v) for key in ("max_error", "rms_error") for v in err[key].values()), err
+            assert set(tree(work)) - set(before) == {args[3]}
+
+        check_promise(res, before, tree(work), ok, args)
+
+
 # ------------------------------------------------------------------------------------------------ predict / info
 @_settings("predict")
 @given(data=st.data())
@@ -507,6 +540,34 @@ def test_fuzz_synth(base, data):
         res = run(args, work)
         assert res.exit_code != 0 or isinstance(res.exception, Reached), (args, res.output)
         check_promise(res, before, tree(work), None, args)
+
+
+@_settings("export-testbench")
+@given(data=st.data())
+def test_fuzz_export_testbench(base, data):
+    k = Knobs(data)
+    with scratch(base, ("d.csv",)) as work:
+        _prepare(work)
+        folder = _folder_variant(k, base, work)
+        args = ["export-testbench", folder]
+        args += k.option("-o", ["tb", None], BAD_DIRS)
+        args += ["--samples", k.choose("--samples", [1, 20], [0, -1, 10**12, "x", ""])]
+        args += k.option("--seed", [0, 3, None], [-1, "x"])
+        args += k.option("--stall", [0.0, 0.3, None], [-0.1, 1.5, NAN, "x"])
+        before = tree(work)
+        res = run(args, work)
+
+        def ok():
+            rel = args[args.index("-o") + 1] if "-o" in args else f"{folder}/tb"
+            out = work / rel
+            names = {p.name for p in out.iterdir()}
+            assert {"run_icarus.sh", "run_verilator.sh", "files.f"} <= names and any(n.startswith("tb_") for n in names)
+            lines = [ln for ln in (out / next(n for n in names if n.endswith("_tb_in.hex"))).read_text().splitlines() if ln]
+            assert len(lines) >= int(args[args.index("--samples") + 1])
+            new = set(tree(work)) - set(before)  # only the testbench folder, nothing beside it
+            assert new and all(p.startswith(rel.rstrip("/") + "/") for p in new), new
+
+        check_promise(res, before, tree(work), ok, args)
 
 
 # ------------------------------------------------------------------------------------------------ explore / report
