@@ -24,6 +24,8 @@ DesignConfig = designs.DesignConfig
 SENSOR = DesignConfig("s-u1y2-p3", "sensor", 1, 2, 1, 1, 3, 1, {})
 CORE_WIDE_READMEMH = DesignConfig("c-n6-p2-readmemh-amaranth", "core", 0, 6, 0, 1, 2, 2,
                                   {"memory_init": "readmemh", "ports": "amaranth", "pipeline": "max"})
+#: a serial sensor (II > 1; its lag bank's warm-up transfers are not throttled): pwas_designs.SERIAL_CONFIGS
+SERIAL_SENSOR = next(c for c in designs.SERIAL_CONFIGS if c.design == "sensor")
 
 needs_iverilog = pytest.mark.skipif(which("iverilog") is None, reason="iverilog not installed")
 
@@ -31,7 +33,7 @@ needs_iverilog = pytest.mark.skipif(which("iverilog") is None, reason="iverilog 
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory):
     root = tmp_path_factory.mktemp("export-tb")
-    for cfg in (SENSOR, CORE_WIDE_READMEMH):
+    for cfg in (SENSOR, CORE_WIDE_READMEMH, SERIAL_SENSOR):
         cfg.generate(root / cfg.name)
     return root
 
@@ -94,6 +96,40 @@ def test_icarus_from_another_directory_with_readmemh(folders, tmp_path):
     _flip_hex(tb / "pwas_core_rom_b0.hex")
     r = _icarus(tb, cwd=elsewhere, params={"VEC_DIR": f"{tb}/", "MEM_DIR": f"{tb}/"})
     assert r.returncode != 0 and "FAIL" in r.stdout
+
+
+@pytest.mark.rtl
+@needs_iverilog
+def test_serial_design_passes_at_its_ii_and_a_wrong_ii_fails(folders, tmp_path):
+    """II > 1: full-speed transfers II cycles apart after the unthrottled warm-up (the template once
+    assumed II = 1 and failed every serial design)."""
+    import json
+
+    res = export_testbench(folders / SERIAL_SENSOR.name, tmp_path / "tb", samples=120, seed=1)
+    tb = Path(res["outdir"])
+    ii = json.loads((folders / SERIAL_SENSOR.name / "manifest.json").read_text())["ii"]
+    assert ii > 1
+    r = _icarus(tb)
+    assert r.returncode == 0 and f"II {ii}" in r.stdout and "FAIL" not in r.stdout, r.stdout + r.stderr
+    text = (tb / "tb_pwas_sensor.v").read_text()
+    bad = tmp_path / "bad"
+    shutil.copytree(tb, bad)
+    (bad / "tb_pwas_sensor.v").write_text(text.replace(f"localparam II = {ii};", f"localparam II = {ii - 1};"))
+    r = _icarus(bad)
+    assert r.returncode != 0 and "input transfers not II cycles apart" in r.stdout, r.stdout
+
+
+@pytest.mark.rtl
+@pytest.mark.parametrize("cfg", [SENSOR, CORE_WIDE_READMEMH, SERIAL_SENSOR], ids=lambda c: c.name)
+def test_exported_testbench_is_lint_clean(folders, tmp_path, cfg):
+    """``verilator --lint-only -Wall`` on the testbench with its design: no warning (the design's
+    own lint is tested where it is generated)."""
+    res = export_testbench(folders / cfg.name, tmp_path / "tb", samples=20)
+    tb = Path(res["outdir"])
+    files = [str(tb / f) for f in (tb / "files.f").read_text().split()]
+    r = subprocess.run([which("verilator"), "--lint-only", "-Wall", "--timing", "--top-module", res["testbench"], *files],
+                       capture_output=True, text=True, env=tool_env(), timeout=600)
+    assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[-3000:]
 
 
 @pytest.mark.rtl

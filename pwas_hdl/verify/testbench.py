@@ -141,9 +141,16 @@ def export_testbench(
     readmemh = man["memory"].get("init", {}).get("kind") == "readmemh"
     mem_param = man["memory"]["init"]["parameter"] if readmemh else None
     hold = int(np.random.default_rng(seed).integers(0, max(1, design.latency)))
+    ii = int(man["ii"])
+    # a serial design (II > 1) takes the lag bank's warm-up transfers unthrottled (as the cocotb bench measures it)
+    ii_from = 1 if ii == 1 else design.warmup + 1
     text = _VerilogTemplate((templates_dir() / "testbench.v.tmpl").read_text(encoding="utf-8")).substitute(
         top=top, version=__version__, tb_name=tb, in_file=in_file, exp_file=exp_file, n_in=len(vin), n_out=len(vexp),
-        latency=design.latency, warmup=design.warmup, hold=hold, wi=wi, wo=wo,
+        latency=design.latency, warmup=design.warmup, hold=hold, wi=wi, wo=wo, ii=ii, ii_from=ii_from,
+        ii_note="" if ii_from == 1 else f" (after the {design.warmup} warm-up transfers, which are not throttled)",
+        mem_dir_note=" / MEM_DIR" if mem_param else "", mem_dir_plural="s" if mem_param else "",
+        mem_dir_files=" and of the design's .hex weight files" if mem_param else "",
+        mem_dir_decl='  parameter MEM_DIR = "./";\n' if mem_param else "",
         seed=f"{(seed * 2654435761 + 0x1234567) & 0xFFFFFFFF or 1:08x}", stall=int(round(float(stall) * 256)),
         out_valid=_port(man, "out.valid")["name"], reset_port=man["reset"]["port"], reset_polarity="low" if low else "high",
         warm_note=", warm high exactly from the transfer that yields the first output" if has_warm else "",
