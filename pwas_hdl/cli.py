@@ -632,7 +632,7 @@ def generate(
     weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Weight width (default: the fewest bits that hold every weight).")] = None,
     weight_frac: Annotated[Optional[int], typer.Option("--weight-frac", help="Weight fraction bits (default: rounding noise <= 5 % of the training RMSE).")] = None,
     output_bits: Annotated[Optional[int], typer.Option("--output-bits", help="Output width (default: never saturates).")] = None,
-    output_frac: Annotated[Optional[int], typer.Option("--output-frac", help="Output fraction bits (default: weight fraction + 1).")] = None,
+    output_frac: Annotated[Optional[int], typer.Option("--output-frac", help="Output fraction bits (default: weight fraction + 1, at most the exact product's: input fraction + weight fraction).")] = None,
     overflow: Annotated[str, typer.Option("--overflow", help="Weights that do not fit: error (refuse) or saturate (with a warning).")] = "error",
     rounding: Annotated[str, typer.Option("--rounding", help="Rounding of weights and output: half_up or truncate.")] = "half_up",
     clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Choose the pipeline by timing closure instead of --pipeline: the shallowest one whose fmax, measured by place and route (nextpnr, --fpga), reaches this clock in MHz. One P&R run per candidate tried (ECP5 ~25 s, iCE40 ~100 s for a Lorenz-size core).")] = None,

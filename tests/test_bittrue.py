@@ -324,6 +324,21 @@ def test_defaults_from_reference_error():
     assert m2.to_dict()["reference_error"]["source"] == "weight_range"
 
 
+@pytest.mark.parametrize("input_bits", [3, 4, 6])
+def test_default_output_frac_at_the_fewest_input_bits(input_bits):
+    """With few input bits (input fraction F small) the default output fraction is the exact
+    product's, never finer: the default formats must not be refused (they were at 3 bits, p = 7)."""
+    g, w = _problem([7], 5, nz=1)
+    m = FixedPointModel(g, w, input_bits=input_bits, reference_error=0.01)
+    fw = m.weight_format.frac
+    assert m.output_format.frac == min(fw + 1, m.F + fw) and m.shift >= 0
+    if m.F == 0:
+        assert m.output_format.frac == fw and m.shift == 0  # the exact product, no rounding
+    q = _test_codes(m, np.random.default_rng(3))
+    out, _ = m.evaluate(q)
+    assert np.abs(m.to_physical_output(out) - m.reference(q)).max() <= m.error_bound + 1e-9 * (1 + np.abs(w).max())
+
+
 def test_from_sensor_lorenz_defaults():
     from pwas_hdl import PWASVirtualSensor
     from pwas_hdl.systems.lorenz import lorenz

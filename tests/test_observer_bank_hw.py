@@ -107,6 +107,15 @@ def test_refusals(pv_data):
         l1_gain(np.array([[1.0]]), np.ones((1, 1)))
 
 
+def test_bare_core_of_a_bank_sensor_is_refused_before_any_hardware(sensor_11b, tmp_path):
+    """`generate --design core` of an observer-bank model: a clear refusal (it once built the core, then
+    failed its own manifest check as an internal error)."""
+    from pwas_hdl.design.generate import build_design
+
+    with pytest.raises(InputError, match=r"--design core of an observer-bank sensor.*--design sensor"):
+        build_design(sensor_11b, design="core")
+
+
 def test_input_width_refusal_names_the_option(sensor_11b):
     with pytest.raises(InputError, match=r"--input-bits \(input_bits\) = 30: an observer-bank design needs 4\.\.24"):
         ObserverBankSensorModel.from_sensor(sensor_11b, input_bits=30)

@@ -416,6 +416,10 @@ def build_design(
             raise InputError("--clock-mhz (timing closure) is not supported for observer-bank sensors yet; give --pipeline")
         if design == "recurrent":
             raise InputError("hardware for a recurrent observer-bank sensor is not available")
+        if design == "core":  # its inputs would be the bank's features, which a manifest's lags do not describe
+            raise InputError("--design core of an observer-bank sensor is not available: the core's inputs are the "
+                             "bank's residual features, not lagged u / y samples; give --design sensor (the bank, "
+                             "the features and the core)")
         bank_model = observer_bank_model(sensor, memory=memory or DEFAULT_MEMORY, **formats)
         fxm = bank_model.core
         memory = memory or DEFAULT_MEMORY

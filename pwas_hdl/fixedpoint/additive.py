@@ -42,7 +42,7 @@ from typing import Sequence
 import numpy as np
 
 from pwas_hdl.errors import InputError
-from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, NOISE_BUDGET, FixedPointModel, _py_shift_round
+from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, NOISE_BUDGET, FixedPointModel, _py_shift_round, default_output_frac
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling, grid_input_formats, shift_round, signed_bits_needed
 from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
 
@@ -140,7 +140,7 @@ class AdditiveFixedPointModel(FixedPointModel):
         ref, ref_src = output_reference(reference_error, w)
         self.reference_error, self.reference_error_source = ref, ref_src
         fw = int(weight_frac) if weight_frac is not None else additive_weight_frac(ref, k)
-        fo = int(output_frac) if output_frac is not None else fw + 1
+        fo = int(output_frac) if output_frac is not None else default_output_frac(fw, self.F)
         sh = self.F + fw - fo
         if sh < 0:
             raise ValueError(

@@ -146,6 +146,16 @@ def default_weight_frac(ref: float, budget: float = NOISE_BUDGET) -> int:
     return -(math.frexp(limit)[1] - 1)
 
 
+def default_output_frac(weight_frac: int, input_frac: int) -> int:
+    """Default output fraction bits ``Fo`` for weight fraction ``Fw`` and input fraction ``F``.
+
+    One bit finer than the weights (``lsb_o = lsb_w / 2``, as :func:`default_weight_frac` budgets),
+    but never finer than the exact product ``F + Fw``: with ``F = 0`` (the fewest input bits) the
+    output is then the exact product, with no rounding at all.
+    """
+    return min(int(weight_frac) + 1, int(input_frac) + int(weight_frac))
+
+
 def _py_shift_round(a: int, sh: int, rounding: str) -> int:
     if sh == 0:
         return a
@@ -286,7 +296,7 @@ class FixedPointModel:
         self.reference_error = ref
         self.reference_error_source = ref_src
         fw = int(weight_frac) if weight_frac is not None else default_weight_frac(ref)
-        fo = int(output_frac) if output_frac is not None else fw + 1
+        fo = int(output_frac) if output_frac is not None else default_output_frac(fw, self.F)
         for nm, v in (("weight_frac", fw), ("output_frac", fo)):
             if abs(v) > _MAX_ABS_FRAC:  # before the shifts below (1 << 10**20 never ends)
                 raise InputError(f"{option_text(nm)} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
