@@ -395,7 +395,10 @@ def test_instance_template_exponent_is_readable(tmp_path):
     m = sim_module("pwas_designs").synthetic_model(0, 2, 0, 1, 3, seed=2, weight_scale=300.0)
     gd = build_design(m, weight_frac=-2, output_frac=-1)
     inst = gd.files[gd.manifest["files"]["instance_template"]]
-    assert "2^--" not in inst and "* code * 2^1" in inst  # output LSB 2 = 2^1
+    assert "2**--" not in inst and "physical = code * 2**1" in inst  # output LSB 2 = 2**1
+    # the header of the design says it the same way
+    header = gd.files[gd.manifest["files"]["verilog"]].split("module", 1)[0]
+    assert "physical = code * 2**1" in header
 
 
 def test_console_script_process_exit_statuses(tmp_path):

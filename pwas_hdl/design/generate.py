@@ -211,6 +211,16 @@ def _reset_text(man: dict, quote: str = "") -> str:
     return f"{quote}{r['port']}{quote} ({r['kind']}, active {r['polarity']})"
 
 
+def _physical_text(fmt: dict) -> str:
+    """A manifest field format and its physical value, as the header and the instance template say it
+    (``s12.-1, physical = code * 2**1``; offset and scale where they are not 0 and 1)."""
+    lsb = f"2**-{fmt['frac']}" if fmt["frac"] > 0 else f"2**{-fmt['frac']}"
+    name = fmt.get("str") or f"{'s' if fmt['signed'] else 'u'}{fmt['bits']}.{fmt['frac']}"
+    if fmt.get("offset") or fmt.get("scale", 1.0) != 1.0:
+        return f"{name}, physical = {fmt['offset']!r} + {fmt['scale']!r} * code * {lsb}"
+    return f"{name}, physical = code * {lsb}"
+
+
 def _instance(man: dict) -> str:
     comments = []
     for p in man["ports"]:
@@ -218,8 +228,7 @@ def _instance(man: dict) -> str:
             fmt = f.get("format")
             desc = ""
             if fmt:
-                desc = (f" {'s' if fmt['signed'] else 'u'}{fmt['bits']}.{fmt['frac']}, physical = "
-                        f"{fmt['offset']!r} + {fmt['scale']!r} * code * 2^{-fmt['frac']}")
+                desc = f" {_physical_text(fmt)}"
             comments.append(f"//   {p['name']}[{f['lsb'] + f['width'] - 1}:{f['lsb']}] {f['name']}{desc}")
     conns = ",\n".join(
         f"    .{p['name']}({p['name']})" for p in man["ports"]
@@ -645,10 +654,7 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
             bits = f"[{f['lsb'] + f['width'] - 1}:{f['lsb']}]"
             what = f.get("meaning")
             if what is None:
-                fmt = f["format"]
-                lsb = f"2**-{fmt['frac']}" if fmt["frac"] > 0 else f"2**{-fmt['frac']}"
-                what = (f"{fmt['str']}, physical = {fmt['offset']!r} + {fmt['scale']!r} * code * {lsb}"
-                        if fmt.get("offset") or fmt.get("scale") != 1.0 else f"{fmt['str']}, physical = code * {lsb}")
+                what = _physical_text(f["format"])
             lines.append(f"      {bits:<9} {f['name']}: {what}")
     return "".join(f"// {ln}".rstrip() + "\n" for ln in lines) + "\n"
 
