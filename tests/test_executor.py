@@ -8,6 +8,7 @@ machine); they compare the JSON of `explore` (synthesising real design points wi
 from __future__ import annotations
 
 import json
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -176,7 +177,13 @@ def test_cv_folds_on_two_workers_choose_the_serial_sigma_and_weights(cluster):
     kw = dict(my=2, partitions=4, gamma=1.2, sigma=None, sigma_grid=list(np.logspace(-6, 2, 9)), cv_folds=5)
     serial = PWASVirtualSensor(**kw).fit(None, tr.y, tr.z)
     seen = []
-    dist = PWASVirtualSensor(**kw).fit(None, tr.y, tr.z, executor=cluster, progress=lambda d, t: seen.append((d, t)))
+    lock = threading.Lock()  # as the command line's progress display holds one: a callback that does not pickle
+
+    def progress(d, t):
+        with lock:
+            seen.append((d, t))
+
+    dist = PWASVirtualSensor(**kw).fit(None, tr.y, tr.z, executor=cluster, progress=progress)
     assert serial.cv_.solver["method"] == "direct"
     assert dist.sigma_ == serial.sigma_
     assert np.array_equal(dist.weights_, serial.weights_)
@@ -185,7 +192,7 @@ def test_cv_folds_on_two_workers_choose_the_serial_sigma_and_weights(cluster):
     assert seen[-1] == (45, 45) and all(d % 9 == 0 for d, _ in seen)  # per fold: the tasks ran on the cluster
     # the map hook itself: distributed only when asked
     calls = []
-    assert rl._map_folds(lambda f: calls.append(f) or f, 3, None, 9, None) == [0, 1, 2] and calls == [0, 1, 2]
+    assert rl._map_folds(lambda f, progress: calls.append(f) or f, 3, None, 9, None) == [0, 1, 2] and calls == [0, 1, 2]
 
 
 def test_cli_fit_refuses_bad_workers(tmp_path):

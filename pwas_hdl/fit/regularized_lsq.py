@@ -1835,13 +1835,14 @@ def _map_folds(fn: Callable, folds: int, executor, n_sigmas: int,
                progress: Callable[[int, int], None] | None) -> list:
     """``[fn(f) for f in range(folds)]``: the map hook of :func:`cross_validate_sigma`.
 
-    On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold;
-    otherwise in this process, in fold order, with ``fn``'s own per-solve progress. Either way the
-    results are those of the serial loop. (Forked local workers take the folds' segments instead,
-    see :func:`_fork_segments`.)
+    On ``executor`` (a distributed :class:`pwas_hdl.flow.executor.Executor`) one task per fold
+    (``fn(f, progress=None)``: what is shipped holds no callback, which need not pickle, and the
+    progress is counted per fold here); otherwise in this process, in fold order, with the per-solve
+    ``fn(f, progress=progress)``. Either way the results are those of the serial loop. (Forked local
+    workers take the folds' segments instead, see :func:`_fork_segments`.)
     """
     if executor is None or not getattr(executor, "distributed", False) or folds < 2:
-        return [fn(f) for f in range(folds)]
+        return [fn(f, progress=progress) for f in range(folds)]
     report = None if progress is None else (lambda done, total: progress(done * n_sigmas, total * n_sigmas))
     return executor.map(partial(fn, progress=None), range(folds), labels=[f"cv fold {f}" for f in range(folds)],
                         progress=report)
@@ -2097,7 +2098,7 @@ def cross_validate_sigma(
             bf += bf_s
         return mse_f, bound_f, infos_f, fb, bf
 
-    def one_fold(f: int, progress=progress) -> tuple[np.ndarray, np.ndarray, list, int, int]:
+    def one_fold(f: int, progress=None) -> tuple[np.ndarray, np.ndarray, list, int, int]:
         with single_blas_thread():  # also on a Dask worker (a remote one need not limit its BLAS)
             data = fold_data(f)
             return merge([run_segment(data, seg, progress) for seg in solver.sweep_segments(data[2], sig)])
