@@ -10,12 +10,16 @@ of that size exists.
 constant                   value          what it bounds
 =========================  =============  ===============================================
 ``MAX_VERTICES``           1 048 576      weights per target ``N = prod(p_j + 1)``
+``MAX_WEIGHTS``            4 194 304      weights over all targets ``N x nz`` (a model
+                                          file of about 100 MB)
 ``MAX_REGRESSORS``         20             regressor dimension ``n = nu*Mu + ny*My``
 ``MAX_SAMPLES``            1 000 000      data rows of a CSV file, ``make-data --samples``
 ``MAX_SIGMA_CANDIDATES``   1 000          cross-validation candidates (``--sigma-grid``)
 ``MAX_SWEEP_POINTS``       10 000         format combinations of one ``explore``
 ``MAX_CSV_FIELD``          131 072        characters in one CSV cell (128 KiB)
 ``MAX_CSV_BYTES``          1 GiB          size of a CSV file read
+``MAX_JSON_BYTES``         256 MiB        size of a JSON file read (model, breakpoints,
+                                          manifest, results)
 ``MAX_NAME_LENGTH``        200            Verilog module name (``--name``), so that the
                                           file names made from it fit a 255-byte name
 ``MAX_BENCH_COUNT``        1 000          a bench's count options (``--runs``, ``--seeds``;
@@ -32,6 +36,8 @@ from pwas_hdl.errors import ResourceLimit
 
 __all__ = [
     "MAX_VERTICES",
+    "MAX_WEIGHTS",
+    "MAX_JSON_BYTES",
     "MAX_REGRESSORS",
     "MAX_SAMPLES",
     "MAX_SIGMA_CANDIDATES",
@@ -45,10 +51,17 @@ __all__ = [
     "MAX_MEMORY_WORDS",
     "check_limit",
     "check_vertices",
+    "check_weights",
 ]
 
 #: Largest number of vertices (weights per target) ``N = prod(p_j + 1)`` of a partition.
 MAX_VERTICES = 2**20
+#: Largest number of weights over all targets, ``N x nz``: a model file of about 24 bytes a weight
+#: (100 MB), written with about 140 bytes a weight at its peak (the JSON text of every float).
+MAX_WEIGHTS = 2**22
+#: Largest JSON file read (model, breakpoints, manifest, results files), in bytes: a model at
+#: :data:`MAX_WEIGHTS` is about 100 MB.
+MAX_JSON_BYTES = 2**28
 #: Largest regressor dimension ``n``; with ``p_j >= 1`` it also bounds ``N >= 2**n``.
 MAX_REGRESSORS = 20
 #: Largest number of samples: data rows of a CSV file, ``make-data --samples`` (+ ``--test-samples``).
@@ -137,3 +150,27 @@ def _short(parts: list[int]) -> str:
         return f"p = {parts[0]} in {len(parts)} dimension(s)"
     text = ", ".join(str(p) for p in parts)
     return f"p = [{text if len(text) < 80 else text[:77] + '...'}]"
+
+
+def check_weights(n_vertices: int, n_targets: int) -> int:
+    """Weights over all targets ``N x nz``, refused above :data:`MAX_WEIGHTS`.
+
+    Parameters
+    ----------
+    n_vertices : int
+        Weights per target ``N``.
+    n_targets : int
+        Targets ``nz``.
+
+    Returns
+    -------
+    int
+        ``N x nz``.
+
+    Raises
+    ------
+    ResourceLimit
+        ``N x nz > MAX_WEIGHTS``.
+    """
+    return check_limit(f"the weights N x targets ({int(n_vertices)} x {int(n_targets)})", int(n_vertices) * int(n_targets),
+                       MAX_WEIGHTS, "fit fewer targets in one model (one model per target) or use a coarser partition (-p)")

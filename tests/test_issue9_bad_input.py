@@ -380,6 +380,46 @@ def test_vertices_refused_before_allocating():
     assert g.n_vertices == MAX_VERTICES
 
 
+def test_weights_over_all_targets_refused_before_the_fit(work):
+    """N x targets over MAX_WEIGHTS: refused before any array (20 targets at N = 2^20 once fitted at
+    2.8 GB under a 1 GB limit, wrote a 170 MB model and took minutes to load)."""
+    from pwas_hdl.limits import MAX_WEIGHTS
+
+    rng = np.random.default_rng(0)
+    targets = [f"z{i}" for i in range(5)]
+    p = work / "many.csv"
+    p.write_text(",".join(["y"] + targets) + "\n" + "\n".join(",".join(repr(float(v)) for v in r)
+                                                             for r in rng.standard_normal((60, 6))) + "\n")
+    before = tree(work)
+    # My = 20, p = 1: N = 2^20 per target, 5 targets = 5 x 2^20 weights > MAX_WEIGHTS = 2^22
+    assert_refused(invoke("fit", p, "-o", work / "w.json", "-y", "y", "-z", ",".join(targets), "--my", 20, "-p", 1,
+                          "--sigma", 1e-3), f"the weights N x targets (1048576 x 5) = 5242880 exceeds the limit of {MAX_WEIGHTS}",
+                   "one model per target")
+    assert tree(work) == before
+
+
+def test_model_file_over_the_weight_limit_and_json_size_cap(work, monkeypatch):
+    from pwas_hdl.fit import model_file
+    from pwas_hdl.io import json_contract
+
+    d = json.loads((work / "m.json").read_text())
+    monkeypatch.setattr("pwas_hdl.limits.MAX_WEIGHTS", 10)  # N = 16 > 10: as a model over 2^22 weights would be
+    errs = model_file._consistency_errors(d)
+    assert errs and "the weights N x targets (16 x 1) = 16 exceeds the limit of 10" in errs[0]
+    monkeypatch.setattr(json_contract, "MAX_JSON_BYTES", 100)
+    assert_refused(invoke("info", work / "m.json"), "bytes, more than the limit of 100 bytes of a JSON file")
+
+
+def test_breakpoints_sizes_refused_before_the_schema_check(work):
+    big = work / "bp.json"
+    big.write_text(json.dumps({"format": "pwas-hdl-breakpoints", "version": 1, "breakpoints": [list(range(2_000_000))]}))
+    before = tree(work)
+    assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "-y", "y", "-z", "z", "--my", 1,
+                          "--breakpoints", big, "--sigma", 1), "the vertices N = prod(cut points per list) = 2000000",
+                   f"limit of {MAX_VERTICES}")
+    assert tree(work) == before
+
+
 def test_many_inputs_refused_not_a_segfault(work):
     """64+ inputs overflowed the int64 strides (a segfault); now the dimension limit refuses them."""
     rng = np.random.default_rng(0)
@@ -579,3 +619,14 @@ def test_model_with_huge_lags_of_an_unused_signal_loads_at_once(work):
     assert res.exit_code in (0, 2), res.output
     if res.exit_code == 2:
         assert_refused(res)
+
+
+def test_memory_estimate_counts_writing_the_model():
+    """The model file's text is charged (about 140 bytes a weight at its peak): 4 targets at N = 2^20 need
+    about 590 MB to write, which the estimate of the fit must hold."""
+    from pwas_hdl.fit.regularized_lsq import MODEL_TEXT_BYTES_PER_WEIGHT, estimate_fit_memory
+
+    one = estimate_fit_memory(600, 2**20, 20, n_targets=1, order=0)
+    four = estimate_fit_memory(600, 2**20, 20, n_targets=4, order=0)
+    assert four["model_file"] == MODEL_TEXT_BYTES_PER_WEIGHT * 4 * 2**20
+    assert four["total"] - one["total"] >= 3 * MODEL_TEXT_BYTES_PER_WEIGHT * 2**20

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.io.json_contract import check_header, read_json, schema_errors
+from pwas_hdl.limits import MAX_REGRESSORS, MAX_VERTICES, check_limit
 
 __all__ = ["BREAKPOINTS_FORMAT", "BREAKPOINTS_VERSION", "SCHEMA", "read_breakpoints", "breakpoints_errors"]
 
@@ -77,6 +78,12 @@ def read_breakpoints(path: str | os.PathLike) -> tuple[list[list[float]], list[s
     d = read_json(p, _HINT)
     if isinstance(d, dict):
         check_header(d, BREAKPOINTS_FORMAT, BREAKPOINTS_VERSION, str(p), _HINT)
+        bps = d.get("breakpoints")
+        if isinstance(bps, list) and all(isinstance(b, list) for b in bps):  # the sizes before the (slow) schema check
+            check_limit(f"{p}: the breakpoint lists", len(bps), MAX_REGRESSORS, "give one list per regressor")
+            n_vertices = math.prod(max(len(b), 1) for b in bps)  # cut points per dimension = p_j + 1
+            check_limit(f"{p}: the vertices N = prod(cut points per list)", n_vertices, MAX_VERTICES,
+                        "give fewer cut points")
     errs = breakpoints_errors(d)
     if errs:
         raise InputError(f"{p}: {errs[0]}; {_HINT}")

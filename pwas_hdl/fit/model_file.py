@@ -71,7 +71,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.limits import check_vertices
+from pwas_hdl.limits import check_vertices, check_weights
 from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
 
 if TYPE_CHECKING:
@@ -274,6 +274,10 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
             n_vertices = check_vertices(g["partitions"])
         except ResourceLimit as exc:
             return [str(exc)]
+    try:
+        check_weights(n_vertices, len(tgts))
+    except ResourceLimit as exc:
+        return [str(exc)]
     for what, keys in (("weights", list(d["weights"])), ("fit.train_rmse", list(d["fit"]["train_rmse"]))):
         if keys != tgts:
             errs.append(f"{what} has the keys {keys}, signals.targets are {tgts}")

@@ -24,7 +24,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from pwas_hdl.fit import model_file
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
-from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
+from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit, check_weights
 from pwas_hdl.fit.geometry import BREAKPOINT_RULES, Grid, pow2_breakpoints, quantile_breakpoints
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
@@ -416,6 +416,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             basis_dims = grid.n
         # refuse (ResourceLimit) before H, H'H or a factor is allocated; limit: $PWAS_HDL_MAX_MEMORY
         # or a fraction of the available RAM (see pwas_hdl.fit.regularized_lsq.check_fit_memory)
+        check_weights(grid.n_vertices, nz)
         check_fit_memory(xi.shape[0], grid.n_vertices, basis_dims, nz, int(self.tikhonov_order),
                          grid_side=max(grid.shape) if self.additive is None else None)
         h = grid.basis_matrix(xi)

@@ -18,7 +18,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Iterable
 
-from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.errors import InputError, InternalError, ResourceLimit
+from pwas_hdl.limits import MAX_JSON_BYTES
 from pwas_hdl.resources import schemas_dir
 
 __all__ = ["load_schema", "read_json", "check_header", "validate", "schema_errors", "json_path"]
@@ -65,8 +66,14 @@ def read_json(path: str | os.PathLike, hint: str) -> Any:
         The file cannot be read.
     InputError
         Not UTF-8, not JSON, or holds a non-JSON constant such as NaN.
+    ResourceLimit
+        Larger than :data:`~pwas_hdl.limits.MAX_JSON_BYTES`.
     """
     p = Path(path)
+    size = p.stat().st_size if p.is_file() else 0
+    if size > MAX_JSON_BYTES:  # before reading: a JSON file of pwas-hdl is at most about 100 MB
+        raise ResourceLimit(f"{p} is {size} bytes, more than the limit of {MAX_JSON_BYTES} bytes of a JSON file "
+                            f"pwas-hdl reads; {hint}")
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
