@@ -233,7 +233,27 @@ TrajColOpt = Annotated[Optional[str], typer.Option("--traj-col", help="Trajector
 def _executor(workers: Optional[int], scheduler: Optional[str]):
     from pwas_hdl.flow.executor import Executor
 
+    if workers is not None and scheduler is not None:
+        raise InputError("give --workers (a local cluster) or --scheduler (an existing one), not both")
+
     return Executor(workers=workers, scheduler=scheduler)
+
+
+def _distinct_columns(*roles: tuple[str, list[str]]) -> None:
+    """Refuse a data column named twice in one option or given two roles (``(option, names)`` pairs)."""
+    seen: dict[str, str] = {}
+    for opt, names in roles:
+        for nm in names:
+            if nm not in seen:
+                seen[nm] = opt
+            elif seen[nm] == opt:
+                raise InputError(f"column {nm!r} is named twice in {opt}; name each column once")
+            else:
+                pair = {seen[nm], opt}
+                why = ("the model would read what it estimates" if "-z/--targets" in pair else
+                       "it labels trajectories, it is no signal" if "--traj-col" in pair else
+                       "the regressor would hold the same samples twice")
+                raise InputError(f"column {nm!r} is given both as {seen[nm]} and as {opt} ({why}); give each column one role")
 
 
 def _names(values: Optional[list[str]]) -> list[str]:
@@ -336,8 +356,20 @@ def fit(
             raise InputError("--front-end observer-bank needs exactly one measured output column: give one -y/--outputs")
         if my and not outs:
             raise InputError(f"--my {my} needs measured output column(s): give -y/--outputs (or --my 0)")
+        _executor(workers, scheduler)  # --workers / --scheduler checked before the data are read
+        if mu < 0 or my < 0:
+            raise InputError(f"--mu and --my must be >= 0 (past samples in the regressor), got {mu} and {my}")
+        if sigma is not None and sigma_grid is not None:
+            raise InputError("give --sigma (a fixed weight) or --sigma-grid (the cross-validation's candidates), not both")
         if mu and not ins:
             raise InputError(f"--mu {mu} needs input column(s): give -u/--inputs (or --mu 0)")
+        if ins and not mu and not bank:
+            raise InputError(f"-u/--inputs {','.join(ins)} is given but --mu is 0 (inputs unused): give --mu K, the past "
+                             "input samples in the regressor, or leave -u out")
+        if outs and not my and not bank:
+            raise InputError(f"-y/--outputs {','.join(outs)} is given but --my is 0 (outputs unused): give --my K or leave -y out")
+        _distinct_columns(("-u/--inputs", ins), ("-y/--outputs", outs), ("-z/--targets", tgts),
+                          ("--traj-col", [traj_col] if traj_col is not None else []))
         table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
@@ -490,8 +522,7 @@ def fit_map_cmd(
         if init is not None and not all(np.isfinite(init)):
             raise InputError(f"--z0 values must be finite numbers, got {z0!r}")
         cols = ins + outs + sts
-        if len(set(cols)) != len(cols):
-            raise InputError(f"an argument column is named twice: {cols}")
+        _distinct_columns(("-u/--inputs", ins), ("-y/--outputs", outs), ("--state", sts), ("-z/--targets", tgts))
         if not (0.0 <= test_fraction <= 0.9):
             raise InputError(f"--test-fraction must be in [0, 0.9], got {test_fraction}")
         parts = _int_list(partitions, "--partitions")
@@ -517,7 +548,7 @@ def fit_map_cmd(
         with outset:
             outset.write_text(output, text)
         e = approx.errors
-        names = sts or tgts
+        names = tgts  # the errors are of the value columns (with --state: the next states z(t+1))
         _say(f"fitted a PWAS of {', '.join(tgts)} over {', '.join(cols)}: n = {approx.grid.n}, N = {approx.grid.n_vertices} weights; "
              f"error on {e['test']}: max {', '.join(f'{t}: {v:.4g}' for t, v in zip(names, e['max']))}, RMS "
              f"{', '.join(f'{t}: {v:.4g}' for t, v in zip(names, e['rms']))}")

@@ -630,3 +630,37 @@ def test_memory_estimate_counts_writing_the_model():
     four = estimate_fit_memory(600, 2**20, 20, n_targets=4, order=0)
     assert four["model_file"] == MODEL_TEXT_BYTES_PER_WEIGHT * 4 * 2**20
     assert four["total"] - one["total"] >= 3 * MODEL_TEXT_BYTES_PER_WEIGHT * 2**20
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["-y", "y", "-z", "z,z"], "column 'z' is named twice in -z/--targets"),
+    (["-y", "y,y", "-z", "z"], "column 'y' is named twice in -y/--outputs"),
+    (["-y", "z", "-z", "z"], "given both as -y/--outputs and as -z/--targets (the model would read what it estimates)"),
+    (["-u", "y", "--mu", "1", "-y", "y", "-z", "z"], "given both as -u/--inputs and as -y/--outputs"),
+    (["-y", "y", "-z", "z", "--traj-col", "z"], "given both as -z/--targets and as --traj-col"),
+    (["-u", "z_true", "-y", "y", "-z", "z"], "-u/--inputs z_true is given but --mu is 0"),
+    (["-y", "y", "-z", "z", "--my", "0", "--mu", "1", "-u", "z_true"], "-y/--outputs y is given but --my is 0"),
+    (["-y", "y", "-z", "z", "--mu", "-1"], "--mu and --my must be >= 0"),
+    (["-y", "y", "-z", "z", "--sigma", "1", "--sigma-grid", "1,2"], "give --sigma (a fixed weight) or --sigma-grid"),
+    (["-y", "y", "-z", "z", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "give --workers (a local cluster) or --scheduler"),
+])
+def test_fit_refuses_columns_with_two_roles_and_conflicting_options(work, args, fragment):
+    """Each was accepted: a repeated target wrote a model every other command refused, a target read as
+    a regressor leaked it, and a conflicting option was silently dropped."""
+    before = tree(work)
+    assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "-p", 2, *args), fragment)
+    assert tree(work) == before
+
+
+def test_fit_map_refuses_a_value_column_that_is_an_argument(work):
+    rng = np.random.default_rng(0)
+    a, b = rng.uniform(-1, 1, (2, 200))
+    (work / "map.csv").write_text("a,b,f,s,s1\n" + "".join(f"{x},{y},{x * y},{x / 2},{x / 3 + y / 5}\n" for x, y in zip(a, b)))
+    before = tree(work)
+    assert_refused(invoke("fit-map", work / "map.csv", "-u", "a", "-z", "a", "-o", work / "o.json"),
+                   "column 'a' is given both as -u/--inputs and as -z/--targets")
+    assert_refused(invoke("fit-map", work / "map.csv", "-u", "a", "--state", "s1", "-z", "s1", "--z0", "0", "-o", work / "o.json"),
+                   "column 's1' is given both as --state and as -z/--targets")
+    assert tree(work) == before
+    res = invoke("fit-map", work / "map.csv", "-u", "a", "--state", "s", "-z", "s1", "--z0", "0", "-o", work / "o.json")
+    assert res.exit_code == 0 and "max s1:" in res.output, res.output  # the errors are the next state's
