@@ -836,6 +836,8 @@ def export_testbench(
     from pwas_hdl.verify.testbench import export_testbench as _export
 
     with _user_errors():
+        if output is not None:
+            check_output_path(output, "-o/--out", kind="folder")
         res = _export(outdir, output, samples=samples, seed=seed, stall=stall)
     stdout.print_json(json.dumps(res))
     _say(f"wrote {res['outdir']}/ ({len(res['files'])} files); run it with {res['outdir']}/run_icarus.sh or run_verilator.sh")
@@ -1425,7 +1427,33 @@ def command() -> Any:
     Calling a ``typer.Typer`` builds its Click command tree again (every command's signature and type
     hints: about 50 ms); :func:`main` and in-process callers (tests, notebooks) run this one instead.
     """
-    return typer.main.get_command(app)
+    cmd = typer.main.get_command(app)
+    _refuse_empty_paths(cmd)
+    return cmd
+
+
+def _refuse_empty_paths(cmd: Any) -> None:
+    """Make every ``Path`` option of the tree (all name outputs) pass an empty value (``-o ""``) on as
+    the empty text, which the command's output check refuses (:func:`pwas_hdl.io.atomic.check_output_path`).
+
+    Click turns ``""`` into ``Path("")``, which is ``Path(".")``: the working folder, where
+    ``synth``, ``explore`` and ``simulate --build-dir`` then wrote their files. The raw string is
+    seen where the option takes its value from the parsed command line (``handle_parse_result``).
+    """
+    for p in getattr(cmd, "params", []):
+        td = getattr(p, "type_descriptor", None)
+        if getattr(p, "param_type_name", "") == "option" and getattr(td, "annotation", None) is Path:
+            def checked(ctx, opts, args, _p=p, _orig=p.handle_parse_result):
+                value, rest = _orig(ctx, opts, args)
+                raw = opts.get(_p.name)
+                if isinstance(raw, str) and not raw.strip() and _p.expose_value:
+                    # the command gets the empty text, which its output check refuses (check_output_path)
+                    ctx.params[_p.name] = value = raw
+                return value, rest
+
+            p.handle_parse_result = checked
+    for sub in getattr(cmd, "commands", {}).values():
+        _refuse_empty_paths(sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -664,3 +664,19 @@ def test_fit_map_refuses_a_value_column_that_is_an_argument(work):
     assert tree(work) == before
     res = invoke("fit-map", work / "map.csv", "-u", "a", "--state", "s", "-z", "s1", "--z0", "0", "-o", work / "o.json")
     assert res.exit_code == 0 and "max s1:" in res.output, res.output  # the errors are the next state's
+
+
+@pytest.mark.parametrize("args", [
+    ["synth", "{g}", "--fpga", "generic", "-o", ""],
+    ["explore", "m.json", "d.csv", "-o", " "],
+    ["simulate", "{g}", "t.csv", "-o", "s.csv", "--build-dir", ""],
+    ["export-testbench", "{g}", "-o", ""],
+    ["synth", "{g}", "--fpga", "generic", "--out="],
+    ["-q", "predict", "m.json", "t.csv", "-o", ""],
+])
+def test_an_empty_path_is_refused_not_taken_for_the_working_folder(work, design, args):
+    """Click turns "" into Path(".") (the working folder): synth, explore and simulate wrote their files there."""
+    before = tree(work)
+    res = invoke(*[a.format(g=design) for a in args], cwd=work)
+    assert_refused(res, "the output path is empty")
+    assert tree(work) == before
