@@ -38,7 +38,7 @@ from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import OutputSet, check_output_path, install_termination_handler
 from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories, write_csv
-from pwas_hdl.limits import MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit
+from pwas_hdl.limits import MAX_NOISE, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
 _CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -1063,14 +1063,22 @@ def _write_plant(output: Path, test_output: Optional[Path], train, test, what: s
         _say(f"wrote {extra[0]} ({extra[3]})")
 
 
+def _check_noise(noise: float, what: str) -> None:
+    """Refuse a make-data ``--noise`` outside ``[0, MAX_NOISE]`` (NaN / inf / huge noise: NaN / inf data)."""
+    if not 0 <= noise <= MAX_NOISE:
+        raise InputError(f"--noise must be a finite number >= 0 and at most {MAX_NOISE:g} ({what}), got {noise}; "
+                         f"give a smaller --noise")
+
+
 def _write_runs(out: Optional[Path], test_out: Optional[Path], samples: int, runs: int, noise: float, seed: int,
                make_train, make_test, extra: Optional[tuple] = None) -> None:
     """``make-data`` of a multi-run plant: options checked, paths checked, then the data made and written."""
     with _user_errors():
         output = _required(out, "-o/--out", "the CSV file to write")
-        if samples < 1 or runs < 1 or not 0 <= noise < np.inf or seed < 0:  # NaN / inf noise: NaN / inf data
-            raise InputError(f"--samples and --runs must be >= 1, --noise a finite number >= 0 and --seed >= 0, got "
-                             f"--samples {samples}, --runs {runs}, --noise {noise}, --seed {seed}")
+        if samples < 1 or runs < 1 or seed < 0:
+            raise InputError(f"--samples and --runs must be >= 1 and --seed >= 0, got "
+                             f"--samples {samples}, --runs {runs}, --seed {seed}")
+        _check_noise(noise, "a standard deviation on y")
         _plant_outputs(output, test_out, extra)  # the paths are checked before the work
         check_limit("--samples x --runs", samples * runs, MAX_SAMPLES, "ask for fewer samples or runs")
         train = make_train()
@@ -1083,7 +1091,7 @@ def make_data_three_tank(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns u1, u2, y, x1, x3, x1_true, x3_true, run). Required.", show_default=False)] = None,
     samples: Annotated[int, typer.Option("--samples", help="Samples per run.")] = 1000,
     runs: Annotated[int, typer.Option("--runs", help="Training runs from random admissible levels (column run).")] = 20,
-    noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y (the paper has none).")] = 0.0,
+    noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y (the paper has none); 0..1000.")] = 0.0,
     test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the paper's run here (x(0) = (8, 2, 1), rho from t = 100).", show_default=False)] = None,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (levels, phases, disturbance, noise).")] = 0,
 ) -> None:
@@ -1100,7 +1108,7 @@ def make_data_switched_linear(
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV to write (columns u, y, x1, x2, x1_true, x2_true, mode, run). Required.", show_default=False)] = None,
     samples: Annotated[int, typer.Option("--samples", help="Samples per run.")] = 1000,
     runs: Annotated[int, typer.Option("--runs", help="Runs (column run), random dwell 20-50 and random x0.")] = 10,
-    noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y.")] = 0.0,
+    noise: Annotated[float, typer.Option("--noise", help="Standard deviation of the Gaussian noise on y; 0..1000.")] = 0.0,
     switching: Annotated[str, typer.Option("--switching", help="Switching law: time (cyclic) or output (thresholds on y).")] = "time",
     input_kind: Annotated[str, typer.Option("--input-signal", help="Input: step, prbs or sine.")] = "prbs",
     test_out: Annotated[Optional[Path], typer.Option("--test-out", help="Also write the paper-replica run here (100 samples, dwell 34, step input).", show_default=False)] = None,
@@ -1204,8 +1212,7 @@ def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out
     if samples < 1 or test_samples < 1:  # --test-samples too without --test-out: a bad value is refused, not ignored
         raise InputError("--samples and --test-samples must be >= 1")
     check_limit("--test-samples", test_samples, MAX_SAMPLES, "ask for fewer samples")
-    if not 0 <= noise < np.inf:
-        raise InputError(f"--noise must be a finite number >= 0 (a standard deviation in normalised units), got {noise}")
+    _check_noise(noise, "a standard deviation in normalised units")
     n_test = test_samples if test_out is not None else 1
     if system == "battery":
         train, test, _ = make_battery_dataset(samples, n_test, seed, noise)
@@ -1223,7 +1230,7 @@ Seed004Samples = Annotated[int, typer.Option("--samples", help="Number of sample
 Seed004TestOut = Annotated[Optional[Path], typer.Option("--test-out", help="Also write an independent test run here, normalised with the training statistics.", show_default=False)]
 Seed004TestSamples = Annotated[int, typer.Option("--test-samples", help="Samples in the test file (paper: 5 000).")]
 Seed004Seed = Annotated[int, typer.Option("--seed", help="Random seed of the run (excitation, parameter law and noise).")]
-Seed004Noise = Annotated[float, typer.Option("--noise", help="Std of the white noise added after normalisation (paper: 0.03).")]
+Seed004Noise = Annotated[float, typer.Option("--noise", help="Std of the white noise added after normalisation (paper: 0.03); 0..1000.")]
 
 
 @data_app.command("pv-benchmark")

@@ -24,6 +24,7 @@ constant                   value          what it bounds
                                           file names made from it fit a 255-byte name
 ``MAX_BENCH_COUNT``        1 000          a bench's count options (``--runs``, ``--seeds``;
                                           :func:`pwas_hdl.bench_results.check_count`)
+``MAX_NOISE``              1 000          ``make-data --noise`` (a standard deviation)
 =========================  =============  ===============================================
 """
 
@@ -49,6 +50,7 @@ __all__ = [
     "MAX_PORT_BITS",
     "MAX_BENCH_COUNT",
     "MAX_MEMORY_WORDS",
+    "MAX_NOISE",
     "check_limit",
     "check_vertices",
     "check_weights",
@@ -88,6 +90,10 @@ MAX_PORT_BITS = 2**16
 #: of ``2**sum(cell bits)`` words grow far faster than ``N``: n = 10, p = 3 would be 2**30 words);
 #: 4 Mi words is about 12 times what the largest ECP5 (LFE5U-85F, 208 x 18 kbit of block RAM) holds at 11 bits.
 MAX_MEMORY_WORDS = 2**22
+#: Largest ``make-data --noise`` (standard deviation of the added Gaussian noise). The signals are of
+#: order 1-10 (seed 004's are normalised to unit std), so 1000 already drowns them; far larger values
+#: overflow to inf / NaN data (``--noise 1e308``) that every later command refuses.
+MAX_NOISE = 1000.0
 
 
 def check_limit(what: str, value: int, limit: int, hint: str) -> int:
