@@ -1213,15 +1213,18 @@ def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out
         raise InputError("--samples and --test-samples must be >= 1")
     check_limit("--test-samples", test_samples, MAX_SAMPLES, "ask for fewer samples")
     _check_noise(noise, "a standard deviation in normalised units")
+    outset = _plant_outputs(output, test_out)  # the paths are checked before the work, and written all or none
     n_test = test_samples if test_out is not None else 1
     if system == "battery":
         train, test, _ = make_battery_dataset(samples, n_test, seed, noise)
     else:
         train, test, _ = make_pv_dataset(system, samples, n_test, seed, noise, rho_law=rho_law)
-    write_csv(output, train.columns())
+    with outset:
+        outset.write_text(output, format_csv(train.columns()))
+        if test_out is not None:
+            outset.write_text(test_out, format_csv(test.columns()))
     _say(f"wrote {output} ({samples} samples, seed {seed}, noise {noise})")
     if test_out is not None:
-        write_csv(test_out, test.columns())
         _say(f"wrote {test_out} ({test_samples} samples of an independent run, normalised with the statistics of {output})")
 
 
