@@ -1332,7 +1332,9 @@ def _seed004_bench(module: str, json_out: Optional[Path], json_old: Optional[Pat
     from pwas_hdl import bench_results
 
     json_out = _required(_merge("-o/--out", json_out, json=json_old), "-o/--out", "the JSON result file to write")
-    bench_results.check_count("--runs", kw.get("runs", 1))
+    bench_results.check_count("--runs", kw.get("runs", 1))  # checked with --quick too (which then runs once)
+    if kw.get("quick"):
+        kw["runs"] = 1
     for p in (json_out, markdown, plot):
         if p is not None and not p.parent.is_dir():
             raise InputError(f"folder {p.parent} does not exist; create it first")
@@ -1370,13 +1372,33 @@ def bench_pv(
     with _user_errors():
         from pwas_hdl.benchmarks import pv_benchmark as pvb
 
-        preds = tuple(_names([predictors]))
-        bad = set(preds) - set(pvb.ESTIMATORS)
-        if bad:
-            raise InputError(f"--predictors: unknown {', '.join(sorted(bad))}; use {', '.join(pvb.ESTIMATORS)}")
-        sel = pvb.select_cases(_names([tables]) if tables else None, ["base"] if quick else (_names([cases]) if cases else None))
-        _seed004_bench("pv_benchmark", json_out, json_old, markdown, None, workers, scheduler, cases=sel, runs=1 if quick else runs, quick=quick,
-                       predictors=preds, ann_cases=tuple(_names([ann_cases])) if ann_cases else None)
+        import re
+
+        case_names = [c.name for c in pvb.CASES]
+        table_names = sorted({t for c in pvb.CASES for t in re.findall(r"T\d+", c.table)}, key=lambda t: int(t[1:]))
+        # every list is checked, --quick or not: an empty or misspelt one is refused, not ignored
+        preds = tuple(_known_names("--predictors", predictors, pvb.ESTIMATORS))
+        table_sel = _known_names("--tables", tables, table_names)
+        case_sel = _known_names("--cases", cases, case_names, "case(s) ")
+        ann_sel = _known_names("--ann-cases", ann_cases, case_names, "case(s) ")
+        sel = pvb.select_cases(table_sel, case_sel)
+        if quick:
+            sel = pvb.select_cases(None, ["base"])
+        _seed004_bench("pv_benchmark", json_out, json_old, markdown, None, workers, scheduler, cases=sel, runs=runs, quick=quick,
+                       predictors=preds, ann_cases=tuple(ann_sel) if ann_sel is not None else None)
+
+
+def _known_names(option: str, text: Optional[str], known: Sequence[str], what: str = "") -> Optional[list[str]]:
+    """The comma list of ``option`` (None if not given), refused when empty or with a name not in ``known``."""
+    if text is None:
+        return None
+    names = _names([text])
+    if not names:
+        raise InputError(f"{option} is empty; give a comma list of {', '.join(known)}, or leave the option out")
+    bad = sorted(set(names) - set(known))
+    if bad:
+        raise InputError(f"{option}: unknown {what}{', '.join(bad)}; use {', '.join(known)}")
+    return names
 
 
 @bench_app.command("switching-4")
@@ -1391,7 +1413,7 @@ def bench_switching4(
 ) -> None:
     """Seed 004 E2, Tables 8-9: mode reconstruction (FIT, NRMSE, per-mode F1) for RFR, RFC, PWAS beside the paper."""
     with _user_errors():
-        _seed004_bench("switching4", json_out, json_old, markdown, None, workers, scheduler, runs=1 if quick else runs, quick=quick)
+        _seed004_bench("switching4", json_out, json_old, markdown, None, workers, scheduler, runs=runs, quick=quick)
 
 
 @bench_app.command("battery")
@@ -1407,7 +1429,7 @@ def bench_battery(
 ) -> None:
     """Seed 004 E3 (Fig. 5): SoC RMSE/FIT of the RFR and PWAS sensors and of 4 EKFs (substitute battery coefficients)."""
     with _user_errors():
-        _seed004_bench("battery", json_out, json_old, markdown, plot, workers, scheduler, runs=1 if quick else runs, quick=quick)
+        _seed004_bench("battery", json_out, json_old, markdown, plot, workers, scheduler, runs=runs, quick=quick)
 
 
 def _version(value: bool) -> None:
