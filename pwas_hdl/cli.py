@@ -217,9 +217,14 @@ def _float_list(text: str, what: str) -> list[float]:
         raise InputError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
     check_limit(f"the number of {what} candidates K", k_count, MAX_SIGMA_CANDIDATES, "give fewer candidates")
     try:
-        return [float(v) for v in np.logspace(float(a), float(b), k_count)]
+        with np.errstate(over="ignore", under="ignore"):  # an exponent out of the float range: refused below
+            vals = [float(v) for v in np.logspace(float(a), float(b), k_count)]
     except ValueError:
         raise InputError(f"{what} must be a comma-separated list of numbers or logspace:A:B:K, got {text!r}") from None
+    if not all(0.0 < v < np.inf for v in vals):
+        raise InputError(f"{what} {text}: 10**A .. 10**B must be positive finite numbers; give exponents A and B "
+                         f"between -307 and 308")
+    return vals
 
 
 WorkersOpt = Annotated[Optional[int], typer.Option("--workers", help="Run the independent tasks on a local Dask cluster of this many worker processes (default: serially).")]
@@ -261,6 +266,21 @@ def _names(values: Optional[list[str]]) -> list[str]:
     for v in values or []:
         res += [s.strip() for s in v.split(",") if s.strip()]  # spaces inside a name are part of it
     return res
+
+
+def _rmse(estimate: np.ndarray, reference: np.ndarray) -> float:
+    """RMS of ``estimate - reference`` without a numpy overflow warning: where the squares overflow (a
+    model or data near the float limit), both are scaled by their largest magnitude first, so the RMSE
+    printed is the huge number it is, not inf beside a RuntimeWarning."""
+    with np.errstate(over="ignore"):  # the overflow is the case handled below
+        plain = float(np.sqrt(np.mean((estimate - reference) ** 2))) if estimate.size else float("nan")
+    if not plain == np.inf:
+        return plain
+    scale = float(max(np.max(np.abs(estimate)), np.max(np.abs(reference))))
+    if scale == np.inf:  # an infinite estimate
+        return scale
+    d = estimate / scale - reference / scale
+    return scale * float(np.sqrt(np.mean(d * d)))  # a Python float product: inf above the float range, no warning
 
 
 @contextmanager
@@ -622,7 +642,7 @@ def predict(
             ref = table.reference_column(t)
             if ref is not None:
                 ztrue = table.numeric([ref])[rows[scored] + lead, 0]
-                rmse = float(np.sqrt(np.mean((zhat[scored, i] - ztrue) ** 2)))
+                rmse = _rmse(zhat[scored, i], ztrue)
                 shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
                 _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
         if flags.any():

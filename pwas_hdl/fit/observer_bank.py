@@ -393,6 +393,13 @@ def residual_features(res: np.ndarray, window: int, feature_map: str) -> np.ndar
         cols = [res[window - lag : window - lag + rows, j] for j in range(n_th) for lag in range(window + 1)]
         return np.stack(cols, axis=1)
     if feature_map in ("11b", "11b-sq"):
+        # the running sum of squares must stay finite: T * max|e|**2 below the float range (checked, not
+        # left to numpy's overflow warning and a later "NaN or infinite" error that blames the data)
+        big = float(np.max(np.abs(res))) if res.size else 0.0
+        if not big <= math.sqrt(1e300 / max(t_len, 1)):
+            raise InputError(f"the observer-bank residuals reach {big:.3g}, too large for the windowed RMS features "
+                             f"({feature_map}) to be computed: the input / output columns hold values far too large "
+                             f"for the bank's models; rescale or clean the data")
         c = np.concatenate([np.zeros((1, n_th)), np.cumsum(res**2, axis=0)])
         sums = c[window + 1 :] - c[: rows]
         ms = np.maximum(sums, 0.0) / window

@@ -327,9 +327,21 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                 f"regressor(s) {', '.join(names)} are constant in the training data (zero-width domain); "
                 "remove the constant signal, add excitation, or pass an explicit domain"
             )
-        centre = 0.5 * (lo + hi)
-        half = 0.5 * (hi - lo) * self.gamma
-        return centre - half, centre + half
+        # halves first (exact, so the same box as 0.5 * (lo + hi) +- 0.5 * (hi - lo) * gamma) and the
+        # overflow of a huge gamma or a data range near the float limit checked here, not warned by numpy
+        with np.errstate(over="ignore", invalid="ignore"):
+            centre = 0.5 * lo + 0.5 * hi
+            half = (0.5 * hi - 0.5 * lo) * self.gamma
+            box_lo, box_hi = centre - half, centre + half
+        wide = np.flatnonzero(~(np.isfinite(box_lo) & np.isfinite(box_hi)))
+        if wide.size:
+            name = self._regressor_names(lags, fe)[int(wide[0])]
+            raise InputError(
+                f"the domain of regressor {name} (the data range [{lo[wide[0]]:.6g}, {hi[wide[0]]:.6g}] expanded by "
+                f"gamma = {self.gamma:g}) is wider than a float can hold; give a smaller gamma (--gamma), an explicit "
+                "domain (--domain), or rescale the signal"
+            )
+        return box_lo, box_hi
 
     def _regressor_names(self, lags: LagStructure | None, fe: ObserverBankFrontEnd | None = None) -> list[str]:
         fe = fe if fe is not None else getattr(self, "front_end_", None)

@@ -1,0 +1,99 @@
+"""Bad input gives one ``error:`` line and no numpy RuntimeWarning beside it (D16).
+
+Each case runs with warnings turned into errors: a numpy floating-point warning that reaches the user
+then shows as an internal error (exit 3) instead of the one ``error:`` line.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+from helpers.cli import CliRunner
+from helpers.folders import tree
+
+import pwas_hdl.cli as cli
+from pwas_hdl.errors import InputError
+
+RUNNER = CliRunner()
+
+
+def _run(*args):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return RUNNER.invoke(cli.app, [str(a) for a in args])
+
+
+def _refused(root, *args) -> str:
+    before = tree(root)
+    res = _run(*args)
+    lines = res.output.strip().splitlines()
+    assert res.exit_code == 2, res.output
+    assert len(lines) == 1 and lines[0].startswith("error:"), res.output
+    assert tree(root) == before
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fpw")
+    assert RUNNER.invoke(cli.app, ["make-data", "lorenz", "-o", str(d / "d.csv"), "--samples", "400"]).exit_code == 0
+    res = RUNNER.invoke(cli.app, ["fit", str(d / "d.csv"), "-o", str(d / "m.json"), "-y", "y", "-z", "z", "--my", "2",
+                                  "-p", "3", "--sigma", "1e-3"])
+    assert res.exit_code == 0, res.output
+    return d
+
+
+@pytest.mark.parametrize("grid", ["logspace:300:400:3", "logspace:-400:-350:3"])
+def test_a_sigma_grid_beyond_the_float_range_is_refused_without_a_warning(work, grid):
+    line = _refused(work, "fit", work / "d.csv", "-o", work / "o.json", "-y", "y", "-z", "z", "--my", "2", "-p", "3",
+                    "--sigma-grid", grid)
+    assert "--sigma-grid" in line and "between -307 and 308" in line, line
+
+
+def test_a_gamma_that_overflows_the_domain_is_refused_without_a_warning(work):
+    line = _refused(work, "fit", work / "d.csv", "-o", work / "o.json", "-y", "y", "-z", "z", "--my", "2", "-p", "3",
+                    "--sigma", "1e-3", "--gamma", "1e308")
+    assert "--gamma" in line and "y[t-1]" in line, line
+
+
+@pytest.mark.parametrize("weight", [1e308, -1.7e308])
+def test_predict_with_huge_weights_prints_a_finite_rmse_without_a_warning(work, tmp_path, weight):
+    doc = json.loads((work / "m.json").read_text())
+    w = doc["weights"]["z"]
+    doc["weights"]["z"] = [weight * (-1) ** i for i in range(len(w))]
+    (tmp_path / "big.json").write_text(json.dumps(doc))
+    res = _run("predict", tmp_path / "big.json", work / "d.csv", "-o", tmp_path / "p.csv")
+    assert res.exit_code == 0, res.output
+    rmse = [ln for ln in res.output.splitlines() if ln.startswith("RMSE")]
+    assert len(rmse) == 1 and "Warning" not in res.output, res.output
+    value = float(rmse[0].split(":")[1].split()[0])
+    assert 1e306 < value < np.inf, rmse[0]
+
+
+def test_predict_rmse_of_an_ordinary_model_is_unchanged(work, tmp_path):
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.io.csv_table import read_csv
+
+    res = _run("predict", work / "m.json", work / "d.csv", "-o", tmp_path / "p.csv")
+    assert res.exit_code == 0, res.output
+    model = PWASVirtualSensor.load(work / "m.json")
+    t = read_csv(work / "d.csv")
+    zhat = model.predict(None, t.numeric(["y"]))[:, 0]
+    ztrue = t.numeric(["z_true"])[model.memory - 1:, 0]
+    expected = float(np.sqrt(np.mean((zhat - ztrue) ** 2)))
+    assert f"RMSE of z_hat against column z_true: {expected:.6g} " in res.output, res.output
+
+
+def test_observer_bank_features_of_huge_residuals_are_refused_without_a_warning():
+    from pwas_hdl.fit.observer_bank import residual_features
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for fm in ("11b", "11b-sq"):
+            with pytest.raises(InputError, match="rescale or clean the data"):
+                residual_features(np.full((50, 3), 1e300), 7, fm)
+        ok = residual_features(np.full((50, 3), 2.0), 7, "11b")
+    np.testing.assert_allclose(ok, 2.0 * np.sqrt(8 / 7))  # l + 1 = 8 squares over l = 7
