@@ -189,7 +189,7 @@ def test_grid_factor_bound_is_for_the_measured_dimensions_only():
 def test_memory_limit_refuses_before_solving(monkeypatch):
     grid, h, z = _problem(2, 40, 4000)
     gam = tikhonov_matrix(grid, 1)
-    with pytest.raises(ResourceLimit, match=r"estimated \d+ MiB .* over the limit of 1 MiB \(max_memory\)"):
+    with pytest.raises(ResourceLimit, match=r"estimated [\d.]+ MiB .* over the limit of 1 MiB \(max_memory\)"):
         solve_regularized(h, z, 1.0, gam, max_memory="1M")
     with pytest.raises(ResourceLimit, match="max_memory"):
         cross_validate_sigma(h, z, gam, [1.0, 2.0], max_memory=2**20)

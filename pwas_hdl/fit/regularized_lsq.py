@@ -539,8 +539,31 @@ def gamma_min_eigenvalue(gamma: sparse.sparray) -> float:
     return max(float((diag - off).min()), 0.0)
 
 
-def parse_memory(text: str | int | float) -> int:
-    """Bytes from ``"4G"``, ``"512M"``, ``"1e9"`` or a number (for ``$PWAS_HDL_MAX_MEMORY``)."""
+#: Smallest memory limit accepted: below it no fit can run (the interpreter and its libraries alone
+#: take far more), so ``PWAS_HDL_MAX_MEMORY=1K`` is refused as a mistake instead of refusing every fit.
+MIN_MEMORY_LIMIT = 2**20
+
+
+def size_text(nbytes: float) -> str:
+    """A memory size for a message: MiB from 1 MiB (one decimal below 10 MiB, unless whole), KiB or
+    bytes below (never "0 MiB", nor "needs 1 MiB, over the limit of 1 MiB")."""
+    if nbytes >= 10 * 2**20 or (nbytes >= 2**20 and nbytes % 2**20 == 0):
+        return f"{nbytes / 2**20:.0f} MiB"
+    if nbytes >= 2**20:
+        return f"{nbytes / 2**20:.1f} MiB"
+    if nbytes >= 2**10:
+        return f"{nbytes / 2**10:.0f} KiB"
+    return f"{nbytes:.0f} bytes"
+
+
+#: How to raise the memory limit, in the refusals (the command line has only the environment variable).
+RAISE_LIMIT_HINT = f"raise the limit with the environment variable {MAX_MEMORY_ENV} (e.g. {MAX_MEMORY_ENV}=8G; max_memory= in the Python API)"
+
+
+def parse_memory(text: str | int | float, source: str = "memory limit", minimum: int = 1) -> int:
+    """Bytes from ``"4G"``, ``"512M"``, ``"1e9"`` or a number (for ``$PWAS_HDL_MAX_MEMORY``), at least
+    ``minimum`` (1 byte; :data:`MIN_MEMORY_LIMIT` for the environment variable); ``source`` names the
+    setting in the messages."""
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         val = float(text)
     else:
@@ -549,9 +572,12 @@ def parse_memory(text: str | int | float) -> int:
         try:
             val = float(t[:-1] if mult != 1 else t) * mult
         except ValueError:
-            raise InputError(f"memory limit {text!r} is not a size; give bytes or a number with K, M or G (e.g. 4G)") from None
-    if not (np.isfinite(val) and val > 0):
-        raise InputError(f"memory limit {text!r} must be a positive size (e.g. 4G)")
+            raise InputError(f"{source} {text!r} is not a size; give bytes or a number with K, M or G (e.g. 4G)") from None
+    if not (np.isfinite(val) and val >= 1):
+        raise InputError(f"{source} {text!r} must be a positive size of at least 1 byte (e.g. 4G)")
+    if val < minimum:
+        raise InputError(f"{source} {text!r} is {size_text(val)}, below the {size_text(minimum)} any fit needs; "
+                         f"give a size such as 512M or 4G")
     return int(val)
 
 
@@ -574,10 +600,10 @@ def memory_limit(max_memory: int | str | None = None) -> tuple[int | None, str]:
     available RAM; ``(None, ...)`` (no limit) where none of these is known.
     """
     if max_memory is not None:
-        return parse_memory(max_memory), "max_memory"
+        return parse_memory(max_memory, "max_memory"), "max_memory"
     env = os.environ.get(MAX_MEMORY_ENV)
     if env:
-        return parse_memory(env), f"${MAX_MEMORY_ENV}"
+        return parse_memory(env, f"the environment variable {MAX_MEMORY_ENV}", MIN_MEMORY_LIMIT), f"${MAX_MEMORY_ENV}"
     avail = available_memory()
     if avail is None:
         return None, "unknown"
@@ -777,13 +803,13 @@ def check_fit_memory(
                               grid_side)
     limit, source = memory_limit(max_memory)
     if limit is not None and est["total"] > limit:
-        parts = ", ".join(f"{k} {est[k] / 2**20:.0f} MiB" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
+        parts = ", ".join(f"{k} {size_text(est[k])}" for k in ("H", "HtH", "Gamma", "factor", "multigrid", "vectors",
                                                                     "shift", "workers", "fold_matrices")
                           if k not in ("workers", "fold_matrices") or est[k] > 0)
         raise ResourceLimit(
-            f"the fit needs an estimated {est['total'] / 2**20:.0f} MiB ({parts}) for T = {n_samples} samples and "
-            f"N = {n_vertices} weights, over the limit of {limit / 2**20:.0f} MiB ({source}); use fewer partitions "
-            f"or samples, or raise the limit with max_memory / ${MAX_MEMORY_ENV}"
+            f"the fit needs an estimated {size_text(est['total'])} ({parts}) for T = {n_samples} samples and "
+            f"N = {n_vertices} weights, over the limit of {size_text(limit)} ({source}); use fewer partitions "
+            f"or samples, or {RAISE_LIMIT_HINT}"
         )
     return est
 
@@ -839,9 +865,9 @@ def _checked_direct_factor(solver: "NormalEquationSolver", hth: sparse.sparray, 
         raise ResourceLimit(
             f"the direct solve's sparse Cholesky factor needs {solver.analysis.bytes / 2**20:.0f} MiB "
             f"(CHOLMOD's symbolic analysis of N = {solver.analysis.n} unknowns, {solver.analysis.flops:.2g} "
-            f"multiply-adds) and the fit {(est['total'] + extra) / 2**20:.0f} MiB in all, over the limit of "
-            f"{limit / 2**20:.0f} MiB; use the iterative solver (method 'auto' or 'cg'), fewer partitions or "
-            f"samples, or raise the limit with max_memory / ${MAX_MEMORY_ENV}"
+            f"multiply-adds) and the fit {size_text(est['total'] + extra)} in all, over the limit of "
+            f"{size_text(limit)}; use the iterative solver (method 'auto' or 'cg'), fewer partitions or "
+            f"samples, or {RAISE_LIMIT_HINT}"
         )
     return dict(est, factor=est["factor"] + extra, total=est["total"] + extra)
 
