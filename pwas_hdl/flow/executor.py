@@ -92,6 +92,21 @@ def _run_with_retry(fn: Callable[..., Any], item: Any) -> Any:
         return fn(item)
 
 
+def _check_address(scheduler: object, source: str) -> None:
+    """Refuse a scheduler address that is not ``PROTOCOL://HOST[:PORT]`` with a port in 1..65535 (at
+    once: a port out of range would only fail after the connect timeout). ``source`` names where it came from."""
+    fix = "give an address like tcp://HOST:PORT" + (f" or unset {SCHEDULER_ENV}" if source != "--scheduler" else "")
+    if not (isinstance(scheduler, str) and "://" in scheduler):
+        raise InputError(f"{source} must be an address like tcp://HOST:PORT, got {scheduler!r}; {fix}")
+    rest = scheduler.split("://", 1)[1]
+    host, sep, port = rest.rpartition(":")
+    if sep and host and not host.endswith("]") and ":" in host:  # an IPv6 address without brackets: no port to check
+        return
+    if sep and host:
+        if not (port.isdigit() and 1 <= int(port) <= 65535):
+            raise InputError(f"{source} {scheduler!r}: the port {port!r} is not a number from 1 to 65535; {fix}")
+
+
 class Executor:
     """Run independent tasks serially or on Dask (see the module notes).
 
@@ -117,10 +132,12 @@ class Executor:
             if workers > MAX_LOCAL_WORKERS:
                 raise InputError(f"--workers {workers} is more than the {MAX_LOCAL_WORKERS} a local cluster may have; "
                                  "use --scheduler for a larger cluster")
+        source = "--scheduler"
         if scheduler is None:
             scheduler = os.environ.get(SCHEDULER_ENV) or None
-        if scheduler is not None and not (isinstance(scheduler, str) and "://" in scheduler):
-            raise InputError(f"--scheduler must be an address like tcp://HOST:PORT, got {scheduler!r}")
+            source = f"the environment variable {SCHEDULER_ENV}"
+        if scheduler is not None:
+            _check_address(scheduler, source)
         self.workers = workers
         self.scheduler = scheduler
         self._client = None
