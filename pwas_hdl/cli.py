@@ -37,7 +37,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import OutputSet, check_output_path, install_termination_handler
-from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories, write_csv
+from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories
 from pwas_hdl.limits import MAX_NOISE, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).

@@ -439,3 +439,14 @@ def test_no_progress_bar_or_blank_line_when_not_a_terminal(tmp_path, monkeypatch
     assert code == 0 and err.startswith("fitted ") and "\n\n" not in err, err
     code, err = run("generate", "m.json", "-o", "g", "--goal", "latency", "--pipeline", "max")
     assert code == 2 and err.startswith("error: ") and len(err.splitlines()) == 1, err
+
+
+def test_python_dash_m_runs_the_command_line():
+    """``python -m pwas_hdl`` is the ``pwas-hdl`` command (pwas_hdl/__main__.py)."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "pwas_hdl", "--version"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("pwas-hdl "), r.stdout + r.stderr
+    r = subprocess.run([sys.executable, "-m", "pwas_hdl", "fit"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.startswith("error:"), r.stderr
