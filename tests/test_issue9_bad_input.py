@@ -680,3 +680,11 @@ def test_an_empty_path_is_refused_not_taken_for_the_working_folder(work, design,
     res = invoke(*[a.format(g=design) for a in args], cwd=work)
     assert_refused(res, "the output path is empty")
     assert tree(work) == before
+
+
+@pytest.mark.skipif(not os.path.isdir("/sys") or os.access("/sys", os.W_OK) is False, reason="needs /sys, where access() says writable to root")
+def test_a_folder_where_nothing_can_be_created_is_refused_naming_the_option(work):
+    """root on /sys: access() says writable, creating fails; the message named the internal temporary file."""
+    res = invoke("predict", work / "m.json", work / "t.csv", "-o", "/sys/pwas-probe.csv")
+    assert_refused(res, "-o/--out '/sys/pwas-probe.csv': nothing can be written in the folder '/sys'")
+    assert "pwas-tmp" not in res.output

@@ -209,6 +209,13 @@ def check_output_path(path: str | os.PathLike, what: str = "output", *, kind: st
             raise InputError(f"{what} {shown!r} exists and is not a folder; choose another path")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise InputError(f"{what} {shown!r}: the folder {str(anc)!r} is not writable; choose another path")
+    try:  # what access() cannot tell (root on a read-only or pseudo file system such as /sys): try it
+        fd, probe = tempfile.mkstemp(prefix=_temp_prefix("probe"), suffix=".tmp", dir=anc)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError(f"{what} {shown!r}: nothing can be written in the folder {str(anc)!r} "
+                         f"({exc.strerror or exc}); choose another path") from None
     return p
 
 
