@@ -120,6 +120,18 @@ def test_serial_design_passes_at_its_ii_and_a_wrong_ii_fails(folders, tmp_path):
 
 
 @pytest.mark.rtl
+@needs_iverilog
+@pytest.mark.parametrize("cfg", [SENSOR, SERIAL_SENSOR], ids=lambda c: c.name)
+def test_high_stall_rate_passes_a_correct_design(folders, tmp_path, cfg):
+    """--stall 0.95: a transfer takes about 1 / (1 - 0.95)^2 = 400 cycles; the cycle budget per pass
+    grows with it (a fixed budget once failed every correct design above --stall 0.9 with "in.ready
+    stuck low?")."""
+    res = export_testbench(folders / cfg.name, tmp_path / "tb", samples=200, seed=2, stall=0.95)
+    r = _icarus(Path(res["outdir"]))
+    assert r.returncode == 0 and "PASS" in r.stdout and "FAIL" not in r.stdout, r.stdout + r.stderr
+
+
+@pytest.mark.rtl
 @pytest.mark.parametrize("cfg", [SENSOR, CORE_WIDE_READMEMH, SERIAL_SENSOR], ids=lambda c: c.name)
 def test_exported_testbench_is_lint_clean(folders, tmp_path, cfg):
     """``verilator --lint-only -Wall`` on the testbench with its design: no warning (the design's
@@ -167,9 +179,12 @@ def test_export_cli_and_bad_input(folders, tmp_path):
         ([str(folders / SENSOR.name), "--samples", "0"], "--samples"),
         ([str(folders / SENSOR.name), "--samples", "2000000"], "limit"),
         ([str(folders / SENSOR.name), "--stall", "1.5"], "--stall"),
+        # rounds to 256/256 in the testbench's steps: no input would ever be offered
+        ([str(folders / SENSOR.name), "--stall", "0.999", "-o", str(tmp_path / "never")], "--stall 0.999"),
         ([str(folders / SENSOR.name), "-o", str(tmp_path / "mine")], "not written by export-testbench"),
     ]:
         r = runner.invoke(app, ["export-testbench", *args])
         assert r.exit_code == 2, (args, r.output)
         assert "error:" in r.output and msg in r.output and "Traceback" not in r.output, r.output
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+    assert not (tmp_path / "never").exists()

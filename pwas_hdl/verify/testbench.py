@@ -21,6 +21,7 @@ and whole-range codes), the same as the RTL tests use.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 from pathlib import Path
@@ -82,7 +83,8 @@ def export_testbench(
         Seed of the stimulus and of the testbench's stall pattern.
     stall : float
         Probability of a bubble on the input and of backpressure on the output per cycle in
-        passes 1-3 (``0 <= stall < 1``, rounded to multiples of 1/256).
+        passes 1-3 (``0 <= stall < 1``, rounded to multiples of 1/256: at most 255/256). The
+        testbench's cycle budget per pass grows as ``1 / (1 - stall)^2``.
 
     Returns
     -------
@@ -96,6 +98,10 @@ def export_testbench(
         raise ResourceLimit(f"--samples {samples} is more than the limit of {MAX_SAMPLES} vectors an exported testbench holds")
     if not 0.0 <= float(stall) < 1.0:
         raise InputError(f"--stall must be in [0, 1), got {stall}")
+    stall_256 = int(round(float(stall) * 256))  # the testbench draws its stalls in steps of 1/256
+    if stall_256 >= 256:
+        raise InputError(f"--stall {stall} rounds to 256/256 in the testbench's steps of 1/256 (no input would ever be "
+                         f"offered); use at most {255 / 256:.6g}")
     from pwas_hdl.design.manifest import load_manifest
 
     if load_manifest(design_dir)["design"] == "estimator":  # no PWAS model for load_design: its folder holds estimator.json
@@ -144,6 +150,10 @@ def export_testbench(
     ii = int(man["ii"])
     # a serial design (II > 1) takes the lag bank's warm-up transfers unthrottled (as the cocotb bench measures it)
     ii_from = 1 if ii == 1 else design.warmup + 1
+    # cycles per pass before giving up: with stalls a transfer needs a cycle with in.valid (probability
+    # 1 - q) and one with out.ready that lets the pipeline move (1 - q), about 1 / (1 - q)^2 cycles each;
+    # 8 times the expected count (64-bit: at q = 255/256 a transfer takes about 65 536 cycles)
+    limit = math.ceil(8 * (len(vin) * ii + design.latency + 16) * (256 / (256 - stall_256)) ** 2) + 1000
     text = _VerilogTemplate((templates_dir() / "testbench.v.tmpl").read_text(encoding="utf-8")).substitute(
         top=top, version=__version__, tb_name=tb, in_file=in_file, exp_file=exp_file, n_in=len(vin), n_out=len(vexp),
         latency=design.latency, warmup=design.warmup, hold=hold, wi=wi, wo=wo, ii=ii, ii_from=ii_from,
@@ -151,7 +161,7 @@ def export_testbench(
         mem_dir_note=" / MEM_DIR" if mem_param else "", mem_dir_plural="s" if mem_param else "",
         mem_dir_files=" and of the design's .hex weight files" if mem_param else "",
         mem_dir_decl='  parameter MEM_DIR = "./";\n' if mem_param else "",
-        seed=f"{(seed * 2654435761 + 0x1234567) & 0xFFFFFFFF or 1:08x}", stall=int(round(float(stall) * 256)),
+        seed=f"{(seed * 2654435761 + 0x1234567) & 0xFFFFFFFF or 1:08x}", stall=stall_256, limit=limit,
         out_valid=_port(man, "out.valid")["name"], reset_port=man["reset"]["port"], reset_polarity="low" if low else "high",
         warm_note=", warm high exactly from the transfer that yields the first output" if has_warm else "",
         warm_decl="  wire warm;" if has_warm else "",
