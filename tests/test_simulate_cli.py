@@ -113,6 +113,16 @@ def test_simulate_core_trajectories_with_stalls(folders, sim_cache, tmp_path):
 
 
 @pytest.mark.rtl
+def test_simulate_at_the_largest_stall_passes(folders, sim_cache, tmp_path):
+    """--stall 0.95 (MAX_STALL): a correct design passes within the bench's cycle limit."""
+    res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "-o", str(tmp_path / "o.csv"),
+                              "--stall", "0.95", "--build-dir", str(sim_cache)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o.json").read_text())
+    assert s["samples"] == 149 and s["mismatches"] == 0 and s["stall"] == 0.95
+
+
+@pytest.mark.rtl
 def test_simulate_sensor_resets_between_trajectories(folders, sim_cache, tmp_path):
     res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "data.csv"), "-o", str(tmp_path / "o.csv"),
                               "--traj-col", "run", "--build-dir", str(sim_cache)])
@@ -164,6 +174,10 @@ def test_simulate_reports_rtl_mismatch(folders, sim_cache, tmp_path):
     [
         (["--simulator", "modelsim"], "simulator must be one of"),
         (["--stall", "1.5"], "--stall must be in"),
+        # beyond what the benches' cycle limit covers: refused before anything runs (it once ran and
+        # reported a correct design as failing, "only 255 of 300 inputs were accepted", exit 1)
+        (["--stall", "0.999"], "--stall must be in [0, 0.95]"),
+        (["--stall", "0.96"], "--stall must be in [0, 0.95]"),
         (["--engine", "vcs"], "--engine must be one of"),
         (["--engine", "native", "--simulator", "icarus"], "runs on Verilator"),
         (["--engine", "native", "--waves"], "without waveforms"),

@@ -51,6 +51,7 @@ __all__ = [
     "SIM_DIR",
     "SIMULATORS",
     "ENGINES",
+    "MAX_STALL",
     "Design",
     "Segment",
     "Run",
@@ -70,6 +71,12 @@ SIM_DIR = sim_dir()
 SIMULATORS = ("icarus", "verilator")
 #: Testbench engines of :func:`run_rtl` / ``pwas-hdl simulate --engine``.
 ENGINES = ("cocotb", "native")
+#: Largest ``--stall`` of ``pwas-hdl simulate``. The benches (``sim/pwas_tb.py``,
+#: ``sim/pwas_recurrent_tb.py``, ``sim/pwas_native_tb.cpp``) give up after about 4 / (p_valid p_ready)
+#: times the transfers' cycles with each probability taken >= 0.05, i.e. 4 times what a stalled
+#: stream needs up to a stall of 0.95 (a transfer: about 1 / (1 - stall)^2 = 400 cycles); above it they
+#: failed correct designs (and a transfer would take thousands of cycles: hours in cocotb).
+MAX_STALL = 0.95
 
 
 def sim_module(name: str):
@@ -838,8 +845,9 @@ def simulate_data(
         simulator = "verilator" if engine == "native" else "icarus"
     if simulator not in SIMULATORS:
         raise ValueError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
-    if not 0.0 <= stall < 1.0:
-        raise ValueError(f"--stall must be in [0, 1), got {stall}")
+    if not 0.0 <= stall <= MAX_STALL:
+        raise ValueError(f"--stall must be in [0, {MAX_STALL}] (the probability of a bubble / of backpressure per cycle; "
+                         f"the benches' cycle limit covers stalls up to {MAX_STALL}), got {stall}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:  # a seed of the stalls, as numpy takes it
         raise InputError(f"--seed must be an integer >= 0, got {seed!r}")
     check_output_path(output, "-o")  # before its .json sibling is made from it
