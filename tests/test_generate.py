@@ -104,6 +104,9 @@ def test_bad_options_write_nothing(lorenz_model, tmp_path):
         (["--memory", "dual"], "memory must be"),
         (["--name", "9bad"], "identifier"),
         (["--input-bits", "2"], "too small"),
+        # --fpga is checked without --clock-mhz / --goal too (it was silently ignored, exit 0)
+        (["--fpga", "foo"], "--fpga (fpga_target) must be one of ecp5, ice40, got 'foo'"),
+        (["--fpga", "generic"], "--fpga (fpga_target) must be one of ecp5, ice40"),
     ]:
         res = runner.invoke(app, ["generate", str(lorenz_model), "-o", str(out), *args])
         assert res.exit_code == 2, (args, res.output)

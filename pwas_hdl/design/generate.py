@@ -366,7 +366,10 @@ def build_design(
     from pwas_hdl.design.estimator import build_estimator_design, is_estimator
 
     from pwas_hdl.design.goal_memory import DEFAULT_MEMORY, goal_memory
+    from pwas_hdl.flow.timing_closure import FPGA_TARGETS
 
+    if fpga_target not in FPGA_TARGETS:  # checked whether or not --clock-mhz / --goal use it: never silently ignored
+        raise ValueError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga_target!r}")
     if is_estimator(model):  # an estimator file (seed 003's switched observer): pwas_hdl.design.estimator
         return build_estimator_design(model, design=design, name=name, memory=memory or DEFAULT_MEMORY, pipeline=pipeline, memory_init=memory_init,
                                       ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
