@@ -759,7 +759,7 @@ def synth(
     package: Annotated[Optional[str], typer.Option("--package", help="Package (default per device).")] = None,
     clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Clock constraint in MHz for place and route (default: nextpnr's).")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Placer seed, 0 .. 2^63-1.")] = 1,
-    harness: Annotated[bool, typer.Option("--harness/--no-harness", help="Place and route inside the timing harness that registers every port (default), so fmax covers the input and output paths, as generate --clock-mhz and benchmarks/hw_tables.py measure it; --no-harness: the bare design, register-to-register paths only.")] = True,
+    harness: Annotated[Optional[bool], typer.Option("--harness/--no-harness", help="Place and route inside the timing harness that registers every port (the default on ecp5 and ice40; refused with generic, which has no place and route), so fmax covers the input and output paths, as generate --clock-mhz and benchmarks/hw_tables.py measure it; --no-harness: the bare design, register-to-register paths only.", show_default=False)] = None,
     floorplan: Annotated[str, typer.Option("--floorplan", help="ECP5 hard-block placement: auto (default) fixes the block RAMs to the central EBR row and the multipliers to the DSP row below it where that was measured to help: the latency-first pipeline (--goal latency; mul_in without mem_out) with the banked or replicated memory on the LFE5U-45F (--device 45k), at most 36 of each; none: nextpnr places them freely. synth.json's floorplan records the sites or why there are none.")] = "auto",
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Also copy the JSON report here.")] = None,
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for the tool files and results (default OUTDIR/synth/FPGA, where `report` finds them).", show_default=False)] = None,
@@ -785,7 +785,7 @@ def synth(
         if out is not None:
             check_output_path(out, "-o/--out", kind="folder")
         res = synthesize(outdir, family, device=device, package=package, freq_mhz=freq, seed=seed, workdir=out,
-                         progress=_say, harness=harness and family != "generic", floorplan=floorplan)
+                         progress=_say, harness=harness, floorplan=floorplan)
         if json_out is not None:
             with outset:
                 outset.write_text(json_out, json.dumps(res, indent=2) + "\n")

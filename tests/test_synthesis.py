@@ -337,6 +337,17 @@ def test_a_package_the_device_has_not_is_refused_before_yosys(design: Path, targ
     assert not (design / "synth").exists()
 
 
+def test_cli_harness_with_the_generic_target_is_refused(design: Path):
+    """`synth --fpga generic --harness` was silently synthesised without the harness (exit 0)."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+
+    r = CliRunner().invoke(app, ["synth", str(design), "--fpga", "generic", "--harness"])
+    assert r.exit_code == 2 and r.output.count("error:") == 1 and "no timing harness" in r.output, r.output
+    assert "drop --harness" in r.output and not (design / "synth").exists()
+
+
 def test_every_default_package_is_a_known_package():
     for dev, (pkg, _, _) in synthesis._ICE40.items():
         assert pkg in synthesis._ICE40_PACKAGES[dev], dev

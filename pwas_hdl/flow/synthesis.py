@@ -254,7 +254,8 @@ def synthesize(
     if harness is None:
         harness = target != "generic"
     if harness and target == "generic":
-        raise ValueError("the generic target has no place and route, so no timing harness; use --target ice40/ecp5")
+        raise ValueError("--harness: the generic target has no place and route, so no timing harness; drop --harness "
+                         "or use --fpga ice40/ecp5")
 
     outdir = Path(outdir)
     manifest = load_manifest(outdir)
