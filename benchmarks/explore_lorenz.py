@@ -117,8 +117,8 @@ def main() -> None:
             "-o", "train.csv", cwd=work)
         fit_log = cli("fit", "train.csv", "--output", "y", "--target", "z", "--my", "4", "-p", "7", "-o", "model.json", cwd=work)
         t1 = time.perf_counter()
-        log = cli("explore", "model.json", "test.csv", "-o", "explore", "--resources", args.resources,
-                  "--measure-max", str(args.measure_max), cwd=work)
+        measure = ["--measure-max", str(args.measure_max)] if args.resources != "estimate" else []  # refused without synthesis
+        log = cli("explore", "model.json", "test.csv", "-o", "explore", "--resources", args.resources, *measure, cwd=work)
         t2 = time.perf_counter()
         res = json.loads((work / "explore" / "explore.json").read_text())
         res["benchmark"] = {

@@ -882,7 +882,7 @@ def explore(
     fpga: Annotated[Optional[str], typer.Option("--fpga", help="Also synthesise the Pareto points and the default on this FPGA family: generic, ecp5 or ice40 (default: the analytic resource estimate only).", show_default=False)] = None,
     cost: Annotated[str, typer.Option("--cost", help="Cost axis of the front: total_bits, memory_bits, logic_bits, register_bits, mult_bit_products, adder_bits, dsp18 or bram18k.")] = "total_bits",
     device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --fpga ecp5/ice40 (as for synth).")] = None,
-    measure_max: Annotated[int, typer.Option("--measure-max", help="Synthesise at most this many Pareto points (spread along the front) besides the default.")] = 10,
+    measure_max: Annotated[Optional[int], typer.Option("--measure-max", help="With --fpga: synthesise at most this many Pareto points (spread along the front) besides the default (default 10).", show_default=False)] = None,
     synth_dir: Annotated[Optional[Path], typer.Option("--synth-dir", help="Keep the synthesised designs here (default: a temporary folder, removed).")] = None,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,

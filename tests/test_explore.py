@@ -310,10 +310,17 @@ def test_cli_explore(tiny, tmp_path):
     for args, msg in ((["--traj-col", "run"], "no column named 'run'"), (["--input-bits", "a"], "--input-bits"),
                       (["--weight-frac", "3:1"], "not a range"),
                       (["--fpga", "xx"], "error: --fpga must be one of generic, ecp5, ice40"),
-                      (["--resources", "xx"], "error: --fpga must be one of generic, ecp5, ice40")):
+                      (["--resources", "xx"], "error: --fpga must be one of generic, ecp5, ice40"),
+                      # the synthesis options without --fpga were silently ignored
+                      (["--device", "85k"], "error: --device needs --fpga ecp5|ice40|generic"),
+                      (["--measure-max", "3"], "error: --measure-max needs --fpga ecp5|ice40|generic (it is about the synthesis"),
+                      (["--device", "85k", "--synth-dir", "sd"], "--device, --synth-dir need --fpga ecp5|ice40|generic (they are about"),
+                      (["--synth-dir", str(tmp_path / "sd")], "error: --synth-dir needs --fpga ecp5|ice40|generic"),
+                      (["--fpga", "generic", "--device", "85k"], "error: --device needs --fpga ecp5 or ice40"),
+                      (["--fpga", "ecp5", "--device", "99k"], "error: unknown ECP5 device '99k'")):
         r = runner.invoke(app, ["explore", str(root / "model.json"), str(root / "test.csv"), "-o", str(bad), *args])
-        assert r.exit_code == 2 and msg in r.output, r.output
-        assert not bad.exists()
+        assert r.exit_code == 2 and msg in r.output and r.output.count("error:") == 1, r.output
+        assert not bad.exists() and not (tmp_path / "sd").exists()
 
 
 def test_help_states_the_default_fraction_sweep():

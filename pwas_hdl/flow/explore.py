@@ -459,7 +459,7 @@ def explore(
     resources: str = "estimate",
     cost: str = "total_bits",
     device: str | None = None,
-    measure_max: int = DEFAULT_MEASURE_MAX,
+    measure_max: int | None = None,
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     executor: "Executor | None" = None,
@@ -493,12 +493,14 @@ def explore(
     cost : str
         Estimate key used as the cost axis of the front (:data:`COST_KEYS`, default ``total_bits``).
     device : str, optional
-        FPGA device for ``ecp5`` / ``ice40``.
-    measure_max : int
+        FPGA device for ``ecp5`` / ``ice40`` (checked before the sweep, as ``synth`` checks it).
+    measure_max : int, optional
         With measured resources, synthesise at most this many Pareto points (evenly spread along
-        the front, both ends kept), plus the default.
+        the front, both ends kept), plus the default (default :data:`DEFAULT_MEASURE_MAX`).
     workdir : path, optional
         Where the synthesised designs go (kept); default a temporary folder, removed afterwards.
+        ``device``, ``measure_max`` and ``workdir`` are about the synthesis: with
+        ``resources="estimate"`` they are refused (``ValueError``) rather than ignored.
     progress : callable(stage, done, total), optional
         Called as the sweep and the synthesis runs progress.
     blank_rows : {"error", "break"}
@@ -533,8 +535,22 @@ def explore(
         raise ValueError(f"--cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
     if memory not in ("banked", "replicated"):
         raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
-    if isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1:
+    if measure_max is not None and (isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1):
         raise ValueError(f"--measure-max (measure_max) must be an integer >= 1, got {measure_max!r}")
+    if resources == "estimate":  # the synthesis options mean nothing without synthesis: refused, not ignored
+        given = [opt for opt, v in (("--device", device), ("--measure-max", measure_max), ("--synth-dir", workdir)) if v is not None]
+        if given:
+            one = len(given) == 1
+            raise ValueError(f"{', '.join(given)} {'needs' if one else 'need'} --fpga ecp5|ice40|generic ({'it is' if one else 'they are'} "
+                             f"about the synthesis of the Pareto points); add --fpga or drop {'it' if one else 'them'} for the analytic estimate only")
+    elif device is not None:
+        if resources == "generic":
+            raise ValueError("--device needs --fpga ecp5 or ice40 (the generic target has no device); drop it or choose the family")
+        from pwas_hdl.flow.synthesis import check_device
+
+        check_device(resources, device)  # an unknown device refused before the sweep, as synth refuses it
+    if measure_max is None:
+        measure_max = DEFAULT_MEASURE_MAX
     if workdir is not None:
         check_output_path(workdir, "--synth-dir", kind="folder")
     sensor, model_path = _load_sensor(model)

@@ -515,6 +515,14 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
     return dev, pkg, f"{prefix}-{size[:-1]}F-6{pkg}", None, True
 
 
+def check_device(target: str, device: str | None) -> None:
+    """``ValueError`` unless ``device`` is a part of ``target`` that :func:`synthesize` takes (for
+    callers that synthesise later, e.g. ``explore --fpga ecp5 --device D``)."""
+    if target not in TARGETS:
+        raise ValueError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
+    _resolve_device(target, device, None, None)
+
+
 def _verilog_files(outdir: Path, manifest: dict[str, Any]) -> list[Path]:
     files = manifest["files"]["verilog"]  # a name or a list of names (validated by load_manifest)
     if isinstance(files, str):
