@@ -56,3 +56,44 @@ def test_report_refuses_a_foreign_summary(tmp_path):
     assert res.exit_code == 2 and "not a `pwas-hdl simulate` summary" in res.output
     res = runner.invoke(app, ["report", str(tmp_path / "nowhere")])
     assert res.exit_code == 2 and "run `pwas-hdl generate" in res.output
+
+
+SIM_OK = {"simulator": "icarus", "samples": 10, "mismatches": 0, "latency_cycles": {"measured_min": 7, "measured_max": 7},
+          "ii": {"measured": 1.0}, "max_error_vs_float_lsb": 0.25, "targets": {"z": {"rmsee_float": 0.5, "rmsee_hw": 0.51}}}
+SYNTH_OK = {"target": "ecp5", "top": "pwas_core", "part": "LFE5U-45F", "luts": 123, "ffs": 45, "fmax_mhz": 99.5,
+            "latency_ns": 70.35, "throughput_msps": 99.5}
+
+
+def test_report_refuses_values_out_of_range(tmp_path):
+    """Negative counts, zero samples, an infinite fmax, another top were printed as if measured."""
+    out = _folder(tmp_path)
+    man = json.loads((out / "manifest.json").read_text())
+    cases = [
+        ("sim", {"mismatches": -5}, "mismatches = -5 is out of range"),
+        ("sim", {"samples": 0, "mismatches": 0}, "samples = 0 is out of range"),
+        ("sim", {"mismatches": 11}, "more than samples"),
+        ("sim", {"latency_cycles": {"measured_min": -1, "measured_max": 7}}, "latency_cycles.measured_min = -1"),
+        ("sim", {"max_error_vs_float_lsb": float("nan")}, "not a finite number"),
+        ("sim", {"targets": {"z": {"rmsee_hw": -0.5}}}, "targets.z.rmsee_hw = -0.5"),
+        ("sim", {"design": "other_top", "design_hash": man["design_hash"]}, "result for the top \"other_top\""),
+        ("synth", {"luts": -1}, "luts = -1 is out of range"),
+        ("synth", {"fmax_mhz": float("inf")}, "fmax_mhz = inf is not a finite number"),
+        ("synth", {"fmax_mhz": 0}, "fmax_mhz = 0 is out of range (must be > 0)"),
+        ("synth", {"target": "xilinx"}, "target = \"xilinx\" is not one of"),
+        ("synth", {"top": "other_top", "design_hash": man["design_hash"]}, "result for the top \"other_top\""),
+    ]
+    for kind, change, msg in cases:
+        for p in (out / "sim" / "s.json", out / "synth" / "ecp5" / "synth.json"):
+            p.unlink(missing_ok=True)
+        path = out / "sim" / "s.json" if kind == "sim" else out / "synth" / "ecp5" / "synth.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({**(SIM_OK if kind == "sim" else SYNTH_OK), **change}))  # Infinity / NaN as JSON writes them
+        res = runner.invoke(app, ["report", str(out), "--json", str(tmp_path / "r.json"), "-o", str(tmp_path / "r.md")])
+        assert res.exit_code == 2, (change, res.output)
+        assert res.output.count("error:") == 1 and msg in res.output and "Traceback" not in res.output, (change, res.output)
+        assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.md").exists()
+    # the same files within range are shown; another top marked stale (an earlier design) is kept, not refused
+    (out / "sim" / "s.json").write_text(json.dumps({**SIM_OK, "design": "other_top", "design_hash": "0" * 64}))
+    (out / "synth" / "ecp5" / "synth.json").write_text(json.dumps({**SYNTH_OK, "top": man["top"], "design_hash": man["design_hash"]}))
+    res = runner.invoke(app, ["report", str(out)])
+    assert res.exit_code == 0 and "| ecp5 | LFE5U-45F | 123 | 45 |" in res.output and "stale" in res.output, res.output

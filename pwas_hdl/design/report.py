@@ -9,6 +9,7 @@ side by side; :func:`report_markdown` renders them.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any, Sequence
@@ -77,9 +78,49 @@ def _read_json(path: Path) -> dict[str, Any]:
 _SIM_KEYS = {"simulator": str, "samples": int, "mismatches": int, "latency_cycles": dict, "ii": dict}
 _SYNTH_KEYS = {"target": str, "luts": int, "ffs": int, "fmax_mhz": (int, float, type(None))}
 
+_NUM = (int, float, type(None))
+#: The values the report shows, by path in the result file: (types, smallest value, whether the
+#: smallest is excluded). Absent keys of the optional ones are shown as "-"; null is allowed where the
+#: types say so; numbers must be finite (JSON's Infinity / NaN are refused).
+_SIM_VALUES = {
+    ("samples",): (int, 1, False), ("mismatches",): (int, 0, False),
+    ("latency_cycles", "measured_min"): ((int, type(None)), 0, False),
+    ("latency_cycles", "measured_max"): ((int, type(None)), 0, False),
+    ("ii", "measured"): (_NUM, 0, True), ("max_error_vs_float_lsb",): (_NUM, 0, False),
+    ("samples_per_second",): (_NUM, 0, False),
+}
+_SIM_TARGET_VALUES = {"rmsee_float": (_NUM, 0, False), "rmsee_hw": (_NUM, 0, False),
+                      "rmsee_increase_hw_vs_float_percent": (_NUM, None, False)}
+_SYNTH_VALUES = {
+    ("luts",): (int, 0, False), ("ffs",): (int, 0, False), ("carry",): ((int, type(None)), 0, False),
+    ("dsp",): ((int, type(None)), 0, False), ("bram",): ((int, type(None)), 0, False),
+    ("bram_bits",): ((int, type(None)), 0, False), ("fmax_mhz",): (_NUM, 0, True),
+    ("latency_ns",): (_NUM, 0, True), ("throughput_msps",): (_NUM, 0, True),
+}
+
+
+def _check_values(d: dict[str, Any], spec: dict[tuple[str, ...], tuple], path: Path, command: str, where: str = "") -> None:
+    """Refuse a value of the wrong type or out of range (a negative count, zero samples, an infinite
+    or non-positive fmax) rather than print it."""
+    for keys, (types, lo, strict) in spec.items():
+        v: Any = d
+        for k in keys:
+            v = v.get(k) if isinstance(v, dict) else None
+        name = where + ".".join(keys)
+        if isinstance(v, bool) or not isinstance(v, types):
+            raise InputError(f"{path}: {name} = {json.dumps(v)} has the wrong type; re-run `pwas-hdl {command}`")
+        if v is None:
+            continue
+        if isinstance(v, float) and not math.isfinite(v):
+            raise InputError(f"{path}: {name} = {v} is not a finite number; re-run `pwas-hdl {command}`")
+        if lo is not None and (v <= lo if strict else v < lo):
+            raise InputError(f"{path}: {name} = {json.dumps(v)} is out of range (must be {'>' if strict else '>='} {lo}); "
+                             f"re-run `pwas-hdl {command}`")
+
 
 def _require(d: Any, keys: dict[str, Any], path: Path, command: str) -> dict[str, Any]:
-    """Refuse a result file that lacks what the report shows (instead of printing ``None`` rows)."""
+    """Refuse a result file that lacks what the report shows (instead of printing ``None`` rows),
+    or holds a value of the wrong type or out of range."""
     noun = "summary" if command == "simulate" else "result"
     if not isinstance(d, dict):
         raise InputError(f"{path} is not a `pwas-hdl {command}` {noun} (not a JSON object); re-run `pwas-hdl {command}`")
@@ -92,7 +133,31 @@ def _require(d: Any, keys: dict[str, Any], path: Path, command: str) -> dict[str
     bad = [k for k, t in keys.items() if not isinstance(d[k], t) or isinstance(d[k], bool)]
     if bad:
         raise InputError(f"{path}: {', '.join(f'{k} = {json.dumps(d[k])}' for k in bad)} has the wrong type; re-run `pwas-hdl {command}`")
+    if command == "simulate":
+        _check_values(d, _SIM_VALUES, path, command)
+        if d["mismatches"] > d["samples"]:
+            raise InputError(f"{path}: mismatches = {d['mismatches']} is more than samples = {d['samples']}; re-run `pwas-hdl {command}`")
+        targets = d.get("targets", {})
+        if isinstance(targets, dict):
+            for t, v in targets.items():
+                if isinstance(v, dict):
+                    _check_values(v, {(k,): spec for k, spec in _SIM_TARGET_VALUES.items()}, path, command, f"targets.{t}.")
+    else:
+        _check_values(d, _SYNTH_VALUES, path, command)
+        from pwas_hdl.flow.synthesis import TARGETS
+
+        if d["target"] not in TARGETS:
+            raise InputError(f"{path}: target = {json.dumps(d['target'])} is not one of {', '.join(TARGETS)}; re-run `pwas-hdl {command}`")
     return d
+
+
+def _check_top(r: dict[str, Any], key: str, man: dict[str, Any], path: Path, command: str) -> None:
+    """A result for another top level than the folder's (and not marked stale: same design hash or
+    none) belongs to another design: refused, not shown as this one's."""
+    top = r.get(key)
+    if top is not None and top != man["top"] and not _is_stale(r, man):
+        raise InputError(f"{path} is a result for the top {json.dumps(top)}, not this folder's {man['top']}; "
+                         f"re-run `pwas-hdl {command}` on this folder or remove the file")
 
 
 def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.PathLike] = ()) -> dict[str, Any]:
@@ -177,6 +242,7 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
     sims = []
     for p in paths:
         s = _require(_read_json(p), _SIM_KEYS, p, "simulate")
+        _check_top(s, "design", man, p, "simulate")
         if not isinstance(s.get("targets", {}), dict) or not all(isinstance(v, dict) for v in s.get("targets", {}).values()):
             raise InputError(f"{p}: \"targets\" is not an object of objects; re-run `pwas-hdl simulate`")
         sims.append(
@@ -201,6 +267,7 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
     synth = []
     for p in sorted(out.glob("synth/*/synth.json")):
         r = _require(_read_json(p), _SYNTH_KEYS, p, "synth")
+        _check_top(r, "top", man, p, "synth")
         synth.append({k: r.get(k) for k in ("target", "part", "luts", "ffs", "carry", "dsp", "bram", "bram_bits",
                                              "fmax_mhz", "latency_ns", "throughput_msps", "timing_met")})
         synth[-1].update(file=p.relative_to(out).as_posix(), stale=_is_stale(r, man))
