@@ -688,3 +688,13 @@ def test_a_folder_where_nothing_can_be_created_is_refused_naming_the_option(work
     res = invoke("predict", work / "m.json", work / "t.csv", "-o", "/sys/pwas-probe.csv")
     assert_refused(res, "-o/--out '/sys/pwas-probe.csv': nothing can be written in the folder '/sys'")
     assert "pwas-tmp" not in res.output
+
+
+def test_a_bad_sim_cache_variable_is_named_before_the_work(work, design, monkeypatch):
+    """PWAS_HDL_SIM_CACHE naming a file: it said only 'cachefile: File exists', once simulating had started."""
+    (work / "cachefile").write_text("x")
+    monkeypatch.setenv("PWAS_HDL_SIM_CACHE", str(work / "cachefile"))
+    before = tree(work)
+    res = invoke("simulate", design, work / "t.csv", "-o", work / "s.csv")
+    assert_refused(res, "$PWAS_HDL_SIM_CACHE", "exists and is not a folder")
+    assert "simulating" not in res.output and tree(work) == before

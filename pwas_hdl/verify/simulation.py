@@ -867,6 +867,9 @@ def simulate_data(
         outset.add(waves_dir, "the --waves folder", kind="folder")
     if cache_dir is not None:
         check_output_path(cache_dir, "--build-dir", kind="folder")
+    elif os.environ.get("PWAS_HDL_SIM_CACHE"):  # the default cache from the environment: checked like the option
+        check_output_path(os.environ["PWAS_HDL_SIM_CACHE"], "$PWAS_HDL_SIM_CACHE (the simulator build cache; set it to "
+                          "a folder or unset it)", kind="folder")
     design = load_design(outdir)
     if design.kind == "recurrent":  # issue 13: the recurrent bench (pwas_hdl.verify.recurrent_simulation)
         from pwas_hdl.verify.recurrent_simulation import simulate_recurrent
