@@ -903,6 +903,8 @@ def explore(
         t = text.replace(" ", "")
         if ":" in t:
             a, _, b = t.partition(":")
+            if ":" in b or "," in t:
+                raise InputError(f"{what}: {text!r} is not a range A:B (two integers, A <= B) nor a comma list")
             lo, hi = _int_list(a, what), _int_list(b, what)
             if len(lo) != 1 or len(hi) != 1 or hi[0] < lo[0]:
                 raise InputError(f"{what}: {text!r} is not a range A:B with A <= B")

@@ -331,3 +331,12 @@ def test_help_states_the_default_fraction_sweep():
     said = " ".join(r.output.split())
     for opt in ("--weight-frac", "--output-frac"):
         assert f"default: generate's default {lo:+d}..{hi:+d}" in said.split(opt, 1)[1], opt
+
+
+def test_a_range_with_a_step_is_refused_as_given(tmp_path):
+    """``--input-bits 8:12:2`` (a step is no syntax here): the message quoted '12:2' instead of the value given."""
+    r = runner.invoke(app, ["explore", str(tmp_path / "m.json"), str(tmp_path / "d.csv"), "-o", str(tmp_path / "ex"),
+                            "--input-bits", "8:12:2"])
+    assert r.exit_code == 2 and "'8:12:2' is not a range A:B" in r.output, r.output
+    assert not (tmp_path / "ex").exists()
+
