@@ -173,7 +173,7 @@ def test_build_dir_that_is_a_file(work, design):
     assert_refused(invoke("simulate", design, work / "t.csv", "-o", work / "s.csv", "--build-dir", work / "d.csv"),
                    "--build-dir", "is not a folder")
     assert_refused(invoke("explore", work / "m.json", work / "t.csv", "-o", work / "e", "--input-bits", 12,
-                          "--synth-dir", work / "d.csv"), "--synth-dir", "is not a folder")
+                          "--fpga", "generic", "--synth-dir", work / "d.csv"), "--synth-dir", "is not a folder")
     assert tree(work) == before
 
 
