@@ -261,6 +261,13 @@ def _distinct_columns(*roles: tuple[str, list[str]]) -> None:
                 raise InputError(f"column {nm!r} is given both as {seen[nm]} and as {opt} ({why}); give each column one role")
 
 
+def _design_folder(outdir: Path) -> Path:
+    """OUTDIR of simulate / synth / report / export-testbench: a folder (a file, even its manifest.json, is refused)."""
+    if outdir.is_file():
+        raise InputError(f"OUTDIR {str(outdir)!r} is a file, not a folder written by `pwas-hdl generate`; give the design folder")
+    return outdir
+
+
 def _names(values: Optional[list[str]]) -> list[str]:
     res: list[str] = []
     for v in values or []:
@@ -774,6 +781,7 @@ def synth(
     from pwas_hdl.flow.synthesis import synth_summary_text, synthesize
 
     with _user_errors():
+        _design_folder(outdir)
         family = _merge("--fpga", fpga, target=target_old)
         family = "ecp5" if family is None else family  # an empty --fpga is refused by synthesize, not taken for ecp5
         freq = _merge("--clock-mhz", clock_mhz, freq=freq_old)
@@ -824,6 +832,7 @@ def simulate(
     from pwas_hdl.verify.simulation import simulate_data
 
     with _user_errors():
+        _design_folder(outdir)
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         res = simulate_data(
             outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
@@ -856,6 +865,7 @@ def export_testbench(
     from pwas_hdl.verify.testbench import export_testbench as _export
 
     with _user_errors():
+        _design_folder(outdir)
         if output is not None:
             check_output_path(output, "-o/--out", kind="folder")
         res = _export(outdir, output, samples=samples, seed=seed, stall=stall)
@@ -973,6 +983,7 @@ def report(
     from pwas_hdl.design.report import collect_report, report_markdown
 
     with _user_errors():
+        _design_folder(outdir)
         from pwas_hdl.design.report import report_inputs
 
         markdown = _merge("-o/--out", out, md=md_old)

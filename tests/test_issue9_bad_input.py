@@ -698,3 +698,14 @@ def test_a_bad_sim_cache_variable_is_named_before_the_work(work, design, monkeyp
     res = invoke("simulate", design, work / "t.csv", "-o", work / "s.csv")
     assert_refused(res, "$PWAS_HDL_SIM_CACHE", "exists and is not a folder")
     assert "simulating" not in res.output and tree(work) == before
+
+
+@pytest.mark.parametrize("args", [["simulate", "{x}", "t.csv", "-o", "s.csv"], ["synth", "{x}"], ["report", "{x}"],
+                                  ["export-testbench", "{x}"]])
+@pytest.mark.parametrize("which", ["d.csv", "manifest"])
+def test_a_file_given_as_the_design_folder_is_named_as_such(work, design, args, which):
+    """A data file said 'd.csv is not valid JSON ... re-run generate'; the manifest itself 'manifest.json/model.json: Not a directory'."""
+    x = str(work / "d.csv") if which == "d.csv" else str(design / "manifest.json")
+    before = tree(work)
+    assert_refused(invoke(*[a.format(x=x) for a in args], cwd=work), "is a file, not a folder written by `pwas-hdl generate`")
+    assert tree(work) == before

@@ -741,6 +741,9 @@ def load_manifest(outdir_or_file: str | os.PathLike) -> dict[str, Any]:
         p = p / MANIFEST_FILE
     if not p.exists():
         raise FileNotFoundError(f"{p} does not exist; run `pwas-hdl generate MODEL -o DIR` first")
+    if p.name != MANIFEST_FILE and p.suffix.lower() != ".json":  # e.g. a data CSV given where the folder goes
+        raise InputError(f"{p} is a file, not a folder written by `pwas-hdl generate` (nor its {MANIFEST_FILE}); "
+                         "give the design folder")
     d = read_json(p, _HINT)
     validate_manifest(d, str(p))
     errs = _folder_errors(d, p.parent)
