@@ -315,8 +315,8 @@ def fit(
     targets: Annotated[Optional[list[str]], typer.Option("-z", "--targets", help="Column(s) z to estimate.")] = None,
     mu: Annotated[int, typer.Option("--mu", help="Mu: past input samples in the regressor (0 = inputs unused).")] = 0,
     my: Annotated[int, typer.Option("--my", help="My: past output samples in the regressor.")] = 1,
-    partitions: Annotated[str, typer.Option("-p", "--partitions", help="Intervals per dimension: one integer or a comma list (one per regressor).")] = "7",
-    gamma: Annotated[float, typer.Option("--gamma", help="Domain expansion factor (>= 1) about the centre of the data box.")] = 1.2,
+    partitions: Annotated[Optional[str], typer.Option("-p", "--partitions", help="Intervals per dimension: one integer or a comma list (one per regressor); default 7. With a --breakpoints FILE, the file's (it sets the cells): leave it out or repeat them.", show_default=False)] = None,
+    gamma: Annotated[Optional[float], typer.Option("--gamma", help="Domain expansion factor (>= 1) about the centre of the data box; default 1.2. Not with a --breakpoints FILE (it sets the domain).", show_default=False)] = None,
     sigma: Annotated[Optional[float], typer.Option("--sigma", help="Tikhonov weight (unnormalised, eq. 14). Omit to choose it by cross-validation.")] = None,
     sigma_grid: Annotated[Optional[str], typer.Option("--sigma-grid", help="CV candidates: comma list or logspace:A:B:K.")] = None,
     folds: Annotated[int, typer.Option("--folds", help="Cross-validation folds.")] = 5,
@@ -417,7 +417,13 @@ def fit(
                 dom = ([a for a, _ in pairs], [b for _, b in pairs])
             except ValueError:
                 raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
-        parts = _int_list(partitions, "--partitions")
+        # the estimator's own defaults (PWASVirtualSensor: partitions 7, gamma 1.2) where the options are not given
+        grid_opts: dict[str, Any] = {}
+        if partitions is not None:
+            parts = _int_list(partitions, "--partitions")
+            grid_opts["partitions"] = parts[0] if len(parts) == 1 else parts
+        if gamma is not None:
+            grid_opts["gamma"] = gamma
         if mz < 0 or refine < 0:
             raise InputError(f"--mz and --refine must be >= 0, got {mz} and {refine}")
         if (refine or z0 is not None) and not mz:
@@ -440,13 +446,21 @@ def fit(
             bpath = Path(breakpoints)
             if not bpath.is_file():
                 raise InputError(f"--breakpoints must be quantile, quantile-pow2 or a breakpoints file; {breakpoints!r} is neither")
+            if gamma is not None:
+                raise InputError("a --breakpoints FILE sets the domain: --gamma does not apply; leave it out")
             bps, bp_names = read_breakpoints(bpath)
+            if partitions is not None:  # may repeat the file's intervals, not contradict them
+                file_parts = [len(b) - 1 for b in bps]
+                asked = grid_opts["partitions"]
+                asked = [asked] * len(file_parts) if isinstance(asked, int) else list(asked)
+                if asked != file_parts:
+                    raise InputError(f"-p/--partitions {partitions} differs from the intervals of --breakpoints {breakpoints} "
+                                     f"({','.join(map(str, file_parts))}); leave -p out (the file sets the cells)")
         from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor  # imports scikit-learn: only when needed
         model = PWASVirtualSensor(
             mu=mu,
             my=my,
-            partitions=parts[0] if len(parts) == 1 else parts,
-            gamma=gamma,
+            **grid_opts,
             sigma=sigma,
             tikhonov_order=tikhonov,
             cv_folds=folds,

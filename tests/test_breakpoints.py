@@ -154,8 +154,8 @@ def test_bad_breakpoints_file_is_one_error_line(content, msg, lorenz_csv, tmp_pa
     if content is not None:
         path.write_text(content)
     out = tmp_path / "m.json"
-    r = CliRunner().invoke(app, ["fit", str(lorenz_csv), "-y", "y", "-z", "z", "--my", "2", "-p", "4", "--sigma", "1e-3",
-                                 "--breakpoints", str(path), "-o", str(out)])
+    r = CliRunner().invoke(app, ["fit", str(lorenz_csv), "-y", "y", "-z", "z", "--my", "2", "--sigma", "1e-3",
+                                 "--breakpoints", str(path), "-o", str(out)])  # no -p: the file sets the cells
     assert r.exit_code == 2, r.output
     errs = [ln for ln in r.output.splitlines() if ln.startswith("error:")]
     assert len(errs) == 1 and msg in r.output, r.output

@@ -709,3 +709,19 @@ def test_a_file_given_as_the_design_folder_is_named_as_such(work, design, args, 
     before = tree(work)
     assert_refused(invoke(*[a.format(x=x) for a in args], cwd=work), "is a file, not a folder written by `pwas-hdl generate`")
     assert tree(work) == before
+
+
+def test_a_breakpoints_file_with_partitions_or_gamma_is_refused(work):
+    """The file sets the cells and the domain: --gamma and a -p other than the file's were silently ignored."""
+    bp = work / "bp.json"
+    bp.write_text(json.dumps({"format": "pwas-hdl-breakpoints", "version": 1,
+                              "breakpoints": [[-25, -8, 0, 8, 25], [-25, -5, 0, 5, 25]]}))
+    before = tree(work)
+    for extra, named in ((["-p", "7"], "-p/--partitions 7 differs from the intervals of --breakpoints"),
+                         (["-p", "4,3"], "-p/--partitions 4,3 differs"), (["--gamma", "2"], "--gamma does not apply")):
+        assert_refused(invoke("fit", work / "d.csv", "-o", work / "w.json", "-y", "y", "-z", "z", "--my", 2, "--sigma", 1e-3,
+                              "--breakpoints", bp, *extra), named)
+    assert tree(work) == before
+    for same in ([], ["-p", "4"], ["-p", "4,4"]):  # leave -p out, or repeat the file's intervals
+        assert invoke("fit", work / "d.csv", "-o", work / "w.json", "-y", "y", "-z", "z", "--my", 2, "--sigma", 1e-3,
+                      "--breakpoints", bp, *same).exit_code == 0
