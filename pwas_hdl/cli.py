@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import traceback
 from contextlib import contextmanager
@@ -162,9 +163,18 @@ def _user_errors() -> Iterator[None]:
 # clock. The names of earlier versions still work as hidden options (--output-model, --outdir,
 # --output, --input, --target, --resources, --freq, --target-mhz, --md / --json where they named
 # the main output); _merge() folds them into the new one.
+#: The metavar of the options that name a folder (the other ``Path`` options name files).
+FOLDER_METAVAR = "<dir>"
+
+
 def _hidden(*names: str) -> Any:
     """A hidden old name of an option (merged into the new one by :func:`_merge`)."""
     return typer.Option(*names, hidden=True, show_default=False)
+
+
+def _hidden_dir(*names: str) -> Any:
+    """A hidden old name of a folder option (``metavar=FOLDER_METAVAR``: a trailing ``/`` is allowed)."""
+    return typer.Option(*names, hidden=True, show_default=False, metavar=FOLDER_METAVAR)
 
 
 def _merge(new: str, value: Any, **old: Any) -> Any:
@@ -688,7 +698,7 @@ def info(model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model
 @app.command()
 def generate(
     model_path: Annotated[Path, typer.Argument(metavar="MODEL", help="Model file written by `pwas-hdl fit`, or an estimator file (make-data switched-linear --estimator-out): seed 003's estimator top (options --name, --ports, --input-bits).")],
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; in a folder an earlier `generate` made, only its files are replaced: sim/, synth/ and your files stay). Required.", show_default=False)] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (created; in a folder an earlier `generate` made, only its files are replaced: sim/, synth/ and your files stay). Required.", show_default=False, metavar=FOLDER_METAVAR)] = None,
     design: Annotated[str, typer.Option("--design", help="core: the PWAS core (input = regressor codes); sensor: lag bank + core (input = one (u, y) sample per transfer), or for an observer-bank model (fit --front-end observer-bank) the observer bank + residual features (+ the --mu/--my taps) + core; of a recurrent model (fit --mz, fit-map --state) sensor is the recurrent top: lag bank + core + feedback of the estimates, II = latency (manifest design recurrent; use --input-bits 16). An additive model (fit --additive) gets one core per part, summed before one rounding. A non-uniform model (fit --breakpoints quantile-pow2) gets a warp of every input code in front of the core (one more register; core, sensor, parallel or serial; manifest warp).")] = "core",
     name: Annotated[Optional[str], typer.Option("--name", help="Verilog module name (default pwas_core / pwas_sensor).")] = None,
     memory: Annotated[Optional[str], typer.Option("--memory", help="Weight memory: banked (n+1 banks, about N words), replicated (n+1 copies of N words) or corner (2**n banks addressed by the cell alone). Default: banked, except --goal latency on ECP5, which takes replicated where its bit-field addresses and its block RAMs fit the floorplan's row (a plain parallel core or sensor, power-of-two strides as p = 7, n > 1; manifest generator.options.memory says which).", show_default=False)] = None,
@@ -707,11 +717,15 @@ def generate(
     output_frac: Annotated[Optional[int], typer.Option("--output-frac", help="Output fraction bits (default: weight fraction + 1, at most the exact product's: input fraction + weight fraction).")] = None,
     overflow: Annotated[str, typer.Option("--overflow", help="Weights that do not fit: error (refuse) or saturate (with a warning).")] = "error",
     rounding: Annotated[str, typer.Option("--rounding", help="Rounding of weights and output: half_up or truncate.")] = "half_up",
+    state_bits: Annotated[Optional[int], typer.Option("--state-bits", help="Observer-bank sensor or estimator file: width B_s of the observer states (default: from the l1 state bound; smaller saturates, flagged, and the error bound then does not hold).")] = None,
+    state_frac: Annotated[Optional[int], typer.Option("--state-frac", help="Observer-bank sensor or estimator file: fraction bits F_s of the states (default: from the noise budget; at least the input fraction bits).")] = None,
+    coef_frac: Annotated[Optional[int], typer.Option("--coef-frac", help="Observer-bank sensor or estimator file: fraction bits F_c of the observer coefficients (default: from the noise budget).")] = None,
+    input_headroom: Annotated[Optional[float], typer.Option("--input-headroom", help="Observer-bank sensor or estimator file: H, the input codes hold (-H, H) (normalised units for a bank, physical for an estimator; default 8). Smaller: more input fraction bits, narrower datapaths.")] = None,
     clock_mhz: Annotated[Optional[float], typer.Option("--clock-mhz", help="Choose the pipeline by timing closure instead of --pipeline: the shallowest one whose fmax, measured by place and route (nextpnr, --fpga), reaches this clock in MHz. One P&R run per candidate tried (ECP5 ~25 s, iCE40 ~100 s for a Lorenz-size core).")] = None,
     fpga: Annotated[str, typer.Option("--fpga", help="FPGA family of --clock-mhz and --goal: ecp5 (LFE5U-45F) or ice40 (HX8K; --goal throughput then splits the LUT multipliers: preset max-lut).")] = "ecp5",
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
-    outdir_old: Annotated[Optional[Path], _hidden("--outdir")] = None,
+    outdir_old: Annotated[Optional[Path], _hidden_dir("--outdir")] = None,
     target_mhz_old: Annotated[Optional[float], _hidden("--target-mhz")] = None,
 ) -> None:
     """Generate the Verilog, weight memory (.hex), manifest.json and report.md of a model.
@@ -725,6 +739,8 @@ def generate(
     with _user_errors():
         outdir = _required(_merge("-o/--out", out, outdir=outdir_old), "-o/--out", "the folder to write")
         target_mhz = _merge("--clock-mhz", clock_mhz, target_mhz=target_mhz_old)
+        bank_formats = {k: v for k, v in (("state_bits", state_bits), ("state_frac", state_frac), ("coef_frac", coef_frac),
+                                          ("input_headroom", input_headroom)) if v is not None}
         if target_mhz is None:
             _executor(workers, scheduler)  # checks --workers / --scheduler (unused without --clock-mhz: still refused when bad)
             with _progress("building the design"):
@@ -732,7 +748,7 @@ def generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
                     architecture=architecture, bank_lanes=bank_lanes, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding, goal=goal,
-                    fpga_target=fpga,
+                    fpga_target=fpga, **bank_formats,
                 )
         else:
             with _executor(workers, scheduler) as ex:
@@ -741,7 +757,7 @@ def generate(
                     architecture=architecture, bank_lanes=bank_lanes, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                     target_mhz=target_mhz, fpga_target=fpga, goal=goal,
-                    progress=_say, executor=ex,
+                    progress=_say, executor=ex, **bank_formats,
                 )
         man = gd.manifest
         if man["design"] == "estimator":  # seed 003's estimator (an estimator file): no PWAS core
@@ -783,7 +799,7 @@ def synth(
     harness: Annotated[Optional[bool], typer.Option("--harness/--no-harness", help="Place and route inside the timing harness that registers every port (the default on ecp5 and ice40; refused with generic, which has no place and route), so fmax covers the input and output paths, as generate --clock-mhz and benchmarks/hw_tables.py measure it; --no-harness: the bare design, register-to-register paths only.", show_default=False)] = None,
     floorplan: Annotated[str, typer.Option("--floorplan", help="ECP5 hard-block placement: auto (default) fixes the block RAMs to the central EBR row and the multipliers to the DSP row below it where that was measured to help: the latency-first pipeline (--goal latency; mul_in without mem_out) with the banked or replicated memory on the LFE5U-45F (--device 45k), at most 36 of each; none: nextpnr places them freely. synth.json's floorplan records the sites or why there are none.")] = "auto",
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Also copy the JSON report here.")] = None,
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for the tool files and results (default OUTDIR/synth/FPGA, where `report` finds them).", show_default=False)] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for the tool files and results (default OUTDIR/synth/FPGA, where `report` finds them).", show_default=False, metavar=FOLDER_METAVAR)] = None,
     target_old: Annotated[Optional[str], _hidden("--target")] = None,
     freq_old: Annotated[Optional[float], _hidden("--freq")] = None,
 ) -> None:
@@ -825,7 +841,7 @@ def simulate(
     traj_col: Annotated[Optional[str], typer.Option("--traj-col", help="Trajectory column, as for fit (the sensor design is reset between trajectories).")] = None,
     stall: Annotated[float, typer.Option("--stall", help="Probability of a random bubble on the input and of backpressure on the output in each cycle (0 = none: latency and II are measured at full speed).")] = 0.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the random stalls (an integer >= 0).")] = 0,
-    build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.")] = None,
+    build_dir: Annotated[Optional[Path], typer.Option("--build-dir", help="Cache of simulator builds (default: $PWAS_HDL_SIM_CACHE or ~/.cache/pwas-hdl/sim); a design is built once and reused.", metavar=FOLDER_METAVAR)] = None,
     waves: Annotated[bool, typer.Option("--waves", help="Record waveforms (Icarus: FST, Verilator: VCD) next to the build; the path is in the summary.")] = False,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
     blank_rows: BlankRowsOpt = "error",
@@ -865,7 +881,7 @@ def simulate(
 @app.command("export-testbench")
 def export_testbench(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate`.")],
-    output: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (default OUTDIR/tb; replaced only if an earlier export made it).")] = None,
+    output: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder to write (default OUTDIR/tb; replaced only if an earlier export made it).", metavar=FOLDER_METAVAR)] = None,
     samples: Annotated[int, typer.Option("--samples", help="Input transfers of the stimulus (random points, plus vertices, faces, corners, out-of-domain codes).")] = 1000,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the stimulus and of the stall pattern.")] = 0,
     stall: Annotated[float, typer.Option("--stall", help="Probability of a bubble / of backpressure per cycle in the stalled passes.")] = 0.3,
@@ -891,7 +907,7 @@ def export_testbench(
 def explore(
     model_path: ModelArg,
     data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for explore.json and explore.png (created if missing). Required.", show_default=False)] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for explore.json and explore.png (created if missing). Required.", show_default=False, metavar=FOLDER_METAVAR)] = None,
     traj_col: TrajColOpt = None,
     input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
     weight_frac: Annotated[Optional[str], typer.Option("--weight-frac", help="Weight fraction bits to sweep (comma list or A:B; default: generate's default -4..+4).")] = None,
@@ -907,10 +923,10 @@ def explore(
     cost: Annotated[str, typer.Option("--cost", help="Cost axis of the front: total_bits, memory_bits, logic_bits, register_bits, mult_bit_products, adder_bits, dsp18 or bram18k.")] = "total_bits",
     device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --fpga ecp5/ice40 (as for synth).")] = None,
     measure_max: Annotated[Optional[int], typer.Option("--measure-max", help="With --fpga: synthesise at most this many Pareto points (spread along the front) besides the default (default 10).", show_default=False)] = None,
-    synth_dir: Annotated[Optional[Path], typer.Option("--synth-dir", help="Keep the synthesised designs here (default: a temporary folder, removed).")] = None,
+    synth_dir: Annotated[Optional[Path], typer.Option("--synth-dir", help="Keep the synthesised designs here (default: a temporary folder, removed).", metavar=FOLDER_METAVAR)] = None,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
-    outdir_old: Annotated[Optional[Path], _hidden("--outdir")] = None,
+    outdir_old: Annotated[Optional[Path], _hidden_dir("--outdir")] = None,
     resources_old: Annotated[Optional[str], _hidden("--resources")] = None,
     blank_rows: BlankRowsOpt = "error",
 ) -> None:
@@ -1513,7 +1529,9 @@ def command() -> Any:
 
 def _refuse_empty_paths(cmd: Any) -> None:
     """Make every ``Path`` option of the tree (all name outputs) pass an empty value (``-o ""``) on as
-    the empty text, which the command's output check refuses (:func:`pwas_hdl.io.atomic.check_output_path`).
+    the empty text, which the command's output check refuses (:func:`pwas_hdl.io.atomic.check_output_path`),
+    and refuse a file option (every one whose metavar is not :data:`FOLDER_METAVAR`) whose value ends
+    with ``/``.
 
     Click turns ``""`` into ``Path("")``, which is ``Path(".")``: the working folder, where
     ``synth``, ``explore`` and ``simulate --build-dir`` then wrote their files. The raw string is
@@ -1528,6 +1546,9 @@ def _refuse_empty_paths(cmd: Any) -> None:
                 if isinstance(raw, str) and not raw.strip() and _p.expose_value:
                     # the command gets the empty text, which its output check refuses (check_output_path)
                     ctx.params[_p.name] = value = raw
+                elif isinstance(raw, str) and raw.endswith(("/", os.sep)) and _p.metavar != FOLDER_METAVAR:
+                    # Path("p.csv/") is Path("p.csv"): the slash, which names a folder, would be lost
+                    raise typer.BadParameter(f"{raw!r} ends with '/', which names a folder; give a file name", ctx=ctx, param=_p)
                 return value, rest
 
             p.handle_parse_result = checked

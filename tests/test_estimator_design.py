@@ -76,7 +76,7 @@ def test_generate_refuses_pwas_options_and_unstable_gains(tmp_path):
         build_design(cfg, memory="replicated")
     with pytest.raises(InputError, match="design recurrent does not apply"):
         build_design(cfg, design="recurrent")
-    with pytest.raises(InputError, match="state_bits must be an integer in 2..48"):
+    with pytest.raises(InputError, match=r"--state-bits \(state_bits\) must be an integer in 2\.\.48"):
         build_design(cfg, state_bits=1)
     bad = SwitchedEstimatorConfig(cfg.A, cfg.B, cfg.C, [np.full(2, 50.0)] * 3)  # poles of A - K C far outside
     with pytest.raises(InputError, match="not stable"):

@@ -97,3 +97,57 @@ def test_observer_bank_features_of_huge_residuals_are_refused_without_a_warning(
                 residual_features(np.full((50, 3), 1e300), 7, fm)
         ok = residual_features(np.full((50, 3), 2.0), 7, "11b")
     np.testing.assert_allclose(ok, 2.0 * np.sqrt(8 / 7))  # l + 1 = 8 squares over l = 7
+
+
+def test_observer_bank_normalisation_of_signals_near_the_float_limit():
+    """Signals of ~1e300 have a finite spread (the plain std overflowed to inf, every normalised signal
+    became 0 and the fit said the features were constant); ordinary signals keep numpy's own mean and std."""
+    from pwas_hdl.fit.observer_bank import _mean_std
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(2.0, 3.0, size=(500, 2))
+    mean, std = _mean_std(x)
+    assert np.array_equal(mean, x.mean(axis=0)) and np.array_equal(std, x.std(axis=0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        big_mean, big_std = _mean_std(x * 1e300)
+    np.testing.assert_allclose(big_mean / 1e300, mean, rtol=1e-12)
+    np.testing.assert_allclose(big_std / 1e300, std, rtol=1e-12)
+
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+
+    tr, _, _ = make_pv_dataset("pv-benchmark", 1200, 10, seed=2)
+    us, ys, zs, big = [tr.u], [tr.y], [tr.z], 2.0**1000  # exact scaling: the same data to the last bit
+    plain = ObserverBankFrontEnd(n_models=2).fit(us, ys, zs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        huge = ObserverBankFrontEnd(n_models=2).fit([tr.u * big], [tr.y * big], zs)
+    np.testing.assert_allclose(huge.u_std_ / big, plain.u_std_, rtol=1e-12)
+    np.testing.assert_allclose(huge.y_std_ / big, plain.y_std_, rtol=1e-12)
+    f_plain, _ = plain.transform(us, ys)
+    f_huge, _ = huge.transform([tr.u * big], [tr.y * big])
+    assert np.ptp(f_huge, axis=0).min() > 0
+    np.testing.assert_allclose(f_huge, f_plain, rtol=1e-9, atol=1e-9)
+
+
+def test_observer_bank_accumulator_bound_of_huge_coefficient_codes_is_exact():
+    """The accumulator's bound is computed in Python integers: with input coefficients near 1e5 (local
+    models of collinear inputs, as three-tank's u1 = u2) the codes times 2**(B_in - 1) passed 2**63, the
+    numpy int64 product wrapped with a RuntimeWarning and could under-size the accumulator; now the
+    width is exact and refused, without a warning."""
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    tr, _, _ = make_pv_dataset("pv-benchmark", 1200, 10, seed=2)
+    m = PWASVirtualSensor(mu=0, my=0, partitions=2, sigma=0.1, front_end=ObserverBankFrontEnd(n_models=2)).fit(tr.u, tr.y, tr.z)
+    fe = m.front_end_
+    b = slice(fe.order, fe.order + fe.order * fe.nu_)  # the b_i of [a_M .. a_1, b_M .. b_1, c]
+    fe.models_[:, b] *= 2e5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match=r"acc would need (\d+) bits") as exc:
+            observer_bank_model(m)
+    assert "--state-frac (state_frac)" in str(exc.value) and "--input-headroom (input_headroom)" in str(exc.value)

@@ -725,3 +725,53 @@ def test_a_breakpoints_file_with_partitions_or_gamma_is_refused(work):
     for same in ([], ["-p", "4"], ["-p", "4,4"]):  # leave -p out, or repeat the file's intervals
         assert invoke("fit", work / "d.csv", "-o", work / "w.json", "-y", "y", "-z", "z", "--my", 2, "--sigma", 1e-3,
                       "--breakpoints", bp, *same).exit_code == 0
+
+
+@pytest.mark.parametrize("args, named", [
+    (["-q", "predict", "m.json", "t.csv", "-o", "p.csv/"], "'-o' / '--out': 'p.csv/'"),
+    (["fit", "d.csv", "-y", "y", "-z", "z", "-p", "2", "-o", "w.json/"], "'-o' / '--out': 'w.json/'"),
+    (["make-data", "lorenz", "-o", "n.csv", "--test-out", "q.csv/"], "'--test-out': 'q.csv/'"),
+    (["simulate", "{g}", "t.csv", "-o", "s.csv", "--json", "s.json/"], "'--json': 's.json/'"),
+])
+def test_a_file_option_ending_with_a_slash_is_refused(work, design, args, named, capsys, monkeypatch):
+    """Click's Path("p.csv/") is Path("p.csv"): `-o p.csv/`, which names a folder, wrote the file p.csv.
+    A usage error of the command line (refused while parsing it): run through the entry point."""
+    from pwas_hdl.cli import main
+
+    monkeypatch.chdir(work)
+    before = tree(work)
+    capsys.readouterr()
+    assert main([a.format(g=design) for a in args]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("error: Invalid value for ") and named in err[0], err
+    assert "ends with '/', which names a folder; give a file name" in err[0], err
+    assert tree(work) == before
+
+
+def test_a_folder_option_may_end_with_a_slash(work):
+    res = invoke("generate", "m.json", "-o", "hw/", cwd=work)
+    assert res.exit_code == 0, res.output
+    assert (work / "hw" / "manifest.json").is_file()
+
+
+def test_an_output_that_is_a_symbolic_link_is_written_where_it_points(work):
+    """Outputs are written by rename: a link at the output path was replaced by a regular file (a shell
+    redirection, cp and the like write where it points)."""
+    (work / "out").mkdir()
+    (work / "link.csv").symlink_to(Path("out") / "real.csv")  # dangling: the file is created
+    for _ in range(2):  # then replaced, the link kept
+        res = invoke("-q", "predict", "m.json", "t.csv", "-o", "link.csv", cwd=work)
+        assert res.exit_code == 0, res.output
+        assert (work / "link.csv").is_symlink() and os.readlink(work / "link.csv") == os.path.join("out", "real.csv")
+        assert (work / "out" / "real.csv").read_text().startswith("row,")
+    (work / "hw").mkdir()
+    (work / "hwlink").symlink_to("hw")  # a folder output through a link: the folder it names is written
+    res = invoke("generate", "m.json", "-o", "hwlink", cwd=work)
+    assert res.exit_code == 0, res.output
+    assert (work / "hwlink").is_symlink() and (work / "hw" / "manifest.json").is_file()
+    (work / "loop.csv").symlink_to("loop.csv")
+    before = tree(work)
+    assert_refused(invoke("-q", "predict", "m.json", "t.csv", "-o", "loop.csv", cwd=work),
+                   "-o/--out 'loop.csv' is a symbolic link that leads to itself")
+    assert_refused(invoke("make-data", "lorenz", "-o", "link.csv", "--test-out", "out/real.csv", cwd=work), "both name")
+    assert tree(work) == before

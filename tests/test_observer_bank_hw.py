@@ -191,3 +191,47 @@ def test_observer_bank_summary_reads_the_results_and_refuses_mixed_designs(tmp_p
     (tmp_path / "observer_bank_synth.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="pv-benchmark.*differs"):
         sm.markdown(sm.collect(tmp_path))
+
+
+def test_cli_generate_sets_the_bank_formats_and_refuses_them_elsewhere(pv_data, sensor_11b, tmp_path):
+    """`generate --state-bits/--state-frac/--coef-frac/--input-headroom` reach the bank (they were
+    API-only, while the width refusal told CLI users to change them); a plain PWAS model refuses them."""
+    import json
+
+    from helpers.cli import CliRunner
+    from helpers.folders import tree
+
+    from pwas_hdl.cli import app
+
+    run = CliRunner()
+    model = tmp_path / "bank.json"
+    sensor_11b.save(model)
+    default = ObserverBankSensorModel.from_sensor(sensor_11b).bank.formats
+    want = dict(state_bits=default.state_bits + 3, state_frac=default.state_frac + 2, coef_frac=default.coef_frac - 1)
+    res = run.invoke(app, ["generate", str(model), "--design", "sensor", "-o", str(tmp_path / "hw"),
+                           "--state-bits", str(want["state_bits"]), "--state-frac", str(want["state_frac"]),
+                           "--coef-frac", str(want["coef_frac"]), "--input-headroom", "4"])
+    assert res.exit_code == 0, res.output
+    man = json.loads((tmp_path / "hw" / "manifest.json").read_text())
+    got = man["front_end"]["formats"]
+    assert {k: got[k] for k in want} == want
+    assert got["input_frac"] == default.input_frac + 1  # head room 4 instead of 8: one more input fraction bit
+    assert man["generator"]["options"]["input_headroom"] == 4.0
+    # the bit-true model that simulate rebuilds from the manifest's options has the same formats
+    ref = ObserverBankSensorModel.from_sensor(sensor_11b, input_headroom=4.0, **want).bank.formats
+    assert ref.state_frac == got["state_frac"] and ref.acc_bits == got["acc_bits"]
+
+    tr, _, _ = pv_data
+    plain = tmp_path / "plain.json"
+    PWASVirtualSensor(mu=0, my=1, partitions=2, sigma=1e-3).fit(tr.u, tr.y, tr.z).save(plain)
+    before = tree(tmp_path)
+    res = run.invoke(app, ["generate", str(model), "--design", "sensor", "-o", str(tmp_path / "hw2"), "--state-frac", "2"])
+    assert res.exit_code == 2 and res.output.startswith("error: --state-frac (state_frac) = 2 must be >= the input "
+                                                        "fraction bits"), res.output
+    for opt, val in (("--state-bits", "16"), ("--state-frac", "8"), ("--coef-frac", "12"), ("--input-headroom", "2")):
+        res = run.invoke(app, ["generate", str(plain), "-o", str(tmp_path / "hw3"), opt, val])
+        assert res.exit_code == 2, res.output
+        assert res.output.strip() == (f"error: {opt} ({opt[2:].replace('-', '_')}) sets a format of the observer bank: it "
+                                      "applies to observer-bank sensors (fit --front-end observer-bank) and estimator "
+                                      "files only"), res.output
+    assert tree(tmp_path) == before

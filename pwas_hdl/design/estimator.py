@@ -29,7 +29,7 @@ import os
 from typing import Any
 
 from pwas_hdl import __version__
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fit.estimator_file import SwitchedEstimatorConfig, estimator_text, is_estimator_file, read_estimator
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling
 
@@ -63,7 +63,7 @@ def _check_int(name: str, v: Any, lo: int, hi: int) -> None:
     if v is None:
         return
     if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
-        raise InputError(f"{name} must be an integer in {lo}..{hi}, got {v!r}")
+        raise InputError(f"{option_text(name)} must be an integer in {lo}..{hi}, got {v!r}")
 
 
 def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | None = None, input_headroom: float | None = None,
@@ -97,7 +97,7 @@ def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | 
     _check_int("coef_frac", coef_frac, 1, 40)
     if input_headroom is not None and not (isinstance(input_headroom, (int, float)) and not isinstance(input_headroom, bool)
                                            and 0 < float(input_headroom) < 1e6):
-        raise InputError(f"input_headroom must be a positive number, got {input_headroom!r}")
+        raise InputError(f"{option_text('input_headroom')} must be a positive number below 1e6, got {input_headroom!r}")
     for i, (a, k, c) in enumerate(zip(config.A, config.K, config.C)):
         rho = float(np.max(np.abs(np.linalg.eigvals(a - np.outer(k, c)))))
         if not rho < 1.0:
@@ -108,7 +108,7 @@ def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | 
                                       input_headroom=8.0 if input_headroom is None else float(input_headroom),
                                       coef_frac=coef_frac, state_frac=state_frac, state_bits=state_bits)
     if est.state_frac < est.input_frac:
-        raise InputError(f"state_frac = {est.state_frac} must be >= the input fraction bits {est.input_frac}")
+        raise InputError(f"{option_text('state_frac')} = {est.state_frac} must be >= the input fraction bits {est.input_frac}")
     return est
 
 

@@ -38,7 +38,7 @@ import numpy as np
 
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.design.names import check_module_name, check_signal_names
 from pwas_hdl.io.atomic import check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
@@ -436,6 +436,12 @@ def build_design(
         fxm = bank_model.core
         memory = memory or DEFAULT_MEMORY
     else:
+        from pwas_hdl.fixedpoint.observer_bank import BANK_FORMAT_OPTIONS
+
+        for k in BANK_FORMAT_OPTIONS:
+            if formats.get(k) is not None:
+                raise InputError(f"{option_text(k)} sets a format of the observer bank: it applies to observer-bank "
+                                 "sensors (fit --front-end observer-bank) and estimator files only")
         fxm = fixed_point_model(sensor, memory=memory or DEFAULT_MEMORY, **formats)
         if memory is None:  # the goal's memory (pwas_hdl.design.goal_memory)
             plain = (not additive and not warped and design in ("core", "sensor") and architecture == "parallel"

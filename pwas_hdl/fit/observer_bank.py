@@ -60,6 +60,22 @@ MAX_LAD_ROWS = 200_000
 
 
 # ------------------------------------------------------------------------------------- step 1
+def _mean_std(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Column means and standard deviations of ``x`` (T, k).
+
+    Where the plain sums overflow (signals beyond ~1e150), they are computed on ``x`` divided by the
+    largest magnitude of its column, so that finite signals of any size have a finite spread.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean, std = x.mean(axis=0), x.std(axis=0)
+    if np.all(np.isfinite(mean)) and np.all(np.isfinite(std)):
+        return mean, std
+    scale = np.max(np.abs(x), axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    xs = x / scale
+    return xs.mean(axis=0) * scale, xs.std(axis=0) * scale
+
+
 def arx_regressors(u: np.ndarray, y: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
     """ARX regressors of Problem (5) for one trajectory.
 
@@ -528,8 +544,7 @@ class ObserverBankFrontEnd:
             us = [np.zeros((y.shape[0], 0)) for y in ys]
         if self.normalize:
             ucat, ycat = np.concatenate(us), np.concatenate(ys)
-            self.u_mean_, self.u_std_ = ucat.mean(axis=0), ucat.std(axis=0)
-            self.y_mean_, self.y_std_ = ycat.mean(axis=0), ycat.std(axis=0)
+            (self.u_mean_, self.u_std_), (self.y_mean_, self.y_std_) = _mean_std(ucat), _mean_std(ycat)
             for nm, s in (("input", self.u_std_), ("output", self.y_std_)):
                 if np.any(s <= 0):
                     raise InputError(f"an {nm} column is constant in the training data; remove it or add excitation")

@@ -232,11 +232,11 @@ class FixedPointObserverBank:
                              f"this model uses {front_end.features!r} (refit with --features 11b)")
         for nm, v in (("input_bits", input_bits), ("coef_frac", coef_frac), ("state_frac", state_frac), ("state_bits", state_bits)):
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
-                raise InputError(f"{nm} must be an integer, got {v!r}")
+                raise InputError(f"{option_text(nm)} must be an integer, got {v!r}")
         if not 4 <= input_bits <= 24:
             raise InputError(f"{option_text('input_bits')} = {input_bits}: an observer-bank design needs 4..24")
         if not (math.isfinite(input_headroom) and input_headroom > 0):
-            raise InputError(f"input_headroom must be a positive number, got {input_headroom!r}")
+            raise InputError(f"{option_text('input_headroom')} must be a positive number, got {input_headroom!r}")
         fe = front_end
         self.front_end = fe
         self.n_models = fe.n_models_
@@ -300,7 +300,8 @@ class FixedPointObserverBank:
         else:
             fs = int(state_frac)
         if fs < fin:
-            raise InputError(f"state_frac = {fs} must be >= the input fraction bits {fin}")
+            raise InputError(f"{option_text('state_frac')} = {fs} must be >= the input fraction bits {fin} "
+                             f"({option_text('input_bits')} - 1 - ceil(log2 {option_text('input_headroom')}))")
         if coef_frac is None:
             fc = 4
             while feat_err(g_e * 2.0 ** -(fc + 1) * (x0 + (nu + 1) * h_in + 1)) > target and fc < 40:
@@ -308,7 +309,7 @@ class FixedPointObserverBank:
         else:
             fc = int(coef_frac)
         if not 1 <= fc <= 40 or fs > 40:
-            raise InputError(f"coef_frac must be in 1..40 and state_frac <= 40, got {fc}, {fs}")
+            raise InputError(f"{option_text('coef_frac')} must be in 1..40 and {option_text('state_frac')} <= 40, got {fc}, {fs}")
         self.state_frac, self.coef_frac = fs, fc
 
         # ---- coefficient codes
@@ -331,7 +332,7 @@ class FixedPointObserverBank:
         self.state_bits_needed = int(need)
         bs = int(state_bits) if state_bits is not None else int(need)
         if bs < 2:
-            raise InputError(f"state_bits must be >= 2, got {bs}")
+            raise InputError(f"{option_text('state_bits')} must be >= 2, got {bs}")
         self.state_may_saturate = bs < need
         # residual x0 - y (exact in max(B_s, B_in + F_s - F_in) + 1 bits), widened so that the square
         # e * e (2 rb bits) also holds the window sum of l + 1 squares: the RTL sums at one width
@@ -376,8 +377,10 @@ class FixedPointObserverBank:
         r_max = max(caps)
         # acc_i = A0 x0 + (sum B qu + L qy) << (Fs-Fin) + D + (x_{i+1} << Fc): bound it from the codes
         amax = int(np.abs(self.a0_codes).max(initial=0)) * (1 << (bs - 1))
-        bin_max = (np.abs(self.b_codes).sum(axis=2).max(initial=0) + np.abs(self.l_codes).max(initial=0)) * (1 << (self.input_bits - 1))
-        accmax = int(amax) + (int(bin_max) << (fs - fin)) + int(np.abs(self.d_codes).max(initial=0)) + ((1 << (bs - 1)) << fc)
+        # Python ints: the product exceeds int64 for wide inputs (numpy would wrap, under-sizing acc)
+        bin_max = (int(np.abs(self.b_codes).sum(axis=2).max(initial=0)) + int(np.abs(self.l_codes).max(initial=0))) \
+            * (1 << (self.input_bits - 1))
+        accmax = int(amax) + (bin_max << (fs - fin)) + int(np.abs(self.d_codes).max(initial=0)) + ((1 << (bs - 1)) << fc)
         accb = accmax.bit_length() + 2  # + 1: the rounding term 2**(F_c-1) is added in it
         accb = max(accb, bs + fc + 2)  # x_{i+1} 2**F_c is a product of that width in the RTL
         self.formats = ObserverBankFormats(self.input_bits, fin, fc, bs, fs, rb, sqb, sumb, rootb, shift, kb, accb)
@@ -387,7 +390,9 @@ class FixedPointObserverBank:
         for nm, w in self.widths.items():
             if w > MAX_DATAPATH_BITS:
                 raise InputError(f"the observer bank's {nm} would need {w} bits (more than {MAX_DATAPATH_BITS}); "
-                                 "use fewer state fraction bits or a smaller input head room")
+                                 f"give fewer state fraction bits ({option_text('state_frac')}), a smaller input head "
+                                 f"room ({option_text('input_headroom')}) or fewer {option_text('state_bits')}, or fit "
+                                 "faster observers (fit --observer)")
 
         # ---- error bound of the features
         eta = 2.0 ** -(fs + 1) + self.coef_error * (x0 + (nu + 1) * h_in) + 2.0 ** -(fc + fs + 1)

@@ -138,6 +138,14 @@ def _path_max(folder: Path) -> int:
         return 4096
 
 
+def _is_link(p: Path) -> bool:
+    """``p.is_symlink()``, False where the path cannot be examined (a name too long: refused later)."""
+    try:
+        return p.is_symlink()
+    except OSError:
+        return False
+
+
 def check_output_path(path: str | os.PathLike, what: str = "output", *, kind: str = "file") -> Path:
     """Refuse an output path that cannot be written, before any work is done.
 
@@ -153,11 +161,13 @@ def check_output_path(path: str | os.PathLike, what: str = "output", *, kind: st
     Returns
     -------
     Path
+        Where to write: ``path``, or where it points if it is a symbolic link (even a dangling one),
+        so that writing by rename keeps the link.
 
     Raises
     ------
     InputError
-        Empty, an existing folder where a file is wanted (or a file where a folder is), a path
+        Empty, a symbolic link loop, an existing folder where a file is wanted (or a file where a folder is), a path
         through a file, a file name or path that is too long, a missing folder (for files), a
         folder that is not writable.
     """
@@ -169,6 +179,11 @@ def check_output_path(path: str | os.PathLike, what: str = "output", *, kind: st
     if "\x00" in text:
         raise InputError(f"{what} {text!r}: a path cannot contain a NUL character")
     p = Path(text)
+    if _is_link(p):  # written where the link points (as a shell redirection would), the link kept
+        real = Path(os.path.realpath(p))
+        if _is_link(real):
+            raise InputError(f"{what} {text!r} is a symbolic link that leads to itself; choose another path")
+        return check_output_path(real, what, kind=kind)
     shown = text if len(text) <= 80 else text[:38] + "..." + text[-38:]
     full = os.path.abspath(text)
     plimit = _path_max(Path("/"))
@@ -344,9 +359,12 @@ class OutputSet:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
-    The parent folder must exist. On any error the target is left untouched.
+    The parent folder must exist. On any error the target is left untouched. A symbolic link at
+    ``path`` is kept: the file it points to is written. Returns where the data went.
     """
     target = Path(path)
+    if _is_link(target):  # the link is kept; its target is written
+        target = Path(os.path.realpath(target))
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         raise FileNotFoundError(f"folder {parent} does not exist; create it first")
