@@ -160,3 +160,33 @@ def test_first_order_floor_quick_smoke(tmp_path):
     assert row["iterations_in_budget"] == row["budget_ms_per_solve"] / (k["vcycle_ms"] + k["matvec_ms"])
     assert "| 2 | 127 | 16384 |" in (tmp_path / "first_order_floor_quick.md").read_text()
 
+
+
+@pytest.mark.rtl
+def test_rtl_random_configs_quick_smoke(tmp_path):
+    """benchmarks/rtl_random_configs.py --quick: three drawn configurations generated and replayed on
+    Icarus; none differs from the bit-true model or crashes, and the draw depends on (seed, index) only."""
+    import json
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.rtl_random_configs")
+    assert script_main(bench.main, ["--quick", "--outdir", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "rtl_random_configs_quick.json").read_text())
+    assert res["count"] == 3 and len(res["configs"]) == 3 and res["counts"]["FAIL"] == res["counts"]["error"] == 0
+    passed = [r for r in res["configs"] if r["outcome"] == "pass"]
+    assert passed and all(r["checks"]["bit_exact"] and r["mismatches"] == 0 for r in passed)
+    assert bench.draw_config(0, 1) == bench.draw_config(0, 1) != bench.draw_config(1, 1)
+    assert (tmp_path / "rtl_random_configs_quick.md").read_text() == bench.markdown(res)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--count", "0"], "--count"),
+    (["--samples", "5"], "--samples must be in 20..100000"),
+    (["--seed", "-1"], "--seed and --first must be >= 0"),
+])
+def test_rtl_random_configs_bad_option(tmp_path, capsys, args, message):
+    bench = importlib.import_module("pwas_hdl.benchmarks.rtl_random_configs")
+    out = tmp_path / "out"
+    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
+    assert not out.exists()
