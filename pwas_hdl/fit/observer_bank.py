@@ -43,6 +43,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 import scipy.sparse as sp
+from sklearn.base import BaseEstimator
 
 from pwas_hdl.errors import InputError, ResourceLimit
 
@@ -424,8 +425,12 @@ def residual_features(res: np.ndarray, window: int, feature_map: str) -> np.ndar
 
 
 # ---------------------------------------------------------------------------------- front end
-class ObserverBankFrontEnd:
+class ObserverBankFrontEnd(BaseEstimator):
     """Seed 004's front end: learned local models, an observer bank and residual features.
+
+    A scikit-learn estimator (``get_params`` / ``set_params``, ``sklearn.base.clone``): nested in a
+    :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor` its parameters are
+    ``front_end__n_models`` etc. of the sensor's ``get_params(deep=True)`` / ``set_params``.
 
     Parameters
     ----------
@@ -584,7 +589,7 @@ class ObserverBankFrontEnd:
             Samples of trajectory ``i`` that have a feature row: ``slice(M + l, T_i)``.
         """
         if not hasattr(self, "models_"):
-            raise InputError("the observer-bank front end is not fitted")
+            raise InputError("the observer-bank front end is not fitted; call fit() first (or use the fitted front_end_ of a sensor)")
         self._check_signals(us, ys)
         if not us:
             us = [np.zeros((y.shape[0], 0)) for y in ys]
