@@ -35,3 +35,31 @@ def test_observer_bank_front_end_is_a_nested_estimator():
     assert c.front_end is not m.front_end and not hasattr(c.front_end, "models_")
     assert c.get_params(deep=True) == {**m.get_params(deep=True), "front_end": c.front_end}
     np.testing.assert_array_equal(c.fit(tr.u, tr.y, tr.z).weights_, m.weights_)
+
+
+def test_refit_forgets_the_fitted_attributes_of_the_previous_model(tmp_path):
+    """A refit replaces the whole fitted state: attributes a previous fit or a loaded file set and this
+    fit does not (a recurrent sensor's recurrence_fit_ / initial_state_rule_ / initial_values_, a
+    classifier's classifier_) are removed, so the model file of the refit describes the refit (they
+    stayed: a classifier refitted on one regression target wrote a classifier block with its old
+    classes, a file that load() refused)."""
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(400, 1))
+    y = np.cumsum(0.1 * u, axis=0)
+    z = np.sin(y) + 0.1 * u
+    m = PWASVirtualSensor(mu=1, my=1, mz=1, partitions=3, sigma=1e-3).fit(u, y, z)
+    assert hasattr(m, "recurrence_fit_")
+    fresh = PWASVirtualSensor(mu=1, my=1, partitions=3, sigma=1e-3).fit(u, y, z)
+    m.set_params(mz=0).fit(u, y, z)
+    assert sorted(k for k in vars(m) if k.endswith("_")) == sorted(k for k in vars(fresh) if k.endswith("_"))
+    np.testing.assert_array_equal(m.weights_, fresh.weights_)
+
+    labels = (z[:, 0] > 0).astype(float)
+    clf = PWASVirtualSensor(mu=1, my=1, partitions=3, sigma=1e-3, target_names=["c=0", "c=1"])
+    clf.fit(u, y, np.column_stack([labels == 0, labels == 1]).astype(float))
+    clf.classifier_ = {"target": "c", "classes": [0.0, 1.0]}  # as `pwas-hdl fit --classify` sets it
+    loaded = PWASVirtualSensor.load(clf.save(tmp_path / "clf.json"))
+    assert loaded.classifier_["classes"] == [0.0, 1.0]
+    loaded.set_params(target_names=["z"]).fit(u, y, z)
+    assert not hasattr(loaded, "classifier_") and "classifier" not in loaded.to_dict()
+    np.testing.assert_array_equal(PWASVirtualSensor.load(loaded.save(tmp_path / "z.json")).weights_, fresh.weights_)

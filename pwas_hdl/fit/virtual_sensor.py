@@ -464,6 +464,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             rec_info["series_parallel_rmse"] = sp_rmse
             rec_info["initial"] = self._initial_values(zs, lags)
         resid = zt - h @ w
+        # forget every fitted attribute of a previous fit or load (recurrence_, classifier_, map_fit_, ...):
+        # this fit sets its own, and a stale one would describe another model (and be written to its file)
+        for key in [k for k in vars(self) if k.endswith("_") and not k.startswith("_")]:
+            delattr(self, key)
         self.lags_ = lags
         self.front_end_ = fe
         self.nu_ = fe.nu_ if fe is not None else lags.nu
