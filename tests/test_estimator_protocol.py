@@ -63,3 +63,34 @@ def test_refit_forgets_the_fitted_attributes_of_the_previous_model(tmp_path):
     loaded.set_params(target_names=["z"]).fit(u, y, z)
     assert not hasattr(loaded, "classifier_") and "classifier" not in loaded.to_dict()
     np.testing.assert_array_equal(PWASVirtualSensor.load(loaded.save(tmp_path / "z.json")).weights_, fresh.weights_)
+
+
+@pytest.mark.parametrize("params, data, match", [
+    (dict(my=1.5), None, "my must be a non-negative integer"),        # was truncated to 1 silently
+    (dict(mu=True, my=1), None, "mu must be a non-negative integer"),
+    (dict(gamma=0.5), None, "gamma must be a number >= 1"),
+    (dict(tikhonov_order=2), None, "tikhonov_order must be 0 or 1"),
+    (dict(), dict(z=None), r"z \(the measured targets"),             # was 'got 0 target trajectories for 1 ...'
+    (dict(), dict(y="complex"), "is complex"),                       # the imaginary part was dropped with a warning
+    (dict(), dict(y="sparse"), "sparse matrix"),                     # was 'setting an array element with a sequence'
+    (dict(), dict(y="text"), "not an array of numbers"),
+    (dict(output_names=["a", "b"]), None, r"2 output names \['a', 'b'\] for 1 output column"),
+    (dict(mu=1, input_names=["a"]), dict(u=np.zeros((200, 2))), "1 input names"),
+])
+def test_fit_refuses_bad_parameters_and_signals_with_input_error(params, data, match):
+    """Each is an InputError (a ValueError) that names the problem; the wrong number of signal names was
+    accepted and written to a model file that load() refused ('grid.lo has 1 values, the lags give n = 2')."""
+    import scipy.sparse
+
+    from pwas_hdl.errors import InputError
+
+    rng = np.random.default_rng(1)
+    y = rng.normal(size=(200, 1))
+    sig = dict(u=None, y=y, z=y**2)
+    for key, val in (data or {}).items():
+        sig[key] = {"complex": y + 1j, "sparse": scipy.sparse.csr_matrix(y), "text": np.full((200, 1), "a")}.get(val, val) \
+            if isinstance(val, str) else val
+    m = PWASVirtualSensor(**{"partitions": 2, "sigma": 1e-3, **params})
+    with pytest.raises(InputError, match=match):
+        m.fit(sig["u"], sig["y"], sig["z"])
+    assert not hasattr(m, "weights_")

@@ -25,6 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.limits import MAX_REGRESSORS, check_limit
 
 __all__ = ["LagStructure", "as_trajectories"]
@@ -44,9 +45,16 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
     Returns
     -------
     list of ndarray, each shape (T_i, k)
+
+    Raises
+    ------
+    InputError
+        Not 1-D / 2-D, complex, sparse, not numeric, NaN or infinite values, or not ``width`` columns.
     """
     if data is None:
         return []
+    if type(data).__module__.startswith("scipy.sparse"):
+        raise InputError(f"{name} is a scipy sparse matrix; pass a dense array ({name}.toarray()), samples x channels")
     if isinstance(data, np.ndarray) and data.dtype != object:
         items = [data]
     else:
@@ -55,16 +63,21 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
             items = [np.asarray(items, dtype=float)]
     out = []
     for i, a in enumerate(items):
-        arr = np.asarray(a, dtype=float)
+        if np.iscomplexobj(a):  # numpy would drop the imaginary part with only a warning
+            raise InputError(f"{name} trajectory {i} is complex; pass real signals (the real part, or magnitude and phase as two channels)")
+        try:
+            arr = np.asarray(a, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{name} trajectory {i} is not an array of numbers ({exc}); pass float arrays, samples x channels") from exc
         if arr.ndim == 1:
             arr = arr[:, None]
         if arr.ndim != 2:
-            raise ValueError(f"{name} trajectory {i} must be 1-D or 2-D (samples x channels), got shape {arr.shape}")
+            raise InputError(f"{name} trajectory {i} must be 1-D or 2-D (samples x channels), got shape {arr.shape}")
         if width is not None and arr.shape[1] != width:
-            raise ValueError(f"{name} trajectory {i} has {arr.shape[1]} channels, expected {width}")
+            raise InputError(f"{name} trajectory {i} has {arr.shape[1]} channels, expected {width}")
         if not np.all(np.isfinite(arr)):
             bad = np.argwhere(~np.isfinite(arr))[0]
-            raise ValueError(
+            raise InputError(
                 f"{name} trajectory {i} has a NaN or infinite value at sample {bad[0]}, channel {bad[1]}; "
                 "remove or interpolate missing samples before fitting"
             )

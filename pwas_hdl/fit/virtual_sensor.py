@@ -177,14 +177,19 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
 
     # ------------------------------------------------------------ validation
     def _check_params(self) -> None:
+        """Raise :class:`~pwas_hdl.errors.InputError` for an impossible hyper-parameter (before any work)."""
+        for nm in ("mu", "my"):
+            v = getattr(self, nm)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
+                raise InputError(f"{nm} must be a non-negative integer (number of past samples), got {v!r}")
         if not (isinstance(self.gamma, (int, float)) and math.isfinite(self.gamma) and self.gamma >= 1):
-            raise ValueError(f"gamma must be a number >= 1 (domain expansion factor), got {self.gamma!r}")
+            raise InputError(f"gamma must be a number >= 1 (domain expansion factor), got {self.gamma!r}")
         if self.sigma is not None and not (
             isinstance(self.sigma, (int, float, np.floating)) and math.isfinite(self.sigma) and self.sigma > 0
         ):
-            raise ValueError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
+            raise InputError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
-            raise ValueError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
+            raise InputError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
         if not isinstance(self.cv_folds, (int, np.integer)) or isinstance(self.cv_folds, bool) or self.cv_folds < 2:
             raise InputError(f"cv_folds (--folds) must be an integer >= 2, got {self.cv_folds!r}")
         if isinstance(self.front_end, ObserverBankFrontEnd):
@@ -383,6 +388,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self._check_params()
         # Everything is computed into locals first: a fit that fails leaves a previous fit intact.
         lags = self._infer_lags(u, y)
+        if z is None:
+            raise InputError("z (the measured targets, (T, nz) or a list of such) is needed to fit; got None")
         zs = as_trajectories(z, "z")
         fe = None
         if self._bank:
@@ -407,7 +414,14 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         zt = np.concatenate([zi[sl] for zi, sl in zip(zs, valid)], axis=0)
         nz = zt.shape[1]
         if self.target_names is not None and len(self.target_names) != nz:
-            raise ValueError(f"{len(self.target_names)} target names for {nz} target columns")
+            raise InputError(f"{len(self.target_names)} target names for {nz} target columns")
+        # names the model file holds must match its signals, or load() refuses the file
+        n_in = fe.nu_ if fe is not None else (lags.nu if lags is not None and lags.mu else None)
+        n_out = 1 if fe is not None else (lags.ny if lags is not None and lags.my else None)
+        for what, names, count in (("input", self.input_names, n_in), ("output", self.output_names, n_out)):
+            if names and count is not None and len(names) != count:
+                raise InputError(f"{len(names)} {what} names {list(names)} for {count} {what} column(s); give one name per "
+                                 f"column of {'u' if what == 'input' else 'y'} (or None for the defaults)")
         if self.domain is not None:
             lo, hi = (np.asarray(b, dtype=float).reshape(-1) for b in self.domain)
             if lo.size != xi.shape[1] or hi.size != xi.shape[1]:
