@@ -1,5 +1,7 @@
 """HLNN baseline (seed 000, A7): one tanh hidden layer on the PWAS regressor, size by validation."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -30,11 +32,36 @@ def test_hlnn_fits_a_smooth_map_and_picks_a_size(rng):
 
 
 def test_hlnn_refuses_bad_parameters_and_unfitted_use(rng):
-    with pytest.raises(InputError):
-        HLNNSensor(hidden_sizes=())
-    with pytest.raises(InputError):
-        HLNNSensor(val_fraction=1.5)
-    with pytest.raises(RuntimeError, match="not fitted"):
+    from sklearn.exceptions import NotFittedError
+
+    y = rng.normal(size=(50, 1))
+    for bad in (dict(hidden_sizes=()), dict(val_fraction=1.5), dict(restarts=0), dict(my=1.5), dict(hidden_sizes=(2, 0))):
+        m = HLNNSensor(**bad)  # stored unchanged; refused by fit (the scikit-learn convention)
+        assert all(m.get_params()[k] == v for k, v in bad.items())
+        with pytest.raises(InputError):
+            m.fit(None, y, y)
+        assert not hasattr(m, "model_")
+    with pytest.raises(NotFittedError, match="not fitted"):
         HLNNSensor(my=1).predict(None, np.zeros((5, 1)))
     with pytest.raises(InputError, match="too few"):
         HLNNSensor(my=1).fit(None, np.zeros((2, 1)), np.zeros((2, 1)))
+
+
+def test_hlnn_is_a_scikit_learn_estimator(rng):
+    """get_params / set_params / clone, parameters stored unchanged, the same fit twice (it had no
+    get_params, so clone raised TypeError, and __init__ converted and validated its arguments)."""
+    from sklearn.base import clone
+
+    u, y, z = _data(rng, T=300)
+    h = HLNNSensor(mu=1, my=1, hidden_sizes=[1, 2], restarts=1, max_iter=50, seed=3)
+    assert h.get_params()["hidden_sizes"] == [1, 2] and h.get_params()["seed"] == 3
+    assert repr(h) == "HLNNSensor(hidden_sizes=[1, 2], max_iter=50, mu=1, restarts=1, seed=3)"
+    c = clone(h).set_params(seed=3)
+    assert c is not h and c.get_params() == h.get_params()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        h.fit(u, y, z)
+        c.fit(u, y, z)
+    assert c.hidden_ == h.hidden_ and c.val_rmse_ == h.val_rmse_
+    np.testing.assert_array_equal(c.predict(u, y), h.predict(u, y))
+    assert not hasattr(clone(h), "model_")

@@ -18,6 +18,7 @@ import warnings
 from typing import Sequence
 
 import numpy as np
+from sklearn.base import BaseEstimator
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
@@ -38,8 +39,11 @@ def _net(hidden: int, seed: int, max_iter: int, alpha: float):
     return TransformedTargetRegressor(regressor=make_pipeline(StandardScaler(), mlp), transformer=StandardScaler())
 
 
-class HLNNSensor:
-    """HLNN virtual sensor on the PWAS regressor (scikit-learn style).
+class HLNNSensor(BaseEstimator):
+    """HLNN virtual sensor on the PWAS regressor (a scikit-learn estimator).
+
+    The hyper-parameters below are the ``__init__`` arguments, stored unchanged (``get_params`` /
+    ``set_params``, ``sklearn.base.clone``) and checked by :meth:`fit`; fitted attributes end in ``_``.
 
     Parameters
     ----------
@@ -60,27 +64,46 @@ class HLNNSensor:
 
     Attributes
     ----------
-    lags_ : LagStructure; hidden_ : int, the chosen size; val_rmse_ : dict size -> validation RMSE
-    (target units, per target averaged); model_ : the fitted scikit-learn estimator.
+    lags_ : LagStructure
+    hidden_ : int
+        The chosen hidden-layer size.
+    val_rmse_ : dict
+        Hidden size -> validation RMSE (target units, averaged over the targets).
+    model_ : sklearn estimator
+        The fitted network (standardised inputs and targets).
+    nz_ : int
+        Number of targets.
     """
 
     def __init__(self, mu: int = 0, my: int = 1, hidden_sizes: Sequence[int] = DEFAULT_HIDDEN_SIZES,
                  val_fraction: float = 0.2, restarts: int = 3, max_iter: int = 1000, alpha: float = 1e-4, seed: int = 0):
-        self.mu, self.my = int(mu), int(my)
-        self.hidden_sizes = tuple(int(h) for h in hidden_sizes)
-        self.val_fraction, self.restarts, self.max_iter, self.alpha, self.seed = val_fraction, restarts, max_iter, alpha, seed
-        if not self.hidden_sizes or min(self.hidden_sizes) < 1:
-            raise InputError(f"hidden_sizes must be positive integers, got {hidden_sizes!r}")
-        if not 0 < val_fraction < 1:
-            raise InputError(f"val_fraction must be in (0, 1), got {val_fraction}")
-        if restarts < 1:
-            raise InputError(f"restarts must be >= 1, got {restarts}")
+        self.mu = mu
+        self.my = my
+        self.hidden_sizes = hidden_sizes
+        self.val_fraction = val_fraction
+        self.restarts = restarts
+        self.max_iter = max_iter
+        self.alpha = alpha
+        self.seed = seed
+
+    def _check_params(self) -> tuple[int, ...]:
+        """The hidden sizes as ints; :class:`InputError` for an impossible setting (before any work)."""
+        for nm in ("mu", "my", "restarts", "max_iter", "seed"):
+            v = getattr(self, nm)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < (1 if nm in ("restarts", "max_iter") else 0):
+                raise InputError(f"{nm} must be an integer >= {1 if nm in ('restarts', 'max_iter') else 0}, got {v!r}")
+        sizes = tuple(self.hidden_sizes) if self.hidden_sizes is not None else ()
+        if not sizes or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and h >= 1 for h in sizes):
+            raise InputError(f"hidden_sizes must be positive integers, got {self.hidden_sizes!r}")
+        if not (isinstance(self.val_fraction, (int, float)) and 0 < self.val_fraction < 1):
+            raise InputError(f"val_fraction must be in (0, 1), got {self.val_fraction!r}")
+        return tuple(int(h) for h in sizes)
 
     def _xi(self, u, y, lags: LagStructure | None = None):
         us = as_trajectories(u, "u") if self.mu else []
         ys = as_trajectories(y, "y") if self.my else []
         if lags is None:
-            lags = LagStructure(self.mu, self.my, us[0].shape[1] if us else 0, ys[0].shape[1] if ys else 0)
+            lags = LagStructure(int(self.mu), int(self.my), us[0].shape[1] if us else 0, ys[0].shape[1] if ys else 0)
         return lags, *lags.build_many(us, ys, max(len(us), len(ys)))
 
     def _best(self, hidden: int, xtr, ztr, xva, zva):
@@ -95,8 +118,22 @@ class HLNNSensor:
                 best, best_rmse = net, rmse
         return best, best_rmse
 
-    def fit(self, u, y, z) -> "HLNNSensor":
-        """Fit on trajectories ``u`` (T, nu), ``y`` (T, ny), ``z`` (T, nz) (or lists of them)."""
+    def fit(self, u: np.ndarray | Sequence[np.ndarray] | None, y: np.ndarray | Sequence[np.ndarray] | None,
+            z: np.ndarray | Sequence[np.ndarray]) -> "HLNNSensor":
+        """Fit on trajectories (as :meth:`PWASVirtualSensor.fit <pwas_hdl.fit.virtual_sensor.PWASVirtualSensor.fit>`).
+
+        Parameters
+        ----------
+        u : ndarray (T, nu), list of such, or None when ``mu == 0``
+        y : ndarray (T, ny), list of such, or None when ``my == 0``
+        z : ndarray (T,) or (T, nz), or list of such
+            Targets, same sample times.
+
+        Returns
+        -------
+        self
+        """
+        hidden_sizes = self._check_params()
         lags, xi, valid = self._xi(u, y)
         zs = as_trajectories(z, "z")
         zt = np.concatenate([zi[sl] for zi, sl in zip(zs, valid)], axis=0)
@@ -107,16 +144,24 @@ class HLNNSensor:
             raise InputError(f"{m} training regressors are too few to hold out {self.val_fraction:.0%} for validation")
         target = zt[:, 0] if nz == 1 else zt
         xtr, xva, ztr, zva = xi[:-n_val], xi[-n_val:], target[:-n_val], zt[-n_val:]
-        self.val_rmse_ = {h: self._best(h, xtr, ztr, xva, zva)[1] for h in self.hidden_sizes}
+        self.val_rmse_ = {h: self._best(h, xtr, ztr, xva, zva)[1] for h in hidden_sizes}
         self.hidden_ = min(self.val_rmse_, key=self.val_rmse_.get)
         # refit the chosen size on all the training data (restarts scored by their training error)
         self.model_, _ = self._best(self.hidden_, xi, target, xi, zt)
         self.lags_, self.nz_ = lags, nz
         return self
 
-    def predict(self, u, y) -> np.ndarray:
-        """Estimates ``(sum_i (T_i - M + 1), nz)``, rows ``t = M-1 .. T_i-1`` of each trajectory."""
+    def predict(self, u: np.ndarray | Sequence[np.ndarray] | None, y: np.ndarray | Sequence[np.ndarray] | None) -> np.ndarray:
+        """Estimates ``(sum_i (T_i - M + 1), nz)``, rows ``t = M-1 .. T_i-1`` of each trajectory (target units).
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            Before :meth:`fit`.
+        """
         if not hasattr(self, "model_"):
-            raise RuntimeError("this HLNNSensor is not fitted yet; call fit() first")
+            from sklearn.exceptions import NotFittedError
+
+            raise NotFittedError("this HLNNSensor is not fitted yet; call fit() first")
         _, xi, _ = self._xi(u, y, self.lags_)
         return self.model_.predict(xi).reshape(xi.shape[0], self.nz_)
