@@ -102,10 +102,32 @@ def _load_sensor(model: PWASVirtualSensor | str | os.PathLike) -> PWASVirtualSen
 
 
 def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **formats: Any) -> FixedPointModel:
-    """The bit-true model of ``sensor`` with the given format options (see :data:`FORMAT_OPTIONS`)."""
+    """The bit-true model of ``sensor`` with the given format options: the one :func:`generate` builds.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A fitted or loaded sensor.
+    memory : {"banked", "replicated", "corner"}
+        Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`).
+    **formats
+        Word formats, the names of :data:`FORMAT_OPTIONS` (``input_bits``, ``weight_frac``, ...);
+        None means the default.
+
+    Returns
+    -------
+    FixedPointModel
+        An :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` for an additive sensor, a
+        :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` for one fitted with ``breakpoints``.
+
+    Raises
+    ------
+    InputError
+        An unknown or impossible format option.
+    """
     unknown = set(formats) - set(FORMAT_OPTIONS)
     if unknown:
-        raise ValueError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
+        raise InputError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
     given = {k: v for k, v in formats.items() if v is not None}
     if _is_additive(sensor):  # the parts' cores summed before one rounding (pwas_hdl.fixedpoint.additive)
         from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
@@ -819,6 +841,19 @@ def generate(model: PWASVirtualSensor | str | os.PathLike, outdir: str | os.Path
     The folder is checked (:func:`check_outdir`) before the design is built. Re-generating into
     a folder keeps its ``sim/``, ``synth/`` and user files; results made for another design are
     then stale (:func:`write_folder`, :func:`pwas_hdl.design.report.stale_results`).
+
+    Parameters
+    ----------
+    model : PWASVirtualSensor or path of a model (or estimator) file
+    outdir : str or os.PathLike
+        The design folder (created; Verilog, ``manifest.json``, ``report.md``, ...).
+    **options
+        The keyword options of :func:`build_design` (``design``, ``memory``, ``pipeline``, formats).
+
+    Returns
+    -------
+    GeneratedDesign
+        The design, with ``outdir`` set.
     """
     check_outdir(outdir)
     gd = build_design(model, **options)

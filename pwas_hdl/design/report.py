@@ -336,7 +336,18 @@ def _estimator_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def report_markdown(rep: dict[str, Any]) -> str:
-    """Markdown rendering of :func:`collect_report`."""
+    """Markdown rendering of :func:`collect_report`.
+
+    Parameters
+    ----------
+    rep : dict
+        What :func:`collect_report` returns.
+
+    Returns
+    -------
+    str
+        The report text (as in ``report.md``): accuracy, latency, resources.
+    """
     if rep["design"]["kind"] == "estimator":
         lines = _estimator_lines(rep)
         lines += _synth_lines(rep)

@@ -50,11 +50,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from pwas_hdl.limits import MAX_REGRESSORS, check_limit, check_vertices
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 __all__ = ["Grid", "Location", "quantile_breakpoints", "pow2_breakpoints", "pow2_exponents", "BREAKPOINT_RULES", "MAX_POW2_RATIO"]
 
@@ -420,7 +423,7 @@ class Grid:
             return np.einsum("mk,mk->m", loc.mu, w[loc.vertices])
         return np.einsum("mk,mkz->mz", loc.mu, w[loc.vertices])
 
-    def basis_matrix(self, x: np.ndarray):
+    def basis_matrix(self, x: np.ndarray) -> scipy.sparse.csr_array:
         """Sparse alpha-basis matrix ``H`` (``H[t, k] = alpha_k(x_t)``), n + 1 entries per row.
 
         Parameters

@@ -167,7 +167,18 @@ class LagStructure:
         return out
 
     def names(self, inputs: Sequence[str], outputs: Sequence[str], targets: Sequence[str] = ()) -> list[str]:
-        """Human-readable regressor names such as ``y[t-3]``; past estimates are ``z_hat[t-1]``."""
+        """Human-readable regressor names such as ``y[t-3]``; past estimates are ``z_hat[t-1]``.
+
+        Parameters
+        ----------
+        inputs, outputs, targets : sequence of str
+            Names of the ``nu`` inputs, ``ny`` outputs and ``nz`` targets.
+
+        Returns
+        -------
+        list of str
+            ``n`` names in regressor order.
+        """
         res = []
         for kind, ch, lag in self.signal_of_dimension():
             if kind == "z":
@@ -255,6 +266,13 @@ class LagStructure:
 
     def build_many(self, us: list[np.ndarray], ys: list[np.ndarray], n_traj: int) -> tuple[np.ndarray, list[slice]]:
         """Regressors of several trajectories, stacked; also the sample slice each row block covers.
+
+        Parameters
+        ----------
+        us, ys : list of ndarray, shapes (T_i, nu) and (T_i, ny)
+            Inputs and outputs per trajectory (ignored when ``nu`` / ``ny`` is 0; then may be empty).
+        n_traj : int
+            Number of trajectories.
 
         Returns
         -------

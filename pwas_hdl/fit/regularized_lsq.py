@@ -13,7 +13,7 @@ import time
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Callable, Literal, Sequence
+from typing import TYPE_CHECKING, Callable, Literal, Sequence
 
 import numpy as np
 from scipy import sparse
@@ -33,6 +33,9 @@ from pwas_hdl.fit.sparse_cholesky import (
     grid_nested_dissection,
 )
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit
+
+if TYPE_CHECKING:
+    from pwas_hdl.flow.executor import Executor
 
 __all__ = [
     "tikhonov_matrix",
@@ -1635,7 +1638,7 @@ def solve_regularized(
     rtol: float = CG_RTOL,
     max_memory: int | str | None = None,
     return_info: bool = False,
-):
+) -> "np.ndarray | tuple[np.ndarray, SolveInfo]":
     """Weights ``w = (H'H + sigma Gamma)^{-1} H'z`` (eq. 16).
 
     Parameters
@@ -1832,6 +1835,7 @@ class CVResult:
     final_info: "SolveInfo | None" = field(repr=False, default=None, compare=False)
 
     def to_dict(self) -> dict:
+        """The ``fit.cv`` block of the model file: ``sigmas``, ``mse``, ``best_sigma``, ``folds`` (JSON types)."""
         return {
             "sigmas": [float(s) for s in self.sigmas],
             "mse": [float(v) for v in self.mse],
@@ -2017,7 +2021,7 @@ def cross_validate_sigma(
     method: Method = "auto",
     rtol: float = CG_RTOL,
     max_memory: int | str | None = None,
-    executor=None,
+    executor: "Executor | None" = None,
     final_solve: bool = False,
     block_smoother: bool = True,
 ) -> CVResult:

@@ -16,7 +16,7 @@ import copy
 import math
 import os
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
@@ -36,6 +36,9 @@ from pwas_hdl.fit.regularized_lsq import (
     solve_report,
     tikhonov_matrix,
 )
+
+if TYPE_CHECKING:
+    from pwas_hdl.flow.executor import Executor
 
 __all__ = ["PWASVirtualSensor", "MODEL_FORMAT", "MODEL_VERSION", "load_model"]
 
@@ -258,6 +261,23 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         """Stacked regressors of the trajectories (see :mod:`pwas_hdl.fit.regressors`).
 
         Uses the fitted lag structure when the sensor is fitted, else the one implied by the data.
+
+        Parameters
+        ----------
+        u, y : as in :meth:`fit`
+
+        Returns
+        -------
+        xi : ndarray, shape (sum_i (T_i - M + 1), n)
+            Physical regressors, row blocks per trajectory (observer bank: its features, then the
+            lag taps).
+        valid : list of slice
+            Per trajectory, the samples ``t`` that have a row: ``slice(M - 1, T_i)``.
+
+        Raises
+        ------
+        InputError
+            A recurrent sensor (``mz >= 1``): its regressors need its own estimates (use :meth:`predict`).
         """
         if self._bank:
             self._check_fitted()
@@ -364,7 +384,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         y: Trajectories,
         z: Trajectories,
         progress: Callable[[int, int], None] | None = None,
-        executor=None,
+        executor: "Executor | None" = None,
     ) -> "PWASVirtualSensor":
         """Fit the weights by regularised least squares (eqs. 14-16).
 
@@ -544,18 +564,20 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
 
             raise NotFittedError("this PWASVirtualSensor is not fitted yet; call fit() or load a model first")
 
-    def predict_regressors(self, xi: np.ndarray, return_flags: bool = False):
+    def predict_regressors(self, xi: np.ndarray, return_flags: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Evaluate the PWAS function at regressor vectors.
 
         Parameters
         ----------
         xi : ndarray, shape (m, n)
+            Physical regressors (as :meth:`regressors` builds them).
         return_flags : bool
             Also return the out-of-domain flag of each row (True where a coordinate was clamped).
 
         Returns
         -------
         zhat : ndarray, shape (m, nz)
+            Estimates, physical target units.
         flags : ndarray, shape (m,), bool  (only with ``return_flags``)
         """
         self._check_fitted()
@@ -566,7 +588,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         zhat = np.einsum("mk,mkz->mz", loc.mu, self.weights_[loc.vertices])
         return (zhat, loc.out_of_domain) if return_flags else zhat
 
-    def predict(self, u: Trajectories, y: Trajectories, return_flags: bool = False, z: Trajectories = None):
+    def predict(self, u: Trajectories, y: Trajectories, return_flags: bool = False,
+                z: Trajectories = None) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Estimate ``z`` for every sample that has a full regressor.
 
         Parameters
@@ -622,7 +645,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                              for b, p in zip(blocks, past)])
         return zhat, self.grid_.locate(xi).out_of_domain
 
-    def score(self, u: Trajectories, y: Trajectories, z: Trajectories, sample_weight=None) -> float:
+    def score(self, u: Trajectories, y: Trajectories, z: Trajectories, sample_weight: np.ndarray | Sequence[float] | None = None) -> float:
         """Coefficient of determination R^2 of the estimates of ``z`` (as scikit-learn regressors).
 
         Parameters
@@ -669,7 +692,13 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         return int(self.weights_.shape[1])
 
     def signal_names(self) -> tuple[list[str], list[str], list[str]]:
-        """Names of (inputs, outputs, targets), defaults ``u0.., y0.., z0..``."""
+        """Names of the signals.
+
+        Returns
+        -------
+        inputs, outputs, targets : list of str
+            ``nu``, ``ny`` and ``nz`` names (defaults ``u0..``, ``y0..``, ``z0..``).
+        """
         self._check_fitted()
         ins = list(self.input_names) if self.input_names else [f"u{i}" for i in range(self.n_inputs)]
         outs = list(self.output_names) if self.output_names else [f"y{i}" for i in range(self.n_outputs)]
@@ -686,17 +715,61 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         return model_file.model_text(self)
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model file atomically (:func:`pwas_hdl.fit.model_file.write_model`)."""
+        """Write the model file atomically (:func:`pwas_hdl.fit.model_file.write_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The JSON file to write (replaced whole, or left as it was on error).
+
+        Returns
+        -------
+        Path
+            ``path``.
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            The sensor is not fitted.
+        """
         return model_file.write_model(self, path)
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "model") -> "PWASVirtualSensor":
-        """Rebuild a fitted sensor from a model-file dict (validated: :func:`pwas_hdl.fit.model_file.model_from_dict`)."""
+        """Rebuild a fitted sensor from a model-file dict (validated: :func:`pwas_hdl.fit.model_file.model_from_dict`).
+
+        Parameters
+        ----------
+        d : dict
+            The parsed model file (:meth:`to_dict`).
+        source : str
+            What ``d`` came from, for error messages.
+
+        Returns
+        -------
+        PWASVirtualSensor
+            Fitted: ``predict`` gives what the saved sensor gave.
+
+        Raises
+        ------
+        InputError
+            ``d`` is not a valid model (the message names the key).
+        """
         return model_file.model_from_dict(d, source)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "PWASVirtualSensor":
         """Read and validate a model file (:func:`pwas_hdl.fit.model_file.read_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            A model file written by :meth:`save` or ``pwas-hdl fit``.
+
+        Returns
+        -------
+        PWASVirtualSensor
+            The fitted sensor.
 
         Raises
         ------
@@ -710,5 +783,16 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
 
 
 def load_model(path: str | os.PathLike) -> PWASVirtualSensor:
-    """Shorthand for :meth:`PWASVirtualSensor.load`."""
+    """Shorthand for :meth:`PWASVirtualSensor.load`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A model file written by :meth:`PWASVirtualSensor.save` or ``pwas-hdl fit``.
+
+    Returns
+    -------
+    PWASVirtualSensor
+        The fitted sensor.
+    """
     return PWASVirtualSensor.load(path)

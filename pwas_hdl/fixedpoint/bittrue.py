@@ -75,9 +75,10 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fixedpoint.formats import _MAX_ABS_FRAC
@@ -94,6 +95,9 @@ from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.memory_layout import make_layout
 from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
 from pwas_hdl.fixedpoint.reduction import tree_reduce
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["FixedPointModel", "MAX_DATAPATH_BITS", "TRACE_STAGES", "NOISE_BUDGET", "default_weight_frac"]
 
@@ -432,12 +436,30 @@ class FixedPointModel:
         return codes, fmt, int(sat.sum())
 
     @classmethod
-    def from_sensor(cls, sensor, **overrides) -> "FixedPointModel":
+    def from_sensor(cls, sensor: "PWASVirtualSensor", **overrides: Any) -> "FixedPointModel":
         """Bit-true model of a fitted :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor`.
 
         The reference error for the default output lsb is the sensor's training RMSE (max over
         targets) unless ``reference_error`` is given. Names of regressors, signals and targets
-        come from the sensor. Other keyword arguments: see :class:`FixedPointModel`.
+        come from the sensor.
+
+        Parameters
+        ----------
+        sensor : PWASVirtualSensor
+            A fitted (or loaded) sensor with a uniform grid: its ``grid_`` and ``weights_`` (N, nz).
+        **overrides
+            Keyword arguments of :class:`FixedPointModel` (``input_bits``, ``weight_frac``, ...).
+
+        Returns
+        -------
+        FixedPointModel
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            The sensor is not fitted.
+        InputError
+            A format option is impossible, or the grid is non-uniform (``breakpoints``).
         """
         if not hasattr(sensor, "weights_"):
             from sklearn.exceptions import NotFittedError  # a ValueError; imported here: sklearn is slow to import
@@ -463,12 +485,13 @@ class FixedPointModel:
         return model
 
     # ------------------------------------------------------------- inputs
-    def quantize_inputs(self, x, return_saturated: bool = False):
+    def quantize_inputs(self, x: ArrayLike, return_saturated: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Input codes of physical regressors (half up, saturated to ``B_in`` bits).
 
         Parameters
         ----------
         x : array_like, shape (m, n) or (n,)
+            Physical regressor values (the units of the signals).
         return_saturated : bool
             Also return a bool (m,) mask of rows where some value saturated the code range.
 
@@ -486,10 +509,22 @@ class FixedPointModel:
             q[:, j], sat[:, j] = f.quantize(xa[:, j], return_saturated=True)
         return (q, sat.any(axis=1)) if return_saturated else q
 
-    def represented_inputs(self, q) -> np.ndarray:
-        """Physical points the circuit evaluates for codes ``q``, shape (m, n): ``lo_j + lsb_j * (q -
-        lo_code_j)``; with ``input_scale="exact"``, inside the domain ``lo_j + h_j t'_j / 2**F_j``
-        (the scaled offset, :meth:`InputFormat.scaled`)."""
+    def represented_inputs(self, q: ArrayLike) -> np.ndarray:
+        """Physical points the circuit evaluates for input codes.
+
+        ``lo_j + lsb_j * (q - lo_code_j)``; with ``input_scale="exact"``, inside the domain
+        ``lo_j + h_j t'_j / 2**F_j`` (the scaled offset, :meth:`InputFormat.scaled`).
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Signed input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        ndarray of float, shape (m, n)
+            Physical regressor values.
+        """
         qa = self._check_codes(q)
         x = np.stack([f.to_physical(qa[:, j]) for j, f in enumerate(self.inputs)], axis=1)
         for j, f in enumerate(self.inputs):
@@ -575,7 +610,7 @@ class FixedPointModel:
             )
         return res
 
-    def evaluate(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Run the circuit on input codes.
 
         Parameters
@@ -593,10 +628,10 @@ class FixedPointModel:
         r = self._run(q, full=False)
         return r["out"], r["out_of_range"]
 
-    def trace(self, q) -> dict[str, np.ndarray]:
-        """Every pipeline stage for input codes ``q`` (integer arrays, ``m`` rows).
+    def trace(self, q: ArrayLike) -> dict[str, np.ndarray]:
+        """Every pipeline stage for input codes ``q`` (integer arrays, shape (m, n) or (n,)).
 
-        Keys (:data:`TRACE_STAGES`) and shapes: ``q, t, t_clamped, cell, frac_raw, frac, rank,
+        Returns a dict of integer (or bool) arrays, one per stage. Keys (:data:`TRACE_STAGES`) and shapes: ``q, t, t_clamped, cell, frac_raw, frac, rank,
         perm`` (m, n); ``out_of_range, out_saturated`` (m,); ``vertices, bank, addr, mu`` (m, n+1)
         indexed by simplex vertex ``k``; ``rot`` (m,) = ``sum(cell) mod (n+1)``;
         ``addr_by_bank`` (m, n_banks) address presented to each bank; ``w`` (m, n+1, nz) weight
@@ -606,16 +641,22 @@ class FixedPointModel:
         """
         return self._run(q, full=True)
 
-    def reference(self, q) -> np.ndarray:
+    def reference(self, q: ArrayLike) -> np.ndarray:
         """Float model (unquantised weights) at the physical inputs the codes represent.
 
         Equal to ``grid.evaluate(weights, represented_inputs(q))`` up to float rounding; it is
         computed from the exact grid coordinates ``(clip(q - lo_code) ) / 2**F_j`` with
         :meth:`Grid.locate_grid_units`, so no physical round trip moves a point across a face.
 
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Signed input codes inside the ``B_in``-bit range.
+
         Returns
         -------
         ndarray, shape (m, nz), float
+            Physical target units.
         """
         qa = self._check_codes(q)
         tc = np.clip(qa - self._lo_code, 0, self._span)
@@ -623,12 +664,30 @@ class FixedPointModel:
         _, _, _, _, vertices, mu = self.grid.locate_grid_units(s)
         return np.einsum("mk,mkz->mz", mu, self.weights[vertices])
 
-    def to_physical_output(self, out_codes) -> np.ndarray:
-        """Physical output values ``code * 2**-Fo``."""
+    def to_physical_output(self, out_codes: ArrayLike) -> np.ndarray:
+        """Physical output values ``code * 2**-Fo``.
+
+        Parameters
+        ----------
+        out_codes : array_like of int, shape (m, nz)
+            Output codes (``s<B_out>.<Fo>``), as :meth:`evaluate` returns them.
+
+        Returns
+        -------
+        ndarray of float, shape (m, nz)
+            Physical target units.
+        """
         return self.output_port.to_physical(out_codes)
 
-    def predict(self, x, return_flags: bool = False):
+    def predict(self, x: ArrayLike, return_flags: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Physical regressors -> physical outputs through the bit-true circuit.
+
+        Parameters
+        ----------
+        x : array_like, shape (m, n) or (n,)
+            Physical regressor values (quantised by :meth:`quantize_inputs`).
+        return_flags : bool
+            Also return the flags below.
 
         Returns
         -------

@@ -50,7 +50,18 @@ class PlantData:
         return PlantData(self.u[sl], self.y[sl], self.z[sl], self.z_true[sl], self.names, pick(self.run), pick(self.mode))
 
     def split(self, n_first: int) -> tuple["PlantData", "PlantData"]:
-        """The first ``n_first`` samples and the rest, as two contiguous data sets."""
+        """The first ``n_first`` samples and the rest, as two contiguous data sets.
+
+        Parameters
+        ----------
+        n_first : int
+            Samples in the first set (``0 <= n_first <= T``).
+
+        Returns
+        -------
+        first, rest : PlantData
+            Samples ``0 .. n_first-1`` and ``n_first .. T-1`` (every array cut along its rows).
+        """
         return self._rows(slice(None, n_first)), self._rows(slice(n_first, None))
 
     def runs(self) -> list["PlantData"]:
@@ -61,7 +72,19 @@ class PlantData:
         return [self._rows(slice(a, b)) for a, b in zip(cuts[:-1], cuts[1:])]
 
     def columns(self, with_truth: bool = True) -> dict[str, np.ndarray]:
-        """Named columns for a CSV file (``<z>_true`` holds the noise-free target; then ``mode``, ``run``)."""
+        """Named columns for a CSV file (:func:`pwas_hdl.io.csv_table.write_csv`).
+
+        Parameters
+        ----------
+        with_truth : bool
+            Add ``<z>_true``, the noise-free target, after the measured signals.
+
+        Returns
+        -------
+        dict of str to ndarray, each shape (T,)
+            The inputs, outputs and targets by name (physical units), then ``<z>_true``, then
+            ``mode`` and ``run`` when the data have them.
+        """
         cols: dict[str, np.ndarray] = {}
         for key, arr in (("u", self.u), ("y", self.y), ("z", self.z)):
             for i, nm in enumerate(self.names[key]):

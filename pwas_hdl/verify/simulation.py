@@ -172,7 +172,17 @@ class Design(ManifestView):
 def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = None) -> Design:
     """Read a folder written by ``pwas-hdl generate``; rebuild its bit-true model.
 
-    ``verilog``: simulate this file instead of the folder's (e.g. a deliberately mutated copy).
+    Parameters
+    ----------
+    outdir : str or os.PathLike
+        The design folder (``manifest.json``, ``model.json``, the Verilog).
+    verilog : str or os.PathLike, optional
+        Simulate this file instead of the folder's (e.g. a deliberately mutated copy).
+
+    Returns
+    -------
+    Design
+        The manifest, the rebuilt sensor and bit-true model, and the paths the simulators need.
 
     Raises
     ------
@@ -1129,9 +1139,9 @@ def simulate_arrays(
     outdir: str | os.PathLike,
     output: str | os.PathLike,
     *,
-    u=None,
-    y=None,
-    z_true=None,
+    u: np.ndarray | Sequence[np.ndarray] | None = None,
+    y: np.ndarray | Sequence[np.ndarray] | None = None,
+    z_true: np.ndarray | Sequence[np.ndarray] | None = None,
     **options: Any,
 ) -> dict:
     """Replay signals given as arrays through the generated RTL (as :func:`simulate_data` does a CSV file).
