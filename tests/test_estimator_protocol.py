@@ -94,3 +94,18 @@ def test_fit_refuses_bad_parameters_and_signals_with_input_error(params, data, m
     with pytest.raises(InputError, match=match):
         m.fit(sig["u"], sig["y"], sig["z"])
     assert not hasattr(m, "weights_")
+
+
+def test_design_functions_refuse_an_unfitted_sensor_with_not_fitted_error(tmp_path):
+    """fixed_point_model / build_design / generate of an unfitted sensor raised AttributeError
+    ('no attribute grid_' / 'lags_'); now sklearn's NotFittedError, as predict does, and nothing is written."""
+    from sklearn.exceptions import NotFittedError
+
+    from pwas_hdl import build_design, fixed_point_model, generate
+
+    for call in (lambda: fixed_point_model(PWASVirtualSensor()), lambda: build_design(PWASVirtualSensor()),
+                 lambda: build_design(PWASVirtualSensor(), design="sensor"),
+                 lambda: generate(PWASVirtualSensor(), tmp_path / "hw")):
+        with pytest.raises(NotFittedError, match="not fitted"):
+            call()
+    assert not (tmp_path / "hw").exists()

@@ -96,7 +96,9 @@ class GeneratedDesign:
 
 
 def _load_sensor(model: PWASVirtualSensor | str | os.PathLike) -> PWASVirtualSensor:
+    """The sensor itself (NotFittedError unless fitted), or the one a model file holds."""
     if isinstance(model, PWASVirtualSensor):
+        model._check_fitted()
         return model
     return PWASVirtualSensor.load(model)
 
@@ -122,9 +124,12 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
 
     Raises
     ------
+    sklearn.exceptions.NotFittedError
+        The sensor is not fitted.
     InputError
         An unknown or impossible format option.
     """
+    _load_sensor(sensor)  # fitted?
     unknown = set(formats) - set(FORMAT_OPTIONS)
     if unknown:
         raise InputError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
