@@ -109,3 +109,21 @@ def test_design_functions_refuse_an_unfitted_sensor_with_not_fitted_error(tmp_pa
         with pytest.raises(NotFittedError, match="not fitted"):
             call()
     assert not (tmp_path / "hw").exists()
+
+
+@pytest.mark.parametrize("initial", [[1.0, 2.0, 3.0], [np.nan]])
+def test_recurrent_fixed_point_model_refuses_bad_initial_values(initial):
+    """The wrong number of initial values said 'cannot reshape array of size 3 into shape (1,1)', a NaN
+    'input values contain NaN; cannot quantize'; now an InputError naming Mz x nz."""
+    from pwas_hdl.errors import InputError
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
+
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(400, 1))
+    y = np.cumsum(0.1 * u, axis=0)
+    rec = PWASVirtualSensor(mu=1, my=1, mz=1, partitions=3, sigma=1e-3).fit(u, y, np.sin(y))
+    fxm = FixedPointModel.from_sensor(rec)
+    assert RecurrentFixedPointModel(fxm, rec.lags_, rec.initial_values_).initial_codes.shape == (1, 1)
+    with pytest.raises(InputError, match="Mz x nz = 1 x 1"):
+        RecurrentFixedPointModel(fxm, rec.lags_, initial)

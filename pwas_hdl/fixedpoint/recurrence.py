@@ -40,7 +40,9 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat
@@ -122,7 +124,7 @@ class RecurrentFixedPointModel:
         Reset values of the feedback registers.
     """
 
-    def __init__(self, fxm: FixedPointModel, lags: LagStructure, initial_values):
+    def __init__(self, fxm: FixedPointModel, lags: LagStructure, initial_values: ArrayLike):
         if not lags.recurrent:
             raise ValueError("the lag structure has no fed-back estimates (Mz = 0): use FixedPointModel")
         if lags.dimension != fxm.n:
@@ -139,7 +141,11 @@ class RecurrentFixedPointModel:
         zdims = {c: [j for j, (k, ch, _) in enumerate(sod) if k == "z" and ch == c] for c in range(lags.nz)}
         self.z_formats = [fxm.inputs[zdims[c][0]] for c in range(lags.nz)]
         self.feedback = [FeedbackRequant.between(fxm.output_format, f) for f in self.z_formats]
-        iv = np.asarray(initial_values, dtype=float).reshape(lags.mz, lags.nz)
+        iv = np.asarray(initial_values, dtype=float)
+        if iv.size != lags.mz * lags.nz or not np.all(np.isfinite(iv)):
+            raise InputError(f"initial_values must be Mz x nz = {lags.mz} x {lags.nz} finite physical values (oldest first), "
+                             f"got shape {iv.shape}{'' if np.all(np.isfinite(iv)) else ' with NaN or infinite values'}")
+        iv = iv.reshape(lags.mz, lags.nz)
         self.initial_values = iv
         self.initial_codes = np.stack([f.quantize(iv[:, c]) for c, f in enumerate(self.z_formats)], axis=1).astype(np.int64)
 
