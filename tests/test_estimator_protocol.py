@@ -127,3 +127,19 @@ def test_recurrent_fixed_point_model_refuses_bad_initial_values(initial):
     assert RecurrentFixedPointModel(fxm, rec.lags_, rec.initial_values_).initial_codes.shape == (1, 1)
     with pytest.raises(InputError, match="Mz x nz = 1 x 1"):
         RecurrentFixedPointModel(fxm, rec.lags_, initial)
+
+
+def test_loaded_model_keeps_the_cross_validation_settings(tmp_path):
+    """load() restores cv_folds and sigma_grid from the model file's fit.cv block (they came back as the
+    defaults 5 and None, so clone(loaded).fit(...) cross-validated differently from the original fit)."""
+    rng = np.random.default_rng(2)
+    u = rng.normal(size=(400, 1))
+    y = np.cumsum(0.1 * u, axis=0)
+    z = np.sin(3 * y) + 0.05 * rng.normal(size=(400, 1))
+    for kw in (dict(cv_folds=3, sigma_grid=[1e-4, 1e-2, 1.0]), dict()):
+        m = PWASVirtualSensor(mu=1, my=1, partitions=4, **kw).fit(u, y, z)
+        loaded = PWASVirtualSensor.load(m.save(tmp_path / "m.json"))
+        assert loaded.cv_folds == m.cv_folds and loaded.sigma_grid == m.sigma_grid
+        refit = clone(loaded).fit(u, y, z)
+        assert refit.cv_.folds == m.cv_.folds and np.array_equal(refit.cv_.sigmas, m.cv_.sigmas)
+        np.testing.assert_array_equal(refit.weights_, m.weights_)

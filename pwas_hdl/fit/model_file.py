@@ -381,6 +381,12 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         rule = fit.get("breakpoints", "given")
         obj.breakpoints = rule if rule != "given" else [None if b is None else b.tolist() for b in grid.breakpoints]
     cv = fit["cv"]
+    if cv is not None:  # the CV's own settings, so that clone(loaded).fit(...) cross-validates as the original did
+        from pwas_hdl.fit.regularized_lsq import DEFAULT_SIGMA_GRID
+
+        obj.cv_folds = int(cv["folds"])
+        sigmas = [float(v) for v in cv["sigmas"]]
+        obj.sigma_grid = None if np.array_equal(sigmas, DEFAULT_SIGMA_GRID) else sigmas
     if "front_end" in d:
         fe, taps, _ = _front_end_regressors(d)
         obj.front_end = fe
