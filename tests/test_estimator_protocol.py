@@ -130,16 +130,18 @@ def test_recurrent_fixed_point_model_refuses_bad_initial_values(initial):
 
 
 def test_loaded_model_keeps_the_cross_validation_settings(tmp_path):
-    """load() restores cv_folds and sigma_grid from the model file's fit.cv block (they came back as the
+    """load() restores cv_folds, sigma_grid and cv_shuffle from the model file's fit.cv block (they came back as the
     defaults 5 and None, so clone(loaded).fit(...) cross-validated differently from the original fit)."""
     rng = np.random.default_rng(2)
     u = rng.normal(size=(400, 1))
     y = np.cumsum(0.1 * u, axis=0)
     z = np.sin(3 * y) + 0.05 * rng.normal(size=(400, 1))
-    for kw in (dict(cv_folds=3, sigma_grid=[1e-4, 1e-2, 1.0]), dict()):
+    for kw in (dict(cv_folds=3, sigma_grid=[1e-4, 1e-2, 1.0]), dict(), dict(cv_shuffle=True, cv_folds=4)):
         m = PWASVirtualSensor(mu=1, my=1, partitions=4, **kw).fit(u, y, z)
         loaded = PWASVirtualSensor.load(m.save(tmp_path / "m.json"))
         assert loaded.cv_folds == m.cv_folds and loaded.sigma_grid == m.sigma_grid
+        assert loaded.cv_shuffle == m.cv_shuffle and loaded.cv_.shuffle == m.cv_shuffle
+        assert ("shuffle" in m.to_dict()["fit"]["cv"]) == m.cv_shuffle  # written only for shuffled folds
         refit = clone(loaded).fit(u, y, z)
         assert refit.cv_.folds == m.cv_.folds and np.array_equal(refit.cv_.sigmas, m.cv_.sigmas)
         np.testing.assert_array_equal(refit.weights_, m.weights_)

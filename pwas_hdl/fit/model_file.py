@@ -13,7 +13,7 @@
       "weights": {"<target>": [w_0, ..., w_{N-1}], ...},   # vertex order of pwas_hdl.fit.geometry
       "fit": {"sigma": ..., "sigma_given": bool, "tikhonov_order": 0 | 1, "gamma": ..., "domain_from":
               "data" | "explicit", "share_lag_domain": bool, "n_train": int, "n_trajectories": int,
-              "train_rmse": {"<target>": ...}, "cv": {"sigmas", "mse", "best_sigma", "folds"} | null,
+              "train_rmse": {"<target>": ...}, "cv": {"sigmas", "mse", "best_sigma", "folds"[, "shuffle"]} | null,
               "solve": {...}}     # optional, see below
     }
 
@@ -385,6 +385,7 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         from pwas_hdl.fit.regularized_lsq import DEFAULT_SIGMA_GRID
 
         obj.cv_folds = int(cv["folds"])
+        obj.cv_shuffle = bool(cv.get("shuffle", False))
         sigmas = [float(v) for v in cv["sigmas"]]
         obj.sigma_grid = None if np.array_equal(sigmas, DEFAULT_SIGMA_GRID) else sigmas
     if "front_end" in d:
@@ -416,7 +417,7 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
     obj.weights_ = w
     obj.sigma_ = float(fit["sigma"])
     obj.cv_ = (CVResult(np.array(cv["sigmas"], dtype=float), np.array(cv["mse"], dtype=float), float(cv["best_sigma"]),
-                        int(cv["folds"])) if cv is not None else None)
+                        int(cv["folds"]), shuffle=bool(cv.get("shuffle", False))) if cv is not None else None)
     obj.solve_ = dict(fit["solve"]) if "solve" in fit else None
     obj.n_train_ = int(fit["n_train"])
     obj.n_trajectories_ = int(fit["n_trajectories"])

@@ -1833,15 +1833,21 @@ class CVResult:
     #: as :func:`solve_regularized` returns them, and their :class:`SolveInfo`; else None
     final_weights: np.ndarray | None = field(repr=False, default=None, compare=False)
     final_info: "SolveInfo | None" = field(repr=False, default=None, compare=False)
+    #: the folds were shuffled samples (``fit --cv-shuffle``), not contiguous blocks
+    shuffle: bool = False
 
     def to_dict(self) -> dict:
-        """The ``fit.cv`` block of the model file: ``sigmas``, ``mse``, ``best_sigma``, ``folds`` (JSON types)."""
-        return {
+        """The ``fit.cv`` block of the model file: ``sigmas``, ``mse``, ``best_sigma``, ``folds`` and, for
+        shuffled folds only, ``shuffle: true`` (JSON types)."""
+        d = {
             "sigmas": [float(s) for s in self.sigmas],
             "mse": [float(v) for v in self.mse],
             "best_sigma": float(self.best_sigma),
             "folds": int(self.folds),
         }
+        if self.shuffle:
+            d["shuffle"] = True
+        return d
 
 
 def fold_labels(n_rows: int, folds: int, shuffle: bool = False, seed: int = 0) -> np.ndarray:
@@ -2217,4 +2223,4 @@ def cross_validate_sigma(
     if final_solve:
         solver.start_segment()
         final_w, final_info = solver.solve(hth_r, htz[:, 0] if np.ndim(z) == 1 else htz, best)
-    return CVResult(sig, mse, best, folds, fold_mse, summary, final_w, final_info)
+    return CVResult(sig, mse, best, folds, fold_mse, summary, final_w, final_info, shuffle=bool(shuffle))
