@@ -193,6 +193,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise InputError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
             raise InputError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
+        for nm in ("share_lag_domain", "cv_shuffle"):  # a string such as "no" would read as True
+            if not isinstance(getattr(self, nm), (bool, np.bool_)):
+                raise InputError(f"{nm} must be True or False, got {getattr(self, nm)!r}")
         if not isinstance(self.cv_folds, (int, np.integer)) or isinstance(self.cv_folds, bool) or self.cv_folds < 2:
             raise InputError(f"cv_folds (--folds) must be an integer >= 2, got {self.cv_folds!r}")
         if isinstance(self.front_end, ObserverBankFrontEnd):
