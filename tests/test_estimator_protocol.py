@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
@@ -147,3 +148,18 @@ def test_loaded_model_keeps_the_cross_validation_settings(tmp_path):
         refit = clone(loaded).fit(u, y, z)
         assert refit.cv_.folds == m.cv_.folds and np.array_equal(refit.cv_.sigmas, m.cv_.sigmas)
         np.testing.assert_array_equal(refit.weights_, m.weights_)
+
+
+def test_a_list_of_lists_is_refused_as_ambiguous():
+    """(T, 2).tolist() was read as T trajectories of two samples and one channel, and the fit succeeded
+    with nz = ny = 1; a list of lists is now refused (arrays say which is meant)."""
+    rng = np.random.default_rng(0)
+    y2, z2 = rng.normal(size=(300, 2)), rng.normal(size=(300, 2))
+    with pytest.raises(InputError, match="y is a list of lists"):
+        PWASVirtualSensor(my=1, partitions=3, sigma=1e-3).fit(None, y2.tolist(), z2)
+    m = PWASVirtualSensor(my=1, partitions=3, sigma=1e-3).fit(None, y2, z2)  # the array: one trajectory, 2 channels
+    assert m.to_dict()["signals"]["targets"] == ["z0", "z1"] and m.ny_ == 2
+    two = PWASVirtualSensor(my=1, partitions=3, sigma=1e-3).fit(None, [y2[:150], y2[150:]], [z2[:150], z2[150:]])
+    assert two.n_trajectories_ == 2
+    one = PWASVirtualSensor(my=1, partitions=3, sigma=1e-3).fit(None, list(y2[:, 0]), z2[:, :1])  # a list of numbers
+    assert one.n_trajectories_ == 1

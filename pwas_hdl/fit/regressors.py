@@ -37,6 +37,8 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
     Parameters
     ----------
     data : ndarray (T,) or (T, k), or a list of them, or None (no such signal)
+        A plain list of numbers is one trajectory of one channel; a list of lists is refused (rows or
+        trajectories? pass arrays).
     name : str
         Signal name for error messages ("u", "y", "z").
     width : int, optional
@@ -49,7 +51,8 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
     Raises
     ------
     InputError
-        Not 1-D / 2-D, complex, sparse, not numeric, NaN or infinite values, or not ``width`` columns.
+        Not 1-D / 2-D, complex, sparse, not numeric, a list of lists, NaN or infinite values, or not
+        ``width`` columns.
     """
     if data is None:
         return []
@@ -61,6 +64,12 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
         items = list(data)
         if items and all(np.ndim(a) == 0 for a in items):  # a plain list of numbers: one trajectory
             items = [np.asarray(items, dtype=float)]
+        elif items and all(isinstance(a, (list, tuple)) for a in items):
+            # rows of one trajectory ((T, k).tolist()) or k trajectories? Read as trajectories, rows of 2
+            # channels became T two-sample trajectories of one channel and the fit went on: refused
+            raise InputError(f"{name} is a list of lists, which could be the rows of one trajectory or several "
+                             f"trajectories; pass a numpy array (samples x channels) for one trajectory, or a list "
+                             f"of numpy arrays (one per trajectory)")
     out = []
     for i, a in enumerate(items):
         if np.iscomplexobj(a):  # numpy would drop the imaginary part with only a warning
