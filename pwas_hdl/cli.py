@@ -365,7 +365,6 @@ def fit(
     iterative solver stopped at its iteration cap, fit prints a warning: line with the relative
     residual and a bound on the weights' error, and one when cross-validation solves did.
     """
-    from pwas_hdl.fit import classifier as clf
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd, parse_observer
 
     with _user_errors():
@@ -414,12 +413,6 @@ def fit(
         u = select_signals(table, ins, traj_col) if use_u else None
         y = select_signals(table, outs, traj_col) if (my or bank) else None
         z = select_signals(table, tgts, traj_col)
-        classes = None
-        if classify:
-            classes = clf.class_labels(np.concatenate([zi[:, 0] for zi in z]))
-            z = [clf.one_hot(zi[:, 0], classes) for zi in z]
-            class_target = tgts[0]
-            tgts = clf.class_target_names(class_target, classes)
         dom = None
         if domain is not None:
             try:
@@ -487,6 +480,7 @@ def fit(
             initial_state=init,
             additive=additive,
             breakpoints=bps,
+            classify=classify,
         )
         if additive is not None and not bank:  # the parts are checked before the data are read into a fit
             from pwas_hdl.fit.additive import parse_additive
@@ -502,8 +496,6 @@ def fit(
         if bp_names is not None and bp_names != model.to_dict()["regressors"]:
             raise InputError(f"--breakpoints {breakpoints}: the file is for regressors {bp_names}, the fit has "
                              f"{model.to_dict()['regressors']}")
-        if classes is not None:
-            model.classifier_ = {"target": class_target, "classes": classes}
         with outset:
             outset.write_text(output, model.to_json())
         d = model.to_dict()

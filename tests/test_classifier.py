@@ -57,6 +57,40 @@ def test_fit_classify_and_predict_cli(tmp_path):
     assert (hat == truth).mean() > 0.6   # well above chance (1/3) on an independent run
 
 
+def test_classifier_through_the_api_equals_the_cli(tmp_path):
+    """classify=True (the API; the CLI's --classify is a thin layer over it): the same file as the CLI's,
+    predict_class = the argmax of the scores, a loaded classifier refits as a classifier, clone keeps it."""
+    from sklearn.base import clone
+
+    data = switched_training_runs(4, 800, seed=0)
+    _csv(tmp_path / "train.csv", data)
+    r = CliRunner().invoke(app, ["fit", str(tmp_path / "train.csv"), "-o", str(tmp_path / "cli.json"), "-u", "u", "-y", "y",
+                                 "-z", "mode", "--classify", "--mu", "2", "--my", "2", "-p", "4", "--traj-col", "run"])
+    assert r.exit_code == 0, r.output
+    t = read_csv(tmp_path / "train.csv")
+    from pwas_hdl.io.csv_table import select_signals
+
+    u, y, z = (select_signals(t, [c], "run") for c in ("u", "y", "mode"))
+    m = PWASVirtualSensor(mu=2, my=2, partitions=4, input_names=["u"], output_names=["y"], target_names=["mode"],
+                          classify=True).fit(u, y, z)
+    assert m.classifier_ == {"target": "mode", "classes": [1.0, 2.0, 3.0]}
+    assert m.to_json() == (tmp_path / "cli.json").read_text()
+    scores = m.predict(u, y)
+    assert scores.shape[1] == 3
+    np.testing.assert_array_equal(m.predict_class(u, y), np.array([1.0, 2.0, 3.0])[np.argmax(scores, axis=1)])
+    loaded = PWASVirtualSensor.load(tmp_path / "cli.json")
+    assert loaded.get_params()["classify"] and loaded.target_names == ["mode"]
+    np.testing.assert_array_equal(clone(loaded).fit(u, y, z).weights_, m.weights_)
+    with pytest.raises(InputError, match="predict_class needs a classifier"):
+        PWASVirtualSensor(mu=2, my=2, partitions=4, sigma=1e-3).fit(u, y, y).predict_class(u, y)
+    with pytest.raises(InputError, match="one target name"):
+        PWASVirtualSensor(my=1, classify=True, target_names=["a", "b"]).fit(None, y, z)
+    with pytest.raises(InputError, match="classify .* needs the lag front end"):
+        PWASVirtualSensor(my=1, mz=1, classify=True).fit(None, y, z)
+    with pytest.raises(InputError, match="one label column"):
+        PWASVirtualSensor(my=1, classify=True).fit(None, y, [np.column_stack([zi, zi]) for zi in z])
+
+
 def test_classify_bad_input_writes_nothing(tmp_path):
     d = switched_training_runs(1, 200, seed=0)
     cols = d.columns()

@@ -56,12 +56,10 @@ def test_refit_forgets_the_fitted_attributes_of_the_previous_model(tmp_path):
     np.testing.assert_array_equal(m.weights_, fresh.weights_)
 
     labels = (z[:, 0] > 0).astype(float)
-    clf = PWASVirtualSensor(mu=1, my=1, partitions=3, sigma=1e-3, target_names=["c=0", "c=1"])
-    clf.fit(u, y, np.column_stack([labels == 0, labels == 1]).astype(float))
-    clf.classifier_ = {"target": "c", "classes": [0.0, 1.0]}  # as `pwas-hdl fit --classify` sets it
+    clf = PWASVirtualSensor(mu=1, my=1, partitions=3, sigma=1e-3, target_names=["c"], classify=True).fit(u, y, labels)
     loaded = PWASVirtualSensor.load(clf.save(tmp_path / "clf.json"))
-    assert loaded.classifier_["classes"] == [0.0, 1.0]
-    loaded.set_params(target_names=["z"]).fit(u, y, z)
+    assert loaded.classifier_["classes"] == [0.0, 1.0] and loaded.classify
+    loaded.set_params(classify=False, target_names=["z"]).fit(u, y, z)
     assert not hasattr(loaded, "classifier_") and "classifier" not in loaded.to_dict()
     np.testing.assert_array_equal(PWASVirtualSensor.load(loaded.save(tmp_path / "z.json")).weights_, fresh.weights_)
 

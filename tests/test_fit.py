@@ -344,7 +344,7 @@ def test_sklearn_protocol_params_clone_score_repr(rng):
     assert params["my"] == 2 and params["partitions"] == 4 and params["sigma"] == 1e-6 and params["mu"] == 0
     assert set(params) == {"mu", "my", "partitions", "gamma", "sigma", "tikhonov_order", "cv_folds", "sigma_grid",
                            "cv_shuffle", "domain", "share_lag_domain", "input_names", "output_names", "target_names",
-                           "front_end", "mz", "refine", "initial_state", "additive", "breakpoints"}
+                           "front_end", "mz", "refine", "initial_state", "additive", "breakpoints", "classify"}
     m.fit(None, y, z)
     c = clone(m)
     assert c is not m and not hasattr(c, "weights_") and not hasattr(c, "grid_")

@@ -426,7 +426,8 @@ def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
         mf = d["map_fit"]
         obj.map_fit_ = {"max": [mf["max_error"][t] for t in tgts], "rms": [mf["rms_error"][t] for t in tgts],
                         "n_test": mf["n_test"], "test": mf["test"]}
-    if "classifier" in d:
+    if "classifier" in d:  # the estimator's own parameters (classify, the label's name), so that a refit classifies
+        obj.classify, obj.target_names = True, [d["classifier"]["target"]]
         obj.classifier_ = {"target": d["classifier"]["target"], "classes": [float(c) for c in d["classifier"]["classes"]]}
     return obj
 

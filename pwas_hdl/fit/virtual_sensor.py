@@ -27,6 +27,7 @@ from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit, check_weights
 from pwas_hdl.fit.geometry import BREAKPOINT_RULES, Grid, pow2_breakpoints, quantile_breakpoints
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
+from pwas_hdl.fit.classifier import class_labels, class_target_names, decide, one_hot
 from pwas_hdl.fit.regressors import LagStructure, as_trajectories
 from pwas_hdl.fit.regularized_lsq import (
     CVResult,
@@ -118,6 +119,13 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         strictly increasing cut points per regressor dimension, physical units; it fixes the
         domain (first and last cut) and the partitions (``domain`` and ``partitions`` are then
         not used). Same number of weights ``N`` as the uniform grid with the same partitions.
+    classify : bool
+        A PWAS classifier (:mod:`pwas_hdl.fit.classifier`): ``z`` is one column of class labels
+        (numbers; at least 2 and at most 64 distinct values), fitted as one one-hot score per class on
+        one shared grid (targets ``<label>=<k>``, ``<label>`` the one ``target_names`` entry or
+        ``"z"``). :meth:`predict` returns the scores ``(T, C)``, :meth:`predict_class` the labels
+        (argmax, ties to the lowest class); ``classifier_`` holds the label name and the classes.
+        Lag front end, no feedback (``mz = 0``).
 
     Attributes (after ``fit``)
     --------------------------
@@ -156,6 +164,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         initial_state: str | Sequence[float] = "mean",
         additive: str | Sequence[Sequence[int]] | None = None,
         breakpoints: str | Sequence[Sequence[float]] | None = None,
+        classify: bool = False,
     ):
         self.mu = mu
         self.my = my
@@ -177,6 +186,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.initial_state = initial_state
         self.additive = additive
         self.breakpoints = breakpoints
+        self.classify = classify
 
     # ------------------------------------------------------------ validation
     def _check_params(self) -> None:
@@ -193,7 +203,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             raise InputError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
             raise InputError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
-        for nm in ("share_lag_domain", "cv_shuffle"):  # a string such as "no" would read as True
+        for nm in ("share_lag_domain", "cv_shuffle", "classify"):  # a string such as "no" would read as True
             if not isinstance(getattr(self, nm), (bool, np.bool_)):
                 raise InputError(f"{nm} must be True or False, got {getattr(self, nm)!r}")
         if not isinstance(self.cv_folds, (int, np.integer)) or isinstance(self.cv_folds, bool) or self.cv_folds < 2:
@@ -219,6 +229,12 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                              f"regressor, got {self.breakpoints!r}")
         if self.breakpoints is not None and self.additive is not None:
             raise InputError("breakpoints (non-uniform partition) with an additive sensor is not available yet; use one of them")
+        if self.classify and (self._bank or self.mz):
+            raise InputError("classify (--classify) needs the lag front end and no past estimates (not "
+                             "--front-end observer-bank, not --mz)")
+        if self.classify and self.target_names is not None and len(self.target_names) != 1:
+            raise InputError(f"a classifier has one label column: give one target name (the label's), got "
+                             f"{list(self.target_names)}")
         if self.sigma_grid is not None and hasattr(self.sigma_grid, "__len__"):
             check_limit("the number of sigma candidates", len(self.sigma_grid), MAX_SIGMA_CANDIDATES,
                         "give fewer candidates (--sigma-grid)")
@@ -414,6 +430,13 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         if z is None:
             raise InputError("z (the measured targets, (T, nz) or a list of such) is needed to fit; got None")
         zs = as_trajectories(z, "z")
+        classifier = None
+        if self.classify:  # one label column -> one one-hot score per class (pwas_hdl.fit.classifier)
+            if any(zi.shape[1] != 1 for zi in zs):
+                raise InputError(f"a classifier fits one label column; z has {zs[0].shape[1]} columns")
+            classes = class_labels(np.concatenate([zi[:, 0] for zi in zs]))
+            zs = [one_hot(zi[:, 0], classes) for zi in zs]
+            classifier = {"target": self.target_names[0] if self.target_names else "z", "classes": classes}
         fe = None
         if self._bank:
             fe = copy.deepcopy(self.front_end)
@@ -436,7 +459,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                 )
         zt = np.concatenate([zi[sl] for zi, sl in zip(zs, valid)], axis=0)
         nz = zt.shape[1]
-        if self.target_names is not None and len(self.target_names) != nz:
+        if self.target_names is not None and len(self.target_names) != nz and classifier is None:
             raise InputError(f"{len(self.target_names)} target names for {nz} target columns")
         # names the model file holds must match its signals, or load() refuses the file
         n_in = fe.nu_ if fe is not None else (lags.nu if lags is not None and lags.mu else None)
@@ -518,6 +541,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self.train_rmse_ = np.sqrt(np.mean(resid**2, axis=0))
         self.n_trajectories_ = len(valid)
         self.lead_ = 0
+        if classifier is not None:
+            self.classifier_ = classifier
         if rec_info is not None:
             self.initial_state_rule_, self.initial_values_ = rec_info.pop("initial")
             self.recurrence_fit_ = {"mode": "series-parallel", "refine": int(self.refine), **rec_info}
@@ -617,6 +642,30 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         xi, _ = self.regressors(u, y)
         return self.predict_regressors(xi, return_flags)
 
+    def predict_class(self, u: Trajectories, y: Trajectories) -> np.ndarray:
+        """The class labels of a classifier (``classify=True`` or a loaded classifier file).
+
+        Parameters
+        ----------
+        u, y : as in :meth:`fit`
+
+        Returns
+        -------
+        labels : ndarray, shape (sum_i (T_i - M + 1),)
+            The class of the largest score (:meth:`predict`), ties to the lowest class
+            (:func:`pwas_hdl.fit.classifier.decide`: what the generated argmax stage outputs).
+
+        Raises
+        ------
+        InputError
+            The model is not a classifier.
+        """
+        self._check_fitted()
+        clf = getattr(self, "classifier_", None)
+        if clf is None:
+            raise InputError("predict_class needs a classifier (fit with classify=True, or fit --classify)")
+        return decide(self.predict(u, y), clf["classes"])
+
     def _predict_recurrent(self, u: Trajectories, y: Trajectories, z: Trajectories, return_flags: bool):
         """Run the recurrence (:func:`pwas_hdl.fit.recurrent.run_recurrence`) on every trajectory."""
         from pwas_hdl.fit.recurrent import initial_block, run_recurrence
@@ -705,7 +754,11 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         self._check_fitted()
         ins = list(self.input_names) if self.input_names else [f"u{i}" for i in range(self.n_inputs)]
         outs = list(self.output_names) if self.output_names else [f"y{i}" for i in range(self.n_outputs)]
-        tgts = list(self.target_names) if self.target_names else [f"z{i}" for i in range(self.n_targets)]
+        clf = getattr(self, "classifier_", None)
+        if clf is not None:  # the one-hot scores: <label>=<k>
+            tgts = class_target_names(clf["target"], clf["classes"])
+        else:
+            tgts = list(self.target_names) if self.target_names else [f"z{i}" for i in range(self.n_targets)]
         return ins, outs, tgts
 
     # ------------------------------------------------------------ save/load
