@@ -124,6 +124,21 @@ def test_recurrent_generate_bad_input(flow, tmp_path, capsys):
         assert not out.exists()
 
 
+def test_simulate_refuses_the_core_of_a_recurrent_model(flow, tmp_path, capsys):
+    """`generate --design core` of a recurrent model is the bare core (its last inputs are the fed-back
+    estimates); simulate cannot form those from DATA: one error line naming the way out, exit 2, nothing written
+    (it said 'inputs have 2 columns, the model has n = 3')."""
+    core = tmp_path / "core"
+    assert main(["generate", str(flow / "dyn.json"), "--design", "core", "-o", str(core)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "hw.csv"
+    assert main(["simulate", str(core), str(flow / "dyn.csv"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().startswith("error:") and err.count("error:") == 1 and "Traceback" not in err
+    assert "z_hat[t-1]" in err and "--design sensor" in err and "export-testbench" in err
+    assert not out.exists() and not out.with_suffix(".json").exists()
+
+
 @pytest.mark.rtl
 def test_recurrent_top_lint_clean(flow):
     from pwas_hdl.flow.toolchain import lint_verilog, which

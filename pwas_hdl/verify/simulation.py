@@ -890,6 +890,13 @@ def simulate_data(
     sensor, model = design.sensor, design.model
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
+    if design.kind == "core" and lags is not None and lags.recurrent:
+        # the core's last nz*Mz inputs are the fed-back estimates, which no column of DATA holds
+        fed = lags.names(ins, outs, tgts)[lags.io_dimension:]
+        raise InputError(f"{outdir}: the core of a recurrent model takes its own past estimates as regressors "
+                         f"({', '.join(fed)}), which simulate cannot form from DATA; "
+                         "generate --design sensor (the recurrent top, which feeds them back) to replay DATA, or "
+                         "check this core with `pwas-hdl export-testbench`")
     table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
     data = table.path
     if traj_col is not None:
