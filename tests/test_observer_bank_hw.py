@@ -235,3 +235,16 @@ def test_cli_generate_sets_the_bank_formats_and_refuses_them_elsewhere(pv_data, 
                                       "applies to observer-bank sensors (fit --front-end observer-bank) and estimator "
                                       "files only"), res.output
     assert tree(tmp_path) == before
+
+
+def test_width_refusal_states_the_formats_it_tried(sensor_11b):
+    """A bank datapath over 62 bits is refused with the F_s, B_s and head room that led there and the
+    smallest F_s allowed: the line said only 'give fewer state fraction bits', so a user of the
+    default formats (three-tank + fit --front-end observer-bank) had no value to start from."""
+    default = ObserverBankSensorModel.from_sensor(sensor_11b).bank.formats
+    with pytest.raises(InputError) as exc:
+        ObserverBankSensorModel.from_sensor(sensor_11b, state_frac=40)
+    msg = str(exc.value)
+    assert "would need" in msg and "more than 62" in msg and "F_s = 40" in msg and "B_s = " in msg
+    assert "input head room 8" in msg and f"at least the input fraction bits {default.input_frac}" in msg
+    assert "--state-frac (state_frac)" in msg and "--input-headroom (input_headroom)" in msg

@@ -301,7 +301,8 @@ class FixedPointObserverBank:
             fs = int(state_frac)
         if fs < fin:
             raise InputError(f"{option_text('state_frac')} = {fs} must be >= the input fraction bits {fin} "
-                             f"({option_text('input_bits')} - 1 - ceil(log2 {option_text('input_headroom')}))")
+                             f"(input bits {self.input_bits} - 1 - ceil(log2 input head room {self.input_headroom:g}); "
+                             f"{option_text('input_bits')}, {option_text('input_headroom')})")
         if coef_frac is None:
             fc = 4
             while feat_err(g_e * 2.0 ** -(fc + 1) * (x0 + (nu + 1) * h_in + 1)) > target and fc < 40:
@@ -389,10 +390,11 @@ class FixedPointObserverBank:
                        "scale_product": scaleb}
         for nm, w in self.widths.items():
             if w > MAX_DATAPATH_BITS:
-                raise InputError(f"the observer bank's {nm} would need {w} bits (more than {MAX_DATAPATH_BITS}); "
-                                 f"give fewer state fraction bits ({option_text('state_frac')}), a smaller input head "
-                                 f"room ({option_text('input_headroom')}) or fewer {option_text('state_bits')}, or fit "
-                                 "faster observers (fit --observer)")
+                raise InputError(f"the observer bank's {nm} would need {w} bits (more than {MAX_DATAPATH_BITS}) with "
+                                 f"state fraction bits F_s = {fs}, state bits B_s = {bs} and input head room "
+                                 f"{self.input_headroom:g}; give a smaller {option_text('state_frac')}, at least the input "
+                                 f"fraction bits {fin}, fewer {option_text('state_bits')} or a smaller "
+                                 f"{option_text('input_headroom')}, or fit faster observers (fit --observer)")
 
         # ---- error bound of the features
         eta = 2.0 ** -(fs + 1) + self.coef_error * (x0 + (nu + 1) * h_in) + 2.0 ** -(fc + fs + 1)
