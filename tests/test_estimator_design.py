@@ -72,8 +72,14 @@ def test_generate_refuses_pwas_options_and_unstable_gains(tmp_path):
     from pwas_hdl.design.generate import build_design
 
     cfg = estimator_config()
-    with pytest.raises(InputError, match="--memory 'replicated' belongs to the PWAS designs"):
+    with pytest.raises(InputError, match="--memory 'replicated' belongs to the PWAS designs") as exc:
         build_design(cfg, memory="replicated")
+    # the options it lists are the ones generate takes for an estimator file (it said the bank formats
+    # were API-only after generate got --state-bits, --state-frac, --coef-frac and --input-headroom)
+    assert "API" not in str(exc.value)
+    for opt in ("--architecture", "--bank-lanes", "--input-bits", "--input-headroom", "--state-bits", "--state-frac",
+                "--coef-frac"):
+        assert opt in str(exc.value)
     with pytest.raises(InputError, match="design recurrent does not apply"):
         build_design(cfg, design="recurrent")
     with pytest.raises(InputError, match=r"--state-bits \(state_bits\) must be an integer in 2\.\.48"):

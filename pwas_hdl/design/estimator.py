@@ -320,8 +320,9 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     if given:
         k = sorted(given)[0]
         opt = "--clock-mhz" if k == "target_mhz" else "--" + k.replace("_", "-")  # the generate option of API name k
-        raise InputError(f"{opt} {given[k]!r} belongs to the PWAS designs; the estimator file takes --name, --ports and "
-                         f"--input-bits only (through the API also {', '.join(ESTIMATOR_OPTIONS[1:])})")
+        takes = ["--name", "--ports", "--architecture", "--bank-lanes"] + ["--" + o.replace("_", "-") for o in ESTIMATOR_OPTIONS]
+        raise InputError(f"{opt} {given[k]!r} belongs to the PWAS designs; the estimator file takes "
+                         f"{', '.join(takes[:-1])} and {takes[-1]} only")
     unknown = set(options) - set(_PWAS_DEFAULTS) - set(ESTIMATOR_OPTIONS)
     if unknown:
         raise InputError(f"unknown option(s) {sorted(unknown)} for an estimator design; known: {', '.join(ESTIMATOR_OPTIONS)}")
