@@ -159,6 +159,10 @@ ADDITIVE_CONFIGS = [
 #: sensor top with lag bank, warm-up and the deepest pipeline (``s-u3y3-p2-max``, n = 6, II = 7).
 SERIAL_CONFIGS = [
     DesignConfig("serial-c-n3-p4x4x4-z2-sat", "core", 0, 3, 0, 1, [4, 4, 4], 2,
-                 {"memory": "replicated", "output_bits": 9, "architecture": "serial"}),
+                 {"output_bits": 9, "architecture": "serial"}),
     DesignConfig("serial-s-u3y3-p2-max", "sensor", 3, 3, 1, 1, 2, 1, {"pipeline": "max", "architecture": "serial"}),
 ]
+
+#: Options of the parallel twin of a serial configuration that the serial design refuses (its one memory
+#: of N words takes no ``memory``): with them the twin is the ``tests/test_rtl_cocotb.py`` configuration.
+SERIAL_TWIN_OPTIONS = {"serial-c-n3-p4x4x4-z2-sat": {"memory": "replicated"}}

@@ -28,7 +28,7 @@ SERIAL = {c.name: c for c in designs.SERIAL_CONFIGS}
 
 
 def _parallel_twin(cfg):
-    opts = {k: v for k, v in cfg.options.items() if k != "architecture"}
+    opts = {k: v for k, v in cfg.options.items() if k != "architecture"} | designs.SERIAL_TWIN_OPTIONS.get(cfg.name, {})
     return designs.DesignConfig(cfg.name.replace("serial-", "parallel-"), cfg.design, cfg.mu, cfg.my, cfg.nu, cfg.ny,
                                 cfg.partitions, cfg.nz, opts, seed=cfg.seed)
 
@@ -101,6 +101,10 @@ def test_serial_core_ports_equal_the_parallel_core():
 @pytest.mark.parametrize("args, msg", [
     (["--architecture", "tiny"], "architecture must be one of parallel, serial"),
     (["--architecture", "serial", "--clock-mhz", "50"], "--architecture serial"),
+    # --memory was ignored by the serial design (one memory of N words) while the manifest recorded it
+    (["--architecture", "serial", "--memory", "replicated"], "--memory replicated does not apply to --architecture serial"),
+    (["--architecture", "serial", "--memory", "corner"], "--memory corner does not apply to --architecture serial"),
+    (["--architecture", "serial", "--memory", "banked"], "--memory banked does not apply to --architecture serial"),
 ])
 def test_cli_bad_architecture_is_one_error_line_exit_2(args, msg, tmp_path):
     from pwas_hdl.cli import app

@@ -375,8 +375,8 @@ def build_design(
     architecture : {"parallel", "serial"}
         ``parallel`` (default): ``n + 1`` memories and multipliers per target, II = 1.
         ``serial``: one multiplier per target, one memory of N words, ``n + 1`` cycles per
-        sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`);
-        ``memory`` then only selects the bit-true model's layout. Not with ``target_mhz``.
+        sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`).
+        Not with ``target_mhz`` nor ``memory`` (refused: the serial memory is the only one).
         For an observer-bank sensor, ``serial`` also time-multiplexes the bank
         (:mod:`pwas_hdl.hdl.serial_observer_bank`: ``bank_lanes`` state-update units, the II is
         the manifest's ``front_end.cycles_per_sample``).
@@ -415,6 +415,9 @@ def build_design(
     if architecture == "serial" and target_mhz is not None:
         raise ValueError("the timing closure (--clock-mhz) chooses among parallel pipelines; "
                          "give --pipeline with --architecture serial")
+    if architecture == "serial" and memory is not None:  # it was ignored, and the manifest recorded it as built
+        raise InputError(f"--memory {memory} does not apply to --architecture serial (one weight memory of N words, "
+                         "one vertex read per cycle); leave --memory out")
     if name is not None:
         check_module_name(name)
     sensor = _load_sensor(model)
