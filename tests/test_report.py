@@ -97,3 +97,32 @@ def test_report_refuses_values_out_of_range(tmp_path):
     (out / "synth" / "ecp5" / "synth.json").write_text(json.dumps({**SYNTH_OK, "top": man["top"], "design_hash": man["design_hash"]}))
     res = runner.invoke(app, ["report", str(out)])
     assert res.exit_code == 0 and "| ecp5 | LFE5U-45F | 123 | 45 |" in res.output and "stale" in res.output, res.output
+
+
+def test_report_shows_the_class_results_of_a_classifier(tmp_path):
+    """A classifier design's simulation summary has the class mismatches, the accuracy against the label
+    and the agreement with the float argmax; report showed only the score rows (no reference, RMSEE '-')."""
+    from pwas_hdl.io.csv_table import write_csv
+    from pwas_hdl.systems.switched_linear import switched_training_runs
+
+    write_csv(tmp_path / "train.csv", switched_training_runs(2, 300, seed=0).columns())
+    assert runner.invoke(app, ["fit", str(tmp_path / "train.csv"), "-o", str(tmp_path / "m.json"), "-u", "u", "-y", "y",
+                               "-z", "mode", "--classify", "--mu", "1", "--my", "1", "-p", "2", "--sigma", "1e-3",
+                               "--traj-col", "run"]).exit_code == 0
+    out = tmp_path / "hw"
+    assert runner.invoke(app, ["generate", str(tmp_path / "m.json"), "--design", "sensor", "-o", str(out)]).exit_code == 0
+    (out / "sim").mkdir()
+    clf = {"target": "mode", "classes": [1.0, 2.0, 3.0], "class_mismatches": 0, "reference_column": "mode",
+           "agreement_float": {"samples": 10, "agreement": 0.9}, "scores_hw": {"accuracy": 0.8125},
+           "scores_float": {"accuracy": 0.75}}
+    (out / "sim" / "icarus.json").write_text(json.dumps({**SIM_OK, "targets": {}, "classifier": clf}))
+    (out / "sim" / "verilator.json").write_text(json.dumps({**SIM_OK, "simulator": "verilator", "targets": {},
+                                                            "classifier": {**clf, "scores_hw": {"accuracy": "high"}}}))
+    res = runner.invoke(app, ["report", str(out), "--json", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["simulation"][0]["classifier"] == {"class_mismatches": 0, "accuracy_hw": 0.8125, "accuracy_float": 0.75,
+                                                  "reference_column": "mode", "agreement_float": 0.9}
+    assert rep["simulation"][1]["classifier"]["accuracy_hw"] is None  # a value of another type is not carried
+    assert "## Classifier" in res.output and "| icarus | 10 | 0 | 0.8125 | 0.75 | mode | 0.9 |" in res.output
+    assert "| verilator | 10 | 0 | - | 0.75 | mode | 0.9 |" in res.output

@@ -258,6 +258,8 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
                 "samples_per_second": s.get("samples_per_second"),
                 "stale": _is_stale(s, man),
                 **({"modes": s.get("modes"), "metrics": s.get("metrics")} if man["design"] == "estimator" else {}),
+                **({"classifier": _classifier_result(s["classifier"])}
+                   if man.get("classifier") is not None and isinstance(s.get("classifier"), dict) else {}),
                 "targets": {
                     t: {k: v.get(k) for k in ("reference_column", "rmsee_float", "rmsee_hw", "rmsee_increase_hw_vs_float_percent")}
                     for t, v in s.get("targets", {}).items()
@@ -284,6 +286,23 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
         "simulation": sims,
         "synthesis": synth,
     }
+
+
+def _classifier_result(c: dict[str, Any]) -> dict[str, Any]:
+    """What the report keeps of a classifier simulation (``simulate``'s ``classifier`` entry): the class
+    mismatches against the bit-true argmax, the accuracy of the RTL and of the float classifier against
+    the label column, and the agreement with the float argmax; a value of another type is ``None``."""
+
+    def num(*keys: str) -> float | None:
+        v: Any = c
+        for k in keys:
+            v = v.get(k) if isinstance(v, dict) else None
+        return v if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+
+    ref = c.get("reference_column")
+    return {"class_mismatches": num("class_mismatches"), "accuracy_hw": num("scores_hw", "accuracy"),
+            "accuracy_float": num("scores_float", "accuracy"), "reference_column": ref if isinstance(ref, str) else None,
+            "agreement_float": num("agreement_float", "agreement")}
 
 
 def _fmt(v: Any, spec: str = ".4g") -> str:
@@ -382,6 +401,16 @@ def report_markdown(rep: dict[str, Any]) -> str:
                 )
         lines += _stale_lines(rep["simulation"], "simulate")
         lines.append("")
+        clf = [s for s in rep["simulation"] if s.get("classifier")]
+        if clf:  # a classifier design: the class of the RTL (the score rows above have no reference)
+            lines += ["## Classifier (class index of the RTL against the bit-true and float argmax)", "",
+                      "| simulator | samples | class mismatches | accuracy hardware | accuracy float | reference | "
+                      "agreement with float argmax |", "|---|---:|---:|---:|---:|---|---:|"]
+            for s in clf:
+                c = s["classifier"]
+                lines.append(f"| {s['simulator']} | {s['samples']} | {_fmt(c['class_mismatches'])} | {_fmt(c['accuracy_hw'])} | "
+                             f"{_fmt(c['accuracy_float'])} | {_fmt(c['reference_column'])} | {_fmt(c['agreement_float'])} |")
+            lines.append("")
     lines += _synth_lines(rep)
     return "\n".join(lines)
 
