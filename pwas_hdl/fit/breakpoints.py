@@ -35,9 +35,21 @@ SCHEMA = "breakpoints-v1.schema.json"
 
 
 def breakpoints_errors(d: object) -> list[str]:
-    """What is wrong with a parsed breakpoints document (empty when it is valid): the shipped
-    schema's violations first, then what a schema cannot say (strictly increasing cut points, as
-    many regressor names as lists)."""
+    """What is wrong with a parsed breakpoints document (empty when it is valid).
+
+    The shipped schema's violations first, then what a schema cannot say (finite, strictly
+    increasing cut points, as many regressor names as lists).
+
+    Parameters
+    ----------
+    d : object
+        The parsed JSON document (any value; a non-dict is reported by the schema check).
+
+    Returns
+    -------
+    list of str
+        One message per problem; empty when ``d`` is a valid breakpoints document.
+    """
     errs = schema_errors(d, SCHEMA)
     if errs:
         return errs
@@ -58,6 +70,11 @@ def breakpoints_errors(d: object) -> list[str]:
 
 def read_breakpoints(path: str | os.PathLike) -> tuple[list[list[float]], list[str] | None]:
     """Read and validate a breakpoints file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The breakpoints file (strict JSON, format ``pwas-hdl-breakpoints``).
 
     Returns
     -------

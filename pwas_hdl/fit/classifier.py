@@ -23,7 +23,23 @@ MAX_CLASSES = 64
 
 
 def class_labels(values: np.ndarray) -> list[float]:
-    """Sorted distinct labels of a label column (numbers); refuses a single class or too many."""
+    """Sorted distinct labels of a label column (numbers); refuses a single class or too many.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        The label column, any shape (flattened), ``(T,)`` typically; numbers.
+
+    Returns
+    -------
+    list of float
+        The ``C`` distinct labels in increasing order, ``2 <= C <=`` :data:`MAX_CLASSES`.
+
+    Raises
+    ------
+    InputError
+        A non-finite label, a single distinct value, or more than :data:`MAX_CLASSES` of them.
+    """
     v = np.asarray(values, dtype=float).reshape(-1)
     if not np.all(np.isfinite(v)):
         raise InputError("the class column has non-finite values")
@@ -37,7 +53,25 @@ def class_labels(values: np.ndarray) -> list[float]:
 
 
 def one_hot(values: np.ndarray, classes: Sequence[float]) -> np.ndarray:
-    """``(T, C)`` one-hot matrix of labels ``values`` over ``classes``."""
+    """``(T, C)`` one-hot matrix of labels ``values`` over ``classes``.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        ``T`` labels (flattened).
+    classes : sequence of float
+        The ``C`` classes (column order), as from :func:`class_labels`.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, C)`` float array: 1.0 where ``values[t] == classes[i]``, else 0.0.
+
+    Raises
+    ------
+    InputError
+        A label that is not one of ``classes``.
+    """
     v = np.asarray(values, dtype=float).reshape(-1)
     cls = np.asarray(classes, dtype=float)
     hit = v[:, None] == cls[None, :]
@@ -48,17 +82,59 @@ def one_hot(values: np.ndarray, classes: Sequence[float]) -> np.ndarray:
 
 
 def label_text(c: float) -> str:
-    """A label as text: integers without a decimal point."""
+    """A label as text: integers without a decimal point.
+
+    Parameters
+    ----------
+    c : float
+        A class label.
+
+    Returns
+    -------
+    str
+        ``"3"`` for 3.0, ``repr(float(c))`` (``"0.5"``) otherwise.
+    """
     return str(int(c)) if float(c).is_integer() else repr(float(c))
 
 
 def class_target_names(target: str, classes: Sequence[float]) -> list[str]:
-    """Target names of the one-hot outputs: ``target=k``."""
+    """Target names of the one-hot outputs: ``target=k``.
+
+    Parameters
+    ----------
+    target : str
+        Name of the class label column.
+    classes : sequence of float
+        The ``C`` classes.
+
+    Returns
+    -------
+    list of str
+        ``C`` names ``f"{target}={label_text(k)}"``, in the order of ``classes``.
+    """
     return [f"{target}={label_text(c)}" for c in classes]
 
 
 def decide(scores: np.ndarray, classes: Sequence[float]) -> np.ndarray:
-    """Class labels of the rows of ``scores`` (m, C): argmax, ties to the lowest index."""
+    """Class labels of the rows of ``scores`` (m, C): argmax, ties to the lowest index.
+
+    Parameters
+    ----------
+    scores : numpy.ndarray
+        ``(m, C)`` scores, one column per class (the PWAS outputs).
+    classes : sequence of float
+        The ``C`` classes, in the column order of ``scores``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(m,)`` float array of the decided labels.
+
+    Raises
+    ------
+    InputError
+        ``scores`` is not 2-D with ``len(classes)`` columns.
+    """
     s = np.asarray(scores, dtype=float)
     if s.ndim != 2 or s.shape[1] != len(classes):
         raise InputError(f"scores have shape {s.shape}; expected (m, {len(classes)})")
@@ -66,7 +142,21 @@ def decide(scores: np.ndarray, classes: Sequence[float]) -> np.ndarray:
 
 
 def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -> dict:
-    """Accuracy and per-class F1 (scikit-learn): ``{"accuracy": a, "f1": [f1 of each class in order]}``."""
+    """Accuracy and per-class F1 (scikit-learn): ``{"accuracy": a, "f1": [f1 of each class in order]}``.
+
+    Parameters
+    ----------
+    true, pred : numpy.ndarray
+        ``(T,)`` true and decided labels (flattened).
+    classes : sequence of float
+        The ``C`` classes; the order of the F1 list.
+
+    Returns
+    -------
+    dict
+        ``{"accuracy": float, "f1": list of C floats}``; the F1 of a class absent from both
+        ``true`` and ``pred`` is 0.
+    """
     from sklearn.metrics import accuracy_score, f1_score
 
     t = np.asarray(true, dtype=float).reshape(-1)

@@ -90,14 +90,28 @@ class SwitchedEstimatorConfig:
 
     @property
     def n_modes(self) -> int:
+        """Number of modes ``s``."""
         return len(self.A)
 
     @property
     def n_states(self) -> int:
+        """Number of states ``n`` (the order of every ``A_i``)."""
         return int(self.A[0].shape[0])
 
     def to_dict(self) -> dict[str, Any]:
-        """The file content (validated)."""
+        """The file content (validated).
+
+        Returns
+        -------
+        dict
+            The JSON document of the estimator file (header, ``signals``, ``window``, ``modes``
+            as lists of floats, and ``source`` when it is not empty).
+
+        Raises
+        ------
+        InputError
+            The configuration does not pass :func:`validate_estimator`.
+        """
         d = {"$schema": ESTIMATOR_SCHEMA_ID, "format": ESTIMATOR_FORMAT, "version": ESTIMATOR_VERSION,
              "kind": "switched-observer",
              "signals": {"input": self.input_name, "output": self.output_name, "states": list(self.state_names)},
@@ -111,6 +125,24 @@ class SwitchedEstimatorConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "estimator") -> "SwitchedEstimatorConfig":
+        """A configuration from a parsed estimator document (validated first).
+
+        Parameters
+        ----------
+        d : dict
+            The parsed JSON of an estimator file (what :meth:`to_dict` returns).
+        source : str
+            What to call the document in error messages (e.g. the file path).
+
+        Returns
+        -------
+        SwitchedEstimatorConfig
+
+        Raises
+        ------
+        InputError
+            ``d`` is not a valid estimator document (:func:`validate_estimator`).
+        """
         validate_estimator(d, source)
         m = d["modes"]
         return cls([e["A"] for e in m], [e["B"] for e in m], [e["C"] for e in m], [e["K"] for e in m], window=d["window"],
@@ -118,7 +150,13 @@ class SwitchedEstimatorConfig:
                    state_names=list(d["signals"]["states"]), source=dict(d.get("source", {})))
 
     def signal_names(self) -> tuple[list[str], list[str], list[str]]:
-        """(inputs, outputs, states), as :meth:`PWASVirtualSensor.signal_names` (targets = the states)."""
+        """(inputs, outputs, states), as :meth:`PWASVirtualSensor.signal_names` (targets = the states).
+
+        Returns
+        -------
+        inputs, outputs, states : list of str
+            ``[input_name]``, ``[output_name]`` and the ``n`` state names.
+        """
         return [self.input_name], [self.output_name], list(self.state_names)
 
 
@@ -158,6 +196,13 @@ def _config_errors(c: SwitchedEstimatorConfig) -> list[str]:
 def validate_estimator(d: Any, source: str = "estimator") -> None:
     """Check an estimator dict (header, schema, shapes).
 
+    Parameters
+    ----------
+    d : Any
+        The parsed JSON document.
+    source : str
+        What to call the document in error messages (e.g. the file path).
+
     Raises
     ------
     InputError
@@ -191,12 +236,34 @@ def validate_estimator(d: Any, source: str = "estimator") -> None:
 
 
 def estimator_text(config: SwitchedEstimatorConfig) -> str:
-    """The file text (strict JSON, indented, newline at the end; floats round-trip exactly)."""
+    """The file text (strict JSON, indented, newline at the end; floats round-trip exactly).
+
+    Parameters
+    ----------
+    config : SwitchedEstimatorConfig
+
+    Returns
+    -------
+    str
+        The JSON text of :meth:`SwitchedEstimatorConfig.to_dict`.
+    """
     return json.dumps(config.to_dict(), indent=1, allow_nan=False) + "\n"
 
 
 def write_estimator(config: SwitchedEstimatorConfig, path: str | os.PathLike) -> Path:
-    """Write the estimator file atomically (temporary file + rename)."""
+    """Write the estimator file atomically (temporary file + rename).
+
+    Parameters
+    ----------
+    config : SwitchedEstimatorConfig
+    path : str or os.PathLike
+        The file to write (replaced if it exists).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from pwas_hdl.io.atomic import OutputSet
 
     p = Path(path)
@@ -208,6 +275,15 @@ def write_estimator(config: SwitchedEstimatorConfig, path: str | os.PathLike) ->
 
 def read_estimator(path: str | os.PathLike) -> SwitchedEstimatorConfig:
     """Read and validate an estimator file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The estimator file.
+
+    Returns
+    -------
+    SwitchedEstimatorConfig
 
     Raises
     ------
@@ -227,9 +303,20 @@ def read_estimator(path: str | os.PathLike) -> SwitchedEstimatorConfig:
 def is_estimator_file(path: str | os.PathLike) -> bool:
     """True when ``path`` is a file whose JSON ``format`` is ``pwas-hdl-estimator`` (no validation).
 
-    A file that cannot be read is not one (the model reader then reports it); a file that names
-    the estimator format in its first 4 kB but is not valid JSON (truncated, NaN, not UTF-8) is
-    one, so that :func:`read_estimator` reports it with the estimator's own hint."""
+    A file that cannot be read, or larger than 64 MiB, is not one (the model reader then reports
+    it); a file that names the estimator format in its first 4 kB but is not valid JSON
+    (truncated, NaN, not UTF-8) is one, so that :func:`read_estimator` reports it with the
+    estimator's own hint.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any path.
+
+    Returns
+    -------
+    bool
+    """
     try:
         p = Path(path)
         if not p.is_file() or p.stat().st_size > (64 << 20):

@@ -249,6 +249,11 @@ class Grid:
     def vertex_coords(self, index: np.ndarray | int | None = None) -> np.ndarray:
         """Integer coordinates of vertices (all of them, in index order, when ``index`` is None).
 
+        Parameters
+        ----------
+        index : ndarray or int, optional
+            Linear vertex indices, ``0 <= index < N``; None for all ``N`` vertices.
+
         Returns
         -------
         ndarray, shape (..., n), int64
@@ -258,7 +263,19 @@ class Grid:
         return np.stack(np.unravel_index(np.asarray(index, dtype=np.int64), self.shape), axis=-1).astype(np.int64)
 
     def vertex_points(self, index: np.ndarray | int | None = None) -> np.ndarray:
-        """Physical coordinates of vertices, shape (..., n)."""
+        """Physical coordinates of vertices, shape (..., n).
+
+        Parameters
+        ----------
+        index : ndarray or int, optional
+            Linear vertex indices, ``0 <= index < N``; None for all ``N`` vertices.
+
+        Returns
+        -------
+        ndarray, shape (..., n), float
+            Vertex positions in physical units: ``lo + coords * step``, or the breakpoints of a
+            dimension cut at given breakpoints.
+        """
         coords = self.vertex_coords(index)
         pts = self.lo + coords * self.step
         bps = getattr(self, "breakpoints", None)
@@ -366,6 +383,13 @@ class Grid:
     def simplex_vertices(self, cell: np.ndarray, perm: np.ndarray) -> np.ndarray:
         """Linear indices of the ``n + 1`` vertices of the Kuhn simplex (cell, perm).
 
+        Parameters
+        ----------
+        cell : ndarray, shape (m, n), int
+            Integer cell coordinates, ``0 <= cell[:, j] < p_j``.
+        perm : ndarray, shape (m, n), int
+            Dimensions in descending order of the fractional parts (:meth:`order`).
+
         Returns
         -------
         ndarray, shape (m, n + 1), int64
@@ -447,7 +471,19 @@ class Grid:
 
     # ----------------------------------------------------------- neighbours
     def axis_edges(self, dim: int) -> tuple[np.ndarray, np.ndarray]:
-        """All grid edges parallel to axis ``dim``: pairs (a, a + e_dim) of vertex indices."""
+        """All grid edges parallel to axis ``dim``: pairs (a, a + e_dim) of vertex indices.
+
+        Parameters
+        ----------
+        dim : int
+            The axis, ``0 <= dim < n``.
+
+        Returns
+        -------
+        a, b : ndarray, shape (E,), int64
+            Linear indices of the two ends of each edge (``b = a + strides[dim]``), ``E = N p_dim /
+            (p_dim + 1)`` edges in increasing order of ``a``.
+        """
         coords = self.vertex_coords()
         keep = coords[:, dim] < self.partitions[dim]
         a = np.flatnonzero(keep).astype(np.int64)
@@ -532,6 +568,20 @@ def pow2_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], pa
     cell of ``2**e_k`` base steps is ``2**(e_k + f0)`` input codes, and the fraction within it is
     a shift of the code offset (:mod:`pwas_hdl.fixedpoint.warp`).
 
+    Parameters
+    ----------
+    x : ndarray, shape (m, n)
+        Regressor samples (physical units).
+    lo, hi : array_like, shape (n,)
+        The domain; the outer breakpoints are kept at ``lo`` and ``hi``.
+    partitions : int or sequence of int
+        Intervals ``p_j`` per dimension.
+    max_ratio : int
+        Largest ratio of two cell widths of one dimension, a power of two ``>= 1`` (1 gives
+        uniform cells).
+    groups : sequence of sequence of int, optional
+        Dimensions sharing one set of cuts, as in :func:`quantile_breakpoints`.
+
     Returns
     -------
     list of ndarray, one per dimension, ``p_j + 1`` strictly increasing values
@@ -553,7 +603,19 @@ def pow2_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], pa
 
 
 def pow2_exponents(b: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """``(e, h0)`` when the cells of ``b`` are ``2**e_k * h0`` wide (to 1e-9 relative), else None."""
+    """``(e, h0)`` when the cells of ``b`` are ``2**e_k * h0`` wide (to 1e-9 relative), else None.
+
+    Parameters
+    ----------
+    b : ndarray, shape (p + 1,)
+        Strictly increasing breakpoints of one dimension (physical units).
+
+    Returns
+    -------
+    tuple of (ndarray, float) or None
+        ``e``, shape (p,), int64 exponents (``e_k >= 0``) and ``h0``, the narrowest cell width
+        (physical units); None when a cell is not a power-of-two multiple of ``h0``.
+    """
     t = np.diff(np.asarray(b, dtype=float))
     h0 = float(t.min())
     r = t / h0

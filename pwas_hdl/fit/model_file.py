@@ -93,7 +93,25 @@ _HINT = "re-run `pwas-hdl fit` to write the model file again"
 
 
 def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
-    """The model-file content of a fitted sensor as a JSON-ready dict (valid against the schema)."""
+    """The model-file content of a fitted sensor as a JSON-ready dict (valid against the schema).
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A fitted (or loaded) sensor.
+
+    Returns
+    -------
+    dict
+        Header, ``signals``, ``lags``, ``regressors``, ``grid`` (physical units), ``weights`` (one
+        list of ``N`` floats per target, in target units), ``fit``; and the optional
+        ``classifier``, ``front_end``, ``recurrence``, ``map_fit`` and ``additive`` blocks.
+
+    Raises
+    ------
+    sklearn.exceptions.NotFittedError
+        ``sensor`` is not fitted.
+    """
     sensor._check_fitted()
     ins, outs, tgts = sensor.signal_names()
     lags, grid = sensor.lags_, sensor.grid_
@@ -211,6 +229,16 @@ def _front_end_regressors(d: dict[str, Any]) -> tuple[Any, Any, list[str]]:
 def model_text(sensor: "PWASVirtualSensor") -> str:
     """The model file's text (strict JSON, one key per line at the top, newline at the end).
 
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A fitted (or loaded) sensor.
+
+    Returns
+    -------
+    str
+        The JSON text of :func:`model_to_dict`.
+
     Raises
     ------
     ValueError
@@ -220,7 +248,25 @@ def model_text(sensor: "PWASVirtualSensor") -> str:
 
 
 def write_model(sensor: "PWASVirtualSensor", path: str | os.PathLike) -> Path:
-    """Write the model file atomically (nothing is left half-written on error); returns the path."""
+    """Write the model file atomically (nothing is left half-written on error); returns the path.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A fitted (or loaded) sensor.
+    path : str or os.PathLike
+        The model file to write (replaced if it exists).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    ValueError
+        A weight or statistic is not finite (:func:`model_text`).
+    """
     return atomic_write_text(path, model_text(sensor))
 
 
@@ -320,7 +366,20 @@ def _additive_errors(d: dict[str, Any], names: list[str]) -> list[str]:
 
 
 def model_errors(d: Any) -> list[str]:
-    """Every problem of a model-file dict, one sentence each (empty: a valid model file)."""
+    """Every problem of a model-file dict, one sentence each (empty: a valid model file).
+
+    A wrong format or version is the only problem reported; then the schema's violations, or,
+    when there are none, the consistency problems (names, dimensions, sizes).
+
+    Parameters
+    ----------
+    d : Any
+        The parsed JSON document.
+
+    Returns
+    -------
+    list of str
+    """
     if not isinstance(d, dict) or d.get("format") != MODEL_FORMAT:
         return [f'not a {MODEL_FORMAT} file (missing "format": "{MODEL_FORMAT}")']
     if type(d.get("version")) is not int or d.get("version") != MODEL_VERSION:
@@ -330,6 +389,13 @@ def model_errors(d: Any) -> list[str]:
 
 def validate_model(d: Any, source: str = "model") -> None:
     """Check a model-file dict against the format (header, schema, consistency).
+
+    Parameters
+    ----------
+    d : Any
+        The parsed JSON document.
+    source : str
+        What to call the document in error messages (e.g. the file path).
 
     Raises
     ------
@@ -344,7 +410,27 @@ def validate_model(d: Any, source: str = "model") -> None:
 
 
 def model_from_dict(d: Any, source: str = "model") -> "PWASVirtualSensor":
-    """A fitted sensor from a model-file dict (validated first, see :func:`validate_model`)."""
+    """A fitted sensor from a model-file dict (validated first, see :func:`validate_model`).
+
+    Parameters
+    ----------
+    d : Any
+        The parsed JSON of a model file (what :func:`model_to_dict` returns).
+    source : str
+        What to call the document in error messages (e.g. the file path).
+
+    Returns
+    -------
+    PWASVirtualSensor
+        A fitted sensor: grid, weights ``(N, nz)``, ``sigma_``, CV result and the optional
+        front end, recurrence, classifier and additive parts restored.
+
+    Raises
+    ------
+    InputError
+        ``d`` is not a valid model document, or its grid is impossible (the message names
+        ``source``).
+    """
     from pwas_hdl.fit.geometry import Grid
     from pwas_hdl.fit.regressors import LagStructure
     from pwas_hdl.fit.regularized_lsq import CVResult
@@ -452,6 +538,16 @@ def _solve_to_dict(report: dict) -> dict:
 
 def read_model(path: str | os.PathLike) -> "PWASVirtualSensor":
     """Read and validate a model file written by :func:`write_model`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The model file.
+
+    Returns
+    -------
+    PWASVirtualSensor
+        The fitted sensor (:func:`model_from_dict`).
 
     Raises
     ------

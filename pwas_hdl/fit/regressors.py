@@ -164,7 +164,15 @@ class LagStructure:
         return max(self.mu if self.nu else 0, self.my if self.ny else 0)
 
     def signal_of_dimension(self) -> list[tuple[str, int, int]]:
-        """For each regressor dimension: (kind 'u' or 'y', channel, lag) with lag 0 = current sample."""
+        """For each regressor dimension: (kind 'u', 'y' or 'z', channel, lag) with lag 0 = current sample.
+
+        Returns
+        -------
+        list of (str, int, int)
+            ``n`` tuples in regressor order: the inputs ``u`` (lags ``Mu - 1 .. 0``), the outputs
+            ``y`` (lags ``My - 1 .. 0``), then the past estimates ``z`` (lags ``Mz .. 1``), each lag
+            listing its channels in order.
+        """
         out: list[tuple[str, int, int]] = []
         # no loop over the lags of a signal without channels (Mu = 10**30 with nu = 0 would never end)
         for lag in range(self.mu - 1, -1, -1) if self.nu else ():

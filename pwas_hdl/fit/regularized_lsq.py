@@ -420,8 +420,18 @@ AMG_MIN_SIDE = 128
 
 
 def amg_allowed(grid_side: int | None) -> bool:
-    """True when the first-order CG preconditioner may be AMG (:data:`AMG_MIN_SIDE`) on a vertex
-    grid whose longest axis has ``grid_side`` vertices (``None``: unknown, allowed)."""
+    """True when the first-order CG preconditioner may be AMG (:data:`AMG_MIN_SIDE`).
+
+    Parameters
+    ----------
+    grid_side : int or None
+        Vertices on the longest axis of the vertex grid; None when unknown (then allowed).
+
+    Returns
+    -------
+    bool
+        ``grid_side is None or grid_side >= AMG_MIN_SIDE``.
+    """
     return grid_side is None or int(grid_side) >= AMG_MIN_SIDE
 
 #: The algebraic-multigrid hierarchy of the preconditioner serves a band of sigmas of this ratio
@@ -495,8 +505,9 @@ class SolveInfo:
 
     Attributes
     ----------
-    method : {"direct", "cg", "mg", "factor-pcg", "direct-fallback"}
+    method : {"direct", "cg", "mg", "mg-block", "factor-pcg", "direct-fallback"}
         ``mg``: CG preconditioned by a geometric-multigrid V-cycle (:mod:`pwas_hdl.fit.multigrid`).
+        ``mg-block``: the same with the data-block cycle (:data:`MG_BLOCK_DOMINANCE`).
         ``direct-fallback``: CG did not converge within :data:`CG_MAXITER`, the direct solve was used.
         ``factor-pcg``: CG preconditioned by the CHOLMOD factor of another sigma of the same fold
         (see :data:`FACTOR_PCG_MAXITER`).
@@ -517,6 +528,14 @@ class SolveInfo:
     converged: bool = True
 
     def to_dict(self) -> dict:
+        """The attributes as plain JSON types.
+
+        Returns
+        -------
+        dict
+            ``method`` (str), ``iterations`` (int), ``rel_residual`` and ``weight_bound`` (float),
+            ``converged`` (bool).
+        """
         return {
             "method": self.method,
             "iterations": int(self.iterations),
@@ -601,6 +620,25 @@ def memory_limit(max_memory: int | str | None = None) -> tuple[int | None, str]:
 
     Order: the explicit ``max_memory``; ``$PWAS_HDL_MAX_MEMORY``; ``MEMORY_FRACTION`` of the
     available RAM; ``(None, ...)`` (no limit) where none of these is known.
+
+    Parameters
+    ----------
+    max_memory : int or str, optional
+        An explicit limit: bytes, or text with a suffix K, M, G or T (:func:`parse_memory`).
+
+    Returns
+    -------
+    limit : int or None
+        The limit in bytes; None when no limit is known.
+    source : str
+        Where it comes from (``"max_memory"``, ``"$PWAS_HDL_MAX_MEMORY"``, ``"80% of the available
+        RAM"`` or ``"unknown"``).
+
+    Raises
+    ------
+    InputError
+        ``max_memory`` or the environment variable cannot be parsed or is too small
+        (:func:`parse_memory`).
     """
     if max_memory is not None:
         return parse_memory(max_memory, "max_memory"), "max_memory"
@@ -619,8 +657,21 @@ def _sparse_bytes(nnz: float, rows: int) -> float:
 
 
 def grid_factor_bound(n_unknowns: int, n_dims: int) -> tuple[float, float] | None:
-    """``(nnz(L), bytes)``: the bound of :data:`GRID_FACTOR_BOUND` on the CHOLMOD factor of a
-    system of ``n_unknowns`` grid vertices in ``n_dims`` dimensions, or None where not measured."""
+    """``(nnz(L), bytes)``: the bound of :data:`GRID_FACTOR_BOUND` on the CHOLMOD factor of a grid system.
+
+    Parameters
+    ----------
+    n_unknowns : int
+        Unknowns ``U`` of the system (grid vertices solved for).
+    n_dims : int
+        Regressor dimension ``n``.
+
+    Returns
+    -------
+    tuple of (float, float) or None
+        The bound on the factor's entries ``nnz(L)`` (at most the dense triangle ``U (U + 1) / 2``)
+        and on its bytes; None for a dimension not in :data:`GRID_FACTOR_BOUND`.
+    """
     if int(n_dims) not in GRID_FACTOR_BOUND:
         return None
     c, e, per_entry, per_unknown = GRID_FACTOR_BOUND[int(n_dims)]
@@ -637,6 +688,27 @@ def choose_method(n_unknowns: int, n_dims: int, order: int = 1, method: Method =
     (:data:`DIRECT_MAX_UNKNOWNS_CHOLMOD` where CHOLMOD is available). First-order problems of at
     least :data:`MG_MIN_UNKNOWNS` unknowns then also use multigrid per sigma (see
     :data:`MG_DOMINANCE` and :class:`NormalEquationSolver`).
+
+    Parameters
+    ----------
+    n_unknowns : int
+        Unknowns of the system.
+    n_dims : int
+        Regressor dimension ``n`` (dimensions above 5 use the 5-D limit).
+    order : int
+        Tikhonov order (0, or first order for any non-zero value).
+    method : {"auto", "direct", "cg", "mg"}
+        The requested method; anything but ``auto`` is returned unchanged.
+
+    Returns
+    -------
+    str
+        ``"direct"``, ``"cg"`` or ``"mg"``.
+
+    Raises
+    ------
+    InputError
+        ``method`` is not one of the four.
     """
     if method not in ("auto", "direct", "cg", "mg"):
         raise InputError(f"solver method must be 'auto', 'direct', 'cg' or 'mg', got {method!r}")
@@ -1248,10 +1320,22 @@ class NormalEquationSolver:
         return chol
 
     def analyse_direct_factor(self, hth: sparse.sparray) -> FactorCounts | None:
-        """The counts of the factor the direct method makes, from the full-data system ``hth +
-        Gamma`` (every fold's pattern is part of it), kept in :attr:`analysis` (None where CHOLMOD's
-        struct could not be read). First order analyses the pattern the folds share
-        (:meth:`_shared_pattern`), so the solves do not analyse it again."""
+        """The counts of the factor the direct method makes, from the full-data system ``hth + Gamma``.
+
+        Every fold's pattern is part of it; the counts are kept in :attr:`analysis`. First order
+        analyses the pattern the folds share (:meth:`_shared_pattern`), so the solves do not
+        analyse it again.
+
+        Parameters
+        ----------
+        hth : sparse array, shape (N, N)
+            The full-data normal matrix ``H'H``.
+
+        Returns
+        -------
+        FactorCounts or None
+            The factor's counts; None where CHOLMOD's struct could not be read.
+        """
         if self._shared_hth is not None:
             self.analysis = self._shared_pattern()[0].counts()
         else:
@@ -1292,8 +1376,21 @@ class NormalEquationSolver:
         return state
 
     def factorises(self, m: sparse.csr_array, sigma: float) -> bool:
-        """True when the solve at ``sigma`` factorises ``m + sigma Gamma`` (the direct method or the
-        factor chain; a fallback of an unconverged CG solve aside)."""
+        """True when the solve at ``sigma`` factorises ``m + sigma Gamma``.
+
+        The direct method or the factor chain; a fallback of an unconverged CG solve aside.
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            A fold's normal matrix (on the unknowns solved for).
+        sigma : float
+            The regularisation weight.
+
+        Returns
+        -------
+        bool
+        """
         if self.uses_mg(m, sigma):
             return False
         return self.method == "direct" or self.uses_factor_chain(m, sigma)
@@ -1323,6 +1420,17 @@ class NormalEquationSolver:
         :data:`MG_MIN_UNKNOWNS` unknowns) when the penalty dominates,
         ``rho = sigma * mean(diag Gamma) / mean(rowsum m)`` at least :data:`MG_DOMINANCE` (base
         method direct) or :data:`MG_DOMINANCE_CG` (base method Jacobi-preconditioned CG).
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            A fold's normal matrix (on the unknowns solved for).
+        sigma : float
+            The regularisation weight.
+
+        Returns
+        -------
+        bool
         """
         if self._mg_shape is None:
             return False
@@ -1332,24 +1440,66 @@ class NormalEquationSolver:
         return sigma * self._gamma_diag_mean() >= limit * self._mg_fold(m)[1]
 
     def uses_block(self, m: sparse.csr_array, sigma: float) -> bool:
-        """True when this sigma is solved by the data-block multigrid cycle
-        (``rho <`` :attr:`block_dominance`, see :data:`MG_BLOCK_DOMINANCE`)."""
+        """True when this sigma is solved by the data-block multigrid cycle.
+
+        That is with :attr:`block_mg` and ``rho <`` :attr:`block_dominance` (see
+        :data:`MG_BLOCK_DOMINANCE`).
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            A fold's normal matrix (on the unknowns solved for).
+        sigma : float
+            The regularisation weight.
+
+        Returns
+        -------
+        bool
+        """
         if not self.block_mg:
             return False
         return sigma * self._gamma_diag_mean() < self.block_dominance * self._mg_fold(m)[1]
 
     def uses_factor_chain(self, m: sparse.csr_array, sigma: float) -> bool:
-        """True when the base method is Jacobi-CG and this sigma is in the fold's factor chain
-        (``rho < FACTOR_DOMINANCE_CG``, see :data:`FACTOR_DOMINANCE_CG`)."""
+        """True when the base method is Jacobi-CG and this sigma is in the fold's factor chain.
+
+        That is ``rho < FACTOR_DOMINANCE_CG`` (see :data:`FACTOR_DOMINANCE_CG`).
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            A fold's normal matrix (on the unknowns solved for).
+        sigma : float
+            The regularisation weight.
+
+        Returns
+        -------
+        bool
+        """
         if not self.factor_chain:
             return False
         return sigma * self._gamma_diag_mean() < FACTOR_DOMINANCE_CG * self._mg_fold(m)[1]
 
     def segment_cost(self, m: sparse.csr_array, sigma: float) -> float:
-        """Relative cost of this sigma in a segment, for the order of the forked tasks
-        (:func:`_fork_segments`): :data:`_MG_COST` by multigrid, :data:`_CHAIN_COST` in the factor
-        chain, :data:`_MG_BLOCK_COST` by the data-block cycle, a sigma of a sweep by CG alone
-        ``sqrt(CG_COST_RHO_FLOOR / max(rho, CG_COST_RHO_FLOOR))``, else 1."""
+        """Relative cost of this sigma in a segment, for the order of the forked tasks (:func:`_fork_segments`).
+
+        :data:`_MG_COST` by multigrid, :data:`_CHAIN_COST` in the factor chain,
+        :data:`_MG_BLOCK_COST` by the data-block cycle, a sigma of a sweep by CG alone
+        ``sqrt(CG_COST_RHO_FLOOR / max(rho, CG_COST_RHO_FLOOR))``, else 1.
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            A fold's normal matrix (on the unknowns solved for).
+        sigma : float
+            The regularisation weight.
+
+        Returns
+        -------
+        float
+            A relative cost (1 for a solve of none of these kinds); only the order of the costs
+            matters.
+        """
         if self.uses_block(m, sigma):
             return _MG_BLOCK_COST
         if self.uses_mg(m, sigma):
@@ -1360,7 +1510,17 @@ class NormalEquationSolver:
         return _CHAIN_COST if self.uses_factor_chain(m, sigma) else 1.0
 
     def full_data_uses_mg(self, sigma: float) -> bool:
-        """:meth:`uses_mg` for the full-data normal matrix (a lower bound of every fold's rho)."""
+        """:meth:`uses_mg` for the full-data normal matrix (a lower bound of every fold's rho).
+
+        Parameters
+        ----------
+        sigma : float
+            The regularisation weight.
+
+        Returns
+        -------
+        bool
+        """
         return self._mg_shape is not None and (
             self.method == "mg" or self.block_mg
             or sigma * self._gamma_diag_mean() >= (MG_DOMINANCE if self.method == "direct" else MG_DOMINANCE_CG)
@@ -1407,6 +1567,18 @@ class NormalEquationSolver:
         From the largest sigma down (each iterative solve warm-started from the previous one);
         with :attr:`factor_pcg` the sigmas solved by multigrid first (largest down), then the
         data-dominated ones from the smallest up (see :data:`FACTOR_PCG_MAXITER`).
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            The fold's normal matrix.
+        sigmas : ndarray, shape (S,)
+            The candidate sigmas.
+
+        Returns
+        -------
+        list of int
+            A permutation of ``range(S)``.
         """
         descending = [int(i) for i in np.argsort(-np.asarray(sigmas, dtype=float), kind="stable")]
         if not self.factor_pcg:
@@ -1434,6 +1606,18 @@ class NormalEquationSolver:
         With CG alone (base method ``cg`` without the factor chain): :data:`CG_SEGMENTS` chains of
         consecutive sigmas (each warm-started largest down). Otherwise the whole sweep is one
         segment.
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            The fold's normal matrix.
+        sigmas : ndarray, shape (S,)
+            The candidate sigmas.
+
+        Returns
+        -------
+        list of list of int
+            Non-empty segments whose concatenation is a permutation of ``range(S)``.
         """
         order = self.sweep_order(m, sigmas)
         if self.block_mg:  # the Gauss-Seidel cycle's sigmas, the data-block cycle's (each largest down)
@@ -1460,7 +1644,14 @@ class NormalEquationSolver:
     def prepare_multigrid(self, m: sparse.csr_array) -> None:
         """Build now the multigrid levels of ``m`` (kept for the next solve with this ``m``; see
         :meth:`_mg_solve`): :func:`cross_validate_sigma` does so for the final solve while its
-        forked workers run (measured ~1 s CPU at n = 2, N = 10^6 off the critical path)."""
+        forked workers run (measured ~1 s CPU at n = 2, N = 10^6 off the critical path). Nothing
+        happens where multigrid is not used.
+
+        Parameters
+        ----------
+        m : sparse array, shape (U, U)
+            The normal matrix of the next solves.
+        """
         if self._mg_shape is None:
             return
         _, mean_row, fold = self._mg_fold(m)
@@ -1537,7 +1728,17 @@ class NormalEquationSolver:
         return m if self.keep is None else sparse.csr_array(m[self.keep][:, self.keep])
 
     def restrict_matrix(self, m: sparse.sparray) -> sparse.csr_array:
-        """``m`` on the unknowns that are solved for (identity map unless order 0 with empty vertices)."""
+        """``m`` on the unknowns that are solved for (identity map unless order 0 with empty vertices).
+
+        Parameters
+        ----------
+        m : sparse array, shape (N, N)
+
+        Returns
+        -------
+        scipy.sparse.csr_array, shape (U, U)
+            The rows and columns of the kept vertices (``U = N`` when none is dropped).
+        """
         return self._restrict(m)
 
     def _direct(self, m: sparse.csr_array, bk: np.ndarray, sigma: float) -> np.ndarray:
@@ -1773,6 +1974,18 @@ def solve_warnings(report: dict | None, sigma: float) -> list[str]:
     One line when the weights' own solve stopped unconverged (its residual and weight bound, and
     what makes the system better conditioned), one when some of the CV's solves did (the CV errors
     of those sigmas are then approximate, and so may be the choice of sigma).
+
+    Parameters
+    ----------
+    report : dict or None
+        What :func:`solve_report` returns (None or empty: no warning).
+    sigma : float
+        The sigma of the weights' solve (named in the message).
+
+    Returns
+    -------
+    list of str
+        Zero, one or two lines, each starting with ``warning:``.
     """
     if not report:
         return []
@@ -1837,8 +2050,14 @@ class CVResult:
     shuffle: bool = False
 
     def to_dict(self) -> dict:
-        """The ``fit.cv`` block of the model file: ``sigmas``, ``mse``, ``best_sigma``, ``folds`` and, for
-        shuffled folds only, ``shuffle: true`` (JSON types)."""
+        """The ``fit.cv`` block of the model file.
+
+        Returns
+        -------
+        dict
+            ``sigmas`` and ``mse`` (lists of ``S`` floats), ``best_sigma`` (float), ``folds`` (int)
+            and, for shuffled folds only, ``shuffle: true`` (JSON types).
+        """
         d = {
             "sigmas": [float(s) for s in self.sigmas],
             "mse": [float(v) for v in self.mse],
