@@ -103,6 +103,15 @@ class BankTaps:
         return out
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description of the taps (the manifest's ``taps`` block).
+
+        Returns
+        -------
+        dict
+            ``taps`` (signal name and lag of each), ``mul``, ``add``, ``shift``, ``product_bits``,
+            ``lag_bank_samples``, the ``rule`` as text and ``error_bound`` (per tap, physical
+            units).
+        """
         names = self.bank.signal_names
         return {"taps": [{"signal": names[s], "lag": lag} for s, lag in self.dims], "mul": list(self.mul), "add": list(self.add),
                 "shift": self.shift, "product_bits": self.product_bits, "lag_bank_samples": self.memory,

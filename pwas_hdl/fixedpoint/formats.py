@@ -44,9 +44,13 @@ import math
 import re
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.warp import WarpInputFormat
 
 __all__ = [
     "ROUNDING_MODES",
@@ -74,7 +78,7 @@ def _is_int(v) -> bool:
     return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
 
 
-def signed_bits_needed(codes) -> int:
+def signed_bits_needed(codes: ArrayLike) -> int:
     """Fewest two's complement bits that hold every integer in ``codes`` (at least 1).
 
     ``c >= 0`` needs ``c.bit_length() + 1`` bits, ``c < 0`` needs ``(-c - 1).bit_length() + 1``.
@@ -95,8 +99,18 @@ def signed_bits_needed(codes) -> int:
     return max(1, hi.bit_length() + 1 if hi >= 0 else 1, (-lo - 1).bit_length() + 1 if lo < 0 else 1)
 
 
-def unsigned_bits_needed(codes) -> int:
+def unsigned_bits_needed(codes: ArrayLike) -> int:
     """Fewest unsigned bits that hold every integer in ``codes`` (at least 1).
+
+    Parameters
+    ----------
+    codes : int or array_like of int
+        Non-negative integers (empty: 1 bit).
+
+    Returns
+    -------
+    int
+        ``max(1, max(codes).bit_length())``.
 
     Raises
     ------
@@ -111,7 +125,7 @@ def unsigned_bits_needed(codes) -> int:
     return max(1, int(a.max()).bit_length())
 
 
-def shift_round(a, sh: int, rounding: str = "half_up") -> np.ndarray:
+def shift_round(a: ArrayLike, sh: int, rounding: str = "half_up") -> np.ndarray:
     """Drop ``sh`` low bits of integers as the RTL does.
 
     Parameters
@@ -127,6 +141,11 @@ def shift_round(a, sh: int, rounding: str = "half_up") -> np.ndarray:
     Returns
     -------
     ndarray of int64
+
+    Raises
+    ------
+    ValueError
+        ``sh`` is not an integer ``>= 0``, or an unknown ``rounding``.
     """
     if not _is_int(sh) or sh < 0:
         raise ValueError(f"shift must be an integer >= 0, got {sh!r}")
@@ -240,15 +259,37 @@ class FixedFormat:
 
     @classmethod
     def from_string(cls, text: str, rounding: str = "half_up", overflow: str = "saturate") -> "FixedFormat":
-        """Parse ``"s16.4"``, ``"u12.9"`` or ``"s8.-2"`` (the :meth:`__str__` form)."""
+        """Parse ``"s16.4"``, ``"u12.9"`` or ``"s8.-2"`` (the :meth:`__str__` form).
+
+        Parameters
+        ----------
+        text : str
+            ``s`` (signed) or ``u`` (unsigned), the total bits, ``.``, the fraction bits.
+        rounding : {"half_up", "truncate"}
+        overflow : {"saturate", "error", "wrap"}
+
+        Returns
+        -------
+        FixedFormat
+
+        Raises
+        ------
+        ValueError
+            ``text`` does not parse, or the format is invalid.
+        """
         m = re.fullmatch(r"\s*([su])(\d+)\.(-?\d+)\s*", str(text))
         if not m:
             raise ValueError(f"cannot parse fixed-point format {text!r}; expected e.g. 's16.4' or 'u12.9'")
         return cls(int(m.group(2)), int(m.group(3)), m.group(1) == "s", rounding, overflow)
 
     # ------------------------------------------------------- conversion
-    def fits(self, codes) -> np.ndarray:
+    def fits(self, codes: ArrayLike) -> np.ndarray:
         """Elementwise: is the integer code inside ``[min_code, max_code]``?
+
+        Parameters
+        ----------
+        codes : array_like of int or float
+            Codes; a float that is not a whole number does not fit.
 
         Returns
         -------
@@ -259,11 +300,23 @@ class FixedFormat:
             return (c >= self.min_code) & (c <= self.max_code)
         return (c >= self.min_code) & (c <= self.max_code) & (c == np.floor(c))
 
-    def to_float(self, codes) -> np.ndarray:
-        """Format values ``codes * 2**-frac`` (float64; exact for ``|code| < 2**53``)."""
+    def to_float(self, codes: ArrayLike) -> np.ndarray:
+        """Format values ``codes * 2**-frac`` (float64; exact for ``|code| < 2**53``).
+
+        Parameters
+        ----------
+        codes : array_like of int
+            Codes (converted to int64).
+
+        Returns
+        -------
+        ndarray of float64, shape of ``codes``
+            Format values (not physical units; see :meth:`PortFormat.to_physical`).
+        """
         return np.ldexp(np.asarray(codes, dtype=np.int64).astype(float), -self.frac)
 
-    def quantize(self, values, return_saturated: bool = False, what: str = "value"):
+    def quantize(self, values: ArrayLike, return_saturated: bool = False,
+                 what: str = "value") -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Round values to codes and apply the overflow rule.
 
         Parameters
@@ -340,7 +393,14 @@ class FixedFormat:
     # ---------------------------------------------------------- files
     def to_dict(self) -> dict:
         """JSON-ready description (``from_dict`` reads ``bits``, ``frac``, ``signed``,
-        ``rounding``, ``overflow``; the rest is for people and the manifest)."""
+        ``rounding``, ``overflow``; the rest is for people and the manifest).
+
+        Returns
+        -------
+        dict
+            ``str``, ``bits``, ``frac``, ``signed``, ``rounding``, ``overflow``, ``lsb``,
+            ``min_code``, ``max_code``, ``min_value``, ``max_value``.
+        """
         return {
             "str": str(self),
             "bits": self.bits,
@@ -357,14 +417,30 @@ class FixedFormat:
 
     @classmethod
     def from_dict(cls, d: dict) -> "FixedFormat":
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : dict
+            ``bits`` and ``frac`` (required), ``signed``, ``rounding``, ``overflow`` (optional:
+            True, ``"half_up"``, ``"saturate"``); other keys are ignored.
+
+        Returns
+        -------
+        FixedFormat
+
+        Raises
+        ------
+        ValueError
+            A required key is missing, or the values do not make a valid format.
+        """
         try:
             return cls(int(d["bits"]), int(d["frac"]), bool(d.get("signed", True)), d.get("rounding", "half_up"), d.get("overflow", "saturate"))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"not a fixed-point format description ({type(exc).__name__}: {exc}): {d!r}") from exc
 
 
-def frac_for_bits(values, bits: int, signed: bool = True, rounding: str = "half_up") -> int:
+def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: str = "half_up") -> int:
     """Largest number of fraction bits with which every value fits in ``bits`` bits.
 
     Useful for precision sweeps ("given B_w bits, the finest lsb that holds all weights").
@@ -382,6 +458,12 @@ def frac_for_bits(values, bits: int, signed: bool = True, rounding: str = "half_
     int
         ``frac`` such that ``FixedFormat(bits, frac, signed, rounding, "error").quantize(values)``
         succeeds and ``frac + 1`` would not.
+
+    Raises
+    ------
+    ValueError
+        No value, a non-finite value, all values zero, an invalid ``bits``, or no ``frac`` in
+        ``[-1000, 1000]`` that holds the values.
     """
     v = np.asarray(values, dtype=float).reshape(-1)
     if v.size == 0 or not np.all(np.isfinite(v)) or not np.any(v != 0):
@@ -428,15 +510,44 @@ class SignalScaling:
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "offset", float(self.offset))
 
-    def to_physical(self, value) -> np.ndarray:
-        """``offset + scale * value``."""
+    def to_physical(self, value: ArrayLike) -> np.ndarray:
+        """``offset + scale * value``.
+
+        Parameters
+        ----------
+        value : array_like of float
+            Format values (``code * 2**-frac``).
+
+        Returns
+        -------
+        ndarray of float64
+            Physical values.
+        """
         return self.offset + self.scale * np.asarray(value, dtype=float)
 
-    def from_physical(self, x) -> np.ndarray:
-        """``(x - offset) / scale``."""
+    def from_physical(self, x: ArrayLike) -> np.ndarray:
+        """``(x - offset) / scale``.
+
+        Parameters
+        ----------
+        x : array_like of float
+            Physical values.
+
+        Returns
+        -------
+        ndarray of float64
+            Format values (not yet rounded).
+        """
         return (np.asarray(x, dtype=float) - self.offset) / self.scale
 
     def to_dict(self) -> dict:
+        """JSON-ready description.
+
+        Returns
+        -------
+        dict
+            ``{"scale": float, "offset": float}``.
+        """
         return {"scale": self.scale, "offset": self.offset}
 
 
@@ -461,16 +572,55 @@ class PortFormat:
         """Physical value of one code step, ``scale * 2**-frac``."""
         return self.scaling.scale * self.format.lsb
 
-    def to_physical(self, codes) -> np.ndarray:
-        """Physical values of codes."""
+    def to_physical(self, codes: ArrayLike) -> np.ndarray:
+        """Physical values of codes.
+
+        Parameters
+        ----------
+        codes : array_like of int
+            Codes of :attr:`format`.
+
+        Returns
+        -------
+        ndarray of float64, shape of ``codes``
+            ``offset + scale * code * 2**-frac``, physical units.
+        """
         return self.scaling.to_physical(self.format.to_float(codes))
 
-    def quantize(self, x, return_saturated: bool = False, what: str = "value"):
-        """Codes of physical values (rounding and overflow of ``format``)."""
+    def quantize(self, x: ArrayLike, return_saturated: bool = False,
+                 what: str = "value") -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Codes of physical values (rounding and overflow of ``format``).
+
+        Parameters
+        ----------
+        x : array_like of float
+            Physical values.
+        return_saturated : bool
+            Also return the mask of the values outside the range (see :meth:`FixedFormat.quantize`).
+        what : str
+            Noun used in error messages.
+
+        Returns
+        -------
+        codes : ndarray of int64, shape of ``x``
+        saturated : ndarray of bool (only with ``return_saturated``)
+
+        Raises
+        ------
+        ValueError
+            NaN input, or ``overflow="error"`` and a value does not fit.
+        """
         return self.format.quantize(self.scaling.from_physical(x), return_saturated, what)
 
     def to_dict(self) -> dict:
-        """Format, scale and offset (JSON-ready) with the conversion rule spelled out."""
+        """Format, scale and offset (JSON-ready) with the conversion rule spelled out.
+
+        Returns
+        -------
+        dict
+            :meth:`FixedFormat.to_dict` plus ``scale``, ``offset``, ``physical_lsb`` and the rule
+            ``physical``.
+        """
         return {
             **self.format.to_dict(),
             "scale": self.scaling.scale,
@@ -481,7 +631,23 @@ class PortFormat:
 
     @classmethod
     def from_dict(cls, d: dict) -> "PortFormat":
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : dict
+            The keys of :meth:`FixedFormat.from_dict`, and ``scale`` and ``offset`` (default 1
+            and 0).
+
+        Returns
+        -------
+        PortFormat
+
+        Raises
+        ------
+        ValueError
+            Not a valid format, or a scale that is not positive and finite.
+        """
         return cls(FixedFormat.from_dict(d), SignalScaling(float(d.get("scale", 1.0)), float(d.get("offset", 0.0))))
 
 
@@ -564,9 +730,20 @@ class InputFormat:
         """Input codes from ``lo`` to ``hi``: ``p * 2**F`` (pow2) or ``S`` (exact)."""
         return self.span or self.span_codes
 
-    def scaled(self, t) -> np.ndarray:
-        """Grid sub-steps (``2**F`` per cell) of input offsets ``t = q - lo_code``: ``t`` (pow2) or
-        ``(t * K) >> R`` (exact; ``0 -> 0``, ``S -> p * 2**F``, non-decreasing)."""
+    def scaled(self, t: ArrayLike) -> np.ndarray:
+        """Grid sub-steps (``2**F`` per cell) of input offsets ``t = q - lo_code``.
+
+        Parameters
+        ----------
+        t : array_like of int
+            Input code offsets ``q - lo_code`` (converted to int64).
+
+        Returns
+        -------
+        ndarray of int64, shape of ``t``
+            ``t`` (pow2) or ``(t * K) >> R`` (exact; ``0 -> 0``, ``S -> p * 2**F``,
+            non-decreasing). Not clamped.
+        """
         ta = np.asarray(t, dtype=np.int64)
         return ta if self.span == 0 else (ta * self.scale_mul) >> self.scale_shift
 
@@ -595,6 +772,10 @@ class InputFormat:
             ``F`` the smallest such that ``p * 2**F >= S``, ``R = bits + 1`` and
             ``K = ceil(p * 2**(F + R) / S)``: exact at both ends (``t' = p * 2**F`` at ``t = S``)
             and monotone; the point the hardware evaluates is ``lo + h * t' / 2**F``.
+
+        Returns
+        -------
+        InputFormat
 
         Raises
         ------
@@ -682,7 +863,7 @@ class InputFormat:
         return PortFormat(self.format, SignalScaling(self.step if self.span == 0 else self.lsb, self.offset))
 
     # --------------------------------------------------------- conversion
-    def quantize(self, x, return_saturated: bool = False):
+    def quantize(self, x: ArrayLike, return_saturated: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Input codes of physical values.
 
         ``q = floor(lo_code + (x - lo) / lsb + 1/2)`` evaluated in float64 (round half up to the
@@ -699,20 +880,56 @@ class InputFormat:
         -------
         q : ndarray of int64
         saturated : ndarray of bool (only with ``return_saturated``)
+
+        Raises
+        ------
+        ValueError
+            ``x`` contains NaN.
         """
         return quantize_input(self, x, return_saturated)
 
-    def to_physical(self, q) -> np.ndarray:
-        """Physical value a code represents: ``lo + lsb * (q - lo_code)`` (= ``offset + lsb*q``)."""
+    def to_physical(self, q: ArrayLike) -> np.ndarray:
+        """Physical value a code represents: ``lo + lsb * (q - lo_code)`` (= ``offset + lsb*q``).
+
+        Parameters
+        ----------
+        q : array_like of int
+            Input codes.
+
+        Returns
+        -------
+        ndarray of float64, shape of ``q``
+            Physical units.
+        """
         return input_to_physical(self, q)
 
-    def grid_units(self, q) -> np.ndarray:
+    def grid_units(self, q: ArrayLike) -> np.ndarray:
         """Unclamped grid coordinate the hardware computes for codes, ``scaled(q - lo_code) / 2**F``
-        (exact float; ``(q - lo_code) / 2**F`` for pow2)."""
+        (exact float; ``(q - lo_code) / 2**F`` for pow2).
+
+        Parameters
+        ----------
+        q : array_like of int
+            Input codes.
+
+        Returns
+        -------
+        ndarray of float64, shape of ``q``
+            Grid units (cells from ``lo``); outside ``[0, p]`` for codes outside the domain.
+        """
         return np.ldexp(self.scaled(np.asarray(q, dtype=np.int64) - self.lo_code).astype(float), -self.frac)
 
     def to_dict(self) -> dict:
-        """JSON-ready: domain, ``F``, codes, physical scaling."""
+        """JSON-ready: domain, ``F``, codes, physical scaling.
+
+        Returns
+        -------
+        dict
+            ``format``, ``bits``, ``F``, ``partitions``, ``lo``, ``hi``, ``fill``, ``lo_code``,
+            ``hi_code``, ``input_scale`` (and ``input_span``, ``scale_mul``, ``scale_shift`` for
+            the exact scale, ``cell_codes`` for pow2), ``min_code``, ``max_code``, ``lsb``,
+            ``offset``, ``scale`` (the cell width ``h``) and the rule ``physical``.
+        """
         return {
             "format": str(self.format),
             "bits": self.bits,
@@ -737,11 +954,26 @@ class InputFormat:
         }
 
 
-def quantize_input(f, x, return_saturated: bool = False):
-    """The input codes of physical values ``x`` for an input format ``f`` (:class:`InputFormat`, or
-    :class:`~pwas_hdl.fixedpoint.warp.WarpInputFormat`: anything with ``lo``, ``lo_code``, ``lsb`` and
-    a saturating ``format``): ``floor(lo_code + (x - lo) / lsb + 1/2)`` in float64, saturated to
-    ``f.format`` (see :meth:`InputFormat.quantize`; ``saturated`` mask with ``return_saturated``).
+def quantize_input(f: InputFormat | WarpInputFormat, x: ArrayLike,
+                   return_saturated: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """The input codes of physical values ``x`` for an input format ``f``.
+
+    ``floor(lo_code + (x - lo) / lsb + 1/2)`` in float64, saturated to ``f.format`` (see
+    :meth:`InputFormat.quantize`).
+
+    Parameters
+    ----------
+    f : InputFormat or WarpInputFormat
+        Anything with ``lo``, ``lo_code``, ``lsb`` and a saturating ``format``.
+    x : array_like of float
+        Physical values.
+    return_saturated : bool
+        Also return the mask of the values that saturated ``f.format``.
+
+    Returns
+    -------
+    q : ndarray of int64, shape of ``x``
+    saturated : ndarray of bool (only with ``return_saturated``)
 
     Raises
     ------
@@ -755,15 +987,47 @@ def quantize_input(f, x, return_saturated: bool = False):
     return f.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
 
 
-def input_to_physical(f, q) -> np.ndarray:
-    """The physical values input codes ``q`` represent for an input format ``f`` (as
-    :func:`quantize_input`): ``lo + lsb * (q - lo_code)``, float64."""
+def input_to_physical(f: InputFormat | WarpInputFormat, q: ArrayLike) -> np.ndarray:
+    """The physical values input codes ``q`` represent for an input format ``f``.
+
+    Parameters
+    ----------
+    f : InputFormat or WarpInputFormat
+        As in :func:`quantize_input`.
+    q : array_like of int
+        Input codes.
+
+    Returns
+    -------
+    ndarray of float64, shape of ``q``
+        ``lo + lsb * (q - lo_code)``, physical units.
+    """
     return f.lo + f.lsb * (np.asarray(q, dtype=np.int64) - f.lo_code).astype(float)
 
 
 def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Sequence[int], bits: int = 12, fill: float = 0.9,
                        scale: str = "pow2") -> list[InputFormat]:
     """One :class:`InputFormat` per dimension (e.g. of a :class:`~pwas_hdl.fit.geometry.Grid`:
-    ``grid_input_formats(g.lo, g.hi, g.partitions)``)."""
+    ``grid_input_formats(g.lo, g.hi, g.partitions)``).
+
+    Parameters
+    ----------
+    lo, hi : sequence of float, length n
+        Domain bounds per dimension, physical units.
+    partitions : sequence of int, length n
+        Intervals ``p_j`` per dimension.
+    bits, fill, scale
+        As in :meth:`InputFormat.for_interval` (the same for every dimension).
+
+    Returns
+    -------
+    list of InputFormat
+        ``n`` formats (as many as the shortest of ``lo``, ``hi``, ``partitions``).
+
+    Raises
+    ------
+    ValueError
+        A dimension's arguments are invalid (the message names the dimension).
+    """
     return [InputFormat.for_interval(float(a), float(b), int(p), bits, fill, dim=j, scale=scale)
             for j, (a, b, p) in enumerate(zip(lo, hi, partitions))]

@@ -65,6 +65,7 @@ significant ``B_w`` bits (``<prefix>_b<bank>.hex``, ``nz * B_w`` bits).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.bitfields import pack_rows, to_unsigned
@@ -199,7 +200,8 @@ class BankedLayout(_LayoutBase):
         self.depth = self.n_rows * self.row_words
         self.row_strides = tuple(int(s) * self.row_words for s in grid.strides[:-1] // last)
 
-    def bank_addr(self, vertex, slot=None) -> tuple[np.ndarray, np.ndarray]:
+    def bank_addr(self, vertex: int | np.ndarray | tuple[int, ...],
+                  slot: int | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Bank and address of vertices.
 
         Parameters
@@ -214,8 +216,24 @@ class BankedLayout(_LayoutBase):
         """
         return self.bank_addr_coords(self.grid.vertex_coords(self._index(vertex)))
 
-    def bank_addr_coords(self, coords) -> tuple[np.ndarray, np.ndarray]:
-        """Bank and address from integer coordinates, shape ``(..., n)``."""
+    def bank_addr_coords(self, coords: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Bank and address from integer coordinates, shape ``(..., n)``.
+
+        Parameters
+        ----------
+        coords : array_like of int, shape (..., n)
+            Vertex coordinates, ``0 <= v_j <= p_j``.
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape (...)
+            ``bank = sum(v) mod (n + 1)``, ``addr = v[:-1] @ row_strides + v[-1] // (n + 1)``.
+
+        Raises
+        ------
+        ValueError
+            The last axis is not ``n`` long, or a coordinate is outside the grid.
+        """
         c = np.asarray(coords, dtype=np.int64)
         if c.shape[-1:] != (self.n,):
             raise ValueError(f"vertex coordinates must have shape (..., {self.n}), got {c.shape}")
@@ -225,7 +243,7 @@ class BankedLayout(_LayoutBase):
         addr = c[..., :-1] @ np.array(self.row_strides, dtype=np.int64) + c[..., -1] // self.n_banks
         return bank.astype(np.int64), np.asarray(addr, dtype=np.int64)
 
-    def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
+    def simplex_bank_addr(self, vertices: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Bank and address of each vertex of simplices.
 
         Parameters
@@ -241,6 +259,14 @@ class BankedLayout(_LayoutBase):
         return self.bank_addr(np.asarray(vertices, dtype=np.int64))
 
     def to_dict(self) -> dict:
+        """JSON-ready description for the manifest.
+
+        Returns
+        -------
+        dict
+            The common keys (``kind``, ``n_banks``, ``depth``, ``addr_bits``, ...) and
+            ``n_rows``, ``padded_last``, ``row_words`` and the ``bank`` / ``addr`` rules as text.
+        """
         d = super().to_dict()
         d.update(
             {
@@ -266,16 +292,44 @@ class ReplicatedLayout(_LayoutBase):
         super().__init__(grid)
         self.depth = grid.n_vertices
 
-    def bank_addr(self, vertex, slot: int | np.ndarray | None = 0) -> tuple[np.ndarray, np.ndarray]:
+    def bank_addr(self, vertex: int | np.ndarray | tuple[int, ...],
+                  slot: int | np.ndarray | None = 0) -> tuple[np.ndarray, np.ndarray]:
         """Bank (= ``slot``, the vertex's position ``k`` in its simplex; default 0) and address
-        (= linear index) of vertices. Every copy holds every vertex."""
+        (= linear index) of vertices. Every copy holds every vertex.
+
+        Parameters
+        ----------
+        vertex : int, array of int (linear indices, any shape) or tuple of n ints (coordinates)
+        slot : int or array of int, optional
+            The copy to read, broadcast to the shape of the indices (None: 0).
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape of the indices
+
+        Raises
+        ------
+        ValueError
+            A vertex index that is not an integer or is outside ``[0, N)``.
+        """
         idx = self._index(vertex)
         slot = 0 if slot is None else slot
         bank = np.broadcast_to(np.asarray(slot, dtype=np.int64), idx.shape).copy()
         return bank, idx.copy()
 
-    def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
-        """Vertex ``k`` from copy ``k``; see :meth:`BankedLayout.simplex_bank_addr`."""
+    def simplex_bank_addr(self, vertices: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex ``k`` from copy ``k``; see :meth:`BankedLayout.simplex_bank_addr`.
+
+        Parameters
+        ----------
+        vertices : array_like of int, shape (m, n + 1)
+            Linear vertex indices (as :meth:`Grid.simplex_vertices`).
+
+        Returns
+        -------
+        bank, addr : ndarray of int64, shape (m, n + 1)
+            ``bank[:, k] = k``, ``addr`` = the linear index.
+        """
         v = np.asarray(vertices, dtype=np.int64)
         return self.bank_addr(v, np.arange(v.shape[-1], dtype=np.int64))
 
@@ -342,8 +396,24 @@ class CornerLayout(_LayoutBase):
                     MAX_MEMORY_WORDS, "use the banked memory (--memory banked) for this grid")
         self.depth = 1 << pos
 
-    def cell_addr(self, cells) -> np.ndarray:
-        """Address of cells (integer coordinates ``0 <= c_j < p_j``, shape ``(..., n)``)."""
+    def cell_addr(self, cells: ArrayLike) -> np.ndarray:
+        """Address of cells (integer coordinates ``0 <= c_j < p_j``, shape ``(..., n)``).
+
+        Parameters
+        ----------
+        cells : array_like of int, shape (..., n)
+            Cell coordinates.
+
+        Returns
+        -------
+        ndarray of int64, shape (...)
+            ``sum_j c_j * 2**field_shifts[j]``.
+
+        Raises
+        ------
+        ValueError
+            The last axis is not ``n`` long, or a coordinate is outside ``[0, p_j)``.
+        """
         c = np.asarray(cells, dtype=np.int64)
         if c.shape[-1:] != (self.n,):
             raise ValueError(f"cell coordinates must have shape (..., {self.n}), got {c.shape}")
@@ -351,7 +421,8 @@ class CornerLayout(_LayoutBase):
             raise ValueError("cell coordinates outside the grid")
         return np.asarray(c @ (np.int64(1) << np.array(self.field_shifts, dtype=np.int64)), dtype=np.int64)
 
-    def bank_addr(self, vertex, slot=None) -> tuple[np.ndarray, np.ndarray]:
+    def bank_addr(self, vertex: int | np.ndarray | tuple[int, ...],
+                  slot: int | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Bank and address of vertices as corner ``slot`` (a bank number ``s``) of a cell.
 
         Parameters
@@ -371,7 +442,7 @@ class CornerLayout(_LayoutBase):
         bank = np.broadcast_to(s, v.shape[:-1]).copy()
         return bank, self.cell_addr(v - bits)
 
-    def simplex_bank_addr(self, vertices) -> tuple[np.ndarray, np.ndarray]:
+    def simplex_bank_addr(self, vertices: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Bank (the corner ``s_k``) and address (the cell's) of each vertex of simplices.
 
         Parameters
@@ -392,11 +463,37 @@ class CornerLayout(_LayoutBase):
 
     def product_slots(self, bank: np.ndarray) -> np.ndarray:
         """Position of each product in the adder tree: vertex order (the RTL selects vertex ``k``'s
-        word among the corners, then multiplies and adds in vertex order)."""
+        word among the corners, then multiplies and adds in vertex order).
+
+        Parameters
+        ----------
+        bank : ndarray of int, shape (m, n + 1)
+            The banks of :meth:`simplex_bank_addr` (only the shape is used).
+
+        Returns
+        -------
+        ndarray of int64, shape of ``bank``
+            ``k`` at column ``k`` (a read-only broadcast view).
+        """
         return np.broadcast_to(np.arange(bank.shape[-1], dtype=np.int64), bank.shape)
 
-    def contents(self, weight_codes) -> np.ndarray:
-        """ROM contents, shape ``(2**n, depth, nz)``: ``out[s, a(c), t] = W[c + s, t]``, 0 elsewhere."""
+    def contents(self, weight_codes: ArrayLike) -> np.ndarray:
+        """ROM contents, shape ``(2**n, depth, nz)``: ``out[s, a(c), t] = W[c + s, t]``, 0 elsewhere.
+
+        Parameters
+        ----------
+        weight_codes : array_like of int, shape (N, nz) or (N,)
+            Weight codes in vertex order.
+
+        Returns
+        -------
+        ndarray of int64, shape (2**n, depth, nz)
+
+        Raises
+        ------
+        ValueError
+            Non-integer codes, or not ``N`` rows.
+        """
         w = _as_weight_matrix(weight_codes, self.grid.n_vertices)
         out = np.zeros((self.n_banks, self.depth, w.shape[1]), dtype=np.int64)
         parts = np.asarray(self.grid.partitions, dtype=np.int64)
@@ -408,6 +505,14 @@ class CornerLayout(_LayoutBase):
         return out
 
     def to_dict(self) -> dict:
+        """JSON-ready description for the manifest.
+
+        Returns
+        -------
+        dict
+            The common keys (``kind``, ``n_banks``, ``depth``, ``addr_bits``, ...) and
+            ``cell_bits``, ``field_shifts`` and the ``bank`` / ``addr`` rules as text.
+        """
         d = super().to_dict()
         d.update({"cell_bits": list(self.cell_bits), "field_shifts": list(self.field_shifts),
                   "bank": "corner s of the cell (bit j of s: offset in dimension j)",
@@ -416,7 +521,22 @@ class CornerLayout(_LayoutBase):
 
 
 def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLayout | CornerLayout:
-    """Layout by name: ``"banked"`` (default), ``"replicated"`` or ``"corner"``."""
+    """Layout by name: ``"banked"`` (default), ``"replicated"`` or ``"corner"``.
+
+    Parameters
+    ----------
+    grid : Grid
+    kind : {"banked", "replicated", "corner"}
+
+    Returns
+    -------
+    BankedLayout or ReplicatedLayout or CornerLayout
+
+    Raises
+    ------
+    ValueError
+        An unknown ``kind``.
+    """
     if kind == "banked":
         return BankedLayout(grid)
     if kind == "replicated":
@@ -426,7 +546,7 @@ def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLa
     raise ValueError(f"memory layout must be one of {LAYOUT_KINDS}, got {kind!r}")
 
 
-def readmemh_text(words, bits: int) -> str:
+def readmemh_text(words: ArrayLike, bits: int) -> str:
     """``$readmemh`` text: one word per line, two's complement, ``ceil(bits/4)`` lower-case hex digits.
 
     Parameters
@@ -440,6 +560,11 @@ def readmemh_text(words, bits: int) -> str:
     -------
     str
         Ends with a newline (empty string for no words).
+
+    Raises
+    ------
+    ValueError
+        ``bits`` is not an integer ``>= 1``.
     """
     if not isinstance(bits, (int, np.integer)) or bits < 1:
         raise ValueError(f"word width must be an integer >= 1, got {bits!r}")
@@ -452,12 +577,13 @@ def readmemh_text(words, bits: int) -> str:
 pack_words = pack_rows
 
 
-def hex_files(layout: BankedLayout | ReplicatedLayout, weight_codes, bits: int, packed: bool = False, prefix: str = "w") -> dict[str, str]:
+def hex_files(layout: BankedLayout | ReplicatedLayout | CornerLayout, weight_codes: ArrayLike, bits: int,
+              packed: bool = False, prefix: str = "w") -> dict[str, str]:
     """``$readmemh`` files of all banks.
 
     Parameters
     ----------
-    layout : BankedLayout or ReplicatedLayout
+    layout : BankedLayout, ReplicatedLayout or CornerLayout
     weight_codes : array_like of int, shape (N, nz)
     bits : int
         Weight width ``B_w``.

@@ -79,14 +79,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError, InternalError, option_text
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, FixedPointModel
 from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat, PortFormat, SignalScaling, signed_bits_needed
 from pwas_hdl.fit.observer_bank import FRONT_END_KIND, ObserverBankFrontEnd, canonical_form
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = [
     "observer_bank_model", "BANK_FORMAT_OPTIONS", "ObserverBankFormats", "FixedPointObserverBank", "ObserverBankSensorModel", "isqrt_floor",
@@ -143,7 +147,22 @@ def switched_state_bound(f: np.ndarray, c: np.ndarray, max_steps: int = 100_000)
 
 
 def isqrt_floor(a: np.ndarray) -> np.ndarray:
-    """Elementwise ``floor(sqrt(a))`` of non-negative int64 (exact, corrected float guess)."""
+    """Elementwise ``floor(sqrt(a))`` of non-negative int64 (exact, corrected float guess).
+
+    Parameters
+    ----------
+    a : ndarray of int
+        Non-negative integers (converted to int64), any shape.
+
+    Returns
+    -------
+    ndarray of int64, shape of ``a``
+
+    Raises
+    ------
+    InternalError
+        A negative entry (a window sum cannot be negative).
+    """
     a = np.asarray(a, dtype=np.int64)
     if np.any(a < 0):
         raise InternalError("isqrt of a negative number (a window sum below 0 cannot happen)")
@@ -161,6 +180,16 @@ def l1_gain(a_cl: np.ndarray, b: np.ndarray, tol: float = 1e-13, max_steps: int 
     ----------
     a_cl : ndarray (M, M), a stable matrix (spectral radius < 1)
     b : ndarray (M, m)
+    tol : float
+        Stop when the current term is below ``tol`` times the sum (at least 1); the geometric
+        tail is then added as a bound.
+    max_steps : int
+        Most terms summed.
+
+    Returns
+    -------
+    ndarray of float, shape (M, m)
+        The elementwise sum (an upper bound: it includes the tail bound).
 
     Raises
     ------
@@ -200,6 +229,12 @@ class ObserverBankFormats:
     acc_bits: int
 
     def to_dict(self) -> dict:
+        """JSON-ready: every field name -> its value (int, bits).
+
+        Returns
+        -------
+        dict of str to int
+        """
         return {k: int(v) for k, v in self.__dict__.items()}
 
 
@@ -428,7 +463,24 @@ class FixedPointObserverBank:
         return codes, sat.any(axis=1)
 
     def represented_signals(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Physical (u, y) the codes stand for: shapes (T, nu), (T, 1)."""
+        """Physical (u, y) the codes stand for: shapes (T, nu), (T, 1).
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes (columns ``u0 .. u{nu-1}, y0``) inside the signed ``B_in``-bit range.
+
+        Returns
+        -------
+        u : ndarray of float, shape (T, nu)
+        y : ndarray of float, shape (T, 1)
+            Physical units.
+
+        Raises
+        ------
+        InputError
+            ``codes`` is not an integer array of that shape, or a code is out of range.
+        """
         codes = self._check(codes)
         phys = np.column_stack([p.to_physical(codes[:, c]) for c, p in enumerate(self.signal_ports)])
         return phys[:, : self.nu], phys[:, self.nu :]
@@ -446,10 +498,24 @@ class FixedPointObserverBank:
     def trace(self, codes: np.ndarray) -> dict[str, np.ndarray]:
         """Run the bank from reset over one trajectory of codes (T, nu + 1).
 
-        Returns (keys :data:`BANK_TRACE_STAGES`): ``state`` (T, N, M) state *before* sample k,
-        ``state_saturated`` (T,) some state saturated in the update with sample k, ``residual``,
-        ``square``, ``window_sum``, ``root`` (T, N), ``feature_codes`` (T, N) (rows ``k < M + l``
-        are computed too; the sensor has no output for them).
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes (columns ``u0 .. u{nu-1}, y0``) inside the signed ``B_in``-bit range.
+
+        Returns
+        -------
+        dict of str to ndarray
+            Keys :data:`BANK_TRACE_STAGES`: ``state`` (T, N, M) state *before* sample k,
+            ``state_saturated`` (T,) some state saturated in the update with sample k, ``residual``,
+            ``square``, ``window_sum``, ``root``, ``root_capped`` (T, N), ``feature_codes`` (T, N)
+            (rows ``k < M + l`` are computed too; the sensor has no output for them); and
+            ``codes``, the input codes (int64).
+
+        Raises
+        ------
+        InputError
+            ``codes`` is not an integer array of that shape, or a code is out of range.
         """
         codes = self._check(codes)
         t_len = codes.shape[0]
@@ -492,6 +558,7 @@ class FixedPointObserverBank:
 
     @property
     def input_bits_core(self) -> int:
+        """``B_in`` of the PWAS core's feature codes."""
         return int(self.feature_inputs[0].bits)
 
     @property
@@ -500,13 +567,33 @@ class FixedPointObserverBank:
         return self.order + self.window
 
     def float_features(self, codes: np.ndarray) -> np.ndarray:
-        """The float front end's features at the physical signals the codes represent, rows ``k >= M + l``."""
+        """The float front end's features at the physical signals the codes represent, rows ``k >= M + l``.
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes of one trajectory from reset.
+
+        Returns
+        -------
+        ndarray of float, shape (T - M - l, N)
+            Features (the front end's feature map), one row per sample with an estimate.
+        """
         u, y = self.represented_signals(codes)
         feats, _ = self.front_end.transform([u], [y])
         return feats
 
     def to_dict(self) -> dict:
-        """Formats, constants and bounds (the manifest's ``observer_bank`` block)."""
+        """Formats, constants and bounds (the manifest's ``observer_bank`` block).
+
+        Returns
+        -------
+        dict
+            Sizes, feature map, signal formats, ``formats`` (:meth:`ObserverBankFormats.to_dict`),
+            coefficient codes, the feature scale constants, widths, state bound, residual gain,
+            ``error_bound`` (residual and per-feature, physical units of the normalised residual
+            and of the features) and ``first_output_sample``.
+        """
         return {
             "n_models": self.n_models, "order": self.order, "nu": self.nu, "window": self.window,
             "feature_map": self.feature_map, "observer": self.front_end.observer,
@@ -560,13 +647,40 @@ class ObserverBankSensorModel:
         self.error_bound = [float(core.error_bound + self.lipschitz[z] @ fb) for z in range(core.nz)]
 
     @classmethod
-    def from_sensor(cls, sensor, *, input_bits: int = 12, input_headroom: float | None = 8.0, coef_frac: int | None = None,
-                    state_frac: int | None = None, state_bits: int | None = None, **core_formats) -> "ObserverBankSensorModel":
+    def from_sensor(cls, sensor: PWASVirtualSensor, *, input_bits: int = 12, input_headroom: float | None = 8.0,
+                    coef_frac: int | None = None, state_frac: int | None = None, state_bits: int | None = None,
+                    **core_formats: Any) -> "ObserverBankSensorModel":
         """From a fitted :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor` with an observer-bank front end.
 
         ``core_formats``: :class:`FixedPointModel` options (``input_bits`` of the core = the same
         ``input_bits``); the core's regressors are the bank features (lag taps are not supported
         in hardware yet).
+
+        Parameters
+        ----------
+        sensor : PWASVirtualSensor
+            Fitted, with an observer-bank front end and no u/y lag taps.
+        input_bits : int
+            ``B_in`` of the u / y codes and of the core's feature codes.
+        input_headroom : float, optional
+            ``H`` (None: 8).
+        coef_frac, state_frac, state_bits : int, optional
+            ``F_c``, ``F_s``, ``B_s`` of :class:`FixedPointObserverBank` (default: from the noise
+            budget and the state bound).
+        **core_formats
+            Options of :class:`FixedPointModel` (None means the default); ``reference_error``
+            defaults to the largest finite positive training RMSE.
+
+        Returns
+        -------
+        ObserverBankSensorModel
+
+        Raises
+        ------
+        InputError
+            No observer-bank front end, lag taps present (see
+            :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`), or impossible
+            formats.
         """
         fe = getattr(sensor, "front_end_", None)
         if fe is None:
@@ -587,11 +701,44 @@ class ObserverBankSensorModel:
                                       coef_frac=coef_frac, state_frac=state_frac, state_bits=state_bits)
         return cls(bank, core, sensor)
 
-    def quantize_signals(self, u, y):
+    def quantize_signals(self, u: ArrayLike | None, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Input codes of one trajectory (:meth:`FixedPointObserverBank.quantize_signals`).
+
+        Parameters
+        ----------
+        u : array_like, shape (T, nu), or None
+            Physical inputs (None when ``nu = 0``).
+        y : array_like, shape (T,) or (T, 1)
+            Physical output.
+
+        Returns
+        -------
+        codes : ndarray of int64, shape (T, nu + 1)
+            Columns ``u0 .. u{nu-1}, y0``.
+        saturated : ndarray of bool, shape (T,)
+            Some signal of the sample saturated its code range.
+
+        Raises
+        ------
+        InputError
+            Another number of input columns than the bank has.
+        """
         return self.bank.quantize_signals(u, y)
 
     def trace(self, codes: np.ndarray) -> dict[str, np.ndarray]:
-        """Bank trace plus the core's ``out`` (T - M - l, nz) and ``out_of_range`` for rows ``k >= M + l``."""
+        """Bank trace plus the core's ``out`` (T - M - l, nz) and ``out_of_range`` for rows ``k >= M + l``.
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes of one trajectory from reset.
+
+        Returns
+        -------
+        dict of str to ndarray
+            :meth:`FixedPointObserverBank.trace` with ``out`` (T - M - l, nz) output codes and
+            ``out_of_range`` (T - M - l,).
+        """
         tr = self.bank.trace(codes)
         qf = tr["feature_codes"][self.bank.first_output :]
         out, oor = self.core.evaluate(qf) if qf.shape[0] else (np.zeros((0, self.core.nz), np.int64), np.zeros(0, bool))
@@ -599,22 +746,68 @@ class ObserverBankSensorModel:
         return tr
 
     def evaluate(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Output codes (T - M - l, nz) and out-of-range flags of one trajectory from reset."""
+        """Output codes (T - M - l, nz) and out-of-range flags of one trajectory from reset.
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes.
+
+        Returns
+        -------
+        out : ndarray of int64, shape (T - M - l, nz)
+            Output codes of the core's output format.
+        out_of_range : ndarray of bool, shape (T - M - l,)
+            Some feature was outside the PWAS domain.
+        """
         tr = self.trace(codes)
         return tr["out"], tr["out_of_range"]
 
-    def predict(self, u, y) -> np.ndarray:
-        """Physical estimates (T - M - l, nz) of one trajectory through the bit-true circuit."""
+    def predict(self, u: ArrayLike | None, y: ArrayLike) -> np.ndarray:
+        """Physical estimates (T - M - l, nz) of one trajectory through the bit-true circuit.
+
+        Parameters
+        ----------
+        u : array_like, shape (T, nu), or None
+            Physical inputs (None when ``nu = 0``).
+        y : array_like, shape (T,) or (T, 1)
+            Physical output.
+
+        Returns
+        -------
+        ndarray of float, shape (T - M - l, nz)
+            Physical target units, one row per sample ``k >= M + l``.
+        """
         codes, _ = self.quantize_signals(u, y)
         out, _ = self.evaluate(codes)
         return self.core.to_physical_output(out)
 
     def reference(self, codes: np.ndarray) -> np.ndarray:
-        """The float sensor (front end + PWAS) at the physical signals the codes represent, (T - M - l, nz)."""
+        """The float sensor (front end + PWAS) at the physical signals the codes represent, (T - M - l, nz).
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes of one trajectory from reset.
+
+        Returns
+        -------
+        ndarray of float, shape (T - M - l, nz)
+            Physical target units (needs the ``sensor`` the model was built from).
+        """
         feats = self.bank.float_features(codes)
         return self.sensor.predict_regressors(feats)
 
     def to_dict(self) -> dict:
+        """The manifest's description of the front end and of the sensor's error bound.
+
+        Returns
+        -------
+        dict
+            ``observer_bank`` (:meth:`FixedPointObserverBank.to_dict`), ``lipschitz`` (nz x n
+            list) and ``error_bound`` (per target, physical units, with the core's and the
+            features' parts and the rule).
+        """
         return {"observer_bank": self.bank.to_dict(), "lipschitz": self.lipschitz.tolist(),
                 "error_bound": {"physical": list(self.error_bound), "core": self.core.error_bound,
                                 "features": list(self.bank.feature_error_bound),
@@ -623,12 +816,32 @@ class ObserverBankSensorModel:
                                 "against": "float sensor (front end + PWAS) at the physical signals the codes represent"}}
 
 
-def observer_bank_model(sensor, memory: str = "banked", **formats) -> ObserverBankSensorModel:
+def observer_bank_model(sensor: PWASVirtualSensor, memory: str = "banked", **formats: Any) -> ObserverBankSensorModel:
     """The bit-true model ``generate`` builds for an observer-bank sensor.
 
     ``formats``: the core's format options (those of :class:`FixedPointModel`; ``input_bits`` is
     shared by the u / y codes and the feature codes) and :data:`BANK_FORMAT_OPTIONS`; None means
     the default. Raises :class:`InputError` for an option the bank design does not have.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        Fitted, with an observer-bank front end.
+    memory : {"banked", "replicated", "corner"}
+        Weight memory layout of the core.
+    **formats
+        As above.
+
+    Returns
+    -------
+    ObserverBankSensorModel
+        A :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel` (a subclass)
+        when the sensor also has u/y lag taps.
+
+    Raises
+    ------
+    InputError
+        An unknown option, an input scale other than ``pow2``, or impossible formats.
     """
     given = {k: v for k, v in formats.items() if v is not None}
     bank = {k: given.pop(k) for k in BANK_FORMAT_OPTIONS if k in given}

@@ -96,6 +96,14 @@ class FeedbackRequant:
         return np.clip((oa * self.mul + self.add) >> self.shift, self.qmin, self.qmax)
 
     def to_dict(self) -> dict:
+        """JSON-ready description (a manifest's ``requant`` entry).
+
+        Returns
+        -------
+        dict
+            The ``rule`` as text, ``mul``, ``add``, ``shift``, ``qmin``, ``qmax``,
+            ``product_bits`` and ``error_bound`` (physical units).
+        """
         return {"rule": "q = clip((o * mul + add) >> shift, qmin, qmax): round half up, saturate",
                 "mul": self.mul, "add": self.add, "shift": self.shift, "qmin": self.qmin, "qmax": self.qmax,
                 "product_bits": self.product_bits, "error_bound": self.error_bound}

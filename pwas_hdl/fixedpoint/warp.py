@@ -33,12 +33,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid, pow2_exponents
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat
 
 __all__ = ["Pow2Warp", "WarpInputFormat", "WarpedFixedPointModel"]
 
@@ -74,14 +79,33 @@ class Pow2Warp:
 
     @property
     def p(self) -> int:
+        """Number of cells ``p`` of the dimension."""
         return len(self.exps)
 
     def shifts(self) -> tuple[int, ...]:
-        """Left shift of cell ``k``: ``F - f0 - e_k``."""
+        """Left shift of cell ``k``: ``F - f0 - e_k``.
+
+        Returns
+        -------
+        tuple of int
+            ``p`` shifts, one per cell.
+        """
         return tuple(self.frac - self.f0 - e for e in self.exps)
 
     def apply(self, q: np.ndarray) -> np.ndarray:
-        """``u`` codes (int64, same shape) for input codes ``q``."""
+        """``u`` codes (int64, same shape) for input codes ``q``.
+
+        Parameters
+        ----------
+        q : ndarray of int
+            Input codes of this dimension (``B_in``-bit; any shape).
+
+        Returns
+        -------
+        ndarray of int64, shape of ``q``
+            The core's codes ``u`` by the rule of the module notes: ``lo_u - 1`` below ``B_0``,
+            ``lo_u + p 2**F + 1`` above ``B_p``.
+        """
         q = np.asarray(q, dtype=np.int64)
         b = np.asarray(self.code_breaks, dtype=np.int64)
         k = np.clip(np.searchsorted(b, q, side="right") - 1, 0, self.p - 1)
@@ -92,6 +116,13 @@ class Pow2Warp:
         return u
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description (the manifest's ``warp.dimensions`` entries).
+
+        Returns
+        -------
+        dict
+            The attributes (``frac`` as ``F``) and the per-cell ``shifts``.
+        """
         return {"input_bits": self.input_bits, "code_breaks": list(self.code_breaks), "exps": list(self.exps), "f0": self.f0,
                 "F": self.frac, "lo_u": self.lo_u, "width": self.width, "shifts": list(self.shifts())}
 
@@ -138,33 +169,72 @@ class WarpInputFormat:
         return 0
 
     @property
-    def format(self):
+    def format(self) -> FixedFormat:
+        """:class:`~pwas_hdl.fixedpoint.formats.FixedFormat` ``s<bits>.0``, rounding half up, saturating."""
         from pwas_hdl.fixedpoint.formats import FixedFormat
 
         return FixedFormat(self.bits, 0, True, "half_up", "saturate")
 
     @property
-    def port(self):
+    def port(self) -> PortFormat:
         """:class:`~pwas_hdl.fixedpoint.formats.PortFormat` ``s<bits>.0``, ``scale = lsb``, :attr:`offset`."""
         from pwas_hdl.fixedpoint.formats import PortFormat, SignalScaling
 
         return PortFormat(self.format, SignalScaling(self.lsb, self.offset))
 
-    def quantize(self, x, return_saturated: bool = False):
+    def quantize(self, x: ArrayLike, return_saturated: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Input codes of physical values: ``floor(lo_code + (x - lo) / lsb + 1/2)``, saturated to
         ``bits`` (as :meth:`pwas_hdl.fixedpoint.formats.InputFormat.quantize`: ``x = lo`` gives
-        ``lo_code`` exactly)."""
+        ``lo_code`` exactly).
+
+        Parameters
+        ----------
+        x : array_like of float
+            Physical values.
+        return_saturated : bool
+            Also return the mask of the values that saturated the ``bits``-bit range.
+
+        Returns
+        -------
+        q : ndarray of int64, shape of ``x``
+        saturated : ndarray of bool (only with ``return_saturated``)
+
+        Raises
+        ------
+        ValueError
+            ``x`` contains NaN.
+        """
         from pwas_hdl.fixedpoint.formats import quantize_input
 
         return quantize_input(self, x, return_saturated)
 
-    def to_physical(self, q) -> np.ndarray:
-        """``lo + lsb * (q - lo_code)``."""
+    def to_physical(self, q: ArrayLike) -> np.ndarray:
+        """``lo + lsb * (q - lo_code)``.
+
+        Parameters
+        ----------
+        q : array_like of int
+            Input codes.
+
+        Returns
+        -------
+        ndarray of float64, shape of ``q``
+            Physical units.
+        """
         from pwas_hdl.fixedpoint.formats import input_to_physical
 
         return input_to_physical(self, q)
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description, with the keys of :meth:`InputFormat.to_dict` where they apply.
+
+        Returns
+        -------
+        dict
+            ``format``, ``bits``, ``F`` (0), ``partitions``, ``lo``, ``hi``, ``lo_code``, ``hi_code``,
+            ``input_scale`` (``"warp"``), ``min_code``, ``max_code``, ``lsb``, ``offset``, ``scale``
+            (= ``lsb``), ``breakpoints``, ``code_breaks`` and the rule ``physical``.
+        """
         fmt = self.format
         return {"format": str(fmt), "bits": self.bits, "signed": True, "F": 0, "partitions": self.partitions,
                 "lo": self.lo, "hi": self.hi, "lo_code": self.lo_code, "hi_code": self.hi_code,
@@ -297,21 +367,59 @@ class WarpedFixedPointModel:
         """``F_j`` of the uniform core behind the warp (one core cell = ``2**F_j`` codes of ``u``)."""
         return tuple(self.core.frac_bits)
 
-    def to_physical_output(self, out_codes) -> np.ndarray:
-        """Physical output values (the core's output format)."""
+    def to_physical_output(self, out_codes: ArrayLike) -> np.ndarray:
+        """Physical output values (the core's output format).
+
+        Parameters
+        ----------
+        out_codes : array_like of int, shape (m, nz)
+            Output codes, as :meth:`evaluate` returns them.
+
+        Returns
+        -------
+        ndarray of float, shape (m, nz)
+            Physical target units.
+        """
         return self.core.to_physical_output(out_codes)
 
-    def reference(self, q) -> np.ndarray:
+    def reference(self, q: ArrayLike) -> np.ndarray:
         """Float model (unquantised weights) at the physical inputs the codes ``q`` represent, shape (m, nz).
 
         The warp is exact, so this is the uniform core's reference at the warped codes: the
         non-uniform PWAS of the fit at ``represented_inputs(q)`` (clamped to the domain).
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        ndarray of float, shape (m, nz)
+            Physical target units.
+
+        Raises
+        ------
+        ValueError
+            ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
         """
         return self.core.reference(self.warp(q))
 
-    def trace(self, q) -> dict[str, np.ndarray]:
+    def trace(self, q: ArrayLike) -> dict[str, np.ndarray]:
         """The core's trace (:meth:`FixedPointModel.trace`) at the warped codes, with ``q`` the
-        input codes and ``u`` (m, n) the warped ones."""
+        input codes and ``u`` (m, n) the warped ones.
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        dict of str to ndarray
+            The stages of :meth:`FixedPointModel.trace` (its ``t``, ``cell``, ... are those of
+            ``u``), with ``q`` the input codes (m, n) and ``u`` the warped codes (m, n).
+        """
         qa = np.atleast_2d(np.asarray(q, dtype=np.int64))
         u = self.warp(qa)
         tr = self.core.trace(u)
@@ -320,6 +428,11 @@ class WarpedFixedPointModel:
 
     def signal_input_formats(self) -> dict[str, WarpInputFormat]:
         """The input format of each signal (the sensor top feeds one code to all its lags).
+
+        Returns
+        -------
+        dict of str to WarpInputFormat
+            Signal name -> the format of its lags, in the order of first appearance.
 
         Raises
         ------
@@ -341,7 +454,15 @@ class WarpedFixedPointModel:
         return res
 
     def warp_info(self) -> dict[str, Any]:
-        """The manifest's ``warp`` entry without the hardware keys (bit-true facts of every dimension)."""
+        """The manifest's ``warp`` entry without the hardware keys (bit-true facts of every dimension).
+
+        Returns
+        -------
+        dict
+            ``kind`` (``"pow2"``), ``input_bits``, ``core_input_bits`` (``W``), ``dimensions``
+            (regressor name, breakpoints and :meth:`Pow2Warp.to_dict` of each), the ``rule`` as
+            text and ``bit_true`` (this class).
+        """
         return {
             "kind": "pow2",
             "input_bits": self.input_bits,
@@ -355,7 +476,16 @@ class WarpedFixedPointModel:
 
     def to_dict(self) -> dict[str, Any]:
         """Everything the manifest needs (as :meth:`FixedPointModel.to_dict`): the core's formats
-        with the warped inputs, plus ``warp``."""
+        with the warped inputs, plus ``warp``.
+
+        Returns
+        -------
+        dict
+            The core's :meth:`FixedPointModel.to_dict` with ``inputs`` (one
+            :meth:`WarpInputFormat.to_dict` per regressor, with ``name``, ``signal``, ``lag``),
+            ``signals`` (per signal, or None when the lags of a signal differ) and ``warp``
+            (:meth:`warp_info`).
+        """
         d = self.core.to_dict()
         try:
             signals = {k: v.to_dict() for k, v in self.signal_input_formats().items()}
@@ -368,8 +498,27 @@ class WarpedFixedPointModel:
         return d
 
     @classmethod
-    def from_sensor(cls, sensor, **options: Any) -> "WarpedFixedPointModel":
-        """The warped bit-true model of a fitted sensor with power-of-two breakpoints."""
+    def from_sensor(cls, sensor: PWASVirtualSensor, **options: Any) -> "WarpedFixedPointModel":
+        """The warped bit-true model of a fitted sensor with power-of-two breakpoints.
+
+        Parameters
+        ----------
+        sensor : PWASVirtualSensor
+            Fitted, with a grid whose cells are power-of-two multiples of one base step
+            (``breakpoints="quantile-pow2"``).
+        **options
+            The keyword options of the constructor; regressor and target names default to the
+            sensor's, ``reference_error`` to the largest finite positive training RMSE.
+
+        Returns
+        -------
+        WarpedFixedPointModel
+
+        Raises
+        ------
+        InputError
+            The cells are not power-of-two multiples, or the formats are impossible.
+        """
         ins, outs, tgts = sensor.signal_names()
         lags = sensor.lags_
         options.setdefault("regressor_names", lags.names(ins, outs))
@@ -388,43 +537,137 @@ class WarpedFixedPointModel:
     # ------------------------------------------------------------------ integer path
     @property
     def code_range(self) -> tuple[int, int]:
+        """Smallest and largest signed ``B_in``-bit input code."""
         return -(1 << (self.input_bits - 1)), (1 << (self.input_bits - 1)) - 1
 
-    def quantize_inputs(self, x) -> np.ndarray:
-        """Input codes of physical points (half up, saturated to ``B_in`` bits), shape (m, n)."""
+    def quantize_inputs(self, x: ArrayLike) -> np.ndarray:
+        """Input codes of physical points (half up, saturated to ``B_in`` bits), shape (m, n).
+
+        Parameters
+        ----------
+        x : array_like of float, shape (m, n) or (n,)
+            Physical regressor values.
+
+        Returns
+        -------
+        ndarray of int64, shape (m, n)
+            Input codes (no saturation mask, unlike :meth:`FixedPointModel.quantize_inputs`).
+
+        Raises
+        ------
+        ValueError
+            ``x`` has not ``n`` columns, or contains NaN.
+        """
         xa = np.atleast_2d(np.asarray(x, dtype=float))
         if xa.shape[1] != self.n:
             raise ValueError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
         return np.stack([f.quantize(xa[:, j]) for j, f in enumerate(self.inputs)], axis=1).astype(np.int64)
 
-    def represented_inputs(self, q) -> np.ndarray:
-        """Physical values of input codes, shape (m, n)."""
+    def represented_inputs(self, q: ArrayLike) -> np.ndarray:
+        """Physical values of input codes, shape (m, n).
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Input codes (not checked).
+
+        Returns
+        -------
+        ndarray of float, shape (m, n)
+            ``offset + lsb * q``, physical units (not clamped to the domain).
+        """
         return self.offset + self.lsb * np.atleast_2d(np.asarray(q, dtype=np.int64))
 
-    def warp(self, q) -> np.ndarray:
-        """``u`` codes of the core, shape (m, n)."""
+    def warp(self, q: ArrayLike) -> np.ndarray:
+        """``u`` codes of the core, shape (m, n).
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        ndarray of int64, shape (m, n)
+            The warped codes (:meth:`Pow2Warp.apply` per dimension).
+
+        Raises
+        ------
+        ValueError
+            ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
+        """
         qa = np.atleast_2d(np.asarray(q, dtype=np.int64))
         lo, hi = self.code_range
         if qa.shape[1] != self.n or qa.min(initial=lo) < lo or qa.max(initial=hi) > hi:
             raise ValueError(f"input codes must have {self.n} columns within the signed {self.input_bits}-bit range")
         return np.stack([w.apply(qa[:, j]) for j, w in enumerate(self.warps)], axis=1)
 
-    def evaluate(self, q) -> tuple[np.ndarray, np.ndarray]:
-        """Output codes (m, nz) and out-of-range flags (m,) for input codes ``q`` (m, n)."""
+    def evaluate(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Output codes (m, nz) and out-of-range flags (m,) for input codes ``q`` (m, n).
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        out : ndarray of int64, shape (m, nz)
+            Output codes (the core's output format).
+        out_of_range : ndarray of bool, shape (m,)
+            True where some input was outside the domain.
+
+        Raises
+        ------
+        ValueError
+            ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
+        """
         return self.core.evaluate(self.warp(q))
 
-    def predict(self, x) -> np.ndarray:
-        """Physical outputs for physical inputs (quantised first), shape (m, nz)."""
+    def predict(self, x: ArrayLike) -> np.ndarray:
+        """Physical outputs for physical inputs (quantised first), shape (m, nz).
+
+        Parameters
+        ----------
+        x : array_like of float, shape (m, n) or (n,)
+            Physical regressor values.
+
+        Returns
+        -------
+        ndarray of float, shape (m, nz)
+            Physical target units (no flags: unlike :meth:`FixedPointModel.predict` there is no
+            ``return_flags``).
+        """
         out, _ = self.evaluate(self.quantize_inputs(x))
         return self.core.to_physical_output(out)
 
     def input_port_format(self, j: int) -> dict[str, Any]:
-        """The manifest ``format`` of input field ``j``: ``s<B_in>.0`` with ``physical = offset_j + lsb_j * code``."""
+        """The manifest ``format`` of input field ``j``: ``s<B_in>.0`` with ``physical = offset_j + lsb_j * code``.
+
+        Parameters
+        ----------
+        j : int
+            Regressor dimension, ``0 <= j < n``.
+
+        Returns
+        -------
+        dict
+            :meth:`~pwas_hdl.fixedpoint.formats.PortFormat.to_dict` of that format.
+        """
         from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling
 
         return PortFormat(FixedFormat(self.input_bits, 0, True, "half_up", "saturate"),
                           SignalScaling(float(self.lsb[j]), float(self.offset[j]))).to_dict()
 
     def summary(self) -> dict[str, Any]:
+        """A short JSON-ready description of the input side.
+
+        Returns
+        -------
+        dict
+            ``input_bits``, ``input_fill``, ``lsb`` and ``offset`` (lists of ``n``, physical
+            units per code and of code 0), ``warps`` (:meth:`Pow2Warp.to_dict` of each) and
+            ``core_input_bits`` (``W``).
+        """
         return {"input_bits": self.input_bits, "input_fill": self.input_fill, "lsb": self.lsb.tolist(),
                 "offset": self.offset.tolist(), "warps": [w.to_dict() for w in self.warps], "core_input_bits": self.warps[0].width}
