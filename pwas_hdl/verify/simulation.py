@@ -34,9 +34,11 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import CheckFailed, InputError
 from pwas_hdl.resources import sim_dir
@@ -79,8 +81,24 @@ ENGINES = ("cocotb", "native")
 MAX_STALL = 0.95
 
 
-def sim_module(name: str):
-    """Import a module of ``sim/`` (not an installed package) by path, e.g. ``"pwas_runner"``."""
+def sim_module(name: str) -> ModuleType:
+    """Import a module of ``sim/`` (not an installed package) by path, e.g. ``"pwas_runner"``.
+
+    Parameters
+    ----------
+    name : str
+        The module's file name without ``.py``.
+
+    Returns
+    -------
+    module
+        The module (imported once, then taken from ``sys.modules``).
+
+    Raises
+    ------
+    FileNotFoundError
+        ``sim/<name>.py`` is missing (an incomplete installation).
+    """
     if name in sys.modules:
         return sys.modules[name]
     path = SIM_DIR / f"{name}.py"
@@ -273,13 +291,27 @@ class Segment:
     cls: np.ndarray | None = None
 
     def rows(self) -> np.ndarray:
-        """Expected output payload fields, in the manifest's order: scores, ``out_of_range``[, ``class_index``]."""
+        """Expected output payload fields, in the manifest's order: scores, ``out_of_range``[, ``class_index``].
+
+        Returns
+        -------
+        ndarray of int64, shape (m, nz + 1) or (m, nz + 2)
+            Output codes, the flag (0 / 1) and, for a classifier, the class index.
+        """
         cols = [self.expected, self.oor[:, None].astype(np.int64)]
         if self.cls is not None:
             cols.append(np.asarray(self.cls, dtype=np.int64)[:, None])
         return np.concatenate(cols, axis=1).astype(np.int64)
 
     def to_job(self) -> dict:
+        """The segment as the testbench's JSON job reads it.
+
+        Returns
+        -------
+        dict
+            ``codes`` (T lists of ints), ``expected`` (:meth:`rows` as lists), ``src``, ``drain``,
+            ``hold``.
+        """
         exp = self.rows()
         return {"codes": self.codes.astype(np.int64).tolist(), "expected": exp.astype(np.int64).tolist(),
                 "src": self.src.astype(np.int64).tolist(), "drain": bool(self.drain), "hold": int(self.hold)}
@@ -297,6 +329,14 @@ class Run:
     seed: int = 0
 
     def to_job(self) -> dict:
+        """The run as the testbench's JSON job reads it.
+
+        Returns
+        -------
+        dict
+            ``name``, ``p_valid``, ``p_ready``, ``seed`` and ``segments`` (:meth:`Segment.to_job`
+            of each).
+        """
         return {"name": self.name, "p_valid": self.p_valid, "p_ready": self.p_ready, "seed": self.seed,
                 "segments": [s.to_job() for s in self.segments]}
 
@@ -315,8 +355,32 @@ def _signal_columns(design: Design, codes: np.ndarray) -> tuple[np.ndarray | Non
     return cu, cy
 
 
-def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segment:
-    """The expected outputs of the input transfers ``codes`` right after a reset."""
+def segment(design: Design, codes: ArrayLike, *, drain: bool = True, hold: int = 0) -> Segment:
+    """The expected outputs of the input transfers ``codes`` right after a reset.
+
+    Parameters
+    ----------
+    design : Design
+        The generated design (:func:`load_design`).
+    codes : array_like of int, shape (T, fields)
+        One row per input transfer: the regressor codes ``q`` (core) or one code per signal in
+        payload order (sensor top).
+    drain : bool
+        Wait for every output before the next reset.
+    hold : int
+        Without ``drain``: cycles after the last transfer before the reset.
+
+    Returns
+    -------
+    Segment
+        With the bit-true expected outputs; a sensor top has none for the first
+        :attr:`Design.warmup` transfers.
+
+    Raises
+    ------
+    ValueError
+        ``codes`` is not 2-D with one column per input field.
+    """
     c = np.asarray(codes, dtype=np.int64)
     if c.ndim != 2 or c.shape[1] != len(design.in_fields):
         raise ValueError(f"codes must have shape (T, {len(design.in_fields)}), got {c.shape}")
@@ -350,9 +414,26 @@ def segment(design: Design, codes, *, drain: bool = True, hold: int = 0) -> Segm
     return Segment(c, q, out, oor, src, drain, hold, cls)
 
 
-def standard_runs(design: Design, codes, *, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[Run]:
+def standard_runs(design: Design, codes: ArrayLike, *, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[Run]:
     """The three replays of the RTL tests: full speed (latency, II = 1), random bubbles and
-    backpressure, and a reset in the middle of a stream (with stalls) followed by a fresh stream."""
+    backpressure, and a reset in the middle of a stream (with stalls) followed by a fresh stream.
+
+    Parameters
+    ----------
+    design : Design
+    codes : array_like of int, shape (T, fields)
+        Input transfers (as :func:`segment`).
+    seed : int
+        Seed of the reset's hold time and of the runs' stall patterns.
+    stalls : (float, float)
+        ``p_valid`` and ``p_ready`` of the ``"stalls"`` run.
+
+    Returns
+    -------
+    list of Run
+        ``"full-speed"``, ``"stalls"`` and ``"reset-mid-stream"`` (cut at ``max(warmup + 2, T // 3)``,
+        ``p_valid = p_ready = 0.8``).
+    """
     c = np.asarray(codes, dtype=np.int64)
     rng = np.random.default_rng(seed)
     cut = max(design.warmup + 2, len(c) // 3)
@@ -381,6 +462,16 @@ def stage_probes(verilog: str) -> dict[str, int]:
 
     They keep the Amaranth names (``s_<stage>_<value><index>``, ``vdata<k>`` = weight words of
     vertex ``k`` after the memory, ``out__payload``); the ``_valid`` bits are left out.
+
+    Parameters
+    ----------
+    verilog : str
+        The design's Verilog text.
+
+    Returns
+    -------
+    dict of str to int
+        Register name -> width in bits, in source order.
     """
     res = {}
     for mo in _PROBE_RE.finditer(verilog):
@@ -527,8 +618,25 @@ def locate_difference(design: Design, probe: dict, q_row: Sequence[int]) -> dict
     """Compare the recorded pipeline registers of one sample with the bit-true trace.
 
     Returns ``{"first_stage": name or None, "diffs": [StageDiff...], "checked": k,
-    "trace": {stage: value}}`` (``first_stage`` None: every register the model names agreed, e.g. a
-    corrupted constant that only shows in the output, or no offsets could be assigned).
+    "trace": {stage: value}, "offsets": ..., "memory_diffs": ...}`` (``first_stage`` None: every
+    register the model names agreed, e.g. a corrupted constant that only shows in the output, or no
+    offsets could be assigned).
+
+    Parameters
+    ----------
+    design : Design
+    probe : dict
+        What the debug run recorded: ``values`` (register name -> value per cycle after the
+        transfer) and optionally ``memories`` (the weight memories' words).
+    q_row : sequence of int, length n
+        The regressor codes of the sample.
+
+    Returns
+    -------
+    dict
+        ``first_stage``, ``diffs`` (sorted by cycle offset, then register), ``checked`` (registers
+        compared), ``trace`` (the bit-true trace of the sample as JSON types), ``offsets`` (stage ->
+        cycle offset, or None) and ``memory_diffs`` (list, or None when no memory was recorded).
     """
     model = design.model
     tr_all = model.trace(np.asarray(q_row, dtype=np.int64)[None, :])
@@ -600,6 +708,14 @@ class RTLResult:
         return self.float_error_max <= self.error_bound * (1 + 1e-9) + 1e-12
 
     def first_mismatch(self) -> dict | None:
+        """The testbench's record of the first output that differed (run order, then segment order).
+
+        Returns
+        -------
+        dict or None
+            ``run``, ``segment``, ``output``, ``input``, ``input_codes``, ``expected``, ``actual``
+            (as the testbench wrote them); None when every output matched.
+        """
         for r in self.raw.get("runs", []):
             for s in r.get("segments", []):
                 if s.get("first_mismatches"):
@@ -608,7 +724,13 @@ class RTLResult:
 
     def report(self) -> str:
         """Human-readable account: failures, the first mismatch, its bit-true trace and the first
-        pipeline stage that differs (when the debug run recorded the registers)."""
+        pipeline stage that differs (when the debug run recorded the registers).
+
+        Returns
+        -------
+        str
+            Several lines (no trailing newline).
+        """
         lines = [f"{self.simulator} {self.design.top} ({self.design.kind}, {self.design.outdir.name}): "
                  f"{self.outputs} outputs, {self.mismatches} mismatches, latency {sorted(set(self.latencies))} "
                  f"(manifest {self.design.latency}), II {self.ii}"]
@@ -729,6 +851,42 @@ def run_rtl(
     :attr:`RTLResult.located` must find no difference). ``strict``: the cocotb test itself fails on a mismatch (the result
     is returned either way). ``work_dir`` (default: a temporary folder, removed afterwards unless
     ``waves``) holds the job, the result, the log and the waveform.
+
+    Parameters
+    ----------
+    design : Design
+        The generated design (:func:`load_design`).
+    runs : sequence of Run
+        The replays (e.g. :func:`standard_runs`).
+    simulator : {"icarus", "verilator"}
+    cache_dir : str or os.PathLike, optional
+        Where simulator builds are cached (default: the runner's cache).
+    work_dir : str or os.PathLike, optional
+        As above.
+    waves, debug, strict : bool
+        As above (``strict`` and ``probe_output`` apply to the cocotb engine).
+    clock_ns : float
+        Clock period of the cocotb bench, ns.
+    probe_output : int, optional
+        As above.
+    verilator_args : sequence of str
+        Extra Verilator arguments of the cocotb build.
+    engine : {"cocotb", "native"}
+
+    Returns
+    -------
+    RTLResult
+        Mismatches, failures, latencies, II and the error against the float model; a
+        difference does not raise.
+
+    Raises
+    ------
+    InputError
+        An unknown ``engine``, or ``native`` with Icarus, ``debug`` or ``waves``.
+    ValueError
+        An unknown ``simulator``.
+    ToolMissing, ToolFailed
+        The simulator is not installed, or its build or run failed.
     """
     if simulator not in SIMULATORS:
         raise ValueError(f"simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
@@ -838,10 +996,47 @@ def simulate_data(
     with status 1). Both files are written or neither; every path is checked before the
     simulation starts.
 
+    Parameters
+    ----------
+    outdir : str or os.PathLike
+        The design folder (``pwas-hdl generate``).
+    data : str, os.PathLike or Table
+        The CSV data (signals in physical units).
+    output : str or os.PathLike
+        The CSV file to write.
+    simulator : {"icarus", "verilator"}, optional
+        Default ``"icarus"`` (``"verilator"`` with the native engine).
+    engine : {"cocotb", "native"}
+    summary_path : str or os.PathLike, optional
+        The JSON summary (default: ``output`` with the suffix ``.json``).
+    traj_col : str, optional
+        Column that numbers the trajectories (a reset between them); None: one trajectory.
+    stall : float
+        Probability of a bubble on the input and of backpressure on the output per cycle,
+        ``0 <= stall <=`` :data:`MAX_STALL`.
+    seed : int
+        Seed of the stall pattern.
+    cache_dir : str or os.PathLike, optional
+        Where simulator builds are cached.
+    waves : bool
+        Record a waveform.
+    progress : callable, optional
+        Called with one line of text per step.
+    blank_rows : str
+        What :func:`~pwas_hdl.io.csv_table.read_csv` does with blank rows (default ``"error"``).
+
+    Returns
+    -------
+    dict
+        As described above.
+
     Raises
     ------
     InputError
         Bad data, options or paths (before anything runs).
+    ValueError
+        An unknown ``simulator`` or a ``stall`` out of range (plain ``ValueError``, not
+        :class:`InputError`).
     CheckFailed
         The RTL did not produce every output (nothing is written).
     """
