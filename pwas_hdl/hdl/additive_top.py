@@ -28,6 +28,8 @@ The Verilog (:func:`emit_additive_verilog`) is one file with the top module and 
 
 from __future__ import annotations
 
+from typing import Any
+
 import re
 from dataclasses import dataclass, replace
 
@@ -213,7 +215,18 @@ class AdditiveCore(wiring.Component):
         })
         self._MustUse__silence = False
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         inp = getattr(self, "in")
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)

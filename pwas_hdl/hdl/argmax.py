@@ -27,6 +27,8 @@ holds the scores, the flags and, in its top ``index_width`` bits, the class inde
 
 from __future__ import annotations
 
+from typing import Any
+
 from types import SimpleNamespace
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
@@ -125,7 +127,18 @@ class ArgmaxStage(wiring.Component):
         return SimpleNamespace(payload=Signal(unsigned(self.index_lsb), name=f"{prefix}_payload", reset_less=True),
                                valid=out.valid, ready=out.ready)
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The pipelined argmax logic (ties to the lowest index).
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         inp = getattr(self, "in")
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)

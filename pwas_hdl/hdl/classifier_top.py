@@ -11,6 +11,8 @@ ties to the lowest index); the latency is the core's plus the stage's
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Module, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
@@ -88,7 +90,18 @@ class PWASClassifierCore(wiring.Component):
         })
         self._MustUse__silence = False
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The PWAS core and the argmax stage, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         inp = getattr(self, "in")
         scores = self.argmax.scores_stream(self.out)

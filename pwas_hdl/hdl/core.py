@@ -45,6 +45,8 @@ The Verilog of this description passes ``verilator --lint-only -Wall``; see
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
@@ -191,7 +193,18 @@ class PWASCore(wiring.Component):
         )
         self._MustUse__silence = False
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The pipelined PWAS evaluator's logic (stages, weight memories, adder tree).
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         inp = getattr(self, "in")
         # advance = in.ready (one net; a separately named copy would be an unused alias wire)

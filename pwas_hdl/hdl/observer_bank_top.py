@@ -151,6 +151,18 @@ class ObserverBankTopBase(wiring.Component):
         return serial_flow_control(self, names)
 
     def expected_outputs(self, n_samples: int) -> int:
+        """Outputs the top gives for ``n_samples`` input transfers after a reset.
+
+        Parameters
+        ----------
+        n_samples : int
+            Input transfers (samples) since the reset.
+
+        Returns
+        -------
+        int
+            ``max(0, n_samples - warmup)``: no output until the first regressor is complete.
+        """
         return max(0, n_samples - self.warmup)
 
 

@@ -35,6 +35,8 @@ names (:func:`inputs_and_warmup`, :func:`serial_sensor_path`, ...) stay importab
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Cat, Module
 
 from pwas_hdl.hdl.observer_bank_top import (  # noqa: F401 (public names of this module since issue 12)
@@ -89,7 +91,18 @@ class ObserverSensorTop(ObserverBankTopBase):
         super().__init__(bank, params, memory=memory, pipeline=pipeline, architecture=architecture, lanes=lanes,
                          isqrt_every=isqrt_every, warmup=bank.first_output, double_buffered=True)
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The observer bank, residual features and PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:

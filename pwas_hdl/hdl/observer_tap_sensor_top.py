@@ -29,6 +29,8 @@ sample), ``latency = stages_before_core + core latency``. The bit-true model is 
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Cat, Module, Signal, signed
 
 from pwas_hdl.hdl._lintsafe import sink_unused
@@ -108,7 +110,18 @@ class ObserverTapSensorTop(ObserverBankTopBase):
             out.append(reg)
         return out
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The observer bank, residual features, u/y taps and PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:  # serial bank: the tap codes registered with the last feature code (done)

@@ -293,6 +293,19 @@ class Pipeline:
         return max(1, tree_depth(n + 1))
 
     def tree_registers(self, n: int) -> int:
+        """Register stages in the adder tree of ``n + 1`` products.
+
+        Parameters
+        ----------
+        n : int
+            Regressor dimension.
+
+        Returns
+        -------
+        int
+            0 with ``tree_levels = 0``, else ``ceil(tree_depth(n) / tree_levels)`` (a register every
+            ``tree_levels`` adder levels).
+        """
         if self.tree_levels == 0:
             return 0
         return math.ceil(self.tree_depth(n) / self.tree_levels)
@@ -316,6 +329,25 @@ class Pipeline:
 
     @classmethod
     def cast(cls, value: "Pipeline | str | dict | None") -> "Pipeline":
+        """A pipeline from any of the forms the API and the manifest use.
+
+        Parameters
+        ----------
+        value : Pipeline, str, dict or None
+            A pipeline (returned as is), a preset name of :data:`PIPELINE_PRESETS`, the options as
+            :meth:`to_dict` writes them, or None (the default ``Pipeline()``).
+
+        Returns
+        -------
+        Pipeline
+
+        Raises
+        ------
+        ValueError
+            An unknown preset or option, or options that contradict each other.
+        TypeError
+            ``value`` is of another type.
+        """
         if value is None:
             return cls()
         if isinstance(value, Pipeline):
@@ -338,6 +370,16 @@ class Pipeline:
         raise TypeError(f"pipeline must be a Pipeline, a preset name, a dict of its options or None, not {value!r}")
 
     def to_dict(self) -> dict:
+        """The options as a JSON-ready dict (a manifest's ``pipeline``; :meth:`cast` reads it back).
+
+        Returns
+        -------
+        dict
+            ``split``, ``rank``, ``mem_out``, ``product``, ``tree_levels``, ``addr``, ``mul_in``,
+            ``offset``, ``bank``, ``mul_halves``, ``mu_late``, and each of ``flat_sum``,
+            ``prune_sat``, ``raw_compare``, ``counter_sum``, ``late_select``, ``sort_late`` only
+            when it is set.
+        """
         return {
             "split": self.split,
             "rank": self.rank,
@@ -487,6 +529,14 @@ class MemoryPlan:
         return self.layout.addr_bits if self.depth > 1 else 0
 
     def to_dict(self) -> dict:
+        """JSON-ready summary of the memories (for the manifest and the report).
+
+        Returns
+        -------
+        dict
+            ``kind``, ``memories`` (banks), ``depth`` (words per memory), ``word_bits``, ``words``
+            (all memories) and ``bits`` (all memories).
+        """
         return {
             "kind": self.kind,
             "memories": self.n_banks,

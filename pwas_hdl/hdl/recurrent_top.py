@@ -23,6 +23,8 @@ a new sample is accepted every ``L`` cycles (``II = latency = L``). During warm-
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
@@ -122,6 +124,18 @@ class PWASRecurrentTop(wiring.Component):
         }
 
     def expected_outputs(self, n_samples: int) -> int:
+        """Outputs the top gives for ``n_samples`` input transfers after a reset.
+
+        Parameters
+        ----------
+        n_samples : int
+            Input transfers (samples) since the reset.
+
+        Returns
+        -------
+        int
+            ``max(0, n_samples - warmup)``: no output until the first regressor is complete.
+        """
         return max(0, n_samples - self.warmup)
 
     def _requant(self, m: Module, o, fb, c: int):
@@ -166,7 +180,18 @@ class PWASRecurrentTop(wiring.Component):
             m.d.comb += q.eq(Cat(val[: b - 1], ~val[b - 1]))
         return q
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The lag bank, PWAS core and feedback registers, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         p = self.params
         b = p.in_width

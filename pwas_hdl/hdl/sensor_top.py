@@ -20,6 +20,8 @@ pipeline); afterwards ``in.ready = ~out.valid | out.ready``. ``rst`` restarts th
 
 from __future__ import annotations
 
+from typing import Any
+
 import re
 
 from amaranth.hdl import Cat, Const, Module, Signal, unsigned
@@ -226,9 +228,32 @@ class PWASSensorTop(wiring.Component):
         }
 
     def expected_outputs(self, n_samples: int) -> int:
+        """Outputs the top gives for ``n_samples`` input transfers after a reset.
+
+        Parameters
+        ----------
+        n_samples : int
+            Input transfers (samples) since the reset.
+
+        Returns
+        -------
+        int
+            ``max(0, n_samples - warmup)``: no output until the first regressor is complete.
+        """
         return max(0, n_samples - self.warmup)
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The lag bank and the PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         b = self.in_width
         inp = getattr(self, "in")

@@ -90,6 +90,21 @@ class SingleMemoryPlan(MemoryPlan):
 
     @classmethod
     def build(cls, p: CoreParams, kind: str = "single") -> "SingleMemoryPlan":
+        """The single memory of ``p``'s grid and weight codes.
+
+        Parameters
+        ----------
+        p : CoreParams
+            Grid, weight codes ``(N, nz)`` and weight width ``B_w``.
+        kind : str
+            Not used (always the single memory; the argument keeps the signature of
+            :meth:`MemoryPlan.build`).
+
+        Returns
+        -------
+        SingleMemoryPlan
+            ``N`` words of ``nz * B_w`` bits.
+        """
         from pwas_hdl.fixedpoint.bitfields import pack_rows
         from pwas_hdl.fixedpoint.memory_layout import make_layout
 

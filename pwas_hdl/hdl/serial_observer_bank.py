@@ -109,6 +109,16 @@ class SerialBankPlan:
     double_buffered: bool = False
 
     def to_dict(self) -> dict:
+        """JSON-ready schedule (the manifest's description of the serial bank).
+
+        Returns
+        -------
+        dict
+            ``lanes`` (count), ``observers_per_lane``, ``steps``, the register counts
+            (``mac_stages``, ``affine_registers``, ``square_registers``, ``isqrt_registers``),
+            ``isqrt_every``, ``stages_before_core``, ``cycles_per_sample`` (clock cycles) and
+            ``double_buffered_codes``.
+        """
         return {"lanes": len(self.lanes), "observers_per_lane": [len(ln) for ln in self.lanes], "steps": self.steps,
                 "mac_stages": MAC_STAGES, "affine_registers": AFFINE_REGS, "square_registers": SQUARE_REGS,
                 "isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs,

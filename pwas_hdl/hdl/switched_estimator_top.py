@@ -17,6 +17,8 @@ latency 1 cycle, one output per transfer, no warm-up (the estimator starts at 0,
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 from amaranth.lib import stream, wiring
@@ -110,7 +112,18 @@ class SwitchedEstimatorTop(wiring.Component):
         sink_unused(m, acc[: est.coef_frac], f"{name}_frac")
         return acc[est.coef_frac :].as_signed()
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The estimator's logic: the per-mode observers, the residual detector and the switched output.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         est, wd = self.est, self.widths
         b = est.input_bits
@@ -372,7 +385,18 @@ class SerialSwitchedEstimatorTop(wiring.Component):
                 cols[n + 1].append(ly)
         return cols
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The time-multiplexed estimator's logic: row units, schedule and memories.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, rom
         from pwas_hdl.hdl.serial_observer_bank import eq_const, table_mac, var_product
 

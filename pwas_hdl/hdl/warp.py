@@ -27,6 +27,8 @@ over the distinct shifts, one constant addition.
 
 from __future__ import annotations
 
+from typing import Any
+
 from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
@@ -201,7 +203,18 @@ class WarpedPWASCore(wiring.Component):
     def extra_info(self) -> dict:
         return {"warp": warp_hw_info(self._model)}
 
-    def elaborate(self, platform):
+    def elaborate(self, platform: Any) -> Module:
+        """The warp stage, its register and the PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            The Amaranth platform (None in simulation and Verilog conversion); not used.
+
+        Returns
+        -------
+        amaranth.hdl.Module
+        """
         m = Module()
         inp = getattr(self, "in")
         self.core.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
