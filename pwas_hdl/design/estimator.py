@@ -56,6 +56,24 @@ def is_estimator(model: Any) -> bool:
 
 
 def load_estimator_config(model: SwitchedEstimatorConfig | str | os.PathLike) -> SwitchedEstimatorConfig:
+    """The estimator configuration itself, or the one read from an estimator file.
+
+    Parameters
+    ----------
+    model : SwitchedEstimatorConfig, str or os.PathLike
+        A configuration (returned as is) or the path of an estimator file.
+
+    Returns
+    -------
+    SwitchedEstimatorConfig
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    InputError
+        Not a valid estimator file (:func:`~pwas_hdl.fit.estimator_file.read_estimator`).
+    """
     return model if isinstance(model, SwitchedEstimatorConfig) else read_estimator(model)
 
 

@@ -111,6 +111,23 @@ class Table:
         return next((c for c in (f"{name}_true", name) if c in self.header), None)
 
     def column_index(self, name: str) -> int:
+        """Index of the column ``name`` in :attr:`header`.
+
+        Parameters
+        ----------
+        name : str
+            A column name (exact match).
+
+        Returns
+        -------
+        int
+            The index of its first occurrence.
+
+        Raises
+        ------
+        InputError
+            No column has that name (the message lists the columns).
+        """
         try:
             return self.header.index(name)
         except ValueError:

@@ -72,26 +72,110 @@ class BatteryModel:
         e = np.exp(-rate * s)
         return sign * amp * e + off, -sign * amp * rate * e
 
-    def e0(self, s):
+    def e0(self, s: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """Open-circuit voltage ``E0(s) = -a1 exp(-a2 s) + a3 + a4 s - a5 s^2 + a6 s^3`` and its derivative.
+
+        Parameters
+        ----------
+        s : float or ndarray
+            State of charge ``x1`` (nominally in [0, 1]).
+
+        Returns
+        -------
+        value : float or ndarray, shape of ``s``
+            The value [V].
+        derivative : float or ndarray, shape of ``s``
+            ``d value / d s`` [V per unit SoC].
+        """
         c = self.c
         e = np.exp(-c["a2"] * s)
         val = -c["a1"] * e + c["a3"] + c["a4"] * s - c["a5"] * s**2 + c["a6"] * s**3
         der = c["a1"] * c["a2"] * e + c["a4"] - 2 * c["a5"] * s + 3 * c["a6"] * s**2
         return val, der
 
-    def rts(self, s):
+    def rts(self, s: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """Short transient resistance ``R_ts(s) = a7 exp(-a8 s) + a9`` and its derivative.
+
+        Parameters
+        ----------
+        s : float or ndarray
+            State of charge ``x1`` (nominally in [0, 1]).
+
+        Returns
+        -------
+        value : float or ndarray, shape of ``s``
+            The value [Ohm].
+        derivative : float or ndarray, shape of ``s``
+            ``d value / d s`` [Ohm per unit SoC].
+        """
         return self._exp_term(s, self.c["a7"], self.c["a8"], self.c["a9"])
 
-    def rtl(self, s):
+    def rtl(self, s: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """Long transient resistance ``R_tl(s) = a10 exp(-a11 s) + a12`` and its derivative.
+
+        Parameters
+        ----------
+        s : float or ndarray
+            State of charge ``x1`` (nominally in [0, 1]).
+
+        Returns
+        -------
+        value : float or ndarray, shape of ``s``
+            The value [Ohm].
+        derivative : float or ndarray, shape of ``s``
+            ``d value / d s`` [Ohm per unit SoC].
+        """
         return self._exp_term(s, self.c["a10"], self.c["a11"], self.c["a12"])
 
-    def cts(self, s):
+    def cts(self, s: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """Short transient capacitance ``C_ts(s) = -a13 exp(-a14 s) + a15`` and its derivative.
+
+        Parameters
+        ----------
+        s : float or ndarray
+            State of charge ``x1`` (nominally in [0, 1]).
+
+        Returns
+        -------
+        value : float or ndarray, shape of ``s``
+            The value [F].
+        derivative : float or ndarray, shape of ``s``
+            ``d value / d s`` [F per unit SoC].
+        """
         return self._exp_term(s, self.c["a13"], self.c["a14"], self.c["a15"], -1.0)
 
-    def ctl(self, s):
+    def ctl(self, s: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """Long transient capacitance ``C_tl(s) = -a16 exp(-a17 s) + a18`` and its derivative.
+
+        Parameters
+        ----------
+        s : float or ndarray
+            State of charge ``x1`` (nominally in [0, 1]).
+
+        Returns
+        -------
+        value : float or ndarray, shape of ``s``
+            The value [F].
+        derivative : float or ndarray, shape of ``s``
+            ``d value / d s`` [F per unit SoC].
+        """
         return self._exp_term(s, self.c["a16"], self.c["a17"], self.c["a18"], -1.0)
 
-    def rs(self, s):
+    def rs(self, s: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """Series resistance ``R_s(s) = a19 exp(-a20 s) + a21`` and its derivative.
+
+        Parameters
+        ----------
+        s : float or ndarray
+            State of charge ``x1`` (nominally in [0, 1]).
+
+        Returns
+        -------
+        value : float or ndarray, shape of ``s``
+            The value [Ohm].
+        derivative : float or ndarray, shape of ``s``
+            ``d value / d s`` [Ohm per unit SoC].
+        """
         return self._exp_term(s, self.c["a19"], self.c["a20"], self.c["a21"])
 
     def f(self, x: np.ndarray, i: float) -> tuple[np.ndarray, np.ndarray]:

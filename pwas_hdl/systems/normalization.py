@@ -54,6 +54,14 @@ class Normalization:
         return arr * self.std[key] + self.mean[key]
 
     def to_dict(self) -> dict:
+        """JSON-ready statistics.
+
+        Returns
+        -------
+        dict
+            ``{key: {"mean": [...], "std": [...]}}`` for ``key`` in ``"u"``, ``"y"``, ``"z"`` (lists
+            of floats, physical units).
+        """
         return {k: {"mean": [float(v) for v in self.mean[k]], "std": [float(v) for v in self.std[k]]} for k in self.mean}
 
 
