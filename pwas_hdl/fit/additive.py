@@ -37,13 +37,16 @@ Identifiability
 from __future__ import annotations
 
 import re
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid, _as_partitions
 from pwas_hdl.limits import MAX_VERTICES, check_limit
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 __all__ = ["ADDITIVE_KINDS", "ADDITIVE_DIRECT_MAX_UNKNOWNS", "parse_additive", "AdditiveGrid", "additive_tikhonov_matrix",
            "additive_solver_method"]
@@ -230,23 +233,56 @@ class AdditiveGrid:
     __hash__ = None
 
     def split_weights(self, weights: np.ndarray) -> list[np.ndarray]:
-        """The blocks ``w_i`` of stacked weights (shape (N, ...)) in part order."""
+        """The blocks ``w_i`` of stacked weights (shape (N, ...)) in part order.
+
+        Parameters
+        ----------
+        weights : ndarray, shape (N,) or (N, nz)
+            Stacked weights of all parts.
+
+        Returns
+        -------
+        list of ndarray
+            ``k`` views, part ``i``'s of shape ``(N_i,)`` or ``(N_i, nz)``.
+
+        Raises
+        ------
+        ValueError
+            ``weights`` has not ``N`` rows.
+        """
         w = np.asarray(weights)
         if w.shape[0] != self.n_vertices:
             raise ValueError(f"weights have {w.shape[0]} rows but the additive grid has N = {self.n_vertices}")
         return [w[self.offsets[i] : self.offsets[i + 1]] for i in range(self.n_parts)]
 
     def to_grid_units(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Clamped grid coordinates of all ``n`` regressors and the out-of-domain flags (as :meth:`Grid.to_grid_units`)."""
+        """Clamped grid coordinates of all ``n`` regressors and the out-of-domain flags (as :meth:`Grid.to_grid_units`).
+
+        Parameters
+        ----------
+        x : array_like, shape (m, n) or (n,)
+            Regressors, physical units.
+
+        Returns
+        -------
+        s : ndarray, shape (m, n)
+            Grid coordinates clamped to ``[0, p_j]``.
+        out_of_domain : ndarray, shape (m,), bool
+        """
         return Grid.to_grid_units(self, x)  # reads only lo, step, partitions and n, which this box has
 
-    def basis_matrix(self, x: np.ndarray):
+    def basis_matrix(self, x: np.ndarray) -> scipy.sparse.csr_array:
         """Stacked sparse basis ``H = [H_1 ... H_k]``, shape (m, sum_i N_i).
 
         Parameters
         ----------
         x : array_like, shape (m, n)
             Regressors, physical units (clamped to the domain).
+
+        Returns
+        -------
+        scipy.sparse.csr_array, shape (m, N)
+            At most ``sum_i (|S_i| + 1)`` entries per row.
         """
         from scipy import sparse
 
@@ -273,9 +309,16 @@ class AdditiveGrid:
         return sum(g.evaluate(w, xa[:, list(s)]) for g, s, w in zip(self.parts, self.subsets, blocks))
 
 
-def additive_tikhonov_matrix(grid: AdditiveGrid, order: int = 0):
+def additive_tikhonov_matrix(grid: AdditiveGrid, order: int = 0) -> scipy.sparse.csc_array:
     """``Gamma = blockdiag(Gamma_1, ..., Gamma_k)``, one Tikhonov term per part
     (:func:`pwas_hdl.fit.regularized_lsq.tikhonov_matrix` of each part's grid).
+
+    Parameters
+    ----------
+    grid : AdditiveGrid
+    order : int
+        Tikhonov order (0: ``I``; 1: the gradient penalty), as
+        :func:`~pwas_hdl.fit.regularized_lsq.tikhonov_matrix`.
 
     Returns
     -------
@@ -305,5 +348,17 @@ def additive_solver_method(grid: AdditiveGrid, order: int) -> str:
     """The solver of an additive fit: ``"direct"`` for a first-order penalty up to
     :data:`ADDITIVE_DIRECT_MAX_UNKNOWNS` unknowns, else ``"auto"`` (the rule of
     :func:`pwas_hdl.fit.regularized_lsq.choose_method`). Zero order: ``sigma I`` keeps the system
-    well conditioned and CG converges."""
+    well conditioned and CG converges.
+
+    Parameters
+    ----------
+    grid : AdditiveGrid
+    order : int
+        Tikhonov order.
+
+    Returns
+    -------
+    str
+        ``"direct"`` or ``"auto"``.
+    """
     return "direct" if int(order) >= 1 and grid.n_vertices <= ADDITIVE_DIRECT_MAX_UNKNOWNS else "auto"

@@ -151,7 +151,18 @@ class LPVARXModel:
     mae: float
 
     def gamma(self, rho: np.ndarray) -> np.ndarray:
-        """ARX parameters at each ``rho``, shape (T, n_gamma)."""
+        """ARX parameters at each ``rho``, shape (T, n_gamma).
+
+        Parameters
+        ----------
+        rho : ndarray, shape (T,)
+            Scheduling parameter values (the measured rho, its physical units).
+
+        Returns
+        -------
+        ndarray, shape (T, n_gamma)
+            The hat-basis interpolation of the local ARX parameters at each ``rho``.
+        """
         return hat_basis(rho, self.knots) @ self.coefs
 
 
@@ -295,6 +306,17 @@ def canonical_form(gamma: np.ndarray, order: int, nu: int) -> tuple[np.ndarray, 
 def parse_observer(text: str) -> tuple[str, float | None]:
     """``"deadbeat"``, ``"poles:R"`` or ``"kalman:LAMBDA"`` -> (kind, parameter).
 
+    Parameters
+    ----------
+    text : str
+        The observer option (case and surrounding blanks ignored).
+
+    Returns
+    -------
+    kind : {"deadbeat", "poles", "kalman"}
+    parameter : float or None
+        The radius ``R`` (poles), ``LAMBDA`` (kalman) or None (deadbeat).
+
     Raises
     ------
     InputError
@@ -333,6 +355,11 @@ def observer_gain(a_mat: np.ndarray, c_mat: np.ndarray, kind: str, param: float 
         ``P = dare(A', C', I, lambda)``, ``L = A P C' (C P C' + lambda)^-1``.
     param : float
         The radius ``r`` (poles) or ``lambda`` (kalman).
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        The gain ``L``.
     """
     a = -a_mat[:, 0]
     m = a.size
@@ -502,7 +529,13 @@ class ObserverBankFrontEnd(BaseEstimator):
         return int(self.models_.shape[0])
 
     def feature_names(self) -> list[str]:
-        """``v1[t] ..`` (11b), ``s1[t] ..`` (11b-sq) or ``e1[t] .. e1[t-l] ..`` (11a)."""
+        """``v1[t] ..`` (11b), ``s1[t] ..`` (11b-sq) or ``e1[t] .. e1[t-l] ..`` (11a).
+
+        Returns
+        -------
+        list of str
+            ``N_theta`` names (11b, 11b-sq) or ``N_theta (l + 1)`` names (11a), in feature order.
+        """
         if self.features in ("11b", "11b-sq"):
             return [f"{'v' if self.features == '11b' else 's'}{j + 1}[t]" for j in range(self.n_models_)]
         return [f"e{j + 1}[t]" if lag == 0 else f"e{j + 1}[t-{lag}]" for j in range(self.n_models_) for lag in range(self.window + 1)]
@@ -539,6 +572,16 @@ class ObserverBankFrontEnd(BaseEstimator):
             Local models already learned on the same data with the same ``order`` (``lpv_`` of another
             front end): step 1 is skipped. Benches use it to vary N_theta, observer or features
             without solving the same LAD problem again.
+
+        Returns
+        -------
+        ObserverBankFrontEnd
+            ``self``, fitted.
+
+        Raises
+        ------
+        InputError
+            Bad parameters or signals, a constant signal column, or an observer design that fails.
         """
         self.check_params()
         self._check_signals(us, ys)
@@ -582,6 +625,13 @@ class ObserverBankFrontEnd(BaseEstimator):
     def transform(self, us: list[np.ndarray], ys: list[np.ndarray]) -> tuple[np.ndarray, list[slice]]:
         """Bank features of every trajectory, stacked.
 
+        Parameters
+        ----------
+        us : list of ndarray (T_i, nu)
+            Inputs of each trajectory, physical units (empty list: no inputs).
+        ys : list of ndarray (T_i, 1)
+            Output of each trajectory, physical units; ``T_i >= M + l + 1``.
+
         Returns
         -------
         feats : ndarray, shape (sum_i (T_i - M - l), n_features)
@@ -606,7 +656,15 @@ class ObserverBankFrontEnd(BaseEstimator):
 
     # ------------------------------------------------------------------ model file block
     def to_dict(self) -> dict:
-        """The ``front_end`` block of the model file (floats round-trip exactly through JSON)."""
+        """The ``front_end`` block of the model file (floats round-trip exactly through JSON).
+
+        Returns
+        -------
+        dict
+            Hyper-parameters, ``nu``, the ``normalization`` statistics, the selected ``models``,
+            ``leaf_rho``, the observer ``gains``, ``lpv_mae`` and the ``lpv`` knots and
+            coefficients (lists of floats).
+        """
         fl = lambda a: [float(v) for v in np.asarray(a).reshape(-1)]  # noqa: E731
         return {
             "kind": FRONT_END_KIND,
@@ -629,7 +687,23 @@ class ObserverBankFrontEnd(BaseEstimator):
 
     @classmethod
     def from_dict(cls, d: dict) -> "ObserverBankFrontEnd":
-        """Rebuild a fitted front end from :meth:`to_dict`'s block (``KeyError``/``ValueError`` if corrupt)."""
+        """Rebuild a fitted front end from :meth:`to_dict`'s block (``KeyError``/``ValueError`` if corrupt).
+
+        Parameters
+        ----------
+        d : dict
+            The model file's ``front_end`` block.
+
+        Returns
+        -------
+        ObserverBankFrontEnd
+            Fitted (``models_``, ``gains_``, normalisation, ``lpv_`` restored).
+
+        Raises
+        ------
+        KeyError, ValueError
+            A missing key, another ``kind``, non-finite values or inconsistent sizes.
+        """
         if d.get("kind") != FRONT_END_KIND:
             raise ValueError(f"front_end kind {d.get('kind')!r} is not {FRONT_END_KIND!r}")
         obj = cls(int(d["n_models"]), str(d["observer"]), int(d["window"]), str(d["features"]), int(d["order"]),

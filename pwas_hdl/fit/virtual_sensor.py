@@ -763,11 +763,35 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
 
     # ------------------------------------------------------------ save/load
     def to_dict(self) -> dict:
-        """The model-file content as a JSON-ready dict (:func:`pwas_hdl.fit.model_file.model_to_dict`)."""
+        """The model-file content as a JSON-ready dict (:func:`pwas_hdl.fit.model_file.model_to_dict`).
+
+        Returns
+        -------
+        dict
+            What :meth:`from_dict` reads back.
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            The sensor is not fitted.
+        """
         return model_file.model_to_dict(self)
 
     def to_json(self) -> str:
-        """The model file's text (what :meth:`save` writes; :func:`pwas_hdl.fit.model_file.model_text`)."""
+        """The model file's text (what :meth:`save` writes; :func:`pwas_hdl.fit.model_file.model_text`).
+
+        Returns
+        -------
+        str
+            Strict JSON with a newline at the end.
+
+        Raises
+        ------
+        ValueError
+            A weight or statistic is not finite.
+        sklearn.exceptions.NotFittedError
+            The sensor is not fitted.
+        """
         return model_file.model_text(self)
 
     def save(self, path: str | os.PathLike) -> Path:
