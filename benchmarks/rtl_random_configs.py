@@ -14,7 +14,7 @@ memory (banked / replicated / corner), a pipeline preset, a goal or a random pip
 register and variant flag drawn; the documented dependencies kept: ``flat_sum`` without adder-tree
 registers, ``counter_sum`` on ``flat_sum``, ``sort_late`` on ``mu_late``), input bits 6..16, input
 fill and scale, rounding, narrow weights with saturation, narrow outputs, explicit fractions, the
-serial architecture, Amaranth port names, ``$readmemh`` weights.
+serial architecture (its one memory: no ``memory`` option), Amaranth port names, ``$readmemh`` weights.
 
 Each design is replayed as the RTL tests replay theirs (``pwas_hdl.verify.simulation.standard_runs``:
 full speed, random bubbles and backpressure, a reset in the middle of a stream; stimulus of random
@@ -129,6 +129,7 @@ def draw_config(seed: int, index: int):
         opts["output_frac"] = int(rng.integers(0, 10))
     if rng.random() < 0.2:
         opts["architecture"] = "serial"
+        opts.pop("memory", None)  # one memory of N words: --memory does not apply (refused)
     if rng.random() < 0.2:
         opts["ports"] = "amaranth"
     if rng.random() < 0.15:
