@@ -93,6 +93,18 @@ def _warn(msg: str) -> None:
     err.print(msg, highlight=False, markup=False)
 
 
+def _warn_unused_trajectory_column(table: Any, traj_col: str | None, used: Sequence[str]) -> None:
+    """Warn when DATA has a run index (``run``, ...) but no ``--traj-col``: its runs are then read as one
+    trajectory (:func:`pwas_hdl.io.csv_table.unused_trajectory_column`)."""
+    from pwas_hdl.io.csv_table import unused_trajectory_column
+
+    hit = unused_trajectory_column(table, traj_col, used)
+    if hit is not None:
+        name, runs = hit
+        _warn(f"warning: column {name!r} numbers {runs} runs, but without --traj-col {name} they are read as one "
+              f"trajectory (regressors straddle their boundaries); give --traj-col {name} to keep them apart")
+
+
 def _error_line(msg: str) -> None:
     """``error: MESSAGE`` on stderr, always one line (a message's line breaks become spaces)."""
     one = " ".join(part.strip() for part in msg.splitlines() if part.strip())
@@ -409,6 +421,7 @@ def fit(
         table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
+        _warn_unused_trajectory_column(table, traj_col, [*ins, *outs, *tgts])
         use_u = bool(mu or (bank and ins))
         u = select_signals(table, ins, traj_col) if use_u else None
         y = select_signals(table, outs, traj_col) if (my or bank) else None
@@ -623,6 +636,7 @@ def predict(
         table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
+        _warn_unused_trajectory_column(table, traj_col, [*ins, *outs])
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
         y = select_signals(table, outs, traj_col) if model.n_outputs else None
         lags = model.lags_
@@ -856,6 +870,16 @@ def simulate(
     with _user_errors():
         _design_folder(outdir)
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
+        if traj_col is None:  # a run index without --traj-col: warned before the replay (a bad file is reported by it)
+            from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
+
+            try:
+                with open(data, encoding="utf-8-sig", errors="replace") as fh:
+                    head = [h.strip() for h in fh.readline().split(",")]
+                if any(n in head for n in TRAJECTORY_COLUMN_NAMES):
+                    _warn_unused_trajectory_column(read_csv(data, blank_rows=blank_rows), None, ())
+            except (OSError, ValueError):
+                pass
         res = simulate_data(
             outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
             stall=stall, seed=seed, cache_dir=build_dir, waves=waves,

@@ -450,3 +450,30 @@ def test_python_dash_m_runs_the_command_line():
     assert r.returncode == 0 and r.stdout.startswith("pwas-hdl "), r.stdout + r.stderr
     r = subprocess.run([sys.executable, "-m", "pwas_hdl", "fit"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.startswith("error:"), r.stderr
+
+
+def test_a_run_column_without_traj_col_is_warned_about(tmp_path, capsys):
+    """A run index (make-data ... --runs writes `run`) without --traj-col: fit, predict and simulate read
+    the runs as one trajectory, silently; now a warning says so (and nothing without the column or with
+    --traj-col, or when `run` is not an index in blocks)."""
+    from pwas_hdl.io.csv_table import read_csv, unused_trajectory_column
+
+    data = tmp_path / "d.csv"
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=90)
+    rows = [f"{v},{v * v},{i // 30}" for i, v in enumerate(y)]
+    data.write_text("y,z,run\n" + "\n".join(rows) + "\n")
+    code, _, err = run_main(capsys, "fit", data, "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2, "--sigma", 1e-3)
+    assert code == 0
+    warned = [ln for ln in err.splitlines() if ln.startswith("warning:")]
+    assert warned == ["warning: column 'run' numbers 3 runs, but without --traj-col run they are read as one trajectory "
+                      "(regressors straddle their boundaries); give --traj-col run to keep them apart"], err
+    code, _, err = run_main(capsys, "-q", "predict", tmp_path / "m.json", data, "-o", tmp_path / "p.csv")
+    assert code == 0 and "numbers 3 runs" in err
+    code, _, err = run_main(capsys, "fit", data, "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2,
+                            "--sigma", 1e-3, "--traj-col", "run")
+    assert code == 0 and "warning" not in err
+    t = read_csv(data)
+    assert unused_trajectory_column(t, None, ["run"]) is None  # read as a signal: not an index
+    data.write_text("y,z,run\n" + "\n".join(f"{v},{v * v},{i % 3}" for i, v in enumerate(y)) + "\n")
+    assert unused_trajectory_column(read_csv(data), None) is None  # values that recur: not contiguous runs

@@ -24,7 +24,11 @@ from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.limits import MAX_CSV_BYTES, MAX_CSV_FIELD, MAX_SAMPLES, check_limit
 
-__all__ = ["Table", "read_csv", "write_csv", "select_signals", "split_trajectories", "format_csv", "parse_number", "BLANK_ROWS"]
+__all__ = ["Table", "read_csv", "write_csv", "select_signals", "split_trajectories", "format_csv", "parse_number", "BLANK_ROWS",
+           "TRAJECTORY_COLUMN_NAMES", "unused_trajectory_column"]
+
+#: Column names that usually number the trajectories of a file (``make-data ... --runs`` writes ``run``).
+TRAJECTORY_COLUMN_NAMES = ("run", "trajectory", "traj", "experiment", "episode")
 
 
 #: A number as Python's ``float`` reads it, restricted to ASCII digits and without ``_`` separators
@@ -257,6 +261,42 @@ def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
         cuts |= {i for i in range(1, n) if labels[i] != labels[i - 1]}
     edges = [0] + sorted(cuts) + [n]
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def unused_trajectory_column(table: Table, traj_column: str | None, used: Sequence[str] = ()) -> tuple[str, int] | None:
+    """A column that looks like a trajectory index but is not given as one.
+
+    Parameters
+    ----------
+    table : Table
+    traj_column : str or None
+        The trajectory column the command was given (``--traj-col``); with one, nothing is reported.
+    used : sequence of str
+        Columns the command reads as signals (never reported).
+
+    Returns
+    -------
+    (name, runs) or None
+        The first column named as in :data:`TRAJECTORY_COLUMN_NAMES` whose values are integers in
+        contiguous blocks of at least 2 distinct values (``runs``); without ``--traj-col`` its runs
+        are read as one trajectory, and regressors straddle their boundaries.
+    """
+    if traj_column is not None:
+        return None
+    for name in TRAJECTORY_COLUMN_NAMES:
+        if name not in table.header or name in used:
+            continue
+        try:
+            v = table.numeric([name])[:, 0]
+        except InputError:
+            continue
+        if len(v) < 2 or not np.all(v == np.round(v)):
+            continue
+        starts = np.flatnonzero(np.diff(v) != 0) + 1
+        runs = len(starts) + 1
+        if runs >= 2 and len(np.unique(v)) == runs:  # each value in one block: an index, not a signal
+            return name, runs
+    return None
 
 
 def select_signals(
