@@ -934,7 +934,7 @@ def explore(
     rounding: Annotated[str, typer.Option("--rounding", help="As for generate: half_up or truncate.")] = "half_up",
     overflow: Annotated[str, typer.Option("--overflow", help="As for generate: error (refuse the point) or saturate.")] = "error",
     memory: Annotated[str, typer.Option("--memory", help="As for generate: banked or replicated.")] = "banked",
-    pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="As for generate: min, short, balanced (default) or max.")] = None,
+    pipeline: Annotated[Optional[str], typer.Option("--pipeline", help="As for generate: min, short, balanced (default), max or max-lut.")] = None,
     fpga: Annotated[Optional[str], typer.Option("--fpga", help="Also synthesise the Pareto points and the default on this FPGA family: generic, ecp5 or ice40 (default: the analytic resource estimate only).", show_default=False)] = None,
     cost: Annotated[str, typer.Option("--cost", help="Cost axis of the front: total_bits, memory_bits, logic_bits, register_bits, mult_bit_products, adder_bits, dsp18 or bram18k.")] = "total_bits",
     device: Annotated[Optional[str], typer.Option("--device", help="FPGA device for --fpga ecp5/ice40 (as for synth).")] = None,

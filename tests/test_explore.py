@@ -228,7 +228,8 @@ def test_bad_input(tiny, tmp_path):
     for kw, msg in (({"input_bits": []}, "sweep is empty"), ({"weight_frac": []}, "sweep is empty"),
                     ({"output_frac": []}, "sweep is empty"), ({"input_bits": [12.5]}, "integers"),
                     ({"input_bits": [1]}, ">= 2"), ({"resources": "vivado"}, "resources must be"),
-                    ({"cost": "area"}, "cost must be"), ({"memory": "dual"}, "memory must be"),
+                    ({"cost": "area"}, "cost must be"), ({"memory": "dual"}, r"--memory \(memory\) must be"),
+                    ({"memory": "corner"}, "does not sweep the corner memory"),
                     ({"measure_max": 0}, "measure_max")):
         with pytest.raises(ValueError, match=msg):
             explore(mp, csv, **kw)

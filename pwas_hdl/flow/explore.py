@@ -534,7 +534,8 @@ def explore(
     if cost not in COST_KEYS:
         raise ValueError(f"--cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
     if memory not in ("banked", "replicated"):
-        raise ValueError(f"memory must be 'banked' or 'replicated', got {memory!r}")
+        raise ValueError(f"--memory (memory) must be 'banked' or 'replicated' (explore does not sweep the corner memory), "
+                         f"got {memory!r}")
     if measure_max is not None and (isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1):
         raise ValueError(f"--measure-max (measure_max) must be an integer >= 1, got {measure_max!r}")
     if resources == "estimate":  # the synthesis options mean nothing without synthesis: refused, not ignored
