@@ -395,6 +395,11 @@ def test_native_engine_refuses_what_it_cannot_do(design_folder, sim_cache, tmp_p
         run_rtl(d, runs, "verilator", engine="native", debug=True, cache_dir=sim_cache)
     with pytest.raises(InputError, match="--engine"):
         run_rtl(d, runs, "verilator", engine="vcs", cache_dir=sim_cache)
+    # options of the cocotb bench only: refused with the native one (they were silently dropped)
+    for kw, named in (({"probe_output": 0}, "probe_output apply"), ({"verilator_args": ["-O3"]}, "verilator_args apply"),
+                      ({"clock_ns": 5.0, "verilator_args": ["-O3"]}, "verilator_args, clock_ns apply")):
+        with pytest.raises(InputError, match=named):
+            run_rtl(d, runs, "verilator", engine="native", cache_dir=sim_cache, **kw)
 
 
 @pytest.mark.rtl

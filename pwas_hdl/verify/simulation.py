@@ -894,6 +894,11 @@ def run_rtl(
         raise InputError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     runner = sim_module("pwas_runner")
     if engine == "native":
+        ignored = [nm for nm, given in (("probe_output", probe_output is not None), ("verilator_args", bool(verilator_args)),
+                                        ("clock_ns", clock_ns != 10.0)) if given]
+        if ignored:  # the C++ bench has no probes, builds with its own options and counts cycles, not ns
+            raise InputError(f"{', '.join(ignored)} apply to the cocotb engine only (engine='cocotb'); leave "
+                             f"{'it' if len(ignored) == 1 else 'them'} out with engine='native'")
         return _run_native(design, runs, simulator, cache_dir=cache_dir, work_dir=work_dir, waves=waves, debug=debug)
     b = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves, verilator_args=verilator_args)
     tmp = None
