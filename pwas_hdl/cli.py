@@ -93,16 +93,18 @@ def _warn(msg: str) -> None:
     err.print(msg, highlight=False, markup=False)
 
 
-def _warn_unused_trajectory_column(table: Any, traj_col: str | None, used: Sequence[str]) -> None:
-    """Warn when DATA has a run index (``run``, ...) but no ``--traj-col``: its runs are then read as one
-    trajectory (:func:`pwas_hdl.io.csv_table.unused_trajectory_column`)."""
+def _trajectory_warning(table: Any, traj_col: str | None, used: Sequence[str]) -> str | None:
+    """The warning line when DATA has a run index (``run``, ...) but no ``--traj-col``: its runs are then
+    read as one trajectory (:func:`pwas_hdl.io.csv_table.unused_trajectory_column`). Printed by the
+    command once its work succeeded (bad input stays one ``error:`` line)."""
     from pwas_hdl.io.csv_table import unused_trajectory_column
 
     hit = unused_trajectory_column(table, traj_col, used)
-    if hit is not None:
-        name, runs = hit
-        _warn(f"warning: column {name!r} numbers {runs} runs, but without --traj-col {name} they are read as one "
-              f"trajectory (regressors straddle their boundaries); give --traj-col {name} to keep them apart")
+    if hit is None:
+        return None
+    name, runs = hit
+    return (f"warning: column {name!r} numbers {runs} runs, but without --traj-col {name} they are read as one "
+            f"trajectory (regressors straddle their boundaries); give --traj-col {name} to keep them apart")
 
 
 def _error_line(msg: str) -> None:
@@ -421,7 +423,7 @@ def fit(
         table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
-        _warn_unused_trajectory_column(table, traj_col, [*ins, *outs, *tgts])
+        traj_warning = _trajectory_warning(table, traj_col, [*ins, *outs, *tgts])
         use_u = bool(mu or (bank and ins))
         u = select_signals(table, ins, traj_col) if use_u else None
         y = select_signals(table, outs, traj_col) if (my or bank) else None
@@ -528,6 +530,8 @@ def fit(
 
         for line in solve_warnings(getattr(model, "solve_", None), model.sigma_):
             _warn(line)
+        if traj_warning:
+            _warn(traj_warning)
         _say(f"wrote {output}")
 
 
@@ -636,7 +640,7 @@ def predict(
         table = read_csv(data, blank_rows=blank_rows)
         if traj_col is not None:
             table.column_index(traj_col)
-        _warn_unused_trajectory_column(table, traj_col, [*ins, *outs])
+        traj_warning = _trajectory_warning(table, traj_col, [*ins, *outs])
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
         y = select_signals(table, outs, traj_col) if model.n_outputs else None
         lags = model.lags_
@@ -684,6 +688,8 @@ def predict(
                 _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
         if flags.any():
             _warn(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")
+        if traj_warning:
+            _warn(traj_warning)
         _say(f"wrote {output} ({rows.size} rows)")
 
 
@@ -870,14 +876,15 @@ def simulate(
     with _user_errors():
         _design_folder(outdir)
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
-        if traj_col is None:  # a run index without --traj-col: warned before the replay (a bad file is reported by it)
+        traj_warning = None
+        if traj_col is None:  # a run index without --traj-col (a bad file is reported by the replay)
             from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
 
             try:
                 with open(data, encoding="utf-8-sig", errors="replace") as fh:
                     head = [h.strip() for h in fh.readline().split(",")]
                 if any(n in head for n in TRAJECTORY_COLUMN_NAMES):
-                    _warn_unused_trajectory_column(read_csv(data, blank_rows=blank_rows), None, ())
+                    traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), None, ())
             except (OSError, ValueError):
                 pass
         res = simulate_data(
@@ -887,6 +894,8 @@ def simulate(
         )
         s = res["summary"]
         stdout.print_json(json.dumps(s))
+        if traj_warning:
+            _warn(traj_warning)
         _say(f"wrote {output} and {res['summary_path']}")
         fails = s["checks"]["failures"]  # mismatches, testbench failures, latency / II against the manifest
         if fails:

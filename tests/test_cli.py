@@ -470,6 +470,9 @@ def test_a_run_column_without_traj_col_is_warned_about(tmp_path, capsys):
                       "(regressors straddle their boundaries); give --traj-col run to keep them apart"], err
     code, _, err = run_main(capsys, "-q", "predict", tmp_path / "m.json", data, "-o", tmp_path / "p.csv")
     assert code == 0 and "numbers 3 runs" in err
+    code, _, err = run_main(capsys, "fit", data, "-o", tmp_path / "m2.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2,
+                            "--sigma", 1e-3, "--mz", 1, "--classify")
+    assert code == 2 and _one_error_line(err)  # bad input: the one error line, no warning beside it
     code, _, err = run_main(capsys, "fit", data, "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 2,
                             "--sigma", 1e-3, "--traj-col", "run")
     assert code == 0 and "warning" not in err
