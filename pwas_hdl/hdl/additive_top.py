@@ -216,17 +216,7 @@ class AdditiveCore(wiring.Component):
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding; ``platform`` is not used."""
         m = Module()
         inp = getattr(self, "in")
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)

@@ -128,17 +128,7 @@ class ArgmaxStage(wiring.Component):
                                valid=out.valid, ready=out.ready)
 
     def elaborate(self, platform: Any) -> Module:
-        """The pipelined argmax logic (ties to the lowest index).
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The pipelined argmax logic (ties to the lowest index); ``platform`` is not used."""
         m = Module()
         inp = getattr(self, "in")
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)

@@ -91,17 +91,7 @@ class PWASClassifierCore(wiring.Component):
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The PWAS core and the argmax stage, connected.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The PWAS core and the argmax stage, connected; ``platform`` is not used."""
         m = Module()
         inp = getattr(self, "in")
         scores = self.argmax.scores_stream(self.out)

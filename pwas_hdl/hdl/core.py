@@ -194,17 +194,7 @@ class PWASCore(wiring.Component):
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The pipelined PWAS evaluator's logic (stages, weight memories, adder tree).
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The pipelined PWAS evaluator's logic (stages, weight memories, adder tree); ``platform`` is not used."""
         m = Module()
         inp = getattr(self, "in")
         # advance = in.ready (one net; a separately named copy would be an unused alias wire)

@@ -92,17 +92,7 @@ class ObserverSensorTop(ObserverBankTopBase):
                          isqrt_every=isqrt_every, warmup=bank.first_output, double_buffered=True)
 
     def elaborate(self, platform: Any) -> Module:
-        """The observer bank, residual features and PWAS core, connected.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The observer bank, residual features and PWAS core, connected; ``platform`` is not used."""
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:

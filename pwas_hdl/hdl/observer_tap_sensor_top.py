@@ -111,17 +111,7 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         return out
 
     def elaborate(self, platform: Any) -> Module:
-        """The observer bank, residual features, u/y taps and PWAS core, connected.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The observer bank, residual features, u/y taps and PWAS core, connected; ``platform`` is not used."""
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:  # serial bank: the tap codes registered with the last feature code (done)

@@ -181,17 +181,7 @@ class PWASRecurrentTop(wiring.Component):
         return q
 
     def elaborate(self, platform: Any) -> Module:
-        """The lag bank, PWAS core and feedback registers, connected.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The lag bank, PWAS core and feedback registers, connected; ``platform`` is not used."""
         m = Module()
         p = self.params
         b = p.in_width

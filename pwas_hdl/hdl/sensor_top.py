@@ -243,17 +243,7 @@ class PWASSensorTop(wiring.Component):
         return max(0, n_samples - self.warmup)
 
     def elaborate(self, platform: Any) -> Module:
-        """The lag bank and the PWAS core, connected.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The lag bank and the PWAS core, connected; ``platform`` is not used."""
         m = Module()
         b = self.in_width
         inp = getattr(self, "in")

@@ -113,17 +113,7 @@ class SwitchedEstimatorTop(wiring.Component):
         return acc[est.coef_frac :].as_signed()
 
     def elaborate(self, platform: Any) -> Module:
-        """The estimator's logic: the per-mode observers, the residual detector and the switched output.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The estimator's logic: the per-mode observers, the residual detector and the switched output; ``platform`` is not used."""
         m = Module()
         est, wd = self.est, self.widths
         b = est.input_bits
@@ -386,17 +376,7 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         return cols
 
     def elaborate(self, platform: Any) -> Module:
-        """The time-multiplexed estimator's logic: row units, schedule and memories.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The time-multiplexed estimator's logic: row units, schedule and memories; ``platform`` is not used."""
         from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, rom
         from pwas_hdl.hdl.serial_observer_bank import eq_const, table_mac, var_product
 

@@ -204,17 +204,7 @@ class WarpedPWASCore(wiring.Component):
         return {"warp": warp_hw_info(self._model)}
 
     def elaborate(self, platform: Any) -> Module:
-        """The warp stage, its register and the PWAS core, connected.
-
-        Parameters
-        ----------
-        platform : Any
-            The Amaranth platform (None in simulation and Verilog conversion); not used.
-
-        Returns
-        -------
-        amaranth.hdl.Module
-        """
+        """The warp stage, its register and the PWAS core, connected; ``platform`` is not used."""
         m = Module()
         inp = getattr(self, "in")
         self.core.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
