@@ -661,7 +661,7 @@ def predict(
 
             ct, classes = classifier["target"], classifier["classes"]
             label = clf.decide(zhat, classes)
-            cols[f"{ct}_hat"] = label.astype(int) if all(float(c).is_integer() for c in classes) else label
+            cols[f"{ct}_hat"] = clf.label_column(label, classes)
             for i, c in enumerate(classes):
                 cols[f"{ct}_score_{clf.label_text(c)}"] = zhat[:, i]
             cols["out_of_domain"] = flags

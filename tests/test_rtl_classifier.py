@@ -172,6 +172,8 @@ def test_simulate_writes_the_class_column(folders, sim_cache, tmp_path):
     rows = [line.split(",") for line in out.read_text().splitlines()[1:]]
     i_hw, i_bt = header.index("mode_hat_hw"), header.index("mode_hat_bittrue")
     assert all(row[i_hw] == row[i_bt] for row in rows)
+    # integer classes are written as predict writes them: 2, not 2.0
+    assert all(row[header.index(c)].lstrip("-").isdigit() for row in rows for c in ("mode_hat_hw", "mode_hat_bittrue", "mode_hat_float"))
     truth = d.mode[r["rows"]]
     hw = np.array([float(row[i_hw]) for row in rows])
     assert np.mean(hw == truth) > 0.6  # a working mode classifier, not a constant

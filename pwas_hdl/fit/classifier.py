@@ -16,7 +16,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 
-__all__ = ["class_labels", "one_hot", "class_target_names", "decide", "label_text", "class_scores"]
+__all__ = ["class_labels", "one_hot", "class_target_names", "decide", "label_text", "class_scores", "label_column"]
 
 #: Most classes a classifier may have (one PWAS output each).
 MAX_CLASSES = 64
@@ -139,6 +139,25 @@ def decide(scores: np.ndarray, classes: Sequence[float]) -> np.ndarray:
     if s.ndim != 2 or s.shape[1] != len(classes):
         raise InputError(f"scores have shape {s.shape}; expected (m, {len(classes)})")
     return np.asarray(classes, dtype=float)[np.argmax(s, axis=1)]
+
+
+def label_column(labels: np.ndarray, classes: Sequence[float]) -> np.ndarray:
+    """Labels as a CSV column writes them: integers when every class is an integer (``1``, not ``1.0``).
+
+    Parameters
+    ----------
+    labels : ndarray, shape (m,)
+        Class labels (values of ``classes``).
+    classes : sequence of float
+        The classifier's classes.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+        ``int64`` when every class is integral, else the labels as floats.
+    """
+    lab = np.asarray(labels, dtype=float)
+    return lab.astype(np.int64) if all(float(c).is_integer() for c in classes) else lab
 
 
 def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -> dict:

@@ -1300,7 +1300,7 @@ def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: 
     hw_lab = classes[hw_cls] if len(hw_cls) else np.empty(0)
     bt_lab = classes[bt_cls] if len(bt_cls) else np.empty(0)
     fl_lab = fc.decide(zf, classes) if len(zf) else np.empty(0)
-    cols = {f"{t}_hat_hw": hw_lab, f"{t}_hat_bittrue": bt_lab, f"{t}_hat_float": fl_lab}
+    cols = {f"{t}_hat_{k}": fc.label_column(lab, classes) for k, lab in (("hw", hw_lab), ("bittrue", bt_lab), ("float", fl_lab))}
     summary: dict[str, Any] = {
         "target": t, "classes": classes.tolist(), "class_mismatches": int(np.sum(hw_cls != bt_cls)),
         "tie_rule": clf["tie_rule"],
