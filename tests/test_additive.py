@@ -85,7 +85,7 @@ def test_bad_subsets_are_refused(spec, words):
 
 
 def test_windows_need_enough_lags():
-    with pytest.raises(InputError, match="needs at least 3 lags"):
+    with pytest.raises(InputError, match=r"needs at least 3 lags per signal, the regressor has 2 distinct lags \(t-1, t\)"):
         parse_additive("triples", LagStructure(0, 2, 0, 1).signal_of_dimension())
 
 

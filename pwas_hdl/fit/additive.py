@@ -95,7 +95,8 @@ def parse_additive(spec: str | Sequence[Sequence[int]], dims: Sequence[tuple[str
             if len(lags) < width:
                 raise InputError(
                     f"--additive {text} needs at least {width} lags per signal, the regressor has {len(lags)} "
-                    f"({', '.join(str(v) for v in lags)}); use more lags (--my/--mu) or another --additive"
+                    f"distinct lag{'s' if len(lags) != 1 else ''} ({', '.join(f't-{v}' if v else 't' for v in lags)}); use more "
+                    f"lags (--my/--mu) or another --additive"
                 )
             parts = []
             for i in range(len(lags) - width + 1):
