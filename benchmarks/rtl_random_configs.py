@@ -4,7 +4,7 @@ the bit-true model: the option space beyond the fixed configurations of the RTL 
 Usage::
 
     python benchmarks/rtl_random_configs.py [--count 40] [--seed 0] [--simulator icarus|verilator]
-                                            [--samples 300] [--quick] [--outdir benchmarks/results]
+                                            [--samples 300] [--quick] [--outdir benchmarks/results] [--stem NAME]
 
 Configuration ``i`` of seed ``s`` is drawn from ``numpy.random.default_rng([s, i])`` (the same pair
 draws the same configuration on every machine and in every run): a core (n = 1..5) or a sensor top
@@ -28,7 +28,8 @@ points, vertices, simplex faces, corners, out-of-domain and whole-range codes). 
 * ``error``: anything else (an exception other than an input error: a bug).
 
 The script exits with status 1 when any configuration is ``FAIL`` or ``error``. ``--quick`` draws
-3 configurations of 150 samples (the CI smoke). Writes ``rtl_random_configs.json`` and ``.md``.
+3 configurations of 150 samples (the CI smoke). Writes ``STEM.json`` and ``STEM.md`` (default stem
+``rtl_random_configs``, ``_verilator`` added for Verilator, ``_quick`` for ``--quick``).
 """
 
 from __future__ import annotations
@@ -197,8 +198,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samples", type=int, default=300, help="input transfers per replay (20..100000; default 300)")
     ap.add_argument("--quick", action="store_true", help="3 configurations of 150 samples (the CI smoke)")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
+    ap.add_argument("--stem", default=None, help="output file stem (default rtl_random_configs[_verilator][_quick])")
     args = ap.parse_args(argv)
-    from pwas_hdl.bench_results import check_count
+    from pwas_hdl.bench_results import check_count, check_stem
     from pwas_hdl.errors import InputError
     from pwas_hdl.io.atomic import OutputSet, check_output_path
 
@@ -209,7 +211,8 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError("--seed and --first must be >= 0")
     if not 20 <= args.samples <= 100_000:
         raise InputError(f"--samples must be in 20..100000, got {args.samples}")
-    stem = "rtl_random_configs_quick" if args.quick else "rtl_random_configs"
+    stem = check_stem(args.stem or ("rtl_random_configs" + ("_verilator" if args.simulator == "verilator" else "")
+                                    + ("_quick" if args.quick else "")))
     check_output_path(args.outdir, "--outdir", kind="folder").mkdir(parents=True, exist_ok=True)
     with OutputSet() as outs:
         jpath = outs.add(args.outdir / f"{stem}.json", "--outdir")

@@ -182,6 +182,7 @@ def test_rtl_random_configs_quick_smoke(tmp_path):
     (["--count", "0"], "--count"),
     (["--samples", "5"], "--samples must be in 20..100000"),
     (["--seed", "-1"], "--seed and --first must be >= 0"),
+    (["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
 ])
 def test_rtl_random_configs_bad_option(tmp_path, capsys, args, message):
     bench = importlib.import_module("pwas_hdl.benchmarks.rtl_random_configs")
