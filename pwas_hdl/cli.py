@@ -663,7 +663,7 @@ def predict(
             label = clf.decide(zhat, classes)
             cols[f"{ct}_hat"] = clf.label_column(label, classes)
             for i, c in enumerate(classes):
-                cols[f"{ct}_score_{clf.label_text(c)}"] = zhat[:, i]
+                cols[clf.score_column(ct, c)] = zhat[:, i]
             cols["out_of_domain"] = flags
             with outset:
                 outset.write_text(output, format_csv(cols))

@@ -164,6 +164,10 @@ def test_simulate_writes_the_class_column(folders, sim_cache, tmp_path):
     assert s["checks"]["passed"], s["checks"]
     header = out.read_text().splitlines()[0].split(",")
     assert {"mode_hat_hw", "mode_hat_bittrue", "mode_hat_float"} <= set(header)
+    # the scores under predict's names (mode_score_<k>), not the model's one-hot targets (mode=<k>)
+    scores = [f"mode_score_{k}{sfx}" for k in MODES for sfx in ("_hw", "_bittrue", "_float")]
+    assert set(scores) <= set(header) and not any("=" in h for h in header), header
+    assert sorted(s["targets"]) == sorted(f"mode_score_{k}" for k in MODES)
     c = s["classifier"]
     assert c["class_mismatches"] == 0
     # where the bound applies (float scores at the represented inputs) a difference needs a near tie

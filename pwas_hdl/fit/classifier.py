@@ -16,7 +16,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 
-__all__ = ["class_labels", "one_hot", "class_target_names", "decide", "label_text", "class_scores", "label_column"]
+__all__ = ["class_labels", "one_hot", "class_target_names", "score_column", "decide", "label_text", "class_scores", "label_column"]
 
 #: Most classes a classifier may have (one PWAS output each).
 MAX_CLASSES = 64
@@ -113,6 +113,27 @@ def class_target_names(target: str, classes: Sequence[float]) -> list[str]:
         ``C`` names ``f"{target}={label_text(k)}"``, in the order of ``classes``.
     """
     return [f"{target}={label_text(c)}" for c in classes]
+
+
+def score_column(target: str, c: float) -> str:
+    """CSV column name of the score of class ``c``: ``<target>_score_<k>``.
+
+    The one name ``predict`` writes and ``simulate`` suffixes with ``_hw``, ``_bittrue`` and
+    ``_float`` (the model file keeps the target names of :func:`class_target_names`).
+
+    Parameters
+    ----------
+    target : str
+        Name of the class label column.
+    c : float
+        A class label.
+
+    Returns
+    -------
+    str
+        ``f"{target}_score_{label_text(c)}"``.
+    """
+    return f"{target}_score_{label_text(c)}"
 
 
 def decide(scores: np.ndarray, classes: Sequence[float]) -> np.ndarray:

@@ -1185,6 +1185,10 @@ def simulate_data(
     zref = model.reference(q)  # float model at the inputs the codes represent
     zhw = hw * lsb
     cols: dict[str, Any] = {"row": row}
+    if clf is not None:  # the class scores under the names predict gives them (<c>_score_<k>)
+        from pwas_hdl.fit.classifier import score_column
+
+        tgts = [score_column(clf["target"], c) for c in clf["classes"]]
     for i, t in enumerate(tgts):
         cols[f"{t}_hw"] = zhw[:, i]
         cols[f"{t}_bittrue"] = bt[:, i] * lsb
