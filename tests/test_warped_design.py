@@ -72,6 +72,26 @@ def test_warped_lags_of_one_signal_need_one_input_code(warped_sensor):
     assert wm.to_dict()["signals"] is None  # the core design still has one code per regressor
 
 
+def test_warped_model_flags_as_the_uniform_model(warped_sensor):
+    """``predict(return_flags=True)`` and ``quantize_inputs(return_saturated=True)``: the interface of
+    FixedPointModel (out of the domain or saturated -> flagged; inside -> not)."""
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+    m, d = warped_sensor
+    wm = WarpedFixedPointModel.from_sensor(m, input_bits=10)
+    lo, hi = m.grid_.lo, m.grid_.hi
+    mid = (lo + hi) / 2
+    far = hi + 1e6 * (hi - lo)  # saturates the code range
+    past = hi + 0.03 * (hi - lo)  # a code beyond the domain, inside the range (fill 0.9)
+    x = np.vstack([mid, far, past])
+    q, sat = wm.quantize_inputs(x, return_saturated=True)
+    np.testing.assert_array_equal(q, wm.quantize_inputs(x))
+    assert sat.tolist() == [False, True, False]
+    z, flags = wm.predict(x, return_flags=True)
+    np.testing.assert_array_equal(z, wm.predict(x))
+    assert flags.tolist() == [False, True, True]
+
+
 @pytest.mark.parametrize("extra, msg", [(["--clock-mhz", "50"], "non-uniform partition"),
                                         (["--input-scale", "exact"], "--input-scale must be 'pow2'")])
 def test_generate_warped_refusals_are_one_error_line(extra, msg, warped_sensor, tmp_path):

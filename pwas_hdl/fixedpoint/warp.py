@@ -540,18 +540,23 @@ class WarpedFixedPointModel:
         """Smallest and largest signed ``B_in``-bit input code."""
         return -(1 << (self.input_bits - 1)), (1 << (self.input_bits - 1)) - 1
 
-    def quantize_inputs(self, x: ArrayLike) -> np.ndarray:
+    def quantize_inputs(self, x: ArrayLike, return_saturated: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Input codes of physical points (half up, saturated to ``B_in`` bits), shape (m, n).
 
         Parameters
         ----------
         x : array_like of float, shape (m, n) or (n,)
             Physical regressor values.
+        return_saturated : bool
+            Also return a bool (m,) mask of the rows where some value saturated the code range (as
+            :meth:`FixedPointModel.quantize_inputs`).
 
         Returns
         -------
-        ndarray of int64, shape (m, n)
-            Input codes (no saturation mask, unlike :meth:`FixedPointModel.quantize_inputs`).
+        q : ndarray of int64, shape (m, n)
+            Input codes.
+        saturated : ndarray of bool, shape (m,)
+            Only with ``return_saturated``.
 
         Raises
         ------
@@ -561,7 +566,11 @@ class WarpedFixedPointModel:
         xa = np.atleast_2d(np.asarray(x, dtype=float))
         if xa.shape[1] != self.n:
             raise ValueError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
-        return np.stack([f.quantize(xa[:, j]) for j, f in enumerate(self.inputs)], axis=1).astype(np.int64)
+        q = np.empty(xa.shape, dtype=np.int64)
+        sat = np.zeros(xa.shape, dtype=bool)
+        for j, f in enumerate(self.inputs):
+            q[:, j], sat[:, j] = f.quantize(xa[:, j], return_saturated=True)
+        return (q, sat.any(axis=1)) if return_saturated else q
 
     def represented_inputs(self, q: ArrayLike) -> np.ndarray:
         """Physical values of input codes, shape (m, n).
@@ -624,22 +633,27 @@ class WarpedFixedPointModel:
         """
         return self.core.evaluate(self.warp(q))
 
-    def predict(self, x: ArrayLike) -> np.ndarray:
+    def predict(self, x: ArrayLike, return_flags: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Physical outputs for physical inputs (quantised first), shape (m, nz).
 
         Parameters
         ----------
         x : array_like of float, shape (m, n) or (n,)
             Physical regressor values.
+        return_flags : bool
+            Also return the flags below (as :meth:`FixedPointModel.predict`).
 
         Returns
         -------
-        ndarray of float, shape (m, nz)
-            Physical target units (no flags: unlike :meth:`FixedPointModel.predict` there is no
-            ``return_flags``).
+        zhat : ndarray of float, shape (m, nz)
+            Physical target units.
+        flags : ndarray of bool, shape (m,)
+            Only with ``return_flags``: out of the domain or input saturation.
         """
-        out, _ = self.evaluate(self.quantize_inputs(x))
-        return self.core.to_physical_output(out)
+        q, sat = self.quantize_inputs(x, return_saturated=True)
+        out, oor = self.evaluate(q)
+        z = self.core.to_physical_output(out)
+        return (z, oor | sat) if return_flags else z
 
     def input_port_format(self, j: int) -> dict[str, Any]:
         """The manifest ``format`` of input field ``j``: ``s<B_in>.0`` with ``physical = offset_j + lsb_j * code``.
