@@ -730,16 +730,19 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
     # ----------------------------------------------------------- properties
     @property
     def n_inputs(self) -> int:
+        """Number of measured input signals ``nu`` (raises ``NotFittedError`` before fitting)."""
         self._check_fitted()
         return getattr(self, "nu_", self.lags_.nu if self.lags_ is not None else 0)
 
     @property
     def n_outputs(self) -> int:
+        """Number of measured output signals ``ny`` (1 with a front end; ``NotFittedError`` before fitting)."""
         self._check_fitted()
         return getattr(self, "ny_", self.lags_.ny if self.lags_ is not None else 0)
 
     @property
     def n_targets(self) -> int:
+        """Number of estimated targets ``nz`` (columns of ``weights_``; ``NotFittedError`` before fitting)."""
         self._check_fitted()
         return int(self.weights_.shape[1])
 

@@ -629,15 +629,24 @@ class FixedPointModel:
         return r["out"], r["out_of_range"]
 
     def trace(self, q: ArrayLike) -> dict[str, np.ndarray]:
-        """Every pipeline stage for input codes ``q`` (integer arrays, shape (m, n) or (n,)).
+        """Every pipeline stage for input codes ``q``.
 
-        Returns a dict of integer (or bool) arrays, one per stage. Keys (:data:`TRACE_STAGES`) and shapes: ``q, t, t_clamped, cell, frac_raw, frac, rank,
-        perm`` (m, n); ``out_of_range, out_saturated`` (m,); ``vertices, bank, addr, mu`` (m, n+1)
-        indexed by simplex vertex ``k``; ``rot`` (m,) = ``sum(cell) mod (n+1)``;
-        ``addr_by_bank`` (m, n_banks) address presented to each bank; ``w`` (m, n+1, nz) weight
-        code of vertex ``k``; ``w_by_bank`` (m, n_banks, nz) word read from each bank;
-        ``products`` (m, n+1, nz); ``acc, acc_rounded, out`` (m, nz). See the module docstring
-        for the definitions and :attr:`widths` for the widths.
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Signed input codes.
+
+        Returns
+        -------
+        dict of str to ndarray
+            Integer (or bool) arrays, one per stage. Keys (:data:`TRACE_STAGES`) and shapes:
+            ``q, t, t_clamped, cell, frac_raw, frac, rank, perm`` (m, n); ``out_of_range,
+            out_saturated`` (m,); ``vertices, bank, addr, mu`` (m, n+1) indexed by simplex vertex
+            ``k``; ``rot`` (m,) = ``sum(cell) mod (n+1)``; ``addr_by_bank`` (m, n_banks) address
+            presented to each bank; ``w`` (m, n+1, nz) weight code of vertex ``k``; ``w_by_bank``
+            (m, n_banks, nz) word read from each bank; ``products`` (m, n+1, nz); ``acc,
+            acc_rounded, out`` (m, nz). See the module docstring for the definitions and
+            :attr:`widths` for the widths.
         """
         return self._run(q, full=True)
 
@@ -703,6 +712,11 @@ class FixedPointModel:
     def signal_input_formats(self) -> dict[str, InputFormat]:
         """The input format of each signal (all its lags share it).
 
+        Returns
+        -------
+        dict of str to InputFormat
+            Signal name -> the format of its lags, in first-appearance order.
+
         Raises
         ------
         ValueError
@@ -722,7 +736,16 @@ class FixedPointModel:
         return res
 
     def to_dict(self) -> dict:
-        """Everything the manifest needs (JSON-ready): formats, codes, scaling, widths, layout, bound."""
+        """Everything the manifest needs (JSON-ready): formats, codes, scaling, widths, layout, bound.
+
+        Returns
+        -------
+        dict
+            ``n``, ``nz``, ``F``, ``rounding``, ``weight_overflow``, ``inputs`` (one per regressor
+            dimension), ``signals`` (``None`` when the lags of a signal have different formats),
+            ``weights``, ``output``, ``widths`` (bits), ``layout``, ``error_bound`` (physical units
+            and output LSB) and ``reference_error``.
+        """
         try:
             signals = {k: v.to_dict() for k, v in self.signal_input_formats().items()}
         except ValueError:

@@ -443,7 +443,7 @@ def _evaluate(fxm: FixedPointModel, xi, z, zf, zf_rmsee) -> tuple[dict, np.ndarr
 
 def explore(
     model: PWASVirtualSensor | str | os.PathLike,
-    data,
+    data: str | os.PathLike | Table | tuple,
     *,
     traj_col: str | None = None,
     input_bits: Sequence[int] = DEFAULT_INPUT_BITS,

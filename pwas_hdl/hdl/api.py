@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING, Any
 
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.emit import port_list, port_names
 from pwas_hdl.hdl.params import CoreParams, Pipeline
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.hdl.sensor_top import PWASSensorTop
 
 __all__ = ["build_core", "build_sensor", "design_info"]
 
@@ -17,14 +23,14 @@ def _check_name(name: str) -> str:
     return name
 
 
-def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core",
+def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core",
                classifier: dict | None = None, architecture: str = "parallel") -> PWASCore:
     """The pipelined PWAS core of a bit-true model.
 
     Parameters
     ----------
     model : pwas_hdl.fixedpoint.bittrue.FixedPointModel or CoreParams
-    memory : {"banked", "replicated"}
+    memory : {"banked", "replicated", "corner"}
         Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`), independent of ``model.layout``.
     pipeline : Pipeline, "min", "balanced" (default) or "max"
     name : str
@@ -41,8 +47,17 @@ def build_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None
 
     Returns
     -------
-    PWASCore or PWASClassifierCore
+    PWASCore or SerialPWASCore or PWASClassifierCore
         ``.latency`` (cycles), ``.ii`` (1, serial: n + 1), ``.memory_plan``, ``.params``.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier, an unknown ``architecture``, a classifier with
+        ``architecture="serial"`` or whose class count differs from ``nz``, or parameters the
+        core refuses.
+    TypeError
+        ``model`` is neither a bit-true model nor ``CoreParams``.
     """
     name = _check_name(name)
     params = CoreParams.from_model(model)
@@ -89,15 +104,26 @@ def _fields(names_widths):
     return out
 
 
-def design_info(component, ports: str = "axis") -> dict:
+def design_info(component: Any, ports: str = "axis") -> dict:
     """JSON-ready description of a built design (core or sensor top).
 
-    Keys: ``module``, ``kind``, ``latency`` (cycles), ``ii``, ``ports`` (Verilog ports in module
-    order with their roles, see :func:`~pwas_hdl.hdl.emit.port_list`; ``ports`` is the naming,
-    ``"axis"`` or ``"amaranth"``), ``clock`` and ``reset`` (port, edge / polarity, kind),
-    ``payload`` (bit fields of the input and output payload ports, by port name, LSB first),
-    ``flow_control``, ``memory`` (memories, depth, word bits, words, bits), ``pipeline``,
-    ``arithmetic``; the sensor top adds ``lags`` and ``warmup``.
+    Parameters
+    ----------
+    component : Component
+        What :func:`build_core` or :func:`build_sensor` (or another top of :mod:`pwas_hdl.hdl`)
+        returned: it needs ``latency``, ``ii`` and a ``core`` (or is the core).
+    ports : {"axis", "amaranth"}
+        Port naming (:func:`~pwas_hdl.hdl.emit.port_names`).
+
+    Returns
+    -------
+    dict
+        Keys: ``module``, ``kind``, ``latency`` (cycles), ``ii`` (cycles), ``ports`` (Verilog ports
+        in module order with their roles, see :func:`~pwas_hdl.hdl.emit.port_list`),
+        ``port_naming``, ``clock`` and ``reset`` (port, edge / polarity, kind), ``payload`` (bit
+        fields of the input and output payload ports, by port name, LSB first), ``flow_control``,
+        ``memory`` (memories, depth, word bits, words, bits), ``pipeline``, ``arithmetic``,
+        ``architecture``; the sensor top adds ``lags`` and ``warmup``, a classifier ``classifier``.
     """
     nm = port_names(ports)
     rst = f"~{nm['reset']}" if ports == "axis" else nm["reset"]
@@ -168,15 +194,15 @@ def design_info(component, ports: str = "axis") -> dict:
 
 
 def build_sensor(
-    model,
-    lags=None,
+    model: FixedPointModel | CoreParams,
+    lags: LagStructure | None = None,
     *,
     memory: str = "banked",
     pipeline: Pipeline | str | None = None,
     name: str = "pwas_sensor",
     classifier: dict | None = None,
     architecture: str = "parallel",
-):
+) -> PWASSensorTop:
     """The virtual-sensor top (lag bank + core) of a bit-true model.
 
     Parameters
@@ -192,6 +218,14 @@ def build_sensor(
     -------
     PWASSensorTop
         ``.latency``, ``.ii``, ``.warmup`` (= M - 1), ``.core``, ``.signals``, ``.dims``, ``.argmax``.
+
+    Raises
+    ------
+    InputError
+        ``lags`` is recurrent (the lag top has no feedback path).
+    ValueError
+        As :func:`build_core`; also a signal whose lags have different input formats, or
+        ``lags`` that do not match the model (or neither ``lags`` nor ``model.regressor_signals``).
     """
     from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 

@@ -31,7 +31,7 @@ from typing import Any
 
 from types import SimpleNamespace
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -43,7 +43,20 @@ __all__ = ["ArgmaxStage", "argmax_latency", "inner_stream"]
 
 
 def argmax_latency(n_classes: int, pipeline: Pipeline | str | None = None) -> int:
-    """Cycles the argmax stage adds: ``ceil(ceil(log2 C) / tree_levels)``, 0 when ``tree_levels = 0``."""
+    """Cycles the argmax stage adds: ``ceil(ceil(log2 C) / tree_levels)``, 0 when ``tree_levels = 0``.
+
+    Parameters
+    ----------
+    n_classes : int
+        Number of scores ``C`` (0 when ``C = 1``: no compare level).
+    pipeline : Pipeline, preset name or None
+        Its ``tree_levels`` counts; default balanced.
+
+    Returns
+    -------
+    int
+        Latency in clock cycles.
+    """
     pl = Pipeline.cast(pipeline)
     levels = compare_levels(n_classes)
     if pl.tree_levels == 0 or levels == 0:
@@ -52,7 +65,20 @@ def argmax_latency(n_classes: int, pipeline: Pipeline | str | None = None) -> in
 
 
 def inner_stream(width: int, prefix: str) -> SimpleNamespace:
-    """``payload`` / ``valid`` / ``ready`` signals joining two inlined stages (names ``<prefix>_*``)."""
+    """``payload`` / ``valid`` / ``ready`` signals joining two inlined stages (names ``<prefix>_*``).
+
+    Parameters
+    ----------
+    width : int
+        Payload bits.
+    prefix : str
+        Signal name prefix.
+
+    Returns
+    -------
+    types.SimpleNamespace
+        ``payload`` (unsigned ``width``, reset-less), ``valid``, ``ready`` (1 bit).
+    """
     return SimpleNamespace(payload=Signal(unsigned(width), name=f"{prefix}_payload", reset_less=True),
                            valid=Signal(name=f"{prefix}_valid"), ready=Signal(name=f"{prefix}_ready"))
 
@@ -115,12 +141,22 @@ class ArgmaxStage(wiring.Component):
         })
         self._MustUse__silence = False
 
-    def scores_stream(self, out, prefix: str = "scores") -> SimpleNamespace:
+    def scores_stream(self, out: Any, prefix: str = "scores") -> SimpleNamespace:
         """The stream that the block before an inlined stage drives, for :meth:`build_into`.
 
-        With registers: new ``<prefix>_payload`` / ``_valid`` / ``_ready`` signals
-        (:func:`inner_stream`). Without (latency 0): a new payload signal but ``out``'s own valid
-        and ready, so that no signal merely aliases another (Verilator's UNUSEDSIGNAL).
+        Parameters
+        ----------
+        out : stream interface
+            The stage's own output stream (its ``valid`` / ``ready`` are reused at latency 0).
+        prefix : str
+            Name prefix of the new signals.
+
+        Returns
+        -------
+        types.SimpleNamespace
+            With registers: new ``<prefix>_payload`` / ``_valid`` / ``_ready`` signals
+            (:func:`inner_stream`). Without (latency 0): a new payload signal but ``out``'s own
+            valid and ready, so that no signal merely aliases another (Verilator's UNUSEDSIGNAL).
         """
         if self.latency:
             return inner_stream(self.index_lsb, prefix)
@@ -128,18 +164,37 @@ class ArgmaxStage(wiring.Component):
                                valid=out.valid, ready=out.ready)
 
     def elaborate(self, platform: Any) -> Module:
-        """The pipelined argmax logic (ties to the lowest index); ``platform`` is not used."""
+        """The pipelined argmax logic (ties to the lowest index).
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; unused here.
+
+        Returns
+        -------
+        Module
+            :meth:`build_into` on the stage's own ports.
+        """
         m = Module()
         inp = getattr(self, "in")
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
-    def build_into(self, m: Module, payload, valid, advance, out) -> None:
+    def build_into(self, m: Module, payload: Value, valid: Value, advance: Signal, out: Any) -> None:
         """Add the stage's logic to ``m`` (its own :meth:`elaborate`, or inlined after a core).
 
-        ``payload`` / ``valid``: the input (``index_lsb`` bits) and its valid bit; ``advance``: a
-        1-bit signal this method drives (the input is taken when ``valid & advance``); ``out``:
-        the output stream (``payload`` and ``valid`` driven here, ``ready`` read).
+        Parameters
+        ----------
+        m : Module
+        payload : Value
+            The scores and extra bits (``index_lsb`` bits).
+        valid : Value
+            Valid bit of ``payload``.
+        advance : Signal
+            1 bit, driven here (the input is taken when ``valid & advance``).
+        out : stream interface
+            Output stream: ``payload`` and ``valid`` driven here, ``ready`` read.
         """
         w, iw, levels = self.width, self.index_width, compare_levels(self.n_inputs)
         tl = self.pipeline.tree_levels

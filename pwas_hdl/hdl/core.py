@@ -47,7 +47,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -64,13 +64,34 @@ def core_input_layout(p: CoreParams) -> data.ArrayLayout:
 
     The port itself is a flat ``unsigned(n*B_in)`` (a layout-typed port makes Amaranth emit one
     alias wire per field, which Verilator reports as unused); use this layout to view it.
+
+    Parameters
+    ----------
+    p : CoreParams
+        Gives ``n`` and ``B_in = p.in_width``.
+
+    Returns
+    -------
+    amaranth.lib.data.ArrayLayout
+        ``n`` elements of ``signed(B_in)``, ``n * B_in`` bits.
     """
     return data.ArrayLayout(signed(p.in_width), p.n)
 
 
 def core_output_layout(p: CoreParams) -> data.StructLayout:
     """Output payload fields: ``z`` (``nz`` signed ``B_out``-bit codes, target ``i`` at
-    ``[i*B_out +: B_out]``) then ``out_of_range`` (bit ``nz*B_out``). The port is a flat unsigned."""
+    ``[i*B_out +: B_out]``) then ``out_of_range`` (bit ``nz*B_out``). The port is a flat unsigned.
+
+    Parameters
+    ----------
+    p : CoreParams
+        Gives ``nz`` and ``B_out = p.out_width``.
+
+    Returns
+    -------
+    amaranth.lib.data.StructLayout
+        ``nz * B_out + 1`` bits.
+    """
     return data.StructLayout({"z": data.ArrayLayout(signed(p.out_width), p.nz), "out_of_range": 1})
 
 
@@ -194,19 +215,38 @@ class PWASCore(wiring.Component):
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The pipelined PWAS evaluator's logic (stages, weight memories, adder tree); ``platform`` is not used."""
+        """The pipelined PWAS evaluator's logic (stages, weight memories, adder tree).
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; the core does not use it.
+
+        Returns
+        -------
+        Module
+            The core's logic, :meth:`build_into` on its own ports.
+        """
         m = Module()
         inp = getattr(self, "in")
         # advance = in.ready (one net; a separately named copy would be an unused alias wire)
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
-    def build_into(self, m: Module, payload, valid, advance, out) -> None:
+    def build_into(self, m: Module, payload: Value, valid: Value, advance: Signal, out: Any) -> None:
         """Add the core's logic to ``m`` (used by :meth:`elaborate` and by the sensor top).
 
-        ``payload`` / ``valid``: the input sample (``n*B_in`` bits) and its valid bit; ``advance``:
-        a 1-bit signal this method drives with ``~out.valid | out.ready`` (the input is taken when
-        ``valid & advance``); ``out``: the output stream interface (payload, valid driven here).
+        Parameters
+        ----------
+        m : Module
+            Module the logic is added to.
+        payload, valid : Value
+            The input sample (``n*B_in`` bits, :func:`core_input_layout`) and its valid bit.
+        advance : Signal
+            1 bit, driven here with ``~out.valid | out.ready``: the input is taken when
+            ``valid & advance``.
+        out : stream interface
+            Output stream (``payload`` and ``valid`` driven here, ``ready`` read).
         """
         m.d.comb += advance.eq(~out.valid | out.ready)
         pipe = _Pipe(m, advance)

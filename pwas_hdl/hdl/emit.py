@@ -58,7 +58,21 @@ def _check_naming(ports: str) -> None:
 
 def port_names(ports: str = "axis") -> dict[str, str]:
     """Role -> Verilog port name of the clock, reset and stream ports under a naming scheme
-    (roles ``clock``, ``reset``, ``in.valid``, ``in.ready``, ``in.payload``, ``out.valid``, ...)."""
+    (roles ``clock``, ``reset``, ``in.valid``, ``in.ready``, ``in.payload``, ``out.valid``, ...).
+
+    Parameters
+    ----------
+    ports : {"axis", "amaranth"}
+
+    Returns
+    -------
+    dict of str to str
+
+    Raises
+    ------
+    InputError
+        An unknown naming.
+    """
     _check_naming(ports)
     return {r: (x if ports == "axis" else a) for a, r, x in _PORTS}
 
@@ -70,7 +84,19 @@ _DECL = re.compile(
 
 
 def normalise_verilog(text: str) -> str:
-    """Move the initialisers of procedurally assigned ``reg`` declarations to ``initial`` statements."""
+    """Move the initialisers of procedurally assigned ``reg`` declarations to ``initial`` statements.
+
+    Parameters
+    ----------
+    text : str
+        Verilog text as Yosys' ``write_verilog`` prints it.
+
+    Returns
+    -------
+    str
+        The same text with ``reg x = v;`` of every variable assigned with ``<=`` split into
+        ``reg x;`` and ``initial x = v;``; other declarations unchanged.
+    """
     assigned = set()
     for mo in re.finditer(r"(?<![A-Za-z0-9_$\\])(\\\S+ |[A-Za-z_][A-Za-z0-9_$]*)\s*(?:\[[^\]]*\]\s*)?<=", text):
         assigned.add(mo.group(1).rstrip())
@@ -94,8 +120,7 @@ def emit_verilog(
     hex_prefix: str = "w",
     ports: str = "axis",
 ) -> str:
-    """Verilog-2005 text of ``component`` as a single module called ``name`` (default: the
-    ``module_name`` given to :func:`~pwas_hdl.hdl.build_core`).
+    """Verilog-2005 text of ``component`` as a single module called ``name``.
 
     The module has the ports listed by :func:`port_list`, in that order (clock, reset, input
     stream, output stream, then ``warm`` of the sensor top). ``ports="axis"`` (default) names them
@@ -104,12 +129,39 @@ def emit_verilog(
     Amaranth's ``clk``, ``rst`` (synchronous, active high), ``in__valid`` ... ``out__payload``.
     Deterministic: equal inputs give byte-identical text.
 
-    ``memory_init``: ``"inline"`` (default; the weight memories ``wmem0 .. wmem<n>`` are initialised
-    by assignments in ``initial`` blocks) or ``"readmemh"`` (``initial $readmemh({MEM_DIR,
-    "<hex_prefix>_b<b>.hex"}, wmem<b>);`` -- the files of :func:`memory_hex_files`, equal to
-    ``memory_layout.hex_files(..., packed=True, prefix=hex_prefix)``; the module parameter
-    ``MEM_DIR`` (default ``"./"``: the simulator's / synthesiser's working directory) is the
-    folder that holds them, with its trailing ``/``).
+    Parameters
+    ----------
+    component : amaranth.lib.wiring.Component
+        A core or top built by :mod:`pwas_hdl.hdl`.
+    name : str, optional
+        Module name; default the component's ``module_name`` (as given to
+        :func:`~pwas_hdl.hdl.build_core`), else ``"top"``.
+    memory_init : {"inline", "readmemh"}
+        ``"inline"``: the weight memories ``wmem0 .. wmem<n>`` are initialised by assignments in
+        ``initial`` blocks. ``"readmemh"``: ``initial $readmemh({MEM_DIR,
+        "<hex_prefix>_b<b>.hex"}, wmem<b>);`` -- the files of :func:`memory_hex_files`, equal to
+        ``memory_layout.hex_files(..., packed=True, prefix=hex_prefix)``; the module parameter
+        ``MEM_DIR`` (default ``"./"``: the simulator's / synthesiser's working directory) is the
+        folder that holds them, with its trailing ``/``.
+    hex_prefix : str
+        File-name prefix of the ``.hex`` files (``memory_init="readmemh"`` only).
+    ports : {"axis", "amaranth"}
+        Port naming.
+
+    Returns
+    -------
+    str
+        The Verilog text (first line: the Yosys version).
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier, an unknown ``memory_init``, or a ``hex_prefix``
+        that is not a plain file-name prefix.
+    InputError
+        An unknown ``ports`` naming.
+    InternalError
+        The Yosys output does not have the expected shape (ports, memory initialisers).
     """
     if name is None:
         name = getattr(component, "module_name", None) or "top"
@@ -163,9 +215,22 @@ def _plan(component):
     return core.memory_plan
 
 
-def memory_hex_files(component, prefix: str = "w") -> dict[str, str]:
+def memory_hex_files(component: wiring.Component, prefix: str = "w") -> dict[str, str]:
     """``$readmemh`` files of the weight memories: ``<prefix>_b<bank>.hex``, one packed word per
-    line (all targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits."""
+    line (all targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits.
+
+    Parameters
+    ----------
+    component : amaranth.lib.wiring.Component
+        A core, or a top with a ``core``; its ``memory_plan`` is read.
+    prefix : str
+        File-name prefix.
+
+    Returns
+    -------
+    dict of str to str
+        File name -> file text, one entry per memory bank.
+    """
     from pwas_hdl.fixedpoint.memory_layout import readmemh_text
 
     plan = _plan(component)
@@ -222,6 +287,23 @@ def port_list(component: wiring.Component, ports: str = "axis") -> list[dict]:
     ``out.ready``, ``out.payload``, else the member's name. Names: see :func:`emit_verilog`
     (``ports="axis"``: ``aclk``, ``aresetn`` active low, ``s_axis_t*``, ``m_axis_t*``;
     ``"amaranth"``: ``clk``, ``rst`` active high, the signature path joined with ``__``).
+
+    Parameters
+    ----------
+    component : amaranth.lib.wiring.Component
+    ports : {"axis", "amaranth"}
+        Port naming.
+
+    Returns
+    -------
+    list of dict
+        One per port: ``name``, ``role``, ``direction`` (``"input"`` / ``"output"``), ``width``
+        (bits), ``signed``.
+
+    Raises
+    ------
+    InputError
+        An unknown ``ports`` naming.
     """
     _check_naming(ports)
     found = [

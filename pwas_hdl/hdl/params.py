@@ -31,7 +31,8 @@ from pwas_hdl.fixedpoint.reduction import tree_depth
 
 if TYPE_CHECKING:
     from pwas_hdl.fit.geometry import Grid
-    from pwas_hdl.fixedpoint.memory_layout import BankedLayout, ReplicatedLayout
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.fixedpoint.memory_layout import BankedLayout, CornerLayout, ReplicatedLayout
 
 __all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS", "GOALS", "GOALS_BY_FPGA", "goal_preset"]
 
@@ -111,10 +112,12 @@ class CoreParams:
     # ------------------------------------------------------------------ sizes
     @property
     def n(self) -> int:
+        """Regressor dimension ``n = len(partitions)``."""
         return len(self.partitions)
 
     @property
     def nz(self) -> int:
+        """Number of targets (columns of ``weights``)."""
         return int(self.weights.shape[1])
 
     @property
@@ -128,10 +131,12 @@ class CoreParams:
 
     @property
     def shape(self) -> tuple[int, ...]:
+        """Vertices per dimension, ``p_j + 1``."""
         return tuple(p + 1 for p in self.partitions)
 
     @property
     def n_vertices(self) -> int:
+        """Grid vertex count ``N = prod(p_j + 1)`` (rows of ``weights``)."""
         return int(np.prod(self.shape))
 
     @property
@@ -156,8 +161,25 @@ class CoreParams:
 
     # ------------------------------------------------------------- builders
     @classmethod
-    def from_model(cls, model) -> "CoreParams":
-        """Core parameters of a bit-true model (:class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`)."""
+    def from_model(cls, model: "FixedPointModel | CoreParams") -> "CoreParams":
+        """Core parameters of a bit-true model (:class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel`).
+
+        Parameters
+        ----------
+        model : FixedPointModel or CoreParams
+            A ``CoreParams`` is returned as it is.
+
+        Returns
+        -------
+        CoreParams
+
+        Raises
+        ------
+        TypeError
+            ``model`` lacks an attribute of a bit-true model.
+        ValueError
+            The model's values are invalid for a core (see the class checks).
+        """
         return _params_from_model(cls, model)
 
 
@@ -289,7 +311,18 @@ class Pipeline:
 
     @staticmethod
     def tree_depth(n: int) -> int:
-        """Adder-tree levels to sum ``n + 1`` products (:func:`pwas_hdl.fixedpoint.reduction.tree_depth`)."""
+        """Adder-tree levels to sum ``n + 1`` products (:func:`pwas_hdl.fixedpoint.reduction.tree_depth`).
+
+        Parameters
+        ----------
+        n : int
+            Regressor dimension.
+
+        Returns
+        -------
+        int
+            Adder levels, at least 1.
+        """
         return max(1, tree_depth(n + 1))
 
     def tree_registers(self, n: int) -> int:
@@ -311,7 +344,19 @@ class Pipeline:
         return math.ceil(self.tree_depth(n) / self.tree_levels)
 
     def latency(self, n: int) -> int:
-        """Cycles from an input transfer to the matching output (without backpressure)."""
+        """Cycles from an input transfer to the matching output (without backpressure).
+
+        Parameters
+        ----------
+        n : int
+            Regressor dimension (sets the adder-tree depth).
+
+        Returns
+        -------
+        int
+            Latency in clock cycles: the enabled optional stages, one memory read, the
+            :meth:`tree_registers` and one output register.
+        """
         return (
             int(self.split)
             + int(self.rank)
@@ -491,7 +536,7 @@ class MemoryPlan:
 
     Attributes
     ----------
-    layout : BankedLayout or ReplicatedLayout
+    layout : BankedLayout or ReplicatedLayout or CornerLayout
         The layout the bit-true model reads through (built by :meth:`build`).
     word_bits : int
         ``nz * B_w``.
@@ -499,28 +544,33 @@ class MemoryPlan:
         Per bank, ``depth`` packed words.
     """
 
-    layout: "BankedLayout | ReplicatedLayout"
+    layout: "BankedLayout | ReplicatedLayout | CornerLayout"
     word_bits: int
     contents: tuple[tuple[int, ...], ...]
 
     @property
     def kind(self) -> str:
+        """Layout name: ``"banked"``, ``"replicated"`` or ``"corner"``."""
         return self.layout.kind
 
     @property
     def n_banks(self) -> int:
+        """Number of weight memories (banks)."""
         return self.layout.n_banks
 
     @property
     def depth(self) -> int:
+        """Words per memory."""
         return self.layout.depth
 
     @property
     def words(self) -> int:
+        """Words in all memories together (padding included)."""
         return self.layout.total_words
 
     @property
     def bits(self) -> int:
+        """Memory bits in all: ``words * word_bits``."""
         return self.words * self.word_bits
 
     @property
@@ -548,7 +598,23 @@ class MemoryPlan:
 
     @classmethod
     def build(cls, p: CoreParams, kind: str = "banked") -> "MemoryPlan":
-        """The plan of the layout ``kind`` (``"banked"`` or ``"replicated"``) of ``p``'s grid."""
+        """The plan of the layout ``kind`` of ``p``'s grid, its words packed from ``p.weights``.
+
+        Parameters
+        ----------
+        p : CoreParams
+        kind : {"banked", "replicated", "corner"}
+            Layout name (:func:`pwas_hdl.fixedpoint.memory_layout.make_layout`).
+
+        Returns
+        -------
+        MemoryPlan
+
+        Raises
+        ------
+        ValueError
+            An unknown ``kind``.
+        """
         from pwas_hdl.fixedpoint.bitfields import pack_rows
         from pwas_hdl.fixedpoint.memory_layout import make_layout
 

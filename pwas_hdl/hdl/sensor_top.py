@@ -20,6 +20,7 @@ pipeline); afterwards ``in.ready = ~out.valid | out.ready``. ``rst`` restarts th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import re
@@ -35,15 +36,30 @@ from pwas_hdl.hdl.params import CoreParams, Pipeline
 __all__ = ["PWASSensorTop", "lag_plan", "lag_bank"]
 
 
-def lag_plan(model, lags: LagStructure | None = None):
+def lag_plan(model: Any, lags: LagStructure | None = None) -> tuple[list[tuple[str, int]], list[tuple[int, int]]]:
     """Signals and regressor dimensions of the lag bank.
+
+    Parameters
+    ----------
+    model : FixedPointModel or CoreParams
+        Gives ``n`` and, if set, ``regressor_signals`` (``(signal name, lag)`` per dimension).
+    lags : LagStructure, optional
+        The sensor's lag structure; default: derived from ``model.regressor_signals``.
 
     Returns
     -------
     signals : list of (name, n_lags)
         In payload order.
     dims : list of (signal index, lag)
-        One per regressor dimension, ``lag = 0`` the current sample.
+        One per regressor dimension, ``lag = 0`` the current sample (lags in samples).
+
+    Raises
+    ------
+    InputError
+        ``lags`` is recurrent (``Mz > 0``).
+    ValueError
+        ``lags`` has another dimension than the model, or does not match its
+        ``regressor_signals``; or neither ``lags`` nor ``regressor_signals`` is given.
     """
     n = model.n if isinstance(getattr(model, "n", None), int) else len(CoreParams.from_model(model).partitions)  # n: also additive models
     names = list(getattr(model, "regressor_signals", []) or [])
@@ -83,7 +99,7 @@ def lag_plan(model, lags: LagStructure | None = None):
     return list(zip(order, counts)), dims
 
 
-def sample_fields(names, width: int) -> list[dict]:
+def sample_fields(names: Sequence[str], width: int) -> list[dict]:
     """Fields of a sensor top's input payload: one signed ``width``-bit code per signal, signal ``i``
     at bits ``[i*width, (i+1)*width)`` (the manifest's ``input.fields``).
 
@@ -93,6 +109,11 @@ def sample_fields(names, width: int) -> list[dict]:
         Signal names in payload order.
     width : int
         Bits per code.
+
+    Returns
+    -------
+    list of dict
+        ``{"name", "lsb", "width", "signed": True}`` per signal.
     """
     return [{"name": str(nm), "lsb": i * width, "width": width, "signed": True} for i, nm in enumerate(names)]
 
@@ -209,10 +230,12 @@ class PWASSensorTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
+        """Input payload fields, one signed ``in_width``-bit code per signal (:func:`sample_fields`)."""
         return sample_fields([nm for nm, _ in self.signals], self.in_width)
 
     @property
     def extra_info(self) -> dict:
+        """Manifest entries of the top: ``lags`` (signals, regressor), ``warmup`` and, if warped, ``warp``."""
         return {
             **({"warp": self.warp_entry} if self.warp_entry is not None else {}),
             "lags": {
@@ -243,7 +266,18 @@ class PWASSensorTop(wiring.Component):
         return max(0, n_samples - self.warmup)
 
     def elaborate(self, platform: Any) -> Module:
-        """The lag bank and the PWAS core, connected; ``platform`` is not used."""
+        """The lag bank and the PWAS core (and argmax stage, if any), connected.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; ignored.
+
+        Returns
+        -------
+        Module
+            One module: lag bank, warm-up thermometer and the inlined core.
+        """
         m = Module()
         b = self.in_width
         inp = getattr(self, "in")

@@ -41,7 +41,7 @@ straight from the memory register or ``mem_out``).
 from __future__ import annotations
 
 import numpy as np
-from amaranth.hdl import Const, Module, Signal, signed, unsigned
+from amaranth.hdl import Const, Module, Signal, Value, signed, unsigned
 from amaranth.lib.memory import Memory
 
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
@@ -163,7 +163,19 @@ class SerialPWASCore(PWASCore):
         return {"architecture": architecture_info(self)}
 
     def flow_control(self, names: dict) -> dict:
-        """The handshake rules in words (``names``: port names by role)."""
+        """The handshake rules of the input throttle, in words.
+
+        Parameters
+        ----------
+        names : dict of str to str
+            Port names by role (:func:`~pwas_hdl.hdl.emit.port_names`).
+
+        Returns
+        -------
+        dict of str to str
+            ``advance`` and the ``in.ready`` port's rule (merged into the manifest's
+            ``flow_control``).
+        """
         ov, orr, ir = names["out.valid"], names["out.ready"], names["in.ready"]
         return {
             "advance": f"~{ov} | {orr}",
@@ -171,11 +183,21 @@ class SerialPWASCore(PWASCore):
             f"gap counts the advancing cycles since the last transfer",
         }
 
-    def build_into(self, m: Module, payload, valid, advance, out) -> None:
-        """Add the serial core's logic to ``m`` (as :meth:`PWASCore.build_into`).
+    def build_into(self, m: Module, payload: Value, valid: Value, advance: Signal, out: Any) -> None:
+        """Add the serial core's logic to ``m`` (arguments as :meth:`PWASCore.build_into`).
 
         ``advance`` is driven with ``(~out.valid | out.ready) & (gap == 0)``: the input is taken
-        when ``valid & advance``.
+        when ``valid & advance``, at most once every ``n + 1`` advancing cycles.
+
+        Parameters
+        ----------
+        m : Module
+        payload, valid : Value
+            Input sample (``n*B_in`` bits) and its valid bit.
+        advance : Signal
+            Input enable, driven here.
+        out : stream interface
+            Output stream (``ready`` read, the rest driven).
         """
         p = self.params
         n, nb, nz = p.n, p.n + 1, p.nz

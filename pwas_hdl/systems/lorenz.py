@@ -65,7 +65,13 @@ class PlantData:
         return self._rows(slice(None, n_first)), self._rows(slice(n_first, None))
 
     def runs(self) -> list["PlantData"]:
-        """One :class:`PlantData` per trajectory (consecutive samples with the same ``run``)."""
+        """One :class:`PlantData` per trajectory (consecutive samples with the same ``run``).
+
+        Returns
+        -------
+        list of PlantData
+            In sample order; ``[self]`` when there is no ``run`` column.
+        """
         if self.run is None or len(self.run) == 0:
             return [self]
         cuts = [0] + [int(i) for i in np.flatnonzero(np.diff(self.run)) + 1] + [len(self.run)]
