@@ -59,6 +59,12 @@ def _pid_alive(pid: int) -> bool:
 def clean_stale_temps(folder: str | os.PathLike) -> list[Path]:
     """Remove the pwas-hdl temporaries in ``folder`` whose process no longer runs.
 
+    Parameters
+    ----------
+    folder : path
+        Folder to scan (not recursively); an unreadable folder is skipped. Temporaries are the
+        names with :data:`TEMP_MARK` and a process id; removal errors are ignored.
+
     Returns
     -------
     list of Path
@@ -90,7 +96,20 @@ def _temp_prefix(name: str) -> str:
 
 
 def make_temp_dir(parent: str | os.PathLike, name: str) -> Path:
-    """A new temporary folder in ``parent`` for the output ``name`` (stale ones are cleaned first)."""
+    """A new temporary folder in ``parent`` for the output ``name`` (stale ones are cleaned first).
+
+    Parameters
+    ----------
+    parent : path
+        Existing folder that will hold it (the output's own folder, so that a rename publishes it).
+    name : str
+        The output's file name (its first 80 characters go into the hidden temporary name).
+
+    Returns
+    -------
+    Path
+        The new, empty folder ``.<name>.pwas-tmp-<pid>-<random>``.
+    """
     clean_stale_temps(parent)
     return Path(tempfile.mkdtemp(prefix=_temp_prefix(name), dir=parent))
 
@@ -268,7 +287,25 @@ class OutputSet:
         self.committed = False
 
     def add(self, path: str | os.PathLike, what: str = "output", *, kind: str = "file") -> Path:
-        """Check an output path (see :func:`check_output_path`) and reserve it; returns it as a Path."""
+        """Check an output path (see :func:`check_output_path`) and reserve it.
+
+        Parameters
+        ----------
+        path : path
+        what : str
+            The option that named it, for messages.
+        kind : {"file", "folder"}
+
+        Returns
+        -------
+        Path
+            As :func:`check_output_path` returns it (a symbolic link resolved).
+
+        Raises
+        ------
+        InputError
+            As :func:`check_output_path`; also a path added twice or equal to an input.
+        """
         p = check_output_path(path, what, kind=kind)
         key = _same_key(p)
         if key in self._targets:
@@ -288,7 +325,22 @@ class OutputSet:
         return key, self._targets[key][1]
 
     def temp_path(self, path: str | os.PathLike) -> Path:
-        """A temporary file beside ``path`` that becomes ``path`` on :meth:`commit` (write into it)."""
+        """A temporary file beside ``path`` that becomes ``path`` on :meth:`commit` (write into it).
+
+        Parameters
+        ----------
+        path : path
+            An output given to :meth:`add` (the same temporary on every call).
+
+        Returns
+        -------
+        Path
+
+        Raises
+        ------
+        InputError
+            ``path`` was not added.
+        """
         key, p = self._slot(path)
         if key not in self._staged:
             self._staged[key] = _make_temp_file(p.parent if str(p.parent) else Path("."), p.name)
@@ -296,7 +348,23 @@ class OutputSet:
 
     def temp_dir(self, path: str | os.PathLike) -> Path:
         """A temporary folder beside the folder output ``path`` (added with ``kind="folder"``) that
-        replaces ``path`` on :meth:`commit` (a previous folder of that name is removed then)."""
+        replaces ``path`` on :meth:`commit` (a previous folder of that name is removed then).
+
+        Parameters
+        ----------
+        path : path
+            A folder output given to :meth:`add`; its parent is created if missing.
+
+        Returns
+        -------
+        Path
+            The same temporary folder on every call for ``path``.
+
+        Raises
+        ------
+        InputError
+            ``path`` was not added.
+        """
         key, p = self._slot(path)
         if key not in self._staged:
             parent = p.parent if str(p.parent) else Path(".")
@@ -305,17 +373,35 @@ class OutputSet:
         return self._staged[key]
 
     def write_bytes(self, path: str | os.PathLike, data: bytes) -> None:
-        """Stage ``data`` as the content of ``path``."""
+        """Stage ``data`` as the content of ``path`` (an added output; see :meth:`temp_path`).
+
+        Parameters
+        ----------
+        path : path
+        data : bytes
+        """
         tmp = self.temp_path(path)
         with open(tmp, "wb") as fh:
             fh.write(data)
 
     def write_text(self, path: str | os.PathLike, text: str) -> None:
-        """Stage UTF-8 ``text`` as the content of ``path``."""
+        """Stage UTF-8 ``text`` as the content of ``path`` (as :meth:`write_bytes`).
+
+        Parameters
+        ----------
+        path : path
+        text : str
+        """
         self.write_bytes(path, text.encode("utf-8"))
 
     def commit(self) -> list[Path]:
-        """Rename every staged temporary to its target (outputs that were added but not staged are skipped)."""
+        """Rename every staged temporary to its target (outputs that were added but not staged are skipped).
+
+        Returns
+        -------
+        list of Path
+            The targets written, in staging order.
+        """
         done = []
         for key, tmp in list(self._staged.items()):
             target = self._targets[key][1]
@@ -360,7 +446,24 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
     The parent folder must exist. On any error the target is left untouched. A symbolic link at
-    ``path`` is kept: the file it points to is written. Returns where the data went.
+    ``path`` is kept: the file it points to is written.
+
+    Parameters
+    ----------
+    path : path
+    data : bytes
+
+    Returns
+    -------
+    Path
+        Where the data went (the link's target for a symbolic link).
+
+    Raises
+    ------
+    FileNotFoundError
+        The parent folder does not exist.
+    OSError
+        The write or the rename failed.
     """
     target = Path(path)
     if _is_link(target):  # the link is kept; its target is written
@@ -383,7 +486,18 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    """UTF-8 text version of :func:`atomic_write_bytes`."""
+    """UTF-8 text version of :func:`atomic_write_bytes`.
+
+    Parameters
+    ----------
+    path : path
+    text : str
+
+    Returns
+    -------
+    Path
+        Where the text went.
+    """
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 

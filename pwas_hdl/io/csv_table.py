@@ -41,7 +41,18 @@ BLANK_ROWS = ("error", "break")
 
 
 def parse_number(cell: str) -> float | None:
-    """The value of a CSV cell, or None when it is not a number (strict: see :data:`_NUMBER`)."""
+    """The value of a CSV cell, or None when it is not a number (strict: see :data:`_NUMBER`).
+
+    Parameters
+    ----------
+    cell : str
+        Raw cell text; surrounding whitespace is ignored.
+
+    Returns
+    -------
+    float or None
+        ``nan`` / ``inf`` are returned as such (callers refuse them).
+    """
     t = cell.strip()
     if not _NUMBER.fullmatch(t):
         return None
@@ -78,7 +89,16 @@ class Table:
         return self.lines[r] if r < len(self.lines) else r + 2
 
     def numeric(self, names: Sequence[str]) -> np.ndarray:
-        """The named columns as a float array of shape (rows, len(names)).
+        """The named columns as a float array.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Column names (exact match), in the order of the result's columns.
+
+        Returns
+        -------
+        ndarray of float64, shape (len(self), len(names))
 
         Raises
         ------
@@ -105,13 +125,39 @@ class Table:
         return out
 
     def text(self, name: str) -> list[str]:
-        """A column as raw text."""
+        """A column as text, each cell stripped of surrounding whitespace.
+
+        Parameters
+        ----------
+        name : str
+            Column name.
+
+        Returns
+        -------
+        list of str
+            One per row.
+
+        Raises
+        ------
+        InputError
+            No column has that name.
+        """
         c = self.column_index(name)
         return [row[c].strip() for row in self.rows]
 
     def reference_column(self, name: str) -> str | None:
-        """The column with the reference (measured or true) values of quantity ``name``:
-        ``<name>_true`` if the file has it, else ``<name>``, else None."""
+        """The column with the reference (measured or true) values of quantity ``name``.
+
+        Parameters
+        ----------
+        name : str
+            Quantity (target) name.
+
+        Returns
+        -------
+        str or None
+            ``<name>_true`` if the file has it, else ``<name>``, else None.
+        """
         return next((c for c in (f"{name}_true", name) if c in self.header), None)
 
     def column_index(self, name: str) -> int:
@@ -151,12 +197,17 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
         number and join the samples around it), or ``"break"``: it ends one trajectory and the
         next row starts another (no regressor straddles it). Blank rows at the end are ignored.
 
+    Returns
+    -------
+    Table
+        Cells kept as text; at least one data row.
+
     Raises
     ------
     FileNotFoundError
         The file does not exist.
     InputError
-        Unreadable, not UTF-8 (the byte offset is named), empty, duplicate or empty column
+        An unknown ``blank_rows``, a folder, unreadable, not UTF-8 (the byte offset is named), empty, duplicate or empty column
         names, a control character in a column name, a row with the wrong number of cells, a
         blank row (``blank_rows="error"``), malformed quoting.
     ResourceLimit
@@ -253,7 +304,24 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
 
 def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
     """Row slices of the trajectories: consecutive rows with equal values of ``traj_column``, also
-    cut where a blank row was read as a trajectory break (:attr:`Table.breaks`)."""
+    cut where a blank row was read as a trajectory break (:attr:`Table.breaks`).
+
+    Parameters
+    ----------
+    table : Table
+    traj_column : str or None
+        Trajectory column (compared as stripped text); None: only the blank-row breaks cut.
+
+    Returns
+    -------
+    list of slice
+        Contiguous, in row order, covering every row.
+
+    Raises
+    ------
+    InputError
+        No column named ``traj_column``.
+    """
     n = len(table)
     cuts = set(b for b in table.breaks if 0 < b < n)
     if traj_column is not None:
@@ -302,7 +370,26 @@ def unused_trajectory_column(table: Table, traj_column: str | None, used: Sequen
 def select_signals(
     table: Table, names: Sequence[str], traj_column: str | None = None
 ) -> list[np.ndarray]:
-    """Named numeric columns, split into trajectories: a list of arrays (T_i, len(names))."""
+    """Named numeric columns, split into trajectories (:func:`split_trajectories`).
+
+    Parameters
+    ----------
+    table : Table
+    names : sequence of str
+        Column names; empty gives ``[]``.
+    traj_column : str, optional
+        Trajectory column.
+
+    Returns
+    -------
+    list of ndarray of float64, shape (T_i, len(names))
+        One per trajectory, ``T_i`` samples each.
+
+    Raises
+    ------
+    InputError
+        As :meth:`Table.numeric`.
+    """
     if not names:
         return []
     data = table.numeric(names)
@@ -310,12 +397,47 @@ def select_signals(
 
 
 def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | Sequence]) -> Path:
-    """Write named columns (equal lengths) atomically; floats with round-trip precision."""
+    """Write named columns (equal lengths) atomically; floats with round-trip precision.
+
+    Parameters
+    ----------
+    path : path
+        Target file (its folder must exist).
+    columns : mapping of str to 1-D array or sequence
+        Header name -> values, in column order (see :func:`format_csv`).
+
+    Returns
+    -------
+    Path
+        Where the file was written (:func:`~pwas_hdl.io.atomic.atomic_write_bytes`).
+
+    Raises
+    ------
+    ValueError
+        Columns of different lengths.
+    """
     return atomic_write_text(path, format_csv(columns))
 
 
 def format_csv(columns: Mapping[str, np.ndarray | Sequence]) -> str:
-    """The text :func:`write_csv` writes (for an :class:`~pwas_hdl.io.atomic.OutputSet`)."""
+    """The text :func:`write_csv` writes (for an :class:`~pwas_hdl.io.atomic.OutputSet`).
+
+    Parameters
+    ----------
+    columns : mapping of str to 1-D array or sequence
+        Header name -> values. Booleans are written ``1`` / ``0``, integers as integers, floats
+        as ``repr`` (round-trip), anything else with ``str``.
+
+    Returns
+    -------
+    str
+        Header line, then one line per row (``\\n`` line ends).
+
+    Raises
+    ------
+    ValueError
+        Columns of different lengths.
+    """
     names = list(columns)
     arrays = [np.asarray(columns[nm]) for nm in names]
     lens = {a.shape[0] for a in arrays}

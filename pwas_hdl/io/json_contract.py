@@ -42,7 +42,23 @@ def _schema_and_validator(name: str):
 
 
 def load_schema(name: str) -> dict[str, Any]:
-    """The shipped JSON Schema ``pwas_hdl/schemas/<name>`` (parsed; do not modify it)."""
+    """The shipped JSON Schema ``pwas_hdl/schemas/<name>`` (parsed; do not modify it).
+
+    Parameters
+    ----------
+    name : str
+        File name in ``pwas_hdl/schemas/``, e.g. ``"model-v2.schema.json"``.
+
+    Returns
+    -------
+    dict
+        The schema, cached per process (the same object on every call).
+
+    Raises
+    ------
+    InternalError
+        The schema file cannot be read or parsed (a broken installation).
+    """
     return _schema_and_validator(name)[0]
 
 
@@ -59,6 +75,11 @@ def read_json(path: str | os.PathLike, hint: str) -> Any:
         The file.
     hint : str
         How to get a good file (e.g. "re-run `pwas-hdl fit`"), appended to the message.
+
+    Returns
+    -------
+    Any
+        The parsed value (``dict``, ``list``, ``str``, ``int``, ``float``, ``bool`` or ``None``).
 
     Raises
     ------
@@ -103,6 +124,17 @@ FILE_KINDS = {
 def check_header(d: Any, fmt: str, version: int, source: str, hint: str) -> None:
     """Check ``format`` and ``version`` before the schema (an old file gets a version message, not a key list).
 
+    Parameters
+    ----------
+    d : Any
+        The parsed file (:func:`read_json`).
+    fmt : str
+        Expected ``format``, e.g. ``"pwas-hdl-model"`` (:data:`FILE_KINDS`).
+    version : int
+        The one supported ``version``.
+    source, hint : str
+        File name for the message, and how to get a good file (appended).
+
     Raises
     ------
     InputError
@@ -119,7 +151,18 @@ def check_header(d: Any, fmt: str, version: int, source: str, hint: str) -> None
 
 
 def json_path(parts: Iterable[Any]) -> str:
-    """``["lags", "My"]`` -> ``lags.My``; ``["ports", 3, "width"]`` -> ``ports[3].width``."""
+    """``["lags", "My"]`` -> ``lags.My``; ``["ports", 3, "width"]`` -> ``ports[3].width``.
+
+    Parameters
+    ----------
+    parts : iterable
+        Keys (``str``) and list indices (``int``), outermost first.
+
+    Returns
+    -------
+    str
+        The dotted path; ``""`` for no parts.
+    """
     out = ""
     for p in parts:
         out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
@@ -171,7 +214,20 @@ def _describe(err) -> str:
 
 
 def schema_errors(d: Any, schema_name: str) -> list[str]:
-    """Every schema violation of ``d`` as one sentence each (empty: valid), most relevant first."""
+    """Every schema violation of ``d`` as one sentence each, most relevant first.
+
+    Parameters
+    ----------
+    d : Any
+        The parsed file.
+    schema_name : str
+        Shipped schema file name (:func:`load_schema`).
+
+    Returns
+    -------
+    list of str
+        Empty when ``d`` is valid.
+    """
     from jsonschema.exceptions import best_match, relevance
 
     _, validator = _schema_and_validator(schema_name)
@@ -185,6 +241,15 @@ def schema_errors(d: Any, schema_name: str) -> list[str]:
 
 def validate(d: Any, schema_name: str, source: str, hint: str) -> None:
     """Validate ``d`` against a shipped schema.
+
+    Parameters
+    ----------
+    d : Any
+        The parsed file.
+    schema_name : str
+        Shipped schema file name (:func:`load_schema`).
+    source, hint : str
+        As :func:`check_header`: the file's name and the advice appended to the message.
 
     Raises
     ------
