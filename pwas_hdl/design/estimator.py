@@ -26,12 +26,16 @@ from __future__ import annotations
 
 import hashlib
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pwas_hdl import __version__
 from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fit.estimator_file import SwitchedEstimatorConfig, estimator_text, is_estimator_file, read_estimator
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling
+
+if TYPE_CHECKING:
+    from pwas_hdl.design.generate import GeneratedDesign
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
 
 __all__ = ["ESTIMATOR_OPTIONS", "ESTIMATOR_FILE", "fixed_point_estimator", "build_estimator_design", "is_estimator",
            "estimator_info", "load_estimator_config"]
@@ -49,7 +53,19 @@ _PWAS_DEFAULTS = {"memory": "banked", "pipeline": None, "memory_init": "inline",
 
 
 def is_estimator(model: Any) -> bool:
-    """True for a :class:`SwitchedEstimatorConfig` or the path of an estimator file."""
+    """True for a :class:`SwitchedEstimatorConfig` or the path of an estimator file.
+
+    Parameters
+    ----------
+    model : Any
+        What ``generate`` was given (a sensor, a path, a config).
+
+    Returns
+    -------
+    bool
+        A path counts when its JSON ``format`` is ``pwas-hdl-estimator``
+        (:func:`~pwas_hdl.fit.estimator_file.is_estimator_file`, no validation).
+    """
     if isinstance(model, SwitchedEstimatorConfig):
         return True
     return isinstance(model, (str, os.PathLike)) and is_estimator_file(model)
@@ -85,7 +101,8 @@ def _check_int(name: str, v: Any, lo: int, hi: int) -> None:
 
 
 def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | None = None, input_headroom: float | None = None,
-                          state_bits: int | None = None, state_frac: int | None = None, coef_frac: int | None = None):
+                          state_bits: int | None = None, state_frac: int | None = None,
+                          coef_frac: int | None = None) -> FixedPointSwitchedEstimator:
     """The bit-true estimator (:class:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator`) of ``config``.
 
     Parameters
@@ -99,10 +116,14 @@ def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | 
         ``B_s`` (2..48), ``F_s`` (>= the input fraction bits, <= 40), ``F_c`` (1..40); default from the
         noise budget and the l1 state bound (no saturation for inputs within the code range).
 
+    Returns
+    -------
+    FixedPointSwitchedEstimator
+
     Raises
     ------
     InputError
-        An option out of range or an unstable observer (``A_i - K_i C_i`` with a pole on or outside
+        An option out of range (also ``F_s`` below the input fraction bits) or an unstable observer (``A_i - K_i C_i`` with a pole on or outside
         the unit circle).
     """
     import numpy as np
@@ -134,8 +155,25 @@ def _fmt(bits: int, frac: int, signed: bool = True, scale: float = 1.0, offset: 
     return PortFormat(FixedFormat(bits, frac, signed, "half_up", "saturate"), SignalScaling(scale, offset)).to_dict()
 
 
-def estimator_info(top, config: SwitchedEstimatorConfig, ports: str) -> dict:
-    """Ports (with their payload fields), clock, reset, latency, II and flow control of the built top."""
+def estimator_info(top: Any, config: SwitchedEstimatorConfig, ports: str) -> dict:
+    """Ports (with their payload fields), clock, reset, latency, II and flow control of the built top.
+
+    Parameters
+    ----------
+    top : SwitchedEstimatorTop or SerialSwitchedEstimatorTop
+        The built top (:mod:`pwas_hdl.hdl.switched_estimator_top`).
+    config : SwitchedEstimatorConfig
+        Gives the signal and state names of the fields.
+    ports : {"axis", "amaranth"}
+        Port naming.
+
+    Returns
+    -------
+    dict
+        ``ports`` (payload ports with ``fields``: bit positions, formats, meanings), ``clock``,
+        ``reset``, ``latency`` and ``ii`` (cycles), ``flow_control``: the ``info`` of
+        :func:`~pwas_hdl.design.manifest.build_estimator_manifest`.
+    """
     from pwas_hdl.hdl.emit import port_list, port_names
 
     est = top.est
@@ -297,7 +335,7 @@ def _report(man: dict) -> str:
 def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *, design: str = "core", name: str | None = None,
                            ports: str = "axis", progress: Any = None, executor: Any = None, timing_seed: int = 1,
                            prescreen: bool = True, fpga_target: str = "ecp5", architecture: str = "parallel",
-                           bank_lanes: int | None = None, **options: Any):
+                           bank_lanes: int | None = None, **options: Any) -> GeneratedDesign:
     """Build the estimator's folder in memory (called by :func:`pwas_hdl.design.generate.build_design`).
 
     Parameters
@@ -308,6 +346,8 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     name : str, optional
         Verilog module name (default ``pwas_estimator``).
     ports : {"axis", "amaranth"}
+    progress, executor, timing_seed, prescreen, fpga_target
+        Accepted and ignored (the estimator design has no timing closure).
     architecture : {"parallel", "serial"}
         ``parallel`` (default): :class:`~pwas_hdl.hdl.switched_estimator_top.SwitchedEstimatorTop`, every
         row its own constant multipliers, one sample per clock (II 1, latency 1). ``serial``:
@@ -325,6 +365,13 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     -------
     pwas_hdl.design.generate.GeneratedDesign
         ``model`` is the bit-true estimator, ``component`` the Amaranth top.
+
+    Raises
+    ------
+    InputError
+        A ``design`` other than ``core`` / ``sensor`` / ``estimator``, a PWAS option with a
+        non-default value, an unknown option, ``ports`` or ``architecture``, ``bank_lanes``
+        without ``serial`` or out of range, a bad module name, or as :func:`fixed_point_estimator`.
     """
     from pwas_hdl.design.generate import GeneratedDesign, _fusesoc, _instance, design_hash
     from pwas_hdl.design.manifest import build_estimator_manifest, manifest_text

@@ -698,8 +698,19 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
     return "".join(f"// {ln}".rstrip() + "\n" for ln in lines) + "\n"
 
 
-def comp_core(comp):
-    """The core of a built design (the component itself, or the sensor top's core)."""
+def comp_core(comp: Any) -> Any:
+    """The core of a built design (the component itself, or the sensor top's core).
+
+    Parameters
+    ----------
+    comp : Component
+        A core or a top of :mod:`pwas_hdl.hdl`.
+
+    Returns
+    -------
+    Component
+        ``comp.core`` if it has one, else ``comp``.
+    """
     return getattr(comp, "core", comp)
 
 
@@ -708,6 +719,17 @@ def design_hash(files: dict[str, str]) -> str:
 
     Stored in the manifest (``design_hash``) and in every simulation and synthesis result, so that
     a result made for an earlier design is recognised as stale.
+
+    Parameters
+    ----------
+    files : dict of str to str
+        File name -> text (UTF-8 encoded for hashing); hashed in name order, each with its name
+        and length.
+
+    Returns
+    -------
+    str
+        64 lowercase hex digits.
     """
     h = hashlib.sha256()
     for name in sorted(files):
@@ -772,6 +794,20 @@ def _generated_names(manifest_path: Path) -> set[str]:
 def check_outdir(outdir: str | os.PathLike, what: str = "-o") -> Path:
     """Refuse an output folder that ``generate`` may not write or replace (before any work).
 
+    Stale pwas-hdl temporaries in an existing folder are removed first.
+
+    Parameters
+    ----------
+    outdir : path
+        The output folder (need not exist).
+    what : str
+        The option that named it, for messages.
+
+    Returns
+    -------
+    Path
+        The checked folder path.
+
     Raises
     ------
     InputError
@@ -809,6 +845,22 @@ def write_folder(files: dict[str, str], outdir: str | os.PathLike) -> Path:
     each file is written to a temporary folder inside it and renamed into place, the manifest
     last, so a reader sees either the old or the new version of every file. Temporaries are named
     with this process's pid, so the next run removes those of a killed one.
+
+    Parameters
+    ----------
+    files : dict of str to str
+        File name (inside ``outdir``) -> UTF-8 text; ``manifest.json`` among them.
+    outdir : path
+
+    Returns
+    -------
+    Path
+        The folder written.
+
+    Raises
+    ------
+    InputError
+        As :func:`check_outdir`.
     """
     out = check_outdir(outdir)
     if not out.exists():

@@ -51,6 +51,12 @@ def goal_memory(goal: str | None, fpga: str | None, fxm: "FixedPointModel", *, p
         The design's bit-true model (any layout): its grid, ``nz``, weight width and ``F`` size the copies.
     plain : bool
         True for a plain parallel PWAS core or sensor (the only designs the replicated choice is made for).
+
+    Returns
+    -------
+    str
+        ``"replicated"`` only for ``goal="latency"`` on ECP5, a plain design with ``n >= 2`` whose
+        replicated banks fit the default part's block RAMs and multipliers; else ``"banked"``.
     """
     if goal != "latency" or (fpga or "ecp5") != "ecp5" or not plain or fxm.n < 2:
         return DEFAULT_MEMORY

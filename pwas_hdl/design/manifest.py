@@ -160,7 +160,7 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
 
     Parameters
     ----------
-    design : {"core", "sensor"}
+    design : {"core", "sensor", "recurrent"}
     top : str
         Verilog module name.
     fxm : FixedPointModel
@@ -178,6 +178,11 @@ def build_manifest(design: str, top: str, fxm: "FixedPointModel", info: dict[str
     recurrence : RecurrentFixedPointModel, optional
         The recurrent design (``design == "recurrent"``): its feedback path becomes the
         ``recurrence`` block (:func:`_recurrence_entry`).
+
+    Returns
+    -------
+    dict
+        The JSON-ready manifest (:func:`manifest_text` gives its file text).
 
     Raises
     ------
@@ -275,6 +280,23 @@ def build_estimator_manifest(top: str, info: dict[str, Any], files: dict[str, An
     ``memory``, ``pipeline``, ``arithmetic``) are absent; ``estimator`` holds the formats,
     coefficient codes, widths, bounds and detector; the payload fields carry their formats.
 
+    Parameters
+    ----------
+    top : str
+        Verilog module name.
+    info : dict
+        The top's description (``clock``, ``reset``, ``latency`` and ``ii`` in cycles,
+        ``flow_control``, ``ports`` with their fields).
+    files, options : dict
+        The ``files`` entry and the generate options, as for :func:`build_manifest`.
+    estimator : dict
+        The ``estimator`` block.
+
+    Returns
+    -------
+    dict
+        The JSON-ready manifest with ``design = "estimator"``.
+
     Raises
     ------
     InternalError
@@ -357,7 +379,22 @@ def _recurrence_entry(rm: Any, info: dict[str, Any], sensor: "PWASVirtualSensor"
 
 
 def manifest_text(manifest: dict[str, Any]) -> str:
-    """The text of ``manifest.json`` (strict JSON, indented, newline at the end)."""
+    """The text of ``manifest.json`` (strict JSON, indented, newline at the end).
+
+    Parameters
+    ----------
+    manifest : dict
+        A manifest (:func:`build_manifest`).
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValueError
+        A NaN or infinite number in the manifest.
+    """
     return json.dumps(manifest, indent=1, allow_nan=False) + "\n"
 
 
@@ -702,7 +739,19 @@ def _classifier_errors(m: dict[str, Any]) -> list[str]:
 
 
 def manifest_errors(d: Any) -> list[str]:
-    """Every problem of a manifest dict, one sentence each (empty: a valid manifest)."""
+    """Every problem of a manifest dict, one sentence each (empty: a valid manifest).
+
+    Parameters
+    ----------
+    d : Any
+        The parsed manifest.
+
+    Returns
+    -------
+    list of str
+        A wrong format or version gives that one problem alone; else the schema violations or,
+        when there are none, the consistency problems the schema cannot express.
+    """
     if not isinstance(d, dict) or d.get("format") != MANIFEST_FORMAT:
         return [f'not a {MANIFEST_FORMAT} file (missing "format": "{MANIFEST_FORMAT}")']
     if type(d.get("version")) is not int or d.get("version") != MANIFEST_VERSION:
@@ -712,6 +761,13 @@ def manifest_errors(d: Any) -> list[str]:
 
 def validate_manifest(d: Any, source: str = "manifest") -> None:
     """Check a manifest dict against the format (header, schema, consistency).
+
+    Parameters
+    ----------
+    d : Any
+        The parsed manifest.
+    source : str
+        Name of the file, for the message.
 
     Raises
     ------
@@ -728,12 +784,25 @@ def validate_manifest(d: Any, source: str = "manifest") -> None:
 def load_manifest(outdir_or_file: str | os.PathLike) -> dict[str, Any]:
     """Read and validate a manifest (a generated folder or the ``manifest.json`` itself).
 
+    Parameters
+    ----------
+    outdir_or_file : path
+        A folder written by ``pwas-hdl generate`` or a ``.json`` file; the files that a folder's
+        manifest lists are checked too (against the manifest's folder).
+
+    Returns
+    -------
+    dict
+        The validated manifest.
+
     Raises
     ------
     FileNotFoundError
         No manifest there (run ``pwas-hdl generate`` first).
+    ResourceLimit
+        A manifest larger than :data:`~pwas_hdl.limits.MAX_JSON_BYTES`.
     InputError
-        Not strict JSON, not a pwas-hdl manifest, another version, or a key missing, of the wrong
+        A file that is neither a folder nor ``.json``, not strict JSON, not a pwas-hdl manifest, another version, or a key missing, of the wrong
         type or inconsistent (the message names it).
     """
     p = Path(outdir_or_file)
@@ -757,6 +826,11 @@ def folder_inputs(outdir: str | os.PathLike) -> list[tuple[Path, str]]:
 
     For the ``inputs`` of an :class:`~pwas_hdl.io.atomic.OutputSet`, so that no command writes an
     output over the Verilog, the model or a hex file of the design it reads.
+
+    Parameters
+    ----------
+    outdir : path
+        The design folder.
 
     Returns
     -------
@@ -787,7 +861,25 @@ def folder_inputs(outdir: str | os.PathLike) -> list[tuple[Path, str]]:
 
 # ------------------------------------------------------------------------------ access
 def port(manifest: dict[str, Any], role: str) -> dict[str, Any]:
-    """The port whose ``role`` is ``role`` (e.g. ``"in.payload"``, ``"out.valid"``)."""
+    """The port whose ``role`` is ``role`` (e.g. ``"in.payload"``, ``"out.valid"``).
+
+    Parameters
+    ----------
+    manifest : dict
+        A loaded manifest.
+    role : str
+
+    Returns
+    -------
+    dict
+        The first matching entry of ``manifest["ports"]`` (``name``, ``role``, ``direction``,
+        ``width`` in bits, ``signed``, payload ports also ``fields``).
+
+    Raises
+    ------
+    KeyError
+        No port has that role.
+    """
     for prt in manifest["ports"]:
         if prt["role"] == role:
             return prt
@@ -795,7 +887,25 @@ def port(manifest: dict[str, Any], role: str) -> dict[str, Any]:
 
 
 def field(port_entry: dict[str, Any], name: str) -> dict[str, Any]:
-    """A named bit field of a port."""
+    """A named bit field of a port.
+
+    Parameters
+    ----------
+    port_entry : dict
+        An entry of the manifest's ``ports`` (:func:`port`).
+    name : str
+        Field name (a signal, target, ``out_of_range``, ...).
+
+    Returns
+    -------
+    dict
+        The field: ``name``, ``lsb`` and ``width`` in bits, ``signed`` and, where known, its format.
+
+    Raises
+    ------
+    KeyError
+        The port has no field of that name (or no fields).
+    """
     for f in port_entry.get("fields", []):  # "fields" is optional: only payload ports have it
         if f["name"] == name:
             return f

@@ -83,6 +83,13 @@ def check_module_name(name: str, what: str = "--name") -> str:
 def check_signal_names(names: Iterable[str], what: str = "signal") -> None:
     """Refuse signal names that would break a generated file: empty, not printable, multi-line.
 
+    Parameters
+    ----------
+    names : iterable of str
+        The names to check (a non-string counts as empty).
+    what : str
+        What they name (``"signal"``, ``"target"``...), for the message.
+
     Raises
     ------
     InputError

@@ -31,6 +31,17 @@ __all__ = ["recurrent_model", "build_recurrent_component", "recurrence_header_li
 def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "RecurrentFixedPointModel":
     """The bit-true recurrence of a recurrent ``sensor`` whose circuit is ``fxm``.
 
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A fitted recurrent sensor (``Mz > 0``) with constant initial states.
+    fxm : FixedPointModel
+        Its bit-true core.
+
+    Returns
+    -------
+    RecurrentFixedPointModel
+
     Raises
     ------
     InputError
@@ -82,7 +93,18 @@ def build_recurrent_component(sensor: "PWASVirtualSensor", fxm: "FixedPointModel
 
 
 def recurrence_header_lines(man: dict) -> list[str]:
-    """Lines of the Verilog header that state the feedback path (from the manifest)."""
+    """Lines of the Verilog header that state the feedback path (from the manifest).
+
+    Parameters
+    ----------
+    man : dict
+        A recurrent design's manifest (it has ``recurrence``).
+
+    Returns
+    -------
+    list of str
+        Without comment markers or line ends.
+    """
     r = man["recurrence"]
     lines = [f"recurrence: Mz = {r['Mz']}, lead {r['lead']}; one sample in flight, II = latency = {r['ii_cycles']} cycles"]
     for fb in r["feedback"]:
@@ -94,7 +116,18 @@ def recurrence_header_lines(man: dict) -> list[str]:
 
 
 def recurrence_report_text(man: dict) -> str:
-    """The ``## Recurrence`` section of ``report.md``."""
+    """The ``## Recurrence`` section of ``report.md``.
+
+    Parameters
+    ----------
+    man : dict
+        A recurrent design's manifest (it has ``recurrence``).
+
+    Returns
+    -------
+    str
+        Markdown, starting with a blank line.
+    """
     r = man["recurrence"]
     rows = ["| target | feeds | requantisation q = clip((o K + C) >> S) | input format | reset codes (oldest first) | |q - o| bound |",
             "|---|---|---|---|---|---|"]

@@ -33,11 +33,21 @@ def _is_stale(result: dict[str, Any], manifest: dict[str, Any]) -> bool:
 def stale_results(outdir: str | os.PathLike) -> list[str]:
     """Results in ``outdir/sim/*.json`` and ``outdir/synth/*/synth.json`` made for an earlier design.
 
+    Parameters
+    ----------
+    outdir : path
+        A design folder (its manifest is loaded and validated).
+
     Returns
     -------
     list of str
         Their paths relative to ``outdir`` (sorted); empty when every result matches the
         manifest's ``design_hash``. Files that are not JSON objects are skipped.
+
+    Raises
+    ------
+    FileNotFoundError, InputError
+        As :func:`~pwas_hdl.design.manifest.load_manifest`.
     """
     out = Path(outdir)
     man = load_manifest(out)
@@ -53,9 +63,22 @@ def stale_results(outdir: str | os.PathLike) -> list[str]:
 
 
 def report_inputs(outdir: str | os.PathLike, sims: list[str | os.PathLike] = ()) -> list[tuple[Path, str]]:
-    """Every file :func:`collect_report` reads: the folder's files (:func:`~pwas_hdl.design.manifest.folder_inputs`),
-    its ``sim/*.json`` and ``synth/*/synth.json`` and the extra summaries ``sims`` -- the ``inputs`` of
-    the report's :class:`~pwas_hdl.io.atomic.OutputSet` (``--json`` / ``-o`` never replace one)."""
+    """Every file :func:`collect_report` reads, for the ``inputs`` of the report's
+    :class:`~pwas_hdl.io.atomic.OutputSet` (``--json`` / ``-o`` never replace one).
+
+    Parameters
+    ----------
+    outdir : path
+        The design folder.
+    sims : list of path
+        Extra simulation summaries (``--sim``).
+
+    Returns
+    -------
+    list of (Path, str)
+        The folder's files (:func:`~pwas_hdl.design.manifest.folder_inputs`), its ``sim/*.json``
+        and ``synth/*/synth.json``, then ``sims``, each with a description for messages.
+    """
     from pwas_hdl.design.manifest import folder_inputs
 
     out = Path(outdir)
