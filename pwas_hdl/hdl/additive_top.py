@@ -28,12 +28,12 @@ The Verilog (:func:`emit_additive_verilog`) is one file with the top module and 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import re
 from dataclasses import dataclass, replace
 
-from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -43,6 +43,10 @@ from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
 
 __all__ = ["AdditiveCore", "AdditiveSensorTop", "build_additive_core", "build_additive_sensor", "emit_additive_verilog",
            "additive_hex_files", "equal_latency_pipelines"]
@@ -55,6 +59,18 @@ def equal_latency_pipelines(base: Pipeline, dims: list[int]) -> list[Pipeline]:
     ``mem_out``, ``mul_in``, ``split``, ``rank``, ``product``, in this order), then more adder-tree
     registers. When ``base`` has every register already (the ``max`` preset), the deeper parts go
     without ``mul_in`` so that the shallower ones can take it.
+
+    Parameters
+    ----------
+    base : Pipeline
+        The pipeline asked for.
+    dims : list of int
+        Regressor dimension of each part.
+
+    Returns
+    -------
+    list of Pipeline
+        One per part, in ``dims`` order, all with the same :meth:`Pipeline.latency`.
 
     Raises
     ------
@@ -112,18 +128,22 @@ class AdditiveParams:
 
     @property
     def n(self) -> int:
+        """Regressors of the whole sensor."""
         return len(self.partitions)
 
     @property
     def frac(self) -> int:
+        """``F = max F_j``."""
         return max(self.frac_bits)
 
     @property
     def shift(self) -> int:
+        """Right shift of the sum before rounding, ``F + Fw - Fo`` bits."""
         return self.frac + self.weight_frac - self.out_frac
 
     @property
     def acc_width(self) -> int:
+        """``sum_width - 1`` (so that ``acc_width + 1`` is the sum's width, as for a single core)."""
         return self.sum_width - 1
 
 
@@ -135,9 +155,18 @@ class AdditiveMemoryPlan:
 
     @property
     def kind(self) -> str:
+        """Layout name of the parts' memories (that of part 0)."""
         return self.parts[0].kind
 
     def to_dict(self) -> dict:
+        """JSON-ready summary over all parts.
+
+        Returns
+        -------
+        dict
+            Keys as :meth:`MemoryPlan.to_dict`: memories, words and bits summed, ``depth`` the
+            largest, ``word_bits`` of part 0.
+        """
         return {
             "kind": self.kind,
             "memories": int(sum(p.n_banks for p in self.parts)),
@@ -216,18 +245,33 @@ class AdditiveCore(wiring.Component):
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding; ``platform`` is not used."""
+        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform (the datapath does not depend on it).
+
+        Returns
+        -------
+        Module
+        """
         m = Module()
         inp = getattr(self, "in")
         self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
-    def build_into(self, m: Module, payload, valid, advance, out) -> None:
+    def build_into(self, m: Module, payload: Value, valid: Value, advance: Signal, out: Any) -> None:
         """Add the parts (as submodules ``part<i>``), the sum and the rounding to ``m``.
 
-        The interface of :meth:`PWASCore.build_into`: ``payload`` (``n*B_in`` bits) and ``valid``
-        the input sample, ``advance`` a 1-bit signal driven here (the input is taken when
-        ``valid & advance``), ``out`` the output stream (payload and valid driven here).
+        Parameters
+        ----------
+        m : Module
+        payload, valid, advance, out
+            The interface of :meth:`PWASCore.build_into`: ``payload`` (``n*B_in`` bits) and
+            ``valid`` the input sample, ``advance`` a 1-bit signal driven here (the input is
+            taken when ``valid & advance``), ``out`` the output stream (payload and valid driven
+            here).
         """
         p = self.params
         b = p.in_width
@@ -309,10 +353,18 @@ class AdditiveCore(wiring.Component):
 
     @property
     def extra_info(self) -> dict:
+        """Manifest entries of the core: ``additive`` (:meth:`additive_info`)."""
         return {"additive": self.additive_info()}
 
     def additive_info(self) -> dict:
-        """The parts of the hardware: subsets, pipelines, latencies and memories (for the manifest)."""
+        """The parts of the hardware: subsets, pipelines, latencies and memories (for the manifest).
+
+        Returns
+        -------
+        dict
+            ``parts`` (per part: module suffix, regressor indices, latency in cycles, pipeline,
+            accumulator bits, alignment shift, memory), ``sum_bits``, ``latency`` (in words).
+        """
         return {
             "parts": [
                 {"module_suffix": f"_part{i}", "regressors": [int(j) for j in sub], "latency": int(c.latency),
@@ -355,11 +407,32 @@ class AdditiveSensorTop(PWASSensorTop):
 
     @property
     def extra_info(self) -> dict:
+        """The sensor top's manifest entries (lags, warm-up) plus ``additive``."""
         return {**super().extra_info, "additive": self.core.additive_info()}
 
 
-def build_additive_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core") -> AdditiveCore:
-    """The additive core of an :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` (input: regressor codes)."""
+def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                        name: str = "pwas_core") -> AdditiveCore:
+    """The additive core of an :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` (input: regressor codes).
+
+    Parameters
+    ----------
+    model : AdditiveFixedPointModel
+    memory, pipeline
+        As :class:`AdditiveCore`.
+    name : str
+        Verilog module name (not checked here; :func:`emit_additive_verilog` checks it).
+
+    Returns
+    -------
+    AdditiveCore
+        With ``module_name``, ``input_names`` and ``target_names`` set.
+
+    Raises
+    ------
+    InputError
+        No equal-latency pipelines exist, or the output shift drops the whole sum.
+    """
     core = AdditiveCore(model, memory=memory, pipeline=pipeline)
     core.module_name = name
     core._MustUse__silence = True
@@ -368,9 +441,31 @@ def build_additive_core(model, *, memory: str = "banked", pipeline: Pipeline | s
     return core
 
 
-def build_additive_sensor(model, lags=None, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                          name: str = "pwas_sensor") -> AdditiveSensorTop:
-    """The additive virtual-sensor top (one lag bank, the parts' cores, the sum) of an additive bit-true model."""
+def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | None = None, *, memory: str = "banked",
+                          pipeline: Pipeline | str | None = None, name: str = "pwas_sensor") -> AdditiveSensorTop:
+    """The additive virtual-sensor top (one lag bank, the parts' cores, the sum) of an additive bit-true model.
+
+    Parameters
+    ----------
+    model : AdditiveFixedPointModel
+    lags : LagStructure, optional
+        As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` (default: from ``model.regressor_signals``).
+    memory, pipeline
+        As :class:`AdditiveCore`.
+    name : str
+        Verilog module name.
+
+    Returns
+    -------
+    AdditiveSensorTop
+
+    Raises
+    ------
+    ValueError
+        The lags of a signal have different input formats, or as :func:`lag_plan`.
+    InputError
+        As :func:`build_additive_core`, or recurrent ``lags``.
+    """
 
     model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
@@ -404,11 +499,32 @@ def _flat_verilog(component, name: str) -> str:
     return component_verilog(component, name, (CONVERT_PASSES[0], "flatten", *CONVERT_PASSES[1:]))
 
 
-def emit_additive_verilog(component, name: str, *, ports: str = "axis") -> str:
+def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str, *, ports: str = "axis") -> str:
     """Verilog of an additive design: one module ``name`` (the parts flattened into it).
 
     As :func:`pwas_hdl.hdl.emit.emit_verilog` (same normalisation, port order and ``ports`` naming);
     the parts' names ``\\part<i>.<name>`` become plain identifiers ``part<i>_<name>``. Deterministic.
+    The weight memories are always initialised inline.
+
+    Parameters
+    ----------
+    component : AdditiveCore or AdditiveSensorTop
+    name : str
+        Module name.
+    ports : {"axis", "amaranth"}
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier.
+    InputError
+        An unknown ``ports``.
+    InternalError
+        Flattening leaves a name clash, a hierarchical name or more than one module.
     """
     from pwas_hdl.hdl.emit import _check_naming, _name_ports, _token, normalise_verilog
 
@@ -428,9 +544,21 @@ def emit_additive_verilog(component, name: str, *, ports: str = "axis") -> str:
     return _name_ports(normalise_verilog(text), name, component, ports)
 
 
-def additive_hex_files(component, prefix: str) -> dict[str, str]:
+def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str) -> dict[str, str]:
     """``$readmemh`` files of the parts' weight memories: ``<prefix>_p<i>_b<bank>.hex`` (as
-    :func:`pwas_hdl.hdl.emit.memory_hex_files` per part)."""
+    :func:`pwas_hdl.hdl.emit.memory_hex_files` per part).
+
+    Parameters
+    ----------
+    component : AdditiveCore or AdditiveSensorTop
+    prefix : str
+        File-name prefix.
+
+    Returns
+    -------
+    dict of str to str
+        File name -> ``$readmemh`` text.
+    """
     from pwas_hdl.fixedpoint.memory_layout import readmemh_text
 
     core = getattr(component, "core", component)

@@ -27,23 +27,47 @@ over the distinct shifts, one constant addition.
 
 from __future__ import annotations
 
-from typing import Any
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
-from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, rom
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
-from pwas_hdl.hdl.sensor_top import sample_fields
+from pwas_hdl.hdl.sensor_top import PWASSensorTop, sample_fields
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.fixedpoint.warp import Pow2Warp, WarpedFixedPointModel
 
 __all__ = ["WarpedPWASCore", "attach_warp", "build_warped_core", "build_warped_sensor", "build_warped_design",
            "warp_into", "write_warped_folder"]
 
 
-def warp_into(m: Module, q, warp, name: str):
-    """Add the warp of one dimension to ``m``: signed ``B_in``-bit ``q`` -> signed ``W``-bit ``u`` (a value)."""
+def warp_into(m: Module, q: Value, warp: Pow2Warp, name: str) -> Value:
+    """Add the warp of one dimension to ``m``: signed ``B_in``-bit ``q`` -> signed ``W``-bit ``u`` (a value).
+
+    Parameters
+    ----------
+    m : Module
+        Combinational logic is added to ``m.d.comb``.
+    q : Value
+        The input code, ``warp.input_bits`` bits (two's complement).
+    warp : Pow2Warp
+        The dimension's warp (breakpoint codes, case tables, output width ``W``).
+    name : str
+        Prefix of the signal names.
+
+    Returns
+    -------
+    Value
+        ``u``, ``warp.width`` bits (two's complement), not registered.
+    """
     b, w, f = warp.input_bits, warp.width, warp.frac
     half = 1 << (b - 1)
     msb = Signal(name=f"{name}_msb_n")
@@ -113,7 +137,7 @@ def warp_into(m: Module, q, warp, name: str):
     return Cat(qu[: w - 1], ~qu[w - 1])  # a value, not a named alias (lint: see pwas_hdl.hdl._lintsafe)
 
 
-def attach_warp(core: PWASCore, warps) -> int:
+def attach_warp(core: PWASCore, warps: Sequence[Pow2Warp]) -> int:
     """Put the warps (one per dimension) and their register in front of ``core`` (parallel or serial).
 
     Sets ``core.input_stage`` and adds the register to ``core.latency``.
@@ -129,6 +153,12 @@ def attach_warp(core: PWASCore, warps) -> int:
     -------
     int
         ``B_in``: bits of one input code in front of the warp.
+
+    Raises
+    ------
+    ValueError
+        Not one warp per dimension, mixed input widths, an output width other than the core's,
+        or a core that already has an input stage.
     """
     warps = list(warps)
     p = core.params
@@ -149,9 +179,21 @@ def attach_warp(core: PWASCore, warps) -> int:
     return b
 
 
-def warp_hw_info(model, latency_cycles: int = 1) -> dict:
+def warp_hw_info(model: WarpedFixedPointModel, latency_cycles: int = 1) -> dict:
     """The manifest's ``warp`` entry: the model's :meth:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel.warp_info`
-    plus the hardware facts (cycles added, register names)."""
+    plus the hardware facts (cycles added, register names).
+
+    Parameters
+    ----------
+    model : WarpedFixedPointModel
+    latency_cycles : int
+        Cycles the warp adds (its one register).
+
+    Returns
+    -------
+    dict
+        ``warp_info()`` with ``latency_cycles``, ``register`` and ``meaning``.
+    """
     return {**model.warp_info(), "latency_cycles": int(latency_cycles), "register": "s_warp_u<j> (one per dimension)",
             "meaning": "one warp per regressor dimension maps the input code q (s<B_in>.0, physical = offset + lsb * q) "
                        "to the code u of the uniform core (core_input_bits): three comparators, a constant subtraction, "
@@ -197,23 +239,48 @@ class WarpedPWASCore(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
+        """Input payload fields: one signed ``B_in``-bit code ``q`` per regressor."""
         return sample_fields(getattr(self.core, "input_names", [f"x{j}" for j in range(self.params.n)]), self.in_width)
 
     @property
     def extra_info(self) -> dict:
+        """Manifest entries: ``warp`` (:func:`warp_hw_info`)."""
         return {"warp": warp_hw_info(self._model)}
 
     def elaborate(self, platform: Any) -> Module:
-        """The warp stage, its register and the PWAS core, connected; ``platform`` is not used."""
+        """The warp stage, its register and the PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; the warp ignores it.
+
+        Returns
+        -------
+        Module
+            The core's :meth:`~pwas_hdl.hdl.core.PWASCore.build_into`, its input stage the warp.
+        """
         m = Module()
         inp = getattr(self, "in")
         self.core.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
 
-def build_warped_core(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+def build_warped_core(model: WarpedFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                       name: str = "pwas_core", architecture: str = "parallel") -> WarpedPWASCore:
-    """The warped core of a :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` (named for emit)."""
+    """The warped core of a :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` (named for emit).
+
+    Parameters
+    ----------
+    model : WarpedFixedPointModel
+    memory, pipeline, name, architecture
+        As :func:`pwas_hdl.hdl.api.build_core` (``name`` is not checked here).
+
+    Returns
+    -------
+    WarpedPWASCore
+        Latency: the core's + 1 cycle.
+    """
     comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture)
     comp.module_name = name
     comp._MustUse__silence = True
@@ -222,8 +289,9 @@ def build_warped_core(model, *, memory: str = "banked", pipeline: Pipeline | str
     return comp
 
 
-def build_warped_sensor(model, lags, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                        name: str = "pwas_sensor", architecture: str = "parallel"):
+def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None, *, memory: str = "banked",
+                        pipeline: Pipeline | str | None = None, name: str = "pwas_sensor",
+                        architecture: str = "parallel") -> PWASSensorTop:
     """The warped virtual-sensor top: lag bank of ``B_in``-bit codes -> warp (+ register) -> core.
 
     Parameters
@@ -237,8 +305,15 @@ def build_warped_sensor(model, lags, *, memory: str = "banked", pipeline: Pipeli
     -------
     PWASSensorTop
         With ``warps``; ``extra_info`` adds the manifest's ``warp`` entry.
+
+    Raises
+    ------
+    InputError
+        The lags of a signal have different quantisations, or recurrent ``lags``.
+    ValueError
+        As :func:`~pwas_hdl.hdl.sensor_top.lag_plan`.
     """
-    from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
+    from pwas_hdl.hdl.sensor_top import lag_plan
 
     model.signal_input_formats()  # InputError unless the lags of each signal can share one code
     params = CoreParams.from_model(model.core)
@@ -253,18 +328,45 @@ def build_warped_sensor(model, lags, *, memory: str = "banked", pipeline: Pipeli
     return top
 
 
-def build_warped_design(model, design: str, lags, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                        name: str = "pwas_core", architecture: str = "parallel"):
-    """The component ``generate`` builds for a warped model: ``design`` "core" or "sensor"."""
+def build_warped_design(model: WarpedFixedPointModel, design: str, lags: LagStructure | None, *, memory: str = "banked",
+                        pipeline: Pipeline | str | None = None, name: str = "pwas_core",
+                        architecture: str = "parallel") -> WarpedPWASCore | PWASSensorTop:
+    """The component ``generate`` builds for a warped model.
+
+    Parameters
+    ----------
+    model : WarpedFixedPointModel
+    design : {"core", "sensor"}
+        ``"core"``: :func:`build_warped_core`; any other value: :func:`build_warped_sensor`.
+    lags : LagStructure or None
+        For the sensor top.
+    memory, pipeline, name, architecture
+        As :func:`build_warped_core`.
+
+    Returns
+    -------
+    WarpedPWASCore or PWASSensorTop
+    """
     if design == "core":
         return build_warped_core(model, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
     return build_warped_sensor(model, lags, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
 
 
-def write_warped_folder(sensor, outdir, *, input_bits: int = 12, input_fill: float = 0.9, design: str = "core", **options):
+def write_warped_folder(sensor: PWASVirtualSensor, outdir: str | os.PathLike, *, input_bits: int = 12,
+                        input_fill: float = 0.9, design: str = "core",
+                        **options: Any) -> tuple[WarpedFixedPointModel, dict]:
     """Write the design folder of a sensor with power-of-two breakpoints: ``pwas-hdl generate``
     (:func:`pwas_hdl.design.generate.generate`) with these options, kept for the callers of the
     interim API.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        Fitted with power-of-two breakpoints.
+    outdir : path
+        The design folder.
+    input_bits, input_fill, design, **options
+        Passed to :func:`~pwas_hdl.design.generate.generate` (here ``design`` defaults to ``"core"``).
 
     Returns
     -------
