@@ -107,6 +107,11 @@ def prolongation(shape: tuple[int, ...]) -> tuple[sparse.csr_array, tuple[int, .
     (the last dimension fastest), as in :class:`pwas_hdl.fit.geometry.Grid`, so the prolongation
     is the Kronecker product of the 1-D interpolations in dimension order.
 
+    Parameters
+    ----------
+    shape : tuple of int
+        Vertex counts per dimension of the fine grid.
+
     Returns
     -------
     P : scipy.sparse.csr_array, shape (prod(shape), prod(coarse_shape))
@@ -127,6 +132,13 @@ def interleaved_order(n: int, k: int = INTERLEAVE) -> np.ndarray:
     Slab ``j`` holds the vertices ``j * s .. (j + 1) * s - 1`` (``s = ceil(n / k)``); the order runs
     through ``i = 0, 1, ...`` and, for each, the slabs ``j = 0 .. k - 1``, giving vertex ``j * s + i``
     (those ``>= n``, in the last slabs when ``k`` does not divide ``n``, skipped).
+
+    Parameters
+    ----------
+    n : int
+        Vertex count of the level.
+    k : int
+        Number of slabs (values below 1 count as 1).
 
     Returns
     -------
@@ -209,6 +221,18 @@ def grid_shape_of(gamma: sparse.sparray, n_dims: int) -> tuple[int, ...] | None:
     against the number of non-zeros of the grid Laplacian of that shape; ``None`` when ``Gamma``
     is not such a matrix (e.g. zero order, or a grid with a dimension of one interval... whose
     pattern does not identify the strides).
+
+    Parameters
+    ----------
+    gamma : sparse array, shape (N, N)
+        The Tikhonov matrix, vertices in C order.
+    n_dims : int
+        Number of grid dimensions ``n``.
+
+    Returns
+    -------
+    tuple of int or None
+        Vertex counts per dimension (product ``N``), or None.
     """
     g = sparse.csr_array(gamma)
     n_v = g.shape[0]
@@ -357,31 +381,80 @@ class GridHierarchy:
 
     @property
     def levels(self) -> int:
+        """Number of levels, the fine one included."""
         return len(self.gammas)
 
     def internal(self, m: sparse.sparray) -> sparse.csr_matrix:
-        """A fine-grid matrix (C order) in the fine level's vertex order."""
+        """A fine-grid matrix (C order) in the fine level's vertex order.
+
+        Parameters
+        ----------
+        m : sparse array, shape (N, N)
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix, shape (N, N)
+            Canonical (sorted indices), rows and columns permuted by ``orders[0]``.
+        """
         return _permuted(m, self.orders[0], self.orders[0])
 
     def to_internal(self, v: np.ndarray) -> np.ndarray:
-        """A fine-grid vector (C order, first axis) in the fine level's vertex order (a copy)."""
+        """A fine-grid vector (C order, first axis) in the fine level's vertex order (a copy).
+
+        Parameters
+        ----------
+        v : ndarray, shape (N,) or (N, k)
+
+        Returns
+        -------
+        ndarray, same shape and dtype
+        """
         return np.asarray(v)[self.orders[0]]
 
     def to_natural(self, v: np.ndarray) -> np.ndarray:
-        """The inverse of :meth:`to_internal`."""
+        """The inverse of :meth:`to_internal`: a fine-level vector back in C order (a copy).
+
+        Parameters
+        ----------
+        v : ndarray, shape (N,) or (N, k)
+
+        Returns
+        -------
+        ndarray, same shape and dtype
+        """
         return np.asarray(v)[self._inv0]
 
     def coarsen(self, m: sparse.sparray) -> list[sparse.csr_matrix]:
-        """``[m, P_0' m P_0, ...]``: the Galerkin operators of ``m`` (fine grid, C order) on every
-        level, each in its level's vertex order."""
+        """``[m, P_0' m P_0, ...]``: the Galerkin operators of ``m`` on every level.
+
+        Parameters
+        ----------
+        m : sparse array, shape (N, N)
+            Fine grid, C order.
+
+        Returns
+        -------
+        list of scipy.sparse.csr_matrix
+            One per level (:attr:`levels`), each in its level's vertex order.
+        """
         out = [self.internal(m)]
         for p, r in zip(self.p, self.r):
             out.append(_galerkin(r, out[-1], p))
         return out
 
     def share(self, m: sparse.sparray) -> "LevelPatterns":
-        """Build the level patterns of ``m`` (fine grid, C order; e.g. the full data's normal
-        matrix) for every later :meth:`for_matrix` (:class:`LevelPatterns`), and keep them."""
+        """Build the level patterns of ``m`` for every later :meth:`for_matrix`, and keep them.
+
+        Parameters
+        ----------
+        m : sparse array, shape (N, N)
+            Fine grid, C order; e.g. the full data's normal matrix.
+
+        Returns
+        -------
+        LevelPatterns
+            Also stored as :attr:`shared`.
+        """
         self.shared = LevelPatterns(self, m)
         return self.shared
 
@@ -390,6 +463,19 @@ class GridHierarchy:
 
         On the patterns of :meth:`share` where they hold ``m``'s (a CV fold's ``H'H - H_v'H_v``
         within the full data's ``H'H``); the shared matrix itself is not coarsened again.
+
+        Parameters
+        ----------
+        m : sparse array, shape (N, N)
+
+        Returns
+        -------
+        FoldMultigrid
+
+        Raises
+        ------
+        ValueError
+            ``m`` has a non-zero outside the shared patterns.
         """
         sh = self.shared
         if sh is not None and sh.is_reference(m):
@@ -424,7 +510,18 @@ class LevelPatterns:
 
     @classmethod
     def of_levels(cls, hier: "GridHierarchy", ms: list[sparse.csr_matrix]) -> "LevelPatterns":
-        """The patterns of the levels ``ms`` (:meth:`GridHierarchy.coarsen`) themselves."""
+        """The patterns of the levels ``ms`` themselves (no reference matrix).
+
+        Parameters
+        ----------
+        hier : GridHierarchy
+        ms : list of scipy.sparse.csr_matrix
+            One matrix per level (:meth:`GridHierarchy.coarsen`).
+
+        Returns
+        -------
+        LevelPatterns
+        """
         out = cls.__new__(cls)
         out.reference = None
         out._build(hier, ms)
@@ -457,7 +554,17 @@ class LevelPatterns:
         self.neg_g_tri64 = [np.negative(self.g64[0][tri.keep]) for tri in (self.upper[0], self.lower0)]
 
     def is_reference(self, m: sparse.sparray) -> bool:
-        """Whether ``m`` is the reference matrix (the same object, or the same arrays)."""
+        """Whether ``m`` is the reference matrix.
+
+        Parameters
+        ----------
+        m : sparse array
+
+        Returns
+        -------
+        bool
+            True for the same object, or a CSR matrix with equal shape, index and value arrays.
+        """
         ref = self.reference
         if m is ref:
             return True
@@ -469,17 +576,38 @@ class LevelPatterns:
     def values_of(self, ms: list[sparse.csr_matrix]) -> list[np.ndarray]:
         """Every level's values of ``ms`` (:meth:`GridHierarchy.coarsen`) on these patterns.
 
+        Parameters
+        ----------
+        ms : list of scipy.sparse.csr_matrix
+            One per level.
+
+        Returns
+        -------
+        list of ndarray of float64
+            One per level, ``patterns[l].nnz`` values (0 where ``ms[l]`` has no entry).
+
         Raises
         ------
         ValueError
-            A level has a non-zero outside its pattern.
+            Another number of levels, or a level has a non-zero outside its pattern.
         """
         if len(ms) != len(self.patterns):
             raise ValueError("another number of levels")
         return [_aligned(pat, m, keys) for pat, m, keys in zip(self.patterns, ms, self.keys)]
 
     def matrix(self, level: int, values: np.ndarray) -> sparse.csr_matrix:
-        """A canonical matrix of ``values`` on the pattern of ``level`` (index arrays shared)."""
+        """A canonical matrix of ``values`` on the pattern of ``level`` (index arrays shared).
+
+        Parameters
+        ----------
+        level : int
+        values : ndarray, shape (patterns[level].nnz,)
+            Used as the data array (not copied).
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix
+        """
         pat = self.patterns[level]
         out = sparse.csr_matrix((values, pat.indices, pat.indptr), shape=pat.shape)
         out.has_sorted_indices = True
@@ -579,7 +707,13 @@ class FoldMultigrid:
         self._coarse_chol = None
 
     def set_sigma(self, sigma: float) -> None:
-        """Every level's operator ``m_l + sigma Gamma_l`` (in place) and the coarsest factor."""
+        """Every level's operator ``m_l + sigma Gamma_l`` (in place) and the coarsest factor.
+
+        Parameters
+        ----------
+        sigma : float
+            Tikhonov weight (> 0).
+        """
         self._set_values(sigma, fine32=True)
 
     def _set_values(self, sigma: float, fine32: bool) -> None:
@@ -624,8 +758,16 @@ class FoldMultigrid:
     def vcycle(self, b: np.ndarray) -> np.ndarray:
         """One V-cycle from a zero initial guess: an SPD approximation of ``A^{-1} b``.
 
-        ``b`` and the result in double precision and in the fine grid's C order, the cycle itself
-        in single precision (see the class) and in the levels' vertex orders.
+        Parameters
+        ----------
+        b : ndarray, shape (N,)
+            Fine grid's C order.
+
+        Returns
+        -------
+        ndarray of float64, shape (N,)
+            C order. The cycle itself runs in single precision (see the class) and in the
+            levels' vertex orders.
         """
         return self.hier.to_natural(self._vcycle_fine(self.hier.to_internal(b)))
 
@@ -637,6 +779,11 @@ class FoldMultigrid:
     def set_block(self, sigma: float) -> None:
         """Factorise the data block ``M_TT + sigma diag(Gamma)_TT`` for :meth:`vcycle_block` (and
         :meth:`set_sigma` to ``sigma``).
+
+        Parameters
+        ----------
+        sigma : float
+            Tikhonov weight (> 0).
 
         Raises
         ------
@@ -668,7 +815,17 @@ class FoldMultigrid:
         N = 262 144: 92 instead of 109 iterations, 7.7 instead of 9.5 s; n = 2, N = 10^6: 80 / 95,
         7.2 / 9.0 s; with one block solve between two coarse corrections: 134 iterations, 8.8 s
         (n = 3). The fine level stays in double precision (in single the CG stalls at
-        sigma = 1e-7: measured n = 3, N = 262 144). Call :meth:`set_block` first. ``b`` and the result in the fine grid's C order.
+        sigma = 1e-7: measured n = 3, N = 262 144). Call :meth:`set_block` first.
+
+        Parameters
+        ----------
+        b : ndarray, shape (N,)
+            Fine grid's C order.
+
+        Returns
+        -------
+        ndarray of float64, shape (N,)
+            C order.
         """
         return self.hier.to_natural(self._vcycle_block_fine(self.hier.to_internal(np.asarray(b, dtype=float))))
 
@@ -710,8 +867,28 @@ class FoldMultigrid:
               maxiter: int = 500, block: bool = False) -> tuple[np.ndarray, MGInfo]:
         """``(m + sigma Gamma)^{-1} b`` by PCG to ``||b - A w|| <= rtol ||b||`` (one column ``b``).
 
-        ``block``: precondition with :meth:`vcycle_block` (the data-block smoother) instead of
-        :meth:`vcycle`.
+        Parameters
+        ----------
+        b : ndarray, shape (N,)
+            Right-hand side, fine grid's C order.
+        sigma : float
+            Tikhonov weight (> 0).
+        x0 : ndarray, shape (N,), optional
+            Initial guess (C order); default zero.
+        rtol : float
+            Relative residual to reach.
+        maxiter : int
+            CG iteration limit.
+        block : bool
+            Precondition with :meth:`vcycle_block` (the data-block smoother) instead of
+            :meth:`vcycle`.
+
+        Returns
+        -------
+        w : ndarray of float64, shape (N,)
+            C order; zero for ``b = 0``.
+        info : MGInfo
+            Iterations and the residual computed afresh (``converged``: within ``rtol``).
 
         Raises
         ------
@@ -784,6 +961,11 @@ class DataBlockSmoother:
     def factorize(self, sigma: float) -> None:
         """Factorise ``P`` at ``sigma``.
 
+        Parameters
+        ----------
+        sigma : float
+            Tikhonov weight (> 0).
+
         Raises
         ------
         pwas_hdl.fit.sparse_cholesky.NotPositiveDefinite
@@ -803,7 +985,16 @@ class DataBlockSmoother:
         self.factorizations += 1
 
     def solve(self, r: np.ndarray) -> np.ndarray:
-        """``P^{-1} r`` with the last factorisation (``r`` shape (N,), double precision)."""
+        """``P^{-1} r`` with the last factorisation (:meth:`factorize` first).
+
+        Parameters
+        ----------
+        r : ndarray of float64, shape (N,)
+
+        Returns
+        -------
+        ndarray of float64, shape (N,)
+        """
         out = r * self._inv  # one pass over all vertices, then the touched ones overwritten
         rt = r[self.touched]
         out[self.touched] = self._chol.solve(rt) if self._chol is not None else self._lu.solve(rt)
