@@ -510,6 +510,17 @@ GOALS_BY_FPGA: dict[str, dict[str, str]] = {"ice40": {"throughput": "max-lut"}}
 def goal_preset(goal: str, fpga: str | None = None) -> str:
     """The pipeline preset of ``generate --goal goal`` for the FPGA family ``fpga`` (None: ECP5's).
 
+    Parameters
+    ----------
+    goal : str
+        One of :data:`GOALS`.
+    fpga : {"ecp5", "ice40"}, optional
+
+    Returns
+    -------
+    str
+        A preset name of :data:`PIPELINE_PRESETS`.
+
     Raises
     ------
     ValueError

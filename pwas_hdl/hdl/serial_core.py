@@ -40,6 +40,8 @@ straight from the memory register or ``mem_out``).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from amaranth.hdl import Const, Module, Signal, Value, signed, unsigned
 from amaranth.lib.memory import Memory
@@ -63,6 +65,11 @@ def serial_latency(pipeline: Pipeline, n: int) -> int:
         ``split``, ``rank``, ``offset``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels``, ``mul_in`` and ``bank`` do not.
     n : int
         Regressor dimension.
+
+    Returns
+    -------
+    int
+        Latency in clock cycles (the ``n + 1`` multiply-accumulate steps included).
     """
     return int(pipeline.split) + int(pipeline.rank) + int(pipeline.offset) + int(pipeline.addr) + 1 + n + 1 + int(pipeline.mem_out) \
         + int(pipeline.product) + 1 + 1
@@ -78,14 +85,17 @@ class SingleMemoryPlan(MemoryPlan):
 
     @property
     def kind(self) -> str:
+        """Always ``"single"``."""
         return "single"
 
     @property
     def n_banks(self) -> int:
+        """Always 1."""
         return 1
 
     @property
     def words(self) -> int:
+        """``N``: one word per vertex."""
         return self.depth
 
     @classmethod
@@ -113,7 +123,13 @@ class SingleMemoryPlan(MemoryPlan):
         return cls(layout, p.nz * p.weight_width, (words,))
 
     def layout_spec(self) -> dict:
-        """The manifest's ``memory.layout_spec`` of the serial design."""
+        """The manifest's ``memory.layout_spec`` of the serial design.
+
+        Returns
+        -------
+        dict
+            ``kind``, ``memories`` (1), ``depth`` (words), ``address`` (in words).
+        """
         return {"kind": "single", "memories": 1, "depth": int(self.depth),
                 "address": "linear vertex index (C order, last dimension fastest)"}
 
@@ -316,8 +332,20 @@ class SerialPWASCore(PWASCore):
         assert got == self.latency, (got, self.latency)
 
 
-def architecture_info(core) -> dict:
-    """The manifest's ``architecture`` entry of a core (parallel or serial)."""
+def architecture_info(core: PWASCore) -> dict:
+    """The manifest's ``architecture`` entry of a core (parallel or serial).
+
+    Parameters
+    ----------
+    core : PWASCore or SerialPWASCore
+        Serial when its ``architecture`` attribute is ``"serial"``.
+
+    Returns
+    -------
+    dict
+        ``kind``, ``multipliers``, ``multipliers_per_target``, ``cycles_per_sample``, ``ii``
+        (clock cycles) and ``meaning``.
+    """
     p = core.params
     if getattr(core, "architecture", "parallel") == "serial":
         return {"kind": "serial", "multipliers": p.nz, "multipliers_per_target": 1, "cycles_per_sample": p.n + 1,

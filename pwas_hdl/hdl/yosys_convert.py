@@ -20,7 +20,7 @@ import os
 import tempfile
 import threading
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from pwas_hdl.errors import InternalError
 
@@ -102,6 +102,11 @@ def rtlil_to_verilog(rtlil_text: str, passes: Sequence[str] = CONVERT_PASSES) ->
     passes : sequence of str
         Yosys commands run between reading and writing (default :data:`CONVERT_PASSES`, Amaranth's).
 
+    Returns
+    -------
+    str
+        Yosys' ``write_verilog`` output.
+
     Raises
     ------
     InternalError
@@ -119,9 +124,27 @@ def rtlil_to_verilog(rtlil_text: str, passes: Sequence[str] = CONVERT_PASSES) ->
     return out
 
 
-def component_verilog(component, name: str, passes: Sequence[str] = CONVERT_PASSES) -> str:
-    """``amaranth.back.verilog.convert(component, name=name, emit_src=False)``, run in-process
-    (:func:`rtlil_to_verilog`); ``passes`` as there (e.g. with ``flatten`` after ``proc``)."""
+def component_verilog(component: Any, name: str, passes: Sequence[str] = CONVERT_PASSES) -> str:
+    """``amaranth.back.verilog.convert(component, name=name, emit_src=False)``, run in-process.
+
+    Parameters
+    ----------
+    component : amaranth.lib.wiring.Component
+    name : str
+        Top module name.
+    passes : sequence of str
+        As :func:`rtlil_to_verilog` (e.g. with ``flatten`` after ``proc``).
+
+    Returns
+    -------
+    str
+        Verilog text, not yet normalised (:func:`~pwas_hdl.hdl.emit.normalise_verilog`).
+
+    Raises
+    ------
+    InternalError
+        As :func:`rtlil_to_verilog`.
+    """
     from amaranth.back import rtlil
 
     return rtlil_to_verilog(rtlil.convert(component, name=name, emit_src=False), passes)
