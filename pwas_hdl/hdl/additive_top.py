@@ -192,7 +192,8 @@ class AdditiveCore(wiring.Component):
     Parameters
     ----------
     model : AdditiveFixedPointModel
-    memory : {"banked", "replicated"}
+    memory : {"banked", "replicated", "corner"}
+        Each part's weight memory (as :class:`~pwas_hdl.hdl.core.PWASCore`).
     pipeline : Pipeline, preset name or None
         The parts' pipeline (made equal in latency, :func:`equal_latency_pipelines`).
 
