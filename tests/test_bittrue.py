@@ -375,9 +375,12 @@ def test_from_sensor_lorenz_defaults():
 
 
 def test_signal_formats_differ_refused():
+    """An InputError (the model file's fit, not a bug), as the warped model's refusal."""
+    from pwas_hdl.errors import InputError
+
     g = Grid([0.0, 0.0], [1.0, 2.0], [2, 2])
     m = FixedPointModel(g, np.ones((9, 1)), regressor_signals=[("y", 1), ("y", 0)])
-    with pytest.raises(ValueError, match="share_lag_domain"):
+    with pytest.raises(InputError, match="share_lag_domain"):
         m.signal_input_formats()
     assert m.to_dict()["signals"] is None
 

@@ -719,7 +719,7 @@ class FixedPointModel:
 
         Raises
         ------
-        ValueError
+        InputError
             Two lags of one signal have different formats (the lag bank of the sensor top
             scales once per signal, so it needs ``share_lag_domain=True`` in the fit).
         """
@@ -727,7 +727,7 @@ class FixedPointModel:
         for j, (sig, _lag) in enumerate(self.regressor_signals):
             f = self.inputs[j]
             if sig in res and res[sig] != f:
-                raise ValueError(
+                raise InputError(
                     f"the lags of signal {sig!r} have different input formats (dimension {j}: {f.to_dict()['format']} "
                     f"on [{f.lo}, {f.hi}]); the sensor top scales each signal once, so its lags need one interval "
                     "(fit with share_lag_domain=True) and the same number of partitions p"
