@@ -151,3 +151,15 @@ def test_observer_bank_accumulator_bound_of_huge_coefficient_codes_is_exact():
         with pytest.raises(InputError, match=r"acc would need (\d+) bits") as exc:
             observer_bank_model(m)
     assert "--state-frac (state_frac)" in str(exc.value) and "--input-headroom (input_headroom)" in str(exc.value)
+
+
+def test_explore_of_a_model_with_a_subnormal_domain_saturates_the_input_codes_without_a_warning(work, tmp_path):
+    # a hand-edited domain of width 1e-310: the input lsb is subnormal, (x - lo) / lsb overflows; the
+    # codes saturate like those of any value outside the domain (as Grid.to_grid_units clamps)
+    doc = json.loads((work / "m.json").read_text())
+    doc["grid"]["lo"], doc["grid"]["hi"] = [0.0, 0.0], [1e-310, 1e-310]
+    (tmp_path / "tiny.json").write_text(json.dumps(doc))
+    res = _run("explore", tmp_path / "tiny.json", work / "d.csv", "-o", tmp_path / "ex", "--input-bits", "12",
+               "--weight-frac", "4", "--output-frac", "4")
+    assert res.exit_code == 0 and "Warning" not in res.output, res.output
+    assert (tmp_path / "ex" / "explore.json").is_file()

@@ -983,7 +983,8 @@ def quantize_input(f: InputFormat | WarpInputFormat, x: ArrayLike,
     v = np.asarray(x, dtype=float)
     if np.isnan(v).any():
         raise ValueError("input values contain NaN; cannot quantize")
-    scaled = f.lo_code + (v - f.lo) / f.lsb
+    with np.errstate(over="ignore"):  # a value far outside a tiny lsb: +-inf, saturated like any outside value
+        scaled = f.lo_code + (v - f.lo) / f.lsb
     return f.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")
 
 
