@@ -39,7 +39,7 @@ from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import OutputSet, check_output_path, install_termination_handler
 from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories
-from pwas_hdl.limits import MAX_NOISE, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit
+from pwas_hdl.limits import MAX_NOISE, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit, check_values
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
 _CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -598,6 +598,8 @@ def fit_map_cmd(
         table = read_csv(data, blank_rows=blank_rows)
         x = table.numeric(cols)
         fx = table.numeric(tgts)
+        for t, col in zip(tgts, fx.T):  # named here; fit_map_samples checks f(x) as a whole
+            check_values(f"{data}: column {t!r}", col, "rescale it (divide it by a power of ten)")
         approx = fit_map_samples(x, fx, parts[0] if len(parts) == 1 else parts, box=box, sigma=sigma,
                                  test_fraction=test_fraction, seed=seed)
         if sts:

@@ -25,6 +25,8 @@ constant                   value          what it bounds
 ``MAX_BENCH_COUNT``        1 000          a bench's count options (``--runs``, ``--seeds``;
                                           :func:`pwas_hdl.bench_results.check_count`)
 ``MAX_NOISE``              1 000          ``make-data --noise`` (a standard deviation)
+``MAX_VALUE``              1e150          magnitude of a fitted target / map value and of
+                                          a reference column (``explore``, ``simulate``)
 =========================  =============  ===============================================
 """
 
@@ -94,6 +96,11 @@ MAX_MEMORY_WORDS = 2**22
 #: order 1-10 (seed 004's are normalised to unit std), so 1000 already drowns them; far larger values
 #: overflow to inf / NaN data (``--noise 1e308``) that every later command refuses.
 MAX_NOISE = 1000.0
+#: Largest magnitude of a value a fit approximates or an error is measured against (``fit``'s
+#: targets, ``fit-map``'s values, the reference column of ``explore``'s and ``simulate``'s RMSEE):
+#: the squared errors, summed over up to :data:`MAX_SAMPLES` samples, stay below the float limit
+#: (``(2 * 1e150)**2 * 1e6 = 4e306``); above it the fit's RMSE and the summaries overflowed to inf.
+MAX_VALUE = 1e150
 
 
 def check_limit(what: str, value: int, limit: int, hint: str) -> int:
@@ -120,6 +127,31 @@ def check_limit(what: str, value: int, limit: int, hint: str) -> int:
     if value > limit:
         raise ResourceLimit(f"{what} = {value} exceeds the limit of {limit}; {hint}")
     return value
+
+
+def check_values(what: str, values: np.ndarray, hint: str) -> None:
+    """Refuse values of magnitude above :data:`MAX_VALUE` (their squared errors would overflow).
+
+    Parameters
+    ----------
+    what : str
+        What the values are, as the user named them (e.g. ``"target column 'z'"``).
+    values : array_like
+        Finite values.
+    hint : str
+        How to stay within the limit (one clause).
+
+    Raises
+    ------
+    ResourceLimit
+        Some ``|value| > MAX_VALUE``.
+    """
+    import numpy as np  # here: the limits are imported where numpy is not needed
+
+    top = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    if top > MAX_VALUE:
+        raise ResourceLimit(f"{what} has a value of magnitude {top:.6g}, more than the limit of {MAX_VALUE:g} "
+                            f"(its squared errors would overflow); {hint}")
 
 
 def check_vertices(partitions: Iterable[int]) -> int:

@@ -163,3 +163,46 @@ def test_explore_of_a_model_with_a_subnormal_domain_saturates_the_input_codes_wi
                "--weight-frac", "4", "--output-frac", "4")
     assert res.exit_code == 0 and "Warning" not in res.output, res.output
     assert (tmp_path / "ex" / "explore.json").is_file()
+
+
+def _scaled(src, dst, column, factor, row=None):
+    """``src`` with ``column`` multiplied by ``factor`` (every row, or only ``row``)."""
+    lines = src.read_text().splitlines()
+    c = lines[0].split(",").index(column)
+    for i in range(1, len(lines)):
+        if row is None or i == row:
+            cells = lines[i].split(",")
+            cells[c] = repr(float(cells[c]) * factor)
+            lines[i] = ",".join(cells)
+    dst.write_text("\n".join(lines) + "\n")
+    return dst
+
+
+def test_fit_of_targets_whose_squares_overflow_is_refused_without_a_warning(work, tmp_path):
+    # |z| ~ 1e162: the fit's squared errors overflowed (RuntimeWarnings, then "Out of range float values
+    # are not JSON compliant: inf" as the only explanation); refused before the solve, with the limit
+    _scaled(work / "d.csv", tmp_path / "big.csv", "z", 1e160)
+    for extra in (["--sigma", "1e-3"], []):
+        line = _refused(tmp_path, "fit", tmp_path / "big.csv", "-o", tmp_path / "o.json", "-y", "y", "-z", "z",
+                        "--my", "2", "-p", "3", *extra)
+        assert "'z'" in line and "1e+150" in line and "rescale" in line, line
+    line = _refused(tmp_path, "fit-map", tmp_path / "big.csv", "-o", tmp_path / "o.json", "-z", "z", "-y", "y", "-p", "3")
+    assert "column 'z'" in line and "1e+150" in line, line
+    # below the limit the fit runs as before
+    _scaled(work / "d.csv", tmp_path / "ok.csv", "z", 1e140)
+    res = _run("fit", tmp_path / "ok.csv", "-o", tmp_path / "ok.json", "-y", "y", "-z", "z", "--my", "2", "-p", "3",
+               "--sigma", "1e-3")
+    assert res.exit_code == 0 and "Warning" not in res.output, res.output
+
+
+def test_explore_and_simulate_refuse_a_reference_whose_squares_overflow_before_any_work(work, tmp_path):
+    from unittest import mock
+
+    _scaled(work / "d.csv", tmp_path / "big.csv", "z_true", 1e308 / 400, row=50)  # one reference cell ~1e306
+    line = _refused(tmp_path, "explore", work / "m.json", tmp_path / "big.csv", "-o", tmp_path / "ex", "--input-bits", "12",
+                    "--weight-frac", "4", "--output-frac", "4")
+    assert "column 'z_true'" in line and "1e+150" in line, line
+    assert _run("generate", work / "m.json", "--design", "sensor", "-o", tmp_path / "hw").exit_code == 0
+    with mock.patch("pwas_hdl.verify.simulation.run_rtl", side_effect=AssertionError("the simulator ran")):
+        line = _refused(tmp_path, "simulate", tmp_path / "hw", tmp_path / "big.csv", "-o", tmp_path / "s.csv")
+    assert "column 'z_true'" in line and "1e+150" in line, line

@@ -28,6 +28,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.limits import check_values
 
 __all__ = ["MapApproximation", "fit_map", "fit_map_samples", "map_errors", "static_sensor_from_map",
            "recurrent_sensor_from_map"]
@@ -157,6 +158,7 @@ def fit_map_samples(x: np.ndarray, fx: np.ndarray, partitions: int | Sequence[in
     """
     x = np.atleast_2d(np.asarray(x, dtype=float))
     fx = _as_2d(fx, x.shape[0], "f(x)")
+    check_values("f(x)", fx, "rescale the values (divide them by a power of ten)")
     if not np.all(np.isfinite(x)):
         raise InputError("the sample points have NaN or infinite values")
     if not (0.0 <= test_fraction <= 0.9):

@@ -24,7 +24,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from pwas_hdl.fit import model_file
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
-from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit, check_weights
+from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit, check_values, check_weights
 from pwas_hdl.fit.geometry import BREAKPOINT_RULES, Grid, pow2_breakpoints, quantile_breakpoints
 from pwas_hdl.fit.model_file import MODEL_FORMAT, MODEL_VERSION
 from pwas_hdl.fit.classifier import class_labels, class_target_names, decide, one_hot
@@ -461,6 +461,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         nz = zt.shape[1]
         if self.target_names is not None and len(self.target_names) != nz and classifier is None:
             raise InputError(f"{len(self.target_names)} target names for {nz} target columns")
+        for i in range(nz if classifier is None else 0):  # before the solve: its squared errors would overflow
+            name = self.target_names[i] if self.target_names is not None else f"z{i}"
+            check_values(f"the target {name!r}", zt[:, i], "rescale it (divide it by a power of ten)")
         # names the model file holds must match its signals, or load() refuses the file
         n_in = fe.nu_ if fe is not None else (lags.nu if lags is not None and lags.mu else None)
         n_out = 1 if fe is not None else (lags.ny if lags is not None and lags.my else None)

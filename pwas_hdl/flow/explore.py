@@ -97,7 +97,7 @@ from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.io.csv_table import Table, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.io.atomic import check_output_path, make_temp_dir
-from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit
+from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit, check_values
 
 __all__ = [
     "EXPLORE_FORMAT",
@@ -245,6 +245,9 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
     z = np.concatenate(zs, axis=0)
     if xi.shape[0] == 0:
         raise ValueError("the data have no sample with a full regressor (too few samples for the lags)")
+    for i, t in enumerate(tgts):  # the reference of the RMSEE: its squared errors would overflow
+        where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
+        check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
     desc["samples"] = int(xi.shape[0])
     return xi, z, desc
 

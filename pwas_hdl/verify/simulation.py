@@ -48,6 +48,7 @@ from pwas_hdl.fixedpoint.reduction import tree_levels
 from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.errors import CheckFailed, InputError
 from pwas_hdl.io.atomic import make_temp_dir
+from pwas_hdl.limits import check_values
 
 __all__ = [
     "SIM_DIR",
@@ -955,6 +956,16 @@ def _run_native(design: Design, runs: Sequence[Run], simulator: str, *, cache_di
 # ---------------------------------------------------------------------------------------------------- CSV replay
 
 
+def _check_references(table: "Table", targets: Sequence[str]) -> None:
+    """The reference columns of the RMSEE (``<t>_true`` or ``<t>``) hold no value above
+    :data:`~pwas_hdl.limits.MAX_VALUE`: refused before the simulator runs, not as an overflow after it."""
+    for t in targets:
+        ref = table.reference_column(t)
+        if ref is not None:
+            check_values(f"{table.path}: column {ref!r}", table.numeric([ref])[:, 0],
+                         "fix the data (no RMSEE can be measured against it)")
+
+
 def _rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2))) if len(a) else float("nan")
 
@@ -1085,6 +1096,7 @@ def simulate_data(
         from pwas_hdl.verify.recurrent_simulation import simulate_recurrent
 
         table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
+        _check_references(table, design.sensor.signal_names()[2])
         return simulate_recurrent(design, table, output, spath, outset, simulator=simulator, engine=engine, traj_col=traj_col,
                                   stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say)
     sensor, model = design.sensor, design.model
@@ -1098,6 +1110,8 @@ def simulate_data(
                          "generate --design sensor (the recurrent top, which feeds them back) to replay DATA, or "
                          "check this core with `pwas-hdl export-testbench`")
     table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
+    if getattr(sensor, "classifier_", None) is None:
+        _check_references(table, tgts)
     data = table.path
     if traj_col is not None:
         table.column_index(traj_col)
