@@ -75,6 +75,7 @@ class ToolFailed(PwasError, RuntimeError):
     """
 
     def __init__(self, message: str, log: "str | os.PathLike[str] | None" = None, tail: str = "") -> None:
+        self.message = message
         self.log = None if log is None else str(log)
         self.tail = tail
         super().__init__(message + (f"; log: {self.log}" if self.log else ""))

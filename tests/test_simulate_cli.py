@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -206,3 +207,31 @@ def test_simulate_help():
     assert res.exit_code == 0
     for opt in ("--simulator", "--engine", "--json", "--traj-col", "--stall", "--build-dir", "--waves"):
         assert opt in res.output
+
+
+def test_simulate_failure_names_a_log_that_still_exists(folders, tmp_path, monkeypatch):
+    # the testbench runs in a temporary folder removed afterwards: the `error:` line named the sim.log
+    # inside it, which was gone by the time the user read it; it is copied out first
+    import re
+    from types import SimpleNamespace
+    from unittest import mock
+
+    from pwas_hdl.errors import ToolFailed
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr("tempfile.tempdir", None)  # TMPDIR read afresh
+
+    def run_job(b, job, wd, **kw):
+        (wd / "sim.log").write_text("the simulator's own words\n")
+        raise ToolFailed("the testbench wrote no result (icarus, top)", wd / "sim.log", "the simulator's own words")
+
+    fake = SimpleNamespace(build=lambda *a, **kw: None, run_job=run_job)
+    out = tmp_path / "o.csv"
+    with mock.patch("pwas_hdl.verify.simulation.sim_module", return_value=fake):
+        res = runner.invoke(app, ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "-o", str(out)])
+    lines = [ln for ln in res.output.splitlines() if ln.startswith("error:")]
+    assert res.exit_code == 2 and len(lines) == 1 and "wrote no result" in lines[0], res.output
+    log = re.search(r"log: (\S+)$", lines[0]).group(1)
+    assert (tmp_path / "tmp") in Path(log).parents and Path(log).read_text() == "the simulator's own words\n", lines[0]
+    assert not out.exists() and not [p for p in (tmp_path / "tmp").iterdir() if p.is_dir()]  # the work folder is gone

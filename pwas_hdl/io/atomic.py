@@ -21,9 +21,10 @@ import shutil
 import signal
 import tempfile
 from pathlib import Path
-from typing import Iterable
+from contextlib import contextmanager
+from typing import Iterable, Iterator
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, ToolFailed
 
 __all__ = [
     "atomic_write_text",
@@ -32,6 +33,7 @@ __all__ = [
     "OutputSet",
     "clean_stale_temps",
     "make_temp_dir",
+    "logs_kept",
     "install_termination_handler",
     "TEMP_MARK",
 ]
@@ -112,6 +114,29 @@ def make_temp_dir(parent: str | os.PathLike, name: str) -> Path:
     """
     clean_stale_temps(parent)
     return Path(tempfile.mkdtemp(prefix=_temp_prefix(name), dir=parent))
+
+
+@contextmanager
+def logs_kept(folder: str | os.PathLike | None, name: str) -> Iterator[None]:
+    """Around a tool run in the temporary ``folder`` (removed afterwards; None: nothing to do): a
+    :class:`~pwas_hdl.errors.ToolFailed` whose log is inside it is raised again with the log copied
+    out to ``$TMPDIR/NAME-XXXX.log``, so that the file its ``error:`` line names still exists."""
+    try:
+        yield
+    except ToolFailed as exc:
+        if folder is None or exc.log is None or Path(folder).resolve() not in Path(exc.log).resolve().parents:
+            raise
+        kept = None
+        try:
+            if Path(exc.log).is_file():
+                fd, kept = tempfile.mkstemp(prefix=f"{name}-", suffix=".log")
+                os.close(fd)
+                shutil.copyfile(exc.log, kept)
+        except OSError:  # the log cannot be kept: the message without it (-v still prints its end)
+            if kept is not None:
+                Path(kept).unlink(missing_ok=True)
+            kept = None
+        raise type(exc)(exc.message, kept, exc.tail) from None
 
 
 def _make_temp_file(parent: Path, name: str) -> Path:

@@ -26,6 +26,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pwas_hdl.errors import InputError
+from pwas_hdl.io.atomic import logs_kept
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
 from pwas_hdl.verify.simulation import ManifestView
 from pwas_hdl.verify.segment_bench import (
@@ -164,7 +165,8 @@ def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str 
     bld = runner.build(design.verilog_path, design.top, simulator, cache_dir=cache_dir, waves=waves)
     tmp = Path(tempfile.mkdtemp(prefix=f"pwas-est-{simulator}-")) if work_dir is None else Path(work_dir)
     try:
-        res = runner.run_job(bld, job, tmp, test_module=TEST_MODULE)
+        with logs_kept(tmp if work_dir is None and not waves else None, f"pwas-est-{simulator}"):
+            res = runner.run_job(bld, job, tmp, test_module=TEST_MODULE)
     finally:
         if work_dir is None and not waves:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -123,7 +123,7 @@ def replay_segments(verilog_path: Path, top: str, segments: list[dict], *, ports
     CheckFailed
         The RTL did not produce every output.
     """
-    from pwas_hdl.io.atomic import make_temp_dir
+    from pwas_hdl.io.atomic import logs_kept, make_temp_dir
     from pwas_hdl.verify.simulation import sim_module
 
     p = 1.0 - stall
@@ -135,7 +135,8 @@ def replay_segments(verilog_path: Path, top: str, segments: list[dict], *, ports
     wd = (Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else \
         make_temp_dir(tempfile.gettempdir(), f"{prefix}-{simulator}")
     try:
-        raw = runner.run_job(b, job, wd, files=files, test_module=TEST_MODULE)
+        with logs_kept(None if waves else wd, f"{prefix}-{simulator}"):
+            raw = runner.run_job(b, job, wd, files=files, test_module=TEST_MODULE)
     finally:
         if not waves:
             shutil.rmtree(wd, ignore_errors=True)

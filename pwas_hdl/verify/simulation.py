@@ -47,7 +47,7 @@ from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.reduction import tree_levels
 from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.errors import CheckFailed, InputError
-from pwas_hdl.io.atomic import make_temp_dir
+from pwas_hdl.io.atomic import logs_kept, make_temp_dir
 from pwas_hdl.limits import check_values
 
 __all__ = [
@@ -920,7 +920,8 @@ def run_rtl(
         "runs": [r.to_job() for r in runs],
     }
     try:
-        raw = runner.run_job(b, job, wd, files=design.runtime_files)
+        with logs_kept(None if waves else tmp, f"pwas-sim-{simulator}"):
+            raw = runner.run_job(b, job, wd, files=design.runtime_files)
     finally:
         if tmp is not None and not waves:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -946,7 +947,8 @@ def _run_native(design: Design, runs: Sequence[Run], simulator: str, *, cache_di
     b = native.build(design.verilog_path, design.manifest, cache_dir=cache_dir)
     tmp = Path(tempfile.mkdtemp(prefix="pwas-native-")) if work_dir is None else None
     try:
-        raw = native.run(b, design.manifest, list(runs), tmp or work_dir, files=design.runtime_files)
+        with logs_kept(tmp, "pwas-native"):
+            raw = native.run(b, design.manifest, list(runs), tmp or work_dir, files=design.runtime_files)
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
