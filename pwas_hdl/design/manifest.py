@@ -678,7 +678,35 @@ def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
                     or int(ln, 16) >> h["width"]), None)
         if bad is not None:
             errs.append(f"files.hex[{i}]: line {bad + 1} of {h['file']} ({lines[bad][:20]!r}) is not a {h['width']}-bit hex word")
-    return errs
+    return errs or _port_name_errors(m, folder)
+
+
+#: How much of the Verilog :func:`_port_name_errors` reads to find the top module's header (it is
+#: near the start: the generated files put the header comment and then the top module first).
+_HEADER_BYTES = 2**20
+
+
+def _port_name_errors(m: dict[str, Any], folder: Path) -> list[str]:
+    """The ports the manifest names are the ports of module ``top`` in the design's Verilog (the
+    testbenches drive and read them by name: a renamed one failed inside the simulator)."""
+    f = m["files"]
+    vpath = folder / (f["verilog"] if isinstance(f["verilog"], str) else f["verilog"][0])
+    try:
+        with open(vpath, encoding="utf-8", errors="replace") as fh:
+            head = fh.read(_HEADER_BYTES)
+    except OSError:  # a missing Verilog is reported by its readers
+        return []
+    mo = re.search(r"^module\s+" + re.escape(m["top"]) + r"\s*\(([^)]*)\)\s*;", head, re.M)
+    if mo is None:  # not a header this reader knows: left to the tools
+        return []
+    have = [nm.strip() for nm in mo.group(1).split(",") if nm.strip()]
+    names = [p["name"] for p in m["ports"]]
+    extra, missing = [n for n in names if n not in have], [n for n in have if n not in names]
+    if extra:
+        return [f"ports names {', '.join(extra)}, which module {m['top']} in {vpath.name} does not have (its ports: {', '.join(have)})"]
+    if missing:
+        return [f"ports lacks {', '.join(missing)} of module {m['top']} in {vpath.name} (its ports: {', '.join(have)})"]
+    return []
 
 
 def _recurrence_errors(m: dict[str, Any]) -> list[str]:
