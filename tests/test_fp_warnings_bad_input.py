@@ -206,3 +206,18 @@ def test_explore_and_simulate_refuse_a_reference_whose_squares_overflow_before_a
     with mock.patch("pwas_hdl.verify.simulation.run_rtl", side_effect=AssertionError("the simulator ran")):
         line = _refused(tmp_path, "simulate", tmp_path / "hw", tmp_path / "big.csv", "-o", tmp_path / "s.csv")
     assert "column 'z_true'" in line and "1e+150" in line, line
+
+
+@pytest.mark.parametrize("column", ["x1_true", "y"])
+def test_simulate_of_an_estimator_refuses_a_reference_whose_squares_overflow_before_any_work(tmp_path, column):
+    """The estimator's state RMSE (against ``<x>_true``) and output MSE (against ``y``) overflowed after
+    the simulator had run ('Out of range float values are not JSON compliant: inf')."""
+    from unittest import mock
+
+    assert _run("make-data", "switched-linear", "-o", tmp_path / "d.csv", "--estimator-out", tmp_path / "est.json",
+                "--samples", "200").exit_code == 0
+    assert _run("generate", tmp_path / "est.json", "-o", tmp_path / "g").exit_code == 0
+    big = _scaled(tmp_path / "d.csv", tmp_path / "big.csv", column, 1e300, row=5)
+    with mock.patch("pwas_hdl.verify.estimator_simulation.replay_segments", side_effect=AssertionError("the simulator ran")):
+        line = _refused(tmp_path, "simulate", tmp_path / "g", big, "-o", tmp_path / "s.csv", "--traj-col", "run")
+    assert f"column '{column}'" in line and "1e+150" in line, line

@@ -207,7 +207,8 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     from pwas_hdl.fit.classifier import class_scores
     from pwas_hdl.io.csv_table import format_csv, split_trajectories
     from pwas_hdl.systems.switched_observer import run_switched_observer
-    from pwas_hdl.verify.simulation import _checks, _json_default
+    from pwas_hdl.limits import check_values
+    from pwas_hdl.verify.simulation import _check_references, _checks, _json_default
 
     if engine != "cocotb":
         raise InputError("--engine native drives the PWAS designs only; simulate an estimator design with --engine cocotb")
@@ -215,6 +216,9 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     cfg, est = design.config, design.est
     u_all = table.numeric([cfg.input_name])[:, 0]
     y_all = table.numeric([cfg.output_name])[:, 0]
+    # the state RMSE and output MSE square these: refused before the simulator runs, not as an overflow after it
+    _check_references(table, cfg.state_names)
+    check_values(f"{table.path}: column {cfg.output_name!r}", y_all, "fix the data (no output MSE can be measured against it)")
     if traj_col is not None:
         table.column_index(traj_col)
     slices = list(split_trajectories(table, traj_col))
