@@ -291,6 +291,30 @@ def test_points_outside_are_clamped_and_flagged(make_grid, rng):
     np.testing.assert_array_equal(grid.evaluate(w, x), grid.evaluate(w, np.clip(x, grid.lo, grid.hi)))
 
 
+def test_points_on_the_domain_boundary_are_not_flagged(make_grid, rng):
+    """The domain is the closed box [lo, hi]: a coordinate exactly at lo or hi (the data's own min /
+    max with gamma = 1, a sensor at its rail) is inside and must not be reported as out of domain."""
+    grid = make_grid([3, 2, 5])
+    x = grid.lo + rng.uniform(0.0, 1.0, (200, 3)) * (grid.hi - grid.lo)
+    cols = rng.integers(0, 3, 200)
+    rows = np.arange(200)
+    x[rows[:100], cols[:100]] = grid.lo[cols[:100]]
+    x[rows[100:], cols[100:]] = grid.hi[cols[100:]]
+    x = np.vstack([x, grid.lo, grid.hi, grid.vertex_points()])
+    loc = grid.locate(x)
+    assert not loc.out_of_domain.any()
+    # one ulp outside is outside
+    above = np.nextafter(grid.hi, np.inf)
+    below = np.nextafter(grid.lo, -np.inf)
+    assert grid.locate(np.vstack([above, below])).out_of_domain.all()
+    # many boxes: (hi - lo) / step rounds above p for about 1 box in 20, which must not flag x = hi
+    for _ in range(500):
+        lo = rng.uniform(-100.0, 100.0, 2)
+        g = Grid(lo, lo + 10.0 ** rng.uniform(-3, 3, 2), rng.integers(1, 50, 2))
+        corners = np.array([[a, b] for a in (g.lo[0], g.hi[0]) for b in (g.lo[1], g.hi[1])])
+        assert not g.locate(corners).out_of_domain.any(), g
+
+
 # -------------------------------------------------------------- basis matrix
 @pytest.mark.parametrize("pname", ["mixed", "pow2", "ones"])
 @pytest.mark.parametrize("n", [1, 2, 3, 4])

@@ -270,7 +270,7 @@ class AdditiveGrid:
             Grid coordinates clamped to ``[0, p_j]``.
         out_of_domain : ndarray, shape (m,), bool
         """
-        return Grid.to_grid_units(self, x)  # reads only lo, step, partitions and n, which this box has
+        return Grid.to_grid_units(self, x)  # reads only lo, hi, step, partitions and n, which this box has
 
     def basis_matrix(self, x: np.ndarray) -> scipy.sparse.csr_array:
         """Stacked sparse basis ``H = [H_1 ... H_k]``, shape (m, sum_i N_i).

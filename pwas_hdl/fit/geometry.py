@@ -314,7 +314,9 @@ class Grid:
                     if b is not None:  # piecewise-linear warp: cell c, then the fraction within it
                         c = np.clip(np.searchsorted(b, xa[:, j], side="right") - 1, 0, b.size - 2)
                         s[:, j] = c + (xa[:, j] - b[c]) / (b[c + 1] - b[c])
-        out = np.any((s < 0) | (s > self.partitions), axis=1)
+        # flagged in physical units: (hi - lo) / step may round above p, and s > p at x = hi itself
+        # (about 1 grid in 20) would flag a point on the domain's own boundary
+        out = np.any((xa < self.lo) | (xa > self.hi), axis=1)
         np.clip(s, 0, self.partitions, out=s)
         return s, out
 
