@@ -81,6 +81,27 @@ def test_quantile_and_pow2_breakpoints(rng):
     assert pow2_exponents(q[0]) is None
 
 
+def test_pow2_cell_widths_are_rounded_in_the_log_domain():
+    """Hand-worked: samples 0, 1, 2 on [0, 4] with p = 2 have the median 1, quantile cells 1 and 3 wide;
+    log2(3) = 1.58 rounds to 2, so the cells are 1 and 4 base steps, h0 = 4 / 5. Widths 1 and 1.5
+    (log2 = 0.58) round to 2 and 1 base steps too; 1 and 1.4 (0.49) to equal cells."""
+    p2 = pow2_breakpoints(np.array([[0.0], [1.0], [2.0]]), [0.0], [4.0], 2)
+    np.testing.assert_allclose(p2[0], [0.0, 0.8, 4.0], rtol=1e-15)
+    e, h0 = pow2_exponents(p2[0])
+    assert e.tolist() == [0, 2] and h0 == pytest.approx(0.8)
+    p2 = pow2_breakpoints(np.array([[0.0], [1.0], [2.0]]), [0.0], [2.5], 2)
+    assert pow2_exponents(p2[0])[0].tolist() == [0, 1]
+    p2 = pow2_breakpoints(np.array([[0.0], [1.0], [2.0]]), [0.0], [2.4], 2)
+    assert pow2_exponents(p2[0])[0].tolist() == [0, 0]
+
+
+def test_pow2_exponents_refuses_near_powers_of_two():
+    """The warp shifts by e_k exactly: a cell 1 % off a power-of-two multiple is not one."""
+    assert pow2_exponents(np.array([0.0, 1.0, 3.0, 7.0]))[0].tolist() == [0, 1, 2]
+    assert pow2_exponents(np.array([0.0, 1.0, 3.01])) is None
+    assert pow2_exponents(np.array([0.0, 1.0, 1.99])) is None
+
+
 def test_quantile_groups_pool_the_samples_of_a_group(rng):
     x = np.stack([rng.normal(0, 1, 3000), rng.normal(0.5, 2, 3000), rng.uniform(-5, 5, 3000)], axis=1)
     lo, hi = np.array([-6.0, -6.0, -6.0]), np.array([6.0, 6.0, 6.0])
