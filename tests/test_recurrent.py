@@ -40,6 +40,39 @@ def test_lag_structure_with_past_estimates():
         LagStructure(0, 0, 0, 0, 1, 1)
 
 
+def test_lag_structure_start_when_the_io_lags_reach_further_than_mz():
+    """M = max(Mu, My) = 3 > Mz = 1: the first row is t = M - 1 = 2 (u(0..2), y(2), z(1) all exist),
+    not t = 3; rows t = 2 .. T-1. A signal without channels needs no history (M = My = 1 here)."""
+    ls = LagStructure(3, 1, 1, 1, 1, 1)
+    assert ls.memory == 3 and ls.start == 2
+    assert ls.names(["u"], ["y"], ["x"]) == ["u[t-2]", "u[t-1]", "u[t]", "y[t]", "x_hat[t-1]"]
+    T = 6
+    u, y, z = (np.arange(T, dtype=float)[:, None] + k for k in (0, 10, 100))
+    xi = ls.build_series_parallel(u, y, z)
+    assert xi.shape == (T - 2, 5)
+    np.testing.assert_array_equal(xi[0], [0, 1, 2, 12, 101])  # row t = 2
+    np.testing.assert_array_equal(xi[-1], [3, 4, 5, 15, 104])  # row t = 5
+    no_inputs = LagStructure(3, 1, 0, 1)
+    assert no_inputs.memory == 1 and no_inputs.dimension == 1
+    np.testing.assert_array_equal(no_inputs.build(None, y)[:, 0], y[:, 0])
+
+
+def test_model_file_round_trip_of_per_target_initial_values(rng, tmp_path):
+    """Mz = 2, two targets, the initial state given as an (Mz, nz) array: each target keeps its own
+    two past values through the model file (a transposed read would mix the targets)."""
+    us, ys, zs = _linear_system(rng, runs=2, T=200)
+    zs2 = [np.column_stack([z, -2.0 * z + 0.5]) for z in zs]
+    init = [[0.25, -1.0], [0.5, 2.0]]  # rows z(t-2), z(t-1); columns the targets a, b
+    m = PWASVirtualSensor(my=1, partitions=2, sigma=1e-6, mz=2, initial_state=init, target_names=["a", "b"],
+                          output_names=["y"]).fit(None, ys, zs2)
+    np.testing.assert_array_equal(m.initial_values_, init)
+    path = m.save(tmp_path / "m.json")
+    assert json.loads(path.read_text())["recurrence"]["initial_state"]["values"] == {"a": [0.25, 0.5], "b": [-1.0, 2.0]}
+    back = PWASVirtualSensor.load(path)
+    np.testing.assert_array_equal(back.initial_values_, init)
+    np.testing.assert_array_equal(back.predict(None, ys), m.predict(None, ys))
+
+
 def test_run_recurrence_lockstep_matches_a_loop():
     def step(io, zpast):
         return 0.5 * zpast[:, -1, :] + io[:, :1] + 0.1 * zpast[:, 0, :]
