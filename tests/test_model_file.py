@@ -114,6 +114,29 @@ def test_loaded_model_refits_like_the_original(tmp_path, rng):
     np.testing.assert_array_equal(loaded.weights_, sensor.weights_)
 
 
+def test_loaded_model_keeps_the_cv_and_domain_settings(tmp_path, rng):
+    """The settings the file records (shuffled CV folds, per-lag domains, the sigma grid) come back as
+    the loaded estimator's parameters, so a refit of the loaded model cross-validates and boxes the
+    data as the original did (the other round-trip tests use an explicit sigma and domain)."""
+    t_len = 400
+    u = rng.uniform(-1.0, 1.0, t_len)
+    y = np.cumsum(rng.normal(0.0, 0.1, t_len))
+    z = np.sin(y) + u * u + rng.normal(0.0, 0.05, t_len)
+    sensor = PWASVirtualSensor(mu=1, my=2, partitions=[3, 3, 3], sigma=None, sigma_grid=[1e-3, 1e-1, 10.0], cv_folds=4,
+                               cv_shuffle=True, share_lag_domain=False, gamma=1.1)
+    sensor.fit(u, y, z)
+    loaded = load_model(sensor.save(tmp_path / "m.json"))
+    keys = ("mu", "my", "partitions", "gamma", "sigma", "tikhonov_order", "share_lag_domain", "cv_folds", "cv_shuffle",
+            "sigma_grid")
+    params, back = sensor.get_params(), loaded.get_params()
+    assert {k: back[k] for k in keys} == {k: params[k] for k in keys}
+    sensor.fit(u, y, z)
+    loaded.fit(u, y, z)
+    assert loaded.grid_ == sensor.grid_
+    np.testing.assert_array_equal(loaded.cv_.mse, sensor.cv_.mse)
+    np.testing.assert_array_equal(loaded.weights_, sensor.weights_)
+
+
 # ------------------------------------------------------------------------ schema
 @pytest.fixture
 def good(rng) -> dict:
