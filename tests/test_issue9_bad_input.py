@@ -319,6 +319,19 @@ def test_csv_blank_row_is_an_error_unless_asked(tmp_path, work):
     assert len(rows) == 200 - 2 * 1
 
 
+def test_csv_trajectory_cuts_at_the_first_and_last_rows(tmp_path):
+    """A one-sample trajectory at either end is a trajectory of its own, whether a trajectory column
+    or a blank row marks it; several blank lines in a row are one break, named by the first."""
+    t = read_csv(_csv(tmp_path, "runs.csv", b"run,y\na,1\nb,2\nb,3\nc,4\n"))
+    assert split_trajectories(t, "run") == [slice(0, 1), slice(1, 3), slice(3, 4)]
+    assert split_trajectories(t, None) == [slice(0, 4)]
+    t = read_csv(_csv(tmp_path, "ends.csv", b"y\n1\n\n2\n3\n\n\n4\n"), blank_rows="break")
+    assert split_trajectories(t, None) == [slice(0, 1), slice(1, 3), slice(3, 4)]
+    assert t.lines == [2, 4, 5, 8]
+    with pytest.raises(InputError, match="line 6 is blank"):
+        read_csv(_csv(tmp_path, "two.csv", b"y\n1\n2\n3\n4\n\n\n5\n"))
+
+
 def test_csv_bom_is_dropped_and_never_shown(tmp_path):
     p = _csv(tmp_path, "bom.csv", b"\xef\xbb\xbfy,z\n1,2\n")
     t = read_csv(p)
