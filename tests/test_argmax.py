@@ -75,6 +75,15 @@ def test_agreement_bound():
     assert np.all(margins(s) >= 0)
 
 
+def test_agreement_margin_exactly_two_e_counts_as_near():
+    """Hand-worked: scores 0 and 1, e = 1/2 (lsb 1/2, codes within e of the scores): the codes may both
+    be 1 (0.5), a tie the hardware gives to class 0 while the float winner is class 1. The margin
+    1 = 2 e is inside the documented "<= 2 e" region: within margin, never outside."""
+    a = agreement(np.array([[0.0, 1.0], [1.0, 0.0]]), np.array([[1, 1], [2, 0]]), 0.5)
+    assert a["margin_limit"] == 1.0 and a["near_ties"] == 2
+    assert a["differ"] == 1 and a["differ_within_margin"] == 1 and a["differ_outside_margin"] == 0
+
+
 class _Clocked(Elaboratable):
     """A stage with a sync domain even when it has no register (latency 0), for run_stream."""
 
