@@ -117,6 +117,20 @@ def test_bittrue_within_bound_and_tight(case):
     assert m.error_bound_lsb == pytest.approx(m.error_bound / m.output_format.lsb)
 
 
+@pytest.mark.parametrize("rounding,e_out", [("truncate", (1 - 2.0**-3) / 16), ("half_up", 0.5 / 16)])
+def test_output_rounding_bound_is_exact_and_attained(rounding, e_out):
+    """Hand-worked: p = 1 on [0, 1], weights 0 and 1 (exact at Fw = 0), 8 input bits at fill 0.9 give
+    F = 7, so acc = mu_1 = 0 .. 128 and the output (Fo = 4) drops sh = 3 bits. Truncation loses up to
+    7/8 of an output lsb (acc = 8 k + 7), half up 1/2 of one: the documented e_out, attained."""
+    m = FixedPointModel(Grid([0.0], [1.0], 1), np.array([0.0, 1.0]), input_bits=8, input_fill=0.9, weight_frac=0,
+                        output_frac=4, rounding=rounding)
+    assert m.F == 7 and m.shift == 3 and m.weight_error_max == 0.0
+    assert m.error_bound_output == e_out
+    q = np.arange(m.inputs[0].lo_code, m.inputs[0].hi_code + 1)[:, None]
+    err = np.abs(m.to_physical_output(m.evaluate(q)[0]) - m.reference(q))
+    assert err.max() == e_out
+
+
 @pytest.mark.parametrize("case", CASES, ids=_ids)
 def test_trace_consistent_exact_and_within_widths(case):
     m = _model(case, seed=3)
