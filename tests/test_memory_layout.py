@@ -123,6 +123,23 @@ def test_contents_read_back(parts, kind):
         lay.contents(codes[:-1])
 
 
+@pytest.mark.parametrize("parts", [[3], [2, 3], [3, 1, 2], [2, 2, 1, 3]])
+def test_corner_bank_addr_is_where_contents_put_the_vertex(parts):
+    """CornerLayout.bank_addr(v, s) (v as corner s of cell v - s) names the word that holds W[v]."""
+    g = _grid(parts)
+    lay = make_layout(g, "corner")
+    codes = np.arange(1, g.n_vertices + 1)
+    rom = lay.contents(codes)
+    coords = g.vertex_coords()
+    for s in range(lay.n_banks):
+        bits = (s >> np.arange(g.n)) & 1
+        ok = np.all(coords - bits >= 0, axis=1) & np.all(coords - bits < g.partitions, axis=1)  # cell v - s exists
+        v = np.flatnonzero(ok)
+        bank, addr = lay.bank_addr(v, s)
+        assert np.all(bank == s)
+        assert np.array_equal(rom[bank, addr, 0], codes[v])
+
+
 def test_layout_errors():
     g = _grid([2, 2])
     with pytest.raises(ValueError, match="memory layout"):
