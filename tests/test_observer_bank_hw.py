@@ -93,6 +93,53 @@ def test_state_bound_reaches_no_saturation_and_narrow_states_saturate(pv_data, s
     assert np.abs(tr["state"]).max() <= smax + 1
 
 
+def test_state_update_is_the_documented_half_up_recursion(pv_data, sensor_11b):
+    """x_i' = sat((A0_i x_0 + ((sum_c Bc_ic qu_c + Lc_i qy) << (F_s - F_in)) + Dc_i + (x_{i+1} << F_c)
+    + 2**(F_c-1)) >> F_c), x_M = 0, from x = 0: recomputed step by step in Python integers."""
+    _, te, _ = pv_data
+    hm = ObserverBankSensorModel.from_sensor(sensor_11b)
+    b = hm.bank
+    codes, _ = hm.quantize_signals(te.u[:60], te.y[:60])
+    tr = b.trace(codes)
+    fc, sh = b.coef_frac, b.state_frac - b.input_frac
+    smax = (1 << (b.formats.state_bits - 1)) - 1
+    m = b.order
+    for j in range(b.n_models):
+        x = [0] * m
+        for k in range(codes.shape[0]):
+            assert [int(v) for v in tr["state"][k, j]] == x
+            qu, qy = [int(v) for v in codes[k, : b.nu]], int(codes[k, b.nu])
+            nxt = []
+            for i in range(m):
+                inj = sum(int(b.b_codes[j, i, c]) * qu[c] for c in range(b.nu)) + int(b.l_codes[j, i]) * qy
+                acc = int(b.a0_codes[j, i]) * x[0] + (inj << sh) + int(b.d_codes[j, i]) + ((x[i + 1] if i + 1 < m else 0) << fc)
+                nxt.append(max(-smax - 1, min(smax, (acc + (1 << (fc - 1))) >> fc)))
+            x = nxt
+
+
+def test_state_saturation_is_flagged_in_both_directions(pv_data, sensor_11b):
+    """Narrow states follow the wide (never saturating) ones until an update leaves their range, and
+    that update is flagged whichever rail it hits: constant top and bottom codes drive the states
+    to both signs."""
+    wide = ObserverBankSensorModel.from_sensor(sensor_11b).bank
+    narrow = ObserverBankSensorModel.from_sensor(sensor_11b, state_bits=wide.formats.state_bits - 4).bank
+    assert (narrow.coef_frac, narrow.state_frac) == (wide.coef_frac, wide.state_frac)
+    smin, smax = -(1 << (narrow.formats.state_bits - 1)), (1 << (narrow.formats.state_bits - 1)) - 1
+    lo, hi = -(1 << (wide.input_bits - 1)), (1 << (wide.input_bits - 1)) - 1
+    sides = set()
+    for level in (lo, hi):
+        codes = np.full((200, wide.nu + 1), level, dtype=np.int64)
+        tw, tn = wide.trace(codes), narrow.trace(codes)
+        assert not tw["state_saturated"].any()
+        leaves = [k for k in range(199) if np.any((tw["state"][k + 1] < smin) | (tw["state"][k + 1] > smax))]
+        assert leaves, "the narrow states must saturate on this input"
+        k0 = leaves[0]
+        assert np.array_equal(tn["state"][: k0 + 1], tw["state"][: k0 + 1])
+        assert not tn["state_saturated"][:k0].any() and tn["state_saturated"][k0]
+        sides |= {"low" if np.any(tw["state"][k0 + 1] < smin) else "high"}
+    assert sides == {"low", "high"}
+
+
 def test_refusals(pv_data):
     tr, _, _ = pv_data
     fe = ObserverBankFrontEnd(n_models=2, features="11a", window=2)
