@@ -394,3 +394,20 @@ def test_summary_text_of_a_hand_made_result():
                  "fmax 100.0 MHz", "MISSED", "latency 7 cycles = 70.0 ns", "100.0 Msamples/s"):
         assert part in txt, part
     assert txt.endswith("\n")
+
+
+def test_manifest_port_names_are_checked_against_an_ansi_header(design: Path):
+    """The port check reads ANSI declarations (``input wire [7:0] in_addr,``, comments beside them) as
+    well as Yosys's name lists: the hand-written core loads, a port renamed in its manifest is refused."""
+    from pwas_hdl.design.manifest import load_manifest
+    from pwas_hdl.errors import InputError
+
+    v = design / "tiny_core.v"
+    v.write_text(v.read_text().replace("input  wire               rst,", "input  wire               rst, // (* sync *) reset"))
+    assert [p["name"] for p in load_manifest(design)["ports"]][:3] == ["clk", "rst", "in_valid"]
+    man = json.loads((design / "manifest.json").read_text())
+    man["ports"][6]["name"] = "addr"
+    (design / "manifest.json").write_text(json.dumps(man))
+    with pytest.raises(InputError, match=r"ports names addr, which module tiny_core in tiny_core.v does not have "
+                                         r"\(its ports: clk, rst, in_valid,"):
+        load_manifest(design)

@@ -696,10 +696,12 @@ def _port_name_errors(m: dict[str, Any], folder: Path) -> list[str]:
             head = fh.read(_HEADER_BYTES)
     except OSError:  # a missing Verilog is reported by its readers
         return []
-    mo = re.search(r"^module\s+" + re.escape(m["top"]) + r"\s*\(([^)]*)\)\s*;", head, re.M)
+    head = re.sub(r"//[^\n]*|/\*.*?\*/|\(\*.*?\*\)", " ", head, flags=re.S)  # comments, attributes
+    mo = re.search(r"^\s*module\s+" + re.escape(m["top"]) + r"\s*\(([^)]*)\)\s*;", head, re.M)
     if mo is None:  # not a header this reader knows: left to the tools
         return []
-    have = [nm.strip() for nm in mo.group(1).split(",") if nm.strip()]
+    # a name list (Yosys: `a, b`) or ANSI declarations (`input wire [7:0] a, ...`): the last identifier of each item
+    have = [ids[-1] for item in mo.group(1).split(",") if (ids := re.findall(r"[A-Za-z_][A-Za-z0-9_$]*", item))]
     names = [p["name"] for p in m["ports"]]
     extra, missing = [n for n in names if n not in have], [n for n in have if n not in names]
     if extra:
