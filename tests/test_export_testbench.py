@@ -188,3 +188,42 @@ def test_export_cli_and_bad_input(folders, tmp_path):
         assert "error:" in r.output and msg in r.output and "Traceback" not in r.output, r.output
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
     assert not (tmp_path / "never").exists()
+
+
+@pytest.fixture(scope="module")
+def bank_folders(tmp_path_factory):
+    """Observer-bank sensors (features only, and with u/y taps): their input fields are the bank's
+    (u0 .., y0), not the lag model's signal names (export-testbench used to fail on them with KeyError 'u0')."""
+    from pwas_hdl import generate
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    tr, _, _ = make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
+    root = tmp_path_factory.mktemp("export-tb-bank")
+    for name, mu, my in (("bank", 0, 0), ("bank-taps", 1, 1)):
+        fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=3)
+        s = PWASVirtualSensor(mu=mu, my=my, partitions=2, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+        generate(s, root / name, design="sensor")
+    return root
+
+
+@pytest.mark.parametrize("name", ["bank", "bank-taps"])
+def test_export_observer_bank_sensor(bank_folders, tmp_path, name):
+    res = export_testbench(bank_folders / name, tmp_path / "tb", samples=120, seed=1)
+    tb = Path(res["outdir"])
+    fields = [ln for ln in (tb / "pwas_sensor_tb_in.hex").read_text().splitlines() if ln]
+    assert len(fields) == res["inputs"] and 0 < res["outputs"] < res["inputs"]  # the bank's warm-up gives no output
+
+
+@pytest.mark.rtl
+@needs_iverilog
+@pytest.mark.parametrize("name", ["bank", "bank-taps"])
+def test_export_observer_bank_sensor_icarus(bank_folders, tmp_path, name):
+    res = export_testbench(bank_folders / name, tmp_path / "tb", samples=200, seed=2)
+    tb = Path(res["outdir"])
+    r = _icarus(tb)
+    assert r.returncode == 0 and "PASS" in r.stdout and "FAIL" not in r.stdout, r.stdout + r.stderr
+    _flip_hex(tb / "pwas_sensor_tb_expected.hex")
+    r = _icarus(tb)
+    assert r.returncode != 0 and "FAIL" in r.stdout, r.stdout

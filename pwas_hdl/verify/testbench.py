@@ -120,6 +120,8 @@ def export_testbench(
     native = sim_module("pwas_native")  # payload packing by the manifest's bit fields
     if design.kind == "core":
         codes = stimulus.core_codes(model, samples, seed=seed)
+    elif design.bank is not None:  # observer-bank sensor (with or without u/y taps): (u0 .., y0) codes of the bank
+        codes = stimulus.observer_codes(design.bank.bank, samples, seed=seed)
     else:
         codes = stimulus.sensor_codes(model, [f.get("signal", f["name"]) for f in design.in_fields], samples, seed=seed)
     seg = segment(design, codes)
