@@ -11,7 +11,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["templates_dir", "sim_dir", "schemas_dir", "benchmarks_dir"]
+__all__ = ["templates_dir", "sim_dir", "schemas_dir", "benchmarks_dir", "source_checkout"]
 
 
 def _package_dir(package: str) -> Path:
@@ -40,3 +40,11 @@ def schemas_dir() -> Path:
 def benchmarks_dir() -> Path:
     """Folder of the benchmark scripts (``benchmarks/`` of the repository); results go to its ``results/``."""
     return _package_dir("pwas_hdl.benchmarks")
+
+
+def source_checkout() -> Path | None:
+    """The repository root when pwas-hdl runs from a source checkout (an editable install: the
+    mapped ``benchmarks/`` sits beside ``pyproject.toml`` and ``run.sh``); None for an installed wheel,
+    where ``run.sh`` and ``constraints.txt`` do not exist, so messages must not send the user to them."""
+    root = benchmarks_dir().parent
+    return root if (root / "pyproject.toml").is_file() and (root / "run.sh").is_file() else None

