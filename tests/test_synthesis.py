@@ -157,11 +157,13 @@ def _check_files(work: Path, design: Path, result: dict, tmp_path: Path, logs: t
     assert json.loads((work / "synth.json").read_text()) == result
     assert (work / "synth.txt").read_text() == synth_summary_text(result)
     script = (work / "synth.ys").read_text()
-    harness = ["read_verilog -sv timing_harness.v"] if result.get("harness") else []
+    harness = ["read_verilog -sv tiny_core_timing_harness.v"] if result.get("harness") else []
     assert [ln for ln in script.splitlines() if ln.startswith("read_verilog")] == [f"read_verilog -sv {os.path.relpath(design / 'tiny_core.v', work)}"] + harness
     if harness:  # every port but the clock registered: the harness is the synthesis top
-        assert result["harness"] == {"top": "tiny_core_timing_harness", "file": "timing_harness.v", "ffs": 38}
-        assert "module tiny_core_timing_harness" in (work / "timing_harness.v").read_text()
+        # the file is named after its module (verilator -Wall: DECLFILENAME)
+        assert result["harness"] == {"top": "tiny_core_timing_harness", "file": "tiny_core_timing_harness.v", "ffs": 38}
+        assert "module tiny_core_timing_harness" in (work / "tiny_core_timing_harness.v").read_text()
+        assert not (work / "timing_harness.v").exists()
         assert result["fmax_basis"].startswith("harness: every port registered")
     for name in logs:
         text = (work / name).read_text(errors="replace")
@@ -272,7 +274,7 @@ def test_ecp5(design: Path, tmp_path: Path):
 def test_ecp5_bare_design_without_packing(design: Path, tmp_path: Path):
     r = synthesize(design, "ecp5", harness=False, pack_registers=False, workdir=tmp_path / "bare")
     assert r["harness"] is None and r["hard_registers"] is None
-    assert r["fmax_basis"].startswith("bare design") and not (tmp_path / "bare" / "timing_harness.v").exists()
+    assert r["fmax_basis"].startswith("bare design") and not (tmp_path / "bare" / "tiny_core_timing_harness.v").exists()
     net = json.loads((tmp_path / "bare" / "netlist.json").read_text())["modules"]["tiny_core"]["cells"]
     assert all("REG_OUTPUT_CLK" not in c["parameters"] for c in net.values() if c["type"] == "MULT18X18D")
     _check_timing(r)

@@ -144,8 +144,10 @@ _MAIN_RESOURCES = {
 
 _LOG_TAIL_LINES = 25
 
-# The timing harness (every port registered) written beside the synthesis files.
-_HARNESS_FILE = "timing_harness.v"
+# The timing harness (every port registered) written beside the synthesis files, as
+# ``<module>.v`` (the module is ``<top>_timing_harness``: a file named after its module keeps
+# ``verilator -Wall`` clean, DECLFILENAME). Earlier versions wrote it as ``timing_harness.v``.
+_OLD_HARNESS_FILE = "timing_harness.v"
 
 # Generic target: LUT size of the estimate; memories of at most this many words become logic.
 _GENERIC_LUT_SIZE = 4
@@ -279,14 +281,17 @@ def synthesize(
     # ---- Yosys
     reads = "\n".join(f"read_verilog -sv {_yosys_path(_rel(v, work))}" for v in verilog)
     synth_top, harness_info = top, None
-    (work / _HARNESS_FILE).unlink(missing_ok=True)
+    harness_file = f"{top}_timing_harness.v"
+    for stale in (_OLD_HARNESS_FILE, harness_file):
+        (work / stale).unlink(missing_ok=True)
     if harness:
         from pwas_hdl.flow.timing_closure import harness_verilog
 
         synth_top, htext, nff = harness_verilog(manifest)
-        atomic_write_text(work / _HARNESS_FILE, htext)
-        reads += f"\nread_verilog -sv {_HARNESS_FILE}"
-        harness_info = {"top": synth_top, "file": _HARNESS_FILE, "ffs": nff}
+        harness_file = f"{synth_top}.v"
+        atomic_write_text(work / harness_file, htext)
+        reads += f"\nread_verilog -sv {harness_file}"
+        harness_info = {"top": synth_top, "file": harness_file, "ffs": nff}
     script = _fill_template(target, top=synth_top, read=reads, device=family or "", dsp="-dsp" if has_dsp else "",
                             lut_size=str(_GENERIC_LUT_SIZE), max_logic_rom=str(_GENERIC_MAX_LOGIC_ROM))
     atomic_write_text(work / "synth.ys", script)
@@ -342,7 +347,7 @@ def synthesize(
     result["critical_path"] = None
     if harness_info:
         result["ffs"] -= harness_info["ffs"]  # the design's own flip-flops
-        result["files"]["harness"] = _HARNESS_FILE
+        result["files"]["harness"] = harness_info["file"]
     result["hard_registers"] = None
     if target == "ecp5" and pack_registers:
         from pwas_hdl.flow.hard_registers import pack_ecp5_registers
