@@ -229,3 +229,33 @@ def test_regenerate_keeps_results_and_marks_them_stale(lorenz_tiny, tmp_path):
     res = runner.invoke(app, ["generate", str(lorenz_tiny.model), "-o", str(out)])
     assert res.exit_code == 0 and stale_results(out) == ["sim/old.json"]
     assert f"kept sim/old.json ({STALE_NOTE}" in res.output and "icarus.json" not in res.output
+
+
+def test_every_verilog_file_names_generator_model_and_formats(lorenz_tiny, tmp_path):
+    """Each .v file of a design folder starts with a header naming pwas-hdl with its version, the model
+    (its SHA-256) and the number formats; the instantiation template used to name neither the model nor the
+    design it is for (only 'see manifest.json'), and said '1 clock cycles'."""
+    import hashlib
+
+    from pwas_hdl import __version__
+    from pwas_hdl.systems.switched_observer import estimator_config
+    from pwas_hdl.fit.estimator_file import write_estimator
+
+    est = tmp_path / "est.json"
+    write_estimator(estimator_config((0.3, 0.4), 1), est)
+    for out, src, args in ((tmp_path / "s", lorenz_tiny.model, ["--design", "sensor"]), (tmp_path / "e", est, [])):
+        assert runner.invoke(app, ["generate", str(src), "-o", str(out), *args]).exit_code == 0
+        man = load_manifest(out)
+        model = out / man["files"]["model"]
+        sha = hashlib.sha256(model.read_bytes()).hexdigest()
+        fmts = [f["format"]["str"] for p in man["ports"] for f in p.get("fields", []) if f.get("format")]
+        assert fmts
+        for v in sorted(out.glob("*.v")):
+            lines = v.read_text().splitlines()
+            n = next(i for i, ln in enumerate(lines) if not ln.startswith("//"))
+            head = "\n".join(lines[:n])  # the leading comment block
+            assert n >= 3, v.name
+            assert f"pwas-hdl {__version__}" in head, v.name
+            assert f"{model.name} SHA-256 {sha}" in head, v.name
+            assert all(f in head for f in fmts), v.name
+            assert "1 clock cycles" not in head, v.name

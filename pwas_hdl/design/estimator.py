@@ -415,8 +415,9 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
         gen_opts["bank_lanes"] = bank_lanes
     man = build_estimator_manifest(top_name, info, files, gen_opts, _estimator_block(est, config, comp))
     cfg_text = estimator_text(config)
-    verilog = _header(man, hashlib.sha256(cfg_text.encode("utf-8")).hexdigest()) + emit_verilog(comp, top_name, ports=ports)
+    cfg_sha = hashlib.sha256(cfg_text.encode("utf-8")).hexdigest()
+    verilog = _header(man, cfg_sha) + emit_verilog(comp, top_name, ports=ports)
     man["design_hash"] = design_hash({files["verilog"]: verilog, ESTIMATOR_FILE: cfg_text})
     texts = {files["verilog"]: verilog, ESTIMATOR_FILE: cfg_text, "manifest.json": manifest_text(man), "report.md": _report(man),
-             files["instance_template"]: _instance({**man, "memory": {}}), files["fusesoc_core"]: _fusesoc(man, "inline")}
+             files["instance_template"]: _instance({**man, "memory": {}}, f"{ESTIMATOR_FILE} SHA-256 {cfg_sha}"), files["fusesoc_core"]: _fusesoc(man, "inline")}
     return GeneratedDesign(top_name, texts, man, est, comp)

@@ -248,7 +248,9 @@ def _physical_text(fmt: dict) -> str:
     return f"{name}, physical = code * {lsb}"
 
 
-def _instance(man: dict) -> str:
+def _instance(man: dict, source: str) -> str:
+    """The instantiation template ``<top>_inst.v``; ``source`` names what the design was generated from
+    (``model.json SHA-256 ...``, as line 2 of the Verilog header), so the template says which model it is for."""
     comments = []
     for p in man["ports"]:
         for f in p.get("fields", []):
@@ -265,8 +267,9 @@ def _instance(man: dict) -> str:
     mem_dir = (f"// {init['parameter']}: folder of the .hex weight files (with the trailing /), relative to the\n"
                "// simulator's working directory or absolute.\n") if params else ""
     return _template("instance.v.tmpl").substitute(
-        top=man["top"], version=__version__, clock=man["clock"]["port"], reset=_reset_text(man),
-        latency=man["latency_cycles"], ii=man["ii"], parameters=params, mem_dir_comment=mem_dir,
+        top=man["top"], version=__version__, source=source, design_hash=man["design_hash"],
+        clock=man["clock"]["port"], reset=_reset_text(man), latency=man["latency_cycles"],
+        latency_plural="" if man["latency_cycles"] == 1 else "s", ii=man["ii"], parameters=params, mem_dir_comment=mem_dir,
         field_comments="\n".join(comments), connections=conns,
     )
 
@@ -590,7 +593,8 @@ def build_design(
     if architecture == "serial":  # one memory of N words (pwas_hdl.hdl.serial_core.SingleMemoryPlan)
         man["memory"]["layout_spec"] = comp_core(comp).memory_plan.layout_spec()
     model = model_text(sensor)
-    verilog = _verilog_header(man, hashlib.sha256(model.encode("utf-8")).hexdigest()) + verilog
+    model_sha256 = hashlib.sha256(model.encode("utf-8")).hexdigest()
+    verilog = _verilog_header(man, model_sha256) + verilog
     man["design_hash"] = design_hash({files["verilog"]: verilog, "model.json": model, **hexes})
     texts: dict[str, str] = {
         files["verilog"]: verilog,
@@ -600,7 +604,7 @@ def build_design(
         + (_classifier_section(man) if "classifier" in man else "")
         + (_recurrence_section(man) if "recurrence" in man else "")
         + (_warp_section(man) if "warp" in man else ""),
-        files["instance_template"]: _instance(man),
+        files["instance_template"]: _instance(man, f"model.json SHA-256 {model_sha256}"),
         files["fusesoc_core"]: _fusesoc(man, memory_init),
         **hexes,
     }
