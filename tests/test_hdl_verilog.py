@@ -276,7 +276,11 @@ def test_readmemh_files_are_the_packed_layout_files():
         model = make_model([3, 2, 2], seed=9, nz=2, layout=mem)
         core = build_core(model, memory=mem)
         text = emit_verilog(core, "pwas_core", memory_init="readmemh", hex_prefix="wt")
-        assert memory_hex_files(core, "wt") == hex_files(model.layout, model.weight_codes, model.weight_format.bits, packed=True, prefix="wt")
-        assert [f'$readmemh({{MEM_DIR, "wt_b{b}.hex"}}, wmem{b});' in text for b in range(4)] == [True] * 4
+        files = memory_hex_files(core, "wt")
+        assert files == hex_files(model.layout, model.weight_codes, model.weight_format.bits, packed=True, prefix="wt")
+        # explicit first and last address: the same load order under IEEE 1364-1995 and -2005 (descending ranges)
+        ends = [len(files[f"wt_b{b}.hex"].split()) - 1 for b in range(4)]
+        assert [f'$readmemh({{MEM_DIR, "wt_b{b}.hex"}}, wmem{b}, 0, {ends[b]});' in text for b in range(4)] == [True] * 4
+        assert all(f"wmem{b} [{ends[b]}:0];" in text for b in range(4))
         assert 'parameter MEM_DIR = "./";' in text
         assert "wmem0[0] =" not in text

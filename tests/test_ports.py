@@ -83,8 +83,13 @@ def test_readmemh_mem_dir_parameter(sensor_model):
     gd = build_design(sensor_model, design="core", memory_init="readmemh")
     v = gd.files["pwas_core.v"]
     assert 'parameter MEM_DIR = "./";' in v
-    loads = re.findall(r'\$readmemh\(\{MEM_DIR, "(pwas_core_rom_b\d+\.hex)"\}, wmem\d+\);', v)
-    assert sorted(loads) == sorted(h["file"] for h in gd.manifest["files"]["hex"])
+    loads = re.findall(r'\$readmemh\(\{MEM_DIR, "(pwas_core_rom_b\d+\.hex)"\}, (wmem\d+), 0, (\d+)\);', v)
+    assert sorted(f for f, _, _ in loads) == sorted(h["file"] for h in gd.manifest["files"]["hex"])
+    # explicit first / last address = the memory's declared (descending) range and the file's length: IEEE
+    # 1364-1995 and -2005 load the file in the same order (Icarus warned "Standard inconsistency" without them)
+    depth = {h["file"]: h["depth"] for h in gd.manifest["files"]["hex"]}
+    for f, mem, last in loads:
+        assert int(last) == depth[f] - 1 == len(gd.files[f].split()) - 1 and f"{mem} [{last}:0];" in v
     assert gd.manifest["memory"]["init"]["parameter"] == "MEM_DIR"
     assert 'pwas_core #(.MEM_DIR("./")) u_pwas_core (' in gd.files["pwas_core_inst.v"]
     inline = build_design(sensor_model, design="core")

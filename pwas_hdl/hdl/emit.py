@@ -264,7 +264,12 @@ def _use_readmemh(text: str, component, prefix: str) -> str:
         if {a: w for a, w in got.items() if w} != {a: w for a, w in want.items() if w}:
             raise RuntimeError(f"memory wmem{bank}: the emitted contents differ from the memory plan")
         done.add(bank)
-        return f'{mo.group("ind")}initial $readmemh({{{MEM_DIR_PARAMETER}, "{prefix}_b{bank}.hex"}}, wmem{bank});\n'
+        # explicit first and last address: Yosys declares the memory with a descending range
+        # (reg [..] wmem0 [D-1:0]), where IEEE 1364-1995 loads a file without addresses from the left (highest)
+        # address and 1364-2005 from the lowest; with both given, every tool loads word a of the file into
+        # wmem[a] (and Icarus no longer warns "Standard inconsistency")
+        return (f'{mo.group("ind")}initial $readmemh({{{MEM_DIR_PARAMETER}, "{prefix}_b{bank}.hex"}}, wmem{bank}, '
+                f'0, {len(plan.contents[bank]) - 1});\n')
 
     out = _MEMINIT.sub(repl, text)
     if done != set(range(plan.n_banks)):
