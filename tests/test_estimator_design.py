@@ -207,3 +207,20 @@ def test_simulate_estimator_folder_writes_hw_beside_bittrue_and_float(est_folder
     assert rep["design"]["kind"] == "estimator" and rep["fit"] is None
     assert "| verilator | 120 | 0 | 1..1 | 1 |" in text and "mode accuracy hw / float" in text
     assert "Latency 1 cycle, II 1." in text
+
+
+@pytest.mark.parametrize("ports, reset, polarity", [("axis", "aresetn", "low"), ("amaranth", "rst", "high")])
+def test_estimator_header_says_what_each_port_does(tmp_path, ports, reset, polarity):
+    """The estimator's Verilog header described its ports by their manifest roles ('aresetn ... reset',
+    's_axis_tvalid ... in.valid'): no reset polarity, no handshake rule. It now says what the PWAS designs' header says."""
+    from pwas_hdl.design.generate import build_design
+
+    path = write_estimator(estimator_config(), tmp_path / "est.json")
+    gd = build_design(path, ports=ports)
+    head = gd.files["pwas_estimator.v"].split("\n\n")[0]
+    lines = {ln.split()[1]: ln for ln in head.splitlines() if ln.startswith("//   ") and not ln.startswith("//     ")}
+    assert f"synchronous reset, active {polarity}" in lines[reset], head
+    assert "clock, rising edge" in lines[gd.manifest["clock"]["port"]]
+    roles = {p["role"]: p["name"] for p in gd.manifest["ports"]}
+    assert f"a transfer on a rising edge with {roles['in.valid']} & {roles['in.ready']}" in lines[roles["in.ready"]]
+    assert all(not ln.rstrip().endswith((" reset", " in.valid", " out.payload")) for ln in lines.values()), head
