@@ -195,54 +195,52 @@ def markdown(doc: dict) -> str:
 def run_hardware(kinds=("pairs", "triples"), synth: bool = False, workdir: Path | None = None,
                  progress: Callable[[str], None] | None = print) -> dict[str, Any]:
     """The additive Lorenz My = 8 sensors (seed 0) in RTL: 2000 test samples on Icarus and Verilator; optional ECP5 resources."""
-    import tempfile
-
     from pwas_hdl.design.generate import build_design, generate
     from pwas_hdl.io.csv_table import format_csv
     from pwas_hdl.systems.lorenz import lorenz
     from pwas_hdl.verify.simulation import simulate_data
 
     say = progress or (lambda m: None)
-    work = Path(workdir or tempfile.mkdtemp(prefix="pwas-additive-hw-"))
-    n_total = N_TRAIN + N_TEST + HISTORY - 1
-    data = lorenz(n_total, seed=0, burn_in=BURN_IN)
-    te = slice(N_TRAIN, n_total)
-    csv = work / "test.csv"
-    work.mkdir(parents=True, exist_ok=True)
-    csv.write_text(format_csv({"y": data.y[te, 0], "z_true": data.z_true[te, 0]}))
-    out: dict[str, Any] = {"data": "lorenz seed 0: trained on samples 0..5999, replayed 6000..8006 (2000 estimates)", "designs": []}
-    for kind in kinds:
-        sensor = PWASVirtualSensor(mu=0, my=8, partitions=7, gamma=1.2, additive=kind, output_names=["y"], target_names=["z"])
-        sensor.fit(None, data.y[:N_TRAIN], data.z[:N_TRAIN])
-        folder = work / f"my8_{kind}"
-        gd = generate(sensor, folder, design="sensor")
-        rec = {"kind": kind, "N": int(sensor.grid_.n_vertices), "parts": len(sensor.grid_.subsets), "latency_cycles": gd.manifest["latency_cycles"],
-               "weights": gd.manifest["formats"]["weight"]["str"], "output": gd.manifest["formats"]["output"]["str"],
-               "memory": {k: gd.manifest["memory"][k] for k in ("memories", "depth", "word_bits", "words", "bits")}, "sim": {}}
-        for sim in ("icarus", "verilator"):
-            t0 = time.monotonic()
-            r = simulate_data(folder, csv, work / f"my8_{kind}_{sim}.csv", simulator=sim, cache_dir=work / "cache")
-            s = r["summary"]
-            rec["sim"][sim] = {"passed": bool(s["checks"]["passed"]), "outputs": int(len(r["rows"])),
-                               "mismatches": int(r["result"].mismatches), "ii": r["result"].ii,
-                               "latencies": sorted(set(r["result"].latencies)),
-                               "rmsee_hw": float(np.sqrt(np.mean((r["estimates"][:, 0] - data.z_true[te, 0][r["rows"]]) ** 2))),
-                               "wall_s": round(time.monotonic() - t0, 1)}
-            say(f"My = 8 {kind}: {sim}: {rec['sim'][sim]}")
-        if synth and kind == "pairs":
-            from pwas_hdl.flow.timing_closure import measure_design
-
-            for pipe in ("min",):  # once (the `short` build of hw_tables: no optional registers)
-                core = build_design(sensor, design="core", pipeline=pipe)
+    with br.scratch_folder("pwas-additive-hw-", workdir) as work:
+        n_total = N_TRAIN + N_TEST + HISTORY - 1
+        data = lorenz(n_total, seed=0, burn_in=BURN_IN)
+        te = slice(N_TRAIN, n_total)
+        csv = work / "test.csv"
+        work.mkdir(parents=True, exist_ok=True)
+        csv.write_text(format_csv({"y": data.y[te, 0], "z_true": data.z_true[te, 0]}))
+        out: dict[str, Any] = {"data": "lorenz seed 0: trained on samples 0..5999, replayed 6000..8006 (2000 estimates)", "designs": []}
+        for kind in kinds:
+            sensor = PWASVirtualSensor(mu=0, my=8, partitions=7, gamma=1.2, additive=kind, output_names=["y"], target_names=["z"])
+            sensor.fit(None, data.y[:N_TRAIN], data.z[:N_TRAIN])
+            folder = work / f"my8_{kind}"
+            gd = generate(sensor, folder, design="sensor")
+            rec = {"kind": kind, "N": int(sensor.grid_.n_vertices), "parts": len(sensor.grid_.subsets), "latency_cycles": gd.manifest["latency_cycles"],
+                   "weights": gd.manifest["formats"]["weight"]["str"], "output": gd.manifest["formats"]["output"]["str"],
+                   "memory": {k: gd.manifest["memory"][k] for k in ("memories", "depth", "word_bits", "words", "bits")}, "sim": {}}
+            for sim in ("icarus", "verilator"):
                 t0 = time.monotonic()
-                m = measure_design(core, "ecp5", freq_mhz=150.0, seed=1, workdir=work / f"synth_{kind}_{pipe}")
-                rec.setdefault("ecp5_core", {})[pipe] = {
-                    k: m.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp", "bram", "bram_bits")}
-                rec["ecp5_core"][pipe]["runtime_s"] = round(time.monotonic() - t0, 1)
-                say(f"My = 8 {kind} core ({pipe}) on ECP5: {rec['ecp5_core'][pipe]}")
-        out["designs"].append(rec)
-    out["environment"] = br.environment()
-    return out
+                r = simulate_data(folder, csv, work / f"my8_{kind}_{sim}.csv", simulator=sim, cache_dir=work / "cache")
+                s = r["summary"]
+                rec["sim"][sim] = {"passed": bool(s["checks"]["passed"]), "outputs": int(len(r["rows"])),
+                                   "mismatches": int(r["result"].mismatches), "ii": r["result"].ii,
+                                   "latencies": sorted(set(r["result"].latencies)),
+                                   "rmsee_hw": float(np.sqrt(np.mean((r["estimates"][:, 0] - data.z_true[te, 0][r["rows"]]) ** 2))),
+                                   "wall_s": round(time.monotonic() - t0, 1)}
+                say(f"My = 8 {kind}: {sim}: {rec['sim'][sim]}")
+            if synth and kind == "pairs":
+                from pwas_hdl.flow.timing_closure import measure_design
+
+                for pipe in ("min",):  # once (the `short` build of hw_tables: no optional registers)
+                    core = build_design(sensor, design="core", pipeline=pipe)
+                    t0 = time.monotonic()
+                    m = measure_design(core, "ecp5", freq_mhz=150.0, seed=1, workdir=work / f"synth_{kind}_{pipe}")
+                    rec.setdefault("ecp5_core", {})[pipe] = {
+                        k: m.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp", "bram", "bram_bits")}
+                    rec["ecp5_core"][pipe]["runtime_s"] = round(time.monotonic() - t0, 1)
+                    say(f"My = 8 {kind} core ({pipe}) on ECP5: {rec['ecp5_core'][pipe]}")
+            out["designs"].append(rec)
+        out["environment"] = br.environment()
+        return out
 
 
 #: The full Table VI-size helicopter core of ``hw_tables`` (``heli_mu2_my2_p3``, default build, ECP5
@@ -289,34 +287,32 @@ def run_heli_hardware(kinds=("time", "pairs"), workdir: Path | None = None,
     """The additive helicopter ``Mu = My = 4`` cores (seed 0, the accuracy protocol) placed and routed
     once on ECP5 with the settings of ``hw_tables`` (default pipeline, LFE5U-45F, 150 MHz, seed 1,
     timing harness), beside that table's full ``Mu = My = 2`` core (Table VI size)."""
-    import tempfile
-
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.flow.timing_closure import measure_design
     from pwas_hdl.systems.helicopter import helicopter
 
     say = progress or (lambda m: None)
-    work = Path(workdir or tempfile.mkdtemp(prefix="pwas-additive-heli-"))
-    h = helicopter(25000, seed=0)
-    tr = slice(0, 20000)
-    out: dict[str, Any] = {"data": "helicopter seed 0, trained on samples 0..19999 (the accuracy protocol)", "designs": []}
-    for kind in kinds:
-        sensor = PWASVirtualSensor(mu=4, my=4, partitions=3, gamma=1.1, tikhonov_order=1, additive=kind,
-                                   input_names=["psi_d", "phi_d"], output_names=["phi"], target_names=["psi"])
-        sensor.fit(h.u[tr], h.y[tr], h.z[tr])
-        gd = build_design(sensor, design="core")
-        t0 = time.monotonic()
-        m = measure_design(gd, "ecp5", freq_mhz=150.0, seed=1, workdir=work / f"heli_{kind}")
-        rec = {"kind": kind, "n": 12, "N": int(sensor.grid_.n_vertices), "parts": len(sensor.grid_.subsets),
-               "weights": gd.manifest["formats"]["weight"]["str"],
-               "memory": {k: gd.manifest["memory"][k] for k in ("memories", "depth", "word_bits", "words", "bits")},
-               **{k: m.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp", "bram", "bram_bits")},
-               "runtime_s": round(time.monotonic() - t0, 1)}
-        say(f"helicopter Mu = My = 4 {kind} core on ECP5: {rec}")
-        out["designs"].append(rec)
-    out["full_reference"] = full_reference(say)
-    out["environment"] = br.environment()
-    return out
+    with br.scratch_folder("pwas-additive-heli-", workdir) as work:
+        h = helicopter(25000, seed=0)
+        tr = slice(0, 20000)
+        out: dict[str, Any] = {"data": "helicopter seed 0, trained on samples 0..19999 (the accuracy protocol)", "designs": []}
+        for kind in kinds:
+            sensor = PWASVirtualSensor(mu=4, my=4, partitions=3, gamma=1.1, tikhonov_order=1, additive=kind,
+                                       input_names=["psi_d", "phi_d"], output_names=["phi"], target_names=["psi"])
+            sensor.fit(h.u[tr], h.y[tr], h.z[tr])
+            gd = build_design(sensor, design="core")
+            t0 = time.monotonic()
+            m = measure_design(gd, "ecp5", freq_mhz=150.0, seed=1, workdir=work / f"heli_{kind}")
+            rec = {"kind": kind, "n": 12, "N": int(sensor.grid_.n_vertices), "parts": len(sensor.grid_.subsets),
+                   "weights": gd.manifest["formats"]["weight"]["str"],
+                   "memory": {k: gd.manifest["memory"][k] for k in ("memories", "depth", "word_bits", "words", "bits")},
+                   **{k: m.get(k) for k in ("part", "fmax_mhz", "latency_cycles", "latency_ns", "luts", "ffs_core", "dsp", "bram", "bram_bits")},
+                   "runtime_s": round(time.monotonic() - t0, 1)}
+            say(f"helicopter Mu = My = 4 {kind} core on ECP5: {rec}")
+            out["designs"].append(rec)
+        out["full_reference"] = full_reference(say)
+        out["environment"] = br.environment()
+        return out
 
 
 def heli_hardware_markdown(hw: dict[str, Any]) -> str:

@@ -312,11 +312,10 @@ def _hardware_mode(a) -> bool:
     if not a.hardware:
         return False
     import json
-    import tempfile
-
     from pwas_hdl.io.atomic import atomic_write_text
 
-    hw = run_hardware(a.workdir or Path(tempfile.mkdtemp(prefix="pwas-bp-hw-")), a.simulator, synth=a.synth)
+    with br.scratch_folder("pwas-bp-hw-", a.workdir) as work:
+        hw = run_hardware(work, a.simulator, synth=a.synth)
     a.outdir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(a.outdir / "breakpoints_hw.json", json.dumps(hw, indent=1) + "\n")
     atomic_write_text(a.outdir / "breakpoints_hw.md", hardware_markdown(hw))

@@ -17,10 +17,9 @@ import sys
 
 import argparse
 import json
-import tempfile
 from pathlib import Path
 
-from pwas_hdl.bench_results import default_outdir
+from pwas_hdl.bench_results import default_outdir, scratch_folder
 
 HERE = Path(__file__).resolve().parent
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "fmax_mhz", "latency_cycles")
@@ -36,36 +35,36 @@ def main() -> None:
     from pwas_hdl.flow.synthesis import synthesize
     from pwas_hdl.systems.lorenz import lorenz
 
-    root = Path(tempfile.mkdtemp(prefix="pwas-input-scale-"))
-    train, _ = lorenz(6000, seed=0).split(6000)
-    rows = []
-    for p in (7, 8):
-        m = PWASVirtualSensor(my=4, partitions=p, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
-        m.fit(None, train.y, train.z)
-        for scale in ("pow2", "exact"):
-            out = root / f"p{p}-{scale}"
-            gd = generate(m, out, design="sensor", input_scale=scale)
-            inp = gd.manifest["formats"]["inputs"][0]
-            row = {"p": p, "input_scale": scale, "domain_codes": [inp["lo_code"], inp["hi_code"]],
-                   "codes_used": inp["hi_code"] - inp["lo_code"], "code_range": 2 ** inp["bits"], "F": inp["F"]}
-            for target in ("generic", "ecp5"):
-                r = synthesize(out, target=target)
-                row[target] = {k: r.get(k) for k in KEYS}
-                print(f"p = {p} {scale:5s} {target:7s}: " + ", ".join(f"{k} {row[target][k]}" for k in KEYS))
-            rows.append(row)
-    args.outdir.mkdir(parents=True, exist_ok=True)
-    (args.outdir / "input_scale_cost.json").write_text(json.dumps({"design": "Lorenz sensor My = 4, 12-bit inputs", "rows": rows},
-                                                                  indent=2) + "\n")
-    md = ["# Cost of `--input-scale exact` (Lorenz sensor, My = 4, 12-bit inputs; `benchmarks/input_scale_cost.py`)", "",
-          "| p | input scale | codes of the domain | generic LUTs | generic DSP | ECP5 LUTs | ECP5 FFs | ECP5 carry | ECP5 DSP | ECP5 fmax MHz |",
-          "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        g, e = r["generic"], r["ecp5"]
-        md.append(f"| {r['p']} | {r['input_scale']} | {r['codes_used']} of {r['code_range']} ({100 * r['codes_used'] / r['code_range']:.1f} %) | "
-                  f"{g['luts']} | {g['dsp']} | {e['luts']} | {e['ffs']} | {e['carry']} | {e['dsp']} | {e['fmax_mhz']} |")
-    md.append("")
-    (args.outdir / "input_scale_cost.md").write_text("\n".join(md))
-    print(f"wrote {args.outdir / 'input_scale_cost.md'}")
+    with scratch_folder("pwas-input-scale-") as root:
+        train, _ = lorenz(6000, seed=0).split(6000)
+        rows = []
+        for p in (7, 8):
+            m = PWASVirtualSensor(my=4, partitions=p, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
+            m.fit(None, train.y, train.z)
+            for scale in ("pow2", "exact"):
+                out = root / f"p{p}-{scale}"
+                gd = generate(m, out, design="sensor", input_scale=scale)
+                inp = gd.manifest["formats"]["inputs"][0]
+                row = {"p": p, "input_scale": scale, "domain_codes": [inp["lo_code"], inp["hi_code"]],
+                       "codes_used": inp["hi_code"] - inp["lo_code"], "code_range": 2 ** inp["bits"], "F": inp["F"]}
+                for target in ("generic", "ecp5"):
+                    r = synthesize(out, target=target)
+                    row[target] = {k: r.get(k) for k in KEYS}
+                    print(f"p = {p} {scale:5s} {target:7s}: " + ", ".join(f"{k} {row[target][k]}" for k in KEYS))
+                rows.append(row)
+        args.outdir.mkdir(parents=True, exist_ok=True)
+        (args.outdir / "input_scale_cost.json").write_text(json.dumps({"design": "Lorenz sensor My = 4, 12-bit inputs", "rows": rows},
+                                                                      indent=2) + "\n")
+        md = ["# Cost of `--input-scale exact` (Lorenz sensor, My = 4, 12-bit inputs; `benchmarks/input_scale_cost.py`)", "",
+              "| p | input scale | codes of the domain | generic LUTs | generic DSP | ECP5 LUTs | ECP5 FFs | ECP5 carry | ECP5 DSP | ECP5 fmax MHz |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in rows:
+            g, e = r["generic"], r["ecp5"]
+            md.append(f"| {r['p']} | {r['input_scale']} | {r['codes_used']} of {r['code_range']} ({100 * r['codes_used'] / r['code_range']:.1f} %) | "
+                      f"{g['luts']} | {g['dsp']} | {e['luts']} | {e['ffs']} | {e['carry']} | {e['dsp']} | {e['fmax_mhz']} |")
+        md.append("")
+        (args.outdir / "input_scale_cost.md").write_text("\n".join(md))
+        print(f"wrote {args.outdir / 'input_scale_cost.md'}")
 
 
 if __name__ == "__main__":

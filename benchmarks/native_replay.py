@@ -26,13 +26,12 @@ import sys
 import argparse
 import json
 import platform
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir
+from pwas_hdl.bench_results import default_outdir, scratch_folder
 
 HERE = Path(__file__).resolve().parent
 
@@ -58,63 +57,63 @@ def main() -> None:
     from pwas_hdl.systems.lorenz import lorenz
     from pwas_hdl.verify.simulation import load_design, run_rtl, sim_module, simulate_data, standard_runs
 
-    root = Path(tempfile.mkdtemp(prefix="pwas-native-bench-"))
-    d = lorenz(8003, seed=0)
-    train, test = d.split(6000)
-    m = PWASVirtualSensor(my=4, partitions=7, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
-    m.fit(None, train.y, train.z)
-    generate(m, root / "sensor", design="sensor")
-    write_csv(root / "test.csv", test.columns())
-    result: dict = {"machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
-                    "design": "Table II sensor (My = 4, p = 7, N = 4096), generate --design sensor (defaults)"}
+    with scratch_folder("pwas-native-bench-") as root:
+        d = lorenz(8003, seed=0)
+        train, test = d.split(6000)
+        m = PWASVirtualSensor(my=4, partitions=7, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
+        m.fit(None, train.y, train.z)
+        generate(m, root / "sensor", design="sensor")
+        write_csv(root / "test.csv", test.columns())
+        result: dict = {"machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
+                        "design": "Table II sensor (My = 4, p = 7, N = 4096), generate --design sensor (defaults)"}
 
-    lorenz_rows = {}
-    for engine in ("native", "cocotb"):
+        lorenz_rows = {}
+        for engine in ("native", "cocotb"):
+            t0 = time.perf_counter()
+            r = simulate_data(root / "sensor", root / "test.csv", root / f"{engine}.csv", simulator="verilator", engine=engine)
+            s = r["summary"]
+            lorenz_rows[engine] = {
+                "samples": s["samples"], "mismatches": s["mismatches"], "samples_per_second": s["samples_per_second"],
+                "simulation_seconds": s["simulation_seconds"], "build_seconds": s["build_seconds"], "build_reused": s["build_reused"],
+                "total_seconds": time.perf_counter() - t0, "rmsee_hw": s["targets"]["z"]["rmsee_hw"],
+                "latency_cycles": s["latency_cycles"]["measured_max"], "ii": s["ii"]["measured"],
+            }
+            print(f"lorenz test set, {engine}: {s['samples']} samples, {s['mismatches']} mismatches, "
+                  f"{s['samples_per_second']:.4g} samples/s (build {s['build_seconds']:.1f} s)")
+        result["lorenz_test_set"] = lorenz_rows
+        same = (root / "native.csv").read_text() == (root / "cocotb.csv").read_text()
+        result["lorenz_test_set"]["csv_identical"] = same
+
+        design = load_design(root / "sensor")
+        stim = sim_module("pwas_stimulus")
         t0 = time.perf_counter()
-        r = simulate_data(root / "sensor", root / "test.csv", root / f"{engine}.csv", simulator="verilator", engine=engine)
-        s = r["summary"]
-        lorenz_rows[engine] = {
-            "samples": s["samples"], "mismatches": s["mismatches"], "samples_per_second": s["samples_per_second"],
-            "simulation_seconds": s["simulation_seconds"], "build_seconds": s["build_seconds"], "build_reused": s["build_reused"],
-            "total_seconds": time.perf_counter() - t0, "rmsee_hw": s["targets"]["z"]["rmsee_hw"],
-            "latency_cycles": s["latency_cycles"]["measured_max"], "ii": s["ii"]["measured"],
+        codes = stim.sensor_codes(design.model, [f.get("signal", f["name"]) for f in design.in_fields], args.vectors, seed=1)
+        runs = standard_runs(design, codes, seed=1, stalls=(0.7, 0.6))
+        prep = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        res = run_rtl(design, runs, "verilator", engine="native", strict=False)
+        wall = time.perf_counter() - t0
+        per_run = []
+        for run, rr in zip(runs, res.raw["runs"]):
+            n_out = sum(int(sr["outputs"]) for sr in rr["segments"])
+            per_run.append({"run": run.name, "p_valid": run.p_valid, "p_ready": run.p_ready, "outputs": n_out,
+                            "mismatches": sum(int(sr["mismatches"]) for sr in rr["segments"]), "cycles": int(rr["cycles"]),
+                            "seconds": float(rr["wall_s"]), "samples_per_second": n_out / float(rr["wall_s"]),
+                            "cycles_per_second": int(rr["cycles"]) / float(rr["wall_s"])})
+            print(f"{args.vectors} random vectors, {run.name}: {n_out} outputs, {per_run[-1]['mismatches']} mismatches, "
+                  f"{per_run[-1]['samples_per_second']:.4g} samples/s, {per_run[-1]['cycles_per_second']:.4g} cycles/s")
+        result["random_vectors"] = {
+            "vectors": args.vectors, "runs": per_run, "outputs": res.outputs, "mismatches": res.mismatches, "passed": res.passed,
+            "failures": res.failures[:5], "latencies": sorted(set(int(v) for v in res.latencies)), "ii": res.ii,
+            "within_error_bound": res.within_bound, "samples_per_second": res.outputs / res.sim_seconds,
+            "python_preparation_seconds": prep, "run_rtl_wall_seconds": wall,
+            "end_to_end_samples_per_second": res.outputs / wall,
         }
-        print(f"lorenz test set, {engine}: {s['samples']} samples, {s['mismatches']} mismatches, "
-              f"{s['samples_per_second']:.4g} samples/s (build {s['build_seconds']:.1f} s)")
-    result["lorenz_test_set"] = lorenz_rows
-    same = (root / "native.csv").read_text() == (root / "cocotb.csv").read_text()
-    result["lorenz_test_set"]["csv_identical"] = same
-
-    design = load_design(root / "sensor")
-    stim = sim_module("pwas_stimulus")
-    t0 = time.perf_counter()
-    codes = stim.sensor_codes(design.model, [f.get("signal", f["name"]) for f in design.in_fields], args.vectors, seed=1)
-    runs = standard_runs(design, codes, seed=1, stalls=(0.7, 0.6))
-    prep = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    res = run_rtl(design, runs, "verilator", engine="native", strict=False)
-    wall = time.perf_counter() - t0
-    per_run = []
-    for run, rr in zip(runs, res.raw["runs"]):
-        n_out = sum(int(sr["outputs"]) for sr in rr["segments"])
-        per_run.append({"run": run.name, "p_valid": run.p_valid, "p_ready": run.p_ready, "outputs": n_out,
-                        "mismatches": sum(int(sr["mismatches"]) for sr in rr["segments"]), "cycles": int(rr["cycles"]),
-                        "seconds": float(rr["wall_s"]), "samples_per_second": n_out / float(rr["wall_s"]),
-                        "cycles_per_second": int(rr["cycles"]) / float(rr["wall_s"])})
-        print(f"{args.vectors} random vectors, {run.name}: {n_out} outputs, {per_run[-1]['mismatches']} mismatches, "
-              f"{per_run[-1]['samples_per_second']:.4g} samples/s, {per_run[-1]['cycles_per_second']:.4g} cycles/s")
-    result["random_vectors"] = {
-        "vectors": args.vectors, "runs": per_run, "outputs": res.outputs, "mismatches": res.mismatches, "passed": res.passed,
-        "failures": res.failures[:5], "latencies": sorted(set(int(v) for v in res.latencies)), "ii": res.ii,
-        "within_error_bound": res.within_bound, "samples_per_second": res.outputs / res.sim_seconds,
-        "python_preparation_seconds": prep, "run_rtl_wall_seconds": wall,
-        "end_to_end_samples_per_second": res.outputs / wall,
-    }
-    print(f"all: {res.outputs} outputs, {res.mismatches} mismatches, {res.outputs / res.sim_seconds:.4g} samples/s in the bench, "
-          f"{res.outputs / wall:.4g} samples/s end to end (job writing, run, result reading; bit-true model {prep:.1f} s before)")
-    args.outdir.mkdir(parents=True, exist_ok=True)
-    (args.outdir / "native_replay.json").write_text(json.dumps(result, indent=2) + "\n")
-    write_md(result, args.outdir)
+        print(f"all: {res.outputs} outputs, {res.mismatches} mismatches, {res.outputs / res.sim_seconds:.4g} samples/s in the bench, "
+              f"{res.outputs / wall:.4g} samples/s end to end (job writing, run, result reading; bit-true model {prep:.1f} s before)")
+        args.outdir.mkdir(parents=True, exist_ok=True)
+        (args.outdir / "native_replay.json").write_text(json.dumps(result, indent=2) + "\n")
+        write_md(result, args.outdir)
 
 
 def write_md(result: dict, outdir: Path) -> None:

@@ -38,7 +38,6 @@ import argparse
 import json
 import platform
 import sys
-import tempfile
 import time
 import traceback
 from pathlib import Path
@@ -46,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from pwas_hdl.bench_results import default_outdir
+from pwas_hdl.bench_results import default_outdir, scratch_folder
 
 #: The pipeline flags a random pipeline draws (``pwas_hdl.hdl.params.Pipeline``), besides ``tree_levels``.
 PIPELINE_FLAGS = ("split", "rank", "mem_out", "product", "addr", "mul_in", "offset", "bank", "mul_halves", "mu_late",
@@ -217,24 +216,24 @@ def main(argv: list[str] | None = None) -> int:
     with OutputSet() as outs:
         jpath = outs.add(args.outdir / f"{stem}.json", "--outdir")
         mpath = outs.add(args.outdir / f"{stem}.md", "--outdir")
-        root = Path(tempfile.mkdtemp(prefix="pwas-rtl-random-"))
-        cache = root / "cache"
-        rows = []
-        t0 = time.perf_counter()
-        for i in range(args.first, args.first + args.count):
-            cfg = draw_config(args.seed, i)
-            rec = run_config(cfg, args.simulator, args.samples, root, cache)
-            rec["index"] = i
-            rows.append(rec)
-            extra = rec.get("message", "") if rec["outcome"] != "pass" else f"{rec['outputs']} outputs"
-            print(f"[{i}] {cfg.name}: {rec['outcome']} ({rec['seconds']:.1f} s) {extra[:160]}", flush=True)
-        counts = {k: sum(r["outcome"] == k for r in rows) for k in ("pass", "refused", "FAIL", "error")}
-        result = {"seed": args.seed, "first": args.first, "count": args.count, "simulator": args.simulator,
-                  "samples": args.samples, "counts": counts, "seconds": time.perf_counter() - t0,
-                  "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
-                  "configs": rows}
-        outs.write_text(jpath, json.dumps(result, indent=2) + "\n")
-        outs.write_text(mpath, markdown(result))
+        with scratch_folder("pwas-rtl-random-") as root:
+            cache = root / "cache"
+            rows = []
+            t0 = time.perf_counter()
+            for i in range(args.first, args.first + args.count):
+                cfg = draw_config(args.seed, i)
+                rec = run_config(cfg, args.simulator, args.samples, root, cache)
+                rec["index"] = i
+                rows.append(rec)
+                extra = rec.get("message", "") if rec["outcome"] != "pass" else f"{rec['outputs']} outputs"
+                print(f"[{i}] {cfg.name}: {rec['outcome']} ({rec['seconds']:.1f} s) {extra[:160]}", flush=True)
+            counts = {k: sum(r["outcome"] == k for r in rows) for k in ("pass", "refused", "FAIL", "error")}
+            result = {"seed": args.seed, "first": args.first, "count": args.count, "simulator": args.simulator,
+                      "samples": args.samples, "counts": counts, "seconds": time.perf_counter() - t0,
+                      "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
+                      "configs": rows}
+            outs.write_text(jpath, json.dumps(result, indent=2) + "\n")
+            outs.write_text(mpath, markdown(result))
     print(f"{counts['pass']} pass, {counts['refused']} refused, {counts['FAIL']} FAIL, {counts['error']} error; "
           f"wrote {jpath} and {mpath}")
     return 1 if counts["FAIL"] or counts["error"] else 0

@@ -19,8 +19,9 @@ import sys
 
 import argparse
 import json
-import tempfile
 from pathlib import Path
+
+from pwas_hdl.bench_results import scratch_folder
 
 KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "logic_cells", "fmax_mhz", "latency_cycles", "latency_ns", "ii",
         "throughput_msps", "utilization")
@@ -33,23 +34,23 @@ def run(quick: bool, progress=print) -> dict:
     from pwas_hdl.systems.lorenz import lorenz
 
     my, p = (2, 4) if quick else (4, 7)
-    root = Path(tempfile.mkdtemp(prefix="pwas-serial-"))
-    train, _ = lorenz(6000, seed=0).split(6000)
-    m = PWASVirtualSensor(my=my, partitions=p, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
-    m.fit(None, train.y, train.z)
-    rows = []
-    for arch in ("parallel", "serial"):
-        out = root / arch
-        gd = generate(m, out, design="sensor", architecture=arch)
-        man = gd.manifest
-        r = synthesize(out, target="ice40", device="up5k")
-        row = {"architecture": arch, "memory": {k: man["memory"][k] for k in ("kind", "memories", "depth", "word_bits", "words", "bits")},
-               "multipliers_rtl": r.get("multipliers_rtl"), "port_bits": sum(pt["width"] for pt in man["ports"]),
-               "part": r.get("part"), **{k: r.get(k) for k in KEYS}}
-        progress(f"{arch:8s}: " + ", ".join(f"{k} {row[k]}" for k in KEYS if k != "utilization"))
-        rows.append(row)
-    return {"design": f"Lorenz virtual-sensor top My = {my}, p = {p}, N = {(p + 1) ** my}, 12-bit input",
-            "device": "iCE40 UP5K SG48 (nextpnr-ice40 --up5k --package sg48), seed 1", "rows": rows}
+    with scratch_folder("pwas-serial-") as root:
+        train, _ = lorenz(6000, seed=0).split(6000)
+        m = PWASVirtualSensor(my=my, partitions=p, gamma=1.2, sigma=3.2e-4, output_names=["y"], target_names=["z"])
+        m.fit(None, train.y, train.z)
+        rows = []
+        for arch in ("parallel", "serial"):
+            out = root / arch
+            gd = generate(m, out, design="sensor", architecture=arch)
+            man = gd.manifest
+            r = synthesize(out, target="ice40", device="up5k")
+            row = {"architecture": arch, "memory": {k: man["memory"][k] for k in ("kind", "memories", "depth", "word_bits", "words", "bits")},
+                   "multipliers_rtl": r.get("multipliers_rtl"), "port_bits": sum(pt["width"] for pt in man["ports"]),
+                   "part": r.get("part"), **{k: r.get(k) for k in KEYS}}
+            progress(f"{arch:8s}: " + ", ".join(f"{k} {row[k]}" for k in KEYS if k != "utilization"))
+            rows.append(row)
+        return {"design": f"Lorenz virtual-sensor top My = {my}, p = {p}, N = {(p + 1) ** my}, 12-bit input",
+                "device": "iCE40 UP5K SG48 (nextpnr-ice40 --up5k --package sg48), seed 1", "rows": rows}
 
 
 def markdown(doc: dict) -> str:

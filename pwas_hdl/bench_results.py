@@ -29,10 +29,11 @@ import os
 import platform
 import re
 import sys
+from contextlib import contextmanager
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -42,6 +43,7 @@ from pwas_hdl.resources import schemas_dir
 
 __all__ = [
     "script_main",
+    "scratch_folder",
     "RESULTS_FORMAT",
     "RESULTS_VERSION",
     "STAGES",
@@ -470,6 +472,30 @@ def default_outdir() -> Path:
     if (here.parent / "pyproject.toml").is_file() and (here / "results").is_dir():
         return here / "results"
     return Path.cwd() / "benchmarks-results"
+
+
+@contextmanager
+def scratch_folder(prefix: str, keep: str | os.PathLike | None = None) -> Iterator[Path]:
+    """The work folder of a benchmark run (generated designs, simulator and synthesis files).
+
+    ``keep`` (a script's ``--workdir``): that folder, created if needed and kept. Otherwise a new
+    folder in the system's temporary directory, removed when the block ends, also on an error or
+    Ctrl-C: a benchmark writes its results to ``--outdir`` and leaves nothing else behind (the
+    100-configuration RTL sweep used to leave up to 3 GB in ``/tmp`` per run).
+    """
+    import shutil
+    import tempfile
+
+    if keep is not None:
+        path = Path(keep)
+        path.mkdir(parents=True, exist_ok=True)
+        yield path
+        return
+    path = Path(tempfile.mkdtemp(prefix=prefix))
+    try:
+        yield path
+    finally:
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def script_main(main: Any, argv: Sequence[str] | None = None) -> int:

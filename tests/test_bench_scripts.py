@@ -191,3 +191,49 @@ def test_rtl_random_configs_bad_option(tmp_path, capsys, args, message):
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
     assert not out.exists()
+
+
+def test_scratch_folder_is_removed_unless_kept(tmp_path, monkeypatch):
+    import tempfile
+
+    from pwas_hdl.bench_results import scratch_folder
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    with scratch_folder("pwas-x-") as work:
+        (work / "design").mkdir()
+        (work / "design" / "a.v").write_text("module a; endmodule\n")
+    assert not work.exists()
+    with pytest.raises(RuntimeError):
+        with scratch_folder("pwas-x-") as work:
+            (work / "f").write_text("x")
+            raise RuntimeError("a failed run")
+    assert not work.exists() and list((tmp_path / "tmp").iterdir()) == []
+    with scratch_folder("pwas-x-", tmp_path / "keep" / "me") as work:  # --workdir: created and kept
+        (work / "f").write_text("x")
+    assert (tmp_path / "keep" / "me" / "f").read_text() == "x"
+
+
+def test_rtl_random_configs_leaves_nothing_in_the_temp_folder(tmp_path, monkeypatch):
+    """The sweep generated its designs, simulator builds and work folders in a mkdtemp folder it never removed
+    (a 100-configuration run left up to 3 GB in /tmp); the results in --outdir are all it leaves now."""
+    import tempfile
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.rtl_random_configs")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    seen = []
+
+    def fake_run(cfg, simulator, samples, root, cache):  # what run_config leaves: a design folder and a cache
+        (root / cfg.name).mkdir(parents=True)
+        (root / cfg.name / "design.v").write_text("module d; endmodule\n")
+        cache.mkdir(exist_ok=True)
+        seen.append(root)
+        return {**bench._describe(cfg), "outcome": "refused", "message": "stub", "seconds": 0.0}
+
+    monkeypatch.setattr(bench, "run_config", fake_run)
+    assert script_main(bench.main, ["--quick", "--outdir", str(tmp_path / "out")]) == 0
+    assert seen and all(str(r).startswith(str(tmp)) for r in seen)
+    assert list(tmp.iterdir()) == [], list(tmp.iterdir())
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["rtl_random_configs_quick.json", "rtl_random_configs_quick.md"]
