@@ -160,11 +160,23 @@ def _report_error(exc: BaseException) -> int:
     return code
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A Python warning raised in a command body (e.g. the API's UserWarning of ``generate --overflow
+    saturate``) as one ``warning:`` line, like the command's own warnings: not Python's default
+    ``/path/to/module.py:482: UserWarning: ...`` and the source line after it."""
+    _warn("warning: " + " ".join(str(message).split()))
+
+
 @contextmanager
 def _user_errors() -> Iterator[None]:
-    """Run a command body: every exception becomes its message and exit status (:func:`_report_error`)."""
+    """Run a command body: every exception becomes its message and exit status (:func:`_report_error`),
+    every Python warning one ``warning:`` line (:func:`_show_warning`)."""
+    import warnings
+
     try:
-        yield
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            yield
     except _EXITS:
         raise
     except Exception as exc:  # noqa: BLE001 - the one place where every error is turned into an exit status

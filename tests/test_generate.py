@@ -259,3 +259,16 @@ def test_every_verilog_file_names_generator_model_and_formats(lorenz_tiny, tmp_p
             assert f"{model.name} SHA-256 {sha}" in head, v.name
             assert all(f in head for f in fmts), v.name
             assert "1 clock cycles" not in head, v.name
+
+
+def test_saturate_warning_is_one_warning_line_on_the_command_line(lorenz_tiny, tmp_path):
+    """`generate --overflow saturate` printed Python's raw UserWarning: '/path/to/pwas_hdl/fixedpoint/bittrue.py:482:
+    UserWarning: ...' and the source line after it (the install path, and not the `warning:` form of every other
+    warning of the command line), also under -q."""
+    for args in ([], ["-q"]):
+        r = runner.invoke(app, [*args, "generate", str(lorenz_tiny.model), "-o", str(tmp_path / f"g{len(args)}"),
+                                "--weight-bits", "3", "--overflow", "saturate"])
+        assert r.exit_code == 0, r.output
+        lines = [ln for ln in r.output.splitlines() if "saturated" in ln]
+        assert len(lines) == 1 and lines[0].startswith("warning: ") and "weight(s) saturated" in lines[0], r.output
+        assert "UserWarning" not in r.output and ".py:" not in r.output and "model = cls(" not in r.output, r.output
