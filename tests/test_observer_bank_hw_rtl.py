@@ -252,3 +252,12 @@ def test_switched_estimator_bench_quick_smoke():
     assert rtl and all(r["config"]["mismatches"] == 0 for r in rtl)
     assert all(r["config"]["mode_differs_beyond_bound"] == 0 for r in br.find_rows(doc, stage="bittrue"))
     assert "| replica |" in markdown(doc)
+
+
+def test_header_counts_cycles_in_words(bank_sensor):
+    """The Verilog header of a serial bank sensor read '… 11 cycle per sample'; the count now agrees with its noun."""
+    par = build_design(bank_sensor, design="sensor").files["pwas_sensor.v"]
+    ser = build_design(bank_sensor, design="sensor", architecture="serial")
+    n = ser.manifest["front_end"]["cycles_per_sample"]
+    assert n > 1 and f"; {n} cycles per sample;" in ser.files["pwas_sensor.v"]
+    assert "; 1 cycle per sample;" in par and "cycle(s)" not in par

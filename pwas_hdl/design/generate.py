@@ -641,6 +641,11 @@ def _port_meaning(man: dict, role: str) -> str:
     return text.replace("{polarity}", man["reset"]["polarity"])
 
 
+def _cycles(n: int) -> str:
+    """``1 cycle``, ``11 cycles``."""
+    return f"{n} cycle" + ("" if n == 1 else "s")
+
+
 def _verilog_header(man: dict, model_sha256: str) -> str:
     """Comment block at the top of the generated Verilog: generator, model, formats, ports, timing.
 
@@ -668,7 +673,7 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         labels = ", ".join(f"{v:g}" for v in c["classes"])
         lines.append(f"classifier of {c['target']} ({c['n_classes']} classes {labels}): argmax stage after the core, class index in "
                      f"{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}] {c['field']}, ties to the lowest class index, "
-                     f"{c['stage_latency_cycles']} cycle(s) of the latency")
+                     f"{_cycles(c['stage_latency_cycles'])} of the latency")
     if "warp" in man:  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
         w = man["warp"]
         lines.append(f"non-uniform partition (power-of-two cells): a warp maps each s{w['input_bits']}.0 input code to the uniform "
@@ -684,7 +689,7 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         ff = fe["formats"]
         lines.append(f"observer bank: {fe['n_models']} observers of order {fe['order']} ({fe['observer']}), window l = {fe['window']}, "
                      f"feature map {fe['feature_map']}; states s{ff['state_bits']}.{ff['state_frac']} (saturating), coefficients "
-                     f"{ff['coef_frac']} fraction bits; {fe['cycles_per_sample']} cycle per sample; first estimate at sample "
+                     f"{ff['coef_frac']} fraction bits; {_cycles(fe['cycles_per_sample'])} per sample; first estimate at sample "
                      f"{fe['first_output_sample']} after reset; |estimate - float sensor| <= "
                      f"{', '.join(repr(v) for v in fe['error_bound']['estimate']['physical'])} unless a state saturates")
     lines += [
@@ -748,7 +753,7 @@ def _classifier_section(man: dict) -> str:
     c = man["classifier"]
     labels = ", ".join(f"{v:g}" for v in c["classes"])
     return (f"\n## Classifier\n\nTarget `{c['target']}`, {c['n_classes']} classes ({labels}, in index order). An argmax "
-            f"stage after the core ({c['stage_latency_cycles']} cycle(s), included in the latency) writes the class index "
+            f"stage after the core ({_cycles(c['stage_latency_cycles'])}, included in the latency) writes the class index "
             f"to `{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}]` (`{c['field']}`); ties go to the lowest class index. "
             f"{c['float_agreement'][0].upper()}{c['float_agreement'][1:]}.\n")
 
