@@ -875,7 +875,7 @@ def simulate(
     """Replay DATA through the generated RTL in a simulator (cocotb) and check it bit for bit.
 
     Writes the -o/--out CSV (one row per hardware output: row, TARGET_hw, TARGET_bittrue, TARGET_float,
-    out_of_range) and a JSON summary: samples, mismatches against the bit-true model, the largest
+    out_of_range, mismatch (1 where the RTL differs from the bit-true model)) and a JSON summary: samples, mismatches against the bit-true model, the largest
     error against the float model (LSB and physical units), the RMSEE of the hardware estimate
     against TARGET_true (or TARGET) when DATA has it, the measured latency (cycles) and II, and
     the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.

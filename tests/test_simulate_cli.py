@@ -207,6 +207,9 @@ def test_simulate_help():
     assert res.exit_code == 0
     for opt in ("--simulator", "--engine", "--json", "--traj-col", "--stall", "--build-dir", "--waves"):
         assert opt in res.output
+    # the CSV columns the help lists are the ones simulate writes (mismatch was missing)
+    text = " ".join(res.output.split())
+    assert "row, TARGET_hw, TARGET_bittrue, TARGET_float, out_of_range, mismatch" in text
 
 
 def test_simulate_failure_names_a_log_that_still_exists(folders, tmp_path, monkeypatch):
