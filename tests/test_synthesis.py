@@ -350,6 +350,19 @@ def test_cli_harness_with_the_generic_target_is_refused(design: Path):
     assert "drop --harness" in r.output and not (design / "synth").exists()
 
 
+def test_cli_generic_target_refusal_names_the_options(design: Path):
+    """The refusal of --device / --package / --clock-mhz with --fpga generic named them `device`, `freq_mhz` and
+    pointed at the hidden old `--target`: it names the command's options now."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+
+    r = CliRunner().invoke(app, ["synth", str(design), "--fpga", "generic", "--device", "45k", "--clock-mhz", "50"])
+    assert r.exit_code == 2 and r.output.count("error:") == 1, r.output
+    assert "drop --device, --clock-mhz or use --fpga ice40/ecp5" in r.output, r.output
+    assert "freq_mhz" not in r.output and "--target" not in r.output and not (design / "synth").exists()
+
+
 def test_every_default_package_is_a_known_package():
     for dev, (pkg, _, _) in synthesis._ICE40.items():
         assert pkg in synthesis._ICE40_PACKAGES[dev], dev

@@ -495,9 +495,10 @@ def synth_summary_text(result: dict[str, Any]) -> str:
 def _resolve_device(target: str, device: str | None, package: str | None, freq_mhz: float | None):
     """-> (device, package, part name, synth_ice40 family or None, has DSPs)."""
     if target == "generic":
-        given = [name for name, v in (("device", device), ("package", package), ("freq_mhz", freq_mhz)) if v is not None]
+        # the command's option names (and its --fpga, not the hidden old --target): the message is the CLI's error line
+        given = [name for name, v in (("--device", device), ("--package", package), ("--clock-mhz", freq_mhz)) if v is not None]
         if given:
-            raise ValueError(f"the generic target has no device and no place and route; drop {', '.join(given)} or use --target ice40/ecp5")
+            raise ValueError(f"the generic target has no device and no place and route; drop {', '.join(given)} or use --fpga ice40/ecp5")
         return None, None, None, None, False
     dev = (device or DEFAULT_DEVICE[target]).strip().lower().lstrip("-")
     if target == "ice40":
