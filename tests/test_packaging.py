@@ -243,6 +243,6 @@ def test_installed_wheel_runs_the_flow_outside_the_checkout(built, tmp_path):
     assert summary["testbench_failures"] == []
     rows = (work / "icarus.csv").read_text(encoding="utf-8").splitlines()
     assert len(rows) == 1 + summary["samples"]
-    _run([cli, "synth", "hw", "--target", "generic"], work, env)
+    _run([cli, "synth", "hw", "--fpga", "generic"], work, env)
     synth = json.loads((work / "hw" / "synth" / "generic" / "synth.json").read_text(encoding="utf-8"))
     assert synth["top"] == "pwas_sensor" and synth["luts"] > 0 and synth["ffs"] > 0
