@@ -344,7 +344,7 @@ def _progress(description: str) -> Iterator:
 
 @app.command()
 def fit(
-    data: Annotated[Path, typer.Argument(help="CSV file with a header line; one row per sample.")],
+    data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV file with a header line; one row per sample.")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Model file to write (JSON). Required.", show_default=False)] = None,
     inputs: Annotated[Optional[list[str]], typer.Option("-u", "--inputs", help="Input column(s) u (repeat or comma-separate).")] = None,
     outputs: Annotated[Optional[list[str]], typer.Option("-y", "--outputs", help="Measured output column(s) y.")] = None,
@@ -632,7 +632,7 @@ def fit_map_cmd(
 @app.command()
 def predict(
     model_path: ModelArg,
-    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns.")],
+    data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV with the model's input/output columns.")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of estimates to write. Required.", show_default=False)] = None,
     traj_col: TrajColOpt = None,
     output_old: Annotated[Optional[Path], _hidden("--output")] = None,
@@ -816,7 +816,7 @@ def generate(
 
 @app.command()
 def synth(
-    outdir: Annotated[Path, typer.Argument(help="Folder written by `pwas-hdl generate`.")],
+    outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate`.")],
     fpga: Annotated[Optional[str], typer.Option("--fpga", help="FPGA family: ecp5 (yosys + nextpnr-ecp5, the default), ice40 (yosys + nextpnr-ice40) or generic (yosys only, 4-input LUTs).", show_default=False)] = None,
     device: Annotated[Optional[str], typer.Option("--device", help="Device (ice40: hx8k, hx1k, lp8k, up5k, ...; ecp5: 25k, 45k, 85k, ...). Default: ice40 hx8k, ecp5 45k.")] = None,
     package: Annotated[Optional[str], typer.Option("--package", help="Package (default per device).")] = None,
@@ -859,7 +859,7 @@ def synth(
 @app.command()
 def simulate(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core, sensor or recurrent design).")],
-    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
+    data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of the per-sample hardware outputs to write. Required.", show_default=False)] = None,
     simulator: Annotated[Optional[str], typer.Option("--simulator", help="icarus or verilator (default: icarus; verilator with --engine native).")] = None,
     engine: Annotated[str, typer.Option("--engine", help="cocotb: the cocotb bench (reference, debug trace); native: a generated Verilator C++ bench (same checks and outputs, millions of samples/s; Verilator only).")] = "cocotb",
@@ -945,7 +945,7 @@ def export_testbench(
 @app.command()
 def explore(
     model_path: ModelArg,
-    data: Annotated[Path, typer.Argument(help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
+    data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for explore.json and explore.png (created if missing). Required.", show_default=False, metavar=FOLDER_METAVAR)] = None,
     traj_col: TrajColOpt = None,
     input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
@@ -1038,7 +1038,7 @@ def explore(
 
 @app.command()
 def report(
-    outdir: Annotated[Path, typer.Argument(help="Folder written by `pwas-hdl generate`.")],
+    outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate`.")],
     sim: Annotated[Optional[list[str]], typer.Option("--sim", help="Extra `simulate` JSON summaries (OUTDIR/sim/*.json are read anyway).")] = None,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the collected numbers as JSON.")] = None,
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Write the Markdown report here (it is printed anyway).", show_default=False)] = None,

@@ -39,6 +39,21 @@ def test_every_command_has_help():
         assert "Usage" in res.output
 
 
+def test_usage_names_the_arguments_in_capitals():
+    """The help text says DATA, OUTDIR and MODEL (so does the README); the usage lines of fit, predict, simulate,
+    explore, synth and report showed `{data}` / `{outdir}` in lower case."""
+    import re
+
+    usage = {"fit": "{DATA}", "fit-map": "{SAMPLES}", "predict": "{MODEL} {DATA}", "info": "{MODEL}", "generate": "{MODEL}",
+             "simulate": "{OUTDIR} {DATA}", "export-testbench": "{OUTDIR}", "explore": "{MODEL} {DATA}",
+             "synth": "{OUTDIR}", "report": "{OUTDIR}"}
+    for cmd, args in usage.items():
+        res = invoke(cmd, "--help")
+        assert res.exit_code == 0, (cmd, res.output)
+        assert f"Usage: pwas-hdl {cmd} [OPTIONS] {args}" in res.output, (cmd, res.output)
+        assert not re.search(r"\{[a-z_]+\}", res.output), (cmd, res.output)
+
+
 def test_fit_predict_roundtrip(lorenz_files, tmp_path):
     model = tmp_path / "m.json"
     res = invoke("fit", lorenz_files / "train.csv", "--output", "y", "--target", "z", "--my", 3, "-p", 4, "-o", model)
