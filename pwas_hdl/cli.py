@@ -1047,7 +1047,7 @@ def report(
     """Accuracy, latency and resources of a generated design in one table.
 
     Collects the manifest and model (generate), simulation summaries (simulate) and synthesis
-    results (OUTDIR/synth/TARGET/synth.json from synth).
+    results (OUTDIR/synth/FPGA/synth.json from synth).
     """
     from pwas_hdl.design.report import collect_report, report_markdown
 
