@@ -466,10 +466,10 @@ def default_outdir() -> Path:
     otherwise ``./benchmarks-results`` in the current directory: never inside an installed package
     (``site-packages``) when the scripts run from the wheel.
     """
-    from pwas_hdl.resources import benchmarks_dir
+    from pwas_hdl.resources import benchmarks_dir, source_checkout
 
     here = benchmarks_dir()
-    if (here.parent / "pyproject.toml").is_file() and (here / "results").is_dir():
+    if source_checkout() is not None and (here / "results").is_dir():
         return here / "results"
     return Path.cwd() / "benchmarks-results"
 

@@ -20,8 +20,8 @@ import re
 import shutil
 import signal
 import tempfile
-from pathlib import Path
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Iterable, Iterator
 
 from pwas_hdl.errors import InputError, ToolFailed
