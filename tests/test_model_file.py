@@ -180,6 +180,9 @@ def _set(d: dict, path: tuple, value) -> dict:
         (("signals", "targets"), [], "signals.targets must have at least 1 item, got 0"),
         (("signals", "inputs"), ["valve", "valve"], "signals.inputs has repeated items"),
         (("weights", "flow"), [1.0, None], "weights.flow[1] must be a number, got null"),
+        (("weights", "flow"), [1.0, 2, True], "weights.flow[2] must be a number, got true"),
+        (("weights", "flow"), [], "weights.flow must have at least 1 item, got 0"),
+        (("weights", "flow"), 1.0, "weights.flow must be a list, got 1.0"),
         (("fit", "colour"), "red", "fit has the unknown key 'colour'"),
         (("extra",), 1, "the top level has the unknown key 'extra'"),
         (("$schema",), "urn:pwas-hdl:schema:model-v1", '$schema must be "urn:pwas-hdl:schema:model-v2"'),
@@ -197,6 +200,18 @@ def test_broken_file_one_message_naming_the_key(good, tmp_path, path, value, mes
     assert not list(tmp_path.glob(".*"))  # reading leaves nothing behind
     with pytest.raises(InputError, match="in memory"):
         validate_model(bad, source="in memory")
+
+
+def test_schema_sees_one_weight_of_an_all_number_list(good):
+    """The weight lists are checked for numbers in one pass; the schema validator gets their first
+    items only (its cost no longer grows with N), and whole lists when one holds a non-number."""
+    from pwas_hdl.fit.model_file import _schema_view
+
+    view = _schema_view(good)
+    assert {k: v for k, v in view.items() if k != "weights"} == {k: v for k, v in good.items() if k != "weights"}
+    assert view["weights"] == {k: v[:1] for k, v in good["weights"].items()}
+    bad = _set(good, ("weights", "flow"), [*good["weights"]["flow"][:-1], "x"])
+    assert _schema_view(bad) is bad
 
 
 def test_missing_schema_key_is_named(good, tmp_path):

@@ -491,13 +491,15 @@ def _flat_name(mo: re.Match) -> str:
     return base
 
 
-def _flat_verilog(component, name: str) -> str:
+def _flat_verilog(component, name: str):
     """Amaranth's Verilog conversion (:mod:`pwas_hdl.hdl.yosys_convert`: RTLIL, then Yosys'
     ``proc -nomux -norom; memory_collect; write_verilog -norename``) with the part modules flattened
-    into the top (Yosys ``flatten`` after ``proc``): one module, as every other design of pwas-hdl."""
-    from pwas_hdl.hdl.yosys_convert import CONVERT_PASSES, component_verilog
+    into the top (Yosys ``flatten`` after ``proc``): one module, as every other design of pwas-hdl.
+    Returns the text with the weight ROMs as black boxes and their registry
+    (:func:`~pwas_hdl.hdl.yosys_convert.component_verilog_roms`)."""
+    from pwas_hdl.hdl.yosys_convert import CONVERT_PASSES, component_verilog_roms
 
-    return component_verilog(component, name, (CONVERT_PASSES[0], "flatten", *CONVERT_PASSES[1:]))
+    return component_verilog_roms(component, name, (CONVERT_PASSES[0], "flatten", *CONVERT_PASSES[1:]))
 
 
 def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str, *, ports: str = "axis") -> str:
@@ -528,11 +530,12 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
         Flattening leaves a name clash, a hierarchical name or more than one module.
     """
     from pwas_hdl.hdl.emit import _check_naming, _name_ports, _token, normalise_verilog
+    from pwas_hdl.hdl.weight_rom import splice_roms
 
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
         raise ValueError(f"module name {name!r} is not a plain Verilog identifier")
     _check_naming(ports)
-    text = _flat_verilog(component, name)
+    text, roms = _flat_verilog(component, name)  # the ROMs' words are written last (splice_roms)
     renamed = {_flat_name(mo) for mo in _FLAT_NAME.finditer(text)}
     clash = sorted(nm for nm in renamed if not nm.startswith("\\") and _token(nm).search(text))
     if clash:
@@ -542,7 +545,7 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
         raise InternalError("a hierarchical name is left in the flattened additive design")
     if re.search(r"^module ", text, re.M) is None or len(re.findall(r"^module ", text, re.M)) != 1:
         raise InternalError("the flattened additive design is not one module")
-    return _name_ports(normalise_verilog(text), name, component, ports)
+    return splice_roms(_name_ports(normalise_verilog(text), name, component, ports), roms)
 
 
 def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str) -> dict[str, str]:

@@ -49,12 +49,12 @@ from typing import Any
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
 from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.hdl.weight_rom import weight_rom
 
 __all__ = ["PWASCore", "core_input_layout", "core_output_layout"]
 
@@ -891,15 +891,8 @@ class PWASCore(wiring.Component):
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
         for b in range(nb):
-            mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[b])
-            m.submodules[f"wmem{b}"] = mem
-            rp = mem.read_port(domain="sync")
-            # Drive the port with our own nets instead of assigning to its addr/en signals (which
-            # would leave those as unused alias wires); ReadPort does the same for its comb `en`.
-            if aw:
-                rp.addr = bank_addr[b]
-            rp.en = pipe.advance
-            mem_data.append(rp.data)
+            mem_data.append(weight_rom(m, f"wmem{b}", plan.word_bits, plan.depth, plan.contents[b],
+                                       bank_addr[b] if aw else None, pipe.advance))
         valid, r = pipe.stage("s_mem", True, valid, {mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
         bank_mu = r[mkey]
         if late:  # mu and its rotation in the memory-read cycle (beside the block RAM's clock-to-output)

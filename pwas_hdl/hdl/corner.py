@@ -30,9 +30,9 @@ from __future__ import annotations
 from itertools import combinations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
-from amaranth.lib.memory import Memory
 
 from pwas_hdl.hdl._lintsafe import bits_for, rom
+from pwas_hdl.hdl.weight_rom import weight_rom
 
 __all__ = ["corner_read", "select_corners", "corner_patterns"]
 
@@ -91,13 +91,8 @@ def corner_read(core, m: Module, pipe, valid, cs, ds, oor):
 
     mem_data = []
     for b in range(plan.n_banks):
-        mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[b])
-        m.submodules[f"wmem{b}"] = mem
-        rp = mem.read_port(domain="sync")
-        if aw:
-            rp.addr = addr[0]
-        rp.en = pipe.advance
-        mem_data.append(rp.data)
+        mem_data.append(weight_rom(m, f"wmem{b}", plan.word_bits, plan.depth, plan.contents[b],
+                                   addr[0] if aw else None, pipe.advance))
     valid, r = pipe.stage("s_mem", True, valid, {"ge": ge_bits, "d": ds, "oor": oor})
     ge = dict(zip(pairs, r["ge"]))
     ds = r["d"]

@@ -10,6 +10,10 @@ does (Amaranth's builtin Yosys, run in-process by :mod:`pwas_hdl.hdl.yosys_conve
   IEEE 1364-2005 §6.2.1 defines the declaration form as exactly that. Variables that no
   ``always`` block assigns (Yosys' time-zero trigger register) are left untouched.
 
+The weight memories are elaborated as black boxes and written back last, as Yosys writes
+memories (:mod:`pwas_hdl.hdl.weight_rom`): the passes above run on text without the weights, and a
+million-word ROM costs well under a second instead of about a minute.
+
 The output is deterministic (no paths, no time stamps; the first line names the Yosys version).
 """
 
@@ -20,7 +24,8 @@ import re
 from amaranth.lib import wiring
 
 from pwas_hdl.errors import InputError, InternalError
-from pwas_hdl.hdl.yosys_convert import component_verilog
+from pwas_hdl.hdl.weight_rom import RomEmission, splice_roms
+from pwas_hdl.hdl.yosys_convert import component_verilog_roms
 
 __all__ = ["MEM_DIR_PARAMETER", "MEM_DIR_DEFAULT", "PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog", "memory_hex_files"]
 
@@ -170,10 +175,11 @@ def emit_verilog(
     if memory_init not in ("inline", "readmemh"):
         raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
     _check_naming(ports)
-    text = normalise_verilog(component_verilog(component, name))
+    text, roms = component_verilog_roms(component, name)  # the ROMs' words are written last
+    text = _name_ports(normalise_verilog(text), name, component, ports)
     if memory_init == "readmemh":
-        text = _use_readmemh(text, component, hex_prefix)
-    return _name_ports(text, name, component, ports)
+        return _with_mem_dir(splice_roms(text, roms, _readmemh_files(component, roms, hex_prefix)))
+    return splice_roms(text, roms)
 
 
 def _token(name: str) -> re.Pattern:
@@ -237,50 +243,36 @@ def memory_hex_files(component: wiring.Component, prefix: str = "w") -> dict[str
     return {f"{prefix}_b{b}.hex": readmemh_text(plan.contents[b], plan.word_bits) for b in range(plan.n_banks)}
 
 
-_MEMINIT = re.compile(r"^(?P<ind>[ \t]*)initial begin\n(?P<body>(?:[ \t]*wmem(?P<bank>[0-9]+)\[[0-9]+\] = [^;\n]+;\n)+)[ \t]*end\n", re.M)
-_MEMLINE = re.compile(r"wmem([0-9]+)\[([0-9]+)\] = (?:[0-9]+'([hdb])([0-9a-fA-F_]+)|([0-9]+));")
-
-
-def _const_value(lm: re.Match) -> int:
-    if lm.group(5) is not None:
-        return int(lm.group(5))
-    return int(lm.group(4).replace("_", ""), {"h": 16, "d": 10, "b": 2}[lm.group(3)])
-
-
-def _use_readmemh(text: str, component, prefix: str) -> str:
+def _readmemh_files(component, roms: RomEmission, prefix: str):
+    """``(name, k) -> {MEM_DIR, "<prefix>_b<bank>.hex"}`` for the ROMs ``wmem<bank>`` of the
+    component's memory plan (checked: the ROMs met in elaboration hold the plan's words)."""
     plan = _plan(component)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", prefix):
         raise ValueError(f"hex_prefix {prefix!r} must be a plain file-name prefix")
-    done = set()
+    if len(roms.roms) != plan.n_banks:
+        raise InternalError(f"{len(roms.roms)} weight memories in the design, {plan.n_banks} in its memory plan")
 
-    def repl(mo: re.Match) -> str:
-        bank = int(mo.group("bank"))
-        got = {}
-        for lm in _MEMLINE.finditer(mo.group("body")):
-            if int(lm.group(1)) != bank:
-                raise RuntimeError("unexpected memory initialiser layout in the Yosys output")
-            got[int(lm.group(2))] = _const_value(lm)
-        want = {a: w for a, w in enumerate(plan.contents[bank])}
-        if {a: w for a, w in got.items() if w} != {a: w for a, w in want.items() if w}:
-            raise RuntimeError(f"memory wmem{bank}: the emitted contents differ from the memory plan")
-        done.add(bank)
-        # explicit first and last address: Yosys declares the memory with a descending range
-        # (reg [..] wmem0 [D-1:0]), where IEEE 1364-1995 loads a file without addresses from the left (highest)
-        # address and 1364-2005 from the lowest; with both given, every tool loads word a of the file into
-        # wmem[a] (and Icarus no longer warns "Standard inconsistency")
-        return (f'{mo.group("ind")}initial $readmemh({{{MEM_DIR_PARAMETER}, "{prefix}_b{bank}.hex"}}, wmem{bank}, '
-                f'0, {len(plan.contents[bank]) - 1});\n')
+    def file_of(name: str, k: int) -> str:
+        mo = re.fullmatch(r"wmem([0-9]+)", name)
+        if mo is None or int(mo.group(1)) >= plan.n_banks:
+            raise InternalError(f"unexpected weight memory {name} in the design")
+        bank = int(mo.group(1))
+        if roms.roms[k].contents != tuple(int(w) for w in plan.contents[bank]):
+            raise InternalError(f"memory {name}: its contents differ from the memory plan")
+        return f'{{{MEM_DIR_PARAMETER}, "{prefix}_b{bank}.hex"}}'
 
-    out = _MEMINIT.sub(repl, text)
-    if done != set(range(plan.n_banks)):
-        raise InternalError(f"found initialisers of memories {sorted(done)}, expected 0..{plan.n_banks - 1}")
-    head = re.search(r"^module [A-Za-z_][A-Za-z0-9_]*\([^)]*\);\n", out, re.M)
+    return file_of
+
+
+def _with_mem_dir(text: str) -> str:
+    """Declare the ``MEM_DIR`` parameter right after the module header."""
+    head = re.search(r"^module [A-Za-z_][A-Za-z0-9_]*\([^)]*\);\n", text, re.M)
     if head is None:
         raise InternalError("no module header in the Yosys output")
     decl = (f"  // Folder of the $readmemh files, with its trailing '/': set it where the module is instantiated\n"
             f"  // (#(.{MEM_DIR_PARAMETER}(\"path/to/hex/\"))) to run from any working directory.\n"
             f"  parameter {MEM_DIR_PARAMETER} = \"{MEM_DIR_DEFAULT}\";\n")
-    return out[: head.end()] + decl + out[head.end():]
+    return text[: head.end()] + decl + text[head.end():]
 
 
 def port_list(component: wiring.Component, ports: str = "axis") -> list[dict]:

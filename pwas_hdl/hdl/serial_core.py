@@ -44,11 +44,11 @@ from typing import Any
 
 import numpy as np
 from amaranth.hdl import Const, Module, Signal, Value, signed, unsigned
-from amaranth.lib.memory import Memory
 
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _Pipe
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.hdl.weight_rom import weight_rom
 
 __all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency"]
 
@@ -265,12 +265,7 @@ class SerialPWASCore(PWASCore):
         last = ~q_v[1]
 
         # ---------------------------------------------------------- memory read (the register)
-        mem = Memory(shape=unsigned(plan.word_bits), depth=plan.depth, init=plan.contents[0])
-        m.submodules["wmem0"] = mem
-        rp = mem.read_port(domain="sync")
-        if aw:
-            rp.addr = q_addr[0]
-        rp.en = adv
+        rdata = weight_rom(m, "wmem0", plan.word_bits, plan.depth, plan.contents[0], q_addr[0] if aw else None, adv)
 
         regs = []  # (dst, src) pairs enabled by adv
         valids = []
@@ -285,7 +280,7 @@ class SerialPWASCore(PWASCore):
         m_last = reg("m_last", last, 1)
         m_mu = reg("m_mu", q_mu[0], unsigned(dw))
         m_oor = reg("m_oor", q_oor, 1)
-        data = rp.data
+        data = rdata
         if pl.mem_out:
             data = reg("mo_data", data, unsigned(plan.word_bits))
             m_v = reg("mo_valid", m_v, 1, reset_less=False)

@@ -24,7 +24,7 @@ from typing import Any, Sequence
 
 from pwas_hdl.errors import InternalError
 
-__all__ = ["CONVERT_PASSES", "rtlil_to_verilog", "component_verilog"]
+__all__ = ["CONVERT_PASSES", "rtlil_to_verilog", "component_verilog", "component_verilog_roms"]
 
 #: The passes between ``read_rtlil`` and ``write_verilog -norename`` of Amaranth's Verilog back end
 #: (``amaranth.back.verilog._convert_rtlil_text`` without ``strip_internal_attrs``).
@@ -124,8 +124,43 @@ def rtlil_to_verilog(rtlil_text: str, passes: Sequence[str] = CONVERT_PASSES) ->
     return out
 
 
+def component_verilog_roms(component: Any, name: str, passes: Sequence[str] = CONVERT_PASSES) -> tuple[str, Any]:
+    """:func:`component_verilog` before its weight ROMs are put in: the text with a black-box
+    instance for each (:mod:`pwas_hdl.hdl.weight_rom`), and their registry.
+
+    Text passes over the design (renaming, normalisation) run faster on this form: a ROM's words
+    are only written by :func:`pwas_hdl.hdl.weight_rom.splice_roms`, last.
+
+    Parameters
+    ----------
+    component : amaranth.lib.wiring.Component
+    name : str
+        Top module name.
+    passes : sequence of str
+        As :func:`rtlil_to_verilog`.
+
+    Returns
+    -------
+    tuple of (str, pwas_hdl.hdl.weight_rom.RomEmission)
+
+    Raises
+    ------
+    InternalError
+        As :func:`rtlil_to_verilog`.
+    """
+    from amaranth.back import rtlil
+
+    from pwas_hdl.hdl.weight_rom import rom_emission
+
+    with rom_emission() as roms:
+        design = rtlil.convert(component, name=name, emit_src=False)
+    return rtlil_to_verilog(design, passes), roms
+
+
 def component_verilog(component: Any, name: str, passes: Sequence[str] = CONVERT_PASSES) -> str:
     """``amaranth.back.verilog.convert(component, name=name, emit_src=False)``, run in-process.
+
+    The weight ROMs are written as Yosys writes memories (:mod:`pwas_hdl.hdl.weight_rom`).
 
     Parameters
     ----------
@@ -145,6 +180,6 @@ def component_verilog(component: Any, name: str, passes: Sequence[str] = CONVERT
     InternalError
         As :func:`rtlil_to_verilog`.
     """
-    from amaranth.back import rtlil
+    from pwas_hdl.hdl.weight_rom import splice_roms
 
-    return rtlil_to_verilog(rtlil.convert(component, name=name, emit_src=False), passes)
+    return splice_roms(*component_verilog_roms(component, name, passes))
