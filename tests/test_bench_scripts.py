@@ -237,3 +237,37 @@ def test_rtl_random_configs_leaves_nothing_in_the_temp_folder(tmp_path, monkeypa
     assert seen and all(str(r).startswith(str(tmp)) for r in seen)
     assert list(tmp.iterdir()) == [], list(tmp.iterdir())
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["rtl_random_configs_quick.json", "rtl_random_configs_quick.md"]
+
+
+@pytest.mark.rtl
+def test_generate_scale_quick_smoke(tmp_path):
+    """benchmarks/generate_scale.py --quick: one small point generated both ways and simulated on
+    Icarus without a mismatch; the readmemh Verilog is smaller than the inline one."""
+    import json
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.generate_scale")
+    assert script_main(bench.main, ["--quick", "--outdir", str(tmp_path)]) == 0
+    doc = json.loads((tmp_path / "generate_scale_quick.json").read_text())
+    (row,) = doc["rows"]
+    assert (row["n"], row["p"], row["N"]) == (2, 15, 256) and doc["samples"] == 200
+    assert row["simulate_inline"]["mismatches"] == row["simulate_readmemh"]["mismatches"] == 0
+    assert row["generate_readmemh"]["verilog_mib"] < row["generate_inline"]["verilog_mib"]
+    assert all(row[k]["wall_s"] > 0 and row[k]["peak_rss_mib"] > 0 for k in
+               ("generate_inline", "generate_readmemh", "simulate_inline", "simulate_readmemh"))
+    assert "| 2 | 15 | 256 |" in (tmp_path / "generate_scale_quick.md").read_text()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--points", "2:x"], "--points takes n:p pairs"),
+    (["--points", "2:4000"], "--points: at most"),
+    (["--points", "0:3"], "--points: n must be in 1..6"),
+    (["--samples", "5"], "--samples must be in 20..100000"),
+    (["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
+])
+def test_generate_scale_bad_option(tmp_path, capsys, args, message):
+    bench = importlib.import_module("pwas_hdl.benchmarks.generate_scale")
+    out = tmp_path / "out"
+    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
+    assert not out.exists()
