@@ -132,8 +132,17 @@ def test_cg_preconditioners_subset(tmp_path):
     ("first_order_floor", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
     ("cg_preconditioners", ["--quick", "--stem", ".."], "--stem must be a plain file name"),
     ("fit_scale", ["--quick", "--stem", "../x"], "--stem must be a plain file name"),
+    ("rtl_random_configs", ["--count", "0"], "--count"),
+    ("rtl_random_configs", ["--samples", "5"], "--samples must be in 20..100000"),
+    ("rtl_random_configs", ["--seed", "-1"], "--seed and --first must be >= 0"),
+    ("rtl_random_configs", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
+    ("generate_scale", ["--points", "2:x"], "--points takes n:p pairs"),
+    ("generate_scale", ["--points", "2:4000"], "--points: at most"),
+    ("generate_scale", ["--points", "0:3"], "--points: n must be in 1..6"),
+    ("generate_scale", ["--samples", "5"], "--samples must be in 20..100000"),
+    ("generate_scale", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
 ])
-def test_issue18_benchmarks_bad_option(tmp_path, capsys, script, args, message):
+def test_benchmark_bad_option(tmp_path, capsys, script, args, message):
     bench = importlib.import_module(f"pwas_hdl.benchmarks.{script}")
     out = tmp_path / "out"
     assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
@@ -176,21 +185,6 @@ def test_rtl_random_configs_quick_smoke(tmp_path):
     assert passed and all(r["checks"]["bit_exact"] and r["mismatches"] == 0 for r in passed)
     assert bench.draw_config(0, 1) == bench.draw_config(0, 1) != bench.draw_config(1, 1)
     assert (tmp_path / "rtl_random_configs_quick.md").read_text() == bench.markdown(res)
-
-
-@pytest.mark.parametrize("args, message", [
-    (["--count", "0"], "--count"),
-    (["--samples", "5"], "--samples must be in 20..100000"),
-    (["--seed", "-1"], "--seed and --first must be >= 0"),
-    (["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
-])
-def test_rtl_random_configs_bad_option(tmp_path, capsys, args, message):
-    bench = importlib.import_module("pwas_hdl.benchmarks.rtl_random_configs")
-    out = tmp_path / "out"
-    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
-    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
-    assert not out.exists()
 
 
 def test_scratch_folder_is_removed_unless_kept(tmp_path, monkeypatch):
@@ -255,19 +249,3 @@ def test_generate_scale_quick_smoke(tmp_path):
     assert all(row[k]["wall_s"] > 0 and row[k]["peak_rss_mib"] > 0 for k in
                ("generate_inline", "generate_readmemh", "simulate_inline", "simulate_readmemh"))
     assert "| 2 | 15 | 256 |" in (tmp_path / "generate_scale_quick.md").read_text()
-
-
-@pytest.mark.parametrize("args, message", [
-    (["--points", "2:x"], "--points takes n:p pairs"),
-    (["--points", "2:4000"], "--points: at most"),
-    (["--points", "0:3"], "--points: n must be in 1..6"),
-    (["--samples", "5"], "--samples must be in 20..100000"),
-    (["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
-])
-def test_generate_scale_bad_option(tmp_path, capsys, args, message):
-    bench = importlib.import_module("pwas_hdl.benchmarks.generate_scale")
-    out = tmp_path / "out"
-    assert script_main(bench.main, [*args, "--outdir", str(out)]) == 2
-    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith(f"error: {message}"), lines
-    assert not out.exists()
