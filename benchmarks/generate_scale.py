@@ -96,6 +96,7 @@ def run_point(n: int, p: int, root: Path, samples: int, simulator: str, progress
         out = root / f"g{n}_{p}_{form}"
         g = _run([*cli, "generate", str(mpath), "-o", str(out), "--memory-init", form])
         v = next(q for q in out.glob("*.v") if not q.name.endswith("_inst.v"))
+        g["verilog_bytes"] = v.stat().st_size
         g["verilog_mib"] = round(v.stat().st_size / 2**20, 2)
         row[f"generate_{form}"] = g
         progress(f"n = {n}, p = {p} (N = {row['N']}): generate {form}: {g['wall_s']} s, {g['peak_rss_mib']} MiB, "

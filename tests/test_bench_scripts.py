@@ -245,7 +245,7 @@ def test_generate_scale_quick_smoke(tmp_path):
     (row,) = doc["rows"]
     assert (row["n"], row["p"], row["N"]) == (2, 15, 256) and doc["samples"] == 200
     assert row["simulate_inline"]["mismatches"] == row["simulate_readmemh"]["mismatches"] == 0
-    assert row["generate_readmemh"]["verilog_mib"] < row["generate_inline"]["verilog_mib"]
+    assert row["generate_readmemh"]["verilog_bytes"] < row["generate_inline"]["verilog_bytes"]
     assert all(row[k]["wall_s"] > 0 and row[k]["peak_rss_mib"] > 0 for k in
                ("generate_inline", "generate_readmemh", "simulate_inline", "simulate_readmemh"))
     assert "| 2 | 15 | 256 |" in (tmp_path / "generate_scale_quick.md").read_text()
