@@ -399,7 +399,7 @@ def build_design(
     from pwas_hdl.flow.timing_closure import FPGA_TARGETS
 
     if fpga_target not in FPGA_TARGETS:  # checked whether or not --clock-mhz / --goal use it: never silently ignored
-        raise ValueError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga_target!r}")
+        raise InputError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga_target!r}")
     if is_estimator(model):  # an estimator file (seed 003's switched observer): pwas_hdl.design.estimator
         return build_estimator_design(model, design=design, name=name, memory=memory or DEFAULT_MEMORY, pipeline=pipeline, memory_init=memory_init,
                                       ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
@@ -408,15 +408,15 @@ def build_design(
     from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 
     if design not in ("core", "sensor", "recurrent"):
-        raise ValueError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
+        raise InputError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
     if memory is not None and memory not in ("banked", "replicated", "corner"):
-        raise ValueError(f"memory must be 'banked', 'replicated' or 'corner', got {memory!r}")
+        raise InputError(f"memory must be 'banked', 'replicated' or 'corner', got {memory!r}")
     from pwas_hdl.hdl.serial_core import ARCHITECTURES
 
     if architecture not in ARCHITECTURES:
-        raise ValueError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+        raise InputError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
     if architecture == "serial" and target_mhz is not None:
-        raise ValueError("the timing closure (--clock-mhz) chooses among parallel pipelines; "
+        raise InputError("the timing closure (--clock-mhz) chooses among parallel pipelines; "
                          "give --pipeline with --architecture serial")
     if architecture == "serial" and memory is not None:  # it was ignored, and the manifest recorded it as built
         raise InputError(f"--memory {memory} does not apply to --architecture serial (one weight memory of N words, "
@@ -434,7 +434,7 @@ def build_design(
         preset = goal_preset(goal, fpga_target)  # ValueError for an unknown goal
         given = [k for k, v in (("--pipeline", pipeline), ("--clock-mhz", target_mhz)) if v is not None]
         if given:
-            raise ValueError(f"give one of --goal, --pipeline or --clock-mhz, not --goal with {given[0]}: "
+            raise InputError(f"give one of --goal, --pipeline or --clock-mhz, not --goal with {given[0]}: "
                              "each chooses the pipeline")
         pipeline = preset
     additive = _is_additive(sensor)
@@ -487,9 +487,9 @@ def build_design(
         from pwas_hdl.flow.timing_closure import close_timing
 
         if pipeline is not None:
-            raise ValueError("give either a pipeline or a target clock (target_mhz / --clock-mhz), not both")
+            raise InputError("give either a pipeline or a target clock (target_mhz / --clock-mhz), not both")
         if memory_init not in ("inline", "readmemh"):
-            raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+            raise InputError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
 
         def candidate(pipe: Pipeline) -> GeneratedDesign:
             return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline",

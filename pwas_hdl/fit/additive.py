@@ -183,15 +183,15 @@ class AdditiveGrid:
         lo_a = np.asarray(lo, dtype=float).reshape(-1)
         hi_a = np.asarray(hi, dtype=float).reshape(-1)
         if lo_a.shape != hi_a.shape or lo_a.size == 0:
-            raise ValueError(f"lo and hi must be non-empty and of equal length, got {lo_a.size} and {hi_a.size}")
+            raise InputError(f"lo and hi must be non-empty and of equal length, got {lo_a.size} and {hi_a.size}")
         self.n = lo_a.size
         self.partitions = np.array(_as_partitions(partitions, self.n), dtype=np.int64)
         self.subsets = tuple(tuple(int(v) for v in s) for s in subsets)
         if not self.subsets:
-            raise ValueError("an additive grid needs at least one part")
+            raise InputError("an additive grid needs at least one part")
         for k, s in enumerate(self.subsets):
             if not s or list(s) != sorted(set(s)) or s[0] < 0 or s[-1] >= self.n:
-                raise ValueError(f"part {k} {s} must be sorted distinct indices in 0..{self.n - 1}")
+                raise InputError(f"part {k} {s} must be sorted distinct indices in 0..{self.n - 1}")
         self.parts = [Grid(lo_a[list(s)], hi_a[list(s)], self.partitions[list(s)]) for s in self.subsets]
         sizes = [g.n_vertices for g in self.parts]
         check_limit("the number of weights of the additive sensor (sum of the parts' N)", int(sum(sizes)), MAX_VERTICES,
@@ -253,7 +253,7 @@ class AdditiveGrid:
         """
         w = np.asarray(weights)
         if w.shape[0] != self.n_vertices:
-            raise ValueError(f"weights have {w.shape[0]} rows but the additive grid has N = {self.n_vertices}")
+            raise InputError(f"weights have {w.shape[0]} rows but the additive grid has N = {self.n_vertices}")
         return [w[self.offsets[i] : self.offsets[i + 1]] for i in range(self.n_parts)]
 
     def to_grid_units(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.limits import MAX_REGRESSORS, check_limit, check_vertices
 
 if TYPE_CHECKING:
@@ -108,21 +109,21 @@ def _as_partitions(p: int | Sequence[int], n: int) -> tuple[int, ...]:
     if arr.size == 1 and n > 1:
         arr = np.repeat(arr, n)
     if arr.shape != (n,):
-        raise ValueError(f"partitions must be one integer or {n} integers (one per dimension), got {p!r}")
+        raise InputError(f"partitions must be one integer or {n} integers (one per dimension), got {p!r}")
     out = []
     for j, v in enumerate(arr.tolist()):
         if isinstance(v, float) and not float(v).is_integer():
-            raise ValueError(f"partitions[{j}] = {v!r} is not an integer; use a whole number of intervals >= 1")
+            raise InputError(f"partitions[{j}] = {v!r} is not an integer; use a whole number of intervals >= 1")
         iv = int(v)
         if iv < 1:
-            raise ValueError(f"partitions[{j}] = {iv} but every dimension needs p >= 1 intervals")
+            raise InputError(f"partitions[{j}] = {iv} but every dimension needs p >= 1 intervals")
         out.append(iv)
     return tuple(out)
 
 
 def _as_breakpoints(bps, lo: np.ndarray, hi: np.ndarray, parts: tuple[int, ...]):
     if len(bps) != len(parts):
-        raise ValueError(f"breakpoints need {len(parts)} entries (one per dimension, None = uniform), got {len(bps)}")
+        raise InputError(f"breakpoints need {len(parts)} entries (one per dimension, None = uniform), got {len(bps)}")
     out = []
     for j, b in enumerate(bps):
         if b is None:
@@ -130,14 +131,14 @@ def _as_breakpoints(bps, lo: np.ndarray, hi: np.ndarray, parts: tuple[int, ...])
             continue
         arr = np.asarray(b, dtype=float).reshape(-1)
         if arr.size != parts[j] + 1:
-            raise ValueError(f"breakpoints of dimension {j} have {arr.size} values; p = {parts[j]} intervals need {parts[j] + 1}")
+            raise InputError(f"breakpoints of dimension {j} have {arr.size} values; p = {parts[j]} intervals need {parts[j] + 1}")
         if not np.all(np.isfinite(arr)):
-            raise ValueError(f"breakpoints of dimension {j} contain NaN or infinite values")
+            raise InputError(f"breakpoints of dimension {j} contain NaN or infinite values")
         if not np.all(np.diff(arr) > 0):
             k = int(np.flatnonzero(~(np.diff(arr) > 0))[0])
-            raise ValueError(f"breakpoints of dimension {j} must increase strictly: b[{k}] = {float(arr[k])!r} >= b[{k + 1}] = {float(arr[k + 1])!r}")
+            raise InputError(f"breakpoints of dimension {j} must increase strictly: b[{k}] = {float(arr[k])!r} >= b[{k + 1}] = {float(arr[k + 1])!r}")
         if arr[0] != lo[j] or arr[-1] != hi[j]:
-            raise ValueError(f"breakpoints of dimension {j} must start at lo = {float(lo[j])!r} and end at hi = {float(hi[j])!r}, "
+            raise InputError(f"breakpoints of dimension {j} must start at lo = {float(lo[j])!r} and end at hi = {float(hi[j])!r}, "
                              f"got {float(arr[0])!r} .. {float(arr[-1])!r}")
         out.append(arr)
     return tuple(out) if any(b is not None for b in out) else None
@@ -168,13 +169,13 @@ class Grid:
         lo_a = np.asarray(lo, dtype=float).reshape(-1)
         hi_a = np.asarray(hi, dtype=float).reshape(-1)
         if lo_a.shape != hi_a.shape or lo_a.size == 0:
-            raise ValueError(f"lo and hi must be non-empty and of equal length, got {lo_a.size} and {hi_a.size}")
+            raise InputError(f"lo and hi must be non-empty and of equal length, got {lo_a.size} and {hi_a.size}")
         if not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
-            raise ValueError("domain bounds must be finite numbers")
+            raise InputError("domain bounds must be finite numbers")
         bad = np.flatnonzero(~(hi_a > lo_a))
         if bad.size:
             j = int(bad[0])
-            raise ValueError(
+            raise InputError(
                 f"domain dimension {j} has zero or negative width ([{lo_a[j]}, {hi_a[j]}]); "
                 "a constant regressor cannot be partitioned: drop that signal or give an explicit domain"
             )
@@ -182,7 +183,7 @@ class Grid:
             wide = np.flatnonzero(~np.isfinite(hi_a - lo_a))
         if wide.size:
             j = int(wide[0])
-            raise ValueError(f"domain dimension {j} ([{lo_a[j]}, {hi_a[j]}]) is wider than a float can hold; "
+            raise InputError(f"domain dimension {j} ([{lo_a[j]}, {hi_a[j]}]) is wider than a float can hold; "
                              "give a narrower domain (--domain) or rescale the signal")
         check_limit("the regressor dimension n", lo_a.size, MAX_REGRESSORS, "use fewer lags or signals")
         parts = _as_partitions(partitions, lo_a.size)
@@ -303,9 +304,9 @@ class Grid:
         """
         xa = np.atleast_2d(np.asarray(x, dtype=float))
         if xa.shape[1] != self.n:
-            raise ValueError(f"points have {xa.shape[1]} coordinates but the grid has n = {self.n} dimensions")
+            raise InputError(f"points have {xa.shape[1]} coordinates but the grid has n = {self.n} dimensions")
         if not np.all(np.isfinite(xa)):
-            raise ValueError("points contain NaN or infinite values; clean the data before evaluating")
+            raise InputError("points contain NaN or infinite values; clean the data before evaluating")
         with np.errstate(over="ignore"):  # a point far outside a tiny cell: s = +-inf, clamped below like any outside point
             s = (xa - self.lo) / self.step
             bps = getattr(self, "breakpoints", None)  # pwas_hdl.fit.additive.AdditiveGrid calls this with its own box
@@ -443,7 +444,7 @@ class Grid:
         """
         w = np.asarray(weights, dtype=float)
         if w.shape[0] != self.n_vertices:
-            raise ValueError(f"weights have {w.shape[0]} rows but the grid has N = {self.n_vertices} vertices")
+            raise InputError(f"weights have {w.shape[0]} rows but the grid has N = {self.n_vertices} vertices")
         loc = self.locate(x)
         if w.ndim == 1:
             return np.einsum("mk,mk->m", loc.mu, w[loc.vertices])
@@ -529,9 +530,9 @@ def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float]
     lo_a, hi_a = np.asarray(lo, dtype=float).reshape(-1), np.asarray(hi, dtype=float).reshape(-1)
     parts = _as_partitions(partitions, lo_a.size)
     if xa.shape[1] != lo_a.size or xa.shape[0] < 1:
-        raise ValueError(f"quantile breakpoints need samples with {lo_a.size} columns, got shape {xa.shape}")
+        raise InputError(f"quantile breakpoints need samples with {lo_a.size} columns, got shape {xa.shape}")
     if not 0 < min_width < 1:
-        raise ValueError(f"min_width must be in (0, 1), got {min_width!r}")
+        raise InputError(f"min_width must be in (0, 1), got {min_width!r}")
     pool = {j: [j] for j in range(lo_a.size)}
     for g in groups or ():
         g = [int(j) for j in g]
@@ -543,7 +544,7 @@ def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float]
         col = xa[:, pool[j]].reshape(-1)
         col = col[(col >= lo_a[j]) & (col <= hi_a[j])]
         if col.size == 0:
-            raise ValueError(f"no sample of dimension {j} lies inside its domain [{lo_a[j]}, {hi_a[j]}]: no quantiles")
+            raise InputError(f"no sample of dimension {j} lies inside its domain [{lo_a[j]}, {hi_a[j]}]: no quantiles")
         inner = np.quantile(col, np.arange(1, p) / p) if p > 1 else np.empty(0)
         out.append(_spread(np.concatenate([[lo_a[j]], inner, [hi_a[j]]]), min_width * (hi_a[j] - lo_a[j]) / p))
     return out
@@ -589,7 +590,7 @@ def pow2_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float], pa
     list of ndarray, one per dimension, ``p_j + 1`` strictly increasing values
     """
     if not isinstance(max_ratio, (int, np.integer)) or max_ratio < 1 or max_ratio & (max_ratio - 1):
-        raise ValueError(f"max_ratio must be a power of two >= 1, got {max_ratio!r}")
+        raise InputError(f"max_ratio must be a power of two >= 1, got {max_ratio!r}")
     emax = int(max_ratio).bit_length() - 1
     q = quantile_breakpoints(x, lo, hi, partitions, groups=groups)  # groups: identical cuts, identical rounding
     out = []

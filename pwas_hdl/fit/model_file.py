@@ -217,10 +217,10 @@ def _front_end_regressors(d: dict[str, Any]) -> tuple[Any, Any, list[str]]:
     try:
         fe = ObserverBankFrontEnd.from_dict(d["front_end"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"front_end is corrupt or incomplete ({type(exc).__name__}: {exc})") from None
+        raise InputError(f"front_end is corrupt or incomplete ({type(exc).__name__}: {exc})") from None
     ins, outs = d["signals"]["inputs"], d["signals"]["outputs"]
     if fe.nu_ != len(ins) or len(outs) != 1:
-        raise ValueError(f"front_end has {fe.nu_} inputs and 1 output, signals.inputs {len(ins)} and signals.outputs {len(outs)}")
+        raise InputError(f"front_end has {fe.nu_} inputs and 1 output, signals.inputs {len(ins)} and signals.outputs {len(outs)}")
     mu, my = d["lags"]["Mu"], d["lags"]["My"]
     taps = LagStructure(mu, my, len(ins) if mu else 0, 1 if my else 0) if (mu * len(ins) + my) else None
     return fe, taps, fe.feature_names() + (taps.names(ins, outs) if taps is not None else [])

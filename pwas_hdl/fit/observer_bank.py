@@ -705,7 +705,7 @@ class ObserverBankFrontEnd(BaseEstimator):
             A missing key, another ``kind``, non-finite values or inconsistent sizes.
         """
         if d.get("kind") != FRONT_END_KIND:
-            raise ValueError(f"front_end kind {d.get('kind')!r} is not {FRONT_END_KIND!r}")
+            raise InputError(f"front_end kind {d.get('kind')!r} is not {FRONT_END_KIND!r}")
         obj = cls(int(d["n_models"]), str(d["observer"]), int(d["window"]), str(d["features"]), int(d["order"]),
                   int(d["n_knots"]), None if d["lad_rows"] is None else int(d["lad_rows"]), bool(d["normalize"]))
         obj.check_params()
@@ -723,7 +723,8 @@ class ObserverBankFrontEnd(BaseEstimator):
         obj.lpv_ = LPVARXModel(np.array(lpv["knots"], dtype=float), np.array(lpv["coefs"], dtype=float).reshape(-1, n_g), obj.order, nu, obj.lpv_mae_)
         for arr in (obj.u_mean_, obj.u_std_, obj.y_mean_, obj.y_std_, obj.models_, obj.gains_):
             if not np.all(np.isfinite(arr)):
-                raise ValueError("non-finite values in the observer-bank block")
+                raise InputError("non-finite values in the observer-bank block; the model file is corrupt or was edited: fit the model again")
         if obj.u_mean_.size != nu or obj.u_std_.size != nu or obj.y_mean_.size != 1:
-            raise ValueError("normalisation sizes do not match the number of inputs")
+            raise InputError(f"normalisation sizes do not match the number of inputs ({nu} inputs, 1 output); the model file is corrupt "
+                             "or was edited: fit the model again")
         return obj

@@ -36,6 +36,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
+
 __all__ = ["run_recurrence", "evaluate_weights", "refine_closed_loop", "initial_state_dict", "initial_block"]
 
 Step = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -68,7 +70,7 @@ def run_recurrence(step: Step, io_blocks: Sequence[np.ndarray], z_init: Sequence
     """
     n_traj = len(io_blocks)
     if len(z_init) != n_traj:
-        raise ValueError(f"{len(z_init)} initial states for {n_traj} trajectories")
+        raise InputError(f"{len(z_init)} initial states for {n_traj} trajectories; give one initial state per trajectory")
     if n_traj == 0:
         return []
     lens = np.array([b.shape[0] for b in io_blocks])
@@ -173,6 +175,6 @@ def initial_block(sensor, z: np.ndarray | None, n_rows_before: int) -> np.ndarra
     lags = sensor.lags_
     if sensor.initial_state_rule_ == "measured":
         if z is None:
-            raise ValueError("this recurrent sensor starts from the measured z (initial state rule 'measured'): pass z")
+            raise InputError("this recurrent sensor starts from the measured z (initial state rule 'measured'): pass z")
         return np.asarray(z, dtype=float)[n_rows_before - lags.mz: n_rows_before]
     return np.array(sensor.initial_values_, dtype=float).reshape(lags.mz, lags.nz)

@@ -125,16 +125,16 @@ class LagStructure:
         for nm in ("mu", "my", "nu", "ny", "mz", "nz"):
             v = getattr(self, nm)
             if not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"{nm} must be a non-negative integer, got {v!r}")
+                raise InputError(f"{nm} must be a non-negative integer, got {v!r}")
         if self.mz and self.nz:
             check_limit("the regressor dimension n = nu*Mu + ny*My + nz*Mz", self.dimension, MAX_REGRESSORS,
                         "use fewer lags (--mu, --my, --mz) or fewer signals")
         check_limit("the regressor dimension n = nu*Mu + ny*My", self.dimension, MAX_REGRESSORS,
                     "use fewer lags (--mu, --my) or fewer signals")
         if self.mz and self.nz and self.io_dimension == 0:
-            raise ValueError("a recurrent sensor (Mz >= 1) needs at least one lag of a measured signal (Mu or My >= 1)")
+            raise InputError("a recurrent sensor (Mz >= 1) needs at least one lag of a measured signal (Mu or My >= 1)")
         if self.dimension == 0:
-            raise ValueError(
+            raise InputError(
                 "the regressor is empty: give at least one lag of one signal (Mu*nu + My*ny >= 1)"
             )
 
@@ -221,7 +221,7 @@ class LagStructure:
         t_len = self._length(u, y)
         m = self.memory
         if t_len < m:
-            raise ValueError(
+            raise InputError(
                 f"a trajectory has {t_len} samples but the lags need at least M = max(Mu, My) = {m}; "
                 "use longer trajectories or fewer lags"
             )
@@ -252,10 +252,10 @@ class LagStructure:
         io = self.build(u, y)  # rows t = M-1 ..
         t_len = io.shape[0] + self.memory - 1
         if z.shape[0] != t_len:
-            raise ValueError(f"a target trajectory has {z.shape[0]} samples, its inputs/outputs {t_len}")
+            raise InputError(f"a target trajectory has {z.shape[0]} samples, its inputs/outputs {t_len}")
         s = self.start
         if t_len <= s:
-            raise ValueError(f"a trajectory has {t_len} samples but the lags and Mz = {self.mz} need more than {s}")
+            raise InputError(f"a trajectory has {t_len} samples but the lags and Mz = {self.mz} need more than {s}")
         rows = t_len - s
         cols = []
         j = 0
@@ -271,14 +271,14 @@ class LagStructure:
         lens = []
         if self.nu:
             if u is None:
-                raise ValueError("the lag structure has inputs but no input data was given")
+                raise InputError("the lag structure has inputs but no input data was given")
             lens.append(u.shape[0])
         if self.ny:
             if y is None:
-                raise ValueError("the lag structure has outputs but no output data was given")
+                raise InputError("the lag structure has outputs but no output data was given")
             lens.append(y.shape[0])
         if len(set(lens)) > 1:
-            raise ValueError(f"inputs and outputs of a trajectory have different lengths {lens}")
+            raise InputError(f"inputs and outputs of a trajectory have different lengths {lens}")
         return lens[0]
 
     def build_many(self, us: list[np.ndarray], ys: list[np.ndarray], n_traj: int) -> tuple[np.ndarray, list[slice]]:

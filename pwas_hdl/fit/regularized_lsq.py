@@ -107,7 +107,7 @@ def tikhonov_matrix(grid: Grid, order: int = 0) -> sparse.csc_array:
     if order == 0:
         return sparse.identity(n_v, format="csc")
     if order != 1:
-        raise ValueError(f"Tikhonov order must be 0 or 1, got {order!r}")
+        raise InputError(f"Tikhonov order must be 0 or 1, got {order!r}")
     cell_volume = float(np.prod(grid.step))
     # built directly in CSC form (symmetric: column i = row i), one entry per (row, column) in
     # sorted row order i - s_0 < ... < i - s_{n-1} < i < i + s_{n-1} < ... < i + s_0 (C order: the

@@ -333,7 +333,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         us = as_trajectories(u, "u", lags.nu) if lags.nu else []
         ys = as_trajectories(y, "y", lags.ny) if lags.ny else []
         if us and ys and len(us) != len(ys):
-            raise ValueError(f"got {len(us)} input trajectories but {len(ys)} output trajectories")
+            raise InputError(f"got {len(us)} input trajectories but {len(ys)} output trajectories")
         return lags.build_many(us, ys, max(len(us), len(ys)))
 
     def _infer_lags(self, u: Trajectories, y: Trajectories) -> LagStructure | None:
@@ -346,9 +346,9 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                 return None
             return LagStructure(int(self.mu), int(self.my), nu if self.mu else 0, ny if self.my else 0)
         if self.mu and not us:
-            raise ValueError(f"Mu = {self.mu} input lags requested but no input data given; pass u or set mu=0")
+            raise InputError(f"Mu = {self.mu} input lags requested but no input data given; pass u or set mu=0")
         if self.my and not ys:
-            raise ValueError(f"My = {self.my} output lags requested but no output data given; pass y or set my=0")
+            raise InputError(f"My = {self.my} output lags requested but no output data given; pass y or set my=0")
         nu = us[0].shape[1] if us and self.mu else 0
         ny = ys[0].shape[1] if ys and self.my else 0
         return LagStructure(int(self.mu), int(self.my), nu, ny)
@@ -367,7 +367,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         const = np.flatnonzero(hi <= lo)
         if const.size:
             names = [self._regressor_names(lags, fe)[j] for j in const]
-            raise ValueError(
+            raise InputError(
                 f"regressor(s) {', '.join(names)} are constant in the training data (zero-width domain); "
                 "remove the constant signal, add excitation, or pass an explicit domain"
             )
@@ -442,7 +442,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             fe = copy.deepcopy(self.front_end)
             us, ys = as_trajectories(u, "u"), as_trajectories(y, "y")
             if len(zs) != len(ys):
-                raise ValueError(f"got {len(zs)} target trajectories for {len(ys)} output trajectories")
+                raise InputError(f"got {len(zs)} target trajectories for {len(ys)} output trajectories")
             fe.fit(us, ys, zs)
             xi, valid = self._bank_regressors(fe, lags, u, y)
         elif self.mz:
@@ -450,10 +450,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         else:
             xi, valid = self._build_regressors(lags, u, y)
         if len(zs) != len(valid):
-            raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
+            raise InputError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
         for i, (zi, sl) in enumerate(zip(zs, valid)):
             if zi.shape[0] != sl.stop:
-                raise ValueError(
+                raise InputError(
                     f"target trajectory {i} has {zi.shape[0]} samples but its inputs/outputs have {sl.stop}; "
                     "u, y and z must be sampled at the same instants"
                 )
@@ -474,7 +474,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         if self.domain is not None:
             lo, hi = (np.asarray(b, dtype=float).reshape(-1) for b in self.domain)
             if lo.size != xi.shape[1] or hi.size != xi.shape[1]:
-                raise ValueError(f"explicit domain must have {xi.shape[1]} bounds per side, got {lo.size} and {hi.size}")
+                raise InputError(f"explicit domain must have {xi.shape[1]} bounds per side, got {lo.size} and {hi.size}")
         else:
             lo, hi = self._data_domain(xi, lags, fe)
         if self.additive is not None:  # sum of PWAS parts on regressor subsets (pwas_hdl.fit.additive)
@@ -561,7 +561,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         ys = as_trajectories(y, "y", lags.ny) if lags.ny else []
         n_traj = max(len(us), len(ys))
         if len(zs) != n_traj:
-            raise ValueError(f"got {len(zs)} target trajectories for {n_traj} input/output trajectories")
+            raise InputError(f"got {len(zs)} target trajectories for {n_traj} input/output trajectories")
         blocks, valid, io, zb, z0 = [], [], [], [], []
         s = lags.start
         for i in range(n_traj):
@@ -677,13 +677,13 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         io, valid = self._build_regressors(lags, u, y)
         zs = as_trajectories(z, "z", lags.nz) if z is not None else [None] * len(valid)
         if len(zs) != len(valid):
-            raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
+            raise InputError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
         skip = lags.start - (lags.memory - 1) if self.initial_state_rule_ == "measured" else 0
         blocks, inits, off = [], [], 0
         for sl, zi in zip(valid, zs):
             rows = sl.stop - sl.start
             if rows - skip < 1:
-                raise ValueError(f"a trajectory has {sl.stop} samples; the recurrence needs more than {sl.start + skip}")
+                raise InputError(f"a trajectory has {sl.stop} samples; the recurrence needs more than {sl.start + skip}")
             blocks.append(io[off + skip: off + rows])
             inits.append(initial_block(self, zi, sl.start + skip))
             off += rows
@@ -724,10 +724,10 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             _, valid = self.regressors(u, y)
         zs = as_trajectories(z, "z")
         if len(zs) != len(valid):
-            raise ValueError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
+            raise InputError(f"got {len(zs)} target trajectories for {len(valid)} input/output trajectories")
         zt = np.concatenate([zi[sl] for zi, sl in zip(zs, valid)], axis=0)
         if zt.shape != zhat.shape:
-            raise ValueError(f"z has {zt.shape[0]} usable rows and {zt.shape[1]} columns, the estimates {zhat.shape}")
+            raise InputError(f"z has {zt.shape[0]} usable rows and {zt.shape[1]} columns, the estimates {zhat.shape}")
         return float(r2_score(zt, zhat, sample_weight=sample_weight))
 
     # ----------------------------------------------------------- properties

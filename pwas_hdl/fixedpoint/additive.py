@@ -57,7 +57,7 @@ def additive_weight_frac(ref: float, n_parts: int, budget: float = NOISE_BUDGET)
     :func:`pwas_hdl.fixedpoint.bittrue.default_weight_frac`.
     """
     if not (math.isfinite(ref) and ref > 0):
-        raise ValueError(f"reference error must be a positive number, got {ref!r}")
+        raise InputError(f"reference error must be a positive number, got {ref!r}")
     limit = budget * ref * math.sqrt(12.0 / (n_parts + 0.25))
     return -(math.frexp(limit)[1] - 1)
 
@@ -118,7 +118,7 @@ class AdditiveFixedPointModel(FixedPointModel):
         w = weight_matrix(weights, grid.n_vertices)
         for nm, v in (("weight_bits", weight_bits), ("weight_frac", weight_frac), ("output_bits", output_bits), ("output_frac", output_frac)):
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
-                raise ValueError(f"{nm} must be an integer or None, got {v!r}")
+                raise InputError(f"{nm} must be an integer or None, got {v!r}")
         self.grid = grid
         self.subsets = grid.subsets
         self.n = grid.n
@@ -143,7 +143,7 @@ class AdditiveFixedPointModel(FixedPointModel):
         fo = int(output_frac) if output_frac is not None else default_output_frac(fw, self.F)
         sh = self.F + fw - fo
         if sh < 0:
-            raise ValueError(
+            raise InputError(
                 f"output_frac = {fo} is finer than the exact sum (F + weight_frac = {self.F} + {fw} = {self.F + fw}); "
                 f"use output_frac <= {self.F + fw}"
             )
@@ -204,7 +204,7 @@ class AdditiveFixedPointModel(FixedPointModel):
             "out": self.output_format.bits,
         }
         if self.sum_bits > MAX_DATAPATH_BITS:
-            raise ValueError(f"the sum of the parts would need {self.sum_bits} bits (> {MAX_DATAPATH_BITS}); use fewer input or weight bits")
+            raise InputError(f"the sum of the parts would need {self.sum_bits} bits (> {MAX_DATAPATH_BITS}); use fewer input or weight bits")
         self.layout = parts[0].layout
 
         # ---- error bound: every part's weight rounding, one output rounding

@@ -145,7 +145,7 @@ def default_weight_frac(ref: float, budget: float = NOISE_BUDGET) -> int:
     ``sqrt(1.25 * lsb_w**2 / 12) <= budget * ref`` is chosen, ``Fw = -log2(lsb_w)``.
     """
     if not (math.isfinite(ref) and ref > 0):
-        raise ValueError(f"reference error must be a positive number, got {ref!r}")
+        raise InputError(f"reference error must be a positive number, got {ref!r}")
     limit = budget * ref * math.sqrt(12.0 / 1.25)
     return -(math.frexp(limit)[1] - 1)
 
@@ -267,12 +267,12 @@ class FixedPointModel:
                              "(pwas_hdl.fixedpoint.warp), not available in this command yet")
         w = weight_matrix(weights, grid.n_vertices)
         if overflow not in ("error", "saturate"):
-            raise ValueError(f"weight overflow policy must be 'error' or 'saturate', got {overflow!r}")
+            raise InputError(f"weight overflow policy must be 'error' or 'saturate', got {overflow!r}")
         if rounding not in ("half_up", "truncate"):
-            raise ValueError(f"rounding must be 'half_up' or 'truncate', got {rounding!r}")
+            raise InputError(f"rounding must be 'half_up' or 'truncate', got {rounding!r}")
         for nm, v in (("weight_bits", weight_bits), ("weight_frac", weight_frac), ("output_bits", output_bits), ("output_frac", output_frac)):
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
-                raise ValueError(f"{option_text(nm)} must be an integer or None, got {v!r}")
+                raise InputError(f"{option_text(nm)} must be an integer or None, got {v!r}")
             if nm.endswith("_bits") and v is not None and not 1 <= v <= 64:  # before any format is built with it
                 raise InputError(f"{option_text(nm)} = {v}: need an integer in [1, 64] (codes are held in numpy.int64)")
         self.grid = grid
@@ -306,7 +306,7 @@ class FixedPointModel:
                 raise InputError(f"{option_text(nm)} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
         sh = self.F + fw - fo
         if sh < 0:
-            raise ValueError(
+            raise InputError(
                 f"{option_text('output_frac')} = {fo} is finer than the exact product (F + weight_frac = {self.F} + {fw} = "
                 f"{self.F + fw}); the output would need padding bits: use --output-frac <= {self.F + fw}"
             )
@@ -352,7 +352,7 @@ class FixedPointModel:
             "out": self.output_format.bits,
         }
         if self.widths["acc"] > MAX_DATAPATH_BITS:
-            raise ValueError(
+            raise InputError(
                 f"the accumulator would need {self.widths['acc']} bits (> {MAX_DATAPATH_BITS}): "
                 f"F = {self.F}, B_w = {self.weight_format.bits}; use fewer input or weight bits"
             )
@@ -401,7 +401,7 @@ class FixedPointModel:
         free = FixedFormat(64, fw, True, self.rounding, "saturate")
         codes_free, sat_free = free.quantize(w, return_saturated=True)
         if sat_free.any():
-            raise ValueError(f"weights are too large for 64-bit codes at weight_frac = {fw}; use fewer fraction bits")
+            raise InputError(f"weights are too large for 64-bit codes at weight_frac = {fw}; use fewer fraction bits")
         wmax = float(np.max(np.abs(w))) if w.size else 0.0
         if wmax > 0 and not np.any(codes_free):
             # a format whose LSB is above every weight: the design would compute 0 for every input
@@ -422,7 +422,7 @@ class FixedPointModel:
         coords = tuple(int(c) for c in self.grid.vertex_coords(int(i)))
         what = f"weight {int(i)} (vertex {coords}) of target {self.target_names[t]!r} = {float(w[i, t])!r}"
         if self.overflow == "error":
-            raise ValueError(
+            raise InputError(
                 f"{what} does not fit the weight format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}], "
                 f"lsb {fmt.lsb!r}); {int(sat.sum())} weight(s) overflow, {need} bits are needed at {fw} fraction bits. "
                 "Use --weight-bits (weight_bits) >= %d, fewer --weight-frac bits, or overflow='saturate'" % need
@@ -502,7 +502,7 @@ class FixedPointModel:
         """
         xa = np.atleast_2d(np.asarray(x, dtype=float))
         if xa.shape[1] != self.n:
-            raise ValueError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
+            raise InputError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
         q = np.empty(xa.shape, dtype=np.int64)
         sat = np.zeros(xa.shape, dtype=bool)
         for j, f in enumerate(self.inputs):
@@ -538,14 +538,14 @@ class FixedPointModel:
         qa = np.atleast_2d(np.asarray(q))
         if qa.dtype.kind not in "iu":
             if qa.dtype.kind != "f" or not np.all(qa == np.floor(qa)):
-                raise ValueError("input codes must be integers; use quantize_inputs() for physical values")
+                raise InputError("input codes must be integers; use quantize_inputs() for physical values")
         qa = qa.astype(np.int64)
         if qa.ndim != 2 or qa.shape[1] != self.n:
-            raise ValueError(f"input codes must have shape (m, {self.n}), got {np.shape(q)}")
+            raise InputError(f"input codes must have shape (m, {self.n}), got {np.shape(q)}")
         bad = (qa < self._qmin) | (qa > self._qmax)
         if bad.any():
             r, j = np.argwhere(bad)[0]
-            raise ValueError(
+            raise InputError(
                 f"input code {int(qa[r, j])} (row {int(r)}, dimension {int(j)}) is outside the "
                 f"{self.input_bits}-bit range [{int(self._qmin[j])}, {int(self._qmax[j])}]"
             )

@@ -49,6 +49,8 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pwas_hdl.errors import InputError
+
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.warp import WarpInputFormat
 
@@ -121,7 +123,7 @@ def unsigned_bits_needed(codes: ArrayLike) -> int:
     if a.size == 0:
         return 1
     if int(a.min()) < 0:
-        raise ValueError(f"negative code {int(a.min())} cannot be unsigned")
+        raise InputError(f"negative code {int(a.min())} cannot be unsigned")
     return max(1, int(a.max()).bit_length())
 
 
@@ -148,9 +150,9 @@ def shift_round(a: ArrayLike, sh: int, rounding: str = "half_up") -> np.ndarray:
         ``sh`` is not an integer ``>= 0``, or an unknown ``rounding``.
     """
     if not _is_int(sh) or sh < 0:
-        raise ValueError(f"shift must be an integer >= 0, got {sh!r}")
+        raise InputError(f"shift must be an integer >= 0, got {sh!r}")
     if rounding not in ROUNDING_MODES:
-        raise ValueError(f"rounding must be one of {ROUNDING_MODES}, got {rounding!r}")
+        raise InputError(f"rounding must be one of {ROUNDING_MODES}, got {rounding!r}")
     x = np.asarray(a, dtype=np.int64)
     if sh == 0:
         return x.copy()
@@ -204,25 +206,25 @@ class FixedFormat:
 
     def __post_init__(self) -> None:
         if not _is_int(self.bits):
-            raise ValueError(f"bits must be an integer, got {self.bits!r}")
+            raise InputError(f"bits must be an integer, got {self.bits!r}")
         if not _is_int(self.frac):
-            raise ValueError(f"frac (fraction bits) must be an integer, got {self.frac!r}")
+            raise InputError(f"frac (fraction bits) must be an integer, got {self.frac!r}")
         if not isinstance(self.signed, (bool, np.bool_)):
-            raise ValueError(f"signed must be True or False, got {self.signed!r}")
+            raise InputError(f"signed must be True or False, got {self.signed!r}")
         if self.bits < 1:
-            raise ValueError(f"bits = {self.bits}: a fixed-point format needs at least 1 bit")
+            raise InputError(f"bits = {self.bits}: a fixed-point format needs at least 1 bit")
         limit = 64 if self.signed else 63
         if self.bits > limit:
-            raise ValueError(
+            raise InputError(
                 f"bits = {self.bits} exceeds {limit}, the widest {'signed' if self.signed else 'unsigned'} "
                 "format whose codes fit numpy.int64"
             )
         if abs(self.frac) > _MAX_ABS_FRAC:
-            raise ValueError(f"frac = {self.frac} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
+            raise InputError(f"frac = {self.frac} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
         if self.rounding not in ROUNDING_MODES:
-            raise ValueError(f"rounding must be one of {ROUNDING_MODES}, got {self.rounding!r}")
+            raise InputError(f"rounding must be one of {ROUNDING_MODES}, got {self.rounding!r}")
         if self.overflow not in OVERFLOW_MODES:
-            raise ValueError(f"overflow must be one of {OVERFLOW_MODES}, got {self.overflow!r}")
+            raise InputError(f"overflow must be one of {OVERFLOW_MODES}, got {self.overflow!r}")
         # normalise numpy scalars to Python ints so that the dataclass hashes/compares simply
         object.__setattr__(self, "bits", int(self.bits))
         object.__setattr__(self, "frac", int(self.frac))
@@ -279,7 +281,7 @@ class FixedFormat:
         """
         m = re.fullmatch(r"\s*([su])(\d+)\.(-?\d+)\s*", str(text))
         if not m:
-            raise ValueError(f"cannot parse fixed-point format {text!r}; expected e.g. 's16.4' or 'u12.9'")
+            raise InputError(f"cannot parse fixed-point format {text!r}; expected e.g. 's16.4' or 'u12.9'")
         return cls(int(m.group(2)), int(m.group(3)), m.group(1) == "s", rounding, overflow)
 
     # ------------------------------------------------------- conversion
@@ -347,7 +349,7 @@ class FixedFormat:
         v = np.asarray(values, dtype=float)
         if np.isnan(v).any():
             idx = np.unravel_index(int(np.flatnonzero(np.isnan(v.reshape(-1)))[0]), v.shape)
-            raise ValueError(f"{what} at index {tuple(int(i) for i in idx)} is NaN; cannot quantize to {self}")
+            raise InputError(f"{what} at index {tuple(int(i) for i in idx)} is NaN; cannot quantize to {self}")
         return self._apply(_round_scaled(np.ldexp(v, self.frac), self.rounding), v, return_saturated, what)
 
     def _apply(self, r: np.ndarray, v: np.ndarray, return_saturated: bool, what: str):
@@ -373,7 +375,7 @@ class FixedFormat:
                 rr = [int(r.min()), int(r.max())]
                 nb = signed_bits_needed(rr) if self.signed else unsigned_bits_needed(rr)
                 need = f"{nb} bits are needed at {self.frac} fraction bits"
-            raise ValueError(
+            raise InputError(
                 f"{what}{where} = {worst!r} does not fit the fixed-point format {self} "
                 f"(range [{self.min_value!r}, {self.max_value!r}], lsb {self.lsb!r}); "
                 f"{int(bad.sum())} value(s) overflow and {need}. "
@@ -437,7 +439,7 @@ class FixedFormat:
         try:
             return cls(int(d["bits"]), int(d["frac"]), bool(d.get("signed", True)), d.get("rounding", "half_up"), d.get("overflow", "saturate"))
         except (KeyError, TypeError) as exc:
-            raise ValueError(f"not a fixed-point format description ({type(exc).__name__}: {exc}): {d!r}") from exc
+            raise InputError(f"not a fixed-point format description ({type(exc).__name__}: {exc}): {d!r}") from exc
 
 
 def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: str = "half_up") -> int:
@@ -467,7 +469,7 @@ def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: s
     """
     v = np.asarray(values, dtype=float).reshape(-1)
     if v.size == 0 or not np.all(np.isfinite(v)) or not np.any(v != 0):
-        raise ValueError("frac_for_bits needs finite values, at least one of them non-zero")
+        raise InputError("frac_for_bits needs finite values, at least one of them non-zero")
     FixedFormat(bits, 0, signed)  # validates bits
     big = float(np.max(np.abs(v)))
     frac = (bits - 1 if signed else bits) - (math.frexp(big)[1])  # a first guess, refined below
@@ -481,7 +483,7 @@ def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: s
     while not ok(frac):
         frac -= 1
         if frac < -_MAX_ABS_FRAC:
-            raise ValueError(f"no fraction-bit count lets the values fit {bits} bits")
+            raise InputError(f"no fraction-bit count lets the values fit {bits} bits")
     while frac < _MAX_ABS_FRAC and ok(frac + 1):
         frac += 1
     return frac
@@ -504,9 +506,9 @@ class SignalScaling:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and self.scale > 0):
-            raise ValueError(f"scale must be a positive finite number, got {self.scale!r}")
+            raise InputError(f"scale must be a positive finite number, got {self.scale!r}")
         if not math.isfinite(self.offset):
-            raise ValueError(f"offset must be finite, got {self.offset!r}")
+            raise InputError(f"offset must be finite, got {self.offset!r}")
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "offset", float(self.offset))
 
@@ -785,21 +787,21 @@ class InputFormat:
         tag = f"_{dim}" if dim is not None else ""
         lo, hi = float(lo), float(hi)
         if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-            raise ValueError(f"input domain{tag} [{lo}, {hi}] must be finite with hi > lo")
+            raise InputError(f"input domain{tag} [{lo}, {hi}] must be finite with hi > lo")
         if not _is_int(partitions) or partitions < 1:
-            raise ValueError(f"p{tag} = {partitions!r}: need an integer number of intervals >= 1")
+            raise InputError(f"p{tag} = {partitions!r}: need an integer number of intervals >= 1")
         if not _is_int(bits) or not 2 <= bits <= 40:
-            raise ValueError(f"--input-bits (input_bits) = {bits!r}: need an integer in [2, 40]")
+            raise InputError(f"--input-bits (input_bits) = {bits!r}: need an integer in [2, 40]")
         if not (isinstance(fill, (int, float, np.floating)) and 0 < float(fill) <= 1):
-            raise ValueError(f"--input-fill (input_fill) = {fill!r}: need a number in (0, 1]")
+            raise InputError(f"--input-fill (input_fill) = {fill!r}: need a number in (0, 1]")
         fill = float(fill)
         p = int(partitions)
         if scale not in ("pow2", "exact"):
-            raise ValueError(f"--input-scale (input_scale) must be 'pow2' or 'exact', got {scale!r}")
+            raise InputError(f"--input-scale (input_scale) must be 'pow2' or 'exact', got {scale!r}")
         if scale == "exact":
             smax = int(min(Fraction(fill) * (1 << int(bits)), Fraction((1 << int(bits)) - 1)))
             if smax < p:
-                raise ValueError(f"B_in too small for p{tag} = {p} intervals: input_bits = {bits} at input_fill = {fill} gives "
+                raise InputError(f"B_in too small for p{tag} = {p} intervals: input_bits = {bits} at input_fill = {fill} gives "
                                  f"{smax} codes, fewer than one per grid cell")
             f = 0
             while (p << f) < smax:
@@ -814,7 +816,7 @@ class InputFormat:
             need = int(bits)
             while _cell_frac_bits(p, need, fill) < 0:
                 need += 1
-            raise ValueError(
+            raise InputError(
                 f"B_in too small for p{tag} = {p} intervals: input_bits = {bits} at input_fill = {fill} gives "
                 f"fewer than one code per grid cell; use input_bits >= {need} (or fewer intervals)"
             )
@@ -982,7 +984,7 @@ def quantize_input(f: InputFormat | WarpInputFormat, x: ArrayLike,
     """
     v = np.asarray(x, dtype=float)
     if np.isnan(v).any():
-        raise ValueError("input values contain NaN; cannot quantize")
+        raise InputError("input values contain NaN; cannot quantize")
     with np.errstate(over="ignore"):  # a value far outside a tiny lsb: +-inf, saturated like any outside value
         scaled = f.lo_code + (v - f.lo) / f.lsb
     return f.format._apply(_round_scaled(scaled, "half_up"), v, return_saturated, "input")

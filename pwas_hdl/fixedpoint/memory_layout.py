@@ -67,6 +67,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.bitfields import pack_rows, to_unsigned
 from pwas_hdl.limits import MAX_MEMORY_WORDS, check_limit
@@ -80,12 +81,12 @@ def _as_weight_matrix(weight_codes, n_vertices: int) -> np.ndarray:
     w = np.asarray(weight_codes)
     if w.dtype.kind not in "iu":
         if not np.all(w == np.floor(w)):
-            raise ValueError("weight codes must be integers (quantize the weights first)")
+            raise InputError("weight codes must be integers (quantize the weights first)")
     w = w.astype(np.int64)
     if w.ndim == 1:
         w = w[:, None]
     if w.ndim != 2 or w.shape[0] != n_vertices:
-        raise ValueError(f"weight codes must have shape (N, nz) with N = {n_vertices}, got {np.shape(weight_codes)}")
+        raise InputError(f"weight codes must have shape (N, nz) with N = {n_vertices}, got {np.shape(weight_codes)}")
     return w
 
 
@@ -114,10 +115,11 @@ class _LayoutBase:
             return self.grid.vertex_index(np.asarray(vertex, dtype=np.int64))
         idx = np.asarray(vertex)
         if idx.dtype.kind not in "iu":
-            raise ValueError("vertex indices must be integers")
+            raise InputError(f"vertex indices must be integers, got dtype {idx.dtype}; pass linear indices 0..N-1 or a tuple of coordinates")
         idx = idx.astype(np.int64)
         if idx.size and (idx.min() < 0 or idx.max() >= self.grid.n_vertices):
-            raise ValueError(f"vertex index out of range [0, {self.grid.n_vertices})")
+            raise InputError(f"vertex index {int(idx.min()) if idx.min() < 0 else int(idx.max())} is out of range [0, {self.grid.n_vertices}) "
+                             f"(N = {self.grid.n_vertices} vertices)")
         return idx
 
     def contents(self, weight_codes) -> np.ndarray:
@@ -236,9 +238,9 @@ class BankedLayout(_LayoutBase):
         """
         c = np.asarray(coords, dtype=np.int64)
         if c.shape[-1:] != (self.n,):
-            raise ValueError(f"vertex coordinates must have shape (..., {self.n}), got {c.shape}")
+            raise InputError(f"vertex coordinates must have shape (..., {self.n}), got {c.shape}")
         if c.size and (np.any(c < 0) or np.any(c > self.grid.partitions)):
-            raise ValueError("vertex coordinates outside the grid")
+            raise InputError(f"vertex coordinates outside the grid: coordinate j must be in 0..p_j, p = {tuple(self.grid.partitions)}")
         bank = c.sum(axis=-1) % self.n_banks
         addr = c[..., :-1] @ np.array(self.row_strides, dtype=np.int64) + c[..., -1] // self.n_banks
         return bank.astype(np.int64), np.asarray(addr, dtype=np.int64)
@@ -416,9 +418,9 @@ class CornerLayout(_LayoutBase):
         """
         c = np.asarray(cells, dtype=np.int64)
         if c.shape[-1:] != (self.n,):
-            raise ValueError(f"cell coordinates must have shape (..., {self.n}), got {c.shape}")
+            raise InputError(f"cell coordinates must have shape (..., {self.n}), got {c.shape}")
         if c.size and (np.any(c < 0) or np.any(c >= self.grid.partitions)):
-            raise ValueError("cell coordinates outside the grid")
+            raise InputError(f"cell coordinates outside the grid: coordinate j must be in 0..p_j - 1, p = {tuple(self.grid.partitions)}")
         return np.asarray(c @ (np.int64(1) << np.array(self.field_shifts, dtype=np.int64)), dtype=np.int64)
 
     def bank_addr(self, vertex: int | np.ndarray | tuple[int, ...],
@@ -534,7 +536,7 @@ def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLa
 
     Raises
     ------
-    ValueError
+    InputError
         An unknown ``kind``.
     """
     if kind == "banked":
@@ -543,7 +545,7 @@ def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLa
         return ReplicatedLayout(grid)
     if kind == "corner":
         return CornerLayout(grid)
-    raise ValueError(f"memory layout must be one of {LAYOUT_KINDS}, got {kind!r}")
+    raise InputError(f"memory layout must be one of {LAYOUT_KINDS}, got {kind!r}")
 
 
 def readmemh_text(words: ArrayLike, bits: int) -> str:
@@ -567,7 +569,7 @@ def readmemh_text(words: ArrayLike, bits: int) -> str:
         ``bits`` is not an integer ``>= 1``.
     """
     if not isinstance(bits, (int, np.integer)) or bits < 1:
-        raise ValueError(f"word width must be an integer >= 1, got {bits!r}")
+        raise InputError(f"word width must be an integer >= 1, got {bits!r}")
     bits = int(bits)
     digits = -(-bits // 4)
     return "".join(format(to_unsigned(w, bits), f"0{digits}x") + "\n" for w in words)

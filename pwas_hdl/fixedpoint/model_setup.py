@@ -17,6 +17,8 @@ from typing import Sequence
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
+
 __all__ = ["weight_matrix", "model_names", "input_code_arrays", "output_reference"]
 
 
@@ -32,9 +34,9 @@ def weight_matrix(weights, n_vertices: int) -> np.ndarray:
     if w.ndim == 1:
         w = w[:, None]
     if w.ndim != 2 or w.shape[0] != n_vertices or w.shape[1] < 1:
-        raise ValueError(f"weights must have shape (N, nz) with N = {n_vertices}, got {np.shape(weights)}")
+        raise InputError(f"weights must have shape (N, nz) with N = {n_vertices}, got {np.shape(weights)}")
     if not np.all(np.isfinite(w)):
-        raise ValueError("weights contain NaN or infinite values")
+        raise InputError("weights contain NaN or infinite values; fit the model again or pass finite weights")
     return w
 
 
@@ -53,9 +55,9 @@ def model_names(n: int, nz: int, regressor_names: Sequence[str] | None, regresso
     signals = [(str(s), int(lag)) for s, lag in regressor_signals] if regressor_signals is not None else [(nm, 0) for nm in names]
     targets = list(target_names) if target_names is not None else [f"z{i}" for i in range(nz)]
     if len(names) != n or len(signals) != n:
-        raise ValueError(f"need {n} regressor names/signals, got {len(names)}/{len(signals)}")
+        raise InputError(f"need {n} regressor names/signals, got {len(names)}/{len(signals)}")
     if len(targets) != nz:
-        raise ValueError(f"need {nz} target names, got {len(targets)}")
+        raise InputError(f"need {nz} target names, got {len(targets)}")
     return names, signals, targets
 
 

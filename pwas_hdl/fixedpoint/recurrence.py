@@ -134,9 +134,9 @@ class RecurrentFixedPointModel:
 
     def __init__(self, fxm: FixedPointModel, lags: LagStructure, initial_values: ArrayLike):
         if not lags.recurrent:
-            raise ValueError("the lag structure has no fed-back estimates (Mz = 0): use FixedPointModel")
+            raise InputError("the lag structure has no fed-back estimates (Mz = 0): use FixedPointModel")
         if lags.dimension != fxm.n:
-            raise ValueError(f"the lag structure has n = {lags.dimension}, the fixed-point model {fxm.n}")
+            raise InputError(f"the lag structure has n = {lags.dimension}, the fixed-point model {fxm.n}")
         self.fxm, self.lags = fxm, lags
         formats = fxm.signal_input_formats()  # raises unless the lags of each signal share a format
         sod = lags.signal_of_dimension()
@@ -202,7 +202,7 @@ class RecurrentFixedPointModel:
         """
         ca = np.asarray(codes, dtype=np.int64)
         if ca.ndim != 2 or ca.shape[1] != len(self.signals):
-            raise ValueError(f"codes must have shape (T, {len(self.signals)}), got {ca.shape}")
+            raise InputError(f"codes must have shape (T, {len(self.signals)}), got {ca.shape}")
         io = self._io_codes(ca)
         mz, nz = self.lags.mz, self.lags.nz
         past = self.initial_codes.copy()  # (Mz, nz) oldest first

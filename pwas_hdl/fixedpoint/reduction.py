@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from typing import Callable, Sequence, TypeVar
 
+from pwas_hdl.errors import InputError
+
 __all__ = ["tree_depth", "tree_level", "tree_levels", "tree_reduce"]
 
 T = TypeVar("T")
@@ -27,7 +29,7 @@ T = TypeVar("T")
 def tree_depth(n_items: int) -> int:
     """Levels of the tree over ``n_items >= 1`` items: ``ceil(log2(n_items))`` (0 for one item)."""
     if n_items < 1:
-        raise ValueError(f"a reduction needs at least one item, got {n_items}")
+        raise InputError(f"a reduction needs at least one item, got {n_items}")
     return (int(n_items) - 1).bit_length()
 
 
@@ -46,7 +48,7 @@ def tree_levels(items: Sequence[T], combine: Callable[[T, T, int, int], T]) -> l
     """
     cur = list(items)
     if not cur:
-        raise ValueError("a reduction needs at least one item")
+        raise InputError("a reduction needs at least one item")
     levels = []
     while len(cur) > 1:
         cur = tree_level(cur, combine, len(levels))

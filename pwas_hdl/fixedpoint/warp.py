@@ -565,7 +565,7 @@ class WarpedFixedPointModel:
         """
         xa = np.atleast_2d(np.asarray(x, dtype=float))
         if xa.shape[1] != self.n:
-            raise ValueError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
+            raise InputError(f"inputs have {xa.shape[1]} columns, the model has n = {self.n}")
         q = np.empty(xa.shape, dtype=np.int64)
         sat = np.zeros(xa.shape, dtype=bool)
         for j, f in enumerate(self.inputs):
@@ -608,7 +608,7 @@ class WarpedFixedPointModel:
         qa = np.atleast_2d(np.asarray(q, dtype=np.int64))
         lo, hi = self.code_range
         if qa.shape[1] != self.n or qa.min(initial=lo) < lo or qa.max(initial=hi) > hi:
-            raise ValueError(f"input codes must have {self.n} columns within the signed {self.input_bits}-bit range")
+            raise InputError(f"input codes must have {self.n} columns within the signed {self.input_bits}-bit range")
         return np.stack([w.apply(qa[:, j]) for j, w in enumerate(self.warps)], axis=1)
 
     def evaluate(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:

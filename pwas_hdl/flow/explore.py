@@ -168,10 +168,10 @@ def pareto_front(points: Sequence, objectives: Sequence[str] | None = None) -> l
     else:
         rows = [tuple(float(v) for v in p) for p in points]
         if len({len(r) for r in rows}) != 1 or len(rows[0]) == 0:
-            raise ValueError("all points need the same (non-zero) number of objectives")
+            raise InputError("all points need the same (non-zero) number of objectives")
         vals = np.array(rows, dtype=float)
     if np.isnan(vals).any():
-        raise ValueError("an objective is NaN")
+        raise InputError("an objective is NaN; every point needs finite objective values (drop or fix the point)")
     front = []
     for i in range(vals.shape[0]):
         le = np.all(vals <= vals[i], axis=1)
@@ -218,7 +218,7 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
         for t in tgts:
             col = next((c for c in (f"{t}_true", t) if c in data.header), None)
             if col is None:
-                raise ValueError(
+                raise InputError(
                     f"{data.path}: no column {t + '_true'!r} or {t!r} to compare the estimate of target {t!r} with; "
                     f"the file has columns {', '.join(data.header)}"
                 )
@@ -229,22 +229,22 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
         try:
             u, y, ztab = data
         except (TypeError, ValueError):
-            raise ValueError("data must be a CSV path, a pwas_hdl.io.csv_table.Table or a tuple (u, y, z)") from None
+            raise InputError("data must be a CSV path, a pwas_hdl.io.csv_table.Table or a tuple (u, y, z)") from None
         from pwas_hdl.fit.regressors import as_trajectories
 
         ztab = as_trajectories(ztab, "z", len(tgts))
         desc = {"path": None, "reference_columns": None, "traj_col": None}
     xi, valid = sensor.regressors(u, y)
     if len(ztab) != len(valid):
-        raise ValueError(f"got {len(ztab)} target trajectories but {len(valid)} input/output trajectories")
+        raise InputError(f"got {len(ztab)} target trajectories but {len(valid)} input/output trajectories")
     zs = []
     for zt, sl in zip(ztab, valid):
         if zt.shape[0] < sl.stop:
-            raise ValueError(f"a target trajectory has {zt.shape[0]} samples, its regressors need {sl.stop}")
+            raise InputError(f"a target trajectory has {zt.shape[0]} samples, its regressors need {sl.stop}")
         zs.append(np.asarray(zt, dtype=float)[sl])
     z = np.concatenate(zs, axis=0)
     if xi.shape[0] == 0:
-        raise ValueError("the data have no sample with a full regressor (too few samples for the lags)")
+        raise InputError("the data have no sample with a full regressor (too few samples for the lags)")
     for i, t in enumerate(tgts):  # the reference of the RMSEE: its squared errors would overflow
         where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
         check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
@@ -265,12 +265,12 @@ def _int_values(values, what: str, lo: int | None = None) -> list[int]:
     out = []
     for v in values:
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            raise ValueError(f"{_option(what)} must be integers, got {v!r}")
+            raise InputError(f"{_option(what)} must be integers, got {v!r}")
         if lo is not None and v < lo:
-            raise ValueError(f"{_option(what)} must be >= {lo}, got {v}")
+            raise InputError(f"{_option(what)} must be >= {lo}, got {v}")
         out.append(int(v))
     if not out:
-        raise ValueError(f"{_option(what)}: the sweep is empty; give at least one value")
+        raise InputError(f"{_option(what)}: the sweep is empty; give at least one value")
     return sorted(set(out))
 
 
@@ -533,23 +533,23 @@ def explore(
         Synthesis was asked for and every synthesis run failed (the message quotes the first error).
     """
     if resources not in RESOURCE_MODES:
-        raise ValueError(f"--fpga / resources must be one of {', '.join(RESOURCE_MODES)}, got {resources!r}")
+        raise InputError(f"--fpga / resources must be one of {', '.join(RESOURCE_MODES)}, got {resources!r}")
     if cost not in COST_KEYS:
-        raise ValueError(f"--cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
+        raise InputError(f"--cost must be one of {', '.join(COST_KEYS)}, got {cost!r}")
     if memory not in ("banked", "replicated"):
-        raise ValueError(f"--memory (memory) must be 'banked' or 'replicated' (explore does not sweep the corner memory), "
+        raise InputError(f"--memory (memory) must be 'banked' or 'replicated' (explore does not sweep the corner memory), "
                          f"got {memory!r}")
     if measure_max is not None and (isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1):
-        raise ValueError(f"--measure-max (measure_max) must be an integer >= 1, got {measure_max!r}")
+        raise InputError(f"--measure-max (measure_max) must be an integer >= 1, got {measure_max!r}")
     if resources == "estimate":  # the synthesis options mean nothing without synthesis: refused, not ignored
         given = [opt for opt, v in (("--device", device), ("--measure-max", measure_max), ("--synth-dir", workdir)) if v is not None]
         if given:
             one = len(given) == 1
-            raise ValueError(f"{', '.join(given)} {'needs' if one else 'need'} --fpga ecp5|ice40|generic ({'it is' if one else 'they are'} "
+            raise InputError(f"{', '.join(given)} {'needs' if one else 'need'} --fpga ecp5|ice40|generic ({'it is' if one else 'they are'} "
                              f"about the synthesis of the Pareto points); add --fpga or drop {'it' if one else 'them'} for the analytic estimate only")
     elif device is not None:
         if resources == "generic":
-            raise ValueError("--device needs --fpga ecp5 or ice40 (the generic target has no device); drop it or choose the family")
+            raise InputError("--device needs --fpga ecp5 or ice40 (the generic target has no device); drop it or choose the family")
         from pwas_hdl.flow.synthesis import check_device
 
         check_device(resources, device)  # an unknown device refused before the sweep, as synth refuses it
@@ -636,7 +636,7 @@ def explore(
             "first reason: " + (refused[0]["reason"] if refused else "none")
         )
     if cost == "register_bits" and any(p["cost"] is None for p in points):
-        raise ValueError("register bits are not available with this Amaranth version; choose another cost")
+        raise InputError("register bits are not available with this Amaranth version; choose another cost")
 
     front = pareto_front(points, ("cost", "rmsee_ratio"))
     for k, p in enumerate(points):
@@ -889,7 +889,7 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
 
     pts = result["points"]
     if not pts:
-        raise ValueError("the result has no points to plot")
+        raise InputError("the result has no points to plot (every combination of the sweep was refused); sweep other word lengths")
     meas = result.get("measured")
     ncol = 3 if meas else 2
     fig, axes = plt.subplots(1, ncol, figsize=(6.4 * ncol, 6.2), layout="constrained")

@@ -52,6 +52,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.flow.netlist_json import read_top, write_netlist
 
 __all__ = ["FLOORPLANS", "SITE_TABLES", "SiteTable", "check_floorplan", "plan_sites", "apply_floorplan",
@@ -108,9 +109,9 @@ SITE_TABLES: dict[str, SiteTable] = {"45k": _ecp5_45f()}
 
 
 def check_floorplan(value: Any) -> str:
-    """``value`` if it is one of :data:`FLOORPLANS`, else ValueError (bad input: CLI exit 2)."""
+    """``value`` if it is one of :data:`FLOORPLANS`, else InputError (bad input: CLI exit 2)."""
     if not isinstance(value, str) or value not in FLOORPLANS:
-        raise ValueError(f"--floorplan (floorplan) must be one of {', '.join(FLOORPLANS)}, got {value!r}")
+        raise InputError(f"--floorplan (floorplan) must be one of {', '.join(FLOORPLANS)}, got {value!r}")
     return value
 
 

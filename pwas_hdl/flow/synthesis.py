@@ -240,15 +240,15 @@ def synthesize(
         Yosys or nextpnr failed (``log`` names the log file, ``tail`` holds its end).
     """
     if target not in TARGETS:
-        raise ValueError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
+        raise InputError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_PLACER_SEED:
-        raise ValueError(f"--seed (seed) must be an integer in 0..{MAX_PLACER_SEED} (nextpnr's placer seed), got {seed!r}")
+        raise InputError(f"--seed (seed) must be an integer in 0..{MAX_PLACER_SEED} (nextpnr's placer seed), got {seed!r}")
     for opt, val in (("--device (device)", device), ("--package (package)", package)):
         if val is not None and not str(val).strip():
-            raise ValueError(f"{opt} is empty; omit it for the default or name one (see `pwas-hdl synth --help`)")
+            raise InputError(f"{opt} is empty; omit it for the default or name one (see `pwas-hdl synth --help`)")
     if freq_mhz is not None:
         if isinstance(freq_mhz, bool) or not isinstance(freq_mhz, (int, float)) or not math.isfinite(freq_mhz) or freq_mhz <= 0:
-            raise ValueError(f"--clock-mhz (freq_mhz) must be a positive number of MHz, got {freq_mhz!r}")
+            raise InputError(f"--clock-mhz (freq_mhz) must be a positive number of MHz, got {freq_mhz!r}")
     from pwas_hdl.flow.floorplan import apply_floorplan, check_floorplan
 
     check_floorplan(floorplan)
@@ -256,7 +256,7 @@ def synthesize(
     if harness is None:
         harness = target != "generic"
     if harness and target == "generic":
-        raise ValueError("--harness: the generic target has no place and route, so no timing harness; drop --harness "
+        raise InputError("--harness: the generic target has no place and route, so no timing harness; drop --harness "
                          "or use --fpga ice40/ecp5")
 
     outdir = Path(outdir)
@@ -498,36 +498,36 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
         # the command's option names (and its --fpga, not the hidden old --target): the message is the CLI's error line
         given = [name for name, v in (("--device", device), ("--package", package), ("--clock-mhz", freq_mhz)) if v is not None]
         if given:
-            raise ValueError(f"the generic target has no device and no place and route; drop {', '.join(given)} or use --fpga ice40/ecp5")
+            raise InputError(f"the generic target has no device and no place and route; drop {', '.join(given)} or use --fpga ice40/ecp5")
         return None, None, None, None, False
     dev = (device or DEFAULT_DEVICE[target]).strip().lower().lstrip("-")
     if target == "ice40":
         if dev.startswith("ice40"):
             dev = dev[5:]
         if dev not in _ICE40:
-            raise ValueError(f"unknown iCE40 device {device!r}; nextpnr-ice40 knows {', '.join(_ICE40)}")
+            raise InputError(f"unknown iCE40 device {device!r}; nextpnr-ice40 knows {', '.join(_ICE40)}")
         default_pkg, family, dsp = _ICE40[dev]
         pkg = (package or default_pkg).strip().lower()
         if pkg not in _ICE40_PACKAGES[dev]:
-            raise ValueError(f"--package {package!r} is not a package of the iCE40 {dev.upper()} (--device {dev}); nextpnr-ice40 "
+            raise InputError(f"--package {package!r} is not a package of the iCE40 {dev.upper()} (--device {dev}); nextpnr-ice40 "
                              f"knows {', '.join(_ICE40_PACKAGES[dev])} (default {default_pkg})")
         return dev, pkg, f"iCE40{dev.upper()}-{pkg.upper()}", family, dsp
     if dev not in _ECP5:
-        raise ValueError(f"unknown ECP5 device {device!r}; give it as nextpnr-ecp5 names it: {', '.join(_ECP5)}")
+        raise InputError(f"unknown ECP5 device {device!r}; give it as nextpnr-ecp5 names it: {', '.join(_ECP5)}")
     pkg = (package or _ECP5_PACKAGE).strip().upper()
     kind, size = (dev.rsplit("-", 1) if "-" in dev else ("u", dev))
     if pkg not in _ECP5_PACKAGES[size]:
-        raise ValueError(f"--package {package!r} is not a package of the ECP5 {dev} (--device {dev}); nextpnr-ecp5 knows "
+        raise InputError(f"--package {package!r} is not a package of the ECP5 {dev} (--device {dev}); nextpnr-ecp5 knows "
                          f"{', '.join(_ECP5_PACKAGES[size])}" + (f" (default {_ECP5_PACKAGE})" if _ECP5_PACKAGE in _ECP5_PACKAGES[size] else ""))
     prefix = {"u": "LFE5U", "um": "LFE5UM", "um5g": "LFE5UM5G"}[kind]
     return dev, pkg, f"{prefix}-{size[:-1]}F-6{pkg}", None, True
 
 
 def check_device(target: str, device: str | None) -> None:
-    """``ValueError`` unless ``device`` is a part of ``target`` that :func:`synthesize` takes (for
+    """``InputError`` unless ``device`` is a part of ``target`` that :func:`synthesize` takes (for
     callers that synthesise later, e.g. ``explore --fpga ecp5 --device D``)."""
     if target not in TARGETS:
-        raise ValueError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
+        raise InputError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
     _resolve_device(target, device, None, None)
 
 
@@ -566,7 +566,7 @@ def _rel(path: Path, start: Path) -> str:
 def _yosys_path(p: str) -> str:
     p = p.replace(os.sep, "/")
     if any(c in p for c in '"\n\r'):
-        raise ValueError(f"cannot pass the path {p!r} to yosys (quote or newline in it); move the design folder")
+        raise InputError(f"cannot pass the path {p!r} to yosys (quote or newline in it); move the design folder")
     return f'"{p}"' if any(c.isspace() for c in p) or ";" in p else p
 
 
@@ -743,5 +743,5 @@ def _raise_nextpnr_failure(log: Path, tool: str, part: str, rc: int, port_bits: 
                     f"(e.g. --device hx8k --package ct256, or --target ecp5)")
         elif any(o[0] == "ICESTORM_DSP" for o in over):
             hint = "choose a part with more DSPs, or one without DSPs where multipliers go to LUTs (--device hx8k)"
-        raise ValueError(f"the design does not fit {part}: " + "; ".join(msgs) + f"; {hint} (see {log})")
+        raise InputError(f"the design does not fit {part}: " + "; ".join(msgs) + f"; {hint} (see {log})")
     raise ToolFailed(f"{tool} failed (exit status {rc}) on {part}", log, _log_tail(log))

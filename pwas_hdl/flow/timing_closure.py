@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl.params import Pipeline
 from pwas_hdl.io.atomic import make_temp_dir
 
@@ -99,7 +100,7 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
     """
     n = int(n)
     if n < 1:
-        raise ValueError("a PWAS core needs at least one input (n >= 1)")
+        raise InputError("a PWAS core needs at least one input (n >= 1)")
     depth = Pipeline.tree_depth(n)
     tree = []  # tree_levels giving 1, 2, ... registers (distinct counts ceil(depth / t))
     for t in range(depth, 0, -1):
@@ -161,7 +162,7 @@ def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[
             seq.append(f"        {nm} <= core_{nm};")
             conns.append(f"        .{nm}(core_{nm})")
         else:
-            raise ValueError(f"port {nm} has direction {d!r}; the timing harness handles input and output ports")
+            raise InputError(f"port {nm} has direction {d!r}; the timing harness handles input and output ports")
     from pwas_hdl import __version__
 
     head = [
@@ -354,14 +355,14 @@ def close_timing(
         Bad target or FPGA family; a design that does not fit the device.
     """
     if fpga not in FPGA_TARGETS:
-        raise ValueError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga!r}")
+        raise InputError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga!r}")
     if isinstance(target_mhz, bool) or not isinstance(target_mhz, (int, float)) or not target_mhz > 0 or target_mhz == float("inf"):
-        raise ValueError(f"--clock-mhz (target_mhz) must be a positive number of MHz, got {target_mhz!r}")
+        raise InputError(f"--clock-mhz (target_mhz) must be a positive number of MHz, got {target_mhz!r}")
     target = float(target_mhz)
     cands = list(candidates) if candidates is not None else pipeline_candidates(n)
     lat = [p.latency(n) for p in cands]
     if any(a >= b for a, b in zip(lat, lat[1:])):
-        raise ValueError(f"candidate latencies must increase strictly, got {lat}")
+        raise InputError(f"candidate latencies must increase strictly, got {lat}")
 
     results: dict[int, dict[str, Any]] = {}
     order: list[int] = []

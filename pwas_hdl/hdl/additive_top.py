@@ -393,7 +393,7 @@ class AdditiveSensorTop(PWASSensorTop):
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
         if len(self.dims) != self.params.n:
-            raise ValueError(f"{len(self.dims)} lag-bank dimensions for a sensor with n = {self.params.n}")
+            raise InputError(f"{len(self.dims)} lag-bank dimensions for a sensor with n = {self.params.n}")
         self.latency = self.core.latency
         self.ii = 1
         self.memory_plan = self.core.memory_plan
@@ -533,7 +533,7 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
     from pwas_hdl.hdl.weight_rom import splice_roms
 
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise ValueError(f"module name {name!r} is not a plain Verilog identifier")
+        raise InputError(f"module name {name!r} is not a plain Verilog identifier")
     _check_naming(ports)
     text, roms = _flat_verilog(component, name)  # the ROMs' words are written last (splice_roms)
     renamed = {_flat_name(mo) for mo in _FLAT_NAME.finditer(text)}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING, Any
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.emit import port_list, port_names
 from pwas_hdl.hdl.params import CoreParams, Pipeline
@@ -19,7 +20,7 @@ __all__ = ["build_core", "build_sensor", "design_info"]
 
 def _check_name(name: str) -> str:
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or ""):
-        raise ValueError(f"module name {name!r} is not a plain Verilog identifier (letters, digits, _)")
+        raise InputError(f"module name {name!r} is not a plain Verilog identifier (letters, digits, _)")
     return name
 
 
@@ -65,7 +66,7 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
         from pwas_hdl.hdl.classifier_top import PWASClassifierCore
 
         if architecture != "parallel":
-            raise ValueError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
+            raise InputError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
 
         _check_classes(classifier, params)
         comp = PWASClassifierCore(params, memory=memory, pipeline=pipeline)
@@ -82,7 +83,7 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
 
 def _check_classes(classifier: dict, params: CoreParams) -> None:
     if len(classifier["classes"]) != params.nz:
-        raise ValueError(f"the classifier has {len(classifier['classes'])} classes for nz = {params.nz} score targets")
+        raise InputError(f"the classifier has {len(classifier['classes'])} classes for nz = {params.nz} score targets")
 
 
 def _make_core(params: CoreParams, memory: str, pipeline, architecture: str) -> PWASCore:
@@ -90,7 +91,7 @@ def _make_core(params: CoreParams, memory: str, pipeline, architecture: str) -> 
     from pwas_hdl.hdl.serial_core import ARCHITECTURES, SerialPWASCore
 
     if architecture not in ARCHITECTURES:
-        raise ValueError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+        raise InputError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
     if architecture == "serial":
         return SerialPWASCore(params, pipeline=pipeline)
     return PWASCore(params, memory=memory, pipeline=pipeline)
@@ -239,7 +240,7 @@ def build_sensor(
         from pwas_hdl.hdl.classifier_top import classifier_argmax
 
         if architecture != "parallel":
-            raise ValueError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
+            raise InputError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
 
         _check_classes(classifier, params)
         argmax = classifier_argmax(params, pipeline)

@@ -35,6 +35,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.argmax import SELECT, compare_levels, index_width
 from pwas_hdl.fixedpoint.reduction import tree_level
 from pwas_hdl.hdl.params import Pipeline
@@ -120,11 +121,11 @@ class ArgmaxStage(wiring.Component):
                  pipeline: Pipeline | str | None = None, select: str = "max"):
         self._MustUse__silence = True  # no "never used" warning for an object whose __init__ raised
         if int(n_inputs) < 1:
-            raise ValueError(f"an argmax stage needs at least one input, got {n_inputs}")
+            raise InputError(f"an argmax stage needs at least one input, got {n_inputs}")
         if int(width) < 1 or int(extra_bits) < 0:
-            raise ValueError(f"width must be >= 1 and extra_bits >= 0, got {width}, {extra_bits}")
+            raise InputError(f"width must be >= 1 and extra_bits >= 0, got {width}, {extra_bits}")
         if select not in SELECT:
-            raise ValueError(f"select must be one of {', '.join(SELECT)}, got {select!r}")
+            raise InputError(f"select must be one of {', '.join(SELECT)}, got {select!r}")
         self.n_inputs = int(n_inputs)
         self.width = int(width)
         self.signed = bool(signed)

@@ -51,6 +51,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigne
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
 from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
@@ -188,7 +189,7 @@ class PWASCore(wiring.Component):
         lo, hi = -(1 << (params.in_width - 1)), (1 << (params.in_width - 1)) - 1
         for j, v in enumerate(params.lo_code):
             if not lo <= v <= hi:
-                raise ValueError(
+                raise InputError(
                     f"lo_code[{j}] = {v} is outside the signed {params.in_width}-bit input range; "
                     "the domain's lower bound must be a representable input code"
                 )

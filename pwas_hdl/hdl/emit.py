@@ -171,9 +171,9 @@ def emit_verilog(
     if name is None:
         name = getattr(component, "module_name", None) or "top"
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise ValueError(f"module name {name!r} is not a plain Verilog identifier")
+        raise InputError(f"module name {name!r} is not a plain Verilog identifier")
     if memory_init not in ("inline", "readmemh"):
-        raise ValueError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+        raise InputError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
     _check_naming(ports)
     text, roms = component_verilog_roms(component, name)  # the ROMs' words are written last
     text = _name_ports(normalise_verilog(text), name, component, ports)
@@ -248,7 +248,7 @@ def _readmemh_files(component, roms: RomEmission, prefix: str):
     component's memory plan (checked: the ROMs met in elaboration hold the plan's words)."""
     plan = _plan(component)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", prefix):
-        raise ValueError(f"hex_prefix {prefix!r} must be a plain file-name prefix")
+        raise InputError(f"hex_prefix {prefix!r} must be a plain file-name prefix")
     if len(roms.roms) != plan.n_banks:
         raise InternalError(f"{len(roms.roms)} weight memories in the design, {plan.n_banks} in its memory plan")
 

@@ -24,6 +24,7 @@ from amaranth.hdl import Cat, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.observer_bank import build_observer_bank
@@ -250,7 +251,7 @@ def attach_core_and_schedule(top, bank, params: CoreParams, *, memory: str, pipe
     (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`: II = cycles_per_sample;
     ``double_buffered``: the feature codes double-buffered, :func:`serial_sensor_path`)."""
     if architecture not in ("parallel", "serial"):
-        raise ValueError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
+        raise InputError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
     top.architecture = architecture
     if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
         from pwas_hdl.hdl.serial_core import SerialPWASCore
@@ -299,7 +300,7 @@ def serial_sensor_path(m: Module, top, cur: list, inp, transfer, extra_codes=Non
         m.d.sync += sample_warm.eq(top.warm)
     db = top.plan.double_buffered
     if db and extra_codes is not None:
-        raise ValueError("extra core inputs need the single-buffered serial plan")
+        raise InternalError("extra core inputs need the single-buffered serial plan")
     load = Signal(name="features_load") if db else None
     codes, done, free = build_serial_front_end(m, top.bank, top.plan, cur, transfer, sample_warm, buffer_load=load)
     if db:

@@ -39,6 +39,7 @@ from typing import Any
 
 from amaranth.hdl import Cat, Module
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl.observer_bank_top import (  # noqa: F401 (public names of this module since issue 12)
     FRONT_END_STAGES,
     ObserverBankTopBase,
@@ -85,9 +86,10 @@ class ObserverSensorTop(ObserverBankTopBase):
                  architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
         self._MustUse__silence = True  # no UnusedElaboratable warning when a check refuses
         if params.n != bank.n_models:
-            raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features")
+            raise InputError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features")
         if params.in_width != bank.input_bits_core:
-            raise ValueError("the core's input width differs from the feature code width")
+            raise InputError(f"the core's input width ({params.in_width} bits) differs from the feature code width "
+                             f"({bank.input_bits_core} bits); build the core from the same observer-bank model")
         super().__init__(bank, params, memory=memory, pipeline=pipeline, architecture=architecture, lanes=lanes,
                          isqrt_every=isqrt_every, warmup=bank.first_output, double_buffered=True)
 

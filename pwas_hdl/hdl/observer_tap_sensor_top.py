@@ -33,6 +33,7 @@ from typing import Any
 
 from amaranth.hdl import Cat, Module, Signal, signed
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import sink_unused
 from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
 from pwas_hdl.hdl.observer_bank_top import (
@@ -68,7 +69,7 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         self._MustUse__silence = True  # no UnusedElaboratable warning when the check refuses
         bank, taps = model.bank, model.taps
         if params.n != bank.n_models + len(taps.dims):
-            raise ValueError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features and {len(taps.dims)} taps")
+            raise InputError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features and {len(taps.dims)} taps")
         self.model = model
         self.taps = taps
         super().__init__(bank, params, memory=memory, pipeline=pipeline, architecture=architecture, lanes=lanes,

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.reduction import tree_depth
 
 if TYPE_CHECKING:
@@ -81,32 +82,34 @@ class CoreParams:
     def __post_init__(self) -> None:
         n = len(self.partitions)
         if n < 1:
-            raise ValueError("a PWAS core needs at least one dimension")
+            raise InputError("a PWAS core needs at least one dimension")
         if len(self.lo_code) != n or len(self.frac_bits) != n:
-            raise ValueError(f"lo_code and frac_bits need {n} entries (one per dimension)")
+            raise InputError(f"lo_code and frac_bits need {n} entries (one per dimension)")
         if any(int(p) < 1 for p in self.partitions):
-            raise ValueError(f"partitions must be >= 1, got {self.partitions}")
+            raise InputError(f"partitions must be >= 1, got {self.partitions}")
         if any(int(f) < 0 for f in self.frac_bits):
-            raise ValueError(f"frac_bits must be >= 0, got {self.frac_bits}")
+            raise InputError(f"frac_bits must be >= 0, got {self.frac_bits}")
         if self.in_width < 2 or self.weight_width < 1 or self.out_width < 1:
-            raise ValueError("widths must be >= 1 (inputs >= 2)")
+            raise InputError(f"widths must be >= 1 (inputs >= 2), got in_width = {self.in_width}, weight_width = {self.weight_width}, "
+                             f"out_width = {self.out_width}")
         if self.rounding not in ("half_up", "truncate"):
-            raise ValueError(f"rounding must be 'half_up' or 'truncate', got {self.rounding!r}")
+            raise InputError(f"rounding must be 'half_up' or 'truncate', got {self.rounding!r}")
         w = np.asarray(self.weights, dtype=np.int64)
         if w.ndim == 1:
             w = w[:, None]
         if w.shape[0] != self.n_vertices or w.shape[1] < 1:
-            raise ValueError(f"weights must have shape (N={self.n_vertices}, nz>=1), got {w.shape}")
+            raise InputError(f"weights must have shape (N={self.n_vertices}, nz>=1), got {w.shape}")
         lim = 1 << (self.weight_width - 1)
         if w.min() < -lim or w.max() >= lim:
-            raise ValueError(f"weight codes do not fit signed {self.weight_width} bits")
+            raise InputError(f"weight codes {int(w.min())}..{int(w.max())} do not fit signed {self.weight_width} bits "
+                             f"[{-lim}, {lim - 1}]; give a wider weight_width or quantise the weights to it")
         object.__setattr__(self, "weights", w)
         object.__setattr__(self, "partitions", tuple(int(p) for p in self.partitions))
         object.__setattr__(self, "lo_code", tuple(int(v) for v in self.lo_code))
         object.__setattr__(self, "frac_bits", tuple(int(v) for v in self.frac_bits))
         sc = tuple(self.scaling) or (None,) * n
         if len(sc) != n:
-            raise ValueError(f"scaling needs {n} entries (one per dimension)")
+            raise InputError(f"scaling needs {n} entries (one per dimension)")
         object.__setattr__(self, "scaling", tuple(None if v is None else tuple(int(x) for x in v) for v in sc))
 
     # ------------------------------------------------------------------ sizes
@@ -301,13 +304,13 @@ class Pipeline:
 
     def __post_init__(self) -> None:
         if self.tree_levels < 0:
-            raise ValueError("tree_levels must be >= 0 (0 = no adder-tree registers)")
+            raise InputError("tree_levels must be >= 0 (0 = no adder-tree registers)")
         if self.flat_sum and self.tree_levels:
-            raise ValueError("flat_sum needs tree_levels = 0 (one sum without adder-tree registers)")
+            raise InputError("flat_sum needs tree_levels = 0 (one sum without adder-tree registers)")
         if self.counter_sum and not self.flat_sum:
-            raise ValueError("counter_sum needs flat_sum (it is a way of adding the one sum)")
+            raise InputError("counter_sum needs flat_sum (it is a way of adding the one sum)")
         if self.sort_late and not self.mu_late:
-            raise ValueError("sort_late needs mu_late (the sort moves into the memory-read cycle beside mu)")
+            raise InputError("sort_late needs mu_late (the sort moves into the memory-read cycle beside mu)")
 
     @staticmethod
     def tree_depth(n: int) -> int:
@@ -403,13 +406,13 @@ class Pipeline:
                      "sort_late"}
             bad = set(value) - known
             if bad:
-                raise ValueError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
+                raise InputError(f"unknown pipeline option(s) {sorted(bad)}; known: {', '.join(sorted(known))}")
             return cls(**value)
         if isinstance(value, str):
             try:
                 return PIPELINE_PRESETS[value]
             except KeyError:
-                raise ValueError(
+                raise InputError(
                     f"unknown pipeline preset {value!r}; choose one of {', '.join(PIPELINE_PRESETS)}"
                 ) from None
         raise TypeError(f"pipeline must be a Pipeline, a preset name, a dict of its options or None, not {value!r}")
@@ -527,9 +530,9 @@ def goal_preset(goal: str, fpga: str | None = None) -> str:
         ``goal`` is not one of :data:`GOALS`, or ``fpga`` is not ``ecp5`` / ``ice40``.
     """
     if goal not in GOALS:
-        raise ValueError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
+        raise InputError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
     if fpga is not None and fpga not in ("ecp5", "ice40"):
-        raise ValueError(f"unknown FPGA family {fpga!r} for the goal; choose ecp5 or ice40")
+        raise InputError(f"unknown FPGA family {fpga!r} for the goal; choose ecp5 or ice40")
     return GOALS_BY_FPGA.get(fpga or "", {}).get(goal, GOALS[goal])
 
 

@@ -29,6 +29,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _not, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
@@ -70,11 +71,11 @@ class PWASRecurrentTop(wiring.Component):
         self._MustUse__silence = True
         nz = len(feedback)
         if len(io_dims) + nz * mz != params.n or nz != params.nz or mz < 1:
-            raise ValueError(f"{len(io_dims)} lag dimensions + {nz} x Mz = {mz} fed back do not make the core's n = {params.n}"
+            raise InputError(f"{len(io_dims)} lag dimensions + {nz} x Mz = {mz} fed back do not make the core's n = {params.n}"
                              f" with nz = {params.nz}")
         for s, lag in io_dims:
             if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
-                raise ValueError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
+                raise InputError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
         self.core = PWASCore(params, memory=memory, pipeline=pipeline)
         self.core._MustUse__silence = True
         self.params = params
@@ -151,7 +152,7 @@ class PWASRecurrentTop(wiring.Component):
         k, sh = fb.mul, fb.shift
         pw = ow + k.bit_length()
         if pw < b + sh:
-            raise ValueError(f"feedback requantisation of target {c}: the product has {pw} bits, fewer than B_in + S = {b + sh}; "
+            raise InputError(f"feedback requantisation of target {c}: the product has {pw} bits, fewer than B_in + S = {b + sh}; "
                              "use more output bits or fewer input bits")
         c1 = fb.add - (1 << (ow - 1)) * k
         base = fb.qmin << sh  # (ou K + c1) >> S < qmin  <=>  ou K < qmin 2**S - c1

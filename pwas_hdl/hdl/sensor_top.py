@@ -29,6 +29,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
@@ -56,23 +57,19 @@ def lag_plan(model: Any, lags: LagStructure | None = None) -> tuple[list[tuple[s
     Raises
     ------
     InputError
-        ``lags`` is recurrent (``Mz > 0``).
-    ValueError
-        ``lags`` has another dimension than the model, or does not match its
+        ``lags`` is recurrent (``Mz > 0``); ``lags`` has another dimension than the model, or does not match its
         ``regressor_signals``; or neither ``lags`` nor ``regressor_signals`` is given.
     """
     n = model.n if isinstance(getattr(model, "n", None), int) else len(CoreParams.from_model(model).partitions)  # n: also additive models
     names = list(getattr(model, "regressor_signals", []) or [])
     if lags is not None and lags.recurrent:  # issue 13: the fed-back estimates need the feedback path
-        from pwas_hdl.errors import InputError
-
         raise InputError(
             f"the model is a recurrent (dynamical) sensor (Mz = {lags.mz}): the lag sensor top has no feedback path; "
             "build it with pwas_hdl.verify.recurrent_replay.build_recurrent_design (generate --design core gives the bare core)"
         )
     if lags is not None:
         if lags.dimension != n:
-            raise ValueError(f"the lag structure has n = {lags.dimension} regressors, the model {n}")
+            raise InputError(f"the lag structure has n = {lags.dimension} regressors, the model {n}")
         sod = lags.signal_of_dimension()
         seen: list[tuple[str, int]] = []  # (kind, channel) in first-appearance (= payload) order
         for kind, ch, _ in sod:
@@ -85,10 +82,11 @@ def lag_plan(model: Any, lags: LagStructure | None = None) -> tuple[list[tuple[s
             for j, (s, _) in enumerate(dims):
                 sig_names[s] = str(names[j][0])
             if [(sig_names[s], lag) for s, lag in dims] != [(str(a), int(b)) for a, b in names]:
-                raise ValueError("the lag structure does not match the model's regressor signals")
+                raise InputError("the lag structure does not match the model's regressor signals; pass the LagStructure the "
+                                 "model was fitted with (sensor.lags_)")
         return list(zip(sig_names, counts)), dims
     if not names:
-        raise ValueError("the model has no regressor_signals; pass the LagStructure (sensor.lags_)")
+        raise InputError("the model has no regressor_signals; pass the LagStructure (sensor.lags_)")
     order: dict[str, int] = {}
     for s, _ in names:
         order.setdefault(s, len(order))
@@ -185,14 +183,14 @@ class PWASSensorTop(wiring.Component):
                  argmax=None, architecture: str = "parallel", warps=None):
         self._MustUse__silence = True  # see PWASCore.__init__
         if len(dims) != params.n:
-            raise ValueError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
+            raise InputError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")
         for s, lag in dims:
             if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
-                raise ValueError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
+                raise InputError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
         for s, (nm, _) in enumerate(signals if warps is None else []):  # warped: the model checks its input codes
             fmt = {(params.lo_code[j], params.frac_bits[j], params.partitions[j]) for j, (sj, _) in enumerate(dims) if sj == s}
             if len(fmt) > 1:
-                raise ValueError(
+                raise InputError(
                     f"the lags of signal {nm!r} have different input formats (lo_code, F, p) {sorted(fmt)}; "
                     "the lag bank feeds one code to all of them: fit with share_lag_domain=True and equal partitions per signal"
                 )
@@ -212,7 +210,7 @@ class PWASSensorTop(wiring.Component):
         self.dims = [(int(s), int(lag)) for s, lag in dims]
         self.argmax = argmax
         if argmax is not None and argmax.index_lsb != core_output_layout(params).size:
-            raise ValueError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {core_output_layout(params).size}")
+            raise InputError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {core_output_layout(params).size}")
         self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
         self.ii = self.core.ii
         self.memory_plan = self.core.memory_plan

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from amaranth.hdl import Const, Module, Signal, Value, signed, unsigned
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _Pipe
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
@@ -163,7 +164,7 @@ class SerialPWASCore(PWASCore):
     def __init__(self, params: CoreParams, *, pipeline: Pipeline | str | None = None, memory: str = "single"):
         self._MustUse__silence = True
         if memory != "single":
-            raise ValueError(f"the serial core has one weight memory (memory='single'), got {memory!r}")
+            raise InputError(f"the serial core has one weight memory (memory='single'), got {memory!r}")
         super().__init__(params, memory="replicated", pipeline=pipeline)
         self._MustUse__silence = True
         # the front end's addresses are the replicated layout's (linear vertex index)

@@ -55,7 +55,7 @@ from dataclasses import dataclass
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused
 from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
 from pwas_hdl.hdl.residual_features import cap_const
@@ -409,7 +409,7 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
     codes = [Signal(signed(bank.input_bits_core), name=f"feat{j}_code", reset_less=True) for j in range(bank.n_models)]
     done = Signal(name="bank_features_done")
     if (buffer_load is not None) != plan.double_buffered:
-        raise ValueError("buffer_load is given exactly for a double-buffered plan")
+        raise InternalError("buffer_load is given exactly for a double-buffered plan")
     buf = ([Signal(signed(bank.input_bits_core), name=f"feat{j}_code_buf", reset_less=True) for j in range(bank.n_models)]
            if buffer_load is not None else None)
     sat_flags = []

@@ -24,6 +24,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.argmax import index_width
 from pwas_hdl.hdl._lintsafe import sink_unused
 from pwas_hdl.hdl.argmax import ArgmaxStage, inner_stream
@@ -276,7 +277,6 @@ def serial_estimator_schedule(est, mac_pipeline: int | None = None, lanes: int =
     ValueError
         ``mac_pipeline`` not 0 / 1 (1 needs ``n >= 2``).
     """
-    from pwas_hdl.errors import InputError
     from pwas_hdl.hdl.serial_observer_bank import lane_groups
 
     s, n = est.n_modes, est.n
@@ -284,7 +284,7 @@ def serial_estimator_schedule(est, mac_pipeline: int | None = None, lanes: int =
         raise InputError(f"--bank-lanes must be an integer in 1 .. {s} (the number of modes) for this estimator, got {lanes!r}")
     d = default_mac_pipeline(est) if mac_pipeline is None else int(mac_pipeline)
     if d not in (0, 1) or (d == 1 and n < 2):
-        raise ValueError(f"mac_pipeline must be 0 or 1 (1 needs n >= 2 states), got {mac_pipeline!r} with n = {n}")
+        raise InputError(f"mac_pipeline must be 0 or 1 (1 needs n >= 2 states), got {mac_pipeline!r} with n = {n}")
     groups = lane_groups(s, lanes)
     s0 = len(groups[0])
     p0 = max(s0 + s0 * n, s0 + d + 3)  # idle steps before P only where the detector is not final yet

@@ -35,6 +35,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, rom
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
@@ -163,9 +164,9 @@ def attach_warp(core: PWASCore, warps: Sequence[Pow2Warp]) -> int:
     warps = list(warps)
     p = core.params
     if len(warps) != p.n or {w.input_bits for w in warps} != {warps[0].input_bits} or any(w.width != p.in_width for w in warps):
-        raise ValueError(f"need {p.n} warps of one input width whose output width is the core's {p.in_width} bits")
+        raise InputError(f"need {p.n} warps of one input width whose output width is the core's {p.in_width} bits")
     if core.input_stage is not None:
-        raise ValueError("the core has an input stage already")
+        raise InputError("the core has an input stage already (attach_warp was called on it before); build a new core")
     b = warps[0].input_bits
 
     def stage(m: Module, pipe, payload, valid):

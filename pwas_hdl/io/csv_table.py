@@ -442,7 +442,7 @@ def format_csv(columns: Mapping[str, np.ndarray | Sequence]) -> str:
     arrays = [np.asarray(columns[nm]) for nm in names]
     lens = {a.shape[0] for a in arrays}
     if len(lens) > 1:
-        raise ValueError(f"columns have different lengths {sorted(lens)}")
+        raise InputError(f"columns have different lengths {sorted(lens)}; give every column the same number of rows")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(names)

@@ -63,7 +63,7 @@ def load_schema(name: str) -> dict[str, Any]:
 
 
 def _refuse_constant(name: str) -> float:
-    raise ValueError(f"{name} is not a JSON number")
+    raise InputError(f"{name} is not a JSON number")
 
 
 def read_json(path: str | os.PathLike, hint: str) -> Any:

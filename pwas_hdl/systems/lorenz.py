@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pwas_hdl.errors import InputError
+
 __all__ = ["PlantData", "stack_runs", "lorenz", "LORENZ_PARAMS"]
 
 #: Parameters of the discrete Lorenz system, paper eq. (18).
@@ -108,7 +110,7 @@ class PlantData:
 def stack_runs(parts: list[PlantData]) -> PlantData:
     """Concatenate trajectories into one :class:`PlantData` with a ``run`` index 0..K-1."""
     if not parts:
-        raise ValueError("stack_runs needs at least one trajectory")
+        raise InputError("stack_runs needs at least one trajectory")
     cat = lambda k: np.concatenate([getattr(p, k) for p in parts], axis=0)  # noqa: E731
     run = np.concatenate([np.full(len(p.y), i, dtype=int) for i, p in enumerate(parts)])
     mode = None if parts[0].mode is None else np.concatenate([p.mode for p in parts]).astype(int)
@@ -140,7 +142,7 @@ def lorenz(n_samples: int, seed: int = 0, burn_in: int = 1000, x0: np.ndarray | 
         ``u`` is empty (T, 0); ``y`` is (T, 1) named ``y``; ``z`` is (T, 1) named ``z``.
     """
     if n_samples < 1:
-        raise ValueError(f"n_samples must be >= 1, got {n_samples}")
+        raise InputError(f"n_samples must be >= 1, got {n_samples}")
     prm = LORENZ_PARAMS
     tau, s, beta, rho = prm["tau"], prm["s"], prm["beta"], prm["rho"]
     rng = np.random.default_rng(seed)

@@ -46,7 +46,6 @@ from pwas_hdl.fixedpoint.bitfields import pack, pack_fields
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.reduction import tree_levels
 from pwas_hdl.design.manifest import load_manifest
-from pwas_hdl.errors import CheckFailed, InputError
 from pwas_hdl.io.atomic import logs_kept, make_temp_dir
 from pwas_hdl.limits import check_values
 
@@ -253,12 +252,12 @@ def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
             mine = {k: mine[k] for k in ("bits", "frac")}
             theirs = {k: theirs[k] for k in ("bits", "frac")}
         if json.dumps(mine, sort_keys=True) != json.dumps(theirs, sort_keys=True):
-            raise ValueError(
+            raise InputError(
                 f"{out}: the bit-true model rebuilt from model.json has {key} {mine}, the manifest says {theirs}; "
                 "the folder was modified after `pwas-hdl generate`: regenerate it"
             )
     if [int(v) for v in man["domain"]["lo_code"]] != [int(v) for v in fxm.lo_codes]:
-        raise ValueError(f"{out}: manifest lo_code {man['domain']['lo_code']} differs from the model's {list(fxm.lo_codes)}; regenerate")
+        raise InputError(f"{out}: manifest lo_code {man['domain']['lo_code']} differs from the model's {list(fxm.lo_codes)}; regenerate")
     design_v = files["verilog"] if isinstance(files["verilog"], str) else files["verilog"][0]  # [0]: the design
     vpath = Path(verilog) if verilog is not None else out / design_v
     if not vpath.is_file():
@@ -352,7 +351,7 @@ def _signal_columns(design: Design, codes: np.ndarray) -> tuple[np.ndarray | Non
         cu = codes[:, [col[nm] for nm in ins]] if lags.nu and lags.mu else None
         cy = codes[:, [col[nm] for nm in outs]] if lags.ny and lags.my else None
     except KeyError as exc:
-        raise ValueError(f"the sensor top has no input field for signal {exc}; regenerate the design") from None
+        raise InputError(f"the sensor top has no input field for signal {exc}; regenerate the design") from None
     return cu, cy
 
 
@@ -384,7 +383,7 @@ def segment(design: Design, codes: ArrayLike, *, drain: bool = True, hold: int =
     """
     c = np.asarray(codes, dtype=np.int64)
     if c.ndim != 2 or c.shape[1] != len(design.in_fields):
-        raise ValueError(f"codes must have shape (T, {len(design.in_fields)}), got {c.shape}")
+        raise InputError(f"codes must have shape (T, {len(design.in_fields)}), got {c.shape}")
     if design.kind == "core":
         q = c
         src = np.arange(len(c))
@@ -890,7 +889,7 @@ def run_rtl(
         The simulator is not installed, or its build or run failed.
     """
     if simulator not in SIMULATORS:
-        raise ValueError(f"simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+        raise InputError(f"simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
     if engine not in ENGINES:
         raise InputError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     runner = sim_module("pwas_runner")
@@ -1067,9 +1066,9 @@ def simulate_data(
     if simulator is None:
         simulator = "verilator" if engine == "native" else "icarus"
     if simulator not in SIMULATORS:
-        raise ValueError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+        raise InputError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
     if not 0.0 <= stall <= MAX_STALL:
-        raise ValueError(f"--stall must be in [0, {MAX_STALL}] (the probability of a bubble / of backpressure per cycle; "
+        raise InputError(f"--stall must be in [0, {MAX_STALL}] (the probability of a bubble / of backpressure per cycle; "
                          f"the benches' cycle limit covers stalls up to {MAX_STALL}), got {stall}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:  # a seed of the stalls, as numpy takes it
         raise InputError(f"--seed must be an integer >= 0, got {seed!r}")
@@ -1130,7 +1129,7 @@ def simulate_data(
     for sl in slices:
         if design.bank is not None:
             if sl.stop - sl.start < m_hist:
-                raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {sl.stop - sl.start} samples; "
+                raise InputError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {sl.stop - sl.start} samples; "
                                  f"the observer bank needs {m_hist}")
             u = u_all[sl] if u_all is not None else None
             codes, _ = design.bank.quantize_signals(u, y_all[sl])
@@ -1140,7 +1139,7 @@ def simulate_data(
             continue
         t_len = sl.stop - sl.start
         if t_len < m_hist:
-            raise ValueError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {t_len} samples; the lags need {m_hist}")
+            raise InputError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {t_len} samples; the lags need {m_hist}")
         u = u_all[sl] if u_all is not None else None
         y = y_all[sl] if y_all is not None else None
         xi = lags.build(u, y)  # physical regressors (float model input)
@@ -1412,20 +1411,20 @@ def simulate_arrays(
         if not used:
             continue
         if arr is None:
-            raise ValueError(f"the model uses {what} ({', '.join(names)}); pass {what}=")
+            raise InputError(f"the model uses {what} ({', '.join(names)}); pass {what}=")
         trajs = as_trajectories(arr, what)
         if n_traj is not None and len(trajs) != len(n_traj):
-            raise ValueError(f"{what} has {len(trajs)} trajectories, the other signals {len(n_traj)}")
+            raise InputError(f"{what} has {len(trajs)} trajectories, the other signals {len(n_traj)}")
         if n_traj is not None and [len(t) for t in trajs] != n_traj:
-            raise ValueError(f"{what} has trajectories of {[len(t) for t in trajs]} samples, the other signals {n_traj}")
+            raise InputError(f"{what} has trajectories of {[len(t) for t in trajs]} samples, the other signals {n_traj}")
         n_traj = [len(t) for t in trajs]
         stacked = np.concatenate(trajs, axis=0)
         if stacked.shape[1] != len(names):
-            raise ValueError(f"{what} has {stacked.shape[1]} columns, the model's signals are {', '.join(names)}")
+            raise InputError(f"{what} has {stacked.shape[1]} columns, the model's signals are {', '.join(names)}")
         for j, nm in enumerate(names):
             columns[nm] = stacked[:, j].tolist()
     if n_traj is None:
-        raise ValueError("no signal given: pass u= and/or y=")
+        raise InputError("no signal given: pass u= and/or y=")
     columns["_trajectory"] = [i for i, t in enumerate(n_traj) for _ in range(t)]
     header = list(columns)
     rows = [[repr(columns[h][r]) for h in header] for r in range(sum(n_traj))]
