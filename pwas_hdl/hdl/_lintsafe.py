@@ -28,6 +28,8 @@ The rules followed by the generator, and implemented here:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from amaranth.hdl import Const, Module, Mux, Signal, Value, unsigned
 
 from pwas_hdl.fixedpoint.reduction import tree_reduce
@@ -36,7 +38,18 @@ __all__ = ["bits_for", "rom", "sink_unused", "add_wrap", "add_const_wrap", "sum_
 
 
 def bits_for(v: int) -> int:
-    """Unsigned width for the values ``0 .. v`` (at least 1)."""
+    """Unsigned width for the values ``0 .. v`` (at least 1).
+
+    Parameters
+    ----------
+    v : int
+        Largest value to represent (non-negative).
+
+    Returns
+    -------
+    int
+        ``max(1, v.bit_length())`` bits.
+    """
     return max(1, int(v).bit_length())
 
 
@@ -45,6 +58,16 @@ def sink_unused(m: Module, value: Value, name: str) -> None:
 
     Split in two pieces: an alias covering *all* the nets of a named signal could take over its
     name in the output, leaving the original name as an unused alias.
+
+    Parameters
+    ----------
+    m : Module
+        Module the wires are added to (``comb`` domain).
+    value : Value
+        The dropped bits, any width.
+    name : str
+        Wire name suffix: one wire ``unused_<name>`` for a 1-bit ``value``, else two,
+        ``unused_<name>_lo`` (all bits but the top one) and ``unused_<name>_hi`` (the top bit).
     """
     if len(value) > 1:
         for part, sl in (("lo", value[:-1]), ("hi", value[-1:])):
@@ -55,8 +78,30 @@ def sink_unused(m: Module, value: Value, name: str) -> None:
     m.d.comb += s.eq(value)
 
 
-def rom(m: Module, sel, values, width: int, name: str):
-    """Case table ``values[sel]`` (0 beyond the table). Returns an int when the table is constant."""
+def rom(m: Module, sel: Value | int, values: Sequence[int], width: int, name: str) -> Value | int:
+    """Case table ``values[sel]``: a combinational ``Switch`` on ``sel``.
+
+    Parameters
+    ----------
+    m : Module
+        Module the table is added to (``comb`` domain).
+    sel : Value or int
+        Unsigned selector; an int selects at elaboration time.
+    values : sequence of int
+        The table, entry 0 first, unsigned values of at most ``width`` bits; entries beyond
+        ``2**len(sel)`` are never selected.
+    width : int
+        Width of the output signal, bits.
+    name : str
+        Name of the output signal.
+
+    Returns
+    -------
+    Value or int
+        A ``width``-bit signal holding ``values[sel]`` (0 for a ``sel`` beyond the table); an int
+        when ``sel`` is an int (``values[sel]``, 0 beyond the table) or when every selectable entry
+        is equal (that entry, also for a ``sel`` beyond the table: callers never select there).
+    """
     if isinstance(sel, int):
         return values[sel] if sel < len(values) else 0
     vals = [int(v) for v in values[: 1 << len(sel)]]
@@ -74,7 +119,22 @@ def rom(m: Module, sel, values, width: int, name: str):
 
 
 def add_wrap(m: Module, a: Value, b: Value, name: str) -> Value:
-    """``(a + b) mod 2**w`` for two unsigned ``w``-bit values (the caller knows it does not wrap)."""
+    """``(a + b) mod 2**w`` for two unsigned ``w``-bit values (the caller knows it does not wrap).
+
+    Parameters
+    ----------
+    m : Module
+        Module the adder is added to (``comb`` domain).
+    a, b : Value
+        Unsigned addends of equal width ``w`` bits (asserted).
+    name : str
+        Name of the ``w + 1``-bit sum signal; its carry goes to ``unused_<name>_carry``.
+
+    Returns
+    -------
+    Value
+        The low ``w`` bits of the sum.
+    """
     assert len(a) == len(b), (len(a), len(b))
     w = len(a)
     s = Signal(unsigned(w + 1), name=name)
@@ -84,7 +144,28 @@ def add_wrap(m: Module, a: Value, b: Value, name: str) -> Value:
 
 
 def add_const_wrap(m: Module, x: Value, k: int, name: str) -> Value:
-    """``(x + k) mod 2**w`` for an unsigned ``w``-bit ``x`` (any integer ``k``)."""
+    """``(x + k) mod 2**w`` for an unsigned ``w``-bit ``x`` (any integer ``k``).
+
+    ``k mod 2**w`` with its top bit set is added; otherwise ``2**w - k`` is subtracted (same value
+    modulo ``2**w``), so the constant always has its top bit set at width ``w``.
+
+    Parameters
+    ----------
+    m : Module
+        Module the adder is added to (``comb`` domain).
+    x : Value
+        Unsigned operand, ``w`` bits.
+    k : int
+        Constant, reduced modulo ``2**w``.
+    name : str
+        Name of the ``w + 1``-bit result signal; its top bit goes to ``unused_<name>_carry`` (or
+        ``_borrow``).
+
+    Returns
+    -------
+    Value
+        ``w`` bits; ``x`` itself when ``k mod 2**w`` is 0.
+    """
     w = len(x)
     k %= 1 << w
     if k == 0:
@@ -101,8 +182,27 @@ def add_const_wrap(m: Module, x: Value, k: int, name: str) -> Value:
     return s[:w]
 
 
-def sum_wrap(m: Module, terms, width: int, name: str):
-    """Sum of unsigned ``width``-bit values and ints, modulo ``2**width`` (balanced tree)."""
+def sum_wrap(m: Module, terms: Sequence[Value | int], width: int, name: str) -> Value | int:
+    """Sum of unsigned ``width``-bit values and ints, modulo ``2**width`` (balanced tree).
+
+    Parameters
+    ----------
+    m : Module
+        Module the adders are added to (``comb`` domain).
+    terms : sequence of Value or int
+        Unsigned ``width``-bit values and integer constants; the constants are summed first and
+        added once, after the tree.
+    width : int
+        Width of the values and of the result, bits.
+    name : str
+        Name prefix of the adders' signals (``<name>_s<level>_<i>``, ``<name>_k``).
+
+    Returns
+    -------
+    Value or int
+        ``width`` bits; an int (the constants' sum modulo ``2**width``) when ``terms`` holds no
+        value.
+    """
     const = sum(t for t in terms if isinstance(t, int))
     vals = [t for t in terms if not isinstance(t, int)]
     if not vals:
@@ -111,8 +211,22 @@ def sum_wrap(m: Module, terms, width: int, name: str):
     return add_const_wrap(m, total, const, f"{name}_k")
 
 
-def ge_const(x: Value, k: int):
-    """``x >= k`` for an unsigned ``x`` and a constant ``k`` (returns a bool when constant)."""
+def ge_const(x: Value, k: int) -> Value | bool:
+    """``x >= k`` for an unsigned ``x`` and a constant ``k``.
+
+    Parameters
+    ----------
+    x : Value
+        Unsigned operand, ``w`` bits.
+    k : int
+        Constant.
+
+    Returns
+    -------
+    Value or bool
+        1-bit comparison (upper bits reduced, lower bits compared at ``k``'s width); ``True``
+        when ``k <= 0``, ``False`` when ``k >= 2**w``.
+    """
     w = len(x)
     if k <= 0:
         return True
@@ -125,8 +239,24 @@ def ge_const(x: Value, k: int):
     return x[kb:].any() | low
 
 
-def mux_const(sel, k: int, width: int):
-    """``k`` if ``sel`` else 0, as a full-width ``width``-bit value (int when constant)."""
+def mux_const(sel: Value | bool | int, k: int, width: int) -> Value | int:
+    """``k`` if ``sel`` else 0, as a full-width ``width``-bit value (int when constant).
+
+    Parameters
+    ----------
+    sel : Value or bool or int
+        1-bit select; a bool or int selects at elaboration time.
+    k : int
+        Constant, unsigned, at most ``width`` bits.
+    width : int
+        Width of both multiplexer inputs, bits.
+
+    Returns
+    -------
+    Value or int
+        A ``width``-bit multiplexer; an int (``k`` or 0) when ``sel`` is a bool or int, 0 when
+        ``k`` is 0.
+    """
     if isinstance(sel, bool) or isinstance(sel, int):
         return k if sel else 0
     if k == 0:

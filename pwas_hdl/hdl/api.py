@@ -31,9 +31,11 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
     Parameters
     ----------
     model : pwas_hdl.fixedpoint.bittrue.FixedPointModel or CoreParams
+        The bit-true model (or its integer description).
     memory : {"banked", "replicated", "corner"}
         Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`), independent of ``model.layout``.
     pipeline : Pipeline, "min", "balanced" (default) or "max"
+        Which optional pipeline registers exist (:class:`~pwas_hdl.hdl.params.Pipeline`, :meth:`Pipeline.cast`).
     name : str
         Verilog module name used by :func:`~pwas_hdl.hdl.emit.emit_verilog` and :func:`design_info`.
     classifier : dict, optional
@@ -209,6 +211,7 @@ def build_sensor(
     Parameters
     ----------
     model : pwas_hdl.fixedpoint.bittrue.FixedPointModel (or CoreParams together with ``lags``)
+        The bit-true model.
     lags : LagStructure, optional
         Default: derived from ``model.regressor_signals`` (as ``FixedPointModel.from_sensor``
         sets them); pass ``sensor.lags_`` to be explicit.

@@ -115,6 +115,14 @@ class ArgmaxStage(wiring.Component):
         ``max(1, ceil(log2 C))``.
     index_lsb : int
         Bit of the output payload where the index starts (``C*width + extra_bits``).
+
+    Raises
+    ------
+    ValueError
+        ``n_inputs < 1``, ``width < 1``, ``extra_bits < 0``, an unknown ``select``, or an invalid
+        ``pipeline`` (:meth:`Pipeline.cast`).
+    TypeError
+        ``pipeline`` of another type (:meth:`Pipeline.cast`).
     """
 
     def __init__(self, n_inputs: int, width: int, *, signed: bool = True, extra_bits: int = 0,
@@ -188,6 +196,7 @@ class ArgmaxStage(wiring.Component):
         Parameters
         ----------
         m : Module
+            Module the compare tree and its registers are added to.
         payload : Value
             The scores and extra bits (``index_lsb`` bits).
         valid : Value

@@ -11,6 +11,7 @@ ties to the lowest index); the latency is the core's plus the stage's
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from amaranth.hdl import Module, unsigned
@@ -29,12 +30,47 @@ CLASS_FIELD = "class_index"
 
 
 def classifier_argmax(params: CoreParams, pipeline: Pipeline | str | None = None) -> ArgmaxStage:
-    """The argmax stage after a core of ``params``: ``nz`` signed ``B_out`` scores, ``out_of_range`` carried."""
+    """The argmax stage after a core of ``params``: ``nz`` signed ``B_out`` scores, ``out_of_range`` carried.
+
+    Parameters
+    ----------
+    params : CoreParams
+        The core's parameters: ``nz`` scores of ``out_width`` (``B_out``) bits.
+    pipeline : Pipeline, preset name or None
+        Its ``tree_levels`` places the stage's registers (:class:`~pwas_hdl.hdl.argmax.ArgmaxStage`);
+        default balanced.
+
+    Returns
+    -------
+    ArgmaxStage
+        ``select="max"``, one extra bit (``out_of_range``) carried through.
+    """
     return ArgmaxStage(params.nz, params.out_width, signed=True, extra_bits=1, pipeline=pipeline, select="max")
 
 
-def classifier_info(component, target: str, classes, score_names) -> dict:
-    """The manifest's ``classifier`` entry of a design with an argmax stage (before port naming)."""
+def classifier_info(component: Any, target: str, classes: Sequence[float], score_names: Sequence[str]) -> dict:
+    """The manifest's ``classifier`` entry of a design with an argmax stage (before port naming).
+
+    Parameters
+    ----------
+    component : Component
+        A design with an ``argmax`` (:class:`~pwas_hdl.hdl.argmax.ArgmaxStage`): a
+        :class:`PWASClassifierCore` or a sensor top built with ``argmax=``.
+    target : str
+        Name of the classified target.
+    classes : sequence of float
+        Class labels, one per score, in score (target) order.
+    score_names : sequence of str
+        Names of the score fields of the output payload.
+
+    Returns
+    -------
+    dict
+        ``target``, ``classes``, ``n_classes``, ``field`` (:data:`CLASS_FIELD`), ``lsb`` and
+        ``width`` (bits of the class index in the output payload), ``scores``, ``select``,
+        ``tie_rule``, ``stage_latency_cycles``, ``meaning``, ``float_agreement``. The caller adds
+        ``port``.
+    """
     am: ArgmaxStage = component.argmax
     return {
         "target": str(target),
@@ -61,6 +97,11 @@ class PWASClassifierCore(wiring.Component):
     params : CoreParams
         ``nz = C`` score targets.
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+
+    Raises
+    ------
+    ValueError
+        As :class:`~pwas_hdl.hdl.core.PWASCore` (parameters or a pipeline the core refuses).
 
     Attributes
     ----------
@@ -91,7 +132,18 @@ class PWASClassifierCore(wiring.Component):
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The PWAS core and the argmax stage, connected; ``platform`` is not used."""
+        """The PWAS core and the argmax stage, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; not used.
+
+        Returns
+        -------
+        Module
+            One module: the core's logic, then the argmax stage's (both inlined).
+        """
         m = Module()
         inp = getattr(self, "in")
         scores = self.argmax.scores_stream(self.out)

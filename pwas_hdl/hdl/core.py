@@ -158,9 +158,12 @@ class PWASCore(wiring.Component):
     Parameters
     ----------
     params : CoreParams
+        Integer description of the datapath (grid, formats, weight codes).
     memory : {"banked", "replicated", "corner"}
-        ``corner``: :mod:`pwas_hdl.hdl.corner` (``2**n`` banks addressed by the cells alone).
+        Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`); ``corner``:
+        :mod:`pwas_hdl.hdl.corner` (``2**n`` banks addressed by the cells alone).
     pipeline : Pipeline, preset name ("min", "short", "balanced", "max") or None (balanced)
+        Which optional registers exist (:class:`~pwas_hdl.hdl.params.Pipeline`).
     round_output : bool
         ``False``: no rounding or saturation; the output register holds the exact accumulator,
         ``acc_width + 1`` signed bits per target (``out_field_width``), for a design that adds
@@ -168,8 +171,8 @@ class PWASCore(wiring.Component):
 
     Ports (flattened Verilog names): ``clk``, ``rst`` (synchronous, active high), ``in__valid``,
     ``in__ready``, ``in__payload`` (``n*B_in`` bits), ``out__valid``, ``out__ready``,
-    ``out__payload`` (``nz*B_out + 1`` bits); see :func:`core_input_layout` and
-    :func:`core_output_layout` for the payload bit fields.
+    ``out__payload`` (``nz*B_out + 1`` bits; ``nz*out_field_width + 1`` with ``round_output=False``);
+    see :func:`core_input_layout` and :func:`core_output_layout` for the payload bit fields.
 
     Attributes
     ----------
@@ -181,6 +184,14 @@ class PWASCore(wiring.Component):
         Initiation interval (1).
     memory_plan : MemoryPlan
         Number, depth and width of the weight memories and their contents.
+
+    Raises
+    ------
+    ValueError
+        A ``lo_code`` outside the signed ``B_in``-bit input range, an unknown ``memory`` layout or
+        an invalid ``pipeline`` (:meth:`Pipeline.cast`).
+    TypeError
+        ``pipeline`` of another type (:meth:`Pipeline.cast`).
     """
 
     def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,

@@ -27,19 +27,37 @@ address, the comparison bits, the fractions and the out-of-range flag; ``mu_late
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from itertools import combinations
+from typing import TYPE_CHECKING, Any
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
 
 from pwas_hdl.hdl._lintsafe import bits_for, rom
 from pwas_hdl.hdl.weight_rom import weight_rom
+
+if TYPE_CHECKING:
+    from pwas_hdl.hdl.core import PWASCore
 
 __all__ = ["corner_read", "select_corners", "corner_patterns"]
 
 
 def corner_patterns(n: int, k: int) -> list[int]:
     """The corners of vertex ``k`` (``k`` set bits among ``n``, bit ``j`` = dimension ``j``), in the
-    order their index ``sel_k`` counts them (lexicographic combinations of the dimensions)."""
+    order their index ``sel_k`` counts them (lexicographic combinations of the dimensions).
+
+    Parameters
+    ----------
+    n : int
+        Regressor dimension.
+    k : int
+        Vertex index ``0 .. n`` (the number of set bits).
+
+    Returns
+    -------
+    list of int
+        ``C(n, k)`` corner bit patterns (bank numbers ``0 .. 2**n - 1``).
+    """
     return [sum(1 << j for j in c) for c in combinations(range(n), k)]
 
 
@@ -48,13 +66,21 @@ def _rank_bits(ge, n: int, j: int):
     return [ge[i, j] for i in range(j)] + [~ge[j, i] for i in range(j + 1, n)]
 
 
-def corner_read(core, m: Module, pipe, valid, cs, ds, oor):
+def corner_read(core: PWASCore, m: Module, pipe: Any, valid: Value, cs: list, ds: list,
+                oor: Value | bool) -> tuple[Value, dict]:
     """Comparators, the registers before the memory, the ``2**n`` reads, ``mu`` and the selects.
 
     Parameters
     ----------
     core : PWASCore
         With ``memory_kind == "corner"``.
+    m : Module
+        Module the logic and the ROMs ``wmem<b>`` are added to.
+    pipe : pwas_hdl.hdl.core._Pipe
+        The core's pipeline-register collector (registers ``s_rank`` .. ``s_bank`` when the
+        pipeline has them, and the memory-read stage ``s_mem``).
+    valid : Value
+        Valid bit of the sample after the split.
     cs, ds : list
         Cells (``width(p_j - 1)`` bits, or the int 0 when ``p_j = 1``) and aligned fractions
         (``F + 1`` bits) after the split (and its optional register).
@@ -63,9 +89,12 @@ def corner_read(core, m: Module, pipe, valid, cs, ds, oor):
 
     Returns
     -------
-    valid, dict
-        ``{"data": 2**n read words, "sel": [sel_1 .. sel_{n-1}], "mu": n + 1 coefficients in
-        vertex order, "oor": flag}`` after the memory register.
+    valid : Value
+        Valid bit after the memory-read register.
+    values : dict
+        ``{"data": 2**n read words (word_bits each), "sel": [sel_1 .. sel_{n-1}] (Value or int),
+        "mu": n + 1 coefficients (F + 1 bits) in vertex order, "oor": flag}`` after the memory
+        register.
     """
     p, pl, plan = core.params, core.pipeline, core.memory_plan
     lay = plan.layout
@@ -125,8 +154,28 @@ def corner_read(core, m: Module, pipe, valid, cs, ds, oor):
     return valid, {"data": mem_data, "sel": sels, "mu": mus, "oor": r["oor"]}
 
 
-def select_corners(m: Module, n: int, words, sels, width: int):
-    """Vertex ``k``'s word: corner ``corner_patterns(n, k)[sel_k]`` of the ``2**n`` read words."""
+def select_corners(m: Module, n: int, words: Sequence[Value], sels: Sequence[Value | int], width: int) -> list[Value]:
+    """Vertex ``k``'s word: corner ``corner_patterns(n, k)[sel_k]`` of the ``2**n`` read words.
+
+    Parameters
+    ----------
+    m : Module
+        Module the multiplexers (``cword<k>``) are added to (``comb`` domain).
+    n : int
+        Regressor dimension (``n >= 1``).
+    words : sequence of Value
+        The ``2**n`` words read from the corner banks, bank order, ``width`` bits each.
+    sels : sequence of Value or int
+        ``sel_1 .. sel_{n-1}`` (:func:`corner_read`); an int selects at elaboration time.
+    width : int
+        Word width, bits.
+
+    Returns
+    -------
+    list of Value
+        ``n + 1`` words in vertex order: corner 0, the selected corners of vertices
+        ``1 .. n-1``, corner ``2**n - 1``.
+    """
     out = [words[0]]
     for k in range(1, n):
         pats = corner_patterns(n, k)

@@ -68,10 +68,12 @@ def port_names(ports: str = "axis") -> dict[str, str]:
     Parameters
     ----------
     ports : {"axis", "amaranth"}
+        Port naming scheme (:data:`PORT_NAMINGS`).
 
     Returns
     -------
     dict of str to str
+        Role -> Verilog port name.
 
     Raises
     ------
@@ -288,6 +290,7 @@ def port_list(component: wiring.Component, ports: str = "axis") -> list[dict]:
     Parameters
     ----------
     component : amaranth.lib.wiring.Component
+        A core or top built by :mod:`pwas_hdl.hdl`; its ``signature`` gives the ports.
     ports : {"axis", "amaranth"}
         Port naming.
 

@@ -518,6 +518,7 @@ def goal_preset(goal: str, fpga: str | None = None) -> str:
     goal : str
         One of :data:`GOALS`.
     fpga : {"ecp5", "ice40"}, optional
+        FPGA family; None: ``ecp5``.
 
     Returns
     -------
@@ -617,6 +618,7 @@ class MemoryPlan:
         Parameters
         ----------
         p : CoreParams
+            Grid, weight codes ``(N, nz)`` and weight width ``B_w``.
         kind : {"banked", "replicated", "corner"}
             Layout name (:func:`pwas_hdl.fixedpoint.memory_layout.make_layout`).
 

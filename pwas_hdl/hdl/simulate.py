@@ -5,7 +5,9 @@ Used by the tests; handy to locate a mismatch against the bit-true model without
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from amaranth.sim import Simulator
@@ -19,7 +21,21 @@ __all__ = ["StreamRun", "run_stream", "pack_fields", "unpack_fields"]
 
 @dataclass
 class StreamRun:
-    """Result of :func:`run_stream`."""
+    """Result of :func:`run_stream`.
+
+    Attributes
+    ----------
+    outputs : list of int
+        Output payload words, in order.
+    accepted_at : list of int
+        Cycle of each input transfer (cycle 0: the first after the ``reset_cycles``).
+    produced_at : list of int
+        Cycle of each output transfer.
+    cycles : int
+        Cycles simulated after the ``reset_cycles``.
+    extra : dict of str to list of int
+        Per watched attribute, its value at each output transfer.
+    """
 
     outputs: list[int]  # output payload words, in order
     accepted_at: list[int]  # cycle of each input transfer
@@ -29,8 +45,8 @@ class StreamRun:
 
 
 def run_stream(
-    dut,
-    words,
+    dut: Any,
+    words: Iterable[int],
     *,
     seed: int = 0,
     p_valid: float = 1.0,
@@ -42,11 +58,33 @@ def run_stream(
 ) -> StreamRun:
     """Feed ``words`` (input payload integers) to ``dut.in`` and collect ``dut.out``.
 
-    ``p_valid`` / ``p_ready``: probability that the source offers a word / the sink accepts in a
-    cycle (random bubbles and backpressure, seeded). A transfer happens in a cycle when valid and
-    ready are both high before the clock edge that ends it. ``watch``: names of extra output
-    attributes of ``dut`` sampled at every output transfer (returned in ``extra``).
-    ``n_expected``: outputs to wait for (default: one per input word).
+    A transfer happens in a cycle when valid and ready are both high before the clock edge that
+    ends it. The run stops when every word is taken and ``n_expected`` outputs have come, or after
+    ``max_cycles`` cycles (no error: the result then has fewer outputs).
+
+    Parameters
+    ----------
+    dut : amaranth.lib.wiring.Component
+        A component with an input stream ``in`` and an output stream ``out``.
+    words : iterable of int
+        Input payload words, in order.
+    seed : int
+        Seed of the random bubbles and backpressure.
+    p_valid, p_ready : float
+        Probability that the source offers a word / the sink accepts in a cycle.
+    max_cycles : int, optional
+        Cycle limit after the ``reset_cycles``; default ``8 * len(words) + 200``.
+    reset_cycles : int
+        Idle clock cycles (valid and ready low) before the stream starts; the reset is not asserted.
+    watch : tuple of str
+        Names of extra attributes of ``dut`` (signals) sampled at every output transfer.
+    n_expected : int, optional
+        Outputs to wait for (default: one per input word).
+
+    Returns
+    -------
+    StreamRun
+        The outputs, the cycles of the transfers and the watched values.
     """
     rng = np.random.default_rng(seed)
     words = [int(w) for w in words]

@@ -52,7 +52,22 @@ class RomEmission:
         self.roms: list[_Rom] = []
 
     def add(self, width: int, depth: int, contents: Sequence[int]) -> str:
-        """Register a ROM; returns the name of the black-box module that stands for it."""
+        """Register a ROM.
+
+        Parameters
+        ----------
+        width : int
+            Word width, bits.
+        depth : int
+            Number of words.
+        contents : sequence of int
+            The words, unsigned, address 0 first; at most ``depth`` (padded with zeros).
+
+        Returns
+        -------
+        str
+            The name of the black-box module that stands for it: ``BLACKBOX_PREFIX`` + its index.
+        """
         words = tuple(int(w) for w in contents)
         self.roms.append(_Rom(int(width), int(depth), words + (0,) * (int(depth) - len(words))))
         return f"{BLACKBOX_PREFIX}{len(self.roms) - 1}"
@@ -106,6 +121,11 @@ def weight_rom(m: Module, name: str, width: int, depth: int, contents: Sequence[
     -------
     Value
         The registered read data, ``width`` bits (not reset).
+
+    Raises
+    ------
+    InternalError
+        More than ``depth`` words in ``contents``.
     """
     if len(contents) > depth:
         raise InternalError(f"ROM {name}: {len(contents)} words for depth {depth}")

@@ -134,6 +134,7 @@ def component_verilog_roms(component: Any, name: str, passes: Sequence[str] = CO
     Parameters
     ----------
     component : amaranth.lib.wiring.Component
+        The design (a core or top of :mod:`pwas_hdl.hdl`), elaborated here.
     name : str
         Top module name.
     passes : sequence of str
@@ -141,7 +142,10 @@ def component_verilog_roms(component: Any, name: str, passes: Sequence[str] = CO
 
     Returns
     -------
-    tuple of (str, pwas_hdl.hdl.weight_rom.RomEmission)
+    text : str
+        Yosys' ``write_verilog`` output, with a black-box instance per ROM.
+    roms : pwas_hdl.hdl.weight_rom.RomEmission
+        The ROMs met in elaboration, for :func:`~pwas_hdl.hdl.weight_rom.splice_roms`.
 
     Raises
     ------
@@ -165,6 +169,7 @@ def component_verilog(component: Any, name: str, passes: Sequence[str] = CONVERT
     Parameters
     ----------
     component : amaranth.lib.wiring.Component
+        The design (a core or top of :mod:`pwas_hdl.hdl`), elaborated here.
     name : str
         Top module name.
     passes : sequence of str
@@ -178,7 +183,7 @@ def component_verilog(component: Any, name: str, passes: Sequence[str] = CONVERT
     Raises
     ------
     InternalError
-        As :func:`rtlil_to_verilog`.
+        As :func:`rtlil_to_verilog`, or as :func:`~pwas_hdl.hdl.weight_rom.splice_roms`.
     """
     from pwas_hdl.hdl.weight_rom import splice_roms
 
