@@ -17,15 +17,42 @@ constants are added modulo the width (:func:`add_const_signed`).
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 
 from pwas_hdl.hdl._lintsafe import sink_unused
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
 __all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate"]
 
 
-def saturate(m: Module, rv, width: int, name: str, flag: bool = True):
-    """Saturate a signed value (wider than ``width``) to ``width`` bits; returns (net, saturated flag or None)."""
+def saturate(m: Module, rv: Value, width: int, name: str, flag: bool = True) -> tuple[Signal, Signal | None]:
+    """Saturate a signed value (wider than ``width``) to ``width`` bits.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to (``comb`` domain).
+    rv : Value
+        Signed value, more than ``width`` bits (asserted).
+    width : int
+        Output width, bits.
+    name : str
+        Name of the output net; the flag is ``<name>_sat``.
+    flag : bool
+        Also return a flag net.
+
+    Returns
+    -------
+    net : Signal
+        ``rv`` clipped to ``[-2**(width-1), 2**(width-1) - 1]``, signed ``width`` bits.
+    saturated : Signal or None
+        1 bit, high when ``rv`` was clipped; ``None`` when ``flag`` is false.
+    """
     assert len(rv) > width, (len(rv), width)
     sign = rv[-1]
     upper = rv[width - 1 : len(rv) - 1]
@@ -67,11 +94,34 @@ def _cbits(v: int) -> int:
     return max(2, (v.bit_length() if v >= 0 else (-v - 1).bit_length()) + 1)
 
 
-def const_product(m: Module, k: int, x, width: int, name: str):
+def const_product(m: Module, k: int, x: Value, width: int, name: str) -> Signal:
     """``k * x`` (signed constant times signed ``x``) as a named product net of exactly ``width`` bits.
 
     The constant net gets ``width - len(x)`` bits, so the multiplier's natural width is the
     accumulator width (a whole cell output: no extension in front of the adders).
+
+    Parameters
+    ----------
+    m : Module
+        Module the multiplier is added to (``comb`` domain).
+    k : int
+        Signed constant factor.
+    x : Value
+        Operand, read as signed.
+    width : int
+        Product width, bits.
+    name : str
+        Name of the product net.
+
+    Returns
+    -------
+    Signal
+        Signed ``width`` bits.
+
+    Raises
+    ------
+    ValueError
+        ``k`` does not fit ``width - len(x)`` signed bits.
     """
     kw = width - len(x)
     if kw < _cbits(k):
@@ -81,29 +131,62 @@ def const_product(m: Module, k: int, x, width: int, name: str):
     return p
 
 
-def add_const_signed(m: Module, x, k: int, name: str):
-    """``x + k`` for a signed named net ``x`` whose true sum fits its width (modular add)."""
+def add_const_signed(m: Module, x: Value, k: int, name: str) -> Value:
+    """``x + k`` for a signed named net ``x`` whose true sum fits its width (modular add).
+
+    Parameters
+    ----------
+    m : Module
+        Module the adder is added to (``comb`` domain).
+    x : Value
+        Signed operand, ``w`` bits.
+    k : int
+        Signed constant (added modulo ``2**w``).
+    name : str
+        Name of the adder's result net (:func:`~pwas_hdl.hdl._lintsafe.add_const_wrap`).
+
+    Returns
+    -------
+    Value
+        Signed ``w`` bits.
+    """
     from pwas_hdl.hdl._lintsafe import add_const_wrap
 
     w = len(x)
     return add_const_wrap(m, x.as_unsigned(), k % (1 << w), name).as_signed()
 
 
-def build_observer_bank(m: Module, bank, qu: list, qy, transfer):
+def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Value], qy: Value,
+                        transfer: Value) -> tuple[list[Value], Signal, list[list[Signal]]]:
     """Add the bank to ``m``.
 
     Parameters
     ----------
+    m : Module
+        Module the observers are added to (state registers in ``sync``, without reset).
     bank : FixedPointObserverBank
-    qu : list of signed ``B_in`` values (one per input channel);  qy : signed ``B_in`` value
-    transfer : 1-bit value; the states update when it is high
+        The bit-true bank: coefficient codes and formats.
+    qu : sequence of Value
+        Signed ``B_in``-bit input codes, one per input channel (``nu``).
+    qy : Value
+        Signed ``B_in``-bit code of the measured output.
+    transfer : Value
+        1 bit; the states update when it is high.
 
     Returns
     -------
-    residuals : list of signed ``residual_bits`` nets, ``e_j = x_j0 - (qy << (F_s - F_in))``
-        (from the states before the update: the residual of the sample being transferred)
-    saturated : 1-bit net, some state saturates in this update
-    states : list (N) of lists (M) of state registers
+    residuals : list of Value
+        ``N`` signed ``residual_bits`` nets, ``e_j = x_j0 - (qy << (F_s - F_in))`` (from the
+        states before the update: the residual of the sample being transferred).
+    saturated : Signal
+        1 bit, some state saturates in this update.
+    states : list of list of Signal
+        ``N`` lists of ``M`` state registers, signed ``state_bits`` each.
+
+    Raises
+    ------
+    ValueError
+        A coefficient does not fit its product's constant width (:func:`const_product`).
     """
     fmt = bank.formats
     n, mo, nu = bank.n_models, bank.order, bank.nu

@@ -20,7 +20,10 @@ The names stay importable from :mod:`pwas_hdl.hdl.observer_sensor_top`, where th
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal, unsigned
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from amaranth.hdl import Cat, Module, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -32,6 +35,9 @@ from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
 from pwas_hdl.hdl.sensor_top import sample_fields
 from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY, build_serial_front_end, plan_serial_bank
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
 __all__ = ["ObserverBankTopBase", "build_observer_bank_top", "FRONT_END_STAGES", "attach_core_and_schedule",
            "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes"]
@@ -46,7 +52,9 @@ class ObserverBankTopBase(wiring.Component):
     Parameters
     ----------
     bank : FixedPointObserverBank
-    params : CoreParams of the PWAS core
+        The bit-true bank (its ``signal_names`` and ``input_bits`` give the input payload).
+    params : CoreParams
+        The PWAS core's parameters.
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture : {"parallel", "serial"}
         Parallel constant-multiplier bank + parallel core (II 1), or the time-multiplexed bank
@@ -71,13 +79,21 @@ class ObserverBankTopBase(wiring.Component):
     A subclass checks its core's inputs, then calls this constructor; it may add to the manifest
     with :meth:`_architecture_more`, :meth:`_front_end_more`, :meth:`_error_bound_more` and
     :meth:`_warmup_meaning`, and writes :meth:`elaborate`.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``architecture``, or parameters the core refuses.
+    InputError
+        Serial: ``lanes`` or ``isqrt_every`` out of range
+        (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`).
     """
 
     kind = "observer-sensor"
 
-    def __init__(self, bank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY,
-                 warmup: int, double_buffered: bool = False):
+    def __init__(self, bank: FixedPointObserverBank, params: CoreParams, *, memory: str = "banked",
+                 pipeline: Pipeline | str | None = None, architecture: str = "parallel", lanes: int = 1,
+                 isqrt_every: int | None = DEFAULT_ISQRT_EVERY, warmup: int, double_buffered: bool = False):
         self._MustUse__silence = True
         self.bank = bank
         attach_core_and_schedule(self, bank, params, memory=memory, pipeline=pipeline, architecture=architecture,
@@ -101,6 +117,7 @@ class ObserverBankTopBase(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
+        """Input payload fields, one signed ``bank.input_bits``-bit code per signal (:func:`sample_fields`)."""
         return sample_fields(self.signals, self.bank.input_bits)
 
     # --- what a subclass adds to the manifest
@@ -148,7 +165,18 @@ class ObserverBankTopBase(wiring.Component):
         }
 
     def flow_control(self, names: dict) -> dict:
-        """The handshake rules in words (``names``: port names by role); the serial bank throttles the input."""
+        """The handshake rules in words; the serial bank throttles the input.
+
+        Parameters
+        ----------
+        names : dict of str to str
+            Port name by role (:func:`~pwas_hdl.hdl.emit.port_names`).
+
+        Returns
+        -------
+        dict of str to str
+            As :func:`serial_flow_control`: ``{in.ready port: rule}``, empty for the parallel bank.
+        """
         return serial_flow_control(self, names)
 
     def expected_outputs(self, n_samples: int) -> int:
@@ -167,19 +195,39 @@ class ObserverBankTopBase(wiring.Component):
         return max(0, n_samples - self.warmup)
 
 
-def build_observer_bank_top(cls, first, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                            name: str = "pwas_sensor", architecture: str = "parallel", lanes: int = 1,
-                            isqrt_every: int | None = DEFAULT_ISQRT_EVERY, bound_rule: str, bound_against: str):
+def build_observer_bank_top(cls: type[ObserverBankTopBase], first: Any, model: Any, *, memory: str = "banked",
+                            pipeline: Pipeline | str | None = None, name: str = "pwas_sensor",
+                            architecture: str = "parallel", lanes: int = 1,
+                            isqrt_every: int | None = DEFAULT_ISQRT_EVERY, bound_rule: str,
+                            bound_against: str) -> ObserverBankTopBase:
     """An observer-bank top ``cls(first, CoreParams.from_model(model.core), ...)`` of a bit-true sensor model.
 
     Parameters
     ----------
-    cls : type of :class:`ObserverBankTopBase`
-    first : the top's first constructor argument (the bank, or the whole model)
-    model : bit-true sensor model (``.core``, ``.error_bound`` (nz,) physical, ``.lipschitz`` (n,))
-    memory, pipeline, name, architecture, lanes, isqrt_every : as the top's constructor; ``name``
-        is the Verilog module name (checked)
-    bound_rule, bound_against : the words of ``estimate_bound`` (how the bound adds up, against what)
+    cls : type
+        A subclass of :class:`ObserverBankTopBase`.
+    first : object
+        The top's first constructor argument (the bank, or the whole model).
+    model : ObserverBankSensorModel or TappedObserverBankSensorModel
+        Bit-true sensor model: ``.core`` (the core's ``FixedPointModel``), ``.error_bound``
+        (``nz`` values, physical units), ``.lipschitz`` (ndarray ``(n,)``).
+    memory, pipeline, architecture, lanes, isqrt_every
+        As the top's constructor.
+    name : str
+        Verilog module name (checked).
+    bound_rule, bound_against : str
+        The words of ``estimate_bound`` (how the bound adds up, against what).
+
+    Returns
+    -------
+    ObserverBankTopBase
+        The ``cls`` instance with ``module_name``, the core's ``input_names`` / ``target_names``
+        and ``estimate_bound`` (``physical``, ``lipschitz``, ``rule``, ``against``) set.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier, or as the top's constructor.
     """
     from pwas_hdl.hdl.api import _check_name
 
@@ -195,11 +243,30 @@ def build_observer_bank_top(cls, first, model, *, memory: str = "banked", pipeli
     return top
 
 
-def inputs_and_warmup(m: Module, top) -> tuple[list, object, object, Signal]:
+def inputs_and_warmup(m: Module, top: ObserverBankTopBase) -> tuple[list[Value], Any, Signal, Signal]:
     """The input side shared by the observer-bank tops: the payload's signed sample codes ``cur``
     (one per signal of ``top.signals``, ``top.bank.input_bits`` each), ``advance`` (= ``in.ready``,
     driven by the core), ``transfer`` (``in.valid & advance``) and the saturating warm-up counter
-    0 .. ``top.warmup`` that drives ``top.warm``. Returns ``(cur, in, advance, transfer)``."""
+    0 .. ``top.warmup`` that drives ``top.warm``.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to (the counter ``warmup_count`` in ``sync``).
+    top : ObserverBankTopBase
+        The top being elaborated (its ``in`` stream, ``warm`` port, ``signals``, ``warmup``).
+
+    Returns
+    -------
+    cur : list of Value
+        Signed ``top.bank.input_bits``-bit codes, one per signal, payload order.
+    in : stream interface
+        The top's input stream (``getattr(top, "in")``).
+    advance : Signal
+        ``in.ready`` itself (not driven here).
+    transfer : Signal
+        1 bit, ``in.valid & advance``.
+    """
     b = top.bank.input_bits
     inp = getattr(top, "in")
     cur = [inp.payload[i * b : (i + 1) * b].as_signed() for i in range(len(top.signals))]
@@ -219,10 +286,34 @@ def inputs_and_warmup(m: Module, top) -> tuple[list, object, object, Signal]:
     return cur, inp, advance, transfer
 
 
-def parallel_feature_codes(m: Module, bank, cur: list, transfer, advance, warm) -> tuple[list, Signal]:
+def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, transfer: Value, advance: Value,
+                           warm: Value) -> tuple[list, Signal]:
     """The parallel bank's feature path (:data:`FRONT_END_STAGES` registers): observer bank,
     window sums (stage ``s_sum``), square root or not and its register (stage ``s_root``), feature
-    codes. Returns ``(codes, valid)``: the core's feature inputs and their valid bit."""
+    codes.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to.
+    bank : FixedPointObserverBank
+        The bit-true bank.
+    cur : list of Value
+        Signed ``bank.input_bits``-bit codes ``u0 .. u{nu-1}, y0`` (:func:`inputs_and_warmup`).
+    transfer : Value
+        1 bit, the input transfer (the states, delay lines and sums update).
+    advance : Value
+        1 bit, the core's enable: the ``s_sum`` / ``s_root`` registers load when it is high.
+    warm : Value
+        1 bit: a transfer while it is high yields an output (``s_sum_valid = transfer & warm``).
+
+    Returns
+    -------
+    codes : list of Signal
+        ``N`` feature codes, signed ``bank.input_bits_core`` bits: the core's inputs.
+    valid : Signal
+        Their valid bit (``s_root_valid``), :data:`FRONT_END_STAGES` cycles after the transfer.
+    """
     residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
     sink_unused(m, _sat, "state_saturated_flag")
     sums = build_window_sums(m, bank, residuals, transfer)
@@ -243,13 +334,43 @@ def parallel_feature_codes(m: Module, bank, cur: list, transfer, advance, warm) 
     return build_feature_codes(m, bank, roots), v2
 
 
-def attach_core_and_schedule(top, bank, params: CoreParams, *, memory: str, pipeline, architecture: str, lanes: int,
+def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: CoreParams, *, memory: str,
+                             pipeline: Pipeline | str | None, architecture: str, lanes: int,
                              isqrt_every: int | None, double_buffered: bool = False) -> None:
     """Set the core and the schedule of an observer-bank top (``top.architecture``, ``core``, ``plan``,
     ``stages_before_core``, ``ii``, ``cycles_per_sample``): the parallel core behind the
     :data:`FRONT_END_STAGES` registers (II 1), or the serial core behind the time-multiplexed bank
     (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`: II = cycles_per_sample;
-    ``double_buffered``: the feature codes double-buffered, :func:`serial_sensor_path`)."""
+    ``double_buffered``: the feature codes double-buffered, :func:`serial_sensor_path`).
+
+    Parameters
+    ----------
+    top : ObserverBankTopBase
+        The top under construction; the attributes above are set on it.
+    bank : FixedPointObserverBank
+        The bit-true bank (for the serial schedule).
+    params : CoreParams
+        The core's parameters.
+    memory : {"banked", "replicated", "corner"}
+        Weight memory layout of the parallel core (the serial core has its own).
+    pipeline : Pipeline, preset name or None
+        The core's pipeline.
+    architecture : {"parallel", "serial"}
+        Parallel bank and core, or serial bank and core.
+    lanes : int
+        Serial: state-update units, ``1 .. N_theta``.
+    isqrt_every : int or None
+        Serial: digit steps of the square root between registers.
+    double_buffered : bool
+        Serial: double-buffered feature codes.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``architecture``, or what the core refuses.
+    InputError
+        Serial: ``lanes`` or ``isqrt_every`` out of range (:func:`plan_serial_bank`).
+    """
     if architecture not in ("parallel", "serial"):
         raise InputError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
     top.architecture = architecture
@@ -269,8 +390,21 @@ def attach_core_and_schedule(top, bank, params: CoreParams, *, memory: str, pipe
     top.core._MustUse__silence = True
 
 
-def serial_flow_control(top, names: dict) -> dict:
-    """``in.ready``'s rule in words for a top with the serial bank (``{}`` for the parallel one)."""
+def serial_flow_control(top: ObserverBankTopBase, names: dict) -> dict:
+    """``in.ready``'s rule in words for a top with the serial bank (``{}`` for the parallel one).
+
+    Parameters
+    ----------
+    top : ObserverBankTopBase
+        Its ``plan`` (None: parallel) and ``ii`` (cycles) are read.
+    names : dict of str to str
+        Port name by role (``in.ready``, ``out.valid``, ``out.ready``; :func:`~pwas_hdl.hdl.emit.port_names`).
+
+    Returns
+    -------
+    dict of str to str
+        ``{in.ready port name: rule}``, or ``{}`` for the parallel bank.
+    """
     if top.plan is None:
         return {}
     ir, ov, orr = names["in.ready"], names["out.valid"], names["out.ready"]
@@ -279,7 +413,8 @@ def serial_flow_control(top, names: dict) -> dict:
                 f"{ov} & ~{orr} holds the core"}
 
 
-def serial_sensor_path(m: Module, top, cur: list, inp, transfer, extra_codes=None) -> None:
+def serial_sensor_path(m: Module, top: ObserverBankTopBase, cur: list, inp: Any, transfer: Value,
+                       extra_codes: Callable[[Signal], Sequence[Value]] | None = None) -> None:
     """The serial top's body: time-multiplexed bank (:func:`build_serial_front_end`), the pending
     feature codes and the serial core; ``in.ready`` = bank free & (no pending codes | the core takes
     them now).
@@ -294,6 +429,27 @@ def serial_sensor_path(m: Module, top, cur: list, inp, transfer, extra_codes=Non
     staging registers (``features_held``) and loaded in the cycle the core takes the previous
     codes; ``in.ready`` = bank free & (fewer than 2 warm samples between the input and the core's
     take | the core takes one now), so no sample's codes are overwritten under backpressure.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to.
+    top : ObserverBankTopBase
+        A top with the serial bank (``top.plan`` set); its core, ``warm``, ``out`` are used.
+    cur : list of Value
+        Signed ``bank.input_bits``-bit codes ``u0 .. y0`` (:func:`inputs_and_warmup`).
+    inp : stream interface
+        The top's input stream (``in.ready`` driven here).
+    transfer : Value
+        1 bit, the input transfer.
+    extra_codes : callable, optional
+        ``extra_codes(done) -> sequence of Value`` (see above).
+
+    Raises
+    ------
+    ValueError
+        ``extra_codes`` with a double-buffered plan; or ``buffer_load`` / plan mismatch in
+        :func:`build_serial_front_end`.
     """
     sample_warm = Signal(name="bank_sample_warm")
     with m.If(transfer):

@@ -25,8 +25,9 @@ registers, then the core's buffer), ``in.ready`` = bank idle or in its last cycl
 Warm-up: the first ``M + l`` transfers after reset produce no output (their windows hold observer
 start-up residuals; the float front end has no features for them either); ``warm`` is 1 once they
 have been taken. ``rst`` (synchronous) clears states, delay lines, sums, the warm-up counter and
-the valid bits: the stream restarts as from power-up. ``state_sat`` is 1 in the cycle where a
-state saturates (a sticky copy is ``obs_sat_seen``: no; the flag is combinational, for debug).
+the valid bits: the stream restarts as from power-up. The bank's saturation flag
+(``state_saturated``, 1 in the cycle where a state saturates, combinational) is not a port: it is
+kept for debug as the wires ``unused_state_saturated_flag*``.
 
 The constructor, the manifest parts and the RTL pieces this top shares with the tapped one
 (:mod:`pwas_hdl.hdl.observer_tap_sensor_top`) are in :mod:`pwas_hdl.hdl.observer_bank_top`; their
@@ -35,7 +36,7 @@ names (:func:`inputs_and_warmup`, :func:`serial_sensor_path`, ...) stay importab
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Module
 
@@ -53,6 +54,9 @@ from pwas_hdl.hdl.observer_bank_top import (  # noqa: F401 (public names of this
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank, ObserverBankSensorModel
+
 __all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor", "attach_core_and_schedule",
            "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes"]
 
@@ -63,26 +67,36 @@ class ObserverSensorTop(ObserverBankTopBase):
     Parameters
     ----------
     bank : FixedPointObserverBank
-    params : CoreParams of the PWAS core on the features
-    memory, pipeline : as :class:`PWASCore`
-
-    Ports: ``clk``, ``rst``, ``in__valid/ready/payload`` (``(nu+1) B_in`` bits), ``out__valid/ready/payload``
-    (as the core), ``warm``.
-
+        The bit-true bank and feature unit.
+    params : CoreParams
+        The PWAS core on the features (``n = N_theta`` inputs of ``bank.input_bits_core`` bits).
+    memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture : {"parallel", "serial"}
         Parallel constant-multiplier bank + parallel core (II 1), or the time-multiplexed bank
-        + serial core.
+        + serial core (feature codes double-buffered).
     lanes : int
         Serial bank: state-update units (1 .. N_theta).
     isqrt_every : int or None
         Serial bank: digit steps of the square root between pipeline registers.
 
+    Ports: ``clk``, ``rst``, ``in__valid/ready/payload`` (``(nu+1) B_in`` bits), ``out__valid/ready/payload``
+    (as the core), ``warm``.
+
     Attributes: ``core``, ``latency``, ``ii`` and ``cycles_per_sample`` (1 parallel, the schedule's
     serial), ``plan`` (:class:`~pwas_hdl.hdl.serial_observer_bank.SerialBankPlan` or None), ``warmup`` (``M + l``);
     the constructor and the manifest parts are :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`'s.
+
+    Raises
+    ------
+    ValueError
+        ``params.n`` differs from the bank's number of features, ``params.in_width`` from the
+        feature code width; or as :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`.
+    InputError
+        As :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase` (serial ``lanes``,
+        ``isqrt_every``).
     """
 
-    def __init__(self, bank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+    def __init__(self, bank: FixedPointObserverBank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                  architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
         self._MustUse__silence = True  # no UnusedElaboratable warning when a check refuses
         if params.n != bank.n_models:
@@ -94,7 +108,19 @@ class ObserverSensorTop(ObserverBankTopBase):
                          isqrt_every=isqrt_every, warmup=bank.first_output, double_buffered=True)
 
     def elaborate(self, platform: Any) -> Module:
-        """The observer bank, residual features and PWAS core, connected; ``platform`` is not used."""
+        """The observer bank, residual features and PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; not used.
+
+        Returns
+        -------
+        Module
+            One module: input side and warm-up counter, the bank and feature unit (parallel or
+            serial) and the inlined core.
+        """
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:
@@ -105,15 +131,33 @@ class ObserverSensorTop(ObserverBankTopBase):
         return m
 
 
-def build_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+def build_observer_sensor(model: ObserverBankSensorModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                           name: str = "pwas_sensor", architecture: str = "parallel", lanes: int = 1,
                           isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> ObserverSensorTop:
     """The observer-bank sensor top of a bit-true :class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`.
 
+    Parameters
+    ----------
+    model : ObserverBankSensorModel
+        ``.bank`` (the front end), ``.core`` (the core's ``FixedPointModel``), ``.error_bound``,
+        ``.lipschitz``.
+    memory, pipeline, architecture, lanes, isqrt_every
+        As :class:`ObserverSensorTop`.
+    name : str
+        Verilog module name.
+
     Returns
     -------
     ObserverSensorTop
-        ``.latency``, ``.ii``, ``.cycles_per_sample``, ``.warmup`` (= M + l), ``.core``.
+        ``.latency`` and ``.ii`` (cycles), ``.cycles_per_sample``, ``.warmup`` (= M + l samples),
+        ``.core``.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier, or as :class:`ObserverSensorTop`.
+    InputError
+        As :class:`ObserverSensorTop`.
     """
     return build_observer_bank_top(
         ObserverSensorTop, model.bank, model, memory=memory, pipeline=pipeline, name=name, architecture=architecture,

@@ -29,7 +29,7 @@ sample), ``latency = stages_before_core + core latency``. The bit-true model is 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Module, Signal, signed
 
@@ -46,6 +46,9 @@ from pwas_hdl.hdl.observer_bank_top import (
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.bank_taps import TappedObserverBankSensorModel
+
 __all__ = ["ObserverTapSensorTop", "build_tapped_observer_sensor"]
 
 
@@ -55,16 +58,29 @@ class ObserverTapSensorTop(ObserverBankTopBase):
     Parameters
     ----------
     model : TappedObserverBankSensorModel
-    params : CoreParams of the core on ``[features, taps]``
+        The bit-true model: ``.bank``, ``.taps`` (:class:`~pwas_hdl.fixedpoint.bank_taps.BankTaps`),
+        ``.first_output``.
+    params : CoreParams
+        The core on ``[features, taps]``: ``n = N_theta + len(taps.dims)`` inputs.
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture, lanes, isqrt_every : as :class:`~pwas_hdl.hdl.observer_sensor_top.ObserverSensorTop`
+        (serial: single-buffered feature codes).
 
     The constructor and the manifest parts are :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`'s;
     this top adds the taps (``front_end.taps``, their error bound) and its warm-up
-    ``max(M + l, memory - 1)``.
+    ``max(M + l, memory - 1)`` samples.
+
+    Raises
+    ------
+    ValueError
+        ``params.n`` is not the bank's features plus the taps, or as
+        :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`.
+    InputError
+        As :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase` (serial ``lanes``,
+        ``isqrt_every``).
     """
 
-    def __init__(self, model, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+    def __init__(self, model: TappedObserverBankSensorModel, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                  architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
         self._MustUse__silence = True  # no UnusedElaboratable warning when the check refuses
         bank, taps = model.bank, model.taps
@@ -112,7 +128,19 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         return out
 
     def elaborate(self, platform: Any) -> Module:
-        """The observer bank, residual features, u/y taps and PWAS core, connected; ``platform`` is not used."""
+        """The observer bank, residual features, u/y taps and PWAS core, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; not used.
+
+        Returns
+        -------
+        Module
+            One module: input side and warm-up counter, bank and feature unit, tap lag registers
+            and codes, and the inlined core.
+        """
         m = Module()
         cur, inp, advance, transfer = inputs_and_warmup(m, self)
         if self.plan is not None:  # serial bank: the tap codes registered with the last feature code (done)
@@ -124,11 +152,35 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         return m
 
 
-def build_tapped_observer_sensor(model, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+def build_tapped_observer_sensor(model: TappedObserverBankSensorModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                                  name: str = "pwas_sensor", architecture: str = "parallel", lanes: int = 1,
                                  isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> ObserverTapSensorTop:
     """The top of a bit-true :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel`
-    (``architecture="serial"``: the time-multiplexed bank with ``lanes`` state-update units)."""
+    (``architecture="serial"``: the time-multiplexed bank with ``lanes`` state-update units).
+
+    Parameters
+    ----------
+    model : TappedObserverBankSensorModel
+        ``.bank``, ``.taps``, ``.core`` (the core's ``FixedPointModel``), ``.error_bound``,
+        ``.lipschitz``.
+    memory, pipeline, architecture, lanes, isqrt_every
+        As :class:`ObserverTapSensorTop`.
+    name : str
+        Verilog module name.
+
+    Returns
+    -------
+    ObserverTapSensorTop
+        ``.latency`` and ``.ii`` (cycles), ``.cycles_per_sample``, ``.warmup`` (samples),
+        ``.core``, ``.estimate_bound``.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier, or as :class:`ObserverTapSensorTop`.
+    InputError
+        As :class:`ObserverTapSensorTop`.
+    """
     return build_observer_bank_top(
         ObserverTapSensorTop, model, model, memory=memory, pipeline=pipeline, name=name, architecture=architecture,
         lanes=lanes, isqrt_every=isqrt_every,

@@ -11,17 +11,36 @@ PWAS core's input code ``q = sat((min(r >> t, cap) * K + C) >> R)``.
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 
 from pwas_hdl.hdl._lintsafe import add_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
 __all__ = ["build_window_sums", "build_isqrt", "build_feature_codes", "sub_wrap"]
 
 
 
-def cap_const(m: Module, rs, cap: int, capped: Signal) -> None:
-    """``capped = min(rs, cap)`` for a constant ``cap`` (``capped`` holds ``cap``): one constant compare."""
+def cap_const(m: Module, rs: Value, cap: int, capped: Signal) -> None:
+    """``capped = min(rs, cap)`` for a constant ``cap`` (``capped`` holds ``cap``): one constant compare.
+
+    Parameters
+    ----------
+    m : Module
+        Module the compare is added to (``comb`` domain).
+    rs : Value
+        Unsigned value to cap.
+    cap : int
+        Non-negative constant.
+    capped : Signal
+        Unsigned output, driven here; wide enough for ``cap`` (``rs`` is truncated to its width
+        below the cap).
+    """
     capw = len(capped)
     over = ge_const(rs, cap + 1)
     if isinstance(over, bool):
@@ -32,8 +51,23 @@ def cap_const(m: Module, rs, cap: int, capped: Signal) -> None:
         with m.Else():
             m.d.comb += capped.eq(rs[:capw])
 
-def sub_wrap(m: Module, a, b, name: str):
-    """``(a - b) mod 2**w`` for two unsigned ``w``-bit nets."""
+def sub_wrap(m: Module, a: Value, b: Value, name: str) -> Value:
+    """``(a - b) mod 2**w`` for two unsigned ``w``-bit nets.
+
+    Parameters
+    ----------
+    m : Module
+        Module the subtractor is added to (``comb`` domain).
+    a, b : Value
+        Unsigned, equal width ``w`` bits (asserted).
+    name : str
+        Name of the ``w + 1``-bit difference net; its borrow goes to ``unused_<name>_borrow``.
+
+    Returns
+    -------
+    Value
+        The low ``w`` bits of the difference.
+    """
     assert len(a) == len(b), (len(a), len(b))
     w = len(a)
     s = Signal(unsigned(w + 1), name=name)
@@ -42,8 +76,26 @@ def sub_wrap(m: Module, a, b, name: str):
     return s[:w]
 
 
-def build_window_sums(m: Module, bank, residuals: list, transfer) -> list:
-    """Squares, delay lines and running sums; returns the ``S_j`` registers (unsigned ``window_sum`` bits)."""
+def build_window_sums(m: Module, bank: FixedPointObserverBank, residuals: Sequence[Value], transfer: Value) -> list[Signal]:
+    """Squares, delay lines and running sums of the residuals.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to (delay lines and sums in ``sync``, reset to 0).
+    bank : FixedPointObserverBank
+        Gives the formats (``residual_bits``, ``sum_bits = 2 * residual_bits``) and the window
+        ``l`` (``l + 1`` delay registers per residual).
+    residuals : sequence of Value
+        ``N`` signed ``residual_bits`` residuals (:func:`~pwas_hdl.hdl.observer_bank.build_observer_bank`).
+    transfer : Value
+        1 bit; the delay lines and sums update when it is high.
+
+    Returns
+    -------
+    list of Signal
+        The ``N`` window-sum registers ``S_j``, unsigned ``window_sum`` (``sum_bits``) bits.
+    """
     fmt = bank.formats
     rb, sumb = fmt.residual_bits, fmt.sum_bits
     assert fmt.square_bits == sumb == 2 * rb
@@ -63,13 +115,28 @@ def build_window_sums(m: Module, bank, residuals: list, transfer) -> list:
     return sums
 
 
-def build_isqrt(m: Module, value, name: str):
+def build_isqrt(m: Module, value: Value, name: str) -> Value:
     """``floor(sqrt(value))`` of an unsigned value: combinational digit-by-digit (restoring) square root.
 
     Step ``i`` (``i = 0 ..``, two input bits each, MSB first) holds the remainder in ``i + 2`` bits
     and the root in ``i + 1`` bits: ``cur = rem << 2 | two`` (``i + 3`` bits), ``trial = root << 2 | 1``
     (``i + 2`` bits); ``bit = cur >= trial`` = ``cur[i+2] | no borrow of cur[:i+2] - trial``;
-    ``rem = bit ? cur - trial : cur`` (both ``< 2**(i+2)``). Returns an unsigned ``ceil(len / 2)``-bit net.
+    ``rem = bit ? cur - trial : cur`` (both ``< 2**(i+2)``).
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to (``comb`` domain only: no registers).
+    value : Value
+        Unsigned radicand.
+    name : str
+        Name prefix of the step nets.
+
+    Returns
+    -------
+    Value
+        The root, unsigned ``ceil(len(value) / 2)`` bits
+        (:func:`~pwas_hdl.hdl.serial_observer_bank.build_isqrt_pipelined` without registers).
     """
     from pwas_hdl.hdl.serial_observer_bank import build_isqrt_pipelined  # the one digit-by-digit root (no registers here)
 
@@ -77,8 +144,30 @@ def build_isqrt(m: Module, value, name: str):
     return root
 
 
-def build_feature_codes(m: Module, bank, roots: list) -> list:
-    """Affine map of ``r`` to the core's input code per feature: ``sat((min(r >> t, cap) * K + C) >> R)``."""
+def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence[Value]) -> list[Signal]:
+    """Affine map of ``r`` to the core's input code per feature: ``sat((min(r >> t, cap) * K + C) >> R)``.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to (``comb`` domain).
+    bank : FixedPointObserverBank
+        Gives ``t = root_shift``, ``cap = root_cap[j]``, ``K = scale_mul[j]``, ``C = scale_add[j]``,
+        ``R = scale_shift`` and the code width ``input_bits_core``.
+    roots : sequence of Value
+        ``N`` unsigned roots ``r_j`` (or the window sums, map 11b-sq).
+
+    Returns
+    -------
+    list of Signal
+        ``N`` feature codes, signed ``input_bits_core`` (the core's ``B_in``) bits, saturated.
+
+    Raises
+    ------
+    ValueError
+        A ``scale_mul`` constant does not fit the ``scale_product`` width
+        (:func:`~pwas_hdl.hdl.observer_bank.const_product`).
+    """
     t, sh = bank.root_shift, bank.scale_shift
     bcore = bank.input_bits_core
     sw = bank.widths["scale_product"]

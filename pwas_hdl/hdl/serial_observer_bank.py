@@ -50,15 +50,20 @@ and the II drops to ``max(n_max M + 1, ceil(stages_before_core / 2), (n_max - 1)
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib.memory import Memory
 
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused
 from pwas_hdl.hdl.observer_bank import _cbits, _sum, add_const_signed, const_product, saturate
 from pwas_hdl.hdl.residual_features import cap_const
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
 __all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
            "table_mac", "lane_groups", "DEFAULT_ISQRT_EVERY"]
@@ -93,7 +98,8 @@ class SerialBankPlan:
         Cycles from the input transfer to the core's input valid (``4 + SQUARE_REGS + R + AFFINE_REGS + (n_max - 1) M``).
     cycles_per_sample : int
         The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``; with double-buffered
-        feature codes ``max(steps + MAC_STAGES - 1, ceil(stages_before_core / 2), core_ii)``.
+        feature codes ``max(steps + MAC_STAGES - 1, ceil(stages_before_core / 2),
+        (n_max - 1) M + SQUARE_REGS + 1, core_ii)``.
     double_buffered : bool
         The feature codes are double-buffered (:func:`build_serial_front_end` with ``buffer_load``):
         the next sample may enter while the previous one is still in the feature pipeline.
@@ -131,24 +137,58 @@ def _isqrt_regs(width: int, every: int | None) -> int:
     return 0 if not every else len([i for i in range(1, pairs) if i % every == 0])
 
 
-def lane_groups(n: int, lanes: int) -> tuple:
+def lane_groups(n: int, lanes: int) -> tuple[tuple[int, ...], ...]:
     """``n`` units split into contiguous groups of ``ceil(n / lanes)`` (the first ones the longest; fewer
-    groups than ``lanes`` where ``lanes`` does not divide evenly, e.g. 4 in 3 lanes: (0, 1), (2, 3))."""
+    groups than ``lanes`` where ``lanes`` does not divide evenly, e.g. 4 in 3 lanes: (0, 1), (2, 3)).
+
+    Parameters
+    ----------
+    n : int
+        Number of units (observers), ``n >= 1``.
+    lanes : int
+        Number of lanes asked for, ``1 .. n``.
+
+    Returns
+    -------
+    tuple of tuple of int
+        The unit indices of each group, ``0 .. n-1`` in order.
+    """
     per = math.ceil(n / lanes)
     return tuple(tuple(range(s, min(n, s + per))) for s in range(0, n, per))
 
 
-def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY, core_ii: int = 1,
-                     double_buffered: bool = False) -> SerialBankPlan:
+def plan_serial_bank(bank: FixedPointObserverBank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY,
+                     core_ii: int = 1, double_buffered: bool = False) -> SerialBankPlan:
     """The schedule of a serial bank of ``lanes`` state-update units for ``bank`` (a FixedPointObserverBank).
 
     ``double_buffered``: the feature codes written by the lanes (staging) are copied into a second
     set of registers that the core reads, and at most two warm samples are between the input and
     the core's take (one in the core's buffer, one in the bank or held in staging): the II is then
-    ``max(steps + 1, ceil(stages_before_core / 2), core_ii)`` instead of the feature pipeline's
-    whole tail (a sample's staging writes span ``(n_max - 1) M + 1 <= steps`` cycles, so two
-    samples' writes never meet; sample ``k + 2`` enters no earlier than the cycle the core takes
-    sample ``k``, ``stages_before_core`` cycles after sample ``k``'s transfer).
+    ``max(steps + 1, ceil(stages_before_core / 2), (n_max - 1) M + SQUARE_REGS + 1, core_ii)``
+    instead of the feature pipeline's whole tail (a sample's staging writes span
+    ``(n_max - 1) M + 1 <= steps`` cycles, so two samples' writes never meet; sample ``k + 2``
+    enters no earlier than the cycle the core takes sample ``k``, ``stages_before_core`` cycles
+    after sample ``k``'s transfer; the third term: a sample's delay-line slot is read up to its
+    last observer's window sum).
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+        Gives ``N_theta`` (``n_models``), ``M`` (``order``), the feature map and the window-sum width.
+    lanes : int
+        State-update units, ``1 .. N_theta``.
+    isqrt_every : int or None
+        Digit steps of the square root between pipeline registers; None: no registers (map 11b
+        only; ignored for 11b-sq).
+    core_ii : int
+        The core's initiation interval, cycles.
+    double_buffered : bool
+        Double-buffered feature codes (see above).
+
+    Returns
+    -------
+    SerialBankPlan
+        All counts in clock cycles.
 
     Raises
     ------
@@ -172,12 +212,33 @@ def plan_serial_bank(bank, lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQ
                           bool(double_buffered))
 
 
-def var_product(m: Module, coef, x, width: int, name: str):
+def var_product(m: Module, coef: Value, x: Value, width: int, name: str) -> Signal:
     """``coef * x`` (two signed nets) as a named product net of exactly ``width`` bits.
 
     The multiplier cell's output is the named net; give ``coef`` ``width - len(x)`` bits (a table
     of that width, :func:`_table`) so that the cell's natural width is the product width (no
     extension in front of the adders: lint-clean, as ``const_product``).
+
+    Parameters
+    ----------
+    m : Module
+        Module the multiplier is added to (``comb`` domain).
+    coef, x : Value
+        The factors, read as signed.
+    width : int
+        Product width, bits (at least ``len(coef) + len(x)``).
+    name : str
+        Name of the product net.
+
+    Returns
+    -------
+    Signal
+        Signed ``width`` bits.
+
+    Raises
+    ------
+    ValueError
+        ``len(coef) + len(x) > width``.
     """
     if len(coef) + len(x) > width:
         raise ValueError(f"a {len(coef)} x {len(x)}-bit product does not fit {width} bits (product {name})")
@@ -197,18 +258,29 @@ def _table(m: Module, sel, values: list[int], name: str, width: int | None = Non
     return t.as_signed()
 
 
-def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: str, registered: bool = False,
-              product_enable=None, shifts: list | None = None):
+def table_mac(m: Module, sel: Value, columns: Sequence[Sequence[int]], operands: Sequence[Value], width: int, name: str,
+              registered: bool = False, product_enable: Value | None = None,
+              shifts: Sequence[int] | None = None) -> Value | None:
     """``sum_k columns[k][sel] * operands[k]``: one variable multiplier per operand with its
     coefficient from a table indexed by ``sel`` (the step of a time-multiplexed unit), summed exactly
     in ``width`` bits (the caller's bound; the order of an exact sum does not matter).
 
     Parameters
     ----------
-    sel : unsigned net, the table index (entries beyond a column's length are 0)
-    columns : list of lists of int, one coefficient column per operand
-    operands : list of signed nets
-    width : int, the accumulator width (every product is a ``width``-bit net, :func:`var_product`)
+    m : Module
+        Module the tables, multipliers and adders are added to.
+    sel : Value
+        Unsigned table index (entries beyond a column's length are 0, except in a column whose
+        entries are all equal: a constant, :func:`~pwas_hdl.hdl._lintsafe.rom`).
+    columns : sequence of sequence of int
+        One signed coefficient column per operand; an all-zero column adds no multiplier.
+    operands : sequence of Value
+        Signed nets, one per column.
+    width : int
+        The accumulator width, bits (every product is a ``width``-bit net, :func:`var_product`).
+    name : str
+        Name prefix of the tables (``<name>_c<k>``), products (``<name>_p<k>``) and sum
+        (``<name>_acc``).
     registered : bool
         The coefficients from (reset-less) registers loaded with ``columns[k][sel]`` in every
         cycle: give the *next* cycle's index as ``sel`` (the table decode leaves the datapath).
@@ -221,7 +293,14 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
 
     Returns
     -------
-    The signed ``width``-bit sum, or None when every column is 0.
+    Value or None
+        The signed ``width``-bit sum, or None when every column is 0.
+
+    Raises
+    ------
+    ValueError
+        A coefficient does not fit its table width (``width - shifts[k] - len(operands[k])``
+        signed bits).
     """
     terms = []
     shifts = list(shifts) if shifts is not None else [0] * len(operands)
@@ -243,12 +322,27 @@ def table_mac(m: Module, sel, columns: list, operands: list, width: int, name: s
     return _sum(m, terms, width, f"{name}_acc") if terms else None
 
 
-def build_isqrt_pipelined(m: Module, value, name: str, every: int | None):
+def build_isqrt_pipelined(m: Module, value: Value, name: str, every: int | None) -> tuple[Value, int]:
     """``floor(sqrt(value))`` digit by digit as :func:`pwas_hdl.hdl.residual_features.build_isqrt`,
     with a (free-running, reset-less) register after every ``every`` digit steps.
 
-    Returns ``(root, registers)``: an unsigned ``ceil(len / 2)``-bit net, valid ``registers``
-    cycles after ``value``.
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to (registers in ``sync``, without enable).
+    value : Value
+        Unsigned radicand.
+    name : str
+        Name prefix of the step nets and registers.
+    every : int or None
+        Digit steps between registers; None or 0: no registers (combinational).
+
+    Returns
+    -------
+    root : Value
+        Unsigned ``ceil(len(value) / 2)`` bits.
+    registers : int
+        Number of registers inserted: ``root`` is valid that many cycles after ``value``.
     """
     w = len(value)
     pairs = (w + 1) // 2
@@ -287,8 +381,22 @@ def build_isqrt_pipelined(m: Module, value, name: str, every: int | None):
     return Cat(*reversed(bits)), regs
 
 
-def eq_const(x, k: int):
-    """``x == k`` for an unsigned net and a constant (lint-clean: the constant at the net's width)."""
+def eq_const(x: Value, k: int) -> Value:
+    """``x == k`` for an unsigned net and a constant (lint-clean: the constant at ``k``'s own width,
+    the bits above it reduced).
+
+    Parameters
+    ----------
+    x : Value
+        Unsigned net.
+    k : int
+        Non-negative constant.
+
+    Returns
+    -------
+    Value
+        1 bit; ``Const(0, 1)`` when ``k >= 2**len(x)``.
+    """
     if k == 0:
         return ~x.any()
     if k >= 1 << len(x):
@@ -325,17 +433,27 @@ def _product_reg(m: Module, coef, x, width: int, name: str):
     return r
 
 
-def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, transfer, sample_warm, buffer_load=None):
+def build_serial_front_end(m: Module, bank: FixedPointObserverBank, plan: SerialBankPlan, cur: Sequence[Value],
+                           transfer: Value, sample_warm: Value,
+                           buffer_load: Signal | None = None) -> tuple[list[Signal], Signal, Signal]:
     """Add the time-multiplexed bank and feature unit to ``m``.
 
     Parameters
     ----------
+    m : Module
+        Module the bank, the feature unit and their registers are added to.
     bank : FixedPointObserverBank
+        The bit-true bank: coefficient codes, formats, window, feature map.
     plan : SerialBankPlan
-    cur : list of signed ``B_in``-bit values ``u0 .. y0`` (the input payload; latched on ``transfer``)
-    transfer : 1-bit, the input transfer
-    sample_warm : 1-bit register, the sample being processed yields an output (set by the caller at the transfer)
-    buffer_load : 1-bit net, optional
+        Its schedule (:func:`plan_serial_bank`).
+    cur : sequence of Value
+        Signed ``B_in``-bit codes ``u0 .. y0`` (the input payload; latched on ``transfer``).
+    transfer : Value
+        1 bit, the input transfer.
+    sample_warm : Value
+        1-bit register: the sample being processed yields an output (set by the caller at the transfer).
+    buffer_load : Signal, optional
+        1-bit net, driven by the caller.
         Double-buffered codes (``plan.double_buffered``): the returned ``codes`` are a second set of
         registers loaded when the net is high with the staging codes (``feat{j}_code``), the one
         being written in that cycle taken from its write (so a load in ``done``'s cycle holds the
@@ -343,9 +461,19 @@ def build_serial_front_end(m: Module, bank, plan: SerialBankPlan, cur: list, tra
 
     Returns
     -------
-    codes : list (N) of signed core-input-code registers (the buffer when ``buffer_load`` is given)
-    done : 1-bit, high in the cycle the last feature code of a warm sample is written
-    free : 1-bit, the bank is idle or in its last cycle (a transfer may start the next sample)
+    codes : list of Signal
+        ``N`` registers of signed ``input_bits_core`` bits, the core's input codes (the buffer
+        when ``buffer_load`` is given).
+    done : Signal
+        1 bit, high in the cycle the last feature code of a warm sample is written.
+    free : Signal
+        1 bit, the bank is idle or in its last cycle (a transfer may start the next sample).
+
+    Raises
+    ------
+    ValueError
+        ``buffer_load`` given for a single-buffered plan or missing for a double-buffered one,
+        or an observer constant wider than the accumulator.
     """
     fmt = bank.formats
     mo, nu = bank.order, bank.nu

@@ -17,7 +17,7 @@ latency 1 cycle, one output per transfer, no warm-up (the estimator starts at 0,
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib.memory import Memory
@@ -32,12 +32,30 @@ from pwas_hdl.hdl.observer_bank import _sum, add_const_signed, const_product, sa
 from pwas_hdl.hdl.residual_features import sub_wrap
 from pwas_hdl.hdl._lintsafe import add_wrap  # noqa: E402
 
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from pwas_hdl.fixedpoint.observer_bank import FixedPointSwitchedEstimator
+
 __all__ = ["SwitchedEstimatorTop", "SerialSwitchedEstimatorTop", "serial_estimator_schedule", "estimator_widths",
            "simulate_estimator"]
 
 
-def estimator_widths(est) -> dict:
-    """Widths of the datapath of :class:`SwitchedEstimatorTop` (all exact)."""
+def estimator_widths(est: FixedPointSwitchedEstimator) -> dict[str, int]:
+    """Widths of the datapath of :class:`SwitchedEstimatorTop` (all exact).
+
+    Parameters
+    ----------
+    est : FixedPointSwitchedEstimator
+        The bit-true estimator: coefficient codes, formats, window.
+
+    Returns
+    -------
+    dict of str to int
+        Bits: ``acc`` (state-update accumulator), ``racc`` (residual / output accumulator, widened
+        so that a residual's square holds the window sum), ``residual`` (``racc - F_c``), ``sum``
+        (window sum, ``2 * residual``) and ``y_hat`` (= ``residual``).
+    """
     fc, bs, b_in = est.coef_frac, est.state_bits, est.input_bits
     sh = est.state_frac - est.input_frac
     lw = max(1, (est.window - 1).bit_length()) if est.window > 1 else 0
@@ -69,11 +87,31 @@ def _estimator_ports(top: wiring.Component, est) -> None:
 
 
 class SwitchedEstimatorTop(wiring.Component):
-    """The estimator of seed 003 as one stream component (see the module docstring)."""
+    """The estimator of seed 003 as one stream component (see the module docstring).
+
+    Parameters
+    ----------
+    est : FixedPointSwitchedEstimator
+        The bit-true estimator (``n`` states, ``n_modes`` modes, formats and coefficient codes).
+
+    Ports: ``in`` (stream of ``2 * input_bits``: the u code, then the y code), ``out`` (stream of
+    the fields ``out_fields``, LSB first: ``x<i>_hat``, ``y_hat``, ``mode_index``, ``state_saturated``).
+
+    Attributes
+    ----------
+    widths : dict of str to int
+        :func:`estimator_widths`.
+    index_width : int
+        Bits of ``mode_index``.
+    latency, ii : int
+        1 cycle each.
+    out_fields : list of (name, bits)
+        The output payload fields, LSB first.
+    """
 
     kind = "switched-estimator"
 
-    def __init__(self, est):
+    def __init__(self, est: FixedPointSwitchedEstimator):
         self._MustUse__silence = True
         self.est = est
         self.widths = estimator_widths(est)
@@ -114,7 +152,18 @@ class SwitchedEstimatorTop(wiring.Component):
         return acc[est.coef_frac :].as_signed()
 
     def elaborate(self, platform: Any) -> Module:
-        """The estimator's logic: the per-mode observers, the residual detector and the switched output; ``platform`` is not used."""
+        """The estimator's logic: the per-mode observers, the residual detector and the switched output.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; not used.
+
+        Returns
+        -------
+        Module
+            One module: bank, window sums, argmin detector, switched observer and output register.
+        """
         m = Module()
         est, wd = self.est, self.widths
         b = est.input_bits
@@ -190,12 +239,29 @@ class SwitchedEstimatorTop(wiring.Component):
         return m
 
 
-def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0, p_ready: float = 1.0, seed: int = 0) -> dict:
+def simulate_estimator(top: SwitchedEstimatorTop | SerialSwitchedEstimatorTop, codes: npt.ArrayLike, *,
+                       p_valid: float = 1.0, p_ready: float = 1.0, seed: int = 0) -> dict:
     """Replay (u, y) codes (T, 2) through ``top`` in Amaranth's simulator (the netlist the Verilog is
     emitted from), with random bubbles (``p_valid``) and backpressure (``p_ready``).
 
-    Returns ``x_hat`` (T, n), ``y_hat`` (T,), ``theta`` (T,) 1-based, ``state_saturated`` (T,) bool, as
-    the bit-true :meth:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator.trace`, and ``cycles``.
+    Parameters
+    ----------
+    top : SwitchedEstimatorTop or SerialSwitchedEstimatorTop
+        The estimator top.
+    codes : array_like of int, shape (T, 2)
+        Signed ``input_bits`` codes per sample: column 0 the u code, column 1 the y code.
+    p_valid, p_ready : float
+        Probability that the source offers a sample / the sink accepts in a cycle.
+    seed : int
+        Seed of the random bubbles and backpressure.
+
+    Returns
+    -------
+    dict
+        ``x_hat`` (T, n), ``y_hat`` (T,), ``theta`` (T,) 1-based, ``state_saturated`` (T,) bool, as
+        the bit-true :meth:`~pwas_hdl.fixedpoint.observer_bank.FixedPointSwitchedEstimator.trace`,
+        and ``cycles`` (clock cycles simulated). The run has no cycle limit: it ends when ``T``
+        outputs have come.
     """
     import numpy as np
     from amaranth.sim import Simulator
@@ -247,12 +313,23 @@ def simulate_estimator(top: SwitchedEstimatorTop, codes, *, p_valid: float = 1.0
 # time-multiplexed ("serial") estimator: ``generate EST.json --architecture serial``
 
 
-def default_mac_pipeline(est) -> int:
-    """1 (a register after the row units' multipliers) where the schedule allows it (``n >= 2``), else 0."""
+def default_mac_pipeline(est: FixedPointSwitchedEstimator) -> int:
+    """1 (a register after the row units' multipliers) where the schedule allows it (``n >= 2``), else 0.
+
+    Parameters
+    ----------
+    est : FixedPointSwitchedEstimator
+        Its ``n`` (states) is read.
+
+    Returns
+    -------
+    int
+        The default ``mac_pipeline`` (0 or 1) of :func:`serial_estimator_schedule`.
+    """
     return 1 if est.n >= 2 else 0
 
 
-def serial_estimator_schedule(est, mac_pipeline: int | None = None, lanes: int = 1) -> dict:
+def serial_estimator_schedule(est: FixedPointSwitchedEstimator, mac_pipeline: int | None = None, lanes: int = 1) -> dict:
     """The step schedule of :class:`SerialSwitchedEstimatorTop` (counts in clock cycles).
 
     The ``s`` modes of the bank are split into ``lanes`` contiguous groups
@@ -269,6 +346,23 @@ def serial_estimator_schedule(est, mac_pipeline: int | None = None, lanes: int =
     ``P = max(s_0 + s_0 n, s_0 + d + 3)``. ``cycles_per_sample = P + 1 + n + d`` (= II); latency
     ``cycles_per_sample + 1`` (the input is latched in the transfer cycle, the output register is
     written in the last step).
+
+    Parameters
+    ----------
+    est : FixedPointSwitchedEstimator
+        Gives ``s`` (``n_modes``) and ``n`` (states).
+    mac_pipeline : int, optional
+        ``d``: 0 or 1 steps between a row's issue and its result; default
+        :func:`default_mac_pipeline`.
+    lanes : int
+        Row units for the bank, ``1 .. s``.
+
+    Returns
+    -------
+    dict
+        ``lanes``, ``modes_per_lane``, ``row_unit_multipliers`` (``n + 2``), ``multipliers``,
+        ``squarers``, ``mac_pipeline``, ``rows`` (row counts by kind), ``bank_end_step``,
+        ``observer_first_step`` (``P``), ``cycles_per_sample`` and ``latency`` (clock cycles).
 
     Raises
     ------
@@ -324,12 +418,29 @@ class SerialSwitchedEstimatorTop(wiring.Component):
     Handshake: ``in.ready`` is high when the units are idle, or in their last step when the output
     register can take the result (``~out.valid | out.ready``); otherwise the last step (which
     issues no row) waits. II = ``cycles_per_sample``, latency ``cycles_per_sample + 1``.
+
+    Parameters
+    ----------
+    est : FixedPointSwitchedEstimator
+        The bit-true estimator.
+    mac_pipeline : int, optional
+        0 or 1: the products registered (:func:`serial_estimator_schedule`); default
+        :func:`default_mac_pipeline`.
+    lanes : int
+        Row units for the bank's modes, ``1 .. n_modes``.
+
+    Raises
+    ------
+    InputError
+        ``lanes`` out of range (:func:`serial_estimator_schedule`).
+    ValueError
+        ``mac_pipeline`` not 0 / 1, or 1 with ``n < 2``.
     """
 
     kind = "switched-estimator"
     architecture = "serial"
 
-    def __init__(self, est, mac_pipeline: int | None = None, lanes: int = 1):
+    def __init__(self, est: FixedPointSwitchedEstimator, mac_pipeline: int | None = None, lanes: int = 1):
         self._MustUse__silence = True
         self.est = est
         self.widths = estimator_widths(est)
@@ -376,7 +487,19 @@ class SerialSwitchedEstimatorTop(wiring.Component):
         return cols
 
     def elaborate(self, platform: Any) -> Module:
-        """The time-multiplexed estimator's logic: row units, schedule and memories; ``platform`` is not used."""
+        """The time-multiplexed estimator's logic: row units, schedule and memories.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; not used.
+
+        Returns
+        -------
+        Module
+            One module: step counter and handshake, the lanes' row units, state chains, window
+            sums and delay-line memories, the running argmin and the output register.
+        """
         from pwas_hdl.hdl._lintsafe import add_const_wrap, bits_for, ge_const, rom
         from pwas_hdl.hdl.serial_observer_bank import eq_const, table_mac, var_product
 
