@@ -28,6 +28,7 @@ The Verilog (:func:`emit_additive_verilog`) is one file with the top module and 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import re
@@ -192,27 +193,38 @@ class AdditiveCore(wiring.Component):
     Parameters
     ----------
     model : AdditiveFixedPointModel
+        The bit-true additive model: its parts, subsets, alignment shifts and formats.
     memory : {"banked", "replicated", "corner"}
         Each part's weight memory (as :class:`~pwas_hdl.hdl.core.PWASCore`).
     pipeline : Pipeline, preset name or None
         The parts' pipeline (made equal in latency, :func:`equal_latency_pipelines`).
 
-    Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.payload``: ``n`` codes; ``out.payload``:
-    ``nz`` codes of ``B_out`` bits, then ``out_of_range``).
+    Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.payload``: ``n`` codes of ``B_in`` bits;
+    ``out.payload``: ``nz`` codes of ``B_out`` bits, then ``out_of_range``).
 
     Attributes
     ----------
     parts : list of PWASCore
         The part cores (``round_output=False``).
     subsets : tuple of tuple of int
+        Regressor indices of each part.
     latency, ii : int
+        Cycles: the parts' latency + 1 (the sum register); II = 1.
     params : AdditiveParams
     memory_plan : AdditiveMemoryPlan
     pipeline : Pipeline
         The pipeline asked for (the parts' own are ``parts[i].pipeline``).
+
+    Raises
+    ------
+    InputError
+        No equal-latency pipelines exist for the parts, or the output shift ``F + Fw - Fo`` is not
+        smaller than the sum's width ``W``.
+    InternalError
+        An aligned part accumulator is wider than the sum.
     """
 
-    def __init__(self, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
         self._MustUse__silence = True
         base = Pipeline.cast(pipeline)
         self.subsets = tuple(model.subsets)
@@ -268,6 +280,7 @@ class AdditiveCore(wiring.Component):
         Parameters
         ----------
         m : Module
+            Module the parts (submodules ``part<i>``), sum and rounding are added to.
         payload, valid, advance, out
             The interface of :meth:`PWASCore.build_into`: ``payload`` (``n*B_in`` bits) and
             ``valid`` the input sample, ``advance`` a 1-bit signal driven here (the input is
@@ -364,7 +377,8 @@ class AdditiveCore(wiring.Component):
         -------
         dict
             ``parts`` (per part: module suffix, regressor indices, latency in cycles, pipeline,
-            accumulator bits, alignment shift, memory), ``sum_bits``, ``latency`` (in words).
+            accumulator bits, alignment shift in bits, memory), ``sum_bits``, ``latency`` (a
+            sentence: part latency + 1).
         """
         return {
             "parts": [
@@ -380,11 +394,31 @@ class AdditiveCore(wiring.Component):
 
 class AdditiveSensorTop(PWASSensorTop):
     """Lag bank (:class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`: its elaborate, ports, warm-up and
-    flow control) + :class:`AdditiveCore` (``core``) in place of the single core."""
+    flow control) + :class:`AdditiveCore` (``core``) in place of the single core.
+
+    Parameters
+    ----------
+    model : AdditiveFixedPointModel
+        The bit-true additive model (as :class:`AdditiveCore`).
+    signals : sequence of (name, n_lags)
+        The lag bank's signals in payload order (:func:`~pwas_hdl.hdl.sensor_top.lag_plan`).
+    dims : sequence of (signal index, lag)
+        One per regressor dimension of the whole sensor, lag in samples (0: the current sample).
+    memory, pipeline
+        As :class:`AdditiveCore`.
+
+    Raises
+    ------
+    ValueError
+        ``dims`` does not have one entry per regressor (``n``).
+    InputError, InternalError
+        As :class:`AdditiveCore`.
+    """
 
     kind = "sensor"
 
-    def __init__(self, model, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, model: AdditiveFixedPointModel, signals: Sequence[tuple[str, int]], dims: Sequence[tuple[int, int]], *,
+                 memory: str = "banked", pipeline: Pipeline | str | None = None):
         self._MustUse__silence = True
         self.core = AdditiveCore(model, memory=memory, pipeline=pipeline)
         self.core._MustUse__silence = True
@@ -419,6 +453,7 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     Parameters
     ----------
     model : AdditiveFixedPointModel
+        The bit-true additive model.
     memory, pipeline
         As :class:`AdditiveCore`.
     name : str
@@ -449,6 +484,7 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
     Parameters
     ----------
     model : AdditiveFixedPointModel
+        The bit-true additive model.
     lags : LagStructure, optional
         As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` (default: from ``model.regressor_signals``).
     memory, pipeline
@@ -462,10 +498,11 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
 
     Raises
     ------
-    ValueError
-        The lags of a signal have different input formats, or as :func:`lag_plan`.
     InputError
-        As :func:`build_additive_core`, or recurrent ``lags``.
+        The lags of a signal have different input formats
+        (``model.signal_input_formats``), recurrent ``lags``, or as :func:`build_additive_core`.
+    ValueError
+        As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` (``lags`` that do not match the model).
     """
 
     model.signal_input_formats()  # raises unless all lags of each signal share one format
@@ -512,13 +549,16 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
     Parameters
     ----------
     component : AdditiveCore or AdditiveSensorTop
+        The additive design.
     name : str
         Module name.
     ports : {"axis", "amaranth"}
+        Port naming (:func:`~pwas_hdl.hdl.emit.port_names`).
 
     Returns
     -------
     str
+        The Verilog text (first line: the Yosys version).
 
     Raises
     ------
@@ -555,6 +595,7 @@ def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str)
     Parameters
     ----------
     component : AdditiveCore or AdditiveSensorTop
+        The additive design (its core's ``parts`` are read).
     prefix : str
         File-name prefix.
 

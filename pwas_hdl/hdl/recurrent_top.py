@@ -23,7 +23,8 @@ a new sample is accepted every ``L`` cycles (``II = latency = L``). During warm-
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
@@ -35,6 +36,11 @@ from pwas_hdl.hdl.core import PWASCore, _not, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import lag_bank, sample_fields
 
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from pwas_hdl.fixedpoint.recurrence import FeedbackRequant, RecurrentFixedPointModel
+
 __all__ = ["PWASRecurrentTop", "build_recurrent_sensor"]
 
 
@@ -44,29 +50,40 @@ class PWASRecurrentTop(wiring.Component):
     Parameters
     ----------
     params : CoreParams
+        The core's parameters: ``n`` = lag dimensions + ``nz * Mz``.
     signals : list of (name, n_lags)
-        The measured signals of the payload.
+        The measured signals of the payload, payload order.
     io_dims : list of (signal index, lag)
-        The first ``n - nz*Mz`` regressor dimensions.
+        The first ``n - nz*Mz`` regressor dimensions, lag in samples (0: the current sample).
     mz : int
-    feedback : list of FeedbackRequant, one per target
+        ``Mz >= 1``: fed-back estimates per target.
+    feedback : list of FeedbackRequant
+        One per target: the requantisation of its output code (``B_out`` bits) to the input code
+        (``B_in`` bits) of its fed-back dimensions.
     initial_codes : array_like (Mz, nz)
-        Reset values (oldest first).
-    memory, pipeline : as :class:`PWASCore`
+        Reset values of the feedback registers, input codes (oldest first).
+    memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
 
     Attributes
     ----------
     latency : int
         Cycles from the transfer of a sample that reaches the core to its output.
     ii : int
-        ``latency``: cycles between accepted samples (sink never stalling).
+        ``max(1, latency)``: cycles between accepted samples (sink never stalling).
     warmup : int
-        ``M - 1``.
+        ``M - 1``: transfers after reset that produce no output.
+
+    Raises
+    ------
+    ValueError
+        ``len(io_dims) + nz * mz != n``, ``len(feedback) != nz``, ``mz < 1``, a dimension the lag
+        bank does not hold, or as :class:`~pwas_hdl.hdl.core.PWASCore`.
     """
 
     kind = "recurrent-sensor"
 
-    def __init__(self, params: CoreParams, signals, io_dims, mz: int, feedback, initial_codes, *, memory: str = "banked",
+    def __init__(self, params: CoreParams, signals: Sequence[tuple[str, int]], io_dims: Sequence[tuple[int, int]], mz: int,
+                 feedback: Sequence[FeedbackRequant], initial_codes: npt.ArrayLike, *, memory: str = "banked",
                  pipeline: Pipeline | str | None = None):
         self._MustUse__silence = True
         nz = len(feedback)
@@ -98,10 +115,14 @@ class PWASRecurrentTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
+        """Input payload fields, one signed ``B_in``-bit code per measured signal (:func:`sample_fields`)."""
         return sample_fields([nm for nm, _ in self.signals], self.params.in_width)
 
     @property
     def extra_info(self) -> dict:
+        """Manifest entries of the top: ``lags`` (with the fed-back ``<target>_hat`` dimensions),
+        ``warmup``, ``recurrence`` (Mz, II in cycles, feedback requantisation and initial codes) and
+        ``flow_control`` (replacing :func:`~pwas_hdl.hdl.api.design_info`'s generic rules)."""
         tn = getattr(self.core, "target_names", [f"z{i}" for i in range(self.params.nz)])
         return {
             "lags": {"signals": [{"name": nm, "lags": k} for nm, k in self.signals],
@@ -182,7 +203,24 @@ class PWASRecurrentTop(wiring.Component):
         return q
 
     def elaborate(self, platform: Any) -> Module:
-        """The lag bank, PWAS core and feedback registers, connected; ``platform`` is not used."""
+        """The lag bank, PWAS core and feedback registers, connected.
+
+        Parameters
+        ----------
+        platform : Any
+            Amaranth build platform; not used.
+
+        Returns
+        -------
+        Module
+            One module: lag bank, warm-up thermometer, ``busy`` flag, feedback requantisation and
+            registers, and the inlined core.
+
+        Raises
+        ------
+        ValueError
+            A target's requantisation product ``B_out + bits(K)`` is narrower than ``B_in + S``.
+        """
         m = Module()
         p = self.params
         b = p.in_width
@@ -232,14 +270,29 @@ class PWASRecurrentTop(wiring.Component):
         return m
 
 
-def build_recurrent_sensor(rmodel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                           name: str = "pwas_recurrent_sensor") -> PWASRecurrentTop:
+def build_recurrent_sensor(rmodel: RecurrentFixedPointModel, *, memory: str = "banked",
+                           pipeline: Pipeline | str | None = None, name: str = "pwas_recurrent_sensor") -> PWASRecurrentTop:
     """The recurrent sensor top of a :class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`.
+
+    Parameters
+    ----------
+    rmodel : RecurrentFixedPointModel
+        ``.fxm`` (the core's ``FixedPointModel``), ``.lags`` (with ``Mz``), ``.signals`` (measured
+        signal names, payload order), ``.feedback``, ``.initial_codes``.
+    memory, pipeline
+        As :class:`PWASRecurrentTop`.
+    name : str
+        Verilog module name.
 
     Returns
     -------
     PWASRecurrentTop
-        ``.latency``, ``.ii`` (= latency), ``.warmup``, ``.signals``, ``.core``.
+        ``.latency`` (cycles), ``.ii`` (= latency), ``.warmup`` (samples), ``.signals``, ``.core``.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a plain Verilog identifier, or as :class:`PWASRecurrentTop`.
     """
     from pwas_hdl.hdl.api import _check_name
 

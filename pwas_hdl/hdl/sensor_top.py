@@ -21,7 +21,7 @@ pipeline); afterwards ``in.ready = ~out.valid | out.ready``. ``rst`` restarts th
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import re
 
@@ -33,6 +33,12 @@ from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
+
+if TYPE_CHECKING:
+    from amaranth.hdl import Value
+
+    from pwas_hdl.fixedpoint.warp import Pow2Warp
+    from pwas_hdl.hdl.argmax import ArgmaxStage
 
 __all__ = ["PWASSensorTop", "lag_plan", "lag_bank"]
 
@@ -121,11 +127,31 @@ def _ident(name: str) -> str:
     return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
 
 
-def lag_bank(m: Module, signals, cur: list, transfer, width: int) -> list[list[Signal]]:
+def lag_bank(m: Module, signals: Sequence[tuple[str, int]], cur: Sequence[Value], transfer: Value,
+             width: int) -> list[list[Signal]]:
     """The lag bank of a sensor top: per signal ``(name, k)`` the ``k - 1`` registers
     ``lag_<name>_1 .. lag_<name>_{k-1}`` (``width`` bits, no reset), shifted on ``transfer``
-    (after the transfer of sample ``t``, ``lag_<name>_d`` holds sample ``t - d``; ``cur[i]`` is
-    the current code of signal ``i``). Returns the registers per signal (``hist[i][d - 1]`` = lag ``d``)."""
+    (after the transfer of sample ``t``, ``lag_<name>_d`` holds sample ``t - d``).
+
+    Parameters
+    ----------
+    m : Module
+        Module the registers are added to (``sync`` domain).
+    signals : sequence of (name, n_lags)
+        The signals in payload order; ``name`` is made a Verilog identifier for the register names.
+    cur : sequence of Value
+        ``cur[i]``: the current code of signal ``i``, ``width`` bits.
+    transfer : Value
+        1 bit; the registers shift when it is high.
+    width : int
+        Bits per code.
+
+    Returns
+    -------
+    list of list of Signal
+        The registers per signal: ``hist[i][d - 1]`` holds lag ``d`` of signal ``i`` (``k - 1``
+        registers, empty for ``k = 1``).
+    """
     hist = []
     for i, (nm, k) in enumerate(signals):
         regs = [Signal(width, name=f"lag_{_ident(nm)}_{lag}", reset_less=True) for lag in range(1, k)]
@@ -144,9 +170,12 @@ class PWASSensorTop(wiring.Component):
     Parameters
     ----------
     params : CoreParams
+        The core's parameters.
     signals : list of (name, n_lags)
-    dims : list of (signal index, lag), one per regressor dimension
-    memory, pipeline : as :class:`PWASCore`
+        The signals of the input payload, payload order (:func:`lag_plan`).
+    dims : list of (signal index, lag)
+        One per regressor dimension, lag in samples (0: the current sample).
+    memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     argmax : ArgmaxStage, optional
         A classifier's decision stage after the core (:mod:`pwas_hdl.hdl.argmax`, ``C = nz``
         scores of ``B_out`` bits, ``out_of_range`` carried through): the output payload then ends
@@ -155,6 +184,9 @@ class PWASSensorTop(wiring.Component):
         A non-uniform (power-of-two) partition: the lag bank holds ``B_in``-bit input codes
         (``warps[0].input_bits``) and every regressor dimension is warped to the core's code in
         one more register (:func:`pwas_hdl.hdl.warp.attach_warp`; latency + 1).
+    architecture : {"parallel", "serial"}
+        ``"serial"``: :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` (II = n + 1; ``memory`` is
+        then ignored); any other value: the parallel :class:`~pwas_hdl.hdl.core.PWASCore`.
 
     Ports: ``clk``, ``rst``, ``in__valid``, ``in__ready``, ``in__payload`` (``S*B_in`` bits, one code
     per signal), ``out__valid``, ``out__ready``, ``out__payload`` (as the core, then the class index
@@ -164,9 +196,18 @@ class PWASSensorTop(wiring.Component):
     ----------
     core : PWASCore  (its logic is inlined; ``latency``, ``memory_plan``, ``params`` apply)
     latency, ii : int
-        As the core's (from the transfer of a sample that completes a regressor).
+        Cycles: the core's (from the transfer of a sample that completes a regressor), latency
+        plus ``argmax.latency`` with an argmax stage.
     warmup : int
         ``M - 1``: transfers after reset that produce no output.
+
+    Raises
+    ------
+    ValueError
+        ``dims`` not one per regressor, a dimension the lag bank does not hold, lags of one signal
+        with different input formats (unwarped), an ``argmax`` whose ``index_lsb`` is not the
+        core's output width, warps that do not fit (:func:`~pwas_hdl.hdl.warp.attach_warp`), or
+        as the core.
     """
 
     kind = "sensor"
@@ -179,8 +220,9 @@ class PWASSensorTop(wiring.Component):
         """Bits of one signal's code in the payload and the lag bank: the core's, or the warp's input."""
         return self._warp_in_width or self.params.in_width
 
-    def __init__(self, params: CoreParams, signals, dims, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 argmax=None, architecture: str = "parallel", warps=None):
+    def __init__(self, params: CoreParams, signals: Sequence[tuple[str, int]], dims: Sequence[tuple[int, int]], *,
+                 memory: str = "banked", pipeline: Pipeline | str | None = None, argmax: ArgmaxStage | None = None,
+                 architecture: str = "parallel", warps: Sequence[Pow2Warp] | None = None):
         self._MustUse__silence = True  # see PWASCore.__init__
         if len(dims) != params.n:
             raise InputError(f"{len(dims)} lag-bank dimensions for a core with n = {params.n}")

@@ -32,8 +32,9 @@ speed); a stalled sink stops everything, including the throttle. A valid sample 
 load register exactly ``n + 1`` or more advancing cycles after the previous one, when the
 previous sample's last vertex is being read: the load never overwrites a vertex still to be read.
 
-Latency (input transfer to ``out.valid``, no stalls): ``split + rank + addr + 1 (load) + n
-(vertices 1..n) + 1 (memory) + mem_out + product + 1 (accumulator) + 1 (output)``; the
+Latency (input transfer to ``out.valid``, no stalls): ``split + rank + offset + addr + 1 (load) + n
+(vertices 1..n) + 1 (memory) + mem_out + product + 1 (accumulator) + 1 (output)``
+(:func:`serial_latency`); the
 ``tree_levels`` and ``mul_in`` options do not apply (no adder tree; the multiplier operands come
 straight from the memory register or ``mem_out``).
 """
@@ -129,7 +130,8 @@ class SingleMemoryPlan(MemoryPlan):
         Returns
         -------
         dict
-            ``kind``, ``memories`` (1), ``depth`` (words), ``address`` (in words).
+            ``kind``, ``memories`` (1), ``depth`` (words), ``address`` (a sentence: how a vertex's
+            address is formed).
         """
         return {"kind": "single", "memories": 1, "depth": int(self.depth),
                 "address": "linear vertex index (C order, last dimension fastest)"}
@@ -141,11 +143,21 @@ class SerialPWASCore(PWASCore):
     Parameters
     ----------
     params : CoreParams
+        The core's parameters (those of the parallel core).
     pipeline : Pipeline, preset name ("min", "balanced", "max") or None (balanced)
-        ``split``, ``rank``, ``addr`` (front end), ``mem_out`` and ``product`` registers apply.
+        ``split``, ``rank``, ``offset``, ``addr`` (front end), ``mem_out`` and ``product``
+        registers apply (:func:`serial_latency`).
+    memory : str
+        Must be ``"single"`` (the one memory of ``N`` words); accepted for the signature of
+        :class:`~pwas_hdl.hdl.core.PWASCore`.
 
     Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.ready`` is low while a sample is in the
     multiply-accumulate loop).
+
+    Raises
+    ------
+    ValueError
+        ``memory`` other than ``"single"``, or as :class:`~pwas_hdl.hdl.core.PWASCore`.
 
     Attributes
     ----------
@@ -209,6 +221,7 @@ class SerialPWASCore(PWASCore):
         Parameters
         ----------
         m : Module
+            Module the logic is added to.
         payload, valid : Value
             Input sample (``n*B_in`` bits) and its valid bit.
         advance : Signal

@@ -187,6 +187,7 @@ def warp_hw_info(model: WarpedFixedPointModel, latency_cycles: int = 1) -> dict:
     Parameters
     ----------
     model : WarpedFixedPointModel
+        The warped bit-true model.
     latency_cycles : int
         Cycles the warp adds (its one register).
 
@@ -207,19 +208,31 @@ class WarpedPWASCore(wiring.Component):
     Parameters
     ----------
     model : pwas_hdl.fixedpoint.warp.WarpedFixedPointModel
+        Its ``warps`` (one per dimension) and ``core`` (the uniform core's bit-true model).
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture : {"parallel", "serial"}
         The core behind the warp (serial: II = n + 1, :mod:`pwas_hdl.hdl.serial_core`).
+
+    Ports: as the core, but ``in.payload`` holds ``n`` signed ``B_in``-bit codes ``q``
+    (``in_width`` bits each).
 
     Attributes
     ----------
     core : PWASCore (inlined), latency, ii, memory_plan, pipeline, params : the core's (latency + 1)
     warps : list of Pow2Warp
+    in_width : int
+        ``B_in``: bits of one input code.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``architecture``, warps that do not fit the core
+        (:func:`attach_warp`), or parameters the core refuses.
     """
 
     kind = "core"
 
-    def __init__(self, model, *, memory: str = "banked", pipeline: Pipeline | str | None = None, architecture: str = "parallel"):
+    def __init__(self, model: WarpedFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None, architecture: str = "parallel"):
         from pwas_hdl.hdl.api import _make_core
 
         self._MustUse__silence = True
@@ -274,6 +287,7 @@ def build_warped_core(model: WarpedFixedPointModel, *, memory: str = "banked", p
     Parameters
     ----------
     model : WarpedFixedPointModel
+        The warped bit-true model.
     memory, pipeline, name, architecture
         As :func:`pwas_hdl.hdl.api.build_core` (``name`` is not checked here).
 
@@ -281,6 +295,11 @@ def build_warped_core(model: WarpedFixedPointModel, *, memory: str = "banked", p
     -------
     WarpedPWASCore
         Latency: the core's + 1 cycle.
+
+    Raises
+    ------
+    ValueError
+        As :class:`WarpedPWASCore`.
     """
     comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture)
     comp.module_name = name
@@ -299,7 +318,9 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
     ----------
     model : pwas_hdl.fixedpoint.warp.WarpedFixedPointModel
         Its lags of one signal must share one input quantisation (:meth:`signal_input_formats`).
-    lags : LagStructure
+    lags : LagStructure or None
+        The sensor's lag structure; None: derived from the model's ``regressor_signals``
+        (:func:`~pwas_hdl.hdl.sensor_top.lag_plan`).
     memory, pipeline, name, architecture : as :func:`pwas_hdl.hdl.api.build_sensor`
 
     Returns
@@ -312,7 +333,7 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
     InputError
         The lags of a signal have different quantisations, or recurrent ``lags``.
     ValueError
-        As :func:`~pwas_hdl.hdl.sensor_top.lag_plan`.
+        As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` or :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`.
     """
     from pwas_hdl.hdl.sensor_top import lag_plan
 
@@ -337,6 +358,7 @@ def build_warped_design(model: WarpedFixedPointModel, design: str, lags: LagStru
     Parameters
     ----------
     model : WarpedFixedPointModel
+        The warped bit-true model.
     design : {"core", "sensor"}
         ``"core"``: :func:`build_warped_core`; any other value: :func:`build_warped_sensor`.
     lags : LagStructure or None
@@ -347,6 +369,12 @@ def build_warped_design(model: WarpedFixedPointModel, design: str, lags: LagStru
     Returns
     -------
     WarpedPWASCore or PWASSensorTop
+        Named ``name``; latency the core's + 1 cycle.
+
+    Raises
+    ------
+    InputError, ValueError
+        As :func:`build_warped_core` or :func:`build_warped_sensor`.
     """
     if design == "core":
         return build_warped_core(model, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
