@@ -392,7 +392,7 @@ def manifest_text(manifest: dict[str, Any]) -> str:
 
     Raises
     ------
-    ValueError
+    InputError
         A NaN or infinite number in the manifest.
     """
     return json.dumps(manifest, indent=1, allow_nan=False) + "\n"

@@ -248,7 +248,7 @@ class AdditiveGrid:
 
         Raises
         ------
-        ValueError
+        InputError
             ``weights`` has not ``N`` rows.
         """
         w = np.asarray(weights)

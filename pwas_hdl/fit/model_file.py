@@ -208,7 +208,7 @@ def _front_end_regressors(d: dict[str, Any]) -> tuple[Any, Any, list[str]]:
 
     Raises
     ------
-    ValueError
+    InputError
         The block is incomplete or inconsistent with the signals.
     """
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
@@ -241,7 +241,7 @@ def model_text(sensor: "PWASVirtualSensor") -> str:
 
     Raises
     ------
-    ValueError
+    InputError
         A weight or statistic is not finite (not representable in JSON).
     """
     return json.dumps(model_to_dict(sensor), indent=1, allow_nan=False) + "\n"
@@ -264,7 +264,7 @@ def write_model(sensor: "PWASVirtualSensor", path: str | os.PathLike) -> Path:
 
     Raises
     ------
-    ValueError
+    InputError
         A weight or statistic is not finite (:func:`model_text`).
     """
     return atomic_write_text(path, model_text(sensor))

@@ -474,7 +474,7 @@ class GridHierarchy:
 
         Raises
         ------
-        ValueError
+        InputError
             ``m`` has a non-zero outside the shared patterns.
         """
         sh = self.shared

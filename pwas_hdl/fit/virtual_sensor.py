@@ -793,7 +793,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
 
         Raises
         ------
-        ValueError
+        InputError
             A weight or statistic is not finite.
         sklearn.exceptions.NotFittedError
             The sensor is not fitted.

@@ -116,7 +116,7 @@ def unsigned_bits_needed(codes: ArrayLike) -> int:
 
     Raises
     ------
-    ValueError
+    InputError
         A code is negative.
     """
     a = np.asarray(codes)
@@ -146,7 +146,7 @@ def shift_round(a: ArrayLike, sh: int, rounding: str = "half_up") -> np.ndarray:
 
     Raises
     ------
-    ValueError
+    InputError
         ``sh`` is not an integer ``>= 0``, or an unknown ``rounding``.
     """
     if not _is_int(sh) or sh < 0:
@@ -276,7 +276,7 @@ class FixedFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             ``text`` does not parse, or the format is invalid.
         """
         m = re.fullmatch(r"\s*([su])(\d+)\.(-?\d+)\s*", str(text))
@@ -341,7 +341,7 @@ class FixedFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             NaN input, or ``overflow="error"`` and a value does not fit. The message names the
             worst value (the one furthest outside the range), the range of the format and the
             number of bits (at this ``frac``) that would hold every value.
@@ -433,7 +433,7 @@ class FixedFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             A required key is missing, or the values do not make a valid format.
         """
         try:
@@ -463,7 +463,7 @@ def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: s
 
     Raises
     ------
-    ValueError
+    InputError
         No value, a non-finite value, all values zero, an invalid ``bits``, or no ``frac`` in
         ``[-1000, 1000]`` that holds the values.
     """
@@ -609,7 +609,7 @@ class PortFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             NaN input, or ``overflow="error"`` and a value does not fit.
         """
         return self.format.quantize(self.scaling.from_physical(x), return_saturated, what)
@@ -647,7 +647,7 @@ class PortFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             Not a valid format, or a scale that is not positive and finite.
         """
         return cls(FixedFormat.from_dict(d), SignalScaling(float(d.get("scale", 1.0)), float(d.get("offset", 0.0))))
@@ -781,7 +781,7 @@ class InputFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             Bad arguments, or ``F < 0`` ("B_in too small for p_j intervals").
         """
         tag = f"_{dim}" if dim is not None else ""
@@ -885,7 +885,7 @@ class InputFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             ``x`` contains NaN.
         """
         return quantize_input(self, x, return_saturated)
@@ -979,7 +979,7 @@ def quantize_input(f: InputFormat | WarpInputFormat, x: ArrayLike,
 
     Raises
     ------
-    ValueError
+    InputError
         ``x`` contains NaN.
     """
     v = np.asarray(x, dtype=float)
@@ -1029,7 +1029,7 @@ def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Seq
 
     Raises
     ------
-    ValueError
+    InputError
         A dimension's arguments are invalid (the message names the dimension).
     """
     return [InputFormat.for_interval(float(a), float(b), int(p), bits, fill, dim=j, scale=scale)

@@ -233,7 +233,7 @@ class BankedLayout(_LayoutBase):
 
         Raises
         ------
-        ValueError
+        InputError
             The last axis is not ``n`` long, or a coordinate is outside the grid.
         """
         c = np.asarray(coords, dtype=np.int64)
@@ -311,7 +311,7 @@ class ReplicatedLayout(_LayoutBase):
 
         Raises
         ------
-        ValueError
+        InputError
             A vertex index that is not an integer or is outside ``[0, N)``.
         """
         idx = self._index(vertex)
@@ -413,7 +413,7 @@ class CornerLayout(_LayoutBase):
 
         Raises
         ------
-        ValueError
+        InputError
             The last axis is not ``n`` long, or a coordinate is outside ``[0, p_j)``.
         """
         c = np.asarray(cells, dtype=np.int64)
@@ -493,7 +493,7 @@ class CornerLayout(_LayoutBase):
 
         Raises
         ------
-        ValueError
+        InputError
             Non-integer codes, or not ``N`` rows.
         """
         w = _as_weight_matrix(weight_codes, self.grid.n_vertices)
@@ -565,7 +565,7 @@ def readmemh_text(words: ArrayLike, bits: int) -> str:
 
     Raises
     ------
-    ValueError
+    InputError
         ``bits`` is not an integer ``>= 1``.
     """
     if not isinstance(bits, (int, np.integer)) or bits < 1:

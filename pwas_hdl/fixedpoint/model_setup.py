@@ -27,7 +27,7 @@ def weight_matrix(weights, n_vertices: int) -> np.ndarray:
 
     Raises
     ------
-    ValueError
+    InputError
         Not N rows (``n_vertices``), no column, or NaN / infinite values.
     """
     w = np.asarray(weights, dtype=float)
@@ -48,7 +48,7 @@ def model_names(n: int, nz: int, regressor_names: Sequence[str] | None, regresso
 
     Raises
     ------
-    ValueError
+    InputError
         A list of the wrong length.
     """
     names = list(regressor_names) if regressor_names is not None else [f"x{j}" for j in range(n)]

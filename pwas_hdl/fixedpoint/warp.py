@@ -201,7 +201,7 @@ class WarpInputFormat:
 
         Raises
         ------
-        ValueError
+        InputError
             ``x`` contains NaN.
         """
         from pwas_hdl.fixedpoint.formats import quantize_input
@@ -400,7 +400,7 @@ class WarpedFixedPointModel:
 
         Raises
         ------
-        ValueError
+        InputError
             ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
         """
         return self.core.reference(self.warp(q))
@@ -560,7 +560,7 @@ class WarpedFixedPointModel:
 
         Raises
         ------
-        ValueError
+        InputError
             ``x`` has not ``n`` columns, or contains NaN.
         """
         xa = np.atleast_2d(np.asarray(x, dtype=float))
@@ -602,7 +602,7 @@ class WarpedFixedPointModel:
 
         Raises
         ------
-        ValueError
+        InputError
             ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
         """
         qa = np.atleast_2d(np.asarray(q, dtype=np.int64))
@@ -628,7 +628,7 @@ class WarpedFixedPointModel:
 
         Raises
         ------
-        ValueError
+        InputError
             ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
         """
         return self.core.evaluate(self.warp(q))

@@ -157,7 +157,7 @@ def pareto_front(points: Sequence, objectives: Sequence[str] | None = None) -> l
 
     Raises
     ------
-    ValueError
+    InputError
         Points of different lengths, or a NaN objective.
     """
     if len(points) == 0:
@@ -524,7 +524,7 @@ def explore(
 
     Raises
     ------
-    ValueError
+    InputError
         Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
         missing target column, data without a full regressor.
     ToolMissing

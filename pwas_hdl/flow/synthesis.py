@@ -229,7 +229,7 @@ def synthesize(
 
     Raises
     ------
-    ValueError
+    InputError
         Unknown target or device, a manifest without top / Verilog, or a design that does not fit
         the device (the message says which resource overflowed).
     FileNotFoundError

@@ -351,7 +351,7 @@ def close_timing(
     ------
     TimingNotMet
         No candidate reaches the target (``record`` holds what was measured).
-    ValueError
+    InputError
         Bad target or FPGA family; a design that does not fit the device.
     """
     if fpga not in FPGA_TARGETS:

@@ -409,7 +409,7 @@ class AdditiveSensorTop(PWASSensorTop):
 
     Raises
     ------
-    ValueError
+    InputError
         ``dims`` does not have one entry per regressor (``n``).
     InputError, InternalError
         As :class:`AdditiveCore`.
@@ -501,7 +501,6 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
     InputError
         The lags of a signal have different input formats
         (``model.signal_input_formats``), recurrent ``lags``, or as :func:`build_additive_core`.
-    ValueError
         As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` (``lags`` that do not match the model).
     """
 
@@ -562,10 +561,8 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
 
     Raises
     ------
-    ValueError
-        ``name`` is not a plain Verilog identifier.
     InputError
-        An unknown ``ports``.
+        ``name`` is not a plain Verilog identifier, or an unknown ``ports``.
     InternalError
         Flattening leaves a name clash, a hierarchical name or more than one module.
     """

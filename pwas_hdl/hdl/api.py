@@ -55,7 +55,7 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
 
     Raises
     ------
-    ValueError
+    InputError
         ``name`` is not a plain Verilog identifier, an unknown ``architecture``, a classifier with
         ``architecture="serial"`` or whose class count differs from ``nz``, or parameters the
         core refuses.
@@ -227,7 +227,6 @@ def build_sensor(
     ------
     InputError
         ``lags`` is recurrent (the lag top has no feedback path).
-    ValueError
         As :func:`build_core`; also a signal whose lags have different input formats, or
         ``lags`` that do not match the model (or neither ``lags`` nor ``model.regressor_signals``).
     """

@@ -118,7 +118,7 @@ class ArgmaxStage(wiring.Component):
 
     Raises
     ------
-    ValueError
+    InputError
         ``n_inputs < 1``, ``width < 1``, ``extra_bits < 0``, an unknown ``select``, or an invalid
         ``pipeline`` (:meth:`Pipeline.cast`).
     TypeError

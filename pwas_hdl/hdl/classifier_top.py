@@ -100,7 +100,7 @@ class PWASClassifierCore(wiring.Component):
 
     Raises
     ------
-    ValueError
+    InputError
         As :class:`~pwas_hdl.hdl.core.PWASCore` (parameters or a pipeline the core refuses).
 
     Attributes

@@ -187,7 +187,7 @@ class PWASCore(wiring.Component):
 
     Raises
     ------
-    ValueError
+    InputError
         A ``lo_code`` outside the signed ``B_in``-bit input range, an unknown ``memory`` layout or
         an invalid ``pipeline`` (:meth:`Pipeline.cast`).
     TypeError

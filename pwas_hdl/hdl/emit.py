@@ -162,11 +162,9 @@ def emit_verilog(
 
     Raises
     ------
-    ValueError
-        ``name`` is not a plain Verilog identifier, an unknown ``memory_init``, or a ``hex_prefix``
-        that is not a plain file-name prefix.
     InputError
-        An unknown ``ports`` naming.
+        ``name`` is not a plain Verilog identifier, an unknown ``memory_init`` or ``ports`` naming,
+        or a ``hex_prefix`` that is not a plain file-name prefix.
     InternalError
         The Yosys output does not have the expected shape (ports, memory initialisers).
     """
@@ -176,6 +174,8 @@ def emit_verilog(
         raise InputError(f"module name {name!r} is not a plain Verilog identifier")
     if memory_init not in ("inline", "readmemh"):
         raise InputError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+    if memory_init == "readmemh" and not re.fullmatch(r"[A-Za-z0-9_.-]+", hex_prefix):
+        raise InputError(f"hex_prefix {hex_prefix!r} must be a plain file-name prefix")
     _check_naming(ports)
     text, roms = component_verilog_roms(component, name)  # the ROMs' words are written last
     text = _name_ports(normalise_verilog(text), name, component, ports)
@@ -249,8 +249,6 @@ def _readmemh_files(component, roms: RomEmission, prefix: str):
     """``(name, k) -> {MEM_DIR, "<prefix>_b<bank>.hex"}`` for the ROMs ``wmem<bank>`` of the
     component's memory plan (checked: the ROMs met in elaboration hold the plan's words)."""
     plan = _plan(component)
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+", prefix):
-        raise InputError(f"hex_prefix {prefix!r} must be a plain file-name prefix")
     if len(roms.roms) != plan.n_banks:
         raise InternalError(f"{len(roms.roms)} weight memories in the design, {plan.n_banks} in its memory plan")
 

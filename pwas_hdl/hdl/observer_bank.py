@@ -185,7 +185,7 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
 
     Raises
     ------
-    ValueError
+    InputError
         A coefficient does not fit its product's constant width (:func:`const_product`).
     """
     fmt = bank.formats

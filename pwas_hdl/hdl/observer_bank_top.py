@@ -82,11 +82,10 @@ class ObserverBankTopBase(wiring.Component):
 
     Raises
     ------
-    ValueError
-        An unknown ``architecture``, or parameters the core refuses.
     InputError
         Serial: ``lanes`` or ``isqrt_every`` out of range
         (:func:`~pwas_hdl.hdl.serial_observer_bank.plan_serial_bank`).
+        An unknown ``architecture``, or parameters the core refuses.
     """
 
     kind = "observer-sensor"
@@ -226,7 +225,7 @@ def build_observer_bank_top(cls: type[ObserverBankTopBase], first: Any, model: A
 
     Raises
     ------
-    ValueError
+    InputError
         ``name`` is not a plain Verilog identifier, or as the top's constructor.
     """
     from pwas_hdl.hdl.api import _check_name
@@ -366,10 +365,9 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
 
     Raises
     ------
-    ValueError
-        An unknown ``architecture``, or what the core refuses.
     InputError
         Serial: ``lanes`` or ``isqrt_every`` out of range (:func:`plan_serial_bank`).
+        An unknown ``architecture``, or what the core refuses.
     """
     if architecture not in ("parallel", "serial"):
         raise InputError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
@@ -447,7 +445,7 @@ def serial_sensor_path(m: Module, top: ObserverBankTopBase, cur: list, inp: Any,
 
     Raises
     ------
-    ValueError
+    InputError
         ``extra_codes`` with a double-buffered plan; or ``buffer_load`` / plan mismatch in
         :func:`build_serial_front_end`.
     """

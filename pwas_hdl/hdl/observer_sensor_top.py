@@ -88,12 +88,11 @@ class ObserverSensorTop(ObserverBankTopBase):
 
     Raises
     ------
-    ValueError
-        ``params.n`` differs from the bank's number of features, ``params.in_width`` from the
-        feature code width; or as :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`.
     InputError
         As :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase` (serial ``lanes``,
         ``isqrt_every``).
+        ``params.n`` differs from the bank's number of features, ``params.in_width`` from the
+        feature code width; or as :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`.
     """
 
     def __init__(self, bank: FixedPointObserverBank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
@@ -154,10 +153,9 @@ def build_observer_sensor(model: ObserverBankSensorModel, *, memory: str = "bank
 
     Raises
     ------
-    ValueError
-        ``name`` is not a plain Verilog identifier, or as :class:`ObserverSensorTop`.
     InputError
         As :class:`ObserverSensorTop`.
+        ``name`` is not a plain Verilog identifier, or as :class:`ObserverSensorTop`.
     """
     return build_observer_bank_top(
         ObserverSensorTop, model.bank, model, memory=memory, pipeline=pipeline, name=name, architecture=architecture,

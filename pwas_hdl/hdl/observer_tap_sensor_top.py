@@ -72,12 +72,11 @@ class ObserverTapSensorTop(ObserverBankTopBase):
 
     Raises
     ------
-    ValueError
-        ``params.n`` is not the bank's features plus the taps, or as
-        :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`.
     InputError
         As :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase` (serial ``lanes``,
         ``isqrt_every``).
+        ``params.n`` is not the bank's features plus the taps, or as
+        :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`.
     """
 
     def __init__(self, model: TappedObserverBankSensorModel, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
@@ -176,10 +175,9 @@ def build_tapped_observer_sensor(model: TappedObserverBankSensorModel, *, memory
 
     Raises
     ------
-    ValueError
-        ``name`` is not a plain Verilog identifier, or as :class:`ObserverTapSensorTop`.
     InputError
         As :class:`ObserverTapSensorTop`.
+        ``name`` is not a plain Verilog identifier, or as :class:`ObserverTapSensorTop`.
     """
     return build_observer_bank_top(
         ObserverTapSensorTop, model, model, memory=memory, pipeline=pipeline, name=name, architecture=architecture,

@@ -180,7 +180,7 @@ class CoreParams:
         ------
         TypeError
             ``model`` lacks an attribute of a bit-true model.
-        ValueError
+        InputError
             The model's values are invalid for a core (see the class checks).
         """
         return _params_from_model(cls, model)
@@ -391,7 +391,7 @@ class Pipeline:
 
         Raises
         ------
-        ValueError
+        InputError
             An unknown preset or option, or options that contradict each other.
         TypeError
             ``value`` is of another type.
@@ -527,7 +527,7 @@ def goal_preset(goal: str, fpga: str | None = None) -> str:
 
     Raises
     ------
-    ValueError
+    InputError
         ``goal`` is not one of :data:`GOALS`, or ``fpga`` is not ``ecp5`` / ``ice40``.
     """
     if goal not in GOALS:
@@ -628,7 +628,7 @@ class MemoryPlan:
 
         Raises
         ------
-        ValueError
+        InputError
             An unknown ``kind``.
         """
         from pwas_hdl.fixedpoint.bitfields import pack_rows

@@ -75,7 +75,7 @@ class PWASRecurrentTop(wiring.Component):
 
     Raises
     ------
-    ValueError
+    InputError
         ``len(io_dims) + nz * mz != n``, ``len(feedback) != nz``, ``mz < 1``, a dimension the lag
         bank does not hold, or as :class:`~pwas_hdl.hdl.core.PWASCore`.
     """
@@ -218,7 +218,7 @@ class PWASRecurrentTop(wiring.Component):
 
         Raises
         ------
-        ValueError
+        InputError
             A target's requantisation product ``B_out + bits(K)`` is narrower than ``B_in + S``.
         """
         m = Module()
@@ -291,7 +291,7 @@ def build_recurrent_sensor(rmodel: RecurrentFixedPointModel, *, memory: str = "b
 
     Raises
     ------
-    ValueError
+    InputError
         ``name`` is not a plain Verilog identifier, or as :class:`PWASRecurrentTop`.
     """
     from pwas_hdl.hdl.api import _check_name

@@ -164,7 +164,7 @@ def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence
 
     Raises
     ------
-    ValueError
+    InputError
         A ``scale_mul`` constant does not fit the ``scale_product`` width
         (:func:`~pwas_hdl.hdl.observer_bank.const_product`).
     """

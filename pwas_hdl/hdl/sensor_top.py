@@ -203,7 +203,7 @@ class PWASSensorTop(wiring.Component):
 
     Raises
     ------
-    ValueError
+    InputError
         ``dims`` not one per regressor, a dimension the lag bank does not hold, lags of one signal
         with different input formats (unwarped), an ``argmax`` whose ``index_lsb`` is not the
         core's output width, warps that do not fit (:func:`~pwas_hdl.hdl.warp.attach_warp`), or

@@ -156,7 +156,7 @@ class SerialPWASCore(PWASCore):
 
     Raises
     ------
-    ValueError
+    InputError
         ``memory`` other than ``"single"``, or as :class:`~pwas_hdl.hdl.core.PWASCore`.
 
     Attributes

@@ -298,7 +298,7 @@ def table_mac(m: Module, sel: Value, columns: Sequence[Sequence[int]], operands:
 
     Raises
     ------
-    ValueError
+    InputError
         A coefficient does not fit its table width (``width - shifts[k] - len(operands[k])``
         signed bits).
     """

@@ -368,7 +368,6 @@ def serial_estimator_schedule(est: FixedPointSwitchedEstimator, mac_pipeline: in
     ------
     InputError
         ``lanes`` not an integer in ``1 .. s``.
-    ValueError
         ``mac_pipeline`` not 0 / 1 (1 needs ``n >= 2``).
     """
     from pwas_hdl.hdl.serial_observer_bank import lane_groups
@@ -433,7 +432,6 @@ class SerialSwitchedEstimatorTop(wiring.Component):
     ------
     InputError
         ``lanes`` out of range (:func:`serial_estimator_schedule`).
-    ValueError
         ``mac_pipeline`` not 0 / 1, or 1 with ``n < 2``.
     """
 

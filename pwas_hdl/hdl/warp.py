@@ -157,7 +157,7 @@ def attach_warp(core: PWASCore, warps: Sequence[Pow2Warp]) -> int:
 
     Raises
     ------
-    ValueError
+    InputError
         Not one warp per dimension, mixed input widths, an output width other than the core's,
         or a core that already has an input stage.
     """
@@ -225,7 +225,7 @@ class WarpedPWASCore(wiring.Component):
 
     Raises
     ------
-    ValueError
+    InputError
         An unknown ``architecture``, warps that do not fit the core
         (:func:`attach_warp`), or parameters the core refuses.
     """
@@ -298,7 +298,7 @@ def build_warped_core(model: WarpedFixedPointModel, *, memory: str = "banked", p
 
     Raises
     ------
-    ValueError
+    InputError
         As :class:`WarpedPWASCore`.
     """
     comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture)
@@ -332,7 +332,6 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
     ------
     InputError
         The lags of a signal have different quantisations, or recurrent ``lags``.
-    ValueError
         As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` or :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`.
     """
     from pwas_hdl.hdl.sensor_top import lag_plan

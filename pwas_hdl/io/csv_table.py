@@ -413,7 +413,7 @@ def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | Sequen
 
     Raises
     ------
-    ValueError
+    InputError
         Columns of different lengths.
     """
     return atomic_write_text(path, format_csv(columns))
@@ -435,7 +435,7 @@ def format_csv(columns: Mapping[str, np.ndarray | Sequence]) -> str:
 
     Raises
     ------
-    ValueError
+    InputError
         Columns of different lengths.
     """
     names = list(columns)

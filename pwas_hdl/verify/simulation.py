@@ -378,7 +378,7 @@ def segment(design: Design, codes: ArrayLike, *, drain: bool = True, hold: int =
 
     Raises
     ------
-    ValueError
+    InputError
         ``codes`` is not 2-D with one column per input field.
     """
     c = np.asarray(codes, dtype=np.int64)
@@ -882,9 +882,7 @@ def run_rtl(
     Raises
     ------
     InputError
-        An unknown ``engine``, or ``native`` with Icarus, ``debug`` or ``waves``.
-    ValueError
-        An unknown ``simulator``.
+        An unknown ``simulator`` or ``engine``, or ``native`` with Icarus, ``debug`` or ``waves``.
     ToolMissing, ToolFailed
         The simulator is not installed, or its build or run failed.
     """
@@ -1050,10 +1048,8 @@ def simulate_data(
     Raises
     ------
     InputError
-        Bad data, options or paths (before anything runs).
-    ValueError
-        An unknown ``simulator`` or a ``stall`` out of range (plain ``ValueError``, not
-        :class:`InputError`).
+        Bad data, options or paths, an unknown ``simulator`` or a ``stall`` out of range (before
+        anything runs).
     CheckFailed
         The RTL did not produce every output (nothing is written).
     """
