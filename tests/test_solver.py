@@ -362,10 +362,10 @@ def test_cholmod_analyses_each_fold_once(order):
 
 @needs_cholmod
 def test_pattern_cholesky_refuses_entries_outside_its_pattern_and_indefinite():
-    from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, PatternCholesky
+    from pwas_hdl.fit.sparse_cholesky import NotPositiveDefinite, OutsidePattern, PatternCholesky
 
     pc = PatternCholesky(sparse.identity(4, format="csr"))
-    with pytest.raises(ValueError, match="outside"):
+    with pytest.raises(OutsidePattern, match="outside"):
         pc.align(sparse.csr_array(np.ones((4, 4))))
     with pytest.raises(NotPositiveDefinite):
         pc.factorize(np.array([1.0, -1.0, 1.0, 1.0]))

@@ -114,6 +114,24 @@ def test_a_matrix_outside_the_shared_patterns_gets_its_own():
     assert abs(sparse.csr_array(fold.ops[0]) - sparse.csr_array(hier.internal(m + 0.5 * gam))).max() <= 1e-12
 
 
+def test_only_outside_pattern_falls_back_to_own_patterns(monkeypatch):
+    """The fallback to a matrix's own patterns catches OutsidePattern and nothing else: another
+    ValueError (a bug) propagates instead of silently taking the slower path."""
+    grid, h, z, gam = _fold()
+    hier = mg.GridHierarchy(grid.shape, gam, coarsest_max=30)
+    hier.share(sparse.csr_array(h.T @ h))
+    half = h[: h.shape[0] // 2]
+    fold = sparse.csr_array(half.T @ half)  # within the full data's patterns
+    assert hier.for_matrix(fold).shared is hier.shared
+
+    def broken(self, ms):
+        raise ValueError("a bug")
+
+    monkeypatch.setattr(mg.LevelPatterns, "values_of", broken)
+    with pytest.raises(ValueError, match="a bug"):
+        hier.for_matrix(fold)
+
+
 def test_vcycle_contracts_and_a_wrong_prolongation_does_not():
     """As a stationary iteration, x <- x + V(b - A x) reduces the error about 5x a cycle (at least 3x) at a
     penalty-dominated sigma; with the coarse columns of P shuffled, the coarse correction is useless

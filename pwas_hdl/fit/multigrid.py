@@ -31,6 +31,7 @@ from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
 from pwas_hdl.fit.conjugate_gradients import pcg
+from pwas_hdl.fit.sparse_cholesky import OutsidePattern
 
 __all__ = [
     "COARSEST_MAX",
@@ -276,7 +277,7 @@ def _aligned(pattern: sparse.csr_matrix, m, keys: np.ndarray | None = None) -> n
 
     Raises
     ------
-    ValueError
+    OutsidePattern
         ``m`` has a non-zero outside ``pattern``.
     """
     m = _csr(m)
@@ -285,7 +286,7 @@ def _aligned(pattern: sparse.csr_matrix, m, keys: np.ndarray | None = None) -> n
     keys_m = _keys(m)
     pos = np.searchsorted(keys_p, keys_m)
     if keys_m.size and (pos.max() >= keys_p.size or np.any(keys_p[pos] != keys_m)):
-        raise ValueError("matrix has non-zeros outside the pattern")
+        raise OutsidePattern("matrix has non-zeros outside the pattern")
     out = np.zeros(keys_p.size)
     out[pos] = m.data
     return out
@@ -471,11 +472,7 @@ class GridHierarchy:
         Returns
         -------
         FoldMultigrid
-
-        Raises
-        ------
-        InputError
-            ``m`` has a non-zero outside the shared patterns.
+            On the shared patterns, or on ``m``'s own when it has a non-zero outside them.
         """
         sh = self.shared
         if sh is not None and sh.is_reference(m):
@@ -588,11 +585,11 @@ class LevelPatterns:
 
         Raises
         ------
-        ValueError
+        OutsidePattern
             Another number of levels, or a level has a non-zero outside its pattern.
         """
         if len(ms) != len(self.patterns):
-            raise ValueError("another number of levels")
+            raise OutsidePattern("another number of levels")
         return [_aligned(pat, m, keys) for pat, m, keys in zip(self.patterns, ms, self.keys)]
 
     def matrix(self, level: int, values: np.ndarray) -> sparse.csr_matrix:
@@ -669,7 +666,7 @@ class FoldMultigrid:
         if m_vals is None and shared is not None:
             try:
                 m_vals = shared.values_of(ms)
-            except ValueError:  # not within the shared patterns: this matrix's own
+            except OutsidePattern:  # not within the shared patterns: this matrix's own
                 shared = None
         if shared is None:
             shared = LevelPatterns.of_levels(hier, ms)

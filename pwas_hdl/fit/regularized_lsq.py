@@ -28,6 +28,7 @@ from pwas_hdl.fit.multigrid import GridHierarchy, grid_shape_of
 from pwas_hdl.fit.sparse_cholesky import (
     FactorCounts,
     NotPositiveDefinite,
+    OutsidePattern,
     PatternCholesky,
     cholmod_available,
     grid_nested_dissection,
@@ -1769,7 +1770,7 @@ class NormalEquationSolver:
                 chol, g_vals = self._shared_pattern()
                 try:
                     self._m_cache = (m, chol, chol.align(m), g_vals)
-                except ValueError:  # not a fold of the full-data matrix: its own analysis
+                except OutsidePattern:  # not a fold of the full-data matrix: its own analysis
                     self._m_cache = None
             if self._m_cache is None:
                 chol = PatternCholesky(abs(m) + abs(self.gamma))

@@ -29,12 +29,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-__all__ = ["cholmod_available", "import_cholmod", "openblas_coretype", "PatternCholesky", "NotPositiveDefinite",
+__all__ = ["cholmod_available", "import_cholmod", "openblas_coretype", "PatternCholesky", "NotPositiveDefinite", "OutsidePattern",
            "grid_nested_dissection", "ND_LEAF", "FactorCounts"]
 
 
 class NotPositiveDefinite(ArithmeticError):
     """CHOLMOD found a non-positive pivot: the matrix is not (numerically) positive definite."""
+
+
+class OutsidePattern(ValueError):
+    """A matrix has a non-zero outside the sparsity pattern it is to be placed on (its callers then
+    analyse the matrix's own pattern). A class of its own so that those fallbacks catch this and
+    nothing else (a plain ``ValueError`` from a bug is not taken for it)."""
 
 
 #: OpenBLAS kernel sets by the CPU features they need, newest first (``/proc/cpuinfo`` flag names).
@@ -323,14 +329,14 @@ class PatternCholesky:
 
         Raises
         ------
-        ValueError
+        OutsidePattern
             ``m`` has a non-zero outside the pattern.
         """
         r, c, v = _lower_keys(m)
         key = c * self.n + r
         pos = np.searchsorted(self._ccs, key)
         if key.size and (pos.max(initial=0) >= self._ccs.size or np.any(self._ccs[np.minimum(pos, self._ccs.size - 1)] != key)):
-            raise ValueError("matrix has non-zeros outside the analysed pattern")
+            raise OutsidePattern("matrix has non-zeros outside the analysed pattern")
         out = np.zeros(self._ccs.size)
         out[pos] = v  # the keys are unique (duplicates summed in _lower_keys)
         return out
