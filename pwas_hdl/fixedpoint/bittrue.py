@@ -748,7 +748,7 @@ class FixedPointModel:
         """
         try:
             signals = {k: v.to_dict() for k, v in self.signal_input_formats().items()}
-        except ValueError:
+        except InputError:  # lags of one signal with different formats
             signals = None
         return {
             "n": self.n,

@@ -599,7 +599,7 @@ def explore(
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 fxm = FixedPointModel.from_sensor(sensor, **common, **{k: v for k, v in given.items() if v is not None})
-        except ValueError as exc:
+        except InputError as exc:  # a combination the formats refuse (anything else is a bug: raised)
             refused.append({**{k: v for k, v in given.items()}, "reason": str(exc)})
             if progress:
                 progress("sweep", i + 1, total)
