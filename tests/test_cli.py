@@ -495,3 +495,22 @@ def test_a_run_column_without_traj_col_is_warned_about(tmp_path, capsys):
     assert unused_trajectory_column(t, None, ["run"]) is None  # read as a signal: not an index
     data.write_text("y,z,run\n" + "\n".join(f"{v},{v * v},{i % 3}" for i, v in enumerate(y)) + "\n")
     assert unused_trajectory_column(read_csv(data), None) is None  # values that recur: not contiguous runs
+
+
+def test_generate_notes_readmemh_for_large_inline_memories(capsys, tmp_path, lorenz_files, monkeypatch):
+    """From INLINE_NOTE_WORDS memory words, generate with inline weights names --memory-init readmemh
+    (one note line); not below it, and not with readmemh."""
+    import pwas_hdl.cli as cli
+
+    model = tmp_path / "m.json"
+    assert run_main(capsys, "fit", lorenz_files / "train.csv", "-y", "y", "-z", "z", "--my", 2, "-p", 3, "--sigma", "1e-2", "-o", model)[0] == 0
+    code, _, err = run_main(capsys, "generate", model, "-o", tmp_path / "a")
+    assert code == 0 and "note:" not in err
+    words = json.loads((tmp_path / "a" / "manifest.json").read_text())["memory"]["words"]
+    monkeypatch.setattr(cli, "INLINE_NOTE_WORDS", words)
+    code, _, err = run_main(capsys, "generate", model, "-o", tmp_path / "a")
+    notes = [ln for ln in err.splitlines() if ln.startswith("note:")]
+    assert code == 0 and notes == [f"note: {words} weight words are inline in the Verilog; with --memory-init readmemh "
+                                   f"they stay in the .hex files, which simulators load much faster"], err
+    code, _, err = run_main(capsys, "generate", model, "-o", tmp_path / "b", "--memory-init", "readmemh")
+    assert code == 0 and "note:" not in err
