@@ -7,8 +7,9 @@ while ``en`` is high; the read register is not reset).
 * Elaborated as usual (Amaranth's simulator, or any converter), it is an
   :class:`amaranth.lib.memory.Memory` with its contents as ``init``.
 * While Verilog is being emitted (:func:`rom_emission`, entered by
-  :func:`pwas_hdl.hdl.yosys_convert.component_verilog`), it is a black-box instance, and
-  :func:`splice_roms` then replaces each instance in the Yosys output with the text Yosys itself
+  :func:`pwas_hdl.hdl.yosys_convert.component_verilog_roms`), it is a black-box instance, and
+  :func:`splice_roms` -- after the text passes of :mod:`pwas_hdl.hdl.emit`, which so never see the
+  weights -- replaces each instance in the Yosys output with the text Yosys itself
   writes for that memory: the array declaration, an ``initial`` block with one assignment a word,
   and the registered read. Amaranth's RTLIL back end spells a memory's initial contents bit by bit
   (``depth x width`` objects): for a million-word ROM that took ~60 s of the ~70 s ``generate``
