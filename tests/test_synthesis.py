@@ -426,3 +426,39 @@ def test_manifest_port_names_are_checked_against_an_ansi_header(design: Path):
     with pytest.raises(InputError, match=r"ports names addr, which module tiny_core in tiny_core.v does not have "
                                          r"\(its ports: clk, rst, in_valid,"):
         load_manifest(design)
+
+
+@pytest.mark.synth
+def test_large_inline_memories_are_read_from_the_hex_files(tmp_path: Path, monkeypatch):
+    """From SYNTH_READMEMH_WORDS memory words Yosys reads an inline design's weights from its own .hex
+    files (a copy of the Verilog with $readmemh): the same RTL memory; a Verilog whose words are no
+    longer the files' (a hand edit) is read as it is."""
+    import re
+
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.lorenz import lorenz
+
+    d = lorenz(2000, seed=0)
+    m = PWASVirtualSensor(my=2, partitions=7, gamma=1.2, sigma=1e-3, output_names=["y"], target_names=["z"])
+    m.fit(None, d.y, d.z)
+    out = tmp_path / "g"
+    generate(m, out)
+    work, copy = out / "synth" / "generic", out / "synth" / "generic" / "pwas_core_weights_readmemh.v"
+    inline = synthesize(out, "generic")
+    assert inline["weights_read"] == "inline" and not copy.exists()
+    monkeypatch.setattr(synthesis, "SYNTH_READMEMH_WORDS", 1)
+    hexed = synthesize(out, "generic")
+    assert hexed["weights_read"] == "readmemh (from the .hex files)"
+    text = copy.read_text()
+    assert text.count("$readmemh(") == 3 and "wmem0[0] =" not in text
+    assert "read_verilog -sv pwas_core_weights_readmemh.v" in (work / "synth.ys").read_text()
+    assert "weights: read from the design's .hex files" in (work / "synth.txt").read_text()
+    for key in ("memory_bits", "bram_bits", "multipliers_rtl"):
+        assert hexed[key] == inline[key], key
+    verilog = out / "pwas_core.v"
+    v = verilog.read_text()
+    mo = re.search(r"wmem0\[(\d+)\] = (\d+)'h([0-9a-f]+);", v)
+    verilog.write_text(v.replace(mo.group(0), f"wmem0[{mo.group(1)}] = {mo.group(2)}'h{int(mo.group(3), 16) ^ 1:x};", 1))
+    edited = synthesize(out, "generic")
+    assert edited["weights_read"] == "inline" and not copy.exists()

@@ -120,3 +120,20 @@ endmodule
     got = [int(x) for x in out.split()]
     want = [words[a] for a, _ in reads[:depth]] + [words[-1]] * 3  # en low: held
     assert got == want
+
+
+def test_inline_to_readmemh_only_when_the_words_are_the_files():
+    from pwas_hdl.hdl.weight_rom import inline_to_readmemh
+
+    words = [3, 0x7F, 1, 0, 0]
+    text = component_verilog(_Toy(5, words), "toy")
+    other = "  reg [3:0] ram [1:0];\n  initial begin\n    ram[0] = 4'h0;\n    ram[1] = 4'h0;\n  end\n"
+    text = text.replace("endmodule", other + "endmodule")
+    out = inline_to_readmemh(text, {"wmem0": ("../d/toy_b0.hex", words)})
+    assert out is not None and 'initial $readmemh("../d/toy_b0.hex", wmem0, 0, 4);' in out
+    assert "wmem0[0] =" not in out and other in out  # another array's initialiser is left as it is
+    assert out.replace('  initial $readmemh("../d/toy_b0.hex", wmem0, 0, 4);\n', "") == re.sub(
+        r"  initial begin\n(    wmem0\[[0-9]\] = 7'h[0-9a-f]+;\n)+  end\n", "", text)
+    assert inline_to_readmemh(text, {"wmem0": ("x.hex", [3, 0x7F, 1, 0, 1])}) is None  # a word differs
+    assert inline_to_readmemh(text, {"wmem0": ("x.hex", words[:4])}) is None  # another depth
+    assert inline_to_readmemh(text, {"wmem0": ("x.hex", words), "wmem1": ("y.hex", words)}) is None  # no wmem1

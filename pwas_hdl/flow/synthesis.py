@@ -224,7 +224,9 @@ def synthesize(
         memory in the RTL), ``logic_cells`` (nextpnr ICESTORM_LC / TRELLIS_COMB), ``utilization``
         (nextpnr bel type -> used / available / percent), ``clock``, ``fmax_mhz``, ``freq_mhz``,
         ``timing_met``, ``latency_cycles``, ``latency_ns``, ``ii``, ``throughput_msps``,
-        ``runtime_s``, ``files``, ``hard_registers`` (ECP5 packing counts) and ``floorplan`` (ECP5:
+        ``weights_read`` (how Yosys got the weights: ``inline``, ``readmemh``, or ``readmemh (from
+        the .hex files)`` from :data:`SYNTH_READMEMH_WORDS` memory words), ``runtime_s``, ``files``,
+        ``hard_registers`` (ECP5 packing counts) and ``floorplan`` (ECP5:
         :func:`pwas_hdl.flow.floorplan.plan_sites`'s record; None for other targets).
 
     Raises
@@ -279,6 +281,7 @@ def synthesize(
         (work / stale).unlink(missing_ok=True)
 
     # ---- Yosys
+    verilog, weights_read = _synthesis_sources(verilog, outdir, manifest, work)
     reads = "\n".join(f"read_verilog -sv {_yosys_path(_rel(v, work))}" for v in verilog)
     synth_top, harness_info = top, None
     harness_file = f"{top}_timing_harness.v"
@@ -335,6 +338,7 @@ def synthesize(
         "latency_ns": None,
         "ii": ii,
         "throughput_msps": None,
+        "weights_read": weights_read,
         "runtime_s": {"yosys": round(t_yosys, 2)},
         "files": {"script": "synth.ys", "yosys_log": "yosys.log", "stat": "stat.json", "stat_rtl": "stat_rtl.json"},
     }
@@ -436,6 +440,8 @@ def synth_summary_text(result: dict[str, Any]) -> str:
             res.append(f"LUT RAM {r['lutram']}")
     res.append(f"RTL memory {n(r.get('memory_bits'))} bits")
     lines.append("  " + "  ".join(res))
+    if r.get("weights_read") == "readmemh (from the .hex files)":
+        lines.append("  weights: read from the design's .hex files ($readmemh; the same words as the Verilog's, faster for Yosys)")
 
     util = r.get("utilization")
     if util:
@@ -529,6 +535,44 @@ def check_device(target: str, device: str | None) -> None:
     if target not in TARGETS:
         raise InputError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
     _resolve_device(target, device, None, None)
+
+
+#: From this many weight-memory words, ``synth`` has Yosys read an inline-initialised design's weights
+#: from the design's own ``.hex`` files (``$readmemh``; the Verilog's words checked equal first).
+#: Yosys spends milliseconds a word on one initialiser assignment a word (ECP5, N = 65 536:
+#: 328 s against 13 s; N = 4096: 6.7 s against 2.9 s); the hardware is the same. Below it the
+#: Verilog is read as it is.
+SYNTH_READMEMH_WORDS = 1 << 14
+_READMEMH_COPY = "{top}_weights_readmemh.v"
+
+
+def _synthesis_sources(verilog: list[Path], outdir: Path, manifest: dict[str, Any], work: Path) -> tuple[list[Path], str]:
+    """The Verilog files Yosys reads, and how the weights get in: ``"inline"``, ``"readmemh"`` (the
+    design's own form), or ``"readmemh (from the .hex files)"`` (:data:`SYNTH_READMEMH_WORDS`: a copy
+    of the Verilog in ``work`` with :func:`~pwas_hdl.hdl.weight_rom.inline_to_readmemh`)."""
+    from pwas_hdl.hdl.weight_rom import inline_to_readmemh
+
+    copy = work / _READMEMH_COPY.format(top=manifest["top"])
+    copy.unlink(missing_ok=True)
+    mem = manifest.get("memory") or {}
+    if (mem.get("init") or {}).get("kind") == "readmemh":
+        return verilog, "readmemh"
+    hexes = manifest["files"].get("hex") or []
+    if len(verilog) != 1 or not hexes or int(mem.get("words") or 0) < SYNTH_READMEMH_WORDS:
+        return verilog, "inline"
+    files = {}
+    for h in hexes:  # load_manifest checked them: depth lines of width-bit hex words
+        name = (f"part{h['part']}_" if "part" in h else "") + f"wmem{h['bank']}"
+        rel = _rel(outdir / h["file"], work).replace(os.sep, "/")
+        if any(c in rel for c in '"\\\n\r'):
+            return verilog, "inline"
+        lines = (outdir / h["file"]).read_text(encoding="ascii").split()
+        files[name] = (rel, [int(w, 16) for w in lines])
+    text = inline_to_readmemh(verilog[0].read_text(encoding="utf-8"), files)
+    if text is None:  # the Verilog's words are not the .hex files' (a hand edit): read it as it is
+        return verilog, "inline"
+    atomic_write_text(copy, text)
+    return [copy], "readmemh (from the .hex files)"
 
 
 def _verilog_files(outdir: Path, manifest: dict[str, Any]) -> list[Path]:
