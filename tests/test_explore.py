@@ -341,3 +341,30 @@ def test_a_range_with_a_step_is_refused_as_given(tmp_path):
     assert r.exit_code == 2 and "'8:12:2' is not a range A:B" in r.output, r.output
     assert not (tmp_path / "ex").exists()
 
+
+
+def test_measure_point_notes_bad_input_but_lets_a_bug_through(tiny, small_result, monkeypatch):
+    """A point that cannot be synthesised (InputError, a tool failure) is noted and the sweep goes on;
+    any other exception (a bug) leaves the task, where the executor reports it as a failed task."""
+    import pwas_hdl.flow.explore as ex
+    import pwas_hdl.flow.synthesis as syn
+    from pwas_hdl.errors import InputError
+
+    m, _ = tiny
+    p = next(q for q in small_result["points"] if q["is_default"])
+    task = {"sensor": m, "point": p, "target": "generic", "device": None, "memory": "banked", "pipeline": None,
+            "common": {"input_fill": 0.9, "rounding": "half_up", "overflow": "error", "layout": "banked"}, "folder": None}
+
+    def refuse(*a, **k):
+        raise InputError("no such part")
+
+    monkeypatch.setattr(syn, "synthesize", refuse)
+    r = ex._measure_point(task)
+    assert r == {"error": "no such part", "error_kind": {"class": "InputError"}}
+
+    def bug(*a, **k):
+        raise ValueError("a bug")
+
+    monkeypatch.setattr(syn, "synthesize", bug)
+    with pytest.raises(ValueError, match="a bug"):
+        ex._measure_point(task)

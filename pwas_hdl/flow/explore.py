@@ -762,7 +762,7 @@ def _measure_point(task: dict) -> dict:
                               overflow=common["overflow"], rounding=common["rounding"])
         folder = write_folder(gd.files, root / "design" if own else root)
         res = synthesize(folder, task["target"], device=task["device"])
-    except (ToolMissing, ToolFailed, ValueError, OSError) as exc:  # not a bug: noted, the sweep goes on
+    except (ToolMissing, ToolFailed, InputError, OSError) as exc:  # not a bug: noted, the sweep goes on (a bug: TaskFailed)
         return {"error": str(exc), "error_kind": _error_kind(exc)}
     finally:
         if own:
