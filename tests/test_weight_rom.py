@@ -80,6 +80,8 @@ def test_splice_refuses_unknown_missing_or_incomplete_instances():
         splice_roms(text, RomEmission())
     with pytest.raises(InternalError, match="ports"):
         splice_roms(re.sub(r"^\s*\.EN\(.*\),?\n", "", text, flags=re.M), reg)
+    with pytest.raises(InternalError, match="ports"):  # a port with nothing connected: no `assign  = ...;`
+        splice_roms(re.sub(r"\.DATA\(.*\)", ".DATA()", text), reg)
     with pytest.raises(InternalError, match="is taken"):
         splice_roms(text.replace("endmodule", "  wire wmem0_q;\nendmodule"), reg)
 

@@ -198,7 +198,8 @@ def splice_roms(text: str, reg: RomEmission, readmemh: Callable[[str, int], str]
         done.add(k)
         rom = reg.roms[k]
         conns = {c.group("port"): c.group("expr") for c in _CONN.finditer(mo.group("conns"))}
-        if not {"CLK", "EN", "DATA"} <= set(conns) or ("ADDR" in conns) != (rom.depth > 1):
+        if (not {"CLK", "EN", "DATA"} <= set(conns) or ("ADDR" in conns) != (rom.depth > 1)
+                or not all(v.strip() for v in conns.values())):
             raise InternalError(f"ROM instance {mo.group('name').strip()}: ports {sorted(conns)}")
         ind, name = mo.group("ind"), mo.group("name").rstrip()
         esc = " " if name.startswith("\\") else ""  # an escaped identifier ends at white space
