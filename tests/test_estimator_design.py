@@ -7,6 +7,7 @@ build the folder once (module fixture), lint it and check byte-identical reruns.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -190,9 +191,14 @@ def test_simulate_estimator_folder_writes_hw_beside_bittrue_and_float(est_folder
     _, gd = est_folder
     d = switched_training_runs(2, 60, seed=3, switching="time", noise=0.02)
     write_csv(tmp_path / "data.csv", d.columns())
+    (tmp_path / "hw_waves").mkdir()
+    (tmp_path / "hw_waves" / "old.vcd").write_text("previous run")
     res = simulate_data(gd.outdir, tmp_path / "data.csv", tmp_path / "hw.csv", simulator="verilator", traj_col="run",
-                        cache_dir=sim_cache)
+                        cache_dir=sim_cache, waves=True)
     s = res["summary"]
+    # the waveform folder replaces the previous one with the CSV (the bench wrote into it, old files stayed)
+    assert s["waves"] == str(tmp_path / "hw_waves" / "dump.vcd") and Path(s["waves"]).stat().st_size > 0
+    assert not (tmp_path / "hw_waves" / "old.vcd").exists()
     assert s["checks"]["passed"] and s["mismatches"] == 0 and s["samples"] == 120 and s["trajectories"] == 2
     assert s["latency_cycles"]["measured_max"] == 1 and s["ii"]["measured"] == 1
     assert s["modes"]["differ_beyond_bound"] == 0

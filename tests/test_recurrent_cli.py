@@ -205,6 +205,22 @@ def test_simulate_recurrent_design(flow, tmp_path, simulator, sim_cache, capsys)
     assert se["mismatches"] > 0 and not se["checks"]["passed"]
 
 
+@pytest.mark.rtl
+def test_simulate_recurrent_waves_folder_is_replaced_and_named_as_given(flow, tmp_path, sim_cache, monkeypatch):
+    """--waves on the segment bench: the bench wrote straight into OUT_waves/ (a previous run's files
+    stayed in it, a failed run left a partial folder) and the summary named it by its absolute path.
+    Now the folder is staged and replaces the old one with the CSV, and ``waves`` is spelt as -o is."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "hw_waves").mkdir()
+    (tmp_path / "hw_waves" / "old.fst").write_text("previous run")
+    assert main(["simulate", str(flow / "map"), str(flow / "run.csv"), "-o", "hw.csv", "--traj-col", "run", "--waves",
+                 "--build-dir", str(sim_cache)]) == 0
+    s = json.loads((tmp_path / "hw.json").read_text())
+    assert s["waves"] == "hw_waves/pwas_recurrent_sensor.fst" and (tmp_path / s["waves"]).stat().st_size > 0
+    assert not (tmp_path / "hw_waves" / "old.fst").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hw.csv", "hw.json", "hw_waves"]
+
+
 @pytest.mark.synth
 def test_synth_generic_recurrent(flow, tmp_path):
     out = tmp_path / "synth"

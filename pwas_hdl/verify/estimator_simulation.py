@@ -235,7 +235,7 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     say(f"simulating {n} samples of {table.path} through the estimator {design.top} on {simulator} (cocotb) ...")
     rep = replay_segments(design.verilog_path, design.top, segs, ports=estimator_job_ports(design.manifest),
                           latency=design.latency, ii=design.ii, warmup=0, simulator=simulator, stall=stall, seed=seed,
-                          cache_dir=cache_dir, waves=waves, output=output, prefix="pwas-esim")
+                          cache_dir=cache_dir, waves=waves, output=output, outset=outset, prefix="pwas-esim")
     raw, rsegs = rep.raw, rep.segments
     hw = [_decode(design, r["words"]) for r in rsegs]
     cat = lambda key, src: np.concatenate([d[key] for d in src])  # noqa: E731

@@ -111,7 +111,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
                           [{"words": s["words"], "expected": s["expected"], "drain": True, "hold": 0, "record": True} for s in segs],
                           ports=recurrent_job_ports(man), latency=design.latency, ii=int(man["ii"]), warmup=design.warmup,
                           simulator=simulator, stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, output=output,
-                          files=design.runtime_files, prefix="pwas-rsim")
+                          outset=outset, files=design.runtime_files, prefix="pwas-rsim")
     raw, rsegs = rep.raw, rep.segments
     nz = fxm.nz
     dec = [np.array([unpack_fields(w, out_fields) for w in r["words"]], dtype=np.int64).reshape(-1, nz + 1) for r in rsegs]

@@ -27,7 +27,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import CheckFailed
+from pwas_hdl.errors import CheckFailed, InternalError
 
 __all__ = ["TEST_MODULE", "segment_job_ports", "standard_segment_runs", "plan_job_runs", "count_outputs",
            "SegmentReplay", "replay_segments", "replay_summary", "rmse"]
@@ -111,12 +111,15 @@ class SegmentReplay:
 
 def replay_segments(verilog_path: Path, top: str, segments: list[dict], *, ports: dict, latency: int, ii: int, warmup: int,
                     simulator: str, stall: float, seed: int, cache_dir: Any, waves: bool, output: str | Path,
-                    files: dict | None = None, prefix: str) -> SegmentReplay:
+                    outset: Any = None, files: dict | None = None, prefix: str) -> SegmentReplay:
     """``pwas-hdl simulate`` through the segment bench: one run ``"replay"`` of ``segments`` (one per
     trajectory: ``words``, ``expected``, ...), with ``p_valid = p_ready = 1 - stall``.
 
-    The bench runs in a temporary folder (``prefix``), removed afterwards, or with ``waves`` in
-    ``<output stem>_waves`` beside ``output``, kept. ``files``: run-time files of the design.
+    The bench runs in a temporary folder (``prefix``), removed afterwards, or with ``waves`` in the
+    staged folder of ``outset`` (a :class:`~pwas_hdl.io.atomic.OutputSet` to which
+    :func:`~pwas_hdl.verify.simulation.waves_folder` of ``output`` was added) that becomes
+    ``<output stem>_waves`` beside ``output`` when the caller commits ``outset`` (the run's
+    ``raw["waves"]`` names the waveform there). ``files``: run-time files of the design.
 
     Raises
     ------
@@ -132,14 +135,22 @@ def replay_segments(verilog_path: Path, top: str, segments: list[dict], *, ports
     runner = sim_module("pwas_runner")
     t0 = time.perf_counter()
     b = runner.build(verilog_path, top, simulator, cache_dir=cache_dir, waves=waves)
-    wd = (Path(output).resolve().parent / f"{Path(output).stem}_waves") if waves else \
-        make_temp_dir(tempfile.gettempdir(), f"{prefix}-{simulator}")
+    if waves:
+        from pwas_hdl.verify.simulation import waves_folder, waves_path
+
+        if outset is None:
+            raise InternalError("replay_segments: waves needs the command's OutputSet")
+        wd = outset.temp_dir(waves_folder(output)).resolve()  # replaced whole on commit, removed on discard
+    else:
+        wd = make_temp_dir(tempfile.gettempdir(), f"{prefix}-{simulator}")
     try:
-        with logs_kept(None if waves else wd, f"{prefix}-{simulator}"):
+        with logs_kept(wd, f"{prefix}-{simulator}"):  # both folders go on failure: the log is copied out
             raw = runner.run_job(b, job, wd, files=files, test_module=TEST_MODULE)
     finally:
         if not waves:
             shutil.rmtree(wd, ignore_errors=True)
+    if waves and raw.get("waves"):
+        raw["waves"] = waves_path(raw["waves"], wd, output)
     rep = SegmentReplay(raw, b, runner, time.perf_counter() - t0)
     rsegs = rep.segments
     if len(rsegs) != len(segments) or any(len(r["words"] or []) != len(s["expected"]) for r, s in zip(rsegs, segments)):

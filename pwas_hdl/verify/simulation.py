@@ -1080,7 +1080,7 @@ def simulate_data(
     outset = OutputSet(inputs=sources + folder_inputs(outdir))
     outset.add(output, "-o")
     outset.add(spath, "--json" if summary_path is not None else "the summary (-o with .json)")
-    waves_dir = Path(output).resolve().parent / f"{Path(output).stem}_waves"
+    waves_dir = waves_folder(output)
     if waves:  # the waveform folder is an output too: replaced with the CSV and the summary, or not at all
         outset.add(waves_dir, "the --waves folder", kind="folder")
     if cache_dir is not None:
@@ -1094,8 +1094,9 @@ def simulate_data(
 
         table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
         _check_references(table, design.sensor.signal_names()[2])
-        return simulate_recurrent(design, table, output, spath, outset, simulator=simulator, engine=engine, traj_col=traj_col,
-                                  stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say)
+        with outset:  # a failure removes the staged waveform folder
+            return simulate_recurrent(design, table, output, spath, outset, simulator=simulator, engine=engine,
+                                      traj_col=traj_col, stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say)
     sensor, model = design.sensor, design.model
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
@@ -1169,7 +1170,7 @@ def simulate_data(
             shutil.rmtree(work, ignore_errors=True)
         raise
     if work is not None and res.raw.get("waves"):  # where the waveform will be once committed
-        res.raw["waves"] = str(waves_dir / Path(res.raw["waves"]).resolve().relative_to(work.resolve()))
+        res.raw["waves"] = waves_path(res.raw["waves"], work, output)
     wall = time.perf_counter() - t0
     lsb = 2.0 ** -model.output_format.frac
     hw_codes = [h[0] for h in res.hw[0]]
@@ -1339,6 +1340,19 @@ def _is_estimator_folder(outdir: str | os.PathLike) -> bool:
         return False
 
 
+def waves_folder(output: str | os.PathLike) -> Path:
+    """The folder ``simulate --waves`` writes: ``<output stem>_waves`` beside the CSV ``output``,
+    spelt as ``output`` is (relative stays relative, as the summary's ``data`` and ``outdir``)."""
+    out = Path(output)
+    return out.parent / f"{out.stem}_waves"
+
+
+def waves_path(recorded: str | os.PathLike, work: str | os.PathLike, output: str | os.PathLike) -> str:
+    """Where the waveform file ``recorded``, written in the simulator's folder ``work``, is once
+    that folder has become :func:`waves_folder` of ``output`` (the summary's ``waves``)."""
+    return str(waves_folder(output) / Path(recorded).resolve().relative_to(Path(work).resolve()))
+
+
 def _simulate_estimator(outdir, data, output, spath, sources, *, blank_rows: str, waves: bool, cache_dir, **kw) -> dict:
     from pwas_hdl.io.atomic import OutputSet, check_output_path
     from pwas_hdl.io.csv_table import Table, read_csv
@@ -1350,11 +1364,12 @@ def _simulate_estimator(outdir, data, output, spath, sources, *, blank_rows: str
     outset.add(output, "-o")
     outset.add(spath, "the summary (-o with .json)")
     if waves:
-        outset.add(Path(output).resolve().parent / f"{Path(output).stem}_waves", "the --waves folder", kind="folder")
+        outset.add(waves_folder(output), "the --waves folder", kind="folder")
     if cache_dir is not None:
         check_output_path(cache_dir, "--build-dir", kind="folder")
     table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
-    return simulate_estimator_data(outdir, table, output, spath, outset, waves=waves, cache_dir=cache_dir, **kw)
+    with outset:  # a failure removes the staged waveform folder
+        return simulate_estimator_data(outdir, table, output, spath, outset, waves=waves, cache_dir=cache_dir, **kw)
 
 
 def simulate_arrays(
