@@ -83,6 +83,7 @@ Version history: 1 (no ``$schema``, no validation), 2 (this one).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -90,7 +91,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pwas_hdl.errors import InputError, InternalError
-from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
+from pwas_hdl.io.json_contract import check_header, json_text, read_json, schema_errors, validate
 from pwas_hdl.limits import MAX_LATENCY_CYCLES, MAX_PORT_BITS
 
 if TYPE_CHECKING:
@@ -395,7 +396,7 @@ def manifest_text(manifest: dict[str, Any]) -> str:
     InputError
         A NaN or infinite number in the manifest.
     """
-    return json.dumps(manifest, indent=1, allow_nan=False) + "\n"
+    return json_text(manifest)
 
 
 # ------------------------------------------------------------------------------ validation
@@ -641,6 +642,16 @@ def _latency_errors(m: dict[str, Any]) -> list[str]:
     return []
 
 
+@functools.lru_cache(maxsize=None)
+def _hex_words(width: int) -> re.Pattern:
+    """Lines of hex words of at most ``width`` bits, each ended by a newline: ``ceil(width / 4)``
+    digits whose first one holds the top ``width - 4 (digits - 1)`` bits, or fewer digits."""
+    digits = -(-width // 4)
+    top = "".join(c for c in "0123456789abcdefABCDEF" if int(c, 16) < 1 << (width - 4 * (digits - 1)))
+    word = f"[{top}][0-9a-fA-F]{{{digits - 1}}}" + (f"|[0-9a-fA-F]{{1,{digits - 1}}}" if digits > 1 else "")
+    return re.compile(f"(?:(?:{word})\n)*")
+
+
 def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
     """The files on disk agree with the manifest: listed files stay inside the folder; every hex file
     there has ``depth`` lines of one word of ``width`` bits; a ``$readmemh`` design has its hex files."""
@@ -674,6 +685,8 @@ def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
         if len(lines) != h["depth"]:
             errs.append(f"files.hex[{i}]: {h['file']} has {len(lines)} words, files.hex[{i}].depth is {h['depth']}")
             continue
+        if _hex_words(h["width"]).fullmatch("\n".join(lines) + "\n" if lines else ""):
+            continue  # every line a word of `width` bits (one regular expression over the file, not a loop a line)
         bad = next((k for k, ln in enumerate(lines) if len(ln) > digits or not all(c in "0123456789abcdefABCDEF" for c in ln)
                     or int(ln, 16) >> h["width"]), None)
         if bad is not None:

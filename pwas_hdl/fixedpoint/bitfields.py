@@ -36,6 +36,7 @@ __all__ = [
     "pack_fields",
     "unpack_fields",
     "pack_rows",
+    "check_codes",
     "pack_fields_words",
     "unpack_fields_words",
 ]
@@ -143,7 +144,34 @@ def pack_rows(codes, width: int) -> list[int]:
     c = np.asarray(codes, dtype=np.int64)
     if c.ndim == 1:
         c = c[:, None]
-    return [pack(row, width) for row in c.tolist()]
+    if c.shape[1] * width > 63:  # wider than an int64: Python integers
+        return [pack(row, width) for row in c.tolist()]
+    check_codes(c, width)
+    u = c & ((1 << width) - 1)
+    word = np.zeros(len(c), dtype=np.int64)
+    for i in range(c.shape[1]):
+        word |= u[:, i] << (i * width)
+    return word.tolist()
+
+
+def check_codes(codes: np.ndarray, width: int) -> None:
+    """:func:`to_unsigned`'s check on an integer array: every code fits ``width`` bits, signed or
+    unsigned (``-2**(width-1) <= code < 2**width``).
+
+    Parameters
+    ----------
+    codes : numpy.ndarray of int64, any shape
+    width : int
+        Bits, 1..63.
+
+    Raises
+    ------
+    InputError
+        A code does not fit (the message names the first one, as :func:`to_unsigned` does).
+    """
+    bad = (codes < -(1 << (width - 1))) | (codes >= (1 << width))
+    if bad.any():
+        raise InputError(f"code {int(codes[bad].flat[0])} does not fit {width} bits")
 
 
 def _array_field(f: Mapping, k: int) -> tuple[int, int, str]:

@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid
-from pwas_hdl.fixedpoint.bitfields import pack_rows, to_unsigned
+from pwas_hdl.fixedpoint.bitfields import check_codes, pack_rows, to_unsigned
 from pwas_hdl.limits import MAX_MEMORY_WORDS, check_limit
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
@@ -572,7 +572,24 @@ def readmemh_text(words: ArrayLike, bits: int) -> str:
         raise InputError(f"word width must be an integer >= 1, got {bits!r}")
     bits = int(bits)
     digits = -(-bits // 4)
+    if bits <= 63:
+        try:
+            arr = np.asarray(words, dtype=np.int64)
+        except (OverflowError, TypeError, ValueError):  # a word beyond int64 or not a number: refused below
+            arr = None
+        if arr is not None and arr.ndim == 1:
+            check_codes(arr, bits)
+            # the hex digits of every word at once: nibbles, most significant first, through a table
+            u = arr & ((1 << bits) - 1)  # two's complement in `bits` bits
+            nibbles = (u[:, None] >> (4 * np.arange(digits - 1, -1, -1))) & 0xF
+            text = np.empty((len(arr), digits + 1), dtype=np.uint8)
+            text[:, :digits] = _HEX_DIGITS[nibbles]
+            text[:, digits] = ord("\n")
+            return text.tobytes().decode("ascii")
     return "".join(format(to_unsigned(w, bits), f"0{digits}x") + "\n" for w in words)
+
+
+_HEX_DIGITS = np.frombuffer(b"0123456789abcdef", dtype=np.uint8)
 
 
 #: Packed words of one bank, target 0 in the least significant bits (:func:`pwas_hdl.fixedpoint.bitfields.pack_rows`).
