@@ -38,7 +38,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from pwas_hdl.errors import InputError
-from pwas_hdl.io.json_contract import check_header, read_json, validate
+from pwas_hdl.io.json_contract import check_header, json_text, read_json, validate
 
 __all__ = ["ESTIMATOR_FORMAT", "ESTIMATOR_VERSION", "ESTIMATOR_SCHEMA", "ESTIMATOR_SCHEMA_ID", "SwitchedEstimatorConfig",
            "estimator_text", "write_estimator", "read_estimator", "validate_estimator", "is_estimator_file"]
@@ -247,7 +247,7 @@ def estimator_text(config: SwitchedEstimatorConfig) -> str:
     str
         The JSON text of :meth:`SwitchedEstimatorConfig.to_dict`.
     """
-    return json.dumps(config.to_dict(), indent=1, allow_nan=False) + "\n"
+    return json_text(config.to_dict())
 
 
 def write_estimator(config: SwitchedEstimatorConfig, path: str | os.PathLike) -> Path:

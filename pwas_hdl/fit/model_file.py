@@ -72,7 +72,7 @@ import numpy as np
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.limits import check_vertices, check_weights
-from pwas_hdl.io.json_contract import check_header, read_json, schema_errors, validate
+from pwas_hdl.io.json_contract import check_header, json_text, read_json, schema_errors, validate
 
 if TYPE_CHECKING:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -129,7 +129,7 @@ def model_to_dict(sensor: "PWASVirtualSensor") -> dict[str, Any]:
             **({"breakpoints": [None if b is None else [float(v) for v in b] for b in grid.breakpoints]}
                if getattr(grid, "breakpoints", None) is not None else {}),
         },
-        "weights": {t: [float(v) for v in sensor.weights_[:, i]] for i, t in enumerate(tgts)},
+        "weights": {t: np.asarray(sensor.weights_[:, i], dtype=float).tolist() for i, t in enumerate(tgts)},
         "fit": {
             "sigma": float(sensor.sigma_),
             "sigma_given": sensor.sigma is not None,
@@ -244,7 +244,7 @@ def model_text(sensor: "PWASVirtualSensor") -> str:
     InputError
         A weight or statistic is not finite (not representable in JSON).
     """
-    return json.dumps(model_to_dict(sensor), indent=1, allow_nan=False) + "\n"
+    return json_text(model_to_dict(sensor))
 
 
 def write_model(sensor: "PWASVirtualSensor", path: str | os.PathLike) -> Path:
