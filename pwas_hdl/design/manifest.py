@@ -84,7 +84,6 @@ Version history: 1 (no ``$schema``, no validation), 2 (this one).
 from __future__ import annotations
 
 import functools
-import json
 import os
 import re
 from pathlib import Path

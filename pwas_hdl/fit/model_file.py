@@ -61,7 +61,6 @@ Version history: 1 (no ``$schema``; ``int()`` of the lags accepted 2.7 as 2), 2 
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from pathlib import Path
