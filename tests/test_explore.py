@@ -313,9 +313,9 @@ def test_cli_explore(tiny, tmp_path):
                       (["--fpga", "xx"], "error: --fpga must be one of generic, ecp5, ice40"),
                       (["--resources", "xx"], "error: --fpga must be one of generic, ecp5, ice40"),
                       # the synthesis options without --fpga were silently ignored
-                      (["--device", "85k"], "error: --device needs --fpga ecp5|ice40|generic"),
+                      (["--device", "85k"], "error: --device needs --fpga ecp5|ice40 (it is about"),  # not generic: no device
                       (["--measure-max", "3"], "error: --measure-max needs --fpga ecp5|ice40|generic (it is about the synthesis"),
-                      (["--device", "85k", "--synth-dir", "sd"], "--device, --synth-dir need --fpga ecp5|ice40|generic (they are about"),
+                      (["--device", "85k", "--synth-dir", "sd"], "--device, --synth-dir need --fpga ecp5|ice40 (they are about"),
                       (["--synth-dir", str(tmp_path / "sd")], "error: --synth-dir needs --fpga ecp5|ice40|generic"),
                       (["--fpga", "generic", "--device", "85k"], "error: --device needs --fpga ecp5 or ice40"),
                       (["--fpga", "ecp5", "--device", "99k"], "error: unknown ECP5 device '99k'")):

@@ -545,7 +545,8 @@ def explore(
         given = [opt for opt, v in (("--device", device), ("--measure-max", measure_max), ("--synth-dir", workdir)) if v is not None]
         if given:
             one = len(given) == 1
-            raise InputError(f"{', '.join(given)} {'needs' if one else 'need'} --fpga ecp5|ice40|generic ({'it is' if one else 'they are'} "
+            families = "ecp5|ice40" if "--device" in given else "ecp5|ice40|generic"  # generic has no device
+            raise InputError(f"{', '.join(given)} {'needs' if one else 'need'} --fpga {families} ({'it is' if one else 'they are'} "
                              f"about the synthesis of the Pareto points); add --fpga or drop {'it' if one else 'them'} for the analytic estimate only")
     elif device is not None:
         if resources == "generic":
