@@ -167,3 +167,40 @@ def test_array_forms_of_pack_rows_and_readmemh_match_the_scalar_ones(data):
             pack_rows(codes, width)
         with pytest.raises(InputError, match="does not fit"):
             readmemh_text(codes.ravel().tolist(), width)
+
+
+def test_array_forms_refuse_unsigned_64_bit_codes_an_int64_would_wrap():
+    """readmemh_text / pack_rows convert to int64 for numpy: a uint64 word of 2**63 or more wrapped
+    to a negative that fits (2**64 - 1 became -1 and was written as "ff" in 8 bits, or packed as
+    2**70 - 1 in a 70-bit field). The module refuses codes that do not fit rather than wrapping
+    them, and a 70-bit field holds 2**64 - 1 as it is."""
+    from pwas_hdl.fixedpoint.memory_layout import readmemh_text
+
+    big = np.array([2**64 - 1, 5], dtype=np.uint64)
+    with pytest.raises(InputError, match="code 18446744073709551615 does not fit 8 bits"):
+        readmemh_text(big, 8)
+    with pytest.raises(InputError, match="code 9223372036854775808 does not fit 63 bits"):
+        readmemh_text(np.array([2**63], dtype=np.uint64), 63)
+    with pytest.raises(InputError, match="code 18446744073709551615 does not fit 8 bits"):
+        pack_rows(big[:, None], 8)
+    assert pack_rows(np.array([2**64 - 1], dtype=np.uint64), 70) == [2**64 - 1]
+    # unsigned codes an int64 holds stay on the array path, and give what the scalar path gives
+    assert readmemh_text(np.array([2**63 - 1, 0], dtype=np.uint64), 63) == format(2**63 - 1, "016x") + "\n" + "0" * 16 + "\n"
+    assert pack_rows(np.array([[255, 1]], dtype=np.uint64), 8) == [pack([255, 1], 8)]
+
+
+def test_readmemh_of_floats_is_the_per_word_conversion():
+    """numpy casts NaN and floats beyond int64 to -2**63 (with a RuntimeWarning): readmemh_text named
+    that code instead of the word's (1e30), and refused a NaN as a code that does not fit, where
+    the per-word int() keeps the value or refuses the NaN as not a number."""
+    import warnings
+
+    from pwas_hdl.fixedpoint.memory_layout import readmemh_text
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match=f"code {int(1e30)} does not fit 8 bits"):
+            readmemh_text(np.array([1e30]), 8)
+        with pytest.raises(ValueError, match="NaN"):
+            readmemh_text(np.array([np.nan]), 8)
+        assert readmemh_text(np.array([-1.5, 2.7]), 8) == "ff\n02\n"

@@ -37,6 +37,7 @@ __all__ = [
     "unpack_fields",
     "pack_rows",
     "check_codes",
+    "int64_codes",
     "pack_fields_words",
     "unpack_fields_words",
 ]
@@ -141,7 +142,11 @@ def pack_rows(codes, width: int) -> list[int]:
     list of int
         ``rows`` unsigned words of ``fields * width`` bits.
     """
-    c = np.asarray(codes, dtype=np.int64)
+    a = np.asarray(codes)
+    if a.dtype.kind == "u" and a.size and int(a.max()) > _INT64_MAX:  # int64 would wrap them: exact Python integers
+        c = a.astype(object)
+        return [pack(row, width) for row in (c if c.ndim > 1 else c[:, None]).tolist()]
+    c = np.asarray(a, dtype=np.int64)
     if c.ndim == 1:
         c = c[:, None]
     if c.shape[1] * width > 63:  # wider than an int64: Python integers
@@ -152,6 +157,36 @@ def pack_rows(codes, width: int) -> list[int]:
     for i in range(c.shape[1]):
         word |= u[:, i] << (i * width)
     return word.tolist()
+
+
+#: The largest int64: unsigned 64-bit codes above it would wrap to negatives in an int64 array.
+_INT64_MAX = (1 << 63) - 1
+
+
+def int64_codes(codes) -> np.ndarray | None:
+    """``codes`` as an int64 array when that conversion is exact, else None (use Python integers).
+
+    Exact for arrays and sequences of integers or booleans that an int64 holds. None for unsigned
+    64-bit values of ``2**63`` and more (an int64 would wrap them to negatives, and a code that
+    does not fit would be written as one that does), for floats (numpy turns NaN and values
+    beyond int64 into ``-2**63`` where ``int()`` refuses them or keeps their value), objects,
+    strings and ragged input.
+
+    Parameters
+    ----------
+    codes : array_like
+
+    Returns
+    -------
+    numpy.ndarray of int64 or None
+    """
+    try:
+        a = np.asarray(codes)
+    except (OverflowError, TypeError, ValueError):
+        return None
+    if a.dtype.kind in "bi" or (a.dtype.kind == "u" and (not a.size or int(a.max()) <= _INT64_MAX)):
+        return a.astype(np.int64)
+    return None
 
 
 def check_codes(codes: np.ndarray, width: int) -> None:

@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid
-from pwas_hdl.fixedpoint.bitfields import check_codes, pack_rows, to_unsigned
+from pwas_hdl.fixedpoint.bitfields import check_codes, int64_codes, pack_rows, to_unsigned
 from pwas_hdl.limits import MAX_MEMORY_WORDS, check_limit
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
@@ -573,10 +573,7 @@ def readmemh_text(words: ArrayLike, bits: int) -> str:
     bits = int(bits)
     digits = -(-bits // 4)
     if bits <= 63:
-        try:
-            arr = np.asarray(words, dtype=np.int64)
-        except (OverflowError, TypeError, ValueError):  # a word beyond int64 or not a number: refused below
-            arr = None
+        arr = int64_codes(words)  # None: not integers an int64 holds exactly (the loop below refuses or converts them)
         if arr is not None and arr.ndim == 1:
             check_codes(arr, bits)
             # the hex digits of every word at once: nibbles, most significant first, through a table
