@@ -6,6 +6,7 @@ import csv
 import json
 import shutil
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -95,6 +96,47 @@ def test_simulate_waves_folder_is_part_of_the_outputs(folders, sim_cache, tmp_pa
     assert s["waves"] == str(wave) and wave.is_file() and wave.stat().st_size > 0
     assert not (tmp_path / "hw_waves" / "old.fst").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hw.csv", "hw.json", "hw_waves"]
+
+
+@pytest.mark.rtl
+def test_simulate_waves_failure_keeps_the_log_and_leaves_nothing(folders, sim_cache, tmp_path, monkeypatch, capsys):
+    """--waves on a sensor design: a failed simulator run named its log inside the private waveform
+    folder, removed before the message was read; an error or an interrupt after the run left that
+    folder in $TMPDIR (never cleaned: no process id in its name) and the staged CSV beside -o.
+    Now the log is copied out as without --waves, and nothing is left but the previous outputs."""
+    import tempfile
+
+    from pwas_hdl.cli import main
+
+    tmpd = tmp_path / "tmpdir"
+    tmpd.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmpd))
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "hw_waves").mkdir()
+    (out / "hw_waves" / "old.fst").write_text("previous run")
+    args = ["simulate", str(folders / "sensor"), str(folders / "one.csv"), "--simulator", "icarus", "-o", str(out / "hw.csv"),
+            "--build-dir", str(sim_cache), "--waves"]
+    sim = sim_module("pwas_runner")
+
+    def failing(b, job, wd, **kw):
+        (Path(wd) / "sim.log").write_text("the simulator's log\n")
+        raise sim.SimulationError("the run failed", Path(wd) / "sim.log", "")
+
+    with monkeypatch.context() as m:
+        m.setattr(sim, "run_job", failing)
+        capsys.readouterr()
+        assert main(args) == 2
+    named = capsys.readouterr().err.split("log: ", 1)[1].split()[0]
+    logs = list(tmpd.iterdir())
+    assert [str(p) for p in logs] == [named] and logs[0].read_text() == "the simulator's log\n"
+    logs[0].unlink()
+    for exc in (KeyboardInterrupt(), RuntimeError("late")):  # after the run, before the outputs are committed
+        with monkeypatch.context() as m:
+            m.setattr("pwas_hdl.verify.simulation._checks", mock.Mock(side_effect=exc))
+            assert main(args) != 0
+        assert list(tmpd.iterdir()) == []
+        assert sorted(p.name for p in out.rglob("*")) == ["hw_waves", "old.fst"]
 
 
 @pytest.mark.rtl

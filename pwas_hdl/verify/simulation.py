@@ -1161,140 +1161,140 @@ def simulate_data(
                          "(or --engine cocotb)")
     say(f"simulating {sum(len(s.src) for s in segs)} samples of {data} through {design.top} on {simulator} ({engine}) ...")
     t0 = time.perf_counter()
-    # the simulator writes its folder in a private temporary one; staged into the output set at the end
+    # the simulator writes its folder in a private temporary one, staged into the output set at the end and
+    # removed however the command ends; on an error the staged outputs go too (a failed run's log is copied out)
     work = Path(tempfile.mkdtemp(prefix="pwas-hdl-waves-")) if waves else None
     try:
-        res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False, engine=engine, work_dir=work)
-    except BaseException:
-        if work is not None:
-            shutil.rmtree(work, ignore_errors=True)
-        raise
-    if work is not None and res.raw.get("waves"):  # where the waveform will be once committed
-        res.raw["waves"] = waves_path(res.raw["waves"], work, output)
-    wall = time.perf_counter() - t0
-    lsb = 2.0 ** -model.output_format.frac
-    hw_codes = [h[0] for h in res.hw[0]]
-    hw_oor = [h[1] for h in res.hw[0]]
-    complete = all(len(hc) == len(s.expected) for hc, s in zip(hw_codes, segs))
-    if not complete:
-        if work is not None:
-            shutil.rmtree(work, ignore_errors=True)
-        raise CheckFailed("the RTL did not produce every output: " + "; ".join(res.failures[:3]))
-    hw = np.concatenate(hw_codes) if hw_codes else np.empty((0, model.nz), dtype=np.int64)
-    oor = np.concatenate(hw_oor)
-    bt = np.concatenate([s.expected for s in segs])
-    bt_oor = np.concatenate([s.oor for s in segs])
-    q = np.concatenate([s.q for s in segs])
-    row = np.concatenate(rows)
-    mism = np.any(hw != bt, axis=1) | (oor != bt_oor)
-    clf = design.manifest.get("classifier")  # a classifier design: the class index is checked too
-    if clf is not None:
-        hw_cls = np.concatenate(res.hw_class[0]) if res.hw_class and res.hw_class[0] else np.empty(0, dtype=np.int64)
-        bt_cls = np.concatenate([s.cls for s in segs])
-        mism = mism | (hw_cls != bt_cls)
-    # float model at the real inputs
-    zf = np.concatenate(zfs) if design.bank is not None else sensor.predict_regressors(np.concatenate(xs))
-    zref = model.reference(q)  # float model at the inputs the codes represent
-    zhw = hw * lsb
-    cols: dict[str, Any] = {"row": row}
-    if clf is not None:  # the class scores under the names predict gives them (<c>_score_<k>)
-        from pwas_hdl.fit.classifier import score_column
+        with outset:
+            with logs_kept(work, f"pwas-sim-{simulator}"):
+                res = run_rtl(design, [run], simulator, cache_dir=cache_dir, waves=waves, strict=False, engine=engine,
+                              work_dir=work)
+            if work is not None and res.raw.get("waves"):  # where the waveform will be once committed
+                res.raw["waves"] = waves_path(res.raw["waves"], work, output)
+            wall = time.perf_counter() - t0
+            lsb = 2.0 ** -model.output_format.frac
+            hw_codes = [h[0] for h in res.hw[0]]
+            hw_oor = [h[1] for h in res.hw[0]]
+            complete = all(len(hc) == len(s.expected) for hc, s in zip(hw_codes, segs))
+            if not complete:
+                raise CheckFailed("the RTL did not produce every output: " + "; ".join(res.failures[:3]))
+            hw = np.concatenate(hw_codes) if hw_codes else np.empty((0, model.nz), dtype=np.int64)
+            oor = np.concatenate(hw_oor)
+            bt = np.concatenate([s.expected for s in segs])
+            bt_oor = np.concatenate([s.oor for s in segs])
+            q = np.concatenate([s.q for s in segs])
+            row = np.concatenate(rows)
+            mism = np.any(hw != bt, axis=1) | (oor != bt_oor)
+            clf = design.manifest.get("classifier")  # a classifier design: the class index is checked too
+            if clf is not None:
+                hw_cls = np.concatenate(res.hw_class[0]) if res.hw_class and res.hw_class[0] else np.empty(0, dtype=np.int64)
+                bt_cls = np.concatenate([s.cls for s in segs])
+                mism = mism | (hw_cls != bt_cls)
+            # float model at the real inputs
+            zf = np.concatenate(zfs) if design.bank is not None else sensor.predict_regressors(np.concatenate(xs))
+            zref = model.reference(q)  # float model at the inputs the codes represent
+            zhw = hw * lsb
+            cols: dict[str, Any] = {"row": row}
+            if clf is not None:  # the class scores under the names predict gives them (<c>_score_<k>)
+                from pwas_hdl.fit.classifier import score_column
 
-        tgts = [score_column(clf["target"], c) for c in clf["classes"]]
-    for i, t in enumerate(tgts):
-        cols[f"{t}_hw"] = zhw[:, i]
-        cols[f"{t}_bittrue"] = bt[:, i] * lsb
-        cols[f"{t}_float"] = zf[:, i]
-    clf_summary = None
-    if clf is not None:
-        clf_summary, clf_cols = _class_columns(clf, hw_cls, bt_cls, bt, zf, zref, model.error_bound, table, row)
-        cols.update(clf_cols)
-    cols["out_of_range"] = oor
-    cols["mismatch"] = mism
-    csv_text = format_csv(cols)
-    e_ref = np.abs(zhw - zref)
-    e_float = np.abs(zhw - zf)
-    targets = {}
-    for i, t in enumerate(tgts):
-        entry: dict[str, Any] = {
-            "max_error_vs_float_at_codes": float(e_ref[:, i].max()) if len(e_ref) else 0.0,
-            "max_error_vs_float_at_codes_lsb": float(e_ref[:, i].max() / lsb) if len(e_ref) else 0.0,
-            "max_error_vs_float_model": float(e_float[:, i].max()) if len(e_float) else 0.0,
-            "max_error_vs_float_model_lsb": float(e_float[:, i].max() / lsb) if len(e_float) else 0.0,
-        }
-        ref = table.reference_column(t)
-        if ref is not None:
-            ztrue = table.numeric([ref])[row, 0]
-            entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
-                         rmsee_float=_rmse(zf[:, i], ztrue), rmsee_float_at_codes=_rmse(zref[:, i], ztrue))
-            entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
-        targets[t] = entry
-    first = None
-    if mism.any():
-        k = int(np.flatnonzero(mism)[0])
-        first = {"row": int(row[k]), "regressor_codes": q[k].tolist(), "expected": bt[k].tolist() + [int(bt_oor[k])],
-                 "actual": hw[k].tolist() + [int(oor[k])]}
-        if clf is not None:
-            first["expected"].append(int(bt_cls[k]))
-            first["actual"].append(int(hw_cls[k]))
-    lat = sorted(set(res.latencies if stall == 0 else res.latencies_all))
-    n = int(len(row))
-    summary = {
-        "design": design.top,
-        "design_hash": design.manifest.get("design_hash"),  # the design this result is for (report: stale?)
-        "kind": design.kind,
-        "outdir": str(design.outdir),
-        "data": str(data),
-        "simulator": simulator,
-        "engine": engine,
-        "simulator_version": sim_module("pwas_runner").tool_versions(simulator),
-        "samples": n,
-        "input_transfers": int(sum(len(s.codes) for s in segs)),
-        "trajectories": len(segs),
-        "mismatches": int(mism.sum()),
-        "first_mismatch": first,
-        "out_of_range": int(oor.sum()),
-        "output_lsb": lsb,
-        "error_bound": res.error_bound,
-        "error_bound_lsb": res.error_bound_lsb,
-        "within_error_bound": bool(float(e_ref.max(initial=0.0)) <= res.error_bound * (1 + 1e-9) + 1e-12),
-        "max_error_vs_float_lsb": float(e_ref.max(initial=0.0) / lsb),
-        "max_error_vs_float": float(e_ref.max(initial=0.0)),
-        "targets": targets,
-        "latency_cycles": {"manifest": design.latency, "measured_min": lat[0] if lat else None,
-                           "measured_max": lat[-1] if lat else None,
-                           "note": "from the input transfer that completes a regressor to out.valid"
-                           + ("" if stall == 0 else "; with stalls, cycles waiting on out.ready are included")},
-        "ii": {"manifest": int(design.manifest["ii"]), "measured": res.ii,
-               "note": "cycles per accepted input at full speed" if stall == 0 else "not measured with stalls (--stall > 0)"},
-        "stall": stall,
-        "cycles": res.cycles,
-        "clock_ns": 10.0,
-        "simulation_seconds": res.sim_seconds,
-        "samples_per_second": n / res.sim_seconds if res.sim_seconds > 0 else None,
-        "cycles_per_second": res.cycles / res.sim_seconds if res.sim_seconds > 0 else None,
-        "simulator_process_seconds": res.wall_seconds,
-        "build_seconds": res.build_seconds,
-        "build_reused": res.build_reused,
-        "total_seconds": wall,
-        "testbench_failures": res.failures,
-        "waves": res.raw.get("waves"),
-    }
-    if clf_summary is not None:
-        summary["classifier"] = clf_summary
-    summary["checks"] = _checks(summary, stall)
-    outset.write_text(output, csv_text)
-    outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
-    if work is not None:
-        staged = outset.temp_dir(waves_dir)
-        for item in work.iterdir():
-            shutil.move(str(item), str(staged / item.name))
-        shutil.rmtree(work, ignore_errors=True)
-    outset.commit()
-    ret = {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
-    if clf is not None:
-        ret["class_index"] = hw_cls  # the RTL's class index of each output (classifier designs)
-    return ret
+                tgts = [score_column(clf["target"], c) for c in clf["classes"]]
+            for i, t in enumerate(tgts):
+                cols[f"{t}_hw"] = zhw[:, i]
+                cols[f"{t}_bittrue"] = bt[:, i] * lsb
+                cols[f"{t}_float"] = zf[:, i]
+            clf_summary = None
+            if clf is not None:
+                clf_summary, clf_cols = _class_columns(clf, hw_cls, bt_cls, bt, zf, zref, model.error_bound, table, row)
+                cols.update(clf_cols)
+            cols["out_of_range"] = oor
+            cols["mismatch"] = mism
+            csv_text = format_csv(cols)
+            e_ref = np.abs(zhw - zref)
+            e_float = np.abs(zhw - zf)
+            targets = {}
+            for i, t in enumerate(tgts):
+                entry: dict[str, Any] = {
+                    "max_error_vs_float_at_codes": float(e_ref[:, i].max()) if len(e_ref) else 0.0,
+                    "max_error_vs_float_at_codes_lsb": float(e_ref[:, i].max() / lsb) if len(e_ref) else 0.0,
+                    "max_error_vs_float_model": float(e_float[:, i].max()) if len(e_float) else 0.0,
+                    "max_error_vs_float_model_lsb": float(e_float[:, i].max() / lsb) if len(e_float) else 0.0,
+                }
+                ref = table.reference_column(t)
+                if ref is not None:
+                    ztrue = table.numeric([ref])[row, 0]
+                    entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
+                                 rmsee_float=_rmse(zf[:, i], ztrue), rmsee_float_at_codes=_rmse(zref[:, i], ztrue))
+                    entry["rmsee_increase_hw_vs_float_percent"] = 100.0 * (entry["rmsee_hw"] / entry["rmsee_float"] - 1.0)
+                targets[t] = entry
+            first = None
+            if mism.any():
+                k = int(np.flatnonzero(mism)[0])
+                first = {"row": int(row[k]), "regressor_codes": q[k].tolist(), "expected": bt[k].tolist() + [int(bt_oor[k])],
+                         "actual": hw[k].tolist() + [int(oor[k])]}
+                if clf is not None:
+                    first["expected"].append(int(bt_cls[k]))
+                    first["actual"].append(int(hw_cls[k]))
+            lat = sorted(set(res.latencies if stall == 0 else res.latencies_all))
+            n = int(len(row))
+            summary = {
+                "design": design.top,
+                "design_hash": design.manifest.get("design_hash"),  # the design this result is for (report: stale?)
+                "kind": design.kind,
+                "outdir": str(design.outdir),
+                "data": str(data),
+                "simulator": simulator,
+                "engine": engine,
+                "simulator_version": sim_module("pwas_runner").tool_versions(simulator),
+                "samples": n,
+                "input_transfers": int(sum(len(s.codes) for s in segs)),
+                "trajectories": len(segs),
+                "mismatches": int(mism.sum()),
+                "first_mismatch": first,
+                "out_of_range": int(oor.sum()),
+                "output_lsb": lsb,
+                "error_bound": res.error_bound,
+                "error_bound_lsb": res.error_bound_lsb,
+                "within_error_bound": bool(float(e_ref.max(initial=0.0)) <= res.error_bound * (1 + 1e-9) + 1e-12),
+                "max_error_vs_float_lsb": float(e_ref.max(initial=0.0) / lsb),
+                "max_error_vs_float": float(e_ref.max(initial=0.0)),
+                "targets": targets,
+                "latency_cycles": {"manifest": design.latency, "measured_min": lat[0] if lat else None,
+                                   "measured_max": lat[-1] if lat else None,
+                                   "note": "from the input transfer that completes a regressor to out.valid"
+                                   + ("" if stall == 0 else "; with stalls, cycles waiting on out.ready are included")},
+                "ii": {"manifest": int(design.manifest["ii"]), "measured": res.ii,
+                       "note": "cycles per accepted input at full speed" if stall == 0 else "not measured with stalls (--stall > 0)"},
+                "stall": stall,
+                "cycles": res.cycles,
+                "clock_ns": 10.0,
+                "simulation_seconds": res.sim_seconds,
+                "samples_per_second": n / res.sim_seconds if res.sim_seconds > 0 else None,
+                "cycles_per_second": res.cycles / res.sim_seconds if res.sim_seconds > 0 else None,
+                "simulator_process_seconds": res.wall_seconds,
+                "build_seconds": res.build_seconds,
+                "build_reused": res.build_reused,
+                "total_seconds": wall,
+                "testbench_failures": res.failures,
+                "waves": res.raw.get("waves"),
+            }
+            if clf_summary is not None:
+                summary["classifier"] = clf_summary
+            summary["checks"] = _checks(summary, stall)
+            outset.write_text(output, csv_text)
+            outset.write_text(spath, json.dumps(summary, indent=2, allow_nan=False, default=_json_default) + "\n")
+            if work is not None:
+                staged = outset.temp_dir(waves_dir)
+                for item in work.iterdir():
+                    shutil.move(str(item), str(staged / item.name))
+            outset.commit()
+            ret = {"summary": summary, "summary_path": str(spath), "output": str(output), "result": res, "rows": row, "estimates": zhw}
+            if clf is not None:
+                ret["class_index"] = hw_cls  # the RTL's class index of each output (classifier designs)
+            return ret
+    finally:
+        if work is not None:
+            shutil.rmtree(work, ignore_errors=True)
 
 
 def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: np.ndarray, zf: np.ndarray,
