@@ -105,3 +105,23 @@ def test_classify_bad_input_writes_nothing(tmp_path):
     good["classifier"] = {"target": "mode", "classes": [1, 2]}
     with pytest.raises(ValueError, match="classes"):
         PWASVirtualSensor.from_dict(good)
+
+
+@pytest.mark.parametrize("labels", [[0.0, 0.5, 1.0], [0.0, 1.0, 1e20]])
+def test_non_integral_class_labels_are_scored(tmp_path, labels):
+    """fit --classify accepts any finite labels; scikit-learn's metrics refused a non-integral one
+    (0.5, or 1e20 beyond int64) as "continuous", so predict against the label column (and simulate)
+    failed with a bare ValueError after the model was fitted. class_scores now counts by equality."""
+    sc = clf.class_scores([0.5, 0.0, 1.0, 0.5], [0.5, 0.0, 0.5, 1.0], [0.0, 0.5, 1.0])
+    assert sc["accuracy"] == 0.5 and sc["f1"] == [1.0, 0.5, 0.0]
+    t = np.arange(60, dtype=float)
+    y = np.sin(t / 5)
+    mode = np.array(labels)[np.digitize(y, [-0.3, 0.3])]
+    write_csv(tmp_path / "d.csv", {"y": y, "mode": mode})
+    run = CliRunner().invoke
+    r = run(app, ["fit", str(tmp_path / "d.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "mode",
+                  "--classify", "--my", "1", "-p", "3", "--sigma", "1e-6"])
+    assert r.exit_code == 0, r.output
+    r = run(app, ["predict", str(tmp_path / "m.json"), str(tmp_path / "d.csv"), "-o", str(tmp_path / "p.csv")])
+    assert r.exit_code == 0, r.output
+    assert "accuracy of mode_hat against column mode" in r.output

@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, InternalError
 
 __all__ = ["class_labels", "one_hot", "class_target_names", "score_column", "decide", "label_text", "class_scores", "label_column"]
 
@@ -182,7 +182,12 @@ def label_column(labels: np.ndarray, classes: Sequence[float]) -> np.ndarray:
 
 
 def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -> dict:
-    """Accuracy and per-class F1 (scikit-learn): ``{"accuracy": a, "f1": [f1 of each class in order]}``.
+    """Accuracy and per-class F1: ``{"accuracy": a, "f1": [f1 of each class in order]}``.
+
+    Computed here by label equality (as scikit-learn's ``accuracy_score`` and ``f1_score(labels=classes,
+    average=None, zero_division=0)`` on integer labels), for any labels: scikit-learn refuses a label
+    column with a non-integral value (``0.5``, or ``1e20``, which overflows its integer check) as
+    "continuous", and ``fit --classify`` accepts any finite labels.
 
     Parameters
     ----------
@@ -197,9 +202,14 @@ def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -
         ``{"accuracy": float, "f1": list of C floats}``; the F1 of a class absent from both
         ``true`` and ``pred`` is 0.
     """
-    from sklearn.metrics import accuracy_score, f1_score
-
     t = np.asarray(true, dtype=float).reshape(-1)
     p = np.asarray(pred, dtype=float).reshape(-1)
-    f1 = f1_score(t, p, labels=[float(c) for c in classes], average=None, zero_division=0)
-    return {"accuracy": float(accuracy_score(t, p)), "f1": [float(v) for v in f1]}
+    if t.shape != p.shape or t.size == 0:
+        raise InternalError(f"class_scores: {t.size} true and {p.size} decided labels (same non-zero number expected)")
+    f1 = []
+    for c in classes:
+        is_t, is_p = t == float(c), p == float(c)
+        tp = int(np.count_nonzero(is_t & is_p))
+        denom = int(np.count_nonzero(is_t)) + int(np.count_nonzero(is_p))  # 2 tp + fp + fn
+        f1.append(2.0 * tp / denom if denom else 0.0)
+    return {"accuracy": float(np.mean(t == p)), "f1": f1}
