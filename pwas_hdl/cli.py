@@ -674,6 +674,9 @@ def predict(
         ends = np.concatenate([np.full(max(0, sl.stop - sl.start - first), sl.stop) for sl in spans])
         scored = rows + lead < ends
         cols: dict = {"row": rows}
+        # the scores against DATA's reference columns are computed before the CSV is written: a bad cell
+        # there (NaN, text) is refused with nothing written
+        scores: list[str] = []
         classifier = getattr(model, "classifier_", None)
         if classifier is not None:
             from pwas_hdl.fit import classifier as clf
@@ -683,28 +686,26 @@ def predict(
             cols[f"{ct}_hat"] = clf.label_column(label, classes)
             for i, c in enumerate(classes):
                 cols[clf.score_column(ct, c)] = zhat[:, i]
-            cols["out_of_domain"] = flags
-            with outset:
-                outset.write_text(output, format_csv(cols))
             ref = table.reference_column(ct)
             if ref is not None:
                 sc = clf.class_scores(table.numeric([ref])[rows, 0], label, classes)
                 f1 = ", ".join(f"{clf.label_text(c)}: {v:.4f}" for c, v in zip(classes, sc["f1"]))
-                _say(f"accuracy of {ct}_hat against column {ref}: {sc['accuracy']:.4f} over {rows.size} samples; F1 per class {f1}")
-            tgts = []
+                scores.append(f"accuracy of {ct}_hat against column {ref}: {sc['accuracy']:.4f} over {rows.size} samples; F1 per class {f1}")
         else:
             for i, t in enumerate(tgts):
                 cols[f"{t}_hat"] = zhat[:, i]
-            cols["out_of_domain"] = flags
-            with outset:
-                outset.write_text(output, format_csv(cols))
-        for i, t in enumerate(tgts):
-            ref = table.reference_column(t)
-            if ref is not None:
-                ztrue = table.numeric([ref])[rows[scored] + lead, 0]
-                rmse = _rmse(zhat[scored, i], ztrue)
-                shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
-                _say(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
+            for i, t in enumerate(tgts):
+                ref = table.reference_column(t)
+                if ref is not None:
+                    ztrue = table.numeric([ref])[rows[scored] + lead, 0]
+                    rmse = _rmse(zhat[scored, i], ztrue)
+                    shift = f" (row t estimates {t}(t+{lead}))" if lead else ""
+                    scores.append(f"RMSE of {t}_hat against column {ref}: {rmse:.6g} over {int(scored.sum())} samples{shift}")
+        cols["out_of_domain"] = flags
+        with outset:
+            outset.write_text(output, format_csv(cols))
+        for line in scores:
+            _say(line)
         if flags.any():
             _warn(f"warning: {int(flags.sum())} of {flags.size} regressors were outside the domain (clamped)")
         if traj_warning:

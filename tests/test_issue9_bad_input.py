@@ -788,3 +788,17 @@ def test_an_output_that_is_a_symbolic_link_is_written_where_it_points(work):
                    "-o/--out 'loop.csv' is a symbolic link that leads to itself")
     assert_refused(invoke("make-data", "lorenz", "-o", "link.csv", "--test-out", "out/real.csv", cwd=work), "both name")
     assert tree(work) == before
+
+
+@pytest.mark.parametrize("cell, frag", [("nan", "column 'z_true' is 'nan'"), ("abc", "'abc' is not a number")])
+def test_predict_bad_reference_column_writes_nothing(work, cell, frag):
+    """A bad cell in DATA's reference column (z_true, read only for the RMSE) used to be found after
+    the estimates were written: exit 2 with -o left behind. The RMSE is now computed before writing."""
+    lines = (work / "t.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    row = lines[50].split(",")
+    row[head.index("z_true")] = cell
+    (work / "badz.csv").write_text("\n".join(lines[:50] + [",".join(row)] + lines[51:]) + "\n")
+    before = tree(work)
+    assert_refused(invoke("predict", "m.json", "badz.csv", "-o", "p.csv", cwd=work), "badz.csv", "line 51", frag)
+    assert tree(work) == before
