@@ -18,6 +18,7 @@ from pwas_hdl.design.generate import build_design, generate
 from pwas_hdl.hdl import Pipeline, build_core
 from pwas_hdl.hdl.simulate import pack_fields, run_stream, unpack_fields
 from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.errors import InputError
 from pwas_hdl.flow.timing_closure import TimingNotMet, harness_verilog, pipeline_candidates
 
 runner = CliRunner()
@@ -123,6 +124,27 @@ def test_harness_is_lint_clean(tiny_model, tmp_path):
     assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr
 
 
+def test_unreachable_target_is_input_error_exit_2(tiny_model, tmp_path, monkeypatch):
+    """TimingNotMet was a plain ValueError: a target no pipeline reaches (the user's --clock-mhz) only
+    came out as exit 2 because the CLI took any ValueError for bad input. It is an InputError now
+    (the search itself is replaced here: the real one, tests below, needs nextpnr)."""
+    import pwas_hdl.flow.timing_closure as tc
+
+    assert issubclass(TimingNotMet, InputError)
+
+    def never(*args, **kwargs):
+        raise TimingNotMet("no pipeline reaches 1e+09 MHz on LFE5U-45F: the best measured fmax is 222.8 MHz; "
+                           "choose a target of at most 222 MHz", {"met": False})
+
+    monkeypatch.setattr(tc, "close_timing", never)
+    out = tmp_path / "never"
+    res = runner.invoke(app, ["generate", str(tiny_model), "-o", str(out), "--clock-mhz", "1e9"])
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "at most 222 MHz" in errors[0] and "Traceback" not in res.output
+    assert not out.exists()
+
+
 def test_bad_requests_fail_before_place_and_route(tiny_model, tmp_path):
     with pytest.raises(ValueError, match="either a pipeline or a target"):
         build_design(tiny_model, pipeline="min", target_mhz=50)
@@ -178,4 +200,4 @@ def test_impossible_target_is_a_clear_error(tiny_model, tmp_path):
     measured = [c for c in rec["candidates"] if c["measured"]]
     assert measured and rec["candidates"][-1]["measured"]  # the deepest was tried
     assert rec["best_fmax_mhz"] == max(c["fmax_mhz"] for c in measured)
-    assert isinstance(ei.value, ValueError)
+    assert isinstance(ei.value, InputError)

@@ -353,7 +353,7 @@ def build_design(
         Choose the pipeline by timing closure instead (:mod:`pwas_hdl.flow.timing_closure`): the
         shallowest candidate whose fmax, measured by place and route on ``fpga_target``, reaches
         ``target_mhz``; recorded in the manifest (``timing``) and the report. Not with ``pipeline``.
-        Raises :class:`~pwas_hdl.flow.timing_closure.TimingNotMet` (a ``ValueError``) when even the
+        Raises :class:`~pwas_hdl.flow.timing_closure.TimingNotMet` (an ``InputError``) when even the
         deepest pipeline misses the target. Takes one place-and-route run per candidate tried.
     fpga_target : {"ecp5", "ice40"}
         FPGA family of the timing closure (devices: ECP5 LFE5U-45F, iCE40 HX8K) and of ``goal``

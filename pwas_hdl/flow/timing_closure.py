@@ -21,7 +21,8 @@ if its extra registers split the delay evenly (``fmax * L_next / L_measured >= t
 ``prescreen=False`` simply the next one); when a candidate reaches the target after such a jump, the
 skipped shallower candidates are measured downwards until one misses, so the answer is measured and
 is the shallowest passing candidate above the last miss. When even the deepest misses, a
-``TimingNotMet`` error (a ``ValueError``) says the best fmax reached.
+``TimingNotMet`` error (an :class:`~pwas_hdl.errors.InputError`: the target is the user's choice)
+says the best fmax reached.
 """
 
 from __future__ import annotations
@@ -56,8 +57,9 @@ FPGA_TARGETS = ("ecp5", "ice40")
 Progress = Callable[[str], None]
 
 
-class TimingNotMet(ValueError):
-    """Even the deepest pipeline misses the target clock (the message gives the best fmax)."""
+class TimingNotMet(InputError):
+    """Even the deepest pipeline misses the target clock (the message gives the best fmax and the
+    largest target to ask for): bad input (``--clock-mhz``), exit 2, nothing written."""
 
     def __init__(self, message: str, record: dict[str, Any]):
         super().__init__(message)
