@@ -129,6 +129,17 @@ def test_model_file_round_trip_of_a_dynamical_sensor(rng, tmp_path):
     bad.write_text(json.dumps(d))
     with pytest.raises(InputError, match="initial_state.values"):
         PWASVirtualSensor.load(bad)
+    # a per-target statistic of recurrence.fit without the target: refused on load (it was a KeyError
+    # when info / generate wrote the model back: exit 3, "a bug")
+    from pwas_hdl.cli import main
+
+    for key in ("series_parallel_rmse", "closed_loop_rmse", "series_parallel_closed_loop_rmse"):
+        d = json.loads(path.read_text())
+        d["recurrence"]["fit"][key] = {}
+        bad.write_text(json.dumps(d))
+        with pytest.raises(InputError, match=rf"recurrence.fit.{key} has the keys \[\], signals.targets are \['z'\]"):
+            PWASVirtualSensor.load(bad)
+        assert main(["info", str(bad)]) == 2
 
 
 def test_dynamical_sensor_bad_parameters(rng):

@@ -329,6 +329,10 @@ def _consistency_errors(d: dict[str, Any]) -> list[str]:
     for t, w in d["weights"].items():
         if len(w) != n_vertices:
             errs.append(f"weights.{t} has {len(w)} values, the grid has N = {n_vertices} vertices")
+    rec_fit = d["recurrence"]["fit"] if "recurrence" in d else {}
+    for k in ("series_parallel_rmse", "closed_loop_rmse", "series_parallel_closed_loop_rmse"):
+        if k in rec_fit and list(rec_fit[k]) != tgts:
+            errs.append(f"recurrence.fit.{k} has the keys {list(rec_fit[k])}, signals.targets are {tgts}")
     if "map_fit" in d and any(list(d["map_fit"][k]) != tgts for k in ("max_error", "rms_error")):
         errs.append(f"map_fit.max_error / map_fit.rms_error must have the keys {tgts}")
     if "classifier" in d and len(d["classifier"]["classes"]) != len(tgts):
