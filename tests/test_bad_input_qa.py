@@ -195,6 +195,10 @@ def _port(m: dict, role: str) -> dict:
     (["generate", "{model}", "-o", "hw", "--weight-bits", "100000"], "--weight-bits (weight_bits) = 100000: need", "exceeds"),
     (["generate", "{model}", "-o", "hw", "--output-bits", "0"], "--output-bits (output_bits) = 0: need", None),
     (["generate", "{model}", "-o", "hw", "--weight-frac", "-100"], "use a larger --weight-frac (--weight-frac", None),
+    # the message named only --output-frac (= 1001), an option the user had not given
+    (["generate", "{model}", "-o", "hw", "--weight-frac", "1000"],
+     "--weight-frac (weight_frac) = 1000 gives the default --output-frac (output_frac) = 1001, out of the supported range",
+     None),
 ])
 def test_error_texts_name_the_cli_options(in_tmp, lorenz_tiny, args, words, api_words):
     """Messages said 'give one of goal (--goal), pipeline (--pipeline) or target_mhz (--clock-mhz)',

@@ -303,6 +303,11 @@ class FixedPointModel:
         fo = int(output_frac) if output_frac is not None else default_output_frac(fw, self.F)
         for nm, v in (("weight_frac", fw), ("output_frac", fo)):
             if abs(v) > _MAX_ABS_FRAC:  # before the shifts below (1 << 10**20 never ends)
+                if nm == "output_frac" and output_frac is None:  # the default, from the weight fraction bits
+                    raise InputError(
+                        f"{option_text('weight_frac')} = {fw} gives the default {option_text('output_frac')} = {v}, out of "
+                        f"the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]; use a smaller --weight-frac or give "
+                        "--output-frac")
                 raise InputError(f"{option_text(nm)} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
         sh = self.F + fw - fo
         if sh < 0:
