@@ -14,6 +14,7 @@ import pytest
 from helpers.cli import CliRunner
 
 from pwas_hdl.cli import app
+from pwas_hdl.errors import InputError
 from pwas_hdl.flow.toolchain import tool_env, verilator_bin_dir, which
 from pwas_hdl.verify.simulation import sim_module
 from pwas_hdl.verify.testbench import export_testbench
@@ -181,6 +182,9 @@ def test_export_cli_and_bad_input(folders, tmp_path):
         ([str(folders / SENSOR.name), "--samples", "0"], "--samples"),
         ([str(folders / SENSOR.name), "--samples", "2000000"], "limit"),
         ([str(folders / SENSOR.name), "--stall", "1.5"], "--stall"),
+        # numpy's generators refuse a negative seed: a bare ValueError before (exit 3 without the CLI's
+        # catch-all for ValueError)
+        ([str(folders / SENSOR.name), "--seed", "-1", "-o", str(tmp_path / "never")], "--seed must be an integer >= 0, got -1"),
         # rounds to 256/256 in the testbench's steps: no input would ever be offered
         ([str(folders / SENSOR.name), "--stall", "0.999", "-o", str(tmp_path / "never")], "--stall 0.999"),
         ([str(folders / SENSOR.name), "-o", str(tmp_path / "mine")], "not written by export-testbench"),
@@ -189,6 +193,9 @@ def test_export_cli_and_bad_input(folders, tmp_path):
         assert r.exit_code == 2, (args, r.output)
         assert "error:" in r.output and msg in r.output and "Traceback" not in r.output, r.output
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+    assert not (tmp_path / "never").exists()
+    with pytest.raises(InputError, match="--seed"):
+        export_testbench(folders / SENSOR.name, tmp_path / "never", seed=-1)
     assert not (tmp_path / "never").exists()
 
 

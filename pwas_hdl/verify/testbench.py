@@ -80,7 +80,7 @@ def export_testbench(
     samples : int
         Input transfers of the stimulus (``1 <= samples <= MAX_SAMPLES``; plus the corner cases).
     seed : int
-        Seed of the stimulus and of the testbench's stall pattern.
+        Seed of the stimulus and of the testbench's stall pattern (an integer ``>= 0``).
     stall : float
         Probability of a bubble on the input and of backpressure on the output per cycle in
         passes 1-3 (``0 <= stall < 1``, rounded to multiples of 1/256: at most 255/256). The
@@ -96,6 +96,8 @@ def export_testbench(
         raise InputError(f"--samples must be an integer >= 1, got {samples!r}")
     if samples > MAX_SAMPLES:
         raise ResourceLimit(f"--samples {samples} is more than the limit of {MAX_SAMPLES} vectors an exported testbench holds")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:  # numpy's generators take no negative seed
+        raise InputError(f"--seed must be an integer >= 0, got {seed!r}")
     if not 0.0 <= float(stall) < 1.0:
         raise InputError(f"--stall must be in [0, 1), got {stall}")
     stall_256 = int(round(float(stall) * 256))  # the testbench draws its stalls in steps of 1/256
