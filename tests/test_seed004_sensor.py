@@ -87,6 +87,28 @@ def test_corrupt_front_end_block_is_refused(pv_data, tmp_path):
         with pytest.raises(InputError, match="front_end"):
             PWASVirtualSensor.from_dict(bad)
 
+    # edits that loaded and then failed inside predict / generate with IndexError (a bare number or a
+    # short list for a statistic), divided by a zero standard deviation, or carried NaN (null) in
+    # leaf_rho / lpv into generate's manifest (ValueError: not JSON compliant)
+    def set_norm(key, value):
+        return lambda b: b["normalization"].update({key: value})
+
+    for mutate, words in [
+        (set_norm("y_mean", -1.0), "front_end.normalization.y_mean must be a list of 1 number(s)"),
+        (set_norm("y_std", []), "front_end.normalization.y_std must be a list of 1 number(s)"),
+        (set_norm("y_std", [[]]), "front_end.normalization.y_std must be a list of 1 number(s)"),
+        (set_norm("u_std", [1.0]), "front_end.normalization.u_std must be a list of 2 number(s)"),
+        (set_norm("y_std", [0.0]), "front_end.normalization.y_std must hold positive standard deviations"),
+        (set_norm("u_std", [1.0, -2.0]), "front_end.normalization.u_std must hold positive standard deviations"),
+        (lambda b: b["leaf_rho"].__setitem__(0, None), "non-finite values in the observer-bank block"),
+        (lambda b: b["lpv"]["knots"].__setitem__(0, None), "non-finite values in the observer-bank block"),
+    ]:
+        bad = json.loads(json.dumps(d))
+        mutate(bad["front_end"])
+        with pytest.raises(InputError, match="front_end") as ei:
+            PWASVirtualSensor.from_dict(bad)
+        assert words in str(ei.value), (words, str(ei.value))
+
 
 @pytest.mark.slow
 def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):

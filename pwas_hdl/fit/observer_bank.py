@@ -721,10 +721,18 @@ class ObserverBankFrontEnd(BaseEstimator):
         obj.lpv_mae_ = float(d["lpv_mae"])
         lpv = d["lpv"]
         obj.lpv_ = LPVARXModel(np.array(lpv["knots"], dtype=float), np.array(lpv["coefs"], dtype=float).reshape(-1, n_g), obj.order, nu, obj.lpv_mae_)
-        for arr in (obj.u_mean_, obj.u_std_, obj.y_mean_, obj.y_std_, obj.models_, obj.gains_):
+        for arr in (obj.u_mean_, obj.u_std_, obj.y_mean_, obj.y_std_, obj.models_, obj.gains_, obj.leaf_rho_,
+                    obj.lpv_.knots, obj.lpv_.coefs):
             if not np.all(np.isfinite(arr)):
                 raise InputError("non-finite values in the observer-bank block; the model file is corrupt or was edited: fit the model again")
-        if obj.u_mean_.size != nu or obj.u_std_.size != nu or obj.y_mean_.size != 1:
-            raise InputError(f"normalisation sizes do not match the number of inputs ({nu} inputs, 1 output); the model file is corrupt "
-                             "or was edited: fit the model again")
+        # each statistic a list of one number per signal (a bare number, a nested list or a missing
+        # y_std entry failed later with IndexError), every standard deviation positive
+        for key, arr, size in (("u_mean", obj.u_mean_, nu), ("u_std", obj.u_std_, nu), ("y_mean", obj.y_mean_, 1),
+                               ("y_std", obj.y_std_, 1)):
+            if arr.shape != (size,):
+                raise InputError(f"front_end.normalization.{key} must be a list of {size} number(s) ({nu} inputs, 1 output), "
+                                 f"got {nrm[key]!r}; the model file is corrupt or was edited: fit the model again")
+            if key.endswith("std") and not np.all(arr > 0):
+                raise InputError(f"front_end.normalization.{key} must hold positive standard deviations, got {nrm[key]!r}; "
+                                 "the model file is corrupt or was edited: fit the model again")
         return obj
