@@ -152,6 +152,16 @@ def test_refusals(pv_data):
         ObserverBankSensorModel.from_sensor(s)
     with pytest.raises(InputError, match="stable"):
         l1_gain(np.array([[1.0]]), np.ones((1, 1)))
+    # an unstable observer (e.g. front_end.models / gains edited in the model file): its terms reached inf
+    # and l1_gain returned an infinite bound (generate then failed with OverflowError, exit 3)
+    with pytest.raises(InputError, match="not stable"):
+        l1_gain(np.array([[0.0, 1.0], [-1.5, 2.4]]), np.eye(2))
+    with pytest.raises(InputError, match="not stable"):
+        l1_gain(np.array([[np.nan]]), np.ones((1, 1)))
+    d = _sensor(pv_data, n_models=2).to_dict()
+    d["front_end"]["gains"][0][0] = 0.0
+    with pytest.raises(InputError, match="an observer of the bank is not stable"):
+        ObserverBankSensorModel.from_sensor(PWASVirtualSensor.from_dict(d))
 
 
 def test_bare_core_of_a_bank_sensor_is_refused_before_any_hardware(sensor_11b, tmp_path):

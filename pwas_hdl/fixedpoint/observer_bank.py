@@ -196,19 +196,29 @@ def l1_gain(a_cl: np.ndarray, b: np.ndarray, tol: float = 1e-13, max_steps: int 
     InputError
         The sum does not converge (an unstable or marginally stable observer).
     """
+    unstable = InputError("an observer of the bank is not stable (A - L C has a pole on or outside the unit circle); "
+                          "choose another gain (poles:R with R < 1, or kalman), or, for a model file edited by hand "
+                          "(front_end.models / gains), fit the model again")
+    # an unstable observer is refused before summing: its terms grow to inf, and once the sum is inf
+    # the stopping test below (term < tol * sum) passed and returned an infinite bound
+    if not np.all(np.isfinite(a_cl)):
+        raise unstable
+    rho = float(np.max(np.abs(np.linalg.eigvals(a_cl)))) if a_cl.size else 0.0
+    if not rho < 1:
+        raise unstable
     acc = np.zeros_like(b, dtype=float)
     term = np.array(b, dtype=float)
-    for _ in range(max_steps):
-        acc += np.abs(term)
-        if np.max(np.abs(term), initial=0.0) < tol * max(1.0, float(np.max(acc, initial=0.0))):
-            # geometric tail: bound the rest by the current term over (1 - rho)
-            rho = float(np.max(np.abs(np.linalg.eigvals(a_cl)))) if a_cl.size else 0.0
-            if rho < 1:
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(max_steps):
+            acc += np.abs(term)
+            if not np.all(np.isfinite(acc)):  # a stable but huge transient: no usable bound either
+                raise unstable
+            if np.max(np.abs(term), initial=0.0) < tol * max(1.0, float(np.max(acc, initial=0.0))):
+                # geometric tail: bound the rest by the current term over (1 - rho)
                 acc += np.abs(term) * (rho / (1 - rho) if rho > 0 else 0.0)
-            return acc
-        term = a_cl @ term
-    raise InputError("an observer of the bank is not stable (A - L C has a pole on or outside the unit circle); "
-                     "choose another gain (poles:R with R < 1, or kalman)")
+                return acc
+            term = a_cl @ term
+    raise unstable
 
 
 @dataclass(frozen=True)
