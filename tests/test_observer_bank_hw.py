@@ -305,3 +305,19 @@ def test_width_refusal_states_the_formats_it_tried(sensor_11b):
     assert "would need" in msg and "more than 62" in msg and "F_s = 40" in msg and "B_s = " in msg
     assert "input head room 8" in msg and f"at least the input fraction bits {default.input_frac}" in msg
     assert "--state-frac (state_frac)" in msg and "--input-headroom (input_headroom)" in msg
+
+
+def test_hdl_width_guards_are_internal_errors():
+    """The observer-bank HDL builders' width checks guard the formats' plan (which sizes every product for
+    its constants; no option or model-file edit reaches them): a failure is a bug (InternalError, exit 3),
+    not a plain ValueError that the CLI reported as bad input."""
+    from amaranth.hdl import Module, Signal, signed
+
+    from pwas_hdl.errors import InternalError
+    from pwas_hdl.hdl.observer_bank import const_product
+    from pwas_hdl.hdl.serial_observer_bank import var_product
+
+    with pytest.raises(InternalError, match="constant 1000 does not fit 2 bits"):
+        const_product(Module(), 1000, Signal(signed(4)), 6, "p")
+    with pytest.raises(InternalError, match="a 4 x 4-bit product does not fit 6 bits"):
+        var_product(Module(), Signal(signed(4)), Signal(signed(4)), 6, "p")

@@ -30,6 +30,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
+from pwas_hdl.errors import InternalError
 from pwas_hdl.fit.conjugate_gradients import pcg
 from pwas_hdl.fit.sparse_cholesky import OutsidePattern
 
@@ -81,7 +82,7 @@ def interpolation_1d(m: int) -> sparse.csr_array:
     scipy.sparse.csr_array, shape (m, m // 2 + 1), rows summing to 1
     """
     if m < 3:
-        raise ValueError(f"a 1-D level needs at least 3 vertices to coarsen, got {m}")
+        raise InternalError(f"a 1-D level needs at least 3 vertices to coarsen, got {m}")  # prolongation() skips them
     coarse = list(range(0, m, 2))
     if m % 2 == 0:
         coarse.append(m - 1)
@@ -361,7 +362,7 @@ class GridHierarchy:
         coarsest_max = COARSEST_MAX if coarsest_max is None else int(coarsest_max)
         self.shape = tuple(int(s) for s in shape)
         if gamma.shape[0] != int(np.prod(self.shape)):
-            raise ValueError(f"Gamma has {gamma.shape[0]} rows, the grid {int(np.prod(self.shape))} vertices")
+            raise InternalError(f"Gamma has {gamma.shape[0]} rows, the grid {int(np.prod(self.shape))} vertices")
         self.orders: list[np.ndarray] = [interleaved_order(int(np.prod(self.shape)))]
         self.p: list[sparse.csr_matrix] = []
         self.r: list[sparse.csr_matrix] = []
@@ -941,7 +942,7 @@ class DataBlockSmoother:
         self.n = m.shape[0]
         self.gamma_diag = np.asarray(gamma_diag, dtype=float).reshape(-1)
         if self.gamma_diag.shape != (self.n,) or not np.all(self.gamma_diag > 0):
-            raise ValueError("gamma_diag must be the positive diagonal of Gamma, one entry per vertex")
+            raise InternalError("gamma_diag must be the positive diagonal of Gamma, one entry per vertex")
         self.touched = np.flatnonzero(m.diagonal() > 0)
         self._m_t = _csr(m[self.touched][:, self.touched])
         g_t = sparse.diags(self.gamma_diag[self.touched])

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from pwas_hdl.errors import InternalError
+
 __all__ = ["cholmod_available", "import_cholmod", "openblas_coretype", "PatternCholesky", "NotPositiveDefinite", "OutsidePattern",
            "grid_nested_dissection", "ND_LEAF", "FactorCounts"]
 
@@ -310,7 +312,7 @@ class PatternCholesky:
         else:
             perm = np.asarray(perm, dtype=np.int_)
             if perm.shape != (self.n,) or not np.array_equal(np.sort(perm), np.arange(self.n)):
-                raise ValueError("perm must be a permutation of 0 .. N - 1")
+                raise InternalError("perm must be a permutation of 0 .. N - 1")  # our own ordering (grid_nested_dissection)
             self._factor = cholmod.symbolic(self._a, p=matrix(perm))
         self.factorizations = 0
 

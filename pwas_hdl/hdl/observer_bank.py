@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 
+from pwas_hdl.errors import InternalError
 from pwas_hdl.hdl._lintsafe import sink_unused
 
 if TYPE_CHECKING:
@@ -120,12 +121,13 @@ def const_product(m: Module, k: int, x: Value, width: int, name: str) -> Signal:
 
     Raises
     ------
-    ValueError
-        ``k`` does not fit ``width - len(x)`` signed bits.
+    InternalError
+        ``k`` does not fit ``width - len(x)`` signed bits (the formats' plan sized ``width`` for
+        every constant: a bug, not bad input).
     """
     kw = width - len(x)
     if kw < _cbits(k):
-        raise ValueError(f"constant {k} does not fit {kw} bits (product {name})")
+        raise InternalError(f"constant {k} does not fit {kw} bits (product {name})")
     p = Signal(signed(width), name=name)
     m.d.comb += p.eq(Const(k, signed(kw)) * x.as_signed())
     return p
@@ -185,8 +187,9 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
 
     Raises
     ------
-    InputError
-        A coefficient does not fit its product's constant width (:func:`const_product`).
+    InternalError
+        A coefficient does not fit its product's constant width (:func:`const_product`; the
+        formats were planned for every coefficient).
     """
     fmt = bank.formats
     n, mo, nu = bank.n_models, bank.order, bank.nu

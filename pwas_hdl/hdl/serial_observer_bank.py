@@ -237,11 +237,11 @@ def var_product(m: Module, coef: Value, x: Value, width: int, name: str) -> Sign
 
     Raises
     ------
-    ValueError
-        ``len(coef) + len(x) > width``.
+    InternalError
+        ``len(coef) + len(x) > width`` (the plan sizes every product: a bug, not bad input).
     """
     if len(coef) + len(x) > width:
-        raise ValueError(f"a {len(coef)} x {len(x)}-bit product does not fit {width} bits (product {name})")
+        raise InternalError(f"a {len(coef)} x {len(x)}-bit product does not fit {width} bits (product {name})")
     p = Signal(signed(width), name=name)
     m.d.comb += p.eq(coef.as_signed() * x.as_signed())
     return p
@@ -251,7 +251,7 @@ def _table(m: Module, sel, values: list[int], name: str, width: int | None = Non
     """Signed table ``values[sel]`` as a signed net of the values' width or ``width`` (a Const when all equal)."""
     w = width or max(_cbits(int(v)) for v in values)
     if max(_cbits(int(v)) for v in values) > w:
-        raise ValueError(f"a constant of table {name} does not fit {w} bits")
+        raise InternalError(f"a constant of table {name} does not fit {w} bits")
     t = rom(m, sel, [int(v) % (1 << w) for v in values], w, name)
     if isinstance(t, int):
         return Const(int(values[0]), signed(w))
@@ -471,9 +471,9 @@ def build_serial_front_end(m: Module, bank: FixedPointObserverBank, plan: Serial
 
     Raises
     ------
-    ValueError
+    InternalError
         ``buffer_load`` given for a single-buffered plan or missing for a double-buffered one,
-        or an observer constant wider than the accumulator.
+        or an observer constant wider than the accumulator (the plan sized it: a bug).
     """
     fmt = bank.formats
     mo, nu = bank.order, bank.nu
@@ -587,7 +587,7 @@ def build_serial_front_end(m: Module, bank: FixedPointObserverBank, plan: Serial
         else:
             w = max(_cbits(v) for v in dh)
             if w > accw:
-                raise ValueError("observer constant wider than the accumulator")
+                raise InternalError("observer constant wider than the accumulator")
             dnet = _coef_reg(m, st, dh, f"{pre}_d", accw)  # registered at the step: stage 2's term
             acc = _sum(m, terms + [dnet], accw, f"{pre}_acc")
         sink_unused(m, acc[:fc], f"{pre}_acc_frac")
