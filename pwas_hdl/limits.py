@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 from typing import Iterable
 
-from pwas_hdl.errors import ResourceLimit
+from pwas_hdl.errors import InputError, ResourceLimit, option_text
 
 __all__ = [
     "MAX_VERTICES",
@@ -54,6 +54,7 @@ __all__ = [
     "MAX_MEMORY_WORDS",
     "MAX_NOISE",
     "check_limit",
+    "check_seed",
     "check_vertices",
     "check_weights",
 ]
@@ -127,6 +128,35 @@ def check_limit(what: str, value: int, limit: int, hint: str) -> int:
     if value > limit:
         raise ResourceLimit(f"{what} = {value} exceeds the limit of {limit}; {hint}")
     return value
+
+
+def check_seed(seed: int, param: str = "seed") -> int:
+    """Refuse a seed that numpy's random generators do not take (a negative one, a non-integer).
+
+    ``numpy.random.default_rng(-1)`` raises ``ValueError: expected non-negative integer``, which
+    names neither the option nor the fix.
+
+    Parameters
+    ----------
+    seed : int
+    param : str
+        The API parameter (and, as ``--seed``, the option) that gave it.
+
+    Returns
+    -------
+    int
+        ``seed``.
+
+    Raises
+    ------
+    InputError
+        ``seed`` is not an integer ``>= 0``.
+    """
+    import numbers
+
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise InputError(f"{option_text(param)} must be an integer >= 0, got {seed!r}")
+    return int(seed)
 
 
 def check_values(what: str, values: np.ndarray, hint: str) -> None:

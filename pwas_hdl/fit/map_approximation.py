@@ -28,7 +28,7 @@ import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid
-from pwas_hdl.limits import check_values
+from pwas_hdl.limits import check_seed, check_values
 
 __all__ = ["MapApproximation", "fit_map", "fit_map_samples", "map_errors", "static_sensor_from_map",
            "recurrent_sensor_from_map"]
@@ -163,6 +163,7 @@ def fit_map_samples(x: np.ndarray, fx: np.ndarray, partitions: int | Sequence[in
         raise InputError("the sample points have NaN or infinite values")
     if not (0.0 <= test_fraction <= 0.9):
         raise InputError(f"test_fraction must be in [0, 0.9], got {test_fraction!r}")
+    check_seed(seed)
     lo, hi = _box(box if box is not None else (x.min(axis=0), x.max(axis=0)))
     grid = Grid(lo, hi, partitions)
     idx = np.random.default_rng(seed).permutation(x.shape[0])

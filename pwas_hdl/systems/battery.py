@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pwas_hdl.errors import InputError, ResourceLimit
+from pwas_hdl.limits import check_seed
 from pwas_hdl.systems.lorenz import PlantData
 
 __all__ = ["SUBSTITUTE_COEFFS", "TS", "X0", "battery", "battery_current", "BatteryModel", "BatteryEKF", "make_battery_dataset"]
@@ -305,6 +306,7 @@ def make_battery_dataset(n_train: int, n_test: int, seed: int = 0, noise: float 
     """
     from pwas_hdl.systems.normalization import normalize_with_noise
 
+    check_seed(seed)
     ss = np.random.SeedSequence(seed)
     s_train, s_test, s_noise = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
     tr = battery(n_train, s_train)

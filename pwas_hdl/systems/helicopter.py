@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from pwas_hdl.errors import InputError
+from pwas_hdl.limits import check_seed
 from pwas_hdl.systems.lorenz import PlantData
 
 __all__ = ["helicopter", "HELICOPTER_PARAMS"]
@@ -73,6 +74,7 @@ def helicopter(n_samples: int, seed: int = 0, dt: float = 0.01, substeps: int = 
         raise InputError(f"n_samples must be an integer >= 1, got {n_samples!r}")
     if not (dt > 0 and substeps >= 1 and burn_in >= 0):
         raise InputError(f"need dt > 0, substeps >= 1 and burn_in >= 0, got dt={dt!r}, substeps={substeps!r}, burn_in={burn_in!r}")
+    check_seed(seed)
     prm = HELICOPTER_PARAMS
     rng = np.random.default_rng(seed)
     total = int(n_samples) + int(burn_in)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pwas_hdl.errors import InputError
+from pwas_hdl.limits import check_seed
 
 __all__ = ["PlantData", "stack_runs", "lorenz", "LORENZ_PARAMS"]
 
@@ -143,6 +144,7 @@ def lorenz(n_samples: int, seed: int = 0, burn_in: int = 1000, x0: np.ndarray | 
     """
     if n_samples < 1:
         raise InputError(f"n_samples must be >= 1, got {n_samples}")
+    check_seed(seed)
     prm = LORENZ_PARAMS
     tau, s, beta, rho = prm["tau"], prm["s"], prm["beta"], prm["rho"]
     rng = np.random.default_rng(seed)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from pwas_hdl.errors import InputError
+from pwas_hdl.limits import check_seed
 from pwas_hdl.systems.lorenz import PlantData
 from pwas_hdl.systems.normalization import Normalization, normalize_with_noise
 
@@ -197,6 +198,7 @@ def make_pv_dataset(
         Normalised with the training statistics; ``z_true`` noise-free (normalised).
     norm : Normalization
     """
+    check_seed(seed)
     ss = np.random.SeedSequence(seed)
     s_train, s_test, s_noise = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
     if system == "pv-benchmark":
