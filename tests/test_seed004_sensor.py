@@ -98,6 +98,8 @@ def test_corrupt_front_end_block_is_refused(pv_data, tmp_path):
         (set_norm("y_std", []), "front_end.normalization.y_std must be a list of 1 number(s)"),
         (set_norm("y_std", [[]]), "front_end.normalization.y_std must be a list of 1 number(s)"),
         (set_norm("u_std", [1.0]), "front_end.normalization.u_std must be a list of 2 number(s)"),
+        (set_norm("y_std", [True]), "front_end.normalization.y_std must be a list of 1 number(s)"),
+        (set_norm("u_mean", [0.5, False]), "front_end.normalization.u_mean must be a list of 2 number(s)"),
         (set_norm("y_std", [0.0]), "front_end.normalization.y_std must hold positive standard deviations"),
         (set_norm("u_std", [1.0, -2.0]), "front_end.normalization.u_std must hold positive standard deviations"),
         (lambda b: b["leaf_rho"].__setitem__(0, None), "non-finite values in the observer-bank block"),

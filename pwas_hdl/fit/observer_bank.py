@@ -729,7 +729,7 @@ class ObserverBankFrontEnd(BaseEstimator):
         # y_std entry failed later with IndexError), every standard deviation positive
         for key, arr, size in (("u_mean", obj.u_mean_, nu), ("u_std", obj.u_std_, nu), ("y_mean", obj.y_mean_, 1),
                                ("y_std", obj.y_std_, 1)):
-            if arr.shape != (size,):
+            if arr.shape != (size,) or any(isinstance(v, bool) for v in nrm[key]):  # true would read as 1.0
                 raise InputError(f"front_end.normalization.{key} must be a list of {size} number(s) ({nu} inputs, 1 output), "
                                  f"got {nrm[key]!r}; the model file is corrupt or was edited: fit the model again")
             if key.endswith("std") and not np.all(arr > 0):
