@@ -184,10 +184,10 @@ def label_column(labels: np.ndarray, classes: Sequence[float]) -> np.ndarray:
 def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -> dict:
     """Accuracy and per-class F1: ``{"accuracy": a, "f1": [f1 of each class in order]}``.
 
-    Computed here by label equality (as scikit-learn's ``accuracy_score`` and ``f1_score(labels=classes,
-    average=None, zero_division=0)`` on integer labels), for any labels: scikit-learn refuses a label
-    column with a non-integral value (``0.5``, or ``1e20``, which overflows its integer check) as
-    "continuous", and ``fit --classify`` accepts any finite labels.
+    scikit-learn's ``accuracy_score`` and ``f1_score(labels=classes, average=None, zero_division=0)``
+    on the labels' indices in their sorted union: scikit-learn refuses a label column with a
+    non-integral value (``0.5``, or ``1e20``, which overflows its integer check) as "continuous",
+    and ``fit --classify`` accepts any finite labels.
 
     Parameters
     ----------
@@ -206,10 +206,10 @@ def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -
     p = np.asarray(pred, dtype=float).reshape(-1)
     if t.shape != p.shape or t.size == 0:
         raise InternalError(f"class_scores: {t.size} true and {p.size} decided labels (same non-zero number expected)")
-    f1 = []
-    for c in classes:
-        is_t, is_p = t == float(c), p == float(c)
-        tp = int(np.count_nonzero(is_t & is_p))
-        denom = int(np.count_nonzero(is_t)) + int(np.count_nonzero(is_p))  # 2 tp + fp + fn
-        f1.append(2.0 * tp / denom if denom else 0.0)
-    return {"accuracy": float(np.mean(t == p)), "f1": f1}
+    from sklearn.metrics import accuracy_score, f1_score
+
+    cls = np.asarray([float(c) for c in classes])
+    union = np.unique(np.concatenate([t, p, cls]))  # equal labels, equal indices
+    ti, pi, ci = (np.searchsorted(union, v) for v in (t, p, cls))
+    f1 = f1_score(ti, pi, labels=ci, average=None, zero_division=0)
+    return {"accuracy": float(accuracy_score(ti, pi)), "f1": [float(v) for v in f1]}
