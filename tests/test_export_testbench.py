@@ -184,7 +184,7 @@ def test_export_cli_and_bad_input(folders, tmp_path):
         ([str(folders / SENSOR.name), "--stall", "1.5"], "--stall"),
         # numpy's generators refuse a negative seed: a bare ValueError before (exit 3 without the CLI's
         # catch-all for ValueError)
-        ([str(folders / SENSOR.name), "--seed", "-1", "-o", str(tmp_path / "never")], "--seed must be an integer >= 0, got -1"),
+        ([str(folders / SENSOR.name), "--seed", "-1", "-o", str(tmp_path / "never")], "--seed (seed) must be an integer >= 0, got -1"),
         # rounds to 256/256 in the testbench's steps: no input would ever be offered
         ([str(folders / SENSOR.name), "--stall", "0.999", "-o", str(tmp_path / "never")], "--stall 0.999"),
         ([str(folders / SENSOR.name), "-o", str(tmp_path / "mine")], "not written by export-testbench"),

@@ -42,7 +42,7 @@ def _refused(tmp_path, args, message):
     (["synth", "{hw}", "--seed", str(2**63)], "--seed (seed) must be an integer in 0..9223372036854775807"),
     (["simulate", "{hw}", "{data}", "-o", "{hw}/pwas_core.v"], "is also the input the design's verilog file"),
     (["simulate", "{hw}", "{data}", "-o", ""], "-o: the output path is empty"),
-    (["simulate", "{hw}", "{data}", "-o", "{tmp}/s.csv", "--seed", "-1"], "--seed must be an integer >= 0, got -1"),
+    (["simulate", "{hw}", "{data}", "-o", "{tmp}/s.csv", "--seed", "-1"], "--seed (seed) must be an integer >= 0, got -1"),
     (["generate", "{model}", "-o", "{tmp}/g", "--workers", "-1"], "--workers must be a non-negative integer"),
     (["generate", "{model}", "-o", "{tmp}/g", "--scheduler", ""], "--scheduler must be an address"),
     (["make-data", "lorenz", "-o", "{tmp}/l.csv", "--test-samples", "0"], "--samples and --test-samples must be >= 1"),

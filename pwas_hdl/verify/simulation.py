@@ -47,7 +47,7 @@ from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.reduction import tree_levels
 from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.io.atomic import logs_kept, make_temp_dir
-from pwas_hdl.limits import check_values
+from pwas_hdl.limits import check_seed, check_values
 
 __all__ = [
     "SIM_DIR",
@@ -1066,8 +1066,7 @@ def simulate_data(
     if not 0.0 <= stall <= MAX_STALL:
         raise InputError(f"--stall must be in [0, {MAX_STALL}] (the probability of a bubble / of backpressure per cycle; "
                          f"the benches' cycle limit covers stalls up to {MAX_STALL}), got {stall}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:  # a seed of the stalls, as numpy takes it
-        raise InputError(f"--seed must be an integer >= 0, got {seed!r}")
+    check_seed(seed)  # numpy's generators take no negative seed
     check_output_path(output, "-o")  # before its .json sibling is made from it
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
     sources = [] if isinstance(data, Table) else [(data, "DATA")]

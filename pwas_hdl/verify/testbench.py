@@ -33,6 +33,7 @@ import numpy as np
 from pwas_hdl import __version__
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.resources import templates_dir
+from pwas_hdl.limits import check_seed
 from pwas_hdl.verify.simulation import load_design, segment, sim_module
 
 __all__ = ["export_testbench", "MAX_SAMPLES"]
@@ -96,8 +97,7 @@ def export_testbench(
         raise InputError(f"--samples must be an integer >= 1, got {samples!r}")
     if samples > MAX_SAMPLES:
         raise ResourceLimit(f"--samples {samples} is more than the limit of {MAX_SAMPLES} vectors an exported testbench holds")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:  # numpy's generators take no negative seed
-        raise InputError(f"--seed must be an integer >= 0, got {seed!r}")
+    check_seed(seed)  # numpy's generators take no negative seed
     if not 0.0 <= float(stall) < 1.0:
         raise InputError(f"--stall must be in [0, 1), got {stall}")
     stall_256 = int(round(float(stall) * 256))  # the testbench draws its stalls in steps of 1/256
