@@ -96,3 +96,25 @@ def option_text(param: str) -> str:
     parameter in brackets for the API caller (who gets the same text).
     """
     return f"--{param.replace('_', '-')} ({param})"
+
+
+def choice_text(option: str, choices, value) -> str:
+    """The message for a value that is not one of the allowed ``choices`` of ``option``.
+
+    ``choice_text(option_text("memory"), ("banked", "replicated"), "dual")`` ->
+    ``"--memory (memory) must be one of banked, replicated, got 'dual'"``.
+    """
+    return f"{option} must be one of {', '.join(map(str, choices))}, got {value!r}"
+
+
+def fault_text(exc: BaseException) -> str:
+    """What a ``KeyError`` / ``IndexError`` / ``TypeError`` met while reading a file says, in the file's terms.
+
+    For messages about a corrupt or hand-edited file: the user needs the key that is missing, not the
+    name of a Python exception class.
+    """
+    if isinstance(exc, KeyError):
+        return f"the key {exc.args[0]!r} is missing" if exc.args else "a key is missing"
+    if isinstance(exc, IndexError):
+        return "a list has too few entries"
+    return f"a value has the wrong type ({exc})"

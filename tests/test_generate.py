@@ -100,8 +100,8 @@ def test_bad_options_write_nothing(lorenz_model, tmp_path):
     out = tmp_path / "x"
     for args, msg in [
         (["--weight-bits", "8"], "does not fit the weight format"),
-        (["--design", "gpu"], "design must be"),
-        (["--memory", "dual"], "memory must be"),
+        (["--design", "gpu"], "--design (design) must be core or sensor"),
+        (["--memory", "dual"], "--memory (memory) must be one of banked, replicated, corner"),
         (["--name", "9bad"], "identifier"),
         (["--input-bits", "2"], "too small"),
         # --fpga is checked without --clock-mhz / --goal too (it was silently ignored, exit 0)

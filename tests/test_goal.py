@@ -149,5 +149,5 @@ def test_cli_goal_latency_memory(capsys, tmp_path, lorenz_tiny):
     assert json.loads((tmp_path / "b" / "manifest.json").read_text())["generator"]["options"]["memory"] == "banked"
     code, _, err = _run(capsys, "generate", lorenz_tiny.model, "-o", tmp_path / "x", "--goal", "latency", "--memory", "fastest")
     lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and "memory must be" in lines[0], err
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and "--memory (memory) must be one of" in lines[0], err
     assert not (tmp_path / "x").exists()

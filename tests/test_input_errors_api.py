@@ -163,7 +163,7 @@ def test_fixed_point_model_options():
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 
     grid = _grid()
-    with pytest.raises(InputError, match=r"weight overflow policy must be 'error' or 'saturate', got 'wrap'"):
+    with pytest.raises(InputError, match=r"--overflow \(overflow\) must be one of error, saturate, got 'wrap'"):
         FixedPointModel(grid, np.zeros(grid.n_vertices), overflow="wrap")
     with pytest.raises(InputError, match=r"weights must have shape \(N, nz\) with N = 3"):
         FixedPointModel(grid, np.zeros(5))
@@ -238,7 +238,7 @@ def test_build_core_module_name_and_architecture():
     fxm = _fixed_point_model(1)
     with pytest.raises(InputError, match=r"module name '1core' is not a plain Verilog identifier"):
         build_core(fxm, name="1core")
-    with pytest.raises(InputError, match=r"architecture must be one of .*, got 'systolic'"):
+    with pytest.raises(InputError, match=r"--architecture \(architecture\) must be one of .*, got 'systolic'"):
         build_core(fxm, architecture="systolic")
 
 

@@ -94,12 +94,12 @@ def test_serial_core_ports_equal_the_parallel_core():
     ser, par = design_info(build_core(fxm, architecture="serial")), design_info(build_core(fxm))
     assert ser["ports"] == par["ports"] and ser["payload"] == par["payload"]
     assert ser["ii"] == fxm.n + 1 and par["ii"] == 1
-    with pytest.raises(ValueError, match="architecture must be one of parallel, serial"):
+    with pytest.raises(ValueError, match=r"--architecture \(architecture\) must be one of parallel, serial"):
         build_core(fxm, architecture="tiny")
 
 
 @pytest.mark.parametrize("args, msg", [
-    (["--architecture", "tiny"], "architecture must be one of parallel, serial"),
+    (["--architecture", "tiny"], "--architecture (architecture) must be one of parallel, serial"),
     (["--architecture", "serial", "--clock-mhz", "50"], "--architecture serial"),
     # --memory was ignored by the serial design (one memory of N words) while the manifest recorded it
     (["--architecture", "serial", "--memory", "replicated"], "--memory replicated does not apply to --architecture serial"),

@@ -29,7 +29,7 @@ import os
 from typing import TYPE_CHECKING, Any
 
 from pwas_hdl import __version__
-from pwas_hdl.errors import InputError, option_text
+from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.fit.estimator_file import SwitchedEstimatorConfig, estimator_text, is_estimator_file, read_estimator
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling
 
@@ -394,9 +394,9 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     if unknown:
         raise InputError(f"unknown option(s) {sorted(unknown)} for an estimator design; known: {', '.join(ESTIMATOR_OPTIONS)}")
     if ports not in ("axis", "amaranth"):
-        raise InputError(f"ports must be 'axis' or 'amaranth', got {ports!r}")
+        raise InputError(choice_text(option_text("ports"), ("axis", "amaranth"), ports))
     if architecture not in ESTIMATOR_ARCHITECTURES:
-        raise InputError(f"architecture (--architecture) must be one of {', '.join(ESTIMATOR_ARCHITECTURES)}, got {architecture!r}")
+        raise InputError(choice_text(option_text("architecture"), ESTIMATOR_ARCHITECTURES, architecture))
     if bank_lanes is not None and architecture != "serial":
         raise InputError("--bank-lanes applies to --architecture serial only")
     if name is not None:

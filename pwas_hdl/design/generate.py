@@ -38,7 +38,7 @@ import numpy as np
 
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
-from pwas_hdl.errors import InputError, option_text
+from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.design.names import check_module_name, check_signal_names
 from pwas_hdl.io.atomic import check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
@@ -408,13 +408,13 @@ def build_design(
     from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 
     if design not in ("core", "sensor", "recurrent"):
-        raise InputError(f"design must be 'core' or 'sensor' (of a recurrent model: the recurrent top), got {design!r}")
+        raise InputError(f"{option_text('design')} must be core or sensor (or, of a recurrent model, recurrent), got {design!r}")
     if memory is not None and memory not in ("banked", "replicated", "corner"):
-        raise InputError(f"memory must be 'banked', 'replicated' or 'corner', got {memory!r}")
+        raise InputError(choice_text(option_text("memory"), ("banked", "replicated", "corner"), memory))
     from pwas_hdl.hdl.serial_core import ARCHITECTURES
 
     if architecture not in ARCHITECTURES:
-        raise InputError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+        raise InputError(choice_text(option_text("architecture"), ARCHITECTURES, architecture))
     if architecture == "serial" and target_mhz is not None:
         raise InputError("the timing closure (--clock-mhz) chooses among parallel pipelines; "
                          "give --pipeline with --architecture serial")
@@ -489,7 +489,7 @@ def build_design(
         if pipeline is not None:
             raise InputError("give either a pipeline or a target clock (target_mhz / --clock-mhz), not both")
         if memory_init not in ("inline", "readmemh"):
-            raise InputError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+            raise InputError(choice_text(option_text("memory_init"), ("inline", "readmemh"), memory_init))
 
         def candidate(pipe: Pipeline) -> GeneratedDesign:
             return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline",

@@ -80,7 +80,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pwas_hdl.errors import InputError, option_text
+from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.fixedpoint.formats import _MAX_ABS_FRAC
 from pwas_hdl.fixedpoint.formats import (
     FixedFormat,
@@ -267,9 +267,9 @@ class FixedPointModel:
                              "(pwas_hdl.fixedpoint.warp), not available in this command yet")
         w = weight_matrix(weights, grid.n_vertices)
         if overflow not in ("error", "saturate"):
-            raise InputError(f"weight overflow policy must be 'error' or 'saturate', got {overflow!r}")
+            raise InputError(choice_text(option_text("overflow"), ("error", "saturate"), overflow))
         if rounding not in ("half_up", "truncate"):
-            raise InputError(f"rounding must be 'half_up' or 'truncate', got {rounding!r}")
+            raise InputError(choice_text(option_text("rounding"), ("half_up", "truncate"), rounding))
         for nm, v in (("weight_bits", weight_bits), ("weight_frac", weight_frac), ("output_bits", output_bits), ("output_frac", output_frac)):
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool)):
                 raise InputError(f"{option_text(nm)} must be an integer or None, got {v!r}")

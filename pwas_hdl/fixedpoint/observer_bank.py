@@ -856,7 +856,8 @@ def observer_bank_model(sensor: PWASVirtualSensor, memory: str = "banked", **for
     given = {k: v for k, v in formats.items() if v is not None}
     bank = {k: given.pop(k) for k in BANK_FORMAT_OPTIONS if k in given}
     if "input_scale" in given and given["input_scale"] != "pow2":
-        raise InputError("observer-bank sensors use the pow2 input scale of the core (their feature codes are scaled already)")
+        raise InputError(f"{option_text('input_scale')} {given['input_scale']!r} does not apply: observer-bank sensors use "
+                         "the pow2 input scale of the core (their feature codes are scaled already); leave --input-scale out")
     try:
         if getattr(sensor, "lags_", None) is not None:  # u/y taps beside the features (pwas_hdl.fixedpoint.bank_taps)
             from pwas_hdl.fixedpoint.bank_taps import TappedObserverBankSensorModel

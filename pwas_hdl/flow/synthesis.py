@@ -242,7 +242,7 @@ def synthesize(
         Yosys or nextpnr failed (``log`` names the log file, ``tail`` holds its end).
     """
     if target not in TARGETS:
-        raise InputError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
+        raise _unknown_target(target)
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_PLACER_SEED:
         raise InputError(f"--seed (seed) must be an integer in 0..{MAX_PLACER_SEED} (nextpnr's placer seed), got {seed!r}")
     for opt, val in (("--device (device)", device), ("--package (package)", package)):
@@ -511,7 +511,7 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
         if dev.startswith("ice40"):
             dev = dev[5:]
         if dev not in _ICE40:
-            raise InputError(f"unknown iCE40 device {device!r}; nextpnr-ice40 knows {', '.join(_ICE40)}")
+            raise InputError(f"unknown iCE40 device {device!r} (--device); nextpnr-ice40 knows {', '.join(_ICE40)}")
         default_pkg, family, dsp = _ICE40[dev]
         pkg = (package or default_pkg).strip().lower()
         if pkg not in _ICE40_PACKAGES[dev]:
@@ -519,7 +519,7 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
                              f"knows {', '.join(_ICE40_PACKAGES[dev])} (default {default_pkg})")
         return dev, pkg, f"iCE40{dev.upper()}-{pkg.upper()}", family, dsp
     if dev not in _ECP5:
-        raise InputError(f"unknown ECP5 device {device!r}; give it as nextpnr-ecp5 names it: {', '.join(_ECP5)}")
+        raise InputError(f"unknown ECP5 device {device!r} (--device); give it as nextpnr-ecp5 names it: {', '.join(_ECP5)}")
     pkg = (package or _ECP5_PACKAGE).strip().upper()
     kind, size = (dev.rsplit("-", 1) if "-" in dev else ("u", dev))
     if pkg not in _ECP5_PACKAGES[size]:
@@ -529,11 +529,16 @@ def _resolve_device(target: str, device: str | None, package: str | None, freq_m
     return dev, pkg, f"{prefix}-{size[:-1]}F-6{pkg}", None, True
 
 
+def _unknown_target(target: object) -> InputError:
+    """The error for a synthesis target (``--fpga``) that is not one of :data:`TARGETS`."""
+    return InputError(f"unknown synthesis target {target!r} (--fpga); choose one of {', '.join(TARGETS)}")
+
+
 def check_device(target: str, device: str | None) -> None:
     """``InputError`` unless ``device`` is a part of ``target`` that :func:`synthesize` takes (for
     callers that synthesise later, e.g. ``explore --fpga ecp5 --device D``)."""
     if target not in TARGETS:
-        raise InputError(f"unknown synthesis target {target!r}; choose one of {', '.join(TARGETS)}")
+        raise _unknown_target(target)
     _resolve_device(target, device, None, None)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING, Any
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.emit import port_list, port_names
 from pwas_hdl.hdl.params import CoreParams, Pipeline
@@ -93,7 +93,7 @@ def _make_core(params: CoreParams, memory: str, pipeline, architecture: str) -> 
     from pwas_hdl.hdl.serial_core import ARCHITECTURES, SerialPWASCore
 
     if architecture not in ARCHITECTURES:
-        raise InputError(f"architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+        raise InputError(choice_text(option_text("architecture"), ARCHITECTURES, architecture))
     if architecture == "serial":
         return SerialPWASCore(params, pipeline=pipeline)
     return PWASCore(params, memory=memory, pipeline=pipeline)

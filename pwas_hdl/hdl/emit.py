@@ -23,7 +23,7 @@ import re
 
 from amaranth.lib import wiring
 
-from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl.weight_rom import RomEmission, splice_roms
 from pwas_hdl.hdl.yosys_convert import component_verilog_roms
 
@@ -173,7 +173,7 @@ def emit_verilog(
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
         raise InputError(f"module name {name!r} is not a plain Verilog identifier")
     if memory_init not in ("inline", "readmemh"):
-        raise InputError(f"memory_init must be 'inline' or 'readmemh', got {memory_init!r}")
+        raise InputError(choice_text(option_text("memory_init"), ("inline", "readmemh"), memory_init))
     if memory_init == "readmemh" and not re.fullmatch(r"[A-Za-z0-9_.-]+", hex_prefix):
         raise InputError(f"hex_prefix {hex_prefix!r} must be a plain file-name prefix")
     _check_naming(ports)

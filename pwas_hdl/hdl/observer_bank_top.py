@@ -27,7 +27,7 @@ from amaranth.hdl import Cat, Module, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.observer_bank import build_observer_bank
@@ -370,7 +370,7 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
         An unknown ``architecture``, or what the core refuses.
     """
     if architecture not in ("parallel", "serial"):
-        raise InputError(f"architecture must be 'parallel' or 'serial', got {architecture!r}")
+        raise InputError(choice_text(option_text("architecture"), ("parallel", "serial"), architecture))
     top.architecture = architecture
     if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
         from pwas_hdl.hdl.serial_core import SerialPWASCore

@@ -413,7 +413,7 @@ class Pipeline:
                 return PIPELINE_PRESETS[value]
             except KeyError:
                 raise InputError(
-                    f"unknown pipeline preset {value!r}; choose one of {', '.join(PIPELINE_PRESETS)}"
+                    f"unknown pipeline preset {value!r} (--pipeline); choose one of {', '.join(PIPELINE_PRESETS)}"
                 ) from None
         raise TypeError(f"pipeline must be a Pipeline, a preset name, a dict of its options or None, not {value!r}")
 
@@ -531,7 +531,7 @@ def goal_preset(goal: str, fpga: str | None = None) -> str:
         ``goal`` is not one of :data:`GOALS`, or ``fpga`` is not ``ecp5`` / ``ice40``.
     """
     if goal not in GOALS:
-        raise InputError(f"unknown goal {goal!r}; choose one of {', '.join(GOALS)}")
+        raise InputError(f"unknown goal {goal!r} (--goal); choose one of {', '.join(GOALS)}")
     if fpga is not None and fpga not in ("ecp5", "ice40"):
         raise InputError(f"unknown FPGA family {fpga!r} for the goal; choose ecp5 or ice40")
     return GOALS_BY_FPGA.get(fpga or "", {}).get(goal, GOALS[goal])
