@@ -193,13 +193,13 @@ def test_partitions_wrong_count():
 
 @pytest.mark.parametrize("gamma", [0.999, 0.0, -1.0, float("nan"), float("inf"), "2"])
 def test_gamma_below_one(gamma, good_data):
-    with pytest.raises(ValueError, match="gamma must be a number >= 1"):
+    with pytest.raises(ValueError, match=r"--gamma \(gamma\) must be a number >= 1"):
         PWASVirtualSensor(mu=1, my=1, gamma=gamma, sigma=1.0).fit(*good_data)
 
 
 @pytest.mark.parametrize("sigma", [0.0, -1e-3, float("nan"), float("inf")])
 def test_sigma_not_positive(sigma, good_data):
-    with pytest.raises(ValueError, match="sigma must be a positive"):
+    with pytest.raises(ValueError, match=r"--sigma \(sigma\) must be a positive"):
         PWASVirtualSensor(mu=1, my=1, sigma=sigma).fit(*good_data)
     grid = Grid([0.0], [1.0], 2)
     h = grid.basis_matrix(np.array([[0.1], [0.6]]))
@@ -220,7 +220,7 @@ def test_cv_folds(good_data):
 
 @pytest.mark.parametrize("order", [2, -1, "1"])
 def test_tikhonov_order_other_than_0_or_1(order, good_data):
-    with pytest.raises(ValueError, match="tikhonov_order must be 0 or 1"):
+    with pytest.raises(ValueError, match=r"--tikhonov \(tikhonov_order\) must be 0 \(Gamma = I\) or 1"):
         PWASVirtualSensor(mu=1, my=1, sigma=1.0, tikhonov_order=order).fit(*good_data)
     with pytest.raises(ValueError, match="Tikhonov order must be 0 or 1"):
         tikhonov_matrix(Grid([0.0], [1.0], 2), order)
@@ -240,7 +240,7 @@ def test_failed_fit_leaves_earlier_fit_when_parameters_are_bad(good_data):
     s = PWASVirtualSensor(mu=1, my=1, partitions=2, sigma=1.0).fit(*good_data)
     w = s.weights_.copy()
     s.sigma = -1.0
-    with pytest.raises(ValueError, match="sigma must be a positive"):
+    with pytest.raises(ValueError, match=r"--sigma \(sigma\) must be a positive"):
         s.fit(*good_data)
     np.testing.assert_array_equal(s.weights_, w)
 
@@ -417,5 +417,5 @@ def test_model_version_must_be_the_integer_2(tmp_path, good_data, version):
 
 def test_sigma_of_the_wrong_type_is_a_value_error(good_data):
     u, y, z = good_data
-    with pytest.raises(ValueError, match="sigma must be a positive number"):
+    with pytest.raises(ValueError, match=r"--sigma \(sigma\) must be a positive number"):
         PWASVirtualSensor(mu=1, my=1, sigma="1").fit(u, y, z)

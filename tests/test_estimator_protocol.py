@@ -67,8 +67,8 @@ def test_refit_forgets_the_fitted_attributes_of_the_previous_model(tmp_path):
 @pytest.mark.parametrize("params, data, match", [
     (dict(my=1.5), None, "my must be a non-negative integer"),        # was truncated to 1 silently
     (dict(mu=True, my=1), None, "mu must be a non-negative integer"),
-    (dict(gamma=0.5), None, "gamma must be a number >= 1"),
-    (dict(tikhonov_order=2), None, "tikhonov_order must be 0 or 1"),
+    (dict(gamma=0.5), None, r"--gamma \(gamma\) must be a number >= 1"),
+    (dict(tikhonov_order=2), None, r"--tikhonov \(tikhonov_order\) must be 0"),
     (dict(share_lag_domain="no"), None, "share_lag_domain must be True or False, got 'no'"),  # "no" read as True
     (dict(cv_shuffle=1), None, "cv_shuffle must be True or False, got 1"),
     (dict(), dict(z=None), r"z \(the measured targets"),             # was 'got 0 target trajectories for 1 ...'

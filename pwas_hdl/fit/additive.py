@@ -133,16 +133,17 @@ def parse_additive(spec: str | Sequence[Sequence[int]], dims: Sequence[tuple[str
     out: list[tuple[int, ...]] = []
     for k, idx in enumerate(raw):
         if not idx:
-            raise InputError(f"additive part {k} is empty; every part needs at least one regressor index")
+            raise InputError(f"--additive part {k} is empty; every part needs at least one regressor index")
         bad = [int(v) for v in idx if not 0 <= int(v) < n]
         if bad:
-            raise InputError(f"additive part {k}: regressor index {bad[0]} is out of range; the regressor has n = {n} dimensions (0..{n - 1})")
+            raise InputError(f"--additive part {k}: regressor index {bad[0]} is out of range; the regressor has n = {n} dimensions "
+                             f"(0..{n - 1})")
         if len(set(int(v) for v in idx)) != len(idx):
             dup = next(int(v) for v in idx if [int(u) for u in idx].count(int(v)) > 1)
-            raise InputError(f"additive part {k}: regressor index {dup} appears twice")
+            raise InputError(f"--additive part {k}: regressor index {dup} appears twice; name each index of a part once")
         part = tuple(sorted(int(v) for v in idx))
         if part in out:
-            raise InputError(f"additive part {k} ({','.join(map(str, part))}) repeats part {out.index(part)}")
+            raise InputError(f"--additive part {k} ({','.join(map(str, part))}) repeats part {out.index(part)}; give each part once")
         out.append(part)
     return tuple(out)
 

@@ -45,7 +45,8 @@ def class_labels(values: np.ndarray) -> list[float]:
         raise InputError("the class column has non-finite values")
     labels = sorted(set(v.tolist()))
     if len(labels) < 2:
-        raise InputError(f"the class column has a single value {labels}; a classifier needs at least 2 classes")
+        raise InputError(f"the class column has a single value {labels}; a classifier needs at least 2 classes: give a "
+                         "-z/--targets column with two or more labels, or fit without --classify")
     if len(labels) > MAX_CLASSES:
         raise InputError(f"the class column has {len(labels)} distinct values, more than the limit {MAX_CLASSES}; "
                          "is it really a class label?")

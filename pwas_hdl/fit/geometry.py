@@ -171,7 +171,8 @@ class Grid:
         if lo_a.shape != hi_a.shape or lo_a.size == 0:
             raise InputError(f"lo and hi must be non-empty and of equal length, got {lo_a.size} and {hi_a.size}")
         if not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
-            raise InputError("domain bounds must be finite numbers")
+            raise InputError(f"domain bounds must be finite numbers, got lo = {lo_a.tolist()}, hi = {hi_a.tolist()}; "
+                             "give finite bounds (e.g. --domain -1:1,0:5)")
         bad = np.flatnonzero(~(hi_a > lo_a))
         if bad.size:
             j = int(bad[0])
@@ -544,7 +545,8 @@ def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float]
         col = xa[:, pool[j]].reshape(-1)
         col = col[(col >= lo_a[j]) & (col <= hi_a[j])]
         if col.size == 0:
-            raise InputError(f"no sample of dimension {j} lies inside its domain [{lo_a[j]}, {hi_a[j]}]: no quantiles")
+            raise InputError(f"no sample of dimension {j} lies inside its domain [{lo_a[j]}, {hi_a[j]}]: no quantiles; "
+                             "give a --domain that covers the data, or leave --breakpoints out (equal intervals)")
         inner = np.quantile(col, np.arange(1, p) / p) if p > 1 else np.empty(0)
         out.append(_spread(np.concatenate([[lo_a[j]], inner, [hi_a[j]]]), min_width * (hi_a[j] - lo_a[j]) / p))
     return out

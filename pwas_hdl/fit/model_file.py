@@ -68,7 +68,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pwas_hdl.errors import InputError, ResourceLimit
+from pwas_hdl.errors import InputError, ResourceLimit, fault_text
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.limits import check_vertices, check_weights
 from pwas_hdl.io.json_contract import check_header, json_text, read_json, schema_errors, validate
@@ -216,7 +216,7 @@ def _front_end_regressors(d: dict[str, Any]) -> tuple[Any, Any, list[str]]:
     try:
         fe = ObserverBankFrontEnd.from_dict(d["front_end"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"front_end is corrupt or incomplete ({type(exc).__name__}: {exc})") from None
+        raise InputError(f"front_end is corrupt or incomplete ({fault_text(exc)})") from None
     ins, outs = d["signals"]["inputs"], d["signals"]["outputs"]
     if fe.nu_ != len(ins) or len(outs) != 1:
         raise InputError(f"front_end has {fe.nu_} inputs and 1 output, signals.inputs {len(ins)} and signals.outputs {len(outs)}")

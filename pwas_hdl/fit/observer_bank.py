@@ -97,7 +97,8 @@ def arx_regressors(u: np.ndarray, y: np.ndarray, order: int) -> tuple[np.ndarray
     """
     t_len = y.shape[0]
     if t_len <= order:
-        raise InputError(f"a trajectory has {t_len} samples; the local models of order M = {order} need more than M")
+        raise InputError(f"a trajectory has {t_len} samples; the local models of order M = {order} need more than M; "
+                         "give longer trajectories or a smaller --order")
     rows = t_len - order
     cols = [-y[order - i : order - i + rows, 0] for i in range(order, 0, -1)]
     for i in range(order, 0, -1):
@@ -215,7 +216,8 @@ def fit_lpv_arx(
         raise ResourceLimit(f"the LAD fit of the local models would have {phi.shape[0]} rows; the limit is {MAX_LAD_ROWS} (lower max_rows)")
     lo, hi = float(rho.min()), float(rho.max())
     if not hi > lo:
-        raise InputError("the target (rho) is constant in the training data; the observer bank needs it to vary")
+        raise InputError(f"the target (rho, the -z/--targets column) is constant in the training data (always {lo:g}); the "
+                         "observer bank needs it to vary: give data in which it varies")
     knots = np.linspace(lo, hi, n_knots)
     beta = hat_basis(rho, knots)
     t_rows, n_g = phi.shape
@@ -553,7 +555,8 @@ class ObserverBankFrontEnd(BaseEstimator):
         for i, y in enumerate(ys):
             if y.shape[0] < self.memory:
                 raise InputError(
-                    f"trajectory {i} has {y.shape[0]} samples; the observer bank needs at least M + l + 1 = {self.memory}"
+                    f"trajectory {i} has {y.shape[0]} samples; the observer bank needs at least M + l + 1 = {self.memory}; "
+                    "give longer trajectories, or a smaller --order (M) or --window (l)"
                 )
 
     def fit(self, us: list[np.ndarray], ys: list[np.ndarray], zs: list[np.ndarray], random_state: int = 0,
@@ -595,7 +598,10 @@ class ObserverBankFrontEnd(BaseEstimator):
             (self.u_mean_, self.u_std_), (self.y_mean_, self.y_std_) = _mean_std(ucat), _mean_std(ycat)
             for nm, s in (("input", self.u_std_), ("output", self.y_std_)):
                 if np.any(s <= 0):
-                    raise InputError(f"an {nm} column is constant in the training data; remove it or add excitation")
+                    opt = "-u/--inputs" if nm == "input" else "-y/--outputs"
+                    k = int(np.flatnonzero(s <= 0)[0]) + 1
+                    raise InputError(f"{nm} column {k} of {opt} is constant in the training data; remove it from {opt} "
+                                     "or use data that excites it")
         else:
             self.u_mean_, self.u_std_ = np.zeros(nu), np.ones(nu)
             self.y_mean_, self.y_std_ = np.zeros(1), np.ones(1)

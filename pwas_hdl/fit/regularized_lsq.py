@@ -2309,7 +2309,9 @@ def cross_validate_sigma(
     sig = np.asarray(DEFAULT_SIGMA_GRID if sigmas is None else sigmas, dtype=float).reshape(-1)
     check_limit("the number of sigma candidates", sig.size, MAX_SIGMA_CANDIDATES, "give fewer candidates")
     if sig.size == 0 or not np.all(np.isfinite(sig)) or np.any(sig <= 0):
-        raise InputError("sigma candidates must be positive finite numbers")
+        bad = sig[~(np.isfinite(sig) & (sig > 0))]
+        raise InputError("sigma candidates must be positive finite numbers (--sigma-grid), got "
+                         + (f"{float(bad[0])!r}" if bad.size else "none") + "; give e.g. 1e-4,1e-3 or logspace:-6:1:8")
     h = sparse.csr_array(h)
     z2 = np.asarray(z, dtype=float).reshape(h.shape[0], -1)
     labels = fold_labels(h.shape[0], folds, shuffle, seed)

@@ -22,7 +22,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 
 from pwas_hdl.fit import model_file
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.limits import MAX_SIGMA_CANDIDATES, check_limit, check_values, check_weights
 from pwas_hdl.fit.geometry import BREAKPOINT_RULES, Grid, pow2_breakpoints, quantile_breakpoints
@@ -196,13 +196,14 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
                 raise InputError(f"{nm} must be a non-negative integer (number of past samples), got {v!r}")
         if not (isinstance(self.gamma, (int, float)) and math.isfinite(self.gamma) and self.gamma >= 1):
-            raise InputError(f"gamma must be a number >= 1 (domain expansion factor), got {self.gamma!r}")
+            raise InputError(f"{option_text('gamma')} must be a number >= 1 (domain expansion factor), got {self.gamma!r}")
         if self.sigma is not None and not (
             isinstance(self.sigma, (int, float, np.floating)) and math.isfinite(self.sigma) and self.sigma > 0
         ):
-            raise InputError(f"sigma must be a positive number or None (cross-validation), got {self.sigma!r}")
+            raise InputError(f"{option_text('sigma')} must be a positive number, or None to choose it by cross-validation "
+                             f"(leave --sigma out), got {self.sigma!r}")
         if self.tikhonov_order not in (0, 1):
-            raise InputError(f"tikhonov_order must be 0 or 1, got {self.tikhonov_order!r}")
+            raise InputError(f"--tikhonov (tikhonov_order) must be 0 (Gamma = I) or 1 (gradient), got {self.tikhonov_order!r}")
         for nm in ("share_lag_domain", "cv_shuffle", "classify"):  # a string such as "no" would read as True
             if not isinstance(getattr(self, nm), (bool, np.bool_)):
                 raise InputError(f"{nm} must be True or False, got {getattr(self, nm)!r}")
