@@ -1109,8 +1109,7 @@ def _write_plant_data(plant, samples: int, test_samples: int, seed: int, *, out:
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
         test_output = _merge("--test-out", test_out, test_output=test_output_old)
-        if samples < 1 or test_samples < 1:  # --test-samples too without --test-out: a bad value is refused, not ignored
-            raise InputError("--samples and --test-samples must be >= 1")
+        _check_sample_counts(samples, test_samples)
         outset = OutputSet()
         outset.add(output, "-o/--out")
         if test_output is not None:
@@ -1172,6 +1171,13 @@ def _write_plant(output: Path, test_output: Optional[Path], train, test, what: s
         _say(f"wrote {test_output} (test run)")
     if extra is not None:
         _say(f"wrote {extra[0]} ({extra[3]})")
+
+
+def _check_sample_counts(samples: int, test_samples: int) -> None:
+    """Refuse a make-data ``--samples`` / ``--test-samples`` below 1 (``--test-samples`` too without ``--test-out``:
+    a bad value is refused, not ignored)."""
+    if samples < 1 or test_samples < 1:
+        raise InputError(f"--samples and --test-samples must be >= 1, got --samples {samples}, --test-samples {test_samples}")
 
 
 def _check_noise(noise: float, what: str) -> None:
@@ -1320,8 +1326,7 @@ def _write_seed004_data(system: str, out: Optional[Path], samples: int, test_out
     from pwas_hdl.systems.pv_benchmark import make_pv_dataset
 
     output = _required(out, "-o/--out", "the CSV file to write")
-    if samples < 1 or test_samples < 1:  # --test-samples too without --test-out: a bad value is refused, not ignored
-        raise InputError("--samples and --test-samples must be >= 1")
+    _check_sample_counts(samples, test_samples)
     check_limit("--test-samples", test_samples, MAX_SAMPLES, "ask for fewer samples")
     _check_noise(noise, "a standard deviation in normalised units")
     outset = _plant_outputs(output, test_out)  # the paths are checked before the work, and written all or none

@@ -88,6 +88,12 @@ class Table:
     def _line(self, r: int) -> int:
         return self.lines[r] if r < len(self.lines) else r + 2
 
+    def short_trajectory(self, sl: slice, need: int, what: str) -> InputError:
+        """The error for the trajectory ``sl`` of this file, shorter than the ``need`` samples ``what`` needs."""
+        return InputError(f"{self.path}: the trajectory on lines {self._line(sl.start)}..{self._line(sl.stop - 1)} has "
+                          f"{sl.stop - sl.start} samples; {what} {need}; give trajectories of at least {need} rows "
+                          "(or check --traj-col)")
+
     def numeric(self, names: Sequence[str]) -> np.ndarray:
         """The named columns as a float array.
 
@@ -252,7 +258,8 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
         if not any(header):
             raise InputError(f"{p}: line 1 is blank; the first line must be the header of column names")
         if any(not h for h in header):
-            raise InputError(f"{p}: the header has an empty column name")
+            raise InputError(f"{p}: the header has an empty column name (column {header.index('') + 1} of {len(header)}); "
+                             "name every column, or remove the extra comma")
         for h in header:
             if not h.isprintable():
                 raise InputError(
@@ -261,7 +268,7 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
                 )
         dup = sorted({h for h in header if header.count(h) > 1})
         if dup:
-            raise InputError(f"{p}: duplicate column name(s) {', '.join(dup)}")
+            raise InputError(f"{p}: duplicate column name(s) {', '.join(dup)}; give each column a name of its own")
         start = reader.line_num + 1
         for row in reader:
             line_no, start = start, reader.line_num + 1
@@ -280,7 +287,8 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
                     breaks.append(len(rows))
                 blank_at = None
             if len(row) != len(header):
-                raise InputError(f"{p}: line {line_no} has {len(row)} cells but the header has {len(header)} columns")
+                raise InputError(f"{p}: line {line_no} has {len(row)} cells but the header has {len(header)} columns; "
+                                 "give every row one cell per column (check for a missing or extra comma)")
             rows.append(row)
             lines.append(line_no)
             if len(rows) > MAX_SAMPLES:
@@ -298,7 +306,7 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
     finally:
         csv.field_size_limit(old_limit)
     if not rows:
-        raise InputError(f"{p}: the file has a header but no data rows")
+        raise InputError(f"{p}: the file has a header but no data rows; add the samples, one row per line below the header")
     return Table(str(p), header, rows, lines, breaks)
 
 

@@ -40,7 +40,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pwas_hdl.errors import CheckFailed, InputError
+from pwas_hdl.errors import CheckFailed, InputError, fault_text
 from pwas_hdl.resources import sim_dir
 from pwas_hdl.fixedpoint.bitfields import pack, pack_fields
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
@@ -216,7 +216,7 @@ def load_design(outdir: str | os.PathLike, verilog: str | os.PathLike | None = N
              int(design.manifest["ii"]))
     except (KeyError, TypeError, AttributeError, IndexError) as exc:
         raise InputError(
-            f"{out / 'manifest.json'} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
+            f"{out / 'manifest.json'} is incomplete or corrupt ({fault_text(exc)}); "
             "regenerate the folder with `pwas-hdl generate`"
         ) from exc
     return design
@@ -1125,8 +1125,7 @@ def simulate_data(
     for sl in slices:
         if design.bank is not None:
             if sl.stop - sl.start < m_hist:
-                raise InputError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {sl.stop - sl.start} samples; "
-                                 f"the observer bank needs {m_hist}")
+                raise table.short_trajectory(sl, m_hist, "the observer bank needs")
             u = u_all[sl] if u_all is not None else None
             codes, _ = design.bank.quantize_signals(u, y_all[sl])
             segs.append(segment(design, codes))
@@ -1135,7 +1134,7 @@ def simulate_data(
             continue
         t_len = sl.stop - sl.start
         if t_len < m_hist:
-            raise InputError(f"{data}: a trajectory (rows {sl.start}..{sl.stop - 1}) has {t_len} samples; the lags need {m_hist}")
+            raise table.short_trajectory(sl, m_hist, "the lags need")
         u = u_all[sl] if u_all is not None else None
         y = y_all[sl] if y_all is not None else None
         xi = lags.build(u, y)  # physical regressors (float model input)
