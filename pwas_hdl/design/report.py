@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from pwas_hdl.design.manifest import load_manifest
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, fault_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["collect_report", "report_markdown", "stale_results", "STALE_NOTE"]
@@ -205,7 +205,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         design, fit = _design_summary(out, man)
     except (KeyError, TypeError, AttributeError, IndexError) as exc:
         raise InputError(
-            f"{out / 'manifest.json'} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
+            f"{out / 'manifest.json'} is incomplete or corrupt ({fault_text(exc)}); "
             "regenerate the folder with `pwas-hdl generate`"
         ) from exc
     rep = _collect_results(out, man, design, fit, sim_summaries)
@@ -213,7 +213,7 @@ def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.P
         report_markdown(rep)  # every value the rendering needs is there and of the right kind
     except (KeyError, TypeError, AttributeError, IndexError, ValueError) as exc:
         raise InputError(
-            f"{out}: the manifest or a simulate/synth result holds a value of the wrong kind ({type(exc).__name__}: {exc}); "
+            f"{out}: the manifest or a simulate/synth result holds a value of the wrong kind ({fault_text(exc)}); "
             "regenerate the folder or re-run the command that wrote the result"
         ) from exc
     return rep

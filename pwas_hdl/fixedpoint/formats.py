@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, fault_text
 
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.warp import WarpInputFormat
@@ -439,7 +439,7 @@ class FixedFormat:
         try:
             return cls(int(d["bits"]), int(d["frac"]), bool(d.get("signed", True)), d.get("rounding", "half_up"), d.get("overflow", "saturate"))
         except (KeyError, TypeError) as exc:
-            raise InputError(f"not a fixed-point format description ({type(exc).__name__}: {exc}): {d!r}") from exc
+            raise InputError(f"not a fixed-point format description ({fault_text(exc)}): {d!r}") from exc
 
 
 def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: str = "half_up") -> int:

@@ -167,7 +167,8 @@ class Executor:
             try:
                 self._client = Client(self.scheduler, timeout="20s")
             except OSError as exc:
-                raise InputError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
+                raise InputError(f"cannot reach the Dask scheduler at {self.scheduler} (--scheduler): {exc}; start the scheduler "
+                                 "there, give the address it listens on, or use --workers N for a local cluster") from None
         else:
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                          dashboard_address=":0", silence_logs=40)

@@ -346,7 +346,7 @@ class OutputSet:
         p = Path(path)
         key = _same_key(p)
         if key not in self._targets:
-            raise InputError(f"{p} was not added to the outputs (internal use error)")
+            raise InputError(f"{p} was not added to this OutputSet; call OutputSet.add() with it first")
         return key, self._targets[key][1]
 
     def temp_path(self, path: str | os.PathLike) -> Path:
