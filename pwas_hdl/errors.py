@@ -25,6 +25,7 @@ anything else          a bug                                        traceback + 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 
 __all__ = ["PwasError", "InputError", "ToolMissing", "ToolFailed", "CheckFailed", "InternalError", "ResourceLimit"]
 
@@ -98,7 +99,7 @@ def option_text(param: str) -> str:
     return f"--{param.replace('_', '-')} ({param})"
 
 
-def choice_text(option: str, choices, value) -> str:
+def choice_text(option: str, choices: Iterable[object], value: object) -> str:
     """The message for a value that is not one of the allowed ``choices`` of ``option``.
 
     ``choice_text(option_text("memory"), ("banked", "replicated"), "dual")`` ->
