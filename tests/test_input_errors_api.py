@@ -236,7 +236,7 @@ def test_build_core_module_name_and_architecture():
     from pwas_hdl.hdl import build_core
 
     fxm = _fixed_point_model(1)
-    with pytest.raises(InputError, match=r"module name '1core' is not a plain Verilog identifier"):
+    with pytest.raises(InputError, match=r"module name '1core' is not a Verilog identifier"):
         build_core(fxm, name="1core")
     with pytest.raises(InputError, match=r"--architecture \(architecture\) must be one of .*, got 'systolic'"):
         build_core(fxm, architecture="systolic")

@@ -377,7 +377,7 @@ def build_estimator_design(model: SwitchedEstimatorConfig | str | os.PathLike, *
     """
     from pwas_hdl.design.generate import GeneratedDesign, _fusesoc, _instance, design_hash
     from pwas_hdl.design.manifest import build_estimator_manifest, manifest_text
-    from pwas_hdl.design.names import check_module_name
+    from pwas_hdl.hdl.names import check_module_name
     from pwas_hdl.hdl.emit import emit_verilog
     from pwas_hdl.hdl.switched_estimator_top import SerialSwitchedEstimatorTop, SwitchedEstimatorTop
 

@@ -34,12 +34,11 @@ from pathlib import Path
 from string import Template
 from typing import TYPE_CHECKING, Any, Callable
 
-import numpy as np
 
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.errors import InputError, choice_text, option_text
-from pwas_hdl.design.names import check_module_name, check_signal_names
+from pwas_hdl.hdl.names import check_module_name, check_signal_names
 from pwas_hdl.io.atomic import check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.design.manifest import build_manifest, manifest_text

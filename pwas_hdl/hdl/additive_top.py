@@ -42,6 +42,7 @@ from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.fixedpoint.reduction import tree_reduce
 from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
 from pwas_hdl.hdl.core import PWASCore
+from pwas_hdl.hdl.names import check_module_name
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 
@@ -569,8 +570,7 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
     from pwas_hdl.hdl.emit import _check_naming, _name_ports, _token, normalise_verilog
     from pwas_hdl.hdl.weight_rom import splice_roms
 
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise InputError(f"module name {name!r} is not a plain Verilog identifier")
+    check_module_name(name, "module name")
     _check_naming(ports)
     text, roms = _flat_verilog(component, name)  # the ROMs' words are written last (splice_roms)
     renamed = {_flat_name(mo) for mo in _FLAT_NAME.finditer(text)}

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import re
 from typing import TYPE_CHECKING, Any
 
 from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.emit import port_list, port_names
+from pwas_hdl.hdl.names import check_module_name
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
 if TYPE_CHECKING:
@@ -19,9 +19,7 @@ __all__ = ["build_core", "build_sensor", "design_info"]
 
 
 def _check_name(name: str) -> str:
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or ""):
-        raise InputError(f"module name {name!r} is not a plain Verilog identifier (letters, digits, _)")
-    return name
+    return check_module_name(name, "module name")
 
 
 def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None, name: str = "pwas_core",

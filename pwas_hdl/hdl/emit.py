@@ -24,6 +24,7 @@ import re
 from amaranth.lib import wiring
 
 from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
+from pwas_hdl.hdl.names import check_module_name
 from pwas_hdl.hdl.weight_rom import RomEmission, splice_roms
 from pwas_hdl.hdl.yosys_convert import component_verilog_roms
 
@@ -170,8 +171,7 @@ def emit_verilog(
     """
     if name is None:
         name = getattr(component, "module_name", None) or "top"
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise InputError(f"module name {name!r} is not a plain Verilog identifier")
+    check_module_name(name, "module name")
     if memory_init not in ("inline", "readmemh"):
         raise InputError(choice_text(option_text("memory_init"), ("inline", "readmemh"), memory_init))
     if memory_init == "readmemh" and not re.fullmatch(r"[A-Za-z0-9_.-]+", hex_prefix):

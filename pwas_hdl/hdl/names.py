@@ -1,4 +1,5 @@
-"""Names that end up in generated Verilog: module names and signal names.
+"""Names that end up in generated Verilog: module names and signal names (the one check of each,
+used by `generate`, the estimator builder and the hdl builders of every top).
 
 A module name (``generate --name``) must be a simple identifier of Verilog-2005 (IEEE 1364-2005,
 3.7) that is a keyword neither of Verilog-2005 nor of SystemVerilog (IEEE 1800-2017, Annex B:
