@@ -238,6 +238,8 @@ def test_build_core_module_name_and_architecture():
     fxm = _fixed_point_model(1)
     with pytest.raises(InputError, match=r"module name '1core' is not a Verilog identifier"):
         build_core(fxm, name="1core")
+    with pytest.raises(InputError, match=r"module name 'wire' is a Verilog/SystemVerilog keyword"):  # hdl had its own
+        build_core(fxm, name="wire")  # identifier check, without the keywords that generate --name refuses
     with pytest.raises(InputError, match=r"--architecture \(architecture\) must be one of .*, got 'systolic'"):
         build_core(fxm, architecture="systolic")
 
