@@ -12,7 +12,7 @@ from unittest import mock
 
 import numpy as np
 import pytest
-from helpers.cli import CliRunner
+from helpers.cli import CliRunner, assert_refused
 
 from pwas_hdl.cli import app
 from pwas_hdl.errors import InputError, choice_text, fault_text
@@ -22,18 +22,6 @@ runner = CliRunner()
 
 def invoke(*args):
     return runner.invoke(app, [str(a) for a in args])
-
-
-def assert_refused(res, *fragments: str) -> str:
-    """Exit 2, exactly one line starting with ``error:``, no traceback, each fragment in it."""
-    assert res.exit_code == 2, res.output
-    lines = [ln for ln in res.output.splitlines() if ln.strip()]
-    errors = [ln for ln in lines if ln.startswith("error:")]
-    assert len(errors) == 1, res.output
-    assert "Traceback" not in res.output
-    for frag in fragments:
-        assert frag in errors[0], (frag, errors[0])
-    return errors[0]
 
 
 @pytest.fixture(scope="module")

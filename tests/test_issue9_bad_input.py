@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers.cli import CliRunner
+from helpers.cli import CliRunner, assert_refused
 
 from pwas_hdl.cli import app
 from pwas_hdl.errors import InputError, ResourceLimit
@@ -38,20 +38,6 @@ def invoke(*args, cwd: Path | None = None):
         return runner.invoke(app, [str(a) for a in args])
     finally:
         os.chdir(old)
-
-
-
-
-def assert_refused(res, *fragments: str) -> None:
-    """Exit 2, exactly one line starting with ``error:``, no traceback, each fragment in it."""
-    assert res.exit_code == 2, res.output
-    assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
-    lines = [ln for ln in res.output.splitlines() if ln.strip()]
-    errors = [ln for ln in lines if ln.startswith("error:")]
-    assert len(errors) == 1, res.output
-    assert "Traceback" not in res.output
-    for frag in fragments:
-        assert frag in errors[0], (frag, errors[0])
 
 
 @pytest.fixture(scope="module")
