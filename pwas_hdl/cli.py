@@ -241,7 +241,7 @@ def _int_list(text: str, what: str) -> list[int]:
     except ValueError:
         raise InputError(f"{what} must be an integer or a comma-separated list of integers, got {text!r}") from None
     if not vals:
-        raise InputError(f"{what} is empty")
+        raise InputError(f"{what} is empty; give one or more integers separated by commas")
     return vals
 
 
@@ -611,7 +611,8 @@ def fit_map_cmd(
             except ValueError:
                 raise InputError(f"--domain must look like 'lo:hi,lo:hi,...', got {domain!r}") from None
             if len(pairs) != len(cols):
-                raise InputError(f"--domain gives {len(pairs)} interval(s) for {len(cols)} argument(s)")
+                raise InputError(f"--domain gives {len(pairs)} interval(s) for {len(cols)} argument(s); give one lo:hi "
+                                 f"a column, in the order -u/--inputs, -y/--outputs, --state ({', '.join(cols)})")
         table = read_csv(data, blank_rows=blank_rows)
         x = table.numeric(cols)
         fx = table.numeric(tgts)

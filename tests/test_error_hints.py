@@ -226,3 +226,25 @@ def test_output_set_slot_of_an_unknown_path(tmp_path):
 
     with pytest.raises(InputError, match=r"was not added to this OutputSet; call OutputSet.add\(\) with it first"):
         OutputSet()._slot(tmp_path / "x.csv")
+
+
+# --- counts and lengths (the lead's follow-up) -----------------------------------------------------------
+
+def test_empty_partition_list_and_domain_count_say_what_to_give(tmp_path):
+    (tmp_path / "s.csv").write_text("a,b,f\n" + "".join(f"{i % 7},{i % 5},{i}\n" for i in range(40)))
+    (tmp_path / "d.csv").write_text("y,z\n" + "".join(f"{i % 7},{i}\n" for i in range(40)))
+    assert_refused(fit(tmp_path / "d.csv", tmp_path / "x.json", "-p", ","), "is empty", "one or more integers")
+    res = invoke("fit-map", tmp_path / "s.csv", "-o", tmp_path / "m.json", "-u", "a,b", "-z", "f", "-p", 2,
+                 "--domain", "0:7")
+    assert_refused(res, "--domain gives 1 interval(s) for 2 argument(s)", "one lo:hi a column", "(a, b)")
+    assert not (tmp_path / "x.json").exists() and not (tmp_path / "m.json").exists()
+
+
+def test_a_trajectory_too_short_for_the_fed_back_estimates_says_what_to_change(tmp_path):
+    rows = "".join(f"{r},{0.1 * i},{0.3 * (i % 4)},{0.2 * (i % 3)}\n" for r, n in ((0, 40), (1, 3)) for i in range(n))
+    (tmp_path / "t.csv").write_text("run,u,y,z\n" + rows)
+    res = invoke("fit", tmp_path / "t.csv", "-o", tmp_path / "x.json", "-u", "u", "-y", "y", "-z", "z", "--mu", 1, "--my", 1,
+                 "-p", 2, "--sigma", "1e-3", "--mz", 3, "--z0", 0, "--traj-col", "run")
+    assert_refused(res, "a trajectory has 3 samples but the lags and Mz = 3 need more than 3", "longer trajectories",
+                   "a smaller --mz")
+    assert not (tmp_path / "x.json").exists()

@@ -255,7 +255,8 @@ class LagStructure:
             raise InputError(f"a target trajectory has {z.shape[0]} samples, its inputs/outputs {t_len}")
         s = self.start
         if t_len <= s:
-            raise InputError(f"a trajectory has {t_len} samples but the lags and Mz = {self.mz} need more than {s}")
+            raise InputError(f"a trajectory has {t_len} samples but the lags and Mz = {self.mz} need more than {s}; give "
+                             f"longer trajectories (or check --traj-col), or a smaller --mz")
         rows = t_len - s
         cols = []
         j = 0
