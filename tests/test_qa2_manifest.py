@@ -102,6 +102,11 @@ def test_hex_files_on_disk_match_their_depth_and_width(folders, tmp_path):
     (out / h).write_text("fffffffff\n" + "".join(good.splitlines(keepends=True)[1:]))  # 36 bits in a 20-bit word
     with pytest.raises(InputError, match=r"line 1 of .* is not a 20-bit hex word"):
         load_manifest(out)
+    # a comment on top (one line more than depth): the line is named, not the word count; blank lines
+    # count in the line number as an editor shows it
+    (out / h).write_text("\n// weights\n" + good)
+    with pytest.raises(InputError, match=r"line 2 of .* \('// weights'\) is not a 20-bit hex word; the file holds one word a line"):
+        load_manifest(out)
     (out / h).unlink()  # the Verilog reads it with $readmemh
     with pytest.raises(InputError, match=r"is missing \(the Verilog reads it with \$readmemh\)"):
         load_manifest(out)

@@ -680,16 +680,18 @@ def _folder_errors(m: dict[str, Any], folder: Path) -> list[str]:
             errs.append(f"files.hex[{i}]: {h['file']} has {p.stat().st_size} bytes, more than {h['depth']} words of "
                         f"{h['width']} bits take")
             continue
-        lines = [ln.strip() for ln in p.read_text(encoding="ascii", errors="replace").splitlines() if ln.strip()]
-        if len(lines) != h["depth"]:
-            errs.append(f"files.hex[{i}]: {h['file']} has {len(lines)} words, files.hex[{i}].depth is {h['depth']}")
-            continue
-        if _hex_words(h["width"]).fullmatch("\n".join(lines) + "\n" if lines else ""):
+        raw = p.read_text(encoding="ascii", errors="replace").splitlines()
+        lines = [ln.strip() for ln in raw if ln.strip()]
+        if len(lines) == h["depth"] and _hex_words(h["width"]).fullmatch("\n".join(lines) + "\n" if lines else ""):
             continue  # every line a word of `width` bits (one regular expression over the file, not a loop a line)
-        bad = next((k for k, ln in enumerate(lines) if len(ln) > digits or not all(c in "0123456789abcdefABCDEF" for c in ln)
+        numbered = ((k + 1, ln.strip()) for k, ln in enumerate(raw) if ln.strip())  # line numbers as an editor shows them
+        bad = next(((k, ln) for k, ln in numbered if len(ln) > digits or not all(c in "0123456789abcdefABCDEF" for c in ln)
                     or int(ln, 16) >> h["width"]), None)
-        if bad is not None:
-            errs.append(f"files.hex[{i}]: line {bad + 1} of {h['file']} ({lines[bad][:20]!r}) is not a {h['width']}-bit hex word")
+        if bad is not None:  # a line that is not a word (a comment, a header) before the count: it explains a wrong count
+            errs.append(f"files.hex[{i}]: line {bad[0]} of {h['file']} ({bad[1][:20]!r}) is not a {h['width']}-bit hex word; "
+                        f"the file holds one word a line and nothing else (regenerate the design with `pwas-hdl generate`)")
+        elif len(lines) != h["depth"]:
+            errs.append(f"files.hex[{i}]: {h['file']} has {len(lines)} words, files.hex[{i}].depth is {h['depth']}")
     return errs or _port_name_errors(m, folder)
 
 
