@@ -3,7 +3,7 @@
 Driven by a JSON job (``PWAS_TB_JOB``, built by :mod:`pwas_hdl.verify.segment_bench` for the recurrent top's
 replays and seed 003's estimator's)::
 
-    {"result": "/abs/result.json", "ports": {"clock", "reset", "reset_on", "in_valid", "in_ready",
+    {"result": "result.json" (in the run folder), "ports": {"clock", "reset", "reset_on", "in_valid", "in_ready",
      "in_payload", "out_valid", "out_ready", "out_payload", "warm"}, "latency": L, "ii": II, "warmup": W,
      "clock_ns": 10, "reset_cycles": 2,
      "runs": [{"name", "p_valid", "p_ready", "seed",

@@ -289,12 +289,15 @@ def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, files
     for name, path in (files or {}).items():
         shutil.copyfile(path, wd / name)
     job = dict(job)
-    job["result"] = str((wd / "result.json").resolve())
+    # relative to the simulator's working directory (``wd``): the job file names no staging path
+    # once ``wd`` is moved (``simulate --waves`` keeps it in the waveform folder)
+    job["result"] = "result.json"
+    result = (wd / job["result"]).resolve()
     job_path = wd / "job.json"
     job_path.write_text(json.dumps(job), encoding="utf-8")
     log = wd / "sim.log"
     xml = (wd / "results.xml").resolve()
-    for p in (Path(job["result"]), xml):
+    for p in (result, xml):
         p.unlink(missing_ok=True)
     waves_file = None
     plusargs = []
@@ -316,16 +319,16 @@ def run_job(b: Build, job: dict[str, Any], work_dir: str | os.PathLike, *, files
                 timescale=TIMESCALE if b.simulator == "verilator" else None, log_file=log, plusargs=plusargs,
             )
         except (RuntimeError, SystemExit, subprocess.CalledProcessError) as exc:
-            if not Path(job["result"]).is_file():
+            if not result.is_file():
                 raise SimulationError(f"{b.simulator} run of {b.top} failed ({exc})", log, _tail(log)) from None
         wall = time.perf_counter() - t0
         try:
             n_tests, n_failed = get_results(xml)
         except (RuntimeError, OSError, ValueError):
             n_tests, n_failed = 0, 1
-    if not Path(job["result"]).is_file():
+    if not result.is_file():
         raise SimulationError(f"the testbench wrote no result ({b.simulator}, {b.top}){timeout_note}", log, _tail(log))
-    res = json.loads(Path(job["result"]).read_text(encoding="utf-8"))
+    res = json.loads(result.read_text(encoding="utf-8"))
     res.update(wall_s=wall, log=str(log), waves=str(waves_file) if waves_file else None,
                passed=bool(n_tests) and not n_failed, build=asdict(b))
     return res

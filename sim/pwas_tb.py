@@ -7,7 +7,7 @@ fields listed there, and the latency is the manifest's ``latency_cycles``.
 The host side (:mod:`pwas_runner`, :mod:`pwas_hdl.verify.simulation`) writes a JSON *job* and points the
 environment variable ``PWAS_TB_JOB`` at it::
 
-    {"manifest": "/abs/manifest.json", "result": "/abs/result.json", "strict": true,
+    {"manifest": "/abs/manifest.json", "result": "result.json", "strict": true,
      "clock_ns": 10, "reset_cycles": 2, "debug": false, "probes": ["s_split_c0", ...],
      "runs": [{"name": "random-stalls", "p_valid": 0.7, "p_ready": 0.6, "seed": 3,
                "segments": [{"codes": [[..n_in codes..], ...],       # one row per input transfer

@@ -219,6 +219,8 @@ def test_simulate_recurrent_waves_folder_is_replaced_and_named_as_given(flow, tm
     assert s["waves"] == "hw_waves/pwas_recurrent_sensor.fst" and (tmp_path / s["waves"]).stat().st_size > 0
     assert not (tmp_path / "hw_waves" / "old.fst").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hw.csv", "hw.json", "hw_waves"]
+    job = json.loads((tmp_path / "hw_waves" / "job.json").read_text())  # names no staging folder that is gone
+    assert job["result"] == "result.json" and (tmp_path / "hw_waves" / job["result"]).is_file()
 
 
 @pytest.mark.synth

@@ -96,6 +96,8 @@ def test_simulate_waves_folder_is_part_of_the_outputs(folders, sim_cache, tmp_pa
     assert s["waves"] == str(wave) and wave.is_file() and wave.stat().st_size > 0
     assert not (tmp_path / "hw_waves" / "old.fst").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hw.csv", "hw.json", "hw_waves"]
+    job = json.loads((tmp_path / "hw_waves" / "job.json").read_text())  # names no staging folder that is gone
+    assert job["result"] == "result.json" and (tmp_path / "hw_waves" / job["result"]).is_file()
 
 
 @pytest.mark.rtl
