@@ -248,3 +248,28 @@ def test_a_trajectory_too_short_for_the_fed_back_estimates_says_what_to_change(t
     assert_refused(res, "a trajectory has 3 samples but the lags and Mz = 3 need more than 3", "longer trajectories",
                    "a smaller --mz")
     assert not (tmp_path / "x.json").exists()
+
+
+# --- the second audit: fit options named as typed ------------------------------------------------------
+
+@pytest.mark.parametrize("extra, words", [
+    (["--observer", "poles:2"], ["--observer (observer) must be deadbeat", "got 'poles:2'", "e.g. --observer poles:0.5"]),
+    (["--features", "12"], ["--features (features) must be 11a or 11b", "got '12'"]),
+    (["--blank-rows", "skip"], ["--blank-rows (blank_rows) must be one of error, break, got 'skip'"]),
+    (["-p", "0"], ["-p/--partitions (partitions[0]) = 0", "give whole numbers >= 1"]),
+    (["-p", "3,3,3"], ["-p/--partitions (partitions) must be one integer or 2 integers", "got [3, 3, 3]",
+                       "2 comma-separated values"]),
+    (["--domain", "0:1"], ["--domain (domain) gives 1 lower and 1 upper bound(s) for 2 regressors (y[t-1], y[t])",
+                           "one lo:hi per regressor"]),
+    (["--domain", "1:0,0:1"], ["--domain (domain): the interval of regressor y[t-1] is 1.0:0.0", "give lo < hi"]),
+])
+def test_fit_options_are_named_as_typed(files, tmp_path, extra, words):
+    assert_refused(fit(files / "d.csv", tmp_path / "x.json", *extra), *words)
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_grid_of_zero_width_says_what_each_dimension_needs():
+    from pwas_hdl.fit.geometry import Grid
+
+    with pytest.raises(InputError, match=r"zero or negative width \(\[1\.0, 0\.0\]\); every dimension needs hi > lo"):
+        Grid([1.0], [0.0], 2)

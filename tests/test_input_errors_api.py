@@ -41,9 +41,9 @@ def test_grid_lo_not_below_hi():
 def test_grid_partitions_and_breakpoints():
     from pwas_hdl.fit.geometry import Grid
 
-    with pytest.raises(InputError, match=r"partitions\[0\] = 0 but every dimension needs p >= 1"):
+    with pytest.raises(InputError, match=r"partitions\[0\]\) = 0, but every dimension needs p >= 1"):
         Grid([0.0], [1.0], 0)
-    with pytest.raises(InputError, match=r"partitions must be one integer or 2 integers"):
+    with pytest.raises(InputError, match=r"-p/--partitions \(partitions\) must be one integer or 2 integers"):
         Grid([0.0, 0.0], [1.0, 1.0], [2, 2, 2])
     with pytest.raises(InputError, match=r"breakpoints of dimension 0 must increase strictly"):
         Grid([0.0], [1.0], 2, breakpoints=[[0.0, 0.7, 0.5]])

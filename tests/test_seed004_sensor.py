@@ -145,8 +145,8 @@ def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):
 @pytest.mark.parametrize(
     "extra,needle",
     [
-        (["--observer", "poles:2"], "observer must be"),
-        (["--features", "11c"], "features must be 11a or 11b"),
+        (["--observer", "poles:2"], "--observer (observer) must be"),
+        (["--features", "11c"], "--features (features) must be 11a or 11b"),
         (["--front-end", "bank"], "--front-end must be"),
         (["--models", "0"], "--models (n_models) must be an integer >= 1"),
         (["--window", "0"], "--window (window) must be"),

@@ -109,14 +109,16 @@ def _as_partitions(p: int | Sequence[int], n: int) -> tuple[int, ...]:
     if arr.size == 1 and n > 1:
         arr = np.repeat(arr, n)
     if arr.shape != (n,):
-        raise InputError(f"partitions must be one integer or {n} integers (one per dimension), got {p!r}")
+        raise InputError(f"-p/--partitions (partitions) must be one integer or {n} integers (one per dimension), got {p!r}; "
+                         f"give one value for every dimension or {n} comma-separated values")
     out = []
     for j, v in enumerate(arr.tolist()):
         if isinstance(v, float) and not float(v).is_integer():
-            raise InputError(f"partitions[{j}] = {v!r} is not an integer; use a whole number of intervals >= 1")
+            raise InputError(f"-p/--partitions (partitions[{j}]) = {v!r} is not an integer; use a whole number of intervals >= 1")
         iv = int(v)
         if iv < 1:
-            raise InputError(f"partitions[{j}] = {iv} but every dimension needs p >= 1 intervals")
+            raise InputError(f"-p/--partitions (partitions[{j}]) = {iv}, but every dimension needs p >= 1 intervals; "
+                             "give whole numbers >= 1")
         out.append(iv)
     return tuple(out)
 
@@ -178,7 +180,8 @@ class Grid:
             j = int(bad[0])
             raise InputError(
                 f"domain dimension {j} has zero or negative width ([{lo_a[j]}, {hi_a[j]}]); "
-                "a constant regressor cannot be partitioned: drop that signal or give an explicit domain"
+                "every dimension needs hi > lo; a constant regressor cannot be partitioned: drop that signal or "
+                "give a domain wider than its value"
             )
         with np.errstate(over="ignore"):
             wide = np.flatnonzero(~np.isfinite(hi_a - lo_a))

@@ -338,8 +338,8 @@ def parse_observer(text: str) -> tuple[str, float | None]:
         if kind == "kalman" and v > 0 and math.isfinite(v):
             return kind, v
     raise InputError(
-        f"observer must be deadbeat, poles:R (all poles at radius 0 <= R < 1) or kalman:LAMBDA "
-        f"(measurement-noise variance LAMBDA > 0), got {text!r}"
+        f"--observer (observer) must be deadbeat, poles:R (all poles at radius 0 <= R < 1) or kalman:LAMBDA "
+        f"(measurement-noise variance LAMBDA > 0), got {text!r}; e.g. --observer poles:0.5 or --observer kalman:0.1"
     )
 
 
@@ -513,7 +513,8 @@ class ObserverBankFrontEnd(BaseEstimator):
                 what = f"{opt} ({nm})" if opt else nm
                 raise InputError(f"observer bank: {what} must be an integer >= {lo}, got {v!r}")
         if self.features not in FEATURE_MAPS:
-            raise InputError(f"observer bank: features must be 11a or 11b (or 11b-sq, the squared 11b), got {self.features!r}")
+            raise InputError(f"observer bank: --features (features) must be 11a or 11b (or 11b-sq, the squared 11b), "
+                             f"got {self.features!r}")
         parse_observer(self.observer)
 
     @property

@@ -474,8 +474,15 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
                                  f"column of {'u' if what == 'input' else 'y'} (or None for the defaults)")
         if self.domain is not None:
             lo, hi = (np.asarray(b, dtype=float).reshape(-1) for b in self.domain)
+            names = self._regressor_names(lags, fe)
             if lo.size != xi.shape[1] or hi.size != xi.shape[1]:
-                raise InputError(f"explicit domain must have {xi.shape[1]} bounds per side, got {lo.size} and {hi.size}")
+                raise InputError(f"{option_text('domain')} gives {lo.size} lower and {hi.size} upper bound(s) for "
+                                 f"{xi.shape[1]} regressors ({', '.join(names)}); give one lo:hi per regressor, in that order")
+            bad = np.flatnonzero(np.isfinite(lo) & np.isfinite(hi) & ~(hi > lo))  # non-finite: the Grid's message
+            if bad.size:
+                j = int(bad[0])
+                raise InputError(f"{option_text('domain')}: the interval of regressor {names[j]} is {float(lo[j])!r}:{float(hi[j])!r}, "
+                                 "empty or reversed; give lo < hi")
         else:
             lo, hi = self._data_domain(xi, lags, fe)
         if self.additive is not None:  # sum of PWAS parts on regressor subsets (pwas_hdl.fit.additive)

@@ -20,7 +20,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import InputError, ResourceLimit
+from pwas_hdl.errors import InputError, ResourceLimit, choice_text
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.limits import MAX_CSV_BYTES, MAX_CSV_FIELD, MAX_SAMPLES, check_limit
 
@@ -221,7 +221,7 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
         :data:`~pwas_hdl.limits.MAX_SAMPLES` rows or a file over :data:`~pwas_hdl.limits.MAX_CSV_BYTES`.
     """
     if blank_rows not in BLANK_ROWS:
-        raise InputError(f"blank_rows must be one of {', '.join(BLANK_ROWS)}, got {blank_rows!r}")
+        raise InputError(choice_text("--blank-rows (blank_rows)", BLANK_ROWS, blank_rows))
     p = Path(path)
     try:
         size = p.stat().st_size
