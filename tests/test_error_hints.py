@@ -273,3 +273,56 @@ def test_grid_of_zero_width_says_what_each_dimension_needs():
 
     with pytest.raises(InputError, match=r"zero or negative width \(\[1\.0, 0\.0\]\); every dimension needs hi > lo"):
         Grid([1.0], [0.0], 2)
+
+
+# --- the second audit: fixed-point formats (generate, explore) -------------------------------------------
+
+@pytest.fixture(scope="module")
+def models(files):
+    """More models of the Lorenz data: per-lag partitions, non-uniform partitions, an additive sensor."""
+    for name, extra in (("perlag", ["-p", "3,4"]), ("quantile", ["--breakpoints", "quantile"]),
+                        ("pow2", ["--breakpoints", "quantile-pow2"]), ("additive", ["--my", 3, "--additive", "pairs"])):
+        res = fit(files / "d.csv", files / f"{name}.json", "--sigma", "1e-3", *extra)
+        assert res.exit_code == 0, res.output
+    return files
+
+
+@pytest.mark.parametrize("model, extra, words", [
+    ("m", ["--weight-frac", 100], ["--weight-frac (weight_frac) = 100 makes the weights too large for 64-bit codes",
+                                   "use fewer fraction bits (--weight-frac 50 at most)"]),
+    ("m", ["--weight-frac", 51], ["the outputs would need 65 bits at --output-frac (output_frac) = 52 (the default)",
+                                  "use a smaller --output-frac (at most 51) or --weight-frac"]),
+    ("m", ["--weight-frac", 50], ["the accumulator would need", "fewer input bits (--input-bits)",
+                                  "a smaller --weight-frac or --weight-bits"]),
+    ("m", ["--weight-bits", 3], ["does not fit the weight format", "or --overflow saturate"]),
+    ("m", ["--design", "recurrent"], ["--design recurrent needs a recurrent model", "use --design sensor or core"]),
+    ("perlag", ["--design", "sensor"], ["the lags of signal 'y' have different input formats",
+                                        "fit without --separate-lag-domains", "one -p value for all lags"]),
+    ("pow2", ["--input-bits", 2], ["2-bit inputs cannot give each one a code", "use --input-bits", "or more (input_bits)"]),
+    ("additive", ["--output-frac", 100], ["--output-frac (output_frac) = 100 is finer than the exact sum",
+                                          "use --output-frac <= "]),
+    ("additive", ["--output-frac", -40], ["--output-frac (output_frac) = -40 (LSB 2^40) rounds every output",
+                                          "use a larger --output-frac (at most "]),
+])
+def test_generate_format_errors_name_the_option(models, tmp_path, model, extra, words):
+    msg = assert_refused(invoke("generate", models / f"{model}.json", "-o", tmp_path / "g", *extra), *words)
+    assert "output_frac =" not in msg.replace("(output_frac) =", "")  # the option, not only the parameter
+    assert not (tmp_path / "g").exists()
+
+
+def test_explore_refuses_what_it_cannot_sweep_up_front(models, tmp_path):
+    res = invoke("explore", models / "quantile.json", models / "t.csv", "-o", tmp_path / "ex")
+    assert_refused(res, "explore is not available for non-uniform partitions (fit --breakpoints) yet", "pwas-hdl generate")
+    res = invoke("explore", models / "m.json", models / "t.csv", "-o", tmp_path / "ex", "--overflow", "wrap")
+    msg = assert_refused(res, "--overflow (overflow) must be one of error, saturate, got 'wrap'")
+    assert "every requested combination" not in msg
+    assert not (tmp_path / "ex").exists()
+
+
+def test_fixed_point_model_of_a_non_uniform_grid_names_the_warped_model():
+    from pwas_hdl.fit.geometry import Grid
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+
+    grid = Grid([0.0], [1.0], 2, breakpoints=[[0.0, 0.25, 1.0]])
+    with pytest.raises(InputError, match=r"build pwas_hdl\.fixedpoint\.warp\.WarpedFixedPointModel, as generate and simulate do"):
+        FixedPointModel(grid, np.zeros(3))

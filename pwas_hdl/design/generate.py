@@ -761,7 +761,8 @@ def _design_kind(design: str, sensor: PWASVirtualSensor) -> str:
     """``design`` after the recurrent dispatch: a recurrent model's sensor top is the recurrent top."""
     recurrent = sensor.lags_ is not None and sensor.lags_.recurrent
     if design == "recurrent" and not recurrent:
-        raise InputError("design 'recurrent' needs a recurrent model (fit --mz or fit-map --state); use --design sensor")
+        raise InputError("--design recurrent needs a recurrent model (fit --mz or fit-map --state), and this model has no "
+                         "fed-back estimates; use --design sensor or core")
     return "recurrent" if design == "sensor" and recurrent else design
 
 

@@ -41,7 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, NOISE_BUDGET, FixedPointModel, _py_shift_round, default_output_frac
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling, grid_input_formats, shift_round, signed_bits_needed
 from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
@@ -144,8 +144,8 @@ class AdditiveFixedPointModel(FixedPointModel):
         sh = self.F + fw - fo
         if sh < 0:
             raise InputError(
-                f"output_frac = {fo} is finer than the exact sum (F + weight_frac = {self.F} + {fw} = {self.F + fw}); "
-                f"use output_frac <= {self.F + fw}"
+                f"{option_text('output_frac')} = {fo} is finer than the exact sum (F + weight_frac = {self.F} + {fw} = "
+                f"{self.F + fw}); use --output-frac <= {self.F + fw}"
             )
         self.shift = sh
 
@@ -182,7 +182,8 @@ class AdditiveFixedPointModel(FixedPointModel):
         hi_sum = sum(int(p.weight_codes.max()) << self.F for p in parts)
         self._out_reach = (_py_shift_round(lo_sum, sh, rounding), _py_shift_round(hi_sum, sh, rounding))
         if self._out_reach == (0, 0) and np.any(self.weight_codes):
-            raise InputError(f"output_frac = {fo} (LSB 2^{-fo}) rounds every output of the additive sensor to 0; use a larger output_frac")
+            raise InputError(f"{option_text('output_frac')} = {fo} (LSB 2^{-fo}) rounds every output of the additive sensor to 0 "
+                             f"(weights at --weight-frac {fw}); use a larger --output-frac (at most {self.F + fw}, the exact sum)")
         b_out = int(output_bits) if output_bits is not None else signed_bits_needed(list(self._out_reach))
         self.output_format = FixedFormat(b_out, fo, True, rounding, "saturate")
         self.output_port = PortFormat(self.output_format, SignalScaling(1.0, 0.0))

@@ -262,9 +262,8 @@ class FixedPointModel:
         if not isinstance(grid, Grid):
             raise TypeError(f"grid must be a pwas_hdl.fit.geometry.Grid, got {type(grid).__name__}")
         if getattr(grid, "breakpoints", None) is not None:  # the input formats below assume equal cells
-            raise InputError("the fixed-point model needs a uniform grid; a model fitted with --breakpoints "
-                             "(non-uniform partition) has the warped model of generate / simulate "
-                             "(pwas_hdl.fixedpoint.warp), not available in this command yet")
+            raise InputError("FixedPointModel needs a uniform grid; of a model fitted with --breakpoints (non-uniform "
+                             "partition) build pwas_hdl.fixedpoint.warp.WarpedFixedPointModel, as generate and simulate do")
         w = weight_matrix(weights, grid.n_vertices)
         if overflow not in ("error", "saturate"):
             raise InputError(choice_text(option_text("overflow"), ("error", "saturate"), overflow))
@@ -330,6 +329,11 @@ class FixedPointModel:
                 f"codes at --weight-frac {fw}); use a larger --output-frac (e.g. {fw - max(abs(wmin), abs(wmax)).bit_length() + 1})"
             )
         b_out = int(output_bits) if output_bits is not None else signed_bits_needed(list(self._out_reach))
+        if b_out > 64:  # the default width (a given --output-bits is checked against [1, 64] above)
+            raise InputError(
+                f"the outputs would need {b_out} bits at {option_text('output_frac')} = {fo}{'' if output_frac is not None else ' (the default)'}, "
+                f"more than the 64 of a code; use a smaller --output-frac (at most {fo - (b_out - 64)}) or --weight-frac"
+            )
         self.output_format = FixedFormat(b_out, fo, True, rounding, "saturate")
         self.output_port = PortFormat(self.output_format, SignalScaling(1.0, 0.0))
         self.output_may_saturate = not bool(np.all(self.output_format.fits(np.array(self._out_reach))))
@@ -359,7 +363,8 @@ class FixedPointModel:
         if self.widths["acc"] > MAX_DATAPATH_BITS:
             raise InputError(
                 f"the accumulator would need {self.widths['acc']} bits (> {MAX_DATAPATH_BITS}): "
-                f"F = {self.F}, B_w = {self.weight_format.bits}; use fewer input or weight bits"
+                f"F = {self.F}, B_w = {self.weight_format.bits}; use fewer input bits (--input-bits) or weight bits "
+                "(a smaller --weight-frac or --weight-bits)"
             )
 
         # ---- memory
@@ -405,8 +410,11 @@ class FixedPointModel:
     def _quantize_weights(self, w: np.ndarray, weight_bits: int | None, fw: int) -> tuple[np.ndarray, FixedFormat, int]:
         free = FixedFormat(64, fw, True, self.rounding, "saturate")
         codes_free, sat_free = free.quantize(w, return_saturated=True)
-        if sat_free.any():
-            raise InputError(f"weights are too large for 64-bit codes at weight_frac = {fw}; use fewer fraction bits")
+        if sat_free.any() or signed_bits_needed(codes_free) > 64:
+            wtop = float(np.max(np.abs(w)))
+            most = 61 - math.floor(math.log2(wtop)) if wtop > 0 and math.isfinite(wtop) else fw - 1
+            raise InputError(f"{option_text('weight_frac')} = {fw} makes the weights too large for 64-bit codes (the largest "
+                             f"|weight| is {wtop:.6g}); use fewer fraction bits (--weight-frac {min(most, fw - 1)} at most)")
         wmax = float(np.max(np.abs(w))) if w.size else 0.0
         if wmax > 0 and not np.any(codes_free):
             # a format whose LSB is above every weight: the design would compute 0 for every input
@@ -430,7 +438,7 @@ class FixedPointModel:
             raise InputError(
                 f"{what} does not fit the weight format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}], "
                 f"lsb {fmt.lsb!r}); {int(sat.sum())} weight(s) overflow, {need} bits are needed at {fw} fraction bits. "
-                "Use --weight-bits (weight_bits) >= %d, fewer --weight-frac bits, or overflow='saturate'" % need
+                "Use --weight-bits (weight_bits) >= %d, fewer --weight-frac bits, or --overflow saturate" % need
             )
         warnings.warn(
             f"{int(sat.sum())} weight(s) saturated to the format {fmt} (range [{fmt.min_value!r}, {fmt.max_value!r}]); "
@@ -735,7 +743,8 @@ class FixedPointModel:
                 raise InputError(
                     f"the lags of signal {sig!r} have different input formats (dimension {j}: {f.to_dict()['format']} "
                     f"on [{f.lo}, {f.hi}]); the sensor top scales each signal once, so its lags need one interval "
-                    "(fit with share_lag_domain=True) and the same number of partitions p"
+                    "and the same number of intervals: fit without --separate-lag-domains (share_lag_domain=True) and with "
+                    "one -p value for all lags of the signal, or generate --design core"
                 )
             res.setdefault(sig, f)
         return res

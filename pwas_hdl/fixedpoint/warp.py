@@ -311,7 +311,7 @@ class WarpedFixedPointModel:
                 f0 -= 1
             if f0 < 0:
                 raise InputError(f"dimension {j} spans {s} base steps: {input_bits}-bit inputs cannot give each one a code; "
-                                 f"use more input bits (at least {int(s).bit_length() + 1})")
+                                 f"use --input-bits {int(s).bit_length() + 1} or more (input_bits)")
             lo_in = -((s << f0) + 1) // 2
             breaks = [lo_in] + [lo_in + (int(c) << f0) for c in np.cumsum(1 << e)]
             cells.append((tuple(int(v) for v in breaks), tuple(int(v) for v in e), f0))

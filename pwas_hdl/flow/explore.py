@@ -92,7 +92,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pwas_hdl import __version__
-from pwas_hdl.errors import InputError, ToolFailed, ToolMissing, option_text
+from pwas_hdl.errors import InputError, ToolFailed, ToolMissing, choice_text, option_text
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.io.csv_table import Table, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -196,6 +196,7 @@ def _check_supported(sensor: PWASVirtualSensor) -> None:
         (getattr(sensor, "front_end_", None) is not None, "observer-bank sensors (fit --front-end observer-bank)"),
         (sensor.lags_ is not None and sensor.lags_.recurrent, "recurrent sensors (fit --mz, fit-map --state)"),
         (getattr(sensor, "classifier_", None) is not None, "classifiers (fit --classify)"),
+        (getattr(sensor.grid_, "breakpoints", None) is not None, "non-uniform partitions (fit --breakpoints)"),
     )
     for bad, what in kinds:
         if bad:
@@ -539,6 +540,8 @@ def explore(
     if memory not in ("banked", "replicated"):
         raise InputError(f"--memory (memory) must be 'banked' or 'replicated' (explore does not sweep the corner memory), "
                          f"got {memory!r}")
+    if overflow not in ("error", "saturate"):  # refused up front, not as the reason of every refused point
+        raise InputError(choice_text(option_text("overflow"), ("error", "saturate"), overflow))
     if measure_max is not None and (isinstance(measure_max, bool) or not isinstance(measure_max, (int, np.integer)) or measure_max < 1):
         raise InputError(f"--measure-max (measure_max) must be an integer >= 1, got {measure_max!r}")
     if resources == "estimate":  # the synthesis options mean nothing without synthesis: refused, not ignored
