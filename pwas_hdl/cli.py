@@ -245,9 +245,15 @@ def _int_list(text: str, what: str) -> list[int]:
     return vals
 
 
-def _float_list(text: str, what: str) -> list[float]:
-    """Comma list of floats, or ``logspace:A:B:K`` (K values from 1eA to 1eB)."""
+def _float_list(text: str, what: str, form: str | None = None) -> list[float]:
+    """Comma list of floats, or ``logspace:A:B:K`` (K values from 1eA to 1eB); ``form``: what the option
+    takes, for the message of a value that is neither (default: the two forms)."""
     t = text.replace(" ", "")
+    if form is not None and not t.startswith("logspace:"):
+        try:
+            return [float(v) for v in t.split(",") if v]
+        except ValueError:
+            raise InputError(f"{what} must be {form}, got {text!r}") from None
     try:
         if t.startswith("logspace:"):
             a, b, k = t.split(":")[1:]
@@ -467,7 +473,8 @@ def fit(
             raise InputError("--mz needs the lag front end and a regression target (not --front-end observer-bank or --classify)")
         init: Any = "mean"
         if z0 is not None:
-            init = z0.strip() if z0.strip() in ("mean", "measured") else _float_list(z0, "--z0")
+            init = z0.strip() if z0.strip() in ("mean", "measured") else _float_list(
+                z0, "--z0", "mean, measured or one number per -z/--targets column (comma-separated)")
             if not isinstance(init, str) and len(init) != len(tgts):
                 raise InputError(f"--z0 needs one value per target ({len(tgts)}), got {len(init)}")
             if not isinstance(init, str) and not all(np.isfinite(init)):
@@ -593,7 +600,7 @@ def fit_map_cmd(
             raise InputError("--state needs the initial state: give --z0 (one value per state)")
         if z0 is not None and not sts:
             raise InputError("--z0 needs --state (a recurrent map)")
-        init = _float_list(z0, "--z0") if z0 is not None else None
+        init = _float_list(z0, "--z0", "one number per --state column (comma-separated)") if z0 is not None else None
         if init is not None and len(init) != len(sts):
             raise InputError(f"--z0 needs one value per state ({len(sts)}), got {len(init)}")
         if init is not None and not all(np.isfinite(init)):
@@ -1185,7 +1192,7 @@ def _check_noise(noise: float, what: str) -> None:
     """Refuse a make-data ``--noise`` outside ``[0, MAX_NOISE]`` (NaN / inf / huge noise: NaN / inf data)."""
     if not 0 <= noise <= MAX_NOISE:
         raise InputError(f"--noise must be a finite number >= 0 and at most {MAX_NOISE:g} ({what}), got {noise}; "
-                         f"give a smaller --noise")
+                         f"give a --noise from 0 (no noise) to {MAX_NOISE:g}")
 
 
 def _write_runs(out: Optional[Path], test_out: Optional[Path], samples: int, runs: int, noise: float, seed: int,

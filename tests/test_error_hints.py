@@ -326,3 +326,33 @@ def test_fixed_point_model_of_a_non_uniform_grid_names_the_warped_model():
     grid = Grid([0.0], [1.0], 2, breakpoints=[[0.0, 0.25, 1.0]])
     with pytest.raises(InputError, match=r"build pwas_hdl\.fixedpoint\.warp\.WarpedFixedPointModel, as generate and simulate do"):
         FixedPointModel(grid, np.zeros(3))
+
+
+# --- the second audit: make-data and fit-map options -----------------------------------------------------
+
+@pytest.mark.parametrize("args, words", [
+    (["switched-linear", "--switching", "random"], ["--switching (switching) must be one of time, output, got 'random'"]),
+    (["switched-linear", "--input-signal", "chirp"], ["--input-signal (input_kind) must be one of step, prbs, sine, got 'chirp'"]),
+    (["pv-benchmark", "--rho-law", "linear"], ["--rho-law (rho_law) must be one of random-walk, cosine, got 'linear'"]),
+    (["three-tank", "--noise", "-1"], ["got -1.0", "give a --noise from 0 (no noise) to 1000"]),
+])
+def test_make_data_options_are_named_as_typed(tmp_path, args, words):
+    msg = assert_refused(invoke("make-data", args[0], "-o", tmp_path / "x.csv", *args[1:]), *words)
+    assert "smaller --noise" not in msg
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_fit_map_and_z0_options_are_named_as_typed(files, tmp_path):
+    (tmp_path / "s.csv").write_text("a,b,f\n" + "".join(f"{i % 7},{i % 5},{i}\n" for i in range(40)))
+    args = ["fit-map", tmp_path / "s.csv", "-o", tmp_path / "m.json", "-u", "a,b", "-z", "f", "-p", 2]
+    assert_refused(invoke(*args, "--domain", "1:0,0:1"), "the box (--domain) must have finite bounds with lo < hi",
+                   "lo = [1.0, 0.0]", "give one lo:hi with lo < hi per argument")
+    assert_refused(invoke(*args, "--sigma", "-1"), "--sigma (sigma) must be a positive number, got -1.0", "e.g. --sigma")
+    res = invoke("fit-map", tmp_path / "s.csv", "-o", tmp_path / "m.json", "-u", "a", "--state", "b", "-z", "f",
+                 "--z0", "zero")
+    msg = assert_refused(res, "--z0 must be one number per --state column (comma-separated), got 'zero'")
+    assert "logspace" not in msg
+    msg = assert_refused(fit(files / "d.csv", tmp_path / "x.json", "--mz", 1, "--z0", "zero"),
+                         "--z0 must be mean, measured or one number per -z/--targets column", "got 'zero'")
+    assert "logspace" not in msg
+    assert not (tmp_path / "m.json").exists() and not (tmp_path / "x.json").exists()

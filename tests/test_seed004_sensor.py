@@ -187,4 +187,4 @@ def test_make_data_seed004_commands(tmp_path):
         invoke("make-data", system, "-o", again, "--samples", 200, "--seed", 1, "--noise", 0.01)
         assert again.read_bytes() == out.read_bytes()
     res = invoke("make-data", "pv-benchmark", "-o", tmp_path / "x.csv", "--rho-law", "sine")
-    assert res.exit_code == 2 and "rho_law must be one of" in res.output and not (tmp_path / "x.csv").exists()
+    assert res.exit_code == 2 and "--rho-law (rho_law) must be one of random-walk, cosine" in res.output and not (tmp_path / "x.csv").exists()

@@ -26,7 +26,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.limits import check_seed, check_values
 
@@ -85,7 +85,7 @@ def _solve(grid: Grid, x: np.ndarray, fx: np.ndarray, sigma: float) -> np.ndarra
     from pwas_hdl.fit.regularized_lsq import check_fit_memory, solve_regularized, tikhonov_matrix
 
     if not (np.isfinite(sigma) and sigma > 0):
-        raise InputError(f"sigma must be a positive number, got {sigma!r}")
+        raise InputError(f"{option_text('sigma')} must be a positive number, got {sigma!r}; e.g. --sigma 1e-8")
     check_fit_memory(x.shape[0], grid.n_vertices, grid.n, fx.shape[1], 0)
     h = grid.basis_matrix(x)
     return solve_regularized(h, fx, sigma, tikhonov_matrix(grid, 0)).reshape(grid.n_vertices, fx.shape[1])
@@ -94,7 +94,8 @@ def _solve(grid: Grid, x: np.ndarray, fx: np.ndarray, sigma: float) -> np.ndarra
 def _box(box) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = (np.asarray(b, dtype=float).reshape(-1) for b in box)
     if lo.size != hi.size or lo.size == 0 or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(hi <= lo):
-        raise InputError(f"the box must be (lo, hi) with lo < hi in every dimension, got lo = {lo.tolist()}, hi = {hi.tolist()}")
+        raise InputError(f"the box (--domain) must have finite bounds with lo < hi in every dimension, got lo = {lo.tolist()}, "
+                         f"hi = {hi.tolist()}; give one lo:hi with lo < hi per argument")
     return lo, hi
 
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.limits import check_seed
 from pwas_hdl.systems.lorenz import PlantData
 from pwas_hdl.systems.normalization import Normalization, normalize_with_noise
@@ -123,7 +123,7 @@ def pv_benchmark(
     """
     _check_n(n_samples)
     if rho_law not in RHO_LAWS:
-        raise InputError(f"rho_law must be one of {', '.join(RHO_LAWS)}, got {rho_law!r}")
+        raise InputError(choice_text(option_text("rho_law"), RHO_LAWS, rho_law))
     if output_row not in C_ROWS:
         raise InputError(f"output_row must be one of {', '.join(C_ROWS)}, got {output_row!r}")
     rng = np.random.default_rng(seed)

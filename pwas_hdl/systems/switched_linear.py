@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, choice_text
 from pwas_hdl.systems.lorenz import PlantData, stack_runs
 
 __all__ = ["SWITCHED_A", "SWITCHED_B", "SWITCHED_C", "SWITCHED_ASSUMPTIONS", "SWITCHING_LAWS", "INPUT_KINDS",
@@ -65,7 +65,7 @@ def switched_input(kind: str, samples: int, rng: np.random.Generator) -> np.ndar
     if kind == "prbs":
         levels = rng.choice([0.0, 2.0], size=-(-samples // 5))
         return np.repeat(levels, 5)[:samples]
-    raise InputError(f"input must be one of {', '.join(INPUT_KINDS)}, got {kind!r}")
+    raise InputError(choice_text("--input-signal (input_kind)", INPUT_KINDS, kind))
 
 
 def _dwells(samples: int, dwell, rng: np.random.Generator) -> list[int]:
@@ -131,7 +131,7 @@ def simulate_switched(
     if noise < 0:
         raise InputError(f"the noise standard deviation must be >= 0, got {noise}")
     if switching not in SWITCHING_LAWS:
-        raise InputError(f"switching must be one of {', '.join(SWITCHING_LAWS)}, got {switching!r}")
+        raise InputError(choice_text("--switching (switching)", SWITCHING_LAWS, switching))
     u = switched_input(input_kind, samples, rng)
     dw = _dwells(samples, dwell, rng)
     noise_rng = np.random.default_rng(rng.integers(2**63))  # always drawn: the noise level does not change the states
