@@ -214,7 +214,7 @@ def test_cv_folds(good_data):
     h = grid.basis_matrix(np.linspace(0, 1, 3)[:, None])
     with pytest.raises(ValueError, match="at least 2 folds"):
         cross_validate_sigma(h, np.zeros(3), tikhonov_matrix(grid), [1.0], folds=1)
-    with pytest.raises(ValueError, match="cannot split 3 samples into 4 folds"):
+    with pytest.raises(ValueError, match=r"cannot split 3 samples into 4 folds \(--folds\); use --folds 3 or fewer"):
         cross_validate_sigma(h, np.zeros(3), tikhonov_matrix(grid), [1.0], folds=4)
 
 

@@ -7,6 +7,7 @@ One test per message reworded by the error-message audit: the CLI cases check ex
 from __future__ import annotations
 
 import json
+import types
 from pathlib import Path
 from unittest import mock
 
@@ -356,3 +357,28 @@ def test_fit_map_and_z0_options_are_named_as_typed(files, tmp_path):
                          "--z0 must be mean, measured or one number per -z/--targets column", "got 'zero'")
     assert "logspace" not in msg
     assert not (tmp_path / "m.json").exists() and not (tmp_path / "x.json").exists()
+
+
+# --- the second audit: cross-validation folds, sensor-top messages in CLI terms ----------------------------
+
+def test_folds_are_named_as_typed(files, tmp_path):
+    assert_refused(fit(files / "d.csv", tmp_path / "x.json", "--folds", 1),
+                   "--folds (cv_folds) must be an integer >= 2, got 1", "give --folds 2 or more")
+    res = invoke("fit", files / "d.csv", "-o", tmp_path / "x.json", "-y", "y", "-z", "z", "--my", 2, "-p", 3, "--folds", 1000)
+    assert_refused(res, "cannot split 599 samples into 1000 folds (--folds)", "use --folds 599 or fewer")
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_sensor_top_messages_say_which_command_builds_what(models):
+    from pwas_hdl.fit.model_file import read_model
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.hdl import lag_plan
+    from pwas_hdl.hdl.params import CoreParams
+    from pwas_hdl.hdl.sensor_top import PWASSensorTop
+
+    with pytest.raises(InputError, match=r"no feedback path; build the recurrent top instead \(generate --design sensor does"):
+        lag_plan(types.SimpleNamespace(n=3, regressor_signals=[]), LagStructure(1, 1, 1, 1, mz=1, nz=1))
+    params = CoreParams.from_model(FixedPointModel.from_sensor(read_model(models / "perlag.json")))
+    with pytest.raises(InputError, match=r"fit without --separate-lag-domains \(share_lag_domain=True\) and with one -p value"):
+        PWASSensorTop(params, [("y", 2)], [(0, 1), (0, 0)])

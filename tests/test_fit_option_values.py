@@ -27,13 +27,13 @@ def data_csv(tmp_path_factory):
 @pytest.mark.parametrize(
     "extra,needle",
     [
-        (["--sigma", "0.1", "--folds", "0"], "--folds) must be an integer >= 2"),
-        (["--folds", "1"], "--folds) must be an integer >= 2"),
+        (["--sigma", "0.1", "--folds", "0"], "--folds (cv_folds) must be an integer >= 2"),
+        (["--folds", "1"], "--folds (cv_folds) must be an integer >= 2"),
         (["--models", "0"], "--models (n_models) must be an integer >= 1"),
         (["--window", "0"], "--window (window) must be an integer >= 1"),
         (["--order", "-1"], "--order (order) must be an integer >= 1"),
-        (["--observer", "poles:2"], "observer must be"),
-        (["--features", "11c"], "features must be"),
+        (["--observer", "poles:2"], "--observer (observer) must be"),
+        (["--features", "11c"], "--features (features) must be"),
     ],
 )
 def test_unused_option_values_are_checked(data_csv, tmp_path, extra, needle):

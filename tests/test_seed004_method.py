@@ -187,7 +187,7 @@ import scipy.linalg  # noqa: E402
 
 @pytest.mark.parametrize("bad", ["poles", "poles:1", "kalman:0", "kalman:x", "luenberger", "deadbeat:1"])
 def test_parse_observer_refuses(bad):
-    with pytest.raises(InputError, match="observer must be"):
+    with pytest.raises(InputError, match=r"--observer \(observer\) must be deadbeat, poles:R"):
         parse_observer(bad)
 
 

@@ -2075,7 +2075,7 @@ def fold_labels(n_rows: int, folds: int, shuffle: bool = False, seed: int = 0) -
     if folds < 2:
         raise InputError(f"cross-validation needs at least 2 folds, got {folds}")
     if n_rows < folds:
-        raise InputError(f"cannot split {n_rows} samples into {folds} folds; use fewer folds or more data")
+        raise InputError(f"cannot split {n_rows} samples into {folds} folds (--folds); use --folds {n_rows} or fewer, or more data")
     labels = (np.arange(n_rows) * folds) // n_rows
     if shuffle:
         labels = np.random.default_rng(seed).permutation(labels)

@@ -208,7 +208,7 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
             if not isinstance(getattr(self, nm), (bool, np.bool_)):
                 raise InputError(f"{nm} must be True or False, got {getattr(self, nm)!r}")
         if not isinstance(self.cv_folds, (int, np.integer)) or isinstance(self.cv_folds, bool) or self.cv_folds < 2:
-            raise InputError(f"cv_folds (--folds) must be an integer >= 2, got {self.cv_folds!r}")
+            raise InputError(f"--folds (cv_folds) must be an integer >= 2, got {self.cv_folds!r}; give --folds 2 or more")
         if isinstance(self.front_end, ObserverBankFrontEnd):
             self.front_end.check_params()
         elif self.front_end != "lags":

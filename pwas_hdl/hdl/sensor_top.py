@@ -71,7 +71,8 @@ def lag_plan(model: Any, lags: LagStructure | None = None) -> tuple[list[tuple[s
     if lags is not None and lags.recurrent:  # issue 13: the fed-back estimates need the feedback path
         raise InputError(
             f"the model is a recurrent (dynamical) sensor (Mz = {lags.mz}): the lag sensor top has no feedback path; "
-            "build it with pwas_hdl.verify.recurrent_replay.build_recurrent_design (generate --design core gives the bare core)"
+            "build the recurrent top instead (generate --design sensor does; in Python "
+            "pwas_hdl.verify.recurrent_replay.build_recurrent_design), or the bare core (generate --design core)"
         )
     if lags is not None:
         if lags.dimension != n:
@@ -234,7 +235,8 @@ class PWASSensorTop(wiring.Component):
             if len(fmt) > 1:
                 raise InputError(
                     f"the lags of signal {nm!r} have different input formats (lo_code, F, p) {sorted(fmt)}; "
-                    "the lag bank feeds one code to all of them: fit with share_lag_domain=True and equal partitions per signal"
+                    "the lag bank feeds one code to all of them: fit without --separate-lag-domains (share_lag_domain=True) "
+                    "and with one -p value for all lags of the signal, or generate --design core"
                 )
         if architecture == "serial":  # one multiplier per target, II = n + 1 (pwas_hdl.hdl.serial_core)
             from pwas_hdl.hdl.serial_core import SerialPWASCore
