@@ -382,3 +382,16 @@ def test_sensor_top_messages_say_which_command_builds_what(models):
     params = CoreParams.from_model(FixedPointModel.from_sensor(read_model(models / "perlag.json")))
     with pytest.raises(InputError, match=r"fit without --separate-lag-domains \(share_lag_domain=True\) and with one -p value"):
         PWASSensorTop(params, [("y", 2)], [(0, 1), (0, 0)])
+
+
+@pytest.mark.parametrize("extra,words", [
+    (["--coef-frac", "41"], ["--coef-frac (coef_frac) must be in 1..40, got 41"]),
+    (["--state-frac", "41"], ["--state-frac (state_frac) must be <= 40, got 41"]),
+])
+def test_observer_bank_fractions_name_the_value_that_is_wrong(tmp_path, files, extra, words):
+    """One check said '--coef-frac must be in 1..40 and --state-frac <= 40, got 41, 21': which one?"""
+    res = invoke("fit", files / "d.csv", "-o", tmp_path / "ob.json", "-y", "y", "-z", "z", "--my", 0, "-p", 2,
+                 "--sigma", 1, "--front-end", "observer-bank", "--models", 2)
+    assert res.exit_code == 0, res.output
+    assert_refused(invoke("generate", tmp_path / "ob.json", "-o", tmp_path / "g", "--design", "sensor", *extra), *words)
+    assert not (tmp_path / "g").exists()

@@ -354,8 +354,12 @@ class FixedPointObserverBank:
                 fc += 1
         else:
             fc = int(coef_frac)
-        if not 1 <= fc <= 40 or fs > 40:
-            raise InputError(f"{option_text('coef_frac')} must be in 1..40 and {option_text('state_frac')} <= 40, got {fc}, {fs}")
+        if not 1 <= fc <= 40:
+            raise InputError(f"{option_text('coef_frac')} must be in 1..40, got {fc}")  # the default is 4..40
+        if fs > 40:
+            raise InputError(f"{option_text('state_frac')} must be <= 40, got {fs}"
+                             + ("" if state_frac is not None else " (the default, from the input fraction bits: give fewer "
+                                f"{option_text('input_bits')} or --state-frac 40 or less)"))
         self.state_frac, self.coef_frac = fs, fc
 
         # ---- coefficient codes
