@@ -1,6 +1,9 @@
-"""io/atomic.OutputSet with a folder output (``temp_dir``): replaced whole on commit, untouched on failure."""
+"""io/atomic: OutputSet with a folder output (``temp_dir``), replaced whole on commit, untouched on failure;
+the logs of failed tool runs that ``logs_kept`` copies out."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import pytest
 
@@ -43,3 +46,38 @@ def test_new_folder_output_appears_only_on_commit(tmp_path):
     assert not target.exists()
     outs.commit()
     assert (target / "w.fst").read_text() == "w"
+
+
+def test_logs_kept_keeps_the_newest_logs_of_a_name(tmp_path, monkeypatch):
+    """Each failed tool run copies its log to $TMPDIR (the error line names it); those copies were
+    never removed. Now the newest KEPT_LOGS of a name stay; other names and other files are left."""
+    import os
+    import tempfile
+
+    from pwas_hdl.errors import ToolFailed
+    from pwas_hdl.io.atomic import KEPT_LOGS, logs_kept
+
+    tmpd = tmp_path / "tmpdir"
+    tmpd.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmpd))
+    old = []
+    for k in range(KEPT_LOGS + 5):
+        p = tmpd / f"pwas-sim-icarus-old{k:02d}.log"
+        p.write_text(str(k))
+        os.utime(p, (1_000_000 + k, 1_000_000 + k))
+        old.append(p)
+    others = [tmpd / "pwas-synth-ecp5-x1.log", tmpd / "pwas-sim-icarus-notes.txt", tmpd / "mine.log"]
+    for p in others:
+        p.write_text("not ours to remove")
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "sim.log").write_text("the new log")
+    with pytest.raises(ToolFailed) as exc:
+        with logs_kept(run, "pwas-sim-icarus"):
+            raise ToolFailed("the run failed", run / "sim.log")
+    kept = Path(exc.value.log)
+    assert kept.parent == tmpd and kept.read_text() == "the new log"
+    logs = sorted(p.name for p in tmpd.glob("pwas-sim-icarus-*.log"))
+    assert len(logs) == KEPT_LOGS and kept.name in logs
+    assert [p.exists() for p in old] == [False] * 6 + [True] * (KEPT_LOGS - 1)  # the oldest went
+    assert all(p.read_text() == "not ours to remove" for p in others)

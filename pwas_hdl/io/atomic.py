@@ -34,6 +34,7 @@ __all__ = [
     "clean_stale_temps",
     "make_temp_dir",
     "logs_kept",
+    "KEPT_LOGS",
     "install_termination_handler",
     "TEMP_MARK",
 ]
@@ -120,7 +121,8 @@ def make_temp_dir(parent: str | os.PathLike, name: str) -> Path:
 def logs_kept(folder: str | os.PathLike | None, name: str) -> Iterator[None]:
     """Around a tool run in the temporary ``folder`` (removed afterwards; None: nothing to do): a
     :class:`~pwas_hdl.errors.ToolFailed` whose log is inside it is raised again with the log copied
-    out to ``$TMPDIR/NAME-XXXX.log``, so that the file its ``error:`` line names still exists."""
+    out to ``$TMPDIR/NAME-XXXX.log``, so that the file its ``error:`` line names still exists.
+    Of those logs the newest :data:`KEPT_LOGS` of each ``NAME`` stay; older ones are removed."""
     try:
         yield
     except ToolFailed as exc:
@@ -129,6 +131,7 @@ def logs_kept(folder: str | os.PathLike | None, name: str) -> Iterator[None]:
         kept = None
         try:
             if Path(exc.log).is_file():
+                _prune_kept_logs(name, KEPT_LOGS - 1)
                 fd, kept = tempfile.mkstemp(prefix=f"{name}-", suffix=".log")
                 os.close(fd)
                 shutil.copyfile(exc.log, kept)
@@ -137,6 +140,32 @@ def logs_kept(folder: str | os.PathLike | None, name: str) -> Iterator[None]:
                 Path(kept).unlink(missing_ok=True)
             kept = None
         raise type(exc)(exc.message, kept, exc.tail) from None
+
+
+#: How many logs of failed tool runs :func:`logs_kept` keeps in ``$TMPDIR`` per name (the newest).
+KEPT_LOGS = 20
+
+
+def _prune_kept_logs(name: str, keep: int) -> None:
+    """Remove all but the newest ``keep`` of ``$TMPDIR/NAME-*.log`` (plain files of the pattern
+    :func:`logs_kept` writes; a file that cannot be removed is left)."""
+    pat = re.compile(re.escape(name) + r"-[A-Za-z0-9_]+\.log")
+    found = []
+    try:
+        with os.scandir(tempfile.gettempdir()) as it:
+            for e in it:
+                if pat.fullmatch(e.name) and e.is_file(follow_symlinks=False):
+                    try:
+                        found.append((e.stat(follow_symlinks=False).st_mtime, e.path))
+                    except OSError:
+                        pass
+    except OSError:
+        return
+    for _, path in sorted(found, reverse=True)[max(keep, 0):]:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
 
 
 def _make_temp_file(parent: Path, name: str) -> Path:
