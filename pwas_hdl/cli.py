@@ -526,6 +526,9 @@ def fit(
             from pwas_hdl.fit.regressors import LagStructure
 
             parse_additive(additive, LagStructure(mu, my, len(ins) if mu else 0, len(outs) if my else 0).signal_of_dimension())
+        if sigma is not None and (workers is not None or scheduler is not None):  # accepted (checked), but idle
+            _say(f"note: {'--workers' if workers is not None else '--scheduler'} runs the cross-validation folds; "
+                 "with a given --sigma there are none, the fit runs in this process")
         with _progress("cross-validating sigma" if sigma is None else "solving") as update, _executor(workers, scheduler) as ex:
             model.fit(u, y, z, progress=update, executor=ex)
         cv = getattr(model, "cv_", None)

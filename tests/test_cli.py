@@ -80,6 +80,16 @@ def test_fit_predict_roundtrip(lorenz_files, tmp_path):
     assert info["N"] == 125 and info["regressors"] == ["y[t-2]", "y[t-1]", "y[t]"]
 
 
+@pytest.mark.parametrize("opt", [["--workers", "2"], ["--scheduler", "tcp://127.0.0.1:1"]])
+def test_fit_with_fixed_sigma_says_workers_are_idle(lorenz_files, tmp_path, opt):
+    """--workers / --scheduler spread the CV folds; with --sigma there are none. They were accepted
+    silently (no cluster is started or reached): now a note says the fit runs in this process."""
+    res = invoke("fit", str(lorenz_files / "train.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z",
+                 "--my", "2", "-p", "3", "--sigma", "1e-3", *opt)
+    assert res.exit_code == 0, res.output
+    assert f"note: {opt[0]} runs the cross-validation folds; with a given --sigma there are none" in res.output
+
+
 def test_fit_with_fixed_sigma_first_order_and_trajectories(tmp_path):
     rng = np.random.default_rng(0)
     path = tmp_path / "d.csv"
