@@ -786,6 +786,9 @@ def generate(
                                           ("input_headroom", input_headroom)) if v is not None}
         if target_mhz is None:
             _executor(workers, scheduler)  # checks --workers / --scheduler (unused without --clock-mhz: still refused when bad)
+            if workers is not None or scheduler is not None:
+                _say(f"note: {'--workers' if workers is not None else '--scheduler'} runs the place-and-route candidates "
+                     "of --clock-mhz; without it there are none, the design is built in this process")
             with _progress("building the design"):
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,

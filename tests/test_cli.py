@@ -88,6 +88,9 @@ def test_fit_with_fixed_sigma_says_workers_are_idle(lorenz_files, tmp_path, opt)
                  "--my", "2", "-p", "3", "--sigma", "1e-3", *opt)
     assert res.exit_code == 0, res.output
     assert f"note: {opt[0]} runs the cross-validation folds; with a given --sigma there are none" in res.output
+    res = invoke("generate", str(tmp_path / "m.json"), "-o", str(tmp_path / "g"), *opt)  # the same for generate
+    assert res.exit_code == 0, res.output
+    assert f"note: {opt[0]} runs the place-and-route candidates of --clock-mhz; without it there are none" in res.output
 
 
 def test_fit_with_fixed_sigma_first_order_and_trajectories(tmp_path):
