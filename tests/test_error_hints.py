@@ -290,7 +290,7 @@ def models(files):
 
 @pytest.mark.parametrize("model, extra, words", [
     ("m", ["--weight-frac", 100], ["--weight-frac (weight_frac) = 100 makes the weights too large for 64-bit codes",
-                                   "use fewer fraction bits (--weight-frac 50 at most)"]),
+                                   "use fewer fraction bits (--weight-frac 51 at most)"]),
     ("m", ["--weight-frac", 51], ["the outputs would need 65 bits at --output-frac (output_frac) = 52 (the default)",
                                   "use a smaller --output-frac (at most 51) or --weight-frac"]),
     ("m", ["--weight-frac", 50], ["the accumulator would need", "fewer input bits (--input-bits)",

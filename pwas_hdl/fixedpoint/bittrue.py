@@ -412,7 +412,7 @@ class FixedPointModel:
         codes_free, sat_free = free.quantize(w, return_saturated=True)
         if sat_free.any() or signed_bits_needed(codes_free) > 64:
             wtop = float(np.max(np.abs(w)))
-            most = 61 - math.floor(math.log2(wtop)) if wtop > 0 and math.isfinite(wtop) else fw - 1
+            most = 62 - math.floor(math.log2(wtop)) if wtop > 0 and math.isfinite(wtop) else fw - 1  # wtop 2^most < 2^63
             raise InputError(f"{option_text('weight_frac')} = {fw} makes the weights too large for 64-bit codes (the largest "
                              f"|weight| is {wtop:.6g}); use fewer fraction bits (--weight-frac {min(most, fw - 1)} at most)")
         wmax = float(np.max(np.abs(w))) if w.size else 0.0
