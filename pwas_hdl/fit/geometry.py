@@ -155,7 +155,7 @@ class Grid:
         Lower and upper bounds of the domain, physical units; ``hi > lo`` elementwise.
     partitions : int or array_like of int, shape (n,)
         Number of intervals ``p_j >= 1`` per dimension (one int is used for every dimension).
-    breakpoints : sequence of (array_like or None), optional
+    breakpoints : sequence of (array_like, shape (p_j + 1,), or None), optional
         Per dimension, the ``p_j + 1`` strictly increasing cut points from ``lo_j`` to ``hi_j``
         (physical units), or None for equal intervals. Default: uniform in every dimension.
 
@@ -256,8 +256,8 @@ class Grid:
 
         Parameters
         ----------
-        index : ndarray or int, optional
-            Linear vertex indices, ``0 <= index < N``; None for all ``N`` vertices.
+        index : ndarray of int, any shape ``(...)``, or int, optional
+            Linear vertex indices, ``0 <= index < N``; None for all ``N`` vertices (``(...) = (N,)``).
 
         Returns
         -------
@@ -272,8 +272,8 @@ class Grid:
 
         Parameters
         ----------
-        index : ndarray or int, optional
-            Linear vertex indices, ``0 <= index < N``; None for all ``N`` vertices.
+        index : ndarray of int, any shape ``(...)``, or int, optional
+            Linear vertex indices, ``0 <= index < N``; None for all ``N`` vertices (``(...) = (N,)``).
 
         Returns
         -------

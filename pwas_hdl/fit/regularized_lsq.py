@@ -1863,7 +1863,9 @@ def solve_regularized(
     rtol : float
         CG tolerance.
     max_memory : int or str, optional
-        Memory limit (see :func:`check_fit_memory`).
+        Memory limit: bytes, or text with a binary suffix K, M, G or T (``"4G"`` = 4 GiB,
+        :func:`parse_memory`); default ``$PWAS_HDL_MAX_MEMORY`` or a fraction of the available RAM
+        (:func:`memory_limit`, checked by :func:`check_fit_memory`).
     return_info : bool
         Also return the :class:`SolveInfo`.
 
@@ -2035,6 +2037,16 @@ class CVResult:
         seconds and worker pid of each task on forked workers, else empty) and
         ``parent_overlap_cpu_s`` (this process's CPU seconds while they ran: the final solve's
         multigrid levels); not written to the model file.
+    final_weights : ndarray, shape (N,) or (N, nz), or None
+        With ``final_solve=True`` (:func:`cross_validate_sigma`): the full-data weights at
+        ``best_sigma``, as :func:`solve_regularized` returns them; else None.
+        :meth:`PWASVirtualSensor.fit <pwas_hdl.fit.virtual_sensor.PWASVirtualSensor.fit>` takes
+        them and leaves None in ``cv_``. Not written to the model file.
+    final_info : SolveInfo or None
+        How ``final_weights`` were solved (with ``final_solve=True``; else None).
+    shuffle : bool
+        The folds were shuffled samples (``fit --cv-shuffle``), not contiguous blocks; written to
+        the model file as ``shuffle: true`` only when set.
     """
 
     sigmas: np.ndarray
@@ -2043,11 +2055,8 @@ class CVResult:
     folds: int
     fold_mse: np.ndarray = field(repr=False, default_factory=lambda: np.empty(0))
     solver: dict = field(repr=False, default_factory=dict)
-    #: with ``final_solve=True``: the full-data weights at :attr:`best_sigma`, shape (N,) or (N, nz)
-    #: as :func:`solve_regularized` returns them, and their :class:`SolveInfo`; else None
     final_weights: np.ndarray | None = field(repr=False, default=None, compare=False)
     final_info: "SolveInfo | None" = field(repr=False, default=None, compare=False)
-    #: the folds were shuffled samples (``fit --cv-shuffle``), not contiguous blocks
     shuffle: bool = False
 
     def to_dict(self) -> dict:
@@ -2283,7 +2292,9 @@ def cross_validate_sigma(
     rtol : float
         CG relative-residual tolerance.
     max_memory : int or str, optional
-        Memory limit (see :func:`check_fit_memory`).
+        Memory limit: bytes, or text with a binary suffix K, M, G or T (``"4G"`` = 4 GiB,
+        :func:`parse_memory`); default ``$PWAS_HDL_MAX_MEMORY`` or a fraction of the available RAM
+        (:func:`memory_limit`, checked by :func:`check_fit_memory`).
     executor : pwas_hdl.flow.executor.Executor, optional
         Runs the folds (one task per fold: its sigma sweep) on Dask workers when it is
         distributed, or, with local ``workers >= 2`` and at least

@@ -645,7 +645,8 @@ class PWASVirtualSensor(RegressorMixin, BaseEstimator):
         zhat : ndarray, shape (sum_i (T_i - M + 1), nz)
             Row blocks per trajectory, sample ``t = M-1 .. T_i-1``. A recurrent sensor (``Mz >= 1``)
             runs the recurrence: row ``t`` is ``z_hat(t + lead)`` from the past estimates.
-        flags : ndarray of bool (only with ``return_flags``)
+        flags : ndarray, shape (sum_i (T_i - M + 1),), bool  (only with ``return_flags``)
+            True where a regressor coordinate was clamped to the domain (out-of-domain row).
         """
         self._check_fitted()
         if self.lags_ is not None and self.lags_.recurrent:

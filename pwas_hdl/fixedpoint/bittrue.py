@@ -175,7 +175,7 @@ class FixedPointModel:
     weights : ndarray, shape (N,) or (N, nz)
         Float weights in vertex order (``PWASVirtualSensor.weights_``).
     input_bits : int
-        ``B_in`` (default 12).
+        Input code width ``B_in``, bits, sign included (default 12).
     input_fill : float
         Fraction of the input code range used by the domain, ``(0, 1]`` (default 0.9).
     input_scale : {"pow2", "exact"}
@@ -184,13 +184,16 @@ class FixedPointModel:
         whole ``input_fill`` of the code range for any ``p`` and the front end scales by a constant
         (:meth:`InputFormat.for_interval <pwas_hdl.fixedpoint.formats.InputFormat.for_interval>`).
     weight_bits : int, optional
-        ``B_w``; default: the fewest bits that hold every weight code.
+        Weight code width ``B_w``, bits, sign included; default: the fewest bits that hold every
+        weight code.
     weight_frac : int, optional
-        ``Fw``; default :func:`default_weight_frac` of ``reference_error`` (noise budget).
+        Weight fraction bits ``Fw`` (weight LSB ``2**-Fw`` physical units; may be negative);
+        default :func:`default_weight_frac` of ``reference_error`` (noise budget).
     output_bits : int, optional
-        ``B_out``; default: the fewest bits such that no output saturates.
+        Output code width ``B_out``, bits, sign included; default: the fewest bits such that no
+        output saturates.
     output_frac : int, optional
-        ``Fo``; default ``Fw + 1``.
+        Output fraction bits ``Fo`` (output LSB ``2**-Fo`` physical target units); default ``Fw + 1``.
     overflow : {"error", "saturate"}
         What to do with weights that do not fit ``weight_bits`` (default "error").
     rounding : {"half_up", "truncate"}

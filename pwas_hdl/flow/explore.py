@@ -483,7 +483,7 @@ def explore(
     traj_col : str, optional
         Trajectory column of the CSV, as for ``fit``.
     input_bits : sequence of int
-        Input widths ``B_in`` (default 8, 10, 12, 14, 16).
+        Input code widths ``B_in``, bits (default 8, 10, 12, 14, 16).
     weight_frac, output_frac : sequence of int, optional
         Absolute fraction bits ``Fw`` / ``Fo``; default: the defaults of ``generate`` -7 .. +2
         (:data:`DEFAULT_FRAC_OFFSETS`).

@@ -187,7 +187,7 @@ def synthesize(
         FPGA part and package, as nextpnr names them (``"hx8k"``/``"ct256"``, ``"up5k"``/``"sg48"``,
         ``"45k"``/``"CABGA381"``, ...). Defaults: see :data:`DEFAULT_DEVICE` and the module notes.
     freq_mhz
-        Target clock frequency given to nextpnr (``--freq``). A miss is reported, not raised.
+        Target clock frequency, MHz, given to nextpnr (``--freq``). A miss is reported, not raised.
     seed
         nextpnr placement seed.
     workdir
