@@ -1,0 +1,136 @@
+"""The public API documents itself: every parameter of what ``pwas_hdl`` exports is annotated and named
+in its numpydoc Parameters section (the project standard: type hints on public functions, numpydoc
+docstrings that say units and shapes).
+
+Checked for each name of ``pwas_hdl.__all__``: a function's parameters and return; a class's
+constructor parameters (in the class docstring's Parameters or, for dataclass fields, Attributes
+section, as numpydoc documents a constructor) and its public methods (those the class defines, not
+the inherited scikit-learn ones). The sections are parsed by hand (numpydoc is not a dependency):
+a section is a title line over a line of dashes; an entry is ``name : type`` (or ``a, b : type``)
+at the section's indentation, its description indented below.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+import textwrap
+
+import pytest
+
+import pwas_hdl
+
+_DASHES = re.compile(r"\s*-{3,}\s*")
+_TITLE = re.compile(r"\s*([A-Z][A-Za-z ]*?)\s*(\(.*\))?\s*")
+
+
+def _sections(doc: str) -> dict[str, list[str]]:
+    """Section title (``Parameters``, ``Returns``, ...) -> its lines (dedented)."""
+    lines = (doc or "").expandtabs().splitlines()
+    lines = lines[:1] + textwrap.dedent("\n".join(lines[1:])).splitlines()
+    out: dict[str, list[str]] = {}
+    title = None
+    for i, line in enumerate(lines):
+        if _DASHES.fullmatch(line):  # a title's underline
+            continue
+        nxt = lines[i + 1] if i + 1 < len(lines) else ""
+        m = _TITLE.fullmatch(line)
+        if m and line.strip() and _DASHES.fullmatch(nxt):
+            title = m.group(1)
+            out.setdefault(title, [])
+        elif title is not None:
+            out[title].append(line)
+    return out
+
+
+def _entries(lines: list[str]) -> dict[str, str]:
+    """Parameter name -> its type and description, of one Parameters-like section."""
+    base = None
+    out: dict[str, str] = {}
+    current: list[str] = []
+    for line in lines:
+        if not line.strip():
+            continue
+        indent = len(line) - len(line.lstrip())
+        base = indent if base is None else base
+        if indent <= base:
+            head, _, typ = line.strip().partition(" :")
+            current = [n.strip().lstrip("*") for n in head.split(",") if n.strip()]
+            for name in current:
+                out[name] = typ
+        else:
+            for name in current:
+                out[name] += " " + line.strip()
+    return out
+
+
+def _documented(doc: str, titles: tuple[str, ...]) -> dict[str, str]:
+    secs = _sections(doc)
+    out: dict[str, str] = {}
+    for title, lines in secs.items():
+        if title.startswith(titles):
+            out.update(_entries(lines))
+    return out
+
+
+def _public_callables() -> list[tuple[str, object, str, bool]]:
+    """(qualified name, function, docstring holding its Parameters, is a constructor) for the exported API."""
+    items = []
+    for name in pwas_hdl.__all__:
+        obj = getattr(pwas_hdl, name)
+        if not inspect.isclass(obj):
+            items.append((name, obj, inspect.getdoc(obj) or "", False))
+            continue
+        own_init = vars(obj).get("__init__")
+        if own_init is not None or dataclasses.is_dataclass(obj):  # error classes without their own: Exception's
+            doc = (obj.__doc__ or "") + "\n" + (getattr(own_init, "__doc__", None) or "")
+            items.append((f"{name}.__init__", obj.__init__, doc, True))
+        for attr, member in vars(obj).items():
+            if attr.startswith("_"):
+                continue
+            fn = member.__func__ if isinstance(member, (staticmethod, classmethod)) else member
+            if inspect.isfunction(fn):
+                items.append((f"{name}.{attr}", fn, inspect.getdoc(fn) or "", False))
+    return items
+
+
+_ITEMS = _public_callables()
+
+
+def _params(fn: object) -> list[inspect.Parameter]:
+    return [p for p in inspect.signature(fn).parameters.values() if p.name not in ("self", "cls")]
+
+
+def test_the_walk_covers_the_readme_api():
+    names = {q for q, *_ in _ITEMS}
+    assert {"PWASVirtualSensor.fit", "PWASVirtualSensor.predict", "PWASVirtualSensor.__init__", "FixedPointModel.evaluate",
+            "generate", "simulate_arrays", "synthesize", "explore", "collect_report", "load_model", "load_design"} <= names
+
+
+@pytest.mark.parametrize("qual, fn, doc, ctor", _ITEMS, ids=[q for q, *_ in _ITEMS])
+def test_parameters_are_annotated_and_documented(qual, fn, doc, ctor):
+    assert doc.strip(), f"{qual} has no docstring"
+    params = _params(fn)
+    unannotated = [p.name for p in params if p.annotation is inspect.Parameter.empty]
+    assert not unannotated, f"{qual}: parameters without a type hint: {unannotated}"
+    if not ctor:
+        assert inspect.signature(fn).return_annotation is not inspect.Signature.empty, f"{qual}: no return annotation"
+    if not params:
+        return
+    documented = _documented(doc, ("Parameters", "Other Parameters") + (("Attributes",) if ctor else ()))
+    missing = [p.name for p in params if p.name not in documented]
+    assert not missing, f"{qual}: parameters missing from the docstring's Parameters section: {missing}"
+    if not ctor and not any(p.kind is p.VAR_KEYWORD for p in params):
+        unknown = sorted(set(documented) - {p.name for p in params})
+        assert not unknown, f"{qual}: the Parameters section names parameters that do not exist: {unknown}"
+
+
+@pytest.mark.parametrize("qual, fn, doc, ctor", _ITEMS, ids=[q for q, *_ in _ITEMS])
+def test_array_parameters_give_a_shape(qual, fn, doc, ctor):
+    """A parameter annotated as an ndarray says its shape (``shape (T, n)``, ``(N,)``, or "as in" a method that does)."""
+    documented = _documented(doc, ("Parameters", "Other Parameters") + (("Attributes",) if ctor else ()))
+    shape = re.compile(r"shape|\([^()]*,[^()]*\)|as in :|scalar")
+    for p in _params(fn):
+        if "ndarray" in str(p.annotation) and p.name in documented:
+            assert shape.search(documented[p.name]), f"{qual}: array parameter {p.name!r} has no shape in its docstring"
