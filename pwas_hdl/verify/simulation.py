@@ -128,13 +128,32 @@ class ManifestView:
 
     @property
     def top(self) -> str:
+        """The top module's Verilog name (manifest ``top``)."""
         return self.manifest["top"]
 
     @property
     def latency(self) -> int:
+        """Input-to-output latency, clock cycles (manifest ``latency_cycles``)."""
         return int(self.manifest["latency_cycles"])
 
     def port(self, role: str) -> dict:
+        """The manifest's port record of one role.
+
+        Parameters
+        ----------
+        role : str
+            A port role of the manifest (``"in.payload"``, ``"out.payload"``, ``"clock"``, ...).
+
+        Returns
+        -------
+        dict
+            The port record (``name``, ``role``, ``width`` in bits, ``fields`` for a payload, ...).
+
+        Raises
+        ------
+        KeyError
+            The manifest has no port of that role.
+        """
         for p in self.manifest["ports"]:
             if p["role"] == role:
                 return p
@@ -142,38 +161,61 @@ class ManifestView:
 
     @property
     def in_fields(self) -> list[dict]:
+        """The input payload's bit fields, payload order (manifest port ``in.payload``)."""
         return self.port("in.payload")["fields"]
 
     @property
     def out_fields(self) -> list[dict]:
+        """The output payload's bit fields: the scores, ``out_of_range``[, ``class_index``]."""
         return self.port("out.payload")["fields"]
 
 
 @dataclass
 class Design(ManifestView):
-    """A generated design folder and the bit-true model it must match (the manifest's facts: :class:`ManifestView`)."""
+    """A generated design folder and the bit-true model it must match (the manifest's facts: :class:`ManifestView`).
+
+    Made by :func:`load_design`.
+
+    Attributes
+    ----------
+    outdir : Path
+        The design folder.
+    manifest : dict
+        Its ``manifest.json``, parsed.
+    sensor : PWASVirtualSensor
+        The sensor rebuilt from the folder's ``model.json``.
+    model : FixedPointModel
+        The bit-true model of the PWAS core (the formats the manifest lists).
+    verilog_path : Path
+        The Verilog file to simulate (the folder's, or the one given to :func:`load_design`).
+    bank : ObserverBankSensorModel or None
+        Observer-bank sensors (manifest ``front_end``): the bit-true bank + core
+        (:class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`; ``model`` is its
+        core); else None.
+    """
 
     outdir: Path
     manifest: dict
     sensor: Any  # PWASVirtualSensor
     model: FixedPointModel
     verilog_path: Path
-    #: observer-bank sensors (manifest ``front_end``): the bit-true bank + core
-    #: (:class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`); ``model`` is its core
     bank: Any = None
 
     @property
     def kind(self) -> str:
+        """The manifest's design kind: ``"core"``, ``"sensor"``, ``"recurrent"``, ..."""
         return self.manifest["design"]
 
     @property
     def warmup(self) -> int:
+        """Input samples a sensor top takes before its first output (0 for a core)."""
         if self.kind not in ("sensor", "recurrent"):
             return 0
         return int(self.manifest["lags"]["warmup"]["samples_without_output"])  # the schema requires it for a sensor
 
     @property
     def verilog(self) -> str:
+        """The text of :attr:`verilog_path`."""
         return self.verilog_path.read_text(encoding="utf-8")
 
     @property
@@ -272,13 +314,27 @@ def _load_design(out: Path, verilog: str | os.PathLike | None) -> Design:
 class Segment:
     """Input transfers between two resets and the outputs they must give.
 
-    ``codes`` (T, fields): one row per input transfer (the core: regressor codes ``q``; the sensor
-    top: one code per signal, payload order). ``q`` (m, n): the regressor of each expected output;
-    ``expected`` (m, nz) output codes and ``oor`` (m,) flags from the bit-true model; ``src`` (m,):
-    the transfer that completes each output's regressor. ``drain``: wait for every output before the
-    next reset; otherwise reset ``hold`` cycles after the last transfer (in the middle of the stream).
-    ``cls`` (m,): a classifier design's class index (:func:`pwas_hdl.fixedpoint.argmax.argmax_index`
-    of ``expected``), else None.
+    Attributes
+    ----------
+    codes : ndarray of int, shape (T, fields)
+        One row per input transfer (the core: regressor codes ``q``; the sensor top: one code per
+        signal, payload order).
+    q : ndarray of int, shape (m, n)
+        The regressor codes of each expected output.
+    expected : ndarray of int64, shape (m, nz)
+        Output codes from the bit-true model.
+    oor : ndarray of bool, shape (m,)
+        Out-of-range flags from the bit-true model.
+    src : ndarray of int, shape (m,)
+        The transfer (row of ``codes``) that completes each output's regressor.
+    drain : bool
+        Wait for every output before the next reset; otherwise reset ``hold`` cycles after the
+        last transfer (in the middle of the stream).
+    hold : int
+        Clock cycles from the last transfer to the reset when not ``drain``.
+    cls : ndarray of int, shape (m,), or None
+        A classifier design's class index (:func:`pwas_hdl.fixedpoint.argmax.argmax_index` of
+        ``expected``), else None.
     """
 
     codes: np.ndarray
@@ -319,8 +375,20 @@ class Segment:
 
 @dataclass
 class Run:
-    """Segments replayed with one stall pattern: ``p_valid`` / ``p_ready`` = probability that the
-    source offers / the sink accepts in a cycle (1.0: never stalls)."""
+    """Segments replayed with one stall pattern.
+
+    Attributes
+    ----------
+    name : str
+        The run's name in the results (``"full"``, ``"stall"``, ...).
+    segments : list of Segment
+        Replayed in order, a reset before each.
+    p_valid, p_ready : float
+        Probability in ``[0, 1]`` that the source offers / the sink accepts in a clock cycle (1.0:
+        never stalls).
+    seed : int
+        Seed of the stall pattern.
+    """
 
     name: str
     segments: list[Segment]
@@ -673,7 +741,58 @@ def locate_difference(design: Design, probe: dict, q_row: Sequence[int]) -> dict
 
 @dataclass
 class RTLResult:
-    """Outcome of :func:`run_rtl` (one simulator, one design, several runs)."""
+    """Outcome of :func:`run_rtl` (one simulator, one design, several runs).
+
+    Attributes
+    ----------
+    simulator : str
+        ``"icarus"`` or ``"verilator"``.
+    design : Design
+        The simulated design.
+    runs : list of Run
+        The replays.
+    raw : dict
+        The testbench's JSON result as written.
+    failures : list of str
+        Testbench failures (missing outputs, protocol errors, ...), one line each.
+    mismatches : int
+        Outputs whose codes differ from the bit-true model.
+    outputs : int
+        Outputs received, all runs.
+    latencies : list of int
+        Input-to-output latency of each output of the runs without backpressure, clock cycles.
+    ii : float or None
+        Measured initiation interval, clock cycles per sample (the largest of the stall-free
+        draining segments); None when no segment measures it.
+    float_error_max : float
+        ``max |RTL output - float model|`` at the input codes, physical target units (saturated
+        outputs left out).
+    float_error_max_lsb : float
+        The same in output LSBs.
+    error_bound, error_bound_lsb : float
+        The bit-true model's error bound, physical units and output LSBs.
+    cycles : int
+        Clock cycles simulated, all runs.
+    sim_seconds : float
+        Seconds inside the simulator (testbench runs).
+    wall_seconds : float
+        Seconds of the simulator process(es), start-up included.
+    build_seconds : float
+        Seconds of the simulator build (0 when reused).
+    build_reused : bool
+        The cached build was reused.
+    located : dict or None
+        With ``debug``: :func:`locate_difference`'s record of the first differing sample.
+    hw : list
+        Per run, per segment: ``(codes, oor)``, the RTL's output codes ``(m, nz)`` and
+        out-of-range flags ``(m,)``.
+    hw_class : list
+        Classifier designs: per run, per segment, the RTL's class index ``(m,)``; else empty lists.
+    latencies_all : list of int
+        Latencies of all runs, backpressure included (waiting counts), clock cycles.
+    saturated : int
+        Outputs at the saturation limits (left out of the float comparison).
+    """
 
     simulator: str
     design: Design
@@ -684,27 +803,29 @@ class RTLResult:
     outputs: int
     latencies: list[int]
     ii: float | None
-    float_error_max: float  # physical units, RTL output vs float model at the input codes
+    float_error_max: float
     float_error_max_lsb: float
     error_bound: float
     error_bound_lsb: float
     cycles: int
-    sim_seconds: float  # inside the simulator (testbench runs)
-    wall_seconds: float  # simulator process(es), start-up included
+    sim_seconds: float
+    wall_seconds: float
     build_seconds: float
     build_reused: bool
     located: dict | None = None
-    hw: list = field(default_factory=list, repr=False)  # per run, per segment: (codes (m, nz), oor (m,))
-    hw_class: list = field(default_factory=list, repr=False)  # classifier: per run, per segment: class index (m,)
-    latencies_all: list = field(default_factory=list, repr=False)  # also with backpressure (includes waiting)
-    saturated: int = 0  # outputs at the saturation limits (left out of the float comparison)
+    hw: list = field(default_factory=list, repr=False)
+    hw_class: list = field(default_factory=list, repr=False)
+    latencies_all: list = field(default_factory=list, repr=False)
+    saturated: int = 0
 
     @property
     def passed(self) -> bool:
+        """No testbench failure, no mismatch, and the testbench reported success."""
         return not self.failures and self.mismatches == 0 and bool(self.raw.get("passed"))
 
     @property
     def within_bound(self) -> bool:
+        """:attr:`float_error_max` is within :attr:`error_bound` (relative slack 1e-9)."""
         return self.float_error_max <= self.error_bound * (1 + 1e-9) + 1e-12
 
     def first_mismatch(self) -> dict | None:
