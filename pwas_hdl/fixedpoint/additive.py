@@ -37,14 +37,19 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, NOISE_BUDGET, FixedPointModel, _py_shift_round, default_output_frac
 from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat, SignalScaling, grid_input_formats, shift_round, signed_bits_needed
 from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.additive import AdditiveGrid
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["AdditiveFixedPointModel", "additive_weight_frac"]
 
@@ -55,6 +60,25 @@ def additive_weight_frac(ref: float, n_parts: int, budget: float = NOISE_BUDGET)
     The largest power-of-two ``lsb_w`` with ``sqrt((n_parts + 1/4) lsb_w**2 / 12) <= budget * ref``
     (uniform, independent rounding errors; output lsb = half the weight lsb); ``n_parts = 1`` gives
     :func:`pwas_hdl.fixedpoint.bittrue.default_weight_frac`.
+
+    Parameters
+    ----------
+    ref : float
+        The reference error, physical target units (> 0; the sensor's training RMSE).
+    n_parts : int
+        Number of parts ``k`` (weight roundings summed).
+    budget : float
+        Fraction of ``ref`` the quantisation noise may take (default :data:`NOISE_BUDGET`).
+
+    Returns
+    -------
+    int
+        ``Fw``, weight fraction bits (weight LSB ``2**-Fw`` physical units; may be negative).
+
+    Raises
+    ------
+    InputError
+        ``ref`` is not a positive finite number.
     """
     if not (math.isfinite(ref) and ref > 0):
         raise InputError(f"reference error must be a positive number, got {ref!r}")
@@ -72,12 +96,13 @@ class AdditiveFixedPointModel(FixedPointModel):
     Parameters
     ----------
     grid : pwas_hdl.fit.additive.AdditiveGrid
+        The parts' grids on the shared domain box (``PWASVirtualSensor.grid_`` of an additive sensor).
     weights : ndarray, shape (sum_i N_i,) or (sum_i N_i, nz)
         Stacked float weights (``PWASVirtualSensor.weights_`` of an additive sensor).
     input_bits, input_fill, input_scale, weight_bits, weight_frac, output_bits, output_frac, overflow,
     rounding, reference_error, layout, regressor_names, regressor_signals, target_names
-        As :class:`FixedPointModel`; the weight format is common to all parts and the output format
-        is that of the sum.
+        As :class:`FixedPointModel` (widths ``*_bits`` and fraction bits ``*_frac`` in bits); the
+        weight format is common to all parts and the output format is that of the sum.
 
     Attributes
     ----------
@@ -93,7 +118,7 @@ class AdditiveFixedPointModel(FixedPointModel):
 
     def __init__(
         self,
-        grid,
+        grid: "AdditiveGrid",
         weights: np.ndarray,
         *,
         input_bits: int = 12,
@@ -218,9 +243,21 @@ class AdditiveFixedPointModel(FixedPointModel):
 
     # ------------------------------------------------------------- construction
     @classmethod
-    def from_sensor(cls, sensor, **overrides) -> "AdditiveFixedPointModel":
+    def from_sensor(cls, sensor: "PWASVirtualSensor", **overrides: Any) -> "AdditiveFixedPointModel":
         """Bit-true model of a fitted additive :class:`~pwas_hdl.fit.virtual_sensor.PWASVirtualSensor`
-        (names and the reference error as :meth:`FixedPointModel.from_sensor`)."""
+        (names and the reference error as :meth:`FixedPointModel.from_sensor`).
+
+        Parameters
+        ----------
+        sensor : PWASVirtualSensor
+            A fitted sensor with ``additive`` (``grid_`` an ``AdditiveGrid``, ``weights_`` stacked).
+        **overrides
+            Keyword arguments of :class:`AdditiveFixedPointModel` (``input_bits``, ``weight_frac``, ...).
+
+        Returns
+        -------
+        AdditiveFixedPointModel
+        """
         return super().from_sensor(sensor, **overrides)
 
     # ------------------------------------------------------------- datapath
@@ -241,15 +278,37 @@ class AdditiveFixedPointModel(FixedPointModel):
                        out_saturated=np.any(acc_r != out, axis=1))
         return res
 
-    def trace(self, q) -> dict:
-        """The parts' traces (``parts``: one :meth:`FixedPointModel.trace` each, on ``q[:, S_i]``),
-        ``part_acc`` (list of (m, nz)), the aligned sum ``acc``, ``acc_rounded``, ``out_saturated``,
-        ``out`` and ``out_of_range``."""
+    def trace(self, q: ArrayLike) -> dict:
+        """Every stage of the additive datapath for input codes ``q``.
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Signed input codes of all ``n`` regressors.
+
+        Returns
+        -------
+        dict
+            ``q`` (m, n); ``parts`` (one :meth:`FixedPointModel.trace` each, on ``q[:, S_i]``);
+            ``part_acc`` (list of (m, nz)); the aligned sum ``acc``, ``acc_rounded`` and ``out``
+            (m, nz); ``out_saturated`` and ``out_of_range`` (m,), bool.
+        """
         return self._run(q, full=True)
 
-    def reference(self, q) -> np.ndarray:
+    def reference(self, q: ArrayLike) -> np.ndarray:
         """Float additive model (unquantised weights) at the physical inputs the codes represent:
-        the sum of the parts' :meth:`FixedPointModel.reference`."""
+        the sum of the parts' :meth:`FixedPointModel.reference`.
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n) or (n,)
+            Signed input codes inside the ``B_in``-bit range.
+
+        Returns
+        -------
+        ndarray, shape (m, nz), float
+            Physical target units.
+        """
         qa = self._check_codes(q)
         return sum(p.reference(qa[:, list(s)]) for p, s in zip(self.parts, self.subsets))
 

@@ -27,13 +27,17 @@ and the float model clamp. The estimate's bound adds ``G_j`` times this per tap
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank, ObserverBankSensorModel, _edge_lipschitz
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.regressors import LagStructure
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["BankTaps", "TappedObserverBankSensorModel"]
 
@@ -59,7 +63,7 @@ class BankTaps:
         Per tap, physical units.
     """
 
-    def __init__(self, bank: FixedPointObserverBank, lags, tap_inputs: list):
+    def __init__(self, bank: FixedPointObserverBank, lags: "LagStructure", tap_inputs: list):
         self.bank = bank
         self.lags = lags
         sod = lags.signal_of_dimension()
@@ -91,7 +95,19 @@ class BankTaps:
         self.error_bound = [(0.5 + (qn + 1) * 2.0 ** -(r + 1)) * f.lsb for f in self.tap_inputs]
 
     def codes(self, codes: np.ndarray) -> np.ndarray:
-        """Tap codes (T, n_taps) of one trajectory of bank input codes (T, nu + 1) from reset."""
+        """Tap codes of one trajectory from reset.
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            The bank's input codes (columns ``u0 .. u{nu-1}, y0``).
+
+        Returns
+        -------
+        ndarray of int64, shape (T, n_taps)
+            The core's input codes of the tap dimensions (a lag before the first sample reads the
+            bank input code 0).
+        """
         c = np.asarray(codes, dtype=np.int64)
         t_len = c.shape[0]
         out = np.empty((t_len, len(self.dims)), dtype=np.int64)
@@ -124,6 +140,17 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
 
     Build with :meth:`from_sensor`. The first estimate is at sample ``max(M + l, memory - 1)``
     after reset (``memory = max(Mu, My)``), as the float sensor's regressors.
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+        The bit-true bank (features).
+    core : FixedPointModel
+        The bit-true PWAS core on the features followed by the taps.
+    taps : BankTaps
+        The requantised u/y lag taps.
+    sensor : PWASVirtualSensor, optional
+        The float sensor they were built from (needed by :meth:`reference`).
     """
 
     def __init__(self, bank: FixedPointObserverBank, core: FixedPointModel, taps: BankTaps, sensor: Any = None):
@@ -134,12 +161,33 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
 
     @property
     def first_output(self) -> int:
+        """Sample index (0-based since reset) of the first estimate: ``max(M + l, memory - 1)``."""
         return max(self.bank.first_output, self.taps.memory - 1)
 
     @classmethod
-    def from_sensor(cls, sensor, *, input_bits: int = 12, input_headroom: float | None = 8.0, coef_frac: int | None = None,
-                    state_frac: int | None = None, state_bits: int | None = None, **core_formats) -> "TappedObserverBankSensorModel":
-        """From a fitted bank sensor with taps (``sensor.lags_`` not None)."""
+    def from_sensor(cls, sensor: "PWASVirtualSensor", *, input_bits: int = 12, input_headroom: float | None = 8.0,
+                    coef_frac: int | None = None, state_frac: int | None = None, state_bits: int | None = None,
+                    **core_formats: Any) -> "TappedObserverBankSensorModel":
+        """From a fitted bank sensor with taps (``sensor.lags_`` not None).
+
+        Parameters
+        ----------
+        sensor : PWASVirtualSensor
+            Fitted, with an observer-bank front end and u/y lag taps.
+        input_bits, input_headroom, coef_frac, state_frac, state_bits, **core_formats
+            As :meth:`ObserverBankSensorModel.from_sensor` (``input_bits``: ``B_in``, bits of the
+            u / y codes and of the core's input codes).
+
+        Returns
+        -------
+        TappedObserverBankSensorModel
+
+        Raises
+        ------
+        InputError
+            No observer-bank front end or no taps, fed-back estimates, several outputs, or
+            impossible formats.
+        """
         fe = getattr(sensor, "front_end_", None)
         lags = getattr(sensor, "lags_", None)
         if fe is None or lags is None:
@@ -163,7 +211,19 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
         return cls(bank, core, taps, sensor)
 
     def trace(self, codes: np.ndarray) -> dict[str, np.ndarray]:
-        """Bank trace, ``tap_codes`` (T, n_taps), and the core's ``out`` / ``out_of_range`` for rows ``k >= first_output``."""
+        """Bank trace, ``tap_codes`` (T, n_taps), and the core's ``out`` / ``out_of_range`` for rows ``k >= first_output``.
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes of one trajectory from reset.
+
+        Returns
+        -------
+        dict of str to ndarray
+            :meth:`FixedPointObserverBank.trace` with ``tap_codes`` (T, n_taps), ``out``
+            (T - first_output, nz) output codes and ``out_of_range`` (T - first_output,).
+        """
         tr = self.bank.trace(codes)
         tr["tap_codes"] = self.taps.codes(codes)
         q = np.hstack([tr["feature_codes"], tr["tap_codes"]])[self.first_output :]
@@ -172,7 +232,18 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
         return tr
 
     def reference(self, codes: np.ndarray) -> np.ndarray:
-        """The float sensor (front end + taps + PWAS) at the physical signals the codes represent."""
+        """The float sensor (front end + taps + PWAS) at the physical signals the codes represent.
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, nu + 1)
+            Input codes of one trajectory from reset.
+
+        Returns
+        -------
+        ndarray of float, shape (T - first_output, nz)
+            Physical target units (needs the ``sensor`` the model was built from).
+        """
         u, y = self.bank.represented_signals(codes)
         xi, _ = self.sensor.regressors([u] if self.bank.nu else None, [y])
         return self.sensor.predict_regressors(xi)

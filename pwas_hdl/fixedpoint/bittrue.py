@@ -143,6 +143,23 @@ def default_weight_frac(ref: float, budget: float = NOISE_BUDGET) -> int:
     (the ``mu`` are a convex combination) and the output rounding ``lsb_o**2 / 12`` with
     ``lsb_o = lsb_w / 2``; the largest power-of-two ``lsb_w`` with
     ``sqrt(1.25 * lsb_w**2 / 12) <= budget * ref`` is chosen, ``Fw = -log2(lsb_w)``.
+
+    Parameters
+    ----------
+    ref : float
+        The reference error, physical target units (> 0; the sensor's training RMSE).
+    budget : float
+        Fraction of ``ref`` the quantisation noise may take (default :data:`NOISE_BUDGET`).
+
+    Returns
+    -------
+    int
+        ``Fw``, weight fraction bits (weight LSB ``2**-Fw`` physical units; may be negative).
+
+    Raises
+    ------
+    InputError
+        ``ref`` is not a positive finite number.
     """
     if not (math.isfinite(ref) and ref > 0):
         raise InputError(f"reference error must be a positive number, got {ref!r}")

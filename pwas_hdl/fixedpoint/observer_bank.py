@@ -257,7 +257,7 @@ class FixedPointObserverBank:
     feature_inputs : list of InputFormat
         The PWAS core's input formats of the ``N_theta`` feature dimensions.
     input_bits : int
-        ``B_in`` of the u / y codes (default 12).
+        ``B_in``, bits of the u / y codes (default 12).
     input_headroom : float
         ``H``: normalised values in ``(-H, H)`` are representable (default 8).
     coef_frac, state_frac, state_bits : int, optional
@@ -459,11 +459,17 @@ class FixedPointObserverBank:
 
         Parameters
         ----------
-        u : ndarray (T, nu) or None (nu = 0);  y : ndarray (T,) or (T, 1), physical units
+        u : ndarray, shape (T, nu), or None
+            Physical inputs (None when ``nu = 0``).
+        y : ndarray, shape (T,) or (T, 1)
+            Physical output.
 
         Returns
         -------
-        codes : ndarray int64 (T, nu + 1);  saturated : ndarray bool (T,)
+        codes : ndarray of int64, shape (T, nu + 1)
+            Signed ``B_in``-bit codes, columns ``u0 .. u{nu-1}, y0``.
+        saturated : ndarray of bool, shape (T,)
+            Some signal of the sample saturated.
         """
         y = np.asarray(y, float).reshape(-1, 1)
         cols = [np.zeros((y.shape[0], 0))] if u is None else [np.asarray(u, float).reshape(y.shape[0], -1)]
@@ -648,8 +654,24 @@ def _edge_lipschitz(grid, weights: np.ndarray) -> np.ndarray:
 class ObserverBankSensorModel:
     """Bit-true observer-bank sensor: :class:`FixedPointObserverBank` -> PWAS core (:class:`FixedPointModel`).
 
-    Build with :meth:`from_sensor`. Attributes: ``bank``, ``core``, ``lipschitz`` (nz, n),
-    ``error_bound`` (per target, physical units).
+    Build with :meth:`from_sensor`.
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+        The bit-true bank (features).
+    core : FixedPointModel
+        The bit-true PWAS core on the bank's features.
+    sensor : PWASVirtualSensor, optional
+        The float sensor both were built from (needed by :meth:`reference`).
+
+    Attributes
+    ----------
+    lipschitz : ndarray, shape (nz, n)
+        Per target and core input, a bound on the PWAS function's slope (physical target units per
+        physical regressor unit), from its edges.
+    error_bound : list of float
+        Per target, physical units: the core's bound plus ``lipschitz`` times the features' bounds.
     """
 
     def __init__(self, bank: FixedPointObserverBank, core: FixedPointModel, sensor: Any = None):
@@ -675,12 +697,12 @@ class ObserverBankSensorModel:
         sensor : PWASVirtualSensor
             Fitted, with an observer-bank front end and no u/y lag taps.
         input_bits : int
-            ``B_in`` of the u / y codes and of the core's feature codes.
+            ``B_in``, bits of the u / y codes and of the core's feature codes.
         input_headroom : float, optional
             ``H`` (None: 8).
         coef_frac, state_frac, state_bits : int, optional
-            ``F_c``, ``F_s``, ``B_s`` of :class:`FixedPointObserverBank` (default: from the noise
-            budget and the state bound).
+            ``F_c``, ``F_s`` (fraction bits), ``B_s`` (bits) of :class:`FixedPointObserverBank`
+            (default: from the noise budget and the state bound).
         **core_formats
             Options of :class:`FixedPointModel` (None means the default); ``reference_error``
             defaults to the largest finite positive training RMSE.

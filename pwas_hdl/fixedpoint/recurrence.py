@@ -55,7 +55,26 @@ FEEDBACK_PRECISION = 24
 
 @dataclass(frozen=True)
 class FeedbackRequant:
-    """``q = clip((o * mul + add) >> shift, qmin, qmax)``: an output code to an input code."""
+    """``q = clip((o * mul + add) >> shift, qmin, qmax)``: an output code to an input code.
+
+    Made by :meth:`between` (see the module docstring for the constants).
+
+    Attributes
+    ----------
+    mul, add : int
+        ``K`` and ``C`` of the module docstring (integers scaled by ``2**shift``).
+    shift : int
+        ``S``, bits of the arithmetic right shift.
+    qmin, qmax : int
+        The input code range (``-2**(B_in-1)``, ``2**(B_in-1) - 1``).
+    out_bits : int
+        ``B_out``, bits of the output code ``o``.
+    in_bits : int
+        ``B_in``, bits of the input code ``q``.
+    error_bound : float
+        ``lsb (1/2 + eps)``: bound on the error of the fed-back value against the output it comes
+        from (unless it saturates), physical units of the fed-back dimension.
+    """
 
     mul: int
     add: int
@@ -64,11 +83,25 @@ class FeedbackRequant:
     qmax: int
     out_bits: int
     in_bits: int
-    error_bound: float  # physical units (see the module docstring)
+    error_bound: float
 
     @classmethod
     def between(cls, out_format: FixedFormat, inp: InputFormat, precision: int = FEEDBACK_PRECISION) -> "FeedbackRequant":
-        """The requantisation from ``out_format`` codes to ``inp`` codes."""
+        """The requantisation from ``out_format`` codes to ``inp`` codes.
+
+        Parameters
+        ----------
+        out_format : FixedFormat
+            The output format ``s<B_out>.<Fo>`` of the estimate fed back.
+        inp : InputFormat
+            The input format of the fed-back regressor dimension.
+        precision : int
+            Bits of ``mul`` (``K``), default :data:`FEEDBACK_PRECISION`.
+
+        Returns
+        -------
+        FeedbackRequant
+        """
         lsb = Fraction(inp.lsb)
         r = Fraction(1, 1) / (lsb * (Fraction(2) ** out_format.frac))
         c0 = Fraction(inp.lo_code) - Fraction(inp.lo) / lsb
@@ -87,8 +120,19 @@ class FeedbackRequant:
         hi = max(abs(-(1 << (self.out_bits - 1)) * self.mul + self.add), abs(((1 << (self.out_bits - 1)) - 1) * self.mul + self.add))
         return hi.bit_length() + 1
 
-    def apply(self, o) -> np.ndarray:
-        """Input codes of output codes ``o`` (int64 array)."""
+    def apply(self, o: ArrayLike) -> np.ndarray:
+        """Input codes of output codes ``o``.
+
+        Parameters
+        ----------
+        o : array_like of int, any shape
+            Output codes (``B_out``-bit).
+
+        Returns
+        -------
+        ndarray of int64, the shape of ``o``
+            Input codes, saturated to ``[qmin, qmax]``.
+        """
         oa = np.asarray(o, dtype=np.int64)
         if self.product_bits > 62:  # exact with Python integers
             v = np.array([(int(x) * self.mul + self.add) >> self.shift for x in oa.reshape(-1)], dtype=object).reshape(oa.shape)
@@ -159,7 +203,20 @@ class RecurrentFixedPointModel:
 
     # ------------------------------------------------------------------ inputs
     def quantize_signals(self, u: np.ndarray | None, y: np.ndarray | None) -> np.ndarray:
-        """Payload codes (T, S) of one trajectory: each measured signal in its input format."""
+        """Payload codes of one trajectory: each measured signal in its input format.
+
+        Parameters
+        ----------
+        u : ndarray, shape (T, nu), or None
+            Measured inputs, physical units (None when the model has no input lags).
+        y : ndarray, shape (T, ny), or None
+            Measured outputs, physical units (None when the model has no output lags).
+
+        Returns
+        -------
+        ndarray of int64, shape (T, S)
+            One ``B_in``-bit code per signal of :attr:`signals`, in that order.
+        """
         cols = []
         for s, f in zip(self.signals, self.signal_formats):
             kind, ch = self._signal_kind(s)
@@ -185,7 +242,7 @@ class RecurrentFixedPointModel:
         return io_lags.build(u, y).astype(np.int64)
 
     # ------------------------------------------------------------------ run
-    def run(self, codes) -> dict:
+    def run(self, codes: ArrayLike) -> dict:
         """The recurrence on the payload codes of one trajectory (the circuit after a reset).
 
         Parameters
@@ -220,7 +277,21 @@ class RecurrentFixedPointModel:
         return {"out": out, "out_of_range": oor, "fed_back": fed, "regressor": reg}
 
     def predict(self, u: np.ndarray | None, y: np.ndarray | None) -> np.ndarray:
-        """Physical estimates (R, nz) of one trajectory through the bit-true recurrence."""
+        """Physical estimates of one trajectory through the bit-true recurrence.
+
+        Parameters
+        ----------
+        u : ndarray, shape (T, nu), or None
+            Measured inputs, physical units (None when the model has no input lags).
+        y : ndarray, shape (T, ny), or None
+            Measured outputs, physical units (None when the model has no output lags).
+
+        Returns
+        -------
+        ndarray, shape (R, nz), float
+            Estimates in physical target units, ``R = T - M + 1`` rows for ``t = M-1 .. T-1``
+            (:meth:`run`).
+        """
         return self.fxm.to_physical_output(self.run(self.quantize_signals(u, y))["out"])
 
     def to_dict(self) -> dict:
