@@ -215,14 +215,17 @@ class AdditiveGrid:
 
     @property
     def n_parts(self) -> int:
+        """Number of parts (PWAS functions summed)."""
         return len(self.parts)
 
     @property
     def part_sizes(self) -> list[int]:
+        """Vertices ``N_i`` of each part (rows of its block of the stacked weights)."""
         return [g.n_vertices for g in self.parts]
 
     @property
     def n_simplices(self) -> int:
+        """Simplices of all parts together."""
         return int(sum(g.n_simplices for g in self.parts))
 
     def __repr__(self) -> str:

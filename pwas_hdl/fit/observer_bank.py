@@ -529,6 +529,7 @@ class ObserverBankFrontEnd(BaseEstimator):
 
     @property
     def n_models_(self) -> int:
+        """Number of models ``N_theta`` in the fitted bank (rows of ``models_``)."""
         return int(self.models_.shape[0])
 
     def feature_names(self) -> list[str]:

@@ -17,6 +17,7 @@ folder (called by :func:`pwas_hdl.verify.simulation.simulate_data`).
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -64,8 +65,23 @@ class EstimatorDesign(ManifestView):
         return int(self.manifest["ii"])
 
 
-def load_estimator_design(outdir, manifest: dict | None = None, verilog=None) -> EstimatorDesign:
+def load_estimator_design(outdir: str | os.PathLike, manifest: dict | None = None,
+                          verilog: str | os.PathLike | None = None) -> EstimatorDesign:
     """Read an estimator folder and rebuild its bit-true estimator (checked against the manifest's formats).
+
+    Parameters
+    ----------
+    outdir : str or os.PathLike
+        A folder written by ``pwas-hdl generate`` for an estimator file (design ``"estimator"``).
+    manifest : dict, optional
+        Its parsed ``manifest.json`` when already read (default: read and validated here).
+    verilog : str or os.PathLike, optional
+        Simulate this file instead of the folder's.
+
+    Returns
+    -------
+    EstimatorDesign
+        The manifest, the configuration, the rebuilt bit-true estimator and the Verilog path.
 
     Raises
     ------
@@ -132,7 +148,8 @@ def _decode(design: EstimatorDesign, words: Sequence[int]) -> dict[str, np.ndarr
 
 
 def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str = "icarus", *, runs: Sequence[dict] | None = None,
-                     cache_dir=None, work_dir=None, waves: bool = False) -> dict:
+                     cache_dir: str | os.PathLike | None = None, work_dir: str | os.PathLike | None = None,
+                     waves: bool = False) -> dict:
     """Replay (u, y) codes (T, 2) through the RTL; every segment starts after a reset.
 
     Parameters
@@ -144,6 +161,12 @@ def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str 
     simulator : {"icarus", "verilator"}
     runs : list of dict, optional
         Plans as :func:`standard_estimator_runs` (segments give ``rows`` = (start, stop)).
+    cache_dir : str or os.PathLike, optional
+        Where simulator builds are cached (default: the runner's cache).
+    work_dir : str or os.PathLike, optional
+        Where the run's files go (default: a temporary folder, removed afterwards unless ``waves``).
+    waves : bool
+        Build the simulator with waveform tracing (the temporary ``work_dir`` is then kept).
 
     Returns
     -------
