@@ -862,8 +862,30 @@ def check_fit_memory(
 ) -> dict[str, float]:
     """Refuse a fit whose estimated memory exceeds the limit, before allocating anything.
 
-    Parameters are those of :func:`estimate_fit_memory`; ``max_memory`` (bytes, or ``"4G"``)
-    overrides ``$PWAS_HDL_MAX_MEMORY`` and the default of ``MEMORY_FRACTION`` of the available RAM.
+    Parameters
+    ----------
+    n_samples : int
+        Rows ``T`` of ``H`` (samples).
+    n_vertices : int
+        Weights ``N`` per target.
+    n_dims : int
+        Regressor dimension ``n`` (``H`` has ``n + 1`` entries per row).
+    n_targets : int
+        Target columns ``nz``.
+    order : {0, 1}
+        Tikhonov order.
+    method : {"auto", "direct", "cg", "mg"}
+        The solver method, as in :func:`estimate_fit_memory`.
+    max_memory : int or str, optional
+        The limit in bytes, or text with a suffix K, M, G or T (``"4G"``, :func:`parse_memory`);
+        overrides ``$PWAS_HDL_MAX_MEMORY`` and the default of ``MEMORY_FRACTION`` of the available
+        RAM (:func:`memory_limit`).
+    processes : int
+        Processes that solve CV folds at the same time, as in :func:`estimate_fit_memory`.
+    block_smoother : bool
+        As in :func:`estimate_fit_memory`.
+    grid_side : int, optional
+        Vertices on the longest axis of the first-order vertex grid, as in :func:`estimate_fit_memory`.
 
     Returns
     -------
@@ -982,7 +1004,30 @@ def plan_fit_memory(
     all folds run by one worker after another (``one_factor``: one factor resident at a time, see
     :func:`cross_validate_sigma`), then fewer processes, down to one.
 
-    Parameters are those of :func:`check_fit_memory`.
+    Parameters
+    ----------
+    n_samples : int
+        Rows ``T`` of ``H`` (samples).
+    n_vertices : int
+        Weights ``N`` per target.
+    n_dims : int
+        Regressor dimension ``n`` (``H`` has ``n + 1`` entries per row).
+    n_targets : int
+        Target columns ``nz``.
+    order : {0, 1}
+        Tikhonov order.
+    method : {"auto", "direct", "cg", "mg"}
+        The solver method, as in :func:`estimate_fit_memory`.
+    max_memory : int or str, optional
+        The limit in bytes, or text with a suffix K, M, G or T (``"4G"``, :func:`parse_memory`);
+        overrides ``$PWAS_HDL_MAX_MEMORY`` and the default of ``MEMORY_FRACTION`` of the available
+        RAM (:func:`memory_limit`).
+    processes : int
+        The processes requested (forked CV workers); the plan may use fewer.
+    block_smoother : bool
+        As in :func:`estimate_fit_memory`.
+    grid_side : int, optional
+        Vertices on the longest axis of the first-order vertex grid, as in :func:`estimate_fit_memory`.
 
     Returns
     -------
@@ -1790,12 +1835,13 @@ class NormalEquationSolver:
 
         Parameters
         ----------
-        m : sparse array
-            A normal matrix already passed through :meth:`restrict_matrix`.
+        m : sparse array, shape (U, U)
+            A normal matrix already passed through :meth:`restrict_matrix` (``U`` kept unknowns).
         b : ndarray, shape (N,) or (N, nz)
             Full-size right-hand side.
         sigma : float
-        x0 : ndarray, optional
+            The regularisation weight of ``Gamma``.
+        x0 : ndarray, shape as ``b``, optional
             Full-size warm start (CG only).
 
         Returns
