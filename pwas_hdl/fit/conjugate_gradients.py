@@ -12,16 +12,20 @@ an iteration outside the preconditioner and the product (9.5 s over 886 iteratio
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 from scipy.linalg import blas
+
+if TYPE_CHECKING:
+    from scipy import sparse
+    from scipy.sparse.linalg import LinearOperator
 
 __all__ = ["pcg"]
 
 
 def pcg(
-    a,
+    a: "sparse.sparray | sparse.spmatrix | np.ndarray | LinearOperator",
     b: np.ndarray,
     precond: Callable[[np.ndarray], np.ndarray] | None = None,
     x0: np.ndarray | None = None,

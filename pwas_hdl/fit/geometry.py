@@ -518,9 +518,9 @@ def quantile_breakpoints(x: np.ndarray, lo: Sequence[float], hi: Sequence[float]
         inside ``[lo_j, hi_j]``.
     partitions : int or sequence of int
     min_width : float
-        No cell narrower than ``min_width`` times the uniform width ``(hi - lo) / p`` (repeated
-        values and tails would give empty cells): the cuts are then pushed apart, keeping their
-        order.
+        A dimensionless fraction: no cell narrower than ``min_width`` times the uniform width
+        ``(hi - lo) / p`` (repeated values and tails would give empty cells): the cuts are then
+        pushed apart, keeping their order.
     groups : sequence of sequence of int, optional
         Dimensions that share one set of cuts (e.g. the lags of one signal, which the sensor top
         feeds one input code): the quantiles of their pooled samples. A group is pooled only when

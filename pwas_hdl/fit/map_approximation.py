@@ -22,13 +22,16 @@ the states ``z`` -- the order of the lag regressor (:class:`~pwas_hdl.fit.regres
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError, option_text
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.limits import check_seed, check_values
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["MapApproximation", "fit_map", "fit_map_samples", "map_errors", "static_sensor_from_map",
            "recurrent_sensor_from_map"]
@@ -75,7 +78,29 @@ def _as_2d(v: np.ndarray, m: int, what: str) -> np.ndarray:
 
 
 def map_errors(approx: MapApproximation, x: np.ndarray, fx: np.ndarray, test: str) -> dict:
-    """Max and RMS of ``approx(x) - fx`` per output (``fx`` (m, k))."""
+    """Max and RMS of ``approx(x) - fx`` per output.
+
+    Parameters
+    ----------
+    approx : MapApproximation
+        The approximation, ``k`` outputs.
+    x : ndarray, shape (m, n)
+        Test points, physical units.
+    fx : ndarray, shape (m,) or (m, k)
+        The map's values at ``x`` (the units of its outputs).
+    test : str
+        How the test set was made (kept as ``errors["test"]``).
+
+    Returns
+    -------
+    dict
+        ``max``, ``rms`` (lists of ``k`` floats, the units of ``fx``), ``n_test`` (``m``) and ``test``.
+
+    Raises
+    ------
+    InputError
+        ``fx`` has not ``m`` rows, or NaN or infinite values.
+    """
     e = approx(x) - _as_2d(fx, x.shape[0], "f(x)")
     return {"max": [float(v) for v in np.max(np.abs(e), axis=0)], "rms": [float(v) for v in np.sqrt(np.mean(e**2, axis=0))],
             "n_test": int(x.shape[0]), "test": test}
@@ -99,7 +124,8 @@ def _box(box) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def fit_map(f: Callable[[np.ndarray], np.ndarray], box, partitions: int | Sequence[int], *, samples_per_vertex: float = 3.0,
+def fit_map(f: Callable[[np.ndarray], np.ndarray], box: tuple[np.ndarray | Sequence[float], np.ndarray | Sequence[float]],
+            partitions: int | Sequence[int], *, samples_per_vertex: float = 3.0,
             sigma: float = MAP_SIGMA, n_test: int = 20000, seed: int = 0) -> MapApproximation:
     """PWAS approximation of a callable over a box.
 
@@ -118,6 +144,7 @@ def fit_map(f: Callable[[np.ndarray], np.ndarray], box, partitions: int | Sequen
     n_test : int
         Uniform random test points (a dense test set, drawn independently of the samples).
     seed : int
+        Seed of the training samples (the test points use ``seed + 1``).
 
     Returns
     -------
@@ -137,21 +164,28 @@ def fit_map(f: Callable[[np.ndarray], np.ndarray], box, partitions: int | Sequen
     return approx
 
 
-def fit_map_samples(x: np.ndarray, fx: np.ndarray, partitions: int | Sequence[int], *, box=None, sigma: float = MAP_SIGMA,
+def fit_map_samples(x: np.ndarray, fx: np.ndarray, partitions: int | Sequence[int], *,
+                    box: tuple[np.ndarray | Sequence[float], np.ndarray | Sequence[float]] | None = None, sigma: float = MAP_SIGMA,
                     test_fraction: float = 0.2, seed: int = 0) -> MapApproximation:
     """PWAS approximation of a map from samples ``(x, f(x))``.
 
     Parameters
     ----------
     x : ndarray, shape (m, n)
+        Sample points, physical units.
     fx : ndarray, shape (m,) or (m, k)
+        The map's values at ``x``.
     partitions : int or sequence of int
-    box : (lo, hi), optional
+        Intervals ``p_j`` per dimension.
+    box : (lo, hi), each of shape (n,), optional
         The domain; default the bounding box of ``x`` (exactly: a sample on the border is inside).
     sigma : float
+        Tikhonov weight (zero order, unnormalised).
     test_fraction : float
         Share of the samples held out (at random, ``seed``) to measure the error, in [0, 0.9];
         0: the error is measured on the fitting samples (then said in ``errors["test"]``).
+    seed : int
+        Seed of the random hold-out.
 
     Returns
     -------
@@ -204,8 +238,17 @@ def _sensor(approx: MapApproximation, n_u: int, n_y: int, inputs, outputs, targe
 
 
 def static_sensor_from_map(approx: MapApproximation, inputs: Sequence[str] = (), outputs: Sequence[str] = (),
-                           targets: Sequence[str] = ("f",)):
+                           targets: Sequence[str] = ("f",)) -> "PWASVirtualSensor":
     """A static model file of the map: the arguments are the current samples of ``inputs`` then ``outputs``.
+
+    Parameters
+    ----------
+    approx : MapApproximation
+        Of ``f`` with ``n = len(inputs) + len(outputs)`` arguments and ``len(targets)`` outputs.
+    inputs, outputs : sequence of str
+        Names of the arguments, in order: the inputs ``u``, then the outputs ``y``.
+    targets : sequence of str
+        Names of the map's outputs (the sensor's targets).
 
     Returns
     -------
@@ -224,7 +267,7 @@ def static_sensor_from_map(approx: MapApproximation, inputs: Sequence[str] = (),
 
 
 def recurrent_sensor_from_map(approx: MapApproximation, inputs: Sequence[str], outputs: Sequence[str], targets: Sequence[str],
-                              z0: Sequence[float]):
+                              z0: Sequence[float]) -> "PWASVirtualSensor":
     """The observer ``z(t+1) = f(u(t), y(t), z(t))`` as a recurrent PWAS sensor.
 
     Parameters

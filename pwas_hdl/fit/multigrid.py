@@ -615,7 +615,19 @@ class LevelPatterns:
 
 @dataclass
 class MGInfo:
-    """One multigrid-preconditioned CG solve: iterations and the residual computed afresh."""
+    """One multigrid-preconditioned CG solve: iterations and the residual computed afresh.
+
+    Attributes
+    ----------
+    iterations : int
+        CG iterations (0 for ``b = 0``).
+    rel_residual : float
+        ``||b - A w|| / ||b||`` of the returned ``w``, computed afresh in double precision.
+    abs_residual : float
+        ``||b - A w||`` (the units of ``b``).
+    converged : bool
+        CG stopped within ``maxiter`` and ``rel_residual <= rtol``.
+    """
 
     iterations: int
     rel_residual: float
@@ -653,8 +665,9 @@ class FoldMultigrid:
     shared : LevelPatterns, optional
         Patterns that hold every level of ``m`` (:meth:`GridHierarchy.share`); where they do not,
         or without them, the levels' own.
-    m_vals : list of ndarray, optional
-        ``m``'s values on every level of ``shared`` (the reference matrix's, :attr:`LevelPatterns.ref_vals`).
+    m_vals : list of ndarray, each shape (nnz_l,), optional
+        ``m``'s values on every level of ``shared``, one per level ``l`` on its pattern's ``nnz_l``
+        entries (the reference matrix's, :attr:`LevelPatterns.ref_vals`).
     """
 
     def __init__(self, hier: GridHierarchy, ms: list[sparse.csr_matrix], shared: LevelPatterns | None = None,

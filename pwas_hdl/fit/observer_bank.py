@@ -348,15 +348,17 @@ def observer_gain(a_mat: np.ndarray, c_mat: np.ndarray, kind: str, param: float 
 
     Parameters
     ----------
-    a_mat, c_mat : ndarray
-        Canonical form (:func:`canonical_form`).
+    a_mat : ndarray, shape (M, M)
+        ``A`` of the canonical form (:func:`canonical_form`): first column ``-a_1 .. -a_M``.
+    c_mat : ndarray, shape (1, M)
+        ``C`` of the canonical form, ``[1, 0, .., 0]``.
     kind : {"deadbeat", "poles", "kalman"}
         deadbeat: ``L = -a`` so ``A - L C`` is the nilpotent shift (all poles at 0);
         poles: ``L_i = c_i - a_i`` with ``(z - r)^M = z^M + c_1 z^{M-1} + .. + c_M``;
         kalman: stationary Kalman predictor of (15) with ``Q = I``, ``R = lambda``:
         ``P = dare(A', C', I, lambda)``, ``L = A P C' (C P C' + lambda)^-1``.
-    param : float
-        The radius ``r`` (poles) or ``lambda`` (kalman).
+    param : float, optional
+        The radius ``r`` (poles) or ``lambda`` (kalman); unused by deadbeat.
 
     Returns
     -------

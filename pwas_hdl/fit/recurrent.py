@@ -32,19 +32,38 @@ a PWAS approximation of an observer map ``z(t+1) = f(z(t), u(t), y(t))``
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError
+
+if TYPE_CHECKING:
+    from pwas_hdl.fit.geometry import Grid
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
 __all__ = ["run_recurrence", "evaluate_weights", "refine_closed_loop", "initial_state_dict", "initial_block"]
 
 Step = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-def evaluate_weights(grid, w: np.ndarray, xi: np.ndarray) -> np.ndarray:
-    """Float PWAS values at regressors ``xi`` (m, n) for weights ``w`` (N, nz): shape (m, nz)."""
+def evaluate_weights(grid: "Grid", w: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """Float PWAS values at regressors ``xi`` for weights ``w``.
+
+    Parameters
+    ----------
+    grid : Grid
+        The simplicial grid (``n`` dimensions, ``N`` vertices).
+    w : ndarray, shape (N, nz)
+        Vertex weights, the targets' physical units.
+    xi : ndarray, shape (m, n)
+        Regressors, physical units.
+
+    Returns
+    -------
+    ndarray, shape (m, nz)
+        The PWAS values.
+    """
     loc = grid.locate(xi)
     return np.einsum("mk,mkz->mz", loc.mu, w[loc.vertices])
 
@@ -65,7 +84,7 @@ def run_recurrence(step: Step, io_blocks: Sequence[np.ndarray], z_init: Sequence
 
     Returns
     -------
-    list of ndarray, each (R_i, nz)
+    list of ndarray, each shape (R_i, nz)
         The estimates (what ``step`` returned), row by row.
     """
     n_traj = len(io_blocks)
@@ -107,7 +126,7 @@ def _rmse(parts: list[np.ndarray], targets: list[np.ndarray]) -> np.ndarray:
     return np.sqrt(np.mean(e**2, axis=0))
 
 
-def refine_closed_loop(grid, basis: Callable[[np.ndarray], object], solve: Callable[[object], np.ndarray],
+def refine_closed_loop(grid: "Grid", basis: Callable[[np.ndarray], object], solve: Callable[[object], np.ndarray],
                        w0: np.ndarray, io_blocks: list[np.ndarray], z_blocks: list[np.ndarray],
                        z_init: list[np.ndarray], mz: int, iterations: int) -> tuple[np.ndarray, dict]:
     """Series-parallel weights ``w0`` refined on the closed-loop error (see the module docstring).
@@ -115,6 +134,7 @@ def refine_closed_loop(grid, basis: Callable[[np.ndarray], object], solve: Calla
     Parameters
     ----------
     grid : Grid
+        The simplicial grid of the weights (``N`` vertices).
     basis : callable(xi) -> H
         The basis matrix of regressors ``xi`` (m, n).
     solve : callable(H) -> w (N, nz)
@@ -126,6 +146,7 @@ def refine_closed_loop(grid, basis: Callable[[np.ndarray], object], solve: Calla
     z_init : list of ndarray (Mz, nz)
         The measured z before the first row of each trajectory.
     mz : int
+        Fed-back lags ``Mz`` of each target.
     iterations : int
         Upper bound ``K`` on the refinements (0: none).
 
@@ -162,16 +183,52 @@ def refine_closed_loop(grid, basis: Callable[[np.ndarray], object], solve: Calla
 
 
 def initial_state_dict(rule: str, values: np.ndarray | None, targets: Sequence[str]) -> dict:
-    """The model file's ``initial_state`` block; ``values`` (Mz, nz) for the "value" rule."""
+    """The model file's ``initial_state`` block.
+
+    Parameters
+    ----------
+    rule : {"value", "measured"}
+        The initial-state rule (see the module docstring).
+    values : ndarray, shape (Mz, nz), or None
+        For the "value" rule: the constant past estimates ``z(t0-Mz) .. z(t0-1)``, oldest first, the
+        targets' physical units; ignored by "measured".
+    targets : sequence of str
+        The ``nz`` target names (the keys of ``values`` in the block).
+
+    Returns
+    -------
+    dict
+        ``{"rule": "measured"}`` or ``{"rule": "value", "values": {target: [Mz floats]}}``.
+    """
     if rule == "measured":
         return {"rule": "measured"}
     v = np.asarray(values, dtype=float)
     return {"rule": "value", "values": {t: [float(x) for x in v[:, i]] for i, t in enumerate(targets)}}
 
 
-def initial_block(sensor, z: np.ndarray | None, n_rows_before: int) -> np.ndarray:
-    """The (Mz, nz) past of a trajectory's first estimated row: the stored constants, or the
-    measured ``z`` of the ``Mz`` samples before row ``n_rows_before`` ("measured" rule)."""
+def initial_block(sensor: "PWASVirtualSensor", z: np.ndarray | None, n_rows_before: int) -> np.ndarray:
+    """The past of a trajectory's first estimated row: the stored constants, or the
+    measured ``z`` of the ``Mz`` samples before row ``n_rows_before`` ("measured" rule).
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A fitted recurrent sensor (``lags_``, ``initial_state_rule_``, ``initial_values_``).
+    z : ndarray, shape (T, nz), or None
+        The trajectory's measured targets (needed by the "measured" rule only).
+    n_rows_before : int
+        Samples of the trajectory before its first estimated row (at least ``Mz`` for "measured").
+
+    Returns
+    -------
+    ndarray, shape (Mz, nz)
+        The past estimates, oldest first, physical units.
+
+    Raises
+    ------
+    InputError
+        The rule is "measured" and ``z`` is None.
+    """
     lags = sensor.lags_
     if sensor.initial_state_rule_ == "measured":
         if z is None:

@@ -42,7 +42,7 @@ def as_trajectories(data: np.ndarray | Sequence[np.ndarray] | None, name: str, w
     name : str
         Signal name for error messages ("u", "y", "z").
     width : int, optional
-        Expected number of columns.
+        Expected number of columns ``k`` (channels).
 
     Returns
     -------

@@ -25,11 +25,15 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import sparse
 
 from pwas_hdl.errors import InternalError
+
+if TYPE_CHECKING:
+    from types import ModuleType
 
 __all__ = ["cholmod_available", "import_cholmod", "openblas_coretype", "PatternCholesky", "NotPositiveDefinite", "OutsidePattern",
            "grid_nested_dissection", "ND_LEAF", "FactorCounts"]
@@ -89,7 +93,7 @@ def openblas_coretype(cpuinfo: str | None = None) -> str | None:
     return None
 
 
-def import_cholmod():
+def import_cholmod() -> "ModuleType":
     """``cvxopt.cholmod``, imported with the OpenBLAS kernels of :func:`openblas_coretype` (see the
     module) unless ``OPENBLAS_CORETYPE`` is set or cvxopt was imported before (its OpenBLAS then
     keeps the kernels it has); ``ImportError`` where cvxopt is not installed."""
@@ -329,6 +333,16 @@ class PatternCholesky:
     def align(self, m: sparse.sparray) -> np.ndarray:
         """Values of ``m`` (lower triangle) at the pattern's entries (zeros where ``m`` has none).
 
+        Parameters
+        ----------
+        m : sparse array, shape (N, N)
+            A symmetric matrix within the pattern (only its lower triangle is read).
+
+        Returns
+        -------
+        ndarray of float64, shape (nnz_lower,)
+            The values in the pattern's CCS order (:attr:`nnz_lower` entries), for :meth:`factorize`.
+
         Raises
         ------
         OutsidePattern
@@ -345,6 +359,11 @@ class PatternCholesky:
 
     def factorize(self, values: np.ndarray) -> None:
         """Numeric factorisation of the matrix with these values on the pattern (see :meth:`align`).
+
+        Parameters
+        ----------
+        values : ndarray, shape (nnz_lower,)
+            The matrix's lower-triangle values in the pattern's CCS order (:meth:`align`).
 
         Raises
         ------
@@ -367,7 +386,18 @@ class PatternCholesky:
         self.factorizations += 1
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """``A^{-1} b`` with the last factorisation; ``b`` shape (N,) or (N, k)."""
+        """``A^{-1} b`` with the last factorisation.
+
+        Parameters
+        ----------
+        b : ndarray, shape (N,) or (N, k)
+            Right-hand side(s).
+
+        Returns
+        -------
+        ndarray, shape as ``b``
+            The solution (float64).
+        """
         b = np.asarray(b, dtype=float)
         bm = self._matrix(np.array(b.reshape(self.n, -1), dtype=float, order="F"))
         self._cholmod.solve(self._factor, bm)
