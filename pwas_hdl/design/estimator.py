@@ -108,13 +108,15 @@ def fixed_point_estimator(config: SwitchedEstimatorConfig, *, input_bits: int | 
     Parameters
     ----------
     config : SwitchedEstimatorConfig
+        The float estimator (observer bank and switching rule).
     input_bits : int, optional
-        ``B_in`` of the u and y codes (default 12; 4..24).
+        ``B_in``: width in bits of the u and y codes (default 12; 4..24).
     input_headroom : float, optional
-        ``H``: physical |u|, |y| < H are representable (default 8).
+        ``H``: physical |u|, |y| < H are representable (the signals' physical units; default 8).
     state_bits, state_frac, coef_frac : int, optional
-        ``B_s`` (2..48), ``F_s`` (>= the input fraction bits, <= 40), ``F_c`` (1..40); default from the
-        noise budget and the l1 state bound (no saturation for inputs within the code range).
+        ``B_s`` (2..48 bits), ``F_s`` (fraction bits, >= the input fraction bits, <= 40), ``F_c`` (fraction
+        bits, 1..40); default from the noise budget and the l1 state bound (no saturation for inputs within
+        the code range).
 
     Returns
     -------

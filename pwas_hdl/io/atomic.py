@@ -122,7 +122,26 @@ def logs_kept(folder: str | os.PathLike | None, name: str) -> Iterator[None]:
     """Around a tool run in the temporary ``folder`` (removed afterwards; None: nothing to do): a
     :class:`~pwas_hdl.errors.ToolFailed` whose log is inside it is raised again with the log copied
     out to ``$TMPDIR/NAME-XXXX.log``, so that the file its ``error:`` line names still exists.
-    Of those logs the newest :data:`KEPT_LOGS` of each ``NAME`` stay; older ones are removed."""
+    Of those logs the newest :data:`KEPT_LOGS` of each ``NAME`` stay; older ones are removed.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike, optional
+        The tool run's temporary folder; None: the context does nothing.
+    name : str
+        ``NAME``, the prefix of the kept log's file name (e.g. the tool's name).
+
+    Yields
+    ------
+    None
+        The body of the ``with`` block runs once.
+
+    Raises
+    ------
+    ToolFailed
+        Raised again, with :attr:`~pwas_hdl.errors.ToolFailed.log` the kept copy (or None where it
+        could not be copied), when the original log is inside ``folder``.
+    """
     try:
         yield
     except ToolFailed as exc:

@@ -89,7 +89,22 @@ class Table:
         return self.lines[r] if r < len(self.lines) else r + 2
 
     def short_trajectory(self, sl: slice, need: int, what: str) -> InputError:
-        """The error for the trajectory ``sl`` of this file, shorter than the ``need`` samples ``what`` needs."""
+        """The error for the trajectory ``sl`` of this file, shorter than the ``need`` samples ``what`` needs.
+
+        Parameters
+        ----------
+        sl : slice
+            The trajectory's rows (data rows, 0-based, ``stop`` exclusive).
+        need : int
+            Samples (rows) the trajectory would need.
+        what : str
+            What needs them, worded to go before the number (e.g. ``"the lags need"``).
+
+        Returns
+        -------
+        InputError
+            The error to raise, naming the file's line numbers of the trajectory.
+        """
         return InputError(f"{self.path}: the trajectory on lines {self._line(sl.start)}..{self._line(sl.stop - 1)} has "
                           f"{sl.stop - sl.start} samples; {what} {need}; give trajectories of at least {need} rows "
                           "(or check --traj-col)")
@@ -411,8 +426,8 @@ def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray | Sequen
     ----------
     path : path
         Target file (its folder must exist).
-    columns : mapping of str to 1-D array or sequence
-        Header name -> values, in column order (see :func:`format_csv`).
+    columns : mapping of str to 1-D array or sequence, each shape (T,)
+        Header name -> values, in column order (see :func:`format_csv`); ``T`` rows.
 
     Returns
     -------
@@ -432,8 +447,8 @@ def format_csv(columns: Mapping[str, np.ndarray | Sequence]) -> str:
 
     Parameters
     ----------
-    columns : mapping of str to 1-D array or sequence
-        Header name -> values. Booleans are written ``1`` / ``0``, integers as integers, floats
+    columns : mapping of str to 1-D array or sequence, each shape (T,)
+        Header name -> values (``T`` rows). Booleans are written ``1`` / ``0``, integers as integers, floats
         as ``repr`` (round-trip), anything else with ``str``.
 
     Returns
