@@ -88,10 +88,12 @@ def signed_bits_needed(codes: ArrayLike) -> int:
     Parameters
     ----------
     codes : int or array_like of int
+        Integers, any shape (empty: 1 bit).
 
     Returns
     -------
     int
+        Bits (a two's complement width).
     """
     a = np.asarray(codes)
     if a.size == 0:
@@ -107,12 +109,12 @@ def unsigned_bits_needed(codes: ArrayLike) -> int:
     Parameters
     ----------
     codes : int or array_like of int
-        Non-negative integers (empty: 1 bit).
+        Non-negative integers, any shape (empty: 1 bit).
 
     Returns
     -------
     int
-        ``max(1, max(codes).bit_length())``.
+        Bits, ``max(1, max(codes).bit_length())``.
 
     Raises
     ------
@@ -133,7 +135,7 @@ def shift_round(a: ArrayLike, sh: int, rounding: str = "half_up") -> np.ndarray:
     Parameters
     ----------
     a : array_like of int
-        Two's complement integers (``numpy.int64``).
+        Two's complement integers (``numpy.int64``), any shape.
     sh : int
         Bits to drop, ``>= 0``; ``sh = 0`` returns ``a`` unchanged (no rounding).
     rounding : {"half_up", "truncate"}
@@ -142,7 +144,8 @@ def shift_round(a: ArrayLike, sh: int, rounding: str = "half_up") -> np.ndarray:
 
     Returns
     -------
-    ndarray of int64
+    ndarray of int64, shape of ``a``
+        The shifted integers (units of ``2**sh`` of ``a``'s LSB).
 
     Raises
     ------
@@ -291,7 +294,7 @@ class FixedFormat:
         Parameters
         ----------
         codes : array_like of int or float
-            Codes; a float that is not a whole number does not fit.
+            Codes, any shape; a float that is not a whole number does not fit.
 
         Returns
         -------
@@ -308,7 +311,7 @@ class FixedFormat:
         Parameters
         ----------
         codes : array_like of int
-            Codes (converted to int64).
+            Codes (converted to int64), any shape.
 
         Returns
         -------
@@ -325,8 +328,8 @@ class FixedFormat:
         ----------
         values : array_like of float
             Format values (``code * 2**-frac`` units, i.e. *not* physical units; see
-            :meth:`PortFormat.quantize` for physical values). NaN is refused; +-inf saturates
-            (or raises with ``overflow="error"``).
+            :meth:`PortFormat.quantize` for physical values), any shape. NaN is refused; +-inf
+            saturates (or raises with ``overflow="error"``).
         return_saturated : bool
             Also return the boolean mask of the values that were outside the range before the
             overflow rule (saturated, wrapped; with ``"error"`` it is all False). ``mask.sum()``
@@ -337,7 +340,7 @@ class FixedFormat:
         Returns
         -------
         codes : ndarray of int64, shape of ``values``
-        saturated : ndarray of bool (only with ``return_saturated``)
+        saturated : ndarray of bool, shape of ``values`` (only with ``return_saturated``)
 
         Raises
         ------
@@ -450,15 +453,18 @@ def frac_for_bits(values: ArrayLike, bits: int, signed: bool = True, rounding: s
     Parameters
     ----------
     values : array_like of float
-        Must be finite; at least one must be non-zero.
+        Format values, any shape (flattened); must be finite; at least one must be non-zero.
     bits : int
+        Total width in bits of the format.
     signed : bool
+        Two's complement signed, or unsigned.
     rounding : {"half_up", "truncate"}
+        Rounding of the quantization (see :class:`FixedFormat`).
 
     Returns
     -------
     int
-        ``frac`` such that ``FixedFormat(bits, frac, signed, rounding, "error").quantize(values)``
+        Fraction bits ``frac`` such that ``FixedFormat(bits, frac, signed, rounding, "error").quantize(values)``
         succeeds and ``frac + 1`` would not.
 
     Raises
@@ -518,11 +524,11 @@ class SignalScaling:
         Parameters
         ----------
         value : array_like of float
-            Format values (``code * 2**-frac``).
+            Format values (``code * 2**-frac``), any shape.
 
         Returns
         -------
-        ndarray of float64
+        ndarray of float64, shape of ``value``
             Physical values.
         """
         return self.offset + self.scale * np.asarray(value, dtype=float)
@@ -533,11 +539,11 @@ class SignalScaling:
         Parameters
         ----------
         x : array_like of float
-            Physical values.
+            Physical values, any shape.
 
         Returns
         -------
-        ndarray of float64
+        ndarray of float64, shape of ``x``
             Format values (not yet rounded).
         """
         return (np.asarray(x, dtype=float) - self.offset) / self.scale
@@ -562,6 +568,7 @@ class PortFormat:
     Parameters
     ----------
     format : FixedFormat
+        The codes' format.
     scaling : SignalScaling
         Default: the identity (physical value = format value).
     """
@@ -580,7 +587,7 @@ class PortFormat:
         Parameters
         ----------
         codes : array_like of int
-            Codes of :attr:`format`.
+            Codes of :attr:`format`, any shape.
 
         Returns
         -------
@@ -596,7 +603,7 @@ class PortFormat:
         Parameters
         ----------
         x : array_like of float
-            Physical values.
+            Physical values, any shape.
         return_saturated : bool
             Also return the mask of the values outside the range (see :meth:`FixedFormat.quantize`).
         what : str
@@ -605,7 +612,7 @@ class PortFormat:
         Returns
         -------
         codes : ndarray of int64, shape of ``x``
-        saturated : ndarray of bool (only with ``return_saturated``)
+        saturated : ndarray of bool, shape of ``x`` (only with ``return_saturated``)
 
         Raises
         ------
@@ -703,12 +710,19 @@ class InputFormat:
     partitions : int
         ``p >= 1``.
     bits : int
-        ``B_in``.
+        ``B_in``, the width of the input codes in bits.
     fill : float
         ``input_fill`` in ``(0, 1]``.
     frac : int
-        ``F_j``.
+        ``F_j``: fraction bits, one grid cell is ``2**F_j`` grid sub-steps.
     lo_code : int
+        The input code of ``lo`` (LSB).
+    span : int
+        Input codes across the domain, ``S``; 0 for the "pow2" scale (then ``p * 2**F``).
+    scale_mul : int
+        ``K`` of the "exact" front-end scale ``t' = (t * K) >> R`` (1 for "pow2").
+    scale_shift : int
+        ``R``, in bits, of that scale (0 for "pow2").
     """
 
     lo: float
@@ -738,7 +752,7 @@ class InputFormat:
         Parameters
         ----------
         t : array_like of int
-            Input code offsets ``q - lo_code`` (converted to int64).
+            Input code offsets ``q - lo_code`` (LSB, converted to int64), any shape.
 
         Returns
         -------
@@ -875,13 +889,15 @@ class InputFormat:
         Parameters
         ----------
         x : array_like of float, physical units
+            Values to quantize, any shape.
         return_saturated : bool
             Also return the mask of values that saturated the ``bits``-bit range.
 
         Returns
         -------
-        q : ndarray of int64
-        saturated : ndarray of bool (only with ``return_saturated``)
+        q : ndarray of int64, shape of ``x``
+            Input codes (LSB).
+        saturated : ndarray of bool, shape of ``x`` (only with ``return_saturated``)
 
         Raises
         ------
@@ -896,7 +912,7 @@ class InputFormat:
         Parameters
         ----------
         q : array_like of int
-            Input codes.
+            Input codes (LSB), any shape.
 
         Returns
         -------
@@ -912,7 +928,7 @@ class InputFormat:
         Parameters
         ----------
         q : array_like of int
-            Input codes.
+            Input codes (LSB), any shape.
 
         Returns
         -------
@@ -968,14 +984,15 @@ def quantize_input(f: InputFormat | WarpInputFormat, x: ArrayLike,
     f : InputFormat or WarpInputFormat
         Anything with ``lo``, ``lo_code``, ``lsb`` and a saturating ``format``.
     x : array_like of float
-        Physical values.
+        Physical values, any shape.
     return_saturated : bool
         Also return the mask of the values that saturated ``f.format``.
 
     Returns
     -------
     q : ndarray of int64, shape of ``x``
-    saturated : ndarray of bool (only with ``return_saturated``)
+        Input codes (LSB).
+    saturated : ndarray of bool, shape of ``x`` (only with ``return_saturated``)
 
     Raises
     ------
@@ -998,7 +1015,7 @@ def input_to_physical(f: InputFormat | WarpInputFormat, q: ArrayLike) -> np.ndar
     f : InputFormat or WarpInputFormat
         As in :func:`quantize_input`.
     q : array_like of int
-        Input codes.
+        Input codes (LSB), any shape.
 
     Returns
     -------
@@ -1019,7 +1036,9 @@ def grid_input_formats(lo: Sequence[float], hi: Sequence[float], partitions: Seq
         Domain bounds per dimension, physical units.
     partitions : sequence of int, length n
         Intervals ``p_j`` per dimension.
-    bits, fill, scale
+    bits : int
+        ``B_in``, the input code width in bits, as in :meth:`InputFormat.for_interval`.
+    fill, scale
         As in :meth:`InputFormat.for_interval` (the same for every dimension).
 
     Returns
