@@ -27,10 +27,15 @@ decision boundaries that no bound here covers (also measured by :func:`agreement
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.reduction import tree_depth, tree_reduce
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["TIE_RULE", "SELECT", "index_width", "compare_levels", "argmax_index", "margins", "agreement"]
 
@@ -41,18 +46,45 @@ SELECT = ("max", "min")
 
 
 def index_width(n_classes: int) -> int:
-    """Bits of the class index ``0 .. n_classes - 1`` (at least 1)."""
+    """Bits of the class index ``0 .. n_classes - 1`` (at least 1).
+
+    Parameters
+    ----------
+    n_classes : int
+        ``C >= 1``, the number of classes.
+
+    Returns
+    -------
+    int
+        The index width in bits.
+
+    Raises
+    ------
+    InputError
+        ``n_classes < 1``.
+    """
     if int(n_classes) < 1:
         raise InputError(f"an argmax needs at least one class, got {n_classes}")
     return max(1, (int(n_classes) - 1).bit_length())
 
 
 def compare_levels(n_classes: int) -> int:
-    """Levels of the pairwise compare tree: ``ceil(log2(n_classes))`` (0 for one class)."""
+    """Levels of the pairwise compare tree: ``ceil(log2(n_classes))`` (0 for one class).
+
+    Parameters
+    ----------
+    n_classes : int
+        ``C >= 1``, the number of classes.
+
+    Returns
+    -------
+    int
+        Compare levels of the tree (combinational levels, not cycles).
+    """
     return tree_depth(int(n_classes))
 
 
-def argmax_index(codes, select: str = "max") -> np.ndarray:
+def argmax_index(codes: "ArrayLike", select: str = "max") -> np.ndarray:
     """Class index of each row of ``codes`` by the hardware's compare tree.
 
     Parameters
@@ -88,8 +120,24 @@ def argmax_index(codes, select: str = "max") -> np.ndarray:
     return tree_reduce(leaves, node)[0]
 
 
-def margins(scores) -> np.ndarray:
-    """Best minus runner-up score of each row of ``scores`` (m, C); ``inf`` when ``C = 1``."""
+def margins(scores: "ArrayLike") -> np.ndarray:
+    """Best minus runner-up score of each row of ``scores``.
+
+    Parameters
+    ----------
+    scores : array_like of float, shape (m, C)
+        Float scores (physical units).
+
+    Returns
+    -------
+    ndarray of float64, shape (m,)
+        The margins (the units of ``scores``); ``inf`` when ``C = 1``.
+
+    Raises
+    ------
+    InputError
+        ``scores`` is not 2-D.
+    """
     s = np.asarray(scores, dtype=float)
     if s.ndim != 2:
         raise InputError(f"scores must have shape (m, C), got {s.shape}")
@@ -99,7 +147,7 @@ def margins(scores) -> np.ndarray:
     return top2[:, 1] - top2[:, 0]
 
 
-def agreement(float_scores, codes, error_bound: float) -> dict:
+def agreement(float_scores: "ArrayLike", codes: "ArrayLike", error_bound: float) -> dict:
     """How often the hardware class equals the float classifier's, and where it may not.
 
     Parameters

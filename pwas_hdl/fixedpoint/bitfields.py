@@ -22,11 +22,14 @@ integers (a packed ROM word of several targets can be wider than 64 bits).
 
 from __future__ import annotations
 
-from typing import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = [
     "to_unsigned",
@@ -70,7 +73,20 @@ def to_unsigned(value: int, width: int) -> int:
 
 
 def to_signed(bits: int, width: int) -> int:
-    """Two's complement reading of the low ``width`` bits of ``bits``."""
+    """Two's complement reading of the low ``width`` bits of ``bits``.
+
+    Parameters
+    ----------
+    bits : int
+        A bit pattern (only its low ``width`` bits are read; not a width).
+    width : int
+        Field width in bits, ``>= 1``.
+
+    Returns
+    -------
+    int
+        In ``[-2**(width-1), 2**(width-1))``.
+    """
     v = int(bits) & ((1 << width) - 1)
     return v - (1 << width) if v >> (width - 1) else v
 
@@ -97,7 +113,24 @@ def pack(values: Iterable[int], width: int) -> int:
 
 
 def unpack(word: int, width: int, count: int, signed: bool = True) -> list[int]:
-    """Inverse of :func:`pack`: ``count`` fields of ``width`` bits, two's complement unless ``signed=False``."""
+    """Inverse of :func:`pack`: ``count`` fields of ``width`` bits, two's complement unless ``signed=False``.
+
+    Parameters
+    ----------
+    word : int
+        The packed word, field 0 in the least significant bits.
+    width : int
+        Bits per field.
+    count : int
+        Fields to read.
+    signed : bool
+        Read each field as two's complement (default) or unsigned.
+
+    Returns
+    -------
+    list of int
+        ``count`` codes.
+    """
     word = int(word)
     mask = (1 << width) - 1
     if signed:
@@ -109,6 +142,23 @@ def pack_fields(values: Iterable[int], fields: Sequence[Mapping]) -> int:
     """Pack codes by explicit bit fields (``lsb``, ``width``; the manifest's ``payload`` entries).
 
     ``values[i]`` goes to ``fields[i]``; extra values or fields are ignored (``zip``).
+
+    Parameters
+    ----------
+    values : iterable of int
+        Codes, each fitting its field's ``width`` bits (signed or unsigned).
+    fields : sequence of mapping
+        ``lsb`` (bit position) and ``width`` (bits) of each field.
+
+    Returns
+    -------
+    int
+        The unsigned word.
+
+    Raises
+    ------
+    InputError
+        A value does not fit its field.
     """
     word = 0
     for v, f in zip(values, fields):
@@ -117,7 +167,20 @@ def pack_fields(values: Iterable[int], fields: Sequence[Mapping]) -> int:
 
 
 def unpack_fields(word: int, fields: Sequence[Mapping]) -> list[int]:
-    """Inverse of :func:`pack_fields`; fields with a true ``signed`` are two's complement."""
+    """Inverse of :func:`pack_fields`; fields with a true ``signed`` are two's complement.
+
+    Parameters
+    ----------
+    word : int
+        The packed word.
+    fields : sequence of mapping
+        ``lsb`` (bit position), ``width`` (bits) and optionally ``signed`` of each field.
+
+    Returns
+    -------
+    list of int
+        One code per field.
+    """
     word = int(word)
     out = []
     for f in fields:
@@ -127,7 +190,7 @@ def unpack_fields(word: int, fields: Sequence[Mapping]) -> list[int]:
     return out
 
 
-def pack_rows(codes, width: int) -> list[int]:
+def pack_rows(codes: "ArrayLike", width: int) -> list[int]:
     """One packed word per row of ``codes`` (:func:`pack` of each row).
 
     Parameters
@@ -163,7 +226,7 @@ def pack_rows(codes, width: int) -> list[int]:
 _INT64_MAX = (1 << 63) - 1
 
 
-def int64_codes(codes) -> np.ndarray | None:
+def int64_codes(codes: "ArrayLike") -> np.ndarray | None:
     """``codes`` as an int64 array when that conversion is exact, else None (use Python integers).
 
     Exact for arrays and sequences of integers or booleans that an int64 holds. None for unsigned
@@ -175,10 +238,11 @@ def int64_codes(codes) -> np.ndarray | None:
     Parameters
     ----------
     codes : array_like
+        Codes, any shape.
 
     Returns
     -------
-    numpy.ndarray of int64 or None
+    numpy.ndarray of int64, shape of ``codes``, or None
     """
     try:
         a = np.asarray(codes)
@@ -227,7 +291,7 @@ def _chunks(lsb: int, width: int, word_bits: int):
         done += take
 
 
-def pack_fields_words(values, fields: Sequence[Mapping], n_words: int, word_bits: int = 32) -> np.ndarray:
+def pack_fields_words(values: "ArrayLike", fields: Sequence[Mapping], n_words: int, word_bits: int = 32) -> np.ndarray:
     """:func:`pack_fields` of many rows at once, as ``word_bits``-bit words (word 0 = the low bits).
 
     Parameters
@@ -239,11 +303,17 @@ def pack_fields_words(values, fields: Sequence[Mapping], n_words: int, word_bits
     n_words : int
         Words per row (``ceil(payload width / word_bits)``).
     word_bits : int
-        8, 16 or 32 (default 32: Verilator's ``VlWide`` words).
+        Bits per word: 8, 16 or 32 (default 32: Verilator's ``VlWide`` words).
 
     Returns
     -------
     ndarray, shape (m, n_words), unsigned of ``word_bits`` bits
+
+    Raises
+    ------
+    InputError
+        Bad ``word_bits`` or shape, a code that does not fit its field, a field wider than 62 bits
+        or ending past ``n_words`` words.
     """
     if word_bits not in (8, 16, 32):
         raise InputError(f"word_bits must be 8, 16 or 32, got {word_bits!r}")
@@ -265,10 +335,29 @@ def pack_fields_words(values, fields: Sequence[Mapping], n_words: int, word_bits
     return out.astype({8: np.uint8, 16: np.uint16, 32: np.uint32}[word_bits])
 
 
-def unpack_fields_words(words, fields: Sequence[Mapping], word_bits: int = 32) -> np.ndarray:
+def unpack_fields_words(words: "ArrayLike", fields: Sequence[Mapping], word_bits: int = 32) -> np.ndarray:
     """Inverse of :func:`pack_fields_words`: ``(m, n_words)`` -> ``(m, len(fields))`` int64.
 
     Fields with a true ``signed`` are two's complement; fields of up to 62 bits.
+
+    Parameters
+    ----------
+    words : array_like of unsigned int, shape (m, n_words)
+        ``word_bits``-bit words of each row, word 0 the low bits.
+    fields : sequence of mapping
+        ``lsb`` (bit position), ``width`` (bits) and optionally ``signed`` of each field.
+    word_bits : int
+        Bits per word, as in :func:`pack_fields_words`.
+
+    Returns
+    -------
+    ndarray of int64, shape (m, len(fields))
+        The codes.
+
+    Raises
+    ------
+    InputError
+        ``words`` is not 2-D, or a field is wider than 62 bits.
     """
     wv = np.asarray(words).astype(np.uint64)
     if wv.ndim != 2:
