@@ -99,10 +99,11 @@ class AdditiveFixedPointModel(FixedPointModel):
         The parts' grids on the shared domain box (``PWASVirtualSensor.grid_`` of an additive sensor).
     weights : ndarray, shape (sum_i N_i,) or (sum_i N_i, nz)
         Stacked float weights (``PWASVirtualSensor.weights_`` of an additive sensor).
-    input_bits, input_fill, input_scale, weight_bits, weight_frac, output_bits, output_frac, overflow,
-    rounding, reference_error, layout, regressor_names, regressor_signals, target_names
+    input_bits, input_fill, input_scale, weight_bits, weight_frac, output_bits, output_frac
         As :class:`FixedPointModel` (widths ``*_bits`` and fraction bits ``*_frac`` in bits); the
         weight format is common to all parts and the output format is that of the sum.
+    overflow, rounding, reference_error, layout, regressor_names, regressor_signals, target_names
+        As :class:`FixedPointModel`.
 
     Attributes
     ----------

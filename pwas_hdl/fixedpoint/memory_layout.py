@@ -209,8 +209,9 @@ class BankedLayout(_LayoutBase):
         Parameters
         ----------
         vertex : int, array of int (linear indices, any shape) or tuple of n ints (coordinates)
-        slot : ignored
-            (Position in the simplex; only :class:`ReplicatedLayout` needs it.)
+        slot : int or array of int, any shape, optional
+            Ignored (the position in the simplex; only :class:`ReplicatedLayout` and
+            :class:`CornerLayout` need it).
 
         Returns
         -------
@@ -286,6 +287,11 @@ class ReplicatedLayout(_LayoutBase):
     """``n + 1`` full copies of the weights (the MOBY-DIC "fast" circuit), for comparison.
 
     Copy ``k`` serves vertex ``k`` of the simplex; address = linear vertex index.
+
+    Parameters
+    ----------
+    grid : Grid
+        The simplicial grid (``N`` vertices: every copy is ``N`` words deep).
     """
 
     kind = "replicated"
@@ -431,8 +437,9 @@ class CornerLayout(_LayoutBase):
         ----------
         vertex : int, array of int (linear indices) or tuple of n ints (coordinates)
         slot : int or array of int, optional
-            The corner ``s`` the vertex is read as (default 0: the vertex as its own cell's
-            corner 0, valid for vertices with every ``v_j < p_j``); the cell is ``v - s``.
+            The corner ``s`` the vertex is read as, broadcast to the shape of the indices (default 0:
+            the vertex as its own cell's corner 0, valid for vertices with every ``v_j < p_j``); the
+            cell is ``v - s``.
 
         Returns
         -------
@@ -553,10 +560,10 @@ def readmemh_text(words: ArrayLike, bits: int) -> str:
 
     Parameters
     ----------
-    words : sequence of int
+    words : sequence of int, shape (depth,)
         Signed or unsigned integers that fit ``bits`` bits (two's complement for negatives).
     bits : int
-        Word width, ``>= 1``.
+        Word width in bits, ``>= 1``.
 
     Returns
     -------
@@ -600,14 +607,17 @@ def hex_files(layout: BankedLayout | ReplicatedLayout | CornerLayout, weight_cod
     Parameters
     ----------
     layout : BankedLayout, ReplicatedLayout or CornerLayout
+        Where each vertex's weights go (banks and addresses).
     weight_codes : array_like of int, shape (N, nz)
+        Weight codes (LSB of the weight format), one row per vertex.
     bits : int
-        Weight width ``B_w``.
+        Weight width ``B_w`` in bits.
     packed : bool
         False (default): one file per bank per target, ``<prefix>_b<bank>_z<target>.hex``.
         True: one file per bank, ``<prefix>_b<bank>.hex``, ``nz * bits``-bit words with target 0
         in the least significant bits.
     prefix : str
+        Start of the file names.
 
     Returns
     -------

@@ -13,17 +13,34 @@ Used by :class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel` (one grid) and
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from pwas_hdl.fixedpoint.formats import InputFormat
+
 __all__ = ["weight_matrix", "model_names", "input_code_arrays", "output_reference"]
 
 
-def weight_matrix(weights, n_vertices: int) -> np.ndarray:
+def weight_matrix(weights: "ArrayLike", n_vertices: int) -> np.ndarray:
     """The weights as a float array of shape (N, nz) (a 1-D array is one target).
+
+    Parameters
+    ----------
+    weights : array_like of float, shape (N, nz) or (N,)
+        Vertex weights, the targets' physical units.
+    n_vertices : int
+        ``N``, the grid's vertices.
+
+    Returns
+    -------
+    ndarray of float64, shape (N, nz)
+        The weights (a copy only where the conversion needs one).
 
     Raises
     ------
@@ -46,6 +63,28 @@ def model_names(n: int, nz: int, regressor_names: Sequence[str] | None, regresso
 
     Defaults: ``x0 .. x{n-1}``; each regressor its own signal at lag 0; ``z0 .. z{nz-1}``.
 
+    Parameters
+    ----------
+    n : int
+        Regressors (grid dimensions).
+    nz : int
+        Targets.
+    regressor_names : sequence of str, length n, optional
+        Name of each regressor.
+    regressor_signals : sequence of (str, int), length n, optional
+        ``(signal, lag)`` of each regressor (lag in samples).
+    target_names : sequence of str, length nz, optional
+        Name of each target.
+
+    Returns
+    -------
+    names : list of str
+        ``n`` regressor names.
+    signals : list of (str, int)
+        ``n`` regressor signals ``(signal, lag)``.
+    targets : list of str
+        ``nz`` target names.
+
     Raises
     ------
     InputError
@@ -61,9 +100,21 @@ def model_names(n: int, nz: int, regressor_names: Sequence[str] | None, regresso
     return names, signals, targets
 
 
-def input_code_arrays(inputs: Sequence) -> tuple[np.ndarray, ...]:
+def input_code_arrays(inputs: "Sequence[InputFormat]") -> tuple[np.ndarray, ...]:
     """The constants of the input formats (:class:`~pwas_hdl.fixedpoint.formats.InputFormat`, one per
-    regressor) as int64 arrays (n,): ``(lo_code, frac, input_span, scale_mul, scale_shift, min_code, max_code)``."""
+    regressor) as int64 arrays (n,): ``(lo_code, frac, input_span, scale_mul, scale_shift, min_code, max_code)``.
+
+    Parameters
+    ----------
+    inputs : sequence of InputFormat, length n
+        One input format per regressor.
+
+    Returns
+    -------
+    tuple of 7 ndarray of int64, each shape (n,)
+        ``lo_code`` (LSB), ``frac`` (bits), ``input_span`` (codes), ``scale_mul``, ``scale_shift``
+        (bits), ``min_code``, ``max_code`` (LSB).
+    """
     def col(get) -> np.ndarray:
         return np.array([get(f) for f in inputs], dtype=np.int64)
 
@@ -74,7 +125,22 @@ def input_code_arrays(inputs: Sequence) -> tuple[np.ndarray, ...]:
 def output_reference(reference_error: float | None, w: np.ndarray) -> tuple[float, str]:
     """The reference error of the output LSB and its source: ``reference_error`` when a positive
     finite number ("given"), else the weight range / 2**10 ("weight_range"), or 1.0 for constant
-    weights ("constant_weights")."""
+    weights ("constant_weights").
+
+    Parameters
+    ----------
+    reference_error : float, optional
+        The requested reference error (the targets' physical units).
+    w : ndarray, shape (N, nz)
+        The float weights (physical units).
+
+    Returns
+    -------
+    reference : float
+        The reference error, physical units.
+    source : str
+        ``"given"``, ``"weight_range"`` or ``"constant_weights"``.
+    """
     if reference_error is not None and math.isfinite(reference_error) and reference_error > 0:
         return float(reference_error), "given"
     rng = float(w.max() - w.min())

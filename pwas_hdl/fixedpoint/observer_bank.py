@@ -223,7 +223,35 @@ def l1_gain(a_cl: np.ndarray, b: np.ndarray, tol: float = 1e-13, max_steps: int 
 
 @dataclass(frozen=True)
 class ObserverBankFormats:
-    """Formats and widths of the bank and the feature unit (all integers: bits)."""
+    """Formats and widths of the bank and the feature unit (all integers: bits).
+
+    Attributes
+    ----------
+    input_bits : int
+        ``B_in``, width in bits of the u and y codes.
+    input_frac : int
+        ``F_in``, fraction bits of the u and y codes.
+    coef_frac : int
+        ``F_c``, fraction bits of the observer coefficients.
+    state_bits : int
+        ``B_s``, width in bits of the observer states.
+    state_frac : int
+        ``F_s``, fraction bits of the states.
+    residual_bits : int
+        Width in bits of the residual ``x0 - y`` (widened so that its square holds the window sum).
+    square_bits : int
+        Width in bits of the squared residual (``2 * residual_bits``).
+    sum_bits : int
+        Width in bits of the window sum of squares.
+    root_bits : int
+        Width in bits of the square root (feature map 11b) or of the sum itself (11b-sq).
+    scale_shift : int
+        ``R``, the right shift in bits of the feature scale ``(r * K + c) >> R``.
+    scale_mul_bits : int
+        Width in bits of the scale constants ``K`` (signed).
+    acc_bits : int
+        Width in bits of the state update's accumulator.
+    """
 
     input_bits: int
     input_frac: int

@@ -27,14 +27,45 @@ T = TypeVar("T")
 
 
 def tree_depth(n_items: int) -> int:
-    """Levels of the tree over ``n_items >= 1`` items: ``ceil(log2(n_items))`` (0 for one item)."""
+    """Levels of the tree over ``n_items >= 1`` items: ``ceil(log2(n_items))`` (0 for one item).
+
+    Parameters
+    ----------
+    n_items : int
+        Leaves of the tree, ``>= 1``.
+
+    Returns
+    -------
+    int
+        Levels of pairwise combinations (not cycles).
+
+    Raises
+    ------
+    InputError
+        ``n_items < 1``.
+    """
     if n_items < 1:
         raise InputError(f"a reduction needs at least one item, got {n_items}")
     return (int(n_items) - 1).bit_length()
 
 
 def tree_level(items: Sequence[T], combine: Callable[[T, T, int, int], T], level: int = 0) -> list[T]:
-    """One level: ``combine(items[2i], items[2i+1], level, i)``; an odd last item passes."""
+    """One level: ``combine(items[2i], items[2i+1], level, i)``; an odd last item passes.
+
+    Parameters
+    ----------
+    items : sequence
+        The items entering this level, lowest index first.
+    combine : callable(a, b, level, index) -> item
+        Combines two items of level ``level`` into the ``index``-th item of the next level.
+    level : int
+        This level's number (0: the leaves' level), passed to ``combine``.
+
+    Returns
+    -------
+    list
+        ``ceil(len(items) / 2)`` items.
+    """
     return [
         combine(items[i], items[i + 1], level, i // 2) if i + 1 < len(items) else items[i]
         for i in range(0, len(items), 2)
@@ -45,6 +76,23 @@ def tree_levels(items: Sequence[T], combine: Callable[[T, T, int, int], T]) -> l
     """Every level of the tree: ``out[l]`` are the items after level ``l``; ``out[-1]`` has one item.
 
     Empty for a single item (nothing to add).
+
+    Parameters
+    ----------
+    items : sequence
+        The leaves, lowest index first (at least one).
+    combine : callable(a, b, level, index) -> item
+        Combines two items of level ``level`` into the ``index``-th item of the next level.
+
+    Returns
+    -------
+    list of list
+        ``tree_depth(len(items))`` levels.
+
+    Raises
+    ------
+    InputError
+        No item.
     """
     cur = list(items)
     if not cur:
@@ -57,6 +105,24 @@ def tree_levels(items: Sequence[T], combine: Callable[[T, T, int, int], T]) -> l
 
 
 def tree_reduce(items: Sequence[T], combine: Callable[[T, T, int, int], T]) -> T:
-    """The root of the tree (``items[0]`` for a single item)."""
+    """The root of the tree (``items[0]`` for a single item).
+
+    Parameters
+    ----------
+    items : sequence
+        The leaves, lowest index first (at least one).
+    combine : callable(a, b, level, index) -> item
+        Combines two items of level ``level`` into the ``index``-th item of the next level.
+
+    Returns
+    -------
+    item
+        What the last ``combine`` returned.
+
+    Raises
+    ------
+    InputError
+        No item.
+    """
     levels = tree_levels(items, combine)
     return levels[-1][0] if levels else list(items)[0]

@@ -55,7 +55,7 @@ class Pow2Warp:
     Attributes
     ----------
     input_bits : int
-        ``B_in`` of the input code ``q``.
+        ``B_in``, the width in bits of the input code ``q``.
     code_breaks : tuple of int
         ``B_0 .. B_p`` (input codes).
     exps : tuple of int
@@ -139,9 +139,11 @@ class WarpInputFormat:
     Attributes
     ----------
     bits : int
+        ``B_in``, the width in bits of the input codes.
     lo, hi : float
         Domain, physical units.
     partitions : int
+        Cells ``p`` of the dimension.
     lsb, offset : float
         Physical units per code and of code 0.
     lo_code, hi_code : int
@@ -190,14 +192,15 @@ class WarpInputFormat:
         Parameters
         ----------
         x : array_like of float
-            Physical values.
+            Physical values, any shape.
         return_saturated : bool
             Also return the mask of the values that saturated the ``bits``-bit range.
 
         Returns
         -------
         q : ndarray of int64, shape of ``x``
-        saturated : ndarray of bool (only with ``return_saturated``)
+            Input codes (LSB).
+        saturated : ndarray of bool, shape of ``x`` (only with ``return_saturated``)
 
         Raises
         ------
@@ -214,7 +217,7 @@ class WarpInputFormat:
         Parameters
         ----------
         q : array_like of int
-            Input codes.
+            Input codes (LSB), any shape.
 
         Returns
         -------
@@ -254,7 +257,7 @@ class WarpedFixedPointModel:
         dimension (a uniform dimension counts: all ``e_k = 0``).
     weights : ndarray, shape (N,) or (N, nz)
     input_bits : int
-        ``B_in`` of the inputs ``q`` (default 12).
+        ``B_in``, the width in bits of the inputs ``q`` (default 12).
     input_fill : float
         Largest fraction of the input code range the domain takes (default 0.9); also the fill of
         the core's ``u`` codes.
