@@ -277,12 +277,38 @@ def _int_values(values, what: str, lo: int | None = None) -> list[int]:
 
 # ------------------------------------------------------------------------------------ resources
 def mult18_blocks(f: int, weight_bits: int) -> int:
-    """18x18 multiplier blocks of one product ``u(F+1) x s(B_w)`` (the fraction times the weight)."""
+    """18x18 multiplier blocks of one product ``u(F+1) x s(B_w)`` (the fraction times the weight).
+
+    Parameters
+    ----------
+    f : int
+        ``F``, fraction bits of the grid coordinate (the unsigned fraction is ``F + 1`` bits wide).
+    weight_bits : int
+        ``B_w``, the weight width in bits.
+
+    Returns
+    -------
+    int
+        Multiplier blocks.
+    """
     return math.ceil((f + 2) / 18) * math.ceil(weight_bits / 18)
 
 
 def bram18k_blocks(depth: int, width: int) -> int:
-    """18-kbit block RAMs (ECP5 DP16KD, any of its aspect ratios) that hold ``depth`` words of ``width`` bits."""
+    """18-kbit block RAMs (ECP5 DP16KD, any of its aspect ratios) that hold ``depth`` words of ``width`` bits.
+
+    Parameters
+    ----------
+    depth : int
+        Words of the memory.
+    width : int
+        Word width in bits.
+
+    Returns
+    -------
+    int
+        Block RAMs (the fewest over the aspect ratios).
+    """
     return min(math.ceil(depth / d) * math.ceil(width / w) for d, w in _BRAM18_SHAPES)
 
 
@@ -838,7 +864,20 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
 
 # ------------------------------------------------------------------------------------ reports
 def format_table(result: dict, rows: str = "pareto") -> str:
-    """A Markdown table of the Pareto points (``rows="pareto"``, plus the default) or of all points."""
+    """A Markdown table of the Pareto points (``rows="pareto"``, plus the default) or of all points.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`explore` returns.
+    rows : {"pareto", "all"}
+        The Pareto points and the default (``"pareto"``), or every point (anything else).
+
+    Returns
+    -------
+    str
+        The table (costs in bits, RMSEE in the targets' physical units, max deviation in output LSB).
+    """
     pts = result["points"]
     idx = list(result["pareto"]) if rows == "pareto" else list(range(len(pts)))
     di = result["default"]["index"]
@@ -881,6 +920,25 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
     the RMS deviation of the bit-true estimate from the float model (log axis), same points and
     marks. With measured resources a third panel plots the same accuracy against the measured LUTs
     of the synthesised points, annotated with DSP and block-RAM counts.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`explore` returns.
+    png_path : str or os.PathLike
+        The PNG file to write.
+    title : str, optional
+        The figure's title; default: the model's ``n``, ``N``, the samples and the point counts.
+
+    Returns
+    -------
+    Path
+        Where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        The result has no points.
     """
     import io
 

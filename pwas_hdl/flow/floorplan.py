@@ -109,14 +109,40 @@ SITE_TABLES: dict[str, SiteTable] = {"45k": _ecp5_45f()}
 
 
 def check_floorplan(value: Any) -> str:
-    """``value`` if it is one of :data:`FLOORPLANS`, else InputError (bad input: CLI exit 2)."""
+    """``value`` if it is one of :data:`FLOORPLANS`, else InputError (bad input: CLI exit 2).
+
+    Parameters
+    ----------
+    value : Any
+        The ``--floorplan`` value to check.
+
+    Returns
+    -------
+    str
+        ``value``.
+
+    Raises
+    ------
+    InputError
+        Not one of :data:`FLOORPLANS`.
+    """
     if not isinstance(value, str) or value not in FLOORPLANS:
         raise InputError(f"--floorplan (floorplan) must be one of {', '.join(FLOORPLANS)}, got {value!r}")
     return value
 
 
 def applies_to_pipeline(pipeline: dict[str, Any] | None) -> bool:
-    """Whether ``auto`` plans a design of this manifest pipeline (``mul_in`` without ``mem_out``)."""
+    """Whether ``auto`` plans a design of this manifest pipeline (``mul_in`` without ``mem_out``).
+
+    Parameters
+    ----------
+    pipeline : dict, optional
+        The manifest's ``pipeline`` (register flags such as ``mul_in``, ``mem_out``); None: no flags.
+
+    Returns
+    -------
+    bool
+    """
     pl = pipeline or {}
     return bool(pl.get("mul_in")) and not pl.get("mem_out", True)
 
@@ -132,6 +158,20 @@ def replicated_sites(table: SiteTable, kind: str, count: int) -> tuple[str, ...]
 
     With the cells in natural order (copy 0's blocks, copy 1's, ...) each copy's blocks are adjacent
     and the copies run left to right, copy 0 and copy ``n`` at the ends.
+
+    Parameters
+    ----------
+    table : SiteTable
+        The part's sites.
+    kind : str
+        Cell type, one of :data:`HARD_BLOCKS`.
+    count : int
+        Cells of that type to place.
+
+    Returns
+    -------
+    tuple of str
+        ``count`` nextpnr BEL names, left to right.
     """
     sites = table.sites[kind]
     g = table.group
@@ -208,9 +248,21 @@ def apply_floorplan(netlist: str | os.PathLike, top: str, device: str | None, *,
                     part: str | None = None) -> dict[str, Any]:
     """Give the hard blocks of a Yosys JSON netlist their sites (nextpnr ``BEL`` attributes), in place.
 
-    Parameters as :func:`plan_sites` (``netlist``: the file after hard-register packing; ``top``:
-    its top module). The netlist is rewritten only when a plan applies. Returns the record of
-    :func:`plan_sites`.
+    The netlist is rewritten only when a plan applies.
+
+    Parameters
+    ----------
+    netlist : str or os.PathLike
+        The Yosys JSON netlist, after hard-register packing (rewritten in place).
+    top : str
+        Its top module.
+    device, mode, pipeline, memory, part
+        As in :func:`plan_sites`.
+
+    Returns
+    -------
+    dict
+        The record of :func:`plan_sites`.
     """
     data, mod = read_top(netlist, top)
     rec = plan_sites({n: c["type"] for n, c in mod["cells"].items()}, device, mode=mode, pipeline=pipeline, memory=memory,

@@ -20,6 +20,20 @@ __all__ = ["read_top", "write_netlist"]
 def read_top(netlist: str | os.PathLike, top: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(netlist, module)``: the parsed netlist and its module ``top`` (Yosys may write it ``\\top``).
 
+    Parameters
+    ----------
+    netlist : str or os.PathLike
+        A Yosys JSON netlist file.
+    top : str
+        The module's name.
+
+    Returns
+    -------
+    data : dict
+        The whole parsed netlist.
+    module : dict
+        ``data["modules"]``'s entry of ``top`` (the same object: edits to it edit ``data``).
+
     Raises
     ------
     KeyError
@@ -35,7 +49,15 @@ def read_top(netlist: str | os.PathLike, top: str) -> tuple[dict[str, Any], dict
 
 
 def write_netlist(netlist: str | os.PathLike, data: dict[str, Any]) -> None:
-    """Write ``data`` (as :func:`read_top` returned it, edited) back to ``netlist``, atomically."""
+    """Write ``data`` (as :func:`read_top` returned it, edited) back to ``netlist``, atomically.
+
+    Parameters
+    ----------
+    netlist : str or os.PathLike
+        The JSON netlist file to replace.
+    data : dict
+        The whole netlist.
+    """
     path = Path(netlist)
     tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps(data), encoding="utf-8")

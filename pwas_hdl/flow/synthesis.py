@@ -410,7 +410,18 @@ def synthesize(
 
 
 def synth_summary_text(result: dict[str, Any]) -> str:
-    """A few human-readable lines about a :func:`synthesize` result (for ``pwas-hdl synth``)."""
+    """A few human-readable lines about a :func:`synthesize` result (for ``pwas-hdl synth``).
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`synthesize` returns.
+
+    Returns
+    -------
+    str
+        The lines, newline-separated.
+    """
     r = result
     tools = r.get("tools") or {}
     tool_txt = ", ".join(str(tools[k]) for k in ("yosys", "nextpnr") if tools.get(k))

@@ -35,11 +35,14 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.hdl.params import Pipeline
 from pwas_hdl.io.atomic import make_temp_dir
+
+if TYPE_CHECKING:
+    from pwas_hdl.design.generate import GeneratedDesign
 
 __all__ = [
     "FPGA_TARGETS",
@@ -59,7 +62,15 @@ Progress = Callable[[str], None]
 
 class TimingNotMet(InputError):
     """Even the deepest pipeline misses the target clock (the message gives the best fmax and the
-    largest target to ask for): bad input (``--clock-mhz``), exit 2, nothing written."""
+    largest target to ask for): bad input (``--clock-mhz``), exit 2, nothing written.
+
+    Parameters
+    ----------
+    message : str
+        The error message.
+    record : dict
+        The search's record so far (as :func:`close_timing` returns it), kept as :attr:`record`.
+    """
 
     def __init__(self, message: str, record: dict[str, Any]):
         super().__init__(message)
@@ -99,6 +110,16 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
     comparison bits) the last one, the ``max`` preset of 13 cycles, ~206 MHz (seed 1);
     ``benchmarks/hw_tables.py`` has the current figures. On iCE40 HX8K (multipliers in LUTs) the core goes from 42 MHz (2 cycles) to
     ~85-94 MHz, limited by the LUT multipliers.
+
+    Parameters
+    ----------
+    n : int
+        Inputs of the core (sets the adder-tree depth and so the tree registers of the candidates).
+
+    Returns
+    -------
+    list of Pipeline
+        The candidates; ``latency(n)`` (cycles) strictly increasing.
     """
     n = int(n)
     if n < 1:
@@ -137,7 +158,21 @@ def _label(p: Pipeline, n: int) -> str:
 def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[str, str, int]:
     """A Verilog wrapper that registers every port of the manifest's top except the clock.
 
-    Returns ``(module name, Verilog text, number of harness flip-flops)``.
+    Parameters
+    ----------
+    manifest : dict
+        The design's manifest (``top``, ``clock``, ``ports``).
+    name : str, optional
+        The wrapper module's name (default ``<top>_timing_harness``).
+
+    Returns
+    -------
+    module : str
+        The wrapper module's name.
+    verilog : str
+        Its Verilog text.
+    ffs : int
+        Flip-flops the harness adds (one per port bit but the clock's).
     """
     top = manifest["top"]
     name = name or f"{top}_timing_harness"
@@ -236,7 +271,7 @@ def _critical_path(report: dict[str, Any]) -> dict[str, Any] | None:
 # measuring one design
 # ---------------------------------------------------------------------------------------------
 def measure_design(
-    gd,
+    gd: "GeneratedDesign",
     fpga: str,
     *,
     freq_mhz: float | None,
@@ -252,6 +287,31 @@ def measure_design(
     :func:`~pwas_hdl.flow.synthesis.synthesize` (with ``harness``: inside the timing harness, the
     same one ``pwas-hdl synth`` uses by default); returns its result with ``harness_ffs`` and
     ``ffs_core`` (the design's flip-flops) added and ``ffs`` counting the harness's too.
+
+    Parameters
+    ----------
+    gd : GeneratedDesign
+        The built design (its ``files`` and ``manifest``).
+    fpga : str
+        ``"ecp5"`` or ``"ice40"`` (as :func:`~pwas_hdl.flow.synthesis.synthesize`'s ``target``).
+    freq_mhz : float, optional
+        Target clock in MHz, nextpnr's ``--freq``.
+    seed : int
+        nextpnr placer seed.
+    device : str, optional
+        nextpnr device (default: the family's, see :func:`~pwas_hdl.flow.synthesis.synthesize`).
+    workdir : str or os.PathLike
+        Folder for the design's files and the run (emptied first if it exists).
+    harness : bool
+        Place and route inside the timing harness (:func:`harness_verilog`).
+    progress : callable(str), optional
+        Called with one line of text before each tool runs.
+
+    Returns
+    -------
+    dict
+        :func:`~pwas_hdl.flow.synthesis.synthesize`'s result (``fmax_mhz`` in MHz, resources in
+        cells), ``ffs`` including the harness's flip-flops, plus ``harness_ffs`` and ``ffs_core``.
     """
     from pwas_hdl.flow.synthesis import synthesize
 
@@ -322,7 +382,7 @@ def close_timing(
     n
         Number of core inputs (sets the adder-tree depth of the candidates).
     target_mhz
-        Clock target; also nextpnr's ``--freq``.
+        Clock target in MHz; also nextpnr's ``--freq``.
     fpga, device
         ``"ecp5"`` (default device 45k) or ``"ice40"`` (hx8k).
     seed
@@ -335,6 +395,8 @@ def close_timing(
         Default :func:`pipeline_candidates` ``(n)``.
     workdir
         Where the place-and-route runs go (default: a temporary folder, removed afterwards).
+    progress : callable(str), optional
+        Called with one line of text before each tool runs.
     executor : pwas_hdl.flow.executor.Executor, optional
         With a distributed executor, the candidates the search may need next are placed and
         routed speculatively on the workers (as many as there are workers) while the search
@@ -478,7 +540,18 @@ def close_timing(
 
 
 def timing_report_text(rec: dict[str, Any]) -> str:
-    """The Markdown section of ``report.md`` about a timing-closure search."""
+    """The Markdown section of ``report.md`` about a timing-closure search.
+
+    Parameters
+    ----------
+    rec : dict
+        The record of :func:`close_timing`.
+
+    Returns
+    -------
+    str
+        Markdown (clocks in MHz, latencies in cycles and ns).
+    """
     lines = [
         "## Timing closure",
         "",

