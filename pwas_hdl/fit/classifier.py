@@ -58,15 +58,15 @@ def one_hot(values: np.ndarray, classes: Sequence[float]) -> np.ndarray:
 
     Parameters
     ----------
-    values : numpy.ndarray
+    values : numpy.ndarray, shape (T,) or any shape of T elements
         ``T`` labels (flattened).
     classes : sequence of float
         The ``C`` classes (column order), as from :func:`class_labels`.
 
     Returns
     -------
-    numpy.ndarray
-        ``(T, C)`` float array: 1.0 where ``values[t] == classes[i]``, else 0.0.
+    numpy.ndarray, shape (T, C)
+        Float array: 1.0 where ``values[t] == classes[i]``, else 0.0.
 
     Raises
     ------

@@ -42,7 +42,7 @@ def pcg(
     b : ndarray, shape (N,)
         Right-hand side (converted to float64).
     precond : callable or object with ``matvec``, optional
-        ``z = precond(r)``: an approximation of ``a^{-1} r`` (symmetric positive definite); its
+        ``z = precond(r)``, ``r`` and ``z`` of shape (N,): an approximation of ``a^{-1} r`` (symmetric positive definite); its
         result may be a new array or one the caller does not touch again before the next call.
         ``None``: no preconditioner.
     x0 : ndarray, shape (N,), optional

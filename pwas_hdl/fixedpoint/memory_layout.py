@@ -435,7 +435,7 @@ class CornerLayout(_LayoutBase):
 
         Parameters
         ----------
-        vertex : int, array of int (linear indices) or tuple of n ints (coordinates)
+        vertex : int, array of int (linear indices, any shape) or tuple of n ints (coordinates)
         slot : int or array of int, optional
             The corner ``s`` the vertex is read as, broadcast to the shape of the indices (default 0:
             the vertex as its own cell's corner 0, valid for vertices with every ``v_j < p_j``); the
