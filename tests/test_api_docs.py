@@ -8,12 +8,17 @@ section, as numpydoc documents a constructor) and its public methods (those the 
 the inherited scikit-learn ones). The sections are parsed by hand (numpydoc is not a dependency):
 a section is a title line over a line of dashes; an entry is ``name : type`` (or ``a, b : type``)
 at the section's indentation, its description indented below.
+
+The same rules hold for the modules' own API (:data:`DOCUMENTED_PACKAGES`): every function and
+class that a submodule of those packages lists in its ``__all__`` and defines itself.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import inspect
+import pkgutil
 import re
 import textwrap
 
@@ -74,11 +79,13 @@ def _documented(doc: str, titles: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
-def _public_callables() -> list[tuple[str, object, str, bool]]:
-    """(qualified name, function, docstring holding its Parameters, is a constructor) for the exported API."""
+def _public_callables(names: list[tuple[str, object]] | None = None) -> list[tuple[str, object, str, bool]]:
+    """(qualified name, function, docstring holding its Parameters, is a constructor) for the exported API
+    (``names``: (qualified name, object) pairs; default ``pwas_hdl.__all__``)."""
     items = []
-    for name in pwas_hdl.__all__:
-        obj = getattr(pwas_hdl, name)
+    if names is None:
+        names = [(name, getattr(pwas_hdl, name)) for name in pwas_hdl.__all__]
+    for name, obj in names:
         if not inspect.isclass(obj):
             items.append((name, obj, inspect.getdoc(obj) or "", False))
             continue
@@ -97,6 +104,30 @@ def _public_callables() -> list[tuple[str, object, str, bool]]:
 
 _ITEMS = _public_callables()
 
+#: Packages whose submodules' ``__all__`` follow the standard too (not only what ``pwas_hdl`` exports).
+DOCUMENTED_PACKAGES = ("pwas_hdl.fit", "pwas_hdl.fixedpoint", "pwas_hdl.design", "pwas_hdl.io", "pwas_hdl.flow")
+
+
+def _module_api() -> dict[str, list[tuple[str, object, str, bool]]]:
+    """Module name -> the :func:`_public_callables` of every function and class that a submodule of
+    :data:`DOCUMENTED_PACKAGES` lists in ``__all__`` and defines itself (re-exports are checked
+    where they are defined)."""
+    out = {}
+    for pkg_name in DOCUMENTED_PACKAGES:
+        pkg = importlib.import_module(pkg_name)
+        for info in pkgutil.iter_modules(pkg.__path__, pkg_name + "."):
+            mod = importlib.import_module(info.name)
+            names = [(f"{mod.__name__}.{name}", getattr(mod, name)) for name in getattr(mod, "__all__", ())]
+            names = [(q, obj) for q, obj in names
+                     if (inspect.isfunction(obj) or inspect.isclass(obj)) and obj.__module__ == mod.__name__]
+            if names:
+                out[mod.__name__] = _public_callables(names)
+    return out
+
+
+#: One test per module (not per function: a thousand parametrised cases would cost seconds).
+_MODULE_ITEMS = _module_api()
+
 
 def _params(fn: object) -> list[inspect.Parameter]:
     return [p for p in inspect.signature(fn).parameters.values() if p.name not in ("self", "cls")]
@@ -106,6 +137,13 @@ def test_the_walk_covers_the_readme_api():
     names = {q for q, *_ in _ITEMS}
     assert {"PWASVirtualSensor.fit", "PWASVirtualSensor.predict", "PWASVirtualSensor.__init__", "FixedPointModel.evaluate",
             "generate", "simulate_arrays", "synthesize", "explore", "collect_report", "load_model", "load_design"} <= names
+
+
+def test_the_module_walk_covers_the_packages():
+    names = {q for items in _MODULE_ITEMS.values() for q, *_ in items}
+    assert {"pwas_hdl.fit.regularized_lsq.check_fit_memory", "pwas_hdl.fit.regularized_lsq.plan_fit_memory",
+            "pwas_hdl.fixedpoint.formats.FixedFormat.quantize", "pwas_hdl.fixedpoint.formats.quantize_input",
+            "pwas_hdl.flow.explore.format_table", "pwas_hdl.io.atomic.logs_kept"} <= names
 
 
 @pytest.mark.parametrize("qual, fn, doc, ctor", _ITEMS, ids=[q for q, *_ in _ITEMS])
@@ -134,3 +172,16 @@ def test_array_parameters_give_a_shape(qual, fn, doc, ctor):
     for p in _params(fn):
         if "ndarray" in str(p.annotation) and p.name in documented:
             assert shape.search(documented[p.name]), f"{qual}: array parameter {p.name!r} has no shape in its docstring"
+
+
+@pytest.mark.parametrize("module", sorted(_MODULE_ITEMS))
+def test_module_api_is_annotated_and_documented(module):
+    """The rules of the two tests above for every name of one module's ``__all__``, all failures at once."""
+    failures = []
+    for item in _MODULE_ITEMS[module]:
+        for check in (test_parameters_are_annotated_and_documented, test_array_parameters_give_a_shape):
+            try:
+                check(*item)
+            except AssertionError as exc:
+                failures.append(str(exc).splitlines()[0])
+    assert not failures, "\n".join(failures)
