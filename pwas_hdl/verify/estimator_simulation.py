@@ -58,10 +58,12 @@ class EstimatorDesign(ManifestView):
 
     @property
     def kind(self) -> str:
+        """``"estimator"``."""
         return "estimator"
 
     @property
     def ii(self) -> int:
+        """Initiation interval in cycles, the manifest's ``ii``."""
         return int(self.manifest["ii"])
 
 
@@ -117,7 +119,18 @@ def load_estimator_design(outdir: str | os.PathLike, manifest: dict | None = Non
 
 
 def estimator_job_ports(manifest: dict) -> dict:
-    """Port names of the bench's job, from the manifest's roles and reset polarity (no ``warm``: no warm-up)."""
+    """Port names of the bench's job, from the manifest's roles and reset polarity (no ``warm``: no warm-up).
+
+    Parameters
+    ----------
+    manifest : dict
+        The estimator design's manifest.
+
+    Returns
+    -------
+    dict
+        As :func:`~pwas_hdl.verify.segment_bench.segment_job_ports`.
+    """
     return segment_job_ports(manifest)
 
 
@@ -127,7 +140,24 @@ def _trace_rows(tr: dict) -> np.ndarray:
 
 
 def expected_words(design: EstimatorDesign, codes: np.ndarray) -> tuple[list[int], list[int], dict]:
-    """Packed input words, the expected packed output words and the bit-true trace of ``codes`` (T, 2) from reset."""
+    """Packed input words, the expected packed output words and the bit-true trace of ``codes`` (T, 2) from reset.
+
+    Parameters
+    ----------
+    design : EstimatorDesign
+        The loaded design (:func:`load_estimator_design`).
+    codes : ndarray of int, shape (T, 2)
+        The u and y input codes (LSB) of ``T`` samples.
+
+    Returns
+    -------
+    ins : list of int
+        ``T`` packed input words.
+    outs : list of int
+        ``T`` expected packed output words.
+    trace : dict
+        The bit-true trace (:meth:`FixedPointSwitchedEstimator.trace`).
+    """
     codes = np.asarray(codes, dtype=np.int64)
     tr = design.est.trace(codes)
     ins = [pack_fields([int(v) for v in row], design.in_fields) for row in codes]
@@ -137,7 +167,22 @@ def expected_words(design: EstimatorDesign, codes: np.ndarray) -> tuple[list[int
 
 def standard_estimator_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[dict]:
     """Run plans over ``n`` samples: full speed (latency and II checked), then random bubbles and
-    backpressure with a reset after about a third of the samples, then the whole run again (recorded)."""
+    backpressure with a reset after about a third of the samples, then the whole run again (recorded).
+
+    Parameters
+    ----------
+    n : int
+        Samples (rows) of the codes to replay.
+    seed : int
+        Seed of the full-speed run (the stall run uses ``seed + 1``).
+    stalls : (float, float)
+        ``p_valid``, ``p_ready`` of the stall run: per-cycle probabilities of input valid and output ready.
+
+    Returns
+    -------
+    list of dict
+        As :func:`~pwas_hdl.verify.segment_bench.standard_segment_runs` (``record_reset_run=True``).
+    """
     return standard_segment_runs(n, seed, stalls, record_reset_run=True)
 
 

@@ -36,10 +36,12 @@ class RecurrentDesign:
 
     @property
     def latency(self) -> int:
+        """Latency of the RTL top in cycles."""
         return int(self.top.latency)
 
     @property
     def ii(self) -> int:
+        """Initiation interval of the RTL top in cycles."""
         return int(self.top.ii)
 
     def words(self, codes: np.ndarray) -> tuple[list[int], list[int], np.ndarray]:
@@ -89,7 +91,22 @@ def build_recurrent_design(sensor, *, input_bits: int = 16, pipeline=None, name:
 
 def standard_recurrent_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (0.7, 0.6)) -> list[dict]:
     """Run plans for ``n`` samples: full speed (checks II and latency), and random bubbles and
-    stalls with a reset after about a third of the samples (then the whole trajectory again)."""
+    stalls with a reset after about a third of the samples (then the whole trajectory again).
+
+    Parameters
+    ----------
+    n : int
+        Samples (rows) of the codes to replay.
+    seed : int
+        Seed of the full-speed run (the stall run uses ``seed + 1``).
+    stalls : (float, float)
+        ``p_valid``, ``p_ready`` of the stall run: per-cycle probabilities of input valid and output ready.
+
+    Returns
+    -------
+    list of dict
+        As :func:`~pwas_hdl.verify.segment_bench.standard_segment_runs`.
+    """
     return standard_segment_runs(n, seed, stalls)
 
 

@@ -36,7 +36,18 @@ __all__ = ["recurrent_job_ports", "simulate_recurrent"]
 
 
 def recurrent_job_ports(manifest: dict) -> dict:
-    """The port names of the recurrent bench's job, from the manifest's roles and reset polarity."""
+    """The port names of the recurrent bench's job, from the manifest's roles and reset polarity.
+
+    Parameters
+    ----------
+    manifest : dict
+        The recurrent design's manifest.
+
+    Returns
+    -------
+    dict
+        As :func:`~pwas_hdl.verify.segment_bench.segment_job_ports` with ``warm``.
+    """
     return segment_job_ports(manifest, warm=True)
 
 

@@ -39,8 +39,19 @@ TEST_MODULE = "pwas_recurrent_tb"
 def segment_job_ports(manifest: dict, warm: bool = False) -> dict:
     """Port names of the bench's job, from the manifest's roles and reset polarity.
 
-    ``warm``: the design has a warm-up port (``manifest["lags"]["warmup"]["port"]``; the recurrent
-    top), added as ``"warm"``.
+    Parameters
+    ----------
+    manifest : dict
+        The design's manifest (``ports`` with roles, ``clock``, ``reset``).
+    warm : bool
+        The design has a warm-up port (``manifest["lags"]["warmup"]["port"]``; the recurrent
+        top), added as ``"warm"``.
+
+    Returns
+    -------
+    dict
+        ``clock``, ``reset``, ``reset_on`` (1: active high), ``in_valid``, ``in_ready``, ``in_payload``,
+        ``out_valid``, ``out_ready``, ``out_payload`` (and ``warm``): port names.
     """
     by_role = {p["role"]: p["name"] for p in manifest["ports"]}
     ports = {"clock": manifest["clock"]["port"], "reset": manifest["reset"]["port"],
@@ -56,7 +67,25 @@ def standard_segment_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (
                           record_reset_run: bool = False) -> list[dict]:
     """Run plans over ``n`` samples: full speed (latency and II checked), then random bubbles and
     backpressure (``stalls`` = p_valid, p_ready) with a reset after about a third of the samples,
-    then the whole run again (its outputs recorded if ``record_reset_run``)."""
+    then the whole run again (its outputs recorded if ``record_reset_run``).
+
+    Parameters
+    ----------
+    n : int
+        Samples (rows) of the codes to replay.
+    seed : int
+        Seed of the full-speed run (the stall run uses ``seed + 1``).
+    stalls : (float, float)
+        ``p_valid``, ``p_ready`` of the stall run: per-cycle probabilities of input valid and output ready.
+    record_reset_run : bool
+        Record the outputs of the stall run's last segment too.
+
+    Returns
+    -------
+    list of dict
+        Two plans, ``"full-speed"`` and ``"stalls-reset"``: ``name``, ``p_valid``, ``p_ready``,
+        ``seed``, ``segments`` (``rows`` = (start, stop), ``drain``, ``record``, ``hold`` in cycles).
+    """
     cut = max(1, n // 3)
     last = {"rows": (0, n), "drain": True, "record": True} if record_reset_run else {"rows": (0, n), "drain": True}
     return [{"name": "full-speed", "p_valid": 1.0, "p_ready": 1.0, "seed": seed,
@@ -88,7 +117,14 @@ def plan_job_runs(plans: Sequence[dict], words: Callable[[int, int], tuple]) -> 
 
 
 def count_outputs(res: dict) -> None:
-    """Add ``mismatches`` and ``outputs_compared`` (over every segment of every run) to the bench's result."""
+    """Add ``mismatches`` and ``outputs_compared`` (over every segment of every run) to the bench's result.
+
+    Parameters
+    ----------
+    res : dict
+        The bench's result (``runs`` of ``segments`` with ``mismatches``, ``outputs``, ``expected``
+        counts); modified in place.
+    """
     segs = [s for r in res.get("runs", []) for s in r["segments"]]
     res["mismatches"] = int(sum(s["mismatches"] for s in segs))
     res["outputs_compared"] = int(sum(min(s["outputs"], s["expected"]) for s in segs))
@@ -196,6 +232,17 @@ def replay_summary(rep: SegmentReplay, *, design: Any, kind: str, table: Any, si
 
 
 def rmse(a: Any, b: Any) -> float | None:
-    """Root mean square of ``a - b`` (same shapes), None when empty."""
+    """Root mean square of ``a - b`` (same shapes), None when empty.
+
+    Parameters
+    ----------
+    a, b : array_like of float, same shape
+        Values in the same units.
+
+    Returns
+    -------
+    float or None
+        The RMS difference, the units of ``a``; None for empty arrays.
+    """
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.sqrt(np.mean((a - b) ** 2))) if a.size else None
