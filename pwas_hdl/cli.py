@@ -38,7 +38,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import OutputSet, check_output_path, install_termination_handler
-from pwas_hdl.io.csv_table import format_csv, read_csv, select_signals, split_trajectories
+from pwas_hdl.io.csv_table import check_trajectory_column, format_csv, read_csv, select_signals, split_trajectories
 from pwas_hdl.limits import MAX_NOISE, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit, check_values
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
@@ -245,15 +245,17 @@ def _int_list(text: str, what: str) -> list[int]:
     return vals
 
 
-def _float_list(text: str, what: str, form: str | None = None) -> list[float]:
-    """Comma list of floats, or ``logspace:A:B:K`` (K values from 1eA to 1eB); ``form``: what the option
-    takes, for the message of a value that is neither (default: the two forms)."""
+def _number_list(text: str, what: str, takes: str) -> list[float]:
+    """Comma list of floats (no ``logspace:``: values, not candidates); ``takes`` says what the option takes."""
+    try:
+        return [float(v) for v in text.replace(" ", "").split(",") if v]
+    except ValueError:
+        raise InputError(f"{what} must be {takes}, got {text!r}") from None
+
+
+def _float_list(text: str, what: str) -> list[float]:
+    """Comma list of floats, or ``logspace:A:B:K`` (K values from 1eA to 1eB)."""
     t = text.replace(" ", "")
-    if form is not None and not t.startswith("logspace:"):
-        try:
-            return [float(v) for v in t.split(",") if v]
-        except ValueError:
-            raise InputError(f"{what} must be {form}, got {text!r}") from None
     try:
         if t.startswith("logspace:"):
             a, b, k = t.split(":")[1:]
@@ -473,7 +475,7 @@ def fit(
             raise InputError("--mz needs the lag front end and a regression target (not --front-end observer-bank or --classify)")
         init: Any = "mean"
         if z0 is not None:
-            init = z0.strip() if z0.strip() in ("mean", "measured") else _float_list(
+            init = z0.strip() if z0.strip() in ("mean", "measured") else _number_list(
                 z0, "--z0", "mean, measured or one number per -z/--targets column (comma-separated)")
             if not isinstance(init, str) and len(init) != len(tgts):
                 raise InputError(f"--z0 needs one value per target ({len(tgts)}), got {len(init)}")
@@ -486,6 +488,8 @@ def fit(
             if dom is not None:
                 raise InputError("--domain and a --breakpoints FILE both set the domain: give one of them")
             bpath = Path(breakpoints)
+            if bpath.is_dir():
+                raise InputError(f"--breakpoints {breakpoints!r} is a folder; give a breakpoints file (JSON) or quantile / quantile-pow2")
             if not bpath.is_file():
                 raise InputError(f"--breakpoints must be quantile, quantile-pow2 or a breakpoints file; {breakpoints!r} is neither")
             if gamma is not None:
@@ -603,7 +607,7 @@ def fit_map_cmd(
             raise InputError("--state needs the initial state: give --z0 (one value per state)")
         if z0 is not None and not sts:
             raise InputError("--z0 needs --state (a recurrent map)")
-        init = _float_list(z0, "--z0", "one number per --state column (comma-separated)") if z0 is not None else None
+        init = _number_list(z0, "--z0", "one number per --state column (comma-separated)") if z0 is not None else None
         if init is not None and len(init) != len(sts):
             raise InputError(f"--z0 needs one value per state ({len(sts)}), got {len(init)}")
         if init is not None and not all(np.isfinite(init)):
@@ -668,8 +672,8 @@ def predict(
         model = PWASVirtualSensor.load(model_path)
         ins, outs, tgts = model.signal_names()
         table = read_csv(data, blank_rows=blank_rows)
-        if traj_col is not None:
-            table.column_index(traj_col)
+        classifier = getattr(model, "classifier_", None)
+        check_trajectory_column(table, traj_col, [*ins, *outs], [classifier["target"]] if classifier else tgts)
         traj_warning = _trajectory_warning(table, traj_col, [*ins, *outs])
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
         y = select_signals(table, outs, traj_col) if model.n_outputs else None

@@ -75,7 +75,7 @@ def work(tmp_path, files):
         ("d.csv/x.csv", "goes through 'd.csv', which is a file"),
         ("a" * 300 + ".csv", "more than the 255 bytes a file name may have"),
         ("nodir/x.csv", "folder 'nodir' does not exist"),
-        (".", "the output path is empty"),
+        (".", "'.' is a folder; give a file name"),
     ],
 )
 def test_bad_output_path_refused_before_work(work, out, frag):

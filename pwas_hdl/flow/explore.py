@@ -94,7 +94,7 @@ import numpy as np
 from pwas_hdl import __version__
 from pwas_hdl.errors import InputError, ToolFailed, ToolMissing, choice_text, option_text
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
-from pwas_hdl.io.csv_table import Table, read_csv, select_signals
+from pwas_hdl.io.csv_table import Table, check_trajectory_column, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.io.atomic import check_output_path, make_temp_dir
 from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit, check_values
@@ -211,8 +211,7 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
     if isinstance(data, (str, os.PathLike)):
         data = read_csv(data, blank_rows=blank_rows)
     if isinstance(data, Table):
-        if traj_col is not None:
-            data.column_index(traj_col)
+        check_trajectory_column(data, traj_col, [*ins, *outs], tgts)
         u = select_signals(data, ins, traj_col) if lags.nu else None
         y = select_signals(data, outs, traj_col) if lags.ny else None
         refs = []

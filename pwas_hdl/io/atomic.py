@@ -266,8 +266,10 @@ def check_output_path(path: str | os.PathLike, what: str = "output", *, kind: st
     text = os.fspath(path)
     if isinstance(text, bytes):
         text = os.fsdecode(text)
-    if not text.strip() or (kind == "file" and text in (".", "..")):
+    if not text.strip():
         raise InputError(f"{what}: the output path is empty; give a {kind} name")
+    if kind == "file" and text in (".", ".."):
+        raise InputError(f"{what} {text!r} is a folder; give a file name")
     if "\x00" in text:
         raise InputError(f"{what} {text!r}: a path cannot contain a NUL character")
     p = Path(text)

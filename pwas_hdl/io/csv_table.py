@@ -354,6 +354,41 @@ def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
 
 
+def check_trajectory_column(table: Table, traj_column: str | None, signals: Sequence[str] = (),
+                            references: Sequence[str] = ()) -> None:
+    """Refuse a ``--traj-col`` that DATA lacks or that names a column the model reads.
+
+    A trajectory column labels runs; one that is also a signal of the model (an integer-valued input
+    such as a PRBS passes for a run index) or the reference its estimates are scored against would
+    be read in two roles, as ``fit`` refuses for the columns it is given.
+
+    Parameters
+    ----------
+    table : Table
+    traj_column : str or None
+        The trajectory column (None: nothing to check).
+    signals : sequence of str
+        The columns the model reads as inputs / outputs (or states).
+    references : sequence of str
+        Target names; ``<t>`` and ``<t>_true`` are the reference columns of their scores.
+
+    Raises
+    ------
+    InputError
+        No such column, or it is one of ``signals`` or a reference column.
+    """
+    if traj_column is None:
+        return
+    table.column_index(traj_column)
+    fix = ("give each column one role: --traj-col names the column that numbers the runs (such as run), "
+           "or leave it out for one trajectory")
+    if traj_column in signals:
+        raise InputError(f"--traj-col {traj_column!r} is a signal the model reads ({', '.join(signals)}); {fix}")
+    refs = [c for t in references for c in (t, f"{t}_true")]
+    if traj_column in refs:
+        raise InputError(f"--traj-col {traj_column!r} is the reference the estimates are compared with; {fix}")
+
+
 def unused_trajectory_column(table: Table, traj_column: str | None, used: Sequence[str] = ()) -> tuple[str, int] | None:
     """A column that looks like a trajectory index but is not given as one.
 

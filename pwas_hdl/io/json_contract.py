@@ -94,6 +94,12 @@ def read_json(path: str | os.PathLike, hint: str) -> Any:
         Larger than :data:`~pwas_hdl.limits.MAX_JSON_BYTES`.
     """
     p = Path(path)
+    if p.is_dir():  # not "Is a directory": say which file to give (a generate folder's own model file)
+        made = [p / n for n in ("model.json", "estimator.json") if (p / "manifest.json").is_file() and (p / n).is_file()]
+        if made:
+            raise InputError(f"{p} is a folder, not a JSON file: a `pwas-hdl generate` folder, whose model file is "
+                             f"{made[0]}; give that file")
+        raise InputError(f"{p} is a folder, not a JSON file; give the file's path")
     size = p.stat().st_size if p.is_file() else 0
     if size > MAX_JSON_BYTES:  # before reading: a JSON file of pwas-hdl is at most about 100 MB
         raise ResourceLimit(f"{p} is {size} bytes, more than the limit of {MAX_JSON_BYTES} bytes of a JSON file "

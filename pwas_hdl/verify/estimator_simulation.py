@@ -273,7 +273,7 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
         The RTL did not produce every output (nothing is written).
     """
     from pwas_hdl.fit.classifier import class_scores
-    from pwas_hdl.io.csv_table import format_csv, split_trajectories
+    from pwas_hdl.io.csv_table import check_trajectory_column, format_csv, split_trajectories
     from pwas_hdl.systems.switched_observer import run_switched_observer
     from pwas_hdl.limits import check_values
     from pwas_hdl.verify.simulation import _check_references, _checks, _json_default
@@ -287,8 +287,7 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     # the state RMSE and output MSE square these: refused before the simulator runs, not as an overflow after it
     _check_references(table, cfg.state_names)
     check_values(f"{table.path}: column {cfg.output_name!r}", y_all, "fix the data (no output MSE can be measured against it)")
-    if traj_col is not None:
-        table.column_index(traj_col)
+    check_trajectory_column(table, traj_col, [cfg.input_name, cfg.output_name], [*cfg.state_names, "mode"])
     slices = list(split_trajectories(table, traj_col))
     segs, bts, fls, codes_all = [], [], [], []
     for sl in slices:

@@ -82,7 +82,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         The RTL did not produce every output (nothing is written).
     """
     from pwas_hdl.design.recurrent import recurrent_model
-    from pwas_hdl.io.csv_table import format_csv, split_trajectories
+    from pwas_hdl.io.csv_table import check_trajectory_column, format_csv, split_trajectories
     from pwas_hdl.verify.simulation import _checks, _json_default
 
     if engine != "cocotb":
@@ -97,8 +97,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     if [f["name"] for f in in_fields] != list(rm.signals):
         raise InputError(f"{design.outdir}: the input fields {[f['name'] for f in in_fields]} are not the model's signals "
                          f"{rm.signals}; regenerate the folder with `pwas-hdl generate`")
-    if traj_col is not None:
-        table.column_index(traj_col)
+    check_trajectory_column(table, traj_col, [*ins, *outs], tgts)
     u_all = table.numeric(ins) if lags.nu and lags.mu else None
     y_all = table.numeric(outs) if lags.ny and lags.my else None
     m_hist = max(lags.memory, 1)

@@ -1175,7 +1175,7 @@ def simulate_data(
         The RTL did not produce every output (nothing is written).
     """
     from pwas_hdl.io.atomic import OutputSet, check_output_path
-    from pwas_hdl.io.csv_table import Table, format_csv, read_csv, split_trajectories
+    from pwas_hdl.io.csv_table import Table, check_trajectory_column, format_csv, read_csv, split_trajectories
 
     say = progress or (lambda msg: None)
     if engine not in ENGINES:
@@ -1231,8 +1231,8 @@ def simulate_data(
     if getattr(sensor, "classifier_", None) is None:
         _check_references(table, tgts)
     data = table.path
-    if traj_col is not None:
-        table.column_index(traj_col)
+    clf = getattr(sensor, "classifier_", None)
+    check_trajectory_column(table, traj_col, [*ins, *outs], [clf["target"]] if clf is not None else tgts)
     slices = split_trajectories(table, traj_col)
     segs, rows, xs = [], [], []
     if design.bank is not None:  # observer-bank sensor: every u and the y feed the bank

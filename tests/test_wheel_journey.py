@@ -1,0 +1,157 @@
+"""Bad input met by a new user of the installed wheel (the wheel-journey audit of 2026-12-07).
+
+Each case failed before its fix: a ``--traj-col`` that names a column the model reads (a signal or
+the reference of the score) was taken as a run index, a folder given as a JSON file said only
+"Is a directory", ``--z0 abc`` pointed to ``logspace:A:B:K`` (which it took), and ``-o .`` was
+called an empty path. CLI cases: exit 2, one ``error:`` line, nothing written.
+"""
+
+from __future__ import annotations
+
+import pytest
+from helpers.cli import CliRunner, assert_refused
+
+from pwas_hdl.cli import app
+
+runner = CliRunner()
+
+
+def invoke(*args, cwd=None):
+    if cwd is None:
+        return runner.invoke(app, [str(a) for a in args])
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(cwd)
+        return runner.invoke(app, [str(a) for a in args])
+
+
+def tree(root):
+    return sorted((str(p.relative_to(root)), p.stat().st_size if p.is_file() else -1) for p in root.rglob("*"))
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """Switched-linear runs (columns u (PRBS 0 / 2: integer-valued, so it passes for a run index), y,
+    x1, x1_true, mode, run), a lag model of x1 and its sensor design, a classifier of the mode label,
+    seed 003's estimator and its design."""
+    d = tmp_path_factory.mktemp("journey")
+    res = invoke("make-data", "switched-linear", "-o", d / "d.csv", "--runs", 3, "--samples", 120,
+                 "--estimator-out", d / "est.json")
+    assert res.exit_code == 0, res.output
+    res = invoke("fit", d / "d.csv", "-o", d / "m.json", "-u", "u", "-y", "y", "-z", "x1", "--mu", 1, "--my", 2,
+                 "-p", 2, "--sigma", "1e-3", "--traj-col", "run")
+    assert res.exit_code == 0, res.output
+    res = invoke("fit", d / "d.csv", "-o", d / "c.json", "-u", "u", "-y", "y", "-z", "mode", "--classify",
+                 "--mu", 1, "--my", 2, "-p", 2, "--sigma", "1e-3", "--traj-col", "run")
+    assert res.exit_code == 0, res.output
+    res = invoke("generate", d / "m.json", "--design", "sensor", "-o", d / "hw")
+    assert res.exit_code == 0, res.output
+    res = invoke("generate", d / "est.json", "-o", d / "est")
+    assert res.exit_code == 0, res.output
+    return d
+
+
+# --- --traj-col names a column the model reads -------------------------------------------------------------
+
+@pytest.mark.parametrize("col, frag", [
+    ("u", "a signal the model reads"),          # u is PRBS {0, 2}: it passed as a run index
+    ("y", "a signal the model reads"),
+    ("x1_true", "the reference"),
+    ("x1", "the reference"),
+])
+def test_predict_refuses_a_traj_col_the_model_reads(files, tmp_path, col, frag):
+    before = tree(tmp_path)
+    res = invoke("predict", files / "m.json", files / "d.csv", "-o", tmp_path / "p.csv", "--traj-col", col)
+    assert_refused(res, f"--traj-col {col!r}", frag, "give each column one role")
+    assert tree(tmp_path) == before
+
+
+def test_predict_of_a_classifier_refuses_its_label_as_traj_col(files, tmp_path):
+    res = invoke("predict", files / "c.json", files / "d.csv", "-o", tmp_path / "p.csv", "--traj-col", "mode")
+    assert_refused(res, "--traj-col 'mode'", "the reference")
+    assert not (tmp_path / "p.csv").exists()
+
+
+def test_explore_refuses_a_traj_col_the_model_reads(files, tmp_path):
+    res = invoke("explore", files / "m.json", files / "d.csv", "-o", tmp_path / "ex", "--traj-col", "u",
+                 "--input-bits", 10)
+    assert_refused(res, "--traj-col 'u'", "a signal the model reads")
+    assert not (tmp_path / "ex").exists()
+
+
+@pytest.mark.parametrize("design, col, frag", [
+    ("hw", "u", "a signal the model reads"),
+    ("hw", "x1_true", "the reference"),
+    ("est", "y", "a signal the model reads"),
+    ("est", "mode", "the reference"),
+])
+def test_simulate_refuses_a_traj_col_the_design_reads(files, tmp_path, design, col, frag):
+    # refused while reading DATA, before any simulator is started (no rtl marker needed)
+    res = invoke("simulate", files / design, files / "d.csv", "-o", tmp_path / "s.csv", "--traj-col", col)
+    assert_refused(res, f"--traj-col {col!r}", frag)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_run_column_still_works(files, tmp_path):
+    res = invoke("predict", files / "c.json", files / "d.csv", "-o", tmp_path / "p.csv", "--traj-col", "run")
+    assert res.exit_code == 0, res.output
+
+
+# --- a folder where a JSON file is expected --------------------------------------------------------------
+
+@pytest.mark.parametrize("cmd", [
+    ("info", "{hw}"),
+    ("predict", "{hw}", "{d}/d.csv", "-o", "{out}/p.csv"),
+    ("generate", "{hw}", "-o", "{out}/g"),
+    ("explore", "{hw}", "{d}/d.csv", "-o", "{out}/ex"),
+])
+def test_a_design_folder_given_as_the_model_names_its_model_file(files, tmp_path, cmd):
+    args = [a.format(hw=files / "hw", d=files, out=tmp_path) for a in cmd]
+    line = assert_refused(invoke(*args), "is a folder, not a", "model.json")
+    assert "Is a directory" not in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_plain_folder_given_as_the_model_says_give_the_file(files, tmp_path):
+    line = assert_refused(invoke("info", tmp_path), "is a folder, not a", "give the")
+    assert "model.json" not in line
+
+
+def test_a_folder_given_as_the_breakpoints_file(files, tmp_path):
+    (tmp_path / "bp").mkdir()
+    res = invoke("fit", files / "d.csv", "-o", tmp_path / "m.json", "-u", "u", "-y", "y", "-z", "x1", "--mu", 1,
+                 "--my", 2, "-p", 2, "--sigma", "1e-3", "--traj-col", "run", "--breakpoints", tmp_path / "bp")
+    assert_refused(res, "is a folder")
+    assert not (tmp_path / "m.json").exists()
+
+
+# --- --z0 ----------------------------------------------------------------------------------------------------
+
+def test_fit_z0_hint_lists_what_it_takes(files, tmp_path):
+    for z0 in ("abc", "logspace:0:1:1"):
+        line = assert_refused(invoke("fit", files / "d.csv", "-o", tmp_path / "m.json", "-u", "u", "-y", "y", "-z",
+                                     "x1", "--mu", 1, "--my", 2, "-p", 2, "--sigma", "1e-3", "--traj-col", "run",
+                                     "--mz", 1, "--z0", z0), "--z0", "mean", "measured")
+        assert "logspace:A" not in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_fit_map_z0_hint_lists_what_it_takes(tmp_path):
+    (tmp_path / "s.csv").write_text("y,z,zn\n0,0,0\n1,0,0.5\n0,1,0.9\n1,1,1.2\n0.5,0.5,0.6\n")
+    for z0 in ("abc", "logspace:0:1:1"):
+        line = assert_refused(invoke("fit-map", tmp_path / "s.csv", "-o", tmp_path / "m.json", "-y", "y",
+                                     "--state", "z", "-z", "zn", "-p", 1, "--z0", z0), "--z0", "one number per --state column")
+        assert "logspace:A" not in line
+    assert not (tmp_path / "m.json").exists()
+
+
+# --- -o . -----------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("out", [".", ".."])
+def test_dot_as_a_file_output_is_called_a_folder(tmp_path, out):
+    work = tmp_path / "w"
+    work.mkdir()
+    before = tree(tmp_path)
+    line = assert_refused(invoke("make-data", "lorenz", "-o", out, "--samples", 50, cwd=work), "is a folder",
+                          "give a file name")
+    assert "empty" not in line
+    assert tree(tmp_path) == before
