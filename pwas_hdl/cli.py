@@ -816,6 +816,10 @@ def generate(
                  f"cycle{'s' if man['latency_cycles'] != 1 else ''}, II {man['ii']}, states s{e['formats']['state_bits']}.{e['formats']['state_frac']}, "
                  + (f"|x_hat - float| <= {e['error_bound']['state']:.4g} where the modes agree" if e["error_bound"]["state"] is not None
                     else "no state bound (max_i ||A_i - K_i C_i||_inf >= 1)"))
+            if e.get("state_may_saturate"):
+                _warn(f"warning: the states (s{e['formats']['state_bits']}.{e['formats']['state_frac']}) may saturate: the "
+                      "stated bounds do not hold in those samples (the output state_saturated flags them); leave "
+                      "--state-bits out for the width of the state bound")
             _say(f"wrote {outdir}/ ({len(gd.files)} files)")
             return
         eb = man["error_bound"]
@@ -825,6 +829,12 @@ def generate(
             f"({mem['words'] / mem['n_vertices']:.3g} N) x {mem['word_bits']} bits, error bound {eb['lsb']:.4g} LSB "
             f"= {eb['physical']:.4g}"
         )
+        fe = man.get("front_end") or {}
+        if fe.get("state_may_saturate"):
+            f = fe["formats"]
+            _warn(f"warning: the observer states (s{f['state_bits']}.{f['state_frac']}) are narrower than the "
+                  f"{fe['state_bits_needed']} bits of their bound: they may saturate, and the error bound does not hold "
+                  "then; leave --state-bits out (or give at least that many bits)")
         if mem["words"] >= INLINE_NOTE_WORDS and (mem.get("init") or {}).get("kind") != "readmemh":
             _say(f"note: {mem['words']} weight words are inline in the Verilog; with --memory-init readmemh they stay in "
                  f"the .hex files, which simulators load much faster")

@@ -155,3 +155,27 @@ def test_dot_as_a_file_output_is_called_a_folder(tmp_path, out):
                           "give a file name")
     assert "empty" not in line
     assert tree(tmp_path) == before
+
+
+# --- generate --state-bits below the bound: said, not only in the manifest -------------------------------------
+
+def test_generate_warns_when_the_bank_states_may_saturate(tmp_path):
+    res = invoke("make-data", "pv-benchmark", "-o", tmp_path / "d.csv", "--samples", 1500)
+    assert res.exit_code == 0, res.output
+    res = invoke("fit", tmp_path / "d.csv", "-o", tmp_path / "b.json", "-u", "u1,u2", "-y", "y", "-z", "rho",
+                 "--front-end", "observer-bank", "--models", 2, "--mu", 0, "--my", 0, "-p", 2, "--sigma", "1e-3")
+    assert res.exit_code == 0, res.output
+    res = invoke("generate", tmp_path / "b.json", "--design", "sensor", "-o", tmp_path / "ok")
+    assert res.exit_code == 0, res.output
+    assert "may saturate" not in res.output
+    res = invoke("generate", tmp_path / "b.json", "--design", "sensor", "--state-bits", 4, "-o", tmp_path / "hw")
+    assert res.exit_code == 0, res.output
+    warn = [ln for ln in res.output.splitlines() if ln.startswith("warning:")]
+    assert len(warn) == 1 and "s4." in warn[0] and "may saturate" in warn[0] and "--state-bits" in warn[0], res.output
+
+
+def test_generate_warns_when_the_estimator_states_may_saturate(files, tmp_path):
+    res = invoke("generate", files / "est.json", "--state-bits", 8, "-o", tmp_path / "est")
+    assert res.exit_code == 0, res.output
+    warn = [ln for ln in res.output.splitlines() if ln.startswith("warning:")]
+    assert len(warn) == 1 and "s8." in warn[0] and "may saturate" in warn[0], res.output
