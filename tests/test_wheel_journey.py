@@ -179,3 +179,17 @@ def test_generate_warns_when_the_estimator_states_may_saturate(files, tmp_path):
     assert res.exit_code == 0, res.output
     warn = [ln for ln in res.output.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and "s8." in warn[0] and "may saturate" in warn[0], res.output
+
+
+# --- a JSON file given as DATA ------------------------------------------------------------------------------
+
+def test_a_model_file_given_as_data_is_named_as_such(files, tmp_path):
+    line = assert_refused(invoke("predict", files / "m.json", files / "m.json", "-o", tmp_path / "p.csv"),
+                          "is a pwas-hdl-model file (JSON), not CSV data", "give the CSV file")
+    assert "cells" not in line
+    line = assert_refused(invoke("simulate", files / "hw", files / "hw" / "manifest.json", "-o", tmp_path / "s.csv"),
+                          "is a pwas-hdl-manifest file (JSON), not CSV data")
+    (tmp_path / "x.json").write_text('[{"a": 1}]')
+    assert_refused(invoke("fit", tmp_path / "x.json", "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1,
+                          "-p", 1, "--sigma", 1), "is a JSON file, not CSV data")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.json"]

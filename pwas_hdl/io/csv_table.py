@@ -258,6 +258,7 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
             "cannot be decoded; save the file as UTF-8"
         ) from None
     del raw
+    _refuse_json(p, text)
     old_limit = csv.field_size_limit(MAX_CSV_FIELD)
     rows: list[list[str]] = []
     lines: list[int] = []
@@ -323,6 +324,23 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
     if not rows:
         raise InputError(f"{p}: the file has a header but no data rows; add the samples, one row per line below the header")
     return Table(str(p), header, rows, lines, breaks)
+
+
+def _refuse_json(p: Path, text: str) -> None:
+    """A JSON document given as DATA (a model, manifest or results file: the other files pwas-hdl
+    writes) is named as such, not reported as a row with the wrong number of cells."""
+    if text.lstrip()[:1] not in ("{", "["):
+        return
+    import json
+
+    try:
+        doc = json.loads(text)
+    except ValueError:
+        return
+    fmt = doc.get("format") if isinstance(doc, dict) else None
+    what = f"a {fmt} file (JSON)" if isinstance(fmt, str) and fmt.startswith("pwas-hdl") else "a JSON file"
+    raise InputError(f"{p} is {what}, not CSV data; give the CSV file of samples (a header line of column names, "
+                     "one row per sample)")
 
 
 def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
