@@ -193,3 +193,38 @@ def test_a_model_file_given_as_data_is_named_as_such(files, tmp_path):
     assert_refused(invoke("fit", tmp_path / "x.json", "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1,
                           "-p", 1, "--sigma", 1), "is a JSON file, not CSV data")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.json"]
+
+
+# --- report --sim ---------------------------------------------------------------------------------------------
+
+def _summary(files, tmp_path, top):
+    """A simulate summary as `simulate` writes it, for the top level ``top`` (another design's hash)."""
+    import json
+
+    doc = {"design": top, "design_hash": "0" * 64, "simulator": "icarus", "samples": 10, "mismatches": 0,
+           "latency_cycles": {"manifest": 7, "measured_min": 7, "measured_max": 7}, "ii": {"manifest": 1, "measured": 1.0},
+           "targets": {}}
+    p = tmp_path / "other.json"
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def test_report_refuses_a_given_summary_of_another_design(files, tmp_path):
+    import json
+
+    top = json.loads((files / "hw" / "manifest.json").read_text())["top"]
+    other = _summary(files, tmp_path, top + "_other")
+    res = invoke("report", files / "hw", "--sim", other, "-o", tmp_path / "r.md")
+    assert_refused(res, "is a result for the top", "not this folder's")
+    assert not (tmp_path / "r.md").exists()
+    # the same top with another hash: an earlier version of this design, shown and marked stale
+    same = _summary(files, tmp_path, top)
+    res = invoke("report", files / "hw", "--sim", same, "-o", tmp_path / "r.md")
+    assert res.exit_code == 0, res.output
+    assert "stale" in (tmp_path / "r.md").read_text()
+
+
+def test_report_sim_folder_says_give_the_summary(files, tmp_path):
+    (tmp_path / "sim").mkdir()
+    line = assert_refused(invoke("report", files / "hw", "--sim", tmp_path / "sim"), "is a folder", "JSON summary")
+    assert "Is a directory" not in line

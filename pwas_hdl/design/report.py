@@ -89,6 +89,9 @@ def report_inputs(outdir: str | os.PathLike, sims: list[str | os.PathLike] = ())
 
 
 def _read_json(path: Path) -> dict[str, Any]:
+    if path.is_dir():
+        raise InputError(f"{path} is a folder; give the JSON summary that `pwas-hdl simulate` wrote (OUTDIR/sim/*.json "
+                         "are read without --sim)")
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -174,11 +177,13 @@ def _require(d: Any, keys: dict[str, Any], path: Path, command: str) -> dict[str
     return d
 
 
-def _check_top(r: dict[str, Any], key: str, man: dict[str, Any], path: Path, command: str) -> None:
+def _check_top(r: dict[str, Any], key: str, man: dict[str, Any], path: Path, command: str, given: bool = False) -> None:
     """A result for another top level than the folder's (and not marked stale: same design hash or
-    none) belongs to another design: refused, not shown as this one's."""
+    none) belongs to another design: refused, not shown as this one's. A file ``given`` by ``--sim``
+    (not in the folder, so not left there by an earlier ``generate``) is refused for another top
+    even with another hash: it is another design's, not "made for an earlier design"."""
     top = r.get(key)
-    if top is not None and top != man["top"] and not _is_stale(r, man):
+    if top is not None and top != man["top"] and (given or not _is_stale(r, man)):
         raise InputError(f"{path} is a result for the top {json.dumps(top)}, not this folder's {man['top']}; "
                          f"re-run `pwas-hdl {command}` on this folder or remove the file")
 
@@ -261,11 +266,12 @@ def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dic
 def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit: dict[str, Any],
                      sim_summaries: Sequence[str | os.PathLike]) -> dict[str, Any]:
     paths = sorted((out / "sim").glob("*.json")) if (out / "sim").is_dir() else []
+    n_folder = len(paths)
     paths += [Path(p) for p in sim_summaries]
     sims = []
-    for p in paths:
+    for i, p in enumerate(paths):
         s = _require(_read_json(p), _SIM_KEYS, p, "simulate")
-        _check_top(s, "design", man, p, "simulate")
+        _check_top(s, "design", man, p, "simulate", given=i >= n_folder)
         if not isinstance(s.get("targets", {}), dict) or not all(isinstance(v, dict) for v in s.get("targets", {}).values()):
             raise InputError(f"{p}: \"targets\" is not an object of objects; re-run `pwas-hdl simulate`")
         sims.append(
