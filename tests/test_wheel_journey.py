@@ -228,3 +228,9 @@ def test_report_sim_folder_says_give_the_summary(files, tmp_path):
     (tmp_path / "sim").mkdir()
     line = assert_refused(invoke("report", files / "hw", "--sim", tmp_path / "sim"), "is a folder", "JSON summary")
     assert "Is a directory" not in line
+
+
+def test_generate_weight_frac_too_fine_names_the_option(files, tmp_path):
+    assert_refused(invoke("generate", files / "m.json", "-o", tmp_path / "g", "--weight-frac", 999),
+                   "--weight-frac (weight_frac) = 999", "too large for 64-bit codes", "fewer")
+    assert list(tmp_path.iterdir()) == []
