@@ -234,3 +234,11 @@ def test_generate_weight_frac_too_fine_names_the_option(files, tmp_path):
     assert_refused(invoke("generate", files / "m.json", "-o", tmp_path / "g", "--weight-frac", 999),
                    "--weight-frac (weight_frac) = 999", "too large for 64-bit codes", "fewer")
     assert list(tmp_path.iterdir()) == []
+
+
+# --- a good file of another kind: say what to give, not "re-run fit" ---------------------------------------------
+
+def test_an_estimator_file_given_to_info_says_what_to_give(files):
+    line = assert_refused(invoke("info", files / "est.json"), "is a pwas-hdl-estimator file",
+                          "not a pwas-hdl-model file (a fitted model of `pwas-hdl fit`", "give a pwas-hdl-model file")
+    assert "re-run" not in line

@@ -152,7 +152,10 @@ def check_header(d: Any, fmt: str, version: int, source: str, hint: str) -> None
     if not isinstance(d, dict) or d.get("format") != fmt:
         other = d.get("format") if isinstance(d, dict) else None
         if isinstance(other, str) and other in FILE_KINDS:  # another pwas-hdl file given where this one belongs
-            raise InputError(f"{source} is a {other} file ({FILE_KINDS[other]}), not a {fmt} file; {hint}")
+            # the file is good, of another kind: "re-run fit to write it again" would send the user the wrong way
+            wanted = f" ({FILE_KINDS[fmt]})" if fmt in FILE_KINDS else ""
+            raise InputError(f"{source} is a {other} file ({FILE_KINDS[other]}), not a {fmt} file{wanted}; "
+                             f"give a {fmt} file here")
         raise InputError(f'{source} is not a {fmt} file (missing "format": "{fmt}"); {hint}')
     v = d.get("version")
     if type(v) is not int or v != version:
