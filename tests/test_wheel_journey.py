@@ -242,3 +242,15 @@ def test_an_estimator_file_given_to_info_says_what_to_give(files):
     line = assert_refused(invoke("info", files / "est.json"), "is a pwas-hdl-estimator file",
                           "not a pwas-hdl-model file (a fitted model of `pwas-hdl fit`", "give a pwas-hdl-model file")
     assert "re-run" not in line
+
+
+# --- a CSV file with another separator ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("sep, called", [(";", "';'"), ("\t", "tabs")])
+def test_a_csv_with_another_separator_is_named_as_such(tmp_path, sep, called):
+    rows = ["y,z", *(f"{i * 0.5},{i * 0.25}" for i in range(40))]
+    (tmp_path / "d.csv").write_text("\n".join(r.replace(",", sep) for r in rows) + "\n")
+    line = assert_refused(invoke("fit", tmp_path / "d.csv", "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1,
+                                 "-p", 1, "--sigma", 1), f"separated by {called}, not commas", "save the file with ','")
+    assert "control" not in line
+    assert not (tmp_path / "m.json").exists()

@@ -273,6 +273,12 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
             raise InputError(f"{p}: the file is empty; expected a header line of column names") from None
         if not any(header):
             raise InputError(f"{p}: line 1 is blank; the first line must be the header of column names")
+        if len(header) == 1:  # another separator (a spreadsheet's ';' export, a tab-separated file)
+            for sep, called in ((";", "';'"), ("\t", "tabs")):
+                if len([h for h in header[0].split(sep) if h.strip()]) >= 2:
+                    raise InputError(f"{p}: the header {header[0]!r} is separated by {called}, not commas; pwas-hdl "
+                                     "reads comma-separated values: save the file with ',' between the cells "
+                                     "(and '.' as the decimal point)")
         if any(not h for h in header):
             raise InputError(f"{p}: the header has an empty column name (column {header.index('') + 1} of {len(header)}); "
                              "name every column, or remove the extra comma")
