@@ -69,14 +69,16 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m pwas_hdl.benchmarks.bank_taps_rtl [--quick] [--outdir DIR]``."""
     import argparse
 
-    from pwas_hdl.bench_results import default_outdir
+    from pwas_hdl.bench_results import checked_outdir, default_outdir, make_outdir
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the CI smoke: fewer layouts and samples")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder (default: %(default)s)")
     a = ap.parse_args(argv)
+    checked_outdir(a.outdir)
     doc = run(a.quick)
     stem = "bank_taps_rtl_quick" if a.quick else "bank_taps_rtl"
+    make_outdir(a.outdir)
     atomic_write_text(a.outdir / f"{stem}.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(a.outdir / f"{stem}.md", markdown(doc))
     print(markdown(doc))

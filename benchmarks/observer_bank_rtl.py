@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m pwas_hdl.benchmarks.observer_bank_rtl [--quick] [--only serial|parallel] [--outdir DIR]``."""
     import argparse
 
-    from pwas_hdl.bench_results import default_outdir
+    from pwas_hdl.bench_results import checked_outdir, default_outdir, make_outdir
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the CI smoke: two configurations")
@@ -76,9 +76,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="re-run the configurations of that bank and replace their rows in the results")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="output folder (default: %(default)s)")
     a = ap.parse_args(argv)
+    checked_outdir(a.outdir)
     doc = run(a.quick, a.only)
     stem = "observer_bank_rtl_quick" if a.quick else "observer_bank_rtl"
-    out = a.outdir
+    out = make_outdir(a.outdir)
     if a.only:  # a re-run of one bank's rows: replace them in the results
         from pwas_hdl.benchmarks.seed004_common import replace_rows
 

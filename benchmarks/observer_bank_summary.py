@@ -124,14 +124,15 @@ def main(argv: list[str] | None = None) -> None:
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    from pwas_hdl.bench_results import default_outdir
+    from pwas_hdl.bench_results import checked_outdir, default_outdir, make_outdir
 
     ap.add_argument("--results", type=Path, default=default_outdir(), help="results folder read (default: where the benchmarks write, "
                     "%(default)s: the committed results in a checkout, ./benchmarks-results from the wheel)")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="where observer_bank_summary.md goes (default: %(default)s)")
     a = ap.parse_args(argv)
+    checked_outdir(a.outdir)
     text = "# Issue 12's systems in hardware: the designs that fit the LFE5U-45F\n\n" + markdown(collect(a.results))
-    atomic_write_text(a.outdir / "observer_bank_summary.md", text)
+    atomic_write_text(make_outdir(a.outdir) / "observer_bank_summary.md", text)
     print(text)
 
 

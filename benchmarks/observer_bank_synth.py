@@ -226,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
     """The command line of the module docstring."""
     import argparse
 
-    from pwas_hdl.bench_results import default_outdir
+    from pwas_hdl.bench_results import checked_outdir, default_outdir, make_outdir
     from pwas_hdl.errors import InputError
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -242,8 +242,9 @@ def main(argv: list[str] | None = None) -> int:
     limit = a.limit_min
     designs = a.designs.split(",") if a.designs else None
     targets = a.targets.split(",") if a.targets else None
+    checked_outdir(a.outdir)
     doc = run(a.quick, limit, a.only, designs, targets)
-    out = a.outdir
+    out = make_outdir(a.outdir)
     stem = "observer_bank_synth_quick" if a.quick else "observer_bank_synth"
     if designs or targets:  # a re-run of some rows: replace them in the results
         from pwas_hdl.benchmarks.seed004_common import replace_rows

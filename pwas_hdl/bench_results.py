@@ -474,6 +474,29 @@ def default_outdir() -> Path:
     return Path.cwd() / "benchmarks-results"
 
 
+def checked_outdir(outdir: str | os.PathLike) -> Path:
+    """A script's ``--outdir``, checked before its run (a file there, a path through a file, an
+    unwritable parent: one ``error:`` line before minutes of work, not after them); create it with
+    :func:`make_outdir` when the results are written.
+
+    Raises
+    ------
+    InputError
+        As :func:`pwas_hdl.io.atomic.check_output_path` for a folder.
+    """
+    from pwas_hdl.io.atomic import check_output_path
+
+    return check_output_path(outdir, "--outdir", kind="folder")
+
+
+def make_outdir(outdir: str | os.PathLike) -> Path:
+    """Create ``--outdir`` (with its parents) where the results are about to be written: from the
+    wheel it is ``./benchmarks-results``, absent in a new folder."""
+    path = Path(outdir)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 @contextmanager
 def scratch_folder(prefix: str, keep: str | os.PathLike | None = None) -> Iterator[Path]:
     """The work folder of a benchmark run (generated designs, simulator and synthesis files).
