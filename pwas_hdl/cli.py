@@ -1605,7 +1605,20 @@ def command() -> Any:
     """
     cmd = typer.main.get_command(app)
     _refuse_empty_paths(cmd)
+    _name_list_metavars(cmd)
     return cmd
+
+
+def _name_list_metavars(cmd: Any) -> None:
+    """The help shows a repeatable option's value as ``<column>`` (``--sim``: ``<path>``), not as
+    typer's ``<list[str]>``."""
+    for p in getattr(cmd, "params", []):
+        td = getattr(p, "type_descriptor", None)
+        if getattr(p, "param_type_name", "") == "option" and p.metavar is None and \
+                str(getattr(td, "annotation", "")).startswith("list["):
+            p.metavar = "<path>" if "--sim" in p.opts else "<column>"
+    for sub in getattr(cmd, "commands", {}).values():
+        _name_list_metavars(sub)
 
 
 def _refuse_empty_paths(cmd: Any) -> None:

@@ -254,3 +254,14 @@ def test_a_csv_with_another_separator_is_named_as_such(tmp_path, sep, called):
                                  "-p", 1, "--sigma", 1), f"separated by {called}, not commas", "save the file with ','")
     assert "control" not in line
     assert not (tmp_path / "m.json").exists()
+
+
+# --- help text --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("cmd, shown", [("fit", "-u, --inputs <column>"), ("fit-map", "--state <column>"),
+                                        ("report", "--sim <path>")])
+def test_help_shows_repeatable_options_by_what_they_take(cmd, shown):
+    res = invoke(cmd, "--help")
+    assert res.exit_code == 0
+    assert "list[str]" not in res.output
+    assert shown in res.output, res.output
