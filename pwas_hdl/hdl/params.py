@@ -52,17 +52,24 @@ class CoreParams:
     partitions : tuple of int
         ``p_j >= 1`` intervals per dimension (``n = len(partitions)``).
     in_width : int
-        Width ``B_in`` of the signed input codes (all dimensions).
+        Width ``B_in`` of the signed input codes in bits (all dimensions).
     lo_code : tuple of int
         Input code of the lower domain bound per dimension.
     frac_bits : tuple of int
-        ``F_j >= 0``: one grid interval of dimension ``j`` is ``2**F_j`` input codes.
+        ``F_j >= 0`` bits: one grid interval of dimension ``j`` is ``2**F_j`` input codes.
     weight_width, weight_frac : int
         Signed weight codes ``B_w`` bits with ``Fw`` fractional bits.
     out_width, out_frac : int
         Signed output codes ``B_out`` bits with ``Fo`` fractional bits.
     weights : ndarray, shape (N, nz), int64
         Weight codes in the vertex order of :mod:`pwas_hdl.fit.geometry` (C order, last dimension fastest).
+    rounding : {"half_up", "truncate"}
+        Rounding of the output shift ``acc >> sh``: ``"half_up"`` adds ``2**(sh-1)`` first,
+        ``"truncate"`` adds nothing (default ``"half_up"``).
+    scaling : tuple
+        One entry per ``input_scale="exact"`` dimension ``j``: ``(S_j, K_j, R_j)``, the input codes
+        across the domain and the scale ``t' = (t * K_j) >> R_j`` (``R_j`` in bits); ``None`` for a
+        pow2 dimension. Empty (default): every dimension pow2.
     """
 
     partitions: tuple[int, ...]
@@ -282,6 +289,16 @@ class Pipeline:
     On ECP5, ``pwas-hdl synth`` moves the ``mem_out``, ``mul_in`` and ``product`` registers into the
     block RAMs and multipliers (:mod:`pwas_hdl.flow.hard_registers`); the generated Verilog is the
     same for every FPGA.
+
+    Attributes
+    ----------
+    split, rank, offset, addr, bank, mem_out, mul_in, product : bool
+        The register stages of the table above, each present when true (defaults: ``rank``,
+        ``addr``, ``mem_out`` and ``product``).
+    tree_levels : int
+        Adder-tree levels between two ``tree`` registers (default 3; 0: no adder-tree register).
+    mu_late, raw_compare, mul_halves, flat_sum, counter_sum, late_select, sort_late, prune_sat : bool
+        The structural options of the table above, each on when true (default: all off).
     """
 
     split: bool = False
@@ -554,7 +571,7 @@ class MemoryPlan:
     layout : BankedLayout or ReplicatedLayout or CornerLayout
         The layout the bit-true model reads through (built by :meth:`build`).
     word_bits : int
-        ``nz * B_w``.
+        Bits of one packed word, ``nz * B_w``.
     contents : tuple of tuple of int
         Per bank, ``depth`` packed words.
     """

@@ -83,6 +83,15 @@ class SingleMemoryPlan(MemoryPlan):
 
     The ``layout`` is the replicated layout of the grid (whose copy 0 is exactly this memory);
     only one copy exists.
+
+    Attributes
+    ----------
+    layout : ReplicatedLayout
+        The grid's replicated layout (depth ``N``, address = linear vertex index; built by :meth:`build`).
+    word_bits : int
+        Bits of one packed word, ``nz * B_w``.
+    contents : tuple of tuple of int
+        One entry (the one memory) of ``N`` packed words.
     """
 
     @property

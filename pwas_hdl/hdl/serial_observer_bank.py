@@ -90,14 +90,19 @@ class SerialBankPlan:
     ----------
     lanes : tuple of tuples of int
         The observers of each lane (contiguous, the first lanes the longest).
+    order : int
+        ``M``: the bank's observer order (state-update steps per observer and sample).
     steps : int
-        ``n_max * M``: state-update steps per sample of the longest lane.
+        ``n_max * M``: state-update steps (cycles) per sample of the longest lane.
+    isqrt_every : int or None
+        Digit steps of the square root between pipeline registers (None: no registers, or map
+        11b-sq, which has no square root).
     isqrt_regs : int
         ``R``: registers inside the square root (0 for 11b-sq or ``isqrt_every`` None).
     stages_before_core : int
         Cycles from the input transfer to the core's input valid (``4 + SQUARE_REGS + R + AFFINE_REGS + (n_max - 1) M``).
     cycles_per_sample : int
-        The II: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``; with double-buffered
+        The II in cycles: ``max(steps + MAC_STAGES - 1, stages_before_core, core_ii)``; with double-buffered
         feature codes ``max(steps + MAC_STAGES - 1, ceil(stages_before_core / 2),
         (n_max - 1) M + SQUARE_REGS + 1, core_ii)``.
     double_buffered : bool

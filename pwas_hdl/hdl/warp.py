@@ -393,8 +393,13 @@ def write_warped_folder(sensor: PWASVirtualSensor, outdir: str | os.PathLike, *,
         Fitted with power-of-two breakpoints.
     outdir : path
         The design folder.
-    input_bits, input_fill, design, **options
-        Passed to :func:`~pwas_hdl.design.generate.generate` (here ``design`` defaults to ``"core"``).
+    input_bits : int
+        ``B_in``, the width in bits of the input codes (default 12).
+    input_fill : float
+        Largest fraction of the input code range the domain takes (default 0.9).
+    design, **options
+        Passed to :func:`~pwas_hdl.design.generate.generate` (here ``design`` defaults to ``"core"``),
+        as are ``input_bits`` and ``input_fill``.
 
     Returns
     -------
