@@ -97,9 +97,23 @@ def standard_segment_runs(n: int, seed: int = 0, stalls: tuple[float, float] = (
 def plan_job_runs(plans: Sequence[dict], words: Callable[[int, int], tuple]) -> tuple[list[dict], dict]:
     """The job's runs of ``plans`` (segments of row ranges ``rows`` = (start, stop)).
 
-    ``words(start, stop)`` returns ``(input words, expected output words, ...)`` of the codes of
-    those rows from reset; it is called once per range. Returns ``(runs, cache)``: the runs for
-    the job's ``"runs"`` and the results of ``words`` by range.
+    Parameters
+    ----------
+    plans : sequence of dict
+        Run plans as :func:`standard_segment_runs` returns them (``name``, ``p_valid``, ``p_ready``,
+        ``seed``, ``segments`` with ``rows`` = (start, stop) and optional ``drain`` (default true),
+        ``hold`` (cycles, default 0), ``record`` (default false)).
+    words : callable
+        ``words(start, stop)`` returns ``(input words, expected output words, ...)`` (packed
+        integers) of the codes of those rows from reset; called once per range.
+
+    Returns
+    -------
+    runs : list of dict
+        The job's ``"runs"``: per plan ``name``, ``p_valid``, ``p_ready``, ``seed`` and ``segments``
+        (``words``, ``expected``, ``drain``, ``hold``, ``record``).
+    cache : dict
+        The results of ``words`` by range ``(start, stop)``.
     """
     cache: dict = {}
     runs = []
@@ -132,7 +146,20 @@ def count_outputs(res: dict) -> None:
 
 @dataclass
 class SegmentReplay:
-    """One ``simulate`` replay: the bench's raw result, its build, the runner module and the wall time (s)."""
+    """One ``simulate`` replay: the bench's raw result, its build, the runner module and the wall time (s).
+
+    Attributes
+    ----------
+    raw : dict
+        The bench's result (``pwas_runner.run_job``): ``runs`` of ``segments``, ``failures``,
+        ``wall_s`` (simulator process, seconds), ``log``, ``waves``, ``passed``.
+    build : pwas_runner.Build
+        The simulator build used (``build_seconds``, ``reused``).
+    runner : module
+        The ``pwas_runner`` module (for ``tool_versions``).
+    wall_s : float
+        Seconds from the build to the end of the run.
+    """
 
     raw: dict
     build: Any  # pwas_runner.Build
@@ -155,7 +182,49 @@ def replay_segments(verilog_path: Path, top: str, segments: list[dict], *, ports
     staged folder of ``outset`` (a :class:`~pwas_hdl.io.atomic.OutputSet` to which
     :func:`~pwas_hdl.verify.simulation.waves_folder` of ``output`` was added) that becomes
     ``<output stem>_waves`` beside ``output`` when the caller commits ``outset`` (the run's
-    ``raw["waves"]`` names the waveform there). ``files``: run-time files of the design.
+    ``raw["waves"]`` names the waveform there).
+
+    Parameters
+    ----------
+    verilog_path : Path
+        The design's Verilog.
+    top : str
+        Its top module.
+    segments : list of dict
+        One per trajectory: ``words`` (packed input words), ``expected`` (packed output words),
+        ``drain``, ``hold`` (cycles), ``record`` (as the job's segments of :func:`plan_job_runs`).
+    ports : dict
+        The job's port names (:func:`segment_job_ports`).
+    latency : int
+        Latency in cycles from the input transfer to ``out.valid`` (checked when the output never stalls).
+    ii : int
+        Initiation interval in cycles (checked without stalls).
+    warmup : int
+        Input samples at the start of each segment that give no output (0: none).
+    simulator : {"icarus", "verilator"}
+        The simulator.
+    stall : float
+        Probability per cycle of a bubble on the input and of backpressure on the output
+        (``p_valid = p_ready = 1 - stall``).
+    seed : int
+        Seed of the stall pattern.
+    cache_dir : str or os.PathLike or None
+        Where simulator builds are cached (None: the runner's default).
+    waves : bool
+        Record a waveform (needs ``outset``).
+    output : str or Path
+        The command's CSV output (the waveform folder is named after it).
+    outset : OutputSet, optional
+        The command's output set (only with ``waves``).
+    files : dict, optional
+        Run-time files of the design (name -> path, e.g. ``$readmemh`` hex files).
+    prefix : str
+        Name prefix of the temporary folder (and of the kept log).
+
+    Returns
+    -------
+    SegmentReplay
+        The bench's result; ``segments`` holds one replayed segment per entry of ``segments``.
 
     Raises
     ------
@@ -204,6 +273,38 @@ def replay_summary(rep: SegmentReplay, *, design: Any, kind: str, table: Any, si
     ``ii_note`` says what the spacing is at full speed), stall, cycles, clock_ns, simulation_seconds,
     samples_per_second, (``process_seconds``: simulator_process_seconds), build_seconds, build_reused,
     total_seconds, testbench_failures, waves. The design's own entries go between them.
+
+    Parameters
+    ----------
+    rep : SegmentReplay
+        The replay (:func:`replay_segments`).
+    design : object
+        The loaded design: ``top``, ``manifest`` (``design_hash``), ``outdir``.
+    kind : str
+        The summary's ``kind`` (design kind).
+    table : Table
+        The replayed data (its ``path``).
+    simulator, engine : str
+        The simulator and the engine (``"cocotb"``), as the summary reports them.
+    samples : int
+        Samples with an output.
+    input_transfers : int
+        Input words sent (the recurrent top: the samples plus each trajectory's warm-up inputs).
+    latency : int
+        The manifest's latency, cycles.
+    ii : int
+        The manifest's initiation interval, cycles.
+    stall : float
+        The replay's stall probability per cycle (latency and II are measured only at 0).
+    ii_note : str
+        What the measured spacing means at full speed (the ``ii`` entry's ``note``).
+    process_seconds : bool
+        Also report ``simulator_process_seconds`` (default false).
+
+    Returns
+    -------
+    head, tail : dict
+        The entries listed above, in that order.
     """
     raw, rsegs = rep.raw, rep.segments
     lats = sorted({v for r in rsegs for v in r["latencies"]})
