@@ -13,19 +13,38 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
 from pwas_hdl.verify.segment_bench import TEST_MODULE, count_outputs, plan_job_runs, standard_segment_runs
 
+if TYPE_CHECKING:
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.hdl.params import Pipeline
+
 __all__ = ["RecurrentDesign", "build_recurrent_design", "replay", "standard_recurrent_runs"]
 
 
 @dataclass
 class RecurrentDesign:
-    """A recurrent sensor ready to simulate: bit-true model, RTL component, Verilog text."""
+    """A recurrent sensor ready to simulate: bit-true model, RTL component, Verilog text.
+
+    Attributes
+    ----------
+    rmodel : RecurrentFixedPointModel
+        The bit-true recurrence the RTL implements.
+    top : PWASRecurrentTop
+        The Amaranth top (``latency``, ``ii`` in cycles, ``warmup`` in samples).
+    verilog : str
+        Its Verilog text.
+    name : str
+        The Verilog module name.
+    in_fields, out_fields : list of dict
+        Bit fields (``name``, ``lsb``, ``width``, ``signed``) of the input payload (one code per
+        measured signal) and of the output payload (one code per target, then ``out_of_range``).
+    """
 
     rmodel: Any  # RecurrentFixedPointModel
     top: Any  # PWASRecurrentTop
@@ -45,15 +64,32 @@ class RecurrentDesign:
         return int(self.top.ii)
 
     def words(self, codes: np.ndarray) -> tuple[list[int], list[int], np.ndarray]:
-        """Packed input words, the expected packed output words and the output codes (R, nz)."""
+        """Packed input words, the expected packed output words and the output codes (R, nz).
+
+        Parameters
+        ----------
+        codes : ndarray of int, shape (T, S)
+            Payload codes of one trajectory from reset, one row per input transfer
+            (:meth:`RecurrentFixedPointModel.quantize_signals`).
+
+        Returns
+        -------
+        ins : list of int
+            ``T`` packed input words (``in_fields``).
+        outs : list of int
+            ``R`` packed expected output words (``out_fields``): ``R = T - M + 1`` rows, none during
+            the warm-up (as :meth:`RecurrentFixedPointModel.run`).
+        out : ndarray of int, shape (R, nz)
+            The bit-true output codes.
+        """
         res = self.rmodel.run(codes)
         ins = [pack_fields([int(v) for v in row], self.in_fields) for row in np.asarray(codes)]
         outs = [pack_fields([int(v) for v in o] + [int(f)], self.out_fields) for o, f in zip(res["out"], res["out_of_range"])]
         return ins, outs, res["out"]
 
 
-def build_recurrent_design(sensor, *, input_bits: int = 16, pipeline=None, name: str = "pwas_recurrent_sensor",
-                           **formats) -> RecurrentDesign:
+def build_recurrent_design(sensor: PWASVirtualSensor, *, input_bits: int = 16, pipeline: Pipeline | str | None = None,
+                           name: str = "pwas_recurrent_sensor", **formats: Any) -> RecurrentDesign:
     """Bit-true model, RTL top and Verilog of a recurrent sensor (``sensor.lags_.mz >= 1``).
 
     Parameters
@@ -61,10 +97,19 @@ def build_recurrent_design(sensor, *, input_bits: int = 16, pipeline=None, name:
     sensor : PWASVirtualSensor
         Recurrent, initial-state rule "value" (the reset values of the feedback registers).
     input_bits : int
-        ``B_in`` of every regressor dimension (default 16: the fed-back state is re-quantised
+        ``B_in`` in bits of every regressor dimension (default 16: the fed-back state is re-quantised
         every step, see :mod:`pwas_hdl.fixedpoint.recurrence`).
-    pipeline, name : as :func:`pwas_hdl.hdl.api.build_sensor`
-    **formats : more :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` options.
+    pipeline : Pipeline or str, optional
+        Pipeline registers of the core, or a preset name (as :func:`pwas_hdl.hdl.api.build_sensor`).
+    name : str
+        Verilog module name.
+    **formats
+        More :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` options.
+
+    Returns
+    -------
+    RecurrentDesign
+        The bit-true recurrence, the top, its Verilog and the payload fields.
 
     Raises
     ------
@@ -123,6 +168,10 @@ def replay(design: RecurrentDesign, codes: np.ndarray, simulator: str = "icarus"
     runs : list of dict, optional
         Plans as :func:`standard_recurrent_runs` (segments give ``rows`` = (start, stop) of
         ``codes``); default: the standard runs over all of ``codes``.
+    work_dir : str or Path, optional
+        Folder for the Verilog and the simulator run (kept); default: a temporary folder, removed.
+    cache_dir : str or Path, optional
+        Where simulator builds are cached (default: the runner's cache).
 
     Returns
     -------
