@@ -48,7 +48,21 @@ __all__ = ["EstimatorDesign", "load_estimator_design", "estimator_job_ports", "e
 @dataclass
 class EstimatorDesign(ManifestView):
     """A generated estimator folder: manifest, configuration, bit-true estimator, Verilog path
-    (top, latency, ports and fields: :class:`~pwas_hdl.verify.simulation.ManifestView`)."""
+    (top, latency, ports and fields: :class:`~pwas_hdl.verify.simulation.ManifestView`).
+
+    Attributes
+    ----------
+    outdir : Path
+        The design folder.
+    manifest : dict
+        Its parsed ``manifest.json``.
+    config : SwitchedEstimatorConfig
+        The estimator configuration (``estimator.json``).
+    est : FixedPointSwitchedEstimator
+        The bit-true estimator rebuilt from ``config`` and ``generator.options``.
+    verilog_path : Path
+        The Verilog to simulate.
+    """
 
     outdir: Path
     manifest: dict
@@ -251,8 +265,8 @@ def replay_estimator(design: EstimatorDesign, codes: np.ndarray, simulator: str 
     return res
 
 
-def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any, *, simulator: str, engine: str,
-                            traj_col: str | None, stall: float, seed: int, cache_dir: Any, waves: bool,
+def simulate_estimator_data(outdir: str | os.PathLike, table: Any, output: str | os.PathLike, spath: Path, outset: Any,
+                            *, simulator: str, engine: str, traj_col: str | None, stall: float, seed: int, cache_dir: Any, waves: bool,
                             say: Callable[[str], None]) -> dict:
     """``pwas-hdl simulate`` of an estimator folder (called by :func:`pwas_hdl.verify.simulation.simulate_data`).
 
@@ -264,6 +278,44 @@ def simulate_estimator_data(outdir, table: Any, output, spath: Path, outset: Any
     margin above the bound ``2 dS``, the largest state and y_hat deviation from the float estimator
     over the samples whose modes agree, and with the reference columns in the data (``mode``,
     ``<x>_true`` or ``<x>``, ``<y>``) mode accuracy, state RMSE and output MSE of hw, bit-true and float.
+
+    Parameters
+    ----------
+    outdir : str or os.PathLike
+        The estimator folder (:func:`load_estimator_design`).
+    table : Table
+        The data (:func:`~pwas_hdl.io.csv_table.read_csv`; signals in physical units).
+    output : str or os.PathLike
+        The CSV to write.
+    spath : Path
+        The JSON summary to write.
+    outset : OutputSet
+        The command's :class:`~pwas_hdl.io.atomic.OutputSet` holding ``output``, ``spath`` (and
+        the waveform folder); committed here.
+    simulator : {"icarus", "verilator"}
+        The simulator.
+    engine : str
+        Must be ``"cocotb"``.
+    traj_col : str or None
+        Column that numbers the trajectories (a reset between them); None: one trajectory.
+    stall : float
+        Probability per cycle of a bubble on the input and of backpressure on the output.
+    seed : int
+        Seed of the stall pattern.
+    cache_dir : str or os.PathLike or None
+        Where simulator builds are cached (None: the runner's default).
+    waves : bool
+        Record a waveform (in ``<output stem>_waves``).
+    say : callable
+        Called with one line of progress text.
+
+    Returns
+    -------
+    dict
+        ``summary`` (the JSON summary), ``summary_path``, ``output``, ``result`` (the bench's raw
+        result), ``rows`` (data row per sample, shape ``(T,)``), ``estimates`` (hw state
+        estimates, physical units, shape ``(T, nx)``), ``mode_hat`` (hw modes, ``(T,)``),
+        ``y_hat`` (hw output estimates, ``(T,)``).
 
     Raises
     ------
