@@ -105,7 +105,8 @@ def _public_callables(names: list[tuple[str, object]] | None = None) -> list[tup
 _ITEMS = _public_callables()
 
 #: Packages whose submodules' ``__all__`` follow the standard too (not only what ``pwas_hdl`` exports).
-DOCUMENTED_PACKAGES = ("pwas_hdl.fit", "pwas_hdl.fixedpoint", "pwas_hdl.design", "pwas_hdl.io", "pwas_hdl.flow")
+DOCUMENTED_PACKAGES = ("pwas_hdl.fit", "pwas_hdl.fixedpoint", "pwas_hdl.design", "pwas_hdl.io", "pwas_hdl.flow",
+                       "pwas_hdl.verify", "pwas_hdl.hdl")
 
 
 def _module_api() -> dict[str, list[tuple[str, object, str, bool]]]:
@@ -130,7 +131,11 @@ _MODULE_ITEMS = _module_api()
 
 
 def _params(fn: object) -> list[inspect.Parameter]:
-    return [p for p in inspect.signature(fn).parameters.values() if p.name not in ("self", "cls")]
+    """The parameters of ``fn`` but a method's ``self`` / ``cls`` (a function's own ``cls`` stays)."""
+    params = list(inspect.signature(fn).parameters.values())
+    if params and params[0].name in ("self", "cls") and "." in getattr(fn, "__qualname__", ""):
+        params = params[1:]
+    return params
 
 
 def test_the_walk_covers_the_readme_api():
