@@ -303,3 +303,13 @@ def test_benchmark_quick_smoke(tmp_path):
     assert rows[("pwas-full", 4, "bittrue")]["value"] > 0
     md = bench.markdown(doc)
     assert "| lorenz | My = 8 | additive-pairs | 7 | 448 |" in md and "16777216 (refused)" in md
+
+
+@pytest.mark.parametrize("spec, full", [("pairs", True), ("0,1", True), ("time", False), ("0;1", False)])
+def test_cli_additive_of_one_full_part_says_so(tmp_path, cli, spec, full):
+    """--additive pairs over 2 lags is one part of both regressors: the full sensor, fitted without a
+    word; now a note says so (and nothing is said when the parts drop interactions)."""
+    cli(["make-data", "lorenz", "-o", str(tmp_path / "tr.csv"), "--samples", "300"])
+    r = cli(["fit", str(tmp_path / "tr.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z", "--my", "2",
+             "-p", "3", "--sigma", "1e-3", "--additive", spec])
+    assert (f"note: --additive {spec} gives one part over all 2 regressors, i.e. the full PWAS sensor" in r.stderr) is full
