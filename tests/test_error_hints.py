@@ -395,3 +395,18 @@ def test_observer_bank_fractions_name_the_value_that_is_wrong(tmp_path, files, e
     assert res.exit_code == 0, res.output
     assert_refused(invoke("generate", tmp_path / "ob.json", "-o", tmp_path / "g", "--design", "sensor", *extra), *words)
     assert not (tmp_path / "g").exists()
+
+
+def test_a_target_too_small_for_fixed_point_says_to_rescale_it(tmp_path):
+    """A target of ~1e-310 fits (RMSE 0 at print precision); generate then said '--weight-frac
+    (weight_frac) = 1043 is out of the supported range', an option the user never gave."""
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=400)
+    z = 1e-310 * (1 + 0.5 * np.tanh(y) + 0.01 * rng.normal(size=400))
+    (tmp_path / "d.csv").write_text("y,z\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(y, z)))
+    res = invoke("fit", tmp_path / "d.csv", "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 3,
+                 "--sigma", "1e-3")
+    assert res.exit_code == 0, res.output
+    assert_refused(invoke("generate", tmp_path / "m.json", "-o", tmp_path / "g"), "the default --weight-frac (weight_frac) = ",
+                   "the target's values are too small for fixed point", "rescale the target column")
+    assert not (tmp_path / "g").exists()

@@ -327,6 +327,13 @@ class FixedPointModel:
                         f"{option_text('weight_frac')} = {fw} gives the default {option_text('output_frac')} = {v}, out of "
                         f"the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]; use a smaller --weight-frac or give "
                         "--output-frac")
+                if nm == "weight_frac" and weight_frac is None:  # the default, from the reference error
+                    raise InputError(
+                        f"the default {option_text('weight_frac')} = {v}, from the reference error {ref:.3g} "
+                        f"({'the weight range / 2^10' if ref_src == 'weight_range' else 'the training RMSE or as given'}), is out of the "
+                        f"supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]: the target's values are too "
+                        f"{'small' if v > 0 else 'large'} for fixed point; rescale the target column (a unit of "
+                        "sensible size) and fit again, or give --weight-frac")
                 raise InputError(f"{option_text(nm)} = {v} is out of the supported range [-{_MAX_ABS_FRAC}, {_MAX_ABS_FRAC}]")
         sh = self.F + fw - fo
         if sh < 0:
