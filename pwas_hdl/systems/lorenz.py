@@ -109,7 +109,20 @@ class PlantData:
 
 
 def stack_runs(parts: list[PlantData]) -> PlantData:
-    """Concatenate trajectories into one :class:`PlantData` with a ``run`` index 0..K-1."""
+    """Concatenate trajectories into one :class:`PlantData` with a ``run`` index 0..K-1.
+
+    Parameters
+    ----------
+    parts : list of PlantData
+        K >= 1 trajectories with the same columns (the names and the presence of ``mode`` are
+        taken from the first); their own ``run`` columns are ignored.
+
+    Returns
+    -------
+    PlantData
+        Every array concatenated along its rows (sum of the T_i samples); ``run`` (sum T_i,) is
+        the index i of the part each sample comes from.
+    """
     if not parts:
         raise InputError("stack_runs needs at least one trajectory")
     cat = lambda k: np.concatenate([getattr(p, k) for p in parts], axis=0)  # noqa: E731

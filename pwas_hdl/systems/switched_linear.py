@@ -25,6 +25,7 @@ The true mode is recorded (``PlantData.mode``, labels 1..3); the targets are the
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError, choice_text
 from pwas_hdl.systems.lorenz import PlantData, stack_runs
@@ -56,7 +57,23 @@ SWITCHED_ASSUMPTIONS = {
 
 
 def switched_input(kind: str, samples: int, rng: np.random.Generator) -> np.ndarray:
-    """Input sequence of assumption A5, shape (samples,)."""
+    """Input sequence of assumption A5, shape (samples,).
+
+    Parameters
+    ----------
+    kind : {"step", "prbs", "sine"}
+        ``step``: u = 1; ``prbs``: levels {0, 2} redrawn every 5 samples; ``sine``: ``1 + 0.5 sin(0.1 k)``
+        (k the sample index, radians).
+    samples : int
+        Length T of the sequence (samples; T_s = 1, assumption A1).
+    rng : numpy.random.Generator
+        Draws the PRBS levels (``ceil(T / 5)`` of them); unused by ``step`` and ``sine``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (samples,): the input ``u_k``.
+    """
     k = np.arange(samples)
     if kind == "step":
         return np.ones(samples)
@@ -98,8 +115,8 @@ def simulate_switched(
     rng: np.random.Generator,
     switching: str = "time",
     input_kind: str = "prbs",
-    dwell=(20, 50),
-    x0=(0.5, 0.5),
+    dwell: int | tuple[int, int] = (20, 50),
+    x0: ArrayLike = (0.5, 0.5),
     noise: float = 0.0,
 ) -> PlantData:
     """One trajectory of eq. (11).
@@ -118,6 +135,7 @@ def simulate_switched(
         Fixed dwell or the inclusive range of the random dwell (samples). For ``output`` the
         lower bound is at least 20 (the minimum dwell of A2).
     x0 : array_like, shape (2,)
+        Initial state ``x_0``.
     noise : float
         Standard deviation of the Gaussian noise on ``y``.
 
@@ -165,15 +183,59 @@ def simulate_switched(
 
 def switched_paper_run(samples: int = 100, seed: int = 0, switching: str = "time", input_kind: str = "step",
                        noise: float = 0.0) -> PlantData:
-    """The paper-replica run (A1, A2, A5, A6): 100 samples, dwell 34, ``x0 = (0.5, 0.5)``."""
+    """The paper-replica run (A1, A2, A5, A6): 100 samples, dwell 34, ``x0 = (0.5, 0.5)``.
+
+    Parameters
+    ----------
+    samples : int
+        Samples T (the paper's "100 seconds" are 100 samples, A1).
+    seed : int
+        Seed of the generator passed to :func:`simulate_switched`.
+    switching : {"time", "output"}
+        Switching law of assumption A2 (fixed dwell 34 samples).
+    input_kind : {"step", "prbs", "sine"}
+        Input of assumption A5.
+    noise : float
+        Standard deviation of the Gaussian noise on ``y`` (none on the replica, A7).
+
+    Returns
+    -------
+    PlantData
+        As in :func:`simulate_switched` (``u`` (T, 1), ``y`` (T, 1), ``z`` (T, 2), ``mode`` (T,)),
+        with ``run`` (T,) all 0.
+    """
     d = simulate_switched(samples, np.random.default_rng(seed), switching, input_kind, 34, (0.5, 0.5), noise)
     d.run = np.zeros(samples, dtype=int)
     return d
 
 
 def switched_training_runs(runs: int = 10, samples: int = 1000, seed: int = 0, switching: str = "time",
-                           input_kind: str = "prbs", noise: float = 0.0, dwell=(20, 50)) -> PlantData:
-    """``runs`` long trajectories (A9): random dwell in ``dwell``, the given input, ``x0 ~ U[0, 2]^2``."""
+                           input_kind: str = "prbs", noise: float = 0.0,
+                           dwell: int | tuple[int, int] = (20, 50)) -> PlantData:
+    """``runs`` long trajectories (A9): random dwell in ``dwell``, the given input, ``x0 ~ U[0, 2]^2``.
+
+    Parameters
+    ----------
+    runs : int
+        Number of trajectories K (>= 1).
+    samples : int
+        Samples T per trajectory.
+    seed : int
+        Seed of the one generator that draws every run's input, dwells, noise seed and ``x0``.
+    switching : {"time", "output"}
+        Switching law of assumption A2.
+    input_kind : {"step", "prbs", "sine"}
+        Input of assumption A5.
+    noise : float
+        Standard deviation of the Gaussian noise on ``y``.
+    dwell : int or (int, int)
+        Fixed dwell or the inclusive range of the random dwell (samples), as in :func:`simulate_switched`.
+
+    Returns
+    -------
+    PlantData
+        The runs stacked: ``u`` (K T, 1), ``y`` (K T, 1), ``z`` (K T, 2), ``mode`` (K T,), ``run`` (K T,).
+    """
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")
     rng = np.random.default_rng(seed)

@@ -22,6 +22,7 @@ inputs (they are equal in the paper's experiment, so an estimator should use onl
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.systems.lorenz import PlantData, stack_runs
@@ -47,14 +48,42 @@ THREE_TANK_ASSUMPTIONS = {
 }
 
 
-def signed_sqrt(d):
-    """``sign(d) sqrt(|d|)`` (assumption A1), elementwise."""
+def signed_sqrt(d: ArrayLike) -> np.ndarray:
+    """``sign(d) sqrt(|d|)`` (assumption A1), elementwise.
+
+    Parameters
+    ----------
+    d : array_like, any shape (a scalar too)
+        Level differences (or levels), in the plant's level unit (the paper gives none).
+
+    Returns
+    -------
+    numpy.ndarray
+        Float array of the shape of ``d`` (0-d for a scalar): the signed root.
+    """
     d = np.asarray(d, dtype=float)
     return np.sign(d) * np.sqrt(np.abs(d))
 
 
 def three_tank_step(x: np.ndarray, u1: float, u2: float, rho: float, prm: dict = THREE_TANK_PARAMS) -> np.ndarray:
-    """One step of eq. (26): ``x(t) -> x(t+1)`` for levels ``x`` of shape (3,)."""
+    """One step of eq. (26): ``x(t) -> x(t+1)`` for levels ``x`` of shape (3,).
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (3,)
+        Levels ``[x1, x2, x3]`` at step t (the paper gives no unit; the time unit is one step).
+    u1, u2 : float
+        Inflows into tanks 1 and 2 at step t (level units per step, scaled by ``a4`` and ``a5``).
+    rho : float
+        Disturbance added to ``x1(t+1)`` (level units).
+    prm : dict
+        Coefficients ``a1``..``a5`` (keys as in :data:`THREE_TANK_PARAMS`; ``rho_max`` unused here).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (3,): the levels ``x(t+1)``.
+    """
     a1, a2, a3, a4, a5 = (prm[k] for k in ("a1", "a2", "a3", "a4", "a5"))
     q12, q23, q3 = signed_sqrt(x[0] - x[1]), signed_sqrt(x[1] - x[2]), signed_sqrt(x[2])
     return np.array([
@@ -66,7 +95,7 @@ def three_tank_step(x: np.ndarray, u1: float, u2: float, rho: float, prm: dict =
 
 def simulate_three_tank(
     samples: int,
-    x0,
+    x0: ArrayLike,
     rho_start: int,
     rng: np.random.Generator,
     phase: float = 0.0,
@@ -90,6 +119,9 @@ def simulate_three_tank(
         Input phase (rad): ``u1 = u2 = 1 + sin(t + phase)``.
     noise : float
         Standard deviation of the Gaussian noise on ``y`` (the paper has none).
+    prm : dict
+        Coefficients ``a1``..``a5`` and the disturbance bound ``rho_max`` (``rho ~ U[-rho_max, rho_max]``),
+        keys as in :data:`THREE_TANK_PARAMS`.
 
     Returns
     -------
@@ -119,7 +151,20 @@ def simulate_three_tank(
 def three_tank_paper_run(samples: int = 1000, seed: int = 0, noise: float = 0.0) -> PlantData:
     """The paper's run (Section 5, Fig. 2): ``x(0) = (8, 2, 1)``, ``rho`` from t = 100, phase 0.
 
-    ``seed`` draws the disturbance (and the y noise). Returns one trajectory with ``run = 0``.
+    Parameters
+    ----------
+    samples : int
+        Steps T (the spec's replica, A7, has 1000).
+    seed : int
+        Seed of the generator that draws the disturbance (and the seed of the y noise).
+    noise : float
+        Standard deviation of the Gaussian noise on ``y`` (the paper has none).
+
+    Returns
+    -------
+    PlantData
+        One trajectory as in :func:`simulate_three_tank` (``u`` (T, 2), ``y`` (T, 1), ``z`` (T, 2)
+        ``[x1, x3]``), with ``run`` (T,) all 0.
     """
     d = simulate_three_tank(samples, (8.0, 2.0, 1.0), 100, np.random.default_rng(seed), 0.0, noise)
     d.run = np.zeros(samples, dtype=int)
@@ -131,6 +176,22 @@ def three_tank_training_runs(runs: int = 20, samples: int = 1000, seed: int = 0,
 
     Levels: three values uniform in [0, 25], sorted so that ``x1 >= x2 >= x3``; phase uniform in
     [0, 2 pi); ``rho`` on from t = 0. The ``run`` column numbers the trajectories 0..runs-1.
+
+    Parameters
+    ----------
+    runs : int
+        Number of trajectories K (>= 1).
+    samples : int
+        Steps T per trajectory.
+    seed : int
+        Seed of the one generator that draws every run's levels, phase, disturbance and noise seed.
+    noise : float
+        Standard deviation of the Gaussian noise on ``y``.
+
+    Returns
+    -------
+    PlantData
+        The runs stacked: ``u`` (K T, 2), ``y`` (K T, 1), ``z`` (K T, 2) ``[x1, x3]``, ``run`` (K T,).
     """
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")
