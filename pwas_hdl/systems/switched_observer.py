@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.signal import place_poles
 
 from pwas_hdl.errors import InputError
@@ -41,7 +42,8 @@ __all__ = [
 DEFAULT_POLES = (0.3, 0.4)
 
 
-def switched_observability_matrix(modes: Sequence[int], dwells: Sequence[int], A=SWITCHED_A, C=SWITCHED_C) -> np.ndarray:
+def switched_observability_matrix(modes: Sequence[int], dwells: Sequence[int], A: Sequence[np.ndarray] = SWITCHED_A,
+                                   C: Sequence[np.ndarray] = SWITCHED_C) -> np.ndarray:
     """The switched observability matrix ``O(theta^s_{N_s})`` of eq. (6).
 
     Parameters
@@ -50,11 +52,14 @@ def switched_observability_matrix(modes: Sequence[int], dwells: Sequence[int], A
         Modes visited in order.
     dwells : sequence of int, same length
         Samples ``N_i`` spent in each (>= 1).
-    A, C : sequences of (n, n) and (p, n) arrays, index ``label - 1``.
+    A, C : sequence of numpy.ndarray
+        Per-mode matrices, shapes (n, n) and (p, n) (a (n,) row for p = 1), index ``label - 1``
+        (default: eq. (11)).
 
     Returns
     -------
     O : ndarray, shape (p * sum(dwells), n)
+        The rows ``C(theta_{k+j}) A(theta_{k+j-1}) ... A(theta_k)`` along the path.
     """
     if len(modes) != len(dwells) or not modes:
         raise InputError("modes and dwells must be non-empty and of equal length")
@@ -74,8 +79,29 @@ def switched_observability_matrix(modes: Sequence[int], dwells: Sequence[int], A
     return np.vstack(rows)
 
 
-def observer_gains(poles: Sequence[float] = DEFAULT_POLES, A=SWITCHED_A, C=SWITCHED_C) -> tuple[np.ndarray, ...]:
-    """Gains ``K_i`` (n,) with ``eig(A_i - K_i C_i) = poles`` for every mode (A4)."""
+def observer_gains(poles: Sequence[float] = DEFAULT_POLES, A: Sequence[np.ndarray] = SWITCHED_A,
+                   C: Sequence[np.ndarray] = SWITCHED_C) -> tuple[np.ndarray, ...]:
+    """Gains ``K_i`` (n,) with ``eig(A_i - K_i C_i) = poles`` for every mode (A4).
+
+    Parameters
+    ----------
+    poles : sequence of float, length n
+        Desired discrete-time closed-loop poles of every mode's error dynamics (dimensionless,
+        inside the unit circle for a convergent observer).
+    A, C : sequence of numpy.ndarray
+        Per-mode matrices, shapes (n, n) and (1, n) or (n,) (one output), index ``label - 1``
+        (default: eq. (11)).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        One gain of shape (n,) per mode, in the order of ``A``.
+
+    Raises
+    ------
+    InputError
+        When ``scipy.signal.place_poles`` rejects the poles.
+    """
     out = []
     for Ai, Ci in zip(A, C):
         Ci = np.atleast_2d(Ci)
@@ -93,8 +119,14 @@ class ObserverRun:
 
     Attributes
     ----------
-    x_hat : (T, n) state estimates; y_hat : (T,) ``C(theta_hat) x_hat``;
-    theta_hat : (T,) int, detected (or given) mode labels; residuals : (T, s) detector residuals.
+    x_hat : numpy.ndarray, shape (T, n)
+        State estimates; row ``k`` is ``xhat_k``, available at sample k.
+    y_hat : numpy.ndarray, shape (T,)
+        Output estimates ``C(theta_hat_k) xhat_k``.
+    theta_hat : numpy.ndarray of int, shape (T,)
+        Detected (or given) mode labels 1..s.
+    residuals : numpy.ndarray, shape (T, s)
+        Detector residuals: per mode, the sum of ``|y - C_i xhat^i|^2`` over the window.
     """
 
     x_hat: np.ndarray
@@ -110,21 +142,38 @@ def run_switched_observer(
     known_mode: np.ndarray | None = None,
     bank: str = "practical",
     window: int = 1,
-    x0_hat=None,
-    A=SWITCHED_A,
-    B=SWITCHED_B,
-    C=SWITCHED_C,
+    x0_hat: ArrayLike | None = None,
+    A: Sequence[np.ndarray] = SWITCHED_A,
+    B: Sequence[np.ndarray] = SWITCHED_B,
+    C: Sequence[np.ndarray] = SWITCHED_C,
 ) -> ObserverRun:
     """The virtual estimator of Fig. 2 (eqs. 8-10), or the known-mode baseline of [18].
 
     Parameters
     ----------
-    u : (T,) or (T, 1) input; y : (T,) or (T, 1) measured output.
-    K : per-mode gains (default :func:`observer_gains` with :data:`DEFAULT_POLES`).
-    known_mode : (T,) labels, optional -- use them instead of the detector (baseline [18]).
-    bank : {"practical", "literal"} -- per-mode observers with injection, or open-loop models (8).
-    window : int -- samples in the detector's residual sum (A3; 1 = eq. 9 as printed).
-    x0_hat : (n,) initial estimate for the observer and the bank (default 0, A6).
+    u : numpy.ndarray, shape (T,) or (T, 1)
+        Input, one value per sample.
+    y : numpy.ndarray, shape (T,) or (T, 1)
+        Measured output.
+    K : sequence of numpy.ndarray, optional
+        Per-mode gains, each shape (n,) (default :func:`observer_gains` with :data:`DEFAULT_POLES`).
+    known_mode : numpy.ndarray of int, shape (T,), optional
+        Mode labels 1..s to use instead of the detector (baseline [18]).
+    bank : {"practical", "literal"}
+        Per-mode observers with output injection, or the open-loop models of (8).
+    window : int
+        Samples in the detector's residual sum (A3; 1 = eq. 9 as printed).
+    x0_hat : array_like, shape (n,), optional
+        Initial estimate for the observer and the bank (default 0, A6).
+    A, B, C : sequence of numpy.ndarray
+        Per-mode matrices, shapes (n, n), (n,) and (n,) (one input, one output), index ``label - 1``
+        (default: eq. (11)).
+
+    Returns
+    -------
+    ObserverRun
+        ``x_hat`` (T, n), ``y_hat`` (T,), ``theta_hat`` (T,), ``residuals`` (T, s), row k aligned
+        with plant sample k.
     """
     u = np.asarray(u, dtype=float).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1)
@@ -161,7 +210,20 @@ def run_switched_observer(
 
 
 def mode_scores(true: np.ndarray, pred: np.ndarray, labels: Sequence[int] = (1, 2, 3)) -> dict:
-    """Accuracy and per-mode F1 of mode labels: ``{"accuracy": a, "f1": {label: f1}}``."""
+    """Accuracy and per-mode F1 of mode labels: ``{"accuracy": a, "f1": {label: f1}}``.
+
+    Parameters
+    ----------
+    true, pred : numpy.ndarray of int, shape (T,)
+        True and detected mode labels.
+    labels : sequence of int
+        The labels scored (default the three modes of eq. (11)).
+
+    Returns
+    -------
+    dict
+        ``"accuracy"``: fraction of samples with ``pred == true`` (0..1); ``"f1"``: label -> F1 score (0..1).
+    """
     from pwas_hdl.fit.classifier import class_scores
 
     sc = class_scores(true, pred, labels)
