@@ -154,6 +154,19 @@ class HLNNSensor(BaseEstimator):
     def predict(self, u: np.ndarray | Sequence[np.ndarray] | None, y: np.ndarray | Sequence[np.ndarray] | None) -> np.ndarray:
         """Estimates ``(sum_i (T_i - M + 1), nz)``, rows ``t = M-1 .. T_i-1`` of each trajectory (target units).
 
+        Parameters
+        ----------
+        u : ndarray (T, nu), list of such, or None when ``mu == 0``
+            Inputs, as in :meth:`fit`.
+        y : ndarray (T, ny), list of such, or None when ``my == 0``
+            Measured outputs, as in :meth:`fit`.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape ``(sum_i (T_i - M + 1), nz)`` with ``M`` the regressor's lag depth: one row per
+            complete regressor, trajectories in order, in the units of the fitted target.
+
         Raises
         ------
         sklearn.exceptions.NotFittedError

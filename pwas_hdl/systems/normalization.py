@@ -36,7 +36,18 @@ class Normalization:
 
     @classmethod
     def of(cls, data: PlantData) -> "Normalization":
-        """Statistics of ``data`` (the training set). A constant column gets std 1 (left unscaled)."""
+        """Statistics of ``data`` (the training set). A constant column gets std 1 (left unscaled).
+
+        Parameters
+        ----------
+        data : PlantData
+            The training set, physical units; ``u`` (T, nu), ``y`` (T, ny), ``z`` (T, nz).
+
+        Returns
+        -------
+        Normalization
+            ``mean[key]`` and ``std[key]`` of shape (k,) per column of ``data.<key>`` (``(0,)`` for no columns).
+        """
         mean, std = {}, {}
         for key in ("u", "y", "z"):
             arr = getattr(data, key)
@@ -46,11 +57,37 @@ class Normalization:
         return cls(mean, std)
 
     def apply(self, key: str, arr: np.ndarray) -> np.ndarray:
-        """``(arr - mean) / std`` of signal ``key``."""
+        """``(arr - mean) / std`` of signal ``key``.
+
+        Parameters
+        ----------
+        key : {"u", "y", "z"}
+            Which signal's statistics.
+        arr : numpy.ndarray, shape (T, k)
+            Values in physical units, k the number of columns of that signal (a (k,) row broadcasts too).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape of ``arr``: the normalised values (dimensionless).
+        """
         return (arr - self.mean[key]) / self.std[key]
 
     def invert(self, key: str, arr: np.ndarray) -> np.ndarray:
-        """Physical units from normalised values of signal ``key``."""
+        """Physical units from normalised values of signal ``key``.
+
+        Parameters
+        ----------
+        key : {"u", "y", "z"}
+            Which signal's statistics.
+        arr : numpy.ndarray, shape (T, k)
+            Normalised values, k the number of columns of that signal (a (k,) row broadcasts too).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape of ``arr``: ``arr * std + mean``, in the signal's physical units.
+        """
         return arr * self.std[key] + self.mean[key]
 
     def to_dict(self) -> dict:

@@ -148,6 +148,15 @@ def switching4(n_samples: int, seed: int = 0, output_row: str = "e5") -> PlantDa
     ``N = n_samples`` (B2: the training and the test set each use their own N), ``rho_0 = 0``.
     Mode 1 (rho = 0) has ``log(rho + 1) = 0``: the output is identically zero there.
 
+    Parameters
+    ----------
+    n_samples : int
+        Samples ``k = 0 .. n_samples - 1`` (also the ``N`` of eq. 18: four blocks of ``N / 4``).
+    seed : int
+        Seed of the input ``u_k ~ N(0, I_2)``.
+    output_row : {"e5", "e4"}
+        Reading of the printed output row (A1).
+
     Returns
     -------
     PlantData
