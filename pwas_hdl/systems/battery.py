@@ -31,12 +31,16 @@ model with the analytic Jacobian of the RK4 step.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError, ResourceLimit
 from pwas_hdl.limits import check_seed
 from pwas_hdl.systems.lorenz import PlantData
+
+if TYPE_CHECKING:
+    from pwas_hdl.systems.normalization import Normalization
 
 __all__ = ["SUBSTITUTE_COEFFS", "TS", "X0", "battery", "battery_current", "BatteryModel", "BatteryEKF", "make_battery_dataset"]
 
@@ -79,7 +83,7 @@ class BatteryModel:
         Parameters
         ----------
         s : float or ndarray
-            State of charge ``x1`` (nominally in [0, 1]).
+            State of charge ``x1`` (nominally in [0, 1], dimensionless): a scalar or an array of any shape.
 
         Returns
         -------
@@ -100,7 +104,7 @@ class BatteryModel:
         Parameters
         ----------
         s : float or ndarray
-            State of charge ``x1`` (nominally in [0, 1]).
+            State of charge ``x1`` (nominally in [0, 1], dimensionless): a scalar or an array of any shape.
 
         Returns
         -------
@@ -117,7 +121,7 @@ class BatteryModel:
         Parameters
         ----------
         s : float or ndarray
-            State of charge ``x1`` (nominally in [0, 1]).
+            State of charge ``x1`` (nominally in [0, 1], dimensionless): a scalar or an array of any shape.
 
         Returns
         -------
@@ -134,7 +138,7 @@ class BatteryModel:
         Parameters
         ----------
         s : float or ndarray
-            State of charge ``x1`` (nominally in [0, 1]).
+            State of charge ``x1`` (nominally in [0, 1], dimensionless): a scalar or an array of any shape.
 
         Returns
         -------
@@ -151,7 +155,7 @@ class BatteryModel:
         Parameters
         ----------
         s : float or ndarray
-            State of charge ``x1`` (nominally in [0, 1]).
+            State of charge ``x1`` (nominally in [0, 1], dimensionless): a scalar or an array of any shape.
 
         Returns
         -------
@@ -168,7 +172,7 @@ class BatteryModel:
         Parameters
         ----------
         s : float or ndarray
-            State of charge ``x1`` (nominally in [0, 1]).
+            State of charge ``x1`` (nominally in [0, 1], dimensionless): a scalar or an array of any shape.
 
         Returns
         -------
@@ -180,7 +184,22 @@ class BatteryModel:
         return self._exp_term(s, self.c["a19"], self.c["a20"], self.c["a21"])
 
     def f(self, x: np.ndarray, i: float) -> tuple[np.ndarray, np.ndarray]:
-        """Right-hand side of (19) and its Jacobian d f / d x, shapes (3,) and (3, 3)."""
+        """Right-hand side of (19) and its Jacobian d f / d x, shapes (3,) and (3, 3).
+
+        Parameters
+        ----------
+        x : ndarray, shape (3,)
+            State ``(SoC, v_ts [V], v_tl [V])``.
+        i : float
+            Current [A] (positive = discharge).
+
+        Returns
+        -------
+        f : ndarray, shape (3,)
+            ``dx/dt``: [1/s], [V/s], [V/s].
+        jac : ndarray, shape (3, 3)
+            ``d f / d x``: entry (r, c) in units of ``f_r`` per unit of ``x_c`` (row 0 is zero).
+        """
         s, x2, x3 = x
         rts, drts = self.rts(s)
         cts, dcts = self.cts(s)
@@ -195,7 +214,24 @@ class BatteryModel:
         return f, jac
 
     def rk4(self, x: np.ndarray, i: float, h: float = TS) -> tuple[np.ndarray, np.ndarray]:
-        """One explicit RK4 step and its exact Jacobian (chain rule through the four stages)."""
+        """One explicit RK4 step and its exact Jacobian (chain rule through the four stages).
+
+        Parameters
+        ----------
+        x : ndarray, shape (3,)
+            State ``(SoC, v_ts [V], v_tl [V])``.
+        i : float
+            Current [A], constant over the step.
+        h : float
+            Step [s].
+
+        Returns
+        -------
+        x_next : ndarray, shape (3,)
+            The next state.
+        jac : ndarray, shape (3, 3)
+            ``d x_next / d x``: entry (r, c) in units of ``x_r`` per unit of ``x_c``.
+        """
         k1, j1 = self.f(x, i)
         k2, j2 = self.f(x + 0.5 * h * k1, i)
         k3, j3 = self.f(x + 0.5 * h * k2, i)
@@ -250,14 +286,42 @@ class BatteryModel:
                          x3 + w * (k3a + 2 * k3b + 2 * k3c + k3d)])
 
     def output(self, x: np.ndarray, i: float) -> tuple[float, np.ndarray]:
-        """Terminal voltage y [V] and its gradient d y / d x, shape (3,)."""
+        """Terminal voltage y [V] and its gradient d y / d x, shape (3,).
+
+        Parameters
+        ----------
+        x : ndarray, shape (3,)
+            State ``(SoC, v_ts [V], v_tl [V])``.
+        i : float
+            Current [A] (positive = discharge).
+
+        Returns
+        -------
+        y : float
+            ``E0(x1) - x2 - x3 - i R_s(x1)`` [V].
+        grad : ndarray, shape (3,)
+            ``d y / d x``: [V per unit SoC], -1, -1.
+        """
         e0, de0 = self.e0(x[0])
         rs, drs = self.rs(x[0])
         return float(e0 - x[1] - x[2] - i * rs), np.array([de0 - i * drs, -1.0, -1.0])
 
 
 def battery_current(n_samples: int, rng: np.random.Generator) -> np.ndarray:
-    """Eq. (20): ``i_k = 0.2 max{0, cos(k/100) + cos(k/37)} + u_k``, ``u_k ~ U(0, 0.4)`` [A]."""
+    """Eq. (20): ``i_k = 0.2 max{0, cos(k/100) + cos(k/37)} + u_k``, ``u_k ~ U(0, 0.4)`` [A].
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples T (``k = 0 .. T-1``, ``T_s = 5 s`` apart).
+    rng : numpy.random.Generator
+        Draws the T values ``u_k``.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        The current ``i_k`` [A] (positive = discharge).
+    """
     k = np.arange(n_samples)
     return 0.2 * np.maximum(0.0, np.cos(k / 100.0) + np.cos(k / 37.0)) + rng.uniform(0.0, 0.4, n_samples)
 
@@ -299,10 +363,26 @@ def battery(n_samples: int, seed: int = 0, coeffs: dict | None = None) -> PlantD
     return PlantData(cur[:, None], v[:, None], soc[:, None].copy(), soc[:, None].copy(), {"u": ["i"], "y": ["v"], "z": ["soc"]})
 
 
-def make_battery_dataset(n_train: int, n_test: int, seed: int = 0, noise: float = 0.03):
+def make_battery_dataset(n_train: int, n_test: int, seed: int = 0,
+                         noise: float = 0.03) -> tuple[PlantData, PlantData, Normalization]:
     """Training and test sets as in Section 4.10 / 4.2: independent runs, normalised, noisy (C3).
 
-    Returns ``(train, test, norm)`` as :func:`pwas_hdl.systems.pv_benchmark.make_pv_dataset`.
+    Parameters
+    ----------
+    n_train, n_test : int
+        Samples of each set (``T_s = 5 s`` apart).
+    seed : int
+        One run: the battery seeds of both sets and the noise are drawn from it.
+    noise : float
+        Noise std after normalisation (normalised units; paper 0.03), on ``u``, ``y`` and ``z``.
+
+    Returns
+    -------
+    train, test : PlantData
+        ``u`` (T, 1) current, ``y`` (T, 1) voltage, ``z`` (T, 1) SoC, normalised with the training
+        statistics and noisy; ``z_true`` normalised and noise-free.
+    norm : Normalization
+        The training statistics (physical units: [A], [V], SoC).
     """
     from pwas_hdl.systems.normalization import normalize_with_noise
 
@@ -346,7 +426,8 @@ class BatteryEKF:
         Model coefficients (default the substitute of C1, the same as the simulator).
     """
 
-    def __init__(self, q, r: float, x0: np.ndarray | None = None, p0=(1e-2, 1e-4, 1e-4), coeffs: dict | None = None):
+    def __init__(self, q: Sequence[float], r: float, x0: np.ndarray | None = None,
+                 p0: Sequence[float] = (1e-2, 1e-4, 1e-4), coeffs: dict | None = None):
         self.q = np.diag(np.asarray(q, dtype=float))
         self.r = float(r)
         if self.r <= 0 or np.any(np.diag(self.q) < 0):
