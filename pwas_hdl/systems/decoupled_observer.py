@@ -34,8 +34,10 @@ Only ``k = 1`` is implemented: a system that needs ``k > 1`` is refused with an 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import null_space
 
 from pwas_hdl.errors import InputError
@@ -56,8 +58,19 @@ __all__ = [
 _TOL = 1e-9
 
 
-def _phi(s):
-    """The nonlinearity of the three-tank rewrite: ``sq(s) - s`` (signed root, A1)."""
+def _phi(s: ArrayLike) -> np.ndarray:
+    """The nonlinearity of the three-tank rewrite: ``sq(s) - s`` (signed root, A1).
+
+    Parameters
+    ----------
+    s : array_like, any shape (a scalar too)
+        Values ``F_j x`` (level differences or levels, the plant's level unit).
+
+    Returns
+    -------
+    numpy.ndarray
+        Float array of the shape of ``s`` (0-d for a scalar).
+    """
     return signed_sqrt(s) - np.asarray(s, dtype=float)
 
 
@@ -65,11 +78,28 @@ def _phi(s):
 class LogicDynamicSystem:
     """Matrices of form (12) of the paper.
 
+    Given as nested lists or arrays; stored as float arrays of at least two dimensions (a shape
+    mismatch with ``n = A.shape[0]`` raises :class:`~pwas_hdl.errors.InputError`).
+
     Attributes
     ----------
-    A : (n, n); B : (n, m); C : (l, n); D : (n, d); G : (n, q); F : (q, n) (row ``j`` is ``F_j``)
-    V : (p, n) -- the estimated quantity ``v = V x``.
-    phi : callable, elementwise nonlinearity applied to ``F_j x``.
+    A : numpy.ndarray, shape (n, n)
+        State matrix.
+    B : numpy.ndarray, shape (n, m)
+        Input matrix.
+    C : numpy.ndarray, shape (l, n)
+        Output matrix: ``y = C x``.
+    D : numpy.ndarray, shape (n, d)
+        Disturbance matrix (``rho`` of dimension d).
+    G : numpy.ndarray, shape (n, q)
+        Weights of the nonlinear terms ``Phi(x)``.
+    F : numpy.ndarray, shape (q, n)
+        Row ``j`` is ``F_j``: the argument ``F_j x`` of the j-th nonlinear term.
+    V : numpy.ndarray, shape (p, n)
+        The estimated quantity ``v = V x``.
+    phi : callable
+        Elementwise nonlinearity applied to ``F_j x`` (:func:`simulate_design` calls it on one scalar
+        at a time and takes ``float`` of the result; default ``sq(s) - s``).
     """
 
     A: np.ndarray
@@ -79,7 +109,7 @@ class LogicDynamicSystem:
     G: np.ndarray
     F: np.ndarray
     V: np.ndarray
-    phi: object = _phi
+    phi: Callable[[ArrayLike], np.ndarray] = _phi
 
     def __post_init__(self) -> None:
         for k in ("A", "B", "C", "D", "G", "F", "V"):
@@ -99,14 +129,22 @@ class Subsystem:
 
     Attributes
     ----------
-    psi : (n,) -- ``z = psi x``.
-    a : float -- coefficient of the own state.
-    J : (ns,) -- coefficients of the signals ``s``.
-    signals : list of str -- what ``s`` holds: ``"y0"``, ``"y1"``... (measured) and ``"z:i"`` (state
-        of subsystem ``i``).
-    B_star : (m,); G_star : (q,) -- ``psi B`` and ``psi G``.
-    F_star : dict j -> (1 + ns,) -- row ``F*_j`` over ``[z; s]`` for the nonzero columns j of ``G*``.
-    insensitive : bool -- ``psi D = 0`` (first subsystem) or not (second subsystem, Section 3.2).
+    psi : numpy.ndarray, shape (n,)
+        The estimated combination: ``z = psi x``.
+    a : float
+        Coefficient of the own state.
+    J : numpy.ndarray, shape (ns,)
+        Coefficients of the signals ``s``.
+    signals : list of str
+        What ``s`` holds: ``"y0"``, ``"y1"``... (measured) and ``"z:i"`` (state of subsystem ``i``).
+    B_star : numpy.ndarray, shape (m,)
+        ``psi B``.
+    G_star : numpy.ndarray, shape (q,)
+        ``psi G``.
+    F_star : dict of int to numpy.ndarray
+        ``j`` -> row ``F*_j``, shape (1 + ns,), over ``[z; s]``, for the nonzero columns j of ``G*``.
+    insensitive : bool
+        ``psi D = 0`` (first subsystem) or not (second subsystem, Section 3.2).
     """
 
     psi: np.ndarray
@@ -125,13 +163,22 @@ class SensorDesign:
 
     Attributes
     ----------
-    subsystems : list of Subsystem (first the insensitive ones, then the sensitive ones).
-    C0 : (l0, n) -- the measured combination insensitive to rho (14).
-    psi_solutions : (r, n) -- canonical basis of the ``Psi`` of (21) (k = 1), measured rows dropped.
-    J_star : (r, l + p) -- the ``J*`` of each such ``Psi`` (``Psi A = J* C*``).
-    cond18 : bool; cond20 : list of bool (one per row of V).
-    V_bar, V0 : the rows of V that satisfy (20) / that do not.
-    estimates : list of (subsystem index) per row of V.
+    subsystems : list of Subsystem
+        First the insensitive ones, then the sensitive ones.
+    C0 : numpy.ndarray, shape (l0, n)
+        The measured combination insensitive to rho (14).
+    psi_solutions : numpy.ndarray, shape (r, n)
+        Canonical basis of the ``Psi`` of (21) (k = 1), measured rows dropped.
+    J_star : numpy.ndarray, shape (r, l + p)
+        The ``J*`` of each such ``Psi`` (``Psi A = J* C*``).
+    cond18 : bool
+        Condition (18) holds.
+    cond20 : list of bool
+        Condition (20), one per row of V.
+    V_bar, V0 : numpy.ndarray, shape (p_bar, n) and (p - p_bar, n)
+        The rows of V that satisfy (20) / that do not.
+    estimates : list of int
+        Per row of V, the index of the subsystem whose state estimates it.
     """
 
     subsystems: list
@@ -219,10 +266,12 @@ def design_virtual_sensor(sys_: LogicDynamicSystem) -> SensorDesign:
     Parameters
     ----------
     sys_ : LogicDynamicSystem
+        The plant in form (12), with the estimated rows ``V``.
 
     Returns
     -------
     SensorDesign
+        The subsystems, the conditions (18)/(20) and which subsystem estimates each row of ``V``.
 
     Raises
     ------
@@ -271,12 +320,27 @@ def design_virtual_sensor(sys_: LogicDynamicSystem) -> SensorDesign:
     return SensorDesign(subs, C0, psis, J_star, cond18, cond20, V_bar, V0, estimates)
 
 
-def simulate_design(design: SensorDesign, sys_: LogicDynamicSystem, u: np.ndarray, y: np.ndarray, z0) -> np.ndarray:
+def simulate_design(design: SensorDesign, sys_: LogicDynamicSystem, u: np.ndarray, y: np.ndarray,
+                    z0: ArrayLike) -> np.ndarray:
     """Run the designed sensor: returns ``v_hat`` (T, p), sample ``t`` = the state ``z(t)``.
 
     Parameters
     ----------
-    u : (T, m); y : (T, l); z0 : (n_subsystems,) initial states.
+    design : SensorDesign
+        The result of :func:`design_virtual_sensor` for ``sys_``.
+    sys_ : LogicDynamicSystem
+        The plant (its ``phi`` evaluates the nonlinear terms).
+    u : numpy.ndarray, shape (T, m)
+        Inputs, one row per step (a (T,) vector for m = 1).
+    y : numpy.ndarray, shape (T, l)
+        Measured outputs (a (T,) vector for l = 1).
+    z0 : array_like, shape (n_subsystems,)
+        Initial states, in the order of ``design.subsystems``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (T, p): ``v_hat``, row ``t`` the subsystem states ``z(t)`` picked by ``design.estimates``.
     """
     u = np.atleast_2d(np.asarray(u, dtype=float).reshape(len(u), -1))
     y = np.atleast_2d(np.asarray(y, dtype=float).reshape(len(y), -1))
@@ -296,7 +360,18 @@ def simulate_design(design: SensorDesign, sys_: LogicDynamicSystem, u: np.ndarra
 
 
 def three_tank_logic_dynamic(prm: dict = THREE_TANK_PARAMS) -> LogicDynamicSystem:
-    """Section 5 matrices (seed_001.md §2.1, with B of assumption A3); ``V`` selects x1 and x3."""
+    """Section 5 matrices (seed_001.md §2.1, with B of assumption A3); ``V`` selects x1 and x3.
+
+    Parameters
+    ----------
+    prm : dict
+        Coefficients ``a1``..``a5`` (keys as in :data:`~pwas_hdl.systems.three_tank.THREE_TANK_PARAMS`).
+
+    Returns
+    -------
+    LogicDynamicSystem
+        n = 3, m = 2, l = 1 (``y = x2``), d = 1 (rho on x1), q = 3, p = 2.
+    """
     a1, a2, a3, a4, a5 = (prm[k] for k in ("a1", "a2", "a3", "a4", "a5"))
     return LogicDynamicSystem(
         A=[[1 - a1, a1, 0], [a1, 1 - a1 - a2, a2], [0, a2, 1 - a2 - a3]],
@@ -309,28 +384,76 @@ def three_tank_logic_dynamic(prm: dict = THREE_TANK_PARAMS) -> LogicDynamicSyste
     )
 
 
-def observer_map_27(u1, y, z1, prm: dict = THREE_TANK_PARAMS):
+def observer_map_27(u1: ArrayLike, y: ArrayLike, z1: ArrayLike, prm: dict = THREE_TANK_PARAMS) -> np.ndarray | float:
     """One step of sensor (27): ``z1(t+1) = a4 u1(t) - a1 sq(z1(t) - y(t)) + z1(t)`` (elementwise).
 
     Arguments in the order of a recurrent PWAS regressor (input, output, state); see
     :func:`pwas_hdl.fit.map_approximation.recurrent_sensor_from_map`.
+
+    Parameters
+    ----------
+    u1 : array_like, shape (N,) or scalar
+        Inflow into tank 1 at step t.
+    y : array_like, shape (N,) or scalar
+        Measured level ``x2(t)``.
+    z1 : array_like, shape (N,) or scalar
+        Sensor state ``z1(t)`` (estimate of ``x1(t)``, level units).
+    prm : dict
+        Coefficients ``a1`` and ``a4`` (keys as in :data:`~pwas_hdl.systems.three_tank.THREE_TANK_PARAMS`).
+
+    Returns
+    -------
+    numpy.ndarray or float
+        ``z1(t+1)``, the broadcast shape of the arguments (a numpy float for scalars).
     """
     a1, a4 = prm["a1"], prm["a4"]
     return a4 * u1 - a1 * signed_sqrt(z1 - y) + z1
 
 
-def observer_map_28(y, z2, prm: dict = THREE_TANK_PARAMS):
-    """One step of sensor (28): ``z2(t+1) = a2 sq(y(t) - z2(t)) - a3 sq(z2(t)) + z2(t)`` (elementwise)."""
+def observer_map_28(y: ArrayLike, z2: ArrayLike, prm: dict = THREE_TANK_PARAMS) -> np.ndarray | float:
+    """One step of sensor (28): ``z2(t+1) = a2 sq(y(t) - z2(t)) - a3 sq(z2(t)) + z2(t)`` (elementwise).
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or scalar
+        Measured level ``x2(t)``.
+    z2 : array_like, shape (N,) or scalar
+        Sensor state ``z2(t)`` (estimate of ``x3(t)``, level units).
+    prm : dict
+        Coefficients ``a2`` and ``a3`` (keys as in :data:`~pwas_hdl.systems.three_tank.THREE_TANK_PARAMS`).
+
+    Returns
+    -------
+    numpy.ndarray or float
+        ``z2(t+1)``, the broadcast shape of the arguments (a numpy float for scalars).
+    """
     a2, a3 = prm["a2"], prm["a3"]
     return a2 * signed_sqrt(y - z2) - a3 * signed_sqrt(z2) + z2
 
 
-def paper_sensors(u1: np.ndarray, y: np.ndarray, z0=(5.0, 2.0), prm: dict = THREE_TANK_PARAMS) -> np.ndarray:
+def paper_sensors(u1: np.ndarray, y: np.ndarray, z0: Sequence[float] = (5.0, 2.0),
+                  prm: dict = THREE_TANK_PARAMS) -> np.ndarray:
     """The printed sensors (27) and (28): ``[x1_hat, x3_hat]`` (T, 2), sample ``t`` = ``z(t)``.
 
     ``z1(t+1) = a4 u1(t) - a1 sq(z1(t) - y(t)) + z1(t)`` (27),
     ``z2(t+1) = a2 sq(y(t) - z2(t)) - a3 sq(z2(t)) + z2(t)`` (28); ``sq`` the signed root (A1),
     ``z(0) = (5, 2)`` (A4).
+
+    Parameters
+    ----------
+    u1 : numpy.ndarray, shape (T,) (any shape, flattened)
+        Inflow into tank 1, one value per step.
+    y : numpy.ndarray, shape (T,) (any shape, flattened)
+        Measured level ``x2``.
+    z0 : sequence of float, length 2
+        Initial sensor states ``(z1(0), z2(0))`` (level units).
+    prm : dict
+        Coefficients ``a1``..``a4`` (keys as in :data:`~pwas_hdl.systems.three_tank.THREE_TANK_PARAMS`).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (T, 2): ``[x1_hat, x3_hat]``, row ``t`` the states ``z(t)`` (row 0 is ``z0``).
     """
     u1 = np.asarray(u1, dtype=float).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1)
