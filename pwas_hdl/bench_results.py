@@ -124,6 +124,40 @@ def row(
 
     Non-finite ``value``/``std`` become ``None`` (an estimator that diverged: say why in
     ``config["note"]``).
+
+    Parameters
+    ----------
+    system : str
+        The plant (``three-tank``, ``switched-linear``, ...).
+    target : str
+        The estimated quantity (``x1``, ``soc``, ...).
+    estimator : str
+        What estimated it (``pwas``, ``paper``, ``hlnn``, ...).
+    stage : {"float", "bittrue", "rtl"}
+        Float model, bit-true fixed-point model or RTL simulation.
+    metric : {"rmse", "mse", "fit", "nrmse", "accuracy", "f1"}
+        The metric; ``value``, ``std`` and ``paper`` are in its units (the target's for ``rmse``,
+        squared for ``mse``, dimensionless for the others).
+    value : float or None
+        Mean over the runs (the value itself for one run).
+    std : float or None
+        Sample standard deviation over the runs (``ddof = 1``); None for one run.
+    runs : int
+        Number of runs (>= 1).
+    paper : float or None
+        The paper's printed figure for the same quantity, if any.
+    config : mapping, optional
+        Whatever distinguishes the row (made JSON-ready: numpy scalars and arrays to plain types).
+
+    Returns
+    -------
+    dict
+        The row: the ten keys above, ``value``/``std``/``paper`` as float or None.
+
+    Raises
+    ------
+    InputError
+        An unknown ``stage`` or ``metric``, or ``runs < 1``.
     """
     if stage not in STAGES:
         raise InputError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
@@ -159,9 +193,20 @@ def row_from_values(
 
     Parameters
     ----------
+    system, target, estimator, stage, metric : str
+        As in :func:`row`.
     values : sequence of float, length = number of runs
         One value per run. If any is not finite the row's value is ``None`` and
         ``config["n_nonfinite"]`` counts them.
+    paper : float or None
+        The paper's printed figure, as in :func:`row`.
+    config : mapping, optional
+        As in :func:`row` (copied, not changed).
+
+    Returns
+    -------
+    dict
+        The row of :func:`row` with ``runs = len(values)``.
     """
     v = np.asarray(list(values), dtype=float).reshape(-1)
     if v.size == 0:
@@ -178,7 +223,19 @@ def row_from_values(
 
 
 def environment(elapsed_s: float | None = None) -> dict:
-    """Python, platform and the versions of the packages that produce the numbers."""
+    """Python, platform and the versions of the packages that produce the numbers.
+
+    Parameters
+    ----------
+    elapsed_s : float, optional
+        Wall-clock time of the run in seconds, recorded rounded to 0.01 s (None: not recorded).
+
+    Returns
+    -------
+    dict
+        ``{"python": version, "platform": text, "packages": {name: version}}`` (installed packages
+        only), plus ``"elapsed_s"`` when given.
+    """
     pk: dict[str, str] = {}
     for name in _PACKAGES:
         try:
@@ -221,6 +278,18 @@ def extend_lists(into: dict, part: Mapping[Any, Sequence[Any]]) -> dict:
     """Append the per-run value lists of ``part`` to those of ``into`` (key by key; ``into`` returned).
 
     Merging the parts of :func:`map_runs` in input order gives the lists of the serial loop.
+
+    Parameters
+    ----------
+    into : dict
+        Key -> list of per-run values; extended in place (a missing key gets a new list).
+    part : mapping of key to sequence
+        One part's per-run values.
+
+    Returns
+    -------
+    dict
+        ``into``.
     """
     for k, v in part.items():
         into.setdefault(k, []).extend(v)
@@ -233,6 +302,16 @@ def execution_record(executor: Any = None) -> dict:
     ``{"kind": "serial" | "local-cluster" | "scheduler", "workers": N, "scheduler": address or None,
     "tool_versions": {...}}``; the tool versions come from every worker and are checked to be equal
     (:meth:`pwas_hdl.flow.executor.Executor.tool_versions` raises when they differ).
+
+    Parameters
+    ----------
+    executor : pwas_hdl.flow.executor.Executor, optional
+        What ran the tasks; ``None``: the serial executor.
+
+    Returns
+    -------
+    dict
+        The executor's description with its ``"tool_versions"``.
     """
     from pwas_hdl.flow.executor import Executor
 
@@ -261,6 +340,23 @@ def make_results(
         The spec assumptions applied (ids like ``seed_001.A1``).
     config : mapping, optional
         Bench-wide settings.
+    description : str, optional
+        One line on what the bench measures (omitted from the document when empty).
+    quick : bool
+        A reduced smoke run (``--quick``), not a result to quote.
+    elapsed_s : float, optional
+        Wall-clock time of the run in seconds, for :func:`environment`.
+
+    Returns
+    -------
+    dict
+        The document: ``format``, ``version``, ``bench``, ``description``, ``quick``, ``rows``,
+        ``assumptions``, ``config``, ``environment``.
+
+    Raises
+    ------
+    InputError
+        The document violates the schema.
     """
     doc: dict[str, Any] = {
         "format": RESULTS_FORMAT,
@@ -279,7 +375,18 @@ def make_results(
 
 
 def validate_results(doc: Any) -> None:
-    """Raise :class:`~pwas_hdl.errors.InputError` naming the first violation of the schema."""
+    """Raise :class:`~pwas_hdl.errors.InputError` naming the first violation of the schema.
+
+    Parameters
+    ----------
+    doc : Any
+        A parsed result document (anything: a non-dict is a violation too).
+
+    Raises
+    ------
+    InputError
+        With the JSON path (``rows/3/metric``) and the message of the first violation.
+    """
     import jsonschema
 
     validator = jsonschema.Draft202012Validator(schema())
@@ -291,13 +398,37 @@ def validate_results(doc: Any) -> None:
 
 
 def results_text(doc: dict) -> str:
-    """Validate ``doc`` and return the text of its file (indented JSON, no NaN)."""
+    """Validate ``doc`` and return the text of its file (indented JSON, no NaN).
+
+    Parameters
+    ----------
+    doc : dict
+        A result document (:func:`make_results`).
+
+    Returns
+    -------
+    str
+        The JSON text, one-space indent, ending in a newline.
+    """
     validate_results(doc)
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
 def write_results(path: str | Path, doc: dict) -> Path:
-    """Validate and write ``doc`` atomically (indented JSON, no NaN)."""
+    """Validate and write ``doc`` atomically (indented JSON, no NaN).
+
+    Parameters
+    ----------
+    path : str or Path
+        The result file.
+    doc : dict
+        A result document (:func:`make_results`).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return atomic_write_text(path, results_text(doc))
 
 
@@ -325,7 +456,23 @@ def write_json_and_markdown(outdir: str | Path, stem: str, doc: dict, md: str) -
 
 
 def load_results(path: str | Path) -> dict:
-    """Read and validate a result file."""
+    """Read and validate a result file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``pwas-hdl-bench-results`` JSON file.
+
+    Returns
+    -------
+    dict
+        The document.
+
+    Raises
+    ------
+    InputError
+        The file is not JSON or not a valid document.
+    """
     p = Path(path)
     try:
         doc = json.loads(p.read_text())
@@ -336,7 +483,21 @@ def load_results(path: str | Path) -> dict:
 
 
 def find_rows(doc: Mapping[str, Any], **match: Any) -> list[dict]:
-    """Rows whose fields equal every ``match`` item (``config`` keys via ``config={"k": v}``)."""
+    """Rows whose fields equal every ``match`` item (``config`` keys via ``config={"k": v}``).
+
+    Parameters
+    ----------
+    doc : mapping
+        A result document.
+    **match
+        Row field -> required value (``system="three-tank", metric="rmse"``); ``config`` a mapping of
+        config key -> required value.
+
+    Returns
+    -------
+    list of dict
+        The matching rows, in document order.
+    """
     cfg = match.pop("config", {}) or {}
     res = []
     for r in doc["rows"]:
@@ -355,7 +516,20 @@ def _fmt(v: float | None) -> str:
 
 
 def markdown_table(doc: Mapping[str, Any], config_keys: Sequence[str] = ()) -> str:
-    """All rows as one Markdown table (mean ± std, the paper's figure, chosen config keys)."""
+    """All rows as one Markdown table (mean ± std, the paper's figure, chosen config keys).
+
+    Parameters
+    ----------
+    doc : mapping
+        A result document.
+    config_keys : sequence of str
+        Config keys shown as extra columns after ``metric`` (empty cell for a row without the key).
+
+    Returns
+    -------
+    str
+        The table, one line per row, ending in a newline.
+    """
     keys = list(config_keys)
     head = ["system", "target", "estimator", "stage", "metric", *keys, "ours (mean ± std)", "runs", "paper"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * (len(head) - 3) + "---:|---:|---:|"]
@@ -505,6 +679,18 @@ def scratch_folder(prefix: str, keep: str | os.PathLike | None = None) -> Iterat
     folder in the system's temporary directory, removed when the block ends, also on an error or
     Ctrl-C: a benchmark writes its results to ``--outdir`` and leaves nothing else behind (the
     100-configuration RTL sweep used to leave up to 3 GB in ``/tmp`` per run).
+
+    Parameters
+    ----------
+    prefix : str
+        Name prefix of the temporary folder.
+    keep : str or path-like, optional
+        A folder to use and keep instead.
+
+    Yields
+    ------
+    Path
+        The work folder.
     """
     import shutil
     import tempfile
@@ -527,6 +713,18 @@ def script_main(main: Any, argv: Sequence[str] | None = None) -> int:
     Bad input (an :class:`~pwas_hdl.errors.InputError`, an OS error, a missing tool) gives one
     ``error:`` line and exit status 2 instead of a traceback; a bug a traceback and 3
     (:func:`pwas_hdl.cli.report_error`). ``main`` returning None counts as success.
+
+    Parameters
+    ----------
+    main : callable
+        The script's ``main``; called as ``main(argv)``, or ``main()`` when ``argv`` is None.
+    argv : sequence of str, optional
+        Command-line arguments (None: ``main`` reads ``sys.argv`` itself).
+
+    Returns
+    -------
+    int
+        The exit status: ``main``'s return value (0 for None), else 2 or 3 as above.
     """
     from pwas_hdl.cli import report_error
 
