@@ -10,7 +10,8 @@ a section is a title line over a line of dashes; an entry is ``name : type`` (or
 at the section's indentation, its description indented below.
 
 The same rules hold for the modules' own API (:data:`DOCUMENTED_PACKAGES`): every function and
-class that a submodule of those packages lists in its ``__all__`` and defines itself.
+class that a submodule of those packages lists in its ``__all__`` and defines itself, and for the
+single-file modules of :data:`DOCUMENTED_MODULES`.
 """
 
 from __future__ import annotations
@@ -106,23 +107,28 @@ _ITEMS = _public_callables()
 
 #: Packages whose submodules' ``__all__`` follow the standard too (not only what ``pwas_hdl`` exports).
 DOCUMENTED_PACKAGES = ("pwas_hdl.fit", "pwas_hdl.fixedpoint", "pwas_hdl.design", "pwas_hdl.io", "pwas_hdl.flow",
-                       "pwas_hdl.verify", "pwas_hdl.hdl")
+                       "pwas_hdl.verify", "pwas_hdl.hdl", "pwas_hdl.systems")
+
+#: Modules outside those packages whose ``__all__`` follows the standard too.
+DOCUMENTED_MODULES = ("pwas_hdl.bench_results",)
 
 
 def _module_api() -> dict[str, list[tuple[str, object, str, bool]]]:
     """Module name -> the :func:`_public_callables` of every function and class that a submodule of
-    :data:`DOCUMENTED_PACKAGES` lists in ``__all__`` and defines itself (re-exports are checked
-    where they are defined)."""
+    :data:`DOCUMENTED_PACKAGES`, or a module of :data:`DOCUMENTED_MODULES`, lists in ``__all__`` and
+    defines itself (re-exports are checked where they are defined)."""
     out = {}
+    module_names = list(DOCUMENTED_MODULES)
     for pkg_name in DOCUMENTED_PACKAGES:
         pkg = importlib.import_module(pkg_name)
-        for info in pkgutil.iter_modules(pkg.__path__, pkg_name + "."):
-            mod = importlib.import_module(info.name)
-            names = [(f"{mod.__name__}.{name}", getattr(mod, name)) for name in getattr(mod, "__all__", ())]
-            names = [(q, obj) for q, obj in names
-                     if (inspect.isfunction(obj) or inspect.isclass(obj)) and obj.__module__ == mod.__name__]
-            if names:
-                out[mod.__name__] = _public_callables(names)
+        module_names += [info.name for info in pkgutil.iter_modules(pkg.__path__, pkg_name + ".")]
+    for module_name in module_names:
+        mod = importlib.import_module(module_name)
+        names = [(f"{mod.__name__}.{name}", getattr(mod, name)) for name in getattr(mod, "__all__", ())]
+        names = [(q, obj) for q, obj in names
+                 if (inspect.isfunction(obj) or inspect.isclass(obj)) and obj.__module__ == mod.__name__]
+        if names:
+            out[mod.__name__] = _public_callables(names)
     return out
 
 
@@ -148,7 +154,8 @@ def test_the_module_walk_covers_the_packages():
     names = {q for items in _MODULE_ITEMS.values() for q, *_ in items}
     assert {"pwas_hdl.fit.regularized_lsq.check_fit_memory", "pwas_hdl.fit.regularized_lsq.plan_fit_memory",
             "pwas_hdl.fixedpoint.formats.FixedFormat.quantize", "pwas_hdl.fixedpoint.formats.quantize_input",
-            "pwas_hdl.flow.explore.format_table", "pwas_hdl.io.atomic.logs_kept"} <= names
+            "pwas_hdl.flow.explore.format_table", "pwas_hdl.io.atomic.logs_kept",
+            "pwas_hdl.systems.three_tank.simulate_three_tank", "pwas_hdl.bench_results.make_results"} <= names
 
 
 @pytest.mark.parametrize("qual, fn, doc, ctor", _ITEMS, ids=[q for q, *_ in _ITEMS])
