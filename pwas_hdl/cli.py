@@ -821,9 +821,14 @@ def generate(
                  + (f"|x_hat - float| <= {e['error_bound']['state']:.4g} where the modes agree" if e["error_bound"]["state"] is not None
                     else "no state bound (max_i ||A_i - K_i C_i||_inf >= 1)"))
             if e.get("state_may_saturate"):
-                _warn(f"warning: the states (s{e['formats']['state_bits']}.{e['formats']['state_frac']}) may saturate: the "
-                      "stated bounds do not hold in those samples (the output state_saturated flags them); leave "
-                      "--state-bits out for the width of the state bound")
+                sf = f"s{e['formats']['state_bits']}.{e['formats']['state_frac']}"
+                if getattr(gd.model, "state_bound_proven", True):  # a --state-bits below the proven bound's width
+                    _warn(f"warning: the states ({sf}) may saturate: the stated bounds do not hold in those samples (the "
+                          "output state_saturated flags them); leave --state-bits out for the width of the state bound")
+                else:  # no invariant box: the default width holds each mode's own bound only
+                    _warn(f"warning: the states ({sf}) may saturate: no bound of the switched observer's states holds over "
+                          "every mode sequence (the modes' A_i - K_i C_i have no common contraction; the width holds each "
+                          "mode's own bound); the output state_saturated flags those samples, where the stated bounds do not hold")
             _say(f"wrote {outdir}/ ({len(gd.files)} files)")
             return
         eb = man["error_bound"]

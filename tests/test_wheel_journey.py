@@ -265,3 +265,25 @@ def test_help_shows_repeatable_options_by_what_they_take(cmd, shown):
     assert res.exit_code == 0
     assert "list[str]" not in res.output
     assert shown in res.output, res.output
+
+
+def test_generate_does_not_tell_to_leave_out_a_state_bits_never_given(files, tmp_path):
+    """An estimator whose |F_i| have no common contraction may saturate at its default width (no
+    invariant box: the width holds each mode's own bound). The warning told the user to 'leave
+    --state-bits out', which they had done; it now says why the default width may saturate."""
+    import json
+
+    import numpy as np
+
+    doc = json.loads((files / "est.json").read_text())
+    f = [np.array([[0.5, 1.5], [0.0, 0.5]]), np.array([[0.5, 0.0], [1.5, 0.5]])]
+    c = [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
+    k = np.array([0.5, 0.5])
+    doc["modes"] = [{"A": (fi + np.outer(k, ci)).tolist(), "B": b, "C": ci.tolist(), "K": k.tolist()}
+                    for fi, ci, b in zip(f, c, ([1.0, 0.0], [0.0, 1.0]))]
+    (tmp_path / "e.json").write_text(json.dumps(doc))
+    res = invoke("generate", tmp_path / "e.json", "-o", tmp_path / "hw")
+    assert res.exit_code == 0, res.output
+    warn = [ln for ln in res.output.splitlines() if ln.startswith("warning:")]
+    assert len(warn) == 1 and "may saturate" in warn[0], res.output
+    assert "--state-bits out" not in warn[0] and "every mode sequence" in warn[0], warn[0]
