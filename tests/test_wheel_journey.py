@@ -287,3 +287,16 @@ def test_generate_does_not_tell_to_leave_out_a_state_bits_never_given(files, tmp
     warn = [ln for ln in res.output.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and "may saturate" in warn[0], res.output
     assert "--state-bits out" not in warn[0] and "every mode sequence" in warn[0], warn[0]
+
+
+def test_a_one_column_csv_with_a_quoted_semicolon_in_its_name_is_read(tmp_path):
+    """A comma CSV of one column whose quoted name holds ';' (a static one-input model's DATA) is valid:
+    the ';' check looked at the parsed name, not at the line, and refused it."""
+    from pwas_hdl.io.csv_table import read_csv
+
+    (tmp_path / "d.csv").write_text('"flow;l/min"\n1.5\n2.5\n')
+    t = read_csv(tmp_path / "d.csv")
+    assert t.header == ["flow;l/min"] and len(t.rows) == 2
+    (tmp_path / "e.csv").write_text("flow;level\n1.5;2\n")  # unquoted: still named as ';'-separated
+    with pytest.raises(Exception, match="separated by ';', not commas"):
+        read_csv(tmp_path / "e.csv")

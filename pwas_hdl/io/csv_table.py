@@ -274,8 +274,12 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
         if not any(header):
             raise InputError(f"{p}: line 1 is blank; the first line must be the header of column names")
         if len(header) == 1:  # another separator (a spreadsheet's ';' export, a tab-separated file)
-            for sep, called in ((";", "';'"), ("\t", "tabs")):
-                if len([h for h in header[0].split(sep) if h.strip()]) >= 2:
+            for sep, called in ((";", "';'"), ("\t", "tabs")):  # the line read with that separator (a quoted name keeps it)
+                try:
+                    alt = next(csv.reader(io.StringIO(text, newline=""), delimiter=sep), [])
+                except csv.Error:  # e.g. a quote that opens a field only with this separator
+                    alt = []
+                if len([h for h in alt if h.strip()]) >= 2:
                     raise InputError(f"{p}: the header {header[0]!r} is separated by {called}, not commas; pwas-hdl "
                                      "reads comma-separated values: save the file with ',' between the cells "
                                      "(and '.' as the decimal point)")
