@@ -62,13 +62,15 @@ def test_logs_kept_keeps_the_newest_logs_of_a_name(tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, "tempdir", str(tmpd))
     old = []
     for k in range(KEPT_LOGS + 5):
-        p = tmpd / f"pwas-sim-icarus-old{k:02d}.log"
+        p = tmpd / f"pwas-sim-icarus-old{k:02d}_ab.log"  # mkstemp's form: 8 characters of [a-z0-9_]
         p.write_text(str(k))
         os.utime(p, (1_000_000 + k, 1_000_000 + k))
         old.append(p)
-    others = [tmpd / "pwas-synth-ecp5-x1.log", tmpd / "pwas-sim-icarus-notes.txt", tmpd / "mine.log"]
+    others = [tmpd / "pwas-synth-ecp5-x1.log", tmpd / "pwas-sim-icarus-notes.txt", tmpd / "mine.log",
+              tmpd / "pwas-sim-icarus-run1.log", tmpd / "pwas-sim-icarus-MyRun001.log"]  # not mkstemp's names
     for p in others:
         p.write_text("not ours to remove")
+        os.utime(p, (1_000, 1_000))  # older than every kept log
     run = tmp_path / "run"
     run.mkdir()
     (run / "sim.log").write_text("the new log")
@@ -77,7 +79,7 @@ def test_logs_kept_keeps_the_newest_logs_of_a_name(tmp_path, monkeypatch):
             raise ToolFailed("the run failed", run / "sim.log")
     kept = Path(exc.value.log)
     assert kept.parent == tmpd and kept.read_text() == "the new log"
-    logs = sorted(p.name for p in tmpd.glob("pwas-sim-icarus-*.log"))
+    logs = sorted(p.name for p in tmpd.glob("pwas-sim-icarus-*.log") if p not in others)
     assert len(logs) == KEPT_LOGS and kept.name in logs
     assert [p.exists() for p in old] == [False] * 6 + [True] * (KEPT_LOGS - 1)  # the oldest went
     assert all(p.read_text() == "not ours to remove" for p in others)

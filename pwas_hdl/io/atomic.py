@@ -168,7 +168,7 @@ KEPT_LOGS = 20
 def _prune_kept_logs(name: str, keep: int) -> None:
     """Remove all but the newest ``keep`` of ``$TMPDIR/NAME-*.log`` (plain files of the pattern
     :func:`logs_kept` writes; a file that cannot be removed is left)."""
-    pat = re.compile(re.escape(name) + r"-[A-Za-z0-9_]+\.log")
+    pat = re.compile(re.escape(name) + r"-[a-z0-9_]{8}\.log")  # mkstemp's 8 random characters, nothing else
     found = []
     try:
         with os.scandir(tempfile.gettempdir()) as it:
