@@ -526,14 +526,15 @@ def fit(
             classify=classify,
         )
         if additive is not None and not bank:  # the parts are checked before the data are read into a fit
-            from pwas_hdl.fit.additive import parse_additive
+            from pwas_hdl.fit.additive import ADDITIVE_KINDS, parse_additive
             from pwas_hdl.fit.regressors import LagStructure
 
             dims = LagStructure(mu, my, len(ins) if mu else 0, len(outs) if my else 0).signal_of_dimension()
             parts = parse_additive(additive, dims)
             if len(parts) == 1 and len(parts[0]) == len(dims):  # one part over every regressor: nothing is dropped
                 _say(f"note: --additive {additive} gives one part over all {len(dims)} regressors, i.e. the full PWAS "
-                     "sensor; more lags (--my/--mu) give more parts")
+                     "sensor; " + ("more lags (--my/--mu) give more parts" if additive.strip() in ADDITIVE_KINDS
+                                   else "give parts over fewer regressors"))
         if sigma is not None and (workers is not None or scheduler is not None):  # accepted (checked), but idle
             _say(f"note: {'--workers' if workers is not None else '--scheduler'} runs the cross-validation folds; "
                  "with a given --sigma there are none, the fit runs in this process")

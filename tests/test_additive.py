@@ -313,3 +313,5 @@ def test_cli_additive_of_one_full_part_says_so(tmp_path, cli, spec, full):
     r = cli(["fit", str(tmp_path / "tr.csv"), "-o", str(tmp_path / "m.json"), "-y", "y", "-z", "z", "--my", "2",
              "-p", "3", "--sigma", "1e-3", "--additive", spec])
     assert (f"note: --additive {spec} gives one part over all 2 regressors, i.e. the full PWAS sensor" in r.stderr) is full
+    if full:  # the way out: more lags for a named rule, smaller parts for explicit ones
+        assert ("more lags (--my/--mu) give more parts" if spec == "pairs" else "give parts over fewer regressors") in r.stderr
