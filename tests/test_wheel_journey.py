@@ -215,7 +215,7 @@ def test_report_refuses_a_given_summary_of_another_design(files, tmp_path):
     top = json.loads((files / "hw" / "manifest.json").read_text())["top"]
     other = _summary(files, tmp_path, top + "_other")
     res = invoke("report", files / "hw", "--sim", other, "-o", tmp_path / "r.md")
-    assert_refused(res, "is a result for the top", "not this folder's")
+    assert_refused(res, "is a result for the top", "not this folder's", "leave it out of --sim")
     assert not (tmp_path / "r.md").exists()
     # the same top with another hash: an earlier version of this design, shown and marked stale
     same = _summary(files, tmp_path, top)

@@ -185,7 +185,8 @@ def _check_top(r: dict[str, Any], key: str, man: dict[str, Any], path: Path, com
     top = r.get(key)
     if top is not None and top != man["top"] and (given or not _is_stale(r, man)):
         raise InputError(f"{path} is a result for the top {json.dumps(top)}, not this folder's {man['top']}; "
-                         f"re-run `pwas-hdl {command}` on this folder or remove the file")
+                         f"re-run `pwas-hdl {command}` on this folder or "
+                         + ("leave it out of --sim" if given else "remove the file"))
 
 
 def collect_report(outdir: str | os.PathLike, sim_summaries: Sequence[str | os.PathLike] = ()) -> dict[str, Any]:
