@@ -907,7 +907,7 @@ def synth(
 def simulate(
     outdir: Annotated[Path, typer.Argument(metavar="OUTDIR", help="Folder written by `pwas-hdl generate` (core, sensor or recurrent design).")],
     data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV with the model's input/output columns (and optionally the target or TARGET_true).")],
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of the per-sample hardware outputs to write. Required.", show_default=False)] = None,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="CSV of the per-sample hardware outputs to write (default: OUTDIR/sim/SIMULATOR.csv, beside its summary where `report` reads it).", show_default=False)] = None,
     simulator: Annotated[Optional[str], typer.Option("--simulator", help="icarus or verilator (default: icarus; verilator with --engine native).")] = None,
     engine: Annotated[str, typer.Option("--engine", help="cocotb: the cocotb bench (reference, debug trace); native: a generated Verilator C++ bench (same checks and outputs, millions of samples/s; Verilator only).")] = "cocotb",
     summary: Annotated[Optional[Path], typer.Option("--json", help="JSON summary to write (default: the -o/--out file with the suffix .json).")] = None,
@@ -932,36 +932,56 @@ def simulate(
     recurrence; it adds estimate_of_row (row + lead), TARGET_float is the float recurrence, and
     --engine native is refused.
     """
+    from pwas_hdl.verify.simulation import resolve_simulator
+
+    made = None  # OUTDIR/sim, made for the default -o: removed again if the command ends with nothing in it
+    try:
+        with _user_errors():
+            _design_folder(outdir)
+            output = _merge("-o/--out", out, output=output_old)
+            if output is None:  # the design folder's results, where `report` reads them
+                from pwas_hdl.design.report import SIM_RESULTS
+
+                output = Path(outdir) / SIM_RESULTS / f"{resolve_simulator(simulator, engine)}.csv"
+                if not output.parent.exists():
+                    output.parent.mkdir()
+                    made = output.parent
+            _simulate(outdir, data, output, simulator, engine, summary, traj_col, stall, seed, build_dir, waves, blank_rows)
+    finally:
+        if made is not None and made.is_dir() and not any(made.iterdir()):
+            made.rmdir()
+
+
+def _simulate(outdir: Path, data: Path, output: Path, simulator: Optional[str], engine: str, summary: Optional[Path],
+              traj_col: Optional[str], stall: float, seed: int, build_dir: Optional[Path], waves: bool, blank_rows: str) -> None:
+    """The body of ``simulate``, with the CSV ``output`` decided."""
     from pwas_hdl.verify.simulation import simulate_data
 
-    with _user_errors():
-        _design_folder(outdir)
-        output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
-        traj_warning = None
-        if traj_col is None:  # a run index without --traj-col (a bad file is reported by the replay)
-            from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
+    traj_warning = None
+    if traj_col is None:  # a run index without --traj-col (a bad file is reported by the replay)
+        from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
 
-            try:
-                with open(data, encoding="utf-8-sig", errors="replace") as fh:
-                    head = [h.strip() for h in fh.readline().split(",")]
-                if any(n in head for n in TRAJECTORY_COLUMN_NAMES):
-                    traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), None, ())
-            except (OSError, ValueError):
-                pass
-        res = simulate_data(
-            outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
-            stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
-            progress=_say, blank_rows=blank_rows,
-        )
-        s = res["summary"]
-        stdout.print_json(json.dumps(s))
-        if traj_warning:
-            _warn(traj_warning)
-        _say(f"wrote {output} and {res['summary_path']}")
-        fails = s["checks"]["failures"]  # mismatches, testbench failures, latency / II against the manifest
-        if fails:
-            more = f" (and {len(fails) - 1} more, see {res['summary_path']})" if len(fails) > 1 else ""
-            raise CheckFailed(f"{fails[0]}{more}; the outputs are in {output}")
+        try:
+            with open(data, encoding="utf-8-sig", errors="replace") as fh:
+                head = [h.strip() for h in fh.readline().split(",")]
+            if any(n in head for n in TRAJECTORY_COLUMN_NAMES):
+                traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), None, ())
+        except (OSError, ValueError):
+            pass
+    res = simulate_data(
+        outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
+        stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
+        progress=_say, blank_rows=blank_rows,
+    )
+    s = res["summary"]
+    stdout.print_json(json.dumps(s))
+    if traj_warning:
+        _warn(traj_warning)
+    _say(f"wrote {output} and {res['summary_path']}")
+    fails = s["checks"]["failures"]  # mismatches, testbench failures, latency / II against the manifest
+    if fails:
+        more = f" (and {len(fails) - 1} more, see {res['summary_path']})" if len(fails) > 1 else ""
+        raise CheckFailed(f"{fails[0]}{more}; the outputs are in {output}")
 
 
 @app.command("export-testbench")

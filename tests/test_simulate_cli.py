@@ -282,3 +282,26 @@ def test_simulate_failure_names_a_log_that_still_exists(folders, tmp_path, monke
     log = re.search(r"log: (\S+)$", lines[0]).group(1)
     assert (tmp_path / "tmp") in Path(log).parents and Path(log).read_text() == "the simulator's own words\n", lines[0]
     assert not out.exists() and not [p for p in (tmp_path / "tmp").iterdir() if p.is_dir()]  # the work folder is gone
+
+
+@pytest.mark.rtl
+def test_simulate_writes_into_the_design_folder_by_default(folders, sim_cache, tmp_path):
+    """Without -o the results go to OUTDIR/sim/SIMULATOR.csv / .json, where `report` reads them (-o was
+    required, and OUTDIR/sim had to be made by hand); a refused run leaves no empty sim/ behind."""
+    import shutil
+
+    hw = tmp_path / "sensor"
+    shutil.copytree(folders / "sensor", hw)
+    assert not (hw / "sim").exists()
+    wrong = tmp_path / "wrong.csv"
+    write_csv(wrong, {"a": np.arange(5.0), "y0": np.arange(5.0)})
+    res = runner.invoke(app, ["simulate", str(hw), str(wrong), "--build-dir", str(sim_cache)])
+    assert res.exit_code == 2 and "no column named 'u0'" in res.output, res.output
+    assert not (hw / "sim").exists()
+    res = runner.invoke(app, ["simulate", str(hw), str(folders / "one.csv"), "--build-dir", str(sim_cache)])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in (hw / "sim").iterdir()) == ["icarus.csv", "icarus.json"]
+    res = runner.invoke(app, ["report", str(hw), "--json", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    sims = json.loads((tmp_path / "r.json").read_text())["simulation"]
+    assert [s["simulator"] for s in sims] == ["icarus"] and sims[0]["mismatches"] == 0

@@ -18,10 +18,13 @@ from pwas_hdl.design.manifest import load_manifest
 from pwas_hdl.errors import InputError, fault_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
-__all__ = ["collect_report", "report_markdown", "stale_results", "STALE_NOTE"]
+__all__ = ["collect_report", "report_markdown", "stale_results", "STALE_NOTE", "SIM_RESULTS"]
 
 #: What the report says of a result made for another design than the folder's.
 STALE_NOTE = "stale: made for an earlier design"
+#: The subfolder of a design folder whose ``*.json`` simulation summaries ``report`` reads (where
+#: ``simulate`` writes by default: ``OUTDIR/sim/SIMULATOR.csv`` and ``.json``).
+SIM_RESULTS = "sim"
 
 
 def _is_stale(result: dict[str, Any], manifest: dict[str, Any]) -> bool:
@@ -266,7 +269,7 @@ def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dic
 
 def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit: dict[str, Any],
                      sim_summaries: Sequence[str | os.PathLike]) -> dict[str, Any]:
-    paths = sorted((out / "sim").glob("*.json")) if (out / "sim").is_dir() else []
+    paths = sorted((out / SIM_RESULTS).glob("*.json")) if (out / SIM_RESULTS).is_dir() else []
     n_folder = len(paths)
     paths += [Path(p) for p in sim_summaries]
     sims = []

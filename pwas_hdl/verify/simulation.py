@@ -1178,12 +1178,7 @@ def simulate_data(
     from pwas_hdl.io.csv_table import Table, check_trajectory_column, format_csv, read_csv, split_trajectories
 
     say = progress or (lambda msg: None)
-    if engine not in ENGINES:
-        raise InputError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
-    if simulator is None:
-        simulator = "verilator" if engine == "native" else "icarus"
-    if simulator not in SIMULATORS:
-        raise InputError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+    simulator = resolve_simulator(simulator, engine)
     if not 0.0 <= stall <= MAX_STALL:
         raise InputError(f"--stall must be in [0, {MAX_STALL}] (the probability of a bubble / of backpressure per cycle; "
                          f"the benches' cycle limit covers stalls up to {MAX_STALL}), got {stall}")
@@ -1457,6 +1452,36 @@ def _is_estimator_folder(outdir: str | os.PathLike) -> bool:
         return load_manifest(outdir)["design"] == "estimator"
     except (OSError, ValueError, KeyError, TypeError):
         return False
+
+
+def resolve_simulator(simulator: str | None, engine: str = "cocotb") -> str:
+    """The simulator ``simulate`` runs: ``simulator``, or by default ``icarus`` (``verilator`` with
+    ``engine="native"``).
+
+    Parameters
+    ----------
+    simulator : str, optional
+        ``icarus`` or ``verilator``; None for the default.
+    engine : str
+        ``cocotb`` or ``native``.
+
+    Returns
+    -------
+    str
+        The simulator's name.
+
+    Raises
+    ------
+    InputError
+        An unknown ``engine`` or ``simulator``.
+    """
+    if engine not in ENGINES:
+        raise InputError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if simulator is None:
+        simulator = "verilator" if engine == "native" else "icarus"
+    if simulator not in SIMULATORS:
+        raise InputError(f"--simulator must be one of {', '.join(SIMULATORS)}, got {simulator!r}")
+    return simulator
 
 
 def waves_folder(output: str | os.PathLike) -> Path:
