@@ -38,7 +38,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from pwas_hdl import __version__
 from pwas_hdl.errors import CheckFailed, InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.io.atomic import OutputSet, check_output_path, install_termination_handler
-from pwas_hdl.io.csv_table import check_trajectory_column, format_csv, read_csv, select_signals, split_trajectories
+from pwas_hdl.io.csv_table import check_trajectory_column, check_trajectory_lengths, format_csv, read_csv, select_signals, split_trajectories
 from pwas_hdl.limits import MAX_NOISE, MAX_SAMPLES, MAX_SIGMA_CANDIDATES, MAX_SWEEP_POINTS, check_limit, check_values
 
 #: ``-h`` as well as ``--help`` on every command (sub-commands inherit the setting).
@@ -102,8 +102,10 @@ def _trajectory_warning(table: Any, traj_col: str | None, used: Sequence[str]) -
     """The warning line when DATA has a run index (``run``, ...) but no ``--traj-col``: its runs are then
     read as one trajectory (:func:`pwas_hdl.io.csv_table.unused_trajectory_column`). Printed by the
     command once its work succeeded (bad input stays one ``error:`` line)."""
-    from pwas_hdl.io.csv_table import unused_trajectory_column
+    from pwas_hdl.io.csv_table import split_runs, unused_trajectory_column
 
+    if traj_col is not None:  # a run label that comes back after another run: read as runs of their own
+        return split_runs(table, traj_col)
     hit = unused_trajectory_column(table, traj_col, used)
     if hit is None:
         return None
@@ -450,6 +452,11 @@ def fit(
             table.column_index(traj_col)
         traj_warning = _trajectory_warning(table, traj_col, [*ins, *outs, *tgts])
         use_u = bool(mu or (bank and ins))
+        from pwas_hdl.limits import MAX_REGRESSORS
+
+        # a run shorter than the lags: named with its file lines (too many regressors: the limit's message first)
+        if not bank and max(mu, my) > 1 and len(ins) * mu + len(outs) * my <= MAX_REGRESSORS:
+            check_trajectory_lengths(table, traj_col, max(mu, my))
         u = select_signals(table, ins, traj_col) if use_u else None
         y = select_signals(table, outs, traj_col) if (my or bank) else None
         z = select_signals(table, tgts, traj_col)
@@ -566,9 +573,84 @@ def fit(
 
         for line in solve_warnings(getattr(model, "solve_", None), model.sigma_):
             _warn(line)
+        if not mz:
+            for line in _training_data_warnings(model, table, traj_col, u, y, z, dom is not None, classify):
+                _warn(line)
         if traj_warning:
             _warn(traj_warning)
         _say(f"wrote {output}")
+
+
+def _training_data_warnings(model: Any, table: Any, traj_col: str | None, u: Any, y: Any, z: Any,
+                            given_domain: bool, classify: bool) -> list[str]:
+    """Warnings about the training data seen through the fitted sensor: training regressors outside a
+    given ``--domain`` (clamped: the sensor is fitted on values the data do not have), and a few target
+    samples far off the fit (outliers) that carry most of the squared error -- the training RMSE, the
+    sigma the CV picks and the default hardware word lengths (sized by that RMSE) follow them (found
+    without the fit: a sample far from the median of its neighbours in time)."""
+    out: list[str] = []
+    if given_domain:
+        _, flags = model.predict(u, y, return_flags=True)
+    if given_domain and flags.any():
+        out.append(f"warning: {int(flags.sum())} of {flags.size} training regressors are outside --domain and were "
+                   "clamped to its edge; widen --domain to cover the data (or leave it out: the data box times --gamma)")
+    if classify:
+        return out
+    # outliers of a target: samples far from the median of their neighbours in time (a Hampel filter: steps
+    # and slow changes pass), measured in robust standard deviations of those differences over the file
+    spans = split_trajectories(table, traj_col)
+    for i, t in enumerate(model.signal_names()[2]):
+        dev, at, val = [], [], []
+        for sl, zt in zip(spans, z):
+            v = np.asarray(zt, float)[:, i]
+            if v.size < 3:
+                continue
+            pad = np.pad(v, 3, mode="edge")
+            med = np.median(np.lib.stride_tricks.sliding_window_view(pad, 7), axis=1)
+            dev.append(v - med)
+            at.append(np.arange(sl.start, sl.stop))
+            val.append(v)
+        if not dev:
+            continue
+        d, at_rows, zv = np.concatenate(dev), np.concatenate(at), np.concatenate(val)
+        off = np.abs(zv - np.median(zv))
+        spread = 1.4826 * float(np.median(off))  # robust standard deviation of the target
+        # far from the neighbours against their noise (10 robust sigmas of d) and against the signal (3 of z):
+        # a smooth trajectory has d = 0 nearly everywhere, so d's own scale alone would flag ordinary noise
+        limit = max(10 * 1.4826 * float(np.median(np.abs(d))), 3 * spread)
+        if not limit > 0:
+            continue
+        far = np.abs(d) > limit
+        if not far.any() or far.all():
+            continue
+        # and apart from the rest of the values (twice as far from the median as any other): a heavy-tailed
+        # target (y**2 of a noise) has its large values continue the tail, an outlier stands alone
+        far = np.flatnonzero(far & (off > 2 * float(off[~far].max())))
+        if far.size == 0 or far.size > max(1, d.size // 100):
+            continue
+        lines = ", ".join(str(table._line(int(at_rows[k]))) for k in far[:5]) + (", ..." if far.size > 5 else "")
+        out.append(f"warning: {far.size} training samples of {t} (lines {lines}) are outliers, off the median of their "
+                   f"neighbours in time by up to {float(np.abs(d[far]).max()):.4g} (the robust spread of {t} is "
+                   f"{spread:.4g}): the fit, "
+                   "the training RMSE, the sigma the CV picks and the default hardware word lengths (sized by that RMSE) "
+                   "follow them; check those samples and remove or correct them")
+    return out
+    for i, t in enumerate(model.signal_names()[2]):
+        r = zhat[:, i] - ztrue[:, i]
+        scale = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        if not scale > 0:
+            continue
+        far = np.flatnonzero(np.abs(r) > 10 * scale)
+        sse = float(np.sum(r * r))
+        share = float(np.sum(r[far] ** 2)) / sse if sse > 0 else 0.0
+        if far.size == 0 or far.size > max(1, rows.size // 100) or share < 0.5:
+            continue
+        lines = ", ".join(str(table._line(int(rows[k]))) for k in far[:5]) + (", ..." if far.size > 5 else "")
+        out.append(f"warning: {far.size} training samples of {t} (lines {lines}) are outliers, more than 10 robust "
+                   f"standard deviations off the fit, and carry {100 * share:.0f}% of its squared error: the training "
+                   "RMSE, the sigma the CV picks and the default hardware word lengths (sized by that RMSE) follow "
+                   "them; check those samples and remove or correct them")
+    return out
 
 
 @app.command("fit-map")
@@ -680,6 +762,9 @@ def predict(
         classifier = getattr(model, "classifier_", None)
         check_trajectory_column(table, traj_col, [*ins, *outs], [classifier["target"]] if classifier else tgts)
         traj_warning = _trajectory_warning(table, traj_col, [*ins, *outs])
+        if model.memory > 1:  # a run shorter than the lags: named with its file lines
+            check_trajectory_lengths(table, traj_col, model.memory, "the observer bank needs"
+                                     if getattr(model, "front_end_", None) is not None else "the lags need")
         u = select_signals(table, ins, traj_col) if model.n_inputs else None
         y = select_signals(table, outs, traj_col) if model.n_outputs else None
         lags = model.lags_
@@ -958,6 +1043,11 @@ def _simulate(outdir: Path, data: Path, output: Path, simulator: Optional[str], 
     from pwas_hdl.verify.simulation import simulate_data
 
     traj_warning = None
+    if traj_col is not None:  # a run label that comes back after another run (a bad file is reported by the replay)
+        try:
+            traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), traj_col, ())
+        except (OSError, ValueError):
+            pass
     if traj_col is None:  # a run index without --traj-col (a bad file is reported by the replay)
         from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
 
@@ -975,6 +1065,10 @@ def _simulate(outdir: Path, data: Path, output: Path, simulator: Optional[str], 
     )
     s = res["summary"]
     stdout.print_json(json.dumps(s))
+    clamped, estimates = s.get("out_of_range"), s.get("samples")
+    if isinstance(clamped, int) and clamped > 0:  # as predict warns of out_of_domain: the same regressors, clamped
+        _warn(f"warning: {clamped} of {estimates} estimates had a regressor outside the domain (clamped; column "
+              f"out_of_range of {output}): there the sensor extrapolates from the domain's edge")
     if traj_warning:
         _warn(traj_warning)
     _say(f"wrote {output} and {res['summary_path']}")

@@ -183,8 +183,8 @@ def test_simulate_short_trajectory_gives_file_lines_and_hint(files, tmp_path):
     rows = [lines[0] + ",run"] + [ln + (",0" if i == 0 else ",1") for i, ln in enumerate(lines[1:40])]
     (tmp_path / "sh.csv").write_text("\n".join(rows) + "\n")
     res = invoke("simulate", files / "g", tmp_path / "sh.csv", "-o", tmp_path / "s.csv", "--traj-col", "run")
-    assert_refused(res, "sh.csv: the trajectory on lines 2..2 has 1 samples", "the lags need 2",
-                   "give trajectories of at least 2 rows", "--traj-col")
+    assert_refused(res, "sh.csv: run '0' (column run) on line 2 has 1 samples", "the lags need 2",
+                   "drop that run or give it at least 2 rows")
 
 
 def test_manifest_of_the_wrong_shape_names_the_key_not_the_exception(files):

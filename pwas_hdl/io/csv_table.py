@@ -88,7 +88,7 @@ class Table:
     def _line(self, r: int) -> int:
         return self.lines[r] if r < len(self.lines) else r + 2
 
-    def short_trajectory(self, sl: slice, need: int, what: str) -> InputError:
+    def short_trajectory(self, sl: slice, need: int, what: str, traj_column: str | None = None) -> InputError:
         """The error for the trajectory ``sl`` of this file, shorter than the ``need`` samples ``what`` needs.
 
         Parameters
@@ -99,15 +99,28 @@ class Table:
             Samples (rows) the trajectory would need.
         what : str
             What needs them, worded to go before the number (e.g. ``"the lags need"``).
+        traj_column : str or None
+            The trajectory column: the run's label is named, and a label whose rows are not
+            consecutive (it comes back after another run) is said to be split, with the fix (sort by run).
 
         Returns
         -------
         InputError
             The error to raise, naming the file's line numbers of the trajectory.
         """
-        return InputError(f"{self.path}: the trajectory on lines {self._line(sl.start)}..{self._line(sl.stop - 1)} has "
-                          f"{sl.stop - sl.start} samples; {what} {need}; give trajectories of at least {need} rows "
-                          "(or check --traj-col)")
+        lines = f"lines {self._line(sl.start)}..{self._line(sl.stop - 1)}" if sl.stop - sl.start > 1 else \
+            f"line {self._line(sl.start)}"
+        if traj_column is None:
+            return InputError(f"{self.path}: the trajectory on {lines} has {sl.stop - sl.start} samples; {what} {need}; "
+                              f"give trajectories of at least {need} rows (or check --traj-col)")
+        label = self.text(traj_column)[sl.start]
+        blocks = len(_label_blocks(self, traj_column)[label])
+        fix = (f"the rows of run {label!r} are not consecutive (it is split into {blocks} separate blocks, each read as "
+               f"a run of its own): sort the rows by {traj_column} (each run's rows in time order), or give each "
+               "experiment a label of its own") if blocks > 1 else \
+            f"drop that run or give it at least {need} rows" + (", or use fewer lags (--mu, --my)" if "lags" in what else "")
+        return InputError(f"{self.path}: run {label!r} (column {traj_column}) on {lines} has {sl.stop - sl.start} "
+                          f"samples; {what} {need}; {fix}")
 
     def numeric(self, names: Sequence[str]) -> np.ndarray:
         """The named columns as a float array.
@@ -380,6 +393,52 @@ def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
         cuts |= {i for i in range(1, n) if labels[i] != labels[i - 1]}
     edges = [0] + sorted(cuts) + [n]
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _label_blocks(table: Table, traj_column: str) -> dict[str, list[slice]]:
+    """Each label of ``traj_column`` -> its blocks of consecutive rows, in row order."""
+    labels = table.text(traj_column)
+    blocks: dict[str, list[slice]] = {}
+    edges = [0] + [i for i in range(1, len(table)) if labels[i] != labels[i - 1]] + [len(table)]
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b > a:
+            blocks.setdefault(labels[a], []).append(slice(a, b))
+    return blocks
+
+
+def check_trajectory_lengths(table: Table, traj_column: str | None, need: int, what: str = "the lags need") -> None:
+    """Refuse a trajectory of fewer than ``need`` rows, naming the file, its lines and its run
+    (:meth:`Table.short_trajectory`).
+
+    Raises
+    ------
+    InputError
+        The first trajectory shorter than ``need`` rows.
+    """
+    for sl in split_trajectories(table, traj_column):
+        if sl.stop - sl.start < need:
+            raise table.short_trajectory(sl, need, what, traj_column)
+
+
+def split_runs(table: Table, traj_column: str | None) -> str | None:
+    """The warning when a run label comes back after another run: its rows are read as separate runs.
+
+    Returns
+    -------
+    str or None
+        ``warning: ...`` naming the first such label, its blocks (file lines) and the fix; None when every
+        label is one block of consecutive rows (or there is no trajectory column).
+    """
+    if traj_column is None:
+        return None
+    split = [(lab, sls) for lab, sls in _label_blocks(table, traj_column).items() if len(sls) > 1]
+    if not split:
+        return None
+    lab, sls = split[0]
+    where = ", ".join(f"{table._line(s.start)}..{table._line(s.stop - 1)}" for s in sls[:4]) + (", ..." if len(sls) > 4 else "")
+    more = f" ({len(split) - 1} more run(s) likewise)" if len(split) > 1 else ""
+    return (f"warning: run {lab!r} of column {traj_column} comes back after another run: its {len(sls)} separate blocks "
+            f"(lines {where}) are read as runs of their own{more}; sort the rows by {traj_column} if a run is one experiment")
 
 
 def check_trajectory_column(table: Table, traj_column: str | None, signals: Sequence[str] = (),

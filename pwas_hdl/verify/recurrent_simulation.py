@@ -104,7 +104,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     segs = []  # per trajectory: words, expected words, bit-true codes, flags, float, data rows
     for sl in split_trajectories(table, traj_col):
         if sl.stop - sl.start < m_hist:
-            raise table.short_trajectory(sl, m_hist, "the lags need")
+            raise table.short_trajectory(sl, m_hist, "the lags need", traj_col)
         u = u_all[sl] if u_all is not None else None
         y = y_all[sl] if y_all is not None else None
         codes = rm.quantize_signals(u, y)

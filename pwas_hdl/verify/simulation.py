@@ -1241,7 +1241,7 @@ def simulate_data(
     for sl in slices:
         if design.bank is not None:
             if sl.stop - sl.start < m_hist:
-                raise table.short_trajectory(sl, m_hist, "the observer bank needs")
+                raise table.short_trajectory(sl, m_hist, "the observer bank needs", traj_col)
             u = u_all[sl] if u_all is not None else None
             codes, _ = design.bank.quantize_signals(u, y_all[sl])
             segs.append(segment(design, codes))
@@ -1250,7 +1250,7 @@ def simulate_data(
             continue
         t_len = sl.stop - sl.start
         if t_len < m_hist:
-            raise table.short_trajectory(sl, m_hist, "the lags need")
+            raise table.short_trajectory(sl, m_hist, "the lags need", traj_col)
         u = u_all[sl] if u_all is not None else None
         y = y_all[sl] if y_all is not None else None
         xi = lags.build(u, y)  # physical regressors (float model input)
