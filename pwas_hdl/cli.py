@@ -574,83 +574,14 @@ def fit(
         for line in solve_warnings(getattr(model, "solve_", None), model.sigma_):
             _warn(line)
         if not mz:
-            for line in _training_data_warnings(model, table, traj_col, u, y, z, dom is not None, classify):
+            from pwas_hdl.fit.training_data import training_data_warnings
+
+            for line in training_data_warnings(model, table, traj_col, u, y, z, given_domain=dom is not None,
+                                               classify=classify):
                 _warn(line)
         if traj_warning:
             _warn(traj_warning)
         _say(f"wrote {output}")
-
-
-def _training_data_warnings(model: Any, table: Any, traj_col: str | None, u: Any, y: Any, z: Any,
-                            given_domain: bool, classify: bool) -> list[str]:
-    """Warnings about the training data seen through the fitted sensor: training regressors outside a
-    given ``--domain`` (clamped: the sensor is fitted on values the data do not have), and a few target
-    samples far off the fit (outliers) that carry most of the squared error -- the training RMSE, the
-    sigma the CV picks and the default hardware word lengths (sized by that RMSE) follow them (found
-    without the fit: a sample far from the median of its neighbours in time)."""
-    out: list[str] = []
-    if given_domain:
-        _, flags = model.predict(u, y, return_flags=True)
-    if given_domain and flags.any():
-        out.append(f"warning: {int(flags.sum())} of {flags.size} training regressors are outside --domain and were "
-                   "clamped to its edge; widen --domain to cover the data (or leave it out: the data box times --gamma)")
-    if classify:
-        return out
-    # outliers of a target: samples far from the median of their neighbours in time (a Hampel filter: steps
-    # and slow changes pass), measured in robust standard deviations of those differences over the file
-    spans = split_trajectories(table, traj_col)
-    for i, t in enumerate(model.signal_names()[2]):
-        dev, at, val = [], [], []
-        for sl, zt in zip(spans, z):
-            v = np.asarray(zt, float)[:, i]
-            if v.size < 3:
-                continue
-            pad = np.pad(v, 3, mode="edge")
-            med = np.median(np.lib.stride_tricks.sliding_window_view(pad, 7), axis=1)
-            dev.append(v - med)
-            at.append(np.arange(sl.start, sl.stop))
-            val.append(v)
-        if not dev:
-            continue
-        d, at_rows, zv = np.concatenate(dev), np.concatenate(at), np.concatenate(val)
-        off = np.abs(zv - np.median(zv))
-        spread = 1.4826 * float(np.median(off))  # robust standard deviation of the target
-        # far from the neighbours against their noise (10 robust sigmas of d) and against the signal (3 of z):
-        # a smooth trajectory has d = 0 nearly everywhere, so d's own scale alone would flag ordinary noise
-        limit = max(10 * 1.4826 * float(np.median(np.abs(d))), 3 * spread)
-        if not limit > 0:
-            continue
-        far = np.abs(d) > limit
-        if not far.any() or far.all():
-            continue
-        # and apart from the rest of the values (twice as far from the median as any other): a heavy-tailed
-        # target (y**2 of a noise) has its large values continue the tail, an outlier stands alone
-        far = np.flatnonzero(far & (off > 2 * float(off[~far].max())))
-        if far.size == 0 or far.size > max(1, d.size // 100):
-            continue
-        lines = ", ".join(str(table._line(int(at_rows[k]))) for k in far[:5]) + (", ..." if far.size > 5 else "")
-        out.append(f"warning: {far.size} training samples of {t} (lines {lines}) are outliers, off the median of their "
-                   f"neighbours in time by up to {float(np.abs(d[far]).max()):.4g} (the robust spread of {t} is "
-                   f"{spread:.4g}): the fit, "
-                   "the training RMSE, the sigma the CV picks and the default hardware word lengths (sized by that RMSE) "
-                   "follow them; check those samples and remove or correct them")
-    return out
-    for i, t in enumerate(model.signal_names()[2]):
-        r = zhat[:, i] - ztrue[:, i]
-        scale = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-        if not scale > 0:
-            continue
-        far = np.flatnonzero(np.abs(r) > 10 * scale)
-        sse = float(np.sum(r * r))
-        share = float(np.sum(r[far] ** 2)) / sse if sse > 0 else 0.0
-        if far.size == 0 or far.size > max(1, rows.size // 100) or share < 0.5:
-            continue
-        lines = ", ".join(str(table._line(int(rows[k]))) for k in far[:5]) + (", ..." if far.size > 5 else "")
-        out.append(f"warning: {far.size} training samples of {t} (lines {lines}) are outliers, more than 10 robust "
-                   f"standard deviations off the fit, and carry {100 * share:.0f}% of its squared error: the training "
-                   "RMSE, the sigma the CV picks and the default hardware word lengths (sized by that RMSE) follow "
-                   "them; check those samples and remove or correct them")
-    return out
 
 
 @app.command("fit-map")
