@@ -281,7 +281,12 @@ def test_generated_additive_verilog_is_lint_clean(small_sensor, tmp_path):
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.flow.toolchain import lint_verilog
 
-    for design, opts in (("sensor", {}), ("core", {"pipeline": "max", "rounding": "truncate"})):
+    for design, opts in (("sensor", {}), ("core", {"pipeline": "max", "rounding": "truncate"}),
+                         # the parts' other memories, pipelines, input scale, ports and odd word lengths
+                         ("sensor", {"pipeline": "short", "memory": "corner", "input_scale": "exact", "ports": "amaranth"}),
+                         ("core", {"pipeline": "max-lut", "memory": "replicated", "input_bits": 7, "weight_bits": 9,
+                                   "output_bits": 11, "overflow": "saturate"}),
+                         ("sensor", {"pipeline": "min", "input_bits": 9, "output_bits": 9, "overflow": "saturate"})):
         gd = build_design(small_sensor, design=design, **opts)
         path = tmp_path / f"{gd.top}.v"
         path.write_text(gd.files[f"{gd.top}.v"])
