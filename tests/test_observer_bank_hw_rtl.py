@@ -75,6 +75,23 @@ def test_verilog_lint_clean(bank_sensor, pv_small, tmp_path):
         assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
 
 
+@pytest.mark.rtl
+@pytest.mark.parametrize("opts", [
+    dict(pipeline="min", memory="corner", ports="amaranth"),
+    dict(pipeline="max-lut", memory_init="readmemh", input_bits=7, state_bits=10),
+    dict(pipeline="short", memory="replicated", rounding="truncate"),
+], ids=["min-corner-amaranth", "maxlut-readmemh-7bit-state10", "short-replicated-truncate"])
+def test_option_sets_lint_clean_and_byte_identical(bank_sensor, tmp_path, opts):
+    """The bank sensor behind other pipelines, memories, ports and widths than the default build the lint
+    tests above use: clean under verilator -Wall and byte-identical when built again."""
+    from pwas_hdl.flow.toolchain import lint_verilog
+
+    g = generate(bank_sensor, tmp_path / "d", design="sensor", **opts)
+    assert build_design(bank_sensor, design="sensor", **opts).files == g.files
+    r = lint_verilog(tmp_path / "d" / f"{g.top}.v", g.top)
+    assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
+
+
 CONFIGS = {
     "n3-m5-deadbeat-11b": dict(n_models=3, observer="deadbeat", features="11b", order=5),
     "n2-m3-kalman-11bsq-saturating": dict(n_models=2, observer="kalman:1", features="11b-sq", order=3, state_bits=14),
