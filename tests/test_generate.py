@@ -287,6 +287,8 @@ OPTION_CASES = {
     "core-odd-widths-max-amaranth": dict(design="core", input_bits=7, weight_bits=9, weight_frac=-5, output_bits=11,
                                          pipeline="max", ports="amaranth"),
     "sensor-goal-latency": dict(design="sensor", goal="latency"),  # the goal's replicated memory (p = 3)
+    "core-serial-readmemh-min-amaranth": dict(design="core", architecture="serial", memory_init="readmemh",
+                                              pipeline="min", ports="amaranth"),
 }
 
 
