@@ -59,7 +59,8 @@ def test_csv_nan_or_inf_cell(cell, tmp_path):
 def test_csv_cell_not_a_number(cell, tmp_path):
     text = f'u,y\n1,2\n3,"{cell}"\n'
     table = read_csv(_write(tmp_path / "d.csv", text))
-    with pytest.raises(ValueError, match=r"line 3, column 'y': .* is not a number"):
+    want = r"line 3, column 'y' is empty \(a missing sample\)" if cell == "" else r"line 3, column 'y': .* is not a number"
+    with pytest.raises(ValueError, match=want):
         table.numeric(["y"])
 
 

@@ -410,3 +410,12 @@ def test_a_target_too_small_for_fixed_point_says_to_rescale_it(tmp_path):
     assert_refused(invoke("generate", tmp_path / "m.json", "-o", tmp_path / "g"), "the default --weight-frac (weight_frac) = ",
                    "the target's values are too small for fixed point", "rescale the target column")
     assert not (tmp_path / "g").exists()
+
+
+@pytest.mark.parametrize("text", ["y,z\n1,2\n,3\n2,4\n", "y,z\n1,2\n2, \n2,4\n"])
+def test_an_empty_cell_is_called_a_missing_sample_with_the_fix(tmp_path, text):
+    """An empty cell read as "'' is not a number (ASCII digits, ...)"; it is a missing sample."""
+    (tmp_path / "e.csv").write_text(text)
+    assert_refused(invoke("fit", tmp_path / "e.csv", "-o", tmp_path / "m.json", "-y", "y", "-z", "z", "--my", 1, "-p", 1,
+                          "--sigma", 1), "line 3, column", "is empty (a missing sample)", "--blank-rows break")
+    assert not (tmp_path / "m.json").exists()

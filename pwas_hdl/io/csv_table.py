@@ -145,6 +145,11 @@ class Table:
             for k, c in enumerate(idx):
                 cell = row[c]
                 v = parse_number(cell)
+                if v is None and not cell.strip():  # a missing sample: said as such, with the fix
+                    raise InputError(
+                        f"{self.path}: line {self._line(r)}, column '{names[k]}' is empty (a missing sample); fill it "
+                        "(e.g. interpolate), or empty the whole row and give --blank-rows break to end the trajectory there"
+                    )
                 if v is None:
                     raise InputError(
                         f"{self.path}: line {self._line(r)}, column '{names[k]}': {cell.strip()!r} is not a number "
