@@ -224,6 +224,27 @@ def test_report_refuses_a_given_summary_of_another_design(files, tmp_path):
     assert "stale" in (tmp_path / "r.md").read_text()
 
 
+def test_report_says_how_many_estimates_were_clamped(files, tmp_path):
+    """The report showed the RMSEE of an out-of-domain test set without a word on the clamped estimates
+    (simulate's summary has their count, out_of_range); now a line under the table says so, and a
+    negative count is refused as a corrupt summary."""
+    import json
+
+    man = json.loads((files / "hw" / "manifest.json").read_text())
+    p = _summary(files, tmp_path, man["top"])
+    doc = json.loads(p.read_text())
+    for n, shown in ((187, True), (0, False)):
+        p.write_text(json.dumps({**doc, "design_hash": man["design_hash"], "samples": 299, "out_of_range": n}))
+        res = invoke("report", files / "hw", "--sim", p, "--json", tmp_path / "r.json", "-o", tmp_path / "r.md")
+        assert res.exit_code == 0, res.output
+        assert json.loads((tmp_path / "r.json").read_text())["simulation"][0]["out_of_range"] == n
+        assert ("icarus (other.json): 187 of 299 estimates had a regressor outside the domain (clamped"
+                in (tmp_path / "r.md").read_text()) is shown
+    p.write_text(json.dumps({**doc, "out_of_range": -1}))
+    assert_refused(invoke("report", files / "hw", "--sim", p, "-o", tmp_path / "r2.md"), "out_of_range")
+    assert not (tmp_path / "r2.md").exists()
+
+
 def test_report_sim_folder_says_give_the_summary(files, tmp_path):
     (tmp_path / "sim").mkdir()
     line = assert_refused(invoke("report", files / "hw", "--sim", tmp_path / "sim"), "is a folder", "JSON summary")

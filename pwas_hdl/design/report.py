@@ -116,7 +116,7 @@ _SIM_VALUES = {
     ("latency_cycles", "measured_min"): ((int, type(None)), 0, False),
     ("latency_cycles", "measured_max"): ((int, type(None)), 0, False),
     ("ii", "measured"): (_NUM, 0, True), ("max_error_vs_float_lsb",): (_NUM, 0, False),
-    ("samples_per_second",): (_NUM, 0, False),
+    ("samples_per_second",): (_NUM, 0, False), ("out_of_range",): ((int, type(None)), 0, False),
 }
 _SIM_TARGET_VALUES = {"rmsee_float": (_NUM, 0, False), "rmsee_hw": (_NUM, 0, False),
                       "rmsee_increase_hw_vs_float_percent": (_NUM, None, False)}
@@ -289,6 +289,7 @@ def _collect_results(out: Path, man: dict[str, Any], design: dict[str, Any], fit
                 "max_error_vs_float_lsb": s.get("max_error_vs_float_lsb"),
                 "within_error_bound": s.get("within_error_bound"),
                 "samples_per_second": s.get("samples_per_second"),
+                "out_of_range": s.get("out_of_range"),
                 "stale": _is_stale(s, man),
                 **({"modes": s.get("modes"), "metrics": s.get("metrics")} if man["design"] == "estimator" else {}),
                 **({"classifier": _classifier_result(s["classifier"])}
@@ -432,6 +433,11 @@ def report_markdown(rep: dict[str, Any]) -> str:
                     f"{_fmt(s['max_error_vs_float_lsb'], '.3f')} | {t} (vs {_fmt(v.get('reference_column'))}) | {_fmt(v['rmsee_float'])} | "
                     f"{_fmt(v['rmsee_hw'])} | {_fmt(v['rmsee_increase_hw_vs_float_percent'], '.3f')} % |"
                 )
+        for s in rep["simulation"]:  # clamped estimates: their errors are in the RMSEE above
+            if s.get("out_of_range"):
+                lines += ["", f"{s['simulator']} ({s['file']}): {s['out_of_range']} of {s['samples']} estimates had a "
+                              "regressor outside the domain (clamped to its edge; column out_of_range): the RMSEE "
+                              "includes the sensor's extrapolation there."]
         lines += _stale_lines(rep["simulation"], "simulate")
         lines.append("")
         clf = [s for s in rep["simulation"] if s.get("classifier")]
