@@ -579,6 +579,12 @@ def fit(
             for line in training_data_warnings(model, table, traj_col, u, y, z, given_domain=dom is not None,
                                                classify=classify):
                 _warn(line)
+        if not classify and not bank:
+            from pwas_hdl.fit.training_data import class_label_note
+
+            note = class_label_note(z, tgts)
+            if note:
+                _say(note)
         if traj_warning:
             _warn(traj_warning)
         _say(f"wrote {output}")

@@ -128,3 +128,21 @@ def test_simulate_warns_when_estimates_are_clamped(files, tmp_path):
     assert res.exit_code == 0, res.output
     warn = [ln for ln in res.output.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and "outside the domain" in warn[0] and "of 59" in warn[0], res.output
+
+
+@pytest.mark.parametrize("labels, noted", [((0, 1, 2), True), ((0.0, 0.5, 1.0), False), (tuple(range(40)), False)])
+def test_a_target_that_looks_like_a_class_label_gets_a_note(tmp_path, labels, noted):
+    """A target of a few integer values (a mode, a class) was fitted as a regression without a word;
+    now a note points to --classify (and stays quiet for non-integer or many-valued targets)."""
+    rows = plant(600, 3)
+    lab = [labels[(k // 50) % len(labels)] for k in range(len(rows))]
+    (tmp_path / "d.csv").write_text("u,y,mode\n" + "".join(f"{float(u)!r},{float(y)!r},{m!r}\n" for (u, y, _), m in zip(rows, lab)))
+    res = invoke("fit", tmp_path / "d.csv", "-o", tmp_path / "m.json", "-u", "u", "-y", "y", "-z", "mode", "--mu", 1,
+                 "--my", 1, "-p", 2, "--sigma", "1e-3")
+    assert res.exit_code == 0, res.output
+    assert ("note: mode takes only 3 integer values (0, 1, 2); if it is a class label, fit with --classify" in res.output) is noted
+    assert ("--classify" in res.output) is noted
+    res = invoke("fit", tmp_path / "d.csv", "-o", tmp_path / "c.json", "-u", "u", "-y", "y", "-z", "mode", "--mu", 1,
+                 "--my", 1, "-p", 2, "--sigma", "1e-3", "--classify")
+    if noted:  # with --classify: no note
+        assert res.exit_code == 0 and "takes only" not in res.output, res.output

@@ -17,7 +17,10 @@ if TYPE_CHECKING:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
     from pwas_hdl.io.csv_table import Table
 
-__all__ = ["training_data_warnings"]
+__all__ = ["training_data_warnings", "class_label_note"]
+
+#: At most this many distinct integer values make a target look like a class label.
+LABEL_LIKE_VALUES = 10
 
 
 def training_data_warnings(model: PWASVirtualSensor, table: Table, traj_col: str | None, u: Sequence[np.ndarray] | None,
@@ -101,3 +104,31 @@ def training_data_warnings(model: PWASVirtualSensor, table: Table, traj_col: str
                    "the training RMSE, the sigma the CV picks and the default hardware word lengths (sized by that RMSE) "
                    "follow them; check those samples and remove or correct them")
     return out
+
+
+def class_label_note(z: Sequence[np.ndarray], names: Sequence[str]) -> str | None:
+    """A note when a regression target looks like a class label: 2 to :data:`LABEL_LIKE_VALUES`
+    distinct values, all integers (``fit`` without ``--classify`` prints it; the fit stands).
+
+    Parameters
+    ----------
+    z : list of ndarray, shape (T_k, nz)
+        The targets per trajectory.
+    names : sequence of str
+        The ``nz`` target names.
+
+    Returns
+    -------
+    str or None
+        ``note: ...`` naming the first such target and its values, or None.
+    """
+    if not len(z):
+        return None
+    zz = np.concatenate([np.asarray(v, float).reshape(len(v), -1) for v in z])
+    for i, t in enumerate(names):
+        vals = np.unique(zz[:, i])
+        if 2 <= vals.size <= LABEL_LIKE_VALUES and np.all(vals == np.round(vals)):
+            shown = ", ".join(f"{v:g}" for v in vals)
+            return (f"note: {t} takes only {vals.size} integer values ({shown}); if it is a class label, fit with "
+                    "--classify (one score per class and an argmax, also in hardware) rather than a regression")
+    return None
