@@ -321,3 +321,12 @@ def test_a_one_column_csv_with_a_quoted_semicolon_in_its_name_is_read(tmp_path):
     (tmp_path / "e.csv").write_text("flow;level\n1.5;2\n")  # unquoted: still named as ';'-separated
     with pytest.raises(Exception, match="separated by ';', not commas"):
         read_csv(tmp_path / "e.csv")
+
+
+def test_a_quoted_semicolon_header_is_named_as_such(tmp_path):
+    """A ';' export with quoted names ("u";"y") failed as "malformed CSV (',' expected after '\"')"."""
+    (tmp_path / "q.csv").write_text('"u";"y"\n1;2\n3;4\n')
+    assert_refused(invoke("fit", tmp_path / "q.csv", "-o", tmp_path / "m.json", "-y", "y", "-z", "u", "--my", 1,
+                          "-p", 1, "--sigma", 1), "the header (line 1) is separated by ';', not commas",
+                   "save the file with ','")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["q.csv"]

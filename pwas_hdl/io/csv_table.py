@@ -292,15 +292,7 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
         if not any(header):
             raise InputError(f"{p}: line 1 is blank; the first line must be the header of column names")
         if len(header) == 1:  # another separator (a spreadsheet's ';' export, a tab-separated file)
-            for sep, called in ((";", "';'"), ("\t", "tabs")):  # the line read with that separator (a quoted name keeps it)
-                try:
-                    alt = next(csv.reader(io.StringIO(text, newline=""), delimiter=sep), [])
-                except csv.Error:  # e.g. a quote that opens a field only with this separator
-                    alt = []
-                if len([h for h in alt if h.strip()]) >= 2:
-                    raise InputError(f"{p}: the header {header[0]!r} is separated by {called}, not commas; pwas-hdl "
-                                     "reads comma-separated values: save the file with ',' between the cells "
-                                     "(and '.' as the decimal point)")
+            _refuse_other_separator(p, text, repr(header[0]))
         if any(not h for h in header):
             raise InputError(f"{p}: the header has an empty column name (column {header.index('') + 1} of {len(header)}); "
                              "name every column, or remove the extra comma")
@@ -341,6 +333,8 @@ def read_csv(path: str | os.PathLike, *, blank_rows: str = "error") -> Table:
                 )
     except csv.Error as exc:
         line = reader.line_num
+        if line <= 1:  # a header quoted in another separator's form ("u";"y") is malformed as CSV
+            _refuse_other_separator(p, text, "(line 1)")
         if "field larger than field limit" in str(exc):
             raise ResourceLimit(
                 f"{p}: line {line} has a cell longer than the limit of {MAX_CSV_FIELD} characters (128 KiB); "
@@ -398,6 +392,21 @@ def split_trajectories(table: Table, traj_column: str | None) -> list[slice]:
         cuts |= {i for i in range(1, n) if labels[i] != labels[i - 1]}
     edges = [0] + sorted(cuts) + [n]
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _refuse_other_separator(p: Path, text: str, header: str) -> None:
+    """Refuse a file whose first line reads as two or more column names with ';' or tabs between them
+    (a spreadsheet's export); the line read with that separator, so a quoted name keeps its quotes'
+    meaning. ``header``: how the message names the line."""
+    for sep, called in ((";", "';'"), ("\t", "tabs")):
+        try:
+            alt = next(csv.reader(io.StringIO(text, newline=""), delimiter=sep, strict=True), [])
+        except csv.Error:  # e.g. a quote that opens a field only with this separator
+            alt = []
+        if len([h for h in alt if h.strip()]) >= 2:
+            raise InputError(f"{p}: the header {header} is separated by {called}, not commas; pwas-hdl "
+                             "reads comma-separated values: save the file with ',' between the cells "
+                             "(and '.' as the decimal point)")
 
 
 def _label_blocks(table: Table, traj_column: str) -> dict[str, list[slice]]:
