@@ -202,6 +202,42 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         f"= {mem['words']} words, {mem['bits']} bits for N = {mem['n_vertices']} weights "
         f"({mem['words'] / mem['n_vertices']:.3f} N)."
     )
+    init = mem.get("init", {})
+    hexes = [h["file"] for h in man["files"].get("hex", [])]
+    if init.get("kind") == "readmemh":
+        par = init["parameter"]
+        init_text = (
+            f"\n\nThe weights are **not** in the Verilog: it loads them with `$readmemh` at time zero from "
+            f"{', '.join(f'`{h}`' for h in hexes)}, each name prefixed with the parameter `{par}` (default "
+            f"`\"{init['default']}\"`: the simulator's or synthesis tool's working directory). Copy the files with the "
+            f"Verilog and set `{par}` where the module is instantiated, to their folder with the trailing `/`, "
+            f"relative to the tool's working directory or absolute: `{man['top']} #(.{par}(\"path/to/hex/\")) u_{man['top']} (...)` "
+            f"(the instance template `{man['files'].get('instance_template', man['top'] + '_inst.v')}` has the line). "
+            f"A missing file leaves the memory undefined (Icarus prints an error and runs on with `x`)."
+        )
+    else:
+        init_text = (
+            "\n\nThe weights are inline in the Verilog (`--memory-init inline`): the `.hex` files are a copy for "
+            "inspection, not read by the design."
+        ) if hexes else ""
+    warm = man["lags"].get("warmup")
+    warm_text = (
+        f"\n- After every reset the first {warm['samples_without_output']} transfer"
+        f"{'s only fill the lag bank and produce' if warm['samples_without_output'] != 1 else ' only fills the lag bank and produces'} no output; every "
+        f"later transfer produces one estimate (output `{warm['port']}` is high from the transfer that yields the first)."
+    ) if warm else ""
+    code_rows = []
+    seen_codes = set()
+    for inp in fmts["inputs"]:
+        key = inp["signal"] if man["design"] != "core" else inp["name"]
+        if key in seen_codes or "offset" not in inp:
+            continue
+        seen_codes.add(key)
+        code_rows.append(f"- `{key}`: physical = {inp['offset']!r} + {inp['lsb']!r} * code; "
+                         f"code = round((physical - {inp['offset']!r}) / {inp['lsb']!r}), half up, "
+                         f"saturated to {inp['bits']} bits")
+    code_text = ("\n\nInput codes (the bit-true model's quantisation, `pwas_hdl.FixedPointModel.quantize_inputs`):\n\n"
+                 + "\n".join(code_rows)) if code_rows else ""
     eb = man["error_bound"]
     terms = f"(weight rounding {eb['weight_term']:.4g} + output rounding {eb['output_term']:.4g}, physical units)"
     files = "\n".join(f"- `{f}`" for f in sorted(_file_names(man["files"])))
@@ -216,7 +252,8 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         clock=man["clock"]["port"], reset=_reset_text(man, "`"), latency=man["latency_cycles"], ii=man["ii"],
         rate="one sample per clock" if man["ii"] == 1 else f"one sample every {man['ii']} clocks: serial architecture",
         port_table=ports, format_table=fmt_table, bound_lsb=f"{eb['lsb']:.4g}", bound_phys=f"{eb['physical']:.4g}",
-        bound_terms=terms, domain_table=dom_table, memory_text=mem_text, file_list=files,
+        bound_terms=terms, domain_table=dom_table, memory_text=mem_text + init_text, file_list=files,
+        warmup_text=warm_text, input_code_text=code_text,
     )
 
 
