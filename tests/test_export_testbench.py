@@ -236,3 +236,26 @@ def test_export_observer_bank_sensor_icarus(bank_folders, tmp_path, name):
     _flip_hex(tb / "pwas_sensor_tb_expected.hex")
     r = _icarus(tb)
     assert r.returncode != 0 and "FAIL" in r.stdout, r.stdout
+
+
+@pytest.mark.rtl
+@pytest.mark.slow
+def test_run_scripts_from_another_directory_in_a_path_with_a_space(folders, tmp_path):
+    """GNU make refuses to build in a folder whose path has a space (Verilator's verilated.mk stops
+    with "Unsupported: GNU Make cannot build in directories containing spaces"): run_verilator.sh
+    builds elsewhere then, and both scripts work when started from another directory."""
+    res = export_testbench(folders / CORE_WIDE_READMEMH.name, tmp_path / "my tb" / "tb", samples=100)
+    tb = Path(res["outdir"])
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    user_bin = tmp_path / "user_bin"
+    user_bin.mkdir()
+    (user_bin / "python3").symlink_to(sys.executable)
+    path = [str(user_bin), str(verilator_bin_dir() or ""), "/usr/bin", "/bin"]
+    env = {k: v for k, v in tool_env().items() if k != "PATH"} | {"PATH": os.pathsep.join(p for p in path if p)}
+    for script in ("run_icarus.sh", "run_verilator.sh"):
+        if script == "run_icarus.sh" and which("iverilog") is None:
+            continue
+        r = subprocess.run(["sh", str(tb / script)], cwd=elsewhere, capture_output=True, text=True, env=env, timeout=900)
+        assert r.returncode == 0 and "PASS" in r.stdout, (script, (r.stdout + r.stderr)[-3000:])
+    assert not any(" " in p.name for p in tb.iterdir())

