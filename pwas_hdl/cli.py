@@ -979,10 +979,24 @@ def _simulate(outdir: Path, data: Path, output: Path, simulator: Optional[str], 
     """The body of ``simulate``, with the CSV ``output`` decided."""
     from pwas_hdl.verify.simulation import simulate_data
 
-    table = read_csv(data, blank_rows=blank_rows)  # read once: the warnings below and the replay
-    traj_warning = _trajectory_warning(table, traj_col, ())  # a run index unused, or a run label that comes back
+    traj_warning = None
+    if traj_col is not None:  # a run label that comes back after another run (a bad file is reported by the replay)
+        try:
+            traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), traj_col, ())
+        except (OSError, ValueError):
+            pass
+    if traj_col is None:  # a run index without --traj-col (a bad file is reported by the replay)
+        from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
+
+        try:
+            with open(data, encoding="utf-8-sig", errors="replace") as fh:
+                head = [h.strip() for h in fh.readline().split(",")]
+            if any(n in head for n in TRAJECTORY_COLUMN_NAMES):
+                traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), None, ())
+        except (OSError, ValueError):
+            pass
     res = simulate_data(
-        outdir, table, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
+        outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
         stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
         progress=_say, blank_rows=blank_rows,
     )

@@ -1185,9 +1185,7 @@ def simulate_data(
     check_seed(seed)  # numpy's generators take no negative seed
     check_output_path(output, "-o")  # before its .json sibling is made from it
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
-    # DATA may not be replaced by an output, also when it comes as a Table read from a file
-    src = (data.path if Path(data.path).is_file() else None) if isinstance(data, Table) else data
-    sources = [(src, "DATA")] if src is not None else []
+    sources = [] if isinstance(data, Table) else [(data, "DATA")]
     if _is_estimator_folder(outdir):  # seed 003's estimator (issue 12): pwas_hdl.verify.estimator_simulation
         return _simulate_estimator(outdir, data, output, spath, sources, simulator=simulator, engine=engine, traj_col=traj_col,
                                    stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say, blank_rows=blank_rows)
