@@ -253,8 +253,6 @@ def test_generate_refuses_what_additive_designs_lack(pairs_sensor):
 
     with pytest.raises(InputError, match="readmemh"):
         build_design(pairs_sensor, design="sensor", memory_init="readmemh")
-    with pytest.raises(InputError, match="clock-mhz"):
-        build_design(pairs_sensor, design="sensor", target_mhz=100.0)
 
 
 def test_generate_manifest_and_deterministic(small_sensor):

@@ -136,9 +136,9 @@ def test_cli_fit_predict_roundtrip_and_generate_refuses(pv_files, tmp_path):
     zhat = m.predict(t.numeric(["u1", "u2"]), t.numeric(["y"]))[:, 0]
     assert np.array_equal(np.array([float(r["rho_hat"]) for r in rows]), zhat)
     out = tmp_path / "gen"
-    res = invoke("generate", model, "--design", "sensor", "-o", out, "--clock-mhz", 50)
-    # hardware for bank sensors with taps exists (issue 12; tests/test_bank_taps_hw.py), timing closure not yet
-    assert res.exit_code == 2 and "--clock-mhz (timing closure) is not supported for observer-bank sensors" in res.output
+    res = invoke("generate", model, "--design", "core", "-o", out)
+    # hardware for bank sensors with taps exists (issue 12; tests/test_bank_taps_hw.py), of the whole sensor only
+    assert res.exit_code == 2 and "--design core of an observer-bank sensor is not available" in res.output
     assert not out.exists()
 
 

@@ -92,7 +92,7 @@ def test_warped_model_flags_as_the_uniform_model(warped_sensor):
     assert flags.tolist() == [False, True, True]
 
 
-@pytest.mark.parametrize("extra, msg", [(["--clock-mhz", "50"], "non-uniform partition"),
+@pytest.mark.parametrize("extra, msg", [(["--design", "recurrent"], "recurrent"),
                                         (["--input-scale", "exact"], "--input-scale must be 'pow2'")])
 def test_generate_warped_refusals_are_one_error_line(extra, msg, warped_sensor, tmp_path):
     from pwas_hdl.cli import app

