@@ -251,8 +251,102 @@ def test_explore_refuses_additive_sensors(small_sensor, tmp_path, cli):
 def test_generate_refuses_what_additive_designs_lack(pairs_sensor):
     from pwas_hdl.design.generate import build_design
 
-    with pytest.raises(InputError, match="readmemh"):
-        build_design(pairs_sensor, design="sensor", memory_init="readmemh")
+    # --memory-init readmemh is available (test_generate_readmemh_additive_hex_files_hold_the_words);
+    # an unknown --memory-init is refused as for any design
+    with pytest.raises(InputError, match=r"--memory-init \(memory_init\) must be one of inline, readmemh"):
+        build_design(pairs_sensor, design="sensor", memory_init="rom")
+
+
+def _inline_words(verilog: str) -> dict[str, list[int]]:
+    """Memory name -> its words, from the inline initialisers (``part0_wmem1[3] = 10'h1f2;``)."""
+    import re
+
+    out: dict[str, list[int]] = {}
+    for mo in re.finditer(r"^\s*(part[0-9]+_wmem[0-9]+)\[([0-9]+)\] = [0-9]+'h([0-9a-f]+);$", verilog, re.M):
+        words = out.setdefault(mo.group(1), [])
+        assert int(mo.group(2)) == len(words)
+        words.append(int(mo.group(3), 16))
+    return out
+
+
+@pytest.mark.parametrize("design, opts", [("sensor", {}), ("core", {"memory": "corner", "ports": "amaranth"})])
+def test_generate_readmemh_additive_hex_files_hold_the_words(small_sensor, tmp_path, design, opts):
+    """generate --memory-init readmemh of an additive sensor: every .hex file of the manifest is written,
+    holds the words of its part's memory plan (and of the inline design's initialisers) and is read by
+    the Verilog's $readmemh of part<i>_wmem<b> under MEM_DIR; the folder passes the manifest's checks;
+    byte-identical reruns."""
+    import re
+
+    from pwas_hdl.design.generate import build_design, generate
+    from pwas_hdl.design.manifest import load_manifest, manifest_errors
+
+    gd = build_design(small_sensor, design=design, memory_init="readmemh", **opts)
+    assert build_design(small_sensor, design=design, memory_init="readmemh", **opts).files == gd.files
+    inline = build_design(small_sensor, design=design, **opts)
+    man, v = gd.manifest, gd.files[f"{gd.top}.v"]
+    assert manifest_errors(json.loads(gd.files["manifest.json"])) == []
+    assert man["memory"]["init"]["kind"] == "readmemh" and man["generator"]["options"]["memory_init"] == "readmemh"
+    assert v.count("\nmodule ") == 1 and '  parameter MEM_DIR = "./";\n' in v
+    assert "_wmem0[0] =" not in v and v.count("$readmemh(") == len(man["files"]["hex"]) == man["memory"]["memories"]
+    parts = getattr(gd.component, "core", gd.component).parts
+    words = _inline_words(inline.files[f"{inline.top}.v"])
+    assert len(words) == len(man["files"]["hex"]) == sum(c.memory_plan.n_banks for c in parts)
+    for h in man["files"]["hex"]:
+        i, b = h["part"], h["bank"]
+        assert h["file"] == f"{gd.top}_rom_p{i}_b{b}.hex"
+        got = [int(w, 16) for w in gd.files[h["file"]].split()]
+        plan = parts[i].memory_plan
+        assert got == [int(w) for w in plan.contents[b]] == words[f"part{i}_wmem{b}"]
+        assert len(got) == h["depth"] == plan.depth and h["width"] == plan.word_bits
+        assert f'initial $readmemh({{MEM_DIR, "{h["file"]}"}}, part{i}_wmem{b}, 0, {len(got) - 1});' in v
+    assert {k: t for k, t in gd.files.items() if k.endswith(".hex")} == {k: t for k, t in inline.files.items() if k.endswith(".hex")}
+    assert "loads them with `$readmemh`" in gd.files["report.md"] and man["files"]["hex"][-1]["file"] in gd.files["report.md"]
+    assert "rom:" in gd.files[f"{gd.top}.core"] and all(f"{h['file']}: {{copyto" in gd.files[f"{gd.top}.core"] for h in man["files"]["hex"])
+    assert "#(.MEM_DIR(" in gd.files[f"{gd.top}_inst.v"]
+    # on disk: the manifest's folder checks find every file; a missing one is named
+    generate(small_sensor, tmp_path / "d", design=design, memory_init="readmemh", **opts)
+    assert load_manifest(tmp_path / "d")["memory"]["init"]["kind"] == "readmemh"
+    gone = man["files"]["hex"][1]["file"]
+    (tmp_path / "d" / gone).unlink()
+    with pytest.raises(InputError, match=re.escape(f"{gone} is missing (the Verilog reads it with $readmemh)")):
+        load_manifest(tmp_path / "d")
+
+
+def test_emit_additive_verilog_readmemh_checks(small_sensor):
+    """emit_additive_verilog takes memory_init / hex_prefix as emit_verilog does (same checks, one file
+    name per part and bank: hex_file_name), and refuses ROMs that are not the parts' memory plans."""
+    from pwas_hdl.errors import InternalError
+    from pwas_hdl.design.generate import fixed_point_model
+    from pwas_hdl.hdl.additive_top import additive_hex_files, build_additive_core, emit_additive_verilog
+    from pwas_hdl.hdl.emit import _readmemh_files, hex_file_name
+    from pwas_hdl.hdl.weight_rom import RomEmission
+
+    core = build_additive_core(fixed_point_model(small_sensor), pipeline="min")
+    with pytest.raises(InputError, match="hex_prefix 'a/b' must be a plain file-name prefix"):
+        emit_additive_verilog(core, "pwas_core", memory_init="readmemh", hex_prefix="a/b")
+    with pytest.raises(InputError, match="memory_init"):
+        emit_additive_verilog(core, "pwas_core", memory_init="rom")
+    v = emit_additive_verilog(core, "pwas_core", memory_init="readmemh", hex_prefix="wt")
+    files = additive_hex_files(core, "wt")
+    assert list(files) == [hex_file_name("wt", b, i) for i, c in enumerate(core.parts) for b in range(c.memory_plan.n_banks)]
+    assert [f'{{MEM_DIR, "{f}"}}' in v for f in files] == [True] * len(files) == [True] * v.count("$readmemh(")
+    assert hex_file_name("wt", 2, 1) == "wt_p1_b2.hex" and hex_file_name("wt", 2) == "wt_b2.hex"
+    # the ROMs met in elaboration must be the parts' memories with their words
+    plans = [c.memory_plan for c in core.parts]
+    good = RomEmission()
+    for pl in plans:
+        for b in range(pl.n_banks):
+            good.add(pl.word_bits, pl.depth, [int(w) for w in pl.contents[b]])
+    assert _readmemh_files(core, good, "wt")("part1_wmem0", plans[0].n_banks) == '{MEM_DIR, "wt_p1_b0.hex"}'
+    with pytest.raises(InternalError, match="its contents differ from the memory plan"):
+        _readmemh_files(core, good, "wt")("part1_wmem0", 0)  # ROM 0 holds part 0's bank 0
+    for name in ("wmem0", "part2_wmem0", f"part0_wmem{plans[0].n_banks}"):
+        with pytest.raises(InternalError, match=f"unexpected weight memory {name}"):
+            _readmemh_files(core, good, "wt")(name, 0)
+    short = RomEmission()
+    short.add(plans[0].word_bits, plans[0].depth, [0])
+    with pytest.raises(InternalError, match="1 weight memories in the design"):
+        _readmemh_files(core, short, "wt")
 
 
 def test_generate_manifest_and_deterministic(small_sensor):
@@ -288,6 +382,23 @@ def test_generated_additive_verilog_is_lint_clean(small_sensor, tmp_path):
         gd = build_design(small_sensor, design=design, **opts)
         path = tmp_path / f"{gd.top}.v"
         path.write_text(gd.files[f"{gd.top}.v"])
+        r = lint_verilog(path)
+        assert r.returncode == 0 and not r.stderr.strip(), r.stderr
+
+
+@pytest.mark.rtl
+def test_readmemh_additive_verilog_is_lint_clean(small_sensor, tmp_path):
+    """--memory-init readmemh: the MEM_DIR parameter and the parts' $readmemh calls are lint-clean
+    (verilator --lint-only -Wall) for both designs, the parts' memory layouts and port namings."""
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.flow.toolchain import lint_verilog
+
+    for design, opts in (("sensor", {}), ("core", {"pipeline": "max", "memory": "replicated"}),
+                         ("sensor", {"pipeline": "short", "memory": "corner", "ports": "amaranth"})):
+        gd = build_design(small_sensor, design=design, memory_init="readmemh", **opts)
+        path = tmp_path / f"{gd.top}.v"
+        path.write_text(gd.files[f"{gd.top}.v"])
+        assert "$readmemh(" in path.read_text()
         r = lint_verilog(path)
         assert r.returncode == 0 and not r.stderr.strip(), r.stderr
 

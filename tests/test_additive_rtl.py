@@ -2,10 +2,13 @@
 
 Configurations: ``sim/pwas_designs.ADDITIVE_CONFIGS``. Each is replayed as the other RTL benches
 (``tests/test_rtl_cocotb.py``): at full speed (latency = manifest, II = 1), with random bubbles and
-backpressure, and with a synchronous reset in the middle of a stream.
+backpressure, and with a synchronous reset in the middle of a stream; and with ``--memory-init readmemh``
+(the weights loaded from the parts' ``.hex`` files).
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -22,11 +25,13 @@ def folder(tmp_path_factory):
     made = {}
     root = tmp_path_factory.mktemp("additive_designs")
 
-    def get(name):
-        if name not in made:
-            BY_NAME[name].generate(root / name)
-            made[name] = root / name
-        return made[name]
+    def get(name, memory_init="inline"):
+        key = name if memory_init == "inline" else f"{name}-{memory_init}"
+        if key not in made:
+            cfg = BY_NAME[name]
+            replace(cfg, options={**cfg.options, "memory_init": memory_init}).generate(root / key)
+            made[key] = root / key
+        return made[key]
 
     return get
 
@@ -61,3 +66,32 @@ def test_additive_rtl_equals_bittrue_model(name, simulator, folder, sim_cache, t
     assert res.within_bound, res.report()
     oor = np.concatenate([o for run in res.hw for _, o in run])
     assert oor.any() and not oor.all()
+
+
+@pytest.mark.parametrize("name, simulator", [("a-c-n4-z2-max-trunc", "icarus"), ("a-s-y3-pairs", "icarus"),
+                                             ("a-c-n4-z2-max-trunc", "verilator")])
+@pytest.mark.rtl
+def test_additive_readmemh_rtl_equals_bittrue_model_and_inline(name, simulator, folder, sim_cache, tmp_path):
+    """--memory-init readmemh of an additive design: the simulator loads every part's weights from its
+    .hex files (MEM_DIR "./": the work folder they are copied to) and the RTL is bit-exact with the
+    bit-true model; on Icarus its outputs are also those of the inline design, run for run."""
+    d = load_design(folder(name, "readmemh"))
+    assert d.manifest["memory"]["init"]["kind"] == "readmemh" and "additive" in d.manifest
+    assert '$readmemh({MEM_DIR, "' in d.verilog and "_wmem0[0] =" not in d.verilog
+    if d.kind == "core":
+        codes = stimulus.core_codes(d.model, 200, seed=11)
+    else:
+        codes = stimulus.sensor_codes(d.model, [f["signal"] for f in d.in_fields], 200, seed=11)
+    runs = standard_runs(d, codes, seed=11)
+    res = run_rtl(d, runs, simulator, cache_dir=sim_cache, work_dir=tmp_path / "readmemh", debug=False)
+    assert res.passed, res.report()
+    assert res.mismatches == 0 and res.outputs >= 2 * len(segment(d, codes).src)
+    assert set(res.latencies) == {d.latency} and res.ii == 1.0
+    if simulator == "icarus":
+        inline = load_design(folder(name))
+        assert "$readmemh" not in inline.verilog
+        ref = run_rtl(inline, runs, simulator, cache_dir=sim_cache, work_dir=tmp_path / "inline", debug=False)
+        assert ref.passed, ref.report()
+        assert len(res.hw) == len(ref.hw) and all(
+            len(a) == len(b) and all(np.array_equal(ca, cb) and np.array_equal(oa, ob) for (ca, oa), (cb, ob) in zip(a, b))
+            for a, b in zip(res.hw, ref.hw))

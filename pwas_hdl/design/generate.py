@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from pwas_hdl import __version__
 from pwas_hdl.resources import templates_dir
-from pwas_hdl.errors import InputError, choice_text, option_text
+from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl.names import check_module_name, check_signal_names
 from pwas_hdl.io.atomic import check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
@@ -375,7 +375,7 @@ def build_design(
         manifest's design is "recurrent" (also accepted here).
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
         :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding); not with
-        ``memory_init="readmemh"``, ``architecture="serial"`` or a classifier.
+        ``architecture="serial"`` or a classifier.
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated", "corner"}, optional
@@ -450,7 +450,7 @@ def build_design(
                                       ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
                                       **formats)
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
-    from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
+    from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, hex_file_name, memory_hex_files
 
     if design not in ("core", "sensor", "recurrent"):
         raise InputError(f"{option_text('design')} must be core or sensor (or, of a recurrent model, recurrent), got {design!r}")
@@ -483,8 +483,6 @@ def build_design(
                              "each chooses the pipeline")
         pipeline = preset
     additive = _is_additive(sensor)
-    if additive and memory_init != "inline":
-        raise InputError("--memory-init readmemh is not available for additive sensors (the weights of the flattened parts are inline initialisers)")
     warped = _is_warped(sensor)  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
     if warped:
         for what, bad in (("a classifier (fit --classify)", getattr(sensor, "classifier_", None) is not None),
@@ -598,12 +596,14 @@ def build_design(
     if additive:
         from pwas_hdl.hdl.additive_top import additive_hex_files, emit_additive_verilog
 
-        verilog = emit_additive_verilog(comp, top, ports=ports)
+        verilog = emit_additive_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix, ports=ports)
         hexes = additive_hex_files(comp, prefix)
         part_plans = [(i, b, c.memory_plan) for i, c in enumerate(comp.core.parts if design == "sensor" else comp.parts)
                       for b in range(c.memory_plan.n_banks)]
-        hex_entries = [{"file": fname, "part": i, "bank": b, "depth": int(pl.depth), "width": int(pl.word_bits), "fields": fields}
-                       for fname, (i, b, pl) in zip(hexes, part_plans)]
+        hex_entries = [{"file": hex_file_name(prefix, b, i), "part": i, "bank": b, "depth": int(pl.depth), "width": int(pl.word_bits),
+                        "fields": fields} for i, b, pl in part_plans]
+        if [h["file"] for h in hex_entries] != list(hexes):
+            raise InternalError("the manifest's hex entries of the additive parts are not the files written")
     else:
         verilog = emit_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix, ports=ports)
         hexes = memory_hex_files(comp, prefix)

@@ -22,8 +22,10 @@ Datapath (the bit-true specification is :class:`pwas_hdl.fixedpoint.additive.Add
   + ceil(log2 k)`` bits (``|acc_i << (F - F_i)| <= 2**(F + B_w - 1)``: no sum can overflow); the
   rounding adds ``2**(sh-1)`` modulo ``2**W`` and drops ``sh`` bits, then saturates to ``B_out``.
 
-The Verilog (:func:`emit_additive_verilog`) is one file with the top module and one module per part;
-``memory_init="readmemh"`` is not available for additive designs (the weights are inline).
+The Verilog (:func:`emit_additive_verilog`) is one module, the parts flattened into it (their names
+prefixed ``part<i>_``); its weight memories ``part<i>_wmem<b>`` are initialised inline or, with
+``memory_init="readmemh"``, loaded from the files of :func:`additive_hex_files` (``<prefix>_p<i>_b<b>.hex``)
+under the ``MEM_DIR`` parameter, as :func:`pwas_hdl.hdl.emit.emit_verilog` does for one core.
 """
 
 from __future__ import annotations
@@ -539,12 +541,13 @@ def _flat_verilog(component, name: str):
     return component_verilog_roms(component, name, (CONVERT_PASSES[0], "flatten", *CONVERT_PASSES[1:]))
 
 
-def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str, *, ports: str = "axis") -> str:
+def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str, *, memory_init: str = "inline",
+                          hex_prefix: str = "w", ports: str = "axis") -> str:
     """Verilog of an additive design: one module ``name`` (the parts flattened into it).
 
-    As :func:`pwas_hdl.hdl.emit.emit_verilog` (same normalisation, port order and ``ports`` naming);
-    the parts' names ``\\part<i>.<name>`` become plain identifiers ``part<i>_<name>``. Deterministic.
-    The weight memories are always initialised inline.
+    As :func:`pwas_hdl.hdl.emit.emit_verilog` (same normalisation, port order, ``ports`` naming and
+    ``memory_init``); the parts' names ``\\part<i>.<name>`` become plain identifiers
+    ``part<i>_<name>``, so the weight memories are ``part<i>_wmem<b>``. Deterministic.
 
     Parameters
     ----------
@@ -552,6 +555,13 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
         The additive design.
     name : str
         Module name.
+    memory_init : {"inline", "readmemh"}
+        ``"inline"``: every ``part<i>_wmem<b>`` is initialised by assignments in an ``initial``
+        block. ``"readmemh"``: ``initial $readmemh({MEM_DIR, "<hex_prefix>_p<i>_b<b>.hex"},
+        part<i>_wmem<b>, ...);`` -- the files of :func:`additive_hex_files` -- with the module
+        parameter ``MEM_DIR`` (default ``"./"``) as in :func:`~pwas_hdl.hdl.emit.emit_verilog`.
+    hex_prefix : str
+        File-name prefix of the ``.hex`` files (``memory_init="readmemh"`` only).
     ports : {"axis", "amaranth"}
         Port naming (:func:`~pwas_hdl.hdl.emit.port_names`).
 
@@ -563,14 +573,16 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
     Raises
     ------
     InputError
-        ``name`` is not a plain Verilog identifier, or an unknown ``ports``.
+        ``name`` is not a plain Verilog identifier, an unknown ``memory_init`` or ``ports``, or a
+        ``hex_prefix`` that is not a plain file-name prefix.
     InternalError
-        Flattening leaves a name clash, a hierarchical name or more than one module.
+        Flattening leaves a name clash, a hierarchical name or more than one module; a weight
+        memory is not one of a part's memory plan or does not hold its words (``readmemh``).
     """
-    from pwas_hdl.hdl.emit import _check_naming, _name_ports, _token, normalise_verilog
-    from pwas_hdl.hdl.weight_rom import splice_roms
+    from pwas_hdl.hdl.emit import _check_memory_init, _check_naming, _name_ports, _splice_weights, _token, normalise_verilog
 
     check_module_name(name, "module name")
+    _check_memory_init(memory_init, hex_prefix)
     _check_naming(ports)
     text, roms = _flat_verilog(component, name)  # the ROMs' words are written last (splice_roms)
     renamed = {_flat_name(mo) for mo in _FLAT_NAME.finditer(text)}
@@ -582,12 +594,13 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
         raise InternalError("a hierarchical name is left in the flattened additive design")
     if re.search(r"^module ", text, re.M) is None or len(re.findall(r"^module ", text, re.M)) != 1:
         raise InternalError("the flattened additive design is not one module")
-    return splice_roms(_name_ports(normalise_verilog(text), name, component, ports), roms)
+    return _splice_weights(_name_ports(normalise_verilog(text), name, component, ports), roms, component, memory_init, hex_prefix)
 
 
 def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str) -> dict[str, str]:
-    """``$readmemh`` files of the parts' weight memories: ``<prefix>_p<i>_b<bank>.hex`` (as
-    :func:`pwas_hdl.hdl.emit.memory_hex_files` per part).
+    """``$readmemh`` files of the parts' weight memories: ``<prefix>_p<i>_b<bank>.hex``
+    (:func:`pwas_hdl.hdl.emit.hex_file_name`; as :func:`pwas_hdl.hdl.emit.memory_hex_files` per part),
+    the files ``emit_additive_verilog(..., memory_init="readmemh")`` reads.
 
     Parameters
     ----------
@@ -602,11 +615,12 @@ def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str)
         File name -> ``$readmemh`` text.
     """
     from pwas_hdl.fixedpoint.memory_layout import readmemh_text
+    from pwas_hdl.hdl.emit import hex_file_name
 
     core = getattr(component, "core", component)
     out = {}
     for i, c in enumerate(core.parts):
         plan = c.memory_plan
         for bnk in range(plan.n_banks):
-            out[f"{prefix}_p{i}_b{bnk}.hex"] = readmemh_text(plan.contents[bnk], plan.word_bits)
+            out[hex_file_name(prefix, bnk, i)] = readmemh_text(plan.contents[bnk], plan.word_bits)
     return out

@@ -28,7 +28,8 @@ from pwas_hdl.hdl.names import check_module_name
 from pwas_hdl.hdl.weight_rom import RomEmission, splice_roms
 from pwas_hdl.hdl.yosys_convert import component_verilog_roms
 
-__all__ = ["MEM_DIR_PARAMETER", "MEM_DIR_DEFAULT", "PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog", "memory_hex_files"]
+__all__ = ["MEM_DIR_PARAMETER", "MEM_DIR_DEFAULT", "PORT_NAMINGS", "emit_verilog", "port_list", "port_names", "normalise_verilog",
+           "memory_hex_files", "hex_file_name"]
 
 #: Parameter of a ``memory_init="readmemh"`` design: the folder of its ``.hex`` files (with the
 #: trailing ``/``), prefixed to every ``$readmemh`` file name; the default is the working directory.
@@ -172,13 +173,25 @@ def emit_verilog(
     if name is None:
         name = getattr(component, "module_name", None) or "top"
     check_module_name(name, "module name")
+    _check_memory_init(memory_init, hex_prefix)
+    _check_naming(ports)
+    text, roms = component_verilog_roms(component, name)  # the ROMs' words are written last
+    text = _name_ports(normalise_verilog(text), name, component, ports)
+    return _splice_weights(text, roms, component, memory_init, hex_prefix)
+
+
+def _check_memory_init(memory_init: str, hex_prefix: str) -> None:
+    """``memory_init`` is ``"inline"`` or ``"readmemh"``; for ``"readmemh"``, ``hex_prefix`` is a plain
+    file-name prefix (it goes into a Verilog string literal)."""
     if memory_init not in ("inline", "readmemh"):
         raise InputError(choice_text(option_text("memory_init"), ("inline", "readmemh"), memory_init))
     if memory_init == "readmemh" and not re.fullmatch(r"[A-Za-z0-9_.-]+", hex_prefix):
         raise InputError(f"hex_prefix {hex_prefix!r} must be a plain file-name prefix")
-    _check_naming(ports)
-    text, roms = component_verilog_roms(component, name)  # the ROMs' words are written last
-    text = _name_ports(normalise_verilog(text), name, component, ports)
+
+
+def _splice_weights(text: str, roms: RomEmission, component, memory_init: str, hex_prefix: str) -> str:
+    """The weight memories into ``text`` (:func:`~pwas_hdl.hdl.weight_rom.splice_roms`): inline, or
+    ``$readmemh`` of the :func:`hex_file_name` files under the ``MEM_DIR`` parameter."""
     if memory_init == "readmemh":
         return _with_mem_dir(splice_roms(text, roms, _readmemh_files(component, roms, hex_prefix)))
     return splice_roms(text, roms)
@@ -223,6 +236,39 @@ def _plan(component):
     return core.memory_plan
 
 
+def _plans(component) -> dict:
+    """The memory plans of a design's weight memories: ``{None: plan}`` (memories ``wmem<b>``), or for
+    an additive design (:mod:`pwas_hdl.hdl.additive_top`, a core with ``parts``) ``{i: plan of part i}``
+    (memories ``part<i>_wmem<b>`` once the parts are flattened)."""
+    core = getattr(component, "core", component)
+    parts = getattr(core, "parts", None)
+    if parts is not None:
+        return {i: c.memory_plan for i, c in enumerate(parts)}
+    return {None: core.memory_plan}
+
+
+def hex_file_name(prefix: str, bank: int, part: int | None = None) -> str:
+    """Name of the ``$readmemh`` file of weight memory ``bank``: ``<prefix>_b<bank>.hex``, or of bank
+    ``bank`` of additive part ``part``: ``<prefix>_p<part>_b<bank>.hex``. The one place these names are
+    made (:func:`memory_hex_files`, :func:`~pwas_hdl.hdl.additive_top.additive_hex_files` and the
+    ``$readmemh`` calls of the Verilog).
+
+    Parameters
+    ----------
+    prefix : str
+        File-name prefix.
+    bank : int
+        Memory bank (``wmem<bank>``).
+    part : int, optional
+        Additive part (``part<part>_wmem<bank>``); None for a design with one core.
+
+    Returns
+    -------
+    str
+    """
+    return f"{prefix}{'' if part is None else f'_p{int(part)}'}_b{int(bank)}.hex"
+
+
 def memory_hex_files(component: wiring.Component, prefix: str = "w") -> dict[str, str]:
     """``$readmemh`` files of the weight memories: ``<prefix>_b<bank>.hex``, one packed word per
     line (all targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits.
@@ -242,24 +288,29 @@ def memory_hex_files(component: wiring.Component, prefix: str = "w") -> dict[str
     from pwas_hdl.fixedpoint.memory_layout import readmemh_text
 
     plan = _plan(component)
-    return {f"{prefix}_b{b}.hex": readmemh_text(plan.contents[b], plan.word_bits) for b in range(plan.n_banks)}
+    return {hex_file_name(prefix, b): readmemh_text(plan.contents[b], plan.word_bits) for b in range(plan.n_banks)}
 
 
 def _readmemh_files(component, roms: RomEmission, prefix: str):
-    """``(name, k) -> {MEM_DIR, "<prefix>_b<bank>.hex"}`` for the ROMs ``wmem<bank>`` of the
-    component's memory plan (checked: the ROMs met in elaboration hold the plan's words)."""
-    plan = _plan(component)
-    if len(roms.roms) != plan.n_banks:
-        raise InternalError(f"{len(roms.roms)} weight memories in the design, {plan.n_banks} in its memory plan")
+    """``(name, k) -> {MEM_DIR, "<file>"}`` (:func:`hex_file_name`) for the ROMs ``wmem<bank>`` of the
+    component's memory plan, or ``part<i>_wmem<bank>`` of the plan of part ``i`` of an additive design
+    (checked: the ROMs met in elaboration are the plans' memories and hold their words)."""
+    plans = _plans(component)
+    n_banks = sum(p.n_banks for p in plans.values())
+    if len(roms.roms) != n_banks:
+        raise InternalError(f"{len(roms.roms)} weight memories in the design, {n_banks} in its memory plan")
+    additive = None not in plans
+    pattern = re.compile(r"part([0-9]+)_wmem([0-9]+)" if additive else r"()wmem([0-9]+)")
 
     def file_of(name: str, k: int) -> str:
-        mo = re.fullmatch(r"wmem([0-9]+)", name)
-        if mo is None or int(mo.group(1)) >= plan.n_banks:
+        mo = pattern.fullmatch(name)
+        part = int(mo.group(1)) if mo is not None and additive else None
+        if mo is None or part not in plans or int(mo.group(2)) >= plans[part].n_banks:
             raise InternalError(f"unexpected weight memory {name} in the design")
-        bank = int(mo.group(1))
+        plan, bank = plans[part], int(mo.group(2))
         if roms.roms[k].contents != tuple(int(w) for w in plan.contents[bank]):
             raise InternalError(f"memory {name}: its contents differ from the memory plan")
-        return f'{{{MEM_DIR_PARAMETER}, "{prefix}_b{bank}.hex"}}'
+        return f'{{{MEM_DIR_PARAMETER}, "{hex_file_name(prefix, bank, part)}"}}'
 
     return file_of
 
