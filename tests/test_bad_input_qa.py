@@ -260,7 +260,12 @@ def test_make_data_refuses_a_noise_that_is_not_a_finite_number(in_tmp, args):
     _refused(args, in_tmp, "--noise", "finite number >= 0")
 
 
-def test_export_testbench_names_the_estimator_design_it_does_not_support(tiny_folder):
-    """It said 'estd/estimator.json is ... not a pwas-hdl-model file; re-run `pwas-hdl fit`'."""
-    _refused(["export-testbench", str(tiny_folder[0]), "-o", str(tiny_folder[0].parent / "tb")], tiny_folder[0].parent,
-             "does not support the estimator design", "pwas-hdl simulate")
+def test_export_testbench_of_the_estimator_design(tiny_folder):
+    """It said 'estd/estimator.json is ... not a pwas-hdl-model file; re-run `pwas-hdl fit`', then that the
+    estimator design was not supported; it is exported now (the RTL runs: tests/test_export_testbench.py)."""
+    out = tiny_folder[0].parent / "tb"
+    res = RUNNER.invoke(cli.app, ["export-testbench", str(tiny_folder[0]), "-o", str(out), "--samples", "40"])
+    assert res.exit_code == 0, res.output
+    assert {"tb_pwas_estimator.v", "pwas_estimator_tb_in.hex", "pwas_estimator_tb_expected.hex", "pwas_estimator.v",
+            "run_icarus.sh", "run_verilator.sh", "files.f"} <= {f.name for f in out.iterdir()}
+    assert len((out / "pwas_estimator_tb_expected.hex").read_text().splitlines()) == 40  # no warm-up: one output a sample

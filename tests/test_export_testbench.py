@@ -259,3 +259,89 @@ def test_run_scripts_from_another_directory_in_a_path_with_a_space(folders, tmp_
         r = subprocess.run(["sh", str(tb / script)], cwd=elsewhere, capture_output=True, text=True, env=env, timeout=900)
         assert r.returncode == 0 and "PASS" in r.stdout, (script, (r.stdout + r.stderr)[-3000:])
     assert not any(" " in p.name for p in tb.iterdir())
+
+
+@pytest.fixture(scope="module")
+def feedback_folders(tmp_path_factory):
+    """A recurrent top (My = 2, Mz = 1: one warm-up transfer, II = latency) and seed 003's estimator,
+    parallel (II 1) and serial (II > 1, Amaranth port names): export-testbench refused both kinds before."""
+    import numpy as np
+
+    from pwas_hdl import generate
+    from pwas_hdl.fit.estimator_file import write_estimator
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.systems.switched_observer import estimator_config
+
+    root = tmp_path_factory.mktemp("export-tb-feedback")
+    rng = np.random.default_rng(0)
+    y = np.sin(np.arange(1200) * 0.05) + 0.1 * rng.standard_normal(1200)
+    s = PWASVirtualSensor(mu=0, my=2, mz=1, partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(
+        None, y, np.roll(y, 1) ** 2)
+    generate(s, root / "recurrent", design="sensor", input_bits=16)
+    est = write_estimator(estimator_config(), root / "est.json")
+    generate(est, root / "estimator")
+    generate(est, root / "estimator-serial", architecture="serial", ports="amaranth")
+    return root
+
+
+@pytest.mark.parametrize("name, warmup", [("recurrent", 1), ("estimator", 0), ("estimator-serial", 0)])
+def test_export_recurrent_and_estimator_vectors(feedback_folders, tmp_path, name, warmup):
+    """The expected words are the bit-true model's of the input words (decoded from the files)."""
+    import json
+
+    import numpy as np
+
+    from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+
+    res = export_testbench(feedback_folders / name, tmp_path / "tb", samples=150, seed=4)
+    tb = Path(res["outdir"])
+    man = json.loads((feedback_folders / name / "manifest.json").read_text())
+    pin = next(p for p in man["ports"] if p["role"] == "in.payload")
+    pout = next(p for p in man["ports"] if p["role"] == "out.payload")
+    top = man["top"]
+    vin = [int(w, 16) for w in (tb / f"{top}_tb_in.hex").read_text().split()]
+    vexp = [int(w, 16) for w in (tb / f"{top}_tb_expected.hex").read_text().split()]
+    assert res["inputs"] == len(vin) == 150 and res["outputs"] == len(vexp) == 150 - warmup
+    codes = np.array([unpack_fields(w, pin["fields"]) for w in vin], dtype=np.int64)
+    if name == "recurrent":
+        from pwas_hdl.design.recurrent import recurrent_model
+        from pwas_hdl.verify.simulation import load_design
+
+        d = load_design(feedback_folders / name)
+        run = recurrent_model(d.sensor, d.model).run(codes)
+        want = [pack_fields([*map(int, o), int(f)], pout["fields"]) for o, f in zip(run["out"], run["out_of_range"])]
+        assert len({tuple(r) for r in codes}) > 30  # the sensor-top stimulus (random points, vertices, corners ...)
+    else:
+        from pwas_hdl.verify.estimator_simulation import expected_words, load_estimator_design
+
+        _, want, tr = expected_words(load_estimator_design(feedback_folders / name), codes)
+        assert len(set(tr["theta"].tolist())) > 1 and codes.min() == -codes.max() - 1  # modes switch; full-scale codes
+    assert vexp == want
+
+
+@pytest.mark.rtl
+@needs_iverilog
+@pytest.mark.parametrize("name", ["recurrent", "estimator", "estimator-serial"])
+def test_export_recurrent_and_estimator_icarus(feedback_folders, tmp_path, name):
+    res = export_testbench(feedback_folders / name, tmp_path / "tb", samples=200, seed=2)
+    tb = Path(res["outdir"])
+    r = _icarus(tb)
+    assert r.returncode == 0 and "PASS" in r.stdout and "FAIL" not in r.stdout, r.stdout + r.stderr
+    top = res["testbench"][3:]
+    bad = tmp_path / "bad"
+    shutil.copytree(tb, bad)
+    if name == "recurrent":  # a wrong weight in the design: its error is fed back
+        _flip_weight(bad / f"{top}.v")
+    else:
+        _flip_hex(bad / f"{top}_tb_expected.hex")
+    r = _icarus(bad)
+    assert r.returncode != 0 and "FAIL" in r.stdout, r.stdout
+
+
+@pytest.mark.rtl
+@pytest.mark.slow
+def test_export_recurrent_verilator(feedback_folders, tmp_path):
+    res = export_testbench(feedback_folders / "recurrent", tmp_path / "tb", samples=200, seed=5)
+    r = subprocess.run(["sh", str(Path(res["outdir"]) / "run_verilator.sh")], capture_output=True, text=True, env=tool_env(),
+                       timeout=900)
+    assert r.returncode == 0 and "PASS" in r.stdout, (r.stdout + r.stderr)[-3000:]

@@ -16,7 +16,11 @@ runs without Python in Icarus, Verilator and vendor simulators:
     The commands (also in the README).
 
 The stimulus is :mod:`pwas_stimulus`'s (random points, vertices, faces, corners, out-of-domain
-and whole-range codes), the same as the RTL tests use.
+and whole-range codes), the same as the RTL tests use; an observer-bank sensor and seed 003's
+estimator get its observer-bank blocks (walks, steps, full-scale, saturating, silence). The expected
+words come from the design kind's bit-true model: the core's, the sensor top's, the recurrence of a
+recurrent top (:func:`pwas_hdl.design.recurrent.recurrent_model`) or the switched estimator
+(:func:`pwas_hdl.verify.estimator_simulation.expected_words`).
 """
 
 from __future__ import annotations
@@ -47,15 +51,74 @@ class _VerilogTemplate(Template):
     delimiter = "@@"  # "$" is Verilog's system-task prefix
 
 
-def _hex_lines(words: np.ndarray, width: int) -> str:
+def _hex_lines(words: list[int], width: int) -> str:
+    """One packed payload word per line, ``ceil(width / 4)`` hex digits (``$readmemh``)."""
     digits = max(1, (width + 3) // 4)
-    lines = []
-    for row in words:
+    return "".join(f"{int(v):0{digits}x}\n" for v in words)
+
+
+def _chunks_to_ints(chunks: np.ndarray) -> list[int]:
+    """Rows of 32-bit chunks (``pwas_native.pack_words``, LSB chunk first) -> one int per row."""
+    out = []
+    for row in chunks:
         v = 0
         for k, w in enumerate(row.tolist()):
             v |= int(w) << (32 * k)
-        lines.append(f"{v:0{digits}x}")
-    return "\n".join(lines) + "\n"
+        out.append(v)
+    return out
+
+
+def _feedforward_vectors(design: Any, stimulus: Any, samples: int, seed: int) -> tuple[list[int], list[int]]:
+    """Input and expected output words of a feed-forward design (core, sensor top, observer-bank sensor)."""
+    man, model = design.manifest, design.model
+    native = sim_module("pwas_native")  # payload packing by the manifest's bit fields
+    if design.kind == "core":
+        codes = stimulus.core_codes(model, samples, seed=seed)
+    elif design.bank is not None:  # observer-bank sensor (with or without u/y taps): (u0 .., y0) codes of the bank
+        codes = stimulus.observer_codes(design.bank.bank, samples, seed=seed)
+    else:
+        codes = stimulus.sensor_codes(model, [f.get("signal", f["name"]) for f in design.in_fields], samples, seed=seed)
+    seg = segment(design, codes)
+    pin, pout = _port(man, "in.payload"), _port(man, "out.payload")
+    wi, wo = int(pin["width"]), int(pout["width"])
+    vin = native.pack_words(seg.codes, pin["fields"], (wi + 31) // 32)
+    exp = seg.rows()  # scores, out_of_range[, class_index of a classifier design]
+    vexp = native.pack_words(exp, pout["fields"], (wo + 31) // 32)
+    return _chunks_to_ints(vin), _chunks_to_ints(vexp)
+
+
+def _recurrent_vectors(design: Any, stimulus: Any, samples: int, seed: int) -> tuple[list[int], list[int]]:
+    """Input and expected output words of a recurrent top: the sensor-top stimulus through the bit-true
+    recurrence (:func:`pwas_hdl.design.recurrent.recurrent_model`; the feedback starts from the reset codes)."""
+    from pwas_hdl.design.recurrent import recurrent_model
+    from pwas_hdl.fixedpoint.bitfields import pack_fields
+
+    rm = recurrent_model(design.sensor, design.model)
+    if [f["name"] for f in design.in_fields] != list(rm.signals):
+        raise InputError(f"{design.outdir}: the input fields {[f['name'] for f in design.in_fields]} are not the model's "
+                         f"signals {list(rm.signals)}; regenerate the folder with `pwas-hdl generate`")
+    codes = stimulus.sensor_codes(design.model, list(rm.signals), samples, seed=seed)
+    res = rm.run(codes)
+    vin = [pack_fields([int(v) for v in row], design.in_fields) for row in codes]
+    vexp = [pack_fields([int(v) for v in o] + [int(f)], design.out_fields) for o, f in zip(res["out"], res["out_of_range"])]
+    return vin, vexp
+
+
+def _estimator_vectors(design_dir: str | os.PathLike, man: dict, stimulus: Any, samples: int,
+                       seed: int) -> tuple[Any, list[int], list[int]]:
+    """The estimator design (seed 003), its input and expected output words: the observer-bank
+    stimulus (walks, steps, full-scale, saturating and silent blocks of (u, y) codes) through the
+    bit-true switched estimator (:func:`pwas_hdl.verify.estimator_simulation.expected_words`)."""
+    from types import SimpleNamespace
+
+    from pwas_hdl.verify.estimator_simulation import expected_words, load_estimator_design
+
+    design = load_estimator_design(design_dir, man)
+    est = design.est
+    codes = stimulus.observer_codes(SimpleNamespace(input_bits=est.input_bits, input_frac=est.input_frac,
+                                                    nu=len(design.in_fields) - 1), samples, seed=seed)
+    vin, vexp, _ = expected_words(design, codes)
+    return design, vin, vexp
 
 
 def _port(man: dict, role: str) -> dict | None:
@@ -106,34 +169,27 @@ def export_testbench(
                          f"offered); use at most {255 / 256:.6g}")
     from pwas_hdl.design.manifest import load_manifest
 
-    if load_manifest(design_dir)["design"] == "estimator":  # no PWAS model for load_design: its folder holds estimator.json
-        raise InputError(f"{design_dir}: export-testbench does not support the estimator design (seed 003) yet; verify it "
-                         "with `pwas-hdl simulate DIR DATA.csv --traj-col run`")
-    design = load_design(design_dir)
-    if design.kind == "recurrent":  # its expected words come from the recurrence (pwas_hdl.verify.recurrent_simulation)
-        raise InputError(f"{design_dir}: export-testbench does not support recurrent designs yet; verify them with "
-                         "`pwas-hdl simulate DIR DATA.csv` (the recurrent cocotb bench)")
-    man, model = design.manifest, design.model
+    man = load_manifest(design_dir)
+    stimulus = sim_module("pwas_stimulus")
+    if man["design"] == "estimator":  # seed 003's estimator: no PWAS model, its folder holds estimator.json
+        design, vin, vexp = _estimator_vectors(design_dir, man, stimulus, samples, seed)
+    else:
+        design = load_design(design_dir)
+        if design.kind == "recurrent":  # the expected words come from the bit-true recurrence
+            vin, vexp = _recurrent_vectors(design, stimulus, samples, seed)
+        else:
+            vin, vexp = _feedforward_vectors(design, stimulus, samples, seed)
+    man = design.manifest
     out = Path(outdir) if outdir is not None else design.outdir / "tb"
     if out.exists():
         if not out.is_dir() or (any(out.iterdir()) and not (out / "files.f").is_file()):
             raise InputError(f"{out} exists and was not written by export-testbench; choose a new or empty folder")
-    stimulus = sim_module("pwas_stimulus")
-    native = sim_module("pwas_native")  # payload packing by the manifest's bit fields
-    if design.kind == "core":
-        codes = stimulus.core_codes(model, samples, seed=seed)
-    elif design.bank is not None:  # observer-bank sensor (with or without u/y taps): (u0 .., y0) codes of the bank
-        codes = stimulus.observer_codes(design.bank.bank, samples, seed=seed)
-    else:
-        codes = stimulus.sensor_codes(model, [f.get("signal", f["name"]) for f in design.in_fields], samples, seed=seed)
-    seg = segment(design, codes)
     pin, pout = _port(man, "in.payload"), _port(man, "out.payload")
     wi, wo = int(pin["width"]), int(pout["width"])
-    vin = native.pack_words(seg.codes, pin["fields"], (wi + 31) // 32)
-    exp = seg.rows()  # scores, out_of_range[, class_index of a classifier design]
-    vexp = native.pack_words(exp, pout["fields"], (wo + 31) // 32)
-    if len(exp) < 1:
+    if len(vexp) < 1:
         raise InputError("the stimulus gives no output (fewer samples than the lags need); use more --samples")
+    latency, warmup = int(design.latency), int(getattr(design, "warmup", 0))
+    runtime_files = getattr(design, "runtime_files", {})
 
     top = design.top
     tb = f"tb_{top}"
@@ -148,20 +204,20 @@ def export_testbench(
             raise InputError(f"port {p['name']} (role {p['role']!r}) of {top} is unknown to the exported testbench; regenerate the design")
         conns.append(f"    .{p['name']}({sig})")
     has_warm = _port(man, "warm") is not None
-    readmemh = man["memory"].get("init", {}).get("kind") == "readmemh"
+    readmemh = (man.get("memory") or {}).get("init", {}).get("kind") == "readmemh"  # an estimator has no weight memory
     mem_param = man["memory"]["init"]["parameter"] if readmemh else None
-    hold = int(np.random.default_rng(seed).integers(0, max(1, design.latency)))
+    hold = int(np.random.default_rng(seed).integers(0, max(1, latency)))
     ii = int(man["ii"])
     # a serial design (II > 1) takes the lag bank's warm-up transfers unthrottled (as the cocotb bench measures it)
-    ii_from = 1 if ii == 1 else design.warmup + 1
+    ii_from = 1 if ii == 1 else warmup + 1
     # cycles per pass before giving up: with stalls a transfer needs a cycle with in.valid (probability
     # 1 - q) and one with out.ready that lets the pipeline move (1 - q), about 1 / (1 - q)^2 cycles each;
     # 8 times the expected count (64-bit: at q = 255/256 a transfer takes about 65 536 cycles)
-    limit = math.ceil(8 * (len(vin) * ii + design.latency + 16) * (256 / (256 - stall_256)) ** 2) + 1000
+    limit = math.ceil(8 * (len(vin) * ii + latency + 16) * (256 / (256 - stall_256)) ** 2) + 1000
     text = _VerilogTemplate((templates_dir() / "testbench.v.tmpl").read_text(encoding="utf-8")).substitute(
         top=top, version=__version__, tb_name=tb, in_file=in_file, exp_file=exp_file, n_in=len(vin), n_out=len(vexp),
-        latency=design.latency, warmup=design.warmup, hold=hold, wi=wi, wo=wo, ii=ii, ii_from=ii_from,
-        ii_note="" if ii_from == 1 else f" (after the {design.warmup} warm-up transfers, which are not throttled)",
+        latency=latency, warmup=warmup, hold=hold, wi=wi, wo=wo, ii=ii, ii_from=ii_from,
+        ii_note="" if ii_from == 1 else f" (after the {warmup} warm-up transfers, which are not throttled)",
         mem_dir_note=" / MEM_DIR" if mem_param else "", mem_dir_plural="s" if mem_param else "",
         mem_dir_files=" and of the design's .hex weight files" if mem_param else "",
         mem_dir_decl='  parameter MEM_DIR = "./";\n' if mem_param else "",
@@ -180,7 +236,7 @@ def export_testbench(
         exp_file: _hex_lines(vexp, wo),
         "files.f": f"{tb}.v\n{design.verilog_path.name}\n",
     }
-    copies = {design.verilog_path.name: design.verilog_path, **design.runtime_files}
+    copies = {design.verilog_path.name: design.verilog_path, **runtime_files}
     make_vars = " ".join(f"-MAKEFLAGS {v}" for v in (*sim_module("pwas_runner").VERILATOR_MAKE_VARS,
                                                         "CFG_CXXFLAGS_COROUTINES=-fcoroutines"))
     vl = f"verilator --binary -j 2 -Wno-fatal --top-module {tb} {tb}.v {design.verilog_path.name} -o {tb} {make_vars} && ./obj_dir/{tb}"
