@@ -100,7 +100,7 @@ def test_serial_core_ports_equal_the_parallel_core():
 
 @pytest.mark.parametrize("args, msg", [
     (["--architecture", "tiny"], "--architecture (architecture) must be one of parallel, serial"),
-    (["--architecture", "serial", "--clock-mhz", "50"], "--architecture serial"),
+    # (--clock-mhz with --architecture serial is searched now: tests/test_timing_closure_kinds.py)
     # --memory was ignored by the serial design (one memory of N words) while the manifest recorded it
     (["--architecture", "serial", "--memory", "replicated"], "--memory replicated does not apply to --architecture serial"),
     (["--architecture", "serial", "--memory", "corner"], "--memory corner does not apply to --architecture serial"),

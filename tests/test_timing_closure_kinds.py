@@ -55,6 +55,12 @@ def classifier_sensor():
 
 
 @pytest.fixture(scope="module")
+def plain_sensor():
+    y, z = _series()
+    return PWASVirtualSensor(my=2, partitions=5, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(None, y, z)
+
+
+@pytest.fixture(scope="module")
 def recurrent_sensor():
     y, z = _series()
     return PWASVirtualSensor(my=1, mz=1, partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(None, y, z)
@@ -86,35 +92,48 @@ class FakePlaceAndRoute:
                 "critical_path": None, "device": "45k", "part": "LFE5U-45F-6CABGA381", "tools": {"fake": "1"}}
 
 
-def _latency_with(model, design, pipeline):
-    return build_design(model, design=design, pipeline=Pipeline.cast(pipeline)).manifest["latency_cycles"]
+def _latency_with(model, design, pipeline, architecture="parallel"):
+    return build_design(model, design=design, pipeline=Pipeline.cast(pipeline),
+                        architecture=architecture).manifest["latency_cycles"]
 
 
-@pytest.mark.parametrize("kind, design, fixed", [
-    ("additive", "core", 1),  # the sum register
-    ("additive", "sensor", 1),
-    ("warped", "core", 1),  # the warp register
-    ("classifier", "core", None),  # the argmax stage: its registers follow the pipeline
-    ("bank", "sensor", None),  # the observer bank and its feature stages
-    ("recurrent", "sensor", 0),  # the recurrent top: the core's latency (II = latency)
+@pytest.mark.parametrize("kind, design, fixed, architecture", [
+    ("additive", "core", 1, "parallel"),  # the sum register
+    ("additive", "sensor", 1, "parallel"),
+    ("warped", "core", 1, "parallel"),  # the warp register
+    ("warped", "sensor", None, "serial"),  # the warp in front of the serial core
+    ("classifier", "core", None, "parallel"),  # the argmax stage: its registers follow the pipeline
+    ("bank", "sensor", None, "parallel"),  # the observer bank and its feature stages
+    ("bank", "sensor", None, "serial"),  # the time-multiplexed bank
+    ("recurrent", "sensor", 0, "parallel"),  # the recurrent top: the core's latency (II = latency)
+    ("plain", "core", None, "serial"),  # the serial core takes 6 of the registers (n + 1 MAC cycles)
+    ("plain", "sensor", None, "serial"),
 ])
-def test_the_search_counts_the_designs_latency(kind, design, fixed, request, monkeypatch):
+def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture, request, monkeypatch):
     model = request.getfixturevalue(f"{kind}_sensor")
-    fake = FakePlaceAndRoute(mhz_per_cycle=20.0)
+    fake = FakePlaceAndRoute(mhz_per_cycle=20.0 if architecture == "parallel" else 12.0)
     monkeypatch.setattr(tc, "measure_design", fake)
-    gd = build_design(model, design=design, target_mhz=100.0)
+    gd = build_design(model, design=design, target_mhz=100.0, architecture=architecture)
+    assert gd.manifest["architecture"]["kind"] == architecture
     tm = gd.manifest["timing"]
     cands = tm["candidates"]
     lat = [c["latency_cycles"] for c in cands]
     assert all(a < b for a, b in zip(lat, lat[1:])), lat
     chosen = cands[tm["chosen"]]
-    assert tm["met"] and gd.manifest["latency_cycles"] == chosen["latency_cycles"] >= 5  # 20 MHz a cycle: 5 cycles
+    assert tm["met"] and gd.manifest["latency_cycles"] == chosen["latency_cycles"]
+    assert chosen["latency_cycles"] == min(c["latency_cycles"] for c in cands if c["latency_cycles"] * fake.mhz_per_cycle >= 100)
     assert gd.manifest["pipeline"] == chosen["pipeline"]
     # what the record says of each measured candidate is the latency of the design built with its pipeline
     measured = [c for c in cands if c["measured"]]
     assert measured and [(c["pipeline"], c["latency_cycles"]) for c in measured] == sorted(fake.built, key=lambda b: b[1])
     for c in measured:
-        assert c["latency_cycles"] == _latency_with(model, design, c["pipeline"])
+        assert c["latency_cycles"] == _latency_with(model, design, c["pipeline"], architecture)
+    if architecture == "serial":  # only the registers the serial core takes: one candidate per latency
+        from pwas_hdl.hdl.serial_core import serial_latency
+
+        assert len(cands) <= 7 and gd.manifest["ii"] > 1
+        if kind == "plain":
+            assert lat == sorted({serial_latency(p, model.grid_.n) for p in tc.pipeline_candidates(model.grid_.n)})
     if fixed is not None:  # the core's latency + the fixed register(s), for every candidate
         n = max(len(s) for s in model.grid_.subsets) if kind == "additive" else model.grid_.n
         assert all(c["latency_cycles"] == Pipeline.cast(c["pipeline"]).latency(n) + fixed for c in cands)
@@ -197,3 +216,17 @@ def test_additive_core_closes_timing_on_ecp5(additive_sensor):
     assert tm["measurements"] == [3]
     assert chosen["critical_path"]["from"].startswith(("part0", "part1", "input")), chosen["critical_path"]
     assert "## Timing closure" in gd.files["report.md"]
+
+
+@needs_pnr
+@pytest.mark.synth
+def test_serial_core_closes_timing_on_ecp5(plain_sensor):
+    """Real place and route of the shallowest serial candidate (one nextpnr run): was refused."""
+    from pwas_hdl.hdl.serial_core import serial_latency
+
+    gd = build_design(plain_sensor, design="core", target_mhz=40.0, fpga_target="ecp5", architecture="serial")
+    tm = gd.manifest["timing"]
+    chosen = tm["candidates"][tm["chosen"]]
+    assert tm["met"] and chosen["fmax_mhz"] >= 40.0 and tm["measurements"] == [chosen["latency_cycles"]]
+    assert gd.manifest["latency_cycles"] == chosen["latency_cycles"] == serial_latency(Pipeline.cast("min"), 2)
+    assert gd.manifest["ii"] == 3 and gd.manifest["architecture"]["kind"] == "serial"

@@ -424,7 +424,9 @@ def build_design(
         ``parallel`` (default): ``n + 1`` memories and multipliers per target, II = 1.
         ``serial``: one multiplier per target, one memory of N words, ``n + 1`` cycles per
         sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`).
-        Not with ``target_mhz`` nor ``memory`` (refused: the serial memory is the only one).
+        Not with ``memory`` (refused: the serial memory is the only one). With ``target_mhz`` the
+        search runs over the registers the serial core takes (``split``, ``rank``, ``offset``,
+        ``addr``, ``mem_out``, ``product``).
         For an observer-bank sensor, ``serial`` also time-multiplexes the bank
         (:mod:`pwas_hdl.hdl.serial_observer_bank`: ``bank_lanes`` state-update units, the II is
         the manifest's ``front_end.cycles_per_sample``).
@@ -460,9 +462,6 @@ def build_design(
 
     if architecture not in ARCHITECTURES:
         raise InputError(choice_text(option_text("architecture"), ARCHITECTURES, architecture))
-    if architecture == "serial" and target_mhz is not None:
-        raise InputError("the timing closure (--clock-mhz) chooses among parallel pipelines; "
-                         "give --pipeline with --architecture serial")
     if architecture == "serial" and memory is not None:  # it was ignored, and the manifest recorded it as built
         raise InputError(f"--memory {memory} does not apply to --architecture serial (one weight memory of N words, "
                          "one vertex read per cycle); leave --memory out")
@@ -577,11 +576,14 @@ def build_design(
             raise InputError(choice_text(option_text("memory_init"), ("inline", "readmemh"), memory_init))
 
         def candidate(pipe: Pipeline) -> GeneratedDesign:
-            return build_design(sensor, design=design, name=name, memory=memory, pipeline=pipe, memory_init="inline",
-                                ports=ports, **formats)
+            return build_design(sensor, design=design, name=name, memory=None if architecture == "serial" else memory,
+                                pipeline=pipe, memory_init="inline", ports=ports, architecture=architecture,
+                                bank_lanes=bank_lanes, **formats)
 
         # each candidate's latency is the built component's (an additive sum, a warp, an observer
-        # bank or an argmax stage adds cycles to the core's); a candidate the design cannot take is dropped
+        # bank or an argmax stage adds cycles to the core's; the serial core takes only some of the
+        # registers: candidates that add none of them are the same design, dropped); a candidate the
+        # design cannot take is dropped
         chosen, timing = close_timing(candidate, _core_inputs(sensor), target_mhz, fpga=fpga_target, seed=timing_seed,
                                       prescreen=prescreen, progress=progress, executor=executor,
                                       latency=lambda pipe: int(component(pipe)[0].latency))
