@@ -193,6 +193,7 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("core.s_rank_q__TRELLIS_FF", "s_rank"),
     ("core.part1_s_mem_q", "part1 s_mem"),
     ("part0_wmem0", "part0 memory"),
+    ("core.part1_part1_acc0_q", "part1 acc0_q"),  # an accumulator of a flattened part: one prefix shown
     ("prod0_1_MULT18X18D_P9", "multiplier"),
     ("core.s_warp_u0", "warp register"),
     ("am_s1_index", "argmax stage"),

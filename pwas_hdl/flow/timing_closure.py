@@ -236,8 +236,11 @@ def _stage_of_cell(cell: str) -> str:
     """
     c = cell[5:] if cell.startswith("core.") else cell
     part = re.match(r"(part[0-9]+)_", c)  # an additive design's parts, flattened (pwas_hdl.hdl.additive_top)
-    if part:
-        return f"{part.group(1)} {_stage_of_cell(c[part.end():])}"
+    if part:  # the part's own names may repeat the prefix (part1_part1_acc): strip every copy of it
+        rest = c[part.end():]
+        while rest.startswith(part.group(0)):
+            rest = rest[part.end():]
+        return f"{part.group(1)} {_stage_of_cell(rest)}"
     if c.startswith(("io_", "in__payload", "in__valid", "rst", "out__ready", "s_axis_tdata", "s_axis_tvalid", "aresetn",
                      "m_axis_tready")):
         return "input register"
