@@ -141,6 +141,10 @@ def test_cg_preconditioners_subset(tmp_path):
     ("generate_scale", ["--points", "0:3"], "--points: n must be in 1..6"),
     ("generate_scale", ["--samples", "5"], "--samples must be in 20..100000"),
     ("generate_scale", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
+    ("timing_closure_kinds", ["--kinds", "plain-core,nope"], "--kinds takes names from"),
+    ("timing_closure_kinds", ["--kinds", "plain-core,plain-core"], "--kinds names a kind twice"),
+    ("timing_closure_kinds", ["--clock-mhz", "0"], "--clock-mhz must be in (0, 2000) MHz"),
+    ("timing_closure_kinds", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
 ])
 def test_benchmark_bad_option(tmp_path, capsys, script, args, message):
     bench = importlib.import_module(f"pwas_hdl.benchmarks.{script}")
@@ -169,6 +173,20 @@ def test_first_order_floor_quick_smoke(tmp_path):
     assert row["iterations_in_budget"] == row["budget_ms_per_solve"] / (k["vcycle_ms"] + k["matvec_ms"])
     assert "| 2 | 127 | 16384 |" in (tmp_path / "first_order_floor_quick.md").read_text()
 
+
+
+@pytest.mark.synth
+def test_timing_closure_kinds_quick_smoke(tmp_path):
+    """benchmarks/timing_closure_kinds.py --quick: the plain core's search meets its target, and the row
+    agrees with the design built (the manifest's latency is the chosen candidate's)."""
+    import json
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.timing_closure_kinds")
+    assert script_main(bench.main, ["--quick", "--clock-mhz", "50", "--outdir", str(tmp_path)]) == 0
+    (row,) = json.loads((tmp_path / "timing_closure_kinds_quick.json").read_text())["rows"]
+    assert row["kind"] == "plain-core" and row["met"] and row["chosen_fmax_mhz"] >= 50
+    assert row["manifest_latency_cycles"] == row["chosen_latency_cycles"] in [c["latency_cycles"] for c in row["measured"]]
+    assert "| plain-core | core | parallel | yes |" in (tmp_path / "timing_closure_kinds_quick.md").read_text()
 
 
 @pytest.mark.rtl
