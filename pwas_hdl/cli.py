@@ -806,7 +806,8 @@ def generate(
 
     Same inputs give byte-identical files. Nothing is written unless the whole design builds.
     A classifier model (fit --classify) gets an argmax stage after the core: the class index
-    (ties to the lowest class) in the top bits of the output payload, field class_index.
+    (ties to the lowest class) in the top bits of the output payload, field class_index; on a
+    non-uniform partition (--breakpoints quantile-pow2) the warp goes in front of the core.
     """
     from pwas_hdl.design.generate import generate as _generate
 

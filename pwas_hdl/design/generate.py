@@ -376,6 +376,9 @@ def build_design(
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
         :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding); not with
         ``architecture="serial"`` or a classifier.
+        A model fitted with power-of-two ``breakpoints`` gets the warped designs of
+        :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
+        too (warp -> core -> argmax stage; parallel only, as every classifier).
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated", "corner"}, optional
@@ -484,8 +487,7 @@ def build_design(
     additive = _is_additive(sensor)
     warped = _is_warped(sensor)  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
     if warped:
-        for what, bad in (("a classifier (fit --classify)", getattr(sensor, "classifier_", None) is not None),
-                          ("a recurrent sensor (fit --mz)", design == "recurrent"),
+        for what, bad in (("a recurrent sensor (fit --mz)", design == "recurrent"),
                           ("an observer-bank sensor", getattr(sensor, "front_end_", None) is not None)):
             if bad:
                 raise InputError(f"{what} is not available with a non-uniform partition (--breakpoints) yet; "
@@ -543,10 +545,11 @@ def build_design(
 
             comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
                                                          pipeline=pipe)
-        elif warped:  # lag bank (sensor) -> warp + register -> the uniform core (parallel or serial)
+        elif warped:  # lag bank (sensor) -> warp + register -> the uniform core (parallel or serial) [-> argmax stage]
             from pwas_hdl.hdl.warp import build_warped_design
 
-            comp = build_warped_design(fxm, design, sensor.lags_, memory=memory, pipeline=pipe, name=top, architecture=architecture)
+            comp = build_warped_design(fxm, design, sensor.lags_, memory=memory, pipeline=pipe, name=top, architecture=architecture,
+                                       classifier=classifier)
         elif design == "core":
             comp = build_core(fxm, memory=memory, pipeline=pipe, name=top, classifier=classifier, architecture=architecture)
         elif bank_model is not None:

@@ -33,7 +33,8 @@ LSB first as listed by ``design_info(...)["payload"]``:
 ``warm``           out     sensor top only: the lag bank holds ``M-1`` samples
 =================  ======  ==========================================================
 
-A classifier model (``classifier=`` of :func:`build_core` / :func:`build_sensor`) adds an
+A classifier model (``classifier=`` of :func:`build_core` / :func:`build_sensor`, and of the warped
+builders of :mod:`pwas_hdl.hdl.warp`) adds an
 :class:`~pwas_hdl.hdl.argmax.ArgmaxStage` after the core: ``out__payload`` then ends with the class
 index (``class_index``, ties to the lowest index) and the latency grows by
 :func:`~pwas_hdl.hdl.argmax.argmax_latency`.

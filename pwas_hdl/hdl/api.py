@@ -13,6 +13,7 @@ from pwas_hdl.hdl.params import CoreParams, Pipeline
 if TYPE_CHECKING:
     from pwas_hdl.fit.regressors import LagStructure
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+    from pwas_hdl.hdl.argmax import ArgmaxStage
     from pwas_hdl.hdl.sensor_top import PWASSensorTop
 
 __all__ = ["build_core", "build_sensor", "design_info"]
@@ -65,10 +66,7 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
     if classifier is not None:
         from pwas_hdl.hdl.classifier_top import PWASClassifierCore
 
-        if architecture != "parallel":
-            raise InputError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
-
-        _check_classes(classifier, params)
+        check_classifier(classifier, params, architecture)
         comp = PWASClassifierCore(params, memory=memory, pipeline=pipeline)
         core = comp.core
     else:
@@ -81,9 +79,65 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
     return comp
 
 
-def _check_classes(classifier: dict, params: CoreParams) -> None:
+def check_classifier(classifier: dict, params: CoreParams, architecture: str) -> None:
+    """Refuse what no classifier design builds: a serial core, or not one class per score target.
+
+    Parameters
+    ----------
+    classifier : dict
+        ``{"target": name, "classes": [labels]}`` (``sensor.classifier_``).
+    params : CoreParams
+        The core's parameters (``nz`` score targets).
+    architecture : str
+        The core's architecture.
+
+    Raises
+    ------
+    InputError
+        ``architecture`` is not ``"parallel"`` (the argmax stage follows the parallel core only), or
+        the number of classes differs from ``nz``.
+    """
+    if architecture != "parallel":
+        raise InputError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
     if len(classifier["classes"]) != params.nz:
         raise InputError(f"the classifier has {len(classifier['classes'])} classes for nz = {params.nz} score targets")
+
+
+def classifier_stage(classifier: dict | None, params: CoreParams, pipeline: Pipeline | str | None,
+                     architecture: str) -> ArgmaxStage | None:
+    """The argmax stage a top inlines after its core for a classifier model (None without one).
+
+    Used by :func:`build_sensor` and the warped builders (:mod:`pwas_hdl.hdl.warp`).
+
+    Parameters
+    ----------
+    classifier : dict or None
+        As :func:`build_core`.
+    params : CoreParams
+        The core's parameters.
+    pipeline : Pipeline, preset name or None
+        The design's pipeline (its ``tree_levels`` place the stage's registers).
+    architecture : str
+        The core's architecture (checked: :func:`check_classifier`).
+
+    Returns
+    -------
+    ArgmaxStage or None
+        :func:`~pwas_hdl.hdl.classifier_top.classifier_argmax`, not elaborated on its own.
+
+    Raises
+    ------
+    InputError
+        As :func:`check_classifier`.
+    """
+    if classifier is None:
+        return None
+    from pwas_hdl.hdl.classifier_top import classifier_argmax
+
+    check_classifier(classifier, params, architecture)
+    argmax = classifier_argmax(params, pipeline)
+    argmax._MustUse__silence = True  # inlined by the top
+    return argmax
 
 
 def _make_core(params: CoreParams, memory: str, pipeline, architecture: str) -> PWASCore:
@@ -235,16 +289,7 @@ def build_sensor(
     if hasattr(model, "signal_input_formats"):
         model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
-    argmax = None
-    if classifier is not None:
-        from pwas_hdl.hdl.classifier_top import classifier_argmax
-
-        if architecture != "parallel":
-            raise InputError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
-
-        _check_classes(classifier, params)
-        argmax = classifier_argmax(params, pipeline)
-        argmax._MustUse__silence = True  # inlined by the top
+    argmax = classifier_stage(classifier, params, pipeline, architecture)
     top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, argmax=argmax,
                         architecture=architecture)
     top.classifier = dict(classifier) if classifier is not None else None

@@ -2,11 +2,13 @@
 
 A classifier model (:mod:`pwas_hdl.fit.classifier`: ``C`` score targets sharing one locator) is
 generated as the core (or the virtual-sensor top, :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`
-with ``argmax=``) followed by :class:`~pwas_hdl.hdl.argmax.ArgmaxStage` over the ``C`` output codes,
+with ``argmax=``; with a non-uniform partition the warped core or top of :mod:`pwas_hdl.hdl.warp`,
+``classifier=``) followed by :class:`~pwas_hdl.hdl.argmax.ArgmaxStage` over the ``C`` output codes,
 both inlined into one module. The output payload keeps the core's fields (the ``C`` scores, then
 ``out_of_range``) and adds the class index in its top bits (``class_index``, ``index_width`` bits,
-ties to the lowest index); the latency is the core's plus the stage's
-(:func:`~pwas_hdl.hdl.argmax.argmax_latency`: 0 with the ``min`` pipeline).
+ties to the lowest index); the latency is the core's (with a warp: + its register) plus the stage's
+(:func:`~pwas_hdl.hdl.argmax.argmax_latency`: 0 with the ``min`` pipeline). Every one of these
+designs connects its core and the stage by :func:`inline_core_and_argmax`.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from amaranth.hdl import Module, unsigned
+from amaranth.hdl import Module, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -23,7 +25,7 @@ from pwas_hdl.hdl.argmax import ArgmaxStage
 from pwas_hdl.hdl.core import PWASCore, core_input_layout, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
-__all__ = ["CLASS_FIELD", "classifier_argmax", "classifier_info", "PWASClassifierCore"]
+__all__ = ["CLASS_FIELD", "classifier_argmax", "classifier_info", "inline_core_and_argmax", "PWASClassifierCore"]
 
 #: Name of the class-index field of the output payload (manifest ``classifier.field``).
 CLASS_FIELD = "class_index"
@@ -46,6 +48,37 @@ def classifier_argmax(params: CoreParams, pipeline: Pipeline | str | None = None
         ``select="max"``, one extra bit (``out_of_range``) carried through.
     """
     return ArgmaxStage(params.nz, params.out_width, signed=True, extra_bits=1, pipeline=pipeline, select="max")
+
+
+def inline_core_and_argmax(m: Module, core: Any, argmax: ArgmaxStage | None, payload: Value, valid: Value,
+                           advance: Signal, out: Any) -> None:
+    """Inline ``core`` into ``m`` and, if there is one, the argmax stage after it (one module).
+
+    The composition of every classifier design (:class:`PWASClassifierCore`, the sensor top, the
+    warped core of :mod:`pwas_hdl.hdl.warp`): the core's output stream feeds the stage, whose
+    output is ``out``; without a stage the core drives ``out`` itself.
+
+    Parameters
+    ----------
+    m : Module
+        Module the logic is added to.
+    core : PWASCore or SerialPWASCore
+        Its :meth:`~pwas_hdl.hdl.core.PWASCore.build_into` (with its input stage, e.g. a warp).
+    argmax : ArgmaxStage or None
+        The stage after the core (``index_lsb`` = the core's output payload bits), or None.
+    payload, valid : Value
+        The core's input payload and its valid bit.
+    advance : Signal
+        The core's input ready (driven here).
+    out : stream interface
+        The design's output stream (the core's, then the class index with ``argmax``).
+    """
+    if argmax is None:
+        core.build_into(m, payload, valid, advance, out)
+        return
+    scores = argmax.scores_stream(out)
+    core.build_into(m, payload, valid, advance, scores)
+    argmax.build_into(m, scores.payload, scores.valid, scores.ready, out)
 
 
 def classifier_info(component: Any, target: str, classes: Sequence[float], score_names: Sequence[str]) -> dict:
@@ -146,7 +179,5 @@ class PWASClassifierCore(wiring.Component):
         """
         m = Module()
         inp = getattr(self, "in")
-        scores = self.argmax.scores_stream(self.out)
-        self.core.build_into(m, inp.payload, inp.valid, inp.ready, scores)
-        self.argmax.build_into(m, scores.payload, scores.valid, scores.ready, self.out)
+        inline_core_and_argmax(m, self.core, self.argmax, inp.payload, inp.valid, inp.ready, self.out)
         return m

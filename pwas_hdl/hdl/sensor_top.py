@@ -31,6 +31,7 @@ from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
+from pwas_hdl.hdl.classifier_top import inline_core_and_argmax
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
@@ -341,10 +342,6 @@ class PWASSensorTop(wiring.Component):
             with m.If(transfer):
                 m.d.sync += [fill[0].eq(1)] + [fill[i].eq(fill[i - 1]) for i in range(1, len(fill))]
         regressor = Cat(*[cur[s] if lag == 0 else hist[s][lag - 1] for s, lag in self.dims])
-        if self.argmax is None:
-            self.core.build_into(m, regressor, inp.valid & warm, advance, self.out)
-        else:  # core -> argmax stage, both inlined (one module)
-            scores = self.argmax.scores_stream(self.out)
-            self.core.build_into(m, regressor, inp.valid & warm, advance, scores)
-            self.argmax.build_into(m, scores.payload, scores.valid, scores.ready, self.out)
+        # the core (after the warp, if any), then the argmax stage, if any: all inlined (one module)
+        inline_core_and_argmax(m, self.core, self.argmax, regressor, inp.valid & warm, advance, self.out)
         return m

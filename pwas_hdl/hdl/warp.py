@@ -9,7 +9,10 @@ the core's + 1; the input payload holds signed ``B_in``-bit codes ``q`` (not the
 warp register is one more front-end register of :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore`)
 and the virtual-sensor top (:class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop` with ``warps``: lag
 bank of ``B_in``-bit codes -> warp -> core). ``pwas-hdl generate`` builds all of them for a model
-fitted with ``--breakpoints quantile-pow2`` (:func:`build_warped_design`).
+fitted with ``--breakpoints quantile-pow2`` (:func:`build_warped_design`); for a classifier model
+(``fit --classify``) the builders' ``classifier`` adds the argmax stage of
+:mod:`pwas_hdl.hdl.classifier_top` after the core (parallel core only, as for a uniform grid):
+warp register -> core -> argmax stage, the class index in the output payload's top bits.
 
 Warp of one dimension (offset-binary ``qo = q + 2**(B_in-1)``, constants ``Bo_k = B_k + 2**(B_in-1)``)::
 
@@ -45,6 +48,7 @@ if TYPE_CHECKING:
     from pwas_hdl.fit.regressors import LagStructure
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
     from pwas_hdl.fixedpoint.warp import Pow2Warp, WarpedFixedPointModel
+    from pwas_hdl.hdl.argmax import ArgmaxStage
 
 __all__ = ["WarpedPWASCore", "attach_warp", "build_warped_core", "build_warped_sensor", "build_warped_design",
            "warp_into", "write_warped_folder"]
@@ -212,42 +216,57 @@ class WarpedPWASCore(wiring.Component):
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture : {"parallel", "serial"}
         The core behind the warp (serial: II = n + 1, :mod:`pwas_hdl.hdl.serial_core`).
+    argmax : ArgmaxStage, optional
+        A classifier's decision stage after the core
+        (:func:`~pwas_hdl.hdl.classifier_top.classifier_argmax`; :func:`build_warped_core` makes it
+        from ``classifier``): the output payload then ends with the class index and the latency
+        grows by ``argmax.latency``.
 
     Ports: as the core, but ``in.payload`` holds ``n`` signed ``B_in``-bit codes ``q``
-    (``in_width`` bits each).
+    (``in_width`` bits each); with ``argmax`` ``out.payload`` adds the class index in its top bits.
 
     Attributes
     ----------
-    core : PWASCore (inlined), latency, ii, memory_plan, pipeline, params : the core's (latency + 1)
+    core : PWASCore (inlined), ii, memory_plan, pipeline, params : the core's
+    latency : int
+        The core's + 1 (the warp register) + ``argmax.latency``.
     warps : list of Pow2Warp
     in_width : int
         ``B_in``: bits of one input code.
+    argmax : ArgmaxStage or None
 
     Raises
     ------
     InputError
         An unknown ``architecture``, warps that do not fit the core
-        (:func:`attach_warp`), or parameters the core refuses.
+        (:func:`attach_warp`), parameters the core refuses, or an ``argmax`` whose ``index_lsb`` is
+        not the core's output width.
     """
 
     kind = "core"
 
-    def __init__(self, model: WarpedFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None, architecture: str = "parallel"):
+    def __init__(self, model: WarpedFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 architecture: str = "parallel", argmax: ArgmaxStage | None = None):
         from pwas_hdl.hdl.api import _make_core
 
         self._MustUse__silence = True
         self.warps = list(model.warps)
         params = CoreParams.from_model(model.core)
+        out_bits = core_output_layout(params).size
+        if argmax is not None and argmax.index_lsb != out_bits:
+            raise InputError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {out_bits}")
         self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True
         self.in_width = attach_warp(self.core, self.warps)
         self.params = params
-        self.latency, self.ii = self.core.latency, self.core.ii
+        self.argmax = argmax
+        self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
+        self.ii = self.core.ii
         self.memory_plan, self.pipeline = self.core.memory_plan, self.core.pipeline
         self._model = model
         super().__init__({
             "in": In(stream.Signature(unsigned(params.n * self.in_width))),
-            "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
+            "out": Out(stream.Signature(unsigned(out_bits + (argmax.index_width if argmax is not None else 0)))),
         })
         self._MustUse__silence = False
 
@@ -262,7 +281,7 @@ class WarpedPWASCore(wiring.Component):
         return {"warp": warp_hw_info(self._model)}
 
     def elaborate(self, platform: Any) -> Module:
-        """The warp stage, its register and the PWAS core, connected.
+        """The warp stage, its register and the PWAS core (and the argmax stage, if any), connected.
 
         Parameters
         ----------
@@ -272,46 +291,56 @@ class WarpedPWASCore(wiring.Component):
         Returns
         -------
         Module
-            The core's :meth:`~pwas_hdl.hdl.core.PWASCore.build_into`, its input stage the warp.
+            The core's :meth:`~pwas_hdl.hdl.core.PWASCore.build_into`, its input stage the warp,
+            then the argmax stage (:func:`~pwas_hdl.hdl.classifier_top.inline_core_and_argmax`).
         """
+        from pwas_hdl.hdl.classifier_top import inline_core_and_argmax
+
         m = Module()
         inp = getattr(self, "in")
-        self.core.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
+        inline_core_and_argmax(m, self.core, self.argmax, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
 
 def build_warped_core(model: WarpedFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                      name: str = "pwas_core", architecture: str = "parallel") -> WarpedPWASCore:
+                      name: str = "pwas_core", architecture: str = "parallel", classifier: dict | None = None) -> WarpedPWASCore:
     """The warped core of a :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` (named for emit).
 
     Parameters
     ----------
     model : WarpedFixedPointModel
         The warped bit-true model.
-    memory, pipeline, name, architecture
-        As :func:`pwas_hdl.hdl.api.build_core` (``name`` is not checked here).
+    memory, pipeline, name, architecture, classifier
+        As :func:`pwas_hdl.hdl.api.build_core` (``name`` is not checked here; ``classifier``: the
+        argmax stage after the core, :func:`pwas_hdl.hdl.api.classifier_stage`).
 
     Returns
     -------
     WarpedPWASCore
-        Latency: the core's + 1 cycle.
+        Latency: the core's + 1 cycle (+ the argmax stage's); ``classifier`` as given (for the
+        manifest's ``classifier`` entry, :func:`pwas_hdl.hdl.api.design_info`).
 
     Raises
     ------
     InputError
-        As :class:`WarpedPWASCore`.
+        As :class:`WarpedPWASCore`; a classifier with ``architecture="serial"`` or whose class
+        count differs from ``nz`` (:func:`pwas_hdl.hdl.api.check_classifier`).
     """
-    comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture)
+    from pwas_hdl.hdl.api import classifier_stage
+
+    argmax = classifier_stage(classifier, CoreParams.from_model(model.core), pipeline, architecture)
+    comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture, argmax=argmax)
     comp.module_name = name
     comp._MustUse__silence = True
     comp.core.input_names = list(model.regressor_names)
     comp.core.target_names = list(model.target_names)
+    comp.classifier = dict(classifier) if classifier is not None else None
     return comp
 
 
 def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None, *, memory: str = "banked",
                         pipeline: Pipeline | str | None = None, name: str = "pwas_sensor",
-                        architecture: str = "parallel") -> PWASSensorTop:
+                        architecture: str = "parallel", classifier: dict | None = None) -> PWASSensorTop:
     """The warped virtual-sensor top: lag bank of ``B_in``-bit codes -> warp (+ register) -> core.
 
     Parameters
@@ -321,27 +350,32 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
     lags : LagStructure or None
         The sensor's lag structure; None: derived from the model's ``regressor_signals``
         (:func:`~pwas_hdl.hdl.sensor_top.lag_plan`).
-    memory, pipeline, name, architecture : as :func:`pwas_hdl.hdl.api.build_sensor`
+    memory, pipeline, name, architecture, classifier : as :func:`pwas_hdl.hdl.api.build_sensor`
+        (``classifier``: the argmax stage after the core, inside the top)
 
     Returns
     -------
     PWASSensorTop
-        With ``warps``; ``extra_info`` adds the manifest's ``warp`` entry.
+        With ``warps`` (and ``argmax`` for a classifier); ``extra_info`` adds the manifest's ``warp`` entry.
 
     Raises
     ------
     InputError
-        The lags of a signal have different quantisations, or recurrent ``lags``.
+        The lags of a signal have different quantisations, or recurrent ``lags``; a classifier
+        with ``architecture="serial"`` or whose class count differs from ``nz``.
         As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` or :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`.
     """
+    from pwas_hdl.hdl.api import classifier_stage
     from pwas_hdl.hdl.sensor_top import lag_plan
 
     model.signal_input_formats()  # InputError unless the lags of each signal can share one code
     params = CoreParams.from_model(model.core)
     signals, dims = lag_plan(model.core, lags)
-    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, architecture=architecture, warps=model.warps)
+    argmax = classifier_stage(classifier, params, pipeline, architecture)
+    top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, architecture=architecture, warps=model.warps,
+                        argmax=argmax)
     top.module_name = name
-    top.classifier = None
+    top.classifier = dict(classifier) if classifier is not None else None
     top._MustUse__silence = True
     top.core.input_names = list(model.regressor_names)
     top.core.target_names = list(model.target_names)
@@ -351,7 +385,7 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
 
 def build_warped_design(model: WarpedFixedPointModel, design: str, lags: LagStructure | None, *, memory: str = "banked",
                         pipeline: Pipeline | str | None = None, name: str = "pwas_core",
-                        architecture: str = "parallel") -> WarpedPWASCore | PWASSensorTop:
+                        architecture: str = "parallel", classifier: dict | None = None) -> WarpedPWASCore | PWASSensorTop:
     """The component ``generate`` builds for a warped model.
 
     Parameters
@@ -362,13 +396,14 @@ def build_warped_design(model: WarpedFixedPointModel, design: str, lags: LagStru
         ``"core"``: :func:`build_warped_core`; any other value: :func:`build_warped_sensor`.
     lags : LagStructure or None
         For the sensor top.
-    memory, pipeline, name, architecture
-        As :func:`build_warped_core`.
+    memory, pipeline, name, architecture, classifier
+        As :func:`build_warped_core` (``classifier``: ``sensor.classifier_`` of a classifier model,
+        the argmax stage after the core).
 
     Returns
     -------
     WarpedPWASCore or PWASSensorTop
-        Named ``name``; latency the core's + 1 cycle.
+        Named ``name``; latency the core's + 1 cycle (+ the argmax stage's).
 
     Raises
     ------
@@ -376,8 +411,10 @@ def build_warped_design(model: WarpedFixedPointModel, design: str, lags: LagStru
         As :func:`build_warped_core` or :func:`build_warped_sensor`.
     """
     if design == "core":
-        return build_warped_core(model, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
-    return build_warped_sensor(model, lags, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
+        return build_warped_core(model, memory=memory, pipeline=pipeline, name=name, architecture=architecture,
+                                 classifier=classifier)
+    return build_warped_sensor(model, lags, memory=memory, pipeline=pipeline, name=name, architecture=architecture,
+                               classifier=classifier)
 
 
 def write_warped_folder(sensor: PWASVirtualSensor, outdir: str | os.PathLike, *, input_bits: int = 12,
