@@ -149,6 +149,11 @@ ADDITIVE_CONFIGS = [
     DesignConfig("a-s-y3-pairs", "sensor", 0, 3, 0, 1, 3, 1, {}, seed=1, additive="pairs"),
     DesignConfig("a-c-n4-z2-max-trunc", "core", 0, 4, 0, 1, [3, 2, 4, 2], 2, {"pipeline": "max", "rounding": "truncate"},
                  seed=2, additive="2;0,1;1,2,3;0,3"),
+    # additive classifiers: the argmax stage after the sum (forced ties: score 1 equals score 0)
+    DesignConfig("a-s-y3-pairs-cls3-ties", "sensor", 0, 3, 0, 1, 3, 3, {}, seed=3, classes=(0, 1, 2), ties=True,
+                 additive="pairs"),
+    DesignConfig("a-c-n4-cls2-max", "core", 0, 4, 0, 1, [3, 2, 4, 2], 2, {"pipeline": "max"}, seed=4, classes=(-1, 1),
+                 additive="2;0,1;1,2,3;0,3"),
 ]
 
 

@@ -429,3 +429,52 @@ def test_cli_additive_of_one_full_part_says_so(tmp_path, cli, spec, full):
     assert (f"note: --additive {spec} gives one part over all 2 regressors, i.e. the full PWAS sensor" in r.stderr) is full
     if full:  # the way out: more lags for a named rule, smaller parts for explicit ones
         assert ("more lags (--my/--mu) give more parts" if spec == "pairs" else "give parts over fewer regressors") in r.stderr
+
+
+# ------------------------------------------------------------------------------------------ additive classifiers
+def _additive_classifier():
+    from pwas_hdl.systems.lorenz import lorenz
+
+    d = lorenz(1500, seed=5)
+    z = d.z[:, 0]
+    c = np.digitize(z, np.quantile(z, [1 / 3, 2 / 3]))
+    return PWASVirtualSensor(my=3, partitions=3, sigma=1e-3, classify=True, additive="pairs", output_names=["y"],
+                             target_names=["c"]).fit(None, d.y[:, 0], c)
+
+
+@pytest.mark.parametrize("design, pipeline", [("core", "max"), ("sensor", None)])
+def test_generate_additive_classifier(design, pipeline):
+    """fit --additive --classify: the argmax stage after the sum (was refused: 'hardware for an additive
+    classifier ... is not available yet'); the manifest has both entries, the class index ends the payload."""
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.design.manifest import manifest_errors
+    from pwas_hdl.hdl.argmax import argmax_latency
+    from pwas_hdl.hdl.params import Pipeline
+
+    s = _additive_classifier()
+    a = build_design(s, design=design, pipeline=pipeline)
+    assert a.files == build_design(s, design=design, pipeline=pipeline).files  # byte-identical reruns
+    man = a.manifest
+    assert manifest_errors(json.loads(a.files["manifest.json"])) == []
+    assert man["classifier"]["target"] == "c" and man["classifier"]["classes"] == [0.0, 1.0, 2.0]
+    parts = man["additive"]["parts"]
+    stage = argmax_latency(3, Pipeline.cast(pipeline))
+    assert all(p["latency"] + 1 + stage == man["latency_cycles"] for p in parts) and man["ii"] == 1
+    out = next(p for p in man["ports"] if p["role"] == "out.payload")
+    assert [f["name"] for f in out["fields"]] == ["c=0", "c=1", "c=2", "out_of_range", "class_index"]
+    assert out["fields"][-1]["lsb"] + out["fields"][-1]["width"] == out["width"]
+    assert "## Classifier" in a.files["report.md"]
+
+
+@pytest.mark.rtl
+def test_additive_classifier_verilog_is_lint_clean(tmp_path):
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.flow.toolchain import lint_verilog
+
+    s = _additive_classifier()
+    for design, opts in (("core", {"pipeline": "max", "ports": "amaranth"}), ("sensor", {"pipeline": "min"})):
+        gd = build_design(s, design=design, **opts)
+        path = tmp_path / f"{gd.top}.v"
+        path.write_text(gd.files[f"{gd.top}.v"])
+        r = lint_verilog(path)
+        assert r.returncode == 0 and not r.stderr.strip(), r.stderr

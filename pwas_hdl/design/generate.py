@@ -523,8 +523,6 @@ def build_design(
                 fxm = fixed_point_model(sensor, memory=memory, **formats)
     classifier = getattr(sensor, "classifier_", None)  # a classifier model: argmax stage after the core
     if additive:
-        if classifier is not None:
-            raise InputError("hardware for an additive classifier (--additive with --classify) is not available yet")
         if design == "recurrent":
             raise InputError("hardware for a recurrent additive sensor is not available")
         if architecture != "parallel":
@@ -538,8 +536,8 @@ def build_design(
         if additive:  # the parts' cores in parallel, summed before one rounding (pwas_hdl.hdl.additive_top)
             from pwas_hdl.hdl.additive_top import build_additive_core, build_additive_sensor
 
-            comp = (build_additive_core(fxm, memory=memory, pipeline=pipe, name=top) if design == "core"
-                    else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top))
+            comp = (build_additive_core(fxm, memory=memory, pipeline=pipe, name=top, classifier=classifier) if design == "core"
+                    else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top, classifier=classifier))
         elif design == "recurrent":
             from pwas_hdl.design.recurrent import build_recurrent_component
 

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 import re
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 from amaranth.lib import stream, wiring
@@ -227,7 +228,8 @@ class AdditiveCore(wiring.Component):
         An aligned part accumulator is wider than the sum.
     """
 
-    def __init__(self, model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 argmax: Any = None):
         self._MustUse__silence = True
         base = Pipeline.cast(pipeline)
         self.subsets = tuple(model.subsets)
@@ -240,7 +242,8 @@ class AdditiveCore(wiring.Component):
         self.pipeline = base
         self.memory_kind = memory
         self.memory_plan = AdditiveMemoryPlan(tuple(c.memory_plan for c in self.parts))
-        self.latency = self.parts[0].latency + 1
+        self.argmax = argmax  # a classifier's stage after the sum (elaborate only; build_into is the sum alone)
+        self.latency = self.parts[0].latency + 1 + (argmax.latency if argmax is not None else 0)
         self.ii = 1
         self.params = AdditiveParams(
             partitions=tuple(int(v) for v in model.grid.partitions), in_width=int(model.input_bits),
@@ -254,14 +257,19 @@ class AdditiveCore(wiring.Component):
         for c, a in zip(self.parts, self.align):
             if c.out_field_width + a > self.params.sum_width:
                 raise InternalError("an aligned part accumulator is wider than the sum")
+        if argmax is not None and argmax.index_lsb != self.params.nz * self.params.out_width + 1:
+            raise InternalError(f"the argmax stage takes {argmax.index_lsb} payload bits, the sum gives "
+                                f"{self.params.nz * self.params.out_width + 1}")
         super().__init__({
             "in": In(stream.Signature(unsigned(self.params.n * self.params.in_width))),
-            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1))),
+            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1
+                                                 + (argmax.index_width if argmax is not None else 0)))),
         })
         self._MustUse__silence = False
 
     def elaborate(self, platform: Any) -> Module:
-        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding.
+        """The additive datapath's logic: the parts' cores in parallel, their exact sum and one rounding
+        (then a classifier's argmax stage, if any).
 
         Parameters
         ----------
@@ -272,9 +280,11 @@ class AdditiveCore(wiring.Component):
         -------
         Module
         """
+        from pwas_hdl.hdl.classifier_top import inline_core_and_argmax
+
         m = Module()
         inp = getattr(self, "in")
-        self.build_into(m, inp.payload, inp.valid, inp.ready, self.out)
+        inline_core_and_argmax(m, self, self.argmax, inp.payload, inp.valid, inp.ready, self.out)
         return m
 
     def build_into(self, m: Module, payload: Value, valid: Value, advance: Signal, out: Any) -> None:
@@ -421,24 +431,25 @@ class AdditiveSensorTop(PWASSensorTop):
     kind = "sensor"
 
     def __init__(self, model: AdditiveFixedPointModel, signals: Sequence[tuple[str, int]], dims: Sequence[tuple[int, int]], *,
-                 memory: str = "banked", pipeline: Pipeline | str | None = None):
+                 memory: str = "banked", pipeline: Pipeline | str | None = None, argmax: Any = None):
         self._MustUse__silence = True
-        self.core = AdditiveCore(model, memory=memory, pipeline=pipeline)
+        self.core = AdditiveCore(model, memory=memory, pipeline=pipeline)  # the sum alone: the top inlines the stage
         self.core._MustUse__silence = True
-        self.argmax = None  # no classifier stage (refused for additive models by generate)
+        self.argmax = argmax  # a classifier's stage after the sum (PWASSensorTop.elaborate inlines it)
         self.params = self.core.params
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
         if len(self.dims) != self.params.n:
             raise InputError(f"{len(self.dims)} lag-bank dimensions for a sensor with n = {self.params.n}")
-        self.latency = self.core.latency
+        self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
         self.ii = 1
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = max(k for _, k in self.signals) - 1
         wiring.Component.__init__(self, {  # the sensor top's signature; its __init__ builds a single core
             "in": In(stream.Signature(unsigned(len(self.signals) * self.params.in_width))),
-            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1))),
+            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1
+                                                 + (argmax.index_width if argmax is not None else 0)))),
             "warm": Out(1),
         })
         self._MustUse__silence = False
@@ -450,7 +461,7 @@ class AdditiveSensorTop(PWASSensorTop):
 
 
 def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                        name: str = "pwas_core") -> AdditiveCore:
+                        name: str = "pwas_core", classifier: dict | None = None) -> AdditiveCore:
     """The additive core of an :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` (input: regressor codes).
 
     Parameters
@@ -461,18 +472,24 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
         As :class:`AdditiveCore`.
     name : str
         Verilog module name (not checked here; :func:`emit_additive_verilog` checks it).
+    classifier : dict, optional
+        ``{"target": name, "classes": [labels]}`` of a classifier model (``sensor.classifier_``):
+        the argmax stage after the sum (:func:`~pwas_hdl.hdl.api.classifier_stage`); the output
+        payload then ends with the class index.
 
     Returns
     -------
     AdditiveCore
-        With ``module_name``, ``input_names`` and ``target_names`` set.
+        With ``module_name``, ``input_names``, ``target_names`` and ``classifier`` set.
 
     Raises
     ------
     InputError
-        No equal-latency pipelines exist, or the output shift drops the whole sum.
+        No equal-latency pipelines exist, the output shift drops the whole sum, or not one class
+        per score target.
     """
-    core = AdditiveCore(model, memory=memory, pipeline=pipeline)
+    core = AdditiveCore(model, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline))
+    core.classifier = dict(classifier) if classifier is not None else None
     core.module_name = name
     core._MustUse__silence = True
     core.input_names = list(model.regressor_names)
@@ -480,8 +497,19 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     return core
 
 
+def _argmax(classifier: dict | None, model: AdditiveFixedPointModel, pipeline: Pipeline | str | None) -> Any:
+    """A classifier's argmax stage after the additive sum (None without a classifier)."""
+    if classifier is None:
+        return None
+    from pwas_hdl.hdl.api import classifier_stage
+
+    params = SimpleNamespace(nz=int(model.nz), out_width=int(model.output_format.bits))  # what the stage reads
+    return classifier_stage(classifier, params, Pipeline.cast(pipeline), "parallel")
+
+
 def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | None = None, *, memory: str = "banked",
-                          pipeline: Pipeline | str | None = None, name: str = "pwas_sensor") -> AdditiveSensorTop:
+                          pipeline: Pipeline | str | None = None, name: str = "pwas_sensor",
+                          classifier: dict | None = None) -> AdditiveSensorTop:
     """The additive virtual-sensor top (one lag bank, the parts' cores, the sum) of an additive bit-true model.
 
     Parameters
@@ -494,6 +522,8 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
         As :class:`AdditiveCore`.
     name : str
         Verilog module name.
+    classifier : dict, optional
+        As :func:`build_additive_core`.
 
     Returns
     -------
@@ -509,7 +539,8 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
 
     model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
-    top = AdditiveSensorTop(model, signals, dims, memory=memory, pipeline=pipeline)
+    top = AdditiveSensorTop(model, signals, dims, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline))
+    top.classifier = dict(classifier) if classifier is not None else None
     top.module_name = name
     top._MustUse__silence = True
     top.core.input_names = list(model.regressor_names)
