@@ -399,8 +399,8 @@ def build_design(
         Choose the pipeline by timing closure instead (:mod:`pwas_hdl.flow.timing_closure`): the
         shallowest candidate whose fmax, measured by place and route on ``fpga_target``, reaches
         ``target_mhz``; recorded in the manifest (``timing``) and the report. Not with ``pipeline``.
-        Every design kind with a parallel core (additive, warped, classifier, recurrent and
-        observer-bank designs too); the record's latencies are the whole design's.
+        Every design kind (additive, warped, classifier, recurrent, observer-bank and serial
+        designs too); the record's latencies are the whole design's.
         Raises :class:`~pwas_hdl.flow.timing_closure.TimingNotMet` (an ``InputError``) when even the
         deepest pipeline misses the target. Takes one place-and-route run per candidate tried.
     fpga_target : {"ecp5", "ice40"}
