@@ -318,7 +318,8 @@ def test_emit_additive_verilog_readmemh_checks(small_sensor):
     from pwas_hdl.errors import InternalError
     from pwas_hdl.design.generate import fixed_point_model
     from pwas_hdl.hdl.additive_top import additive_hex_files, build_additive_core, emit_additive_verilog
-    from pwas_hdl.hdl.emit import _readmemh_files, hex_file_name
+    from pwas_hdl.fixedpoint.memory_layout import hex_file_name
+    from pwas_hdl.hdl.emit import _readmemh_files
     from pwas_hdl.hdl.weight_rom import RomEmission
 
     core = build_additive_core(fixed_point_model(small_sensor), pipeline="min")

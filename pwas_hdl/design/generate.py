@@ -455,7 +455,8 @@ def build_design(
                                       ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
                                       **formats)
     from pwas_hdl.hdl import Pipeline, build_core, build_sensor, design_info, emit_verilog
-    from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, hex_file_name, memory_hex_files
+    from pwas_hdl.fixedpoint.memory_layout import hex_file_name
+    from pwas_hdl.hdl.emit import MEM_DIR_DEFAULT, MEM_DIR_PARAMETER, memory_hex_files
 
     if design not in ("core", "sensor", "recurrent"):
         raise InputError(f"{option_text('design')} must be core or sensor (or, of a recurrent model, recurrent), got {design!r}")

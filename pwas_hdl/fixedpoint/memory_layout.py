@@ -72,7 +72,8 @@ from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.bitfields import check_codes, int64_codes, pack_rows, to_unsigned
 from pwas_hdl.limits import MAX_MEMORY_WORDS, check_limit
 
-__all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS"]
+__all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS",
+           "weight_memory_name", "hex_file_name", "WEIGHT_MEMORY_PATTERN"]
 
 LAYOUT_KINDS = ("banked", "replicated", "corner")
 
@@ -555,6 +556,57 @@ def make_layout(grid: Grid, kind: str = "banked") -> BankedLayout | ReplicatedLa
     raise InputError(f"memory layout must be one of {LAYOUT_KINDS}, got {kind!r}")
 
 
+#: A weight memory's name in the generated Verilog (:func:`weight_memory_name`), as a regular
+#: expression without groups: ``wmem<b>``, or ``part<i>_wmem<b>`` in an additive design's part ``i``.
+WEIGHT_MEMORY_PATTERN = r"(?:part[0-9]+_)?wmem[0-9]+"
+
+
+def weight_memory_name(bank: int, part: int | None = None) -> str:
+    """The name of weight memory ``bank`` in the generated Verilog: ``wmem<bank>``, or
+    ``part<part>_wmem<bank>`` in part ``part`` of an additive design (its parts flattened into the
+    top, :mod:`pwas_hdl.hdl.additive_top`). The one place these names are made; the cores name
+    their ROMs with it, and synthesis and ``$readmemh`` read them back
+    (:data:`WEIGHT_MEMORY_PATTERN`).
+
+    Parameters
+    ----------
+    bank : int
+        Memory bank of the core (``0 .. n_banks - 1``).
+    part : int, optional
+        Additive part; None for a design with one core (or inside a part, before flattening).
+
+    Returns
+    -------
+    str
+    """
+    return f"{'' if part is None else f'part{int(part)}_'}wmem{int(bank)}"
+
+
+def hex_file_name(prefix: str, bank: int, part: int | None = None, target: int | None = None) -> str:
+    """Name of the ``$readmemh`` file of weight memory ``bank``: ``<prefix>_b<bank>.hex``, or of bank
+    ``bank`` of additive part ``part``: ``<prefix>_p<part>_b<bank>.hex``; with ``target``, the file of
+    that target's words alone (:func:`hex_files`): ``..._z<target>.hex``. The one place these names are
+    made (:func:`hex_files`, :func:`pwas_hdl.hdl.emit.memory_hex_files`,
+    :func:`~pwas_hdl.hdl.additive_top.additive_hex_files` and the ``$readmemh`` calls of the Verilog).
+
+    Parameters
+    ----------
+    prefix : str
+        File-name prefix.
+    bank : int
+        Memory bank (``wmem<bank>``).
+    part : int, optional
+        Additive part (``part<part>_wmem<bank>``); None for a design with one core.
+    target : int, optional
+        One target's file (``hex_files(..., packed=False)``); None: the packed word of all targets.
+
+    Returns
+    -------
+    str
+    """
+    return f"{prefix}{'' if part is None else f'_p{int(part)}'}_b{int(bank)}{'' if target is None else f'_z{int(target)}'}.hex"
+
+
 def readmemh_text(words: ArrayLike, bits: int) -> str:
     """``$readmemh`` text: one word per line, two's complement, ``ceil(bits/4)`` lower-case hex digits.
 
@@ -628,8 +680,8 @@ def hex_files(layout: BankedLayout | ReplicatedLayout | CornerLayout, weight_cod
     files: dict[str, str] = {}
     for b in range(layout.n_banks):
         if packed:
-            files[f"{prefix}_b{b}.hex"] = readmemh_text(pack_words(rom[b], bits), bits * rom.shape[2])
+            files[hex_file_name(prefix, b)] = readmemh_text(pack_words(rom[b], bits), bits * rom.shape[2])
         else:
             for t in range(rom.shape[2]):
-                files[f"{prefix}_b{b}_z{t}.hex"] = readmemh_text(rom[b, :, t], bits)
+                files[hex_file_name(prefix, b, target=t)] = readmemh_text(rom[b, :, t], bits)
     return files

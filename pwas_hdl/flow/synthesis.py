@@ -62,6 +62,7 @@ from pwas_hdl.errors import InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 
 __all__ = ["TARGETS", "DEFAULT_DEVICE", "synthesize", "synth_summary_text"]
 
@@ -578,7 +579,7 @@ def _synthesis_sources(verilog: list[Path], outdir: Path, manifest: dict[str, An
         return verilog, "inline"
     files = {}
     for h in hexes:  # load_manifest checked them: depth lines of width-bit hex words
-        name = (f"part{h['part']}_" if "part" in h else "") + f"wmem{h['bank']}"
+        name = weight_memory_name(h["bank"], h.get("part"))
         rel = _rel(outdir / h["file"], work).replace(os.sep, "/")
         if any(c in rel for c in '"\\\n\r'):
             return verilog, "inline"

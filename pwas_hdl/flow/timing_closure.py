@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl.params import Pipeline
+from pwas_hdl.fixedpoint.memory_layout import WEIGHT_MEMORY_PATTERN
 from pwas_hdl.io.atomic import make_temp_dir
 
 if TYPE_CHECKING:
@@ -246,7 +247,7 @@ def _stage_of_cell(cell: str) -> str:
         return "input register"
     if c.startswith(("out__payload", "out__valid", "in__ready", "warm", "m_axis_tdata", "m_axis_tvalid", "s_axis_tready")):
         return "output register"
-    if re.match(r"wmem\d+", c):
+    if re.match(WEIGHT_MEMORY_PATTERN, c):
         return "memory"
     m = _STAGE_RE.match(c)
     if m:

@@ -202,6 +202,10 @@ class AdditiveCore(wiring.Component):
         Each part's weight memory (as :class:`~pwas_hdl.hdl.core.PWASCore`).
     pipeline : Pipeline, preset name or None
         The parts' pipeline (made equal in latency, :func:`equal_latency_pipelines`).
+    argmax : ArgmaxStage, optional
+        A classifier's stage after the sum (:func:`~pwas_hdl.hdl.api.classifier_stage`): inlined
+        by :meth:`elaborate` (not by :meth:`build_into`, the sum alone); the output payload then
+        ends with the class index and the latency grows by ``argmax.latency``.
 
     Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.payload``: ``n`` codes of ``B_in`` bits;
     ``out.payload``: ``nz`` codes of ``B_out`` bits, then ``out_of_range``).
@@ -419,6 +423,9 @@ class AdditiveSensorTop(PWASSensorTop):
         One per regressor dimension of the whole sensor, lag in samples (0: the current sample).
     memory, pipeline
         As :class:`AdditiveCore`.
+    argmax : ArgmaxStage, optional
+        A classifier's stage after the sum, inlined by the sensor top's elaborate
+        (:class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`).
 
     Raises
     ------
@@ -630,7 +637,7 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
 
 def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str) -> dict[str, str]:
     """``$readmemh`` files of the parts' weight memories: ``<prefix>_p<i>_b<bank>.hex``
-    (:func:`pwas_hdl.hdl.emit.hex_file_name`; as :func:`pwas_hdl.hdl.emit.memory_hex_files` per part),
+    (:func:`pwas_hdl.fixedpoint.memory_layout.hex_file_name`; as :func:`pwas_hdl.hdl.emit.memory_hex_files` per part),
     the files ``emit_additive_verilog(..., memory_init="readmemh")`` reads.
 
     Parameters
@@ -646,7 +653,7 @@ def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str)
         File name -> ``$readmemh`` text.
     """
     from pwas_hdl.fixedpoint.memory_layout import readmemh_text
-    from pwas_hdl.hdl.emit import hex_file_name
+    from pwas_hdl.fixedpoint.memory_layout import hex_file_name
 
     core = getattr(component, "core", component)
     out = {}

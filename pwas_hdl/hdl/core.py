@@ -55,6 +55,7 @@ from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
 from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
 __all__ = ["PWASCore", "core_input_layout", "core_output_layout"]
@@ -903,7 +904,7 @@ class PWASCore(wiring.Component):
         # ---------------------------------------------------------- D: memory read (the register)
         mem_data = []
         for b in range(nb):
-            mem_data.append(weight_rom(m, f"wmem{b}", plan.word_bits, plan.depth, plan.contents[b],
+            mem_data.append(weight_rom(m, weight_memory_name(b), plan.word_bits, plan.depth, plan.contents[b],
                                        bank_addr[b] if aw else None, pipe.advance))
         valid, r = pipe.stage("s_mem", True, valid, {mkey: bank_mu, "oor": oor, "rot": rot if late else 0})
         bank_mu = r[mkey]

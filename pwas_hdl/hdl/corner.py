@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
 
 from pwas_hdl.hdl._lintsafe import bits_for, rom
+from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
 if TYPE_CHECKING:
@@ -120,7 +121,7 @@ def corner_read(core: PWASCore, m: Module, pipe: Any, valid: Value, cs: list, ds
 
     mem_data = []
     for b in range(plan.n_banks):
-        mem_data.append(weight_rom(m, f"wmem{b}", plan.word_bits, plan.depth, plan.contents[b],
+        mem_data.append(weight_rom(m, weight_memory_name(b), plan.word_bits, plan.depth, plan.contents[b],
                                    addr[0] if aw else None, pipe.advance))
     valid, r = pipe.stage("s_mem", True, valid, {"ge": ge_bits, "d": ds, "oor": oor})
     ge = dict(zip(pairs, r["ge"]))

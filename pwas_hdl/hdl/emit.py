@@ -25,6 +25,7 @@ from amaranth.lib import wiring
 
 from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl.names import check_module_name
+from pwas_hdl.fixedpoint.memory_layout import hex_file_name, weight_memory_name
 from pwas_hdl.hdl.weight_rom import RomEmission, splice_roms
 from pwas_hdl.hdl.yosys_convert import component_verilog_roms
 
@@ -247,28 +248,6 @@ def _plans(component) -> dict:
     return {None: core.memory_plan}
 
 
-def hex_file_name(prefix: str, bank: int, part: int | None = None) -> str:
-    """Name of the ``$readmemh`` file of weight memory ``bank``: ``<prefix>_b<bank>.hex``, or of bank
-    ``bank`` of additive part ``part``: ``<prefix>_p<part>_b<bank>.hex``. The one place these names are
-    made (:func:`memory_hex_files`, :func:`~pwas_hdl.hdl.additive_top.additive_hex_files` and the
-    ``$readmemh`` calls of the Verilog).
-
-    Parameters
-    ----------
-    prefix : str
-        File-name prefix.
-    bank : int
-        Memory bank (``wmem<bank>``).
-    part : int, optional
-        Additive part (``part<part>_wmem<bank>``); None for a design with one core.
-
-    Returns
-    -------
-    str
-    """
-    return f"{prefix}{'' if part is None else f'_p{int(part)}'}_b{int(bank)}.hex"
-
-
 def memory_hex_files(component: wiring.Component, prefix: str = "w") -> dict[str, str]:
     """``$readmemh`` files of the weight memories: ``<prefix>_b<bank>.hex``, one packed word per
     line (all targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits.
@@ -299,15 +278,13 @@ def _readmemh_files(component, roms: RomEmission, prefix: str):
     n_banks = sum(p.n_banks for p in plans.values())
     if len(roms.roms) != n_banks:
         raise InternalError(f"{len(roms.roms)} weight memories in the design, {n_banks} in its memory plan")
-    additive = None not in plans
-    pattern = re.compile(r"part([0-9]+)_wmem([0-9]+)" if additive else r"()wmem([0-9]+)")
+    names = {weight_memory_name(b, part): (part, b) for part, plan in plans.items() for b in range(plan.n_banks)}
 
     def file_of(name: str, k: int) -> str:
-        mo = pattern.fullmatch(name)
-        part = int(mo.group(1)) if mo is not None and additive else None
-        if mo is None or part not in plans or int(mo.group(2)) >= plans[part].n_banks:
+        if name not in names:
             raise InternalError(f"unexpected weight memory {name} in the design")
-        plan, bank = plans[part], int(mo.group(2))
+        part, bank = names[name]
+        plan = plans[part]
         if roms.roms[k].contents != tuple(int(w) for w in plan.contents[bank]):
             raise InternalError(f"memory {name}: its contents differ from the memory plan")
         return f'{{{MEM_DIR_PARAMETER}, "{hex_file_name(prefix, bank, part)}"}}'

@@ -50,6 +50,7 @@ from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _Pipe
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
 __all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency"]
@@ -288,7 +289,7 @@ class SerialPWASCore(PWASCore):
         last = ~q_v[1]
 
         # ---------------------------------------------------------- memory read (the register)
-        rdata = weight_rom(m, "wmem0", plan.word_bits, plan.depth, plan.contents[0], q_addr[0] if aw else None, adv)
+        rdata = weight_rom(m, weight_memory_name(0), plan.word_bits, plan.depth, plan.contents[0], q_addr[0] if aw else None, adv)
 
         regs = []  # (dst, src) pairs enabled by adv
         valids = []

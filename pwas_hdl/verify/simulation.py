@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pwas_hdl.errors import CheckFailed, InputError, fault_text
+from pwas_hdl.fixedpoint.memory_layout import WEIGHT_MEMORY_PATTERN
 from pwas_hdl.resources import sim_dir
 from pwas_hdl.fixedpoint.bitfields import pack, pack_fields
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
@@ -550,11 +551,12 @@ def stage_probes(verilog: str) -> dict[str, int]:
     return res
 
 
-_MEM_RE = re.compile(r"^\s*reg\s+\[(\d+):(\d+)\]\s+(wmem\d+)\s*\[(\d+):(\d+)\]\s*;", re.M)
+_MEM_RE = re.compile(r"^\s*reg\s+\[(\d+):(\d+)\]\s+(" + WEIGHT_MEMORY_PATTERN + r")\s*\[(\d+):(\d+)\]\s*;", re.M)
 
 
 def weight_memories(verilog: str) -> dict[str, int]:
-    """Weight memories of a generated design (inline arrays ``wmem<b>``): name -> depth."""
+    """Weight memories of a generated design (arrays ``wmem<b>``, ``part<i>_wmem<b>`` of an additive
+    design: :func:`~pwas_hdl.fixedpoint.memory_layout.weight_memory_name`): name -> depth."""
     return {mo.group(3): abs(int(mo.group(4)) - int(mo.group(5))) + 1 for mo in _MEM_RE.finditer(verilog)}
 
 
