@@ -99,9 +99,14 @@ def _warn(msg: str) -> None:
 
 
 def _trajectory_warning(table: Any, traj_col: str | None, used: Sequence[str]) -> str | None:
-    """The warning line when DATA has a run index (``run``, ...) but no ``--traj-col``: its runs are then
-    read as one trajectory (:func:`pwas_hdl.io.csv_table.unused_trajectory_column`). Printed by the
-    command once its work succeeded (bad input stays one ``error:`` line)."""
+    """The warning line about DATA's runs, or None.
+
+    Without ``--traj-col`` (``traj_col`` None): DATA has a run index (``run``, ...) that is not in ``used``
+    (the columns read as signals): its runs are then read as one trajectory
+    (:func:`pwas_hdl.io.csv_table.unused_trajectory_column`). With ``--traj-col``: a run label that comes
+    back after another run, whose separate blocks are then read as runs of their own
+    (:func:`pwas_hdl.io.csv_table.split_runs`; ``used`` is not consulted). Printed by the command once
+    its work succeeded (bad input stays one ``error:`` line)."""
     from pwas_hdl.io.csv_table import split_runs, unused_trajectory_column
 
     if traj_col is not None:  # a run label that comes back after another run: read as runs of their own
@@ -980,25 +985,21 @@ def _simulate(outdir: Path, data: Path, output: Path, simulator: Optional[str], 
     """The body of ``simulate``, with the CSV ``output`` decided."""
     from pwas_hdl.verify.simulation import simulate_data
 
+    # DATA is read once: for the run warnings here and, passed as the Table, for the replay. A file that cannot be read
+    # is passed as its path: simulate_data reports it, after its checks of the options and output paths (as before)
+    try:
+        table = read_csv(data, blank_rows=blank_rows)
+    except (OSError, ValueError):
+        table = None
     traj_warning = None
-    if traj_col is not None:  # a run label that comes back after another run (a bad file is reported by the replay)
-        try:
-            traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), traj_col, ())
-        except (OSError, ValueError):
-            pass
-    if traj_col is None:  # a run index without --traj-col (a bad file is reported by the replay)
-        from pwas_hdl.io.csv_table import TRAJECTORY_COLUMN_NAMES
-
-        try:
-            with open(data, encoding="utf-8-sig", errors="replace") as fh:
-                head = [h.strip() for h in fh.readline().split(",")]
-            if any(n in head for n in TRAJECTORY_COLUMN_NAMES):
-                traj_warning = _trajectory_warning(read_csv(data, blank_rows=blank_rows), None, ())
-        except (OSError, ValueError):
+    if table is not None:
+        try:  # a run index without --traj-col, or a run label that comes back after another run
+            traj_warning = _trajectory_warning(table, traj_col, ())
+        except ValueError:  # e.g. a --traj-col that DATA lacks: the replay reports it
             pass
     res = simulate_data(
-        outdir, data, output, simulator=simulator, engine=engine, summary_path=summary, traj_col=traj_col,
-        stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
+        outdir, table if table is not None else data, output, simulator=simulator, engine=engine, summary_path=summary,
+        traj_col=traj_col, stall=stall, seed=seed, cache_dir=build_dir, waves=waves,
         progress=_say, blank_rows=blank_rows,
     )
     s = res["summary"]

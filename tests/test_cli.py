@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -373,14 +374,81 @@ def test_explore_fpga_and_out_names(capsys, monkeypatch, tmp_path, args, resourc
     assert seen[0][1]["resources"] == (resources or "estimate")
 
 
+def _small_lorenz_csv(path):
+    """A DATA file the CLI reads before calling simulate_data (the y, z columns of the Lorenz sensors here)."""
+    path.write_text("y,z\n" + "".join(f"{0.1 * k},{0.2 * k}\n" for k in range(6)))
+    return path
+
+
 def test_simulate_out_names(capsys, monkeypatch, tmp_path):
+    from pwas_hdl.io.csv_table import Table
     from pwas_hdl.verify import simulation
 
     seen: list = []
     _recording(monkeypatch, simulation, "simulate_data", seen)
+    data = _small_lorenz_csv(tmp_path / "d.csv")  # read by the CLI (run warnings) and passed on as the Table
     for opt in ("-o", "--out", "--output"):
-        run_main(capsys, "simulate", tmp_path, tmp_path / "d.csv", opt, tmp_path / "hw.csv")
+        run_main(capsys, "simulate", tmp_path, data, opt, tmp_path / "hw.csv")
     assert [s[0][2] for s in seen] == [tmp_path / "hw.csv"] * 3
+    # DATA is read once: simulate_data gets the Table the CLI read, not the path to read again
+    assert all(isinstance(s[0][1], Table) and s[0][1].path == str(data) and s[0][1].header == ["y", "z"] for s in seen)
+
+
+def _feed_pipe(fifo, text, stop):
+    """Write ``text`` to the first reader of the named pipe ``fifo``; a later reader gets an empty file (a second read
+    of DATA ends at once instead of waiting for a writer forever), until ``stop`` is set."""
+    first = True
+    while not stop.is_set():
+        try:
+            fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError:  # no reader yet
+            stop.wait(0.01)
+            continue
+        try:
+            if first:
+                os.set_blocking(fd, True)
+                data = text.encode()
+                while data:
+                    data = data[os.write(fd, data):]
+                first = False
+        finally:
+            os.close(fd)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs a named pipe")
+def test_simulate_reads_data_from_a_pipe_once(capsys, monkeypatch, tmp_path):
+    """DATA that can be read only once (`simulate hw <(zcat d.csv.gz)`): the CLI's peek at its header for the run
+    warning consumed the pipe, and the replay then read a file without its header."""
+    import threading
+
+    from pwas_hdl.io.csv_table import Table
+    from pwas_hdl.verify import simulation
+
+    seen: list = []
+    _recording(monkeypatch, simulation, "simulate_data", seen)
+    fifo = tmp_path / "pipe.csv"
+    os.mkfifo(fifo)
+    text = "y,z,run\n" + "".join(f"{0.1 * k},{0.2 * k},0\n" for k in range(6))  # a run index: the header was peeked
+    stop = threading.Event()
+    writer = threading.Thread(target=_feed_pipe, args=(fifo, text, stop), daemon=True)
+    writer.start()
+    try:
+        code, _, err = run_main(capsys, "simulate", tmp_path, fifo, "-o", tmp_path / "hw.csv")
+    finally:
+        stop.set()
+        writer.join(10)
+    assert code == 2 and "stopped by the test" in _one_error_line(err)
+    table = seen[0][0][1]
+    assert isinstance(table, Table) and table.header == ["y", "z", "run"] and len(table) == 6
+
+
+def test_simulate_refuses_an_output_over_data_read_as_a_table(capsys, tmp_path):
+    """DATA reaches simulate_data as the Table the CLI read: its file stays among the inputs no output may replace."""
+    data = _small_lorenz_csv(tmp_path / "d.csv")
+    before = data.read_bytes()
+    code, _, err = run_main(capsys, "simulate", tmp_path, data, "-o", data)
+    assert code == 2 and "is also the input DATA" in _one_error_line(err)
+    assert data.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["d.csv"]
 
 
 def test_generate_out_and_clock_names(capsys, tmp_path, lorenz_files):

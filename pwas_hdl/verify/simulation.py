@@ -1124,7 +1124,8 @@ def simulate_data(
     :func:`run_rtl`; ``simulator`` then defaults to and must be ``"verilator"``). Both write the
     same summary and CSV.
 
-    ``data`` is a CSV path or a :class:`~pwas_hdl.io.csv_table.Table` (see :func:`simulate_arrays`).
+    ``data`` is a CSV path or a :class:`~pwas_hdl.io.csv_table.Table` (see :func:`simulate_arrays`); a Table
+    read from a file (its ``path`` a file) keeps that file among the inputs no output may replace.
 
     Returns ``{"summary": dict, "summary_path": str, "output": str, "result": RTLResult,
     "rows": ndarray (m,), "estimates": ndarray (m, nz)}``: the data row of each hardware output and
@@ -1161,7 +1162,8 @@ def simulate_data(
     progress : callable, optional
         Called with one line of text per step.
     blank_rows : str
-        What :func:`~pwas_hdl.io.csv_table.read_csv` does with blank rows (default ``"error"``).
+        What :func:`~pwas_hdl.io.csv_table.read_csv` does with blank rows (default ``"error"``); unused when
+        ``data`` is a Table (read already, its blank rows handled then).
 
     Returns
     -------
@@ -1187,7 +1189,10 @@ def simulate_data(
     check_seed(seed)  # numpy's generators take no negative seed
     check_output_path(output, "-o")  # before its .json sibling is made from it
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
-    sources = [] if isinstance(data, Table) else [(data, "DATA")]
+    # no output may replace DATA, also when it comes as a Table read from a file (the CLI reads it once, for its
+    # warnings and this replay); a Table built in memory (simulate_arrays: "arrays") names no file
+    src = (data.path if Path(data.path).is_file() else None) if isinstance(data, Table) else data
+    sources = [(src, "DATA")] if src is not None else []
     if _is_estimator_folder(outdir):  # seed 003's estimator (issue 12): pwas_hdl.verify.estimator_simulation
         return _simulate_estimator(outdir, data, output, spath, sources, simulator=simulator, engine=engine, traj_col=traj_col,
                                    stall=stall, seed=seed, cache_dir=cache_dir, waves=waves, say=say, blank_rows=blank_rows)
