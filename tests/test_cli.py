@@ -595,3 +595,20 @@ def test_generate_notes_readmemh_for_large_inline_memories(capsys, tmp_path, lor
                                    f"they stay in the .hex files, which simulators load much faster"], err
     code, _, err = run_main(capsys, "generate", model, "-o", tmp_path / "b", "--memory-init", "readmemh")
     assert code == 0 and "note:" not in err
+
+
+def test_simulate_data_protects_only_a_table_read_from_a_file(tmp_path, monkeypatch):
+    """A Table read from a file keeps that file among the inputs no output may replace; one built in
+    memory (simulate_arrays' "arrays") names no file, even when a file of that name is here."""
+    from pwas_hdl.errors import InputError
+    from pwas_hdl.io.csv_table import Table
+    from pwas_hdl.verify.simulation import simulate_data
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "arrays").write_text("mine\n")
+    (tmp_path / "hw").mkdir()
+    with pytest.raises(FileNotFoundError, match="manifest.json does not exist"):  # past the output checks
+        simulate_data("hw", Table("arrays", ["y", "z"], [["1", "2"]]), "arrays")
+    with pytest.raises(InputError, match="'arrays' is also the input DATA"):
+        simulate_data("hw", Table("arrays", ["y", "z"], [["1", "2"]], lines=[2]), "arrays")
+    assert (tmp_path / "arrays").read_text() == "mine\n"

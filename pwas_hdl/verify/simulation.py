@@ -1190,8 +1190,9 @@ def simulate_data(
     check_output_path(output, "-o")  # before its .json sibling is made from it
     spath = Path(summary_path) if summary_path is not None else Path(output).with_suffix(".json")
     # no output may replace DATA, also when it comes as a Table read from a file (the CLI reads it once, for its
-    # warnings and this replay); a Table built in memory (simulate_arrays: "arrays") names no file
-    src = (data.path if Path(data.path).is_file() else None) if isinstance(data, Table) else data
+    # warnings and this replay: read_csv records the file lines of its rows); a Table built in memory
+    # (simulate_arrays: path "arrays", no lines) names no file, even when one of that name exists here
+    src = (data.path if data.lines and Path(data.path).is_file() else None) if isinstance(data, Table) else data
     sources = [(src, "DATA")] if src is not None else []
     if _is_estimator_folder(outdir):  # seed 003's estimator (issue 12): pwas_hdl.verify.estimator_simulation
         return _simulate_estimator(outdir, data, output, spath, sources, simulator=simulator, engine=engine, traj_col=traj_col,
