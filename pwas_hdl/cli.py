@@ -1074,7 +1074,9 @@ def explore(
     Writes OUTDIR/explore.json (every point: formats, RMSEE against the data, deviation from the
     float model, error bound, resource estimate, Pareto flag; the refused combinations and why;
     whether generate's default formats are on the front) and OUTDIR/explore.png, and prints the
-    Pareto points (and the default) as a table.
+    Pareto points (and the default) as a table. Plain, additive (fit --additive) and power-of-two
+    non-uniform (fit --breakpoints quantile-pow2) models; not classifiers, recurrent or
+    observer-bank sensors.
     """
     from pwas_hdl.flow.explore import explore as _explore, format_table, plot_exploration
 

@@ -240,12 +240,15 @@ def test_one_part_on_every_regressor_is_the_full_model():
 
 
 # ------------------------------------------------------------------------------------------ generate
-def test_explore_refuses_additive_sensors(small_sensor, tmp_path, cli):
+def test_explore_sweeps_additive_sensors(small_sensor, tmp_path, cli):
+    """explore refused additive sensors; it sweeps them now, point by point the model generate builds
+    (tests/test_explore_kinds.py checks the figures)."""
     small_sensor.save(tmp_path / "m.json")
     cli(["make-data", "lorenz", "-o", str(tmp_path / "d.csv"), "--samples", "300"])
-    r = cli(["explore", str(tmp_path / "m.json"), str(tmp_path / "d.csv"), "-o", str(tmp_path / "e.json")], expect=2)
-    assert r.stderr.strip().startswith("error: explore is not available for additive sensors")
-    assert not (tmp_path / "e.json").exists()
+    cli(["explore", str(tmp_path / "m.json"), str(tmp_path / "d.csv"), "-o", str(tmp_path / "ex"), "--input-bits", "12",
+         "--weight-frac", "0", "--output-frac", "0"])
+    res = json.loads((tmp_path / "ex" / "explore.json").read_text())
+    assert res["model"]["kind"] == "additive" and all(p["bound_holds"] for p in res["points"])
 
 
 def test_generate_refuses_what_additive_designs_lack(pairs_sensor):

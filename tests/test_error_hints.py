@@ -312,8 +312,10 @@ def test_generate_format_errors_name_the_option(models, tmp_path, model, extra, 
 
 
 def test_explore_refuses_what_it_cannot_sweep_up_front(models, tmp_path):
+    # non-uniform cells that are not power-of-two multiples of one step: the warp's own message (explore
+    # sweeps quantile-pow2 partitions, tests/test_explore_kinds.py)
     res = invoke("explore", models / "quantile.json", models / "t.csv", "-o", tmp_path / "ex")
-    assert_refused(res, "explore is not available for non-uniform partitions (fit --breakpoints) yet", "pwas-hdl generate")
+    assert_refused(res, "are not power-of-two multiples of one base step", "--breakpoints quantile-pow2")
     res = invoke("explore", models / "m.json", models / "t.csv", "-o", tmp_path / "ex", "--overflow", "wrap")
     msg = assert_refused(res, "--overflow (overflow) must be one of error, saturate, got 'wrap'")
     assert "every requested combination" not in msg

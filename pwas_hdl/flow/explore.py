@@ -61,6 +61,16 @@ counted in bit-level units:
     18-kbit block RAMs (ECP5 DP16KD / Xilinx RAMB18 aspect ratios 16k x 1 .. 512 x 36), best
     aspect ratio per bank.
 
+The formulas above are a plain core's. An additive design (:func:`pwas_hdl.hdl.additive_top.build_additive_core`)
+sums them over its parts (part ``i``: ``n_i`` inputs, ``F_i``, no output rounding) and adds the sum's
+``nz (k - 1)`` adders and ``nz`` roundings of the sum's ``W`` bits (``sum_adder_bits``); memories,
+multipliers, DSP and block-RAM counts are the parts' totals (``memory_depth``: the deepest part's;
+``parts``: each part's figures). A warped design (:func:`pwas_hdl.hdl.warp.build_warped_core`) is
+the uniform core on the warped ``W``-bit codes (``core_input_bits``: its offset and clamp are
+``W + 1`` bits wide) plus the warp: per dimension three ``B_in``-bit comparators, the subtraction of
+the domain's first code and a ``W``-bit constant addition (``warp_adder_bits``, in ``adder_bits``)
+and its register (in ``register_bits``); its case tables and shift multiplexer are not counted.
+
 Measured resources (``resources="generic" | "ecp5" | "ice40"``)
 ----------------------------------------------------------------
 The estimate is computed for every point; then the Pareto points (and the default) are generated
@@ -72,6 +82,23 @@ measured numbers check it: ``result["measured"]["pareto"]`` is the front of the 
 alone in (LUTs, DSPs, block RAMs, ``rmsee_ratio``), and ``default_on_front`` says whether the
 default is on it. Block RAMs and DSPs come in fixed sizes (an 18-bit word costs the same block as
 a 10-bit one), so the measured front can differ from the bit-count estimate's.
+
+Model kinds
+-----------
+Every point's bit-true model is :func:`pwas_hdl.design.generate.fixed_point_model`'s (what
+``generate`` builds): a :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` for a plain sensor, an
+:class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` for an additive one (fit
+``--additive``: one core per part, summed before one rounding) and a
+:class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` for power-of-two breakpoints (fit
+``--breakpoints quantile-pow2``: the warp in front of a uniform core); the resources are estimated
+on the design ``generate`` builds for it (:func:`estimate_resources`), and the measured mode
+generates and synthesises that design. ``result["model"]["kind"]`` says which (``plain``,
+``additive``, ``warped``). Fields that differ: an additive point's ``input_frac`` is ``F = max_i
+F_i`` (the sum's alignment) and ``part_frac`` lists the parts' ``F_i``; a warped point's
+``input_bits`` is the input code's ``B_in``, ``core_input_bits`` the width ``W`` of the warped code
+``u`` the core takes, ``input_frac`` the core's ``F`` (a core cell is ``2**F`` codes of ``u``), and
+its label reads ``in s<B_in> -> u s<W>.<F>``. Classifiers, recurrent and observer-bank sensors are
+refused (:func:`_check_supported`).
 
 Combinations that the bit-true model refuses (an output finer than the exact product, a weight
 that does not fit a fixed ``weight_bits``, an accumulator over 62 bits, an input width too small
@@ -189,14 +216,16 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
 
 
 def _check_supported(sensor: PWASVirtualSensor) -> None:
-    """Refuse, with one :class:`InputError` naming the fit option, the models whose fixed-point model
-    is not :class:`FixedPointModel` on the lag regressors (the sweep evaluates only that one)."""
+    """Refuse, with one :class:`InputError` naming the fit option, the models whose design is not the
+    core of a bit-true model of :func:`pwas_hdl.design.generate.fixed_point_model` on the lag
+    regressors: observer-bank sensors, recurrent sensors and classifiers (also when additive or on a
+    non-uniform partition). Plain, additive (fit --additive) and non-uniform power-of-two (fit
+    --breakpoints quantile-pow2) sensors are swept; other breakpoints are refused by the bit-true
+    model itself (the message names quantile-pow2)."""
     kinds = (
-        (getattr(sensor.grid_, "subsets", None) is not None, "additive sensors (fit --additive)"),
         (getattr(sensor, "front_end_", None) is not None, "observer-bank sensors (fit --front-end observer-bank)"),
         (sensor.lags_ is not None and sensor.lags_.recurrent, "recurrent sensors (fit --mz, fit-map --state)"),
         (getattr(sensor, "classifier_", None) is not None, "classifiers (fit --classify)"),
-        (getattr(sensor.grid_, "breakpoints", None) is not None, "non-uniform partitions (fit --breakpoints)"),
     )
     for bad, what in kinds:
         if bad:
@@ -337,12 +366,54 @@ def _register_bits(core) -> int | None:
         return None
 
 
+def _design_register_bits(design, cores) -> int | None:
+    """:func:`_register_bits` of a design made of several cores (an additive design's parts, the core
+    behind a warp): the ``sync`` signals of the design and of all its submodules (the additive parts
+    are submodules), each core elaborated with empty memory initialisers. None if unavailable."""
+    try:
+        import dataclasses
+
+        from amaranth.hdl import Fragment
+
+        plans = [c.memory_plan for c in cores]
+        for c, plan in zip(cores, plans):
+            c.memory_plan = dataclasses.replace(plan, contents=tuple(() for _ in plan.contents))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                frag = Fragment.get(design, None)
+        finally:
+            for c, plan in zip(cores, plans):
+                c.memory_plan = plan
+        widths: dict[int, int] = {}
+
+        def walk(f) -> None:
+            for st in f.statements.get("sync", []):
+                for sig in st._lhs_signals():
+                    widths[id(sig)] = len(sig)
+            for sub, *_ in getattr(f, "subfragments", ()):
+                walk(sub)
+
+        walk(frag)
+        return int(sum(widths.values()))
+    except Exception:  # pragma: no cover - private Amaranth API changed
+        return None
+
+
 #: Register bits of elaborated cores by :func:`_register_key`, shared by every call in the process
 #: (an explore sweep elaborates each hardware shape once; a second sweep of the same model -- another
 #: cost key, a measured run after an estimate, a narrower range -- elaborates nothing it has seen).
 _REGISTER_BITS: "OrderedDict[tuple, int | None]" = OrderedDict()
 #: At most this many entries are kept (least recently used dropped first; an entry is a few ints).
 _REGISTER_BITS_MAX = 4096
+
+
+def _core_key(core) -> tuple:
+    """The structure of one core that its register widths depend on (see :func:`_register_key`)."""
+    p = core.params
+    return (type(core).__module__, type(core).__qualname__, getattr(core, "memory_kind", None), core.pipeline,
+            getattr(core, "round_output", True), p.partitions, p.nz, p.in_width, p.lo_code, p.frac_bits,
+            p.weight_width, p.out_width, p.scaling)
 
 
 def _register_key(core) -> tuple | None:
@@ -352,10 +423,23 @@ def _register_key(core) -> tuple | None:
     describe (an extra input stage, or unhashable parameters)."""
     if getattr(core, "input_stage", None) is not None:
         return None
-    p = core.params
-    key = (type(core).__module__, type(core).__qualname__, getattr(core, "memory_kind", None), core.pipeline,
-           getattr(core, "round_output", True), p.partitions, p.nz, p.in_width, p.lo_code, p.frac_bits,
-           p.weight_width, p.out_width, p.scaling)
+    key = _core_key(core)
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _design_register_key(design, kind: str) -> tuple | None:
+    """:func:`_register_key` of an additive design (its parts' keys, the sum's and the output's widths) or
+    of a warped core (the core's key; the warp register holds ``n`` codes of the core's input width,
+    in that key). ``None`` if unhashable."""
+    if kind == "additive":
+        p = design.params
+        key = ("additive", tuple(_core_key(c) for c in design.parts), p.n, p.nz, p.in_width, p.sum_width, p.out_width)
+    else:
+        key = ("warped", type(design).__qualname__, _core_key(design.core))
     try:
         hash(key)
     except TypeError:
@@ -376,13 +460,66 @@ def _cached_register_bits(core) -> int | None:
     return regs
 
 
+def _cached_design_register_bits(design, kind: str, cores) -> int | None:
+    key = _design_register_key(design, kind)
+    if key is None:
+        return _design_register_bits(design, cores)
+    if key in _REGISTER_BITS:
+        _REGISTER_BITS.move_to_end(key)
+        return _REGISTER_BITS[key]
+    regs = _REGISTER_BITS[key] = _design_register_bits(design, cores)
+    while len(_REGISTER_BITS) > _REGISTER_BITS_MAX:
+        _REGISTER_BITS.popitem(last=False)
+    return regs
+
+
+def model_kind(fxm) -> str:
+    """``"additive"``, ``"warped"`` or ``"plain"``: which design ``generate`` builds for a bit-true model
+    (:func:`pwas_hdl.design.generate.fixed_point_model` returns the first two for additive sensors and
+    non-uniform power-of-two partitions)."""
+    from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+    if isinstance(fxm, AdditiveFixedPointModel):
+        return "additive"
+    if isinstance(fxm, WarpedFixedPointModel):
+        return "warped"
+    return "plain"
+
+
+def _core_adder_bits(n: int, nz: int, f: int, bw: int, in_width: int, rounding: bool = True) -> int:
+    """Adder/comparator bits of one PWAS core (module notes): input offset and clamp, rank comparators,
+    ``mu`` differences, adder tree and (``rounding``) the output rounding."""
+    acc = f + bw + 1
+    return 2 * n * (in_width + 1) + n * (n - 1) // 2 * (f + 1) + n * (f + 2) + nz * n * acc + (nz * acc if rounding else 0)
+
+
 def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None) -> dict[str, Any]:
     """The resource estimate of the core the generator builds for ``fxm`` (see the module notes).
 
     The register bits come from an elaboration of the core, cached per process by the parameters
-    that shape the hardware (:func:`_register_key`)."""
+    that shape the hardware (:func:`_register_key`).
+
+    An additive model (:class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel`) is estimated
+    on its design (:func:`pwas_hdl.hdl.additive_top.build_additive_core`, what ``generate`` builds):
+    memories and multipliers summed over its parts (part ``i``: ``n_i + 1`` banks, ``F_i``), the
+    parts' adders without their rounding, plus the sum (``nz (k - 1)`` adders and ``nz`` roundings
+    of ``W`` = the sum's bits); ``memory_depth`` is the deepest part's, ``parts`` lists each part's
+    figures. A warped model (:class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel`) is estimated
+    on :func:`pwas_hdl.hdl.warp.build_warped_core`: the uniform core behind the warp (its input
+    offset and clamp on the core's ``W``-bit codes ``u``, ``core_input_bits``) plus the warp's
+    comparators and constant adders (``warp_adder_bits``, in ``adder_bits``: per dimension three
+    ``B_in``-bit comparators, a constant subtraction over the domain's codes and a ``W``-bit
+    constant addition) and its register (in ``register_bits``); its case tables and shift
+    multiplexer are not counted.
+    """
     from pwas_hdl.hdl import build_core, design_info
 
+    kind = model_kind(fxm)
+    if kind == "additive":
+        return _estimate_additive(fxm, memory, pipeline)
+    if kind == "warped":
+        return _estimate_warped(fxm, memory, pipeline)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         core = build_core(fxm, memory=memory, pipeline=pipeline)
@@ -417,13 +554,116 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
     }
 
 
+def _estimate_additive(fxm, memory: str, pipeline) -> dict[str, Any]:
+    """:func:`estimate_resources` of an additive model (the design of ``generate``: one core per part, the sum)."""
+    from pwas_hdl.hdl import design_info
+    from pwas_hdl.hdl.additive_top import build_additive_core
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        comp = build_additive_core(fxm, memory=memory, pipeline=pipeline)
+        info = design_info(comp)
+    mem, ar = info["memory"], info["arithmetic"]
+    nz, bw, bin_ = int(ar["nz"]), int(ar["weight_width"]), int(ar["in_width"])
+    k = len(comp.parts)
+    w_sum = int(comp.params.sum_width)
+    parts, mults, mult_bits, adder, dsp, bram = [], 0, 0, 0, 0, 0
+    for core in comp.parts:
+        pp, plan = core.params, core.memory_plan
+        n_i, f_i, nb = int(pp.n), int(pp.frac), int(plan.n_banks)
+        m_i = nb * nz
+        part = {"n": n_i, "F": f_i, "memory_banks": nb, "memory_depth": int(plan.depth), "memory_words": int(plan.words),
+                "memory_bits": int(plan.bits), "multipliers": m_i, "multiplier": f"u{f_i + 1} x s{bw}",
+                "mult_bit_products": m_i * (f_i + 1) * bw, "adder_bits": _core_adder_bits(n_i, nz, f_i, bw, bin_, rounding=False),
+                "dsp18": m_i * mult18_blocks(f_i, bw), "bram18k": nb * bram18k_blocks(int(plan.depth), int(plan.word_bits))}
+        parts.append(part)
+        mults += m_i
+        mult_bits += part["mult_bit_products"]
+        adder += part["adder_bits"]
+        dsp += part["dsp18"]
+        bram += part["bram18k"]
+    adder += nz * (k - 1) * w_sum + nz * w_sum  # the sum's adder tree and its rounding, W bits each
+    regs = _cached_design_register_bits(comp, "additive", comp.parts)
+    logic = mult_bits + adder
+    kinds = list(dict.fromkeys(p["multiplier"] for p in parts))
+    return {
+        "memory_words": int(mem["words"]),
+        "memory_word_bits": int(mem["word_bits"]),
+        "memory_banks": int(mem["memories"]),
+        "memory_depth": int(mem["depth"]),
+        "memory_bits": int(mem["bits"]),
+        "multipliers": mults,
+        "multiplier": ", ".join(kinds),
+        "mult_bit_products": mult_bits,
+        "adder_bits": adder,
+        "logic_bits": logic,
+        "register_bits": regs,
+        "total_bits": int(mem["bits"]) + logic + (regs or 0),
+        "dsp18": dsp,
+        "bram18k": bram,
+        "latency_cycles": int(info["latency"]),
+        "acc_bits": w_sum,
+        "sum_adder_bits": nz * k * w_sum,
+        "parts": parts,
+    }
+
+
+def _estimate_warped(fxm, memory: str, pipeline) -> dict[str, Any]:
+    """:func:`estimate_resources` of a warped model (the design of ``generate``: warp + register + the uniform core)."""
+    from pwas_hdl.hdl import design_info
+    from pwas_hdl.hdl.warp import build_warped_core
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        comp = build_warped_core(fxm, memory=memory, pipeline=pipeline)
+        info = design_info(comp)
+    mem, ar = info["memory"], info["arithmetic"]
+    n, nz, f, bw, w_core = ar["n"], ar["nz"], ar["F"], ar["weight_width"], ar["in_width"]  # in_width: the core's W
+    nb = int(mem["memories"])
+    mults = nb * nz
+    mult_bits = mults * (f + 1) * bw
+    warp_adder = 0
+    for wp in fxm.warps:  # three comparators on B_in bits, t = q - B_0 over the domain's codes, u = U + L on W bits
+        span = int(wp.code_breaks[-1] - wp.code_breaks[0])
+        warp_adder += 3 * int(wp.input_bits) + max(1, (span - 1).bit_length()) + int(wp.width)
+    adder = _core_adder_bits(n, nz, f, bw, w_core) + warp_adder
+    regs = _cached_design_register_bits(comp, "warped", [comp.core])
+    logic = mult_bits + adder
+    return {
+        "memory_words": int(mem["words"]),
+        "memory_word_bits": int(mem["word_bits"]),
+        "memory_banks": nb,
+        "memory_depth": int(mem["depth"]),
+        "memory_bits": int(mem["bits"]),
+        "multipliers": mults,
+        "multiplier": f"u{f + 1} x s{bw}",
+        "mult_bit_products": mult_bits,
+        "adder_bits": adder,
+        "logic_bits": logic,
+        "register_bits": regs,
+        "total_bits": int(mem["bits"]) + logic + (regs or 0),
+        "dsp18": mults * mult18_blocks(f, bw),
+        "bram18k": nb * bram18k_blocks(int(mem["depth"]), int(mem["word_bits"])),
+        "latency_cycles": int(info["latency"]),
+        "acc_bits": int(ar["sum_bits"]),
+        "core_input_bits": int(w_core),
+        "warp_adder_bits": warp_adder,
+    }
+
+
 _MEASURED_KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "lutram", "memory_bits", "multipliers_rtl",
                   "logic_cells", "fmax_mhz", "runtime_s")
 
 
 # ------------------------------------------------------------------------------------ sweep
 def _label(p: dict) -> str:
-    return f"in s{p['input_bits']}.{p['input_frac']} / w s{p['weight_bits']}.{p['weight_frac']} / out s{p['output_bits']}.{p['output_frac']}"
+    """``in s<B_in>.<F> / w s<B_w>.<Fw> / out s<B_out>.<Fo>``; a warped model's input reads ``s<B_in> -> u s<W>.<F>``
+    (the input code, then the warped code of the core and its fraction bits)."""
+    if p.get("core_input_bits") is not None:
+        inp = f"s{p['input_bits']} -> u s{p['core_input_bits']}.{p['input_frac']}"
+    else:
+        inp = f"s{p['input_bits']}.{p['input_frac']}"
+    return f"in {inp} / w s{p['weight_bits']}.{p['weight_frac']} / out s{p['output_bits']}.{p['output_frac']}"
 
 
 def _paired_se(e_a: np.ndarray, e_b: np.ndarray, blocks: int = 20) -> np.ndarray:
@@ -442,6 +682,20 @@ def _paired_se(e_a: np.ndarray, e_b: np.ndarray, blocks: int = 20) -> np.ndarray
     means = np.stack([b.mean(axis=0) for b in np.array_split(diff, k, axis=0)])
     rm = np.sqrt(np.mean(e_b**2, axis=0))
     return np.std(means, axis=0, ddof=1) / math.sqrt(k) / (2 * np.where(rm > 0, rm, 1.0))
+
+
+def _kind_fields(fxm, kind: str) -> dict:
+    """The point's fields that only an additive or a warped model has (nothing for a plain model).
+
+    Additive: ``part_frac`` (``F_i`` of each part; the point's ``input_frac`` is ``F = max F_i``,
+    the alignment of the sum). Warped: ``core_input_bits`` (``W``, the width of the warped code
+    ``u`` the core takes; ``input_bits`` is ``B_in``, the circuit's input code, and ``input_frac``
+    the core's ``F``: one core cell is ``2**F`` codes of ``u``)."""
+    if kind == "additive":
+        return {"part_frac": [int(p.F) for p in fxm.parts]}
+    if kind == "warped":
+        return {"core_input_bits": int(fxm.warps[0].width)}
+    return {}
 
 
 def _evaluate(fxm: FixedPointModel, xi, z, zf, zf_rmsee) -> tuple[dict, np.ndarray]:
@@ -499,6 +753,8 @@ def explore(
     Parameters
     ----------
     model : PWASVirtualSensor or path of a model file
+        A plain, additive (fit ``--additive``) or power-of-two non-uniform (fit ``--breakpoints
+        quantile-pow2``) sensor; not a classifier, a recurrent or an observer-bank sensor.
     data : path of a CSV, :class:`~pwas_hdl.io.csv_table.Table`, or tuple ``(u, y, z)``
         The evaluation data. From a CSV/Table the model's input/output columns are read (by
         name) and the reference of target ``t`` is column ``t_true`` if present, else ``t``.
@@ -552,7 +808,8 @@ def explore(
     ------
     InputError
         Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
-        missing target column, data without a full regressor.
+        missing target column, data without a full regressor; a classifier, recurrent or
+        observer-bank sensor, or breakpoints whose cells are not power-of-two multiples of one step.
     ToolMissing
         Synthesis was asked for and a synthesis tool is not installed.
     ToolFailed, InputError
@@ -586,6 +843,8 @@ def explore(
         measure_max = DEFAULT_MEASURE_MAX
     if workdir is not None:
         check_output_path(workdir, "--synth-dir", kind="folder")
+    from pwas_hdl.design.generate import fixed_point_model  # the bit-true model generate builds (additive, warped, plain)
+
     sensor, model_path = _load_sensor(model)
     _check_supported(sensor)
     in_bits = _int_values(input_bits, "input_bits", lo=2)
@@ -596,9 +855,11 @@ def explore(
 
     # ---- the defaults of generate (input_bits=12, everything else from the data)
     common = {"input_fill": input_fill, "rounding": rounding, "overflow": overflow, "layout": memory}
+    fmt_common = {"input_fill": input_fill, "rounding": rounding, "overflow": overflow}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        dflt = FixedPointModel.from_sensor(sensor, input_fill=input_fill, rounding=rounding, layout=memory)
+        dflt = fixed_point_model(sensor, memory=memory, input_fill=input_fill, rounding=rounding)
+    kind = model_kind(dflt)
     fw0, fo0 = dflt.weight_format.frac, dflt.output_format.frac
     default_key = (dflt.input_bits, fw0, fo0)
     fws = _int_values(weight_frac, "weight_frac") if weight_frac is not None else [fw0 + d for d in DEFAULT_FRAC_OFFSETS]
@@ -627,7 +888,7 @@ def explore(
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                fxm = FixedPointModel.from_sensor(sensor, **common, **{k: v for k, v in given.items() if v is not None})
+                fxm = fixed_point_model(sensor, memory=memory, **fmt_common, **given)
         except InputError as exc:  # a combination the formats refuse (anything else is a bug: raised)
             refused.append({**{k: v for k, v in given.items()}, "reason": str(exc)})
             if progress:
@@ -648,6 +909,7 @@ def explore(
             "weights_saturated": fxm.n_weights_saturated,
             "output_may_saturate": fxm.output_may_saturate,
             "warnings": [str(w.message) for w in caught],
+            **_kind_fields(fxm, kind),
             **acc,
             "resources": res,
             "is_default": bool(is_default),
@@ -679,6 +941,7 @@ def explore(
         "generator": {"pwas_hdl": __version__},
         "model": {
             "path": model_path,
+            "kind": kind,
             "n": int(sensor.grid_.n),
             "N": int(sensor.grid_.n_vertices),
             "partitions": [int(v) for v in sensor.grid_.partitions],
