@@ -320,7 +320,8 @@ def test_emit_additive_verilog_readmemh_checks(small_sensor):
     name per part and bank: hex_file_name), and refuses ROMs that are not the parts' memory plans."""
     from pwas_hdl.errors import InternalError
     from pwas_hdl.design.generate import fixed_point_model
-    from pwas_hdl.hdl.additive_top import additive_hex_files, build_additive_core, emit_additive_verilog
+    from pwas_hdl.hdl.additive_top import build_additive_core, emit_additive_verilog
+    from pwas_hdl.hdl.emit import memory_hex_files
     from pwas_hdl.fixedpoint.memory_layout import hex_file_name
     from pwas_hdl.hdl.emit import _readmemh_files
     from pwas_hdl.hdl.weight_rom import RomEmission
@@ -331,7 +332,7 @@ def test_emit_additive_verilog_readmemh_checks(small_sensor):
     with pytest.raises(InputError, match="memory_init"):
         emit_additive_verilog(core, "pwas_core", memory_init="rom")
     v = emit_additive_verilog(core, "pwas_core", memory_init="readmemh", hex_prefix="wt")
-    files = additive_hex_files(core, "wt")
+    files = memory_hex_files(core, "wt")
     assert list(files) == [hex_file_name("wt", b, i) for i, c in enumerate(core.parts) for b in range(c.memory_plan.n_banks)]
     assert [f'{{MEM_DIR, "{f}"}}' in v for f in files] == [True] * len(files) == [True] * v.count("$readmemh(")
     assert hex_file_name("wt", 2, 1) == "wt_p1_b2.hex" and hex_file_name("wt", 2) == "wt_b2.hex"

@@ -345,3 +345,10 @@ def test_export_recurrent_verilator(feedback_folders, tmp_path):
     r = subprocess.run(["sh", str(Path(res["outdir"]) / "run_verilator.sh")], capture_output=True, text=True, env=tool_env(),
                        timeout=900)
     assert r.returncode == 0 and "PASS" in r.stdout, (r.stdout + r.stderr)[-3000:]
+
+
+def test_export_recurrent_with_too_few_samples_says_more_samples(feedback_folders, tmp_path):
+    """It said simulate's 'a trajectory has 1 samples but the lags need ...; use longer trajectories'."""
+    with pytest.raises(InputError, match=r"no output .*use more --samples"):
+        export_testbench(feedback_folders / "recurrent", tmp_path / "tb", samples=1)
+    assert not (tmp_path / "tb").exists()

@@ -18,6 +18,7 @@ from pwas_hdl.design.generate import build_design
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.hdl import Pipeline
+from pwas_hdl.hdl.params import PipelineRefused
 from helpers.timing import FakePlaceAndRoute
 
 needs_pnr = pytest.mark.skipif(
@@ -139,7 +140,7 @@ def test_candidates_the_design_cannot_take_are_dropped(monkeypatch):
     def latency(p):
         k = tc.pipeline_candidates(2).index(p)
         if k == 1:
-            raise InputError("this design cannot take that pipeline")
+            raise PipelineRefused("this design cannot take that pipeline")
         return [3, 0, 4, 4, 5][k] if k < 5 else 5 + k  # candidate 3 adds no register: the same design as 2
 
     def build(p):
@@ -158,10 +159,24 @@ def test_candidates_the_design_cannot_take_are_dropped(monkeypatch):
 
 def test_no_buildable_candidate_is_an_input_error(monkeypatch):
     def latency(p):
-        raise InputError("no")
+        raise PipelineRefused("no")
 
     with pytest.raises(InputError, match="none of the candidate pipelines can be built"):
         tc.close_timing(lambda p: None, 2, 100.0, latency=latency)
+
+
+@pytest.mark.parametrize("fixture, opts, message", [
+    ("classifier_sensor", {"design": "core", "architecture": "serial"}, "argmax stage follows the parallel core only"),
+    ("bank_sensor", {"design": "sensor", "architecture": "serial", "bank_lanes": 9}, "--bank-lanes"),
+])
+def test_a_refused_design_is_reported_as_itself(fixture, opts, message, request, monkeypatch):
+    """A refusal that does not depend on the pipeline was taken for 'no candidate can be built; give
+    --pipeline' (the search dropped every candidate); it is the design's own error now, before any run."""
+    fake = FakePlaceAndRoute(mhz_per_cycle=20.0)
+    monkeypatch.setattr(tc, "measure_design", fake)
+    with pytest.raises(InputError, match=message):
+        build_design(request.getfixturevalue(fixture), target_mhz=100.0, **opts)
+    assert fake.built == []
 
 
 def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):

@@ -374,8 +374,8 @@ def build_design(
         (:mod:`pwas_hdl.design.recurrent`: feedback of the estimates, II = latency) and the
         manifest's design is "recurrent" (also accepted here).
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
-        :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding); not with
-        ``architecture="serial"`` or a classifier.
+        :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding; a
+        classifier's argmax stage after the sum); not with ``architecture="serial"``.
         A model fitted with power-of-two ``breakpoints`` gets the warped designs of
         :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
         too (warp -> core -> argmax stage; parallel only, as every classifier).
@@ -598,10 +598,10 @@ def build_design(
     bw = fxm.weight_format.bits
     fields = [{"target": t, "lsb": i * bw, "width": bw, "signed": True} for i, t in enumerate(fxm.target_names)]
     if additive:
-        from pwas_hdl.hdl.additive_top import additive_hex_files, emit_additive_verilog
+        from pwas_hdl.hdl.additive_top import emit_additive_verilog
 
         verilog = emit_additive_verilog(comp, top, memory_init=memory_init, hex_prefix=prefix, ports=ports)
-        hexes = additive_hex_files(comp, prefix)
+        hexes = memory_hex_files(comp, prefix)
         part_plans = [(i, b, c.memory_plan) for i, c in enumerate(comp.core.parts if design == "sensor" else comp.parts)
                       for b in range(c.memory_plan.n_banks)]
         hex_entries = [{"file": hex_file_name(prefix, b, i), "part": i, "bank": b, "depth": int(pl.depth), "width": int(pl.word_bits),

@@ -586,8 +586,8 @@ def hex_file_name(prefix: str, bank: int, part: int | None = None, target: int |
     """Name of the ``$readmemh`` file of weight memory ``bank``: ``<prefix>_b<bank>.hex``, or of bank
     ``bank`` of additive part ``part``: ``<prefix>_p<part>_b<bank>.hex``; with ``target``, the file of
     that target's words alone (:func:`hex_files`): ``..._z<target>.hex``. The one place these names are
-    made (:func:`hex_files`, :func:`pwas_hdl.hdl.emit.memory_hex_files`,
-    :func:`~pwas_hdl.hdl.additive_top.additive_hex_files` and the ``$readmemh`` calls of the Verilog).
+    made (:func:`hex_files`, :func:`pwas_hdl.hdl.emit.memory_hex_files` and the ``$readmemh`` calls
+    of the Verilog).
 
     Parameters
     ----------

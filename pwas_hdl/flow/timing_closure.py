@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from pwas_hdl.errors import InputError, InternalError
-from pwas_hdl.hdl.params import Pipeline
+from pwas_hdl.hdl.params import Pipeline, PipelineRefused
 from pwas_hdl.fixedpoint.memory_layout import WEIGHT_MEMORY_PATTERN
 from pwas_hdl.io.atomic import make_temp_dir
 
@@ -411,9 +411,11 @@ def close_timing(
         The design's latency in cycles with a candidate pipeline (default: the core's,
         ``pipeline.latency(n)``). A design around the core (an additive sum register, a warp, an
         observer bank, an argmax stage) adds cycles; the record and the pre-screen use these. Of the
-        default candidates, one whose ``latency`` raises :class:`~pwas_hdl.errors.InputError` (a
-        pipeline the design cannot take) or equals the previous kept one's (no register added: the
-        same design) is dropped; given ``candidates`` must all be taken, latencies strictly increasing.
+        default candidates, one whose ``latency`` raises :class:`~pwas_hdl.hdl.params.PipelineRefused`
+        (a pipeline the design cannot take, though it takes others) or equals the previous kept
+        one's (no register added: the same design) is dropped; any other error of ``latency`` (the
+        design itself refused: e.g. a classifier on the serial core) is raised as it is. Given
+        ``candidates`` must all be taken, latencies strictly increasing.
     workdir
         Where the place-and-route runs go (default: a temporary folder, removed afterwards).
     progress : callable(str), optional
@@ -453,7 +455,7 @@ def close_timing(
         for p in pipeline_candidates(n):
             try:
                 cycles = int(latency_of(p))
-            except InputError:  # e.g. an additive design's parts cannot be given equal latencies
+            except PipelineRefused:  # e.g. an additive design's parts cannot be given equal latencies
                 continue
             if not lat or cycles > lat[-1]:
                 cands.append(p)

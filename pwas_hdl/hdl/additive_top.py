@@ -24,7 +24,7 @@ Datapath (the bit-true specification is :class:`pwas_hdl.fixedpoint.additive.Add
 
 The Verilog (:func:`emit_additive_verilog`) is one module, the parts flattened into it (their names
 prefixed ``part<i>_``); its weight memories ``part<i>_wmem<b>`` are initialised inline or, with
-``memory_init="readmemh"``, loaded from the files of :func:`additive_hex_files` (``<prefix>_p<i>_b<b>.hex``)
+``memory_init="readmemh"``, loaded from the files of :func:`pwas_hdl.hdl.emit.memory_hex_files` (``<prefix>_p<i>_b<b>.hex``)
 under the ``MEM_DIR`` parameter, as :func:`pwas_hdl.hdl.emit.emit_verilog` does for one core.
 """
 
@@ -46,7 +46,7 @@ from pwas_hdl.fixedpoint.reduction import tree_reduce
 from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.names import check_module_name
-from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.params import CoreParams, Pipeline, PipelineRefused
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
 
 if TYPE_CHECKING:
@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
 
 __all__ = ["AdditiveCore", "AdditiveSensorTop", "build_additive_core", "build_additive_sensor", "emit_additive_verilog",
-           "additive_hex_files", "equal_latency_pipelines"]
+           "equal_latency_pipelines"]
 
 
 def equal_latency_pipelines(base: Pipeline, dims: list[int]) -> list[Pipeline]:
@@ -79,12 +79,13 @@ def equal_latency_pipelines(base: Pipeline, dims: list[int]) -> list[Pipeline]:
 
     Raises
     ------
-    InputError
-        No such pipeline exists for some part (e.g. every register is already used).
+    PipelineRefused
+        No such pipeline exists for some part (e.g. every register is already used): an
+        :class:`~pwas_hdl.errors.InputError` the timing closure takes as "not a candidate".
     """
     try:
         return _equal_latency(base, dims)
-    except InputError:
+    except PipelineRefused:
         if not base.mul_in:
             raise
         return _equal_latency(replace(base, mul_in=False), dims)
@@ -105,7 +106,7 @@ def _equal_latency(base: Pipeline, dims: list[int]) -> list[Pipeline]:
             lv = max(Pipeline.tree_depth(n), 1) if lv == 0 else lv - 1
             p = replace(p, tree_levels=lv)
         if p.latency(n) != target:
-            raise InputError(f"the additive parts cannot be given equal latencies with pipeline {base.to_dict()} "
+            raise PipelineRefused(f"the additive parts cannot be given equal latencies with pipeline {base.to_dict()} "
                              f"(parts of dimensions {sorted(set(dims))}); use another --pipeline or parts of equal size")
         out.append(p)
     return out
@@ -596,7 +597,7 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
     memory_init : {"inline", "readmemh"}
         ``"inline"``: every ``part<i>_wmem<b>`` is initialised by assignments in an ``initial``
         block. ``"readmemh"``: ``initial $readmemh({MEM_DIR, "<hex_prefix>_p<i>_b<b>.hex"},
-        part<i>_wmem<b>, ...);`` -- the files of :func:`additive_hex_files` -- with the module
+        part<i>_wmem<b>, ...);`` -- the files of :func:`pwas_hdl.hdl.emit.memory_hex_files` -- with the module
         parameter ``MEM_DIR`` (default ``"./"``) as in :func:`~pwas_hdl.hdl.emit.emit_verilog`.
     hex_prefix : str
         File-name prefix of the ``.hex`` files (``memory_init="readmemh"`` only).
@@ -633,32 +634,3 @@ def emit_additive_verilog(component: AdditiveCore | AdditiveSensorTop, name: str
     if re.search(r"^module ", text, re.M) is None or len(re.findall(r"^module ", text, re.M)) != 1:
         raise InternalError("the flattened additive design is not one module")
     return _splice_weights(_name_ports(normalise_verilog(text), name, component, ports), roms, component, memory_init, hex_prefix)
-
-
-def additive_hex_files(component: AdditiveCore | AdditiveSensorTop, prefix: str) -> dict[str, str]:
-    """``$readmemh`` files of the parts' weight memories: ``<prefix>_p<i>_b<bank>.hex``
-    (:func:`pwas_hdl.fixedpoint.memory_layout.hex_file_name`; as :func:`pwas_hdl.hdl.emit.memory_hex_files` per part),
-    the files ``emit_additive_verilog(..., memory_init="readmemh")`` reads.
-
-    Parameters
-    ----------
-    component : AdditiveCore or AdditiveSensorTop
-        The additive design (its core's ``parts`` are read).
-    prefix : str
-        File-name prefix.
-
-    Returns
-    -------
-    dict of str to str
-        File name -> ``$readmemh`` text.
-    """
-    from pwas_hdl.fixedpoint.memory_layout import readmemh_text
-    from pwas_hdl.fixedpoint.memory_layout import hex_file_name
-
-    core = getattr(component, "core", component)
-    out = {}
-    for i, c in enumerate(core.parts):
-        plan = c.memory_plan
-        for bnk in range(plan.n_banks):
-            out[hex_file_name(prefix, bnk, i)] = readmemh_text(plan.contents[bnk], plan.word_bits)
-    return out

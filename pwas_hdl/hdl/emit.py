@@ -232,11 +232,6 @@ def _name_ports(text: str, module: str, component, ports: str) -> str:
     return text[: mo.start()] + header + body
 
 
-def _plan(component):
-    core = getattr(component, "core", component)
-    return core.memory_plan
-
-
 def _plans(component) -> dict:
     """The memory plans of a design's weight memories: ``{None: plan}`` (memories ``wmem<b>``), or for
     an additive design (:mod:`pwas_hdl.hdl.additive_top`, a core with ``parts``) ``{i: plan of part i}``
@@ -249,25 +244,27 @@ def _plans(component) -> dict:
 
 
 def memory_hex_files(component: wiring.Component, prefix: str = "w") -> dict[str, str]:
-    """``$readmemh`` files of the weight memories: ``<prefix>_b<bank>.hex``, one packed word per
-    line (all targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits.
+    """``$readmemh`` files of the weight memories (:func:`hex_file_name`): ``<prefix>_b<bank>.hex``,
+    or ``<prefix>_p<i>_b<bank>.hex`` per part of an additive design; one packed word per line (all
+    targets, target 0 in the LSBs), ``ceil(word_bits/4)`` hex digits. The files
+    ``memory_init="readmemh"`` makes the Verilog read.
 
     Parameters
     ----------
     component : amaranth.lib.wiring.Component
-        A core, or a top with a ``core``; its ``memory_plan`` is read.
+        A core, or a top with a ``core``; its ``memory_plan`` (an additive design: its parts') is read.
     prefix : str
         File-name prefix.
 
     Returns
     -------
     dict of str to str
-        File name -> file text, one entry per memory bank.
+        File name -> file text, one entry per memory bank (parts in order, then banks).
     """
     from pwas_hdl.fixedpoint.memory_layout import readmemh_text
 
-    plan = _plan(component)
-    return {hex_file_name(prefix, b): readmemh_text(plan.contents[b], plan.word_bits) for b in range(plan.n_banks)}
+    return {hex_file_name(prefix, b, part): readmemh_text(plan.contents[b], plan.word_bits)
+            for part, plan in _plans(component).items() for b in range(plan.n_banks)}
 
 
 def _readmemh_files(component, roms: RomEmission, prefix: str):

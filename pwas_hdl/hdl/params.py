@@ -35,7 +35,15 @@ if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
     from pwas_hdl.fixedpoint.memory_layout import BankedLayout, CornerLayout, ReplicatedLayout
 
-__all__ = ["CoreParams", "Pipeline", "MemoryPlan", "PIPELINE_PRESETS", "GOALS", "GOALS_BY_FPGA", "goal_preset"]
+__all__ = ["CoreParams", "Pipeline", "PipelineRefused", "MemoryPlan", "PIPELINE_PRESETS", "GOALS", "GOALS_BY_FPGA",
+           "goal_preset"]
+
+
+class PipelineRefused(InputError):
+    """A design cannot take this pipeline, though it takes others (e.g. an additive design whose parts
+    cannot be given equal latencies with it): bad input (``--pipeline``), exit 2. The timing closure
+    (:func:`pwas_hdl.flow.timing_closure.close_timing`) leaves such a candidate out; any other
+    :class:`~pwas_hdl.errors.InputError` of a design is reported as it is."""
 
 
 def _bits_for(v: int) -> int:

@@ -47,6 +47,10 @@ __all__ = ["export_testbench", "MAX_SAMPLES"]
 MAX_SAMPLES = 1_000_000
 
 
+#: The error of a stimulus too short for any output.
+NO_OUTPUT = "the stimulus gives no output (fewer samples than the lags need); use more --samples"
+
+
 class _VerilogTemplate(Template):
     delimiter = "@@"  # "$" is Verilog's system-task prefix
 
@@ -97,6 +101,8 @@ def _recurrent_vectors(design: Any, stimulus: Any, samples: int, seed: int) -> t
     if [f["name"] for f in design.in_fields] != list(rm.signals):
         raise InputError(f"{design.outdir}: the input fields {[f['name'] for f in design.in_fields]} are not the model's "
                          f"signals {list(rm.signals)}; regenerate the folder with `pwas-hdl generate`")
+    if samples <= design.warmup:  # the recurrence would call it a short trajectory (simulate's wording)
+        raise InputError(NO_OUTPUT)
     codes = stimulus.sensor_codes(design.model, list(rm.signals), samples, seed=seed)
     res = rm.run(codes)
     vin = [pack_fields([int(v) for v in row], design.in_fields) for row in codes]
@@ -187,7 +193,7 @@ def export_testbench(
     pin, pout = _port(man, "in.payload"), _port(man, "out.payload")
     wi, wo = int(pin["width"]), int(pout["width"])
     if len(vexp) < 1:
-        raise InputError("the stimulus gives no output (fewer samples than the lags need); use more --samples")
+        raise InputError(NO_OUTPUT)
     latency, warmup = int(design.latency), int(getattr(design, "warmup", 0))
     runtime_files = getattr(design, "runtime_files", {})
 
