@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
+from pwas_hdl.fixedpoint.bitfields import unpack_fields
 from pwas_hdl.verify.segment_bench import TEST_MODULE, count_outputs, plan_job_runs, standard_segment_runs
 
 if TYPE_CHECKING:
@@ -82,9 +82,9 @@ class RecurrentDesign:
         out : ndarray of int, shape (R, nz)
             The bit-true output codes.
         """
-        res = self.rmodel.run(codes)
-        ins = [pack_fields([int(v) for v in row], self.in_fields) for row in np.asarray(codes)]
-        outs = [pack_fields([int(v) for v in o] + [int(f)], self.out_fields) for o, f in zip(res["out"], res["out_of_range"])]
+        from pwas_hdl.verify.recurrent_simulation import recurrence_words
+
+        ins, outs, res = recurrence_words(self.rmodel, codes, self.in_fields, self.out_fields)
         return ins, outs, res["out"]
 
 

@@ -32,7 +32,38 @@ from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.bitfields import pack_fields, unpack_fields
 from pwas_hdl.verify.segment_bench import replay_segments, replay_summary, rmse, segment_job_ports
 
-__all__ = ["recurrent_job_ports", "simulate_recurrent"]
+__all__ = ["recurrent_job_ports", "recurrence_words", "simulate_recurrent"]
+
+
+def recurrence_words(rmodel: Any, codes: np.ndarray, in_fields: list[dict],
+                     out_fields: list[dict]) -> tuple[list[int], list[int], dict]:
+    """Packed input words, the expected packed output words and the bit-true run of one trajectory
+    of a recurrent top from reset (the one packing of ``simulate``, the replay API and
+    ``export-testbench``).
+
+    Parameters
+    ----------
+    rmodel : RecurrentFixedPointModel
+        The bit-true recurrence (:func:`pwas_hdl.design.recurrent.recurrent_model`).
+    codes : ndarray of int, shape (T, S)
+        Payload codes, one row per input transfer (:meth:`RecurrentFixedPointModel.quantize_signals`).
+    in_fields, out_fields : list of dict
+        Bit fields of the input payload (one code per signal) and of the output payload (one code
+        per target, then ``out_of_range``).
+
+    Returns
+    -------
+    ins : list of int
+        ``T`` packed input words.
+    outs : list of int
+        ``T - M + 1`` packed expected output words (none during the warm-up).
+    run : dict
+        :meth:`RecurrentFixedPointModel.run`'s result (``out`` (R, nz), ``out_of_range`` (R,)).
+    """
+    run = rmodel.run(codes)
+    ins = [pack_fields([int(v) for v in row], in_fields) for row in np.asarray(codes)]
+    outs = [pack_fields([int(v) for v in o] + [int(f)], out_fields) for o, f in zip(run["out"], run["out_of_range"])]
+    return ins, outs, run
 
 
 def recurrent_job_ports(manifest: dict) -> dict:
@@ -108,9 +139,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         u = u_all[sl] if u_all is not None else None
         y = y_all[sl] if y_all is not None else None
         codes = rm.quantize_signals(u, y)
-        res = rm.run(codes)
-        words = [pack_fields([int(v) for v in row], in_fields) for row in codes]
-        exp = [pack_fields([int(v) for v in o] + [int(f)], out_fields) for o, f in zip(res["out"], res["out_of_range"])]
+        words, exp, res = recurrence_words(rm, codes, in_fields, out_fields)
         zf = np.asarray(sensor.predict(u, y), dtype=float).reshape(-1, len(tgts))
         segs.append({"words": words, "expected": exp, "bt": res["out"], "bt_oor": res["out_of_range"], "float": zf,
                      "rows": np.arange(sl.start + m_hist - 1, sl.stop), "stop": sl.stop})

@@ -95,7 +95,7 @@ def _recurrent_vectors(design: Any, stimulus: Any, samples: int, seed: int) -> t
     """Input and expected output words of a recurrent top: the sensor-top stimulus through the bit-true
     recurrence (:func:`pwas_hdl.design.recurrent.recurrent_model`; the feedback starts from the reset codes)."""
     from pwas_hdl.design.recurrent import recurrent_model
-    from pwas_hdl.fixedpoint.bitfields import pack_fields
+    from pwas_hdl.verify.recurrent_simulation import recurrence_words
 
     rm = recurrent_model(design.sensor, design.model)
     if [f["name"] for f in design.in_fields] != list(rm.signals):
@@ -104,9 +104,7 @@ def _recurrent_vectors(design: Any, stimulus: Any, samples: int, seed: int) -> t
     if samples <= design.warmup:  # the recurrence would call it a short trajectory (simulate's wording)
         raise InputError(NO_OUTPUT)
     codes = stimulus.sensor_codes(design.model, list(rm.signals), samples, seed=seed)
-    res = rm.run(codes)
-    vin = [pack_fields([int(v) for v in row], design.in_fields) for row in codes]
-    vexp = [pack_fields([int(v) for v in o] + [int(f)], design.out_fields) for o, f in zip(res["out"], res["out_of_range"])]
+    vin, vexp, _ = recurrence_words(rm, codes, design.in_fields, design.out_fields)
     return vin, vexp
 
 
