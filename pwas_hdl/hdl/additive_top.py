@@ -44,6 +44,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.fixedpoint.reduction import tree_reduce
 from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
+from pwas_hdl.hdl.classifier_top import argmax_extent
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.names import check_module_name
 from pwas_hdl.hdl.params import CoreParams, Pipeline, PipelineRefused
@@ -248,7 +249,8 @@ class AdditiveCore(wiring.Component):
         self.memory_kind = memory
         self.memory_plan = AdditiveMemoryPlan(tuple(c.memory_plan for c in self.parts))
         self.argmax = argmax  # a classifier's stage after the sum (elaborate only; build_into is the sum alone)
-        self.latency = self.parts[0].latency + 1 + (argmax.latency if argmax is not None else 0)
+        cycles, index_bits = argmax_extent(argmax, int(model.nz) * int(model.output_format.bits) + 1)
+        self.latency = self.parts[0].latency + 1 + cycles
         self.ii = 1
         self.params = AdditiveParams(
             partitions=tuple(int(v) for v in model.grid.partitions), in_width=int(model.input_bits),
@@ -262,13 +264,9 @@ class AdditiveCore(wiring.Component):
         for c, a in zip(self.parts, self.align):
             if c.out_field_width + a > self.params.sum_width:
                 raise InternalError("an aligned part accumulator is wider than the sum")
-        if argmax is not None and argmax.index_lsb != self.params.nz * self.params.out_width + 1:
-            raise InternalError(f"the argmax stage takes {argmax.index_lsb} payload bits, the sum gives "
-                                f"{self.params.nz * self.params.out_width + 1}")
         super().__init__({
             "in": In(stream.Signature(unsigned(self.params.n * self.params.in_width))),
-            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1
-                                                 + (argmax.index_width if argmax is not None else 0)))),
+            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1 + index_bits))),
         })
         self._MustUse__silence = False
 
@@ -449,15 +447,15 @@ class AdditiveSensorTop(PWASSensorTop):
         self.dims = [(int(s), int(lag)) for s, lag in dims]
         if len(self.dims) != self.params.n:
             raise InputError(f"{len(self.dims)} lag-bank dimensions for a sensor with n = {self.params.n}")
-        self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
+        cycles, index_bits = argmax_extent(argmax, self.params.nz * self.params.out_width + 1)
+        self.latency = self.core.latency + cycles
         self.ii = 1
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = max(k for _, k in self.signals) - 1
         wiring.Component.__init__(self, {  # the sensor top's signature; its __init__ builds a single core
             "in": In(stream.Signature(unsigned(len(self.signals) * self.params.in_width))),
-            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1
-                                                 + (argmax.index_width if argmax is not None else 0)))),
+            "out": Out(stream.Signature(unsigned(self.params.nz * self.params.out_width + 1 + index_bits))),
             "warm": Out(1),
         })
         self._MustUse__silence = False

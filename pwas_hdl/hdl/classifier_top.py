@@ -20,12 +20,14 @@ from amaranth.hdl import Module, Signal, Value, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.argmax import TIE_RULE
 from pwas_hdl.hdl.argmax import ArgmaxStage
 from pwas_hdl.hdl.core import PWASCore, core_input_layout, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
-__all__ = ["CLASS_FIELD", "classifier_argmax", "classifier_info", "inline_core_and_argmax", "PWASClassifierCore"]
+__all__ = ["CLASS_FIELD", "classifier_argmax", "classifier_info", "argmax_extent", "inline_core_and_argmax",
+           "PWASClassifierCore"]
 
 #: Name of the class-index field of the output payload (manifest ``classifier.field``).
 CLASS_FIELD = "class_index"
@@ -48,6 +50,34 @@ def classifier_argmax(params: CoreParams, pipeline: Pipeline | str | None = None
         ``select="max"``, one extra bit (``out_of_range``) carried through.
     """
     return ArgmaxStage(params.nz, params.out_width, signed=True, extra_bits=1, pipeline=pipeline, select="max")
+
+
+def argmax_extent(argmax: ArgmaxStage | None, score_bits: int) -> tuple[int, int]:
+    """The cycles and output bits an optional argmax stage adds after a core (or an additive sum)
+    whose output payload has ``score_bits`` bits; the one check that the stage reads that payload.
+
+    Parameters
+    ----------
+    argmax : ArgmaxStage or None
+        The classifier's stage, or None (no classifier: nothing added).
+    score_bits : int
+        Bits of the output payload before the stage (the scores and ``out_of_range``).
+
+    Returns
+    -------
+    (int, int)
+        ``argmax.latency`` (cycles) and ``argmax.index_width`` (bits of the class index), or ``(0, 0)``.
+
+    Raises
+    ------
+    InputError
+        The stage's ``index_lsb`` is not ``score_bits``.
+    """
+    if argmax is None:
+        return 0, 0
+    if argmax.index_lsb != score_bits:
+        raise InputError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {score_bits}")
+    return int(argmax.latency), int(argmax.index_width)
 
 
 def inline_core_and_argmax(m: Module, core: Any, argmax: ArgmaxStage | None, payload: Value, valid: Value,
@@ -156,11 +186,12 @@ class PWASClassifierCore(wiring.Component):
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.memory_kind = memory
-        self.latency = self.core.latency + self.argmax.latency
+        cycles, index_bits = argmax_extent(self.argmax, core_output_layout(params).size)
+        self.latency = self.core.latency + cycles
         self.ii = 1
         super().__init__({
             "in": In(stream.Signature(unsigned(core_input_layout(params).size))),
-            "out": Out(stream.Signature(unsigned(core_output_layout(params).size + self.argmax.index_width))),
+            "out": Out(stream.Signature(unsigned(core_output_layout(params).size + index_bits))),
         })
         self._MustUse__silence = False
 

@@ -31,7 +31,7 @@ from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
-from pwas_hdl.hdl.classifier_top import inline_core_and_argmax
+from pwas_hdl.hdl.classifier_top import argmax_extent, inline_core_and_argmax
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
@@ -254,9 +254,8 @@ class PWASSensorTop(wiring.Component):
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in dims]
         self.argmax = argmax
-        if argmax is not None and argmax.index_lsb != core_output_layout(params).size:
-            raise InputError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {core_output_layout(params).size}")
-        self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
+        cycles, index_bits = argmax_extent(argmax, core_output_layout(params).size)
+        self.latency = self.core.latency + cycles
         self.ii = self.core.ii
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
@@ -264,8 +263,7 @@ class PWASSensorTop(wiring.Component):
         super().__init__(
             {
                 "in": In(stream.Signature(unsigned(len(self.signals) * self.in_width))),
-                "out": Out(stream.Signature(unsigned(core_output_layout(params).size
-                                                     + (argmax.index_width if argmax is not None else 0)))),
+                "out": Out(stream.Signature(unsigned(core_output_layout(params).size + index_bits))),
                 "warm": Out(1),
             }
         )

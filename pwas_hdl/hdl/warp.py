@@ -40,6 +40,7 @@ from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, rom
+from pwas_hdl.hdl.classifier_top import argmax_extent
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, sample_fields
@@ -253,20 +254,19 @@ class WarpedPWASCore(wiring.Component):
         self.warps = list(model.warps)
         params = CoreParams.from_model(model.core)
         out_bits = core_output_layout(params).size
-        if argmax is not None and argmax.index_lsb != out_bits:
-            raise InputError(f"the argmax stage takes {argmax.index_lsb} payload bits, the core gives {out_bits}")
+        cycles, index_bits = argmax_extent(argmax, out_bits)
         self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True
         self.in_width = attach_warp(self.core, self.warps)
         self.params = params
         self.argmax = argmax
-        self.latency = self.core.latency + (argmax.latency if argmax is not None else 0)
+        self.latency = self.core.latency + cycles
         self.ii = self.core.ii
         self.memory_plan, self.pipeline = self.core.memory_plan, self.core.pipeline
         self._model = model
         super().__init__({
             "in": In(stream.Signature(unsigned(params.n * self.in_width))),
-            "out": Out(stream.Signature(unsigned(out_bits + (argmax.index_width if argmax is not None else 0)))),
+            "out": Out(stream.Signature(unsigned(out_bits + index_bits))),
         })
         self._MustUse__silence = False
 
