@@ -524,15 +524,20 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
         warnings.simplefilter("ignore")
         core = build_core(fxm, memory=memory, pipeline=pipeline)
         info = design_info(core)
+    # the registers depend on the widths only (not on the weights, the shift or the rounding)
+    return _core_estimate(info, _cached_register_bits(core))
+
+
+def _core_estimate(info: dict, regs: int | None, extra_adder_bits: int = 0) -> dict[str, Any]:
+    """The resource figures of one PWAS core from its ``design_info`` (memory, multipliers, adders,
+    DSP / block-RAM estimates; the module notes), its register bits ``regs`` and the adder bits of
+    logic in front of it (``extra_adder_bits``: a warp's)."""
     mem, ar = info["memory"], info["arithmetic"]
     n, nz, f, bw, bin_ = ar["n"], ar["nz"], ar["F"], ar["weight_width"], ar["in_width"]
     nb = int(mem["memories"])
     mults = nb * nz
     mult_bits = mults * (f + 1) * bw
-    acc = f + bw + 1
-    adder = 2 * n * (bin_ + 1) + n * (n - 1) // 2 * (f + 1) + n * (f + 2) + nz * n * acc + nz * acc
-    # the registers depend on the widths only (not on the weights, the shift or the rounding)
-    regs = _cached_register_bits(core)
+    adder = _core_adder_bits(n, nz, f, bw, bin_) + extra_adder_bits
     logic = mult_bits + adder
     return {
         "memory_words": int(mem["words"]),
@@ -617,38 +622,13 @@ def _estimate_warped(fxm, memory: str, pipeline) -> dict[str, Any]:
         warnings.simplefilter("ignore")
         comp = build_warped_core(fxm, memory=memory, pipeline=pipeline)
         info = design_info(comp)
-    mem, ar = info["memory"], info["arithmetic"]
-    n, nz, f, bw, w_core = ar["n"], ar["nz"], ar["F"], ar["weight_width"], ar["in_width"]  # in_width: the core's W
-    nb = int(mem["memories"])
-    mults = nb * nz
-    mult_bits = mults * (f + 1) * bw
+    w_core = int(info["arithmetic"]["in_width"])  # the core's W (the warp's output code)
     warp_adder = 0
     for wp in fxm.warps:  # three comparators on B_in bits, t = q - B_0 over the domain's codes, u = U + L on W bits
         span = int(wp.code_breaks[-1] - wp.code_breaks[0])
         warp_adder += 3 * int(wp.input_bits) + max(1, (span - 1).bit_length()) + int(wp.width)
-    adder = _core_adder_bits(n, nz, f, bw, w_core) + warp_adder
-    regs = _cached_design_register_bits(comp, "warped", [comp.core])
-    logic = mult_bits + adder
-    return {
-        "memory_words": int(mem["words"]),
-        "memory_word_bits": int(mem["word_bits"]),
-        "memory_banks": nb,
-        "memory_depth": int(mem["depth"]),
-        "memory_bits": int(mem["bits"]),
-        "multipliers": mults,
-        "multiplier": f"u{f + 1} x s{bw}",
-        "mult_bit_products": mult_bits,
-        "adder_bits": adder,
-        "logic_bits": logic,
-        "register_bits": regs,
-        "total_bits": int(mem["bits"]) + logic + (regs or 0),
-        "dsp18": mults * mult18_blocks(f, bw),
-        "bram18k": nb * bram18k_blocks(int(mem["depth"]), int(mem["word_bits"])),
-        "latency_cycles": int(info["latency"]),
-        "acc_bits": int(ar["sum_bits"]),
-        "core_input_bits": int(w_core),
-        "warp_adder_bits": warp_adder,
-    }
+    res = _core_estimate(info, _cached_design_register_bits(comp, "warped", [comp.core]), warp_adder)
+    return {**res, "core_input_bits": w_core, "warp_adder_bits": warp_adder}
 
 
 _MEASURED_KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "lutram", "memory_bits", "multipliers_rtl",
