@@ -110,6 +110,30 @@ def test_generate_warped_refusals_are_one_error_line(extra, msg, warped_sensor, 
     assert "Traceback" not in r.output and not (tmp_path / "g").exists()
 
 
+def _lint_and_codes(gd, folder, simulator: str, t: int):
+    """The written design ``folder`` of ``gd`` (lint-clean under Verilator when that simulator runs it)
+    and ``t`` input transfers of codes: every breakpoint +- 1 and the whole code range in each column,
+    the columns shuffled independently."""
+    from pwas_hdl.flow.toolchain import tool_env
+    from pwas_hdl.verify.simulation import load_design
+
+    if simulator == "verilator":
+        env = tool_env()
+        exe = shutil.which("verilator", path=env.get("PATH"))
+        r = subprocess.run([exe, "--lint-only", "-Wall", f"{gd.top}.v"], capture_output=True, text=True, env=env, cwd=folder)
+        assert r.returncode == 0, r.stderr
+    wm = gd.model
+    rng = np.random.default_rng(11)
+    lo, hi = wm.code_range
+    breaks = np.array(wm.warps[0].code_breaks)
+    d = load_design(folder)
+    ncol = len(d.in_fields)
+    codes = np.stack([_codes(rng, lo, hi, breaks, t) for _ in range(ncol)], axis=1)
+    for j in range(1, ncol):
+        codes[:, j] = rng.permutation(codes[:, j])
+    return d, codes
+
+
 def _codes(rng, lo, hi, breaks, t):
     """Random input codes over the whole code range (outside the domain too) and every breakpoint +- 1."""
     near = np.concatenate([breaks - 1, breaks, breaks + 1])
@@ -146,29 +170,14 @@ def test_warped_option_sets_lint_clean_and_byte_identical(warped_sensor, tmp_pat
 ])
 def test_warped_design_in_cocotb_bit_exact(design, arch, simulator, warped_sensor, sim_cache, tmp_path):
     from pwas_hdl.design.generate import build_design, generate
-    from pwas_hdl.flow.toolchain import tool_env
-    from pwas_hdl.verify.simulation import load_design, run_rtl, standard_runs
+    from pwas_hdl.verify.simulation import run_rtl, standard_runs
 
     m, _ = warped_sensor
     pipe = "max" if arch == "parallel" and design == "core" else None
     gd = generate(m, tmp_path / "d", design=design, architecture=arch, input_bits=10, pipeline=pipe)
-    if simulator == "verilator":  # lint-clean, and byte-identical when built again
+    if simulator == "verilator":  # byte-identical when built again
         assert build_design(m, design=design, architecture=arch, input_bits=10, pipeline=pipe).files == gd.files
-        env = tool_env()
-        exe = shutil.which("verilator", path=env.get("PATH"))
-        r = subprocess.run([exe, "--lint-only", "-Wall", f"{gd.top}.v"], capture_output=True, text=True, env=env,
-                           cwd=tmp_path / "d")
-        assert r.returncode == 0, r.stderr
-    wm = gd.model
-    rng = np.random.default_rng(11)
-    lo, hi = wm.code_range
-    breaks = np.array(wm.warps[0].code_breaks)
-    d = load_design(tmp_path / "d")
-    ncol = len(d.in_fields)
-    codes = np.stack([_codes(rng, lo, hi, breaks, 120) for _ in range(ncol)], axis=1)
-    if ncol > 1:  # the core: shuffle the columns independently
-        for j in range(1, ncol):
-            codes[:, j] = rng.permutation(codes[:, j])
+    d, codes = _lint_and_codes(gd, tmp_path / "d", simulator, 120)
     runs = standard_runs(d, codes, seed=3)
     oor = np.concatenate([s.oor for r in runs for s in r.segments])
     assert oor.any() and not oor.all()  # inputs outside the domain, flagged
@@ -350,26 +359,11 @@ def test_warped_classifier_in_cocotb_bit_exact(design, pipe, simulator, warped_c
     and backpressure and with a reset mid-stream; latency and II as the manifest says; lint-clean."""
     from pwas_hdl.design.generate import generate
     from pwas_hdl.fixedpoint.argmax import argmax_index
-    from pwas_hdl.flow.toolchain import tool_env
-    from pwas_hdl.verify.simulation import load_design, run_rtl, standard_runs
+    from pwas_hdl.verify.simulation import run_rtl, standard_runs
 
     m, _, _ = warped_classifier
     gd = generate(m, tmp_path / "d", design=design, input_bits=10, pipeline=pipe)
-    if simulator == "verilator":
-        env = tool_env()
-        exe = shutil.which("verilator", path=env.get("PATH"))
-        r = subprocess.run([exe, "--lint-only", "-Wall", f"{gd.top}.v"], capture_output=True, text=True, env=env,
-                           cwd=tmp_path / "d")
-        assert r.returncode == 0, r.stderr
-    wm = gd.model
-    rng = np.random.default_rng(11)
-    lo, hi = wm.code_range
-    breaks = np.array(wm.warps[0].code_breaks)
-    d = load_design(tmp_path / "d")
-    ncol = len(d.in_fields)
-    codes = np.stack([_codes(rng, lo, hi, breaks, 100) for _ in range(ncol)], axis=1)
-    for j in range(1, ncol):
-        codes[:, j] = rng.permutation(codes[:, j])
+    d, codes = _lint_and_codes(gd, tmp_path / "d", simulator, 100)
     runs = standard_runs(d, codes, seed=3)
     res = run_rtl(d, runs, simulator, cache_dir=sim_cache, work_dir=tmp_path / "w", strict=False)
     assert res.passed, res.report()
