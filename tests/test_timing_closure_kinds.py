@@ -69,6 +69,17 @@ def recurrent_sensor():
 
 
 @pytest.fixture(scope="module")
+def warped_bank_sensor():
+    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+    tr, _, _ = make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
+    fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=2)
+    return PWASVirtualSensor(mu=0, my=0, partitions=4, gamma=1.0, front_end=fe, sigma=1e-3,
+                             breakpoints="quantile-pow2").fit(tr.u, tr.y, tr.z)
+
+
+@pytest.fixture(scope="module")
 def bank_sensor():
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
     from pwas_hdl.systems.pv_benchmark import make_pv_dataset
@@ -91,6 +102,7 @@ def _latency_with(model, design, pipeline, architecture="parallel"):
     ("classifier", "core", None, "parallel"),  # the argmax stage: its registers follow the pipeline
     ("bank", "sensor", None, "parallel"),  # the observer bank and its feature stages
     ("bank", "sensor", None, "serial"),  # the time-multiplexed bank
+    ("warped_bank", "sensor", 3, "parallel"),  # the bank's 2 feature stages + the warp register
     ("recurrent", "sensor", 0, "parallel"),  # the recurrent top: the core's latency (II = latency)
     ("plain", "core", None, "serial"),  # the serial core takes 6 of the registers (n + 1 MAC cycles)
     ("plain", "sensor", None, "serial"),

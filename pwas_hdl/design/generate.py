@@ -378,7 +378,8 @@ def build_design(
         classifier's argmax stage after the sum); not with ``architecture="serial"``.
         A model fitted with power-of-two ``breakpoints`` gets the warped designs of
         :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
-        too (warp -> core -> argmax stage; parallel only, as every classifier).
+        too (warp -> core -> argmax stage; parallel only, as every classifier), an observer-bank
+        sensor's without u/y taps (bank -> features -> warp -> core, parallel or serial).
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated", "corner"}, optional
@@ -488,8 +489,7 @@ def build_design(
     additive = _is_additive(sensor)
     warped = _is_warped(sensor)  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
     if warped:
-        for what, bad in (("a recurrent sensor (fit --mz)", design == "recurrent"),
-                          ("an observer-bank sensor", getattr(sensor, "front_end_", None) is not None)):
+        for what, bad in (("a recurrent sensor (fit --mz)", design == "recurrent"),):
             if bad:
                 raise InputError(f"{what} is not available with a non-uniform partition (--breakpoints) yet; "
                                  "fit with equal intervals or leave the option out")
@@ -544,14 +544,14 @@ def build_design(
 
             comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
                                                          pipeline=pipe)
-        elif warped:  # lag bank (sensor) -> warp + register -> the uniform core (parallel or serial) [-> argmax stage]
+        elif warped and bank_model is None:  # lag bank (sensor) -> warp + register -> the uniform core [-> argmax stage]
             from pwas_hdl.hdl.warp import build_warped_design
 
             comp = build_warped_design(fxm, design, sensor.lags_, memory=memory, pipeline=pipe, name=top, architecture=architecture,
                                        classifier=classifier)
         elif design == "core":
             comp = build_core(fxm, memory=memory, pipeline=pipe, name=top, classifier=classifier, architecture=architecture)
-        elif bank_model is not None:
+        elif bank_model is not None:  # observer bank -> features [-> warp + register] -> core
             from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
 
             if hasattr(bank_model, "taps"):  # u/y taps beside the features (pwas_hdl.hdl.observer_tap_sensor_top)

@@ -192,6 +192,10 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
         lags = getattr(sensor, "lags_", None)
         if fe is None or lags is None:
             raise InputError("the model is not an observer-bank sensor with u/y taps")
+        if getattr(sensor.grid_, "breakpoints", None) is not None:  # the taps would need warp input formats of their own
+            raise InputError("an observer-bank sensor with u/y taps (--mu/--my > 0) on a non-uniform partition "
+                             "(--breakpoints) has no hardware yet; fit it without the taps (--mu 0 --my 0) or with "
+                             "equal intervals")
         ins, outs, tgts = sensor.signal_names()
         fnames = fe.feature_names()
         tnames = lags.names(ins, outs, tgts)

@@ -666,16 +666,26 @@ class FixedPointObserverBank:
 
 
 def _edge_lipschitz(grid, weights: np.ndarray) -> np.ndarray:
-    """``G_j``: the largest ``|w(v + e_j) - w(v)| / h_j`` over the grid edges, per target (nz, n)."""
+    """``G_j``: the largest ``|w(v + e_j) - w(v)| / h`` over the grid edges along ``j`` (``h``: the
+    edge's length, the cell width of its interval on a non-uniform grid), per target (nz, n).
+
+    Every Kuhn simplex has one edge along each axis, and the PWAS function's slope along ``e_j``
+    inside the simplex is that edge's difference over its length, so ``G_j`` bounds the slope."""
     shape = [p + 1 for p in grid.partitions]
     nz = weights.shape[1]
     out = np.zeros((nz, grid.n))
+    cuts = getattr(grid, "breakpoints", None)
     # vertex order of the grid: the last coordinate fastest (Grid.strides): C order
     for z in range(nz):
         arr = np.asarray(weights[:, z], float).reshape(shape)
         for j in range(grid.n):
-            d = np.abs(np.diff(arr, axis=j)).max(initial=0.0) if shape[j] > 1 else 0.0
-            out[z, j] = d / float(grid.step[j])
+            if shape[j] < 2:
+                continue
+            width = np.diff(np.asarray(cuts[j], float)) if cuts is not None and cuts[j] is not None \
+                else np.full(shape[j] - 1, float(grid.step[j]))
+            across = [1] * grid.n
+            across[j] = shape[j] - 1
+            out[z, j] = float((np.abs(np.diff(arr, axis=j)) / width.reshape(across)).max())
     return out
 
 
@@ -688,8 +698,11 @@ class ObserverBankSensorModel:
     ----------
     bank : FixedPointObserverBank
         The bit-true bank (features).
-    core : FixedPointModel
-        The bit-true PWAS core on the bank's features.
+    core : FixedPointModel or WarpedFixedPointModel
+        The bit-true PWAS core on the bank's features; of a sensor fitted with power-of-two
+        ``breakpoints`` the warp and the uniform core (:mod:`pwas_hdl.fixedpoint.warp`), the
+        features' codes then being the warp's input codes (``s<B_in>.0``, :class:`WarpInputFormat
+        <pwas_hdl.fixedpoint.warp.WarpInputFormat>`).
     sensor : PWASVirtualSensor, optional
         The float sensor both were built from (needed by :meth:`reference`).
 
@@ -759,8 +772,13 @@ class ObserverBankSensorModel:
         rmse = np.asarray(getattr(sensor, "train_rmse_", []), float).reshape(-1)
         rmse = rmse[np.isfinite(rmse) & (rmse > 0)]
         given.setdefault("reference_error", float(rmse.max()) if rmse.size else None)
-        core = FixedPointModel(sensor.grid_, sensor.weights_, input_bits=input_bits, regressor_names=names,
-                               regressor_signals=[(nm, 0) for nm in names], target_names=sensor.signal_names()[2], **given)
+        core_cls: Any = FixedPointModel
+        if getattr(sensor.grid_, "breakpoints", None) is not None:  # non-uniform partition: warp + uniform core
+            from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+            core_cls = WarpedFixedPointModel
+        core = core_cls(sensor.grid_, sensor.weights_, input_bits=input_bits, regressor_names=names,
+                        regressor_signals=[(nm, 0) for nm in names], target_names=sensor.signal_names()[2], **given)
         bank = FixedPointObserverBank(fe, core.inputs, input_bits=input_bits, input_headroom=input_headroom,
                                       coef_frac=coef_frac, state_frac=state_frac, state_bits=state_bits)
         return cls(bank, core, sensor)

@@ -67,6 +67,10 @@ class ObserverBankTopBase(wiring.Component):
         Transfers after reset that produce no output (``warm`` is 1 once they have been taken).
     double_buffered : bool
         Serial bank: the feature codes double-buffered (:func:`serial_sensor_path`).
+    warps : sequence of Pow2Warp, optional
+        A non-uniform partition's warps, one per core input (:func:`pwas_hdl.hdl.warp.attach_warp`):
+        the warp and its register go in front of the core (one more cycle of latency), whose
+        ``params`` are then the uniform core's; the feature codes are the warps' ``B_in``-bit inputs.
 
     Ports: ``clk``, ``rst``, ``in__valid/ready/payload`` (``(nu+1) B_in`` bits), ``out__valid/ready/payload``
     (as the core), ``warm``.
@@ -89,14 +93,24 @@ class ObserverBankTopBase(wiring.Component):
     """
 
     kind = "observer-sensor"
+    #: the manifest's ``warp`` entry of a non-uniform partition (:func:`pwas_hdl.hdl.warp.warp_hw_info`),
+    #: set by :func:`build_observer_bank_top`
+    warp_entry = None
 
     def __init__(self, bank: FixedPointObserverBank, params: CoreParams, *, memory: str = "banked",
                  pipeline: Pipeline | str | None = None, architecture: str = "parallel", lanes: int = 1,
-                 isqrt_every: int | None = DEFAULT_ISQRT_EVERY, warmup: int, double_buffered: bool = False):
+                 isqrt_every: int | None = DEFAULT_ISQRT_EVERY, warmup: int, double_buffered: bool = False,
+                 warps: Sequence[Any] | None = None):
         self._MustUse__silence = True
         self.bank = bank
         attach_core_and_schedule(self, bank, params, memory=memory, pipeline=pipeline, architecture=architecture,
                                  lanes=lanes, isqrt_every=isqrt_every, double_buffered=double_buffered)
+        self.warps = None
+        if warps is not None:  # non-uniform partition: the warp stage in front of the core (pwas_hdl.hdl.warp)
+            from pwas_hdl.hdl.warp import attach_warp
+
+            self.warps = list(warps)
+            attach_warp(self.core, self.warps)
         self.params = params
         self.latency = self.stages_before_core + self.core.latency
         self.memory_plan = self.core.memory_plan
@@ -161,6 +175,7 @@ class ObserverBankTopBase(wiring.Component):
         return {
             "front_end": fe,
             "warmup": {"samples_without_output": self.warmup, "port": "warm", "meaning": self._warmup_meaning()},
+            **({"warp": self.warp_entry} if self.warp_entry is not None else {}),
         }
 
     def flow_control(self, names: dict) -> dict:
@@ -231,8 +246,15 @@ def build_observer_bank_top(cls: type[ObserverBankTopBase], first: Any, model: A
     from pwas_hdl.hdl.api import _check_name
 
     name = _check_name(name)
-    top = cls(first, CoreParams.from_model(model.core), memory=memory, pipeline=pipeline,
-              architecture=architecture, lanes=lanes, isqrt_every=isqrt_every)
+    warps = getattr(model.core, "warps", None)  # a WarpedFixedPointModel: the warp, then its uniform core
+    uniform = model.core.core if warps is not None else model.core
+    top = cls(first, CoreParams.from_model(uniform), memory=memory, pipeline=pipeline,
+              architecture=architecture, lanes=lanes, isqrt_every=isqrt_every,
+              **({"warps": warps} if warps is not None else {}))
+    if warps is not None:
+        from pwas_hdl.hdl.warp import warp_hw_info
+
+        top.warp_entry = warp_hw_info(model.core)
     top.module_name = name
     top._MustUse__silence = True
     top.core.input_names = list(model.core.regressor_names)

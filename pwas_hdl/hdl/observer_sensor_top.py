@@ -36,6 +36,7 @@ names (:func:`inputs_and_warmup`, :func:`serial_sensor_path`, ...) stay importab
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Module
@@ -56,6 +57,7 @@ from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank, ObserverBankSensorModel
+    from pwas_hdl.fixedpoint.warp import Pow2Warp
 
 __all__ = ["ObserverSensorTop", "FRONT_END_STAGES", "build_observer_sensor", "attach_core_and_schedule",
            "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes"]
@@ -78,6 +80,10 @@ class ObserverSensorTop(ObserverBankTopBase):
         Serial bank: state-update units (1 .. N_theta).
     isqrt_every : int or None
         Serial bank: digit steps of the square root between pipeline registers.
+    warps : sequence of Pow2Warp, optional
+        A non-uniform partition (``breakpoints="quantile-pow2"``): the warp stage in front of the
+        core (one more cycle); ``params`` are then the uniform core's and the warps' input width is
+        the feature code width.
 
     Ports: ``clk``, ``rst``, ``in__valid/ready/payload`` (``(nu+1) B_in`` bits), ``out__valid/ready/payload``
     (as the core), ``warm``.
@@ -96,15 +102,17 @@ class ObserverSensorTop(ObserverBankTopBase):
     """
 
     def __init__(self, bank: FixedPointObserverBank, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
+                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY,
+                 warps: Sequence[Pow2Warp] | None = None):
         self._MustUse__silence = True  # no UnusedElaboratable warning when a check refuses
         if params.n != bank.n_models:
             raise InputError(f"the core has n = {params.n} inputs, the bank {bank.n_models} features")
-        if params.in_width != bank.input_bits_core:
-            raise InputError(f"the core's input width ({params.in_width} bits) differs from the feature code width "
+        width = params.in_width if warps is None else warps[0].input_bits  # a warp's input codes are the features'
+        if width != bank.input_bits_core:
+            raise InputError(f"the core's input width ({width} bits) differs from the feature code width "
                              f"({bank.input_bits_core} bits); build the core from the same observer-bank model")
         super().__init__(bank, params, memory=memory, pipeline=pipeline, architecture=architecture, lanes=lanes,
-                         isqrt_every=isqrt_every, warmup=bank.first_output, double_buffered=True)
+                         isqrt_every=isqrt_every, warmup=bank.first_output, double_buffered=True, warps=warps)
 
     def elaborate(self, platform: Any) -> Module:
         """The observer bank, residual features and PWAS core, connected.
