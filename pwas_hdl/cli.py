@@ -1075,7 +1075,8 @@ def explore(
     float model, error bound, resource estimate, Pareto flag; the refused combinations and why;
     whether generate's default formats are on the front) and OUTDIR/explore.png, and prints the
     Pareto points (and the default) as a table. Plain, additive (fit --additive) and power-of-two
-    non-uniform (fit --breakpoints quantile-pow2) models; not classifiers, recurrent or
+    non-uniform (fit --breakpoints quantile-pow2) models, and recurrent ones (fit --mz:
+    the closed loop from reset on each trajectory, row t against z(t + lead)); not classifiers or
     observer-bank sensors.
     """
     from pwas_hdl.flow.explore import explore as _explore, format_table, plot_exploration

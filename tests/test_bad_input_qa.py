@@ -74,11 +74,13 @@ def _tiny_sensor(lorenz_tiny, **kw):
                              **kw).fit(None, tr.y[:300], tr.z[:300])
 
 
-def test_explore_refuses_a_recurrent_model_by_its_fit_option(in_tmp, lorenz_tiny):
-    """It said 'use predict() (or LagStructure.build_series_parallel ...)': API names for a CLI user."""
+def test_explore_of_a_recurrent_model_refuses_a_trajectory_shorter_than_the_lags(in_tmp, lorenz_tiny):
+    """Recurrent models are swept now (tests/test_explore_recurrent.py); a trajectory too short for
+    the lags is one error line naming it, nothing written."""
     _tiny_sensor(lorenz_tiny, mz=1).save(in_tmp / "rec.json")
-    _refused(["explore", "rec.json", str(lorenz_tiny.test_csv), "-o", "ex"], in_tmp,
-             "explore is not available for recurrent sensors (fit --mz", "pwas-hdl generate")
+    (in_tmp / "short.csv").write_text("run,y,z\n0,0.1,0.2\n0,0.2,0.3\n0,0.3,0.1\n1,0.5,0.4\n", encoding="utf-8")
+    _refused(["explore", "rec.json", "short.csv", "--traj-col", "run", "-o", "ex"], in_tmp,
+             "trajectory 1 has 1 samples; the lags need 2")
 
 
 def test_explore_refuses_an_observer_bank_model(lorenz_tiny):

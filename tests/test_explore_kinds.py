@@ -166,7 +166,8 @@ def test_classifier_recurrent_and_bank_models_stay_refused_when_additive_or_warp
     z = tr.z[:400, 0]
     for kw, what in ((dict(my=3, additive="pairs", classify=True), "classifiers (fit --classify)"),
                      (dict(my=2, breakpoints="quantile-pow2", classify=True), "classifiers (fit --classify)"),
-                     (dict(my=2, breakpoints="quantile-pow2", mz=1), "recurrent sensors (fit --mz, fit-map --state)")):
+                     (dict(my=2, breakpoints="quantile-pow2", mz=1),
+                      "recurrent sensors on a non-uniform partition (fit --mz with --breakpoints)")):
         target = (z > np.median(z)).astype(float) if kw.get("classify") else z
         PWASVirtualSensor(partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"], **kw).fit(
             None, tr.y[:400], target).save(in_tmp / "m.json")

@@ -97,8 +97,12 @@ generates and synthesises that design. ``result["model"]["kind"]`` says which (`
 F_i`` (the sum's alignment) and ``part_frac`` lists the parts' ``F_i``; a warped point's
 ``input_bits`` is the input code's ``B_in``, ``core_input_bits`` the width ``W`` of the warped code
 ``u`` the core takes, ``input_frac`` the core's ``F`` (a core cell is ``2**F`` codes of ``u``), and
-its label reads ``in s<B_in> -> u s<W>.<F>``. Classifiers, recurrent and observer-bank sensors are
-refused (:func:`_check_supported`).
+its label reads ``in s<B_in> -> u s<W>.<F>``. A recurrent sensor (fit ``--mz``) is swept on its
+closed loop (:func:`_evaluate_recurrent`: the bit-true recurrence from reset on each trajectory,
+row ``t`` against ``z(t + lead)``, the float recurrence as the float column; the per-step bound at
+the regressor codes the recurrence produced); its resources are the core's, and
+``result["model"]["recurrence"]`` has ``Mz`` and ``lead`` (None for the other kinds).
+Classifiers and observer-bank sensors are refused (:func:`_check_supported`).
 
 Combinations that the bit-true model refuses (an output finer than the exact product, a weight
 that does not fit a fixed ``weight_bits``, an accumulator over 62 bits, an input width too small
@@ -218,14 +222,16 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
 def _check_supported(sensor: PWASVirtualSensor) -> None:
     """Refuse, with one :class:`InputError` naming the fit option, the models whose design is not the
     core of a bit-true model of :func:`pwas_hdl.design.generate.fixed_point_model` on the lag
-    regressors: observer-bank sensors, recurrent sensors and classifiers (also when additive or on a
-    non-uniform partition). Plain, additive (fit --additive) and non-uniform power-of-two (fit
-    --breakpoints quantile-pow2) sensors are swept; other breakpoints are refused by the bit-true
-    model itself (the message names quantile-pow2)."""
+    regressors: observer-bank sensors and classifiers (also when additive or on a non-uniform
+    partition). Plain, additive (fit --additive), non-uniform power-of-two (fit --breakpoints
+    quantile-pow2) and recurrent (fit --mz; their accuracy is the closed loop's) sensors are swept;
+    other breakpoints are refused by the bit-true model itself (the message names quantile-pow2)."""
+    recurrent = sensor.lags_ is not None and sensor.lags_.recurrent
     kinds = (
         (getattr(sensor, "front_end_", None) is not None, "observer-bank sensors (fit --front-end observer-bank)"),
-        (sensor.lags_ is not None and sensor.lags_.recurrent, "recurrent sensors (fit --mz, fit-map --state)"),
         (getattr(sensor, "classifier_", None) is not None, "classifiers (fit --classify)"),
+        (recurrent and getattr(sensor.grid_, "breakpoints", None) is not None,
+         "recurrent sensors on a non-uniform partition (fit --mz with --breakpoints)"),
     )
     for bad, what in kinds:
         if bad:
@@ -233,8 +239,9 @@ def _check_supported(sensor: PWASVirtualSensor) -> None:
                              "(--input-bits, --weight-frac, --output-frac)")
 
 
-def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
-    """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
+def _signals_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
+    """The trajectories ``u``, ``y`` and ``z`` (lists, one array per trajectory; ``u`` / ``y`` None
+    when the model has no such signal) of the data, and a description of where they came from."""
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
     if isinstance(data, (str, os.PathLike)):
@@ -263,6 +270,13 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
 
         ztab = as_trajectories(ztab, "z", len(tgts))
         desc = {"path": None, "reference_columns": None, "traj_col": None}
+    return u, y, ztab, desc
+
+
+def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
+    """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
+    u, y, ztab, desc = _signals_and_reference(sensor, data, traj_col, blank_rows)
+    tgts = sensor.signal_names()[2]
     xi, valid = sensor.regressors(u, y)
     if len(ztab) != len(valid):
         raise InputError(f"got {len(ztab)} target trajectories but {len(valid)} input/output trajectories")
@@ -279,6 +293,63 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
         check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
     desc["samples"] = int(xi.shape[0])
     return xi, z, desc
+
+
+def _recurrent_data(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error") -> dict:
+    """The data of a recurrent sensor's sweep, aligned as ``simulate`` aligns a recurrent design.
+
+    Each trajectory is one run of the recurrence from reset; its row ``t = M-1 .. T-1`` estimates
+    ``z(t + lead)``, so the rows whose reference row exists are kept.
+
+    Returns
+    -------
+    dict
+        ``trajectories`` (list of ``(u, y)``, physical, None for a signal without lags),
+        ``keep`` (list of bool arrays, the kept rows of each run), ``z`` (m, nz) the reference and
+        ``float`` (m, nz) the float recurrence on the kept rows, ``desc`` (where the data came from).
+
+    Raises
+    ------
+    InputError
+        As :func:`_signals_and_reference`; a trajectory shorter than the lags, trajectories of
+        different counts or lengths, no kept row, or a reference value that is not finite.
+    """
+    from pwas_hdl.fit.regressors import as_trajectories
+
+    u, y, ztab, desc = _signals_and_reference(sensor, data, traj_col, blank_rows)
+    lags = sensor.lags_
+    tgts = sensor.signal_names()[2]
+    us = as_trajectories(u, "u", lags.nu) if lags.nu and lags.mu else None
+    ys = as_trajectories(y, "y", lags.ny) if lags.ny and lags.my else None
+    for name, tr in (("u", us), ("y", ys)):
+        if tr is not None and len(tr) != len(ztab):
+            raise InputError(f"got {len(ztab)} target trajectories but {len(tr)} {name} trajectories")
+    m_hist, lead = max(lags.memory, 1), int(getattr(sensor, "lead_", 0))
+    trajs, keeps, zs, zfs = [], [], [], []
+    for i, zt in enumerate(ztab):
+        ui, yi = (us[i] if us is not None else None), (ys[i] if ys is not None else None)
+        t_len = zt.shape[0]
+        for name, a in (("u", ui), ("y", yi)):
+            if a is not None and a.shape[0] != t_len:
+                raise InputError(f"trajectory {i}: {name} has {a.shape[0]} samples, z {t_len}")
+        if t_len < m_hist:
+            raise InputError(f"trajectory {i} has {t_len} samples; the lags need {m_hist}")
+        rows = np.arange(m_hist - 1, t_len)
+        keep = rows + lead < t_len
+        zf = np.asarray(sensor.predict(ui, yi), dtype=float).reshape(-1, len(tgts))
+        trajs.append((ui, yi))
+        keeps.append(keep)
+        zs.append(np.asarray(zt, dtype=float)[rows[keep] + lead])
+        zfs.append(zf[keep])
+    z = np.concatenate(zs, axis=0)
+    if z.shape[0] == 0:
+        raise InputError(f"the data have no sample whose estimate has a reference (the lags need {m_hist} samples, "
+                         f"the estimate of row t is z(t + {lead}))")
+    for i, t in enumerate(tgts):
+        where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
+        check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
+    desc["samples"] = int(z.shape[0])
+    return {"trajectories": trajs, "keep": keeps, "z": z, "float": np.concatenate(zfs, axis=0), "desc": desc}
 
 
 _option = option_text  # ``input_bits`` -> ``--input-bits (input_bits)``: the explore option first
@@ -679,9 +750,39 @@ def _kind_fields(fxm, kind: str) -> dict:
 
 
 def _evaluate(fxm: FixedPointModel, xi, z, zf, zf_rmsee) -> tuple[dict, np.ndarray]:
+    """Accuracy of a feed-forward point on the regressors ``xi`` (m, n): :func:`_accuracy`."""
     zb, flags = fxm.predict(xi, return_flags=True)
-    q = fxm.quantize_inputs(xi)
-    ref = fxm.reference(q)
+    return _accuracy(fxm, zb, flags, fxm.reference(fxm.quantize_inputs(xi)), z, zf, zf_rmsee)
+
+
+def _evaluate_recurrent(fxm: FixedPointModel, sensor: PWASVirtualSensor, rdata: dict, zf_rmsee) -> tuple[dict, np.ndarray]:
+    """Accuracy of a recurrent point: the bit-true recurrence of each trajectory from reset
+    (:class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`, what the recurrent top
+    computes), against the reference and the float recurrence; the per-step bound is checked at the
+    regressor codes the recurrence itself produced (the fed-back ones included).
+
+    Raises
+    ------
+    InputError
+        The recurrent top cannot take these formats (:func:`~pwas_hdl.design.recurrent.recurrent_model`).
+    """
+    from pwas_hdl.design.recurrent import recurrent_model
+
+    rm = recurrent_model(sensor, fxm)
+    outs, flags, refs = [], [], []
+    for (u, y), keep in zip(rdata["trajectories"], rdata["keep"]):
+        run = rm.run(rm.quantize_signals(u, y))
+        outs.append(run["out"][keep])
+        flags.append(run["out_of_range"][keep])
+        refs.append(fxm.reference(run["regressor"][keep]))
+    zb = fxm.to_physical_output(np.concatenate(outs))
+    return _accuracy(fxm, zb, np.concatenate(flags), np.concatenate(refs), rdata["z"], rdata["float"], zf_rmsee)
+
+
+def _accuracy(fxm: FixedPointModel, zb, flags, ref, z, zf, zf_rmsee) -> tuple[dict, np.ndarray]:
+    """A point's accuracy fields and its errors ``zb - z`` (m, nz): ``zb`` the bit-true estimates,
+    ``flags`` (m,) out of the domain, ``ref`` (m, nz) the float model at the codes the circuit saw,
+    ``z`` the reference, ``zf`` the float sensor's estimates, ``zf_rmsee`` (nz,) its RMSEE."""
     lsb = fxm.output_format.lsb
     err = zb - z
     rmsee = np.sqrt(np.mean(err**2, axis=0))
@@ -734,7 +835,7 @@ def explore(
     ----------
     model : PWASVirtualSensor or path of a model file
         A plain, additive (fit ``--additive``) or power-of-two non-uniform (fit ``--breakpoints
-        quantile-pow2``) sensor; not a classifier, a recurrent or an observer-bank sensor.
+        quantile-pow2``) or recurrent (fit ``--mz``) sensor; not a classifier or an observer-bank sensor.
     data : path of a CSV, :class:`~pwas_hdl.io.csv_table.Table`, or tuple ``(u, y, z)``
         The evaluation data. From a CSV/Table the model's input/output columns are read (by
         name) and the reference of target ``t`` is column ``t_true`` if present, else ``t``.
@@ -788,7 +889,7 @@ def explore(
     ------
     InputError
         Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
-        missing target column, data without a full regressor; a classifier, recurrent or
+        missing target column, data without a full regressor; a classifier or an
         observer-bank sensor, or breakpoints whose cells are not power-of-two multiples of one step.
     ToolMissing
         Synthesis was asked for and a synthesis tool is not installed.
@@ -830,7 +931,12 @@ def explore(
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
-    xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col, blank_rows)
+    recurrent = sensor.lags_ is not None and sensor.lags_.recurrent  # the accuracy is the closed loop's
+    if recurrent:
+        rdata = _recurrent_data(sensor, data, traj_col, blank_rows)
+        xi, z, zf, data_desc = None, rdata["z"], rdata["float"], rdata["desc"]
+    else:
+        xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col, blank_rows)
     tgts = sensor.signal_names()[2]
 
     # ---- the defaults of generate (input_bits=12, everything else from the data)
@@ -853,8 +959,9 @@ def explore(
     else:  # evaluated all the same, with the default widths, so that it can be compared
         combos.append((*default_key, True))
 
-    # ---- float reference
-    zf = sensor.predict_regressors(xi)
+    # ---- float reference (a recurrent sensor's: its float recurrence, from _recurrent_data)
+    if not recurrent:
+        zf = sensor.predict_regressors(xi)
     zf_rmsee = np.sqrt(np.mean((zf - z) ** 2, axis=0))
 
     points: list[dict] = []
@@ -869,12 +976,15 @@ def explore(
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 fxm = fixed_point_model(sensor, memory=memory, **fmt_common, **given)
+            if recurrent:  # the feedback's requantisation may refuse the formats too
+                acc, err = _evaluate_recurrent(fxm, sensor, rdata, zf_rmsee)
         except InputError as exc:  # a combination the formats refuse (anything else is a bug: raised)
             refused.append({**{k: v for k, v in given.items()}, "reason": str(exc)})
             if progress:
                 progress("sweep", i + 1, total)
             continue
-        acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
+        if not recurrent:
+            acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
         res = estimate_resources(fxm, memory, pipeline)
         pt = {
             "input_bits": fxm.input_bits,
@@ -928,6 +1038,9 @@ def explore(
             "regressors": list(dflt.regressor_names),
             "targets": list(tgts),
             "train_rmse": [float(v) for v in np.ravel(getattr(sensor, "train_rmse_", []))],
+            "recurrence": ({"Mz": int(sensor.lags_.mz), "lead": int(getattr(sensor, "lead_", 0)),
+                            "accuracy": "the bit-true recurrence from reset on each trajectory (closed loop)"}
+                           if recurrent else None),
         },
         "data": data_desc,
         "float": {"rmsee": [float(v) for v in zf_rmsee], "rmsee_ratio": 1.0},
