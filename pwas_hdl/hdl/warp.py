@@ -103,10 +103,10 @@ def warp_into(m: Module, q: Value, warp: Pow2Warp, name: str) -> Value:
     if low is not None:
         kinds = sorted(set(shifts))
         code = rom(m, idx, [kinds.index(shifts[k]) for k in cell_of], max(1, (len(kinds) - 1).bit_length()), f"{name}_sc")
-        u_lo = Signal(unsigned(w), name=f"{name}_lo")
-        if isinstance(code, int):
-            m.d.comb += u_lo.eq(Cat(Const(0, kinds[code]), low))
+        if isinstance(code, int):  # one shift for every cell (e.g. equal cells): a value, not a named alias (lint)
+            u_lo = Cat(Const(0, kinds[code]), low) if kinds[code] else low
         else:
+            u_lo = Signal(unsigned(w), name=f"{name}_lo")
             with m.Switch(code):
                 for c, sh in enumerate(kinds):
                     with (m.Case(c) if c < len(kinds) - 1 else m.Default()):
