@@ -93,7 +93,7 @@ from pwas_hdl.fixedpoint.formats import (
 )
 from pwas_hdl.fit.geometry import Grid
 from pwas_hdl.fixedpoint.memory_layout import make_layout
-from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, weight_matrix
+from pwas_hdl.fixedpoint.model_setup import input_code_arrays, model_names, output_reference, sensor_names, weight_matrix
 from pwas_hdl.fixedpoint.reduction import tree_reduce
 
 if TYPE_CHECKING:
@@ -505,11 +505,7 @@ class FixedPointModel:
             from sklearn.exceptions import NotFittedError  # a ValueError; imported here: sklearn is slow to import
 
             raise NotFittedError("the sensor is not fitted yet; call fit() or load a model first")
-        ins, outs, tgts = sensor.signal_names()
-        lags = sensor.lags_
-        names = lags.names(ins, outs, tgts)
-        by_kind = {"u": ins, "y": outs, "z": [f"{t}_hat" for t in tgts]}  # "z": fed-back estimates (issue 13)
-        signals = [(by_kind[kind][ch], lag) for kind, ch, lag in lags.signal_of_dimension()]
+        names, signals, tgts = sensor_names(sensor)  # past estimates: the signals <target>_hat (issue 13)
         given = set(overrides)
         if "reference_error" not in overrides:
             rmse = np.asarray(getattr(sensor, "train_rmse_", []), dtype=float).reshape(-1)

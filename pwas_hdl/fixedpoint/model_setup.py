@@ -6,6 +6,8 @@ Used by :class:`pwas_hdl.fixedpoint.bittrue.FixedPointModel` (one grid) and
 * :func:`weight_matrix`: the weights as an (N, nz) float array, checked;
 * :func:`model_names`: regressor names, regressor signals ``(signal, lag)`` and target names, with
   their defaults (``x0..``, ``(name, 0)``, ``z0..``), checked against ``n`` and ``nz``;
+* :func:`sensor_names`: those names of a fitted sensor (also used by
+  :class:`pwas_hdl.fixedpoint.warp.WarpedFixedPointModel`), past estimates as ``<target>_hat``;
 * :func:`input_code_arrays`: the per-regressor constants of the input formats as int64 arrays;
 * :func:`output_reference`: the reference error that sets the output LSB, and where it came from.
 """
@@ -22,9 +24,11 @@ from pwas_hdl.errors import InputError
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
     from pwas_hdl.fixedpoint.formats import InputFormat
 
-__all__ = ["weight_matrix", "model_names", "input_code_arrays", "output_reference"]
+__all__ = ["weight_matrix", "model_names", "sensor_names", "input_code_arrays", "output_reference"]
 
 
 def weight_matrix(weights: "ArrayLike", n_vertices: int) -> np.ndarray:
@@ -55,6 +59,34 @@ def weight_matrix(weights: "ArrayLike", n_vertices: int) -> np.ndarray:
     if not np.all(np.isfinite(w)):
         raise InputError("weights contain NaN or infinite values; fit the model again or pass finite weights")
     return w
+
+
+def sensor_names(sensor: "PWASVirtualSensor") -> tuple[list[str], list[tuple[str, int]], list[str]]:
+    """``(regressor names, regressor signals, target names)`` of a fitted sensor.
+
+    The fed-back estimates of a recurrent sensor (``Mz >= 1``) are the signal ``<target>_hat``
+    (its dimensions named ``<target>_hat[t-k]``), so that their input format is their own, not an
+    output's.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        Fitted (``lags_`` and the signal names).
+
+    Returns
+    -------
+    names : list of str
+        ``n`` regressor names (:meth:`LagStructure.names <pwas_hdl.fit.regressors.LagStructure.names>`).
+    signals : list of (str, int)
+        ``n`` pairs ``(signal, lag)``, lag in samples.
+    targets : list of str
+        ``nz`` target names.
+    """
+    ins, outs, tgts = sensor.signal_names()
+    lags = sensor.lags_
+    by_kind = {"u": ins, "y": outs, "z": [f"{t}_hat" for t in tgts]}  # "z": fed-back estimates (issue 13)
+    signals = [(by_kind[kind][ch], lag) for kind, ch, lag in lags.signal_of_dimension()]
+    return lags.names(ins, outs, tgts), signals, list(tgts)
 
 
 def model_names(n: int, nz: int, regressor_names: Sequence[str] | None, regressor_signals: Sequence[tuple[str, int]] | None,

@@ -522,10 +522,11 @@ class WarpedFixedPointModel:
         InputError
             The cells are not power-of-two multiples, or the formats are impossible.
         """
-        ins, outs, tgts = sensor.signal_names()
-        lags = sensor.lags_
-        options.setdefault("regressor_names", lags.names(ins, outs))
-        options.setdefault("regressor_signals", [((ins if kind == "u" else outs)[ch], lag) for kind, ch, lag in lags.signal_of_dimension()])
+        from pwas_hdl.fixedpoint.model_setup import sensor_names
+
+        names, signals, tgts = sensor_names(sensor)  # past estimates (fit --mz): the signals <target>_hat
+        options.setdefault("regressor_names", names)
+        options.setdefault("regressor_signals", signals)
         options.setdefault("target_names", tgts)
         from_rmse = "reference_error" not in options
         if from_rmse:
