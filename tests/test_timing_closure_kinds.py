@@ -80,6 +80,13 @@ def warped_bank_sensor():
 
 
 @pytest.fixture(scope="module")
+def recurrent_warped_sensor():
+    y, z = _series()
+    return PWASVirtualSensor(my=1, mz=1, partitions=4, breakpoints="quantile-pow2", sigma=1e-3, output_names=["y"],
+                             target_names=["z"]).fit(None, y, z)
+
+
+@pytest.fixture(scope="module")
 def bank_sensor():
     from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
     from pwas_hdl.systems.pv_benchmark import make_pv_dataset
@@ -104,6 +111,7 @@ def _latency_with(model, design, pipeline, architecture="parallel"):
     ("bank", "sensor", None, "serial"),  # the time-multiplexed bank
     ("warped_bank", "sensor", 3, "parallel"),  # the bank's 2 feature stages + the warp register
     ("recurrent", "sensor", 0, "parallel"),  # the recurrent top: the core's latency (II = latency)
+    ("recurrent_warped", "sensor", 1, "parallel"),  # the recurrent top with the warp register in front of its core
     ("plain", "core", None, "serial"),  # the serial core takes 6 of the registers (n + 1 MAC cycles)
     ("plain", "sensor", None, "serial"),
 ])

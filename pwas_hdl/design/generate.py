@@ -257,11 +257,23 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         model_summary=(f"n = {sensor.grid_.n} ({', '.join(man['lags']['regressors'])}), N = {sensor.grid_.n_vertices}, "
                        f"targets {', '.join(man['lags']['targets'])}, sigma = {sensor.sigma_:.3g}"),
         clock=man["clock"]["port"], reset=_reset_text(man, "`"), latency=man["latency_cycles"], ii=man["ii"],
-        rate="one sample per clock" if man["ii"] == 1 else f"one sample every {man['ii']} clocks: serial architecture",
+        rate=_rate_text(man),
         port_table=ports, format_table=fmt_table, bound_lsb=f"{eb['lsb']:.4g}", bound_phys=f"{eb['physical']:.4g}",
         bound_terms=terms, domain_table=dom_table, memory_text=mem_text + init_text, file_list=files,
         warmup_text=warm_text, input_code_text=code_text,
     )
+
+
+def _rate_text(man: dict) -> str:
+    """The report's throughput phrase: one sample per clock, or every II clocks and why (the serial
+    core's n + 1 cycles, or a recurrent top's one sample in flight, II = latency, whatever its core)."""
+    if man["ii"] == 1:
+        return "one sample per clock"
+    if "recurrence" in man:
+        from pwas_hdl.design.recurrent import loop_text
+
+        return f"one sample every {man['ii']} clocks: one sample in flight through {loop_text(man)}, II = latency"
+    return f"one sample every {man['ii']} clocks: serial architecture"
 
 
 def _file_names(files: dict) -> list[str]:
@@ -379,7 +391,9 @@ def build_design(
         A model fitted with power-of-two ``breakpoints`` gets the warped designs of
         :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
         too (warp -> core -> argmax stage; parallel only, as every classifier), an observer-bank
-        sensor's without u/y taps (bank -> features -> warp -> core, parallel or serial).
+        sensor's without u/y taps (bank -> features -> warp -> core, parallel or serial), a
+        recurrent model's (the recurrent top with the warp in front of its core; the fed-back
+        estimate is requantised to the warp's input code format).
     name : str, optional
         Verilog module name (default ``pwas_core`` / ``pwas_sensor``).
     memory : {"banked", "replicated", "corner"}, optional
@@ -488,11 +502,6 @@ def build_design(
         pipeline = preset
     additive = _is_additive(sensor)
     warped = _is_warped(sensor)  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
-    if warped:
-        for what, bad in (("a recurrent sensor (fit --mz)", design == "recurrent"),):
-            if bad:
-                raise InputError(f"{what} is not available with a non-uniform partition (--breakpoints) yet; "
-                                 "fit with equal intervals or leave the option out")
     bank_model = None  # observer-bank front end (issue 12): pwas_hdl.fixedpoint.observer_bank
     if bank_lanes is not None and (getattr(sensor, "front_end_", None) is None or architecture != "serial" or design != "sensor"):
         raise InputError("--bank-lanes applies to observer-bank sensors with --design sensor --architecture serial only")
@@ -543,7 +552,7 @@ def build_design(
             from pwas_hdl.design.recurrent import build_recurrent_component
 
             comp, recurrence = build_recurrent_component(sensor, fxm, memory=memory, name=top, classifier=classifier,
-                                                         pipeline=pipe)
+                                                         pipeline=pipe, architecture=architecture)
         elif warped and bank_model is None:  # lag bank (sensor) -> warp + register -> the uniform core [-> argmax stage]
             from pwas_hdl.hdl.warp import build_warped_design
 

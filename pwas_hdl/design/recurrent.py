@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
     from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
 
-__all__ = ["recurrent_model", "build_recurrent_component", "recurrence_header_lines", "recurrence_report_text"]
+__all__ = ["recurrent_model", "build_recurrent_component", "recurrence_header_lines", "recurrence_report_text", "loop_text"]
 
 
 def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "RecurrentFixedPointModel":
@@ -63,16 +63,18 @@ def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "Rec
 
 
 def build_recurrent_component(sensor: "PWASVirtualSensor", fxm: "FixedPointModel", *, memory: str, name: str,
-                              pipeline: Any = None, classifier: Any = None) -> tuple[Any, "RecurrentFixedPointModel"]:
+                              pipeline: Any = None, classifier: Any = None,
+                              architecture: str = "parallel") -> tuple[Any, "RecurrentFixedPointModel"]:
     """The Amaranth recurrent top and its bit-true recurrence.
 
     Parameters
     ----------
     sensor : PWASVirtualSensor
         Recurrent (``sensor.lags_.mz >= 1``), initial-state rule "value".
-    fxm : FixedPointModel
-        The bit-true circuit (:func:`pwas_hdl.design.generate.fixed_point_model`).
-    memory, name, pipeline : as :func:`pwas_hdl.design.generate.build_design`
+    fxm : FixedPointModel or WarpedFixedPointModel
+        The bit-true circuit (:func:`pwas_hdl.design.generate.fixed_point_model`; a warped model,
+        of a non-uniform partition, puts the warp in front of the core).
+    memory, name, pipeline, architecture : as :func:`pwas_hdl.design.generate.build_design`
     classifier : None
         A classifier model is refused (no argmax stage in the recurrent top).
 
@@ -86,7 +88,7 @@ def build_recurrent_component(sensor: "PWASVirtualSensor", fxm: "FixedPointModel
         raise InputError("a recurrent classifier is not supported: the recurrent top has no argmax stage")
     rm = recurrent_model(sensor, fxm)
     try:
-        top = build_recurrent_sensor(rm, memory=memory, pipeline=pipeline, name=name)
+        top = build_recurrent_sensor(rm, memory=memory, pipeline=pipeline, name=name, architecture=architecture)
     except ValueError as exc:  # e.g. a requantisation product narrower than B_in + S
         raise InputError(f"the recurrent top cannot be built with these formats: {exc}") from None
     return top, rm
@@ -106,13 +108,31 @@ def recurrence_header_lines(man: dict) -> list[str]:
         Without comment markers or line ends.
     """
     r = man["recurrence"]
-    lines = [f"recurrence: Mz = {r['Mz']}, lead {r['lead']}; one sample in flight, II = latency = {r['ii_cycles']} cycles"]
+    lines = [f"recurrence: Mz = {r['Mz']}, lead {r['lead']}; one sample in flight through {loop_text(man)}, "
+             f"II = latency = {r['ii_cycles']} cycles"]
     for fb in r["feedback"]:
         q = fb["requant"]
         lines.append(f"  feedback {fb['output_field']} -> {', '.join(fb['regressors'])}: q = clip((o * {q['mul']} + {q['add']}) "
                      f">> {q['shift']}, {q['qmin']}, {q['qmax']}) ({fb['input_format']}); reset codes {fb['initial_codes']}")
     lines.append("  (the |hw - float| bound above is per step; over the recurrence the deviation is measured, see report.md)")
     return lines
+
+
+def loop_text(man: dict) -> str:
+    """What a sample passes through in the recurrent top, from its manifest.
+
+    Parameters
+    ----------
+    man : dict
+        A recurrent design's manifest (``architecture.kind``, ``warp`` if warped).
+
+    Returns
+    -------
+    str
+        ``"the parallel core"``, ``"the warp and the serial core"``, ...
+    """
+    kind = man.get("architecture", {}).get("kind", "parallel")
+    return ("the warp and " if "warp" in man else "") + f"the {kind} core"
 
 
 def recurrence_report_text(man: dict) -> str:
@@ -137,7 +157,7 @@ def recurrence_report_text(man: dict) -> str:
                     f"S = {q['shift']}, [{q['qmin']}, {q['qmax']}] | {fb['input_format']} | {fb['initial_codes']} | "
                     f"{q['error_bound']:.4g} |")
     return (f"\n## Recurrence\n\nThe past estimates are fed back (Mz = {r['Mz']}, lead {r['lead']}: row t estimates "
-            f"z(t + {r['lead']})). Flow control: {r['flow']}. II = latency = {r['ii_cycles']} cycles. Reset restores the initial state "
+            f"z(t + {r['lead']})). Flow control: {r['flow']} (through {loop_text(man)}). II = latency = {r['ii_cycles']} cycles. Reset restores the initial state "
             f"codes (physical {r['initial_state']['values']}).\n\n" + "\n".join(rows) + "\n\n"
             "The error bound above is that of one step; the recurrence filters the per-step errors with its own gain, so "
             "the deviation of the hardware from the float recurrence is measured (simulate: bit-true and float columns), "

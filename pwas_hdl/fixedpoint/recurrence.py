@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from fractions import Fraction
 
 import numpy as np
@@ -46,6 +47,9 @@ from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat
+
+if TYPE_CHECKING:
+    from pwas_hdl.fixedpoint.warp import WarpInputFormat, WarpedFixedPointModel
 
 __all__ = ["FEEDBACK_PRECISION", "FeedbackRequant", "RecurrentFixedPointModel"]
 
@@ -86,15 +90,27 @@ class FeedbackRequant:
     error_bound: float
 
     @classmethod
-    def between(cls, out_format: FixedFormat, inp: InputFormat, precision: int = FEEDBACK_PRECISION) -> "FeedbackRequant":
+    def between(cls, out_format: FixedFormat, inp: InputFormat | WarpInputFormat,
+                precision: int = FEEDBACK_PRECISION) -> "FeedbackRequant":
         """The requantisation from ``out_format`` codes to ``inp`` codes.
+
+        Derivation (any ``inp`` whose codes are ``x = lo + lsb (q - lo_code)`` and whose
+        quantisation is ``floor(lo_code + (x - lo) / lsb + 1/2)`` saturated to ``inp.format``, the
+        one rule of :func:`~pwas_hdl.fixedpoint.formats.quantize_input`): the output code ``o``
+        stands for ``x = o 2**-Fo``, so the input code of ``x`` is ``floor(o r + c0 + 1/2)`` with
+        ``r = 2**-Fo / lsb`` and ``c0 = lo_code - lo / lsb``; ``K``, ``C``, ``S`` approximate
+        ``r`` and ``c0 + 1/2`` in ``S`` fraction bits. This holds for an :class:`InputFormat`
+        (uniform grid) and for a :class:`~pwas_hdl.fixedpoint.warp.WarpInputFormat` (non-uniform
+        power-of-two partition: its codes ``q`` are the warp's inputs, ``lo_code = B_0``, and the
+        warp that follows is exact), so the same rule feeds back into a warped core.
 
         Parameters
         ----------
         out_format : FixedFormat
             The output format ``s<B_out>.<Fo>`` of the estimate fed back.
-        inp : InputFormat
-            The input format of the fed-back regressor dimension.
+        inp : InputFormat or WarpInputFormat
+            The input format of the fed-back regressor dimension (``lo``, ``lsb`` in physical
+            units, ``lo_code``, ``bits`` and a saturating ``format``).
         precision : int
             Bits of ``mul`` (``K``), default :data:`FEEDBACK_PRECISION`.
 
@@ -158,9 +174,12 @@ class RecurrentFixedPointModel:
 
     Parameters
     ----------
-    fxm : FixedPointModel
-        Of the recurrent sensor (``FixedPointModel.from_sensor``); its regressor ends with the
-        fed-back dimensions.
+    fxm : FixedPointModel or WarpedFixedPointModel
+        Of the recurrent sensor (``FixedPointModel.from_sensor``, or
+        ``WarpedFixedPointModel.from_sensor`` for a non-uniform power-of-two partition: the codes
+        are then the warp's inputs and the fed-back estimate is requantised to the
+        :class:`~pwas_hdl.fixedpoint.warp.WarpInputFormat` of its dimension); its regressor ends
+        with the fed-back dimensions.
     lags : LagStructure
         With ``Mz >= 1`` (``sensor.lags_``).
     initial_values : array_like (Mz, nz)
@@ -170,13 +189,15 @@ class RecurrentFixedPointModel:
     ----------
     signals : list of str
         The measured signals of the input payload, in order (one ``B_in``-bit code each).
-    signal_formats : list of InputFormat
+    signal_formats : list of InputFormat or WarpInputFormat
+    z_formats : list of InputFormat or WarpInputFormat
+        The input format of each target's fed-back dimensions.
     feedback : list of FeedbackRequant, one per target
     initial_codes : ndarray (Mz, nz), int64
         Reset values of the feedback registers.
     """
 
-    def __init__(self, fxm: FixedPointModel, lags: LagStructure, initial_values: ArrayLike):
+    def __init__(self, fxm: FixedPointModel | WarpedFixedPointModel, lags: LagStructure, initial_values: ArrayLike):
         if not lags.recurrent:
             raise InputError("the lag structure has no fed-back estimates (Mz = 0): use FixedPointModel")
         if lags.dimension != fxm.n:

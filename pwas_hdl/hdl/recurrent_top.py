@@ -14,6 +14,17 @@ requantised to the input code format of its fed-back dimension -- ``q = clip((o 
 <pwas_hdl.fixedpoint.recurrence.FeedbackRequant>`) -- and shifted into the feedback registers.
 The reset values of the registers are the input codes of the model's initial state.
 
+Non-uniform (power-of-two) partition: with ``warps`` the payload, the lag bank and the feedback
+registers hold the ``B_in``-bit input codes ``q`` of the warped model
+(:class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel`; the fed-back estimate is requantised
+to the :class:`~pwas_hdl.fixedpoint.warp.WarpInputFormat` of its dimension) and the warp and its
+register (:func:`pwas_hdl.hdl.warp.attach_warp`) are the core's first stage: one cycle more.
+
+Serial core (``architecture="serial"``, :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore`): the
+same stream interface and bit-true model; its input throttle (one sample every ``n + 1`` cycles)
+never bites here, since one sample in flight already spaces the samples by the core's latency
+(``> n + 1``); ``in.ready`` still includes it (``& advance``).
+
 Flow control: one sample in flight. After a transfer that reaches the core, ``in.ready`` is low
 until its output is transferred; in that cycle ``in.ready`` is high again and the requantised
 output bypasses the feedback registers into the next regressor, so with a sink that never stalls
@@ -32,7 +43,7 @@ from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
-from pwas_hdl.hdl.core import PWASCore, _not, core_output_layout
+from pwas_hdl.hdl.core import _not, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.sensor_top import lag_bank, sample_fields
 
@@ -40,6 +51,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from pwas_hdl.fixedpoint.recurrence import FeedbackRequant, RecurrentFixedPointModel
+    from pwas_hdl.fixedpoint.warp import Pow2Warp
 
 __all__ = ["PWASRecurrentTop", "build_recurrent_sensor"]
 
@@ -63,13 +75,23 @@ class PWASRecurrentTop(wiring.Component):
     initial_codes : array_like (Mz, nz)
         Reset values of the feedback registers, input codes (oldest first).
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+    architecture : {"parallel", "serial"}
+        The core (:func:`pwas_hdl.hdl.api._make_core`); ``"serial"`` ignores ``memory``.
+    warps : list of Pow2Warp, optional
+        A non-uniform (power-of-two) partition: one warp per regressor dimension in front of the
+        core (:func:`~pwas_hdl.hdl.warp.attach_warp`, one register); the payload, the lag bank and
+        the feedback registers then hold ``warps[0].input_bits``-bit codes.
 
     Attributes
     ----------
     latency : int
-        Cycles from the transfer of a sample that reaches the core to its output.
+        Cycles from the transfer of a sample that reaches the core to its output (the warp
+        register included).
     ii : int
         ``max(1, latency)``: cycles between accepted samples (sink never stalling).
+    in_width : int
+        Bits of one code in the payload, the lag bank and the feedback registers: the core's
+        ``in_width``, or the warp's input width.
     warmup : int
         ``M - 1``: transfers after reset that produce no output.
 
@@ -77,14 +99,26 @@ class PWASRecurrentTop(wiring.Component):
     ------
     InputError
         ``len(io_dims) + nz * mz != n``, ``len(feedback) != nz``, ``mz < 1``, a dimension the lag
-        bank does not hold, or as :class:`~pwas_hdl.hdl.core.PWASCore`.
+        bank does not hold, an unknown ``architecture``, warps that do not fit the core
+        (:func:`~pwas_hdl.hdl.warp.attach_warp`), or as :class:`~pwas_hdl.hdl.core.PWASCore`.
     """
 
     kind = "recurrent-sensor"
+    #: the manifest's warp entry of a warped top (:func:`build_recurrent_sensor`), else None
+    warp_entry = None
+    _warp_in_width = None
+
+    @property
+    def in_width(self) -> int:
+        """Bits of one code in the payload, the lag bank and the feedback registers: the core's, or the warp's input."""
+        return self._warp_in_width or self.params.in_width
 
     def __init__(self, params: CoreParams, signals: Sequence[tuple[str, int]], io_dims: Sequence[tuple[int, int]], mz: int,
                  feedback: Sequence[FeedbackRequant], initial_codes: npt.ArrayLike, *, memory: str = "banked",
-                 pipeline: Pipeline | str | None = None):
+                 pipeline: Pipeline | str | None = None, architecture: str = "parallel",
+                 warps: Sequence[Pow2Warp] | None = None):
+        from pwas_hdl.hdl.api import _make_core
+
         self._MustUse__silence = True
         nz = len(feedback)
         if len(io_dims) + nz * mz != params.n or nz != params.nz or mz < 1:
@@ -93,8 +127,12 @@ class PWASRecurrentTop(wiring.Component):
         for s, lag in io_dims:
             if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
                 raise InputError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
-        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True
+        if warps is not None:  # non-uniform partition: warp + register in front of the core (pwas_hdl.hdl.warp)
+            from pwas_hdl.hdl.warp import attach_warp
+
+            self._warp_in_width = attach_warp(self.core, warps)
         self.params = params
         self.signals = [(str(nm), int(k)) for nm, k in signals]
         self.dims = [(int(s), int(lag)) for s, lag in io_dims]
@@ -106,8 +144,9 @@ class PWASRecurrentTop(wiring.Component):
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = max([k for _, k in self.signals] + [1]) - 1
+        self.serial = getattr(self.core, "architecture", "parallel") == "serial"
         super().__init__({
-            "in": In(stream.Signature(unsigned(len(self.signals) * params.in_width))),
+            "in": In(stream.Signature(unsigned(len(self.signals) * self.in_width))),
             "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
             "warm": Out(1),
         })
@@ -115,16 +154,24 @@ class PWASRecurrentTop(wiring.Component):
 
     @property
     def input_fields(self) -> list[dict]:
-        """Input payload fields, one signed ``B_in``-bit code per measured signal (:func:`sample_fields`)."""
-        return sample_fields([nm for nm, _ in self.signals], self.params.in_width)
+        """Input payload fields, one signed ``in_width``-bit code per measured signal (:func:`sample_fields`)."""
+        return sample_fields([nm for nm, _ in self.signals], self.in_width)
 
     @property
     def extra_info(self) -> dict:
         """Manifest entries of the top: ``lags`` (with the fed-back ``<target>_hat`` dimensions),
-        ``warmup``, ``recurrence`` (Mz, II in cycles, feedback requantisation and initial codes) and
-        ``flow_control`` (replacing :func:`~pwas_hdl.hdl.api.design_info`'s generic rules)."""
+        ``warmup``, ``recurrence`` (Mz, II in cycles, feedback requantisation and initial codes),
+        ``flow_control`` (replacing :func:`~pwas_hdl.hdl.api.design_info`'s generic rules, the serial
+        core's throttle included) and, if warped, ``warp``."""
         tn = getattr(self.core, "target_names", [f"z{i}" for i in range(self.params.nz)])
+        ready = ("~busy | (out.valid & out.ready): low from a transfer that reaches the core until its output is "
+                 "transferred (1 during the warm-up)")
+        if self.serial:
+            ready = (f"(~busy | (out.valid & out.ready)) & advance: {ready}; advance is the serial core's throttle "
+                     f"(~out.valid | out.ready) & (gap == 0), always 1 then (its {self.params.n + 1} cycles per sample are "
+                     f"fewer than the latency)")
         return {
+            **({"warp": self.warp_entry} if self.warp_entry is not None else {}),
             "lags": {"signals": [{"name": nm, "lags": k} for nm, k in self.signals],
                      "regressor": [{"signal": self.signals[s][0], "lag": lag} for s, lag in self.dims]
                      + [{"signal": f"{tn[c]}_hat", "lag": lag} for lag in range(self.mz, 0, -1) for c in range(self.params.nz)]},
@@ -137,8 +184,7 @@ class PWASRecurrentTop(wiring.Component):
                                    "output is transferred; the requantised output bypasses into the next regressor"},
             # replaces design_info's generic entry (whose in.ready = advance holds for the feed-forward designs only)
             "flow_control": {
-                "in.ready": "~busy | (out.valid & out.ready): low from a transfer that reaches the core until its output is "
-                            "transferred (1 during the warm-up)",
+                "in.ready": ready,
                 "ii": f"{self.ii} cycles between accepted samples when out.ready stays high (= latency)",
                 "latency": f"the output of a transfer in cycle t is valid in cycle t + {self.latency} when out.ready stays high",
                 "reset": "synchronous: clears the pipeline and the warm-up, restores the initial state codes",
@@ -169,7 +215,7 @@ class PWASRecurrentTop(wiring.Component):
         ``q - qmin = (P + c1 - qmin 2**S) >> S`` lies in ``[0, 2**B_in)``: it is computed modulo
         ``2**(B_in + S)`` on the low bits of ``P``. Returns the input code (two's complement bits).
         """
-        b, ow = self.params.in_width, len(o)
+        b, ow = self.in_width, len(o)
         k, sh = fb.mul, fb.shift
         pw = ow + k.bit_length()
         if pw < b + sh:
@@ -223,14 +269,17 @@ class PWASRecurrentTop(wiring.Component):
         """
         m = Module()
         p = self.params
-        b = p.in_width
+        b = self.in_width
         inp = getattr(self, "in")
         cur = [inp.payload[i * b: (i + 1) * b] for i in range(len(self.signals))]
-        advance = Signal(name="advance")  # driven by the core: ~out.valid | out.ready
+        advance = Signal(name="advance")  # driven by the core: ~out.valid | out.ready (serial: & its throttle)
         busy = Signal(name="busy")
         out_fire = Signal(name="out_fire")
         m.d.comb += out_fire.eq(self.out.valid & self.out.ready)
-        m.d.comb += inp.ready.eq(~busy | out_fire)
+        if self.serial:  # the serial core's throttle (gap == 0): always 1 here, as its n + 1 cycles < the latency
+            m.d.comb += inp.ready.eq((~busy | out_fire) & advance)
+        else:
+            m.d.comb += inp.ready.eq(~busy | out_fire)
         transfer = inp.valid & inp.ready
         if self.warmup:
             fill = [Signal(name=f"warmup{i + 1}") for i in range(self.warmup - 1)] + [self.warm]
@@ -271,15 +320,18 @@ class PWASRecurrentTop(wiring.Component):
 
 
 def build_recurrent_sensor(rmodel: RecurrentFixedPointModel, *, memory: str = "banked",
-                           pipeline: Pipeline | str | None = None, name: str = "pwas_recurrent_sensor") -> PWASRecurrentTop:
+                           pipeline: Pipeline | str | None = None, name: str = "pwas_recurrent_sensor",
+                           architecture: str = "parallel") -> PWASRecurrentTop:
     """The recurrent sensor top of a :class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`.
 
     Parameters
     ----------
     rmodel : RecurrentFixedPointModel
-        ``.fxm`` (the core's ``FixedPointModel``), ``.lags`` (with ``Mz``), ``.signals`` (measured
-        signal names, payload order), ``.feedback``, ``.initial_codes``.
-    memory, pipeline
+        ``.fxm`` (the core's ``FixedPointModel``, or a
+        :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel`: the warp goes in front of the
+        core), ``.lags`` (with ``Mz``), ``.signals`` (measured signal names, payload order),
+        ``.feedback``, ``.initial_codes``.
+    memory, pipeline, architecture
         As :class:`PWASRecurrentTop`.
     name : str
         Verilog module name.
@@ -287,7 +339,8 @@ def build_recurrent_sensor(rmodel: RecurrentFixedPointModel, *, memory: str = "b
     Returns
     -------
     PWASRecurrentTop
-        ``.latency`` (cycles), ``.ii`` (= latency), ``.warmup`` (samples), ``.signals``, ``.core``.
+        ``.latency`` (cycles), ``.ii`` (= latency), ``.warmup`` (samples), ``.signals``, ``.core``;
+        a warped one has ``.warp_entry`` (the manifest's ``warp``, :func:`~pwas_hdl.hdl.warp.warp_hw_info`).
 
     Raises
     ------
@@ -298,7 +351,8 @@ def build_recurrent_sensor(rmodel: RecurrentFixedPointModel, *, memory: str = "b
 
     name = _check_name(name)
     fxm, lags = rmodel.fxm, rmodel.lags
-    params = CoreParams.from_model(fxm)
+    warps = getattr(fxm, "warps", None)  # a WarpedFixedPointModel: its uniform core's parameters, the warps in front
+    params = CoreParams.from_model(fxm.core if warps is not None else fxm)
     sod = lags.signal_of_dimension()
     sig_index = {s: i for i, s in enumerate(rmodel.signals)}
     counts = [0] * len(rmodel.signals)
@@ -311,9 +365,13 @@ def build_recurrent_sensor(rmodel: RecurrentFixedPointModel, *, memory: str = "b
         counts[s] = max(counts[s], lag + 1)
     signals = list(zip(rmodel.signals, counts))
     top = PWASRecurrentTop(params, signals, io_dims, lags.mz, rmodel.feedback, rmodel.initial_codes, memory=memory,
-                           pipeline=pipeline)
+                           pipeline=pipeline, architecture=architecture, warps=warps)
     top.module_name = name
     top._MustUse__silence = True
+    if warps is not None:
+        from pwas_hdl.hdl.warp import warp_hw_info
+
+        top.warp_entry = warp_hw_info(fxm)
     top.core.input_names = list(fxm.regressor_names)
     top.core.target_names = list(fxm.target_names)
     return top

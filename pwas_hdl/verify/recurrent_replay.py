@@ -89,13 +89,17 @@ class RecurrentDesign:
 
 
 def build_recurrent_design(sensor: PWASVirtualSensor, *, input_bits: int = 16, pipeline: Pipeline | str | None = None,
-                           name: str = "pwas_recurrent_sensor", **formats: Any) -> RecurrentDesign:
+                           name: str = "pwas_recurrent_sensor", architecture: str = "parallel",
+                           **formats: Any) -> RecurrentDesign:
     """Bit-true model, RTL top and Verilog of a recurrent sensor (``sensor.lags_.mz >= 1``).
 
     Parameters
     ----------
     sensor : PWASVirtualSensor
-        Recurrent, initial-state rule "value" (the reset values of the feedback registers).
+        Recurrent, initial-state rule "value" (the reset values of the feedback registers). Fitted
+        with power-of-two ``breakpoints`` (a non-uniform partition), its bit-true model is the
+        :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel` and the warp goes in front of the
+        core (as ``generate`` builds it).
     input_bits : int
         ``B_in`` in bits of every regressor dimension (default 16: the fed-back state is re-quantised
         every step, see :mod:`pwas_hdl.fixedpoint.recurrence`).
@@ -103,6 +107,8 @@ def build_recurrent_design(sensor: PWASVirtualSensor, *, input_bits: int = 16, p
         Pipeline registers of the core, or a preset name (as :func:`pwas_hdl.hdl.api.build_sensor`).
     name : str
         Verilog module name.
+    architecture : {"parallel", "serial"}
+        The core inside the top (:class:`~pwas_hdl.hdl.recurrent_top.PWASRecurrentTop`).
     **formats
         More :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` options.
 
@@ -123,9 +129,13 @@ def build_recurrent_design(sensor: PWASVirtualSensor, *, input_bits: int = 16, p
     from pwas_hdl.hdl.recurrent_top import build_recurrent_sensor
     from pwas_hdl.hdl.sensor_top import sample_fields
 
-    fxm = FixedPointModel.from_sensor(sensor, input_bits=input_bits, **formats)
+    from pwas_hdl.design.generate import _is_warped
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+    model_class = WarpedFixedPointModel if _is_warped(sensor) else FixedPointModel  # the one generate builds
+    fxm = model_class.from_sensor(sensor, input_bits=input_bits, **formats)
     rm = recurrent_model(sensor, fxm)  # the recurrent hardware's conditions: Mz >= 1, constant initial states, one format per signal
-    top = build_recurrent_sensor(rm, pipeline=pipeline, name=name)
+    top = build_recurrent_sensor(rm, pipeline=pipeline, name=name, architecture=architecture)
     verilog = emit_verilog(top, name)
     b, ow = fxm.input_bits, fxm.output_format.bits
     in_fields = sample_fields(rm.signals, b)
