@@ -177,11 +177,12 @@ def test_simulate_warped_recurrent_design(flow, tmp_path, simulator, sim_cache):
 
 
 @pytest.mark.rtl
+@pytest.mark.parametrize("architecture", ["parallel", "serial"])
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_warped_recurrent_replay_stalls_and_reset_bit_exact(flow, tmp_path, simulator, sim_cache):
+def test_warped_recurrent_replay_stalls_and_reset_bit_exact(flow, tmp_path, simulator, architecture, sim_cache):
     from pwas_hdl.verify.recurrent_replay import replay, standard_recurrent_runs
 
-    d = _design(str(flow / "m.json"))
+    d = _design(str(flow / "m.json"), architecture)
     u, y, _z = _system(np.random.default_rng(3), 400)
     codes = d.rmodel.quantize_signals(u[:, None], y[:, None])
     r = replay(d, codes, simulator, runs=standard_recurrent_runs(codes.shape[0], seed=2), cache_dir=sim_cache, work_dir=tmp_path)
@@ -189,6 +190,33 @@ def test_warped_recurrent_replay_stalls_and_reset_bit_exact(flow, tmp_path, simu
     full = r["runs"][0]["segments"][0]
     assert full["outputs"] == codes.shape[0] and full["latencies"] == [d.latency] and full["spacings"] == [d.ii]
     assert r["runs"][1]["segments"][0]["outputs"] < codes.shape[0]  # the stall run: a reset mid-run
+
+
+@pytest.mark.rtl
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+def test_warped_recurrent_top_on_the_serial_core(flow, tmp_path, simulator, sim_cache):
+    """generate --architecture serial of the warped recurrent model: the warp in front of the serial
+    core, latency = II = the serial core's + 1; lint-clean, simulate bit-exact."""
+    from pwas_hdl.flow.toolchain import lint_verilog, which
+    from pwas_hdl.hdl import Pipeline
+    from pwas_hdl.hdl.serial_core import serial_latency
+
+    hw = tmp_path / "hw"
+    assert main(["generate", str(flow / "m.json"), "--design", "sensor", "--architecture", "serial", "--input-bits", "16",
+                 "-o", str(hw)]) == 0
+    man = load_manifest(hw)
+    assert man["architecture"]["kind"] == "serial" and "warp" in man and man["design"] == "recurrent"
+    assert man["latency_cycles"] == man["ii"] == serial_latency(Pipeline.cast(None), 3) + 1
+    assert "one sample in flight through the warp and the serial core" in (hw / f"{TOP}.v").read_text()
+    if simulator == "verilator" and which("verilator") is not None:
+        r = lint_verilog(hw / f"{TOP}.v", TOP)
+        assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[-2000:]
+    out = tmp_path / "hw.csv"
+    assert main(["simulate", str(hw), str(flow / "run.csv"), "-o", str(out), "--simulator", simulator,
+                 "--build-dir", str(sim_cache)]) == 0
+    s = json.loads(out.with_suffix(".json").read_text())
+    assert s["mismatches"] == 0 and s["checks"]["passed"] and s["samples"] == 300
+    assert s["latency_cycles"]["measured_max"] == man["latency_cycles"] and s["ii"]["measured"] == man["ii"]
 
 
 @pytest.mark.rtl

@@ -112,6 +112,8 @@ def _latency_with(model, design, pipeline, architecture="parallel"):
     ("warped_bank", "sensor", 3, "parallel"),  # the bank's 2 feature stages + the warp register
     ("recurrent", "sensor", 0, "parallel"),  # the recurrent top: the core's latency (II = latency)
     ("recurrent_warped", "sensor", 1, "parallel"),  # the recurrent top with the warp register in front of its core
+    ("recurrent", "sensor", None, "serial"),  # the recurrent top around the serial core (II = latency)
+    ("recurrent_warped", "sensor", None, "serial"),
     ("plain", "core", None, "serial"),  # the serial core takes 6 of the registers (n + 1 MAC cycles)
     ("plain", "sensor", None, "serial"),
 ])
@@ -140,6 +142,8 @@ def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture
         assert len(cands) <= 7 and gd.manifest["ii"] > 1
         if kind == "plain":
             assert lat == sorted({serial_latency(p, model.grid_.n) for p in tc.pipeline_candidates(model.grid_.n)})
+    if kind.startswith("recurrent"):  # one sample in flight, whatever the core
+        assert gd.manifest["ii"] == gd.manifest["latency_cycles"]
     if fixed is not None:  # the core's latency + the fixed register(s), for every candidate
         n = max(len(s) for s in model.grid_.subsets) if kind == "additive" else model.grid_.n
         assert all(c["latency_cycles"] == Pipeline.cast(c["pipeline"]).latency(n) + fixed for c in cands)

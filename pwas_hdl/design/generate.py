@@ -441,7 +441,8 @@ def build_design(
     architecture : {"parallel", "serial"}
         ``parallel`` (default): ``n + 1`` memories and multipliers per target, II = 1.
         ``serial``: one multiplier per target, one memory of N words, ``n + 1`` cycles per
-        sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`).
+        sample (II = n + 1), bit-exact with the parallel design (:mod:`pwas_hdl.hdl.serial_core`);
+        inside the recurrent top II = latency (one sample in flight).
         Not with ``memory`` (refused: the serial memory is the only one). With ``target_mhz`` the
         search runs over the registers the serial core takes (``split``, ``rank``, ``offset``,
         ``addr``, ``mem_out``, ``product``).
@@ -537,8 +538,6 @@ def build_design(
             raise InputError("hardware for a recurrent additive sensor is not available")
         if architecture != "parallel":
             raise InputError("the additive sensor's hardware has parallel part cores only; use --architecture parallel")
-    if design == "recurrent" and architecture != "parallel":
-        raise InputError("the recurrent top feeds back a parallel core only; use --architecture parallel")
 
     def component(pipe: Pipeline | None) -> tuple[Any, Any]:
         """The design's Amaranth component with pipeline ``pipe`` (and a recurrent top's recurrence)."""

@@ -8,7 +8,9 @@ whose bit-true specification is
 :class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`; the manifest's ``design`` is
 ``"recurrent"`` and its ``recurrence`` block (built by :mod:`pwas_hdl.design.manifest`) states
 which output feeds which regressors, the requantisation rule (``K``/``C``/``S`` = ``mul``/
-``add``/``shift``), the reset state codes, II = latency and the flow control.
+``add``/``shift``), the reset state codes, II = latency and the flow control. The core inside is
+the parallel or the serial one (``--architecture``), with the warp in front of it for a model
+fitted with power-of-two ``breakpoints``.
 
 This module holds what only the recurrent design needs: the component, the bit-true recurrence
 of a folder, and the lines it adds to the Verilog header and ``report.md``.

@@ -41,7 +41,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import _not, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
@@ -145,6 +145,9 @@ class PWASRecurrentTop(wiring.Component):
         self.pipeline = self.core.pipeline
         self.warmup = max([k for _, k in self.signals] + [1]) - 1
         self.serial = getattr(self.core, "architecture", "parallel") == "serial"
+        if self.serial and self.latency <= self.core.ii:  # the throttle must be free again when the output is taken
+            raise InternalError(f"serial core latency {self.latency} <= its II {self.core.ii}: one sample in flight would "
+                                "not cover the throttle")
         super().__init__({
             "in": In(stream.Signature(unsigned(len(self.signals) * self.in_width))),
             "out": Out(stream.Signature(unsigned(core_output_layout(params).size))),
@@ -164,12 +167,12 @@ class PWASRecurrentTop(wiring.Component):
         ``flow_control`` (replacing :func:`~pwas_hdl.hdl.api.design_info`'s generic rules, the serial
         core's throttle included) and, if warped, ``warp``."""
         tn = getattr(self.core, "target_names", [f"z{i}" for i in range(self.params.nz)])
-        ready = ("~busy | (out.valid & out.ready): low from a transfer that reaches the core until its output is "
-                 "transferred (1 during the warm-up)")
+        when = "low from a transfer that reaches the core until its output is transferred (1 during the warm-up)"
+        ready = f"~busy | (out.valid & out.ready): {when}"
         if self.serial:
-            ready = (f"(~busy | (out.valid & out.ready)) & advance: {ready}; advance is the serial core's throttle "
-                     f"(~out.valid | out.ready) & (gap == 0), always 1 then (its {self.params.n + 1} cycles per sample are "
-                     f"fewer than the latency)")
+            ready = (f"(~busy | (out.valid & out.ready)) & advance: {when}; advance is the serial core's throttle "
+                     f"(~out.valid | out.ready) & (gap == 0), 1 whenever the first term is (its {self.params.n + 1} cycles "
+                     f"per sample are fewer than the latency)")
         return {
             **({"warp": self.warp_entry} if self.warp_entry is not None else {}),
             "lags": {"signals": [{"name": nm, "lags": k} for nm, k in self.signals],
