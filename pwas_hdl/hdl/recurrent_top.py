@@ -23,7 +23,7 @@ register (:func:`pwas_hdl.hdl.warp.attach_warp`) are the core's first stage: one
 Serial core (``architecture="serial"``, :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore`): the
 same stream interface and bit-true model; its input throttle (one sample every ``n + 1`` cycles)
 never bites here, since one sample in flight already spaces the samples by the core's latency
-(``> n + 1``); ``in.ready`` still includes it (``& advance``).
+(``>= n + 1``; checked when the top is built); ``in.ready`` still includes it (``& advance``).
 
 Flow control: one sample in flight. After a transfer that reaches the core, ``in.ready`` is low
 until its output is transferred; in that cycle ``in.ready`` is high again and the requantised
@@ -145,8 +145,9 @@ class PWASRecurrentTop(wiring.Component):
         self.pipeline = self.core.pipeline
         self.warmup = max([k for _, k in self.signals] + [1]) - 1
         self.serial = getattr(self.core, "architecture", "parallel") == "serial"
-        if self.serial and self.latency <= self.core.ii:  # the throttle must be free again when the output is taken
-            raise InternalError(f"serial core latency {self.latency} <= its II {self.core.ii}: one sample in flight would "
+        # the serial throttle is free (gap == 0) from n + 1 cycles after a transfer; the next one comes >= latency after it
+        if self.serial and self.latency < self.core.ii:
+            raise InternalError(f"serial core latency {self.latency} < its II {self.core.ii}: one sample in flight would "
                                 "not cover the throttle")
         super().__init__({
             "in": In(stream.Signature(unsigned(len(self.signals) * self.in_width))),
@@ -172,7 +173,7 @@ class PWASRecurrentTop(wiring.Component):
         if self.serial:
             ready = (f"(~busy | (out.valid & out.ready)) & advance: {when}; advance is the serial core's throttle "
                      f"(~out.valid | out.ready) & (gap == 0), 1 whenever the first term is (its {self.params.n + 1} cycles "
-                     f"per sample are fewer than the latency)")
+                     f"per sample are no more than the latency)")
         return {
             **({"warp": self.warp_entry} if self.warp_entry is not None else {}),
             "lags": {"signals": [{"name": nm, "lags": k} for nm, k in self.signals],
