@@ -8,7 +8,9 @@ the core's + 1; the input payload holds signed ``B_in``-bit codes ``q`` (not the
 ``u``). The same stage serves the parallel and the serial core (``architecture="serial"``: the
 warp register is one more front-end register of :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore`)
 and the virtual-sensor top (:class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop` with ``warps``: lag
-bank of ``B_in``-bit codes -> warp -> core). ``pwas-hdl generate`` builds all of them for a model
+bank of ``B_in``-bit codes -> warp -> core), also the recurrent top
+(:class:`~pwas_hdl.hdl.recurrent_top.PWASRecurrentTop` with ``warps``: its feedback registers hold
+``B_in``-bit codes too). ``pwas-hdl generate`` builds all of them for a model
 fitted with ``--breakpoints quantile-pow2`` (:func:`build_warped_design`); for a classifier model
 (``fit --classify``) the builders' ``classifier`` adds the argmax stage of
 :mod:`pwas_hdl.hdl.classifier_top` after the core (parallel core only, as for a uniform grid):
