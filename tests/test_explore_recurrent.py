@@ -100,3 +100,23 @@ def test_cli(rec, tmp_path):
                  "--output-frac", "7,9", "-o", str(tmp_path / "ex")]) == 0
     r = json.loads((tmp_path / "ex" / "explore.json").read_text())
     assert r["model"]["recurrence"]["Mz"] == 1 and r["pareto"] and (tmp_path / "ex" / "explore.png").exists()
+
+
+def test_a_warped_recurrent_sensor_is_swept_with_its_warp(rec):
+    """fit --mz --breakpoints quantile-pow2: each point's recurrence goes through the warp (the
+    fed-back estimate requantised to the warp's input codes), as the warped recurrent top does."""
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+    _, y, z = rec
+    yf, zf_ = _plant(900, 0)
+    s = PWASVirtualSensor(my=1, mz=1, partitions=4, breakpoints="quantile-pow2", sigma=1e-3, output_names=["y"],
+                          target_names=["z"]).fit(None, yf, zf_)
+    r = explore(s, (None, y, z), input_bits=[8, 12], weight_frac=[8], output_frac=[9])
+    assert r["model"]["kind"] == "warped" and r["model"]["recurrence"]["Mz"] == 1
+    fxm = fixed_point_model(s, input_bits=12, weight_frac=8, output_frac=9)
+    assert isinstance(fxm, WarpedFixedPointModel)
+    rm = recurrent_model(s, fxm)
+    zb = fxm.to_physical_output(rm.run(rm.quantize_signals(None, y[:, None]))["out"])
+    pt = next(p for p in r["points"] if (p["input_bits"], p["weight_frac"], p["output_frac"]) == (12, 8, 9))
+    assert np.allclose(pt["rmsee"], _rmse(zb, z[max(s.lags_.memory, 1) - 1:, None]), rtol=1e-12, atol=0)
+    assert "core_input_bits" in pt and all(p["bound_holds"] for p in r["points"])

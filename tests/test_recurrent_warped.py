@@ -276,23 +276,3 @@ def test_report_and_export_testbench_of_the_warped_recurrent_top(flow, tmp_path,
 
     r = subprocess.run(["bash", str(tb / "run_icarus.sh")], capture_output=True, text=True, cwd=tb, env=tool_env())
     assert r.returncode == 0 and "PASS" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
-
-
-def test_the_refusal_that_remains_on_a_non_uniform_partition(tmp_path, capsys):
-    """An observer-bank sensor on a non-uniform partition is still refused (the bank's features have
-    no warp stage): one error line, exit 2, nothing written. (A recurrent classifier is refused by
-    fit already: --classify needs no past estimates.)"""
-    from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
-    from pwas_hdl.systems.pv_benchmark import make_pv_dataset
-
-    tr, _, _ = make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
-    fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=2)
-    s = PWASVirtualSensor(mu=0, my=0, partitions=4, gamma=1.0, front_end=fe, sigma=1e-3,
-                          breakpoints="quantile-pow2").fit(tr.u, tr.y, tr.z)
-    s.save(tmp_path / "bank.json")
-    capsys.readouterr()
-    out = tmp_path / "hw"
-    assert main(["generate", str(tmp_path / "bank.json"), "--design", "sensor", "-o", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert err.strip().startswith("error:") and err.count("error:") == 1 and "Traceback" not in err
-    assert "observer-bank sensor is not available with a non-uniform partition" in err and not out.exists()

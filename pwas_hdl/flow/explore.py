@@ -226,12 +226,9 @@ def _check_supported(sensor: PWASVirtualSensor) -> None:
     partition). Plain, additive (fit --additive), non-uniform power-of-two (fit --breakpoints
     quantile-pow2) and recurrent (fit --mz; their accuracy is the closed loop's) sensors are swept;
     other breakpoints are refused by the bit-true model itself (the message names quantile-pow2)."""
-    recurrent = sensor.lags_ is not None and sensor.lags_.recurrent
     kinds = (
         (getattr(sensor, "front_end_", None) is not None, "observer-bank sensors (fit --front-end observer-bank)"),
         (getattr(sensor, "classifier_", None) is not None, "classifiers (fit --classify)"),
-        (recurrent and getattr(sensor.grid_, "breakpoints", None) is not None,
-         "recurrent sensors on a non-uniform partition (fit --mz with --breakpoints)"),
     )
     for bad, what in kinds:
         if bad:
