@@ -53,7 +53,7 @@ from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
 from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
-__all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency"]
+__all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency", "serial_throttle"]
 
 #: The values of ``generate --architecture``.
 ARCHITECTURES = ("parallel", "serial")
@@ -160,6 +160,10 @@ class SerialPWASCore(PWASCore):
     memory : str
         Must be ``"single"`` (the one memory of ``N`` words); accepted for the signature of
         :class:`~pwas_hdl.hdl.core.PWASCore`.
+    round_output : bool
+        ``False``: no rounding or saturation; the output register holds the exact accumulator,
+        ``acc_width + 1`` signed bits per target (``out_field_width``), as the parallel core's
+        (the parts of a serial additive design, :mod:`pwas_hdl.hdl.additive_top`).
 
     Ports: as :class:`~pwas_hdl.hdl.core.PWASCore` (``in.ready`` is low while a sample is in the
     multiply-accumulate loop).
@@ -183,11 +187,12 @@ class SerialPWASCore(PWASCore):
     #: the vertex shift register takes mu (PWASCore._vertex_fields)
     _replicated_mu_late = False
 
-    def __init__(self, params: CoreParams, *, pipeline: Pipeline | str | None = None, memory: str = "single"):
+    def __init__(self, params: CoreParams, *, pipeline: Pipeline | str | None = None, memory: str = "single",
+                 round_output: bool = True):
         self._MustUse__silence = True
         if memory != "single":
             raise InputError(f"the serial core has one weight memory (memory='single'), got {memory!r}")
-        super().__init__(params, memory="replicated", pipeline=pipeline)
+        super().__init__(params, memory="replicated", pipeline=pipeline, round_output=round_output)
         self._MustUse__silence = True
         # the front end's addresses are the replicated layout's (linear vertex index)
         self.memory_plan = SingleMemoryPlan.build(params)
@@ -226,7 +231,8 @@ class SerialPWASCore(PWASCore):
         """Add the serial core's logic to ``m`` (arguments as :meth:`PWASCore.build_into`).
 
         ``advance`` is driven with ``(~out.valid | out.ready) & (gap == 0)``: the input is taken
-        when ``valid & advance``, at most once every ``n + 1`` advancing cycles.
+        when ``valid & advance``, at most once every ``n + 1`` advancing cycles
+        (:func:`serial_throttle`, then :meth:`build_datapath`).
 
         Parameters
         ----------
@@ -239,26 +245,41 @@ class SerialPWASCore(PWASCore):
         out : stream interface
             Output stream (``ready`` read, the rest driven).
         """
+        adv = Signal(name="mac_advance")
+        m.d.comb += adv.eq(~out.valid | out.ready)
+        take = serial_throttle(m, self.params.n, adv, valid, advance)
+        self.build_datapath(m, payload, take, adv, out)
+
+    def build_datapath(self, m: Module, payload: Value, take: Value, adv: Value, out: Any) -> None:
+        """Add everything after the input throttle: front end, vertex shift register, memory,
+        multiply-accumulate and output register.
+
+        The caller owns the throttle: ``take`` must be high at most once every ``n + 1`` cycles in
+        which ``adv`` is high (the load never overwrites a vertex still to be read). A serial
+        additive design (:mod:`pwas_hdl.hdl.additive_top`) drives several cores with one throttle
+        and one ``adv``.
+
+        Parameters
+        ----------
+        m : Module
+            Module the logic is added to.
+        payload : Value
+            Input sample (``n*B_in`` bits), read when ``take`` is high.
+        take : Value
+            1 bit: a sample enters in this cycle (when ``adv`` is high too).
+        adv : Value
+            1 bit: every register and the memory read port advance (``~out.valid | out.ready`` of
+            the core's sink).
+        out : stream interface
+            ``payload`` (``nz * out_field_width + 1`` bits) and ``valid`` are driven here, as
+            registers enabled by ``adv``; ``ready`` is not read (``adv`` carries it).
+        """
         p = self.params
         n, nb, nz = p.n, p.n + 1, p.nz
         dw, bw, accw = p.frac + 1, p.weight_width, p.acc_width
         plan = self.memory_plan
         aw = plan.addr_width
         pl = self.pipeline
-
-        adv = Signal(name="mac_advance")
-        m.d.comb += adv.eq(~out.valid | out.ready)
-        gap = Signal(unsigned(bits_for(n)), name="gap")
-        free = Signal(name="gap_free")
-        m.d.comb += free.eq(~gap.any())
-        m.d.comb += advance.eq(adv & free)
-        take = valid & free
-        gap_dec = add_const_wrap(m, gap, -1, "gap_dec")
-        with m.If(adv):
-            with m.If(take):
-                m.d.sync += gap.eq(n)
-            with m.Elif(~free):
-                m.d.sync += gap.eq(gap_dec)
 
         # ---------------------------------------------------------- front end (the parallel core's)
         pipe = _Pipe(m, adv)
@@ -339,8 +360,8 @@ class SerialPWASCore(PWASCore):
         a_oor = reg("acc_oor", m_oor, 1)
 
         # ---------------------------------------------------------- round, saturate, output register
-        zs = self._round(m, accs)
-        outw = p.out_width
+        zs = self._round(m, accs) if self.round_output else accs  # unrounded: the exact sums (additive parts)
+        outw = self.out_field_width
         for z, o in enumerate(zs):
             regs.append((out.payload[z * outw : (z + 1) * outw], o))
         regs.append((out.payload[-1], a_oor))
@@ -351,20 +372,69 @@ class SerialPWASCore(PWASCore):
         assert got == self.latency, (got, self.latency)
 
 
+def serial_throttle(m: Module, n: int, adv: Value, valid: Value, advance: Signal) -> Value:
+    """The serial core's input throttle: at most one transfer every ``n + 1`` advancing cycles.
+
+    ``gap`` (``n`` .. 0) counts the advancing cycles since the last transfer; ``advance = adv &
+    (gap == 0)`` is the input's ready.
+
+    Parameters
+    ----------
+    m : Module
+        Module the counter is added to (signals ``gap``, ``gap_free``, ``gap_dec``).
+    n : int
+        Cycles to wait after a transfer: the II is ``n + 1`` (``n``: the regressor dimension of the
+        core, or the largest part's of a serial additive design).
+    adv : Value
+        1 bit: the design advances in this cycle.
+    valid : Value
+        1 bit: the input offers a sample.
+    advance : Signal
+        1 bit, driven here: the input's ready (a transfer when ``valid & advance``).
+
+    Returns
+    -------
+    Value
+        ``take = valid & (gap == 0)``: a sample enters (in the cycles where ``adv`` is high).
+    """
+    gap = Signal(unsigned(bits_for(n)), name="gap")
+    free = Signal(name="gap_free")
+    m.d.comb += free.eq(~gap.any())
+    m.d.comb += advance.eq(adv & free)
+    take = valid & free
+    gap_dec = add_const_wrap(m, gap, -1, "gap_dec")
+    with m.If(adv):
+        with m.If(take):
+            m.d.sync += gap.eq(n)
+        with m.Elif(~free):
+            m.d.sync += gap.eq(gap_dec)
+    return take
+
+
 def architecture_info(core: PWASCore) -> dict:
     """The manifest's ``architecture`` entry of a core (parallel or serial).
 
     Parameters
     ----------
-    core : PWASCore or SerialPWASCore
-        Serial when its ``architecture`` attribute is ``"serial"``.
+    core : PWASCore or SerialPWASCore or AdditiveCore
+        Serial when its ``architecture`` attribute is ``"serial"``; an additive core (one with
+        ``parts``, :mod:`pwas_hdl.hdl.additive_top`) is described by its parts' entries.
 
     Returns
     -------
     dict
         ``kind``, ``multipliers``, ``multipliers_per_target``, ``cycles_per_sample``, ``ii``
-        (clock cycles) and ``meaning``.
+        (clock cycles) and ``meaning``; an additive core's multipliers are its parts' (summed), its
+        cycles per sample and II the largest part's.
     """
+    parts = getattr(core, "parts", None)
+    if parts:  # an additive design: its part cores, summed before one rounding
+        infos = [architecture_info(c) for c in parts]
+        return {"kind": infos[0]["kind"], "multipliers": sum(a["multipliers"] for a in infos),
+                "multipliers_per_target": sum(a["multipliers_per_target"] for a in infos),
+                "cycles_per_sample": max(a["cycles_per_sample"] for a in infos), "ii": max(a["ii"] for a in infos),
+                "meaning": f"{len(infos)} additive part cores, each: {infos[0]['meaning']}; the parts take each sample "
+                "together (n = the largest part's)"}
     p = core.params
     if getattr(core, "architecture", "parallel") == "serial":
         return {"kind": "serial", "multipliers": p.nz, "multipliers_per_target": 1, "cycles_per_sample": p.n + 1,
