@@ -386,8 +386,8 @@ def build_design(
         (:mod:`pwas_hdl.design.recurrent`: feedback of the estimates, II = latency) and the
         manifest's design is "recurrent" (also accepted here).
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
-        :mod:`pwas_hdl.hdl.additive_top` (one core per part, the exact sum, one rounding; a
-        classifier's argmax stage after the sum); not with ``architecture="serial"``.
+        :mod:`pwas_hdl.hdl.additive_top` (one core per part, parallel or serial, the exact sum, one
+        rounding; a classifier's argmax stage after the sum, parallel only).
         A model fitted with power-of-two ``breakpoints`` gets the warped designs of
         :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
         too (warp -> core -> argmax stage; parallel only, as every classifier), an observer-bank
@@ -536,17 +536,17 @@ def build_design(
     if additive:
         if design == "recurrent":
             raise InputError("hardware for a recurrent additive sensor is not available")
-        if architecture != "parallel":
-            raise InputError("the additive sensor's hardware has parallel part cores only; use --architecture parallel")
 
     def component(pipe: Pipeline | None) -> tuple[Any, Any]:
         """The design's Amaranth component with pipeline ``pipe`` (and a recurrent top's recurrence)."""
         recurrence = None
-        if additive:  # the parts' cores in parallel, summed before one rounding (pwas_hdl.hdl.additive_top)
+        if additive:  # the parts' cores (parallel or serial), summed before one rounding (pwas_hdl.hdl.additive_top)
             from pwas_hdl.hdl.additive_top import build_additive_core, build_additive_sensor
 
-            comp = (build_additive_core(fxm, memory=memory, pipeline=pipe, name=top, classifier=classifier) if design == "core"
-                    else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top, classifier=classifier))
+            comp = (build_additive_core(fxm, memory=memory, pipeline=pipe, name=top, classifier=classifier,
+                                        architecture=architecture) if design == "core"
+                    else build_additive_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top, classifier=classifier,
+                                               architecture=architecture))
         elif design == "recurrent":
             from pwas_hdl.design.recurrent import build_recurrent_component
 
@@ -663,6 +663,7 @@ def build_design(
         "model.json": model,
         "manifest.json": manifest_text(man),
         "report.md": _report(man, sensor, fxm) + (_timing_section(timing) if timing is not None else "")
+        + (_additive_section(man) if "additive" in man else "")
         + (_classifier_section(man) if "classifier" in man else "")
         + (_recurrence_section(man) if "recurrence" in man else "")
         + (_warp_section(man) if "warp" in man else ""),
@@ -723,7 +724,9 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
         f"{man['domain']['n_vertices']} vertices; targets: {', '.join(man['lags']['targets'])}",
         *([f"additive sensor: {len(man['additive']['parts'])} parts (" + "; ".join(
             ", ".join(man['lags']['regressors'][j] for j in pt['regressors']) for pt in man['additive']['parts'])
-            + "), each a PWAS core without rounding; their sums added exactly, then rounded once"] if "additive" in man else []),
+            + "), each a " + ("serial PWAS core (one multiplier per target, n_i + 1 cycles per sample, all parts taking "
+                              "each sample together)" if man["architecture"]["kind"] == "serial" else "PWAS core")
+            + " without rounding; their sums added exactly, then rounded once"] if "additive" in man else []),
         f"latency {man['latency_cycles']} cycles (input transfer to {_port_meaning(man, '{out.valid}')}), II {man['ii']} "
         + ("(one sample per clock)" if man["ii"] == 1 else f"(one sample every {man['ii']} clocks)"),
         f"weights {fm['weight']['str']} ({man['memory']['kind']} memory, {man['memory']['memories']} x "
@@ -827,6 +830,27 @@ def _design_kind(design: str, sensor: PWASVirtualSensor) -> str:
         raise InputError("--design recurrent needs a recurrent model (fit --mz or fit-map --state), and this model has no "
                          "fed-back estimates; use --design sensor or core")
     return "recurrent" if design == "sensor" and recurrent else design
+
+
+def _additive_section(man: dict) -> str:
+    """Report section of an additive design: its parts (regressors, latency, accumulator, alignment,
+    memories) and, for the serial architecture, how the parts of different latencies are aligned."""
+    add, arch = man["additive"], man["architecture"]
+    regs = man["lags"]["regressors"]
+    rows = [[i, ", ".join(f"`{regs[j]}`" for j in pt["regressors"]), pt["latency"], pt["align_shift"],
+             f"{pt['memory']['memories']} x {pt['memory']['depth']} words ({pt['memory']['kind']})"]
+            for i, pt in enumerate(add["parts"])]
+    serial = arch["kind"] == "serial"
+    text = (f"\n## Additive parts\n\n{len(rows)} parts, each a {'serial' if serial else 'parallel'} PWAS core without "
+            f"rounding ({arch['multipliers']} multipliers in all); their accumulators, shifted left by the alignment shift, "
+            f"are added exactly in {add['sum_bits']} bits and rounded once, in one more register.")
+    if serial:
+        text += (f" The parts take each sample together, one every {man['ii']} clocks (the largest part's n + 1); a "
+                 "shorter part's sum waits in its own output register (the next sample overwrites it no earlier) until "
+                 f"the largest part's is ready: latency = the largest part's {max(pt['latency'] for pt in add['parts'])} "
+                 "cycles + 1.")
+    return text + "\n\n" + _md_table(["part", "regressors", "latency (cycles)", "alignment shift (bits)", "memories"],
+                                      rows) + "\n"
 
 
 def _warp_section(man: dict) -> str:

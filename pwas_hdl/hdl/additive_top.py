@@ -22,6 +22,25 @@ Datapath (the bit-true specification is :class:`pwas_hdl.fixedpoint.additive.Add
   + ceil(log2 k)`` bits (``|acc_i << (F - F_i)| <= 2**(F + B_w - 1)``: no sum can overflow); the
   rounding adds ``2**(sh-1)`` modulo ``2**W`` and drops ``sh`` bits, then saturates to ``B_out``.
 
+Serial architecture (``architecture="serial"``): every part is a
+:class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` with ``round_output=False`` (one multiplier per
+target, ``n_i + 1`` cycles per sample, one weight memory of ``N_i`` words), all driven by one input
+throttle (:func:`~pwas_hdl.hdl.serial_core.serial_throttle` with ``n_max``, the largest part's
+dimension: II = ``n_max + 1``) and one ``advance``; then the same exact sum and rounding.
+
+* Alignment: the parts take each sample in the same cycle, so part ``i``'s sum is ready
+  ``n_max - n_i`` cycles before the largest part's. It waits in the part's own output register, at
+  no cost: that register holds the part's accumulator, which the next sample overwrites (its first
+  vertex) no earlier than ``n_max + 1`` advancing cycles after this sample's first vertex, i.e. in
+  the cycle after the largest part's sum reaches its output register. The sum register reads every
+  part's output register when the largest part's ``valid`` is high. (Starting the shorter parts
+  later would need ``n_max - n_i`` registers of their ``n_i * B_in`` input bits; delaying their
+  results in a shift register ``n_max - n_i`` registers of ``nz * acc_bits_i + 1`` bits: both are
+  avoided.) Latency = the largest part's serial latency + 1 (the sum register).
+* The pipeline asked for is every part's own (no equalising: the serial latency depends on
+  ``n_i`` only through the ``n_i`` multiply-accumulate steps).
+* The shorter parts' ``valid`` registers are not read (the largest part's is the sum's).
+
 The Verilog (:func:`emit_additive_verilog`) is one module, the parts flattened into it (their names
 prefixed ``part<i>_``); its weight memories ``part<i>_wmem<b>`` are initialised inline or, with
 ``memory_init="readmemh"``, loaded from the files of :func:`pwas_hdl.hdl.emit.memory_hex_files` (``<prefix>_p<i>_b<b>.hex``)
@@ -41,7 +60,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.fixedpoint.reduction import tree_reduce
 from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
 from pwas_hdl.hdl.classifier_top import argmax_extent
@@ -49,6 +68,7 @@ from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.names import check_module_name
 from pwas_hdl.hdl.params import CoreParams, Pipeline, PipelineRefused
 from pwas_hdl.hdl.sensor_top import PWASSensorTop, lag_plan
+from pwas_hdl.hdl.serial_core import ARCHITECTURES, SerialPWASCore, serial_throttle
 
 if TYPE_CHECKING:
     from pwas_hdl.fit.regressors import LagStructure
@@ -165,6 +185,20 @@ class AdditiveMemoryPlan:
         """Layout name of the parts' memories (that of part 0)."""
         return self.parts[0].kind
 
+    def layout_spec(self) -> dict:
+        """The manifest's ``memory.layout_spec`` of a serial additive design (parts of
+        :class:`~pwas_hdl.hdl.serial_core.SingleMemoryPlan`).
+
+        Returns
+        -------
+        dict
+            ``kind`` (``"single"``), ``memories`` (one per part), ``depth`` (words of the largest),
+            ``address`` (a sentence).
+        """
+        spec = self.parts[0].layout_spec()
+        return {**spec, "memories": len(self.parts), "depth": int(max(p.depth for p in self.parts)),
+                "address": f"{spec['address']} of the part's own grid; one memory of N_i words per part"}
+
     def to_dict(self) -> dict:
         """JSON-ready summary over all parts.
 
@@ -201,9 +235,15 @@ class AdditiveCore(wiring.Component):
     model : AdditiveFixedPointModel
         The bit-true additive model: its parts, subsets, alignment shifts and formats.
     memory : {"banked", "replicated", "corner"}
-        Each part's weight memory (as :class:`~pwas_hdl.hdl.core.PWASCore`).
+        Each part's weight memory (as :class:`~pwas_hdl.hdl.core.PWASCore`); ignored with
+        ``architecture="serial"`` (one memory of ``N_i`` words per part).
     pipeline : Pipeline, preset name or None
-        The parts' pipeline (made equal in latency, :func:`equal_latency_pipelines`).
+        The parts' pipeline (parallel: made equal in latency, :func:`equal_latency_pipelines`;
+        serial: every part's own, :func:`~pwas_hdl.hdl.serial_core.serial_latency`).
+    architecture : {"parallel", "serial"}
+        The parts' cores: :class:`~pwas_hdl.hdl.core.PWASCore` (II = 1) or
+        :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` (one multiplier per target and part, II =
+        ``n_max + 1``; see the module notes for the alignment of the parts).
     argmax : ArgmaxStage, optional
         A classifier's stage after the sum (:func:`~pwas_hdl.hdl.api.classifier_stage`): inlined
         by :meth:`elaborate` (not by :meth:`build_into`, the sum alone); the output payload then
@@ -214,12 +254,17 @@ class AdditiveCore(wiring.Component):
 
     Attributes
     ----------
-    parts : list of PWASCore
+    parts : list of PWASCore or SerialPWASCore
         The part cores (``round_output=False``).
+    architecture : str
+        ``"parallel"`` or ``"serial"``.
+    lead : int
+        Index of the part whose ``valid`` the sum register takes (the first of largest latency).
     subsets : tuple of tuple of int
         Regressor indices of each part.
     latency, ii : int
-        Cycles: the parts' latency + 1 (the sum register); II = 1.
+        Cycles: the (largest) part latency + 1 (the sum register), plus the argmax stage's; II = 1
+        (parallel) or ``n_max + 1`` (serial).
     params : AdditiveParams
     memory_plan : AdditiveMemoryPlan
     pipeline : Pipeline
@@ -228,30 +273,38 @@ class AdditiveCore(wiring.Component):
     Raises
     ------
     InputError
-        No equal-latency pipelines exist for the parts, or the output shift ``F + Fw - Fo`` is not
-        smaller than the sum's width ``W``.
+        No equal-latency pipelines exist for the parts (parallel), an unknown ``architecture``,
+        or the output shift ``F + Fw - Fo`` is not smaller than the sum's width ``W``.
     InternalError
         An aligned part accumulator is wider than the sum.
     """
 
     def __init__(self, model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 argmax: Any = None):
+                 argmax: Any = None, architecture: str = "parallel"):
         self._MustUse__silence = True
+        if architecture not in ARCHITECTURES:
+            raise InputError(choice_text(option_text("architecture"), ARCHITECTURES, architecture))
         base = Pipeline.cast(pipeline)
         self.subsets = tuple(model.subsets)
         self.align = list(model.align)
+        self.architecture = architecture
         part_params = [CoreParams.from_model(p) for p in model.parts]
-        pipes = equal_latency_pipelines(base, [pp.n for pp in part_params])
-        self.parts = [PWASCore(pp, memory=memory, pipeline=pl, round_output=False) for pp, pl in zip(part_params, pipes)]
+        if architecture == "serial":  # every part on the serial core, one throttle (build_into)
+            self.parts = [SerialPWASCore(pp, pipeline=base, round_output=False) for pp in part_params]
+        else:
+            pipes = equal_latency_pipelines(base, [pp.n for pp in part_params])
+            self.parts = [PWASCore(pp, memory=memory, pipeline=pl, round_output=False) for pp, pl in zip(part_params, pipes)]
         for c in self.parts:
             c._MustUse__silence = True  # built into the part modules by build_into, never elaborated alone
         self.pipeline = base
-        self.memory_kind = memory
+        self.memory_kind = "single" if architecture == "serial" else memory
         self.memory_plan = AdditiveMemoryPlan(tuple(c.memory_plan for c in self.parts))
         self.argmax = argmax  # a classifier's stage after the sum (elaborate only; build_into is the sum alone)
         cycles, index_bits = argmax_extent(argmax, int(model.nz) * int(model.output_format.bits) + 1)
-        self.latency = self.parts[0].latency + 1 + cycles
-        self.ii = 1
+        part_latency = max(c.latency for c in self.parts)
+        self.lead = next(i for i, c in enumerate(self.parts) if c.latency == part_latency)
+        self.latency = part_latency + 1 + cycles
+        self.ii = max(c.ii for c in self.parts)
         self.params = AdditiveParams(
             partitions=tuple(int(v) for v in model.grid.partitions), in_width=int(model.input_bits),
             lo_code=tuple(int(v) for v in model.lo_codes), frac_bits=tuple(int(v) for v in model.frac_bits),
@@ -306,8 +359,11 @@ class AdditiveCore(wiring.Component):
         p = self.params
         b = p.in_width
         nz, big_w, outw, sh = p.nz, p.sum_width, p.out_width, p.shift
+        serial = self.architecture == "serial"
         adv = Signal(name="sum_advance")
         m.d.comb += adv.eq(~out.valid | out.ready)
+        # serial: one throttle for all parts (the largest part's II); they take each sample together
+        take = serial_throttle(m, self.ii - 1, adv, valid, advance) if serial else None
         # one net per regressor code, read by the parts that use it (a process output, so that each
         # part's ports are exactly the codes it reads; its value while valid = 0 is never used)
         xs = []
@@ -324,10 +380,14 @@ class AdditiveCore(wiring.Component):
             mi = Module()
             m.submodules[f"part{i}"] = mi
             o = _Out(f"part{i}", core.out_field_width * nz + 1, adv)
-            part_adv = advance if i == 0 else Signal(name=f"part{i}_advance")  # all equal: equal latency and inputs
             q = Cat(*[xs[j] for j in sub])
-            core.build_into(mi, q, valid, part_adv, o)
+            if serial:  # the shared throttle's take and advance (a shorter part's sum waits in its output register)
+                core.build_datapath(mi, q, take, adv, o)
+            else:
+                part_adv = advance if i == 0 else Signal(name=f"part{i}_advance")  # all equal: equal latency and inputs
+                core.build_into(mi, q, valid, part_adv, o)
             outs.append(o)
+        lead = outs[self.lead]  # its valid is the sum's (parallel: every part's valid is the same)
 
         zs = []
         for z in range(nz):
@@ -337,7 +397,7 @@ class AdditiveCore(wiring.Component):
                 acc = o.payload[z * fw : (z + 1) * fw].as_signed()
                 a = self.align[i]
                 t = Signal(signed(big_w), name=f"term{z}_{i}")
-                with m.If(outs[0].valid):  # a process output: a genuine W-bit net (see _lintsafe)
+                with m.If(lead.valid):  # a process output: a genuine W-bit net (see _lintsafe)
                     m.d.comb += t.eq(Cat(Const(0, a), acc).as_signed() if a else acc)
                 terms.append(t)
 
@@ -354,7 +414,7 @@ class AdditiveCore(wiring.Component):
             oor = oor | o.payload[-1]
         with m.If(adv):
             m.d.sync += out.payload.eq(Cat(*zs, oor))
-            m.d.sync += out.valid.eq(outs[0].valid)
+            m.d.sync += out.valid.eq(lead.valid)
 
     def _round(self, m: Module, acc, z: int):
         """``clip((acc + 2**(sh-1)) >> sh)`` (half up) or ``clip(acc >> sh)`` (truncate) to ``B_out`` bits."""
@@ -396,6 +456,9 @@ class AdditiveCore(wiring.Component):
             accumulator bits, alignment shift in bits, memory), ``sum_bits``, ``latency`` (a
             sentence: part latency + 1).
         """
+        latency = ("part latency + 1 (the sum, rounding and saturation register)" if self.architecture != "serial" else
+                   f"the largest part's latency + 1 (the sum, rounding and saturation register); the parts take each "
+                   f"sample together, one every {self.ii} cycles, and a shorter part's sum waits in its output register")
         return {
             "parts": [
                 {"module_suffix": f"_part{i}", "regressors": [int(j) for j in sub], "latency": int(c.latency),
@@ -404,8 +467,27 @@ class AdditiveCore(wiring.Component):
                 for i, (c, sub, a) in enumerate(zip(self.parts, self.subsets, self.align))
             ],
             "sum_bits": int(self.params.sum_width),
-            "latency": "part latency + 1 (the sum, rounding and saturation register)",
+            "latency": latency,
         }
+
+    def flow_control(self, names: dict) -> dict:
+        """The serial design's input throttle, in words (nothing for the parallel one).
+
+        Parameters
+        ----------
+        names : dict of str to str
+            Port names by role (:func:`~pwas_hdl.hdl.emit.port_names`).
+
+        Returns
+        -------
+        dict of str to str
+            Merged into the manifest's ``flow_control`` (:func:`~pwas_hdl.hdl.api.design_info`).
+        """
+        if self.architecture != "serial":
+            return {}
+        return {**self.parts[self.lead].flow_control(names), names["in.ready"]:
+                f"advance & (gap == 0): one transfer every {self.ii} advancing cycles at most (II = n + 1 of the "
+                "largest part); gap counts the advancing cycles since the last transfer"}
 
 
 class AdditiveSensorTop(PWASSensorTop):
@@ -420,7 +502,7 @@ class AdditiveSensorTop(PWASSensorTop):
         The lag bank's signals in payload order (:func:`~pwas_hdl.hdl.sensor_top.lag_plan`).
     dims : sequence of (signal index, lag)
         One per regressor dimension of the whole sensor, lag in samples (0: the current sample).
-    memory, pipeline
+    memory, pipeline, architecture
         As :class:`AdditiveCore`.
     argmax : ArgmaxStage, optional
         A classifier's stage after the sum, inlined by the sensor top's elaborate
@@ -437,9 +519,11 @@ class AdditiveSensorTop(PWASSensorTop):
     kind = "sensor"
 
     def __init__(self, model: AdditiveFixedPointModel, signals: Sequence[tuple[str, int]], dims: Sequence[tuple[int, int]], *,
-                 memory: str = "banked", pipeline: Pipeline | str | None = None, argmax: Any = None):
+                 memory: str = "banked", pipeline: Pipeline | str | None = None, argmax: Any = None,
+                 architecture: str = "parallel"):
         self._MustUse__silence = True
-        self.core = AdditiveCore(model, memory=memory, pipeline=pipeline)  # the sum alone: the top inlines the stage
+        # the sum alone: the top inlines the stage
+        self.core = AdditiveCore(model, memory=memory, pipeline=pipeline, architecture=architecture)
         self.core._MustUse__silence = True
         self.argmax = argmax  # a classifier's stage after the sum (PWASSensorTop.elaborate inlines it)
         self.params = self.core.params
@@ -449,7 +533,7 @@ class AdditiveSensorTop(PWASSensorTop):
             raise InputError(f"{len(self.dims)} lag-bank dimensions for a sensor with n = {self.params.n}")
         cycles, index_bits = argmax_extent(argmax, self.params.nz * self.params.out_width + 1)
         self.latency = self.core.latency + cycles
-        self.ii = 1
+        self.ii = self.core.ii
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = max(k for _, k in self.signals) - 1
@@ -467,21 +551,23 @@ class AdditiveSensorTop(PWASSensorTop):
 
 
 def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                        name: str = "pwas_core", classifier: dict | None = None) -> AdditiveCore:
+                        name: str = "pwas_core", classifier: dict | None = None,
+                        architecture: str = "parallel") -> AdditiveCore:
     """The additive core of an :class:`~pwas_hdl.fixedpoint.additive.AdditiveFixedPointModel` (input: regressor codes).
 
     Parameters
     ----------
     model : AdditiveFixedPointModel
         The bit-true additive model.
-    memory, pipeline
+    memory, pipeline, architecture
         As :class:`AdditiveCore`.
     name : str
         Verilog module name (not checked here; :func:`emit_additive_verilog` checks it).
     classifier : dict, optional
         ``{"target": name, "classes": [labels]}`` of a classifier model (``sensor.classifier_``):
         the argmax stage after the sum (:func:`~pwas_hdl.hdl.api.classifier_stage`); the output
-        payload then ends with the class index.
+        payload then ends with the class index. Parallel only (refused with ``architecture="serial"``,
+        :func:`~pwas_hdl.hdl.api.check_classifier`).
 
     Returns
     -------
@@ -491,10 +577,11 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     Raises
     ------
     InputError
-        No equal-latency pipelines exist, the output shift drops the whole sum, or not one class
-        per score target.
+        No equal-latency pipelines exist, the output shift drops the whole sum, not one class
+        per score target, or a classifier with ``architecture="serial"``.
     """
-    core = AdditiveCore(model, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline))
+    core = AdditiveCore(model, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline, architecture),
+                        architecture=architecture)
     core.classifier = dict(classifier) if classifier is not None else None
     core.module_name = name
     core._MustUse__silence = True
@@ -503,19 +590,21 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     return core
 
 
-def _argmax(classifier: dict | None, model: AdditiveFixedPointModel, pipeline: Pipeline | str | None) -> Any:
-    """A classifier's argmax stage after the additive sum (None without a classifier)."""
+def _argmax(classifier: dict | None, model: AdditiveFixedPointModel, pipeline: Pipeline | str | None,
+            architecture: str) -> Any:
+    """A classifier's argmax stage after the additive sum (None without a classifier; refused for a
+    serial design, as every classifier: :func:`~pwas_hdl.hdl.api.check_classifier`)."""
     if classifier is None:
         return None
     from pwas_hdl.hdl.api import classifier_stage
 
     params = SimpleNamespace(nz=int(model.nz), out_width=int(model.output_format.bits))  # what the stage reads
-    return classifier_stage(classifier, params, Pipeline.cast(pipeline), "parallel")
+    return classifier_stage(classifier, params, Pipeline.cast(pipeline), architecture)
 
 
 def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | None = None, *, memory: str = "banked",
                           pipeline: Pipeline | str | None = None, name: str = "pwas_sensor",
-                          classifier: dict | None = None) -> AdditiveSensorTop:
+                          classifier: dict | None = None, architecture: str = "parallel") -> AdditiveSensorTop:
     """The additive virtual-sensor top (one lag bank, the parts' cores, the sum) of an additive bit-true model.
 
     Parameters
@@ -524,7 +613,7 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
         The bit-true additive model.
     lags : LagStructure, optional
         As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` (default: from ``model.regressor_signals``).
-    memory, pipeline
+    memory, pipeline, architecture
         As :class:`AdditiveCore`.
     name : str
         Verilog module name.
@@ -545,7 +634,8 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
 
     model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
-    top = AdditiveSensorTop(model, signals, dims, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline))
+    top = AdditiveSensorTop(model, signals, dims, memory=memory, pipeline=pipeline,
+                            argmax=_argmax(classifier, model, pipeline, architecture), architecture=architecture)
     top.classifier = dict(classifier) if classifier is not None else None
     top.module_name = name
     top._MustUse__silence = True
