@@ -157,6 +157,19 @@ ADDITIVE_CONFIGS = [
 ]
 
 
+#: The additive designs on the serial architecture (``generate --architecture serial``:
+#: ``tests/test_additive_serial.py``): the serial versions of the two additive regressions above
+#: (equal parts behind a lag bank; parts of 1 to 3 dimensions, an aligned part, two targets, the
+#: deepest pipeline), and a sensor top with a 1- and a 3-dimensional part (II 4, the 1-dimensional
+#: part's sum waits 2 cycles in its output register) on the shallowest pipeline.
+ADDITIVE_SERIAL_CONFIGS = [
+    DesignConfig("as-s-y3-pairs", "sensor", 0, 3, 0, 1, 3, 1, {"architecture": "serial"}, seed=1, additive="pairs"),
+    DesignConfig("as-c-n4-z2-max-trunc", "core", 0, 4, 0, 1, [3, 2, 4, 2], 2,
+                 {"pipeline": "max", "rounding": "truncate", "architecture": "serial"}, seed=2, additive="2;0,1;1,2,3;0,3"),
+    DesignConfig("as-s-u2y2-1+3-min", "sensor", 2, 2, 1, 1, 3, 1, {"pipeline": "min", "architecture": "serial"}, seed=5,
+                 additive="0;1,2,3"),
+]
+
 #: Serial-architecture configurations (``generate --architecture serial``, issue 15 item 2): the
 #: serial versions of two configurations of ``tests/test_rtl_cocotb.py`` (same model, same
 #: options), so their parallel twins are byte-identical to those and share the cached simulator

@@ -18,20 +18,24 @@ import re
 __all__ = ["flip_weight_bit", "round_constant_plus_one_lsb", "offset_constant_off_by_one"]
 
 
-def flip_weight_bit(verilog: str, bank: int, addr: int, bit: int) -> tuple[str, str]:
-    """Flip ``bit`` of ``wmem<bank>[<addr>]`` (the packed word: target 0 in the low bits)."""
-    pat = re.compile(rf"^(\s*wmem{bank}\[{addr}\] = )(\d+)'h([0-9a-fA-F]+);$", re.M)
+def flip_weight_bit(verilog: str, bank: int, addr: int, bit: int, *, part: int | None = None) -> tuple[str, str]:
+    """Flip ``bit`` of ``wmem<bank>[<addr>]`` (the packed word: target 0 in the low bits); with
+    ``part``, of ``part<part>_wmem<bank>[<addr>]`` (an additive design's part)."""
+    from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
+
+    mem = weight_memory_name(bank, part)
+    pat = re.compile(rf"^(\s*{mem}\[{addr}\] = )(\d+)'h([0-9a-fA-F]+);$", re.M)
     mo = pat.search(verilog)
     if not mo:
-        raise ValueError(f"no initialiser of wmem{bank}[{addr}] in the Verilog (inline memory init expected)")
+        raise ValueError(f"no initialiser of {mem}[{addr}] in the Verilog (inline memory init expected)")
     width = int(mo.group(2))
     if not 0 <= bit < width:
-        raise ValueError(f"bit {bit} outside the {width}-bit word of wmem{bank}[{addr}]")
+        raise ValueError(f"bit {bit} outside the {width}-bit word of {mem}[{addr}]")
     old = int(mo.group(3), 16)
     new = old ^ (1 << bit)
     digits = (width + 3) // 4
     text = verilog[: mo.start()] + f"{mo.group(1)}{width}'h{new:0{digits}x};" + verilog[mo.end():]
-    return text, f"wmem{bank}[{addr}]: {width}'h{old:0{digits}x} -> {width}'h{new:0{digits}x} (bit {bit} flipped)"
+    return text, f"{mem}[{addr}]: {width}'h{old:0{digits}x} -> {width}'h{new:0{digits}x} (bit {bit} flipped)"
 
 
 def _const_edit(verilog: str, name: str, delta: int, what: str) -> tuple[str, str]:

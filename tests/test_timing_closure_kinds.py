@@ -116,6 +116,8 @@ def _latency_with(model, design, pipeline, architecture="parallel"):
     ("recurrent_warped", "sensor", None, "serial"),
     ("plain", "core", None, "serial"),  # the serial core takes 6 of the registers (n + 1 MAC cycles)
     ("plain", "sensor", None, "serial"),
+    ("additive", "core", None, "serial"),  # serial parts: the largest part's latency + the sum register
+    ("additive", "sensor", None, "serial"),
 ])
 def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture, request, monkeypatch):
     model = request.getfixturevalue(f"{kind}_sensor")
@@ -142,6 +144,10 @@ def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture
         assert len(cands) <= 7 and gd.manifest["ii"] > 1
         if kind == "plain":
             assert lat == sorted({serial_latency(p, model.grid_.n) for p in tc.pipeline_candidates(model.grid_.n)})
+        if kind == "additive":
+            n = max(len(s) for s in model.grid_.subsets)
+            assert gd.manifest["ii"] == n + 1
+            assert lat == sorted({serial_latency(p, n) + 1 for p in tc.pipeline_candidates(n)})
     if kind.startswith("recurrent"):  # one sample in flight, whatever the core
         assert gd.manifest["ii"] == gd.manifest["latency_cycles"]
     if fixed is not None:  # the core's latency + the fixed register(s), for every candidate
