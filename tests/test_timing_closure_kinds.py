@@ -230,6 +230,13 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("core.sum_sat_q", "additive sum"),
     ("feat0_sum", "observer bank"),
     ("s_axis_tdata_q", "input register"),
+    # the serial core (a serial additive design's parts too): its multiplier, vertex register, accumulator
+    ("core.part1_prod0_MULT18X18D_P9", "part1 multiplier"),
+    ("prod1_MULT18X18D_P9", "multiplier"),
+    ("core.part1_q_mu1_TRELLIS_FF", "part1 serial vertex register"),
+    ("q_addr0$123", "serial vertex register"),
+    ("core.part0_acc0_TRELLIS_FF", "part0 serial accumulator"),
+    ("acc1", "serial accumulator"),
 ])
 def test_critical_path_stage_names(cell, stage):
     assert tc._stage_of_cell(cell) == stage

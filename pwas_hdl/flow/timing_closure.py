@@ -252,8 +252,12 @@ def _stage_of_cell(cell: str) -> str:
     m = _STAGE_RE.match(c)
     if m:
         return m.group(1)
-    if re.match(r"prod[0-9]+_[0-9]+_MULT", c):  # a multiplier (its product register packed inside)
+    if re.match(r"prod[0-9]+(_[0-9]+)?_MULT", c):  # a multiplier (its product register packed inside; serial: prod<z>)
         return "multiplier"
+    if re.match(r"q_(addr|mu|valid)[0-9]+($|_TRELLIS|_SB_|\$)|q_oor", c):  # the serial core's vertex shift register
+        return "serial vertex register"
+    if re.match(r"acc[0-9]+($|_TRELLIS|_SB_|\$)", c):  # the serial core's accumulator (not part<i>_acc, a part's output)
+        return "serial accumulator"
     for prefix, stage in (("s_warp", "warp register"), ("am_", "argmax stage"), (("term", "psum", "sum_sat"), "additive sum"),
                           (("s_sum", "s_root", "bank_", "feat", "obs"), "observer bank")):
         if c.startswith(prefix):
