@@ -446,6 +446,8 @@ def build_design(
         Not with ``memory`` (refused: the serial memory is the only one). With ``target_mhz`` the
         search runs over the registers the serial core takes (``split``, ``rank``, ``offset``,
         ``addr``, ``mem_out``, ``product``).
+        For an additive model, ``serial`` puts every part on the serial core (one throttle at the
+        largest part's II, :mod:`pwas_hdl.hdl.additive_top`); a classifier is refused.
         For an observer-bank sensor, ``serial`` also time-multiplexes the bank
         (:mod:`pwas_hdl.hdl.serial_observer_bank`: ``bank_lanes`` state-update units, the II is
         the manifest's ``front_end.cycles_per_sample``).
