@@ -433,8 +433,9 @@ def architecture_info(core: PWASCore) -> dict:
         return {"kind": infos[0]["kind"], "multipliers": sum(a["multipliers"] for a in infos),
                 "multipliers_per_target": sum(a["multipliers_per_target"] for a in infos),
                 "cycles_per_sample": max(a["cycles_per_sample"] for a in infos), "ii": max(a["ii"] for a in infos),
-                "meaning": f"{len(infos)} additive part cores, each: {infos[0]['meaning']}; the parts take each sample "
-                "together (n = the largest part's)"}
+                "meaning": f"{len(infos)} additive part cores, each (n = its own dimension): {infos[0]['meaning']}; "
+                "the parts take each sample together" + (", one every n + 1 cycles of the largest part"
+                                                         if infos[0]["kind"] == "serial" else "")}
     p = core.params
     if getattr(core, "architecture", "parallel") == "serial":
         return {"kind": "serial", "multipliers": p.nz, "multipliers_per_target": 1, "cycles_per_sample": p.n + 1,
