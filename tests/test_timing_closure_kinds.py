@@ -268,3 +268,23 @@ def test_serial_core_closes_timing_on_ecp5(plain_sensor):
     assert tm["met"] and chosen["fmax_mhz"] >= 40.0 and tm["measurements"] == [chosen["latency_cycles"]]
     assert gd.manifest["latency_cycles"] == chosen["latency_cycles"] == serial_latency(Pipeline.cast("min"), 2)
     assert gd.manifest["ii"] == 3 and gd.manifest["architecture"]["kind"] == "serial"
+
+
+@needs_pnr
+@pytest.mark.synth
+def test_serial_additive_core_closes_timing_on_ecp5(additive_sensor):
+    """Real place and route of the shallowest serial candidate of a tiny additive core (one nextpnr
+    run): the largest part's serial latency + the sum register, II = its n + 1, and the critical path
+    named by stage (no raw cell name of the serial multiplier)."""
+    from pwas_hdl.hdl.serial_core import serial_latency
+
+    gd = build_design(additive_sensor, design="core", target_mhz=40.0, fpga_target="ecp5", architecture="serial")
+    tm = gd.manifest["timing"]
+    chosen = tm["candidates"][tm["chosen"]]
+    assert tm["met"] and chosen["fmax_mhz"] >= 40.0 and tm["measurements"] == [chosen["latency_cycles"]]
+    assert gd.manifest["latency_cycles"] == chosen["latency_cycles"] == serial_latency(Pipeline.cast("min"), 2) + 1
+    assert gd.manifest["ii"] == 3 and gd.manifest["architecture"]["kind"] == "serial"
+    cp = chosen["critical_path"]
+    for end in (cp["from"], cp["to"]):
+        assert "MULT18X18D" not in end and "TRELLIS" not in end, cp
+    assert "## Timing closure" in gd.files["report.md"] and "## Additive parts" in gd.files["report.md"]
