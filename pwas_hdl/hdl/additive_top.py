@@ -346,6 +346,13 @@ class AdditiveCore(wiring.Component):
     def build_into(self, m: Module, payload: Value, valid: Value, advance: Signal, out: Any) -> None:
         """Add the parts (as submodules ``part<i>``), the sum and the rounding to ``m``.
 
+        Parallel: each part's :meth:`PWASCore.build_into` (equal latencies, ``advance`` = part 0's
+        input enable). Serial: one :func:`~pwas_hdl.hdl.serial_core.serial_throttle` (``advance =
+        sum_advance & (gap == 0)``, one transfer every :attr:`ii` cycles) and each part's
+        :meth:`SerialPWASCore.build_datapath` on the same ``take`` and ``sum_advance``. Then, for
+        both, the sum register reads the parts' output registers when the part :attr:`lead`'s
+        ``valid`` is high.
+
         Parameters
         ----------
         m : Module
