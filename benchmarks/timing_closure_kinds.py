@@ -18,7 +18,13 @@ clock, or reports the best fmax when none does (``met`` false). The kinds:
 * ``recurrent-sensor``: My = 2, Mz = 1, p = 3 (II = latency);
 * ``serial-core``: the plain core with ``--architecture serial`` (II = n + 1);
 * ``bank-sensor`` / ``bank-serial``: an observer bank (2 models of order 2, 11b features) + core,
-  parallel and time-multiplexed.
+  parallel and time-multiplexed;
+* ``additive-serial``: the additive core on serial part cores (II = the largest part's n + 1);
+* ``recurrent-serial``: the recurrent top around the serial core (II = latency);
+* ``recurrent-warped``: the recurrent top with the warp in front of its core (``--breakpoints
+  quantile-pow2``, My = 1, Mz = 1, p = 4);
+* ``warped-bank-serial``: the observer bank of ``bank-serial`` on a ``quantile-pow2`` partition
+  (p = 4): time-multiplexed bank, warp, serial core.
 
 Prints a table and writes ``STEM.json`` / ``STEM.md`` into ``--outdir`` (``--quick``: the plain
 core only, written as ``STEM_quick.*``). Nothing asserts on time.
@@ -47,7 +53,13 @@ KINDS: dict[str, tuple[str, str]] = {
     "serial-core": ("core", "serial"),
     "bank-sensor": ("sensor", "parallel"),
     "bank-serial": ("sensor", "serial"),
+    "additive-serial": ("core", "serial"),
+    "recurrent-serial": ("sensor", "serial"),
+    "recurrent-warped": ("sensor", "parallel"),
+    "warped-bank-serial": ("sensor", "serial"),
 }
+#: kinds whose model is not named by the first word of the kind
+FAMILIES = {"recurrent-warped": "recurrent-warped", "warped-bank-serial": "warped-bank"}
 QUICK_KINDS = "plain-core"
 
 
@@ -65,7 +77,7 @@ def _model(kind: str) -> Any:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 
     y, z = _series()
-    family = kind.split("-")[0]
+    family = FAMILIES.get(kind, kind.split("-")[0])
     if family in ("plain", "serial"):
         return PWASVirtualSensor(my=2, partitions=5, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(None, y, z)
     if family == "classifier":
@@ -79,13 +91,17 @@ def _model(kind: str) -> Any:
                                  target_names=["z"]).fit(None, y, z)
     if family == "recurrent":
         return PWASVirtualSensor(my=2, mz=1, partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"]).fit(None, y, z)
-    if family == "bank":
+    if family == "recurrent-warped":
+        return PWASVirtualSensor(my=1, mz=1, partitions=4, breakpoints="quantile-pow2", sigma=1e-3, output_names=["y"],
+                                 target_names=["z"]).fit(None, y, z)
+    if family in ("bank", "warped-bank"):
         from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
         from pwas_hdl.systems.pv_benchmark import make_pv_dataset
 
         tr, _, _ = make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
         fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=2)
-        return PWASVirtualSensor(mu=0, my=0, partitions=3, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
+        warp = {"partitions": 4, "breakpoints": "quantile-pow2"} if family == "warped-bank" else {"partitions": 3}
+        return PWASVirtualSensor(mu=0, my=0, gamma=1.0, front_end=fe, sigma=1e-3, **warp).fit(tr.u, tr.y, tr.z)
     raise InputError(f"unknown kind {kind!r}")
 
 
