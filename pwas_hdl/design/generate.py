@@ -145,8 +145,11 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
 
 
 def _is_warped(sensor: PWASVirtualSensor) -> bool:
-    """True for a sensor fitted with ``breakpoints`` (a non-uniform grid: the warped designs)."""
-    return getattr(sensor.grid_, "breakpoints", None) is not None and getattr(sensor.grid_, "subsets", None) is None
+    """True for a sensor fitted with ``breakpoints`` (a non-uniform grid: the warped designs;
+    :func:`pwas_hdl.fixedpoint.warp.is_warped`)."""
+    from pwas_hdl.fixedpoint.warp import is_warped
+
+    return is_warped(sensor)
 
 
 def _core_inputs(sensor: PWASVirtualSensor) -> int:

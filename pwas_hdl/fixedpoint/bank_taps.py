@@ -192,7 +192,9 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
         lags = getattr(sensor, "lags_", None)
         if fe is None or lags is None:
             raise InputError("the model is not an observer-bank sensor with u/y taps")
-        if getattr(sensor.grid_, "breakpoints", None) is not None:  # the taps would need warp input formats of their own
+        from pwas_hdl.fixedpoint.warp import is_warped
+
+        if is_warped(sensor):  # the taps would need warp input formats of their own
             raise InputError("an observer-bank sensor with u/y taps (--mu/--my > 0) on a non-uniform partition "
                              "(--breakpoints) has no hardware yet; fit it without the taps (--mu 0 --my 0) or with "
                              "equal intervals")

@@ -772,11 +772,10 @@ class ObserverBankSensorModel:
         rmse = np.asarray(getattr(sensor, "train_rmse_", []), float).reshape(-1)
         rmse = rmse[np.isfinite(rmse) & (rmse > 0)]
         given.setdefault("reference_error", float(rmse.max()) if rmse.size else None)
-        core_cls: Any = FixedPointModel
-        if getattr(sensor.grid_, "breakpoints", None) is not None:  # non-uniform partition: warp + uniform core
-            from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+        from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel, is_warped
 
-            core_cls = WarpedFixedPointModel
+        # non-uniform partition: the warp, then the uniform core
+        core_cls: Any = WarpedFixedPointModel if is_warped(sensor) else FixedPointModel
         core = core_cls(sensor.grid_, sensor.weights_, input_bits=input_bits, regressor_names=names,
                         regressor_signals=[(nm, 0) for nm in names], target_names=sensor.signal_names()[2], **given)
         bank = FixedPointObserverBank(fe, core.inputs, input_bits=input_bits, input_headroom=input_headroom,

@@ -45,7 +45,27 @@ if TYPE_CHECKING:
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
     from pwas_hdl.fixedpoint.formats import FixedFormat, PortFormat
 
-__all__ = ["Pow2Warp", "WarpInputFormat", "WarpedFixedPointModel"]
+__all__ = ["Pow2Warp", "WarpInputFormat", "WarpedFixedPointModel", "is_warped"]
+
+
+def is_warped(sensor: Any) -> bool:
+    """True for a sensor fitted with ``breakpoints`` on one grid (a non-uniform partition): its
+    bit-true model is :class:`WarpedFixedPointModel`, its designs have the warp in front of the core.
+
+    The one test of "warped" for every design kind (``generate``, the observer-bank and recurrent
+    models, the replay); an additive sensor's grid (``subsets``) is not warped.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        Fitted.
+
+    Returns
+    -------
+    bool
+    """
+    grid = sensor.grid_
+    return getattr(grid, "breakpoints", None) is not None and getattr(grid, "subsets", None) is None
 
 
 @dataclass(frozen=True)

@@ -129,10 +129,9 @@ def build_recurrent_design(sensor: PWASVirtualSensor, *, input_bits: int = 16, p
     from pwas_hdl.hdl.recurrent_top import build_recurrent_sensor
     from pwas_hdl.hdl.sensor_top import sample_fields
 
-    from pwas_hdl.design.generate import _is_warped
-    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+    from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel, is_warped
 
-    model_class = WarpedFixedPointModel if _is_warped(sensor) else FixedPointModel  # the one generate builds
+    model_class = WarpedFixedPointModel if is_warped(sensor) else FixedPointModel  # the one generate builds
     fxm = model_class.from_sensor(sensor, input_bits=input_bits, **formats)
     rm = recurrent_model(sensor, fxm)  # the recurrent hardware's conditions: Mz >= 1, constant initial states, one format per signal
     top = build_recurrent_sensor(rm, pipeline=pipeline, name=name, architecture=architecture)
