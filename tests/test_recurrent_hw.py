@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from pwas_hdl.fit.map_approximation import fit_map, recurrent_sensor_from_map
-from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat
-from pwas_hdl.fixedpoint.recurrence import FeedbackRequant
+from pwas_hdl.fixedpoint.formats import InputFormat
 from pwas_hdl.systems.decoupled_observer import observer_map_27, observer_map_28
 from pwas_hdl.systems.three_tank import three_tank_paper_run
+from helpers.requant import check_requant_over_every_output_code
 
 BOX = ([0.0, 0.0], [25.0, 25.0])  # (y, x3): the admissible levels of the training runs
 
@@ -38,19 +38,7 @@ def _rmse(e, w):
 
 @pytest.mark.parametrize("bits,frac", [(18, 12), (14, 9), (22, 17)])
 def test_feedback_requant_error_bound_over_every_output_code(bits, frac):
-    inp = InputFormat.for_interval(-1.5, 23.7, 32, 16)
-    out = FixedFormat(bits, frac, True, "half_up", "saturate")
-    fb = FeedbackRequant.between(out, inp)
-    o = np.arange(out.min_code, out.max_code + 1, dtype=np.int64)
-    q = fb.apply(o)
-    x = o * 2.0**-frac
-    ideal = inp.quantize(x)
-    inside = (q > fb.qmin) & (q < fb.qmax)
-    back = inp.offset + inp.lsb * q
-    assert np.all(np.abs(back[inside] - x[inside]) <= fb.error_bound + 1e-12)
-    assert np.mean(q == ideal) > 0.999  # only ties within eps of a half code may round the other way
-    assert np.all(q[x > inp.offset + inp.lsb * (fb.qmax + 1)] == fb.qmax)
-    assert np.all(q[x < inp.offset + inp.lsb * (fb.qmin - 1)] == fb.qmin)
+    check_requant_over_every_output_code(InputFormat.for_interval(-1.5, 23.7, 32, 16), bits, frac)
 
 
 def test_bittrue_recurrence_tracks_the_float_one_and_meets_the_paper_figure():

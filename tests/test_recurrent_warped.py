@@ -19,9 +19,9 @@ import pytest
 from pwas_hdl.cli import main
 from pwas_hdl.design.manifest import load_manifest, validate_manifest
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
-from pwas_hdl.fixedpoint.formats import FixedFormat
 from pwas_hdl.fixedpoint.recurrence import FeedbackRequant
 from pwas_hdl.fixedpoint.warp import WarpInputFormat, WarpedFixedPointModel
+from helpers.requant import check_requant_over_every_output_code
 
 TOP = "pwas_recurrent_sensor"
 
@@ -79,21 +79,7 @@ def test_the_model_is_warped_and_its_past_estimate_is_a_signal_of_its_own(flow):
 def test_feedback_requant_to_a_warp_input_format_over_every_output_code(flow, bits, frac):
     """FeedbackRequant.between derived for the warp's input code format: q is the warp input code of
     the output's value (half up), within its error bound, saturating; checked for every output code."""
-    inp = _design(str(flow / "m.json")).rmodel.z_formats[0]
-    out = FixedFormat(bits, frac, True, "half_up", "saturate")
-    fb = FeedbackRequant.between(out, inp)
-    o = np.arange(out.min_code, out.max_code + 1, dtype=np.int64)
-    q = fb.apply(o)
-    x = o * 2.0**-frac
-    ideal = inp.quantize(x)
-    inside = (q > fb.qmin) & (q < fb.qmax)
-    back = inp.to_physical(q)
-    assert inside.sum() > 100
-    assert np.all(np.abs(back[inside] - x[inside]) <= fb.error_bound + 1e-12)
-    assert np.mean(q == ideal) > 0.999  # only ties within eps of a half code may round the other way
-    np.testing.assert_allclose(inp.to_physical(q), inp.offset + inp.lsb * q, rtol=0, atol=1e-12)  # one physical rule
-    assert np.all(q[x > inp.to_physical(fb.qmax + 1)] == fb.qmax)
-    assert np.all(q[x < inp.to_physical(fb.qmin - 1)] == fb.qmin)
+    check_requant_over_every_output_code(_design(str(flow / "m.json")).rmodel.z_formats[0], bits, frac)
 
 
 def test_bittrue_warped_recurrence_tracks_the_float_one(flow):
