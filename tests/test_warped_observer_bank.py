@@ -1,4 +1,4 @@
-"""Observer-bank sensors on a non-uniform partition (`fit --front-end observer-bank --breakpoints quantile-pow2`).
+"""Observer-bank sensors on a non-uniform partition (`fit --front-end observer-bank --breakpoints quantile-pow2`), with or without u/y taps.
 
 `generate` refused them before; now the bank's feature codes are the warp's input codes
 (:class:`~pwas_hdl.fixedpoint.warp.WarpInputFormat`) and the warp with its register sits between the
@@ -18,7 +18,6 @@ import pytest
 from pwas_hdl.cli import main
 from pwas_hdl.design.generate import build_design, generate
 from pwas_hdl.design.manifest import load_manifest
-from pwas_hdl.errors import InputError
 from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.fixedpoint.observer_bank import ObserverBankSensorModel, _edge_lipschitz, observer_bank_model
@@ -31,10 +30,10 @@ def pv():
     return make_pv_dataset("pv-benchmark", 2000, 300, seed=0)
 
 
-def _fit(pv, mu=0, my=0, n_models=3, features="11b", order=5):
+def _fit(pv, mu=0, my=0, n_models=3, features="11b", order=5, partitions=4):
     tr, _, _ = pv
     fe = ObserverBankFrontEnd(n_models=n_models, observer="deadbeat", features=features, order=order)
-    return PWASVirtualSensor(mu=mu, my=my, partitions=4, gamma=1.0, front_end=fe, sigma=1e-3,
+    return PWASVirtualSensor(mu=mu, my=my, partitions=partitions, gamma=1.0, front_end=fe, sigma=1e-3,
                              breakpoints="quantile-pow2").fit(tr.u, tr.y, tr.z)
 
 
@@ -122,16 +121,25 @@ def test_the_warp_adds_one_cycle_to_the_uniform_bank_sensor(pv, sensor):
     assert a.manifest["latency_cycles"] == b.manifest["latency_cycles"] + 1 and a.manifest["ii"] == b.manifest["ii"] == 1
 
 
-def test_taps_with_a_warp_are_refused(pv, tmp_path, capsys):
-    s = _fit(pv, mu=1, my=1, n_models=2, order=3)
-    with pytest.raises(InputError, match=r"u/y taps .* non-uniform partition .*--mu 0 --my 0"):
-        observer_bank_model(s)
-    s.save(tmp_path / "m.json")
-    capsys.readouterr()
-    assert main(["generate", str(tmp_path / "m.json"), "--design", "sensor", "-o", str(tmp_path / "g")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("error:") and len(err.splitlines()) == 1 and "--breakpoints" in err
-    assert not (tmp_path / "g").exists()
+@pytest.fixture(scope="module")
+def tapped(pv):
+    return _fit(pv, mu=1, my=1, n_models=2, order=3, partitions=2)
+
+
+def test_taps_beside_the_features_go_through_the_warp_too(tapped, pv):
+    """u/y taps (--mu/--my) on the non-uniform partition: the taps' affine requantisation targets the
+    warp's input codes of their dimensions, as the features' does; the estimate within its bound."""
+    _, te, _ = pv
+    m = observer_bank_model(tapped)
+    assert hasattr(m, "taps") and isinstance(m.core, WarpedFixedPointModel)
+    assert all(isinstance(f, WarpInputFormat) for f in m.taps.tap_inputs)
+    codes, _ = m.quantize_signals(te.u, te.y)
+    hw = m.core.to_physical_output(m.evaluate(codes)[0])
+    err = np.abs(hw - m.reference(codes)).max(axis=0)
+    assert np.all(err <= np.array(m.error_bound)) and err.max() > 0
+    g = build_design(tapped, design="sensor")
+    assert "warp" in g.manifest and "taps" in g.manifest["front_end"]
+    assert g.manifest["latency_cycles"] == g.manifest["front_end"]["stages_before_core"] + g.component.core.latency
 
 
 def test_cli_fit_generate(pv, tmp_path):
@@ -148,12 +156,15 @@ def test_cli_fit_generate(pv, tmp_path):
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("simulator, architecture", [("icarus", "parallel"), ("icarus", "serial"), ("verilator", "parallel")])
-def test_rtl_bit_exact_and_lint_clean(sensor, pv, tmp_path, sim_cache, simulator, architecture):
+@pytest.mark.parametrize("simulator, architecture, model", [
+    ("icarus", "parallel", "sensor"), ("icarus", "serial", "sensor"), ("verilator", "parallel", "sensor"),
+    ("icarus", "serial", "tapped"), ("verilator", "parallel", "tapped"),
+])
+def test_rtl_bit_exact_and_lint_clean(request, pv, tmp_path, sim_cache, simulator, architecture, model):
     from pwas_hdl.flow.toolchain import lint_verilog
     from pwas_hdl.verify.simulation import load_design, run_rtl, sim_module, standard_runs
 
-    generate(sensor, tmp_path / "d", design="sensor", architecture=architecture)
+    generate(request.getfixturevalue(model), tmp_path / "d", design="sensor", architecture=architecture)
     if simulator == "verilator":
         r = lint_verilog(tmp_path / "d" / "pwas_sensor.v", "pwas_sensor")
         assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
@@ -163,7 +174,7 @@ def test_rtl_bit_exact_and_lint_clean(sensor, pv, tmp_path, sim_cache, simulator
     codes = sim_module("pwas_stimulus").observer_codes(d.bank.bank, 360, seed=3, data=data)
     res = run_rtl(d, standard_runs(d, codes), simulator, cache_dir=sim_cache)
     assert res.passed, res.report()
-    assert res.mismatches == 0 and res.outputs > 900 and set(res.latencies) == {d.latency}
+    assert res.mismatches == 0 and res.outputs > 800 and set(res.latencies) == {d.latency}
     assert res.within_bound
 
 

@@ -394,7 +394,7 @@ def build_design(
         A model fitted with power-of-two ``breakpoints`` gets the warped designs of
         :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
         too (warp -> core -> argmax stage; parallel only, as every classifier), an observer-bank
-        sensor's without u/y taps (bank -> features -> warp -> core, parallel or serial), a
+        sensor's (bank -> features [+ u/y taps] -> warp -> core, parallel or serial), a
         recurrent model's (the recurrent top with the warp in front of its core; the fed-back
         estimate is requantised to the warp's input code format).
     name : str, optional

@@ -192,12 +192,8 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
         lags = getattr(sensor, "lags_", None)
         if fe is None or lags is None:
             raise InputError("the model is not an observer-bank sensor with u/y taps")
-        from pwas_hdl.fixedpoint.warp import is_warped
+        from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel, is_warped
 
-        if is_warped(sensor):  # the taps would need warp input formats of their own
-            raise InputError("an observer-bank sensor with u/y taps (--mu/--my > 0) on a non-uniform partition "
-                             "(--breakpoints) has no hardware yet; fit it without the taps (--mu 0 --my 0) or with "
-                             "equal intervals")
         ins, outs, tgts = sensor.signal_names()
         fnames = fe.feature_names()
         tnames = lags.names(ins, outs, tgts)
@@ -207,8 +203,11 @@ class TappedObserverBankSensorModel(ObserverBankSensorModel):
         given.setdefault("reference_error", float(rmse.max()) if rmse.size else None)
         by_kind = {"u": ins, "y": outs}
         signals = [(nm, 0) for nm in fnames] + [(by_kind[k][ch], lag) for k, ch, lag in lags.signal_of_dimension()]
-        core = FixedPointModel(sensor.grid_, sensor.weights_, input_bits=input_bits, regressor_names=fnames + tnames,
-                               regressor_signals=signals, target_names=tgts, **given)
+        # a non-uniform partition: the warp, then the uniform core; the features and the taps are
+        # requantised to the warp's input codes (WarpInputFormat: the same lsb / offset rule)
+        core_cls: Any = WarpedFixedPointModel if is_warped(sensor) else FixedPointModel
+        core = core_cls(sensor.grid_, sensor.weights_, input_bits=input_bits, regressor_names=fnames + tnames,
+                        regressor_signals=signals, target_names=tgts, **given)
         nf = len(fnames)
         bank = FixedPointObserverBank(fe, core.inputs[:nf], input_bits=input_bits,
                                       input_headroom=8.0 if input_headroom is None else input_headroom,

@@ -29,6 +29,7 @@ sample), ``latency = stages_before_core + core latency``. The bit-true model is 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Module, Signal, signed
@@ -48,6 +49,7 @@ from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.bank_taps import TappedObserverBankSensorModel
+    from pwas_hdl.fixedpoint.warp import Pow2Warp
 
 __all__ = ["ObserverTapSensorTop", "build_tapped_observer_sensor"]
 
@@ -65,6 +67,9 @@ class ObserverTapSensorTop(ObserverBankTopBase):
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
     architecture, lanes, isqrt_every : as :class:`~pwas_hdl.hdl.observer_sensor_top.ObserverSensorTop`
         (serial: single-buffered feature codes).
+    warps : sequence of Pow2Warp, optional
+        A non-uniform partition: the warp stage in front of the core (features and taps are the
+        warps' ``B_in``-bit input codes; ``params`` the uniform core's).
 
     The constructor and the manifest parts are :class:`~pwas_hdl.hdl.observer_bank_top.ObserverBankTopBase`'s;
     this top adds the taps (``front_end.taps``, their error bound) and its warm-up
@@ -80,7 +85,8 @@ class ObserverTapSensorTop(ObserverBankTopBase):
     """
 
     def __init__(self, model: TappedObserverBankSensorModel, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
-                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY):
+                 architecture: str = "parallel", lanes: int = 1, isqrt_every: int | None = DEFAULT_ISQRT_EVERY,
+                 warps: Sequence[Pow2Warp] | None = None):
         self._MustUse__silence = True  # no UnusedElaboratable warning when the check refuses
         bank, taps = model.bank, model.taps
         if params.n != bank.n_models + len(taps.dims):
@@ -88,7 +94,7 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         self.model = model
         self.taps = taps
         super().__init__(bank, params, memory=memory, pipeline=pipeline, architecture=architecture, lanes=lanes,
-                         isqrt_every=isqrt_every, warmup=int(model.first_output))
+                         isqrt_every=isqrt_every, warmup=int(model.first_output), warps=warps)
 
     def _architecture_more(self) -> str:
         return "u/y taps from a lag bank of the input codes, requantised to the core's tap inputs"
