@@ -126,9 +126,13 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
     sklearn.exceptions.NotFittedError
         The sensor is not fitted.
     InputError
-        An unknown or impossible format option.
+        An unknown or impossible format option; an observer-bank sensor (its bit-true model is
+        :func:`pwas_hdl.fixedpoint.observer_bank.observer_bank_model`: the bank and its core).
     """
     _load_sensor(sensor)  # fitted?
+    if getattr(sensor, "front_end_", None) is not None:  # the core's inputs are the bank's features
+        raise InputError("an observer-bank sensor's bit-true model is the bank and its core: "
+                         "pwas_hdl.fixedpoint.observer_bank.observer_bank_model(sensor), not fixed_point_model")
     unknown = set(formats) - set(FORMAT_OPTIONS)
     if unknown:
         raise InputError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
