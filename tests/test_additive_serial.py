@@ -5,7 +5,7 @@ sample, one memory of ``N_i`` words); one input throttle at the largest part's I
 a shorter part's sum waits in its output register, then the additive design's exact sum and one
 rounding. Configurations: ``sim/pwas_designs.ADDITIVE_SERIAL_CONFIGS``. Checked here: the manifest
 (II, latency, architecture, memories), header and report, byte-identical reruns, Verilator lint, the
-refusals that remain, and in cocotb on Icarus and Verilator (full speed, stalls and backpressure, a
+refusals that remain, an additive classifier generated on the serial parts, and in cocotb on Icarus and Verilator (full speed, stalls and backpressure, a
 reset mid-stream) that every output equals the additive bit-true model and the parallel design's
 output on the same stimulus; a flipped weight bit in the smallest part is caught.
 """
@@ -127,20 +127,26 @@ def test_build_design_refusals(opts, msg):
 
 
 @pytest.mark.parametrize("design", ["core", "sensor"])
-def test_cli_serial_additive_classifier_is_one_error_line_exit_2(design, tmp_path):
-    """The serial core has no argmax stage: an additive classifier stays parallel only."""
-    cfg = designs.DesignConfig("acls", design, 0, 3, 0, 1, 3, 3, {}, seed=3, classes=(0, 1, 2), additive="pairs")
+def test_cli_serial_additive_classifier_is_generated(design, tmp_path):
+    """An additive classifier on the serial architecture (was refused: 'the argmax stage follows the
+    parallel core only'): the argmax stage after the serial parts' sum, II = the largest part's n + 1,
+    the latency the serial sum's + the stage's. (Bit-exact RTL: tests/test_serial_classifier.py.)"""
     from pwas_hdl.cli import app
     from pwas_hdl.fit.model_file import write_model
+    from pwas_hdl.hdl.argmax import argmax_latency
+    from pwas_hdl.hdl.params import Pipeline
+    from pwas_hdl.hdl.serial_core import serial_latency
 
+    cfg = designs.DesignConfig("acls", design, 0, 3, 0, 1, 3, 3, {}, seed=3, classes=(0, 1, 2), additive="pairs")
     model = tmp_path / "m.json"
     write_model(cfg.model(), model)
     out = tmp_path / "out"
     r = CliRunner().invoke(app, ["generate", str(model), "-o", str(out), "--design", design, "--architecture", "serial"])
-    assert r.exit_code == 2, r.output
-    lines = [ln for ln in r.output.splitlines() if ln.startswith("error:")]
-    assert len(lines) == 1 and "argmax stage follows the parallel core only" in lines[0], r.output
-    assert "Traceback" not in r.output and not out.exists()
+    assert r.exit_code == 0, r.output
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["architecture"]["kind"] == "serial" and man["ii"] == 3 and "additive" in man
+    assert man["classifier"]["n_classes"] == 3 and man["classifier"]["stage_latency_cycles"] == argmax_latency(3, None) == 1
+    assert man["latency_cycles"] == serial_latency(Pipeline.cast(None), 2) + 1 + 1
 
 
 @pytest.mark.rtl

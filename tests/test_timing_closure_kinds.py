@@ -118,6 +118,8 @@ def _latency_with(model, design, pipeline, architecture="parallel"):
     ("plain", "sensor", None, "serial"),
     ("additive", "core", None, "serial"),  # serial parts: the largest part's latency + the sum register
     ("additive", "sensor", None, "serial"),
+    ("classifier", "core", None, "serial"),  # the serial core's registers + the argmax stage's (tree_levels)
+    ("classifier", "sensor", None, "serial"),
 ])
 def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture, request, monkeypatch):
     model = request.getfixturevalue(f"{kind}_sensor")
@@ -139,9 +141,16 @@ def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture
     for c in measured:
         assert c["latency_cycles"] == _latency_with(model, design, c["pipeline"], architecture)
     if architecture == "serial":  # only the registers the serial core takes: one candidate per latency
+        from pwas_hdl.hdl.argmax import argmax_latency
         from pwas_hdl.hdl.serial_core import serial_latency
 
-        assert len(cands) <= 7 and gd.manifest["ii"] > 1
+        assert len(cands) <= (7 if kind != "classifier" else 9) and gd.manifest["ii"] > 1
+        if kind == "classifier":  # the stage's registers count on the serial core too (tree_levels)
+            n, classes = model.grid_.n, len(model.classifier_["classes"])
+            assert all(c["latency_cycles"] == serial_latency(Pipeline.cast(c["pipeline"]), n)
+                       + argmax_latency(classes, c["pipeline"]) for c in cands)
+            assert any(argmax_latency(classes, c["pipeline"]) for c in cands)
+            assert gd.manifest["ii"] == n + 1 and "classifier" in gd.manifest
         if kind == "plain":
             assert lat == sorted({serial_latency(p, model.grid_.n) for p in tc.pipeline_candidates(model.grid_.n)})
         if kind == "additive":
@@ -196,7 +205,6 @@ def test_no_buildable_candidate_is_an_input_error(monkeypatch):
 
 
 @pytest.mark.parametrize("fixture, opts, message", [
-    ("classifier_sensor", {"design": "core", "architecture": "serial"}, "argmax stage follows the parallel core only"),
     ("bank_sensor", {"design": "sensor", "architecture": "serial", "bank_lanes": 9}, "--bank-lanes"),
 ])
 def test_a_refused_design_is_reported_as_itself(fixture, opts, message, request, monkeypatch):

@@ -10,7 +10,7 @@ bit-true model, and ``simulate`` writing the hardware, bit-true and float column
 
 A classifier on a power-of-two partition (``fit --classify --breakpoints quantile-pow2``, once refused)
 gets the warp, the core and the argmax stage: its manifest (``warp`` and ``classifier``), latency
-(``--clock-mhz`` too), the serial refusal of every classifier, lint, the cocotb bench with the class
+(``--clock-mhz`` too), the serial core behind a classifier, lint, the cocotb bench with the class
 index, ``simulate``, ``report`` and the exported testbench.
 """
 
@@ -291,21 +291,24 @@ def test_warped_classifier_manifest_header_report_and_reruns(design, warped_clas
 
 
 @pytest.mark.parametrize("design", ["core", "sensor"])
-def test_warped_classifier_serial_is_refused_as_the_uniform_one(design, warped_classifier):
-    """The argmax stage follows the parallel core only, with or without the warp: the same refusal."""
+def test_warped_classifier_on_the_serial_core(design, warped_classifier):
+    """``--architecture serial`` (was refused, as for a uniform classifier): warp register -> serial core ->
+    argmax stage, II = n + 1, latency = the serial core's + 1 + the stage's; the uniform classifier gets
+    the same stage after its serial core. (Bit-exact RTL: tests/test_serial_classifier.py.)"""
     from pwas_hdl.design.generate import build_design
-    from pwas_hdl.errors import InputError
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+    from pwas_hdl.hdl.argmax import argmax_latency
+    from pwas_hdl.hdl.params import Pipeline
+    from pwas_hdl.hdl.serial_core import serial_latency
 
     m, d, labels = warped_classifier
     uniform = PWASVirtualSensor(my=2, partitions=3, sigma=1e-3, classify=True, output_names=["y"],
                                 target_names=["c"]).fit(None, d.y, labels)
-    msgs = []
-    for model in (uniform, m):
-        with pytest.raises(InputError, match="follows the parallel core only") as exc:
-            build_design(model, design=design, architecture="serial")
-        msgs.append(str(exc.value))
-    assert msgs[0] == msgs[1]
+    for model, warp in ((uniform, 0), (m, 1)):
+        man = build_design(model, design=design, architecture="serial", pipeline="max").manifest
+        assert man["architecture"]["kind"] == "serial" and man["ii"] == 3 and ("warp" in man) == bool(warp)
+        assert man["classifier"]["stage_latency_cycles"] == argmax_latency(3, "max") == 2
+        assert man["latency_cycles"] == serial_latency(Pipeline.cast("max"), 2) + warp + 2
 
 
 def test_warped_classifier_clock_mhz_counts_warp_and_argmax(warped_classifier, monkeypatch):

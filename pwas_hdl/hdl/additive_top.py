@@ -573,8 +573,8 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     classifier : dict, optional
         ``{"target": name, "classes": [labels]}`` of a classifier model (``sensor.classifier_``):
         the argmax stage after the sum (:func:`~pwas_hdl.hdl.api.classifier_stage`); the output
-        payload then ends with the class index. Parallel only (refused with ``architecture="serial"``,
-        :func:`~pwas_hdl.hdl.api.check_classifier`).
+        payload then ends with the class index (parallel or serial: the stage's registers advance
+        with its own output's handshake, the sum register feeds it).
 
     Returns
     -------
@@ -584,10 +584,10 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     Raises
     ------
     InputError
-        No equal-latency pipelines exist, the output shift drops the whole sum, not one class
-        per score target, or a classifier with ``architecture="serial"``.
+        No equal-latency pipelines exist, the output shift drops the whole sum, or not one class
+        per score target.
     """
-    core = AdditiveCore(model, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline, architecture),
+    core = AdditiveCore(model, memory=memory, pipeline=pipeline, argmax=_argmax(classifier, model, pipeline),
                         architecture=architecture)
     core.classifier = dict(classifier) if classifier is not None else None
     core.module_name = name
@@ -597,16 +597,15 @@ def build_additive_core(model: AdditiveFixedPointModel, *, memory: str = "banked
     return core
 
 
-def _argmax(classifier: dict | None, model: AdditiveFixedPointModel, pipeline: Pipeline | str | None,
-            architecture: str) -> Any:
-    """A classifier's argmax stage after the additive sum (None without a classifier; refused for a
-    serial design, as every classifier: :func:`~pwas_hdl.hdl.api.check_classifier`)."""
+def _argmax(classifier: dict | None, model: AdditiveFixedPointModel, pipeline: Pipeline | str | None) -> Any:
+    """A classifier's argmax stage after the additive sum (None without a classifier), of either
+    architecture (:func:`~pwas_hdl.hdl.api.classifier_stage`)."""
     if classifier is None:
         return None
     from pwas_hdl.hdl.api import classifier_stage
 
     params = SimpleNamespace(nz=int(model.nz), out_width=int(model.output_format.bits))  # what the stage reads
-    return classifier_stage(classifier, params, Pipeline.cast(pipeline), architecture)
+    return classifier_stage(classifier, params, Pipeline.cast(pipeline))
 
 
 def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | None = None, *, memory: str = "banked",
@@ -642,7 +641,7 @@ def build_additive_sensor(model: AdditiveFixedPointModel, lags: LagStructure | N
     model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
     top = AdditiveSensorTop(model, signals, dims, memory=memory, pipeline=pipeline,
-                            argmax=_argmax(classifier, model, pipeline, architecture), architecture=architecture)
+                            argmax=_argmax(classifier, model, pipeline), architecture=architecture)
     top.classifier = dict(classifier) if classifier is not None else None
     top.module_name = name
     top._MustUse__silence = True

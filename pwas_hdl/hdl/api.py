@@ -44,8 +44,8 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
         with the ``class_index`` field.
     architecture : {"parallel", "serial"}
         ``"serial"``: :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` (one multiplier per
-        target, II = n + 1, one memory of N words; ``memory`` is then ignored). Not with
-        ``classifier``.
+        target, II = n + 1, one memory of N words; ``memory`` is then ignored); with
+        ``classifier`` the argmax stage follows the serial core.
 
     Returns
     -------
@@ -55,9 +55,8 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
     Raises
     ------
     InputError
-        ``name`` is not a plain Verilog identifier, an unknown ``architecture``, a classifier with
-        ``architecture="serial"`` or whose class count differs from ``nz``, or parameters the
-        core refuses.
+        ``name`` is not a plain Verilog identifier, an unknown ``architecture``, a classifier whose
+        class count differs from ``nz``, or parameters the core refuses.
     TypeError
         ``model`` is neither a bit-true model nor ``CoreParams``.
     """
@@ -66,8 +65,8 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
     if classifier is not None:
         from pwas_hdl.hdl.classifier_top import PWASClassifierCore
 
-        check_classifier(classifier, params, architecture)
-        comp = PWASClassifierCore(params, memory=memory, pipeline=pipeline)
+        check_classifier(classifier, params)
+        comp = PWASClassifierCore(params, memory=memory, pipeline=pipeline, architecture=architecture)
         core = comp.core
     else:
         comp = core = _make_core(params, memory, pipeline, architecture)
@@ -79,8 +78,11 @@ def build_core(model: FixedPointModel | CoreParams, *, memory: str = "banked", p
     return comp
 
 
-def check_classifier(classifier: dict, params: CoreParams, architecture: str) -> None:
-    """Refuse what no classifier design builds: a serial core, or not one class per score target.
+def check_classifier(classifier: dict, params: CoreParams) -> None:
+    """Refuse what no classifier design builds: not one class per score target.
+
+    The argmax stage follows the parallel and the serial core alike (both drive it through the
+    same output stream, :func:`~pwas_hdl.hdl.classifier_top.inline_core_and_argmax`).
 
     Parameters
     ----------
@@ -88,23 +90,17 @@ def check_classifier(classifier: dict, params: CoreParams, architecture: str) ->
         ``{"target": name, "classes": [labels]}`` (``sensor.classifier_``).
     params : CoreParams
         The core's parameters (``nz`` score targets).
-    architecture : str
-        The core's architecture.
 
     Raises
     ------
     InputError
-        ``architecture`` is not ``"parallel"`` (the argmax stage follows the parallel core only), or
-        the number of classes differs from ``nz``.
+        The number of classes differs from ``nz``.
     """
-    if architecture != "parallel":
-        raise InputError("the classifier's argmax stage follows the parallel core only; use --architecture parallel")
     if len(classifier["classes"]) != params.nz:
         raise InputError(f"the classifier has {len(classifier['classes'])} classes for nz = {params.nz} score targets")
 
 
-def classifier_stage(classifier: dict | None, params: CoreParams, pipeline: Pipeline | str | None,
-                     architecture: str) -> ArgmaxStage | None:
+def classifier_stage(classifier: dict | None, params: CoreParams, pipeline: Pipeline | str | None) -> ArgmaxStage | None:
     """The argmax stage a top inlines after its core for a classifier model (None without one).
 
     Used by :func:`build_sensor` and the warped builders (:mod:`pwas_hdl.hdl.warp`).
@@ -116,9 +112,8 @@ def classifier_stage(classifier: dict | None, params: CoreParams, pipeline: Pipe
     params : CoreParams
         The core's parameters.
     pipeline : Pipeline, preset name or None
-        The design's pipeline (its ``tree_levels`` place the stage's registers).
-    architecture : str
-        The core's architecture (checked: :func:`check_classifier`).
+        The design's pipeline (its ``tree_levels`` place the stage's registers, behind the parallel
+        or the serial core).
 
     Returns
     -------
@@ -134,7 +129,7 @@ def classifier_stage(classifier: dict | None, params: CoreParams, pipeline: Pipe
         return None
     from pwas_hdl.hdl.classifier_top import classifier_argmax
 
-    check_classifier(classifier, params, architecture)
+    check_classifier(classifier, params)
     argmax = classifier_argmax(params, pipeline)
     argmax._MustUse__silence = True  # inlined by the top
     return argmax
@@ -289,7 +284,7 @@ def build_sensor(
     if hasattr(model, "signal_input_formats"):
         model.signal_input_formats()  # raises unless all lags of each signal share one format
     signals, dims = lag_plan(model, lags)
-    argmax = classifier_stage(classifier, params, pipeline, architecture)
+    argmax = classifier_stage(classifier, params, pipeline)
     top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, argmax=argmax,
                         architecture=architecture)
     top.classifier = dict(classifier) if classifier is not None else None

@@ -23,7 +23,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.errors import InputError
 from pwas_hdl.fixedpoint.argmax import TIE_RULE
 from pwas_hdl.hdl.argmax import ArgmaxStage
-from pwas_hdl.hdl.core import PWASCore, core_input_layout, core_output_layout
+from pwas_hdl.hdl.core import core_input_layout, core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
 __all__ = ["CLASS_FIELD", "classifier_argmax", "classifier_info", "argmax_extent", "inline_core_and_argmax",
@@ -153,22 +153,28 @@ def classifier_info(component: Any, target: str, classes: Sequence[float], score
 
 
 class PWASClassifierCore(wiring.Component):
-    """PWAS core + argmax stage (one regressor in, scores and class index out, every clock).
+    """PWAS core + argmax stage (one regressor in, scores and class index out, every ``ii`` clocks).
 
     Parameters
     ----------
     params : CoreParams
         ``nz = C`` score targets.
     memory, pipeline : as :class:`~pwas_hdl.hdl.core.PWASCore`
+    architecture : {"parallel", "serial"}
+        The core before the stage: :class:`~pwas_hdl.hdl.core.PWASCore` (II = 1) or
+        :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` (II = n + 1, ``memory`` ignored). The
+        stage's registers advance with its own output's handshake; the core's output register
+        feeds it, and a stalled stage stalls the core (throttle included) as a stalled sink would.
 
     Raises
     ------
     InputError
-        As :class:`~pwas_hdl.hdl.core.PWASCore` (parameters or a pipeline the core refuses).
+        As :class:`~pwas_hdl.hdl.core.PWASCore` (parameters or a pipeline the core refuses), or an
+        unknown ``architecture``.
 
     Attributes
     ----------
-    core : PWASCore (inlined), argmax : ArgmaxStage (inlined)
+    core : PWASCore or SerialPWASCore (inlined), argmax : ArgmaxStage (inlined)
     latency : int
         ``core.latency + argmax.latency``.
     ii, params, memory_plan, pipeline : as the core's.
@@ -176,19 +182,22 @@ class PWASClassifierCore(wiring.Component):
 
     kind = "core"
 
-    def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None):
+    def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
+                 architecture: str = "parallel"):
+        from pwas_hdl.hdl.api import _make_core
+
         self._MustUse__silence = True
-        self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True  # inlined by elaborate()
         self.argmax = classifier_argmax(params, self.core.pipeline)
         self.argmax._MustUse__silence = True
         self.params = params
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
-        self.memory_kind = memory
+        self.memory_kind = self.core.memory_kind
         cycles, index_bits = argmax_extent(self.argmax, core_output_layout(params).size)
         self.latency = self.core.latency + cycles
-        self.ii = 1
+        self.ii = self.core.ii
         super().__init__({
             "in": In(stream.Signature(unsigned(core_input_layout(params).size))),
             "out": Out(stream.Signature(unsigned(core_output_layout(params).size + index_bits))),

@@ -32,7 +32,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.regressors import LagStructure
 from pwas_hdl.hdl.classifier_top import argmax_extent, inline_core_and_argmax
-from pwas_hdl.hdl.core import PWASCore, core_output_layout
+from pwas_hdl.hdl.core import core_output_layout
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 
 if TYPE_CHECKING:
@@ -188,7 +188,8 @@ class PWASSensorTop(wiring.Component):
         one more register (:func:`pwas_hdl.hdl.warp.attach_warp`; latency + 1).
     architecture : {"parallel", "serial"}
         ``"serial"``: :class:`~pwas_hdl.hdl.serial_core.SerialPWASCore` (II = n + 1; ``memory`` is
-        then ignored); any other value: the parallel :class:`~pwas_hdl.hdl.core.PWASCore`.
+        then ignored), ``"parallel"``: :class:`~pwas_hdl.hdl.core.PWASCore`
+        (:func:`pwas_hdl.hdl.api._make_core`). With ``argmax`` the stage follows either core.
 
     Ports: ``clk``, ``rst``, ``in__valid``, ``in__ready``, ``in__payload`` (``S*B_in`` bits, one code
     per signal), ``out__valid``, ``out__ready``, ``out__payload`` (as the core, then the class index
@@ -196,7 +197,7 @@ class PWASSensorTop(wiring.Component):
 
     Attributes
     ----------
-    core : PWASCore  (its logic is inlined; ``latency``, ``memory_plan``, ``params`` apply)
+    core : PWASCore or SerialPWASCore  (its logic is inlined; ``latency``, ``memory_plan``, ``params`` apply)
     latency, ii : int
         Cycles: the core's (from the transfer of a sample that completes a regressor), latency
         plus ``argmax.latency`` with an argmax stage.
@@ -208,8 +209,8 @@ class PWASSensorTop(wiring.Component):
     InputError
         ``dims`` not one per regressor, a dimension the lag bank does not hold, lags of one signal
         with different input formats (unwarped), an ``argmax`` whose ``index_lsb`` is not the
-        core's output width, warps that do not fit (:func:`~pwas_hdl.hdl.warp.attach_warp`), or
-        as the core.
+        core's output width, warps that do not fit (:func:`~pwas_hdl.hdl.warp.attach_warp`), an
+        unknown ``architecture``, or as the core.
     """
 
     kind = "sensor"
@@ -239,12 +240,10 @@ class PWASSensorTop(wiring.Component):
                     "the lag bank feeds one code to all of them: fit without --separate-lag-domains (share_lag_domain=True) "
                     "and with one -p value for all lags of the signal, or generate --design core"
                 )
-        if architecture == "serial":  # one multiplier per target, II = n + 1 (pwas_hdl.hdl.serial_core)
-            from pwas_hdl.hdl.serial_core import SerialPWASCore
+        from pwas_hdl.hdl.api import _make_core
 
-            self.core = SerialPWASCore(params, pipeline=pipeline)
-        else:
-            self.core = PWASCore(params, memory=memory, pipeline=pipeline)
+        # parallel, or serial: one multiplier per target, II = n + 1 (pwas_hdl.hdl.serial_core)
+        self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True  # its logic is inlined by elaborate(), never elaborated itself
         self.params = params
         if warps is not None:  # non-uniform partition: warp + register in front of the core (pwas_hdl.hdl.warp)

@@ -13,7 +13,7 @@ bank of ``B_in``-bit codes -> warp -> core), also the recurrent top
 ``B_in``-bit codes too). ``pwas-hdl generate`` builds all of them for a model
 fitted with ``--breakpoints quantile-pow2`` (:func:`build_warped_design`); for a classifier model
 (``fit --classify``) the builders' ``classifier`` adds the argmax stage of
-:mod:`pwas_hdl.hdl.classifier_top` after the core (parallel core only, as for a uniform grid):
+:mod:`pwas_hdl.hdl.classifier_top` after the core (parallel or serial, as for a uniform grid):
 warp register -> core -> argmax stage, the class index in the output payload's top bits.
 
 Warp of one dimension (offset-binary ``qo = q + 2**(B_in-1)``, constants ``Bo_k = B_k + 2**(B_in-1)``)::
@@ -325,12 +325,12 @@ def build_warped_core(model: WarpedFixedPointModel, *, memory: str = "banked", p
     Raises
     ------
     InputError
-        As :class:`WarpedPWASCore`; a classifier with ``architecture="serial"`` or whose class
-        count differs from ``nz`` (:func:`pwas_hdl.hdl.api.check_classifier`).
+        As :class:`WarpedPWASCore`; a classifier whose class count differs from ``nz``
+        (:func:`pwas_hdl.hdl.api.check_classifier`).
     """
     from pwas_hdl.hdl.api import classifier_stage
 
-    argmax = classifier_stage(classifier, CoreParams.from_model(model.core), pipeline, architecture)
+    argmax = classifier_stage(classifier, CoreParams.from_model(model.core), pipeline)
     comp = WarpedPWASCore(model, memory=memory, pipeline=pipeline, architecture=architecture, argmax=argmax)
     comp.module_name = name
     comp._MustUse__silence = True
@@ -364,7 +364,7 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
     ------
     InputError
         The lags of a signal have different quantisations, or recurrent ``lags``; a classifier
-        with ``architecture="serial"`` or whose class count differs from ``nz``.
+        whose class count differs from ``nz``.
         As :func:`~pwas_hdl.hdl.sensor_top.lag_plan` or :class:`~pwas_hdl.hdl.sensor_top.PWASSensorTop`.
     """
     from pwas_hdl.hdl.api import classifier_stage
@@ -373,7 +373,7 @@ def build_warped_sensor(model: WarpedFixedPointModel, lags: LagStructure | None,
     model.signal_input_formats()  # InputError unless the lags of each signal can share one code
     params = CoreParams.from_model(model.core)
     signals, dims = lag_plan(model.core, lags)
-    argmax = classifier_stage(classifier, params, pipeline, architecture)
+    argmax = classifier_stage(classifier, params, pipeline)
     top = PWASSensorTop(params, signals, dims, memory=memory, pipeline=pipeline, architecture=architecture, warps=model.warps,
                         argmax=argmax)
     top.module_name = name
