@@ -170,6 +170,22 @@ ADDITIVE_SERIAL_CONFIGS = [
                  additive="0;1,2,3"),
 ]
 
+#: Classifiers on the serial architecture (``generate --architecture serial`` of a ``fit --classify``
+#: model: ``tests/test_serial_classifier.py``): the argmax stage after the serial core or the serial
+#: additive sum. The serial versions of ``tests/test_rtl_classifier.py``'s tie-forcing core (nz = 4,
+#: pipeline ``max``: 2 argmax registers behind the serial output register) and of the additive
+#: classifiers of :data:`ADDITIVE_CONFIGS` (a core with parts of 1 to 3 dimensions, ``max``), plus a
+#: sensor top on the ``min`` pipeline (the index combinational from the serial core's output register)
+#: with parts of 1 and 3 dimensions (II 4) and forced ties.
+CLASSIFIER_SERIAL_CONFIGS = [
+    DesignConfig("cs-c-n2-nz4-ties-max", "core", 0, 2, 0, 1, [4, 3], 4, {"pipeline": "max", "architecture": "serial"}, seed=5,
+                 classes=(1, 2, 3, 4), ties=True),
+    DesignConfig("acs-c-n4-cls2-max", "core", 0, 4, 0, 1, [3, 2, 4, 2], 2, {"pipeline": "max", "architecture": "serial"}, seed=4,
+                 classes=(-1, 1), additive="2;0,1;1,2,3;0,3"),
+    DesignConfig("acs-s-u2y2-1+3-cls3-ties-min", "sensor", 2, 2, 1, 1, 3, 3, {"pipeline": "min", "architecture": "serial"},
+                 seed=6, classes=(0, 1, 2), ties=True, additive="0;1,2,3"),
+]
+
 #: Serial-architecture configurations (``generate --architecture serial``, issue 15 item 2): the
 #: serial versions of two configurations of ``tests/test_rtl_cocotb.py`` (same model, same
 #: options), so their parallel twins are byte-identical to those and share the cached simulator

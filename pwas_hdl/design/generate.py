@@ -394,10 +394,10 @@ def build_design(
         manifest's design is "recurrent" (also accepted here).
         A model fitted with ``additive`` (:mod:`pwas_hdl.fit.additive`) gets the additive designs of
         :mod:`pwas_hdl.hdl.additive_top` (one core per part, parallel or serial, the exact sum, one
-        rounding; a classifier's argmax stage after the sum, parallel only).
+        rounding; a classifier's argmax stage after the sum, parallel or serial).
         A model fitted with power-of-two ``breakpoints`` gets the warped designs of
         :mod:`pwas_hdl.hdl.warp` (the warp and its register in front of the core), a classifier's
-        too (warp -> core -> argmax stage; parallel only, as every classifier), an observer-bank
+        too (warp -> core -> argmax stage; parallel or serial, as every classifier), an observer-bank
         sensor's (bank -> features [+ u/y taps] -> warp -> core, parallel or serial), a
         recurrent model's (the recurrent top with the warp in front of its core; the fed-back
         estimate is requantised to the warp's input code format).
@@ -454,7 +454,9 @@ def build_design(
         search runs over the registers the serial core takes (``split``, ``rank``, ``offset``,
         ``addr``, ``mem_out``, ``product``).
         For an additive model, ``serial`` puts every part on the serial core (one throttle at the
-        largest part's II, :mod:`pwas_hdl.hdl.additive_top`); a classifier is refused.
+        largest part's II, :mod:`pwas_hdl.hdl.additive_top`). A classifier (plain, additive or
+        warped) gets its argmax stage after the serial core or sum (:mod:`pwas_hdl.hdl.classifier_top`;
+        the stage's ``tree_levels`` registers count in the latency and in the ``target_mhz`` search).
         For an observer-bank sensor, ``serial`` also time-multiplexes the bank
         (:mod:`pwas_hdl.hdl.serial_observer_bank`: ``bank_lanes`` state-update units, the II is
         the manifest's ``front_end.cycles_per_sample``).
@@ -745,7 +747,8 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
     if "classifier" in man:
         c = man["classifier"]
         labels = ", ".join(f"{v:g}" for v in c["classes"])
-        lines.append(f"classifier of {c['target']} ({c['n_classes']} classes {labels}): argmax stage after the core, class index in "
+        lines.append(f"classifier of {c['target']} ({c['n_classes']} classes {labels}): argmax stage after the {_stage_source(man)}, "
+                     f"class index in "
                      f"{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}] {c['field']}, ties to the lowest class index, "
                      f"{_cycles(c['stage_latency_cycles'])} of the latency")
     if "warp" in man:  # non-uniform partition (issue 15): pwas_hdl.hdl.warp
@@ -822,12 +825,20 @@ def design_hash(files: dict[str, str]) -> str:
     return h.hexdigest()
 
 
+def _stage_source(man: dict) -> str:
+    """What the argmax stage follows, for the header and the report: ``core`` (parallel), or the
+    ``serial core`` / ``serial additive sum`` and its rate (one class index every II clocks)."""
+    if man.get("architecture", {}).get("kind") != "serial":
+        return "core"
+    return f"serial {'additive sum' if 'additive' in man else 'core'} (one class index every {man['ii']} clocks)"
+
+
 def _classifier_section(man: dict) -> str:
     """Report section of a classifier design (the argmax stage and its class-index field)."""
     c = man["classifier"]
     labels = ", ".join(f"{v:g}" for v in c["classes"])
     return (f"\n## Classifier\n\nTarget `{c['target']}`, {c['n_classes']} classes ({labels}, in index order). An argmax "
-            f"stage after the core ({_cycles(c['stage_latency_cycles'])}, included in the latency) writes the class index "
+            f"stage after the {_stage_source(man)} ({_cycles(c['stage_latency_cycles'])}, included in the latency) writes the class index "
             f"to `{c['port']}[{c['lsb'] + c['width'] - 1}:{c['lsb']}]` (`{c['field']}`); ties go to the lowest class index. "
             f"{c['float_agreement'][0].upper()}{c['float_agreement'][1:]}.\n")
 

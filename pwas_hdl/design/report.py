@@ -242,6 +242,18 @@ def _estimator_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], 
             "error_bound": e["error_bound"], "source": cfg.source}, None
 
 
+def _architecture_text(d: dict[str, Any]) -> str:
+    """`` (serial architecture)`` and a classifier's argmax stage, for the report's latency line
+    (nothing for a parallel design without a classifier, whose line stays as it was)."""
+    words = ["serial architecture"] if d.get("architecture") == "serial" else []
+    c = d.get("classifier")
+    if c is not None:
+        cyc = c["stage_latency_cycles"]
+        words.append(f"classifier of {c['target']} ({c['n_classes']} classes): argmax stage {cyc} cycle"
+                     f"{'' if cyc == 1 else 's'} of the latency")
+    return f" ({'; '.join(words)})" if words else ""
+
+
 def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any] | None]:
     if man["design"] == "estimator":
         return _estimator_summary(out, man)
@@ -263,7 +275,12 @@ def _design_summary(out: Path, man: dict[str, Any]) -> tuple[dict[str, Any], dic
         "output_lsb": 2.0 ** -fmt["output"]["frac"],
         "error_bound_lsb": man["error_bound"]["lsb"],
         "error_bound": man["error_bound"]["physical"],
+        "architecture": man.get("architecture", {}).get("kind", "parallel"),
     }
+    if "classifier" in man:  # the argmax stage after the core (parallel or serial)
+        c = man["classifier"]
+        design["classifier"] = {"target": c["target"], "n_classes": c["n_classes"],
+                                "stage_latency_cycles": c["stage_latency_cycles"]}
     return design, fit
 
 
@@ -417,7 +434,7 @@ def report_markdown(rep: dict[str, Any]) -> str:
         "",
         f"Formats: inputs {', '.join(d['input_formats'])}, weights {d['weight_format']}, output {d['output_format']} "
         f"(LSB {_fmt(d['output_lsb'])}); error bound vs float {_fmt(d['error_bound_lsb'])} LSB = {_fmt(d['error_bound'])}.",
-        f"Latency {d['latency_cycles']} cycles, II {d['ii']}; weight memory {d['memory']['words']} words x "
+        f"Latency {d['latency_cycles']} cycles, II {d['ii']}{_architecture_text(d)}; weight memory {d['memory']['words']} words x "
         f"{d['memory']['word_bits']} bits ({d['memory']['kind']}, {d['memory']['memories']} memories).",
         "",
     ]
