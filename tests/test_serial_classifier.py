@@ -299,3 +299,46 @@ def test_cli_fit_generate_simulate_report_export(kind, design, simulator, sim_ca
     exp.write_text("\n".join(lines) + "\n")
     res = icarus(bad)
     assert res.returncode != 0 and "FAIL" in res.stdout, res.stdout[-2000:]
+
+
+@pytest.mark.rtl
+@pytest.mark.parametrize("name, simulator", [("acs-c-n4-cls2-max", "icarus"), ("cs-c-n2-nz4-ties-max", "verilator")])
+def test_readmemh_serial_classifier_equals_bittrue_model(name, simulator, folders, sim_cache, tmp_path):
+    """``--memory-init readmemh``: the weights from the hex files, the class index as with inline init."""
+    d = load_design(folders(CFG[name], "readmemh"))
+    assert d.manifest["memory"]["init"]["kind"] == "readmemh" and "classifier" in d.manifest
+    assert '$readmemh({MEM_DIR, "' in d.verilog and "wmem0[0] =" not in d.verilog
+    codes = _codes(d, seed=37, m=150)
+    runs = standard_runs(d, codes, seed=37)
+    res = run_rtl(d, runs, simulator, cache_dir=sim_cache, work_dir=tmp_path, debug=False)
+    assert res.passed and res.mismatches == 0, res.report()
+    assert set(res.latencies) == {d.latency} and res.ii == float(d.manifest["ii"])
+    assert len(_class_checks(res, runs)) > 1
+
+
+@pytest.mark.parametrize("kind, design", [("additive", "core"), ("additive", "sensor"), ("warped", "core")])
+def test_clock_mhz_search_counts_the_stage_on_the_serial_core(kind, design, warped_classifier, monkeypatch):  # noqa: F811
+    """``--clock-mhz`` (fake place and route): every candidate's latency is the serial design's (the
+    serial core, + the sum register or the warp register) + the argmax stage's registers, as built."""
+    import pwas_hdl.flow.timing_closure as tc
+    from helpers.timing import FakePlaceAndRoute
+    from pwas_hdl.design.generate import build_design
+    from pwas_hdl.hdl.argmax import argmax_latency
+
+    additive = CFG["acs-c-n4-cls2-max" if design == "core" else "acs-s-u2y2-1+3-cls3-ties-min"]
+    model = additive.model() if kind == "additive" else warped_classifier[0]
+    fake = FakePlaceAndRoute(mhz_per_cycle=9.0)
+    monkeypatch.setattr(tc, "measure_design", fake)
+    gd = build_design(model, design=design, target_mhz=100.0, architecture="serial")
+    man, tm = gd.manifest, gd.manifest["timing"]
+    assert tm["met"] and man["architecture"]["kind"] == "serial" and "classifier" in man
+    cands = tm["candidates"]
+    extra = 1 if kind == "warped" else 0  # the warp register (the additive sum register is in _expected_latency)
+    for c in cands:
+        assert c["latency_cycles"] == _expected_latency(man, c["pipeline"]) + extra
+        assert c["latency_cycles"] == build_design(model, design=design, pipeline=c["pipeline"],
+                                                   architecture="serial").manifest["latency_cycles"]
+    assert any(argmax_latency(man["classifier"]["n_classes"], c["pipeline"]) for c in cands)
+    chosen = cands[tm["chosen"]]
+    assert man["latency_cycles"] == chosen["latency_cycles"] == min(c["latency_cycles"] for c in cands
+                                                                    if c["latency_cycles"] * 9.0 >= 100)
