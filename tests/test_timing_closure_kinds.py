@@ -296,3 +296,20 @@ def test_serial_additive_core_closes_timing_on_ecp5(additive_sensor):
     for end in (cp["from"], cp["to"]):
         assert "MULT18X18D" not in end and "TRELLIS" not in end, cp
     assert "## Timing closure" in gd.files["report.md"] and "## Additive parts" in gd.files["report.md"]
+
+
+@needs_pnr
+@pytest.mark.synth
+def test_serial_classifier_core_closes_timing_on_ecp5(classifier_sensor):
+    """Real place and route of the shallowest candidate of a serial classifier core (one nextpnr run):
+    the argmax stage after the serial core (was refused), the record's latency the built design's."""
+    from pwas_hdl.hdl.argmax import argmax_latency
+    from pwas_hdl.hdl.serial_core import serial_latency
+
+    gd = build_design(classifier_sensor, design="core", target_mhz=40.0, fpga_target="ecp5", architecture="serial")
+    tm = gd.manifest["timing"]
+    chosen = tm["candidates"][tm["chosen"]]
+    assert tm["met"] and chosen["fmax_mhz"] >= 40.0 and tm["measurements"] == [chosen["latency_cycles"]]
+    pl = Pipeline.cast(chosen["pipeline"])
+    assert gd.manifest["latency_cycles"] == chosen["latency_cycles"] == serial_latency(pl, 2) + argmax_latency(2, pl)
+    assert gd.manifest["ii"] == 3 and gd.manifest["architecture"]["kind"] == "serial" and "classifier" in gd.manifest
