@@ -120,3 +120,21 @@ def test_a_warped_recurrent_sensor_is_swept_with_its_warp(rec):
     pt = next(p for p in r["points"] if (p["input_bits"], p["weight_frac"], p["output_frac"]) == (12, 8, 9))
     assert np.allclose(pt["rmsee"], _rmse(zb, z[max(s.lags_.memory, 1) - 1:, None]), rtol=1e-12, atol=0)
     assert "core_input_bits" in pt and all(p["bound_holds"] for p in r["points"])
+
+
+def test_a_format_the_recurrent_top_refuses_is_refused_by_the_sweep_too(rec, tmp_path, capsys):
+    """An output format whose range is far below the fed-back input's (s4.10 against s8 inputs): the
+    top's feedback product has fewer than B_in + S bits, so generate refuses it (one error line,
+    nothing written); the sweep lists it under refused with the same reason, not on the front."""
+    s, y, z = rec
+    r = explore(s, (None, y, z), input_bits=[8], weight_frac=[8], output_frac=[3, 10], output_bits=4)
+    assert [p["output_frac"] for p in r["points"] if not p["is_default"]] == [3]
+    assert [x["output_frac"] for x in r["refused"]] == [10]
+    assert "feedback requantisation of target 0" in r["refused"][0]["reason"]
+    s.save(tmp_path / "m.json")
+    capsys.readouterr()
+    assert main(["generate", str(tmp_path / "m.json"), "--design", "sensor", "--input-bits", "8", "--output-bits", "4",
+                 "--output-frac", "10", "-o", str(tmp_path / "hw")]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("warning:")]
+    assert len(err) == 1 and err[0].startswith("error: feedback requantisation of target 0")
+    assert r["refused"][0]["reason"] in err[0] and not (tmp_path / "hw").exists()

@@ -48,7 +48,9 @@ def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "Rec
     ------
     InputError
         The model is not recurrent, or its initial state is the measured one (the hardware
-        starts from constant reset codes), or the lags of one signal have different formats.
+        starts from constant reset codes), or the lags of one signal have different formats, or
+        the top's feedback product would be narrower than ``B_in + S``
+        (:meth:`~pwas_hdl.fixedpoint.recurrence.FeedbackRequant.check_top_product`).
     """
     from pwas_hdl.fixedpoint.recurrence import RecurrentFixedPointModel
 
@@ -59,9 +61,12 @@ def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "Rec
         raise InputError("the recurrent hardware starts from constant initial states: fit with --z0 VALUE or 'mean', "
                          "not 'measured'")
     try:
-        return RecurrentFixedPointModel(fxm, lags, sensor.initial_values_)
+        rm = RecurrentFixedPointModel(fxm, lags, sensor.initial_values_)
     except ValueError as exc:  # e.g. separate lag domains of one signal: the lag bank needs one format per signal
         raise InputError(f"the recurrent top cannot be built for this model: {exc}") from None
+    for c, fb in enumerate(rm.feedback):  # the top's feedback product (generate and explore refuse alike)
+        fb.check_top_product(c)
+    return rm
 
 
 def build_recurrent_component(sensor: "PWASVirtualSensor", fxm: "FixedPointModel", *, memory: str, name: str,

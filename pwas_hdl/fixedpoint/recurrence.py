@@ -136,6 +136,30 @@ class FeedbackRequant:
         hi = max(abs(-(1 << (self.out_bits - 1)) * self.mul + self.add), abs(((1 << (self.out_bits - 1)) - 1) * self.mul + self.add))
         return hi.bit_length() + 1
 
+    def check_top_product(self, target: int) -> None:
+        """Refuse a requantisation the recurrent top cannot compute.
+
+        The top (:meth:`pwas_hdl.hdl.recurrent_top.PWASRecurrentTop._requant`) forms the unsigned
+        product ``(o + 2**(B_out-1)) * mul`` in ``B_out + bits(mul)`` bits and takes ``q`` from its
+        low ``B_in + S`` bits, so it needs ``B_out + bits(mul) >= B_in + S``. Checked wherever a
+        recurrent design is made (:func:`pwas_hdl.design.recurrent.recurrent_model`: generate,
+        explore) and by the top itself.
+
+        Parameters
+        ----------
+        target : int
+            Index of the target (for the message).
+
+        Raises
+        ------
+        InputError
+            The product is narrower than ``B_in + S``.
+        """
+        pw = self.out_bits + self.mul.bit_length()
+        if pw < self.in_bits + self.shift:
+            raise InputError(f"feedback requantisation of target {target}: the product has {pw} bits, fewer than "
+                             f"B_in + S = {self.in_bits + self.shift}; use more output bits or fewer input bits")
+
     def apply(self, o: ArrayLike) -> np.ndarray:
         """Input codes of output codes ``o``.
 

@@ -99,8 +99,10 @@ class PWASRecurrentTop(wiring.Component):
     ------
     InputError
         ``len(io_dims) + nz * mz != n``, ``len(feedback) != nz``, ``mz < 1``, a dimension the lag
-        bank does not hold, an unknown ``architecture``, warps that do not fit the core
-        (:func:`~pwas_hdl.hdl.warp.attach_warp`), or as :class:`~pwas_hdl.hdl.core.PWASCore`.
+        bank does not hold, a feedback requantisation whose product is narrower than ``B_in + S``
+        (:meth:`~pwas_hdl.fixedpoint.recurrence.FeedbackRequant.check_top_product`), an unknown
+        ``architecture``, warps that do not fit the core (:func:`~pwas_hdl.hdl.warp.attach_warp`),
+        or as :class:`~pwas_hdl.hdl.core.PWASCore`.
     """
 
     kind = "recurrent-sensor"
@@ -127,6 +129,8 @@ class PWASRecurrentTop(wiring.Component):
         for s, lag in io_dims:
             if not (0 <= s < len(signals) and 0 <= lag < signals[s][1]):
                 raise InputError(f"dimension ({s}, {lag}) is not held by the lag bank {signals}")
+        for c, fb in enumerate(feedback):  # the feedback product (_requant), refused before anything is built
+            fb.check_top_product(c)
         self.core = _make_core(params, memory, pipeline, architecture)
         self.core._MustUse__silence = True
         if warps is not None:  # non-uniform partition: warp + register in front of the core (pwas_hdl.hdl.warp)
@@ -222,9 +226,10 @@ class PWASRecurrentTop(wiring.Component):
         b, ow = self.in_width, len(o)
         k, sh = fb.mul, fb.shift
         pw = ow + k.bit_length()
-        if pw < b + sh:
-            raise InputError(f"feedback requantisation of target {c}: the product has {pw} bits, fewer than B_in + S = {b + sh}; "
-                             "use more output bits or fewer input bits")
+        if (fb.in_bits, fb.out_bits) != (b, ow):
+            raise InternalError(f"feedback requantisation of target {c} is for {fb.out_bits} -> {fb.in_bits} bits, the top "
+                                f"has {ow} -> {b}")
+        fb.check_top_product(c)  # also checked when the top is built (no half-built module on a refusal)
         c1 = fb.add - (1 << (ow - 1)) * k
         base = fb.qmin << sh  # (ou K + c1) >> S < qmin  <=>  ou K < qmin 2**S - c1
         lo_thr, hi_thr = base - c1, base + ((1 << b) << sh) - c1
@@ -269,7 +274,8 @@ class PWASRecurrentTop(wiring.Component):
         Raises
         ------
         InputError
-            A target's requantisation product ``B_out + bits(K)`` is narrower than ``B_in + S``.
+            A target's requantisation product ``B_out + bits(K)`` is narrower than ``B_in + S``
+            (refused when the top is built already).
         """
         m = Module()
         p = self.params
