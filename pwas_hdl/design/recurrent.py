@@ -30,6 +30,36 @@ if TYPE_CHECKING:
 __all__ = ["recurrent_model", "build_recurrent_component", "recurrence_header_lines", "recurrence_report_text", "loop_text"]
 
 
+def estimate_rows(start: int, stop: int, lags: Any, lead: int) -> tuple[Any, Any]:
+    """The rows of one trajectory a recurrent design estimates, and which of them have a reference.
+
+    The one alignment rule of ``simulate`` and ``explore`` for recurrent designs: after a reset the
+    first ``max(M, 1) - 1`` transfers only fill the lags, so the estimates are rows ``start +
+    max(M, 1) - 1 .. stop - 1``; row ``t`` estimates ``z(t + lead)``, which exists when
+    ``t + lead < stop``.
+
+    Parameters
+    ----------
+    start, stop : int
+        The trajectory's rows, ``start .. stop - 1`` (data rows, or 0 .. T for one array).
+    lags : LagStructure
+        The sensor's lags (``memory`` = M).
+    lead : int
+        ``sensor.lead_`` (0, or 1 for a map fitted with ``fit-map``).
+
+    Returns
+    -------
+    rows : ndarray of int, shape (R,)
+        The estimated rows, ``R = stop - start - max(M, 1) + 1``.
+    has_reference : ndarray of bool, shape (R,)
+        ``rows + lead < stop``.
+    """
+    import numpy as np
+
+    rows = np.arange(start + max(int(lags.memory), 1) - 1, stop)
+    return rows, rows + int(lead) < stop
+
+
 def recurrent_model(sensor: "PWASVirtualSensor", fxm: "FixedPointModel") -> "RecurrentFixedPointModel":
     """The bit-true recurrence of a recurrent ``sensor`` whose circuit is ``fxm``.
 

@@ -321,6 +321,8 @@ def _recurrent_data(sensor: PWASVirtualSensor, data, traj_col: str | None, blank
     for name, tr in (("u", us), ("y", ys)):
         if tr is not None and len(tr) != len(ztab):
             raise InputError(f"got {len(ztab)} target trajectories but {len(tr)} {name} trajectories")
+    from pwas_hdl.design.recurrent import estimate_rows
+
     m_hist, lead = max(lags.memory, 1), int(getattr(sensor, "lead_", 0))
     trajs, keeps, zs, zfs = [], [], [], []
     for i, zt in enumerate(ztab):
@@ -331,8 +333,7 @@ def _recurrent_data(sensor: PWASVirtualSensor, data, traj_col: str | None, blank
                 raise InputError(f"trajectory {i}: {name} has {a.shape[0]} samples, z {t_len}")
         if t_len < m_hist:
             raise InputError(f"trajectory {i} has {t_len} samples; the lags need {m_hist}")
-        rows = np.arange(m_hist - 1, t_len)
-        keep = rows + lead < t_len
+        rows, keep = estimate_rows(0, t_len, lags, lead)  # simulate's alignment of a recurrent design
         zf = np.asarray(sensor.predict(ui, yi), dtype=float).reshape(-1, len(tgts))
         trajs.append((ui, yi))
         keeps.append(keep)

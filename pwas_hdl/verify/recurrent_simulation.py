@@ -112,7 +112,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
     CheckFailed
         The RTL did not produce every output (nothing is written).
     """
-    from pwas_hdl.design.recurrent import recurrent_model
+    from pwas_hdl.design.recurrent import estimate_rows, recurrent_model
     from pwas_hdl.io.csv_table import check_trajectory_column, format_csv, split_trajectories
     from pwas_hdl.verify.simulation import _checks, _json_default
 
@@ -141,8 +141,9 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         codes = rm.quantize_signals(u, y)
         words, exp, res = recurrence_words(rm, codes, in_fields, out_fields)
         zf = np.asarray(sensor.predict(u, y), dtype=float).reshape(-1, len(tgts))
+        rows, has_ref = estimate_rows(sl.start, sl.stop, lags, lead)
         segs.append({"words": words, "expected": exp, "bt": res["out"], "bt_oor": res["out_of_range"], "float": zf,
-                     "rows": np.arange(sl.start + m_hist - 1, sl.stop), "stop": sl.stop})
+                     "rows": rows, "has_reference": has_ref, "stop": sl.stop})
     n = int(sum(len(s["expected"]) for s in segs))
     say(f"simulating {n} samples of {table.path} through the recurrent {design.top} on {simulator} (cocotb) ...")
     rep = replay_segments(design.verilog_path, design.top,
@@ -174,7 +175,7 @@ def simulate_recurrent(design: Any, table: Any, output: str | Path, spath: Path,
         ref = table.reference_column(t)
         if ref is not None:
             zt = table.numeric([ref])[:, 0]
-            ok = np.concatenate([s["rows"] + lead < s["stop"] for s in segs])  # the reference row exists
+            ok = np.concatenate([s["has_reference"] for s in segs])  # the reference row exists
             r_ok = row[ok] + lead
             entry.update(reference_column=ref, reference_rows=int(ok.sum()),
                          rmsee_hw=rmse(zhw[ok, i], zt[r_ok]), rmsee_bittrue=rmse(zbt[ok, i], zt[r_ok]),
