@@ -75,7 +75,7 @@ def test_the_model_is_warped_and_its_past_estimate_is_a_signal_of_its_own(flow):
     assert d.top.extra_info["warp"]["kind"] == "pow2"
 
 
-@pytest.mark.parametrize("bits,frac", [(18, 12), (14, 9), (24, 18)])
+@pytest.mark.parametrize("bits,frac", [(18, 12), (14, 9), (21, 16)])
 def test_feedback_requant_to_a_warp_input_format_over_every_output_code(flow, bits, frac):
     """FeedbackRequant.between derived for the warp's input code format: q is the warp input code of
     the output's value (half up), within its error bound, saturating; checked for every output code."""
