@@ -5,6 +5,13 @@ Usage::
 
     python benchmarks/rtl_random_configs.py [--count 40] [--seed 0] [--simulator icarus|verilator]
                                             [--samples 300] [--quick] [--outdir benchmarks/results] [--stem NAME]
+    python benchmarks/rtl_random_configs.py --named [--simulator verilator] [--first K] [--count N]
+
+``--named`` replays the fixed configurations of the RTL tests instead of drawing
+(``sim/pwas_designs.RTL_CONFIGS``, all of them unless ``--first`` / ``--count`` take a slice), with
+the tests' stimulus (500 transfers, seed = length of the name): the tests replay every one on Icarus
+and a cover of them on Verilator; this runs every one on the simulator chosen. Default stem
+``rtl_named_configs`` (``_verilator`` added for Verilator).
 
 Configuration ``i`` of seed ``s`` is drawn from ``numpy.random.default_rng([s, i])`` (the same pair
 draws the same configuration on every machine and in every run): a core (n = 1..5) or a sensor top
@@ -145,8 +152,9 @@ def _describe(cfg) -> dict:
             "additive": cfg.additive, "options": cfg.options, "model_seed": cfg.seed}
 
 
-def run_config(cfg, simulator: str, samples: int, root: Path, cache: Path) -> dict:
-    """Generate and replay one configuration; the outcome record (see the module docstring)."""
+def run_config(cfg, simulator: str, samples: int, root: Path, cache: Path, stimulus_seed: int | None = None) -> dict:
+    """Generate and replay one configuration; the outcome record (see the module docstring). The
+    stimulus seed is the model seed mod 1000 unless ``stimulus_seed`` is given."""
     from pwas_hdl.errors import InputError
     from pwas_hdl.verify.simulation import load_design, run_rtl, segment, sim_module, standard_runs
 
@@ -164,11 +172,9 @@ def run_config(cfg, simulator: str, samples: int, root: Path, cache: Path) -> di
         return rec
     try:
         d = load_design(root / cfg.name)
-        if d.kind == "core":
-            codes = stim.core_codes(d.model, samples, seed=cfg.seed % 1000)
-        else:
-            codes = stim.sensor_codes(d.model, [f.get("signal", f["name"]) for f in d.in_fields], samples, seed=cfg.seed % 1000)
-        runs = standard_runs(d, codes, seed=cfg.seed % 1000)
+        seed = cfg.seed % 1000 if stimulus_seed is None else stimulus_seed
+        codes = stim.design_codes(d, samples, seed=seed)
+        runs = standard_runs(d, codes, seed=seed)
         res = run_rtl(d, runs, simulator, cache_dir=cache, work_dir=root / f"{cfg.name}-work", strict=False)
         man = d.manifest
         per_stream = len(segment(d, codes).src)
@@ -190,27 +196,37 @@ def run_config(cfg, simulator: str, samples: int, root: Path, cache: Path) -> di
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--count", type=int, default=40, help="configurations to draw (1..1000; default 40)")
+    ap.add_argument("--count", type=int, default=None, help="configurations to draw (1..1000; default 40; --named: all from --first)")
+    ap.add_argument("--named", action="store_true",
+                    help="replay the RTL tests' fixed configurations (sim/pwas_designs.RTL_CONFIGS) instead of drawing")
     ap.add_argument("--seed", type=int, default=0, help="seed of the draw (>= 0; default 0)")
     ap.add_argument("--first", type=int, default=0, help="index of the first configuration (>= 0; default 0)")
     ap.add_argument("--simulator", default="icarus", choices=("icarus", "verilator"))
-    ap.add_argument("--samples", type=int, default=300, help="input transfers per replay (20..100000; default 300)")
+    ap.add_argument("--samples", type=int, default=None, help="input transfers per replay (20..100000; default 300, --named 500)")
     ap.add_argument("--quick", action="store_true", help="3 configurations of 150 samples (the CI smoke)")
     ap.add_argument("--outdir", type=Path, default=default_outdir())
-    ap.add_argument("--stem", default=None, help="output file stem (default rtl_random_configs[_verilator][_quick])")
+    ap.add_argument("--stem", default=None, help="output file stem (default rtl_random_configs[_verilator][_quick], --named: rtl_named_configs[_verilator][_quick])")
     args = ap.parse_args(argv)
     from pwas_hdl.bench_results import check_count, check_stem
     from pwas_hdl.errors import InputError
     from pwas_hdl.io.atomic import OutputSet, check_output_path
+    from pwas_hdl.verify.simulation import sim_module
 
+    named = list(sim_module("pwas_designs").RTL_CONFIGS) if args.named else None
     if args.quick:
         args.count, args.samples = 3, 150
+    if named is not None and args.first >= len(named):
+        raise InputError(f"--first must be below {len(named)}, the number of named configurations, got {args.first}")
+    if args.count is None:
+        args.count = len(named) - args.first if named is not None else 40
+    if args.samples is None:
+        args.samples = 500 if named is not None else 300
     check_count("--count", args.count, 1000)
     if args.seed < 0 or args.first < 0:
         raise InputError("--seed and --first must be >= 0")
     if not 20 <= args.samples <= 100_000:
         raise InputError(f"--samples must be in 20..100000, got {args.samples}")
-    stem = check_stem(args.stem or ("rtl_random_configs" + ("_verilator" if args.simulator == "verilator" else "")
+    stem = check_stem(args.stem or (("rtl_named_configs" if named is not None else "rtl_random_configs") + ("_verilator" if args.simulator == "verilator" else "")
                                     + ("_quick" if args.quick else "")))
     check_output_path(args.outdir, "--outdir", kind="folder").mkdir(parents=True, exist_ok=True)
     with OutputSet() as outs:
@@ -220,15 +236,23 @@ def main(argv: list[str] | None = None) -> int:
             cache = root / "cache"
             rows = []
             t0 = time.perf_counter()
-            for i in range(args.first, args.first + args.count):
-                cfg = draw_config(args.seed, i)
-                rec = run_config(cfg, args.simulator, args.samples, root, cache)
+            indices = range(args.first, args.first + args.count)
+            if named is not None:
+                indices = range(args.first, min(args.first + args.count, len(named)))
+            for i in indices:
+                if named is not None:
+                    cfg = named[i]
+                    rec = run_config(cfg, args.simulator, args.samples, root, cache, stimulus_seed=len(cfg.name))
+                else:
+                    cfg = draw_config(args.seed, i)
+                    rec = run_config(cfg, args.simulator, args.samples, root, cache)
                 rec["index"] = i
                 rows.append(rec)
                 extra = rec.get("message", "") if rec["outcome"] != "pass" else f"{rec['outputs']} outputs"
                 print(f"[{i}] {cfg.name}: {rec['outcome']} ({rec['seconds']:.1f} s) {extra[:160]}", flush=True)
             counts = {k: sum(r["outcome"] == k for r in rows) for k in ("pass", "refused", "FAIL", "error")}
-            result = {"seed": args.seed, "first": args.first, "count": args.count, "simulator": args.simulator,
+            result = {"configurations": "named" if named is not None else "random",
+                      "seed": args.seed, "first": args.first, "count": len(rows), "simulator": args.simulator,
                       "samples": args.samples, "counts": counts, "seconds": time.perf_counter() - t0,
                       "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
                       "configs": rows}
@@ -253,8 +277,11 @@ def _options_text(options: dict) -> str:
 def markdown(result: dict) -> str:
     """The Markdown report of a result dict."""
     c = result["counts"]
-    md = ["# Random hardware configurations against the bit-true model", "",
-          f"`benchmarks/rtl_random_configs.py --seed {result['seed']} --first {result['first']} --count {result['count']} "
+    named = result.get("configurations") == "named"
+    title = "The RTL tests' fixed configurations" if named else "Random hardware configurations"
+    how = "--named" if named else f"--seed {result['seed']}"
+    md = [f"# {title} against the bit-true model", "",
+          f"`benchmarks/rtl_random_configs.py {how} --first {result['first']} --count {result['count']} "
           f"--simulator {result['simulator']} --samples {result['samples']}`: {c['pass']} pass, {c['refused']} refused by "
           f"`generate`, {c['FAIL']} FAIL, {c['error']} error ({result['seconds']:.0f} s).", "",
           "| # | design | n (Mu, My, nu, ny) | p | nz | kind | options | outcome | detail |", "|---:|---|---|---|---:|---|---|---|---|"]

@@ -141,6 +141,100 @@ class DesignConfig:
             return generate(self.model(), outdir, design=self.design, **self.options)
 
 
+#: The fixed configurations of the RTL tests (``tests/test_rtl_cocotb.py``: every one on Icarus, those of
+#: :data:`VERILATOR_RTL_CONFIGS` on Verilator too) and of ``benchmarks/rtl_random_configs.py --named``
+#: (every one on the simulator chosen): n = 1..6, cores and sensor tops, 1 and 2 targets, the memories,
+#: pipeline presets, goals and opt-in registers, input, weight and output formats, port names and
+#: ``$readmemh`` weights.
+RTL_CONFIGS = [
+    # name, design, Mu, My, nu, ny, partitions, nz, generate options
+    DesignConfig("c-n1-p5", "core", 0, 1, 0, 1, [5], 1, {}),
+    DesignConfig("c-n1-p8-z2-repl-min-b8", "core", 0, 1, 0, 1, [8], 2, {"memory": "replicated", "pipeline": "min", "input_bits": 8}),
+    DesignConfig("c-n2-p4x3-max-trunc", "core", 0, 2, 0, 1, [4, 3], 1, {"pipeline": "max", "rounding": "truncate"}),
+    DesignConfig("c-n2-p1x1", "core", 0, 2, 0, 1, [1, 1], 1, {"input_bits": 6}),
+    DesignConfig("c-n2-p7x7-z2-b10", "core", 0, 2, 0, 1, [7, 7], 2, {"input_bits": 10}),
+    DesignConfig("c-n3-p2x3x5-min-fill1", "core", 0, 3, 0, 1, [2, 3, 5], 1, {"pipeline": "min", "input_fill": 1.0}),
+    DesignConfig("c-n3-p4x4x4-z2-repl-sat", "core", 0, 3, 0, 1, [4, 4, 4], 2, {"memory": "replicated", "output_bits": 9}),
+    DesignConfig("c-n3-p6x2x3-wsat", "core", 0, 3, 0, 1, [6, 2, 3], 1, {"weight_bits": 8, "overflow": "saturate"}),
+    DesignConfig("c-n4-p3x1x2x4", "core", 0, 4, 0, 1, [3, 1, 2, 4], 1, {}),
+    DesignConfig("c-n4-p8x4x8x2-z2-b14", "core", 0, 4, 0, 1, [8, 4, 8, 2], 2, {"input_bits": 14, "pipeline": "max"}),
+    DesignConfig("c-n5-p2x2x2x2x2-z2-trunc-max", "core", 0, 5, 0, 1, [2, 2, 2, 2, 2], 2, {"rounding": "truncate", "pipeline": "max"}),
+    DesignConfig("c-n5-p3x1x2x4x2-repl-min-b14", "core", 0, 5, 0, 1, [3, 1, 2, 4, 2], 1, {"memory": "replicated", "pipeline": "min", "input_bits": 14}),
+    DesignConfig("c-n6-p2x2x2x2x2x2", "core", 0, 6, 0, 1, [2] * 6, 1, {}),
+    DesignConfig("c-n6-p1x2x1x3x2x1-z2-b10-wf", "core", 0, 6, 0, 1, [1, 2, 1, 3, 2, 1], 2, {"input_bits": 10, "weight_frac": 9, "output_frac": 6}),
+    DesignConfig("c-n3-p5x3x2-readmemh", "core", 0, 3, 0, 1, [5, 3, 2], 1, {"memory_init": "readmemh"}),
+    DesignConfig("c-n4-p2x3x2x3-addr-reg", "core", 0, 4, 0, 1, [2, 3, 2, 3], 1,
+                 {"pipeline": {"split": True, "rank": True, "addr": True, "mem_out": True, "product": True, "tree_levels": 1}}),
+    DesignConfig("s-y1-p6", "sensor", 0, 1, 0, 1, 6, 1, {}),
+    DesignConfig("s-y4-p3", "sensor", 0, 4, 0, 1, 3, 1, {}),
+    DesignConfig("s-u2y3-p4-2-z2", "sensor", 2, 3, 1, 1, [4, 4, 2, 2, 2], 2, {}),
+    DesignConfig("s-u1y1-nu2-p3-repl-min", "sensor", 1, 1, 2, 1, 3, 1, {"memory": "replicated", "pipeline": "min"}),
+    DesignConfig("s-u2y1-ny2-z2-trunc", "sensor", 2, 1, 1, 2, [2, 2, 3, 5], 2, {"rounding": "truncate"}),
+    DesignConfig("s-u3y3-p2-max", "sensor", 3, 3, 1, 1, 2, 1, {"pipeline": "max"}),
+    DesignConfig("s-y2-ny2-p5x3-b8", "sensor", 0, 2, 0, 2, [5, 3, 5, 3], 1, {"input_bits": 8}),
+    DesignConfig("s-u1y2-p8-6-z2-b16", "sensor", 1, 2, 1, 1, [8, 6, 6], 2, {"input_bits": 16}),
+    DesignConfig("c-n2-p3x2-amaranth-ports", "core", 0, 2, 0, 1, [3, 2], 1, {"ports": "amaranth"}),
+    DesignConfig("c-n3-p8x4x1-exact-scale-b10", "core", 0, 3, 0, 1, [8, 4, 1], 2, {"input_scale": "exact", "input_bits": 10}),
+    DesignConfig("s-y2-p8-exact-scale-fill95-max", "sensor", 0, 2, 0, 1, 8, 1, {"input_scale": "exact", "input_fill": 0.95, "pipeline": "max"}),
+    DesignConfig("s-y2-p5-amaranth-ports", "sensor", 0, 2, 0, 1, 5, 1, {"ports": "amaranth", "pipeline": "max"}),
+    DesignConfig("s-y3-p4-addr-reg-repl", "sensor", 0, 3, 0, 1, 4, 1,
+                 {"memory": "replicated", "pipeline": {"split": False, "rank": True, "addr": True, "mem_out": False, "product": False, "tree_levels": 0}}),
+    # issue 14: the generate --goal builds (latency = short: min + product; throughput = max, every
+    # register incl. mul_in, offset and bank; the max configurations above and the default ones run
+    # the new max / balanced presets too), and the offset / bank registers without the others
+    DesignConfig("c-n4-p3x2x5x2-goal-throughput", "core", 0, 4, 0, 1, [3, 2, 5, 2], 1, {"goal": "throughput"}),
+    DesignConfig("c-n3-p5x2x3-z2-goal-latency", "core", 0, 3, 0, 1, [5, 2, 3], 2, {"goal": "latency"}),
+    DesignConfig("c-n3-p3x2x4-z2-max-lut", "core", 0, 3, 0, 1, [3, 2, 4], 2, {"pipeline": "max-lut"}),
+    DesignConfig("s-y4-p3-offset-bank", "sensor", 0, 4, 0, 1, 3, 1,
+                 {"pipeline": {"split": False, "rank": False, "addr": False, "offset": True, "bank": True, "mem_out": True,
+                               "mul_in": False, "product": False, "tree_levels": 2}}),
+    # the banked core without the address rotation (bank addresses as bit fields c_j + step, the
+    # rotation from the cells' adder tree): p + 1 a power of two in the middle dimensions; latency =
+    # mu in the memory cycle; p = 7, n = 3 has a last-dimension field (v // (n+1))
+    # (--memory banked: these grids' goal memory is the replicated one, below)
+    DesignConfig("c-n4-p3-goal-latency", "core", 0, 4, 0, 1, 3, 1, {"goal": "latency", "memory": "banked"}),
+    DesignConfig("c-n3-p7-z2-goal-throughput", "core", 0, 3, 0, 1, 7, 2, {"goal": "throughput"}),
+    DesignConfig("c-n3-p7-z2-goal-latency-b10", "core", 0, 3, 0, 1, 7, 2, {"goal": "latency", "input_bits": 10, "memory": "banked"}),
+    # the latency build's one-sum adder (flat_sum) with a saturation the weights reach (9-bit
+    # outputs: kept by prune_sat), and truncation (no rounding constant in the sum)
+    DesignConfig("c-n3-p4x4x4-z2-sat-goal-latency", "core", 0, 3, 0, 1, [4, 4, 4], 2, {"goal": "latency", "output_bits": 9}),
+    DesignConfig("c-n2-p5x3-trunc-goal-latency", "core", 0, 2, 0, 1, [5, 3], 1, {"goal": "latency", "rounding": "truncate"}),  # the goal's memory: replicated
+    # issue 14, the latency-first front (opt-in, no preset): corner banks (2**n memories addressed by
+    # the cells; vertex k's word chosen among its corners after the memory's output register) and the
+    # comparators on the input bits with the rotation from residue tables (raw_compare)
+    DesignConfig("c-n3-p3x2x4-z2-corner-memout", "core", 0, 3, 0, 1, [3, 2, 4], 2,
+                 {"memory": "corner", "pipeline": {"split": False, "rank": False, "addr": False, "mem_out": True, "mul_in": False,
+                                                   "product": True, "tree_levels": 0, "mu_late": True}}),
+    DesignConfig("s-y3-p3-raw-compare", "sensor", 0, 3, 0, 1, 3, 1,
+                 {"pipeline": {"split": False, "rank": False, "addr": False, "mem_out": False, "mul_in": False, "product": True,
+                               "tree_levels": 0, "mu_late": True, "raw_compare": True}}),
+    # hw14e (opt-in, no preset): the latency build's one sum through column counters (counter_sum)
+    DesignConfig("c-n4-p3x2x3x2-z2-counter-sum", "core", 0, 4, 0, 1, [3, 2, 3, 2], 2,
+                 {"pipeline": {"split": False, "rank": False, "addr": False, "mem_out": False, "mul_in": True, "product": False,
+                               "tree_levels": 0, "mu_late": True, "flat_sum": True, "prune_sat": True, "raw_compare": True,
+                               "counter_sum": True}}),
+    # hw14h: the latency build with the replicated memory (bit-field vertex addresses, mu after the
+    # read; p + 1 = 4, 8 with the first dimension's p = 5 in the top field), and a sensor top
+    DesignConfig("c-n3-p5x7x3-z2-repl-goal-latency", "core", 0, 3, 0, 1, [5, 7, 3], 2, {"memory": "replicated", "goal": "latency"}),
+    DesignConfig("s-y4-p3-repl-goal-latency", "sensor", 0, 4, 0, 1, 3, 1, {"memory": "replicated", "goal": "latency"}),
+    # --goal latency without --memory: the goal's memory (replicated: power-of-two strides, pwas_hdl.design.goal_memory), n = 4
+    DesignConfig("c-n4-p3x3x3x7-goal-latency-goal-memory", "core", 0, 4, 0, 1, [3, 3, 3, 7], 1, {"goal": "latency"}),
+]
+
+
+#: The configurations of :data:`RTL_CONFIGS` that the RTL tests also replay on Verilator (a cover of what
+#: its 2-state, width-strict simulation could treat differently: n = 1, 2, 3, 4, 6, cores and sensor tops,
+#: the replicated and corner memories, ``$readmemh``, Amaranth port names, truncation, weight saturation,
+#: the latency build's one-sum adder with ``prune_sat`` and column counters, bit-field addresses). The
+#: others run on Verilator in ``benchmarks/rtl_random_configs.py --named --simulator verilator``.
+VERILATOR_RTL_CONFIGS = (
+    "c-n1-p8-z2-repl-min-b8", "c-n2-p4x3-max-trunc", "c-n3-p5x3x2-readmemh", "c-n3-p3x2x4-z2-corner-memout",
+    "c-n6-p1x2x1x3x2x1-z2-b10-wf", "c-n3-p6x2x3-wsat", "s-u1y1-nu2-p3-repl-min", "s-u2y1-ny2-z2-trunc",
+    "c-n2-p3x2-amaranth-ports", "c-n3-p4x4x4-z2-sat-goal-latency", "c-n4-p3x2x3x2-z2-counter-sum",
+    "c-n3-p7-z2-goal-latency-b10",
+)
+
+
 #: The additive designs of the RTL benches (issue 15; ``tests/test_additive_rtl.py``): a sensor top with
 #: the sliding-pair parts (y[t-2], y[t-1]) and (y[t-1], y[t]) behind one lag bank,
 #: and a core with parts of 1 to 3 dimensions, two targets, the deepest pipeline and truncation, whose

@@ -126,6 +126,15 @@ def sensor_codes(model, signals: list[str], t_len: int, seed: int = 0) -> np.nda
     return np.stack(cols, axis=1)
 
 
+def design_codes(design, m: int, seed: int = 0) -> np.ndarray:
+    """``m`` input transfers for a loaded design (:class:`pwas_hdl.verify.simulation.Design`): the
+    core's regressor codes (:func:`core_codes`) or, for a sensor top, per-signal codes of its input
+    fields in port order (:func:`sensor_codes`)."""
+    if design.kind == "core":
+        return core_codes(design.model, m, seed=seed)
+    return sensor_codes(design.model, [f.get("signal", f["name"]) for f in design.in_fields], m, seed=seed)
+
+
 #: Blocks of :func:`observer_codes`.
 OBSERVER_KINDS = ("data", "steps", "fullscale", "saturating", "silence")
 

@@ -135,6 +135,7 @@ def test_cg_preconditioners_subset(tmp_path):
     ("rtl_random_configs", ["--count", "0"], "--count"),
     ("rtl_random_configs", ["--samples", "5"], "--samples must be in 20..100000"),
     ("rtl_random_configs", ["--seed", "-1"], "--seed and --first must be >= 0"),
+    ("rtl_random_configs", ["--named", "--first", "44"], "--first must be below 44, the number of named configurations"),
     ("rtl_random_configs", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
     ("generate_scale", ["--points", "2:x"], "--points takes n:p pairs"),
     ("generate_scale", ["--points", "2:4000"], "--points: at most"),

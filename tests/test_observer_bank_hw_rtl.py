@@ -101,7 +101,7 @@ CONFIGS = {
 
 @pytest.mark.rtl
 @pytest.mark.parametrize("simulator,config", [("icarus", "n3-m5-deadbeat-11b"), ("icarus", "n2-m3-kalman-11bsq-saturating"),
-                                              ("verilator", "n3-m5-deadbeat-11b")])
+                                              ("verilator", "n2-m3-kalman-11bsq-saturating")])
 def test_rtl_bit_exact(pv_small, tmp_path, sim_cache, simulator, config):
     cfg = dict(CONFIGS[config])
     opts = {k: cfg.pop(k) for k in ("state_bits",) if k in cfg}

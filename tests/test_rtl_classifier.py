@@ -63,9 +63,7 @@ def folders(switched_model, tmp_path_factory):
 
 
 def _codes(d, seed: int, m: int = 200) -> np.ndarray:
-    if d.kind == "core":
-        return stimulus.core_codes(d.model, m, seed=seed)
-    return stimulus.sensor_codes(d.model, [f["signal"] for f in d.in_fields], m, seed=seed)
+    return stimulus.design_codes(d, m, seed=seed)
 
 
 def test_classifier_manifest_and_header(folders):

@@ -22,12 +22,12 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers.cli import CliRunner
+from helpers.design_cache import DesignCache, parallel_twin
 
 from pwas_hdl.fixedpoint.argmax import argmax_index
 from pwas_hdl.verify.simulation import Run, load_design, run_rtl, segment, sim_module, standard_runs
@@ -40,29 +40,16 @@ CFG = {c.name: c for c in designs.CLASSIFIER_SERIAL_CONFIGS}
 
 
 def _parallel_twin(cfg):
-    opts = {k: v for k, v in cfg.options.items() if k != "architecture"}
-    return replace(cfg, name=f"par-{cfg.name}", options=opts)
+    return parallel_twin(cfg, f"par-{cfg.name}")
 
 
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory):
-    made: dict[str, Path] = {}
-    root = tmp_path_factory.mktemp("serial_classifier")
-
-    def get(cfg, memory_init: str = "inline") -> Path:
-        key = cfg.name if memory_init == "inline" else f"{cfg.name}-{memory_init}"
-        if key not in made:
-            replace(cfg, options={**cfg.options, "memory_init": memory_init}).generate(root / key)
-            made[key] = root / key
-        return made[key]
-
-    return get
+    return DesignCache(tmp_path_factory.mktemp("serial_classifier"))
 
 
-def _codes(d, seed: int, m: int = 200):
-    if d.kind == "core":
-        return stimulus.core_codes(d.model, m, seed=seed)
-    return stimulus.sensor_codes(d.model, [f["signal"] for f in d.in_fields], m, seed=seed)
+def _codes(d, seed: int, m: int = 200) -> np.ndarray:
+    return stimulus.design_codes(d, m, seed=seed)
 
 
 def _expected_latency(man: dict, pipeline) -> int:

@@ -14,11 +14,11 @@ import json
 import shutil
 import subprocess
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers.cli import CliRunner
+from helpers.design_cache import DesignCache
 
 from pwas_hdl.verify.simulation import load_design, run_rtl, segment, sim_module, standard_runs
 
@@ -35,22 +35,11 @@ def _parallel_twin(cfg):
 
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory):
-    made: dict[str, Path] = {}
-    root = tmp_path_factory.mktemp("serial")
-
-    def get(cfg) -> Path:
-        if cfg.name not in made:
-            cfg.generate(root / cfg.name)
-            made[cfg.name] = root / cfg.name
-        return made[cfg.name]
-
-    return get
+    return DesignCache(tmp_path_factory.mktemp("serial"))
 
 
-def _codes(d, seed: int, m: int = 150):
-    if d.kind == "core":
-        return stimulus.core_codes(d.model, m, seed=seed)
-    return stimulus.sensor_codes(d.model, [f.get("signal", f["name"]) for f in d.in_fields], m, seed=seed)
+def _codes(d, seed: int, m: int = 150) -> np.ndarray:
+    return stimulus.design_codes(d, m, seed=seed)
 
 
 @pytest.mark.parametrize("name", list(SERIAL))
