@@ -41,6 +41,7 @@ from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl.names import check_module_name, check_signal_names
 from pwas_hdl.io.atomic import check_output_path, clean_stale_temps, make_temp_dir
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.fixedpoint.memory_layout import SINGLE_MEMORY, model_layout
 from pwas_hdl.design.manifest import build_manifest, manifest_text
 from pwas_hdl.fit.model_file import model_text
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -109,8 +110,11 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
     ----------
     sensor : PWASVirtualSensor
         A fitted or loaded sensor.
-    memory : {"banked", "replicated", "corner"}
-        Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`).
+    memory : {"banked", "replicated", "corner", "single"}
+        Weight memory layout (:mod:`pwas_hdl.fixedpoint.memory_layout`); ``"single"``, the serial
+        core's one memory (a serial design's ``generator.options.memory``), is the replicated
+        layout's copy 0 and gives the model that layout
+        (:func:`~pwas_hdl.fixedpoint.memory_layout.model_layout`).
     **formats
         Word formats, the names of :data:`FORMAT_OPTIONS` (``input_bits``, ``weight_frac``, ...);
         None means the default.
@@ -137,6 +141,7 @@ def fixed_point_model(sensor: PWASVirtualSensor, memory: str = "banked", **forma
     if unknown:
         raise InputError(f"unknown format option(s) {sorted(unknown)}; known: {', '.join(FORMAT_OPTIONS)}")
     given = {k: v for k, v in formats.items() if v is not None}
+    memory = model_layout(memory)  # the serial core's single memory: the replicated layout's copy 0
     if _is_additive(sensor):  # the parts' cores summed before one rounding (pwas_hdl.fixedpoint.additive)
         from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
 
@@ -496,6 +501,8 @@ def build_design(
     if architecture == "serial" and memory is not None:  # it was ignored, and the manifest recorded it as built
         raise InputError(f"--memory {memory} does not apply to --architecture serial (one weight memory of N words, "
                          "one vertex read per cycle); leave --memory out")
+    if architecture == "serial":  # the serial core's one memory of N words: what the manifest records (was "banked")
+        memory = SINGLE_MEMORY
     if name is not None:
         check_module_name(name)
     sensor = _load_sensor(model)

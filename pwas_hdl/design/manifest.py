@@ -37,8 +37,8 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
       "lags": {"Mu": .., "My": .., "inputs": [...], "outputs": [...], "targets": [...], "regressors": [...],
                "warmup": {"samples_without_output": M - 1, "port": "warm", "meaning": ..}},   # sensor only
       "error_bound": {"lsb": .., "physical": .., "weight_term": .., "output_term": .., ...},
-      "memory": {"kind": "banked" | "replicated", "memories": n+1, "depth": .., "word_bits": ..,
-                 "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},
+      "memory": {"kind": "banked" | "replicated" | "corner" | "single", "memories": n+1, "depth": .., "word_bits": ..,
+                 "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},   # kind = generator.options.memory
       "pipeline": {...}, "arithmetic": {...},
       "architecture": {"kind": "parallel" | "serial", "multipliers": .., "multipliers_per_target": ..,
                        "cycles_per_sample": .., "ii": .., "meaning": ..},   # serial: memory.kind "single"
@@ -460,6 +460,8 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
         errs.append(f"formats.inputs has {len(m['formats']['inputs'])} entries for {n} lags.regressors")
     if m["generator"]["options"]["design"] != m["design"]:
         errs.append(f"generator.options.design is {m['generator']['options']['design']!r} but design is {m['design']!r}")
+    if m["generator"]["options"]["memory"] != m["memory"]["kind"]:  # the serial core's: "single" (was recorded "banked")
+        errs.append(f"generator.options.memory is {m['generator']['options']['memory']!r} but memory.kind is {m['memory']['kind']!r}")
     if m["memory"]["n_vertices"] != m["domain"]["n_vertices"]:
         errs.append(f"memory.n_vertices {m['memory']['n_vertices']} differs from domain.n_vertices {m['domain']['n_vertices']}")
     warm = m["lags"].get("warmup")  # optional by the schema: present exactly for the sensor designs

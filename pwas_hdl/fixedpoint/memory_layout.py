@@ -73,9 +73,32 @@ from pwas_hdl.fixedpoint.bitfields import check_codes, int64_codes, pack_rows, t
 from pwas_hdl.limits import MAX_MEMORY_WORDS, check_limit
 
 __all__ = ["BankedLayout", "ReplicatedLayout", "CornerLayout", "make_layout", "readmemh_text", "pack_words", "hex_files", "LAYOUT_KINDS",
-           "weight_memory_name", "hex_file_name", "WEIGHT_MEMORY_PATTERN"]
+           "weight_memory_name", "hex_file_name", "WEIGHT_MEMORY_PATTERN", "SINGLE_MEMORY", "model_layout"]
 
 LAYOUT_KINDS = ("banked", "replicated", "corner")
+
+#: The serial core's weight memory (``generate --architecture serial``,
+#: :class:`pwas_hdl.hdl.serial_core.SingleMemoryPlan`): one memory of ``N`` words addressed by the
+#: linear vertex index, which is copy 0 of the replicated layout. The manifest's ``memory.kind`` and
+#: ``generator.options.memory`` of a serial design.
+SINGLE_MEMORY = "single"
+
+
+def model_layout(memory: str) -> str:
+    """The bit-true model's layout of a design's weight memory (``generate``'s ``memory``, the
+    manifest's ``generator.options.memory``).
+
+    Parameters
+    ----------
+    memory : {"banked", "replicated", "corner", "single"}
+
+    Returns
+    -------
+    str
+        ``memory`` itself, or ``"replicated"`` for the serial core's :data:`SINGLE_MEMORY` (its one
+        memory is the replicated layout's copy 0: the same address of every vertex).
+    """
+    return "replicated" if memory == SINGLE_MEMORY else memory
 
 
 def _as_weight_matrix(weight_codes, n_vertices: int) -> np.ndarray:

@@ -87,6 +87,7 @@ from numpy.typing import ArrayLike
 from pwas_hdl.errors import InputError, InternalError, option_text
 from pwas_hdl.fixedpoint.bittrue import MAX_DATAPATH_BITS, FixedPointModel
 from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat, PortFormat, SignalScaling, signed_bits_needed
+from pwas_hdl.fixedpoint.memory_layout import model_layout
 from pwas_hdl.fit.observer_bank import FRONT_END_KIND, ObserverBankFrontEnd, canonical_form
 
 if TYPE_CHECKING:
@@ -908,8 +909,9 @@ def observer_bank_model(sensor: PWASVirtualSensor, memory: str = "banked", **for
     ----------
     sensor : PWASVirtualSensor
         Fitted, with an observer-bank front end.
-    memory : {"banked", "replicated", "corner"}
-        Weight memory layout of the core.
+    memory : {"banked", "replicated", "corner", "single"}
+        Weight memory layout of the core (``"single"``: the serial core's, modelled by the
+        replicated layout, :func:`~pwas_hdl.fixedpoint.memory_layout.model_layout`).
     **formats
         As above.
 
@@ -924,6 +926,7 @@ def observer_bank_model(sensor: PWASVirtualSensor, memory: str = "banked", **for
     InputError
         An unknown option, an input scale other than ``pow2``, or impossible formats.
     """
+    memory = model_layout(memory)
     given = {k: v for k, v in formats.items() if v is not None}
     bank = {k: given.pop(k) for k in BANK_FORMAT_OPTIONS if k in given}
     if "input_scale" in given and given["input_scale"] != "pow2":

@@ -62,6 +62,7 @@ from amaranth.lib.wiring import In, Out
 
 from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.fixedpoint.reduction import tree_reduce
+from pwas_hdl.fixedpoint.memory_layout import SINGLE_MEMORY
 from pwas_hdl.hdl._lintsafe import add_const_wrap, sink_unused
 from pwas_hdl.hdl.classifier_top import argmax_extent
 from pwas_hdl.hdl.core import PWASCore
@@ -297,7 +298,7 @@ class AdditiveCore(wiring.Component):
         for c in self.parts:
             c._MustUse__silence = True  # built into the part modules by build_into, never elaborated alone
         self.pipeline = base
-        self.memory_kind = "single" if architecture == "serial" else memory
+        self.memory_kind = SINGLE_MEMORY if architecture == "serial" else memory
         self.memory_plan = AdditiveMemoryPlan(tuple(c.memory_plan for c in self.parts))
         self.argmax = argmax  # a classifier's stage after the sum (elaborate only; build_into is the sum alone)
         cycles, index_bits = argmax_extent(argmax, int(model.nz) * int(model.output_format.bits) + 1)

@@ -50,7 +50,7 @@ from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _Pipe
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
-from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
+from pwas_hdl.fixedpoint.memory_layout import SINGLE_MEMORY, weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
 __all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency", "serial_throttle"]
@@ -97,8 +97,8 @@ class SingleMemoryPlan(MemoryPlan):
 
     @property
     def kind(self) -> str:
-        """Always ``"single"``."""
-        return "single"
+        """Always ``"single"`` (:data:`~pwas_hdl.fixedpoint.memory_layout.SINGLE_MEMORY`)."""
+        return SINGLE_MEMORY
 
     @property
     def n_banks(self) -> int:
@@ -143,7 +143,7 @@ class SingleMemoryPlan(MemoryPlan):
             ``kind``, ``memories`` (1), ``depth`` (words), ``address`` (a sentence: how a vertex's
             address is formed).
         """
-        return {"kind": "single", "memories": 1, "depth": int(self.depth),
+        return {"kind": SINGLE_MEMORY, "memories": 1, "depth": int(self.depth),
                 "address": "linear vertex index (C order, last dimension fastest)"}
 
 
@@ -190,7 +190,7 @@ class SerialPWASCore(PWASCore):
     def __init__(self, params: CoreParams, *, pipeline: Pipeline | str | None = None, memory: str = "single",
                  round_output: bool = True):
         self._MustUse__silence = True
-        if memory != "single":
+        if memory != SINGLE_MEMORY:
             raise InputError(f"the serial core has one weight memory (memory='single'), got {memory!r}")
         super().__init__(params, memory="replicated", pipeline=pipeline, round_output=round_output)
         self._MustUse__silence = True

@@ -1,0 +1,85 @@
+"""What ``generate`` says about a design: the manifest, the Verilog header, the report and the console
+line name what was built (build only, no simulation).
+
+Each test was written for a statement a review found untrue: a serial design recorded
+``generator.options.memory = "banked"``; a recurrent top's ``architecture.meaning`` said II = 1 next
+to ``ii`` = latency; an additive design's header gave the largest part's depth for every memory;
+the ``--clock-mhz`` labels of a serial design named registers the serial core does not build; the
+critical path of a classifier ended at ``scores_payload``; the console line said neither serial nor
+classifier.
+"""
+
+from __future__ import annotations
+
+import warnings
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from pwas_hdl.design.generate import build_design, fixed_point_model
+from pwas_hdl.design.manifest import manifest_errors
+from pwas_hdl.verify.simulation import sim_module
+
+designs = sim_module("pwas_designs")
+
+#: Tiny synthetic models (no fitting): (mu, my, nu, ny, partitions, nz, keyword options of synthetic_model).
+MODELS = {
+    "plain": (0, 2, 0, 1, 3, 1, {}),
+    "sensor": (1, 2, 1, 1, 2, 1, {}),
+    "classifier": (0, 2, 0, 1, [3, 2], 3, {"classes": (0, 1, 2)}),
+    "additive": (0, 3, 0, 1, [3, 2, 4], 2, {"additive": "0;1,2"}),
+}
+
+
+@lru_cache(maxsize=None)
+def _model(kind: str):
+    if kind == "recurrent":  # a recurrent sensor (fit --mz): the three-tank observer map on a 4 x 4 grid
+        from pwas_hdl.fit.map_approximation import fit_map, recurrent_sensor_from_map
+        from pwas_hdl.systems.decoupled_observer import observer_map_28
+
+        a = fit_map(lambda x: observer_map_28(x[:, 0], x[:, 1]), ([0.0, 0.0], [25.0, 25.0]), 4)
+        return recurrent_sensor_from_map(a, [], ["y"], ["x3"], [2.0])
+    mu, my, nu, ny, parts, nz, kw = MODELS[kind]
+    return designs.synthetic_model(mu, my, nu, ny, parts, nz, seed=3, **kw)
+
+
+@lru_cache(maxsize=None)
+def _design(kind: str, design: str = "core", architecture: str = "parallel", pipeline: str | None = None):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # saturation warnings of the random weights
+        return build_design(_model(kind), design=design, architecture=architecture, pipeline=pipeline)
+
+
+SERIAL = [("plain", "core"), ("sensor", "sensor"), ("classifier", "core"), ("additive", "core"), ("recurrent", "sensor")]
+
+
+# ------------------------------------------------------------------------------ 1. the serial core's memory
+@pytest.mark.parametrize("kind, design", SERIAL)
+def test_a_serial_design_records_its_single_memory(kind, design):
+    """``generator.options.memory`` said "banked" for the serial core's one memory of N words."""
+    man = _design(kind, design, "serial").manifest
+    assert man["generator"]["options"]["memory"] == man["memory"]["kind"] == man["memory"]["layout_spec"]["kind"] == "single"
+    assert not manifest_errors(man)
+    old = {**man, "generator": {**man["generator"], "options": {**man["generator"]["options"], "memory": "banked"}}}
+    assert any("generator.options.memory is 'banked' but memory.kind is 'single'" in e for e in manifest_errors(old))
+
+
+def test_the_single_memory_rebuilds_the_bit_true_model_and_gets_no_floorplan(tmp_path):
+    """What reads ``generator.options.memory`` takes "single": simulate rebuilds the bit-true model
+    (the replicated layout, whose copy 0 is the serial memory) and synth plans no block-RAM rows."""
+    from pwas_hdl.design.generate import write_folder
+    from pwas_hdl.flow.floorplan import plan_sites
+    from pwas_hdl.hdl import Pipeline
+    from pwas_hdl.verify.simulation import load_design
+
+    gd = _design("plain", "core", "serial")
+    fxm = fixed_point_model(_model("plain"), memory="single")
+    assert fxm.layout.kind == "replicated"
+    q = np.random.default_rng(0).integers(-(1 << (fxm.input_bits - 1)), 1 << (fxm.input_bits - 1), (200, fxm.n))
+    assert all(np.array_equal(a, b) for a, b in zip(fxm.evaluate(q), gd.model.evaluate(q)))
+    write_folder(gd.files, tmp_path / "d")
+    assert load_design(tmp_path / "d").model.layout.kind == "replicated"
+    rec = plan_sites({"wmem0": "DP16KD", "prod0": "MULT18X18D"}, "45k", pipeline=Pipeline.cast("short").to_dict(),
+                     memory=gd.manifest["memory"]["kind"])
+    assert not rec["applied"] and "'single'" in rec["reason"]
