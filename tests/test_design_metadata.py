@@ -40,6 +40,14 @@ def _model(kind: str):
 
         a = fit_map(lambda x: observer_map_28(x[:, 0], x[:, 1]), ([0.0, 0.0], [25.0, 25.0]), 4)
         return recurrent_sensor_from_map(a, [], ["y"], ["x3"], [2.0])
+    if kind == "bank":  # an observer-bank sensor (fit --front-end observer-bank) on 300 samples
+        from pwas_hdl.fit.observer_bank import ObserverBankFrontEnd
+        from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+        from pwas_hdl.systems.pv_benchmark import make_pv_dataset
+
+        tr, _, _ = make_pv_dataset("pv-benchmark", 300, 10, seed=0)
+        fe = ObserverBankFrontEnd(n_models=2, observer="deadbeat", features="11b", order=2)
+        return PWASVirtualSensor(mu=0, my=0, partitions=2, gamma=1.0, front_end=fe, sigma=1e-3).fit(tr.u, tr.y, tr.z)
     mu, my, nu, ny, parts, nz, kw = MODELS[kind]
     return designs.synthetic_model(mu, my, nu, ny, parts, nz, seed=3, **kw)
 
@@ -83,3 +91,39 @@ def test_the_single_memory_rebuilds_the_bit_true_model_and_gets_no_floorplan(tmp
     rec = plan_sites({"wmem0": "DP16KD", "prod0": "MULT18X18D"}, "45k", pipeline=Pipeline.cast("short").to_dict(),
                      memory=gd.manifest["memory"]["kind"])
     assert not rec["applied"] and "'single'" in rec["reason"]
+
+
+# ------------------------------------------------------------------------------ 2. the design's II in words
+@pytest.mark.parametrize("kind, design, architecture", [
+    ("recurrent", "sensor", "parallel"),  # II = latency (the feedback), the parallel core's II is 1
+    ("recurrent", "sensor", "serial"),  # II = latency, the serial core's n + 1
+    ("bank", "sensor", "serial"),  # II = the time-multiplexed bank's cycles per sample
+    ("plain", "core", "parallel"),
+    ("plain", "core", "serial"),
+    ("additive", "core", "serial"),
+])
+def test_architecture_meaning_states_the_designs_ii(kind, design, architecture):
+    """A recurrent top's ``architecture.meaning`` said "II = 1" beside ``ii`` = latency."""
+    man = _design(kind, design, architecture).manifest
+    a = man["architecture"]
+    assert a["ii"] == man["ii"] and a["kind"] == architecture
+    if a["ii"] == a["cycles_per_sample"]:  # the core's own rate: parallel "II = 1", serial "n + 1 cycles per sample"
+        assert ("II = 1" in a["meaning"]) == (a["ii"] == 1) and ("n + 1 cycles per sample" in a["meaning"]) == (architecture == "serial")
+        assert "the design's II" not in a["meaning"]
+    else:  # a top around the core takes samples more slowly: the text gives the field's value and why
+        assert a["meaning"].endswith(f"the design's II = {man['ii']}: " + ("one sample in flight, the estimate fed back into "
+                                     "the next regressor: II = latency" if kind == "recurrent" else
+                                     "the time-multiplexed observer bank's cycles per sample (front_end.cycles_per_sample)"))
+    if kind == "recurrent":
+        assert man["ii"] == man["latency_cycles"] > a["cycles_per_sample"]
+
+
+def test_architecture_info_needs_a_reason_for_another_ii():
+    from pwas_hdl.errors import InternalError
+    from pwas_hdl.hdl import build_core
+    from pwas_hdl.hdl.serial_core import architecture_info
+
+    core = build_core(_design("plain").model)
+    assert architecture_info(core)["ii"] == architecture_info(core, 1)["ii"] == 1
+    with pytest.raises(InternalError, match="differs from its core's 1"):
+        architecture_info(core, 5)

@@ -41,7 +41,8 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
                  "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},   # kind = generator.options.memory
       "pipeline": {...}, "arithmetic": {...},
       "architecture": {"kind": "parallel" | "serial", "multipliers": .., "multipliers_per_target": ..,
-                       "cycles_per_sample": .., "ii": .., "meaning": ..},   # serial: memory.kind "single"
+                       "cycles_per_sample": .., "ii": .., "meaning": ..},   # serial: memory.kind "single";
+                                                 # cycles_per_sample the core's, ii the design's (= the top-level ii)
       "timing": {...},                           # only with generate --clock-mhz (timing closure)
       "classifier": {"target": "mode", "classes": [0, 1, 2], "n_classes": 3,   # only for a classifier model:
                      "port": "m_axis_tdata", "field": "class_index", "lsb": .., "width": 2,  # argmax stage after

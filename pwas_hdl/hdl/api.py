@@ -236,7 +236,8 @@ def design_info(component: Any, ports: str = "axis") -> dict:
         info["flow_control"].update(core.flow_control(nm))
     if component is not core and hasattr(component, "flow_control"):  # a top's own input throttle (serial observer bank)
         info["flow_control"].update(component.flow_control(nm))
-    info["architecture"] = {**architecture_info(core), "ii": int(component.ii)}  # the design's II (a top may add to it)
+    # the design's II: a top may take samples more slowly than its core (its ii_meaning says why)
+    info["architecture"] = architecture_info(core, int(component.ii), getattr(component, "ii_meaning", None))
     info.update(getattr(component, "extra_info", {}))
     if classifier is not None:
         info["classifier"] = cinfo

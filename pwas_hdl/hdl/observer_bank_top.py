@@ -402,6 +402,8 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
         top.plan = plan_serial_bank(bank, lanes, isqrt_every, top.core.ii, double_buffered=double_buffered)
         top.stages_before_core = top.plan.stages_before_core
         top.ii = top.cycles_per_sample = top.plan.cycles_per_sample
+        # why II is not the serial core's (the manifest's architecture.meaning, serial_core.architecture_info)
+        top.ii_meaning = "the time-multiplexed observer bank's cycles per sample (front_end.cycles_per_sample)"
     else:
         top.core = PWASCore(params, memory=memory, pipeline=pipeline)
         top.plan = None

@@ -145,6 +145,8 @@ class PWASRecurrentTop(wiring.Component):
         self.initial_codes = [[int(v) for v in row] for row in initial_codes]
         self.latency = self.core.latency
         self.ii = max(1, self.latency)
+        #: why II is not the core's (the manifest's architecture.meaning, pwas_hdl.hdl.serial_core.architecture_info)
+        self.ii_meaning = "one sample in flight, the estimate fed back into the next regressor: II = latency"
         self.memory_plan = self.core.memory_plan
         self.pipeline = self.core.pipeline
         self.warmup = max([k for _, k in self.signals] + [1]) - 1

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 from amaranth.hdl import Const, Module, Signal, Value, signed, unsigned
 
-from pwas_hdl.errors import InputError
+from pwas_hdl.errors import InputError, InternalError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, sink_unused
 from pwas_hdl.hdl.core import PWASCore, _Pipe
 from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
@@ -411,7 +411,7 @@ def serial_throttle(m: Module, n: int, adv: Value, valid: Value, advance: Signal
     return take
 
 
-def architecture_info(core: PWASCore) -> dict:
+def architecture_info(core: PWASCore, ii: int | None = None, why: str | None = None) -> dict:
     """The manifest's ``architecture`` entry of a core (parallel or serial).
 
     Parameters
@@ -419,27 +419,51 @@ def architecture_info(core: PWASCore) -> dict:
     core : PWASCore or SerialPWASCore or AdditiveCore
         Serial when its ``architecture`` attribute is ``"serial"``; an additive core (one with
         ``parts``, :mod:`pwas_hdl.hdl.additive_top`) is described by its parts' entries.
+    ii : int, optional
+        The design's II in cycles, when a top around the core takes samples more slowly than the
+        core could (the recurrent top: II = latency; the serial observer bank: its cycles per
+        sample). None: the core's own.
+    why : str, optional
+        Why the design's II is ``ii`` (a phrase, e.g. the top's ``ii_meaning``), for ``meaning``.
 
     Returns
     -------
     dict
-        ``kind``, ``multipliers``, ``multipliers_per_target``, ``cycles_per_sample``, ``ii``
-        (clock cycles) and ``meaning``; an additive core's multipliers are its parts' (summed), its
-        cycles per sample and II the largest part's.
+        ``kind``, ``multipliers``, ``multipliers_per_target``, ``cycles_per_sample`` (the core's),
+        ``ii`` (the design's; clock cycles) and ``meaning`` (it states that II); an additive core's
+        multipliers are its parts' (summed), its cycles per sample and II the largest part's.
+
+    Raises
+    ------
+    InternalError
+        ``ii`` differs from the core's without ``why``.
     """
     parts = getattr(core, "parts", None)
     if parts:  # an additive design: its part cores, summed before one rounding
         infos = [architecture_info(c) for c in parts]
-        return {"kind": infos[0]["kind"], "multipliers": sum(a["multipliers"] for a in infos),
+        own = max(a["ii"] for a in infos)
+        base = {"kind": infos[0]["kind"], "multipliers": sum(a["multipliers"] for a in infos),
                 "multipliers_per_target": sum(a["multipliers_per_target"] for a in infos),
-                "cycles_per_sample": max(a["cycles_per_sample"] for a in infos), "ii": max(a["ii"] for a in infos),
+                "cycles_per_sample": max(a["cycles_per_sample"] for a in infos),
                 "meaning": f"{len(infos)} additive part cores, each (n = its own dimension): {infos[0]['meaning']}; "
                 "the parts take each sample together" + (", one every n + 1 cycles of the largest part"
                                                          if infos[0]["kind"] == "serial" else "")}
-    p = core.params
-    if getattr(core, "architecture", "parallel") == "serial":
-        return {"kind": "serial", "multipliers": p.nz, "multipliers_per_target": 1, "cycles_per_sample": p.n + 1,
-                "ii": p.n + 1, "meaning": "one multiply-accumulate unit per target, one vertex weight x barycentric "
-                "coordinate per cycle, n + 1 cycles per sample, one weight memory of N words"}
-    return {"kind": "parallel", "multipliers": (p.n + 1) * p.nz, "multipliers_per_target": p.n + 1, "cycles_per_sample": 1,
-            "ii": 1, "meaning": "n + 1 memories read and n + 1 multipliers per target in every cycle, adder tree, II = 1"}
+    else:
+        p = core.params
+        if getattr(core, "architecture", "parallel") == "serial":
+            own = p.n + 1
+            base = {"kind": "serial", "multipliers": p.nz, "multipliers_per_target": 1, "cycles_per_sample": p.n + 1,
+                    "meaning": "one multiply-accumulate unit per target, one vertex weight x barycentric "
+                    "coordinate per cycle, n + 1 cycles per sample, one weight memory of N words"}
+        else:
+            own = 1
+            base = {"kind": "parallel", "multipliers": (p.n + 1) * p.nz, "multipliers_per_target": p.n + 1,
+                    "cycles_per_sample": 1,
+                    "meaning": "n + 1 memories read and n + 1 multipliers per target in every cycle, adder tree, II = 1"}
+    ii = own if ii is None else int(ii)
+    if ii != own:  # the top's II, not the core's: the text says the field's value and why
+        if why is None:
+            raise InternalError(f"the design's II {ii} differs from its core's {own} and nothing says why")
+        base["meaning"] += f" (the core's); the design's II = {ii}: {why}"
+    return {k: base[k] for k in ("kind", "multipliers", "multipliers_per_target", "cycles_per_sample")} | {
+        "ii": ii, "meaning": base["meaning"]}
