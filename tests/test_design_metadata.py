@@ -127,3 +127,25 @@ def test_architecture_info_needs_a_reason_for_another_ii():
     assert architecture_info(core)["ii"] == architecture_info(core, 1)["ii"] == 1
     with pytest.raises(InternalError, match="differs from its core's 1"):
         architecture_info(core, 5)
+
+
+# ------------------------------------------------------------------------------ 3. an additive design's memories
+@pytest.mark.parametrize("kind, architecture", [("additive", "parallel"), ("additive", "serial"), ("plain", "parallel")])
+def test_header_and_report_give_every_parts_memory(kind, architecture):
+    """The header said ``memories x depth`` with the largest part's depth for all of an additive design's
+    memories (12 x 15 words where the parts hold 90), the report the same."""
+    gd = _design(kind, "core", architecture)
+    man = gd.manifest
+    mem = man["memory"]
+    line = next(ln for ln in gd.files[f"{gd.top}.v"].splitlines() if ln.startswith("// weights "))
+    report = gd.files["report.md"]
+    if kind == "plain":
+        assert f"({mem['kind']} memory, {mem['memories']} x {mem['depth']} words of {mem['word_bits']} bits)" in line
+        assert f"Layout **{mem['kind']}**: {mem['memories']} x {mem['depth']} words of {mem['word_bits']} bits = {mem['words']} words" in report
+        return
+    parts = [p["memory"] for p in man["additive"]["parts"]]
+    assert len({p["depth"] for p in parts}) > 1 and sum(p["memories"] * p["depth"] for p in parts) == mem["words"]
+    shape = " + ".join(f"{p['memories']} x {p['depth']}" for p in parts) + f" words of {mem['word_bits']} bits"
+    assert f"({mem['kind']} memories, one set per additive part: {shape} = {mem['words']} words)" in line
+    assert f"Layout **{mem['kind']}**: one set per additive part: {shape} = {mem['words']} words" in report
+    assert f"{mem['memories']} x {mem['depth']} words" not in line + report  # mem['depth'] is the largest part's

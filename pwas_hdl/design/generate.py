@@ -217,9 +217,8 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
     )
     mem = man["memory"]
     mem_text = (
-        f"Layout **{mem['kind']}**: {mem['memories']} memories x {mem['depth']} words x {mem['word_bits']} bits "
-        f"= {mem['words']} words, {mem['bits']} bits for N = {mem['n_vertices']} weights "
-        f"({mem['words'] / mem['n_vertices']:.3f} N)."
+        f"Layout **{mem['kind']}**: {_memory_shape(man)} = {mem['words']} words, {mem['bits']} bits for "
+        f"N = {mem['n_vertices']} weights ({mem['words'] / mem['n_vertices']:.3f} N)."
     )
     init = mem.get("init", {})
     hexes = [h["file"] for h in man["files"].get("hex", [])]
@@ -274,6 +273,17 @@ def _report(man: dict, sensor: PWASVirtualSensor, fxm: FixedPointModel) -> str:
         bound_terms=terms, domain_table=dom_table, memory_text=mem_text + init_text, file_list=files,
         warmup_text=warm_text, input_code_text=code_text,
     )
+
+
+def _memory_shape(man: dict) -> str:
+    """The weight memories as memories x depth, for the header and the report: ``5 x 1024 words of 22
+    bits``; an additive design's part by part, each part's memories of its own depth (``one set per
+    additive part: 2 x 3 + 3 x 4 + 4 x 15 words of 22 bits``; ``memory.depth`` is the largest part's)."""
+    mems = [p["memory"] for p in man["additive"]["parts"]] if "additive" in man else [man["memory"]]
+    widths = {m["word_bits"] for m in mems}
+    shape = (" + ".join(f"{m['memories']} x {m['depth']}" for m in mems) + f" words of {widths.pop()} bits"
+             if len(widths) == 1 else " + ".join(f"{m['memories']} x {m['depth']} words of {m['word_bits']} bits" for m in mems))
+    return ("one set per additive part: " if "additive" in man else "") + shape
 
 
 def _rate_text(man: dict) -> str:
@@ -747,8 +757,8 @@ def _verilog_header(man: dict, model_sha256: str) -> str:
             + " without rounding; their sums added exactly, then rounded once"] if "additive" in man else []),
         f"latency {man['latency_cycles']} cycles (input transfer to {_port_meaning(man, '{out.valid}')}), II {man['ii']} "
         + ("(one sample per clock)" if man["ii"] == 1 else f"(one sample every {man['ii']} clocks)"),
-        f"weights {fm['weight']['str']} ({man['memory']['kind']} memory, {man['memory']['memories']} x "
-        f"{man['memory']['depth']} words of {man['memory']['word_bits']} bits); output {fm['output']['str']} "
+        f"weights {fm['weight']['str']} ({man['memory']['kind']} memor{'ies' if 'additive' in man else 'y'}, {_memory_shape(man)}"
+        + (f" = {man['memory']['words']} words" if "additive" in man else "") + f"); output {fm['output']['str']} "
         f"(LSB {fm['output']['lsb']!r}); |hw - float| <= {eb['lsb']!r} LSB = {eb['physical']!r}",
     ]
     if "classifier" in man:
