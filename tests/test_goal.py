@@ -88,7 +88,7 @@ def test_goal_latency_takes_the_replicated_memory(lorenz_tiny):
     assert gd.files == same.files
     for kw, mem in (({"goal": "latency", "memory": "banked"}, "banked"), ({"goal": "latency", "fpga_target": "ice40"}, "banked"),
                     ({"goal": "balanced"}, "banked"), ({"goal": "throughput"}, "banked"), ({}, "banked"),
-                    ({"goal": "latency", "architecture": "serial"}, "banked")):
+                    ({"goal": "latency", "architecture": "serial"}, "single")):  # the serial core's one memory
         assert build_design(lorenz_tiny.model, **kw).manifest["generator"]["options"]["memory"] == mem, kw
 
 
