@@ -149,3 +149,63 @@ def test_header_and_report_give_every_parts_memory(kind, architecture):
     assert f"({mem['kind']} memories, one set per additive part: {shape} = {mem['words']} words)" in line
     assert f"Layout **{mem['kind']}**: one set per additive part: {shape} = {mem['words']} words" in report
     assert f"{mem['memories']} x {mem['depth']} words" not in line + report  # mem['depth'] is the largest part's
+
+
+# ------------------------------------------------------------------------------ 4. the registers a serial design builds
+@pytest.mark.parametrize("kind", ["plain", "classifier"])
+def test_serial_timing_labels_name_the_registers_the_serial_core_builds(kind, monkeypatch):
+    """``--clock-mhz`` of a serial design labelled candidates ``balanced`` or ``...+mul_in+product+tree/1``:
+    registers (``tree_levels``, ``mul_in``, ``bank``) the serial core does not build."""
+    import pwas_hdl.flow.timing_closure as tc
+    from helpers.timing import FakePlaceAndRoute
+    from pwas_hdl.hdl import PIPELINE_PRESETS, Pipeline
+    from pwas_hdl.hdl.serial_core import SERIAL_REGISTERS
+
+    monkeypatch.setattr(tc, "measure_design", FakePlaceAndRoute(mhz_per_cycle=10.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        man = build_design(_model(kind), design="core", architecture="serial", target_mhz=120.0).manifest
+    takes = SERIAL_REGISTERS + (("tree_levels",) if kind == "classifier" else ())  # the argmax stage's
+    cands = man["timing"]["candidates"]
+    for c in cands:
+        pl = Pipeline.cast(c["pipeline"])
+        built = [k for k in ("split", "rank", "offset", "addr", "mem_out", "product", "tree_levels") if k in takes and getattr(pl, k)]
+        named = (built if Pipeline.cast(PIPELINE_PRESETS[c["label"]]) == pl else None) if c["label"] in PIPELINE_PRESETS else \
+            ([] if c["label"] == "min" else ["tree_levels" if k.startswith("tree/") else k for k in c["label"].split("+")])
+        assert named == built, c
+        if c["label"] in PIPELINE_PRESETS and c["label"] != "min":  # a preset's name only where it builds all the preset has
+            assert all(not getattr(pl, k) or k in takes for k in ("bank", "mul_in", "tree_levels")), c
+    assert len({c["label"] for c in cands}) == len(cands)
+    chosen = cands[man["timing"]["chosen"]]
+    assert man["architecture"]["pipeline_registers"] == [k for k in takes if getattr(Pipeline.cast(chosen["pipeline"]), k)]
+    assert any(Pipeline.cast(c["pipeline"]).mul_in or Pipeline.cast(c["pipeline"]).tree_levels for c in cands)  # ignored ones were on
+
+
+def test_label_of_a_pipeline_and_the_registers_built():
+    from pwas_hdl.flow.timing_closure import _label
+    from pwas_hdl.hdl import Pipeline
+    from pwas_hdl.hdl.serial_core import SERIAL_REGISTERS
+
+    mx = Pipeline.cast("max")
+    assert _label(mx) == "max" and _label(Pipeline()) == "balanced"  # the parallel core's: unchanged
+    assert _label(mx, SERIAL_REGISTERS) == "split+rank+offset+addr+mem_out+product"
+    assert _label(Pipeline(), SERIAL_REGISTERS) == "rank+addr+mem_out+product"
+    assert _label(Pipeline(), SERIAL_REGISTERS + ("tree_levels",)) == "balanced"
+    assert _label(Pipeline.cast("short"), SERIAL_REGISTERS) == "min"
+
+
+@pytest.mark.parametrize("kind, architecture, pipeline, want", [
+    ("plain", "parallel", "max", ["split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "product", "tree_levels"]),
+    ("plain", "serial", "max", ["split", "rank", "offset", "addr", "mem_out", "product"]),
+    ("plain", "serial", "short", []),  # mul_in alone: nothing the serial core builds
+    ("classifier", "serial", "balanced", ["rank", "addr", "mem_out", "product", "tree_levels"]),  # the argmax stage's tree
+    ("recurrent", "parallel", "balanced", ["rank", "addr", "mem_out", "product", "tree_levels"]),
+    ("additive", "serial", "max", ["split", "rank", "offset", "addr", "mem_out", "product"]),
+])
+def test_manifest_says_which_pipeline_registers_are_built(kind, architecture, pipeline, want):
+    design = "sensor" if kind == "recurrent" else "core"
+    man = _design(kind, design, architecture, pipeline).manifest
+    assert man["architecture"]["pipeline_registers"] == want
+    if "additive" not in man:
+        bad = {**man, "architecture": {**man["architecture"], "pipeline_registers": ["mul_halves"]}}
+        assert any("architecture.pipeline_registers names ['mul_halves']" in e for e in manifest_errors(bad))

@@ -622,9 +622,20 @@ def build_design(
         # bank or an argmax stage adds cycles to the core's; the serial core takes only some of the
         # registers: candidates that add none of them are the same design, dropped); a candidate the
         # design cannot take is dropped
+        from pwas_hdl.hdl.api import pipeline_registers
+
+        built: dict[Pipeline, Any] = {}
+
+        def built_component(pipe: Pipeline) -> Any:  # each candidate's component, built once for both questions
+            if pipe not in built:
+                built[pipe] = component(pipe)[0]
+            return built[pipe]
+
+        # the record's labels name the registers each candidate's design builds (the serial core ignores some)
         chosen, timing = close_timing(candidate, _core_inputs(sensor), target_mhz, fpga=fpga_target, seed=timing_seed,
                                       prescreen=prescreen, progress=progress, executor=executor,
-                                      latency=lambda pipe: int(component(pipe)[0].latency))
+                                      latency=lambda pipe: int(built_component(pipe).latency),
+                                      registers=lambda pipe: pipeline_registers(built_component(pipe)))
     else:
         chosen = pipeline
     comp, recurrence = component(Pipeline.cast(chosen) if chosen is not None else None)

@@ -41,8 +41,9 @@ latency. Format ``pwas-hdl-manifest``, version 2, schema ``pwas_hdl/schemas/mani
                  "words": .., "bits": .., "n_vertices": N, "layout_spec": {...}},   # kind = generator.options.memory
       "pipeline": {...}, "arithmetic": {...},
       "architecture": {"kind": "parallel" | "serial", "multipliers": .., "multipliers_per_target": ..,
-                       "cycles_per_sample": .., "ii": .., "meaning": ..},   # serial: memory.kind "single";
-                                                 # cycles_per_sample the core's, ii the design's (= the top-level ii)
+                       "cycles_per_sample": .., "ii": .., "meaning": ..,   # serial: memory.kind "single";
+                       "pipeline_registers": ["rank", ..]},   # cycles_per_sample the core's, ii the design's
+                                                 # (= the top-level ii); the registers of pipeline it builds
       "timing": {...},                           # only with generate --clock-mhz (timing closure)
       "classifier": {"target": "mode", "classes": [0, 1, 2], "n_classes": 3,   # only for a classifier model:
                      "port": "m_axis_tdata", "field": "class_index", "lsb": .., "width": 2,  # argmax stage after
@@ -475,7 +476,17 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
     errs += _recurrence_errors(m)
     if errs:
         return errs
-    return _lag_errors(m) + _memory_errors(m) + _width_errors(m) + _latency_errors(m) + _rate_errors(m)
+    return _lag_errors(m) + _memory_errors(m) + _width_errors(m) + _latency_errors(m) + _rate_errors(m) + _register_errors(m)
+
+
+def _register_errors(m: dict[str, Any]) -> list[str]:
+    """``architecture.pipeline_registers`` names only registers that ``pipeline`` has (an additive
+    design's parts have pipelines of their own: not checked)."""
+    regs = (m.get("architecture") or {}).get("pipeline_registers")
+    if regs is None or "additive" in m:
+        return []
+    off = [k for k in regs if not m["pipeline"].get(k)]
+    return [f"architecture.pipeline_registers names {off}, which pipeline does not have"] if off else []
 
 
 def _rate_errors(m: dict[str, Any]) -> list[str]:

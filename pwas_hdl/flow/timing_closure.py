@@ -143,14 +143,22 @@ def pipeline_candidates(n: int) -> list[Pipeline]:
     return out
 
 
-def _label(p: Pipeline) -> str:
-    for name in ("min", "short", "balanced", "max"):
-        if Pipeline.cast(name) == p:
-            return name
-    on = [k for k in ("split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "product") if getattr(p, k, False)]
-    if p.tree_levels:
-        on.append(f"tree/{p.tree_levels}")
-    return "+".join(on) or "min"
+def _label(p: Pipeline, registers: Sequence[str] | None = None) -> str:
+    """A candidate's name in the record, the report and the messages: its preset's, else its registers
+    (``rank+addr+mem_out+product+tree/3``).
+
+    ``registers``: the registers the design builds with ``p``
+    (:func:`pwas_hdl.hdl.api.pipeline_registers`; None: every one ``p`` has, as the parallel core).
+    When the design ignores some of ``p``'s (the serial core: ``bank``, ``mul_in``, ``tree_levels``),
+    the name lists the built ones only, and no preset name (a preset names registers not built).
+    """
+    on = [k for k in ("split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "product", "tree_levels") if getattr(p, k, False)]
+    built = on if registers is None else [k for k in on if k in registers]
+    if built == on:
+        for name in ("min", "short", "balanced", "max"):
+            if Pipeline.cast(name) == p:
+                return name
+    return "+".join(f"tree/{p.tree_levels}" if k == "tree_levels" else k for k in built) or "min"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -353,8 +361,9 @@ def measure_design(
 # ---------------------------------------------------------------------------------------------
 # the search
 # ---------------------------------------------------------------------------------------------
-def _entry(pipe: Pipeline, cycles: int, res: dict[str, Any] | None, target: float, note: str | None = None) -> dict[str, Any]:
-    e: dict[str, Any] = {"latency_cycles": int(cycles), "label": _label(pipe), "pipeline": pipe.to_dict()}
+def _entry(pipe: Pipeline, cycles: int, label: str, res: dict[str, Any] | None, target: float,
+           note: str | None = None) -> dict[str, Any]:
+    e: dict[str, Any] = {"latency_cycles": int(cycles), "label": label, "pipeline": pipe.to_dict()}
     if res is None:
         e.update({"measured": False, "note": note})
         return e
@@ -390,6 +399,7 @@ def close_timing(
     progress: Progress | None = None,
     executor: Any = None,
     latency: Callable[[Pipeline], int] | None = None,
+    registers: Callable[[Pipeline], Sequence[str]] | None = None,
 ) -> tuple[Pipeline, dict[str, Any]]:
     """Find the shallowest candidate pipeline whose measured fmax reaches ``target_mhz``.
 
@@ -420,6 +430,11 @@ def close_timing(
         one's (no register added: the same design) is dropped; any other error of ``latency`` (the
         design itself refused: e.g. a classifier on the serial core) is raised as it is. Given
         ``candidates`` must all be taken, latencies strictly increasing.
+    registers : callable(Pipeline) -> sequence of str, optional
+        The registers the design builds with a candidate pipeline
+        (:func:`pwas_hdl.hdl.api.pipeline_registers`); the candidates' labels name those only (the
+        serial core ignores ``bank``, ``mul_in`` and ``tree_levels``). Default: every register of
+        the pipeline (the parallel core).
     workdir
         Where the place-and-route runs go (default: a temporary folder, removed afterwards).
     progress : callable(str), optional
@@ -468,6 +483,7 @@ def close_timing(
             raise InputError("none of the candidate pipelines can be built for this design; give --pipeline")
     if any(a >= b for a, b in zip(lat, lat[1:])):
         raise InputError(f"candidate latencies must increase strictly, got {lat}")
+    labels = [_label(p, None if registers is None else registers(p)) for p in cands]
 
     results: dict[int, dict[str, Any]] = {}
     order: list[int] = []
@@ -487,7 +503,7 @@ def close_timing(
             gd = build(cands[i])
             built = (getattr(gd, "manifest", None) or {}).get("latency_cycles")
             if built is not None and built != lat[i]:
-                raise InternalError(f"candidate {_label(cands[i])}: the design has latency {built}, "
+                raise InternalError(f"candidate {labels[i]}: the design has latency {built}, "
                                     f"the search counted {lat[i]} cycles")
             return measure_design(gd, fpga, freq_mhz=target, seed=seed, device=device,
                                   workdir=base / f"c{i:02d}_L{lat[i]}")
@@ -499,7 +515,7 @@ def close_timing(
         def run(i: int) -> float:
             nonlocal tools
             if progress:
-                progress(f"timing: candidate {i + 1}/{len(cands)} ({_label(cands[i])}, {lat[i]} cycles) on {fpga} at {target:g} MHz")
+                progress(f"timing: candidate {i + 1}/{len(cands)} ({labels[i]}, {lat[i]} cycles) on {fpga} at {target:g} MHz")
             if speculate:
                 # the one needed now; then, while workers are free, the one below (the downward
                 # check) and the deeper ones in order
@@ -556,7 +572,7 @@ def close_timing(
                 note = "not needed (a shallower candidate meets the target)"
             else:
                 note = "skipped by the pre-screen (cannot reach the target if its extra registers split the measured delay evenly)"
-        entries.append(_entry(p, lat[k], results.get(k), target, note))
+        entries.append(_entry(p, lat[k], labels[k], results.get(k), target, note))
     best = max(order, key=lambda k: (results[k].get("fmax_mhz") or 0.0, -k))
     record: dict[str, Any] = {
         "target_mhz": target,
@@ -578,7 +594,7 @@ def close_timing(
         fm = results[best].get("fmax_mhz")
         raise TimingNotMet(
             f"no pipeline reaches {target:g} MHz on {record['part']}: the best measured fmax is "
-            f"{fm:.1f} MHz ({lat[best]} cycles, {_label(cands[best])}); "
+            f"{fm:.1f} MHz ({lat[best]} cycles, {labels[best]}); "
             f"choose a target of at most {math.floor(fm)} MHz, another FPGA, or a fixed --pipeline",
             record,
         )

@@ -8,7 +8,7 @@ from pwas_hdl.errors import InputError, choice_text, option_text
 from pwas_hdl.hdl.core import PWASCore
 from pwas_hdl.hdl.emit import port_list, port_names
 from pwas_hdl.hdl.names import check_module_name
-from pwas_hdl.hdl.params import CoreParams, Pipeline
+from pwas_hdl.hdl.params import PIPELINE_REGISTERS, CoreParams, Pipeline
 
 if TYPE_CHECKING:
     from pwas_hdl.fit.regressors import LagStructure
@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from pwas_hdl.hdl.argmax import ArgmaxStage
     from pwas_hdl.hdl.sensor_top import PWASSensorTop
 
-__all__ = ["build_core", "build_sensor", "design_info"]
+__all__ = ["build_core", "build_sensor", "design_info", "pipeline_registers"]
 
 
 def _check_name(name: str) -> str:
@@ -154,6 +154,34 @@ def _fields(names_widths):
     return out
 
 
+def pipeline_registers(component: Any) -> list[str]:
+    """The pipeline registers a built design has: the options of its pipeline that its cores and
+    stages build and that are on (the manifest's ``architecture.pipeline_registers``).
+
+    The serial core ignores ``bank``, ``mul_in``, ``mul_halves`` and ``tree_levels``
+    (:data:`~pwas_hdl.hdl.serial_core.SERIAL_REGISTERS`); a classifier's argmax stage takes
+    ``tree_levels``; an additive design's parts have pipelines of their own (equal latencies).
+
+    Parameters
+    ----------
+    component : Component
+        A core or a top of :mod:`pwas_hdl.hdl` (its ``core``, the core's ``parts``, the ``argmax``).
+
+    Returns
+    -------
+    list of str
+        Names of :data:`~pwas_hdl.hdl.params.PIPELINE_REGISTERS`, in stage order (``tree_levels``:
+        some adder-tree or compare-tree register).
+    """
+    core = getattr(component, "core", component)
+    stages = list(getattr(core, "parts", None) or [core])
+    argmax = getattr(component, "argmax", None) or getattr(core, "argmax", None)
+    if argmax is not None and argmax.latency:  # its registers (none for tree_levels = 0)
+        stages.append(argmax)
+    on = {k for st in stages for k in st.pipeline_registers if getattr(st.pipeline, k)}  # tree_levels > 0: >= 1 register
+    return [k for k in PIPELINE_REGISTERS if k in on]
+
+
 def design_info(component: Any, ports: str = "axis") -> dict:
     """JSON-ready description of a built design (core or sensor top).
 
@@ -239,6 +267,8 @@ def design_info(component: Any, ports: str = "axis") -> dict:
     # the design's II: a top may take samples more slowly than its core (its ii_meaning says why)
     info["architecture"] = architecture_info(core, int(component.ii), getattr(component, "ii_meaning", None))
     info.update(getattr(component, "extra_info", {}))
+    # which of the pipeline's registers the design builds (the serial core ignores some)
+    info["architecture"] = {**info["architecture"], "pipeline_registers": pipeline_registers(component)}
     if classifier is not None:
         info["classifier"] = cinfo
     return info

@@ -125,6 +125,9 @@ class ArgmaxStage(wiring.Component):
         ``pipeline`` of another type (:meth:`Pipeline.cast`).
     """
 
+    #: The option of ``pipeline`` whose registers the stage builds (when it has a compare level)
+    pipeline_registers = ("tree_levels",)
+
     def __init__(self, n_inputs: int, width: int, *, signed: bool = True, extra_bits: int = 0,
                  pipeline: Pipeline | str | None = None, select: str = "max"):
         self._MustUse__silence = True  # no "never used" warning for an object whose __init__ raised

@@ -54,7 +54,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.errors import InputError
 from pwas_hdl.hdl._lintsafe import add_const_wrap, add_wrap, bits_for, ge_const, rom, sink_unused, sum_wrap
 from pwas_hdl.fixedpoint.reduction import tree_level, tree_reduce
-from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
+from pwas_hdl.hdl.params import PIPELINE_REGISTERS, CoreParams, MemoryPlan, Pipeline
 from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
@@ -194,6 +194,9 @@ class PWASCore(wiring.Component):
     TypeError
         ``pipeline`` of another type (:meth:`Pipeline.cast`).
     """
+
+    #: The options of ``pipeline`` whose registers this core builds: all (each counts in ``latency``)
+    pipeline_registers = PIPELINE_REGISTERS
 
     def __init__(self, params: CoreParams, *, memory: str = "banked", pipeline: Pipeline | str | None = None,
                  round_output: bool = True):

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.bittrue import FixedPointModel
     from pwas_hdl.fixedpoint.memory_layout import BankedLayout, CornerLayout, ReplicatedLayout
 
-__all__ = ["CoreParams", "Pipeline", "PipelineRefused", "MemoryPlan", "PIPELINE_PRESETS", "GOALS", "GOALS_BY_FPGA",
+__all__ = ["CoreParams", "Pipeline", "PipelineRefused", "MemoryPlan", "PIPELINE_PRESETS", "PIPELINE_REGISTERS", "GOALS", "GOALS_BY_FPGA",
            "goal_preset"]
 
 
@@ -473,6 +473,13 @@ class Pipeline:
             **({"late_select": True} if self.late_select else {}),
             **({"sort_late": True} if self.sort_late else {}),
         }
+
+
+#: The options of :class:`Pipeline` that are register stages (each adds a cycle where a design builds
+#: it), in stage order; ``tree_levels`` stands for its adder-tree (or argmax compare-tree) registers.
+#: The parallel core builds every one; a design may build fewer (``pipeline_registers`` of its cores
+#: and stages: the serial core's :data:`~pwas_hdl.hdl.serial_core.SERIAL_REGISTERS`).
+PIPELINE_REGISTERS = ("split", "rank", "offset", "addr", "bank", "mem_out", "mul_in", "mul_halves", "product", "tree_levels")
 
 
 #: Named pipelines (measured on the Lorenz core n = 4, N = 4096, ECP5-45F speed 6, nextpnr, timing

@@ -53,10 +53,15 @@ from pwas_hdl.hdl.params import CoreParams, MemoryPlan, Pipeline
 from pwas_hdl.fixedpoint.memory_layout import SINGLE_MEMORY, weight_memory_name
 from pwas_hdl.hdl.weight_rom import weight_rom
 
-__all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "serial_latency", "serial_throttle"]
+__all__ = ["SerialPWASCore", "SingleMemoryPlan", "ARCHITECTURES", "SERIAL_REGISTERS", "serial_latency", "serial_throttle"]
 
 #: The values of ``generate --architecture``.
 ARCHITECTURES = ("parallel", "serial")
+
+#: The registers of a :class:`~pwas_hdl.hdl.params.Pipeline` the serial core builds (front end, memory
+#: data, product); ``bank``, ``mul_in``, ``mul_halves`` and ``tree_levels`` do not apply (no banks,
+#: the multiplier operands straight from the memory register, no adder tree).
+SERIAL_REGISTERS = ("split", "rank", "offset", "addr", "mem_out", "product")
 
 
 def serial_latency(pipeline: Pipeline, n: int) -> int:
@@ -65,7 +70,8 @@ def serial_latency(pipeline: Pipeline, n: int) -> int:
     Parameters
     ----------
     pipeline : Pipeline
-        ``split``, ``rank``, ``offset``, ``addr``, ``mem_out`` and ``product`` apply; ``tree_levels``, ``mul_in`` and ``bank`` do not.
+        Its :data:`SERIAL_REGISTERS` apply (``split``, ``rank``, ``offset``, ``addr``, ``mem_out``,
+        ``product``); ``tree_levels``, ``mul_in``, ``mul_halves`` and ``bank`` do not.
     n : int
         Regressor dimension.
 
@@ -74,8 +80,8 @@ def serial_latency(pipeline: Pipeline, n: int) -> int:
     int
         Latency in clock cycles (the ``n + 1`` multiply-accumulate steps included).
     """
-    return int(pipeline.split) + int(pipeline.rank) + int(pipeline.offset) + int(pipeline.addr) + 1 + n + 1 + int(pipeline.mem_out) \
-        + int(pipeline.product) + 1 + 1
+    # the registers of SERIAL_REGISTERS + load + vertices 1..n + memory + accumulator + output
+    return sum(int(getattr(pipeline, k)) for k in SERIAL_REGISTERS) + 1 + n + 1 + 1 + 1
 
 
 class SingleMemoryPlan(MemoryPlan):
@@ -183,6 +189,9 @@ class SerialPWASCore(PWASCore):
     """
 
     architecture = "serial"
+
+    #: The options of ``pipeline`` whose registers this core builds (the others are ignored)
+    pipeline_registers = SERIAL_REGISTERS
 
     #: the vertex shift register takes mu (PWASCore._vertex_fields)
     _replicated_mu_late = False
