@@ -209,3 +209,20 @@ def test_manifest_says_which_pipeline_registers_are_built(kind, architecture, pi
     if "additive" not in man:
         bad = {**man, "architecture": {**man["architecture"], "pipeline_registers": ["mul_halves"]}}
         assert any("architecture.pipeline_registers names ['mul_halves']" in e for e in manifest_errors(bad))
+
+
+# ------------------------------------------------------------------------------ 5. a classifier's critical path
+@pytest.mark.parametrize("architecture, pipeline", [("parallel", "min"), ("parallel", "balanced"), ("serial", "balanced")])
+def test_a_classifiers_score_register_is_named_in_the_critical_path(architecture, pipeline):
+    """A classifier's critical path ended at ``scores_payload``, a raw net name: it is the core's output
+    register (the scores), which the argmax stage reads, whatever the stage's registers."""
+    import re
+
+    from pwas_hdl.flow.timing_closure import _stage_of_cell
+
+    gd = _design("classifier", "core", architecture, pipeline)
+    v = gd.files[f"{gd.top}.v"]
+    assert re.search(r"^\s*reg \[\d+:0\] scores_payload;$", v, re.M) and re.search(r"^\s*scores_payload <= ", v, re.M)
+    for cell in ("core.scores_payload_TRELLIS_FF", "scores_payload[3]", "core.scores_valid_q"):
+        assert _stage_of_cell(cell) == "score register (argmax input)"
+    assert _stage_of_cell("core.scores_x") == "scores_x"  # only the register's own names

@@ -257,6 +257,8 @@ def _stage_of_cell(cell: str) -> str:
         return "output register"
     if re.match(WEIGHT_MEMORY_PATTERN, c):
         return "memory"
+    if c.startswith(("scores_payload", "scores_valid")):  # a classifier's core (or additive sum) output register,
+        return "score register (argmax input)"  # which the argmax stage reads (classifier_top.inline_core_and_argmax)
     m = _STAGE_RE.match(c)
     if m:
         return m.group(1)
