@@ -861,10 +861,12 @@ def generate(
                           "mode's own bound); the output state_saturated flags those samples, where the stated bounds do not hold")
             _say(f"wrote {outdir}/ ({len(gd.files)} files)")
             return
+        from pwas_hdl.design.generate import design_summary
+
         eb = man["error_bound"]
         mem = man["memory"]
         _say(
-            f"{man['top']}: latency {man['latency_cycles']} cycles, II {man['ii']}, memory {mem['words']} words "
+            f"{man['top']}: {design_summary(man)}, latency {man['latency_cycles']} cycles, II {man['ii']}, memory {mem['words']} words "
             f"({mem['words'] / mem['n_vertices']:.3g} N) x {mem['word_bits']} bits, error bound {eb['lsb']:.4g} LSB "
             f"= {eb['physical']:.4g}"
         )

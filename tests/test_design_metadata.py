@@ -226,3 +226,32 @@ def test_a_classifiers_score_register_is_named_in_the_critical_path(architecture
     for cell in ("core.scores_payload_TRELLIS_FF", "scores_payload[3]", "core.scores_valid_q"):
         assert _stage_of_cell(cell) == "score register (argmax input)"
     assert _stage_of_cell("core.scores_x") == "scores_x"  # only the register's own names
+
+
+# ------------------------------------------------------------------------------ 6. the console line
+@pytest.mark.parametrize("kind, design, architecture, want", [
+    ("plain", "core", "parallel", "parallel core"),
+    ("plain", "core", "serial", "serial core"),
+    ("sensor", "sensor", "serial", "serial sensor top"),
+    ("classifier", "core", "serial", "serial core, classifier, 3 classes"),
+    ("additive", "core", "parallel", "parallel core, additive, 2 parts"),
+    ("recurrent", "sensor", "serial", "serial recurrent sensor top"),
+    ("bank", "sensor", "serial", "serial sensor top, observer bank (2 observers)"),
+])
+def test_design_summary_names_architecture_and_kind(kind, design, architecture, want):
+    from pwas_hdl.design.generate import design_summary
+
+    assert design_summary(_design(kind, design, architecture).manifest) == want
+
+
+def test_generate_console_line_says_serial_and_classifier(tmp_path):
+    """The line said ``pwas_core: latency 13 cycles, II 3, ...``: neither serial nor classifier."""
+    from helpers.cli import CliRunner
+
+    from pwas_hdl.cli import app
+
+    model = tmp_path / "m.json"
+    model.write_text(_model("classifier").to_json(), encoding="utf-8")
+    r = CliRunner().invoke(app, ["generate", str(model), "-o", str(tmp_path / "o"), "--architecture", "serial"])
+    assert r.exit_code == 0, r.output
+    assert "pwas_core: serial core, classifier, 3 classes, latency " in r.output, r.output

@@ -49,7 +49,8 @@ from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 if TYPE_CHECKING:  # the hdl package (Amaranth) is imported when a design is built
     from pwas_hdl.hdl.params import Pipeline
 
-__all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fixed_point_model", "design_hash", "write_folder", "TEMPLATE_DIR"]
+__all__ = ["FORMAT_OPTIONS", "GeneratedDesign", "build_design", "generate", "fixed_point_model", "design_hash", "write_folder", "TEMPLATE_DIR",
+           "design_summary"]
 
 #: Keyword options of :class:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel` that ``generate`` accepts.
 FORMAT_OPTIONS = (
@@ -731,6 +732,33 @@ _PORT_MEANING = {
 
 
 _HEADER_KIND = {"core": "PWAS core", "sensor": "PWAS virtual-sensor top", "recurrent": "PWAS recurrent virtual-sensor top"}
+
+
+def design_summary(man: dict) -> str:
+    """What a PWAS design is, in a few words, for ``generate``'s console line: the architecture and the
+    design (``serial core``, ``parallel sensor top``), then what the model adds (``additive, 3 parts``,
+    ``non-uniform partition``, ``observer bank``, ``classifier, 3 classes``).
+
+    Parameters
+    ----------
+    man : dict
+        The manifest of a PWAS design (not the estimator's).
+
+    Returns
+    -------
+    str
+    """
+    what = {"core": "core", "sensor": "sensor top", "recurrent": "recurrent sensor top"}[man["design"]]
+    words = [f"{man['architecture']['kind']} {what}"]
+    if "additive" in man:
+        words.append(f"additive, {len(man['additive']['parts'])} parts")
+    if "warp" in man:
+        words.append("non-uniform partition")
+    if "front_end" in man:
+        words.append(f"observer bank ({man['front_end']['n_models']} observers)")
+    if "classifier" in man:
+        words.append(f"classifier, {man['classifier']['n_classes']} classes")
+    return ", ".join(words)
 
 
 def _port_meaning(man: dict, role: str) -> str:
