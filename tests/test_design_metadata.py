@@ -170,11 +170,12 @@ def test_serial_timing_labels_name_the_registers_the_serial_core_builds(kind, mo
     for c in cands:
         pl = Pipeline.cast(c["pipeline"])
         built = [k for k in ("split", "rank", "offset", "addr", "mem_out", "product", "tree_levels") if k in takes and getattr(pl, k)]
-        named = (built if Pipeline.cast(PIPELINE_PRESETS[c["label"]]) == pl else None) if c["label"] in PIPELINE_PRESETS else \
-            ([] if c["label"] == "min" else ["tree_levels" if k.startswith("tree/") else k for k in c["label"].split("+")])
-        assert named == built, c
-        if c["label"] in PIPELINE_PRESETS and c["label"] != "min":  # a preset's name only where it builds all the preset has
-            assert all(not getattr(pl, k) or k in takes for k in ("bank", "mul_in", "tree_levels")), c
+        if c["label"] == "min":  # no register built
+            assert built == [], c
+        elif c["label"] in PIPELINE_PRESETS:  # a preset's name: that pipeline, every register of it built
+            assert PIPELINE_PRESETS[c["label"]] == pl and all(not getattr(pl, k) or k in takes for k in ("bank", "mul_in", "tree_levels")), c
+        else:
+            assert ["tree_levels" if k.startswith("tree/") else k for k in c["label"].split("+")] == built, c
     assert len({c["label"] for c in cands}) == len(cands)
     chosen = cands[man["timing"]["chosen"]]
     assert man["architecture"]["pipeline_registers"] == [k for k in takes if getattr(Pipeline.cast(chosen["pipeline"]), k)]
