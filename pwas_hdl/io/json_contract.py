@@ -222,6 +222,12 @@ def _describe(err) -> str:
         return f"{where} must match {want}, got {_show(inst)}"
     if kind == "uniqueItems":
         return f"{where} has repeated items"
+    if kind == "not" and isinstance(want, dict):  # "not": {"required": [...]} or an anyOf of them: keys that must be absent
+        alts = want.get("anyOf", [want])
+        keys = [k for a in alts if isinstance(a, dict) and set(a) == {"required"} for k in a["required"]]
+        if keys and len(keys) == sum(len(a["required"]) for a in alts if isinstance(a, dict) and "required" in a):
+            present = [k for k in keys if isinstance(inst, dict) and k in inst]
+            return f"{where} must not have the key{'s' if len(present) > 1 else ''} {', '.join(repr(k) for k in present)}"
     return f"{where}: {err.message}"
 
 
