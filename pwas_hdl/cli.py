@@ -1048,7 +1048,7 @@ def export_testbench(
 @app.command()
 def explore(
     model_path: ModelArg,
-    data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE).")],
+    data: Annotated[Path, typer.Argument(metavar="DATA", help="CSV with the model's input/output columns and TARGET_true or TARGET (the reference of the RMSEE; of a classifier, LABEL_true or LABEL: the true class of its error rate).")],
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Folder for explore.json and explore.png (created if missing). Required.", show_default=False, metavar=FOLDER_METAVAR)] = None,
     traj_col: TrajColOpt = None,
     input_bits: Annotated[str, typer.Option("--input-bits", help="Input widths to sweep: comma list or A:B (inclusive).")] = "8,10,12,14,16",
@@ -1072,17 +1072,21 @@ def explore(
     resources_old: Annotated[Optional[str], _hidden("--resources")] = None,
     blank_rows: BlankRowsOpt = "error",
 ) -> None:
-    """Sweep input, weight and output word lengths: bit-true RMSEE against resources.
+    """Sweep input, weight and output word lengths: bit-true RMSEE (or error rate) against resources.
 
     Writes OUTDIR/explore.json (every point: formats, RMSEE against the data, deviation from the
     float model, error bound, resource estimate, Pareto flag; the refused combinations and why;
     whether generate's default formats are on the front) and OUTDIR/explore.png, and prints the
     Pareto points (and the default) as a table. Plain, additive (fit --additive) and power-of-two
     non-uniform (fit --breakpoints quantile-pow2) models, and recurrent ones (fit --mz:
-    the closed loop from reset on each trajectory, row t against z(t + lead)); not classifiers or
-    observer-bank sensors.
+    the closed loop from reset on each trajectory, row t against z(t + lead)); not observer-bank
+    sensors. A classifier (fit --classify; plain, additive or non-uniform) is scored by its
+    decisions: error_rate = share of the rows whose bit-true class (the argmax stage's, ties to the
+    lowest class) is not the true one in column LABEL_true or LABEL, beside the float classifier's
+    error rate and the share of decisions that differ from it (disagreement); the front is
+    (cost, error_rate).
     """
-    from pwas_hdl.flow.explore import explore as _explore, format_table, plot_exploration
+    from pwas_hdl.flow.explore import default_verdict, explore as _explore, format_table, plot_exploration
 
     def ints(text: str, what: str) -> list[int]:
         t = text.replace(" ", "")
@@ -1131,14 +1135,12 @@ def explore(
             plot_exploration(res, outset.temp_path(outdir / "explore.png"))
         stdout.print(format_table(res), highlight=False, markup=False)
         d = res["default"]
-        if d["on_front"]:
-            verdict = "on the Pareto front"
-        else:
-            b = d["dominated_by"][0]
-            verdict = (f"NOT on the Pareto front: {b['label']} costs {100 * b['cost_saved_rel']:.1f} % less with an RMSEE "
-                       f"{b['rmsee_better'][0]:+.4g} better (standard error {b['rmsee_diff_se'][0]:.2g})")
+        if res["model"]["classifier"] is not None:
+            f = res["float"]
+            _say(f"float classifier: error rate {100 * f['error_rate']:.4g} % ({f['errors']} of {res['data']['samples']} "
+                 f"samples) against column {', '.join(res['data']['reference_columns'])}")
         _say(f"{len(res['points'])} formats ({len(res['refused'])} refused), {len(res['pareto'])} on the front; "
-                  f"the default {d['label']} is {verdict}")
+                  f"the default {d['label']} is {default_verdict(res)}")
         _say(f"wrote {outdir / 'explore.json'} and {outdir / 'explore.png'}")
 
 

@@ -94,8 +94,10 @@ def test_explore_refuses_an_observer_bank_model(lorenz_tiny):
         explore(s, lorenz_tiny.test_csv, input_bits=[12])
 
 
-def test_explore_refuses_a_classifier(in_tmp, lorenz_tiny):
-    """A classifier got "no column 'mode=1_true' or 'mode=1'" (its one-hot score targets)."""
+def test_explore_of_a_classifier_needs_its_label_column(in_tmp, lorenz_tiny):
+    """A classifier got "no column 'mode=1_true' or 'mode=1'" (its one-hot score targets), then was
+    refused; now it is swept (tests/test_explore_classifier.py) and DATA without the class label column
+    is one error line naming the label's columns, nothing written."""
     import numpy as np
 
     from pwas_hdl.io.csv_table import write_csv
@@ -104,10 +106,12 @@ def test_explore_refuses_a_classifier(in_tmp, lorenz_tiny):
     y = rng.normal(size=300)
     mode = (y > 0).astype(int) + 1
     write_csv(in_tmp / "c.csv", {"y": y, "mode": mode})
+    write_csv(in_tmp / "nolabel.csv", {"y": y})
     res = RUNNER.invoke(cli.app, ["fit", "c.csv", "-o", "cls.json", "-y", "y", "-z", "mode", "--classify", "--my", "1",
                                   "-p", "2", "--sigma", "1e-3"])
     assert res.exit_code == 0, res.output
-    _refused(["explore", "cls.json", "c.csv", "-o", "ex"], in_tmp, "not available for classifiers (fit --classify)")
+    _refused(["explore", "cls.json", "nolabel.csv", "-o", "ex"], in_tmp,
+             "nolabel.csv: no column 'mode_true' or 'mode' with the true class of classifier 'mode'", "the file has columns y")
 
 
 # ------------------------------------------------------------------ manifests edited by hand

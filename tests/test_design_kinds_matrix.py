@@ -2,7 +2,8 @@
 
 Every row's model is fitted (small, seeded), every cell checked: "yes" must build with
 :func:`~pwas_hdl.design.generate.build_design` (or, for the `explore` column, sweep its default point
-with :func:`~pwas_hdl.flow.explore.explore`), "refused" must raise :class:`~pwas_hdl.errors.InputError`.
+with :func:`~pwas_hdl.flow.explore.explore`: a classifier on its error rate, a sensor on its RMSEE),
+"refused" must raise :class:`~pwas_hdl.errors.InputError`.
 The bit-exactness of each kind is the business of its own tests; this one keeps the table honest.
 """
 
@@ -108,8 +109,12 @@ def test_every_cell_of_the_row(label, data):
             try:
                 if opts is None:
                     d = fixed_point_model(sensor)
-                    explore(sensor, xy, input_bits=[12], weight_frac=[d.weight_format.frac],
-                            output_frac=[d.output_format.frac])
+                    res = explore(sensor, xy, input_bits=[12], weight_frac=[d.weight_format.frac],
+                                  output_frac=[d.output_format.frac])
+                    # a classifier is swept on its decisions (error rate), a sensor on its RMSEE
+                    acc = "error_rate" if getattr(sensor, "classifier_", None) is not None else "rmsee_ratio"
+                    assert res["resource_model"]["objectives"] == ["cost", acc]
+                    assert all(acc in p for p in res["points"])
                 else:
                     build_design(sensor, **opts)
                 got.append("yes")

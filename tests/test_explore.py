@@ -141,6 +141,26 @@ def test_accuracy_sanity_against_the_error_bound(tiny, small_result):
     json.dumps(res, allow_nan=False)
 
 
+def test_result_validates_against_the_format_schema(small_result):
+    """A sensor's result (and the shipped benchmark's, written by an earlier version 1 without
+    model.kind) is valid under pwas_hdl/schemas/explore-v1.schema.json; a classifier's error rate in a
+    sensor's point is named by its path (tests/test_explore_classifier.py: the classifier's results)."""
+    import copy
+    from pathlib import Path
+
+    from pwas_hdl.flow.explore import check_result, result_errors
+
+    assert result_errors(small_result) == [] and small_result["model"]["classifier"] is None
+    shipped = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "explore_lorenz.json"
+    check_result(json.loads(shipped.read_text()), str(shipped))
+    bad = copy.deepcopy(small_result)
+    bad["points"][0]["error_rate"] = 0.5
+    with pytest.raises(InputError, match=r"x.json: points\[0\] must not have the key 'error_rate'"):
+        check_result(bad, "x.json")
+    with pytest.raises(InputError, match="is not a pwas-hdl-explore file"):
+        check_result({"format": "x"}, "x.json")
+
+
 def test_resource_estimate_is_the_generators(tiny, small_result):
     m, _ = tiny
     p = next(p for p in small_result["points"] if p["input_bits"] == 8 and p["weight_offset"] == -2 and p["output_offset"] == 1)

@@ -1,7 +1,7 @@
 """`pwas-hdl explore` on additive sensors (fit --additive) and non-uniform power-of-two partitions
 (fit --breakpoints quantile-pow2): each point is the bit-true model and the design `generate` builds
-(`fixed_point_model`, `build_additive_core`, `build_warped_core`); classifiers, recurrent and
-observer-bank sensors stay refused, also as additive or warped models."""
+(`fixed_point_model`, `build_additive_core`, `build_warped_core`); observer-bank sensors stay
+refused, also as additive or warped models (classifiers of both kinds: tests/test_explore_classifier.py)."""
 
 from __future__ import annotations
 
@@ -156,21 +156,22 @@ def _refused(args, root, *words):
     assert tree(root) == before
 
 
-def test_classifier_and_bank_models_stay_refused_when_additive_or_warped(fitted, lorenz_tiny, in_tmp):
-    """Additive or warped models are swept now, but not as classifiers or observer-bank sensors
-    (recurrent ones are: tests/test_explore_recurrent.py): one error line naming the fit option, exit 2,
-    nothing written. (The old refusal named 'additive sensors' for an additive classifier.)"""
+def test_additive_and_warped_classifiers_refuse_a_reference_that_holds_no_class_and_bank_models_stay_refused(
+        fitted, lorenz_tiny, in_tmp):
+    """Additive or warped classifiers are swept now (tests/test_explore_classifier.py), observer-bank
+    sensors are not (recurrent ones are: tests/test_explore_recurrent.py). A classifier's reference is
+    its true class: the tiny fixture's CSV has the continuous z_true under the label's name, whose
+    values are no class -- one error line naming the column, exit 2, nothing written (it was a sweep
+    with an error rate of 100 %). (The old refusal named 'additive sensors' for an additive classifier.)"""
     import copy
 
     tr = lorenz_tiny.train
     z = tr.z[:400, 0]
-    for kw, what in ((dict(my=3, additive="pairs", classify=True), "classifiers (fit --classify)"),
-                     (dict(my=2, breakpoints="quantile-pow2", classify=True), "classifiers (fit --classify)")):
-        target = (z > np.median(z)).astype(float) if kw.get("classify") else z
+    for kw in (dict(my=3, additive="pairs", classify=True), dict(my=2, breakpoints="quantile-pow2", classify=True)):
         PWASVirtualSensor(partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"], **kw).fit(
-            None, tr.y[:400], target).save(in_tmp / "m.json")
+            None, tr.y[:400], (z > np.median(z)).astype(float)).save(in_tmp / "m.json")
         _refused(["explore", "m.json", str(lorenz_tiny.test_csv), "-o", "ex"], in_tmp,
-                 f"explore is not available for {what} yet", "pwas-hdl generate")
+                 "column 'z_true'", "is not one of the classes ['0', '1'] of classifier 'z'", "give the true class labels")
         (in_tmp / "m.json").unlink()
     for kind in KINDS:
         s = copy.deepcopy(fitted[kind][0])

@@ -20,7 +20,7 @@ SCHEMAS = sorted(p.name for p in schemas_dir().iterdir() if p.name.endswith(".sc
 
 def test_every_format_has_a_schema():
     assert {"model-v2.schema.json", "manifest-v2.schema.json", "bench-results-v1.schema.json",
-            "breakpoints-v1.schema.json", "estimator-v1.schema.json"} <= set(SCHEMAS)
+            "breakpoints-v1.schema.json", "estimator-v1.schema.json", "explore-v1.schema.json"} <= set(SCHEMAS)
 
 
 @pytest.mark.parametrize("name", SCHEMAS)

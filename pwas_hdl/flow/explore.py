@@ -26,6 +26,35 @@ Accuracy (per point)
     Largest deviation from the float model at the *represented* input (what the error bound
     covers); ``bound_holds`` checks it against ``error_bound_lsb``.
 
+Accuracy of a classifier (fit ``--classify``)
+---------------------------------------------
+A classifier's outputs are ``C`` class scores; the design decides by its argmax stage. Its points
+are scored by the decisions, not by an RMSEE (no ``rmsee`` / ``rmsee_ratio`` fields). The true class
+of each row is column ``<label>_true`` if present, else ``<label>`` (as ``predict`` finds it,
+:meth:`Table.reference_column <pwas_hdl.io.csv_table.Table.reference_column>`); the bit-true class
+is :func:`pwas_hdl.fixedpoint.argmax.argmax_index` of the output codes (the stage's compare tree:
+ties to the lowest class index, the convention of :func:`pwas_hdl.fit.classifier.decide`), the
+float classifier's is :func:`~pwas_hdl.fit.classifier.decide` of the float scores at the unquantised
+regressors.
+
+``error_rate`` / ``errors``
+    Share / number of the samples whose bit-true class is not the true one: the accuracy
+    objective of the front (``(cost, error_rate)``). ``result["float"]`` has the float
+    classifier's ``error_rate`` and ``errors`` on the same rows; ``error_rate_se`` is the standard
+    error of the paired difference of the two (batch means).
+``disagreement`` / ``disagreements``
+    Share / number of the samples whose bit-true class differs from the float classifier's. The
+    count of errors of the two differs by at most ``disagreements``.
+``disagreement_at_codes``, ``near_ties``, ``differ_outside_margin``
+    Against the float classifier at the *represented* input (:func:`pwas_hdl.fixedpoint.argmax.agreement`):
+    the share of differing decisions, the samples whose float margin (best minus runner-up score)
+    is at most ``2 error_bound``, and the differences outside that margin (0 whenever the bound
+    holds: only near ties can flip).
+
+The deviation fields (``rms_dev_float``, ``max_dev_float*``, ``max_dev_reference_lsb``,
+``bound_holds``, ``flagged``) are a sensor's, on the scores. ``result["model"]["classifier"]`` has
+the label name, the classes and the tie rule (None for a sensor).
+
 Resources (``resources="estimate"``, every point)
 -------------------------------------------------
 Exact sizes come from the objects the generator itself uses (:func:`pwas_hdl.hdl.build_core` +
@@ -79,7 +108,8 @@ The estimate is computed for every point; then the Pareto points (and the defaul
 ``ecp5``): ``point["measured"]`` holds
 LUTs, FFs, DSPs, block RAMs, memory bits (and fmax). The front stays the estimate's front; the
 measured numbers check it: ``result["measured"]["pareto"]`` is the front of the synthesised points
-alone in (LUTs, DSPs, block RAMs, ``rmsee_ratio``), and ``default_on_front`` says whether the
+alone in (LUTs, DSPs, block RAMs, ``rmsee_ratio``; a classifier's ``error_rate``; the names in
+``result["measured"]["objectives"]``), and ``default_on_front`` says whether the
 default is on it. Block RAMs and DSPs come in fixed sizes (an 18-bit word costs the same block as
 a 10-bit one), so the measured front can differ from the bit-count estimate's.
 
@@ -102,7 +132,15 @@ closed loop (:func:`_evaluate_recurrent`: the bit-true recurrence from reset on 
 row ``t`` against ``z(t + lead)``, the float recurrence as the float column; the per-step bound at
 the regressor codes the recurrence produced); its resources are the core's, and
 ``result["model"]["recurrence"]`` has ``Mz`` and ``lead`` (None for the other kinds).
-Classifiers and observer-bank sensors are refused (:func:`_check_supported`).
+A classifier (plain, additive or warped; fit does not make recurrent ones) is the same bit-true
+model and design with the argmax stage after the core or the sum (what ``generate`` builds): its
+``C - 1`` comparators of ``B_out`` bits are in ``adder_bits`` (``argmax_adder_bits``) and its
+registers in ``register_bits``; its accuracy is the error rate above. Observer-bank sensors are
+refused (:func:`_check_supported`).
+
+The result's format is ``pwas-hdl-explore`` version 1 (:data:`EXPLORE_FORMAT`), this module its
+owner; :func:`check_result` validates a result against the shipped schema
+``pwas_hdl/schemas/explore-v1.schema.json`` (a sensor's and a classifier's points alike).
 
 Combinations that the bit-true model refuses (an output finer than the exact product, a weight
 that does not fit a fixed ``weight_bits``, an accumulator over 62 bits, an input width too small
@@ -123,7 +161,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pwas_hdl import __version__
-from pwas_hdl.errors import InputError, ToolFailed, ToolMissing, choice_text, option_text
+from pwas_hdl.errors import InputError, InternalError, ToolFailed, ToolMissing, choice_text, option_text
+from pwas_hdl.fixedpoint.argmax import TIE_RULE
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
 from pwas_hdl.io.csv_table import Table, check_trajectory_column, read_csv, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
@@ -133,6 +172,9 @@ from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit, check_values
 __all__ = [
     "EXPLORE_FORMAT",
     "EXPLORE_VERSION",
+    "EXPLORE_SCHEMA",
+    "check_result",
+    "result_errors",
     "DEFAULT_INPUT_BITS",
     "DEFAULT_FRAC_OFFSETS",
     "DEFAULT_MEASURE_MAX",
@@ -144,10 +186,14 @@ __all__ = [
     "mult18_blocks",
     "plot_exploration",
     "format_table",
+    "default_verdict",
 ]
 
 EXPLORE_FORMAT = "pwas-hdl-explore"
 EXPLORE_VERSION = 1
+#: The shipped JSON Schema of a result (``pwas_hdl/schemas/``): a sensor's and a classifier's sweep.
+EXPLORE_SCHEMA = "explore-v1.schema.json"
+_HINT = "write it again with `pwas-hdl explore`"
 
 #: Input widths swept by default.
 DEFAULT_INPUT_BITS = (8, 10, 12, 14, 16)
@@ -212,6 +258,53 @@ def pareto_front(points: Sequence, objectives: Sequence[str] | None = None) -> l
     return sorted(front, key=lambda i: (tuple(vals[i]), i))
 
 
+# ------------------------------------------------------------------------------------ the format
+def result_errors(result: Any) -> list[str]:
+    """Every violation of the result format by ``result``, one sentence each (empty when valid).
+
+    Parameters
+    ----------
+    result : Any
+        A parsed ``explore.json`` or what :func:`explore` returns.
+
+    Returns
+    -------
+    list of str
+        The header's problem (format / version), else the schema's
+        (:func:`pwas_hdl.io.json_contract.schema_errors` against :data:`EXPLORE_SCHEMA`), most
+        relevant first.
+    """
+    from pwas_hdl.io.json_contract import check_header, schema_errors
+
+    try:
+        check_header(result, EXPLORE_FORMAT, EXPLORE_VERSION, "the result", _HINT)
+    except InputError as exc:
+        return [str(exc)]
+    return schema_errors(result, EXPLORE_SCHEMA)
+
+
+def check_result(result: Any, source: str = "the explore result") -> None:
+    """Refuse a result that breaks the ``pwas-hdl-explore`` format (version 1, :data:`EXPLORE_SCHEMA`).
+
+    Parameters
+    ----------
+    result : Any
+        A parsed ``explore.json`` or what :func:`explore` returns (a sensor's or a classifier's).
+    source : str
+        Its name in the message (e.g. the file's path).
+
+    Raises
+    ------
+    InputError
+        One message: the file is not a ``pwas-hdl-explore`` version 1 result, or the schema's most
+        relevant violation, naming the key by its path.
+    """
+    from pwas_hdl.io.json_contract import check_header, validate
+
+    check_header(result, EXPLORE_FORMAT, EXPLORE_VERSION, source, _HINT)
+    validate(result, EXPLORE_SCHEMA, source, _HINT)
+
+
 # ------------------------------------------------------------------------------------ data
 def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
     if isinstance(model, PWASVirtualSensor):
@@ -222,37 +315,43 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
 def _check_supported(sensor: PWASVirtualSensor) -> None:
     """Refuse, with one :class:`InputError` naming the fit option, the models whose design is not the
     core of a bit-true model of :func:`pwas_hdl.design.generate.fixed_point_model` on the lag
-    regressors: observer-bank sensors and classifiers (also when additive or on a non-uniform
-    partition). Plain, additive (fit --additive), non-uniform power-of-two (fit --breakpoints
-    quantile-pow2) and recurrent (fit --mz; their accuracy is the closed loop's) sensors are swept;
-    other breakpoints are refused by the bit-true model itself (the message names quantile-pow2)."""
-    kinds = (
-        (getattr(sensor, "front_end_", None) is not None, "observer-bank sensors (fit --front-end observer-bank)"),
-        (getattr(sensor, "classifier_", None) is not None, "classifiers (fit --classify)"),
-    )
-    for bad, what in kinds:
-        if bad:
-            raise InputError(f"explore is not available for {what} yet; give the formats to `pwas-hdl generate` "
-                             "(--input-bits, --weight-frac, --output-frac)")
+    regressors: observer-bank sensors. Plain, additive (fit --additive), non-uniform power-of-two
+    (fit --breakpoints quantile-pow2) and recurrent (fit --mz; their accuracy is the closed loop's)
+    sensors are swept, and classifiers (fit --classify; plain, additive or power-of-two: their
+    accuracy is the error rate of the bit-true argmax); other breakpoints are refused by the
+    bit-true model itself (the message names quantile-pow2)."""
+    if getattr(sensor, "front_end_", None) is not None:
+        raise InputError("explore is not available for observer-bank sensors (fit --front-end observer-bank) yet; "
+                         "give the formats to `pwas-hdl generate` (--input-bits, --weight-frac, --output-frac)")
 
 
 def _signals_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
     """The trajectories ``u``, ``y`` and ``z`` (lists, one array per trajectory; ``u`` / ``y`` None
-    when the model has no such signal) of the data, and a description of where they came from."""
+    when the model has no such signal) of the data, and a description of where they came from.
+
+    ``z`` holds the reference of each target (``(T_i, nz)``): column ``<target>_true``, else
+    ``<target>`` (:meth:`Table.reference_column <pwas_hdl.io.csv_table.Table.reference_column>`).
+    A classifier has one reference, the true class label (``(T_i, 1)``): column ``<label>_true``,
+    else ``<label>``, found as ``predict`` finds it; a tuple ``(u, y, z)`` then gives the labels as
+    ``z``."""
     ins, outs, tgts = sensor.signal_names()
+    clf = getattr(sensor, "classifier_", None)
+    refs_of = [clf["target"]] if clf is not None else tgts  # the quantities compared with the data
     lags = sensor.lags_
     if isinstance(data, (str, os.PathLike)):
         data = read_csv(data, blank_rows=blank_rows)
     if isinstance(data, Table):
-        check_trajectory_column(data, traj_col, [*ins, *outs], tgts)
+        check_trajectory_column(data, traj_col, [*ins, *outs], refs_of)
         u = select_signals(data, ins, traj_col) if lags.nu else None
         y = select_signals(data, outs, traj_col) if lags.ny else None
         refs = []
-        for t in tgts:
-            col = next((c for c in (f"{t}_true", t) if c in data.header), None)
+        for t in refs_of:
+            col = data.reference_column(t)
             if col is None:
+                what = (f"with the true class of classifier {t!r} (its decisions are scored against it)" if clf is not None
+                        else f"to compare the estimate of target {t!r} with")
                 raise InputError(
-                    f"{data.path}: no column {t + '_true'!r} or {t!r} to compare the estimate of target {t!r} with; "
+                    f"{data.path}: no column {t + '_true'!r} or {t!r} {what}; "
                     f"the file has columns {', '.join(data.header)}"
                 )
             refs.append(col)
@@ -265,13 +364,14 @@ def _signals_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None
             raise InputError("data must be a CSV path, a pwas_hdl.io.csv_table.Table or a tuple (u, y, z)") from None
         from pwas_hdl.fit.regressors import as_trajectories
 
-        ztab = as_trajectories(ztab, "z", len(tgts))
+        ztab = as_trajectories(ztab, "z (the true class labels)" if clf is not None else "z", len(refs_of))
         desc = {"path": None, "reference_columns": None, "traj_col": None}
     return u, y, ztab, desc
 
 
 def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
-    """``xi (m, n)``, reference ``z (m, nz)``, and a description of where they came from."""
+    """``xi (m, n)``, reference ``z (m, nz)`` (a classifier's: the true labels, ``(m, 1)``), and a
+    description of where they came from."""
     u, y, ztab, desc = _signals_and_reference(sensor, data, traj_col, blank_rows)
     tgts = sensor.signal_names()[2]
     xi, valid = sensor.regressors(u, y)
@@ -285,9 +385,20 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
     z = np.concatenate(zs, axis=0)
     if xi.shape[0] == 0:
         raise InputError("the data have no sample with a full regressor (too few samples for the lags)")
-    for i, t in enumerate(tgts):  # the reference of the RMSEE: its squared errors would overflow
-        where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
-        check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
+    clf = getattr(sensor, "classifier_", None)
+    if clf is None:
+        for i, t in enumerate(tgts):  # the reference of the RMSEE: its squared errors would overflow
+            where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
+            check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
+    else:  # a label no class stands for: most likely another column (a continuous target, say), not a class
+        from pwas_hdl.fit.classifier import one_hot
+
+        where = f"{desc['path']}: column {desc['reference_columns'][0]!r}" if desc["path"] is not None else "z (the true labels)"
+        try:
+            one_hot(z[:, 0], clf["classes"])
+        except InputError as exc:
+            raise InputError(f"{where}: {exc} of classifier {clf['target']!r}; give the true class labels "
+                             "(explore scores the decisions against them)") from None
     desc["samples"] = int(xi.shape[0])
     return xi, z, desc
 
@@ -501,14 +612,20 @@ def _register_key(core) -> tuple | None:
 
 
 def _design_register_key(design, kind: str) -> tuple | None:
-    """:func:`_register_key` of an additive design (its parts' keys, the sum's and the output's widths) or
-    of a warped core (the core's key; the warp register holds ``n`` codes of the core's input width,
-    in that key). ``None`` if unhashable."""
+    """:func:`_register_key` of an additive design (its parts' keys, the sum's and the output's widths), of
+    a warped core (the core's key; the warp register holds ``n`` codes of the core's input width, in
+    that key) or of a classifier's core and argmax stage (``kind="classifier"``: the core's key). With
+    an argmax stage (``design.argmax``) the key says so: its registers hold ``nz`` scores of the
+    output width under the core's pipeline, all in the key. ``None`` if unhashable."""
+    argmax = getattr(design, "argmax", None) is not None
     if kind == "additive":
         p = design.params
-        key = ("additive", tuple(_core_key(c) for c in design.parts), p.n, p.nz, p.in_width, p.sum_width, p.out_width)
+        key = ("additive", tuple(_core_key(c) for c in design.parts), p.n, p.nz, p.in_width, p.sum_width, p.out_width,
+               argmax)
+    elif kind == "classifier":
+        key = ("classifier", type(design).__qualname__, _core_key(design.core))
     else:
-        key = ("warped", type(design).__qualname__, _core_key(design.core))
+        key = ("warped", type(design).__qualname__, _core_key(design.core), argmax)
     try:
         hash(key)
     except TypeError:
@@ -563,8 +680,31 @@ def _core_adder_bits(n: int, nz: int, f: int, bw: int, in_width: int, rounding: 
     return 2 * n * (in_width + 1) + n * (n - 1) // 2 * (f + 1) + n * (f + 2) + nz * n * acc + (nz * acc if rounding else 0)
 
 
-def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None) -> dict[str, Any]:
+def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None,
+                       classifier: dict | None = None) -> dict[str, Any]:
     """The resource estimate of the core the generator builds for ``fxm`` (see the module notes).
+
+    Parameters
+    ----------
+    fxm : FixedPointModel
+        The bit-true model (:func:`pwas_hdl.design.generate.fixed_point_model`: plain, additive or warped).
+    memory : {"banked", "replicated"}
+        Weight memory layout.
+    pipeline : Pipeline, preset name or None
+        As :func:`pwas_hdl.hdl.build_core` (default balanced).
+    classifier : dict, optional
+        ``sensor.classifier_`` of a classifier model (``{"target", "classes"}``): the design then
+        ends with the argmax stage (:func:`pwas_hdl.hdl.api.classifier_stage`), whose ``C - 1``
+        comparators of ``B_out`` bits are added to ``adder_bits`` (``argmax_adder_bits``; its
+        multiplexers are not counted) and whose registers are in ``register_bits`` (the latency
+        is the design's, stage included).
+
+    Returns
+    -------
+    dict
+        The figures of the module notes (bits, blocks, ``latency_cycles``, ``acc_bits``; an
+        additive model's ``parts`` and ``sum_adder_bits``, a warped model's ``core_input_bits`` and
+        ``warp_adder_bits``, a classifier's ``argmax_adder_bits``).
 
     The register bits come from an elaboration of the core, cached per process by the parameters
     that shape the hardware (:func:`_register_key`).
@@ -586,15 +726,26 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
 
     kind = model_kind(fxm)
     if kind == "additive":
-        return _estimate_additive(fxm, memory, pipeline)
+        return _estimate_additive(fxm, memory, pipeline, classifier)
     if kind == "warped":
-        return _estimate_warped(fxm, memory, pipeline)
+        return _estimate_warped(fxm, memory, pipeline, classifier)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        core = build_core(fxm, memory=memory, pipeline=pipeline)
+        core = build_core(fxm, memory=memory, pipeline=pipeline, classifier=classifier)
         info = design_info(core)
     # the registers depend on the widths only (not on the weights, the shift or the rounding)
-    return _core_estimate(info, _cached_register_bits(core))
+    if classifier is None:
+        return _core_estimate(info, _cached_register_bits(core))
+    am = _argmax_adder_bits(core)
+    res = _core_estimate(info, _cached_design_register_bits(core, "classifier", [core.core]), am)
+    return {**res, "argmax_adder_bits": am}
+
+
+def _argmax_adder_bits(design) -> int:
+    """Comparator bits of a classifier design's argmax stage (``design.argmax``): ``C - 1`` compare
+    nodes of ``B_out`` bits each (0 without a stage)."""
+    am = getattr(design, "argmax", None)
+    return 0 if am is None else (int(am.n_inputs) - 1) * int(am.width)
 
 
 def _core_estimate(info: dict, regs: int | None, extra_adder_bits: int = 0) -> dict[str, Any]:
@@ -628,14 +779,15 @@ def _core_estimate(info: dict, regs: int | None, extra_adder_bits: int = 0) -> d
     }
 
 
-def _estimate_additive(fxm, memory: str, pipeline) -> dict[str, Any]:
-    """:func:`estimate_resources` of an additive model (the design of ``generate``: one core per part, the sum)."""
+def _estimate_additive(fxm, memory: str, pipeline, classifier: dict | None = None) -> dict[str, Any]:
+    """:func:`estimate_resources` of an additive model (the design of ``generate``: one core per part, the
+    sum, a classifier's argmax stage)."""
     from pwas_hdl.hdl import design_info
     from pwas_hdl.hdl.additive_top import build_additive_core
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        comp = build_additive_core(fxm, memory=memory, pipeline=pipeline)
+        comp = build_additive_core(fxm, memory=memory, pipeline=pipeline, classifier=classifier)
         info = design_info(comp)
     mem, ar = info["memory"], info["arithmetic"]
     nz, bw, bin_ = int(ar["nz"]), int(ar["weight_width"]), int(ar["in_width"])
@@ -657,9 +809,12 @@ def _estimate_additive(fxm, memory: str, pipeline) -> dict[str, Any]:
         dsp += part["dsp18"]
         bram += part["bram18k"]
     adder += nz * (k - 1) * w_sum + nz * w_sum  # the sum's adder tree and its rounding, W bits each
+    am = _argmax_adder_bits(comp)
+    adder += am
     regs = _cached_design_register_bits(comp, "additive", comp.parts)
     logic = mult_bits + adder
     kinds = list(dict.fromkeys(p["multiplier"] for p in parts))
+    extra = {"argmax_adder_bits": am} if classifier is not None else {}
     return {
         "memory_words": int(mem["words"]),
         "memory_word_bits": int(mem["word_bits"]),
@@ -679,25 +834,29 @@ def _estimate_additive(fxm, memory: str, pipeline) -> dict[str, Any]:
         "acc_bits": w_sum,
         "sum_adder_bits": nz * k * w_sum,
         "parts": parts,
+        **extra,
     }
 
 
-def _estimate_warped(fxm, memory: str, pipeline) -> dict[str, Any]:
-    """:func:`estimate_resources` of a warped model (the design of ``generate``: warp + register + the uniform core)."""
+def _estimate_warped(fxm, memory: str, pipeline, classifier: dict | None = None) -> dict[str, Any]:
+    """:func:`estimate_resources` of a warped model (the design of ``generate``: warp + register + the
+    uniform core, a classifier's argmax stage)."""
     from pwas_hdl.hdl import design_info
     from pwas_hdl.hdl.warp import build_warped_core
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        comp = build_warped_core(fxm, memory=memory, pipeline=pipeline)
+        comp = build_warped_core(fxm, memory=memory, pipeline=pipeline, classifier=classifier)
         info = design_info(comp)
     w_core = int(info["arithmetic"]["in_width"])  # the core's W (the warp's output code)
     warp_adder = 0
     for wp in fxm.warps:  # three comparators on B_in bits, t = q - B_0 over the domain's codes, u = U + L on W bits
         span = int(wp.code_breaks[-1] - wp.code_breaks[0])
         warp_adder += 3 * int(wp.input_bits) + max(1, (span - 1).bit_length()) + int(wp.width)
-    res = _core_estimate(info, _cached_design_register_bits(comp, "warped", [comp.core]), warp_adder)
-    return {**res, "core_input_bits": w_core, "warp_adder_bits": warp_adder}
+    am = _argmax_adder_bits(comp)
+    res = _core_estimate(info, _cached_design_register_bits(comp, "warped", [comp.core]), warp_adder + am)
+    extra = {"argmax_adder_bits": am} if classifier is not None else {}
+    return {**res, "core_input_bits": w_core, "warp_adder_bits": warp_adder, **extra}
 
 
 _MEASURED_KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "lutram", "memory_bits", "multipliers_rtl",
@@ -715,22 +874,47 @@ def _label(p: dict) -> str:
     return f"in {inp} / w s{p['weight_bits']}.{p['weight_frac']} / out s{p['output_bits']}.{p['output_frac']}"
 
 
-def _paired_se(e_a: np.ndarray, e_b: np.ndarray, blocks: int = 20) -> np.ndarray:
-    """Standard error (per target) of ``RMSEE(a) - RMSEE(b)`` measured on the same samples.
+def _batch_se(diff: np.ndarray, blocks: int = 20) -> np.ndarray:
+    """Standard error of the mean of ``diff`` (m, d) per column, by batch means.
 
-    Batch means: the per-sample differences ``e_a^2 - e_b^2`` are averaged over ``blocks``
-    contiguous blocks (at least 25 samples each), so that the autocorrelation of a time series
-    within a block is accounted for; the standard error of the MSE difference is the standard
-    deviation of the block means over ``sqrt(blocks)``, turned into RMSEE units by the delta method
-    (``/ (2 RMSEE(b))``).
+    The rows are averaged over ``blocks`` contiguous blocks (at least 25 rows each), so that the
+    autocorrelation of a time series within a block is accounted for; the standard error is the
+    standard deviation of the block means over ``sqrt(blocks)``. Zeros (d,) when fewer than two
+    blocks of 25 rows exist.
     """
-    diff = e_a**2 - e_b**2
     k = min(blocks, diff.shape[0] // 25)
     if k < 2:
         return np.zeros(diff.shape[1])
     means = np.stack([b.mean(axis=0) for b in np.array_split(diff, k, axis=0)])
+    return np.std(means, axis=0, ddof=1) / math.sqrt(k)
+
+
+def _paired_se(e_a: np.ndarray, e_b: np.ndarray, blocks: int = 20) -> np.ndarray:
+    """Standard error (per target) of ``RMSEE(a) - RMSEE(b)`` measured on the same samples.
+
+    Batch means (:func:`_batch_se`) of the per-sample differences ``e_a^2 - e_b^2`` give the
+    standard error of the MSE difference, turned into RMSEE units by the delta method
+    (``/ (2 RMSEE(b))``).
+    """
     rm = np.sqrt(np.mean(e_b**2, axis=0))
-    return np.std(means, axis=0, ddof=1) / math.sqrt(k) / (2 * np.where(rm > 0, rm, 1.0))
+    return _batch_se(e_a**2 - e_b**2, blocks) / (2 * np.where(rm > 0, rm, 1.0))
+
+
+def _paired_rate_se(wrong_a: np.ndarray, wrong_b: np.ndarray, blocks: int = 20) -> float:
+    """Standard error of ``error_rate(a) - error_rate(b)`` measured on the same samples.
+
+    Parameters
+    ----------
+    wrong_a, wrong_b : numpy.ndarray, shape (m,)
+        1.0 where decision ``a`` (``b``) misclassifies the sample, else 0.0.
+
+    Returns
+    -------
+    float
+        Batch means (:func:`_batch_se`) of the per-sample differences ``wrong_a - wrong_b``
+        (a fraction of the samples, as the error rates).
+    """
+    return float(_batch_se((np.asarray(wrong_a, float) - np.asarray(wrong_b, float))[:, None], blocks)[0])
 
 
 def _kind_fields(fxm, kind: str) -> dict:
@@ -781,16 +965,26 @@ def _accuracy(fxm: FixedPointModel, zb, flags, ref, z, zf, zf_rmsee) -> tuple[di
     """A point's accuracy fields and its errors ``zb - z`` (m, nz): ``zb`` the bit-true estimates,
     ``flags`` (m,) out of the domain, ``ref`` (m, nz) the float model at the codes the circuit saw,
     ``z`` the reference, ``zf`` the float sensor's estimates, ``zf_rmsee`` (nz,) its RMSEE."""
-    lsb = fxm.output_format.lsb
     err = zb - z
     rmsee = np.sqrt(np.mean(err**2, axis=0))
-    dev = zb - zf
-    dref = float(np.max(np.abs(zb - ref))) / lsb
     ratio = float(np.mean(rmsee / np.where(zf_rmsee > 0, zf_rmsee, np.finfo(float).tiny)))
     acc = {
         "rmsee": [float(v) for v in rmsee],
         "rmsee_ratio": ratio,
         "rmsee_ratio_se": float(np.mean(_paired_se(err, zf - z) / np.where(zf_rmsee > 0, zf_rmsee, 1.0))),
+        **_precision(fxm, zb, flags, ref, zf),
+    }
+    return acc, err
+
+
+def _precision(fxm: FixedPointModel, zb, flags, ref, zf) -> dict:
+    """The deviation fields of a point (module notes): ``zb`` (m, nz) the bit-true outputs
+    (physical units), ``flags`` (m,) out of the domain, ``ref`` (m, nz) the float model at the
+    codes the circuit saw, ``zf`` (m, nz) the float model at the unquantised regressors."""
+    lsb = fxm.output_format.lsb
+    dev = zb - zf
+    dref = float(np.max(np.abs(zb - ref))) / lsb
+    return {
         "rms_dev_float": [float(v) for v in np.sqrt(np.mean(dev**2, axis=0))],
         "max_dev_float": [float(v) for v in np.max(np.abs(dev), axis=0)],
         "max_dev_float_lsb": float(np.max(np.abs(dev)) / lsb),
@@ -800,7 +994,81 @@ def _accuracy(fxm: FixedPointModel, zb, flags, ref, z, zf, zf_rmsee) -> tuple[di
         "bound_holds": bool(dref <= fxm.error_bound_lsb * (1 + 1e-12)),
         "flagged": int(flags.sum()),
     }
-    return acc, err
+
+
+def _classifier_reference(sensor: PWASVirtualSensor, xi: np.ndarray, z: np.ndarray) -> dict:
+    """The float classifier on the sweep's data: what every point is compared with.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        A classifier (``sensor.classifier_``).
+    xi : numpy.ndarray, shape (m, n)
+        Physical regressors.
+    z : numpy.ndarray, shape (m, 1)
+        The true class labels (:func:`_regressors_and_reference`).
+
+    Returns
+    -------
+    dict
+        ``classes`` (C,), ``truth`` (m,) the true labels, ``scores`` (m, C) the float scores,
+        ``decided`` (m,) the float classifier's labels (:func:`pwas_hdl.fit.classifier.decide`),
+        ``wrong`` (m,) 1.0 where it misclassifies, ``error_rate`` and ``errors``.
+    """
+    from pwas_hdl.fit.classifier import decide
+
+    classes = np.asarray(sensor.classifier_["classes"], dtype=float)
+    truth = np.asarray(z, dtype=float)[:, 0]
+    scores = sensor.predict_regressors(xi)
+    decided = decide(scores, classes)
+    wrong = (decided != truth).astype(float)
+    return {"classes": classes, "truth": truth, "scores": scores, "decided": decided, "wrong": wrong,
+            "error_rate": float(wrong.mean()), "errors": int(wrong.sum())}
+
+
+def _evaluate_classifier(fxm: FixedPointModel, xi: np.ndarray, cref: dict) -> tuple[dict, np.ndarray]:
+    """Accuracy of a classifier point on the regressors ``xi`` (m, n): its decisions and its scores.
+
+    The decision is the hardware's: :func:`pwas_hdl.fixedpoint.argmax.argmax_index` of the bit-true
+    output codes (the argmax stage's compare tree, ties to the lowest class index), against the true
+    labels and the float classifier of ``cref`` (:func:`_classifier_reference`). The scores get the
+    deviation fields of a sensor point (:func:`_precision`).
+
+    Returns
+    -------
+    (dict, numpy.ndarray)
+        The accuracy fields: ``error_rate`` (fraction of the samples whose bit-true class is not the
+        true one), ``errors`` (their count), ``error_rate_se`` (standard error of ``error_rate`` minus
+        the float classifier's, paired batch means), ``disagreement`` / ``disagreements`` (bit-true
+        class differs from the float classifier's at the unquantised regressors),
+        ``disagreement_at_codes``, ``near_ties`` and ``differ_outside_margin`` (against the float
+        classifier at the represented inputs, :func:`pwas_hdl.fixedpoint.argmax.agreement`: a
+        difference outside the ``2 error_bound`` margin would break the bound; 0 whenever
+        ``bound_holds``), then :func:`_precision`'s. And ``wrong`` (m,): 1.0 where the bit-true
+        class is wrong.
+    """
+    from pwas_hdl.fixedpoint.argmax import agreement, argmax_index
+
+    q, sat = fxm.quantize_inputs(xi, return_saturated=True)
+    codes, oor = fxm.evaluate(q)
+    zb = fxm.to_physical_output(codes)
+    ref = fxm.reference(q)
+    decided = cref["classes"][argmax_index(codes)]
+    wrong = (decided != cref["truth"]).astype(float)
+    differ = decided != cref["decided"]
+    at_codes = agreement(ref, codes, fxm.error_bound)
+    acc = {
+        "error_rate": float(wrong.mean()),
+        "errors": int(wrong.sum()),
+        "error_rate_se": _paired_rate_se(wrong, cref["wrong"]),
+        "disagreement": float(differ.mean()),
+        "disagreements": int(differ.sum()),
+        "disagreement_at_codes": at_codes["differ"] / at_codes["samples"],
+        "near_ties": at_codes["near_ties"],
+        "differ_outside_margin": at_codes["differ_outside_margin"],
+        **_precision(fxm, zb, oor | sat, ref, cref["scores"]),
+    }
+    return acc, wrong
 
 
 def explore(
@@ -833,13 +1101,17 @@ def explore(
     ----------
     model : PWASVirtualSensor or path of a model file
         A plain, additive (fit ``--additive``) or power-of-two non-uniform (fit ``--breakpoints
-        quantile-pow2``) or recurrent (fit ``--mz``) sensor; not a classifier or an observer-bank sensor.
+        quantile-pow2``) or recurrent (fit ``--mz``) sensor, or a classifier (fit ``--classify``,
+        plain, additive or power-of-two non-uniform: scored by its error rate, module notes);
+        not an observer-bank sensor.
     data : path of a CSV, :class:`~pwas_hdl.io.csv_table.Table`, or tuple ``(u, y, z)``
         The evaluation data. From a CSV/Table the model's input/output columns are read (by
-        name) and the reference of target ``t`` is column ``t_true`` if present, else ``t``.
+        name) and the reference of target ``t`` is column ``t_true`` if present, else ``t`` (a
+        classifier's: the true class in column ``<label>_true`` or ``<label>``).
         A tuple gives arrays (or lists of trajectories) ``u``, ``y`` as for
-        :meth:`PWASVirtualSensor.predict` and the reference ``z`` sample by sample (the first
-        ``M - 1`` samples of each trajectory have no regressor and are skipped).
+        :meth:`PWASVirtualSensor.predict` and the reference ``z`` sample by sample (a
+        classifier's: the true labels, shape ``(T,)``; the first ``M - 1`` samples of each
+        trajectory have no regressor and are skipped).
     traj_col : str, optional
         Trajectory column of the CSV, as for ``fit``.
     input_bits : sequence of int
@@ -877,18 +1149,22 @@ def explore(
     Returns
     -------
     dict
-        JSON-ready: ``format``, ``version``, ``model``, ``data``, ``float`` (RMSEE of the float
-        model), ``sweep``, ``resource_model``, ``points`` (each with its formats, accuracy,
-        ``resources``, ``cost``, ``on_front``, ``is_default``, ``label``), ``refused``,
+        JSON-ready: ``format``, ``version``, ``model`` (``classifier``: None, or the label, the
+        classes and the tie rule), ``data``, ``float`` (RMSEE of the float model; a classifier's:
+        its ``error_rate`` and ``errors``), ``sweep``, ``resource_model`` (``objectives``: ``cost``
+        and ``rmsee_ratio``, a classifier's ``error_rate``), ``points`` (each with its formats,
+        accuracy, ``resources``, ``cost``, ``on_front``, ``is_default``, ``label``), ``refused``,
         ``pareto`` (indices into ``points``, by cost), ``default`` (index, on_front, and the
-        points dominating it with the margins), ``measured`` (None for the estimate).
+        points dominating it with the margins), ``measured`` (None for the estimate). Valid
+        under :func:`check_result`.
 
     Raises
     ------
     InputError
         Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
-        missing target column, data without a full regressor; a classifier or an
-        observer-bank sensor, or breakpoints whose cells are not power-of-two multiples of one step.
+        missing target column (a classifier's: its class label column), data without a full
+        regressor; an observer-bank sensor, or breakpoints whose cells are not power-of-two
+        multiples of one step.
     ToolMissing
         Synthesis was asked for and a synthesis tool is not installed.
     ToolFailed, InputError
@@ -936,6 +1212,8 @@ def explore(
     else:
         xi, z, data_desc = _regressors_and_reference(sensor, data, traj_col, blank_rows)
     tgts = sensor.signal_names()[2]
+    classifier = getattr(sensor, "classifier_", None)  # its accuracy: the error rate of the bit-true argmax
+    acc_key = "error_rate" if classifier is not None else "rmsee_ratio"  # the accuracy objective of the front
 
     # ---- the defaults of generate (input_bits=12, everything else from the data)
     common = {"input_fill": input_fill, "rounding": rounding, "overflow": overflow, "layout": memory}
@@ -957,10 +1235,14 @@ def explore(
     else:  # evaluated all the same, with the default widths, so that it can be compared
         combos.append((*default_key, True))
 
-    # ---- float reference (a recurrent sensor's: its float recurrence, from _recurrent_data)
-    if not recurrent:
+    # ---- float reference (a recurrent sensor's: its float recurrence, from _recurrent_data; a
+    # classifier's: the float classifier's decisions against the true labels)
+    if classifier is not None:
+        cref = _classifier_reference(sensor, xi, z)
+    elif not recurrent:
         zf = sensor.predict_regressors(xi)
-    zf_rmsee = np.sqrt(np.mean((zf - z) ** 2, axis=0))
+    if classifier is None:
+        zf_rmsee = np.sqrt(np.mean((zf - z) ** 2, axis=0))
 
     points: list[dict] = []
     refused: list[dict] = []
@@ -981,9 +1263,11 @@ def explore(
             if progress:
                 progress("sweep", i + 1, total)
             continue
-        if not recurrent:
+        if classifier is not None:
+            acc, err = _evaluate_classifier(fxm, xi, cref)
+        elif not recurrent:
             acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
-        res = estimate_resources(fxm, memory, pipeline)
+        res = estimate_resources(fxm, memory, pipeline, classifier=classifier)
         pt = {
             "input_bits": fxm.input_bits,
             "input_frac": fxm.F,
@@ -1017,11 +1301,11 @@ def explore(
     if cost == "register_bits" and any(p["cost"] is None for p in points):
         raise InputError("register bits are not available with this Amaranth version; choose another cost")
 
-    front = pareto_front(points, ("cost", "rmsee_ratio"))
+    front = pareto_front(points, ("cost", acc_key))
     for k, p in enumerate(points):
         p["on_front"] = k in front
     di = next(k for k, p in enumerate(points) if p["is_default"])
-    default = _default_summary(points, errors, di, front, z)
+    default = _default_summary(points, errors, di, front, acc_key)
 
     result: dict[str, Any] = {
         "format": EXPLORE_FORMAT,
@@ -1039,9 +1323,15 @@ def explore(
             "recurrence": ({"Mz": int(sensor.lags_.mz), "lead": int(getattr(sensor, "lead_", 0)),
                             "accuracy": "the bit-true recurrence from reset on each trajectory (closed loop)"}
                            if recurrent else None),
+            "classifier": (None if classifier is None else
+                           {"target": str(classifier["target"]), "classes": [float(c) for c in classifier["classes"]],
+                            "tie_rule": TIE_RULE,
+                            "accuracy": "the class index of the bit-true argmax of the output codes against the true "
+                                        "label; error_rate = fraction of the samples misclassified"}),
         },
         "data": data_desc,
-        "float": {"rmsee": [float(v) for v in zf_rmsee], "rmsee_ratio": 1.0},
+        "float": ({"rmsee": [float(v) for v in zf_rmsee], "rmsee_ratio": 1.0} if classifier is None
+                  else {"error_rate": cref["error_rate"], "errors": cref["errors"]}),
         "sweep": {
             "input_bits": in_bits,
             "weight_frac": fws,
@@ -1061,7 +1351,7 @@ def explore(
         "resource_model": {
             "mode": resources,
             "cost": cost,
-            "objectives": ["cost", "rmsee_ratio"],
+            "objectives": ["cost", acc_key],
             "definition": _COST_DEFINITION,
         },
         "points": points,
@@ -1078,7 +1368,10 @@ def explore(
         else:
             pick = [front[round(i * (len(front) - 1) / (measure_max - 1))] for i in range(measure_max)]
         result["measured"] = _measure(sensor, points, sorted(set(pick) | {di}), resources, device, workdir, memory,
-                                      pipeline, common, progress, executor)
+                                      pipeline, common, progress, executor, acc_key)
+    errs = result_errors(result)
+    if errs:  # the owner writes what its schema says (a bug otherwise, as the manifest's builder checks)
+        raise InternalError(f"the explore result breaks its schema {EXPLORE_SCHEMA}: {errs[0]}")
     return result
 
 
@@ -1094,8 +1387,33 @@ _COST_DEFINITION = {
 }
 
 
-def _default_summary(points: list[dict], errors: dict[int, np.ndarray], di: int, front: list[int], z: np.ndarray) -> dict:
-    """Is the default on the front? If not, the points dominating it and by how much."""
+def _default_summary(points: list[dict], errors: dict[int, np.ndarray], di: int, front: list[int],
+                     acc_key: str = "rmsee_ratio") -> dict:
+    """Is the default on the front? If not, the points dominating it and by how much.
+
+    Parameters
+    ----------
+    points : list of dict
+        The sweep's points (``cost``, ``on_front``, ``label`` and the accuracy fields).
+    errors : dict of int to numpy.ndarray
+        Per point: a sensor's errors ``(m, nz)`` (estimate minus reference, physical units), a
+        classifier's misclassifications ``(m,)`` (1.0 where the bit-true class is wrong).
+    di : int
+        Index of the default point.
+    front : list of int
+        The Pareto front (indices into ``points``).
+    acc_key : {"rmsee_ratio", "error_rate"}
+        The accuracy objective of the front: a sensor's or a classifier's.
+
+    Returns
+    -------
+    dict
+        ``index``, ``label``, ``on_front``, ``dominated_by`` (largest saving first: ``index``,
+        ``label``, ``cost_saved``, ``cost_saved_rel`` and, for a sensor, ``rmsee_better`` (per
+        target, physical units), ``rmsee_better_rel`` (of ``rmsee_ratio``), ``rmsee_diff_se``; for a
+        classifier ``error_rate_better`` (a fraction of the samples) and ``error_rate_diff_se``) and,
+        when dominated, ``max_cost_saved_rel`` and ``max_rmsee_gain_rel`` / ``max_error_rate_gain``.
+    """
     d = points[di]
     out: dict[str, Any] = {"index": di, "label": d["label"], "on_front": d["on_front"], "dominated_by": []}
     if d["on_front"]:
@@ -1103,22 +1421,29 @@ def _default_summary(points: list[dict], errors: dict[int, np.ndarray], di: int,
     ed = errors[di]
     for k in front:
         p = points[k]
-        if p["cost"] <= d["cost"] and p["rmsee_ratio"] <= d["rmsee_ratio"]:
-            se = _paired_se(errors[k], ed)
-            out["dominated_by"].append({
+        if p["cost"] <= d["cost"] and p[acc_key] <= d[acc_key]:
+            entry = {
                 "index": k,
                 "label": p["label"],
                 "cost_saved": d["cost"] - p["cost"],
                 "cost_saved_rel": (d["cost"] - p["cost"]) / d["cost"] if d["cost"] else 0.0,
-                "rmsee_better": [a - b for a, b in zip(d["rmsee"], p["rmsee"])],
-                "rmsee_better_rel": d["rmsee_ratio"] - p["rmsee_ratio"],
-                "rmsee_diff_se": [float(v) for v in se],
-            })
+            }
+            if acc_key == "error_rate":
+                entry["error_rate_better"] = d["error_rate"] - p["error_rate"]
+                entry["error_rate_diff_se"] = _paired_rate_se(errors[k], ed)
+            else:
+                entry["rmsee_better"] = [a - b for a, b in zip(d["rmsee"], p["rmsee"])]
+                entry["rmsee_better_rel"] = d["rmsee_ratio"] - p["rmsee_ratio"]
+                entry["rmsee_diff_se"] = [float(v) for v in _paired_se(errors[k], ed)]
+            out["dominated_by"].append(entry)
     out["dominated_by"].sort(key=lambda e: -e["cost_saved"])
     if out["dominated_by"]:
         dom = out["dominated_by"]
         out["max_cost_saved_rel"] = max(e["cost_saved_rel"] for e in dom)
-        out["max_rmsee_gain_rel"] = max(e["rmsee_better_rel"] for e in dom)
+        if acc_key == "error_rate":
+            out["max_error_rate_gain"] = max(e["error_rate_better"] for e in dom)
+        else:
+            out["max_rmsee_gain_rel"] = max(e["rmsee_better_rel"] for e in dom)
     return out
 
 
@@ -1165,7 +1490,11 @@ def _error_kind(exc: Exception) -> dict:
     return {"class": "InputError"}
 
 
-def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress, executor=None) -> dict:
+def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress, executor=None,
+             acc_key: str = "rmsee_ratio") -> dict:
+    """Synthesise the points ``idx`` (:func:`_measure_point`, one task each) and the front of the
+    synthesised points in (LUTs, DSPs, block RAMs, ``acc_key``: ``rmsee_ratio``, or a classifier's
+    ``error_rate``)."""
     from pwas_hdl.flow.executor import Executor
 
     root = None if workdir is None else Path(workdir)
@@ -1207,8 +1536,8 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
         raise RuntimeError(msg)  # a task that failed twice: a bug or a lost worker (exit 3 with the traceback)
     done["errors"] = errors
     ok = [k for k in done["points"] if all(isinstance(points[k]["measured"].get(key), (int, float)) for key in ("luts", "dsp", "bram"))]
-    objs = [[points[k]["measured"][key] for key in ("luts", "dsp", "bram")] + [points[k]["rmsee_ratio"]] for k in ok]
-    done["objectives"] = ["luts", "dsp", "bram", "rmsee_ratio"]
+    objs = [[points[k]["measured"][key] for key in ("luts", "dsp", "bram")] + [points[k][acc_key]] for k in ok]
+    done["objectives"] = ["luts", "dsp", "bram", acc_key]
     done["pareto"] = [ok[i] for i in pareto_front(objs)] if ok else []
     di = next((k for k in idx if points[k]["is_default"]), None)
     done["default_on_front"] = (di in done["pareto"]) if di in ok else None
@@ -1216,6 +1545,11 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
 
 
 # ------------------------------------------------------------------------------------ reports
+def _is_classifier_result(result: dict) -> bool:
+    """True for the result of a classifier's sweep (accuracy: the error rate of the bit-true argmax)."""
+    return (result.get("model") or {}).get("classifier") is not None
+
+
 def format_table(result: dict, rows: str = "pareto") -> str:
     """A Markdown table of the Pareto points (``rows="pareto"``, plus the default) or of all points.
 
@@ -1230,6 +1564,10 @@ def format_table(result: dict, rows: str = "pareto") -> str:
     -------
     str
         The table (costs in bits, RMSEE in the targets' physical units, max deviation in output LSB).
+        A classifier's table has, instead of the RMSEE columns, the error rate of the bit-true
+        decisions (percent of the samples, and their count), its difference to the float
+        classifier's (percentage points) and the share of decisions that differ from the float
+        classifier's (percent).
     """
     pts = result["points"]
     idx = list(result["pareto"]) if rows == "pareto" else list(range(len(pts)))
@@ -1237,9 +1575,13 @@ def format_table(result: dict, rows: str = "pareto") -> str:
     if di not in idx:
         idx.append(di)
     tg = result["model"]["targets"]
+    clf = _is_classifier_result(result)
     meas = result.get("measured") is not None
-    head = ["formats (in / weights / out)", "cost", "memory bits", "logic bits", "FFs",
-            f"RMSEE {tg[0]}" if len(tg) == 1 else "RMSEE / float", "vs float", "RMS dev. float", "max dev. (LSB)", "front"]
+    if clf:
+        acc_head = ["error rate", "vs float (pp)", "differs from float"]
+    else:
+        acc_head = [f"RMSEE {tg[0]}" if len(tg) == 1 else "RMSEE / float", "vs float", "RMS dev. float"]
+    head = ["formats (in / weights / out)", "cost", "memory bits", "logic bits", "FFs", *acc_head, "max dev. (LSB)", "front"]
     if meas:
         head[-1:-1] = ["LUT (meas.)", "FF (meas.)", "DSP", "BRAM"]
         head.append("meas. front")
@@ -1248,11 +1590,16 @@ def format_table(result: dict, rows: str = "pareto") -> str:
     for k in idx:
         p = pts[k]
         r = p["resources"]
-        acc = f"{p['rmsee'][0]:.4g}" if len(tg) == 1 else f"{p['rmsee_ratio']:.5f}"
+        if clf:
+            acc = [f"{100 * p['error_rate']:.3f} % ({p['errors']})",
+                   f"{100 * (p['error_rate'] - result['float']['error_rate']):+.3f}",
+                   f"{100 * p['disagreement']:.3f} %"]
+        else:
+            acc = [f"{p['rmsee'][0]:.4g}" if len(tg) == 1 else f"{p['rmsee_ratio']:.5f}",
+                   f"{(p['rmsee_ratio'] - 1) * 100:+.3f} %", ", ".join(f"{v:.3g}" for v in p["rms_dev_float"])]
         row = [
             p["label"].replace("in ", "").replace("w ", "").replace("out ", "") + (" **(default)**" if p["is_default"] else ""),
-            f"{p['cost']}", f"{r['memory_bits']}", f"{r['logic_bits']}", f"{r['register_bits']}", acc,
-            f"{(p['rmsee_ratio'] - 1) * 100:+.3f} %", ", ".join(f"{v:.3g}" for v in p["rms_dev_float"]),
+            f"{p['cost']}", f"{r['memory_bits']}", f"{r['logic_bits']}", f"{r['register_bits']}", *acc,
             f"{p['max_dev_float_lsb']:.3g}", "yes" if p["on_front"] else "no",
         ]
         if meas:
@@ -1261,6 +1608,33 @@ def format_table(result: dict, rows: str = "pareto") -> str:
             row.append(("yes" if k in mfront else "no") if "luts" in m else "")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
+
+
+def default_verdict(result: dict) -> str:
+    """One sentence on the default formats: on the Pareto front, or which point dominates it by how much.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`explore` returns.
+
+    Returns
+    -------
+    str
+        ``"on the Pareto front"``, or ``"NOT on the Pareto front: <label> costs x % less with ..."``
+        and the accuracy margin with its standard error: the RMSEE of a sensor (physical units), the
+        error rate of a classifier (percentage points of the samples).
+    """
+    d = result["default"]
+    if d["on_front"]:
+        return "on the Pareto front"
+    b = d["dominated_by"][0]
+    if _is_classifier_result(result):
+        better = (f"an error rate {100 * b['error_rate_better']:+.4g} percentage points better "
+                  f"(standard error {100 * b['error_rate_diff_se']:.2g})")
+    else:
+        better = f"an RMSEE {b['rmsee_better'][0]:+.4g} better (standard error {b['rmsee_diff_se'][0]:.2g})"
+    return f"NOT on the Pareto front: {b['label']} costs {100 * b['cost_saved_rel']:.1f} % less with {better}"
 
 
 def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | None = None) -> Path:
@@ -1272,7 +1646,9 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
     difference to the float model); the default of ``generate`` as a red star. Right: precision,
     the RMS deviation of the bit-true estimate from the float model (log axis), same points and
     marks. With measured resources a third panel plots the same accuracy against the measured LUTs
-    of the synthesised points, annotated with DSP and block-RAM counts.
+    of the synthesised points, annotated with DSP and block-RAM counts. A classifier's accuracy
+    is its error rate minus the float classifier's, in percentage points of the samples (the
+    standard errors of the paired difference), its precision the RMS deviation of the scores.
 
     Parameters
     ----------
@@ -1315,15 +1691,26 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
     front = list(result["pareto"])
     di = result["default"]["index"]
     dpt = pts[di]
-    excess = np.array([(p["rmsee_ratio"] - 1) * 100 for p in pts])
-    se = np.array([p.get("rmsee_ratio_se", 0.0) * 100 for p in pts])
+    clf = _is_classifier_result(result)
+    if clf:  # percentage points of the samples above the float classifier's error rate
+        fer = result["float"]["error_rate"]
+        excess = np.array([(p["error_rate"] - fer) * 100 for p in pts])
+        se = np.array([p.get("error_rate_se", 0.0) * 100 for p in pts])
+        acc_label = "bit-true error rate above the float classifier's (percentage points)"
+        front_label = "Pareto front (cost, error rate)"
+    else:
+        excess = np.array([(p["rmsee_ratio"] - 1) * 100 for p in pts])
+        se = np.array([p.get("rmsee_ratio_se", 0.0) * 100 for p in pts])
+        acc_label = "bit-true RMSEE above the float model's (%)"
+        front_label = "Pareto front (cost, RMSEE)"
     dev = np.array([float(np.sqrt(np.mean(np.square(p["rms_dev_float"])))) for p in pts])
     cost = np.array([p["cost"] for p in pts], dtype=float)
     nz_abs = np.abs(excess[excess != 0])
     lin = float(max(1e-3, np.min(nz_abs))) if nz_abs.size else 1e-3
     lin = float(10 ** np.floor(np.log10(max(lin, float(np.median(se)) if se.size else lin))))
     tg = result["model"]["targets"]
-    flt = ", ".join(f"{v:.4g}" for v in result["float"]["rmsee"])
+    flt = (f"float classifier (error rate {100 * result['float']['error_rate']:.4g} %)" if clf
+           else "float model (RMSEE " + ", ".join(f"{v:.4g}" for v in result["float"]["rmsee"]) + ")")
     dlabel = "generate default: " + dpt["label"] + (" (on the front)" if dpt["on_front"] else " (dominated)")
 
     def scatter(ax, y, errs=None):
@@ -1352,18 +1739,19 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
 
     ax = axes[0]
     scatter(ax, excess, se)
-    ax.step(cost[front], excess[front], where="post", color="black", lw=1.0, zorder=2, label="Pareto front (cost, RMSEE)")
+    ax.step(cost[front], excess[front], where="post", color="black", lw=1.0, zorder=2, label=front_label)
     ax.set_yscale("symlog", linthresh=lin)
-    ax.axhline(0.0, color="tab:blue", ls="--", lw=1.2, label=f"float model (RMSEE {flt})")
-    ax.set_ylabel("bit-true RMSEE above the float model's (%)")
-    ax.set_title("accuracy: RMSEE against " + ", ".join(result["data"].get("reference_columns") or tg), fontsize=10)
+    ax.axhline(0.0, color="tab:blue", ls="--", lw=1.2, label=flt)
+    ax.set_ylabel(acc_label)
+    against = ", ".join(result["data"].get("reference_columns") or ([result["model"]["classifier"]["target"]] if clf else tg))
+    ax.set_title(("accuracy: misclassification rate against " if clf else "accuracy: RMSEE against ") + against, fontsize=10)
     handles, labels = ax.get_legend_handles_labels()
 
     ax = axes[1]
     scatter(ax, dev)
     ax.set_yscale("log")
-    ax.set_ylabel("RMS |bit-true - float| (physical units)")
-    ax.set_title("precision: deviation from the float model", fontsize=10)
+    ax.set_ylabel("RMS |bit-true - float| of the scores" if clf else "RMS |bit-true - float| (physical units)")
+    ax.set_title("precision: deviation from the float model" + (" (class scores)" if clf else ""), fontsize=10)
 
     if meas:
         ax = axes[2]
@@ -1381,19 +1769,21 @@ def plot_exploration(result: dict, png_path: str | os.PathLike, *, title: str | 
         ax.set_yscale("symlog", linthresh=lin)
         ax.axhline(0.0, color="tab:blue", ls="--", lw=1.2)
         ax.set_xlabel(f"measured LUTs ({meas['target']}{', ' + meas['device'] if meas.get('device') else ''})")
-        ax.set_ylabel("bit-true RMSEE above the float model's (%)")
-        ax.set_title("synthesised: Pareto points and the default\n(line: their own front in LUTs, DSPs, BRAMs, RMSEE)",
-                     fontsize=9)
+        ax.set_ylabel(acc_label)
+        ax.set_title("synthesised: Pareto points and the default\n(line: their own front in LUTs, DSPs, BRAMs, "
+                     + ("error rate)" if clf else "RMSEE)"), fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
 
     fig.suptitle(title or f"bit-width exploration: n = {result['model']['n']}, N = {result['model']['N']}, "
                  f"{result['data']['samples']} samples; {len(pts)} formats, {len(front)} on the front", fontsize=11)
-    note = "error bars: +-1 standard error of the RMSEE difference to the float model (batch means)"
+    note = ("error bars: +-1 standard error of the " + ("error-rate difference to the float classifier" if clf else
+                                                         "RMSEE difference to the float model") + " (batch means)")
     dd = result["default"]
     if not dd["on_front"] and dd.get("dominated_by"):
         best = dd["dominated_by"][0]
-        note += (f". Default dominated, e.g. by {best['label']}: {100 * best['cost_saved_rel']:.0f} % less cost, "
-                 f"RMSEE {best['rmsee_better'][0]:+.3g} better (+-{best['rmsee_diff_se'][0]:.2g})")
+        note += f". Default dominated, e.g. by {best['label']}: {100 * best['cost_saved_rel']:.0f} % less cost, "
+        note += (f"error rate {100 * best['error_rate_better']:+.3g} points better (+-{100 * best['error_rate_diff_se']:.2g})"
+                 if clf else f"RMSEE {best['rmsee_better'][0]:+.3g} better (+-{best['rmsee_diff_se'][0]:.2g})")
     leg = fig.legend(handles, labels, loc="outside lower center", ncol=4, fontsize=8, frameon=False, title=note,
                      title_fontsize=7.5)
     leg.get_title().set_color("dimgray")
