@@ -164,7 +164,7 @@ from pwas_hdl import __version__
 from pwas_hdl.errors import InputError, InternalError, ToolFailed, ToolMissing, choice_text, option_text
 from pwas_hdl.fixedpoint.argmax import TIE_RULE
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
-from pwas_hdl.io.csv_table import Table, check_trajectory_column, read_csv, select_signals
+from pwas_hdl.io.csv_table import Table, check_trajectory_column, read_csv, reference_column_names, select_signals
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.io.atomic import check_output_path, make_temp_dir
 from pwas_hdl.limits import MAX_SWEEP_POINTS, check_limit, check_values
@@ -351,7 +351,7 @@ def _signals_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None
                 what = (f"with the true class of classifier {t!r} (its decisions are scored against it)" if clf is not None
                         else f"to compare the estimate of target {t!r} with")
                 raise InputError(
-                    f"{data.path}: no column {t + '_true'!r} or {t!r} {what}; "
+                    f"{data.path}: no column {' or '.join(map(repr, reference_column_names(t)))} {what}; "
                     f"the file has columns {', '.join(data.header)}"
                 )
             refs.append(col)

@@ -25,7 +25,7 @@ from pwas_hdl.io.atomic import atomic_write_text
 from pwas_hdl.limits import MAX_CSV_BYTES, MAX_CSV_FIELD, MAX_SAMPLES, check_limit
 
 __all__ = ["Table", "read_csv", "write_csv", "select_signals", "split_trajectories", "format_csv", "parse_number", "BLANK_ROWS",
-           "TRAJECTORY_COLUMN_NAMES", "unused_trajectory_column"]
+           "TRAJECTORY_COLUMN_NAMES", "unused_trajectory_column", "reference_column_names"]
 
 #: Column names that usually number the trajectories of a file (``make-data ... --runs`` writes ``run``).
 TRAJECTORY_COLUMN_NAMES = ("run", "trajectory", "traj", "experiment", "episode")
@@ -35,6 +35,27 @@ TRAJECTORY_COLUMN_NAMES = ("run", "trajectory", "traj", "experiment", "episode")
 #: (``float`` also takes ``1_0`` and Arabic-Indic or full-width digits: refused here). Surrounding
 #: whitespace is stripped first; ``nan`` / ``inf`` parse and are then refused as non-finite.
 _NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf(?:inity)?|nan)", re.IGNORECASE)
+
+def reference_column_names(name: str) -> tuple[str, str]:
+    """The columns that may hold the reference of quantity ``name``, the preferred one first.
+
+    The one statement of the naming rule: the reference (true or measured values) of a target
+    ``t`` is column ``t_true`` (noise-free, as ``make-data`` writes it) if the file has it, else
+    ``t``; a classifier's true class likewise ``<label>_true``, else ``<label>``.
+    :meth:`Table.reference_column` picks the one a file has.
+
+    Parameters
+    ----------
+    name : str
+        Quantity (target or class label) name.
+
+    Returns
+    -------
+    tuple of str
+        ``(f"{name}_true", name)``.
+    """
+    return (f"{name}_true", name)
+
 
 #: What :func:`read_csv` does with a blank row between data rows.
 BLANK_ROWS = ("error", "break")
@@ -195,9 +216,10 @@ class Table:
         Returns
         -------
         str or None
-            ``<name>_true`` if the file has it, else ``<name>``, else None.
+            ``<name>_true`` if the file has it, else ``<name>``, else None
+            (:func:`reference_column_names`).
         """
-        return next((c for c in (f"{name}_true", name) if c in self.header), None)
+        return next((c for c in reference_column_names(name) if c in self.header), None)
 
     def column_index(self, name: str) -> int:
         """Index of the column ``name`` in :attr:`header`.
@@ -485,7 +507,7 @@ def check_trajectory_column(table: Table, traj_column: str | None, signals: Sequ
            "or leave it out for one trajectory")
     if traj_column in signals:
         raise InputError(f"--traj-col {traj_column!r} is a signal the model reads ({', '.join(signals)}); {fix}")
-    refs = [c for t in references for c in (t, f"{t}_true")]
+    refs = [c for t in references for c in reference_column_names(t)]
     if traj_column in refs:
         raise InputError(f"--traj-col {traj_column!r} is the reference the estimates are compared with; {fix}")
 
