@@ -691,7 +691,9 @@ def predict(
 
     Writes columns: row (0-based data row), TARGET_hat for each target, out_of_domain (1 when a
     regressor was outside the model's domain and was clamped). When DATA holds the target column
-    (or TARGET_true), the RMSE of the estimate against it is printed.
+    (or TARGET_true), the RMSE of the estimate against it is printed. A classifier (fit --classify)
+    writes LABEL_hat and LABEL_score_K instead and prints the accuracy and F1 against LABEL_true or
+    LABEL; a value there that is none of the model's classes is refused (nothing written).
     """
     with _user_errors():
         output = _required(_merge("-o/--out", out, output=output_old), "-o/--out", "the CSV file to write")
@@ -733,9 +735,10 @@ def predict(
             cols[f"{ct}_hat"] = clf.label_column(label, classes)
             for i, c in enumerate(classes):
                 cols[clf.score_column(ct, c)] = zhat[:, i]
-            ref = table.reference_column(ct)
-            if ref is not None:
-                sc = clf.class_scores(table.numeric([ref])[rows, 0], label, classes)
+            truth = clf.true_labels(table, ct, classes, rows)  # LABEL_true or LABEL; a value no class is refused
+            if truth is not None:
+                ref, lab = truth
+                sc = clf.class_scores(lab, label, classes)
                 f1 = ", ".join(f"{clf.label_text(c)}: {v:.4f}" for c, v in zip(classes, sc["f1"]))
                 scores.append(f"accuracy of {ct}_hat against column {ref}: {sc['accuracy']:.4f} over {rows.size} samples; F1 per class {f1}")
         else:

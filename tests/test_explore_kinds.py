@@ -171,7 +171,7 @@ def test_additive_and_warped_classifiers_refuse_a_reference_that_holds_no_class_
         PWASVirtualSensor(partitions=3, sigma=1e-3, output_names=["y"], target_names=["z"], **kw).fit(
             None, tr.y[:400], (z > np.median(z)).astype(float)).save(in_tmp / "m.json")
         _refused(["explore", "m.json", str(lorenz_tiny.test_csv), "-o", "ex"], in_tmp,
-                 "column 'z_true'", "is not one of the classes ['0', '1'] of classifier 'z'", "give the true class labels")
+                 "column 'z_true'", "are not among the classes ['0', '1'] of classifier 'z'", "give the true class labels")
         (in_tmp / "m.json").unlink()
     for kind in KINDS:
         s = copy.deepcopy(fitted[kind][0])

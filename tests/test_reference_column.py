@@ -28,3 +28,75 @@ def test_a_trajectory_column_is_never_a_reference_column(col):
     t = _table(["y", "c", "c_true"])
     with pytest.raises(InputError, match="is the reference the estimates are compared with"):
         check_trajectory_column(t, col, ["y"], ["c"])
+
+
+# ------------------------------------------------------------------ a classifier's true class
+import numpy as np  # noqa: E402
+
+from helpers.cli import CliRunner, assert_refused  # noqa: E402
+from helpers.folders import tree  # noqa: E402
+
+from pwas_hdl import cli  # noqa: E402
+from pwas_hdl.fit import classifier as clf  # noqa: E402
+from pwas_hdl.io.csv_table import read_csv, write_csv  # noqa: E402
+
+RUNNER = CliRunner()
+N = 60
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory):
+    """A 3-class classifier of c = tercile of y (0, 1, 2; lag My = 1: every row scored), its sensor
+    design (generated, ~0.5 s; never simulated here) and the data."""
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
+
+    root = tmp_path_factory.mktemp("reference-column")
+    y = np.sin(np.arange(N) / 5.0)
+    c = np.digitize(y, [-0.3, 0.3]).astype(float)
+    m = PWASVirtualSensor(my=1, partitions=3, sigma=1e-6, output_names=["y"], target_names=["c"], classify=True).fit(None, y[:, None], c)
+    assert m.classifier_ == {"target": "c", "classes": [0.0, 1.0, 2.0]} and m.memory == 1
+    m.save(root / "model.json")
+    generate(m, root / "hw", design="sensor")
+    return {"root": root, "model": m, "y": y, "c": c}
+
+
+def test_check_true_labels_names_the_values_rows_and_classes():
+    clf.check_true_labels([0, 1, 2, 1], [0, 1, 2], "c", "d.csv: column 'c'")  # every label a class: nothing
+    with pytest.raises(InputError) as e:
+        clf.check_true_labels([0, 7, 1, 7], [0.0, 1.0, 2.0], "c", "d.csv: column 'c'")
+    assert str(e.value).startswith("d.csv: column 'c': label 7 is not one of the classes ['0', '1', '2'] of classifier 'c' "
+                                   "(2 of 4 rows); give the true class labels")
+    with pytest.raises(InputError) as e:  # a continuous column under the label's name: the first values, the rest counted
+        clf.check_true_labels([0.5, 1, 0.25, 3, 9, 0.5], [0.0, 1.0], "c", "d.csv: column 'c_true'")
+    assert str(e.value).startswith("d.csv: column 'c_true': labels 0.5, 0.25, 3 and 1 more are not among the classes "
+                                   "['0', '1'] of classifier 'c' (5 of 6 rows)")
+
+
+def _data(case, path, **cols):
+    write_csv(path, {"y": case["y"], **cols})
+    return path
+
+
+def _bad(case, k=17, value=7.0):
+    c = case["c"].copy()
+    c[k] = value
+    return c
+
+
+@pytest.mark.parametrize("cols, words", [
+    (lambda case: {"c": _bad(case)}, ("d.csv: column 'c': label 7 is not one of the classes ['0', '1', '2'] of classifier 'c'",
+                                      "(1 of 60 rows)")),
+    # LABEL_true is the reference when both are there (a good LABEL does not hide it)
+    (lambda case: {"c": case["c"], "c_true": _bad(case, value=0.5)}, ("d.csv: column 'c_true': label 0.5 is not one of the classes",)),
+])
+def test_predict_refuses_a_label_that_is_no_class(case, tmp_path, monkeypatch, cols, words):
+    """It was scored as a wrong decision (the accuracy printed, the CSV written): now refused as explore
+    refuses it -- one error line naming the file, the column, the value and the classes, exit 2,
+    nothing written."""
+    monkeypatch.chdir(tmp_path)
+    _data(case, tmp_path / "d.csv", **cols(case))
+    before = tree(tmp_path)
+    res = RUNNER.invoke(cli.app, ["predict", str(case["root"] / "model.json"), "d.csv", "-o", "p.csv"])
+    assert_refused(res, *words)
+    assert tree(tmp_path) == before

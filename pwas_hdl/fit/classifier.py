@@ -10,16 +10,23 @@ and in a hardware argmax stage alike. The model file records ``"classifier": {"t
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from pwas_hdl.errors import InputError, InternalError
 
-__all__ = ["class_labels", "one_hot", "class_target_names", "score_column", "decide", "label_text", "class_scores", "label_column"]
+if TYPE_CHECKING:
+    from pwas_hdl.io.csv_table import Table
+
+__all__ = ["class_labels", "one_hot", "class_target_names", "score_column", "decide", "label_text", "class_scores", "label_column",
+           "check_true_labels", "true_labels"]
 
 #: Most classes a classifier may have (one PWAS output each).
 MAX_CLASSES = 64
+
+#: Most offending values :func:`check_true_labels` names (the rest are counted).
+SHOWN_BAD_LABELS = 3
 
 
 def class_labels(values: np.ndarray) -> list[float]:
@@ -214,3 +221,78 @@ def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -
     ti, pi, ci = (np.searchsorted(union, v) for v in (t, p, cls))
     f1 = f1_score(ti, pi, labels=ci, average=None, zero_division=0)
     return {"accuracy": float(accuracy_score(ti, pi)), "f1": [float(v) for v in f1]}
+
+
+def check_true_labels(labels: np.ndarray, classes: Sequence[float], target: str, where: str) -> None:
+    """Refuse true class labels that are none of the classifier's classes.
+
+    Such a label is most likely another column under the label's name (a continuous target, say):
+    scored, every row of it would count as a wrong decision. ``predict``, ``explore`` and
+    ``simulate`` all refuse it with this one message.
+
+    Parameters
+    ----------
+    labels : numpy.ndarray
+        The true labels of the rows that are scored (any shape, flattened).
+    classes : sequence of float
+        The classifier's ``C`` classes.
+    target : str
+        The classifier's label name (``classifier_["target"]``).
+    where : str
+        Where the labels come from, for the message: ``"<file>: column '<c>'"``.
+
+    Raises
+    ------
+    InputError
+        One line: ``where``, the offending values (the first :data:`SHOWN_BAD_LABELS` distinct
+        ones in row order, the others counted), how many rows hold one, the classes and the
+        classifier.
+    """
+    v = np.asarray(labels, dtype=float).reshape(-1)
+    bad = ~np.isin(v, np.asarray(classes, dtype=float))
+    if not bad.any():
+        return
+    vals = list(dict.fromkeys(label_text(x) for x in v[bad].tolist()))  # distinct, in row order
+    shown = ", ".join(vals[:SHOWN_BAD_LABELS])
+    what = (f"label {shown} is not one of" if len(vals) == 1 else
+            f"labels {shown}{f' and {len(vals) - SHOWN_BAD_LABELS} more' if len(vals) > SHOWN_BAD_LABELS else ''} are not among")
+    raise InputError(f"{where}: {what} the classes {[label_text(c) for c in classes]} of classifier {target!r} "
+                     f"({int(bad.sum())} of {v.size} rows); give the true class labels in this column "
+                     "(the decisions are scored against them)")
+
+
+def true_labels(table: "Table", target: str, classes: Sequence[float], rows: np.ndarray) -> tuple[str, np.ndarray] | None:
+    """The true class of the scored rows of a data file, checked.
+
+    The column is :meth:`Table.reference_column <pwas_hdl.io.csv_table.Table.reference_column>`
+    of the label: ``<target>_true`` if the file has it, else ``<target>``; every value of ``rows``
+    must be one of ``classes`` (:func:`check_true_labels`).
+
+    Parameters
+    ----------
+    table : pwas_hdl.io.csv_table.Table
+        The data file.
+    target : str
+        The classifier's label name.
+    classes : sequence of float
+        The classifier's classes.
+    rows : numpy.ndarray of int, shape (m,)
+        The data rows whose decisions are scored.
+
+    Returns
+    -------
+    (str, numpy.ndarray) or None
+        The column's name and its labels at ``rows`` (float, shape ``(m,)``); None when the file
+        has neither column.
+
+    Raises
+    ------
+    InputError
+        A cell of the column that is not a number, or a label of ``rows`` that is no class.
+    """
+    col = table.reference_column(target)
+    if col is None:
+        return None
+    lab = table.numeric([col])[np.asarray(rows, dtype=np.int64), 0]
+    check_true_labels(lab, classes, target, f"{table.path}: column {col!r}")
+    return col, lab

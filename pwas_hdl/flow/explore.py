@@ -391,14 +391,10 @@ def _regressors_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | N
             where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
             check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
     else:  # a label no class stands for: most likely another column (a continuous target, say), not a class
-        from pwas_hdl.fit.classifier import one_hot
+        from pwas_hdl.fit.classifier import check_true_labels
 
         where = f"{desc['path']}: column {desc['reference_columns'][0]!r}" if desc["path"] is not None else "z (the true labels)"
-        try:
-            one_hot(z[:, 0], clf["classes"])
-        except InputError as exc:
-            raise InputError(f"{where}: {exc} of classifier {clf['target']!r}; give the true class labels "
-                             "(explore scores the decisions against them)") from None
+        check_true_labels(z[:, 0], clf["classes"], clf["target"], where)
     desc["samples"] = int(xi.shape[0])
     return xi, z, desc
 
