@@ -961,7 +961,9 @@ def simulate(
     against TARGET_true (or TARGET) when DATA has it, the measured latency (cycles) and II, and
     the simulation speed (samples/s). Exit status 1 when the RTL differs from the bit-true model.
     A classifier design adds C_hat_hw, C_hat_bittrue, C_hat_float (class labels of the RTL's
-    class_index, of the bit-true and of the float argmax; the class is compared too).
+    class_index, of the bit-true and of the float argmax; the class is compared too) and scores them
+    against C_true or C when DATA has it, as predict does (a value there that is none of the
+    classes is refused before the simulator runs).
     A recurrent design runs the recurrent bench (one reset per trajectory) against the bit-true
     recurrence; it adds estimate_of_row (row + lead), TARGET_float is the float recurrence, and
     --engine native is refused.

@@ -100,3 +100,72 @@ def test_predict_refuses_a_label_that_is_no_class(case, tmp_path, monkeypatch, c
     res = RUNNER.invoke(cli.app, ["predict", str(case["root"] / "model.json"), "d.csv", "-o", "p.csv"])
     assert_refused(res, *words)
     assert tree(tmp_path) == before
+
+
+def test_predict_explore_and_simulate_refuse_the_same_way(case, tmp_path, monkeypatch):
+    """The one check (pwas_hdl.fit.classifier.check_true_labels) behind the three commands: the same
+    message for the same file, and simulate refuses before any simulator runs."""
+    from pwas_hdl.verify import simulation
+
+    def no_simulator(*a, **k):
+        raise AssertionError("the simulator ran")
+
+    monkeypatch.setattr(simulation, "run_rtl", no_simulator)
+    monkeypatch.chdir(tmp_path)
+    _data(case, tmp_path / "d.csv", c=case["c"], c_true=_bad(case))
+    before = tree(tmp_path)
+    lines = []
+    for args in (["predict", str(case["root"] / "model.json"), "d.csv", "-o", "p.csv"],
+                 ["explore", str(case["root"] / "model.json"), "d.csv", "-o", "ex", "--input-bits", "10"],
+                 ["simulate", str(case["root"] / "hw"), "d.csv", "-o", "s.csv"]):
+        lines.append(assert_refused(RUNNER.invoke(cli.app, args), "d.csv: column 'c_true': label 7 is not one of the classes "
+                                    "['0', '1', '2'] of classifier 'c' (1 of 60 rows)"))
+        assert tree(tmp_path) == before, args
+    assert len(set(lines)) == 1, lines
+    assert not (case["root"] / "hw" / "sim").exists()
+
+
+def _perfect_rtl(monkeypatch):
+    """run_rtl replaced by an RTL that outputs exactly the bit-true expectation (no simulator): what
+    simulate makes of the outputs is then testable in a fraction of a second."""
+    from pwas_hdl.verify import simulation
+
+    def run_rtl(design, runs, simulator, **kw):
+        raw = {"passed": True, "runs": [{"cycles": 0, "wall_s": 0.0, "segments": [
+            {"got": s.rows().tolist(), "latencies": [design.latency] * len(s.expected), "accepted_at": []} for s in r.segments]}
+            for r in runs]}
+        return simulation._summarise(design, list(runs), raw, simulator, {}, 0.0)
+
+    monkeypatch.setattr(simulation, "run_rtl", run_rtl)
+    monkeypatch.setattr(simulation.sim_module("pwas_runner"), "tool_versions", lambda simulator: "none (test stand-in)")
+
+
+def test_simulate_scores_the_class_against_label_true(case, tmp_path, monkeypatch):
+    """simulate found the true class only in column LABEL (here a constant class 0): it now reads
+    LABEL_true when the file has it, as predict and explore do."""
+    from pwas_hdl.verify.simulation import simulate_data
+
+    _perfect_rtl(monkeypatch)
+    data = _data(case, tmp_path / "d.csv", c=np.zeros(N), c_true=case["c"])
+    s = simulate_data(case["root"] / "hw", data, tmp_path / "s.csv")["summary"]
+    c = s["classifier"]
+    assert c["class_mismatches"] == 0 and c["reference_column"] == "c_true"
+    hat = read_csv(tmp_path / "s.csv").numeric(["c_hat_bittrue"])[:, 0]
+    assert c["scores_bittrue"]["accuracy"] == pytest.approx(np.mean(hat == case["c"]))
+    # the file's own label column, when there is no c_true
+    data = _data(case, tmp_path / "e.csv", c=case["c"])
+    c2 = simulate_data(case["root"] / "hw", data, tmp_path / "s2.csv")["summary"]["classifier"]
+    assert c2["reference_column"] == "c" and c2["scores_bittrue"] == c["scores_bittrue"]
+
+
+def test_simulate_arrays_takes_a_classifiers_true_labels(case, tmp_path, monkeypatch):
+    """z_true of a classifier design is its label column (it was refused: 'the model's signals are
+    c=0_true, c=1_true, c=2_true', the one-hot scores); a label no class is refused as by simulate."""
+    from pwas_hdl.verify.simulation import simulate_arrays
+
+    _perfect_rtl(monkeypatch)
+    c = simulate_arrays(case["root"] / "hw", tmp_path / "s.csv", y=case["y"], z_true=case["c"])["summary"]["classifier"]
+    assert c["reference_column"] == "c_true" and c["scores_bittrue"]["accuracy"] > 0.5
+    with pytest.raises(InputError, match=r"column 'c_true': label 7 is not one of the classes \['0', '1', '2'\]"):
+        simulate_arrays(case["root"] / "hw", tmp_path / "t.csv", y=case["y"], z_true=_bad(case))
+    assert not (tmp_path / "t.csv").exists()

@@ -1118,7 +1118,8 @@ def simulate_data(
     ``class_index``, of the bit-true argmax and of the float argmax, and its ``mismatch`` includes
     the class) and the JSON summary (``summary_path``, default ``output`` with the suffix ``.json``;
     a classifier adds ``classifier``: class mismatches, agreement with the float classifier,
-    accuracy / F1 when the data has the label column).
+    accuracy / F1 when the data has the true class in column ``<c>_true`` or ``<c>``, as ``predict``
+    finds it; a value there that is none of the classes is refused before the simulator runs).
 
     ``engine``: ``"cocotb"`` (default) or ``"native"`` (the Verilator C++ bench, see
     :func:`run_rtl`; ``simulator`` then defaults to and must be ``"verilator"``). Both write the
@@ -1276,6 +1277,11 @@ def simulate_data(
         segs.append(segment(design, codes))
         rows.append(np.arange(sl.start + m_hist - 1, sl.stop))
         xs.append(xi)
+    truth = None  # a classifier's true class (column, labels of the output rows): LABEL_true or LABEL, as predict reads it
+    if clf is not None:
+        from pwas_hdl.fit.classifier import true_labels
+
+        truth = true_labels(table, clf["target"], clf["classes"], np.concatenate(rows) if rows else np.empty(0, dtype=np.int64))
     p = 1.0 - stall
     run = Run("replay", segs, p, p, seed)
     if engine == "native" and (simulator != "verilator" or waves):
@@ -1327,7 +1333,7 @@ def simulate_data(
                 cols[f"{t}_float"] = zf[:, i]
             clf_summary = None
             if clf is not None:
-                clf_summary, clf_cols = _class_columns(clf, hw_cls, bt_cls, bt, zf, zref, model.error_bound, table, row)
+                clf_summary, clf_cols = _class_columns(clf, hw_cls, bt_cls, bt, zf, zref, model.error_bound, truth)
                 cols.update(clf_cols)
             cols["out_of_range"] = oor
             cols["mismatch"] = mism
@@ -1420,7 +1426,7 @@ def simulate_data(
 
 
 def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: np.ndarray, zf: np.ndarray,
-                   zref: np.ndarray, bound: float, table, row: np.ndarray) -> tuple[dict, dict]:
+                   zref: np.ndarray, bound: float, truth: tuple[str, np.ndarray] | None) -> tuple[dict, dict]:
     """CSV columns and summary of a classifier design's class output.
 
     Columns ``<target>_hat_hw`` (the label of the RTL's class index), ``<target>_hat_bittrue``
@@ -1428,7 +1434,8 @@ def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: 
     real inputs, :func:`pwas_hdl.fit.classifier.decide`). The summary has the class mismatches
     (RTL vs bit-true), the agreement with the float classifier at the represented inputs (where the
     bound applies) and at the real inputs (:func:`pwas_hdl.fixedpoint.argmax.agreement`) and, when
-    the data has the label column, accuracy and per-class F1 of the three.
+    the data has the true class (``truth``: its column and the labels of the output rows, from
+    :func:`pwas_hdl.fit.classifier.true_labels`), accuracy and per-class F1 of the three.
     """
     from pwas_hdl.fit import classifier as fc
     from pwas_hdl.fixedpoint.argmax import agreement
@@ -1446,11 +1453,11 @@ def _class_columns(clf: dict, hw_cls: np.ndarray, bt_cls: np.ndarray, bt_codes: 
         "agreement_float_at_codes": agreement(zref, bt_codes, bound),
         "agreement_float": agreement(zf, bt_codes, bound),  # at the real inputs (input rounding too)
     }
-    if t in table.header:
-        truth = table.numeric([t])[row, 0]
+    if truth is not None:
+        ref, labels = truth
         for name, lab in (("hw", hw_lab), ("bittrue", bt_lab), ("float", fl_lab)):
-            summary[f"scores_{name}"] = fc.class_scores(truth, lab, classes)
-        summary["reference_column"] = t
+            summary[f"scores_{name}"] = fc.class_scores(labels, lab, classes)
+        summary["reference_column"] = ref
     return summary, cols
 
 
@@ -1547,7 +1554,8 @@ def simulate_arrays(
         (``sensor.signal_names()``); ``None`` when the model does not use them.
     z_true : ndarray, shape (T, nz) or (T,), or a list of such, optional
         Reference values of the targets: the summary then holds the RMSEE of hardware, bit-true and
-        float estimates against them.
+        float estimates against them. Of a classifier design, its true class labels (T,) or (T, 1)
+        (values of its classes): the summary's ``classifier`` then holds accuracy and F1.
     **options
         ``simulator``, ``stall``, ``seed``, ``cache_dir``, ``waves``, ``summary_path``,
         ``progress`` of :func:`simulate_data`.
@@ -1560,17 +1568,19 @@ def simulate_arrays(
     """
     from pwas_hdl.fit.regressors import as_trajectories
     from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
-    from pwas_hdl.io.csv_table import Table
+    from pwas_hdl.io.csv_table import Table, reference_column_names
 
     if "traj_col" in options or "data" in options:
         raise TypeError("simulate_arrays takes trajectories as lists of arrays, not traj_col/data")
     sensor = PWASVirtualSensor.load(Path(outdir) / "model.json")
     ins, outs, tgts = sensor.signal_names()
     lags = sensor.lags_
+    clf = getattr(sensor, "classifier_", None)
+    refs = [clf["target"]] if clf is not None else tgts  # a classifier's reference: its class label, not its scores
     columns: dict[str, list] = {}
     n_traj = None
     for names, arr, what, used in ((ins, u, "u", lags.nu and lags.mu), (outs, y, "y", lags.ny and lags.my),
-                                   ([f"{t}_true" for t in tgts], z_true, "z_true", z_true is not None)):
+                                   ([reference_column_names(t)[0] for t in refs], z_true, "z_true", z_true is not None)):
         if not used:
             continue
         if arr is None:
