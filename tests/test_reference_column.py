@@ -169,3 +169,32 @@ def test_simulate_arrays_takes_a_classifiers_true_labels(case, tmp_path, monkeyp
     with pytest.raises(InputError, match=r"column 'c_true': label 7 is not one of the classes \['0', '1', '2'\]"):
         simulate_arrays(case["root"] / "hw", tmp_path / "t.csv", y=case["y"], z_true=_bad(case))
     assert not (tmp_path / "t.csv").exists()
+
+
+@pytest.mark.parametrize("col", reference_column_names("mode"))
+def test_simulate_of_an_estimator_reads_mode_true_and_refuses_a_value_that_is_no_mode(col, tmp_path_factory, monkeypatch):
+    """Seed 003's estimator scores its detected modes (1..3) against the true mode: found as every
+    reference column (mode_true, else mode; it read mode only) and a value that is no mode (a
+    0-based column, say) refused before the simulator runs, as a classifier's label is (it scored
+    every such row as wrong)."""
+    from pwas_hdl.design.generate import generate
+    from pwas_hdl.fit.estimator_file import estimator_text
+    from pwas_hdl.systems.switched_observer import estimator_config
+    from pwas_hdl.verify import estimator_simulation
+    from pwas_hdl.verify.simulation import simulate_data
+
+    def no_simulator(*a, **k):
+        raise AssertionError("the simulator ran")
+
+    monkeypatch.setattr(estimator_simulation, "replay_segments", no_simulator)
+    root = tmp_path_factory.mktemp("estimator")
+    (root / "est.json").write_text(estimator_text(estimator_config()), encoding="utf-8")
+    generate(root / "est.json", root / "hw")
+    n = 20
+    cols = {"u": [i % 3 - 1 for i in range(n)], "y": [(i % 5) / 4 for i in range(n)], "mode": [1 + i % 3 for i in range(n)]}
+    cols[col] = [i % 3 for i in range(n)]  # 0-based: 0 is no mode
+    write_csv(root / "d.csv", cols)
+    with pytest.raises(InputError, match=rf"d.csv: column '{col}': label 0 is not one of the classes \['1', '2', '3'\] of the "
+                                         r"estimator's mode detector \(3 modes\) \(7 of 20 rows\)"):
+        simulate_data(root / "hw", root / "d.csv", root / "s.csv")
+    assert not (root / "s.csv").exists()

@@ -223,12 +223,13 @@ def class_scores(true: np.ndarray, pred: np.ndarray, classes: Sequence[float]) -
     return {"accuracy": float(accuracy_score(ti, pi)), "f1": [float(v) for v in f1]}
 
 
-def check_true_labels(labels: np.ndarray, classes: Sequence[float], target: str, where: str) -> None:
+def check_true_labels(labels: np.ndarray, classes: Sequence[float], target: str, where: str, *, owner: str | None = None) -> None:
     """Refuse true class labels that are none of the classifier's classes.
 
     Such a label is most likely another column under the label's name (a continuous target, say):
     scored, every row of it would count as a wrong decision. ``predict``, ``explore`` and
-    ``simulate`` all refuse it with this one message.
+    ``simulate`` all refuse it with this one message (``simulate`` of an estimator design too, for
+    the modes its detector decides).
 
     Parameters
     ----------
@@ -240,6 +241,8 @@ def check_true_labels(labels: np.ndarray, classes: Sequence[float], target: str,
         The classifier's label name (``classifier_["target"]``).
     where : str
         Where the labels come from, for the message: ``"<file>: column '<c>'"``.
+    owner : str, optional
+        Whose classes they are, for the message (default ``"classifier '<target>'"``).
 
     Raises
     ------
@@ -256,7 +259,8 @@ def check_true_labels(labels: np.ndarray, classes: Sequence[float], target: str,
     shown = ", ".join(vals[:SHOWN_BAD_LABELS])
     what = (f"label {shown} is not one of" if len(vals) == 1 else
             f"labels {shown}{f' and {len(vals) - SHOWN_BAD_LABELS} more' if len(vals) > SHOWN_BAD_LABELS else ''} are not among")
-    raise InputError(f"{where}: {what} the classes {[label_text(c) for c in classes]} of classifier {target!r} "
+    owner = owner if owner is not None else f"classifier {target!r}"
+    raise InputError(f"{where}: {what} the classes {[label_text(c) for c in classes]} of {owner} "
                      f"({int(bad.sum())} of {v.size} rows); give the true class labels in this column "
                      "(the decisions are scored against them)")
 

@@ -324,7 +324,7 @@ def simulate_estimator_data(outdir: str | os.PathLike, table: Any, output: str |
     CheckFailed
         The RTL did not produce every output (nothing is written).
     """
-    from pwas_hdl.fit.classifier import class_scores
+    from pwas_hdl.fit.classifier import check_true_labels, class_scores
     from pwas_hdl.io.csv_table import check_trajectory_column, format_csv, split_trajectories
     from pwas_hdl.systems.switched_observer import run_switched_observer
     from pwas_hdl.limits import check_values
@@ -341,6 +341,12 @@ def simulate_estimator_data(outdir: str | os.PathLike, table: Any, output: str |
     check_values(f"{table.path}: column {cfg.output_name!r}", y_all, "fix the data (no output MSE can be measured against it)")
     check_trajectory_column(table, traj_col, [cfg.input_name, cfg.output_name], [*cfg.state_names, "mode"])
     slices = list(split_trajectories(table, traj_col))
+    # the true mode (mode_true, else mode, as every reference column): a value that is no mode is refused, as a classifier's
+    mode_ref = table.reference_column("mode")
+    if mode_ref is not None:
+        mode = table.numeric([mode_ref])[:, 0]
+        check_true_labels(mode, list(range(1, cfg.n_modes + 1)), "mode", f"{table.path}: column {mode_ref!r}",
+                          owner=f"the estimator's mode detector ({cfg.n_modes} modes)")
     segs, bts, fls, codes_all = [], [], [], []
     for sl in slices:
         u, y = u_all[sl], y_all[sl]
@@ -395,10 +401,10 @@ def simulate_estimator_data(outdir: str | os.PathLike, table: Any, output: str |
     # no state bound when max_i ||A_i - K_i C_i||_inf >= 1 (FixedPointSwitchedEstimator): only the modes are checked then
     within = beyond == 0 and (eb["state"] is None or (dx <= eb["state"] and dy <= eb["y_hat"]))
     metrics: dict[str, Any] = {}
-    if "mode" in table.header:
-        mode = table.numeric(["mode"])[:, 0]
+    if mode_ref is not None:
         for st, th in (("hw", th_hw), ("bittrue", th_bt), ("float", th_fl)):
             metrics[f"mode_accuracy_{st}"] = float(class_scores(mode, th.astype(float), sorted(set(mode.tolist())))["accuracy"])
+        metrics["mode_reference_column"] = mode_ref
     for i, nm in enumerate(cfg.state_names):
         ref = table.reference_column(nm)
         if ref is not None:
