@@ -69,8 +69,11 @@ def test_a_serial_design_records_its_single_memory(kind, design):
     man = _design(kind, design, "serial").manifest
     assert man["generator"]["options"]["memory"] == man["memory"]["kind"] == man["memory"]["layout_spec"]["kind"] == "single"
     assert not manifest_errors(man)
+    # folders generated before the fix (options.memory "banked" beside memory.kind "single") stay readable
     old = {**man, "generator": {**man["generator"], "options": {**man["generator"]["options"], "memory": "banked"}}}
-    assert any("generator.options.memory is 'banked' but memory.kind is 'single'" in e for e in manifest_errors(old))
+    assert not manifest_errors(old)
+    wrong = {**man, "generator": {**man["generator"], "options": {**man["generator"]["options"], "memory": "replicated"}}}
+    assert any("generator.options.memory is 'replicated' but memory.kind is 'single'" in e for e in manifest_errors(wrong))
 
 
 def test_the_single_memory_rebuilds_the_bit_true_model_and_gets_no_floorplan(tmp_path):

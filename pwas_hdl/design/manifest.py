@@ -92,6 +92,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pwas_hdl.errors import InputError, InternalError
+from pwas_hdl.fixedpoint.memory_layout import SINGLE_MEMORY
 from pwas_hdl.io.json_contract import check_header, json_text, read_json, schema_errors, validate
 from pwas_hdl.limits import MAX_LATENCY_CYCLES, MAX_PORT_BITS
 
@@ -462,7 +463,10 @@ def _consistency_errors(m: dict[str, Any]) -> list[str]:
         errs.append(f"formats.inputs has {len(m['formats']['inputs'])} entries for {n} lags.regressors")
     if m["generator"]["options"]["design"] != m["design"]:
         errs.append(f"generator.options.design is {m['generator']['options']['design']!r} but design is {m['design']!r}")
-    if m["generator"]["options"]["memory"] != m["memory"]["kind"]:  # the serial core's: "single" (was recorded "banked")
+    recorded = (m["generator"]["options"]["memory"], m["memory"]["kind"])
+    # the serial core's memory is "single"; generate recorded the option as "banked" before 2026-12-07, so
+    # serial folders generated then stay readable
+    if recorded[0] != recorded[1] and recorded != ("banked", SINGLE_MEMORY):
         errs.append(f"generator.options.memory is {m['generator']['options']['memory']!r} but memory.kind is {m['memory']['kind']!r}")
     if m["memory"]["n_vertices"] != m["domain"]["n_vertices"]:
         errs.append(f"memory.n_vertices {m['memory']['n_vertices']} differs from domain.n_vertices {m['domain']['n_vertices']}")
