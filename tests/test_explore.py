@@ -12,6 +12,7 @@ import pytest
 
 from pwas_hdl.errors import InputError
 from helpers.cli import CliRunner
+from helpers.synth_stub import stub_synthesis
 
 from pwas_hdl.errors import ToolFailed, ToolMissing
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
@@ -273,14 +274,7 @@ def test_measured_mode_with_a_stub_synthesizer(tiny, tmp_path, monkeypatch):
     import pwas_hdl.flow.synthesis as synthesis
 
     m, root = tiny
-    calls = []
-
-    def fake(outdir, target, **kw):
-        man = json.loads((outdir / "manifest.json").read_text())
-        calls.append((outdir.name, target))
-        return {"luts": 100 + man["arithmetic"]["weight_width"], "ffs": 50, "dsp": 3, "bram": 3, "memory_bits": man["memory"]["bits"]}
-
-    monkeypatch.setattr(synthesis, "synthesize", fake)
+    calls = stub_synthesis(monkeypatch)
     res = explore(m, root / "test.csv", input_bits=[8, 12], weight_frac=[-2, 0, 2], output_frac=[0], resources="generic",
                   measure_max=2, workdir=tmp_path / "designs")
     meas = res["measured"]

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from helpers.cli import CliRunner, assert_refused
+from helpers.synth_stub import stub_synthesis
 from helpers.folders import tree
 
 from pwas_hdl import cli
@@ -214,23 +215,14 @@ def test_default_point_is_the_classifier_generate_builds(kind, case):
 def test_measured_mode_front_uses_the_error_rate(case, monkeypatch):
     """--fpga with a stub synthesiser: the synthesised designs are the classifier's (manifest
     classifier), the measured front is in (LUTs, DSPs, BRAMs, error_rate)."""
-    import pwas_hdl.flow.synthesis as synthesis
-
-    built = []
-
-    def fake(outdir, target, **kw):
-        man = json.loads((outdir / "manifest.json").read_text())
-        built.append(man)
-        return {"luts": 100 + man["arithmetic"]["weight_width"], "ffs": 50, "dsp": 3, "bram": 3, "memory_bits": man["memory"]["bits"]}
-
-    monkeypatch.setattr(synthesis, "synthesize", fake)
+    built = stub_synthesis(monkeypatch)
     m = case["models"]["plain"]
     d = _formats(m)
     res = explore(m, (None, case["y"], case["labels"]), input_bits=[8], weight_frac=[d.weight_format.frac - 2],
                   output_frac=[d.output_format.frac], resources="generic", measure_max=1)
     meas = res["measured"]
     assert meas["objectives"] == ["luts", "dsp", "bram", "error_rate"] and meas["errors"] == []
-    assert built and all(man["classifier"]["n_classes"] == 3 for man in built) and len(built) == len(meas["points"])
+    assert built and all(man["classifier"]["n_classes"] == 3 for _, _, man in built) and len(built) == len(meas["points"])
     objs = [[res["points"][k]["measured"][key] for key in ("luts", "dsp", "bram")] + [res["points"][k]["error_rate"]]
             for k in meas["points"]]
     assert meas["pareto"] == [meas["points"][i] for i in pareto_front(objs)]

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from helpers.cli import CliRunner
+from helpers.synth_stub import stub_synthesis
 from helpers.folders import tree
 
 from pwas_hdl import cli
@@ -184,22 +185,13 @@ def test_additive_and_warped_classifiers_refuse_a_reference_that_holds_no_class_
 def test_measured_mode_generates_the_new_kinds(fitted, monkeypatch):
     """--fpga: the front points and the default go through generate (the additive / warped design);
     the manifest's memory bits are the estimate's (stub synthesiser: no tools needed)."""
-    import pwas_hdl.flow.synthesis as synthesis
-
-    built = []
-
-    def fake(outdir, target, **kw):
-        man = json.loads((outdir / "manifest.json").read_text())
-        built.append(man)
-        return {"luts": 100 + man["arithmetic"]["weight_width"], "ffs": 50, "dsp": 3, "bram": 3, "memory_bits": man["memory"]["bits"]}
-
-    monkeypatch.setattr(synthesis, "synthesize", fake)
+    built = stub_synthesis(monkeypatch)
     for kind in KINDS:
         m, _, csv = fitted[kind]
         built.clear()
         res = explore(m, csv, input_bits=[8, 12], weight_frac=[-2, 0], output_frac=[0], resources="generic", measure_max=2)
         meas = res["measured"]
         assert meas["errors"] == [] and res["default"]["index"] in meas["points"] and len(built) == len(meas["points"])
-        assert all(("additive" in man) == (kind == "additive") and ("warp" in man) == (kind == "pow2") for man in built)
+        assert all(("additive" in man) == (kind == "additive") and ("warp" in man) == (kind == "pow2") for _, _, man in built)
         for k in meas["points"]:
             assert res["points"][k]["measured"]["estimate_memory_bits_exact"] is True
