@@ -215,6 +215,59 @@ def test_manifest_says_which_pipeline_registers_are_built(kind, architecture, pi
         assert any("architecture.pipeline_registers names ['mul_halves']" in e for e in manifest_errors(bad))
 
 
+def test_built_pipeline_registers_reads_the_manifest_and_falls_back_to_pipeline():
+    """One answer to "which registers does this design build": ``architecture.pipeline_registers``;
+    a manifest without it, the registers ``pipeline`` has on; the estimator (no pipeline), none."""
+    from pwas_hdl.design.manifest import built_pipeline_registers
+
+    man = _design("plain", "core", "serial", "short").manifest
+    assert man["pipeline"]["mul_in"] and built_pipeline_registers(man) == []
+    old = {**man, "architecture": {k: v for k, v in man["architecture"].items() if k != "pipeline_registers"}}
+    assert built_pipeline_registers(old) == ["mul_in"]
+    assert built_pipeline_registers({k: v for k, v in old.items() if k != "architecture"}) == ["mul_in"]
+    assert built_pipeline_registers({"design": "estimator"}) == []
+
+
+@pytest.mark.parametrize("architecture, mult_first", [("serial", False), ("parallel", True)])
+def test_synth_packs_and_plans_by_the_registers_the_design_builds(architecture, mult_first, tmp_path, monkeypatch):
+    """synth ordered the ECP5 hard-register packing (and the floorplan's rule) by ``pipeline``: a
+    serial design on ``short`` (mul_in, no mem_out) was packed multipliers first as if it had the
+    mul_in register the serial core does not build. Yosys and nextpnr are stand-ins here."""
+    import json
+
+    from pwas_hdl.design.generate import write_folder
+    from pwas_hdl.flow import floorplan, hard_registers, synthesis
+
+    class Stop(Exception):
+        pass
+
+    seen = {}
+
+    def run_tool(tool, args, cwd, log):
+        assert tool == "yosys", tool
+        for f in ("stat.json", "stat_rtl.json"):
+            (cwd / f).write_text(json.dumps({"design": {"num_cells_by_type": {}}}), encoding="utf-8")
+        return 0
+
+    def pack(netlist, top, *, mult_first=False):
+        seen["mult_first"] = mult_first
+        return {"ffs_absorbed": 0}
+
+    def plan(netlist, top, device, *, pipeline, **kw):
+        seen["planned"] = floorplan.applies_to_pipeline(pipeline)
+        raise Stop  # before nextpnr
+
+    monkeypatch.setattr(synthesis, "_check_tool", lambda tool: None)
+    monkeypatch.setattr(synthesis, "_run_tool", run_tool)
+    monkeypatch.setattr(hard_registers, "pack_ecp5_registers", pack)
+    monkeypatch.setattr(floorplan, "apply_floorplan", plan)
+    gd = _design("plain", "core", architecture, "short")
+    write_folder(gd.files, tmp_path / "d")
+    with pytest.raises(Stop):
+        synthesis.synthesize(tmp_path / "d", "ecp5", harness=False)
+    assert seen == {"mult_first": mult_first, "planned": mult_first}
+
+
 # ------------------------------------------------------------------------------ 5. a classifier's critical path
 @pytest.mark.parametrize("architecture, pipeline", [("parallel", "min"), ("parallel", "balanced"), ("serial", "balanced")])
 def test_a_classifiers_score_register_is_named_in_the_critical_path(architecture, pipeline):

@@ -103,7 +103,7 @@ if TYPE_CHECKING:
 __all__ = [
     "MANIFEST_FORMAT", "MANIFEST_VERSION", "MANIFEST_SCHEMA", "MANIFEST_SCHEMA_ID", "MANIFEST_FILE", "STREAM_ROLES",
     "build_manifest", "build_estimator_manifest", "manifest_text", "manifest_errors", "validate_manifest", "load_manifest", "port", "field",
-    "folder_inputs",
+    "folder_inputs", "built_pipeline_registers",
 ]
 
 MANIFEST_FORMAT = "pwas-hdl-manifest"
@@ -491,6 +491,36 @@ def _register_errors(m: dict[str, Any]) -> list[str]:
         return []
     off = [k for k in regs if not m["pipeline"].get(k)]
     return [f"architecture.pipeline_registers names {off}, which pipeline does not have"] if off else []
+
+
+def built_pipeline_registers(m: dict[str, Any]) -> list[str]:
+    """The registers of a manifest's ``pipeline`` that its design builds, in stage order.
+
+    ``architecture.pipeline_registers`` (:func:`pwas_hdl.hdl.api.pipeline_registers` records it;
+    the serial core ignores ``bank``, ``mul_in``, ``mul_halves`` and ``tree_levels``). A manifest
+    without it (written before it was recorded) gets the registers ``pipeline`` has on, as the
+    parallel core builds them; a design without a pipeline (the estimator) none. Ask this, not
+    ``pipeline``, whenever what matters is a register in the hardware (hard-register packing, the
+    floorplan).
+
+    Parameters
+    ----------
+    m : dict
+        A manifest (:func:`load_manifest`, :func:`build_manifest`).
+
+    Returns
+    -------
+    list of str
+        Names of :data:`~pwas_hdl.hdl.params.PIPELINE_REGISTERS` (``tree_levels``: some adder-tree
+        or compare-tree register).
+    """
+    regs = (m.get("architecture") or {}).get("pipeline_registers")
+    if regs is not None:
+        return list(regs)
+    from pwas_hdl.hdl.params import PIPELINE_REGISTERS
+
+    pl = m.get("pipeline") or {}
+    return [k for k in PIPELINE_REGISTERS if pl.get(k)]
 
 
 def _rate_errors(m: dict[str, Any]) -> list[str]:

@@ -137,7 +137,9 @@ def applies_to_pipeline(pipeline: dict[str, Any] | None) -> bool:
     Parameters
     ----------
     pipeline : dict, optional
-        The manifest's ``pipeline`` (register flags such as ``mul_in``, ``mem_out``); None: no flags.
+        Register flags such as ``mul_in``, ``mem_out``: ``pwas-hdl synth`` passes those the design
+        builds (:func:`pwas_hdl.design.manifest.built_pipeline_registers`; a serial core has no
+        ``mul_in`` whatever its ``pipeline`` says); None: no flags.
 
     Returns
     -------
@@ -193,7 +195,7 @@ def plan_sites(cells: dict[str, str], device: str | None, *, mode: str = "auto",
     mode
         ``"auto"`` or ``"none"`` (:data:`FLOORPLANS`).
     pipeline
-        The manifest's pipeline (:func:`applies_to_pipeline` decides for ``auto``).
+        The register flags of the design (:func:`applies_to_pipeline` decides for ``auto``).
     memory
         The manifest's ``memory.kind``; ``auto`` plans ``"banked"`` and ``"replicated"`` only.
     part

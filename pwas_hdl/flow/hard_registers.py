@@ -265,7 +265,7 @@ def pack_ecp5_registers(netlist: str | os.PathLike, top: str, *, mult_first: boo
         MULT18X18D qualifies as either block's; by default the block RAM's output register takes it
         (``mem_out``), with ``mult_first`` the multiplier's input registers (``mul_in`` without
         ``mem_out``, as :class:`~pwas_hdl.hdl.params.Pipeline` names it; ``pwas-hdl synth`` sets it
-        from the manifest's pipeline). Where both registers exist the result is the same.
+        from the registers the design builds, :func:`pwas_hdl.design.manifest.built_pipeline_registers`). Where both registers exist the result is the same.
 
     Returns
     -------

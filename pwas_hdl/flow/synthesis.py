@@ -61,7 +61,7 @@ from typing import Any, Callable
 from pwas_hdl.errors import InputError, InternalError, ToolFailed, ToolMissing
 from pwas_hdl.resources import templates_dir
 from pwas_hdl.io.atomic import atomic_write_text
-from pwas_hdl.design.manifest import load_manifest
+from pwas_hdl.design.manifest import built_pipeline_registers, load_manifest
 from pwas_hdl.fixedpoint.memory_layout import weight_memory_name
 
 __all__ = ["TARGETS", "DEFAULT_DEVICE", "synthesize", "synth_summary_text"]
@@ -271,6 +271,7 @@ def synthesize(
     latency = manifest["latency_cycles"]
     ii = manifest["ii"]
     clock_port = manifest["clock"]["port"]
+    built = built_pipeline_registers(manifest)  # the registers in the hardware (packing, floorplan)
 
     tools = ["yosys"] + ([f"nextpnr-{target}"] if target != "generic" else [])
     for t in tools:
@@ -357,16 +358,18 @@ def synthesize(
     if target == "ecp5" and pack_registers:
         from pwas_hdl.flow.hard_registers import pack_ecp5_registers
 
-        pl = manifest.get("pipeline") or {}
-        # a mul_in register right after the read (no mem_out register) is the multipliers' (Pipeline)
+        # a mul_in register right after the read (no mem_out register) is the multipliers' (Pipeline);
+        # the registers the design builds, not those its pipeline names (the serial core has no mul_in)
         hr = pack_ecp5_registers(work / "netlist.json", synth_top,
-                                 mult_first=bool(pl.get("mul_in")) and not pl.get("mem_out", True))
+                                 mult_first="mul_in" in built and "mem_out" not in built)
         result["hard_registers"] = hr
         result["ffs"] -= hr["ffs_absorbed"]  # the flip-flops left in the fabric
     result["floorplan"] = None
     if target == "ecp5":  # after the packing (it keeps the cells), before nextpnr
+        from pwas_hdl.hdl.params import PIPELINE_REGISTERS
+
         result["floorplan"] = apply_floorplan(work / "netlist.json", synth_top, dev, mode=floorplan,
-                                              pipeline=manifest.get("pipeline"),
+                                              pipeline={k: k in built for k in PIPELINE_REGISTERS},
                                               memory=(manifest.get("memory") or {}).get("kind"), part=part)
 
     # ---- nextpnr
