@@ -285,6 +285,32 @@ def test_a_classifiers_score_register_is_named_in_the_critical_path(architecture
     assert _stage_of_cell("core.scores_x") == "scores_x"  # only the register's own names
 
 
+def test_a_serial_cores_registers_are_named_in_the_critical_path():
+    """The serial core's registers beside the memory read (``m_*``), its mem_out (``mo_*``) and product
+    (``p_*``) registers, ``acc_done`` / ``acc_oor`` and the throttle's ``gap`` ended a critical path
+    as raw net names; they get the parallel core's stage names (s_mem, s_memout, s_prod) or the
+    serial core's own. Every register of a serial ``max`` design's Verilog gets a stage name."""
+    import re
+
+    from pwas_hdl.flow.timing_closure import _critical_path, _stage_of_cell
+
+    gd = _design("plain", "core", "serial", "max")
+    regs = set(re.findall(r"always @\(posedge \w+\)\s*\n\s*(\w+) <= ", gd.files[f"{gd.top}.v"]))
+    assert {"m_mu", "mo_data", "p_prod0", "acc_done", "gap"} <= regs
+    assert {r: _stage_of_cell(f"core.{r}_TRELLIS_FF") for r in regs if _stage_of_cell(f"core.{r}_TRELLIS_FF") == r} == {}
+    want = {"m_": "s_mem", "mo_": "s_memout", "p_": "s_prod", "acc": "serial accumulator", "gap": "serial input throttle"}
+    for r in regs:
+        pre = next((p for p in ("mo_", "m_", "p_", "acc", "gap") if r.startswith(p) and not r.startswith("m_axis")), None)
+        if pre:
+            assert _stage_of_cell(r) == want[pre], r
+    # a synthetic nextpnr report: a path from the memory-read cycle's mu to the product register
+    hop = {"type": "logic", "delay": 1.5}
+    report = {"critical_paths": [{"from": "posedge aclk", "to": "posedge aclk", "path": [
+        {**hop, "from": {"cell": "core.m_mu_TRELLIS_FF"}, "to": {"cell": "x"}},
+        {"type": "routing", "delay": 0.5, "from": {"cell": "x"}, "to": {"cell": "core.p_prod0_TRELLIS_FF"}}]}]}
+    assert _critical_path(report) == {"from": "s_mem", "to": "s_prod", "delay_ns": 2.0, "routing_ns": 0.5}
+
+
 # ------------------------------------------------------------------------------ 6. the console line
 @pytest.mark.parametrize("kind, design, architecture, want", [
     ("plain", "core", "parallel", "parallel core"),

@@ -245,6 +245,17 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("q_addr0$123", "serial vertex register"),
     ("core.part0_acc0_TRELLIS_FF", "part0 serial accumulator"),
     ("acc1", "serial accumulator"),
+    # the serial core's registers beside the memory read, mem_out and product: the parallel core's stage names
+    ("core.m_mu_TRELLIS_FF", "s_mem"),
+    ("m_valid", "s_mem"),
+    ("core.mo_data[7]", "s_memout"),
+    ("mo_first$45", "s_memout"),
+    ("core.p_prod1_TRELLIS_FF", "s_prod"),
+    ("core.part0_p_valid_TRELLIS_FF", "part0 s_prod"),
+    ("core.acc_done_TRELLIS_FF", "serial accumulator"),
+    ("acc_oor", "serial accumulator"),
+    ("core.gap_TRELLIS_FF", "serial input throttle"),
+    ("m_axis_tdata_q", "output register"),  # not the serial core's m_
 ])
 def test_critical_path_stage_names(cell, stage):
     assert tc._stage_of_cell(cell) == stage

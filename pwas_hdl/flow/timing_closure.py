@@ -235,10 +235,17 @@ def harness_verilog(manifest: dict[str, Any], name: str | None = None) -> tuple[
 
 
 _STAGE_RE = re.compile(r"^(s_(?:split|rank|voff|addr|bank|memout|mulin|mem|pp|prod|tree\d+))_")
+#: The serial core's registers (:mod:`pwas_hdl.hdl.serial_core`) named by the parallel core's stage
+#: of the same cycle: ``m_*`` beside the memory read (``s_mem``), ``mo_*`` the ``mem_out`` register
+#: (``s_memout``), ``p_*`` the ``product`` register (``s_prod``).
+_SERIAL_STAGE_RE = re.compile(r"^(m|mo|p)_(?:valid|first|last|mu|oor|data|prod[0-9]+)(?:$|_TRELLIS|_SB_|\$|\[)")
+_SERIAL_STAGES = {"m": "s_mem", "mo": "s_memout", "p": "s_prod"}
 
 
 def _stage_of_cell(cell: str) -> str:
-    """Pipeline stage of a nextpnr cell, from the register names of :mod:`pwas_hdl.hdl.core`.
+    """Pipeline stage of a nextpnr cell, from the register names of :mod:`pwas_hdl.hdl.core` (the
+    serial core's, :mod:`pwas_hdl.hdl.serial_core`, by the parallel core's stage of the same cycle
+    where it has one: ``s_mem``, ``s_memout``, ``s_prod``; else ``serial ...``).
 
     After flattening, the harness registers are named after the nets they drive (``core.in__payload``
     ...) and the core's cells carry a ``core.`` prefix.
@@ -266,8 +273,14 @@ def _stage_of_cell(cell: str) -> str:
         return "multiplier"
     if re.match(r"q_(addr|mu|valid)[0-9]+($|_TRELLIS|_SB_|\$)|q_oor", c):  # the serial core's vertex shift register
         return "serial vertex register"
-    if re.match(r"acc[0-9]+($|_TRELLIS|_SB_|\$)", c):  # the serial core's accumulator (not part<i>_acc, a part's output)
+    m = _SERIAL_STAGE_RE.match(c)
+    if m:
+        return _SERIAL_STAGES[m.group(1)]
+    # the serial core's accumulator and the registers beside it (not part<i>_acc, a part's output)
+    if re.match(r"acc([0-9]+|_done|_oor)($|_TRELLIS|_SB_|\$|\[)", c):
         return "serial accumulator"
+    if re.match(r"gap($|_TRELLIS|_SB_|\$|\[)", c):  # the serial core's input throttle (serial_core.serial_throttle)
+        return "serial input throttle"
     for prefix, stage in (("s_warp", "warp register"), ("am_", "argmax stage"), (("term", "psum", "sum_sat"), "additive sum"),
                           (("s_sum", "s_root", "bank_", "feat", "obs"), "observer bank")):
         if c.startswith(prefix):
