@@ -171,6 +171,25 @@ def test_simulate_arrays_takes_a_classifiers_true_labels(case, tmp_path, monkeyp
     assert not (tmp_path / "t.csv").exists()
 
 
+def test_simulate_takes_no_reference_for_a_classifiers_scores(case, tmp_path, monkeypatch):
+    """A file carrying predict's score columns (<c>_score_<k>) got an RMSEE of the RTL's scores
+    against them, and a value there beyond MAX_VALUE was not refused as every reference is (classifier
+    designs skip that check): a score has no reference, the class decision is scored against the
+    label column. Now no score column is read, whatever it holds."""
+    from pwas_hdl.limits import MAX_VALUE
+    from pwas_hdl.verify.simulation import simulate_data
+
+    _perfect_rtl(monkeypatch)
+    scores = {clf.score_column("c", k): (case["c"] == k).astype(float) for k in case["model"].classifier_["classes"]}
+    scores[clf.score_column("c", 2.0)][5] = 10 * MAX_VALUE
+    scores[clf.score_column("c", 1.0) + "_true"] = np.zeros(N)
+    data = _data(case, tmp_path / "d.csv", c=case["c"], **scores)
+    s = simulate_data(case["root"] / "hw", data, tmp_path / "s.csv")["summary"]
+    assert set(s["targets"]) == {clf.score_column("c", k) for k in (0.0, 1.0, 2.0)}
+    assert all("reference_column" not in t and "rmsee_hw" not in t for t in s["targets"].values()), s["targets"]
+    assert s["classifier"]["reference_column"] == "c" and s["classifier"]["class_mismatches"] == 0
+
+
 @pytest.mark.parametrize("col", reference_column_names("mode"))
 def test_simulate_of_an_estimator_reads_mode_true_and_refuses_a_value_that_is_no_mode(col, tmp_path_factory, monkeypatch):
     """Seed 003's estimator scores its detected modes (1..3) against the true mode: found as every

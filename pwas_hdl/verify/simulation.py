@@ -1119,7 +1119,8 @@ def simulate_data(
     the class) and the JSON summary (``summary_path``, default ``output`` with the suffix ``.json``;
     a classifier adds ``classifier``: class mismatches, agreement with the float classifier,
     accuracy / F1 when the data has the true class in column ``<c>_true`` or ``<c>``, as ``predict``
-    finds it; a value there that is none of the classes is refused before the simulator runs).
+    finds it; a value there that is none of the classes is refused before the simulator runs; its
+    ``targets``, the scores, have no RMSEE: a score has no reference column).
 
     ``engine``: ``"cocotb"`` (default) or ``"native"`` (the Verilator C++ bench, see
     :func:`run_rtl`; ``simulator`` then defaults to and must be ``"verilator"``). Both write the
@@ -1232,8 +1233,8 @@ def simulate_data(
                          "generate --design sensor (the recurrent top, which feeds them back) to replay DATA, or "
                          "check this core with `pwas-hdl export-testbench`")
     table = data if isinstance(data, Table) else read_csv(data, blank_rows=blank_rows)
-    if getattr(sensor, "classifier_", None) is None:
-        _check_references(table, tgts)
+    if getattr(sensor, "classifier_", None) is None:  # a classifier's scores have no reference column (none read below);
+        _check_references(table, tgts)  # its label column is checked by classifier.true_labels
     data = table.path
     clf = getattr(sensor, "classifier_", None)
     check_trajectory_column(table, traj_col, [*ins, *outs], [clf["target"]] if clf is not None else tgts)
@@ -1348,7 +1349,9 @@ def simulate_data(
                     "max_error_vs_float_model": float(e_float[:, i].max()) if len(e_float) else 0.0,
                     "max_error_vs_float_model_lsb": float(e_float[:, i].max() / lsb) if len(e_float) else 0.0,
                 }
-                ref = table.reference_column(t)
+                # a classifier's scores have no reference (a column of predict's scores is no truth): its
+                # decision is scored against the label column (classifier.true_labels, _class_columns)
+                ref = table.reference_column(t) if clf is None else None
                 if ref is not None:
                     ztrue = table.numeric([ref])[row, 0]
                     entry.update(reference_column=ref, rmsee_hw=_rmse(zhw[:, i], ztrue), rmsee_bittrue=_rmse(bt[:, i] * lsb, ztrue),
