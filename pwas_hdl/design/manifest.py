@@ -498,8 +498,10 @@ def built_pipeline_registers(m: dict[str, Any]) -> list[str]:
 
     ``architecture.pipeline_registers`` (:func:`pwas_hdl.hdl.api.pipeline_registers` records it;
     the serial core ignores ``bank``, ``mul_in``, ``mul_halves`` and ``tree_levels``). A manifest
-    without it (written before it was recorded) gets the registers ``pipeline`` has on, as the
-    parallel core builds them; a design without a pipeline (the estimator) none. Ask this, not
+    without it (written before it was recorded) gets the registers ``pipeline`` has on that its
+    architecture builds (the parallel core all of them, the serial core those of
+    :data:`~pwas_hdl.hdl.serial_core.SERIAL_REGISTERS`); a design without a pipeline (the estimator)
+    none. Ask this, not
     ``pipeline``, whenever what matters is a register in the hardware (hard-register packing, the
     floorplan).
 
@@ -520,7 +522,12 @@ def built_pipeline_registers(m: dict[str, Any]) -> list[str]:
     from pwas_hdl.hdl.params import PIPELINE_REGISTERS
 
     pl = m.get("pipeline") or {}
-    return [k for k in PIPELINE_REGISTERS if pl.get(k)]
+    regs = [k for k in PIPELINE_REGISTERS if pl.get(k)]
+    if (m.get("architecture") or {}).get("kind") == "serial":
+        from pwas_hdl.hdl.serial_core import SERIAL_REGISTERS
+
+        regs = [k for k in regs if k in SERIAL_REGISTERS]
+    return regs
 
 
 def _rate_errors(m: dict[str, Any]) -> list[str]:
