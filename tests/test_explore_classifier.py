@@ -18,15 +18,15 @@ import numpy as np
 import pytest
 
 from helpers.cli import CliRunner, assert_refused
-from helpers.synth_stub import stub_synthesis
 from helpers.folders import tree
+from helpers.synth_stub import stub_synthesis
 
 from pwas_hdl import cli
 from pwas_hdl.design.generate import build_design, fixed_point_model
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.fixedpoint.argmax import margins
-from pwas_hdl.flow.explore import check_result, estimate_resources, explore, format_table, pareto_front
+from pwas_hdl.flow.explore import check_result, default_verdict, estimate_resources, explore, format_table, pareto_front
 from pwas_hdl.io.csv_table import write_csv
 
 RUNNER = CliRunner()
@@ -181,6 +181,17 @@ def test_front_and_default_use_the_error_rate(plain_result):
     tab = format_table(res)
     assert "| error rate | vs float (pp) | differs from float |" in tab and "RMSEE" not in tab
     assert f"{100 * dp['error_rate']:.3f} % ({dp['errors']})" in tab
+
+
+def test_verdict_of_a_default_dominated_at_the_same_error_rate(plain_result):
+    """A cheaper point with the same errors: the verdict says so (it printed "+0 percentage points
+    better"); with fewer errors it states the gain."""
+    res = copy.deepcopy(plain_result)
+    base = {"label": "i8 w-2 o3", "cost_saved_rel": 0.25, "error_rate_diff_se": 0.004}
+    res["default"] = {**res["default"], "on_front": False, "dominated_by": [{**base, "error_rate_better": 0.0}]}
+    assert default_verdict(res) == "NOT on the Pareto front: i8 w-2 o3 costs 25.0 % less with the same error rate"
+    res["default"]["dominated_by"] = [{**base, "error_rate_better": 0.01}]
+    assert default_verdict(res).endswith("with an error rate +1 percentage points better (standard error 0.4)")
 
 
 @pytest.mark.parametrize("kind", list(KINDS))

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from helpers.cli import CliRunner
-from helpers.synth_stub import stub_synthesis
 from helpers.folders import tree
+from helpers.synth_stub import stub_synthesis
 
 from pwas_hdl import cli
 from pwas_hdl.design.generate import build_design, fixed_point_model

@@ -1626,8 +1626,11 @@ def default_verdict(result: dict) -> str:
         return "on the Pareto front"
     b = d["dominated_by"][0]
     if _is_classifier_result(result):
-        better = (f"an error rate {100 * b['error_rate_better']:+.4g} percentage points better "
-                  f"(standard error {100 * b['error_rate_diff_se']:.2g})")
+        if b["error_rate_better"] == 0:  # the same decisions wrong: an error count, no gain to state
+            better = "the same error rate"
+        else:
+            better = (f"an error rate {100 * b['error_rate_better']:+.4g} percentage points better "
+                      f"(standard error {100 * b['error_rate_diff_se']:.2g})")
     else:
         better = f"an RMSEE {b['rmsee_better'][0]:+.4g} better (standard error {b['rmsee_diff_se'][0]:.2g})"
     return f"NOT on the Pareto front: {b['label']} costs {100 * b['cost_saved_rel']:.1f} % less with {better}"
