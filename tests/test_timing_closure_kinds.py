@@ -256,6 +256,13 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("acc_oor", "serial accumulator"),
     ("core.gap_TRELLIS_FF", "serial input throttle"),
     ("m_axis_tdata_q", "output register"),  # not the serial core's m_
+    # a sensor top's lag bank and warm-up, a recurrent top's feedback registers (raw names before)
+    ("lag_y0_1_TRELLIS_FF", "lag register"),
+    ("core.lag_u1_3$12", "lag register"),
+    ("warmup2", "warm-up register"),
+    ("warm_TRELLIS_FF", "output register"),
+    ("fb0_z1_TRELLIS_FF", "feedback register"),
+    ("fb1_code$7", "feedback register"),
 ])
 def test_critical_path_stage_names(cell, stage):
     assert tc._stage_of_cell(cell) == stage

@@ -260,6 +260,8 @@ def _stage_of_cell(cell: str) -> str:
     if c.startswith(("io_", "in__payload", "in__valid", "rst", "out__ready", "s_axis_tdata", "s_axis_tvalid", "aresetn",
                      "m_axis_tready")):
         return "input register"
+    if re.match(r"warmup[0-9]+", c):  # the warm-up shift register of a sensor / recurrent top (not the warm port)
+        return "warm-up register"
     if c.startswith(("out__payload", "out__valid", "in__ready", "warm", "m_axis_tdata", "m_axis_tvalid", "s_axis_tready")):
         return "output register"
     if re.match(WEIGHT_MEMORY_PATTERN, c):
@@ -281,8 +283,11 @@ def _stage_of_cell(cell: str) -> str:
         return "serial accumulator"
     if re.match(r"gap($|_TRELLIS|_SB_|\$|\[)", c):  # the serial core's input throttle (serial_core.serial_throttle)
         return "serial input throttle"
+    if re.match(r"fb[0-9]+_", c):  # a recurrent top's feedback path (recurrent_top: fb<c>_prod / _code / _z<k> / _in<k>)
+        return "feedback register"
     for prefix, stage in (("s_warp", "warp register"), ("am_", "argmax stage"), (("term", "psum", "sum_sat"), "additive sum"),
-                          (("s_sum", "s_root", "bank_", "feat", "obs"), "observer bank")):
+                          (("s_sum", "s_root", "bank_", "feat", "obs"), "observer bank"),
+                          ("lag_", "lag register")):  # a sensor top's lag bank (sensor_top)
         if c.startswith(prefix):
             return stage
     return re.split(r"_TRELLIS|_SB_|\$", c)[0][:40] or c[:40]
