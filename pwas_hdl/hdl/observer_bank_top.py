@@ -32,18 +32,21 @@ from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
 from pwas_hdl.hdl.observer_bank import build_observer_bank
 from pwas_hdl.hdl.params import CoreParams, Pipeline
-from pwas_hdl.hdl.residual_features import build_feature_codes, build_isqrt, build_window_sums
+from pwas_hdl.hdl.residual_features import build_feature_codes, build_window_sums
 from pwas_hdl.hdl.sensor_top import sample_fields
-from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY, build_serial_front_end, plan_serial_bank
+from pwas_hdl.hdl.serial_observer_bank import (DEFAULT_ISQRT_EVERY, build_isqrt_pipelined, build_serial_front_end,
+                                               check_isqrt_every, isqrt_registers, plan_serial_bank)
 
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
 __all__ = ["ObserverBankTopBase", "build_observer_bank_top", "FRONT_END_STAGES", "attach_core_and_schedule",
-           "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes"]
+           "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes", "advance_registers"]
 
-#: Pipeline stages in front of the core (the sum registers and the root register).
-FRONT_END_STAGES = 2
+#: Pipeline stages in front of the core of the parallel bank (the sum registers, the root register and
+#: the feature-code register after the affine map), besides the registers inside the square root
+#: (:func:`~pwas_hdl.hdl.serial_observer_bank.isqrt_registers`).
+FRONT_END_STAGES = 3
 
 
 class ObserverBankTopBase(wiring.Component):
@@ -62,7 +65,8 @@ class ObserverBankTopBase(wiring.Component):
     lanes : int
         Serial bank: state-update units (1 .. N_theta).
     isqrt_every : int or None
-        Serial bank: digit steps of the square root between pipeline registers.
+        Digit steps of each feature's square root between pipeline registers (map 11b; serial and
+        parallel bank); None: the root in one cycle.
     warmup : int
         Transfers after reset that produce no output (``warm`` is 1 once they have been taken).
     double_buffered : bool
@@ -166,7 +170,8 @@ class ObserverBankTopBase(wiring.Component):
             "cycles_per_sample": self.cycles_per_sample,
             "ii": self.ii,
             "stages_before_core": self.stages_before_core,
-            **({"schedule": self.plan.to_dict()} if self.plan is not None else {}),
+            **({"schedule": self.plan.to_dict()} if self.plan is not None else
+               {"isqrt_every": self.isqrt_every, "isqrt_registers": self.isqrt_regs}),
             **self.bank.to_dict(),
             **self._front_end_more(),
         }
@@ -308,10 +313,11 @@ def inputs_and_warmup(m: Module, top: ObserverBankTopBase) -> tuple[list[Value],
 
 
 def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, transfer: Value, advance: Value,
-                           warm: Value) -> tuple[list, Signal]:
-    """The parallel bank's feature path (:data:`FRONT_END_STAGES` registers): observer bank,
-    window sums (stage ``s_sum``), square root or not and its register (stage ``s_root``), feature
-    codes.
+                           warm: Value, isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> tuple[list, Signal]:
+    """The parallel bank's feature path (:data:`FRONT_END_STAGES` registers + those inside the square
+    root): observer bank, window sums (stage ``s_sum``), square root or not (map 11b: a register
+    after every ``isqrt_every`` digit steps, loading with ``advance``) and its register (stage
+    ``s_root``), feature codes.
 
     Parameters
     ----------
@@ -327,13 +333,16 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
         1 bit, the core's enable: the ``s_sum`` / ``s_root`` registers load when it is high.
     warm : Value
         1 bit: a transfer while it is high yields an output (``s_sum_valid = transfer & warm``).
+    isqrt_every : int or None
+        Digit steps of the square root between registers (None: combinational, one cycle).
 
     Returns
     -------
     codes : list of Signal
         ``N`` feature codes, signed ``bank.input_bits_core`` bits: the core's inputs.
     valid : Signal
-        Their valid bit (``s_root_valid``), :data:`FRONT_END_STAGES` cycles after the transfer.
+        Their valid bit (``s_root_valid``), :data:`FRONT_END_STAGES` + :func:`isqrt_registers`
+        (enabled) cycles after the transfer.
     """
     residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
     sink_unused(m, _sat, "state_saturated_flag")
@@ -341,18 +350,57 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
     v1 = Signal(name="s_sum_valid")
     with m.If(advance):
         m.d.sync += v1.eq(transfer & warm)
-    # stage s_root
+    # the square root (its registers load with the core's enable, as every stage here) and stage s_root
+    nreg = isqrt_registers(bank, isqrt_every)
     roots = []
     for j, s in enumerate(sums):
-        r = build_isqrt(m, s, f"feat{j}_isqrt") if bank.feature_map == "11b" else s
+        if bank.feature_map == "11b":
+            r, got = build_isqrt_pipelined(m, s, f"feat{j}_isqrt", isqrt_every, enable=advance)
+            if got != nreg:
+                raise InternalError(f"the square root has {got} registers, the schedule counted {nreg}")
+        else:
+            r = s
         reg = Signal(unsigned(len(r)), name=f"s_root_r{j}", reset_less=True)
         with m.If(advance):
             m.d.sync += reg.eq(r)
         roots.append(reg)
+    v = advance_registers(m, v1, nreg, advance, "s_isqrt_valid")  # the valid bit beside the root's registers
     v2 = Signal(name="s_root_valid")
     with m.If(advance):
-        m.d.sync += v2.eq(v1)
-    return build_feature_codes(m, bank, roots), v2
+        m.d.sync += v2.eq(v)
+    # stage s_code: the feature codes (the affine map's product and saturation) registered
+    codes = [advance_registers(m, q, 1, advance, f"s_code_q{j}") for j, q in enumerate(build_feature_codes(m, bank, roots))]
+    return codes, advance_registers(m, v2, 1, advance, "s_code_valid")
+
+
+def advance_registers(m: Module, value: Value, n: int, advance: Value, name: str) -> Value:
+    """``value`` through ``n`` registers that load when ``advance`` is high (a stalling pipeline's
+    stages; reset-less, except a 1-bit value, a valid bit, which resets to 0).
+
+    Parameters
+    ----------
+    m : Module
+        Module the registers are added to.
+    value : Value
+        The value to delay.
+    n : int
+        Registers, ``>= 0`` (0: ``value`` itself).
+    advance : Value
+        1 bit, the pipeline's enable.
+    name : str
+        Name of the last register (the others ``<name>_d<k>``).
+
+    Returns
+    -------
+    Value
+        ``value`` as it was ``n`` enabled cycles before, of its shape.
+    """
+    for k in range(n):
+        reg = Signal(value.shape(), name=name if k == n - 1 else f"{name}_d{k}", reset_less=len(value) > 1)
+        with m.If(advance):
+            m.d.sync += reg.eq(value)
+        value = reg
+    return value
 
 
 def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: CoreParams, *, memory: str,
@@ -381,19 +429,22 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
     lanes : int
         Serial: state-update units, ``1 .. N_theta``.
     isqrt_every : int or None
-        Serial: digit steps of the square root between registers.
+        Digit steps of the square root between registers (serial and parallel bank).
     double_buffered : bool
         Serial: double-buffered feature codes.
 
     Raises
     ------
     InputError
-        Serial: ``lanes`` or ``isqrt_every`` out of range (:func:`plan_serial_bank`).
+        ``isqrt_every`` not a positive integer or None; serial: ``lanes`` out of range
+        (:func:`plan_serial_bank`).
         An unknown ``architecture``, or what the core refuses.
     """
     if architecture not in ("parallel", "serial"):
         raise InputError(choice_text(option_text("architecture"), ("parallel", "serial"), architecture))
     top.architecture = architecture
+    check_isqrt_every(isqrt_every)
+    top.isqrt_every = isqrt_every if bank.feature_map == "11b" else None
     if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
         from pwas_hdl.hdl.serial_core import SerialPWASCore
 
@@ -407,7 +458,8 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
     else:
         top.core = PWASCore(params, memory=memory, pipeline=pipeline)
         top.plan = None
-        top.stages_before_core = FRONT_END_STAGES
+        top.isqrt_regs = isqrt_registers(bank, isqrt_every)
+        top.stages_before_core = FRONT_END_STAGES + top.isqrt_regs
         top.ii = top.cycles_per_sample = 1
     top.core._MustUse__silence = True
 

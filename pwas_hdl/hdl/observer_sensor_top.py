@@ -133,7 +133,7 @@ class ObserverSensorTop(ObserverBankTopBase):
         if self.plan is not None:
             serial_sensor_path(m, self, cur, inp, transfer)
             return m
-        codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm)
+        codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm, self.isqrt_every)
         self.core.build_into(m, Cat(*codes), valid, advance, self.out)
         return m
 

@@ -40,6 +40,7 @@ from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
 from pwas_hdl.hdl.observer_bank_top import (
     ObserverBankTopBase,
     build_observer_bank_top,
+    advance_registers,
     inputs_and_warmup,
     parallel_feature_codes,
     serial_sensor_path,
@@ -109,8 +110,9 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         return (f"warm = 1 once max(M + l, memory - 1) = {self.warmup} samples have been taken since reset; the first "
                 f"{self.warmup} transfers after reset produce no output, every later transfer produces one")
 
-    def _tap_codes(self, m: Module, cur: list, transfer, advance) -> list:
-        """Lag registers of the tapped signals (shift on transfer) and the tap codes, registered when ``advance``."""
+    def _tap_codes(self, m: Module, cur: list, transfer, advance, delay: int = 0) -> list:
+        """Lag registers of the tapped signals (shift on transfer) and the tap codes, registered when
+        ``advance`` (``delay`` more such registers: the parallel bank's stages after its root register)."""
         taps, b = self.taps, self.bank.input_bits
         depth: dict[int, int] = {}
         for s, lag in taps.dims:
@@ -129,7 +131,7 @@ class ObserverTapSensorTop(ObserverBankTopBase):
             reg = Signal(signed(taps.core_bits), name=f"s_root_tap{j}", reset_less=True)
             with m.If(advance):
                 m.d.sync += reg.eq(q)
-            out.append(reg)
+            out.append(advance_registers(m, reg, delay, advance, f"s_code_tap{j}"))
         return out
 
     def elaborate(self, platform: Any) -> Module:
@@ -151,8 +153,9 @@ class ObserverTapSensorTop(ObserverBankTopBase):
         if self.plan is not None:  # serial bank: the tap codes registered with the last feature code (done)
             serial_sensor_path(m, self, cur, inp, transfer, lambda done: self._tap_codes(m, cur, transfer, done))
             return m
-        codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm)
-        taps = self._tap_codes(m, cur, transfer, advance)
+        codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm, self.isqrt_every)
+        # the taps wait beside the square root's registers and the feature-code register
+        taps = self._tap_codes(m, cur, transfer, advance, self.isqrt_regs + 1)
         self.core.build_into(m, Cat(*codes, *taps), valid, advance, self.out)
         return m
 

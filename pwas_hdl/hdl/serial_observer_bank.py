@@ -52,7 +52,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib.memory import Memory
@@ -65,7 +65,7 @@ from pwas_hdl.hdl.residual_features import cap_const
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
-__all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "var_product",
+__all__ = ["SerialBankPlan", "plan_serial_bank", "build_serial_front_end", "build_isqrt_pipelined", "isqrt_registers", "check_isqrt_every", "var_product",
            "table_mac", "lane_groups", "DEFAULT_ISQRT_EVERY"]
 
 #: Digit steps of the integer square root between two pipeline registers (serial bank). 3: with the
@@ -137,9 +137,39 @@ class SerialBankPlan:
                 "double_buffered_codes": self.double_buffered}
 
 
-def _isqrt_regs(width: int, every: int | None) -> int:
-    pairs = (width + 1) // 2
-    return 0 if not every else len([i for i in range(1, pairs) if i % every == 0])
+def check_isqrt_every(isqrt_every: Any) -> None:
+    """Refuse an ``isqrt_every`` that is not a positive integer or None.
+
+    Raises
+    ------
+    InputError
+        Otherwise.
+    """
+    if isqrt_every is not None and (isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1):
+        raise InputError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
+
+
+def isqrt_registers(bank: FixedPointObserverBank, every: int | None) -> int:
+    """Registers :func:`build_isqrt_pipelined` puts into a feature's square root (the window sum of
+    ``bank.formats.sum_bits`` bits, a register after every ``every`` digit steps); 0 for map 11b-sq
+    (no root) or ``every`` None.
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+        The bit-true bank (feature map and sum width).
+    every : int or None
+        Digit steps between registers.
+
+    Returns
+    -------
+    int
+        The number of registers, the cycles the root takes.
+    """
+    if bank.feature_map != "11b" or not every:
+        return 0
+    pairs = (bank.formats.sum_bits + 1) // 2
+    return len([i for i in range(1, pairs) if i % every == 0])
 
 
 def lane_groups(n: int, lanes: int) -> tuple[tuple[int, ...], ...]:
@@ -203,11 +233,10 @@ def plan_serial_bank(bank: FixedPointObserverBank, lanes: int = 1, isqrt_every: 
     n, mo = bank.n_models, bank.order
     if isinstance(lanes, bool) or not isinstance(lanes, int) or not 1 <= lanes <= n:
         raise InputError(f"bank lanes (--bank-lanes) must be an integer in 1 .. {n} (the number of observers), got {lanes!r}")
-    if isqrt_every is not None and (isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1):
-        raise InputError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
+    check_isqrt_every(isqrt_every)
     groups = lane_groups(n, lanes)
     n_max = len(groups[0])
-    r = _isqrt_regs(bank.formats.sum_bits, isqrt_every) if bank.feature_map == "11b" else 0
+    r = isqrt_registers(bank, isqrt_every)
     sbc = 4 + SQUARE_REGS + r + AFFINE_REGS + (n_max - 1) * mo
     # double-buffered: half the tail, and the sample's slot / oldest-square flag (updated at the next
     # transfer) are read up to its last observer's window sum, (n_max - 1) M + SQUARE_REGS + 1 cycles on
@@ -327,27 +356,32 @@ def table_mac(m: Module, sel: Value, columns: Sequence[Sequence[int]], operands:
     return _sum(m, terms, width, f"{name}_acc") if terms else None
 
 
-def build_isqrt_pipelined(m: Module, value: Value, name: str, every: int | None) -> tuple[Value, int]:
+def build_isqrt_pipelined(m: Module, value: Value, name: str, every: int | None,
+                          enable: Value | None = None) -> tuple[Value, int]:
     """``floor(sqrt(value))`` digit by digit as :func:`pwas_hdl.hdl.residual_features.build_isqrt`,
-    with a (free-running, reset-less) register after every ``every`` digit steps.
+    with a reset-less register after every ``every`` digit steps (free-running, or loading when
+    ``enable`` is high).
 
     Parameters
     ----------
     m : Module
-        Module the logic is added to (registers in ``sync``, without enable).
+        Module the logic is added to (registers in ``sync``).
     value : Value
         Unsigned radicand.
     name : str
         Name prefix of the step nets and registers.
     every : int or None
         Digit steps between registers; None or 0: no registers (combinational).
+    enable : Value or None
+        1 bit: the registers load when it is high (a stalling pipeline: the parallel bank's
+        ``advance``); None: every clock (the serial bank's token pipeline).
 
     Returns
     -------
     root : Value
         Unsigned ``ceil(len(value) / 2)`` bits.
     registers : int
-        Number of registers inserted: ``root`` is valid that many cycles after ``value``.
+        Number of registers inserted: ``root`` is valid that many (enabled) cycles after ``value``.
     """
     w = len(value)
     pairs = (w + 1) // 2
@@ -366,7 +400,12 @@ def build_isqrt_pipelined(m: Module, value: Value, name: str, every: int | None)
             vr = Signal(unsigned(lo_need), name=f"{name}_r{regs}_v", reset_less=True)
             rr = Signal(unsigned(len(rem)), name=f"{name}_r{regs}_m", reset_less=True)
             br = Signal(unsigned(len(bits)), name=f"{name}_r{regs}_b", reset_less=True)
-            m.d.sync += [vr.eq(v[:lo_need]), rr.eq(rem), br.eq(Cat(*bits))]
+            loads = [vr.eq(v[:lo_need]), rr.eq(rem), br.eq(Cat(*bits))]
+            if enable is None:
+                m.d.sync += loads
+            else:
+                with m.If(enable):
+                    m.d.sync += loads
             v, rem, bits = vr, rr, [br[k] for k in range(len(bits))]
             regs += 1
         lo = 2 * (pairs - 1 - i)
