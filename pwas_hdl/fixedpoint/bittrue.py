@@ -664,6 +664,102 @@ class FixedPointModel:
         r = self._run(q, full=False)
         return r["out"], r["out_of_range"]
 
+    def evaluate_one(self, q: Sequence[int]) -> tuple[tuple[int, ...], bool]:
+        """The circuit on one row of input codes, in plain Python integers (the recurrence's step).
+
+        The arithmetic of :meth:`evaluate` (module notes, steps 1-6) for one sample without numpy:
+        one call costs a few microseconds instead of the ~30 array operations ``evaluate`` spends on
+        a row. :class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel` calls it once per
+        sample, where every row depends on the previous output. Two parts of the datapath are the
+        circuit's structure, not its arithmetic, and are not repeated: the memory read (every layout
+        stores the code of vertex ``v`` wherever it is read, :meth:`layout.contents
+        <pwas_hdl.fixedpoint.memory_layout.BankedLayout.contents>`, so the word is
+        ``weight_codes[v]``) and the adder tree's order (the products are summed exactly, so the
+        order does not change the sum). ``tests/test_recurrence_speed.py`` checks it equals
+        :meth:`evaluate` bit for bit on random codes (out of the domain, ties of the fractions,
+        saturated outputs, every layout, both roundings and input scales).
+
+        Parameters
+        ----------
+        q : sequence of int, length n
+            Input codes inside the ``B_in``-bit range (not checked: check a batch with
+            :meth:`evaluate` or before, as :meth:`RecurrentFixedPointModel.run
+            <pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel.run>` does).
+
+        Returns
+        -------
+        out : tuple of int, length nz
+            Output codes, as a row of :meth:`evaluate`'s ``out``.
+        out_of_range : bool
+            As :meth:`evaluate`'s flag of the row.
+        """
+        c = self.__dict__.get("_one_constants")
+        if c is None:
+            c = self._one_constants = self._step_constants()
+        dims, one, strides, words, nz, sh, half, omin, omax = c
+        oor = False
+        base = 0
+        frac = []
+        for qj, (lo, span, kmul, rsh, fj, cmax, align), st in zip(q, dims, strides):
+            t = qj - lo
+            if t < 0:
+                t, oor = 0, True
+            elif t > span:
+                t, oor = span, True
+            ts = (t * kmul) >> rsh
+            cell = ts >> fj
+            if cell > cmax:
+                cell = cmax
+            frac.append((ts - (cell << fj)) << align)
+            base += cell * st
+        perm = sorted(range(len(frac)), key=frac.__getitem__, reverse=True)  # stable: ties keep the lower dimension first
+        v, upper = base, one
+        wv = words[v]
+        acc = [0] * nz
+        for j in perm:  # vertex k: mu_k = frac_perm[k-1] - frac_perm[k] (mu_0 = 2**F - frac_perm[0])
+            d = frac[j]
+            mu = upper - d
+            for z in range(nz):
+                acc[z] += mu * wv[z]
+            upper = d
+            v += strides[j]
+            wv = words[v]
+        out = []
+        for z in range(nz):  # mu_n = frac_perm[n-1]
+            a = acc[z] + upper * wv[z]
+            if sh:
+                a = (a + half) >> sh
+            out.append(omin if a < omin else omax if a > omax else a)
+        return tuple(out), oor
+
+    def check_codes(self, q: ArrayLike) -> None:
+        """Refuse input codes that :meth:`evaluate` refuses (not integers, not ``n`` columns, outside
+        the ``B_in``-bit range), with its message; what :meth:`evaluate_one` leaves to its caller.
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n)
+
+        Raises
+        ------
+        InputError
+        """
+        self._check_codes(q)
+
+    def _step_constants(self) -> tuple:
+        """The constants :meth:`evaluate_one` needs, as Python integers (made once)."""
+        def ints(a) -> list[int]:
+            return [int(v) for v in a]
+
+        align = [self.F - f for f in ints(self._fj)]
+        dims = tuple(zip(ints(self._lo_code), ints(self._span), ints(self._kmul), ints(self._rsh), ints(self._fj),
+                         [int(p) - 1 for p in self.grid.partitions], align))
+        sh = int(self.shift)
+        half = (1 << (sh - 1)) if sh and self.rounding == "half_up" else 0
+        fo = self.output_format
+        return (dims, 1 << self.F, tuple(ints(self.grid.strides)), self.weight_codes.tolist(), self.nz, sh, half,
+                int(fo.min_code), int(fo.max_code))
+
     def trace(self, q: ArrayLike) -> dict[str, np.ndarray]:
         """Every pipeline stage for input codes ``q``.
 

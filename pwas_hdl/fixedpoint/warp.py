@@ -32,8 +32,9 @@ the unit grid (cells of one grid unit) with ``input_bits = W``.
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -134,6 +135,27 @@ class Pow2Warp:
         u = np.where(q < b[0], self.lo_u - 1, u)
         u = np.where(q > b[-1], self.lo_u + (self.p << self.frac) + 1, u)
         return u
+
+    def apply_one(self, q: int) -> int:
+        """:meth:`apply` of one code, in Python integers (the recurrence's step).
+
+        Parameters
+        ----------
+        q : int
+            An input code of this dimension.
+
+        Returns
+        -------
+        int
+            ``u``, as :meth:`apply` gives it (``bisect_right`` is ``searchsorted(side="right")``).
+        """
+        b = self.code_breaks
+        if q < b[0]:
+            return self.lo_u - 1
+        if q > b[-1]:
+            return self.lo_u + (self.p << self.frac) + 1
+        k = min(max(bisect_right(b, q) - 1, 0), self.p - 1)
+        return self.lo_u + (k << self.frac) + ((q - b[k]) << (self.frac - self.f0 - self.exps[k]))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description (the manifest's ``warp.dimensions`` entries).
@@ -656,6 +678,36 @@ class WarpedFixedPointModel:
             ``q`` has not ``n`` columns or a code outside the ``B_in``-bit range.
         """
         return self.core.evaluate(self.warp(q))
+
+    def evaluate_one(self, q: Sequence[int]) -> tuple[tuple[int, ...], bool]:
+        """:meth:`evaluate` of one row of input codes, in Python integers (the recurrence's step):
+        the warps (:meth:`Pow2Warp.apply_one`), then the core's
+        :meth:`~pwas_hdl.fixedpoint.bittrue.FixedPointModel.evaluate_one`.
+
+        Parameters
+        ----------
+        q : sequence of int, length n
+            Input codes inside the ``B_in``-bit range (not checked).
+
+        Returns
+        -------
+        out : tuple of int, length nz
+        out_of_range : bool
+        """
+        return self.core.evaluate_one([w.apply_one(v) for w, v in zip(self.warps, q)])
+
+    def check_codes(self, q: ArrayLike) -> None:
+        """Refuse input codes outside the ``B_in``-bit range (as :meth:`evaluate` does).
+
+        Parameters
+        ----------
+        q : array_like of int, shape (m, n)
+
+        Raises
+        ------
+        InputError
+        """
+        self.warp(q)
 
     def predict(self, x: ArrayLike, return_flags: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Physical outputs for physical inputs (quantised first), shape (m, nz).
