@@ -1,5 +1,8 @@
-"""The one-sample path of the bit-true models (FixedPointModel.evaluate_one, WarpedFixedPointModel.evaluate_one,
-Python integers, the step of the recurrence) equals evaluate bit for bit.
+"""The fast recurrence (RecurrentFixedPointModel.run on FixedPointModel.evaluate_one, Python integers)
+equals the straightforward one (a loop of evaluate on one-row arrays, RecurrentFixedPointModel._run_reference)
+bit for bit: out, out_of_range, fed_back and regressor, for plain and warped cores, Mz = 1 and 2,
+nz = 1 and 2, every memory layout, narrow formats (out of the domain, saturated outputs and fed-back
+codes) and trajectories of every length down to the lag memory.
 
 The one-sample step itself is checked against evaluate on random codes (hypothesis): the whole
 code range (out of the domain), codes on cell faces (ties of the fractions), saturating outputs,
@@ -12,14 +15,27 @@ tests of test_bittrue.py check the rule.) No test here measures time
 from __future__ import annotations
 
 import warnings
+from functools import lru_cache
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+import pytest
+from hypothesis import event, given, settings, strategies as st
 
+from pwas_hdl.design.generate import fixed_point_model
 from pwas_hdl.errors import InputError
 from pwas_hdl.fit.geometry import Grid
+from pwas_hdl.fit.virtual_sensor import PWASVirtualSensor
 from pwas_hdl.fixedpoint.bittrue import FixedPointModel
+from pwas_hdl.fixedpoint.recurrence import FeedbackRequant, RecurrentFixedPointModel
 from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
+
+KEYS = ("out", "out_of_range", "fed_back", "regressor")
+
+
+def _same(a: dict, b: dict) -> None:
+    for k in KEYS:
+        assert a[k].dtype == b[k].dtype and a[k].shape == b[k].shape, k
+        assert np.array_equal(a[k], b[k]), (k, np.argwhere(a[k] != b[k])[:3])
 
 
 def _codes(fxm, rng, m: int) -> np.ndarray:
@@ -65,6 +81,7 @@ def test_evaluate_one_is_evaluate(seed, n, nz, layout, rounding, scale, bits, na
         try:
             fxm = FixedPointModel(grid, w, **opts)
         except InputError:
+            event("refused")
             return  # a refused combination (e.g. too few input bits for p)
     _check_steps(fxm, _codes(fxm, rng, 200))
 
@@ -92,6 +109,7 @@ def test_warped_evaluate_one_is_evaluate(seed, n, nz, bits, narrow):
         try:
             fxm = WarpedFixedPointModel(grid, w, input_bits=bits, **opts)
         except InputError:
+            event("refused")
             return
     lo, hi = fxm.code_range
     q = _codes(fxm, rng, 200)
@@ -100,3 +118,107 @@ def test_warped_evaluate_one_is_evaluate(seed, n, nz, bits, narrow):
     for wp in fxm.warps:  # the warp alone, every code of the range
         every = np.arange(lo, hi + 1)
         assert wp.apply(every).tolist() == [wp.apply_one(int(v)) for v in every]
+
+
+@settings(max_examples=200, deadline=None)
+@given(out_bits=st.integers(2, 40), in_bits=st.integers(2, 30), mul=st.integers(1, 2**40), shift=st.integers(1, 60),
+       add=st.integers(-2**62, 2**62), data=st.data())
+def test_feedback_apply_one_is_apply(out_bits, in_bits, mul, shift, add, data):
+    """Both arithmetic paths of apply (int64 and Python integers above 62 bits) against apply_one."""
+    fb = FeedbackRequant(mul, add, shift, -(1 << (in_bits - 1)), (1 << (in_bits - 1)) - 1, out_bits, in_bits, 0.0)
+    o = data.draw(st.lists(st.integers(-(1 << (out_bits - 1)), (1 << (out_bits - 1)) - 1), min_size=1, max_size=20))
+    assert fb.apply(np.array(o)).tolist() == [fb.apply_one(v) for v in o]
+
+
+def _plant(rng, T, nz):
+    u = rng.uniform(-1, 1, T)
+    y = np.sin(np.arange(T) * 0.05 + rng.random()) + 0.2 * rng.standard_normal(T)
+    z = np.zeros((T, nz))
+    for t in range(1, T):
+        z[t, 0] = 0.7 * z[t - 1, 0] + 0.3 * np.tanh(2 * y[t]) - 0.1 * u[t] ** 2
+        if nz > 1:
+            z[t, 1] = 0.5 * z[t - 1, 1] + 0.2 * z[t - 1, 0] + 0.1 * u[t]
+    return u, y, z
+
+
+@lru_cache(maxsize=None)
+def _sensor(kind: str, mz: int, nz: int) -> PWASVirtualSensor:
+    u, y, z = _plant(np.random.default_rng(mz * 10 + nz), 600, nz)
+    extra = {"breakpoints": "quantile-pow2"} if kind == "warped" else {}
+    s = PWASVirtualSensor(mu=1, my=1, mz=mz, partitions=3, sigma=1e-3, input_names=["u"], output_names=["y"],
+                          target_names=[f"z{i}" for i in range(nz)], **extra)
+    return s.fit(u, y, z if nz > 1 else z[:, 0])
+
+
+FORMATS = [({}, "banked"), ({"input_bits": 7}, "corner"), ({"input_bits": 9, "output_bits": 4}, "replicated"),
+           ({"input_bits": 12, "output_frac": 2, "rounding": "truncate"}, "banked")]
+
+
+@pytest.mark.parametrize("kind", ["plain", "warped"])
+@pytest.mark.parametrize("mz, nz", [(1, 1), (2, 1), (1, 2), (2, 2)])
+@pytest.mark.parametrize("fmt", range(len(FORMATS)))
+def test_run_is_the_reference_loop(kind, mz, nz, fmt):
+    s = _sensor(kind, mz, nz)
+    opts, memory = FORMATS[fmt]
+    if kind == "warped":
+        memory = "banked"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            fxm = fixed_point_model(s, memory=memory, **opts)
+        except InputError:
+            pytest.skip("format refused for this model")
+    assert isinstance(fxm, WarpedFixedPointModel if kind == "warped" else FixedPointModel)
+    rm = RecurrentFixedPointModel(fxm, s.lags_, s.initial_values_)  # not recurrent_model: narrow feedbacks allowed too
+    m = max(s.lags_.memory, 1)
+    rng = np.random.default_rng([mz, nz, fmt])
+    oor = 0
+    for T in (m, m + 1, 9, 150):
+        u, y, _ = _plant(rng, T, nz)
+        codes = rm.quantize_signals(1.4 * u[:, None], 1.4 * y[:, None])  # beyond the training domain: clamped, flagged
+        got, ref = rm.run(codes), rm._run_reference(codes)
+        _same(got, ref)
+        assert got["out"].shape == (T - m + 1, nz)
+        oor += int(got["out_of_range"].sum())
+    assert oor > 0
+
+
+def test_run_checks_the_codes_as_the_reference_does():
+    s = _sensor("plain", 1, 1)
+    rm = RecurrentFixedPointModel(fixed_point_model(s, input_bits=8), s.lags_, s.initial_values_)
+    codes = rm.quantize_signals(np.zeros((20, 1)), np.zeros((20, 1)))
+    codes[7, 1] = 1000  # outside the 8-bit range
+    for fn in (rm.run, rm._run_reference):
+        with pytest.raises(InputError, match="outside the 8-bit range"):
+            fn(codes)
+        with pytest.raises(InputError, match="codes must have shape"):
+            fn(codes[:, :1])
+    short = codes[:1]  # shorter than the lag memory: both refuse or both return nothing alike
+    try:
+        ref = rm._run_reference(short)
+    except InputError as exc:
+        with pytest.raises(InputError, match=str(exc)[:30]):
+            rm.run(short)
+    else:
+        _same(rm.run(short), ref)
+
+
+def test_a_model_without_the_one_sample_path_runs_the_array_loop():
+    """A core that only has evaluate (e.g. a user's subclass or wrapper) still runs, on the reference loop."""
+    s = _sensor("plain", 2, 2)
+    fxm = fixed_point_model(s)
+
+    class Wrapped:
+        def __init__(self, inner):
+            self._inner = inner
+
+        def __getattr__(self, name):
+            if name in ("evaluate_one",):
+                raise AttributeError(name)
+            return getattr(self._inner, name)
+
+    rm = RecurrentFixedPointModel(fxm, s.lags_, s.initial_values_)
+    rw = RecurrentFixedPointModel(Wrapped(fxm), s.lags_, s.initial_values_)
+    u, y, _ = _plant(np.random.default_rng(3), 60, 2)
+    codes = rm.quantize_signals(u[:, None], y[:, None])
+    _same(rw.run(codes), rm.run(codes))
