@@ -222,3 +222,37 @@ def test_a_model_without_the_one_sample_path_runs_the_array_loop():
     u, y, _ = _plant(np.random.default_rng(3), 60, 2)
     codes = rm.quantize_signals(u[:, None], y[:, None])
     _same(rw.run(codes), rm.run(codes))
+
+
+@pytest.mark.parametrize("kind, mz, nz", [("plain", 1, 1), ("plain", 2, 2), ("warped", 2, 1), ("warped", 1, 2)])
+@pytest.mark.parametrize("lockstep", [True, False, None])
+def test_run_many_is_run_of_each(kind, mz, nz, lockstep):
+    """Trajectories of different lengths (and equal ones, and one of a single estimate) in lockstep or
+    one by one: each result is the reference loop's of that trajectory."""
+    s = _sensor(kind, mz, nz)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fxm = fixed_point_model(s, input_bits=8)
+    rm = RecurrentFixedPointModel(fxm, s.lags_, s.initial_values_)
+    m = max(s.lags_.memory, 1)
+    rng = np.random.default_rng([mz, nz, 7])
+    codes = []
+    for T in (40, m, 3 + m, 40, 17, m + 1):
+        u, y, _ = _plant(rng, T, nz)
+        codes.append(rm.quantize_signals(1.3 * u[:, None], 1.3 * y[:, None]))
+    got = rm.run_many(codes, lockstep=lockstep)
+    assert len(got) == len(codes)
+    for g, c in zip(got, codes):
+        _same(g, rm._run_reference(c))
+    assert rm.run_many([], lockstep=lockstep) == []
+
+
+def test_run_many_checks_the_codes():
+    s = _sensor("plain", 1, 1)
+    rm = RecurrentFixedPointModel(fixed_point_model(s, input_bits=8), s.lags_, s.initial_values_)
+    good = rm.quantize_signals(np.zeros((20, 1)), np.zeros((20, 1)))
+    bad = good.copy()
+    bad[5, 0] = -1000
+    for lockstep in (True, False):
+        with pytest.raises(InputError, match="outside the 8-bit range"):
+            rm.run_many([good, bad], lockstep=lockstep)

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 from fractions import Fraction
 
 import numpy as np
@@ -51,10 +51,15 @@ from pwas_hdl.fixedpoint.formats import FixedFormat, InputFormat
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.warp import WarpInputFormat, WarpedFixedPointModel
 
-__all__ = ["FEEDBACK_PRECISION", "FeedbackRequant", "RecurrentFixedPointModel"]
+__all__ = ["FEEDBACK_PRECISION", "LOCKSTEP_MIN", "FeedbackRequant", "RecurrentFixedPointModel"]
 
 #: Significant bits of the requantisation multiplier ``K``.
 FEEDBACK_PRECISION = 24
+
+#: Trajectories from which :meth:`RecurrentFixedPointModel.run_many` runs them in lockstep (one
+#: array evaluation a time step) rather than one by one on the one-sample path: about where the two
+#: cost the same (``benchmarks/recurrence_speed.py``).
+LOCKSTEP_MIN = 48
 
 
 @dataclass(frozen=True)
@@ -327,7 +332,10 @@ class RecurrentFixedPointModel:
             codes stored into the feedback registers, ``regressor`` (R, n) the regressor codes,
             with ``R = T - M + 1`` rows for the transfers ``M-1 .. T-1``.
         """
-        io = self._io_codes(self._payload(codes))
+        return self._run_io(self._io_codes(self._payload(codes)))
+
+    def _run_io(self, io: np.ndarray) -> dict:
+        """:meth:`run` from the u/y regressor codes (rows t = M-1 ..)."""
         step = getattr(self.fxm, "evaluate_one", None)
         if step is None:  # a model without the one-sample path: the array loop
             return self._loop(io)
@@ -349,6 +357,61 @@ class RecurrentFixedPointModel:
         return {"out": np.array(outs, dtype=np.int64).reshape(R, nz), "out_of_range": np.array(flags, dtype=bool).reshape(R),
                 "fed_back": np.array(feds, dtype=np.int64).reshape(R, nz),
                 "regressor": np.array(regs, dtype=np.int64).reshape(R, self.fxm.n)}
+
+    def run_many(self, codes: Sequence[ArrayLike], lockstep: bool | None = None) -> list[dict]:
+        """:meth:`run` of several trajectories (each from reset), the same results.
+
+        With many trajectories they run in lockstep: one :meth:`FixedPointModel.evaluate
+        <pwas_hdl.fixedpoint.bittrue.FixedPointModel.evaluate>` and one
+        :meth:`FeedbackRequant.apply` per target and time step, over every trajectory still running
+        (the array path's cost is per call, so a step of ``k`` trajectories costs about one sample
+        of :meth:`_run_reference`). With few, each runs on :meth:`run`'s one-sample path, which is
+        faster up to about :data:`LOCKSTEP_MIN` trajectories.
+
+        Parameters
+        ----------
+        codes : sequence of array_like of int, each shape (T_i, S)
+            The payload codes of each trajectory.
+        lockstep : bool, optional
+            Force (True) or avoid (False) the lockstep; default: lockstep from
+            :data:`LOCKSTEP_MIN` trajectories on.
+
+        Returns
+        -------
+        list of dict
+            :meth:`run`'s result for each trajectory, in order.
+        """
+        ios = [self._io_codes(self._payload(c)) for c in codes]
+        if lockstep is None:
+            lockstep = len(ios) >= LOCKSTEP_MIN
+        if not lockstep:
+            return [self._run_io(io) for io in ios]
+        nz, n = self.lags.nz, self.fxm.n
+        k_io = n - self.initial_codes.size
+        order = sorted(range(len(ios)), key=lambda i: -ios[i].shape[0])  # longest first: the running ones are a prefix
+        lengths = np.array([ios[i].shape[0] for i in order], dtype=np.int64)
+        R = int(lengths[0]) if len(order) else 0
+        reg = np.zeros((len(order), R, n), dtype=np.int64)
+        for r, i in enumerate(order):
+            reg[r, :lengths[r], :k_io] = ios[i]
+        out = np.zeros((len(order), R, nz), dtype=np.int64)
+        fed = np.zeros((len(order), R, nz), dtype=np.int64)
+        oor = np.zeros((len(order), R), dtype=bool)
+        past = np.broadcast_to(self.initial_codes.reshape(1, -1), (len(order), self.initial_codes.size)).copy()
+        for t in range(R):
+            k = int(np.count_nonzero(lengths > t))
+            reg[:k, t, k_io:] = past[:k]
+            o, fl = self.fxm.evaluate(reg[:k, t])
+            out[:k, t], oor[:k, t] = o, fl
+            f = np.stack([fb.apply(o[:, c]) for c, fb in enumerate(self.feedback)], axis=1)
+            fed[:k, t] = f
+            past[:k] = np.concatenate([past[:k, nz:], f], axis=1)
+        res: list[dict] = [{}] * len(ios)
+        for r, i in enumerate(order):
+            m = int(lengths[r])
+            res[i] = {"out": out[r, :m].copy(), "out_of_range": oor[r, :m].copy(), "fed_back": fed[r, :m].copy(),
+                      "regressor": reg[r, :m].copy()}
+        return res
 
     def _payload(self, codes: ArrayLike) -> np.ndarray:
         ca = np.asarray(codes, dtype=np.int64)

@@ -935,8 +935,8 @@ def _evaluate(fxm: FixedPointModel, xi, z, zf, zf_rmsee) -> tuple[dict, np.ndarr
 
 def _evaluate_recurrent(fxm: FixedPointModel, sensor: PWASVirtualSensor, rdata: dict, zf_rmsee) -> tuple[dict, np.ndarray]:
     """Accuracy of a recurrent point: the bit-true recurrence of each trajectory from reset
-    (:class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel`, what the recurrent top
-    computes), against the reference and the float recurrence; the per-step bound is checked at the
+    (:meth:`RecurrentFixedPointModel.run_many <pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel.run_many>`,
+    what the recurrent top computes), against the reference and the float recurrence; the per-step bound is checked at the
     regressor codes the recurrence itself produced (the fed-back ones included).
 
     Raises
@@ -948,8 +948,8 @@ def _evaluate_recurrent(fxm: FixedPointModel, sensor: PWASVirtualSensor, rdata: 
 
     rm = recurrent_model(sensor, fxm)
     outs, flags, refs = [], [], []
-    for (u, y), keep in zip(rdata["trajectories"], rdata["keep"]):
-        run = rm.run(rm.quantize_signals(u, y))
+    runs = rm.run_many([rm.quantize_signals(u, y) for u, y in rdata["trajectories"]])  # lockstep when there are many
+    for run, keep in zip(runs, rdata["keep"]):
         outs.append(run["out"][keep])
         flags.append(run["out_of_range"][keep])
         refs.append(fxm.reference(run["regressor"][keep]))
