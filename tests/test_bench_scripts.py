@@ -146,6 +146,10 @@ def test_cg_preconditioners_subset(tmp_path):
     ("timing_closure_kinds", ["--kinds", "plain-core,plain-core"], "--kinds names a kind twice"),
     ("timing_closure_kinds", ["--clock-mhz", "0"], "--clock-mhz must be in (0, 2000) MHz"),
     ("timing_closure_kinds", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
+    ("recurrence_speed", ["--samples", "5"], "--samples must be in 50..100000"),
+    ("recurrence_speed", ["--repeats", "0"], "--repeats must be in 1..20"),
+    ("recurrence_speed", ["--before-points", "4"], "--before-points must be in 1..3"),
+    ("recurrence_speed", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
 ])
 def test_benchmark_bad_option(tmp_path, capsys, script, args, message):
     bench = importlib.import_module(f"pwas_hdl.benchmarks.{script}")
@@ -174,6 +178,21 @@ def test_first_order_floor_quick_smoke(tmp_path):
     assert row["iterations_in_budget"] == row["budget_ms_per_solve"] / (k["vcycle_ms"] + k["matvec_ms"])
     assert "| 2 | 127 | 16384 |" in (tmp_path / "first_order_floor_quick.md").read_text()
 
+
+
+def test_recurrence_speed_quick_smoke(tmp_path):
+    """benchmarks/recurrence_speed.py --quick: the fast recurrence, the lockstep and explore's points
+    equal the reference loop's (times are recorded, never asserted)."""
+    import json
+
+    bench = importlib.import_module("pwas_hdl.benchmarks.recurrence_speed")
+    assert script_main(bench.main, ["--quick", "--outdir", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "recurrence_speed_quick.json").read_text())
+    assert [r["sensor"] for r in res["per_sample"]] == ["Mz=1", "Mz=1 warped"]
+    assert all(r["identical"] for r in res["per_sample"] + res["many_trajectories"])
+    assert [r["trajectories"] for r in res["many_trajectories"]] == list(bench.QUICK_COUNTS)
+    assert res["explore"]["before"]["identical_points"] and res["explore"]["evaluated"] > 0
+    assert (tmp_path / "recurrence_speed_quick.md").read_text() == bench.markdown(res)
 
 
 @pytest.mark.synth
