@@ -142,11 +142,11 @@ def run(samples: int, repeats: int, quick: bool, before_points: int, say: Callab
     ex = {"samples": int(res["data"]["samples"]), "points": points, "evaluated": len(res["points"]),
           "refused": len(res.get("refused", [])),
           "sweep": {k: res["sweep"][k] for k in ("input_bits", "weight_frac", "output_frac")},
-          "seconds": t_after, "seconds_per_point": t_after / max(points, 1),
+          "seconds": t_after, "seconds_per_point": t_after / max(len(res["points"]), 1),
           "before": {"points": n_small, "sweep": small, "seconds_reference_loop": t_small_before,
                      "seconds_now": t_small_after, "seconds_per_point_reference_loop": t_small_before / n_small,
                      "seconds_per_point_now": t_small_after / n_small, "identical_points": bool(same_points),
-                     "estimated_whole_sweep_seconds_reference_loop": t_small_before / n_small * points}}
+                     "estimated_whole_sweep_seconds_reference_loop": t_small_before / n_small * len(res["points"])}}
     say(f"explore ({points} points, {ex['samples']} samples): {t_after:.1f} s now; the reference loop "
         f"{ex['before']['seconds_per_point_reference_loop']:.2f} s a point against {ex['before']['seconds_per_point_now']:.3f} "
         f"(about {ex['before']['estimated_whole_sweep_seconds_reference_loop']:.0f} s for the sweep)")
@@ -176,7 +176,7 @@ def markdown(res: dict) -> str:
     ex, b = res["explore"], res["explore"]["before"]
     out += ["", f"`explore` of the Mz = 1 sensor on one trajectory of {ex['samples']} estimates: {ex['points']} format points "
             f"({ex['evaluated']} evaluated, {ex['refused']} refused; input bits {ex['sweep']['input_bits']}, weight fraction {ex['sweep']['weight_frac']}, output fraction "
-            f"{ex['sweep']['output_frac']}) in **{ex['seconds']:.1f} s** ({ex['seconds_per_point']:.3f} s a point, everything "
+            f"{ex['sweep']['output_frac']}) in **{ex['seconds']:.1f} s** ({ex['seconds_per_point']:.3f} s an evaluated point, everything "
             f"included). With the reference loop, {b['points']} of its points took {b['seconds_reference_loop']:.1f} s "
             f"({b['seconds_per_point_reference_loop']:.2f} s a point, now {b['seconds_per_point_now']:.3f}; points identical: "
             f"{b['identical_points']}): about {b['estimated_whole_sweep_seconds_reference_loop']:.0f} s for the whole sweep.", ""]
