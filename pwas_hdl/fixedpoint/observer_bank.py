@@ -783,6 +783,18 @@ class ObserverBankSensorModel:
                                       coef_frac=coef_frac, state_frac=state_frac, state_bits=state_bits)
         return cls(bank, core, sensor)
 
+    @property
+    def first_output(self) -> int:
+        """Sample index (0-based since reset) of the first estimate: ``M + l`` (the bank's).
+
+        The one alignment rule of an observer-bank sensor: :meth:`evaluate` returns the estimates
+        of samples ``first_output .. T-1`` of a trajectory, the sensor top's warm-up is this many
+        transfers (the manifest's ``lags.warmup.samples_without_output``) and ``simulate`` / ``explore``
+        compare them with data rows ``first_output ..`` of each trajectory.
+        :class:`~pwas_hdl.fixedpoint.bank_taps.TappedObserverBankSensorModel` overrides it.
+        """
+        return self.bank.first_output
+
     def quantize_signals(self, u: ArrayLike | None, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Input codes of one trajectory (:meth:`FixedPointObserverBank.quantize_signals`).
 
@@ -822,7 +834,7 @@ class ObserverBankSensorModel:
             ``out_of_range`` (T - M - l,).
         """
         tr = self.bank.trace(codes)
-        qf = tr["feature_codes"][self.bank.first_output :]
+        qf = tr["feature_codes"][self.first_output :]
         out, oor = self.core.evaluate(qf) if qf.shape[0] else (np.zeros((0, self.core.nz), np.int64), np.zeros(0, bool))
         tr["out"], tr["out_of_range"] = out, oor
         return tr
