@@ -1061,6 +1061,10 @@ def explore(
     output_frac: Annotated[Optional[str], typer.Option("--output-frac", help="Output fraction bits to sweep (comma list or A:B; default: generate's default -4..+4).")] = None,
     weight_bits: Annotated[Optional[int], typer.Option("--weight-bits", help="Fixed weight width (default: the fewest bits for each point).")] = None,
     output_bits: Annotated[Optional[int], typer.Option("--output-bits", help="Fixed output width (default: the fewest bits for each point).")] = None,
+    state_frac: Annotated[Optional[str], typer.Option("--state-frac", help="Observer-bank sensor: state fraction bits F_s to sweep too (comma list or A:B; default: generate's default at each input width).")] = None,
+    coef_frac: Annotated[Optional[str], typer.Option("--coef-frac", help="Observer-bank sensor: coefficient fraction bits F_c to sweep too (comma list or A:B; default: generate's default at each input width).")] = None,
+    state_bits: Annotated[Optional[int], typer.Option("--state-bits", help="Observer-bank sensor: fixed state width B_s (default: the width of the state bound; fewer bits may saturate).")] = None,
+    input_headroom: Annotated[Optional[float], typer.Option("--input-headroom", help="Observer-bank sensor: fixed input head room H, normalised units (default 8).")] = None,
     input_fill: Annotated[float, typer.Option("--input-fill", help="As for generate.")] = 0.9,
     rounding: Annotated[str, typer.Option("--rounding", help="As for generate: half_up or truncate.")] = "half_up",
     overflow: Annotated[str, typer.Option("--overflow", help="As for generate: error (refuse the point) or saturate.")] = "error",
@@ -1083,9 +1087,11 @@ def explore(
     float model, error bound, resource estimate, Pareto flag; the refused combinations and why;
     whether generate's default formats are on the front) and OUTDIR/explore.png, and prints the
     Pareto points (and the default) as a table. Plain, additive (fit --additive) and power-of-two
-    non-uniform (fit --breakpoints quantile-pow2) models, and recurrent ones (fit --mz:
-    the closed loop from reset on each trajectory, row t against z(t + lead)); not observer-bank
-    sensors. A classifier (fit --classify; plain, additive or non-uniform) is scored by its
+    non-uniform (fit --breakpoints quantile-pow2) models, recurrent ones (fit --mz:
+    the closed loop from reset on each trajectory, row t against z(t + lead)) and observer-bank
+    sensors (fit --front-end observer-bank, with or without --mu/--my taps: the bit-true bank,
+    features and core from reset on each trajectory, the estimate of sample k against row k; the
+    cost includes the bank; --state-frac / --coef-frac sweep the bank's formats too). A classifier (fit --classify; plain, additive or non-uniform) is scored by its
     decisions: error_rate = share of the rows whose bit-true class (the argmax stage's, ties to the
     lowest class) is not the true one in column LABEL_true or LABEL, beside the float classifier's
     error rate and the share of decisions that differ from it (disagreement); the front is
@@ -1119,6 +1125,8 @@ def explore(
             input_bits=ints(input_bits, "--input-bits"),
             weight_frac=ints(weight_frac, "--weight-frac") if weight_frac is not None else None,
             output_frac=ints(output_frac, "--output-frac") if output_frac is not None else None,
+            state_frac=ints(state_frac, "--state-frac") if state_frac is not None else None,
+            coef_frac=ints(coef_frac, "--coef-frac") if coef_frac is not None else None,
         )
         check_output_path(outdir, "-o/--out", kind="folder")
         if outdir.is_dir():
@@ -1127,6 +1135,7 @@ def explore(
         with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
                 model_path, data, blank_rows=blank_rows, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
+                state_bits=state_bits, input_headroom=input_headroom,
                 input_fill=input_fill, rounding=rounding, overflow=overflow, memory=memory, pipeline=pipeline,
                 resources=resources, cost=cost, device=device, measure_max=measure_max, workdir=synth_dir,
                 progress=lambda stage, done, total: update(done, total), executor=ex,

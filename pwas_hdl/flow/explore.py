@@ -123,7 +123,7 @@ Every point's bit-true model is :func:`pwas_hdl.design.generate.fixed_point_mode
 ``--breakpoints quantile-pow2``: the warp in front of a uniform core); the resources are estimated
 on the design ``generate`` builds for it (:func:`estimate_resources`), and the measured mode
 generates and synthesises that design. ``result["model"]["kind"]`` says which (``plain``,
-``additive``, ``warped``). Fields that differ: an additive point's ``input_frac`` is ``F = max_i
+``additive``, ``warped``, ``observer-bank``). Fields that differ: an additive point's ``input_frac`` is ``F = max_i
 F_i`` (the sum's alignment) and ``part_frac`` lists the parts' ``F_i``; a warped point's
 ``input_bits`` is the input code's ``B_in``, ``core_input_bits`` the width ``W`` of the warped code
 ``u`` the core takes, ``input_frac`` the core's ``F`` (a core cell is ``2**F`` codes of ``u``), and
@@ -135,8 +135,24 @@ the regressor codes the recurrence produced); its resources are the core's, and
 A classifier (plain, additive or warped; fit does not make recurrent ones) is the same bit-true
 model and design with the argmax stage after the core or the sum (what ``generate`` builds): its
 ``C - 1`` comparators of ``B_out`` bits are in ``adder_bits`` (``argmax_adder_bits``) and its
-registers in ``register_bits``; its accuracy is the error rate above. Observer-bank sensors are
-refused (:func:`_check_supported`).
+registers in ``register_bits``; its accuracy is the error rate above.
+
+An observer-bank sensor (fit ``--front-end observer-bank``, with or without ``--mu/--my`` taps,
+uniform or power-of-two) is the model of :func:`pwas_hdl.fixedpoint.observer_bank.observer_bank_model`
+(what ``generate`` builds; ``kind`` ``observer-bank``): each trajectory runs from reset through the
+bit-true bank, feature unit and core (:func:`bank_bittrue`, the model's ``trace``), the estimate of
+sample ``k >= first_output`` against row ``k`` (the one alignment of the sensor top, its warm-up,
+as ``simulate`` aligns it; :func:`_evaluate_observer_bank`), the float sensor's ``predict`` the
+float column, ``bound_holds`` against the sensor's per-target bound, ``state_saturated`` the
+samples whose bank update saturated a state. Besides the core's formats, the bank's ``F_s`` and
+``F_c`` may be swept (``state_frac``, ``coef_frac``; default ``generate``'s at each input width) and
+``B_s``, ``H`` fixed (``state_bits``, ``input_headroom``); each point's ``bank`` holds them. Its
+resources are the parallel sensor top's (:func:`bank_resources` added to the core's figures,
+``resources["bank"]``: the products by the non-zero coefficient codes -- one row of operand bits
+per set bit of the constant, counted as logic, not DSP --, the ``N`` squarers and their 18x18
+blocks, the accumulators, residuals, window sums, roots and feature maps in ``adder_bits``; the
+registers of the elaborated top, the front end's elaborated once per bank format and the core's
+per core shape). The bank has no memory.
 
 The result's format is ``pwas-hdl-explore`` version 1 (:data:`EXPLORE_FORMAT`), this module its
 owner; :func:`check_result` validates a result against the shipped schema
@@ -312,17 +328,39 @@ def _load_sensor(model) -> tuple[PWASVirtualSensor, str | None]:
     return PWASVirtualSensor.load(model), str(model)
 
 
-def _check_supported(sensor: PWASVirtualSensor) -> None:
-    """Refuse, with one :class:`InputError` naming the fit option, the models whose design is not the
-    core of a bit-true model of :func:`pwas_hdl.design.generate.fixed_point_model` on the lag
-    regressors: observer-bank sensors. Plain, additive (fit --additive), non-uniform power-of-two
-    (fit --breakpoints quantile-pow2) and recurrent (fit --mz; their accuracy is the closed loop's)
-    sensors are swept, and classifiers (fit --classify; plain, additive or power-of-two: their
-    accuracy is the error rate of the bit-true argmax); other breakpoints are refused by the
-    bit-true model itself (the message names quantile-pow2)."""
-    if getattr(sensor, "front_end_", None) is not None:
-        raise InputError("explore is not available for observer-bank sensors (fit --front-end observer-bank) yet; "
-                         "give the formats to `pwas-hdl generate` (--input-bits, --weight-frac, --output-frac)")
+def _is_bank(sensor: PWASVirtualSensor) -> bool:
+    """True for an observer-bank sensor (fit ``--front-end observer-bank``, with or without u/y taps)."""
+    return getattr(sensor, "front_end_", None) is not None
+
+
+def _check_supported(sensor: PWASVirtualSensor, bank_formats: dict[str, Any]) -> None:
+    """Refuse, with one :class:`InputError`, what explore cannot sweep.
+
+    Every kind ``generate`` builds is swept: plain, additive (fit --additive), non-uniform
+    power-of-two (fit --breakpoints quantile-pow2), recurrent (fit --mz; their accuracy is the
+    closed loop's), classifiers (fit --classify: the error rate of the bit-true argmax) and
+    observer-bank sensors (fit --front-end observer-bank, with or without u/y taps: the bank, the
+    features and the core from reset on each trajectory, :func:`_evaluate_observer_bank`); other
+    breakpoints are refused by the bit-true model itself (the message names quantile-pow2).
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        The fitted model.
+    bank_formats : dict
+        The bank's format options given to explore (``state_frac``, ``coef_frac``, ``state_bits``,
+        ``input_headroom``; None: not given).
+
+    Raises
+    ------
+    InputError
+        A bank format option given for a model without an observer bank (as ``generate`` refuses it).
+    """
+    if not _is_bank(sensor):
+        given = [k for k, v in bank_formats.items() if v is not None]
+        if given:
+            raise InputError(f"{_option(given[0])} sets a format of the observer bank: it applies to observer-bank sensors "
+                             "(fit --front-end observer-bank) only; leave it out for this model")
 
 
 def _signals_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None, blank_rows: str = "error"):
@@ -338,12 +376,14 @@ def _signals_and_reference(sensor: PWASVirtualSensor, data, traj_col: str | None
     clf = getattr(sensor, "classifier_", None)
     refs_of = [clf["target"]] if clf is not None else tgts  # the quantities compared with the data
     lags = sensor.lags_
+    # an observer bank takes every input and the output (as simulate feeds the sensor top), whatever its taps
+    use_u, use_y = (bool(ins), True) if _is_bank(sensor) else (bool(lags.nu), bool(lags.ny))
     if isinstance(data, (str, os.PathLike)):
         data = read_csv(data, blank_rows=blank_rows)
     if isinstance(data, Table):
         check_trajectory_column(data, traj_col, [*ins, *outs], refs_of)
-        u = select_signals(data, ins, traj_col) if lags.nu else None
-        y = select_signals(data, outs, traj_col) if lags.ny else None
+        u = select_signals(data, ins, traj_col) if use_u else None
+        y = select_signals(data, outs, traj_col) if use_y else None
         refs = []
         for t in refs_of:
             col = data.reference_column(t)
@@ -455,6 +495,71 @@ def _recurrent_data(sensor: PWASVirtualSensor, data, traj_col: str | None, blank
         check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
     desc["samples"] = int(z.shape[0])
     return {"trajectories": trajs, "keep": keeps, "z": z, "float": np.concatenate(zfs, axis=0), "desc": desc}
+
+
+def _bank_data(sensor: PWASVirtualSensor, first_output: int, data, traj_col: str | None, blank_rows: str = "error") -> dict:
+    """The data of an observer-bank sensor's sweep, aligned as ``simulate`` aligns the sensor top.
+
+    Each trajectory is one run of the bank from reset; its samples ``first_output .. T-1`` have an
+    estimate (the bit-true model's :attr:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel.first_output`,
+    the top's warm-up), compared with the reference rows of the same samples.
+
+    Parameters
+    ----------
+    sensor : PWASVirtualSensor
+        An observer-bank sensor (with or without u/y taps).
+    first_output : int
+        Sample index (0-based since reset) of the first estimate (``M + l``, or ``max(M + l,
+        memory - 1)`` with taps; it does not depend on the formats).
+    data, traj_col, blank_rows
+        As :func:`explore`.
+
+    Returns
+    -------
+    dict
+        ``trajectories`` (list of ``(u (T_i, nu) or None, y (T_i, 1))``, physical units),
+        ``z`` (m, nz) the reference and ``float`` (m, nz) the float sensor
+        (:meth:`PWASVirtualSensor.predict`) on the estimated samples, ``desc`` (where the data
+        came from; ``samples`` = m) and ``first_output``.
+
+    Raises
+    ------
+    InputError
+        As :func:`_signals_and_reference`; trajectories of different counts or lengths, one with no
+        estimated sample (``T_i <= first_output``), or a reference value that is not finite.
+    """
+    from pwas_hdl.fit.regressors import as_trajectories
+
+    ins, outs, tgts = sensor.signal_names()
+    u, y, ztab, desc = _signals_and_reference(sensor, data, traj_col, blank_rows)
+    us = as_trajectories(u, "u", len(ins)) if ins else None
+    ys = as_trajectories(y, "y", len(outs))
+    for name, tr in (("u", us), ("y", ys)):
+        if tr is not None and len(tr) != len(ztab):
+            raise InputError(f"got {len(ztab)} target trajectories but {len(tr)} {name} trajectories")
+    trajs, zs, zfs = [], [], []
+    for i, zt in enumerate(ztab):
+        ui, yi = (us[i] if us is not None else None), ys[i]
+        t_len = zt.shape[0]
+        for name, a in (("u", ui), ("y", yi)):
+            if a is not None and a.shape[0] != t_len:
+                raise InputError(f"trajectory {i}: {name} has {a.shape[0]} samples, z {t_len}")
+        if t_len <= first_output:
+            raise InputError(f"trajectory {i} has {t_len} samples; the observer bank needs {first_output + 1} (its first "
+                             f"estimate is at sample {first_output} after reset)")
+        zf = np.asarray(sensor.predict(ui, yi), dtype=float).reshape(-1, len(tgts))
+        if zf.shape[0] != t_len - first_output:  # the float sensor's rows are the bit-true model's
+            raise InternalError(f"the float observer-bank sensor gave {zf.shape[0]} estimates for {t_len} samples, "
+                                f"the bit-true model {t_len - first_output}")
+        trajs.append((ui, yi))
+        zs.append(np.asarray(zt, dtype=float)[first_output:])
+        zfs.append(zf)
+    z = np.concatenate(zs, axis=0)
+    for i, t in enumerate(tgts):
+        where = f"{desc['path']}: column {desc['reference_columns'][i]!r}" if desc["path"] is not None else f"z of target {t!r}"
+        check_values(where, z[:, i], "fix the data (no RMSEE can be measured against it)")
+    desc["samples"] = int(z.shape[0])
+    return {"trajectories": trajs, "z": z, "float": np.concatenate(zfs, axis=0), "desc": desc, "first_output": first_output}
 
 
 _option = option_text  # ``input_bits`` -> ``--input-bits (input_bits)``: the explore option first
@@ -656,12 +761,16 @@ def _cached_design_register_bits(design, kind: str, cores) -> int | None:
 
 
 def model_kind(fxm) -> str:
-    """``"additive"``, ``"warped"`` or ``"plain"``: which design ``generate`` builds for a bit-true model
-    (:func:`pwas_hdl.design.generate.fixed_point_model` returns the first two for additive sensors and
-    non-uniform power-of-two partitions)."""
+    """``"observer-bank"``, ``"additive"``, ``"warped"`` or ``"plain"``: which design ``generate`` builds
+    for a bit-true model (:func:`pwas_hdl.design.generate.fixed_point_model` returns the additive and
+    warped ones for additive sensors and non-uniform power-of-two partitions,
+    :func:`pwas_hdl.fixedpoint.observer_bank.observer_bank_model` the observer-bank one)."""
     from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
+    from pwas_hdl.fixedpoint.observer_bank import ObserverBankSensorModel
     from pwas_hdl.fixedpoint.warp import WarpedFixedPointModel
 
+    if isinstance(fxm, ObserverBankSensorModel):
+        return "observer-bank"
     if isinstance(fxm, AdditiveFixedPointModel):
         return "additive"
     if isinstance(fxm, WarpedFixedPointModel):
@@ -721,6 +830,8 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
     from pwas_hdl.hdl import build_core, design_info
 
     kind = model_kind(fxm)
+    if kind == "observer-bank":
+        return _estimate_observer_bank(fxm, memory, pipeline)
     if kind == "additive":
         return _estimate_additive(fxm, memory, pipeline, classifier)
     if kind == "warped":
@@ -845,14 +956,190 @@ def _estimate_warped(fxm, memory: str, pipeline, classifier: dict | None = None)
         comp = build_warped_core(fxm, memory=memory, pipeline=pipeline, classifier=classifier)
         info = design_info(comp)
     w_core = int(info["arithmetic"]["in_width"])  # the core's W (the warp's output code)
-    warp_adder = 0
-    for wp in fxm.warps:  # three comparators on B_in bits, t = q - B_0 over the domain's codes, u = U + L on W bits
-        span = int(wp.code_breaks[-1] - wp.code_breaks[0])
-        warp_adder += 3 * int(wp.input_bits) + max(1, (span - 1).bit_length()) + int(wp.width)
+    warp_adder = _warp_adder_bits(fxm)
     am = _argmax_adder_bits(comp)
     res = _core_estimate(info, _cached_design_register_bits(comp, "warped", [comp.core]), warp_adder + am)
     extra = {"argmax_adder_bits": am} if classifier is not None else {}
     return {**res, "core_input_bits": w_core, "warp_adder_bits": warp_adder, **extra}
+
+
+def _warp_adder_bits(fxm) -> int:
+    """Adder/comparator bits of the warps of a :class:`~pwas_hdl.fixedpoint.warp.WarpedFixedPointModel`:
+    per dimension three comparators on ``B_in`` bits, ``t = q - B_0`` over the domain's codes and
+    ``u = U + L`` on ``W`` bits."""
+    bits = 0
+    for wp in fxm.warps:
+        span = int(wp.code_breaks[-1] - wp.code_breaks[0])
+        bits += 3 * int(wp.input_bits) + max(1, (span - 1).bit_length()) + int(wp.width)
+    return bits
+
+
+def _const_mult_bits(k: int, width: int) -> int:
+    """Partial-product bits of a multiplication by the constant ``k`` of a ``width``-bit operand: one
+    row of ``width`` bits per set bit of ``|k|`` (0 for ``k = 0``, which the RTL leaves out)."""
+    return bin(abs(int(k))).count("1") * int(width)
+
+
+def bank_resources(bm) -> dict[str, Any]:
+    """The resource figures of the parallel observer bank, feature unit and u/y taps of a bit-true
+    observer-bank sensor (what :func:`pwas_hdl.hdl.observer_sensor_top.build_observer_sensor` /
+    :func:`~pwas_hdl.hdl.observer_tap_sensor_top.build_tapped_observer_sensor` build in front of
+    the core, ``architecture="parallel"``), in the units of :func:`estimate_resources`.
+
+    Parameters
+    ----------
+    bm : ObserverBankSensorModel or TappedObserverBankSensorModel
+        The bit-true model (:func:`pwas_hdl.fixedpoint.observer_bank.observer_bank_model`).
+
+    Returns
+    -------
+    dict
+        ``constant_multipliers`` (count of the products by a non-zero coefficient: ``a0``, ``b``,
+        ``l`` of every observer and state, the feature scale ``K_j`` and the taps' ``K_j``; the
+        alignments by powers of two that the structure has -- ``y << (F_s - F_in)``,
+        ``x_{i+1} << F_c`` -- are wiring, not counted), ``constant_mult_bit_products`` (one row of
+        operand bits per set bit of the constant: ``B_s`` for ``a0``, ``B_in`` for ``b``, ``l`` and
+        the taps, the capped root's bits + 1 for ``K_j``), ``squarers`` (``N``, one ``e * e`` of
+        ``residual_bits`` each), ``square_bit_products`` (``N residual_bits**2``), ``dsp18`` (the
+        squarers' 18x18 blocks; the constant products are counted as logic), ``adder_bits`` (per
+        observer and state the accumulator's ``terms - 1`` adders of ``acc_bits + 1`` bits and its
+        constant add of ``acc_bits``; per observer the residual ``residual_bits + 1``, the window
+        sum's add and subtract ``2 (sum_bits + 1)``, map 11b the square root's digit steps
+        ``sum_{i < ceil(sum_bits/2)} (i + 2)``, the feature code's cap compare and constant add;
+        per tap its constant add of ``product_bits``), ``state_register_bits`` (``N M B_s``),
+        ``delay_line_bits`` (``N (l + 1) sum_bits``), ``window_sum_bits`` (``N sum_bits``),
+        ``root_register_bits`` (``N root_bits``), ``lag_bank_bits`` (the taps' input-code delay
+        registers, ``B_in`` each), and ``n_models``, ``order``, ``window``, ``feature_map``,
+        ``taps``. The bank has no memory: its delay lines are registers.
+    """
+    b = bm.bank
+    fmt = b.formats
+    n_obs, mo, nu, lw = b.n_models, b.order, b.nu, b.window
+    bs, accw, rb, sumb, rootb = fmt.state_bits, fmt.acc_bits, fmt.residual_bits, fmt.sum_bits, fmt.root_bits
+    bin_ = fmt.input_bits
+    n_const, cbits, adder = 0, 0, 0
+    for j in range(n_obs):
+        adder += rb + 1  # e = x_0 - (qy << (F_s - F_in))
+        for i in range(mo):
+            consts = [(int(b.a0_codes[j, i]), bs)] + [(int(b.b_codes[j, i, c]), bin_) for c in range(nu)] + [(int(b.l_codes[j, i]), bin_)]
+            terms = 0
+            for k, w in consts:
+                if k:
+                    n_const += 1
+                    cbits += _const_mult_bits(k, w)
+                    terms += 1
+            terms += 1 if i + 1 < mo else 0  # x_{i+1} << F_c
+            if terms:
+                adder += (terms - 1) * (accw + 1) + accw  # the sum tree, then + D + the rounding constant
+        adder += 2 * (sumb + 1)  # S + sq - sq_{k-l-1}
+        if b.feature_map == "11b":
+            adder += sum(i + 2 for i in range((sumb + 1) // 2))  # the digit-by-digit root's compare-subtracts
+    sw = int(b.widths["scale_product"])
+    rs = rootb - int(b.root_shift)
+    for k, cap in zip(b.scale_mul, b.root_cap):
+        capw = max(1, int(cap).bit_length())
+        n_const += 1
+        cbits += _const_mult_bits(k, capw + 1)
+        adder += (rs if int(cap) < (1 << rs) - 1 else 0) + sw  # min(r >> t, cap), then + C
+    taps = getattr(bm, "taps", None)
+    lag_bits = 0
+    if taps is not None:
+        for k in taps.mul:
+            n_const += 1
+            cbits += _const_mult_bits(k, bin_)
+            adder += int(taps.product_bits)
+        depth: dict[int, int] = {}
+        for sig, lag in taps.dims:
+            depth[sig] = max(depth.get(sig, 0), int(lag))
+        lag_bits = sum(depth.values()) * bin_
+    return {
+        "n_models": n_obs, "order": mo, "window": lw, "feature_map": b.feature_map,
+        "taps": 0 if taps is None else len(taps.dims),
+        "constant_multipliers": n_const,
+        "constant_mult_bit_products": cbits,
+        "squarers": n_obs,
+        "square_bit_products": n_obs * rb * rb,
+        "dsp18": n_obs * math.ceil(rb / 18) ** 2,
+        "adder_bits": adder,
+        "state_register_bits": n_obs * mo * bs,
+        "delay_line_bits": n_obs * (lw + 1) * sumb,
+        "window_sum_bits": n_obs * sumb,
+        "root_register_bits": n_obs * rootb,
+        "lag_bank_bits": lag_bits,
+    }
+
+
+def _front_register_key(comp, bm) -> tuple | None:
+    """What the registers in front of the core of an observer-bank top depend on: the bank's sizes and
+    widths, the taps, the warp (its register: ``n`` codes of the core's input width) and the
+    warm-up counter; not the core's weight / output formats nor its pipeline (the core's own
+    registers, :func:`_cached_register_bits` of the core alone). ``None`` if unhashable."""
+    b = bm.bank
+    taps = getattr(bm, "taps", None)
+    p = comp.core.params
+    key = ("observer-bank-front", type(comp).__qualname__, tuple(sorted(b.formats.to_dict().items())), b.n_models, b.order,
+           b.nu, b.window, b.feature_map, None if taps is None else (tuple(taps.dims), int(taps.core_bits)),
+           getattr(comp, "warps", None) is not None, int(comp.warmup), p.n, p.in_width)
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _estimate_observer_bank(bm, memory: str, pipeline) -> dict[str, Any]:
+    """:func:`estimate_resources` of an observer-bank sensor: the sensor top ``generate`` builds
+    (parallel bank -> features [+ u/y taps] [-> warp] -> core), :func:`bank_resources` added to the
+    core's figures (``bank``: the bank's own)."""
+    from pwas_hdl.hdl import design_info
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if hasattr(bm, "taps"):
+            from pwas_hdl.hdl.observer_tap_sensor_top import build_tapped_observer_sensor
+
+            comp = build_tapped_observer_sensor(bm, memory=memory, pipeline=pipeline)
+        else:
+            from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
+
+            comp = build_observer_sensor(bm, memory=memory, pipeline=pipeline)
+        info = design_info(comp)
+    warped = getattr(bm.core, "warps", None) is not None
+    warp_adder = _warp_adder_bits(bm.core) if warped else 0
+    # registers = the front end's (the top's minus its core's: one elaboration of the whole top per
+    # bank format) + the core's (the core alone, cached per core shape as a plain core's)
+    from pwas_hdl.hdl.core import PWASCore
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        alone = PWASCore(comp.core.params, memory=memory, pipeline=pipeline)
+    alone._MustUse__silence = True  # elaborated only when its shape is not cached yet
+    core_regs = _cached_register_bits(alone)
+    key = _front_register_key(comp, bm)
+    if key is not None and key in _REGISTER_BITS:
+        _REGISTER_BITS.move_to_end(key)
+        front = _REGISTER_BITS[key]
+    else:
+        whole = _design_register_bits(comp, [comp.core])
+        front = None if whole is None or core_regs is None else whole - core_regs
+        if key is not None:
+            _REGISTER_BITS[key] = front
+            while len(_REGISTER_BITS) > _REGISTER_BITS_MAX:
+                _REGISTER_BITS.popitem(last=False)
+    regs = None if front is None or core_regs is None else front + core_regs
+    bank = bank_resources(bm)
+    res = _core_estimate(info, regs, warp_adder + bank["adder_bits"])
+    bank_mult = bank["constant_mult_bit_products"] + bank["square_bit_products"]
+    res["mult_bit_products"] += bank_mult
+    res["logic_bits"] += bank_mult
+    res["total_bits"] += bank_mult
+    res["dsp18"] += bank["dsp18"]
+    res["core_multipliers"] = res["multipliers"]
+    res["multipliers"] += bank["squarers"]  # the general multipliers (the constant ones are in bank)
+    res["bank"] = bank
+    if warped:
+        res.update(core_input_bits=int(info["arithmetic"]["in_width"]), warp_adder_bits=warp_adder)
+    return res
 
 
 _MEASURED_KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "lutram", "memory_bits", "multipliers_rtl",
@@ -862,12 +1149,17 @@ _MEASURED_KEYS = ("luts", "ffs", "carry", "dsp", "bram", "bram_bits", "lutram", 
 # ------------------------------------------------------------------------------------ sweep
 def _label(p: dict) -> str:
     """``in s<B_in>.<F> / w s<B_w>.<Fw> / out s<B_out>.<Fo>``; a warped model's input reads ``s<B_in> -> u s<W>.<F>``
-    (the input code, then the warped code of the core and its fraction bits)."""
+    (the input code, then the warped code of the core and its fraction bits); an observer-bank point
+    ends with ``/ states s<B_s>.<F_s> coef .<F_c>``."""
     if p.get("core_input_bits") is not None:
         inp = f"s{p['input_bits']} -> u s{p['core_input_bits']}.{p['input_frac']}"
     else:
         inp = f"s{p['input_bits']}.{p['input_frac']}"
-    return f"in {inp} / w s{p['weight_bits']}.{p['weight_frac']} / out s{p['output_bits']}.{p['output_frac']}"
+    lab = f"in {inp} / w s{p['weight_bits']}.{p['weight_frac']} / out s{p['output_bits']}.{p['output_frac']}"
+    if p.get("bank") is not None:  # an observer bank's states and coefficients
+        bk = p["bank"]
+        lab += f" / states s{bk['state_bits']}.{bk['state_frac']} coef .{bk['coef_frac']}"
+    return lab
 
 
 def _batch_se(diff: np.ndarray, blocks: int = 20) -> np.ndarray:
@@ -919,7 +1211,20 @@ def _kind_fields(fxm, kind: str) -> dict:
     Additive: ``part_frac`` (``F_i`` of each part; the point's ``input_frac`` is ``F = max F_i``,
     the alignment of the sum). Warped: ``core_input_bits`` (``W``, the width of the warped code
     ``u`` the core takes; ``input_bits`` is ``B_in``, the circuit's input code, and ``input_frac``
-    the core's ``F``: one core cell is ``2**F`` codes of ``u``)."""
+    the core's ``F``: one core cell is ``2**F`` codes of ``u``). Observer bank (``fxm`` its
+    :class:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel`): ``bank``, the bank's
+    formats (``input_frac`` ``F_in`` of the u / y codes, ``input_headroom`` ``H``, ``state_bits``
+    ``B_s``, ``state_frac`` ``F_s``, ``coef_frac`` ``F_c``, ``state_bits_needed``,
+    ``state_may_saturate``), and ``core_input_bits`` when its core is warped."""
+    if kind == "observer-bank":
+        b = fxm.bank
+        out: dict[str, Any] = {"bank": {"input_frac": int(b.input_frac), "input_headroom": float(b.input_headroom),
+                                        "state_bits": int(b.formats.state_bits), "state_frac": int(b.state_frac),
+                                        "coef_frac": int(b.coef_frac), "state_bits_needed": int(b.state_bits_needed),
+                                        "state_may_saturate": bool(b.state_may_saturate)}}
+        if getattr(fxm.core, "warps", None) is not None:
+            out["core_input_bits"] = int(fxm.core.warps[0].width)
+        return out
     if kind == "additive":
         return {"part_frac": [int(p.F) for p in fxm.parts]}
     if kind == "warped":
@@ -957,10 +1262,74 @@ def _evaluate_recurrent(fxm: FixedPointModel, sensor: PWASVirtualSensor, rdata: 
     return _accuracy(fxm, zb, np.concatenate(flags), np.concatenate(refs), rdata["z"], rdata["float"], zf_rmsee)
 
 
-def _accuracy(fxm: FixedPointModel, zb, flags, ref, z, zf, zf_rmsee) -> tuple[dict, np.ndarray]:
+def bank_bittrue(bm, trajectories: Sequence[tuple]) -> list[dict[str, np.ndarray]]:
+    """The bit-true observer-bank sensor on each trajectory from reset: what the sensor top computes.
+
+    Parameters
+    ----------
+    bm : ObserverBankSensorModel or TappedObserverBankSensorModel
+        The bit-true model (:func:`pwas_hdl.fixedpoint.observer_bank.observer_bank_model`).
+    trajectories : sequence of (u, y)
+        Physical signals of each trajectory: ``u`` (T_i, nu) or None, ``y`` (T_i, 1).
+
+    Returns
+    -------
+    list of dict
+        Per trajectory: ``codes`` (T_i, nu + 1) the input codes
+        (:meth:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel.quantize_signals`),
+        ``out`` (T_i - first_output, nz) the output codes and ``out_of_range`` (T_i - first_output,)
+        of samples ``first_output ..`` (:meth:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel.trace`),
+        ``state_saturated`` (T_i - first_output,) a state of the bank saturated in that sample's update.
+    """
+    runs = []
+    for u, y in trajectories:
+        codes, _ = bm.quantize_signals(u, y)
+        tr = bm.trace(codes)
+        runs.append({"codes": codes, "out": tr["out"], "out_of_range": tr["out_of_range"],
+                     "state_saturated": np.asarray(tr["state_saturated"])[bm.first_output:]})
+    return runs
+
+
+def _evaluate_observer_bank(bm, bdata: dict, zf_rmsee: np.ndarray, refs: dict) -> tuple[dict, np.ndarray]:
+    """Accuracy of an observer-bank point: :func:`bank_bittrue` on each trajectory of ``bdata``
+    (:func:`_bank_data`) against its reference and the float sensor; the deviation from the float
+    sensor at the represented signals (:meth:`~pwas_hdl.fixedpoint.observer_bank.ObserverBankSensorModel.reference`)
+    is checked against the sensor's bound (``bm.error_bound``: the core's plus the features' and
+    taps' through the map's slopes; it holds unless a state saturates: ``state_saturated`` counts
+    those samples).
+
+    Parameters
+    ----------
+    bm : ObserverBankSensorModel
+        The point's bit-true model.
+    bdata : dict
+        :func:`_bank_data`.
+    zf_rmsee : numpy.ndarray, shape (nz,)
+        The float sensor's RMSEE.
+    refs : dict
+        Cache of the float sensor at the represented signals, by the input codes' format (filled here).
+
+    Returns
+    -------
+    (dict, numpy.ndarray)
+        The accuracy fields of :func:`_accuracy` plus ``state_saturated``, and the errors (m, nz).
+    """
+    runs = bank_bittrue(bm, bdata["trajectories"])
+    key = (bm.bank.input_bits, bm.bank.input_headroom)  # the represented signals depend on these only
+    if key not in refs:
+        refs[key] = np.concatenate([bm.reference(r["codes"]) for r in runs])
+    zb = bm.core.to_physical_output(np.concatenate([r["out"] for r in runs]))
+    flags = np.concatenate([r["out_of_range"] for r in runs])
+    acc, err = _accuracy(bm.core, zb, flags, refs[key], bdata["z"], bdata["float"], zf_rmsee, np.asarray(bm.error_bound))
+    acc["state_saturated"] = int(np.concatenate([r["state_saturated"] for r in runs]).sum())
+    return acc, err
+
+
+def _accuracy(fxm: FixedPointModel, zb, flags, ref, z, zf, zf_rmsee, bound: np.ndarray | None = None) -> tuple[dict, np.ndarray]:
     """A point's accuracy fields and its errors ``zb - z`` (m, nz): ``zb`` the bit-true estimates,
     ``flags`` (m,) out of the domain, ``ref`` (m, nz) the float model at the codes the circuit saw,
-    ``z`` the reference, ``zf`` the float sensor's estimates, ``zf_rmsee`` (nz,) its RMSEE."""
+    ``z`` the reference, ``zf`` the float sensor's estimates, ``zf_rmsee`` (nz,) its RMSEE, ``bound``
+    (nz,) a per-target error bound in physical units (default the core's, :func:`_precision`)."""
     err = zb - z
     rmsee = np.sqrt(np.mean(err**2, axis=0))
     ratio = float(np.mean(rmsee / np.where(zf_rmsee > 0, zf_rmsee, np.finfo(float).tiny)))
@@ -968,18 +1337,35 @@ def _accuracy(fxm: FixedPointModel, zb, flags, ref, z, zf, zf_rmsee) -> tuple[di
         "rmsee": [float(v) for v in rmsee],
         "rmsee_ratio": ratio,
         "rmsee_ratio_se": float(np.mean(_paired_se(err, zf - z) / np.where(zf_rmsee > 0, zf_rmsee, 1.0))),
-        **_precision(fxm, zb, flags, ref, zf),
+        **_precision(fxm, zb, flags, ref, zf, bound),
     }
     return acc, err
 
 
-def _precision(fxm: FixedPointModel, zb, flags, ref, zf) -> dict:
+def _precision(fxm: FixedPointModel, zb, flags, ref, zf, bound: np.ndarray | None = None) -> dict:
     """The deviation fields of a point (module notes): ``zb`` (m, nz) the bit-true outputs
     (physical units), ``flags`` (m,) out of the domain, ``ref`` (m, nz) the float model at the
-    codes the circuit saw, ``zf`` (m, nz) the float model at the unquantised regressors."""
+    codes the circuit saw, ``zf`` (m, nz) the float model at the unquantised regressors.
+
+    ``bound`` (nz,), physical units: a per-target bound of ``|zb - ref|`` other than the core's
+    (an observer-bank sensor's, which adds the features' errors); ``error_bound`` is then its
+    largest entry and ``bound_holds`` checks each target against its own."""
     lsb = fxm.output_format.lsb
     dev = zb - zf
     dref = float(np.max(np.abs(zb - ref))) / lsb
+    if bound is not None:
+        b = np.asarray(bound, dtype=float)
+        worst = np.max(np.abs(zb - ref), axis=0) if zb.shape[0] else np.zeros(b.shape)
+        return {
+            "rms_dev_float": [float(v) for v in np.sqrt(np.mean(dev**2, axis=0))],
+            "max_dev_float": [float(v) for v in np.max(np.abs(dev), axis=0)],
+            "max_dev_float_lsb": float(np.max(np.abs(dev)) / lsb),
+            "max_dev_reference_lsb": dref,
+            "error_bound_lsb": float(b.max() / lsb),
+            "error_bound": float(b.max()),
+            "bound_holds": bool(np.all(worst <= b * (1 + 1e-12))),
+            "flagged": int(flags.sum()),
+        }
     return {
         "rms_dev_float": [float(v) for v in np.sqrt(np.mean(dev**2, axis=0))],
         "max_dev_float": [float(v) for v in np.max(np.abs(dev), axis=0)],
@@ -1090,6 +1476,10 @@ def explore(
     progress: Progress | None = None,
     executor: "Executor | None" = None,
     blank_rows: str = "error",
+    state_frac: Sequence[int] | None = None,
+    coef_frac: Sequence[int] | None = None,
+    state_bits: int | None = None,
+    input_headroom: float | None = None,
 ) -> dict[str, Any]:
     """Sweep the fixed-point formats of a model and measure accuracy against resources.
 
@@ -1097,9 +1487,11 @@ def explore(
     ----------
     model : PWASVirtualSensor or path of a model file
         A plain, additive (fit ``--additive``) or power-of-two non-uniform (fit ``--breakpoints
-        quantile-pow2``) or recurrent (fit ``--mz``) sensor, or a classifier (fit ``--classify``,
-        plain, additive or power-of-two non-uniform: scored by its error rate, module notes);
-        not an observer-bank sensor.
+        quantile-pow2``) or recurrent (fit ``--mz``) sensor, an observer-bank sensor (fit
+        ``--front-end observer-bank``, with or without ``--mu/--my`` taps, uniform or power-of-two:
+        the bank, the features and the core from reset on each trajectory, module notes), or a
+        classifier (fit ``--classify``, plain, additive or power-of-two non-uniform: scored by its
+        error rate, module notes).
     data : path of a CSV, :class:`~pwas_hdl.io.csv_table.Table`, or tuple ``(u, y, z)``
         The evaluation data. From a CSV/Table the model's input/output columns are read (by
         name) and the reference of target ``t`` is column ``t_true`` if present, else ``t`` (a
@@ -1141,6 +1533,17 @@ def explore(
     executor : pwas_hdl.flow.executor.Executor, optional
         Runs the synthesis of the measured points (one task per point): serially by default, or
         on a local or remote Dask cluster. The result does not depend on it.
+    state_frac, coef_frac : sequence of int, optional
+        Observer-bank sensors: fraction bits ``F_s`` of the observer states / ``F_c`` of the observer
+        coefficients to sweep as well (default: not swept, ``generate``'s default at each input
+        width, from the noise budget; :class:`~pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank`).
+    state_bits : int, optional
+        Observer-bank sensors: a fixed state width ``B_s`` (default: the width of the state bound;
+        fewer bits may saturate, counted in ``state_saturated``).
+    input_headroom : float, optional
+        Observer-bank sensors: a fixed input head room ``H`` (normalised units, default 8).
+        ``state_frac``, ``coef_frac``, ``state_bits`` and ``input_headroom`` are refused for
+        other models (as ``generate`` refuses them).
 
     Returns
     -------
@@ -1159,8 +1562,9 @@ def explore(
     InputError
         Empty sweep, non-integer widths, unknown resource mode or cost key, unknown column,
         missing target column (a classifier's: its class label column), data without a full
-        regressor; an observer-bank sensor, or breakpoints whose cells are not power-of-two
-        multiples of one step.
+        regressor (an observer-bank sensor: a trajectory with no estimated sample); a bank
+        format option for a model without an observer bank, or breakpoints whose cells are not
+        power-of-two multiples of one step.
     ToolMissing
         Synthesis was asked for and a synthesis tool is not installed.
     ToolFailed, InputError
@@ -1197,12 +1601,30 @@ def explore(
     from pwas_hdl.design.generate import fixed_point_model  # the bit-true model generate builds (additive, warped, plain)
 
     sensor, model_path = _load_sensor(model)
-    _check_supported(sensor)
+    _check_supported(sensor, {"state_frac": state_frac, "coef_frac": coef_frac, "state_bits": state_bits,
+                              "input_headroom": input_headroom})
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
-    recurrent = sensor.lags_ is not None and sensor.lags_.recurrent  # the accuracy is the closed loop's
-    if recurrent:
+    bank = _is_bank(sensor)  # observer bank -> features [+ taps] -> core: its own model, data and resources
+    # the bank's formats: F_s and F_c swept (None: generate's default at each input width), B_s and H fixed
+    sfs = _int_values(state_frac, "state_frac") if state_frac is not None else [None]
+    cfs = _int_values(coef_frac, "coef_frac") if coef_frac is not None else [None]
+    fixed_sb = None if state_bits is None else _int_values(state_bits, "state_bits", lo=2)[0]
+    if input_headroom is not None and (isinstance(input_headroom, bool) or not isinstance(input_headroom, (int, float))
+                                       or not math.isfinite(input_headroom) or input_headroom <= 0):
+        raise InputError(f"{_option('input_headroom')} must be a positive number, got {input_headroom!r}")
+    recurrent = not bank and sensor.lags_ is not None and sensor.lags_.recurrent  # the accuracy is the closed loop's
+    if bank:
+        from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            bank_dflt = observer_bank_model(sensor, memory=memory, input_fill=input_fill, rounding=rounding)
+        bdata = _bank_data(sensor, bank_dflt.first_output, data, traj_col, blank_rows)
+        xi, z, zf, data_desc = None, bdata["z"], bdata["float"], bdata["desc"]
+        bank_refs: dict = {}
+    elif recurrent:
         rdata = _recurrent_data(sensor, data, traj_col, blank_rows)
         xi, z, zf, data_desc = None, rdata["z"], rdata["float"], rdata["desc"]
     else:
@@ -1214,18 +1636,23 @@ def explore(
     # ---- the defaults of generate (input_bits=12, everything else from the data)
     common = {"input_fill": input_fill, "rounding": rounding, "overflow": overflow, "layout": memory}
     fmt_common = {"input_fill": input_fill, "rounding": rounding, "overflow": overflow}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        dflt = fixed_point_model(sensor, memory=memory, input_fill=input_fill, rounding=rounding)
-    kind = model_kind(dflt)
+    if bank:
+        dflt = bank_dflt.core
+        kind = model_kind(bank_dflt)
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            dflt = fixed_point_model(sensor, memory=memory, input_fill=input_fill, rounding=rounding)
+        kind = model_kind(dflt)
     fw0, fo0 = dflt.weight_format.frac, dflt.output_format.frac
-    default_key = (dflt.input_bits, fw0, fo0)
+    default_key = (dflt.input_bits, fw0, fo0, None, None)
     fws = _int_values(weight_frac, "weight_frac") if weight_frac is not None else [fw0 + d for d in DEFAULT_FRAC_OFFSETS]
     fos = _int_values(output_frac, "output_frac") if output_frac is not None else [fo0 + d for d in DEFAULT_FRAC_OFFSETS]
-    check_limit("the number of format combinations", len(in_bits) * len(fws) * len(fos), MAX_SWEEP_POINTS,
-                "sweep fewer input widths or fraction bits")
-    combos = [(b, fw, fo, False) for b in in_bits for fw in fws for fo in fos]
-    default_in_sweep = fixed_wb is None and fixed_ob is None and (*default_key, False) in combos
+    check_limit("the number of format combinations", len(in_bits) * len(fws) * len(fos) * len(sfs) * len(cfs),
+                MAX_SWEEP_POINTS, "sweep fewer input widths or fraction bits")
+    combos = [(b, fw, fo, sf, cf, False) for b in in_bits for fw in fws for fo in fos for sf in sfs for cf in cfs]
+    default_in_sweep = (fixed_wb is None and fixed_ob is None and fixed_sb is None and input_headroom is None
+                        and (*default_key, False) in combos)
     if default_in_sweep:
         combos[combos.index((*default_key, False))] = (*default_key, True)
     else:  # evaluated all the same, with the default widths, so that it can be compared
@@ -1235,7 +1662,7 @@ def explore(
     # classifier's: the float classifier's decisions against the true labels)
     if classifier is not None:
         cref = _classifier_reference(sensor, xi, z)
-    elif not recurrent:
+    elif not recurrent and not bank:
         zf = sensor.predict_regressors(xi)
     if classifier is None:
         zf_rmsee = np.sqrt(np.mean((zf - z) ** 2, axis=0))
@@ -1244,26 +1671,38 @@ def explore(
     refused: list[dict] = []
     errors: dict[int, np.ndarray] = {}
     total = len(combos)
-    for i, (b, fw, fo, is_default) in enumerate(combos):
+    for i, (b, fw, fo, sf, cf, is_default) in enumerate(combos):
         given = {"input_bits": b, "weight_frac": fw, "output_frac": fo}
         if not is_default:
             given.update(weight_bits=fixed_wb, output_bits=fixed_ob)
+        bank_given = {}
+        if bank:
+            bank_given = {"state_frac": sf, "coef_frac": cf}
+            if not is_default:
+                bank_given.update(state_bits=fixed_sb, input_headroom=input_headroom)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                fxm = fixed_point_model(sensor, memory=memory, **fmt_common, **given)
+                if bank:
+                    bm = observer_bank_model(sensor, memory=memory, **fmt_common, **given, **bank_given)
+                    fxm = bm.core
+                else:
+                    fxm = fixed_point_model(sensor, memory=memory, **fmt_common, **given)
             if recurrent:  # the feedback's requantisation may refuse the formats too
                 acc, err = _evaluate_recurrent(fxm, sensor, rdata, zf_rmsee)
         except InputError as exc:  # a combination the formats refuse (anything else is a bug: raised)
-            refused.append({**{k: v for k, v in given.items()}, "reason": str(exc)})
+            refused.append({**{k: v for k, v in given.items()}, **{k: v for k, v in bank_given.items() if v is not None},
+                            "reason": str(exc)})
             if progress:
                 progress("sweep", i + 1, total)
             continue
-        if classifier is not None:
+        if bank:
+            acc, err = _evaluate_observer_bank(bm, bdata, zf_rmsee, bank_refs)
+        elif classifier is not None:
             acc, err = _evaluate_classifier(fxm, xi, cref)
         elif not recurrent:
             acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
-        res = estimate_resources(fxm, memory, pipeline, classifier=classifier)
+        res = estimate_resources(bm if bank else fxm, memory, pipeline, classifier=classifier)
         pt = {
             "input_bits": fxm.input_bits,
             "input_frac": fxm.F,
@@ -1277,7 +1716,7 @@ def explore(
             "weights_saturated": fxm.n_weights_saturated,
             "output_may_saturate": fxm.output_may_saturate,
             "warnings": [str(w.message) for w in caught],
-            **_kind_fields(fxm, kind),
+            **_kind_fields(bm if bank else fxm, kind),
             **acc,
             "resources": res,
             "is_default": bool(is_default),
@@ -1319,6 +1758,17 @@ def explore(
             "recurrence": ({"Mz": int(sensor.lags_.mz), "lead": int(getattr(sensor, "lead_", 0)),
                             "accuracy": "the bit-true recurrence from reset on each trajectory (closed loop)"}
                            if recurrent else None),
+            "observer_bank": (None if not bank else
+                              {"n_models": int(bank_dflt.bank.n_models), "order": int(bank_dflt.bank.order),
+                               "window": int(bank_dflt.bank.window), "feature_map": str(bank_dflt.bank.feature_map),
+                               "observer": str(bank_dflt.bank.front_end.observer),
+                               "taps": [f"{n}[t-{lag}]" if lag else f"{n}[t]" for n, lag in
+                                        ((bank_dflt.bank.signal_names[sg], lg) for sg, lg in bank_dflt.taps.dims)]
+                                       if hasattr(bank_dflt, "taps") else [],
+                               "warped": getattr(bank_dflt.core, "warps", None) is not None,
+                               "first_output_sample": int(bank_dflt.first_output),
+                               "accuracy": "the bit-true bank, features and core from reset on each trajectory; the "
+                                           "estimate of sample k >= first_output_sample against row k of the trajectory"}),
             "classifier": (None if classifier is None else
                            {"target": str(classifier["target"]), "classes": [float(c) for c in classifier["classes"]],
                             "tie_rule": TIE_RULE,
@@ -1343,6 +1793,9 @@ def explore(
             "default_output_frac": fo0,
             "default_in_sweep": default_in_sweep,
             "combinations": total,
+            **({"state_frac": [v for v in sfs if v is not None] or None, "coef_frac": [v for v in cfs if v is not None] or None,
+                "state_bits": fixed_sb, "input_headroom": None if input_headroom is None else float(input_headroom)}
+               if bank else {}),
         },
         "resource_model": {
             "mode": resources,
@@ -1364,7 +1817,7 @@ def explore(
         else:
             pick = [front[round(i * (len(front) - 1) / (measure_max - 1))] for i in range(measure_max)]
         result["measured"] = _measure(sensor, points, sorted(set(pick) | {di}), resources, device, workdir, memory,
-                                      pipeline, common, progress, executor, acc_key)
+                                      pipeline, common, progress, executor, acc_key, bank)
     errs = result_errors(result)
     if errs:  # the owner writes what its schema says (a bug otherwise, as the manifest's builder checks)
         raise InternalError(f"the explore result breaks its schema {EXPLORE_SCHEMA}: {errs[0]}")
@@ -1459,11 +1912,12 @@ def _measure_point(task: dict) -> dict:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            gd = build_design(task["sensor"], design="core", memory=task["memory"], pipeline=task["pipeline"],
-                              input_bits=p["input_bits"], input_fill=common["input_fill"],
+            bank_formats = task.get("bank_formats")  # an observer-bank sensor: its sensor top (no core design)
+            gd = build_design(task["sensor"], design="core" if bank_formats is None else "sensor", memory=task["memory"],
+                              pipeline=task["pipeline"], input_bits=p["input_bits"], input_fill=common["input_fill"],
                               weight_bits=p["weight_bits"], weight_frac=p["weight_frac"],
                               output_bits=p["output_bits"], output_frac=p["output_frac"],
-                              overflow=common["overflow"], rounding=common["rounding"])
+                              overflow=common["overflow"], rounding=common["rounding"], **(bank_formats or {}))
         folder = write_folder(gd.files, root / "design" if own else root)
         res = synthesize(folder, task["target"], device=task["device"])
     except (ToolMissing, ToolFailed, InputError, OSError) as exc:  # not a bug: noted, the sweep goes on (a bug: TaskFailed)
@@ -1487,10 +1941,11 @@ def _error_kind(exc: Exception) -> dict:
 
 
 def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress, executor=None,
-             acc_key: str = "rmsee_ratio") -> dict:
+             acc_key: str = "rmsee_ratio", bank: bool = False) -> dict:
     """Synthesise the points ``idx`` (:func:`_measure_point`, one task each) and the front of the
     synthesised points in (LUTs, DSPs, block RAMs, ``acc_key``: ``rmsee_ratio``, or a classifier's
-    ``error_rate``)."""
+    ``error_rate``). ``bank``: an observer-bank sensor, whose design is the sensor top (bank,
+    features, core) with the point's bank formats."""
     from pwas_hdl.flow.executor import Executor
 
     root = None if workdir is None else Path(workdir)
@@ -1500,9 +1955,16 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
     tasks, labels = [], []
     for k in idx:
         p = points[k]
-        name = f"i{p['input_bits']}_w{p['weight_bits']}f{p['weight_frac']}_o{p['output_bits']}f{p['output_frac']}".replace("-", "m")
+        name = f"i{p['input_bits']}_w{p['weight_bits']}f{p['weight_frac']}_o{p['output_bits']}f{p['output_frac']}"
+        bank_formats = None
+        if bank:  # the sensor top with the bank's formats of the point (all of them: the default ones too)
+            bk = p["bank"]
+            bank_formats = {"state_bits": bk["state_bits"], "state_frac": bk["state_frac"], "coef_frac": bk["coef_frac"],
+                            "input_headroom": bk["input_headroom"]}
+            name += f"_s{bk['state_bits']}f{bk['state_frac']}_c{bk['coef_frac']}"
+        name = name.replace("-", "m")
         tasks.append({"sensor": sensor, "point": p, "target": target, "device": device, "memory": memory, "pipeline": pipeline,
-                      "common": common, "folder": None if root is None else str(root / name)})
+                      "common": common, "folder": None if root is None else str(root / name), "bank_formats": bank_formats})
         labels.append(p["label"])
     ex = executor if executor is not None else Executor()
     results = ex.map(_measure_point, tasks, labels=labels, return_exceptions=True,
