@@ -99,6 +99,7 @@ def test_the_table_has_the_checked_columns():
 @pytest.mark.parametrize("label", list(ROWS))
 def test_every_cell_of_the_row(label, data):
     from pwas_hdl.design.generate import build_design, fixed_point_model
+    from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
     from pwas_hdl.flow.explore import explore
 
     with warnings.catch_warnings():
@@ -108,7 +109,9 @@ def test_every_cell_of_the_row(label, data):
         for col, opts in COLUMNS.items():
             try:
                 if opts is None:
-                    d = fixed_point_model(sensor)
+                    # an observer-bank sensor's core formats are its bank model's (fixed_point_model refuses it)
+                    d = (observer_bank_model(sensor).core if getattr(sensor, "front_end_", None) is not None
+                         else fixed_point_model(sensor))
                     res = explore(sensor, xy, input_bits=[12], weight_frac=[d.weight_format.frac],
                                   output_frac=[d.output_format.frac])
                     # a classifier is swept on its decisions (error rate), a sensor on its RMSEE

@@ -1,7 +1,7 @@
 """`pwas-hdl explore` on additive sensors (fit --additive) and non-uniform power-of-two partitions
 (fit --breakpoints quantile-pow2): each point is the bit-true model and the design `generate` builds
-(`fixed_point_model`, `build_additive_core`, `build_warped_core`); observer-bank sensors stay
-refused, also as additive or warped models (classifiers of both kinds: tests/test_explore_classifier.py)."""
+(`fixed_point_model`, `build_additive_core`, `build_warped_core`). Classifiers of both kinds:
+tests/test_explore_classifier.py; observer-bank sensors: tests/test_explore_observer_bank.py."""
 
 from __future__ import annotations
 
@@ -157,15 +157,12 @@ def _refused(args, root, *words):
     assert tree(root) == before
 
 
-def test_additive_and_warped_classifiers_refuse_a_reference_that_holds_no_class_and_bank_models_stay_refused(
-        fitted, lorenz_tiny, in_tmp):
-    """Additive or warped classifiers are swept now (tests/test_explore_classifier.py), observer-bank
-    sensors are not (recurrent ones are: tests/test_explore_recurrent.py). A classifier's reference is
+def test_additive_and_warped_classifiers_refuse_a_reference_that_holds_no_class(lorenz_tiny, in_tmp):
+    """Additive or warped classifiers are swept now (tests/test_explore_classifier.py; observer-bank
+    sensors: tests/test_explore_observer_bank.py). A classifier's reference is
     its true class: the tiny fixture's CSV has the continuous z_true under the label's name, whose
     values are no class -- one error line naming the column, exit 2, nothing written (it was a sweep
     with an error rate of 100 %). (The old refusal named 'additive sensors' for an additive classifier.)"""
-    import copy
-
     tr = lorenz_tiny.train
     z = tr.z[:400, 0]
     for kw in (dict(my=3, additive="pairs", classify=True), dict(my=2, breakpoints="quantile-pow2", classify=True)):
@@ -174,12 +171,6 @@ def test_additive_and_warped_classifiers_refuse_a_reference_that_holds_no_class_
         _refused(["explore", "m.json", str(lorenz_tiny.test_csv), "-o", "ex"], in_tmp,
                  "column 'z_true'", "are not among the classes ['0', '1'] of classifier 'z'", "give the true class labels")
         (in_tmp / "m.json").unlink()
-    for kind in KINDS:
-        s = copy.deepcopy(fitted[kind][0])
-        s.front_end_ = object()  # what marks an observer-bank sensor (fit --front-end observer-bank)
-        with pytest.raises(InputError, match=r"explore is not available for observer-bank sensors \(fit --front-end "
-                                             r"observer-bank\) yet"):
-            explore(s, lorenz_tiny.test_csv, input_bits=[12])
 
 
 def test_measured_mode_generates_the_new_kinds(fitted, monkeypatch):
