@@ -83,17 +83,6 @@ def test_explore_of_a_recurrent_model_refuses_a_trajectory_shorter_than_the_lags
              "trajectory 1 has 1 samples; the lags need 2")
 
 
-def test_explore_refuses_an_observer_bank_model(lorenz_tiny):
-    """An observer-bank model crashed explore (AttributeError on the lag structure, exit 3) or, with
-    u/y taps, got 'need 5 regressor names/signals, got 3/3'. The check runs before the data are read."""
-    from pwas_hdl.flow.explore import explore
-
-    s = _tiny_sensor(lorenz_tiny)
-    s.front_end_ = object()  # what marks an observer-bank sensor (fit --front-end observer-bank)
-    with pytest.raises(InputError, match=r"not available for observer-bank sensors \(fit --front-end observer-bank\)"):
-        explore(s, lorenz_tiny.test_csv, input_bits=[12])
-
-
 def test_explore_of_a_classifier_needs_its_label_column(in_tmp, lorenz_tiny):
     """A classifier got "no column 'mode=1_true' or 'mode=1'" (its one-hot score targets), then was
     refused; now it is swept (tests/test_explore_classifier.py) and DATA without the class label column

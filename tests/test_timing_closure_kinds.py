@@ -109,7 +109,7 @@ def _latency_with(model, design, pipeline, architecture="parallel"):
     ("classifier", "core", None, "parallel"),  # the argmax stage: its registers follow the pipeline
     ("bank", "sensor", None, "parallel"),  # the observer bank and its feature stages
     ("bank", "sensor", None, "serial"),  # the time-multiplexed bank
-    ("warped_bank", "sensor", 3, "parallel"),  # the bank's 2 feature stages + the warp register
+    ("warped_bank", "sensor", "bank", "parallel"),  # the bank's feature stages (3 + the root's R) + the warp register
     ("recurrent", "sensor", 0, "parallel"),  # the recurrent top: the core's latency (II = latency)
     ("recurrent_warped", "sensor", 1, "parallel"),  # the recurrent top with the warp register in front of its core
     ("recurrent", "sensor", None, "serial"),  # the recurrent top around the serial core (II = latency)
@@ -159,6 +159,10 @@ def test_the_search_counts_the_designs_latency(kind, design, fixed, architecture
             assert lat == sorted({serial_latency(p, n) + 1 for p in tc.pipeline_candidates(n)})
     if kind.startswith("recurrent"):  # one sample in flight, whatever the core
         assert gd.manifest["ii"] == gd.manifest["latency_cycles"]
+    if fixed == "bank":  # the window-sum, root and code registers, the root's own, and the warp register
+        fe = gd.manifest["front_end"]
+        assert fe["stages_before_core"] == 3 + fe["isqrt_registers"] and fe["isqrt_registers"] > 0
+        fixed = fe["stages_before_core"] + 1
     if fixed is not None:  # the core's latency + the fixed register(s), for every candidate
         n = max(len(s) for s in model.grid_.subsets) if kind == "additive" else model.grid_.n
         assert all(c["latency_cycles"] == Pipeline.cast(c["pipeline"]).latency(n) + fixed for c in cands)

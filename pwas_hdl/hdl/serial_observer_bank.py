@@ -140,6 +140,11 @@ class SerialBankPlan:
 def check_isqrt_every(isqrt_every: Any) -> None:
     """Refuse an ``isqrt_every`` that is not a positive integer or None.
 
+    Parameters
+    ----------
+    isqrt_every : Any
+        Digit steps of a square root between its registers, as given.
+
     Raises
     ------
     InputError
