@@ -136,7 +136,7 @@ def test_synth_places_the_latency_structure_on_the_plan(tmp_path: Path, monkeypa
     man = json.loads((d / "manifest.json").read_text())
     # the hand-made design's registers described as short's structure (mul_in right after the read, no mem_out)
     man["pipeline"] = {**man["pipeline"], "addr": False, "mul_in": True, "mem_out": False}
-    man["memory"]["kind"] = "banked"  # (one bank)
+    man["memory"]["kind"] = man["generator"]["options"]["memory"] = "banked"  # (one bank)
     (d / "manifest.json").write_text(json.dumps(man))
     r = synthesize(d, "ecp5", workdir=tmp_path / "on")
     fp = r["floorplan"]

@@ -549,6 +549,7 @@ def test_simulate_exits_1_when_latency_disagrees_with_the_manifest(tmp_path, des
     # unchanged Verilog: only the measurement can tell (an inconsistent one is refused when read, exit 2)
     stage = next(k for k in ("rank", "addr", "mem_out", "product") if man["pipeline"].get(k))
     man["pipeline"][stage] = False
+    man["architecture"]["pipeline_registers"].remove(stage)  # the registers built, as the pipeline says
     (g / "manifest.json").write_text(json.dumps(man))
     res = invoke("simulate", g, files / "t.csv", "-o", tmp_path / "s.csv", "--build-dir", sim_cache)
     assert res.exit_code == 1, res.output
