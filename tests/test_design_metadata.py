@@ -226,6 +226,10 @@ def test_built_pipeline_registers_reads_the_manifest_and_falls_back_to_pipeline(
     old = {**man, "architecture": {k: v for k, v in man["architecture"].items() if k != "pipeline_registers"}}
     assert built_pipeline_registers(old) == []
     assert built_pipeline_registers({k: v for k, v in old.items() if k != "architecture"}) == ["mul_in"]
+    # an old serial classifier manifest: its argmax stage builds tree_levels registers on the serial core
+    cls = {**old, "classifier": {"n_classes": 3}, "pipeline": {**old["pipeline"], "tree_levels": 1}}
+    assert "tree_levels" in built_pipeline_registers(cls) and "tree_levels" not in built_pipeline_registers(
+        {k: v for k, v in cls.items() if k != "classifier"})
     parallel = _design("plain", "core", "parallel", "short").manifest
     old_par = {**parallel, "architecture": {k: v for k, v in parallel["architecture"].items() if k != "pipeline_registers"}}
     assert built_pipeline_registers(old_par) == built_pipeline_registers(parallel)

@@ -256,3 +256,18 @@ def test_run_many_checks_the_codes():
     for lockstep in (True, False):
         with pytest.raises(InputError, match="outside the 8-bit range"):
             rm.run_many([good, bad], lockstep=lockstep)
+
+
+def test_an_additive_model_has_no_one_sample_path():
+    """The plain model's evaluate_one read one grid's strides: an additive model (its grid has parts)
+    inherited it and raised AttributeError; it has none, and the recurrence falls back to evaluate."""
+    from pwas_hdl.fit.additive import AdditiveGrid
+    from pwas_hdl.fixedpoint.additive import AdditiveFixedPointModel
+
+    grid = AdditiveGrid([0.0] * 3, [1.0] * 3, [3, 3, 3], [(0,), (1, 2), (0, 2)])
+    w = np.linspace(-1.0, 1.0, grid.n_vertices)[:, None]
+    fxm = AdditiveFixedPointModel(grid, w)
+    assert fxm.evaluate_one is None
+    q = fxm.quantize_inputs(np.array([[0.2, 0.5, 0.9]]))
+    out, oor = fxm.evaluate(q)
+    assert out.shape == (1, 1) and not oor[0]

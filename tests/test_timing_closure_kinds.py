@@ -267,6 +267,10 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("warm_TRELLIS_FF", "output register"),
     ("fb0_z1_TRELLIS_FF", "feedback register"),
     ("fb1_code$7", "feedback register"),
+    # the parallel bank's root pipeline and feature-code registers
+    ("s_code_q1_TRELLIS_FF", "observer bank"),
+    ("core.s_isqrt_valid_d0", "observer bank"),
+    ("s_code_tap0$3", "observer bank"),
 ])
 def test_critical_path_stage_names(cell, stage):
     assert tc._stage_of_cell(cell) == stage

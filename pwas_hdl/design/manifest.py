@@ -526,7 +526,8 @@ def built_pipeline_registers(m: dict[str, Any]) -> list[str]:
     if (m.get("architecture") or {}).get("kind") == "serial":
         from pwas_hdl.hdl.serial_core import SERIAL_REGISTERS
 
-        regs = [k for k in regs if k in SERIAL_REGISTERS]
+        # the serial core's registers; a classifier's argmax stage builds its tree_levels registers on it too
+        regs = [k for k in regs if k in SERIAL_REGISTERS or (k == "tree_levels" and "classifier" in m)]
     return regs
 
 

@@ -89,6 +89,9 @@ def additive_weight_frac(ref: float, n_parts: int, budget: float = NOISE_BUDGET)
 class AdditiveFixedPointModel(FixedPointModel):
     """Bit-true model of an additive sensor: one :class:`FixedPointModel` per part, summed exactly.
 
+    It has no one-sample path (``evaluate_one`` is None: the plain model's would read one grid);
+    :class:`~pwas_hdl.fixedpoint.recurrence.RecurrentFixedPointModel` then runs :meth:`evaluate`.
+
     The input side (formats, :meth:`quantize_inputs`, :meth:`represented_inputs`,
     :meth:`signal_input_formats`, :meth:`predict`) is that of :class:`FixedPointModel` on all ``n``
     regressors; :meth:`evaluate`, :meth:`trace` and :meth:`reference` are the additive circuit.
@@ -116,6 +119,9 @@ class AdditiveFixedPointModel(FixedPointModel):
     weight_codes : ndarray (sum_i N_i, nz), int64
         Stacked weight codes.
     """
+
+    #: no one-sample path (the plain model's evaluate_one reads one grid's strides)
+    evaluate_one = None
 
     def __init__(
         self,

@@ -1010,7 +1010,10 @@ def bank_resources(bm) -> dict[str, Any]:
         ``delay_line_bits`` (``N (l + 1) sum_bits``), ``window_sum_bits`` (``N sum_bits``),
         ``root_register_bits`` (``N root_bits``), ``lag_bank_bits`` (the taps' input-code delay
         registers, ``B_in`` each), and ``n_models``, ``order``, ``window``, ``feature_map``,
-        ``taps``. The bank has no memory: its delay lines are registers.
+        ``taps``. The bank has no memory: its delay lines are registers. The register entries are
+        the main ones, not all: the square roots' pipeline registers and the feature-code
+        registers (and the taps' registers beside them) are in the estimate's ``register_bits``,
+        which counts the elaborated top's flip-flops, not here.
     """
     b = bm.bank
     fmt = b.formats
@@ -1071,15 +1074,16 @@ def bank_resources(bm) -> dict[str, Any]:
 
 def _front_register_key(comp, bm) -> tuple | None:
     """What the registers in front of the core of an observer-bank top depend on: the bank's sizes and
-    widths, the taps, the warp (its register: ``n`` codes of the core's input width) and the
-    warm-up counter; not the core's weight / output formats nor its pipeline (the core's own
+    widths, the taps, the warp (its register: ``n`` codes of the core's input width), the square
+    root's register spacing and the warm-up counter; not the core's weight / output formats nor its pipeline (the core's own
     registers, :func:`_cached_register_bits` of the core alone). ``None`` if unhashable."""
     b = bm.bank
     taps = getattr(bm, "taps", None)
     p = comp.core.params
     key = ("observer-bank-front", type(comp).__qualname__, tuple(sorted(b.formats.to_dict().items())), b.n_models, b.order,
            b.nu, b.window, b.feature_map, None if taps is None else (tuple(taps.dims), int(taps.core_bits)),
-           getattr(comp, "warps", None) is not None, int(comp.warmup), p.n, p.in_width)
+           getattr(comp, "warps", None) is not None, int(comp.warmup), p.n, p.in_width,
+           getattr(comp, "isqrt_every", None))  # the parallel bank's root registers
     try:
         hash(key)
     except TypeError:

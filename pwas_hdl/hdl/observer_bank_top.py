@@ -445,6 +445,7 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
     top.architecture = architecture
     check_isqrt_every(isqrt_every)
     top.isqrt_every = isqrt_every if bank.feature_map == "11b" else None
+    top.isqrt_regs = isqrt_registers(bank, isqrt_every)  # inside each square root (the serial plan counts the same)
     if architecture == "serial":  # time-multiplexed bank + serial core (pwas_hdl.hdl.serial_observer_bank)
         from pwas_hdl.hdl.serial_core import SerialPWASCore
 
@@ -458,7 +459,6 @@ def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: Cor
     else:
         top.core = PWASCore(params, memory=memory, pipeline=pipeline)
         top.plan = None
-        top.isqrt_regs = isqrt_registers(bank, isqrt_every)
         top.stages_before_core = FRONT_END_STAGES + top.isqrt_regs
         top.ii = top.cycles_per_sample = 1
     top.core._MustUse__silence = True

@@ -8,11 +8,13 @@ Pipeline (one global enable ``advance = ~out.valid | out.ready``, ``in.ready = a
 
 * cycle of the transfer of sample ``k``: residuals ``e_j = yhat_j - y`` from the states, the
   observer updates, the squares, the delay lines and the running sums ``S_j`` (registers);
-* stage ``s_root``: ``r_j = isqrt(S_j)`` (11b) or ``S_j`` (11b-sq) registered;
-* the affine map to the feature codes feeds the PWAS core
+* ``R`` registers inside each square root ``r_j = isqrt(S_j)`` (11b; one every ``isqrt_every``
+  digit steps, :func:`~pwas_hdl.hdl.serial_observer_bank.isqrt_registers`; none for 11b-sq);
+* stage ``s_root``: ``r_j`` (11b) or ``S_j`` (11b-sq) registered;
+* stage ``s_code``: the affine map to the feature codes registered; they feed the PWAS core
   (:meth:`pwas_hdl.hdl.core.PWASCore.build_into`), whose latency follows.
 
-``latency = 2 + core latency`` cycles, II = 1, one cycle per sample (parallel multipliers).
+``latency = 3 + R + core latency`` cycles, II = 1, one cycle per sample (parallel multipliers).
 
 ``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the
 time-multiplexed bank and feature unit of :mod:`pwas_hdl.hdl.serial_observer_bank` (``L``

@@ -10,10 +10,11 @@ root, the feature codes), plus a lag bank of the input codes (payload fields
   (after the transfer of sample ``k`` register ``d`` holds sample ``k - d``; 0 after reset) -- in
   step with the window-sum registers;
 * the tap's affine map to the core's input code (``sat((qn * K + C) >> R)``, constants of
-  :class:`~pwas_hdl.fixedpoint.bank_taps.BankTaps`), registered with the square-root stage;
+  :class:`~pwas_hdl.fixedpoint.bank_taps.BankTaps`), registered with the square-root stage, then
+  ``R + 1`` more registers beside the features' (the ``R`` inside the square root, the code register);
 * the core takes ``Cat(feature codes, tap codes)``, the regressor order of the model.
 
-``latency = 2 + core latency``, II 1, one cycle per sample; warm-up ``max(M + l, memory - 1)``
+``latency = 3 + R + core latency``, II 1, one cycle per sample; warm-up ``max(M + l, memory - 1)``
 transfers (output ``warm``).
 
 ``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the serial
