@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 import pytest
 from helpers.cli import CliRunner
-from helpers.design_cache import DesignCache
+from helpers.design_cache import DesignCache, parallel_twin
 
 from pwas_hdl.verify.simulation import load_design, run_rtl, segment, sim_module, standard_runs
 
@@ -28,9 +28,7 @@ SERIAL = {c.name: c for c in designs.SERIAL_CONFIGS}
 
 
 def _parallel_twin(cfg):
-    opts = {k: v for k, v in cfg.options.items() if k != "architecture"} | designs.SERIAL_TWIN_OPTIONS.get(cfg.name, {})
-    return designs.DesignConfig(cfg.name.replace("serial-", "parallel-"), cfg.design, cfg.mu, cfg.my, cfg.nu, cfg.ny,
-                                cfg.partitions, cfg.nz, opts, seed=cfg.seed)
+    return parallel_twin(cfg, cfg.name.replace("serial-", "parallel-"), **designs.SERIAL_TWIN_OPTIONS.get(cfg.name, {}))
 
 
 @pytest.fixture(scope="module")
