@@ -328,8 +328,10 @@ def test_hdl_width_guards_are_internal_errors():
 def test_parallel_root_is_pipelined(sensor_11b):
     """The parallel bank's square root had no register (feature sum -> root register in one cycle:
     86 ns on the ECP5, 11.6 MHz); now a register every ``isqrt_every`` digit steps, loading with the
-    core's enable, and a feature-code register after the affine map: stages_before_core = 3 + R.
-    ``isqrt_every=None`` keeps the root combinational; a bad value is refused."""
+    core's enable, and a feature-code register after the affine map; the input products and their sum
+    are registered in front of the state update (s_in, s_in2), the residuals and their squares in front
+    of the window sums (s_res, s_sq), the capped root and the product inside the affine map:
+    stages_before_core = 9 + R. ``isqrt_every=None`` keeps the root combinational; a bad value is refused."""
     from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
     from pwas_hdl.hdl.observer_bank_top import FRONT_END_STAGES
     from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
@@ -342,7 +344,7 @@ def test_parallel_root_is_pipelined(sensor_11b):
         r = isqrt_registers(model.bank, every)
         assert r == (0 if every is None else (pairs - 1) // every)
         fe = top.extra_info["front_end"]
-        assert top.stages_before_core == FRONT_END_STAGES + r == 3 + r and fe["isqrt_registers"] == r
+        assert top.stages_before_core == FRONT_END_STAGES + r == 9 + r and fe["isqrt_registers"] == r
         assert fe["isqrt_every"] == every and top.latency == top.stages_before_core + top.core.latency and top.ii == 1
     for bad in (0, -1, 2.5, True):
         with pytest.raises(InputError, match="isqrt_every must be a positive integer or None"):

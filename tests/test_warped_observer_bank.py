@@ -105,8 +105,9 @@ def test_generate_manifest_header_and_reruns(sensor, tmp_path, architecture, ii)
     assert man["latency_cycles"] == man["front_end"]["stages_before_core"] + core.latency
     assert core.warps is not None and core.input_stage is not None  # the warp register counts in core.latency
     if ii is not None:
-        fe = man["front_end"]  # the sum, root and code registers and those inside the root (every 3 digit steps)
-        assert man["ii"] == ii and fe["stages_before_core"] == 3 + fe["isqrt_registers"] and fe["isqrt_every"] == 3
+        # the input (2), residual, square, sum, root, affine (2) and code registers, those inside the root (every 3 digit steps)
+        fe = man["front_end"]
+        assert man["ii"] == ii and fe["stages_before_core"] == 9 + fe["isqrt_registers"] and fe["isqrt_every"] == 3
         assert fe["isqrt_registers"] == ((fe["formats"]["sum_bits"] + 1) // 2 - 1) // 3 > 0
     else:
         assert man["ii"] == man["front_end"]["cycles_per_sample"] > 1

@@ -286,7 +286,7 @@ def _stage_of_cell(cell: str) -> str:
     if re.match(r"fb[0-9]+_", c):  # a recurrent top's feedback path (recurrent_top: fb<c>_prod / _code / _z<k> / _in<k>)
         return "feedback register"
     for prefix, stage in (("s_warp", "warp register"), ("am_", "argmax stage"), (("term", "psum", "sum_sat"), "additive sum"),
-                          (("s_sum", "s_root", "s_isqrt", "s_code", "bank_", "feat", "obs"), "observer bank"),
+                          (("s_in", "s_res", "s_sq", "s_sum", "s_root", "s_isqrt", "s_code", "bank_", "feat", "obs"), "observer bank"),
                           ("lag_", "lag register")):  # a sensor top's lag bank (sensor_top)
         if c.startswith(prefix):
             return stage

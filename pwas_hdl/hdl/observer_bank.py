@@ -28,7 +28,11 @@ from pwas_hdl.hdl._lintsafe import sink_unused
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
-__all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate"]
+__all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate", "INPUT_STAGES"]
+
+#: Registers between the input transfer and the state update (``s_in``: the input products; ``s_in2``:
+#: their sum and the rounding constant).
+INPUT_STAGES = 2
 
 
 def saturate(m: Module, rv: Value, width: int, name: str, flag: bool = True) -> tuple[Signal, Signal | None]:
@@ -159,8 +163,16 @@ def add_const_signed(m: Module, x: Value, k: int, name: str) -> Value:
 
 
 def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Value], qy: Value,
-                        transfer: Value) -> tuple[list[Value], Signal, list[list[Signal]]]:
-    """Add the bank to ``m``.
+                        transfer: Value, advance: Value) -> tuple[list[Value], Signal, list[list[Signal]], Signal]:
+    """Add the bank to ``m``: two input stages (:data:`INPUT_STAGES`), then the state update.
+
+    Stage ``s_in`` (registers loading when ``advance`` is high) holds the input products, stage
+    ``s_in2`` per observer and state their sum and the rounding constant (the part of the next
+    state that does not depend on the states); both carry the aligned output code and the valid
+    bit. The states update two enabled cycles after the transfer, from ``s_in2`` and the state
+    terms only: the multipliers and the input adder tree are out of the bank's recurrence. The
+    sums are modular in the accumulator width and the whole sum fits it, so the next states are
+    those of the one-cycle form bit for bit.
 
     Parameters
     ----------
@@ -173,17 +185,22 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
     qy : Value
         Signed ``B_in``-bit code of the measured output.
     transfer : Value
-        1 bit; the states update when it is high.
+        1 bit, the input transfer: the sample enters stage ``s_in``.
+    advance : Value
+        1 bit, the pipeline's enable: the input stages load when it is high.
 
     Returns
     -------
     residuals : list of Value
-        ``N`` signed ``residual_bits`` nets, ``e_j = x_j0 - (qy << (F_s - F_in))`` (from the
-        states before the update: the residual of the sample being transferred).
+        ``N`` signed ``residual_bits`` nets, ``e_j = x_j0 - (qy << (F_s - F_in))`` of the sample
+        in stage ``s_in2`` (from the states before its update).
     saturated : Signal
         1 bit, some state saturates in this update.
     states : list of list of Signal
         ``N`` lists of ``M`` state registers, signed ``state_bits`` each.
+    update : Signal
+        1 bit, ``s_in2_valid & advance``: the states update (the sample in ``s_in2`` leaves it);
+        the residuals belong to that sample.
 
     Raises
     ------
@@ -197,7 +214,12 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
     bs, accw, rb = fmt.state_bits, fmt.acc_bits, fmt.residual_bits
     sh_in = fs - fin
     states = [[Signal(signed(bs), name=f"obs{j}_x{i}") for i in range(mo)] for j in range(n)]
-    qy_al = const_product(m, 1 << sh_in, qy, rb, "y_aligned")
+    # stages s_in (the products) and s_in2 (their sum): the transfer's valid bit and the aligned output code
+    in_valid = _stage_in(m, _stage_in(m, transfer, advance, "s_in_valid"), advance, "s_in2_valid")
+    update = Signal(name="bank_update")
+    m.d.comb += update.eq(in_valid & advance)
+    qy_al = _stage_in(m, _stage_in(m, const_product(m, 1 << sh_in, qy, rb, "y_aligned"), advance, "s_in_y"),
+                      advance, "s_in2_y")
     residuals = []
     sat_flags = []
     for j in range(n):
@@ -207,19 +229,26 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
         sink_unused(m, e[rb], f"obs{j}_e_top")
         residuals.append(e[:rb].as_signed())
         for i in range(mo):
+            d = int(bank.d_codes[j, i]) + (1 << (fc - 1))  # the rounding term folded into the constant
+            inputs = []
+            coefs = [(int(bank.b_codes[j, i, c]), qu[c], f"b{c}") for c in range(nu)] + [(int(bank.l_codes[j, i]), qy, "l")]
+            for cv, sig, nm in coefs:
+                if cv:  # the input alignment << (F_s - F_in) is folded into the constant; stage s_in
+                    inputs.append(_stage_in(m, const_product(m, cv << sh_in, sig, accw, f"obs{j}_p{nm}_{i}"),
+                                            advance, f"s_in_obs{j}_p{nm}_{i}"))
             terms = []
+            if inputs:  # the products' sum and the constant: stage s_in2 (modular in accw bits)
+                part = add_const_signed(m, _sum(m, inputs, accw, f"obs{j}_in{i}"), d, f"obs{j}_in{i}_d")
+                terms.append(_stage_in(m, part, advance, f"s_in2_obs{j}_{i}"))
             a0 = int(bank.a0_codes[j, i])
             if a0:
                 terms.append(const_product(m, a0, states[j][0], accw, f"obs{j}_pa_{i}"))
-            coefs = [(int(bank.b_codes[j, i, c]), qu[c], f"b{c}") for c in range(nu)] + [(int(bank.l_codes[j, i]), qy, "l")]
-            for cv, sig, nm in coefs:
-                if cv:  # the input alignment << (F_s - F_in) is folded into the constant
-                    terms.append(const_product(m, cv << sh_in, sig, accw, f"obs{j}_p{nm}_{i}"))
             if i + 1 < mo:
                 terms.append(const_product(m, 1 << fc, states[j][i + 1], accw, f"obs{j}_px_{i}"))
-            d = int(bank.d_codes[j, i]) + (1 << (fc - 1))  # the rounding term folded into the constant
             if terms:
-                acc = add_const_signed(m, _sum(m, terms, accw, f"obs{j}_acc{i}"), d, f"obs{j}_acc{i}_d")
+                acc = _sum(m, terms, accw, f"obs{j}_acc{i}")
+                if not inputs:
+                    acc = add_const_signed(m, acc, d, f"obs{j}_acc{i}_d")
                 rv = acc[fc:].as_signed()
                 sink_unused(m, acc[:fc], f"obs{j}_acc{i}_frac")
                 nxt, flag = saturate(m, rv, bs, f"obs{j}_next{i}")
@@ -229,9 +258,19 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
                 lim = 1 << (bs - 1)
                 nxt = Const(min(max(v, -lim), lim - 1), signed(bs))
                 if not -lim <= v < lim:
-                    sat_flags.append(transfer)
-            with m.If(transfer):
+                    sat_flags.append(update)
+            with m.If(update):
                 m.d.sync += states[j][i].eq(nxt)
     saturated = Signal(name="state_saturated")
     m.d.comb += saturated.eq(Cat(*sat_flags).any() if sat_flags else 0)
-    return residuals, saturated, states
+    return residuals, saturated, states, update
+
+
+def _stage_in(m: Module, value: Value, advance: Value, name: str) -> Value:
+    """``value`` registered in an input stage (loads when ``advance`` is high): a 1-bit value is a
+    valid bit (resets to 0), a wider one a signed code (reset-less)."""
+    one = len(value) == 1
+    reg = Signal(1 if one else signed(len(value)), name=name, reset_less=not one)
+    with m.If(advance):
+        m.d.sync += reg.eq(value)
+    return reg

@@ -30,23 +30,29 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
-from pwas_hdl.hdl.observer_bank import build_observer_bank
+from pwas_hdl.hdl.observer_bank import INPUT_STAGES, build_observer_bank
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.residual_features import build_feature_codes, build_window_sums
 from pwas_hdl.hdl.sensor_top import sample_fields
-from pwas_hdl.hdl.serial_observer_bank import (DEFAULT_ISQRT_EVERY, build_isqrt_pipelined, build_serial_front_end,
+from pwas_hdl.hdl.serial_observer_bank import (AFFINE_REGS, DEFAULT_ISQRT_EVERY, build_isqrt_pipelined, build_serial_front_end,
                                                check_isqrt_every, isqrt_registers, plan_serial_bank)
 
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
-__all__ = ["ObserverBankTopBase", "build_observer_bank_top", "FRONT_END_STAGES", "attach_core_and_schedule",
+__all__ = ["ObserverBankTopBase", "build_observer_bank_top", "FRONT_END_STAGES", "BANK_INPUT_STAGES", "attach_core_and_schedule",
            "serial_flow_control", "serial_sensor_path", "inputs_and_warmup", "parallel_feature_codes", "advance_registers"]
 
-#: Pipeline stages in front of the core of the parallel bank (the sum registers, the root register and
-#: the feature-code register after the affine map), besides the registers inside the square root
+#: Of the parallel bank's stages, those in front of the window sums: the input stages in front of the
+#: state update (``s_in``, ``s_in2``, :data:`~pwas_hdl.hdl.observer_bank.INPUT_STAGES`), the residual
+#: register ``s_res`` and the square register ``s_sq``.
+BANK_INPUT_STAGES = INPUT_STAGES + 2
+#: Pipeline stages in front of the core of the parallel bank (:data:`BANK_INPUT_STAGES`, the sum
+#: registers, the root register, the affine map's registers -- the capped root and the product,
+#: :data:`~pwas_hdl.hdl.serial_observer_bank.AFFINE_REGS` as in the serial bank -- and the
+#: feature-code register), besides the registers inside the square root
 #: (:func:`~pwas_hdl.hdl.serial_observer_bank.isqrt_registers`).
-FRONT_END_STAGES = 3
+FRONT_END_STAGES = BANK_INPUT_STAGES + 3 + AFFINE_REGS
 
 
 class ObserverBankTopBase(wiring.Component):
@@ -315,9 +321,12 @@ def inputs_and_warmup(m: Module, top: ObserverBankTopBase) -> tuple[list[Value],
 def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, transfer: Value, advance: Value,
                            warm: Value, isqrt_every: int | None = DEFAULT_ISQRT_EVERY) -> tuple[list, Signal]:
     """The parallel bank's feature path (:data:`FRONT_END_STAGES` registers + those inside the square
-    root): observer bank, window sums (stage ``s_sum``), square root or not (map 11b: a register
-    after every ``isqrt_every`` digit steps, loading with ``advance``) and its register (stage
-    ``s_root``), feature codes.
+    root, all loading with ``advance``): the input stages and the observer bank (stages ``s_in`` and
+    ``s_in2``: the input products and their sum registered in front of the state update), the
+    residuals (stage ``s_res``) and their squares (stage ``s_sq``),
+    window sums (stage ``s_sum``), square root or not (map 11b: a register after every
+    ``isqrt_every`` digit steps) and its register (stage ``s_root``), the affine map with its capped
+    root and product registered (``s_code_cap<j>``, ``s_code_prod<j>``), feature codes (``s_code``).
 
     Parameters
     ----------
@@ -328,11 +337,12 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
     cur : list of Value
         Signed ``bank.input_bits``-bit codes ``u0 .. u{nu-1}, y0`` (:func:`inputs_and_warmup`).
     transfer : Value
-        1 bit, the input transfer (the states, delay lines and sums update).
+        1 bit, the input transfer (the sample enters stage ``s_in``).
     advance : Value
-        1 bit, the core's enable: the ``s_sum`` / ``s_root`` registers load when it is high.
+        1 bit, the core's enable: every register of the path loads when it is high (the states,
+        delay lines and sums when a valid sample leaves the stage in front of them).
     warm : Value
-        1 bit: a transfer while it is high yields an output (``s_sum_valid = transfer & warm``).
+        1 bit: a transfer while it is high yields an output (its ``warm`` bit travels with it).
     isqrt_every : int or None
         Digit steps of the square root between registers (None: combinational, one cycle).
 
@@ -344,12 +354,16 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
         Their valid bit (``s_root_valid``), :data:`FRONT_END_STAGES` + :func:`isqrt_registers`
         (enabled) cycles after the transfer.
     """
-    residuals, _sat, _states = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer)
+    residuals, _sat, _states, update = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer, advance)
     sink_unused(m, _sat, "state_saturated_flag")
-    sums = build_window_sums(m, bank, residuals, transfer)
-    v1 = Signal(name="s_sum_valid")
-    with m.If(advance):
-        m.d.sync += v1.eq(transfer & warm)
+    # update = s_in2_valid & advance; the residuals and their squares registered (s_res, s_sq)
+    sq_valid = advance_registers(m, advance_registers(m, update, 1, advance, "s_res_valid"), 1, advance, "s_sq_valid")
+    sum_update = Signal(name="sum_update")
+    m.d.comb += sum_update.eq(sq_valid & advance)
+    sums = build_window_sums(m, bank, residuals, sum_update, stage_enable=advance)
+    # the sample's warm bit (at its transfer) beside it through s_in and s_sq, then stage s_sum
+    v1 = advance_registers(m, advance_registers(m, transfer & warm, BANK_INPUT_STAGES, advance, "s_in_warm"),
+                           1, advance, "s_sum_valid")
     # the square root (its registers load with the core's enable, as every stage here) and stage s_root
     nreg = isqrt_registers(bank, isqrt_every)
     roots = []
@@ -369,8 +383,9 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
     with m.If(advance):
         m.d.sync += v2.eq(v)
     # stage s_code: the feature codes (the affine map's product and saturation) registered
-    codes = [advance_registers(m, q, 1, advance, f"s_code_q{j}") for j, q in enumerate(build_feature_codes(m, bank, roots))]
-    return codes, advance_registers(m, v2, 1, advance, "s_code_valid")
+    qs = build_feature_codes(m, bank, roots, stage_enable=advance)  # the capped root and the product registered
+    codes = [advance_registers(m, q, 1, advance, f"s_code_q{j}") for j, q in enumerate(qs)]
+    return codes, advance_registers(m, v2, 1 + AFFINE_REGS, advance, "s_code_valid")
 
 
 def advance_registers(m: Module, value: Value, n: int, advance: Value, name: str) -> Value:

@@ -6,15 +6,21 @@ Input stream payload (``in__payload``, LSB first): one signed ``B_in``-bit code 
 
 Pipeline (one global enable ``advance = ~out.valid | out.ready``, ``in.ready = advance``):
 
-* cycle of the transfer of sample ``k``: residuals ``e_j = yhat_j - y`` from the states, the
-  observer updates, the squares, the delay lines and the running sums ``S_j`` (registers);
+* stage ``s_in`` (the transfer of sample ``k``): the input products, and the aligned output code,
+  registered; stage ``s_in2``: per observer and state their sum and the rounding constant;
+* the next enabled cycle: residuals ``e_j = yhat_j - y`` from the states, registered (stage
+  ``s_res``), and the observer updates from ``s_in2`` and the states only (the input products
+  are out of the recurrence's path); then the squares ``e_j^2`` registered (stage ``s_sq``);
+* stage ``s_sum``: the delay lines and the running sums ``S_j`` (registers);
 * ``R`` registers inside each square root ``r_j = isqrt(S_j)`` (11b; one every ``isqrt_every``
   digit steps, :func:`~pwas_hdl.hdl.serial_observer_bank.isqrt_registers`; none for 11b-sq);
 * stage ``s_root``: ``r_j`` (11b) or ``S_j`` (11b-sq) registered;
-* stage ``s_code``: the affine map to the feature codes registered; they feed the PWAS core
+* the affine map to the feature codes: the capped root and the product registered, then the code
+  (stage ``s_code``); they feed the PWAS core
   (:meth:`pwas_hdl.hdl.core.PWASCore.build_into`), whose latency follows.
 
-``latency = 3 + R + core latency`` cycles, II = 1, one cycle per sample (parallel multipliers).
+``latency = 9 + R + core latency`` cycles (:data:`~pwas_hdl.hdl.observer_bank_top.FRONT_END_STAGES` + R), II = 1,
+one cycle per sample (parallel multipliers).
 
 ``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the
 time-multiplexed bank and feature unit of :mod:`pwas_hdl.hdl.serial_observer_bank` (``L``

@@ -8,13 +8,14 @@ root, the feature codes), plus a lag bank of the input codes (payload fields
 
 * per tapped signal with largest lag ``L``, ``L + 1`` registers shifted on every input transfer
   (after the transfer of sample ``k`` register ``d`` holds sample ``k - d``; 0 after reset) -- in
-  step with the window-sum registers;
+  step with the bank's first input stage ``s_in``;
 * the tap's affine map to the core's input code (``sat((qn * K + C) >> R)``, constants of
-  :class:`~pwas_hdl.fixedpoint.bank_taps.BankTaps`), registered with the square-root stage, then
-  ``R + 1`` more registers beside the features' (the ``R`` inside the square root, the code register);
+  :class:`~pwas_hdl.fixedpoint.bank_taps.BankTaps`), registered (beside ``s_in2``), then ``R + 7`` more registers beside
+  the features' (``stages_before_core - 2``: the residual, square and sum stages, the ``R`` inside
+  the square root, the root register, the affine map's two and the code register);
 * the core takes ``Cat(feature codes, tap codes)``, the regressor order of the model.
 
-``latency = 3 + R + core latency``, II 1, one cycle per sample; warm-up ``max(M + l, memory - 1)``
+``latency = 9 + R + core latency``, II 1, one cycle per sample; warm-up ``max(M + l, memory - 1)``
 transfers (output ``warm``).
 
 ``architecture="serial"`` (``generate --architecture serial [--bank-lanes L]``): the serial
@@ -155,8 +156,9 @@ class ObserverTapSensorTop(ObserverBankTopBase):
             serial_sensor_path(m, self, cur, inp, transfer, lambda done: self._tap_codes(m, cur, transfer, done))
             return m
         codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm, self.isqrt_every)
-        # the taps wait beside the square root's registers and the feature-code register
-        taps = self._tap_codes(m, cur, transfer, advance, self.isqrt_regs + 1)
+        # the taps wait beside the bank's input and square stages, the square root's registers and the
+        # feature-code register (their lag and code registers stand for s_sum and s_root)
+        taps = self._tap_codes(m, cur, transfer, advance, self.stages_before_core - 2)
         self.core.build_into(m, Cat(*codes, *taps), valid, advance, self.out)
         return m
 

@@ -76,7 +76,8 @@ def sub_wrap(m: Module, a: Value, b: Value, name: str) -> Value:
     return s[:w]
 
 
-def build_window_sums(m: Module, bank: FixedPointObserverBank, residuals: Sequence[Value], transfer: Value) -> list[Signal]:
+def build_window_sums(m: Module, bank: FixedPointObserverBank, residuals: Sequence[Value], transfer: Value,
+                      stage_enable: Value | None = None) -> list[Signal]:
     """Squares, delay lines and running sums of the residuals.
 
     Parameters
@@ -89,7 +90,12 @@ def build_window_sums(m: Module, bank: FixedPointObserverBank, residuals: Sequen
     residuals : sequence of Value
         ``N`` signed ``residual_bits`` residuals (:func:`~pwas_hdl.hdl.observer_bank.build_observer_bank`).
     transfer : Value
-        1 bit; the delay lines and sums update when it is high.
+        1 bit; the delay lines and sums update when it is high (with ``stage_enable``: from the
+        registered squares, i.e. the sample whose residuals were there two enabled cycles before).
+    stage_enable : Value, optional
+        1 bit: the residuals (stage ``s_res``, ``s_res_<j>``) and their squares (stage ``s_sq``,
+        ``s_sq_<j>``) are registered, loading when it is high, between the residuals and the sums;
+        None: the sums add the squares of ``residuals`` directly.
 
     Returns
     -------
@@ -102,9 +108,13 @@ def build_window_sums(m: Module, bank: FixedPointObserverBank, residuals: Sequen
     lw = bank.window
     sums = []
     for j, e in enumerate(residuals):
+        if stage_enable is not None:
+            e = _register(m, e, stage_enable, f"s_res_{j}")
         p = Signal(signed(2 * rb), name=f"feat{j}_sq")
         m.d.comb += p.eq(e * e)
         sq = p.as_unsigned()
+        if stage_enable is not None:
+            sq = _register(m, sq, stage_enable, f"s_sq_{j}")
         dl = [Signal(unsigned(sumb), name=f"feat{j}_dl{i}") for i in range(lw + 1)]
         s = Signal(unsigned(sumb), name=f"feat{j}_sum")
         added = add_wrap(m, s, sq, f"feat{j}_sum_add")
@@ -144,7 +154,8 @@ def build_isqrt(m: Module, value: Value, name: str) -> Value:
     return root
 
 
-def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence[Value]) -> list[Signal]:
+def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence[Value],
+                        stage_enable: Value | None = None) -> list[Signal]:
     """Affine map of ``r`` to the core's input code per feature: ``sat((min(r >> t, cap) * K + C) >> R)``.
 
     Parameters
@@ -156,6 +167,11 @@ def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence
         ``R = scale_shift`` and the code width ``input_bits_core``.
     roots : sequence of Value
         ``N`` unsigned roots ``r_j`` (or the window sums, map 11b-sq).
+    stage_enable : Value, optional
+        1 bit: the capped root (``s_code_cap<j>``) and the product (``s_code_prod<j>``) are
+        registered, loading when it is high (the map in
+        :data:`~pwas_hdl.hdl.serial_observer_bank.AFFINE_REGS` + 1 cycles with the caller's code
+        register); None: combinational.
 
     Returns
     -------
@@ -183,9 +199,21 @@ def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence
             cap_const(m, rs, cap, capped)
         else:
             m.d.comb += capped.eq(rs)
+        if stage_enable is not None:
+            capped = _register(m, capped, stage_enable, f"s_code_cap{j}")
         prod = const_product(m, int(bank.scale_mul[j]), Cat(capped, Const(0, 1)), sw, f"feat{j}_prod")
+        if stage_enable is not None:
+            prod = _register(m, prod, stage_enable, f"s_code_prod{j}")
         tot = add_const_signed(m, prod, int(bank.scale_add[j]), f"feat{j}_affine")
         sink_unused(m, tot[:sh], f"feat{j}_affine_frac")
         q, _ = saturate(m, tot[sh:].as_signed(), bcore, f"feat{j}_q", flag=False)
         codes.append(q)
     return codes
+
+
+def _register(m: Module, value: Value, enable: Value, name: str) -> Signal:
+    """``value`` in a reset-less register of its shape that loads when ``enable`` is high."""
+    reg = Signal(value.shape(), name=name, reset_less=True)
+    with m.If(enable):
+        m.d.sync += reg.eq(value)
+    return reg
