@@ -788,6 +788,7 @@ def generate(
     goal: Annotated[Optional[str], typer.Option("--goal", help="Choose the pipeline by what matters: latency (fewest ns input to output), throughput (highest clock, II = 1) or balanced (the default). Each is a pipeline preset measured on ECP5 (README hardware tables). One of --goal, --pipeline, --clock-mhz.")] = None,
     memory_init: Annotated[str, typer.Option("--memory-init", help="inline: weights inside the Verilog; readmemh: the Verilog loads the .hex files (relative names).")] = "inline",
     architecture: Annotated[str, typer.Option("--architecture", help="parallel: n+1 memories and multipliers per target, one sample per clock (II = 1); serial: one multiplier per target and one memory of N words, n+1 clocks per sample (II = n+1), bit-exact with parallel, for small FPGAs (iCE40 UP5K); for an additive model (fit --additive) every part on the serial core, all parts taking each sample together (II = the largest part's n+1); for a classifier (fit --classify; plain, additive or non-uniform) the argmax stage after the serial core or sum (one class index every II clocks, its registers in the latency); for an observer-bank sensor also the time-multiplexed bank (--bank-lanes state-update units, II = the manifest's front_end.cycles_per_sample); for a recurrent model (fit --mz) the serial core inside the recurrent top (one sample in flight: II = latency, the serial core's); for an estimator file (seed 003) every row of the bank, detector and switched observer on --bank-lanes units of n+2 variable multipliers, bit-exact, II = the manifest's estimator.cycles_per_sample (13 for 3 modes x 2 states and one lane): parallel stays the default (II 1, more samples per second), serial fits where parallel's multipliers do not (LFE5U-45F, iCE40 HX8K). With --clock-mhz the search runs over the registers the serial core takes.")] = "parallel",
+    isqrt_every: Annotated[Optional[int], typer.Option("--isqrt-every", help="Observer-bank sensor with the 11b feature map: digit steps of each feature's integer square root between pipeline registers (>= 1; default 3). Smaller: a higher clock, more registers and cycles of latency (measured on ECP5, the README's observer-bank section: 77.4 MHz at 3, 91.9 at 2 for a 2-observer bank). Manifest front_end.isqrt_every / isqrt_registers.")] = None,
     bank_lanes: Annotated[Optional[int], typer.Option("--bank-lanes", help="Observer-bank sensor with --architecture serial: state-update units sharing the N_theta x M observer updates (1 .. N_theta; default 1: about N_theta*M clocks per sample). An estimator file with --architecture serial: row units 1 .. the number of modes sharing the bank's modes (lane 0 also runs the switched observer; default 1).")] = None,
     ports: Annotated[str, typer.Option("--ports", help="Port names: axis (aclk, aresetn active low, s_axis_tvalid/tready/tdata, m_axis_tvalid/tready/tdata) or amaranth (clk, rst active high, in__*, out__*).")] = "axis",
     input_bits: Annotated[int, typer.Option("--input-bits", help="Width of the signed input codes (of a non-uniform model: the codes in front of the warp).")] = 12,
@@ -833,7 +834,7 @@ def generate(
             with _progress("building the design"):
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
-                    architecture=architecture, bank_lanes=bank_lanes, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
+                    architecture=architecture, bank_lanes=bank_lanes, isqrt_every=isqrt_every, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding, goal=goal,
                     fpga_target=fpga, **bank_formats,
                 )
@@ -841,7 +842,7 @@ def generate(
             with _executor(workers, scheduler) as ex:
                 gd = _generate(
                     model_path, outdir, design=design, name=name, memory=memory, pipeline=pipeline, memory_init=memory_init, ports=ports,
-                    architecture=architecture, bank_lanes=bank_lanes, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
+                    architecture=architecture, bank_lanes=bank_lanes, isqrt_every=isqrt_every, input_bits=input_bits, input_fill=input_fill, input_scale=input_scale, weight_bits=weight_bits, weight_frac=weight_frac,
                     output_bits=output_bits, output_frac=output_frac, overflow=overflow, rounding=rounding,
                     target_mhz=target_mhz, fpga_target=fpga, goal=goal,
                     progress=_say, executor=ex, **bank_formats,

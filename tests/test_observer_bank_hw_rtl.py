@@ -93,21 +93,25 @@ def test_option_sets_lint_clean_and_byte_identical(bank_sensor, tmp_path, opts):
     assert r.returncode == 0 and "%Warning" not in r.stderr, r.stderr[:2000]
 
 
-CONFIGS = {
-    "n3-m5-deadbeat-11b": dict(n_models=3, observer="deadbeat", features="11b", order=5),
+CONFIGS = {  # the first with a register every 2 digit steps of the root (generate --isqrt-every 2; default 3 elsewhere)
+    "n3-m5-deadbeat-11b-root2": dict(n_models=3, observer="deadbeat", features="11b", order=5, isqrt_every=2),
     "n2-m3-kalman-11bsq-saturating": dict(n_models=2, observer="kalman:1", features="11b-sq", order=3, state_bits=14),
 }
 
 
 @pytest.mark.rtl
-@pytest.mark.parametrize("simulator,config", [("icarus", "n3-m5-deadbeat-11b"), ("icarus", "n2-m3-kalman-11bsq-saturating"),
+@pytest.mark.parametrize("simulator,config", [("icarus", "n3-m5-deadbeat-11b-root2"), ("icarus", "n2-m3-kalman-11bsq-saturating"),
                                               ("verilator", "n2-m3-kalman-11bsq-saturating")])
 def test_rtl_bit_exact(pv_small, tmp_path, sim_cache, simulator, config):
     cfg = dict(CONFIGS[config])
-    opts = {k: cfg.pop(k) for k in ("state_bits",) if k in cfg}
+    opts = {k: cfg.pop(k) for k in ("state_bits", "isqrt_every") if k in cfg}
     s = _fit(pv_small, **cfg)
     generate(s, tmp_path / "d", design="sensor", **opts)
     d = load_design(tmp_path / "d")
+    if "isqrt_every" in opts:  # the root's registers as asked, counted in the latency the stream shows below
+        fe = d.manifest["front_end"]
+        assert fe["isqrt_every"] == opts["isqrt_every"] == d.manifest["generator"]["options"]["isqrt_every"]
+        assert fe["isqrt_registers"] == ((fe["formats"]["sum_bits"] + 1) // 2 - 1) // opts["isqrt_every"]
     _, te, _ = pv_small
     data, _ = d.bank.quantize_signals(te.u, te.y)
     codes = sim_module("pwas_stimulus").observer_codes(d.bank.bank, 360, seed=3, data=data)
@@ -119,6 +123,40 @@ def test_rtl_bit_exact(pv_small, tmp_path, sim_cache, simulator, config):
     assert set(r.latencies) == {d.latency} and r.ii == 1.0
     if "state_bits" not in opts:
         assert r.within_bound  # the core's bound at the feature codes
+
+
+def test_isqrt_every_option_and_refusals(bank_sensor, pv_small, tmp_path, capsys):
+    """generate --isqrt-every K: the root's registers every K digit steps (parallel and serial bank), in
+    the manifest and the latency; refused with one error line and nothing written when it is not a
+    positive integer, for a model without a bank and for the 11b-sq map (no root)."""
+    model = tmp_path / "bank.json"
+    bank_sensor.save(model)
+    lat = {}
+    for k in (1, 3):
+        assert main(["generate", str(model), "--design", "sensor", "--isqrt-every", str(k), "-o", str(tmp_path / f"d{k}")]) == 0
+        man = json.loads((tmp_path / f"d{k}" / "manifest.json").read_text())
+        fe = man["front_end"]
+        pairs = (fe["formats"]["sum_bits"] + 1) // 2
+        assert fe["isqrt_every"] == k == man["generator"]["options"]["isqrt_every"] and fe["isqrt_registers"] == (pairs - 1) // k
+        lat[k] = man["latency_cycles"]
+    assert lat[1] - lat[3] == (pairs - 1) - (pairs - 1) // 3  # the same design but for the root's registers
+    # the default build records no option (it rebuilds as before) and equals --isqrt-every 3 but for that entry
+    assert build_design(bank_sensor, design="sensor").manifest["front_end"]["isqrt_every"] == 3
+    top = build_design(bank_sensor, design="sensor", architecture="serial", isqrt_every=2).manifest["front_end"]["schedule"]
+    assert top["isqrt_every"] == 2
+    capsys.readouterr()
+    plain = tmp_path / "plain.json"
+    tr, _, _ = pv_small
+    PWASVirtualSensor(mu=1, my=1, partitions=3, sigma=1e-3).fit(tr.u, tr.y, tr.z).save(plain)
+    sq = tmp_path / "sq.json"
+    _fit(pv_small, 2, "deadbeat", "11b-sq", order=2).save(sq)
+    for m, val, words in ((model, "0", "positive integer"), (model, "-2", "positive integer"),
+                          (plain, "2", "has no observer bank"), (sq, "2", "11b-sq")):
+        out = tmp_path / "bad"
+        assert main(["generate", str(m), "--design", "sensor", "--isqrt-every", val, "-o", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("error:") and len(err.splitlines()) == 1 and "--isqrt-every" in err and words in err, err
+        assert not out.exists()
 
 
 def test_serial_bank_manifest_and_refusals(bank_sensor, tmp_path):

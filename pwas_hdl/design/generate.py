@@ -391,6 +391,7 @@ def build_design(
     executor: Any = None,
     architecture: str = "parallel",
     bank_lanes: int | None = None,
+    isqrt_every: int | None = None,
     **formats: Any,
 ) -> GeneratedDesign:
     """Build the RTL and all artifacts in memory.
@@ -479,6 +480,13 @@ def build_design(
     bank_lanes : int, optional
         Observer-bank sensors with ``architecture="serial"``: state-update units sharing the
         ``N_theta x M`` updates (1 .. N_theta, default 1: ``N_theta M`` cycles per sample or a few more).
+    isqrt_every : int, optional
+        Observer-bank sensors with the ``11b`` feature map: digit steps of each feature's integer
+        square root between pipeline registers (>= 1; default
+        :data:`~pwas_hdl.hdl.serial_observer_bank.DEFAULT_ISQRT_EVERY` = 3). Smaller: a shorter
+        path inside the root (a higher clock), more registers and cycles of latency (parallel
+        bank; the serial bank's II may grow with its feature pipeline). Manifest
+        ``front_end.isqrt_every`` / ``isqrt_registers``.
     **formats
         Fixed-point options (:data:`FORMAT_OPTIONS`); ``None`` means the data-driven default.
 
@@ -494,6 +502,9 @@ def build_design(
     if fpga_target not in FPGA_TARGETS:  # checked whether or not --clock-mhz / --goal use it: never silently ignored
         raise InputError(f"--fpga (fpga_target) must be one of {', '.join(FPGA_TARGETS)}, got {fpga_target!r}")
     if is_estimator(model):  # an estimator file (seed 003's switched observer): pwas_hdl.design.estimator
+        if isqrt_every is not None:
+            raise InputError("--isqrt-every applies to observer-bank sensors with the 11b feature map (the square root "
+                             "of each window sum); an estimator file has no square root: leave it out")
         return build_estimator_design(model, design=design, name=name, memory=memory or DEFAULT_MEMORY, pipeline=pipeline, memory_init=memory_init,
                                       ports=ports, goal=goal, target_mhz=target_mhz, architecture=architecture, bank_lanes=bank_lanes,
                                       **formats)
@@ -535,6 +546,17 @@ def build_design(
     bank_model = None  # observer-bank front end (issue 12): pwas_hdl.fixedpoint.observer_bank
     if bank_lanes is not None and (getattr(sensor, "front_end_", None) is None or architecture != "serial" or design != "sensor"):
         raise InputError("--bank-lanes applies to observer-bank sensors with --design sensor --architecture serial only")
+    if isqrt_every is not None:
+        if isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1:
+            raise InputError(f"{option_text('isqrt_every')} must be a positive integer (digit steps of the square root "
+                             f"between registers; default 3), got {isqrt_every!r}")
+        fe = getattr(sensor, "front_end_", None)
+        if fe is None:
+            raise InputError("--isqrt-every applies to observer-bank sensors (fit --front-end observer-bank), whose "
+                             "features take a square root; this model has no observer bank: leave it out")
+        if getattr(fe, "features", None) != "11b":
+            raise InputError(f"--isqrt-every applies to the 11b feature map (the square root of each window sum); this "
+                             f"bank's map is {getattr(fe, 'features', None)}, which has no root: leave it out")
     if getattr(sensor, "front_end_", None) is not None:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
 
@@ -566,6 +588,8 @@ def build_design(
         if design == "recurrent":
             raise InputError("hardware for a recurrent additive sensor is not available")
 
+    root_spacing = {} if isqrt_every is None else {"isqrt_every": isqrt_every}  # an observer bank's square root
+
     def component(pipe: Pipeline | None) -> tuple[Any, Any]:
         """The design's Amaranth component with pipeline ``pipe`` (and a recurrent top's recurrence)."""
         recurrence = None
@@ -595,11 +619,11 @@ def build_design(
                 from pwas_hdl.hdl.observer_tap_sensor_top import build_tapped_observer_sensor
 
                 comp = build_tapped_observer_sensor(bank_model, memory=memory, pipeline=pipe, name=top, architecture=architecture,
-                                                    lanes=1 if bank_lanes is None else bank_lanes)
+                                                    lanes=1 if bank_lanes is None else bank_lanes, **root_spacing)
             else:
                 # --architecture serial: the time-multiplexed bank and the serial core (pwas_hdl.hdl.serial_observer_bank)
                 comp = build_observer_sensor(bank_model, memory=memory, pipeline=pipe, name=top, architecture=architecture,
-                                             lanes=1 if bank_lanes is None else bank_lanes)
+                                             lanes=1 if bank_lanes is None else bank_lanes, **root_spacing)
         else:
             comp = build_sensor(fxm, sensor.lags_, memory=memory, pipeline=pipe, name=top, classifier=classifier,
                                 architecture=architecture)
@@ -617,7 +641,7 @@ def build_design(
         def candidate(pipe: Pipeline) -> GeneratedDesign:
             return build_design(sensor, design=design, name=name, memory=None if architecture == "serial" else memory,
                                 pipeline=pipe, memory_init="inline", ports=ports, architecture=architecture,
-                                bank_lanes=bank_lanes, **formats)
+                                bank_lanes=bank_lanes, isqrt_every=isqrt_every, **formats)
 
         # each candidate's latency is the built component's (an additive sum, a warp, an observer
         # bank or an argmax stage adds cycles to the core's; the serial core takes only some of the
@@ -681,6 +705,8 @@ def build_design(
         options["architecture"] = architecture
     if bank_lanes is not None:
         options["bank_lanes"] = bank_lanes
+    if isqrt_every is not None:
+        options["isqrt_every"] = isqrt_every
     if bank_model is not None:
         from pwas_hdl.fixedpoint.observer_bank import BANK_FORMAT_OPTIONS
 
