@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/timing_closure_kinds.py [--kinds plain-core,additive-core,...] [--clock-mhz 100]
                                               [--fpga ecp5|ice40] [--stem timing_closure_kinds] [--label TEXT]
-                                              [--quick] [--outdir DIR]
+                                              [--quick] [--outdir DIR] [--isqrt-every K]
 
 Each kind is a small model fitted here (seeded: the same models every run) and built by
 :func:`pwas_hdl.design.generate.build_design` with ``target_mhz``: the search places and routes its
@@ -25,6 +25,9 @@ clock, or reports the best fmax when none does (``met`` false). The kinds:
   quantile-pow2``, My = 1, Mz = 1, p = 4);
 * ``warped-bank-serial``: the observer bank of ``bank-serial`` on a ``quantile-pow2`` partition
   (p = 4): time-multiplexed bank, warp, serial core.
+
+``--isqrt-every K`` builds the observer-bank kinds with a square-root register every ``K`` digit
+steps (``generate --isqrt-every``; default 3) and is refused when ``--kinds`` names none of them.
 
 Prints a table and writes ``STEM.json`` / ``STEM.md`` into ``--outdir`` (``--quick``: the plain
 core only, written as ``STEM_quick.*``). Nothing asserts on time.
@@ -116,16 +119,24 @@ def parse_kinds(text: str) -> list[str]:
     return kinds
 
 
-def run_kind(kind: str, target: float, fpga: str, progress: Callable[[str], None] = print) -> dict:
-    """Fit the kind's model and run the timing closure; one JSON-ready row."""
+def is_bank_kind(kind: str) -> bool:
+    """The kind's design has an observer bank (whose square root ``--isqrt-every`` spaces)."""
+    return FAMILIES.get(kind, kind.split("-")[0]) in ("bank", "warped-bank")
+
+
+def run_kind(kind: str, target: float, fpga: str, progress: Callable[[str], None] = print,
+             isqrt_every: int | None = None) -> dict:
+    """Fit the kind's model and run the timing closure; one JSON-ready row (``isqrt_every``: the
+    bank kinds' root register spacing, ignored for the others)."""
     from pwas_hdl.design.generate import build_design
     from pwas_hdl.flow.timing_closure import TimingNotMet
 
     design, arch = KINDS[kind]
     model = _model(kind)
+    spacing = {"isqrt_every": isqrt_every} if isqrt_every is not None and is_bank_kind(kind) else {}
     t0 = time.perf_counter()
     try:
-        gd = build_design(model, design=design, architecture=arch, target_mhz=target, fpga_target=fpga)
+        gd = build_design(model, design=design, architecture=arch, target_mhz=target, fpga_target=fpga, **spacing)
         rec, man = gd.manifest["timing"], gd.manifest
     except TimingNotMet as exc:
         rec, man = exc.record, None
@@ -137,7 +148,7 @@ def run_kind(kind: str, target: float, fpga: str, progress: Callable[[str], None
            "measured": [{"latency_cycles": c["latency_cycles"], "label": c["label"], "fmax_mhz": c["fmax_mhz"],
                          "critical_path": c.get("critical_path")} for c in measured],
            "search_order_cycles": list(rec["measurements"]), "best_fmax_mhz": rec["best_fmax_mhz"],
-           "search_wall_s": round(wall, 1)}
+           "search_wall_s": round(wall, 1), **spacing}
     if chosen is not None:
         row.update(chosen_latency_cycles=chosen["latency_cycles"], chosen_label=chosen["label"],
                    chosen_fmax_mhz=chosen["fmax_mhz"], chosen_latency_ns=chosen["latency_ns"],
@@ -160,12 +171,13 @@ def markdown(doc: dict) -> str:
              "measured (cycles: MHz) | candidates | search s |",
              "|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|"]
     for r in doc["rows"]:
+        kind = r["kind"] + (f" (isqrt_every {r['isqrt_every']})" if r.get("isqrt_every") is not None else "")
         meas = ", ".join(f"{c['latency_cycles']}: {c['fmax_mhz']:.1f}" for c in r["measured"])
         if r["met"]:
-            cells = [r["kind"], r["design"], r["architecture"], "yes", f"{r['chosen_latency_cycles']}, {r['chosen_label']}",
+            cells = [kind, r["design"], r["architecture"], "yes", f"{r['chosen_latency_cycles']}, {r['chosen_label']}",
                      f"{r['chosen_fmax_mhz']:.1f}", f"{r['chosen_latency_ns']:.1f}", r["ii"], r["luts"], r["dsp"]]
         else:
-            cells = [r["kind"], r["design"], r["architecture"], f"no (best {r['best_fmax_mhz']:.1f})", "-", "-", "-", "-", "-", "-"]
+            cells = [kind, r["design"], r["architecture"], f"no (best {r['best_fmax_mhz']:.1f})", "-", "-", "-", "-", "-", "-"]
         lines.append("| " + " | ".join(str(c) for c in [*cells, meas, r["candidates"], r["search_wall_s"]]) + " |")
     return "\n".join(lines) + "\n"
 
@@ -179,6 +191,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--label", default="", help="a note for the table's title, e.g. the commit measured")
     ap.add_argument("--quick", action="store_true", help="the plain core only, written as STEM_quick.*: not a result to quote")
     ap.add_argument("--outdir", type=Path, default=default_outdir(), help="folder of the result files (default: %(default)s)")
+    ap.add_argument("--isqrt-every", type=int, default=None,
+                    help="observer-bank kinds: digit steps of the square root between registers (generate --isqrt-every; default 3)")
     a = ap.parse_args(argv)
     from pwas_hdl.bench_results import check_stem, checked_outdir, make_outdir, write_json_and_markdown
 
@@ -186,9 +200,14 @@ def main(argv: list[str] | None = None) -> None:
     kinds = parse_kinds(a.kinds or (QUICK_KINDS if a.quick else ",".join(KINDS)))
     if not 0 < a.clock_mhz < 2000:
         raise InputError(f"--clock-mhz must be in (0, 2000) MHz, got {a.clock_mhz:g}")
+    if a.isqrt_every is not None:
+        if a.isqrt_every < 1:
+            raise InputError(f"--isqrt-every must be a positive integer, got {a.isqrt_every}")
+        if not any(is_bank_kind(k) for k in kinds):
+            raise InputError(f"--isqrt-every applies to the observer-bank kinds, and --kinds names none: {','.join(kinds)}")
     checked_outdir(a.outdir)  # refused before minutes of place and route, not after
     t0 = time.perf_counter()
-    rows = [run_kind(k, a.clock_mhz, a.fpga) for k in kinds]
+    rows = [run_kind(k, a.clock_mhz, a.fpga, isqrt_every=a.isqrt_every) for k in kinds]
     outdir = make_outdir(a.outdir)
     doc = {"format": "pwas-hdl-timing-closure-kinds", "version": 1, "label": a.label, "target_mhz": a.clock_mhz,
            "fpga": a.fpga, "rows": rows, "environment": environment(time.perf_counter() - t0)}

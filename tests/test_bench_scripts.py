@@ -146,6 +146,8 @@ def test_cg_preconditioners_subset(tmp_path):
     ("timing_closure_kinds", ["--kinds", "plain-core,plain-core"], "--kinds names a kind twice"),
     ("timing_closure_kinds", ["--clock-mhz", "0"], "--clock-mhz must be in (0, 2000) MHz"),
     ("timing_closure_kinds", ["--quick", "--stem", "a/b"], "--stem must be a plain file name"),
+    ("timing_closure_kinds", ["--kinds", "plain-core", "--isqrt-every", "2"], "--isqrt-every applies to the observer-bank kinds"),
+    ("timing_closure_kinds", ["--kinds", "bank-sensor", "--isqrt-every", "0"], "--isqrt-every must be a positive integer"),
     ("recurrence_speed", ["--samples", "5"], "--samples must be in 50..100000"),
     ("recurrence_speed", ["--repeats", "0"], "--repeats must be in 1..20"),
     ("recurrence_speed", ["--before-points", "4"], "--before-points must be in 1..3"),
