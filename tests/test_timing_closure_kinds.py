@@ -241,7 +241,7 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("core.s_warp_u0", "warp register"),
     ("am_s1_index", "argmax stage"),
     ("core.sum_sat_q", "additive sum"),
-    ("feat0_sum", "observer bank"),
+    ("feat0_sum", "bank window sum"),
     ("s_axis_tdata_q", "input register"),
     # the serial core (a serial additive design's parts too): its multiplier, vertex register, accumulator
     ("core.part1_prod0_MULT18X18D_P9", "part1 multiplier"),
@@ -268,10 +268,27 @@ def test_a_design_whose_latency_differs_from_the_count_is_a_bug(monkeypatch):
     ("warm_TRELLIS_FF", "output register"),
     ("fb0_z1_TRELLIS_FF", "feedback register"),
     ("fb1_code$7", "feedback register"),
-    # the parallel bank's root pipeline and feature-code registers
-    ("s_code_q1_TRELLIS_FF", "observer bank"),
-    ("core.s_isqrt_valid_d0", "observer bank"),
-    ("s_code_tap0$3", "observer bank"),
+    # the parallel bank's parts: input stages, states, residual square, root pipeline, feature codes, taps
+    ("core.s_in_obs1_pl_1_TRELLIS_FF_Q_29", "bank input stage"),
+    ("s_in2_obs0_1$5", "bank input stage"),
+    ("obs1_yhat_TRELLIS_FF_Q_6", "bank states"),
+    ("core.feat1_sq_MULT18X18D_P9_B9", "bank residual square"),
+    ("s_res_0_TRELLIS_FF", "bank residual square"),
+    ("s_sum_valid", "bank window sum"),
+    ("core.feat1_isqrt_r7_m_TRELLIS_FF_Q_22", "bank square root"),
+    ("core.s_isqrt_valid_d0", "bank square root"),
+    ("s_root_r1_TRELLIS_FF_Q_24", "bank root register"),
+    ("core.feat1_prod_MULT18X18D_P9", "bank feature code"),
+    ("s_code_q1_TRELLIS_FF", "bank feature code"),
+    ("s_code_tap0$3", "bank taps"),
+    ("tap_u0_d1", "bank taps"),
+    # the serial bank's lanes and schedule
+    ("lane0_pb0_r", "bank lane products"),
+    ("lane0_x14", "bank lane states"),
+    ("lane0_e_r", "bank lane residual square"),
+    ("lane1_isqrt_r6_b", "bank lane square root"),
+    ("lane0_fprod_r", "bank lane feature code"),
+    ("bank_step", "bank schedule"),
 ])
 def test_critical_path_stage_names(cell, stage):
     assert tc._stage_of_cell(cell) == stage

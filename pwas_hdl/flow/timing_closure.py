@@ -285,12 +285,39 @@ def _stage_of_cell(cell: str) -> str:
         return "serial input throttle"
     if re.match(r"fb[0-9]+_", c):  # a recurrent top's feedback path (recurrent_top: fb<c>_prod / _code / _z<k> / _in<k>)
         return "feedback register"
+    for pattern, stage in _BANK_STAGES:  # an observer bank, parallel or serial: which part of it
+        if re.match(pattern, c):
+            return stage
     for prefix, stage in (("s_warp", "warp register"), ("am_", "argmax stage"), (("term", "psum", "sum_sat"), "additive sum"),
-                          (("s_in", "s_res", "s_sq", "s_sum", "s_root", "s_isqrt", "s_code", "bank_", "feat", "obs"), "observer bank"),
+                          (("bank_", "feat", "obs"), "observer bank"),
                           ("lag_", "lag register")):  # a sensor top's lag bank (sensor_top)
         if c.startswith(prefix):
             return stage
     return re.split(r"_TRELLIS|_SB_|\$", c)[0][:40] or c[:40]
+
+
+#: The parts of an observer bank by register / net name, first match wins: the parallel bank
+#: (:mod:`pwas_hdl.hdl.observer_bank`, :mod:`pwas_hdl.hdl.residual_features`,
+#: :mod:`pwas_hdl.hdl.observer_bank_top`; the taps of :mod:`pwas_hdl.hdl.observer_tap_sensor_top`) and
+#: the serial bank's lanes (:mod:`pwas_hdl.hdl.serial_observer_bank`, ``lane<k>_*``).
+_BANK_STAGES: tuple[tuple[str, str], ...] = (
+    (r"s_in2?_|y_aligned|obs[0-9]+_(p(b[0-9]+|l)_|in[0-9]+)", "bank input stage"),
+    (r"obs[0-9]+_|bank_update|state_saturated", "bank states"),
+    (r"s_(res|sq)_|feat[0-9]+_sq", "bank residual square"),
+    (r"s_sum|sum_update|feat[0-9]+_(sum|dl)", "bank window sum"),
+    (r"s_isqrt|feat[0-9]+_isqrt", "bank square root"),
+    (r"s_(root|code)_tap|tap[0-9]+_|tap_", "bank taps"),
+    (r"s_root", "bank root register"),
+    (r"s_code|feat[0-9]+_(capped|prod|affine|q)", "bank feature code"),
+    (r"lane[0-9]+_(pa|pb[0-9]*|pl|px|a|b[0-9]*|l|kmul|mac_valid)(_|[0-9]|$|\$|\[)", "bank lane products"),
+    (r"lane[0-9]+_(acc|x|new|shift|first|d($|_|\$|\[)|active|yhat)", "bank lane states"),
+    (r"lane[0-9]+_(e|sq)(_|$|\$|\[)", "bank lane residual square"),
+    (r"lane[0-9]+_(sum|dl|fs_)", "bank lane window sum"),
+    (r"lane[0-9]+_(isqrt|root)", "bank lane square root"),
+    (r"lane[0-9]+_(cap|f)", "bank lane feature code"),
+    (r"lane[0-9]+_", "bank lane"),
+    (r"bank_step|bank_", "bank schedule"),
+)
 
 
 def _critical_path(report: dict[str, Any]) -> dict[str, Any] | None:
