@@ -147,6 +147,27 @@ def test_the_default_estimate_agrees_with_build_designs_manifest(fitted, pv, kin
         assert r["mult_bit_products"] > bk["constant_mult_bit_products"] + bk["square_bit_products"]
 
 
+def test_the_front_register_cache_key_sees_the_input_coefficients_and_affine_widths(fitted):
+    """The parallel bank registers each non-zero input product (``s_in``) and the capped root and
+    product of the affine map: two banks of one format whose input coefficients differ in which are
+    zero have different front-end registers, so different keys of the per-process cache."""
+    import copy
+
+    from pwas_hdl.flow.explore import _front_register_key
+    from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
+
+    bm = observer_bank_model(fitted["bank"])
+    other = copy.deepcopy(bm)
+    j, i, c = (int(v) for v in np.argwhere(other.bank.b_codes != 0)[0])
+    other.bank.b_codes[j, i, c] = 0  # one input coefficient quantised to 0: one product register fewer
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tops = [build_observer_sensor(m) for m in (bm, other)]
+    keys = [_front_register_key(t, m) for t, m in zip(tops, (bm, other))]
+    regs = [_design_register_bits(t, [t.core]) for t in tops]
+    assert None not in keys and keys[0] != keys[1] and regs[0] != regs[1]
+
+
 def test_bank_formats_are_swept_axes_and_refused_elsewhere(fitted, pv, lorenz_free_sensor):
     """--state-frac / --coef-frac sweep the bank's formats (a state fraction below the input's is
     refused with the bank's reason); a bank option for a model without a bank is refused."""

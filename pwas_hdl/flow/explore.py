@@ -1074,8 +1074,11 @@ def bank_resources(bm) -> dict[str, Any]:
 
 def _front_register_key(comp, bm) -> tuple | None:
     """What the registers in front of the core of an observer-bank top depend on: the bank's sizes and
-    widths, the taps, the warp (its register: ``n`` codes of the core's input width), the square
-    root's register spacing and the warm-up counter; not the core's weight / output formats nor its pipeline (the core's own
+    widths, which input coefficients are non-zero (the parallel bank registers each non-zero
+    ``b`` / ``l`` product, stage ``s_in``, and an input sum per state that has one, ``s_in2``), the
+    widths of the capped roots and of the feature products (registered inside the affine map), the
+    taps, the warp (its register: ``n`` codes of the core's input width), the square root's
+    register spacing and the warm-up counter; not the core's weight / output formats nor its pipeline (the core's own
     registers, :func:`_cached_register_bits` of the core alone). ``None`` if unhashable."""
     b = bm.bank
     taps = getattr(bm, "taps", None)
@@ -1083,7 +1086,9 @@ def _front_register_key(comp, bm) -> tuple | None:
     key = ("observer-bank-front", type(comp).__qualname__, tuple(sorted(b.formats.to_dict().items())), b.n_models, b.order,
            b.nu, b.window, b.feature_map, None if taps is None else (tuple(taps.dims), int(taps.core_bits)),
            getattr(comp, "warps", None) is not None, int(comp.warmup), p.n, p.in_width,
-           getattr(comp, "isqrt_every", None))  # the parallel bank's root registers
+           getattr(comp, "isqrt_every", None),  # the parallel bank's root registers
+           tuple(bool(v) for v in np.asarray(b.b_codes).ravel()), tuple(bool(v) for v in np.asarray(b.l_codes).ravel()),
+           tuple(sorted((k, int(v)) for k, v in b.widths.items())), tuple(int(c).bit_length() for c in b.root_cap))
     try:
         hash(key)
     except TypeError:
