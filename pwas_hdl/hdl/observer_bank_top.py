@@ -351,7 +351,7 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
     codes : list of Signal
         ``N`` feature codes, signed ``bank.input_bits_core`` bits: the core's inputs.
     valid : Signal
-        Their valid bit (``s_root_valid``), :data:`FRONT_END_STAGES` + :func:`isqrt_registers`
+        Their valid bit (``s_code_valid``), :data:`FRONT_END_STAGES` + :func:`isqrt_registers`
         (enabled) cycles after the transfer.
     """
     residuals, _sat, _states, update = build_observer_bank(m, bank, cur[: bank.nu], cur[bank.nu], transfer, advance)

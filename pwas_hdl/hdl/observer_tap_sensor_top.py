@@ -156,8 +156,8 @@ class ObserverTapSensorTop(ObserverBankTopBase):
             serial_sensor_path(m, self, cur, inp, transfer, lambda done: self._tap_codes(m, cur, transfer, done))
             return m
         codes, valid = parallel_feature_codes(m, self.bank, cur, transfer, advance, self.warm, self.isqrt_every)
-        # the taps wait beside the bank's input and square stages, the square root's registers and the
-        # feature-code register (their lag and code registers stand for s_sum and s_root)
+        # the taps wait beside the bank's stages (their lag and code registers stand for s_in and s_in2,
+        # the stages_before_core - 2 more for s_res .. s_code)
         taps = self._tap_codes(m, cur, transfer, advance, self.stages_before_core - 2)
         self.core.build_into(m, Cat(*codes, *taps), valid, advance, self.out)
         return m

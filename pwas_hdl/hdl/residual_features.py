@@ -2,7 +2,8 @@
 
 Bit for bit :class:`pwas_hdl.fixedpoint.observer_bank.FixedPointObserverBank`: per observer
 ``sq = e * e``, a delay line of ``l + 1`` squares and the running window sum
-``S <= S + sq - sq_{k-l-1}`` (registers, updated on each input transfer, 0 after reset; modulo
+``S <= S + sq - sq_{k-l-1}`` (registers, updated once per sample -- in the parallel bank from the
+registered residual and square, stages ``s_res`` / ``s_sq`` -- 0 after reset; modulo
 ``2**B_S``, exact because the window sum lies in ``[0, 2**B_S)``), then (one pipeline register
 later) the integer square root ``r = isqrt(S)`` (map 11b; digit by digit, ``B_S / 2``
 compare-subtract steps, combinational) or ``r = S`` (11b-sq), and the constant affine map to the
