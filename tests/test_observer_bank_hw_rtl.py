@@ -151,6 +151,7 @@ def test_isqrt_every_option_and_refusals(bank_sensor, pv_small, tmp_path, capsys
     sq = tmp_path / "sq.json"
     _fit(pv_small, 2, "deadbeat", "11b-sq", order=2).save(sq)
     for m, val, words in ((model, "0", "positive integer"), (model, "-2", "positive integer"),
+                          (model, str(pairs), f"has {pairs} digit steps"), (model, "10" * 12, "no register inside"),
                           (plain, "2", "has no observer bank"), (sq, "2", "11b-sq")):
         out = tmp_path / "bad"
         assert main(["generate", str(m), "--design", "sensor", "--isqrt-every", val, "-o", str(out)]) == 2

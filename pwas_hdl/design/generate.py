@@ -482,7 +482,7 @@ def build_design(
         ``N_theta x M`` updates (1 .. N_theta, default 1: ``N_theta M`` cycles per sample or a few more).
     isqrt_every : int, optional
         Observer-bank sensors with the ``11b`` feature map: digit steps of each feature's integer
-        square root between pipeline registers (>= 1; default
+        square root between pipeline registers (1 .. its digit steps - 1, ``ceil(sum_bits / 2) - 1``; default
         :data:`~pwas_hdl.hdl.serial_observer_bank.DEFAULT_ISQRT_EVERY` = 3). Smaller: a shorter
         path inside the root (a higher clock), more registers and cycles of latency (parallel
         bank; the serial bank's II may grow with its feature pipeline). Manifest
@@ -567,6 +567,10 @@ def build_design(
                              "bank's residual features, not lagged u / y samples; give --design sensor (the bank, "
                              "the features and the core)")
         bank_model = observer_bank_model(sensor, memory=memory or DEFAULT_MEMORY, **formats)
+        steps = (bank_model.bank.formats.sum_bits + 1) // 2  # digit steps of each feature's square root
+        if isqrt_every is not None and isqrt_every > steps - 1:
+            raise InputError(f"{option_text('isqrt_every')} = {isqrt_every} puts no register inside the square root: it has "
+                             f"{steps} digit steps (window sums of {bank_model.bank.formats.sum_bits} bits); give 1 .. {steps - 1}")
         fxm = bank_model.core
         memory = memory or DEFAULT_MEMORY
     else:
