@@ -201,6 +201,30 @@ def test_candidates_the_design_cannot_take_are_dropped(monkeypatch):
     assert all_c[1] not in seen and all_c[3] not in seen
 
 
+@pytest.mark.parametrize("path, words", [
+    ({"from": "bank square root", "to": "bank square root"}, "inside the observer bank's square root: a smaller --isqrt-every"),
+    ({"from": "input register", "to": "bank input stage"}, "is in the observer bank, which the core's pipeline registers do not cut"),
+    ({"from": "memory", "to": "output register"}, None),
+    (None, None),
+])
+def test_a_missed_target_says_what_limits_it(monkeypatch, path, words):
+    """The refusal of a target no candidate reaches names the best candidate's limit when the search
+    cannot move it: a path inside an observer bank (its square root: --isqrt-every)."""
+    def build(p):
+        return type("GD", (), {"manifest": {"latency_cycles": p.latency(2)}})()
+
+    monkeypatch.setattr(tc, "measure_design", lambda gd, *a, **k: {"fmax_mhz": 50.0, "critical_path": path,
+                                                                  "part": "LFE5U-45F-6CABGA381"})
+    with pytest.raises(tc.TimingNotMet, match="no pipeline reaches 100 MHz") as ei:
+        tc.close_timing(build, 2, 100.0, prescreen=False)
+    msg = str(ei.value)
+    assert len(msg.splitlines()) == 1 and "choose a target of at most 50 MHz" in msg
+    if words is None:
+        assert "critical path" not in msg
+    else:
+        assert words in msg and f"({path['from']} -> {path['to']})" in msg
+
+
 def test_no_buildable_candidate_is_an_input_error(monkeypatch):
     def latency(p):
         raise PipelineRefused("no")

@@ -641,11 +641,25 @@ def close_timing(
         fm = results[best].get("fmax_mhz")
         raise TimingNotMet(
             f"no pipeline reaches {target:g} MHz on {record['part']}: the best measured fmax is "
-            f"{fm:.1f} MHz ({lat[best]} cycles, {labels[best]}); "
+            f"{fm:.1f} MHz ({lat[best]} cycles, {labels[best]}){_limit_hint(results[best].get('critical_path'))}; "
             f"choose a target of at most {math.floor(fm)} MHz, another FPGA, or a fixed --pipeline",
             record,
         )
     return cands[chosen], record
+
+
+def _limit_hint(path: dict[str, Any] | None) -> str:
+    """What the best candidate's critical path says about the search's limit, for the
+    :class:`TimingNotMet` message: a path inside an observer bank is not cut by the core's registers
+    (those the search varies), and one inside its square root is shortened by ``--isqrt-every``."""
+    ends = [str(path.get(k) or "") for k in ("from", "to")] if path else []
+    if any("square root" in e for e in ends):
+        return (f"; its critical path ({' -> '.join(ends)}) is inside the observer bank's square root: a smaller "
+                "--isqrt-every (default 3) shortens it")
+    if any(e.startswith("bank ") for e in ends):
+        return (f"; its critical path ({' -> '.join(ends)}) is in the observer bank, which the core's pipeline "
+                "registers do not cut")
+    return ""
 
 
 def timing_report_text(rec: dict[str, Any]) -> str:
