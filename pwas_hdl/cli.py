@@ -1066,6 +1066,7 @@ def explore(
     coef_frac: Annotated[Optional[str], typer.Option("--coef-frac", help="Observer-bank sensor: coefficient fraction bits F_c to sweep too (comma list or A:B; default: generate's default at each input width).")] = None,
     state_bits: Annotated[Optional[int], typer.Option("--state-bits", help="Observer-bank sensor: fixed state width B_s (default: the width of the state bound; fewer bits may saturate).")] = None,
     input_headroom: Annotated[Optional[float], typer.Option("--input-headroom", help="Observer-bank sensor: fixed input head room H, normalised units (default 8).")] = None,
+    isqrt_every: Annotated[Optional[int], typer.Option("--isqrt-every", help="Observer-bank sensor (11b map): the square root's register spacing of every point, as generate --isqrt-every (default 3); its registers count in the estimate and the latency.")] = None,
     input_fill: Annotated[float, typer.Option("--input-fill", help="As for generate.")] = 0.9,
     rounding: Annotated[str, typer.Option("--rounding", help="As for generate: half_up or truncate.")] = "half_up",
     overflow: Annotated[str, typer.Option("--overflow", help="As for generate: error (refuse the point) or saturate.")] = "error",
@@ -1136,7 +1137,7 @@ def explore(
         with _progress("exploring formats") as update, _executor(workers, scheduler) as ex:
             res = _explore(
                 model_path, data, blank_rows=blank_rows, traj_col=traj_col, **sweep, weight_bits=weight_bits, output_bits=output_bits,
-                state_bits=state_bits, input_headroom=input_headroom,
+                state_bits=state_bits, input_headroom=input_headroom, isqrt_every=isqrt_every,
                 input_fill=input_fill, rounding=rounding, overflow=overflow, memory=memory, pipeline=pipeline,
                 resources=resources, cost=cost, device=device, measure_max=measure_max, workdir=synth_dir,
                 progress=lambda stage, done, total: update(done, total), executor=ex,

@@ -168,6 +168,38 @@ def test_the_front_register_cache_key_sees_the_input_coefficients_and_affine_wid
     assert None not in keys and keys[0] != keys[1] and regs[0] != regs[1]
 
 
+def test_the_root_register_spacing_is_an_option_of_the_estimate(fitted, pv, lorenz_free_sensor):
+    """isqrt_every (--isqrt-every): every point's estimate is the top generate builds with it (latency,
+    register bits); recorded in the sweep; a spacing that leaves a point's root without a register
+    refuses that point with generate's reason; refused for a model without a bank and when not a
+    positive integer."""
+    s = fitted["taps"]
+    _, te = pv
+    dflt = observer_bank_model(s)
+    one = dict(input_bits=[12], weight_frac=[dflt.core.weight_format.frac], output_frac=[dflt.core.output_format.frac])
+    res = explore(s, (te.u, te.y, te.z), isqrt_every=2, **one)
+    check_result(res)
+    base = explore(s, (te.u, te.y, te.z), **one)
+    assert res["sweep"]["isqrt_every"] == 2 and base["sweep"]["isqrt_every"] is None
+    (p,) = res["points"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gd = build_design(s, design="sensor", isqrt_every=2)
+    assert gd.manifest["front_end"]["isqrt_every"] == 2
+    assert p["resources"]["latency_cycles"] == gd.manifest["latency_cycles"] > base["points"][0]["resources"]["latency_cycles"]
+    assert p["resources"]["register_bits"] == _design_register_bits(gd.component, [gd.component.core])
+    assert p["resources"]["register_bits"] > base["points"][0]["resources"]["register_bits"]
+    steps = (dflt.bank.formats.sum_bits + 1) // 2
+    with pytest.raises(InputError) as ei:  # every point refused: explore's own refusal, with generate's reason in it
+        explore(s, (te.u, te.y, te.z), isqrt_every=steps, **one)
+    assert "puts no register inside the square root" in str(ei.value)
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(InputError, match=r"--isqrt-every \(isqrt_every\) must be a positive integer"):
+            explore(s, (te.u, te.y, te.z), isqrt_every=bad, **one)
+    with pytest.raises(InputError, match=r"--isqrt-every \(isqrt_every\) applies to observer-bank sensors"):
+        explore(lorenz_free_sensor[0], lorenz_free_sensor[1], input_bits=[12], isqrt_every=2)
+
+
 def test_bank_formats_are_swept_axes_and_refused_elsewhere(fitted, pv, lorenz_free_sensor):
     """--state-frac / --coef-frac sweep the bank's formats (a state fraction below the input's is
     refused with the bank's reason); a bank option for a model without a bank is refused."""
@@ -218,7 +250,7 @@ def test_cli_refuses_data_without_the_banks_columns(fitted, pv, tmp_path, monkey
 
 def test_cli_sweeps_a_bank_sensor_and_measured_mode_generates_its_sensor_top(fitted, pv, tmp_path, monkeypatch):
     """The CLI writes a valid result with the bank options; --fpga generates the sensor top (the
-    manifest's front end) of every measured point, with the point's bank formats."""
+    manifest's front end) of every measured point, with the point's bank formats and --isqrt-every."""
     monkeypatch.chdir(tmp_path)
     _, te = pv
     s = fitted["taps"]
@@ -228,7 +260,8 @@ def test_cli_sweeps_a_bank_sensor_and_measured_mode_generates_its_sensor_top(fit
     built = stub_synthesis(monkeypatch)
     res = RUNNER.invoke(cli.app, ["explore", "m.json", "d.csv", "-o", "ex", "--input-bits", "10",
                                   "--weight-frac", str(dflt.core.weight_format.frac), "--output-frac", str(dflt.core.output_format.frac),
-                                  "--state-frac", str(dflt.bank.state_frac + 1), "--fpga", "generic", "--synth-dir", "syn"])
+                                  "--state-frac", str(dflt.bank.state_frac + 1), "--isqrt-every", "2",
+                                  "--fpga", "generic", "--synth-dir", "syn"])
     assert res.exit_code == 0, res.output
     out = json.loads((tmp_path / "ex" / "explore.json").read_text())
     check_result(out)
@@ -238,4 +271,6 @@ def test_cli_sweeps_a_bank_sensor_and_measured_mode_generates_its_sensor_top(fit
         man = next(m for name, _, m in built if name.endswith(f"_s{p['bank']['state_bits']}f{p['bank']['state_frac']}"
                                                               f"_c{p['bank']['coef_frac']}"))
         assert man["front_end"]["formats"]["state_frac"] == p["bank"]["state_frac"]
+        assert man["front_end"]["isqrt_every"] == 2 == out["sweep"]["isqrt_every"]  # built as estimated
+        assert man["latency_cycles"] == p["resources"]["latency_cycles"]
         assert p["measured"]["estimate_memory_bits_exact"]

@@ -550,13 +550,9 @@ def build_design(
         if isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1:
             raise InputError(f"{option_text('isqrt_every')} must be a positive integer (digit steps of the square root "
                              f"between registers; default 3), got {isqrt_every!r}")
-        fe = getattr(sensor, "front_end_", None)
-        if fe is None:
+        if getattr(sensor, "front_end_", None) is None:
             raise InputError("--isqrt-every applies to observer-bank sensors (fit --front-end observer-bank), whose "
                              "features take a square root; this model has no observer bank: leave it out")
-        if getattr(fe, "features", None) != "11b":
-            raise InputError(f"--isqrt-every applies to the 11b feature map (the square root of each window sum); this "
-                             f"bank's map is {getattr(fe, 'features', None)}, which has no root: leave it out")
     if getattr(sensor, "front_end_", None) is not None:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
 
@@ -567,10 +563,9 @@ def build_design(
                              "bank's residual features, not lagged u / y samples; give --design sensor (the bank, "
                              "the features and the core)")
         bank_model = observer_bank_model(sensor, memory=memory or DEFAULT_MEMORY, **formats)
-        steps = (bank_model.bank.formats.sum_bits + 1) // 2  # digit steps of each feature's square root
-        if isqrt_every is not None and isqrt_every > steps - 1:
-            raise InputError(f"{option_text('isqrt_every')} = {isqrt_every} puts no register inside the square root: it has "
-                             f"{steps} digit steps (window sums of {bank_model.bank.formats.sum_bits} bits); give 1 .. {steps - 1}")
+        from pwas_hdl.hdl.serial_observer_bank import check_root_spacing
+
+        check_root_spacing(bank_model.bank, isqrt_every)  # at least one register inside the root
         fxm = bank_model.core
         memory = memory or DEFAULT_MEMORY
     else:

@@ -786,7 +786,7 @@ def _core_adder_bits(n: int, nz: int, f: int, bw: int, in_width: int, rounding: 
 
 
 def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=None,
-                       classifier: dict | None = None) -> dict[str, Any]:
+                       classifier: dict | None = None, isqrt_every: int | None = None) -> dict[str, Any]:
     """The resource estimate of the core the generator builds for ``fxm`` (see the module notes).
 
     Parameters
@@ -831,7 +831,7 @@ def estimate_resources(fxm: FixedPointModel, memory: str = "banked", pipeline=No
 
     kind = model_kind(fxm)
     if kind == "observer-bank":
-        return _estimate_observer_bank(fxm, memory, pipeline)
+        return _estimate_observer_bank(fxm, memory, pipeline, isqrt_every)
     if kind == "additive":
         return _estimate_additive(fxm, memory, pipeline, classifier)
     if kind == "warped":
@@ -1096,10 +1096,12 @@ def _front_register_key(comp, bm) -> tuple | None:
     return key
 
 
-def _estimate_observer_bank(bm, memory: str, pipeline) -> dict[str, Any]:
+def _estimate_observer_bank(bm, memory: str, pipeline, isqrt_every: int | None = None) -> dict[str, Any]:
     """:func:`estimate_resources` of an observer-bank sensor: the sensor top ``generate`` builds
-    (parallel bank -> features [+ u/y taps] [-> warp] -> core), :func:`bank_resources` added to the
-    core's figures (``bank``: the bank's own)."""
+    (parallel bank -> features [+ u/y taps] [-> warp] -> core; ``isqrt_every``: its root register
+    spacing, None: the default), :func:`bank_resources` added to the core's figures (``bank``: the
+    bank's own)."""
+    spacing = {} if isqrt_every is None else {"isqrt_every": isqrt_every}
     from pwas_hdl.hdl import design_info
 
     with warnings.catch_warnings():
@@ -1107,11 +1109,11 @@ def _estimate_observer_bank(bm, memory: str, pipeline) -> dict[str, Any]:
         if hasattr(bm, "taps"):
             from pwas_hdl.hdl.observer_tap_sensor_top import build_tapped_observer_sensor
 
-            comp = build_tapped_observer_sensor(bm, memory=memory, pipeline=pipeline)
+            comp = build_tapped_observer_sensor(bm, memory=memory, pipeline=pipeline, **spacing)
         else:
             from pwas_hdl.hdl.observer_sensor_top import build_observer_sensor
 
-            comp = build_observer_sensor(bm, memory=memory, pipeline=pipeline)
+            comp = build_observer_sensor(bm, memory=memory, pipeline=pipeline, **spacing)
         info = design_info(comp)
     warped = getattr(bm.core, "warps", None) is not None
     warp_adder = _warp_adder_bits(bm.core) if warped else 0
@@ -1489,6 +1491,7 @@ def explore(
     coef_frac: Sequence[int] | None = None,
     state_bits: int | None = None,
     input_headroom: float | None = None,
+    isqrt_every: int | None = None,
 ) -> dict[str, Any]:
     """Sweep the fixed-point formats of a model and measure accuracy against resources.
 
@@ -1553,6 +1556,11 @@ def explore(
         Observer-bank sensors: a fixed input head room ``H`` (normalised units, default 8).
         ``state_frac``, ``coef_frac``, ``state_bits`` and ``input_headroom`` are refused for
         other models (as ``generate`` refuses them).
+    isqrt_every : int, optional
+        Observer-bank sensors with the 11b map: the square root's register spacing of every point
+        (``generate --isqrt-every``; default 3): its registers count in the estimate and the
+        latency, and ``resources`` other than ``estimate`` build the points with it. A point whose
+        root it leaves without a register is refused (as ``generate`` refuses it); other models refuse it.
 
     Returns
     -------
@@ -1612,6 +1620,13 @@ def explore(
     sensor, model_path = _load_sensor(model)
     _check_supported(sensor, {"state_frac": state_frac, "coef_frac": coef_frac, "state_bits": state_bits,
                               "input_headroom": input_headroom})
+    if isqrt_every is not None:
+        if isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1:
+            raise InputError(f"{_option('isqrt_every')} must be a positive integer (digit steps of the square root between "
+                             f"registers; default 3), got {isqrt_every!r}")
+        if not _is_bank(sensor):
+            raise InputError(f"{_option('isqrt_every')} applies to observer-bank sensors (fit --front-end observer-bank), "
+                             "whose features take a square root; this model has no observer bank: leave it out")
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]
@@ -1626,6 +1641,7 @@ def explore(
     recurrent = not bank and sensor.lags_ is not None and sensor.lags_.recurrent  # the accuracy is the closed loop's
     if bank:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
+        from pwas_hdl.hdl.serial_observer_bank import check_root_spacing
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -1694,6 +1710,7 @@ def explore(
                 warnings.simplefilter("always")
                 if bank:
                     bm = observer_bank_model(sensor, memory=memory, **fmt_common, **given, **bank_given)
+                    check_root_spacing(bm.bank, isqrt_every)  # a root left without a register: refused, as generate
                     fxm = bm.core
                 else:
                     fxm = fixed_point_model(sensor, memory=memory, **fmt_common, **given)
@@ -1711,7 +1728,7 @@ def explore(
             acc, err = _evaluate_classifier(fxm, xi, cref)
         elif not recurrent:
             acc, err = _evaluate(fxm, xi, z, zf, zf_rmsee)
-        res = estimate_resources(bm if bank else fxm, memory, pipeline, classifier=classifier)
+        res = estimate_resources(bm if bank else fxm, memory, pipeline, classifier=classifier, isqrt_every=isqrt_every)
         pt = {
             "input_bits": fxm.input_bits,
             "input_frac": fxm.F,
@@ -1803,7 +1820,8 @@ def explore(
             "default_in_sweep": default_in_sweep,
             "combinations": total,
             **({"state_frac": [v for v in sfs if v is not None] or None, "coef_frac": [v for v in cfs if v is not None] or None,
-                "state_bits": fixed_sb, "input_headroom": None if input_headroom is None else float(input_headroom)}
+                "state_bits": fixed_sb, "input_headroom": None if input_headroom is None else float(input_headroom),
+                "isqrt_every": isqrt_every}
                if bank else {}),
         },
         "resource_model": {
@@ -1826,7 +1844,7 @@ def explore(
         else:
             pick = [front[round(i * (len(front) - 1) / (measure_max - 1))] for i in range(measure_max)]
         result["measured"] = _measure(sensor, points, sorted(set(pick) | {di}), resources, device, workdir, memory,
-                                      pipeline, common, progress, executor, acc_key, bank)
+                                      pipeline, common, progress, executor, acc_key, bank, isqrt_every)
     errs = result_errors(result)
     if errs:  # the owner writes what its schema says (a bug otherwise, as the manifest's builder checks)
         raise InternalError(f"the explore result breaks its schema {EXPLORE_SCHEMA}: {errs[0]}")
@@ -1950,11 +1968,11 @@ def _error_kind(exc: Exception) -> dict:
 
 
 def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, common, progress, executor=None,
-             acc_key: str = "rmsee_ratio", bank: bool = False) -> dict:
+             acc_key: str = "rmsee_ratio", bank: bool = False, isqrt_every: int | None = None) -> dict:
     """Synthesise the points ``idx`` (:func:`_measure_point`, one task each) and the front of the
     synthesised points in (LUTs, DSPs, block RAMs, ``acc_key``: ``rmsee_ratio``, or a classifier's
     ``error_rate``). ``bank``: an observer-bank sensor, whose design is the sensor top (bank,
-    features, core) with the point's bank formats."""
+    features, core) with the point's bank formats (and the root register spacing ``isqrt_every``)."""
     from pwas_hdl.flow.executor import Executor
 
     root = None if workdir is None else Path(workdir)
@@ -1969,7 +1987,8 @@ def _measure(sensor, points, idx, target, device, workdir, memory, pipeline, com
         if bank:  # the sensor top with the bank's formats of the point (all of them: the default ones too)
             bk = p["bank"]
             bank_formats = {"state_bits": bk["state_bits"], "state_frac": bk["state_frac"], "coef_frac": bk["coef_frac"],
-                            "input_headroom": bk["input_headroom"]}
+                            "input_headroom": bk["input_headroom"],
+                            **({} if isqrt_every is None else {"isqrt_every": isqrt_every})}
             name += f"_s{bk['state_bits']}f{bk['state_frac']}_c{bk['coef_frac']}"
         name = name.replace("-", "m")
         tasks.append({"sensor": sensor, "point": p, "target": target, "device": device, "memory": memory, "pipeline": pipeline,

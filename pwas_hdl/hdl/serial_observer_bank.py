@@ -154,6 +154,34 @@ def check_isqrt_every(isqrt_every: Any) -> None:
         raise InputError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
 
 
+def check_root_spacing(bank: FixedPointObserverBank, isqrt_every: int | None) -> None:
+    """Refuse a root register spacing given by the user (``--isqrt-every``) that leaves no register
+    inside the bank's square root, or a bank without one (map 11b-sq).
+
+    Parameters
+    ----------
+    bank : FixedPointObserverBank
+        The bit-true bank (feature map and window-sum width: the root's ``ceil(sum_bits / 2)`` digit steps).
+    isqrt_every : int or None
+        The spacing as given (a positive integer, :func:`check_isqrt_every`); None: nothing to check.
+
+    Raises
+    ------
+    InputError
+        The map has no square root, or ``isqrt_every`` is at least the root's digit steps.
+    """
+    if isqrt_every is None:
+        return
+    opt = "--isqrt-every (isqrt_every)"
+    if bank.feature_map != "11b":
+        raise InputError(f"{opt} applies to the 11b feature map (the square root of each window sum); this bank's map "
+                         f"is {bank.feature_map}, which has no root: leave it out")
+    steps = (bank.formats.sum_bits + 1) // 2
+    if isqrt_every > steps - 1:
+        raise InputError(f"{opt} = {isqrt_every} puts no register inside the square root: it has {steps} digit steps "
+                         f"(window sums of {bank.formats.sum_bits} bits); give 1 .. {steps - 1}")
+
+
 def isqrt_registers(bank: FixedPointObserverBank, every: int | None) -> int:
     """Registers :func:`build_isqrt_pipelined` puts into a feature's square root (the window sum of
     ``bank.formats.sum_bits`` bits, a register after every ``every`` digit steps); 0 for map 11b-sq
