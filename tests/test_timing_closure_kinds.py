@@ -225,6 +225,55 @@ def test_a_missed_target_says_what_limits_it(monkeypatch, path, words):
         assert words in msg and f"({path['from']} -> {path['to']})" in msg
 
 
+class RootLimitedPlaceAndRoute:
+    """Stands for `measure_design` on an observer-bank sensor: fmax set by the square root's register
+    spacing (``{spacing: (fmax, critical path stage)}``), whatever the core's pipeline."""
+
+    def __init__(self, by_spacing: dict):
+        self.by_spacing = by_spacing
+        self.seen: list[int] = []
+
+    def __call__(self, gd, fpga, *, freq_mhz, seed=1, device=None, workdir, harness=True, progress=None):
+        every = gd.manifest["front_end"]["isqrt_every"]
+        self.seen.append(every)
+        fm, stage = self.by_spacing[every]
+        lat = gd.manifest["latency_cycles"]
+        return {"fmax_mhz": fm, "latency_ns": lat * 1000.0 / fm, "luts": 1, "ffs": 1, "ffs_core": 1, "dsp": 0, "bram": 0,
+                "critical_path": {"from": stage, "to": stage, "delay_ns": 1000.0 / fm, "routing_ns": 1.0},
+                "device": "45k", "part": "LFE5U-45F-6CABGA381", "tools": {"fake": "1"}}
+
+
+def test_a_bank_missing_inside_its_square_root_is_searched_again_with_a_denser_root(bank_sensor, monkeypatch):
+    """--clock-mhz of an observer-bank sensor: when the best candidate misses inside the square root
+    (which no core register cuts), the search runs again with a register every 2, then every digit step;
+    the design is built with the spacing that met (options.isqrt_every, timing.isqrt_every_searched);
+    a limit elsewhere, or a given --isqrt-every, stops it; a miss at every spacing names them."""
+    fake = RootLimitedPlaceAndRoute({3: (70.0, "bank square root"), 2: (95.0, "bank square root"),
+                                     1: (99.0, "memory")})
+    monkeypatch.setattr(tc, "measure_design", fake)
+    lines: list[str] = []
+    gd = build_design(bank_sensor, design="sensor", target_mhz=90.0, progress=lines.append)
+    man = gd.manifest
+    assert man["front_end"]["isqrt_every"] == 2 == man["generator"]["options"]["isqrt_every"]
+    assert man["timing"]["isqrt_every_searched"] == [3, 2] and man["timing"]["met"]
+    assert set(fake.seen) == {3, 2} and any("register every 2 digit steps" in ln for ln in lines)
+    assert build_design(bank_sensor, design="sensor", pipeline=man["pipeline"], isqrt_every=2).files["pwas_sensor.v"] == \
+        gd.files["pwas_sensor.v"]  # the same design as asked for directly
+    fake.seen.clear()
+    with pytest.raises(tc.TimingNotMet, match=r"searched with the square root's register every 3, 2, 1 digit steps"):
+        build_design(bank_sensor, design="sensor", target_mhz=100.0)
+    assert set(fake.seen) == {3, 2, 1}
+    fake.seen.clear()
+    with pytest.raises(tc.TimingNotMet) as ei:  # given: searched with it only
+        build_design(bank_sensor, design="sensor", target_mhz=90.0, isqrt_every=3)
+    assert set(fake.seen) == {3} and "searched with" not in str(ei.value) and "--isqrt-every" in str(ei.value)
+    fake = RootLimitedPlaceAndRoute({3: (70.0, "bank input stage"), 2: (95.0, "memory")})
+    monkeypatch.setattr(tc, "measure_design", fake)
+    with pytest.raises(tc.TimingNotMet, match="in the observer bank"):  # not the root: no other spacing tried
+        build_design(bank_sensor, design="sensor", target_mhz=90.0)
+    assert set(fake.seen) == {3}
+
+
 def test_no_buildable_candidate_is_an_input_error(monkeypatch):
     def latency(p):
         raise PipelineRefused("no")

@@ -162,6 +162,20 @@ def _is_warped(sensor: PWASVirtualSensor) -> bool:
     return is_warped(sensor)
 
 
+def _root_spacings(bank_model: Any, isqrt_every: int | None) -> list[int | None]:
+    """The square-root register spacings a ``target_mhz`` search may try, in order: the given one
+    alone, or for an observer bank with the 11b map (no ``isqrt_every`` given) the default (None),
+    then every 2 and every digit step where the root has room for them; else ``[None]``."""
+    from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
+
+    if isqrt_every is not None:
+        return [isqrt_every]
+    if bank_model is None or bank_model.bank.feature_map != "11b":
+        return [None]
+    steps = (bank_model.bank.formats.sum_bits + 1) // 2
+    return [None, *(k for k in range(DEFAULT_ISQRT_EVERY - 1, 0, -1) if k <= steps - 1)]
+
+
 def _core_inputs(sensor: PWASVirtualSensor) -> int:
     """Inputs of the widest PWAS core of the design (sets the adder-tree depth of the pipelines):
     the grid's dimension, or an additive sensor's largest part's."""
@@ -640,13 +654,15 @@ def build_design(
         def candidate(pipe: Pipeline) -> GeneratedDesign:
             return build_design(sensor, design=design, name=name, memory=None if architecture == "serial" else memory,
                                 pipeline=pipe, memory_init="inline", ports=ports, architecture=architecture,
-                                bank_lanes=bank_lanes, isqrt_every=isqrt_every, **formats)
+                                bank_lanes=bank_lanes, **root_spacing, **formats)
 
         # each candidate's latency is the built component's (an additive sum, a warp, an observer
         # bank or an argmax stage adds cycles to the core's; the serial core takes only some of the
         # registers: candidates that add none of them are the same design, dropped); a candidate the
         # design cannot take is dropped
+        from pwas_hdl.flow.timing_closure import TimingNotMet, best_critical_path, in_square_root
         from pwas_hdl.hdl.api import pipeline_registers
+        from pwas_hdl.hdl.serial_observer_bank import DEFAULT_ISQRT_EVERY
 
         built: dict[Pipeline, Any] = {}
 
@@ -655,11 +671,34 @@ def build_design(
                 built[pipe] = component(pipe)[0]
             return built[pipe]
 
-        # the record's labels name the registers each candidate's design builds (the serial core ignores some)
-        chosen, timing = close_timing(candidate, _core_inputs(sensor), target_mhz, fpga=fpga_target, seed=timing_seed,
-                                      prescreen=prescreen, progress=progress, executor=executor,
-                                      latency=lambda pipe: int(built_component(pipe).latency),
-                                      registers=lambda pipe: pipeline_registers(built_component(pipe)))
+        # an observer bank's square root is not cut by the core's registers: when the best candidate
+        # misses inside it, the search runs again with a denser root (unless --isqrt-every was given)
+        spacings = _root_spacings(bank_model, isqrt_every)
+        tried: list[int] = []
+        for k, spacing in enumerate(spacings):
+            root_spacing = {} if spacing is None else {"isqrt_every": spacing}
+            built.clear()
+            try:
+                # the record's labels name the registers each candidate's design builds (the serial core ignores some)
+                chosen, timing = close_timing(candidate, _core_inputs(sensor), target_mhz, fpga=fpga_target,
+                                              seed=timing_seed, prescreen=prescreen, progress=progress, executor=executor,
+                                              latency=lambda pipe: int(built_component(pipe).latency),
+                                              registers=lambda pipe: pipeline_registers(built_component(pipe)))
+            except TimingNotMet as exc:
+                tried.append(spacing or DEFAULT_ISQRT_EVERY)
+                if k + 1 < len(spacings) and in_square_root(best_critical_path(exc.record)):
+                    if progress is not None:
+                        progress(f"the best pipeline misses {target_mhz:g} MHz inside the observer bank's square root: "
+                                 f"searching again with a register every {spacings[k + 1]} digit steps (--isqrt-every)")
+                    continue
+                if len(tried) > 1:
+                    raise TimingNotMet(f"{exc} (searched with the square root's register every "
+                                       f"{', '.join(map(str, tried))} digit steps)", exc.record) from None
+                raise
+            if tried:
+                timing["isqrt_every_searched"] = [*tried, spacing]  # the root spacings searched, the last one chosen
+                isqrt_every = spacing  # recorded in the options: the design is built with it
+            break
     else:
         chosen = pipeline
     comp, recurrence = component(Pipeline.cast(chosen) if chosen is not None else None)

@@ -648,12 +648,38 @@ def close_timing(
     return cands[chosen], record
 
 
+def best_critical_path(record: dict[str, Any]) -> dict[str, Any] | None:
+    """The critical path of the fastest measured candidate of a search's record (the shallowest of
+    equal fmax), or None.
+
+    Parameters
+    ----------
+    record : dict
+        As :func:`close_timing` returns it (or :attr:`TimingNotMet.record`).
+
+    Returns
+    -------
+    dict or None
+        ``{"from", "to", "delay_ns", "routing_ns"}`` (stage names, ns), None when not measured.
+    """
+    measured = [c for c in record.get("candidates", []) if c.get("measured") and c.get("fmax_mhz") is not None]
+    if not measured:
+        return None
+    return max(measured, key=lambda c: (c["fmax_mhz"], -c["latency_cycles"])).get("critical_path")
+
+
+def in_square_root(path: dict[str, Any] | None) -> bool:
+    """True when a critical path (:func:`best_critical_path`) starts or ends inside an observer bank's
+    square root (parallel or serial: stage names ``bank square root`` / ``bank lane square root``)."""
+    return bool(path) and any("square root" in str(path.get(k) or "") for k in ("from", "to"))
+
+
 def _limit_hint(path: dict[str, Any] | None) -> str:
     """What the best candidate's critical path says about the search's limit, for the
     :class:`TimingNotMet` message: a path inside an observer bank is not cut by the core's registers
     (those the search varies), and one inside its square root is shortened by ``--isqrt-every``."""
     ends = [str(path.get(k) or "") for k in ("from", "to")] if path else []
-    if any("square root" in e for e in ends):
+    if in_square_root(path):
         return (f"; its critical path ({' -> '.join(ends)}) is inside the observer bank's square root: a smaller "
                 "--isqrt-every (default 3) shortens it")
     if any(e.startswith("bank ") for e in ends):
