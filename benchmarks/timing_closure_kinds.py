@@ -148,7 +148,9 @@ def run_kind(kind: str, target: float, fpga: str, progress: Callable[[str], None
            "measured": [{"latency_cycles": c["latency_cycles"], "label": c["label"], "fmax_mhz": c["fmax_mhz"],
                          "critical_path": c.get("critical_path")} for c in measured],
            "search_order_cycles": list(rec["measurements"]), "best_fmax_mhz": rec["best_fmax_mhz"],
-           "search_wall_s": round(wall, 1), **spacing}
+           "search_wall_s": round(wall, 1), **spacing,
+           # an observer bank whose best pipeline missed inside its square root: the root spacings searched
+           **({"isqrt_every_searched": rec["isqrt_every_searched"]} if "isqrt_every_searched" in rec else {})}
     if chosen is not None:
         row.update(chosen_latency_cycles=chosen["latency_cycles"], chosen_label=chosen["label"],
                    chosen_fmax_mhz=chosen["fmax_mhz"], chosen_latency_ns=chosen["latency_ns"],
@@ -172,6 +174,8 @@ def markdown(doc: dict) -> str:
              "|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|"]
     for r in doc["rows"]:
         kind = r["kind"] + (f" (isqrt_every {r['isqrt_every']})" if r.get("isqrt_every") is not None else "")
+        if r.get("isqrt_every_searched"):
+            kind += f" (root spacing searched: {', '.join(map(str, r['isqrt_every_searched']))})"
         meas = ", ".join(f"{c['latency_cycles']}: {c['fmax_mhz']:.1f}" for c in r["measured"])
         if r["met"]:
             cells = [kind, r["design"], r["architecture"], "yes", f"{r['chosen_latency_cycles']}, {r['chosen_label']}",
