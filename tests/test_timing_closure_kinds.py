@@ -243,6 +243,7 @@ class RootLimitedPlaceAndRoute:
                 "device": "45k", "part": "LFE5U-45F-6CABGA381", "tools": {"fake": "1"}}
 
 
+@pytest.mark.slow
 def test_a_bank_missing_inside_its_square_root_is_searched_again_with_a_denser_root(bank_sensor, monkeypatch):
     """--clock-mhz of an observer-bank sensor: when the best candidate misses inside the square root
     (which no core register cuts), the search runs again with a register every 2, then every digit step;
