@@ -560,13 +560,9 @@ def build_design(
     bank_model = None  # observer-bank front end (issue 12): pwas_hdl.fixedpoint.observer_bank
     if bank_lanes is not None and (getattr(sensor, "front_end_", None) is None or architecture != "serial" or design != "sensor"):
         raise InputError("--bank-lanes applies to observer-bank sensors with --design sensor --architecture serial only")
-    if isqrt_every is not None:
-        if isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1:
-            raise InputError(f"{option_text('isqrt_every')} must be a positive integer (digit steps of the square root "
-                             f"between registers; default 3), got {isqrt_every!r}")
-        if getattr(sensor, "front_end_", None) is None:
-            raise InputError("--isqrt-every applies to observer-bank sensors (fit --front-end observer-bank), whose "
-                             "features take a square root; this model has no observer bank: leave it out")
+    from pwas_hdl.hdl.serial_observer_bank import check_isqrt_every_option
+
+    check_isqrt_every_option(isqrt_every, getattr(sensor, "front_end_", None) is not None)
     if getattr(sensor, "front_end_", None) is not None:
         from pwas_hdl.fixedpoint.observer_bank import observer_bank_model
 

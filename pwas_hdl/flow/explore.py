@@ -1620,13 +1620,9 @@ def explore(
     sensor, model_path = _load_sensor(model)
     _check_supported(sensor, {"state_frac": state_frac, "coef_frac": coef_frac, "state_bits": state_bits,
                               "input_headroom": input_headroom})
-    if isqrt_every is not None:
-        if isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1:
-            raise InputError(f"{_option('isqrt_every')} must be a positive integer (digit steps of the square root between "
-                             f"registers; default 3), got {isqrt_every!r}")
-        if not _is_bank(sensor):
-            raise InputError(f"{_option('isqrt_every')} applies to observer-bank sensors (fit --front-end observer-bank), "
-                             "whose features take a square root; this model has no observer bank: leave it out")
+    from pwas_hdl.hdl.serial_observer_bank import check_isqrt_every_option
+
+    check_isqrt_every_option(isqrt_every, _is_bank(sensor))
     in_bits = _int_values(input_bits, "input_bits", lo=2)
     fixed_wb = None if weight_bits is None else _int_values(weight_bits, "weight_bits", lo=1)[0]
     fixed_ob = None if output_bits is None else _int_values(output_bits, "output_bits", lo=1)[0]

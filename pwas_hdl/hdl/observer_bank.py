@@ -28,7 +28,7 @@ from pwas_hdl.hdl._lintsafe import sink_unused
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
 
-__all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate", "INPUT_STAGES"]
+__all__ = ["build_observer_bank", "const_product", "add_const_signed", "saturate", "advance_registers", "INPUT_STAGES"]
 
 #: Registers between the input transfer and the state update (``s_in``: the input products; ``s_in2``:
 #: their sum and the rounding constant).
@@ -215,11 +215,11 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
     sh_in = fs - fin
     states = [[Signal(signed(bs), name=f"obs{j}_x{i}") for i in range(mo)] for j in range(n)]
     # stages s_in (the products) and s_in2 (their sum): the transfer's valid bit and the aligned output code
-    in_valid = _stage_in(m, _stage_in(m, transfer, advance, "s_in_valid"), advance, "s_in2_valid")
+    in_valid = advance_registers(m, advance_registers(m, transfer, 1, advance, "s_in_valid"), 1, advance, "s_in2_valid")
     update = Signal(name="bank_update")
     m.d.comb += update.eq(in_valid & advance)
-    qy_al = _stage_in(m, _stage_in(m, const_product(m, 1 << sh_in, qy, rb, "y_aligned"), advance, "s_in_y"),
-                      advance, "s_in2_y")
+    qy_al = advance_registers(m, advance_registers(m, const_product(m, 1 << sh_in, qy, rb, "y_aligned"), 1, advance,
+                                                   "s_in_y"), 1, advance, "s_in2_y")
     residuals = []
     sat_flags = []
     for j in range(n):
@@ -234,12 +234,12 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
             coefs = [(int(bank.b_codes[j, i, c]), qu[c], f"b{c}") for c in range(nu)] + [(int(bank.l_codes[j, i]), qy, "l")]
             for cv, sig, nm in coefs:
                 if cv:  # the input alignment << (F_s - F_in) is folded into the constant; stage s_in
-                    inputs.append(_stage_in(m, const_product(m, cv << sh_in, sig, accw, f"obs{j}_p{nm}_{i}"),
-                                            advance, f"s_in_obs{j}_p{nm}_{i}"))
+                    inputs.append(advance_registers(m, const_product(m, cv << sh_in, sig, accw, f"obs{j}_p{nm}_{i}"),
+                                                     1, advance, f"s_in_obs{j}_p{nm}_{i}"))
             terms = []
             if inputs:  # the products' sum and the constant: stage s_in2 (modular in accw bits)
                 part = add_const_signed(m, _sum(m, inputs, accw, f"obs{j}_in{i}"), d, f"obs{j}_in{i}_d")
-                terms.append(_stage_in(m, part, advance, f"s_in2_obs{j}_{i}"))
+                terms.append(advance_registers(m, part, 1, advance, f"s_in2_obs{j}_{i}"))
             a0 = int(bank.a0_codes[j, i])
             if a0:
                 terms.append(const_product(m, a0, states[j][0], accw, f"obs{j}_pa_{i}"))
@@ -266,11 +266,31 @@ def build_observer_bank(m: Module, bank: FixedPointObserverBank, qu: Sequence[Va
     return residuals, saturated, states, update
 
 
-def _stage_in(m: Module, value: Value, advance: Value, name: str) -> Value:
-    """``value`` registered in an input stage (loads when ``advance`` is high): a 1-bit value is a
-    valid bit (resets to 0), a wider one a signed code (reset-less)."""
-    one = len(value) == 1
-    reg = Signal(1 if one else signed(len(value)), name=name, reset_less=not one)
-    with m.If(advance):
-        m.d.sync += reg.eq(value)
-    return reg
+def advance_registers(m: Module, value: Value, n: int, advance: Value, name: str) -> Value:
+    """``value`` through ``n`` registers that load when ``advance`` is high (a stalling pipeline's
+    stages; reset-less, except a 1-bit value, a valid bit, which resets to 0).
+
+    Parameters
+    ----------
+    m : Module
+        Module the registers are added to.
+    value : Value
+        The value to delay.
+    n : int
+        Registers, ``>= 0`` (0: ``value`` itself).
+    advance : Value
+        1 bit, the pipeline's enable.
+    name : str
+        Name of the last register (the others ``<name>_d<k>``).
+
+    Returns
+    -------
+    Value
+        ``value`` as it was ``n`` enabled cycles before, of its shape.
+    """
+    for k in range(n):
+        reg = Signal(value.shape(), name=name if k == n - 1 else f"{name}_d{k}", reset_less=len(value) > 1)
+        with m.If(advance):
+            m.d.sync += reg.eq(value)
+        value = reg
+    return value

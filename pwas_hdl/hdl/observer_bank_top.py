@@ -30,7 +30,7 @@ from amaranth.lib.wiring import In, Out
 from pwas_hdl.errors import InputError, InternalError, choice_text, option_text
 from pwas_hdl.hdl._lintsafe import add_const_wrap, ge_const, sink_unused
 from pwas_hdl.hdl.core import PWASCore, core_output_layout
-from pwas_hdl.hdl.observer_bank import INPUT_STAGES, build_observer_bank
+from pwas_hdl.hdl.observer_bank import INPUT_STAGES, advance_registers, build_observer_bank
 from pwas_hdl.hdl.params import CoreParams, Pipeline
 from pwas_hdl.hdl.residual_features import build_feature_codes, build_window_sums
 from pwas_hdl.hdl.sensor_top import sample_fields
@@ -386,36 +386,6 @@ def parallel_feature_codes(m: Module, bank: FixedPointObserverBank, cur: list, t
     qs = build_feature_codes(m, bank, roots, stage_enable=advance)  # the capped root and the product registered
     codes = [advance_registers(m, q, 1, advance, f"s_code_q{j}") for j, q in enumerate(qs)]
     return codes, advance_registers(m, v2, 1 + AFFINE_REGS, advance, "s_code_valid")
-
-
-def advance_registers(m: Module, value: Value, n: int, advance: Value, name: str) -> Value:
-    """``value`` through ``n`` registers that load when ``advance`` is high (a stalling pipeline's
-    stages; reset-less, except a 1-bit value, a valid bit, which resets to 0).
-
-    Parameters
-    ----------
-    m : Module
-        Module the registers are added to.
-    value : Value
-        The value to delay.
-    n : int
-        Registers, ``>= 0`` (0: ``value`` itself).
-    advance : Value
-        1 bit, the pipeline's enable.
-    name : str
-        Name of the last register (the others ``<name>_d<k>``).
-
-    Returns
-    -------
-    Value
-        ``value`` as it was ``n`` enabled cycles before, of its shape.
-    """
-    for k in range(n):
-        reg = Signal(value.shape(), name=name if k == n - 1 else f"{name}_d{k}", reset_less=len(value) > 1)
-        with m.If(advance):
-            m.d.sync += reg.eq(value)
-        value = reg
-    return value
 
 
 def attach_core_and_schedule(top: Any, bank: FixedPointObserverBank, params: CoreParams, *, memory: str,

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 from amaranth.hdl import Cat, Const, Module, Signal, Value, signed, unsigned
 
 from pwas_hdl.hdl._lintsafe import add_wrap, ge_const, sink_unused
-from pwas_hdl.hdl.observer_bank import add_const_signed, const_product, saturate
+from pwas_hdl.hdl.observer_bank import add_const_signed, advance_registers, const_product, saturate
 
 if TYPE_CHECKING:
     from pwas_hdl.fixedpoint.observer_bank import FixedPointObserverBank
@@ -110,12 +110,12 @@ def build_window_sums(m: Module, bank: FixedPointObserverBank, residuals: Sequen
     sums = []
     for j, e in enumerate(residuals):
         if stage_enable is not None:
-            e = _register(m, e, stage_enable, f"s_res_{j}")
+            e = advance_registers(m, e, 1, stage_enable, f"s_res_{j}")
         p = Signal(signed(2 * rb), name=f"feat{j}_sq")
         m.d.comb += p.eq(e * e)
         sq = p.as_unsigned()
         if stage_enable is not None:
-            sq = _register(m, sq, stage_enable, f"s_sq_{j}")
+            sq = advance_registers(m, sq, 1, stage_enable, f"s_sq_{j}")
         dl = [Signal(unsigned(sumb), name=f"feat{j}_dl{i}") for i in range(lw + 1)]
         s = Signal(unsigned(sumb), name=f"feat{j}_sum")
         added = add_wrap(m, s, sq, f"feat{j}_sum_add")
@@ -201,20 +201,12 @@ def build_feature_codes(m: Module, bank: FixedPointObserverBank, roots: Sequence
         else:
             m.d.comb += capped.eq(rs)
         if stage_enable is not None:
-            capped = _register(m, capped, stage_enable, f"s_code_cap{j}")
+            capped = advance_registers(m, capped, 1, stage_enable, f"s_code_cap{j}")
         prod = const_product(m, int(bank.scale_mul[j]), Cat(capped, Const(0, 1)), sw, f"feat{j}_prod")
         if stage_enable is not None:
-            prod = _register(m, prod, stage_enable, f"s_code_prod{j}")
+            prod = advance_registers(m, prod, 1, stage_enable, f"s_code_prod{j}")
         tot = add_const_signed(m, prod, int(bank.scale_add[j]), f"feat{j}_affine")
         sink_unused(m, tot[:sh], f"feat{j}_affine_frac")
         q, _ = saturate(m, tot[sh:].as_signed(), bcore, f"feat{j}_q", flag=False)
         codes.append(q)
     return codes
-
-
-def _register(m: Module, value: Value, enable: Value, name: str) -> Signal:
-    """``value`` in a reset-less register of its shape that loads when ``enable`` is high."""
-    reg = Signal(value.shape(), name=name, reset_less=True)
-    with m.If(enable):
-        m.d.sync += reg.eq(value)
-    return reg

@@ -154,6 +154,34 @@ def check_isqrt_every(isqrt_every: Any) -> None:
         raise InputError(f"isqrt_every must be a positive integer or None, got {isqrt_every!r}")
 
 
+def check_isqrt_every_option(isqrt_every: Any, has_bank: bool) -> None:
+    """Refuse a user's ``--isqrt-every`` (``generate``, ``explore``) before anything is built: not a
+    positive integer, or given for a model without an observer bank. The bank itself is checked by
+    :func:`check_root_spacing`.
+
+    Parameters
+    ----------
+    isqrt_every : Any
+        The value as given; None: not given, nothing to check.
+    has_bank : bool
+        The model has an observer-bank front end.
+
+    Raises
+    ------
+    InputError
+        One of the two cases above.
+    """
+    if isqrt_every is None:
+        return
+    opt = "--isqrt-every (isqrt_every)"
+    if isinstance(isqrt_every, bool) or not isinstance(isqrt_every, int) or isqrt_every < 1:
+        raise InputError(f"{opt} must be a positive integer (digit steps of the square root between registers; "
+                         f"default {DEFAULT_ISQRT_EVERY}), got {isqrt_every!r}")
+    if not has_bank:
+        raise InputError(f"{opt} applies to observer-bank sensors (fit --front-end observer-bank), whose features take "
+                         "a square root; this model has no observer bank: leave it out")
+
+
 def check_root_spacing(bank: FixedPointObserverBank, isqrt_every: int | None) -> None:
     """Refuse a root register spacing given by the user (``--isqrt-every``) that leaves no register
     inside the bank's square root, or a bank without one (map 11b-sq).
